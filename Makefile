@@ -1,0 +1,54 @@
+# Marionette: the two set-up commands are `make run` and `make test`.
+SHELL := /bin/bash
+PYTHON ?= python3
+VENV ?= .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed
+MOCAP_DIR ?= ../shared/mocap
+DATASET ?= data/poses.npz
+CONFIG ?= trainer/configs/default.toml
+
+.PHONY: help venv run test test-fast lint format dataset train export bench clean
+
+help:
+	@echo "make run    - create the venv, install, serve the bundled models on http://127.0.0.1:8000"
+	@echo "make test   - create/update the venv, lint, type-check and run the whole test suite"
+	@echo "make lint   - ruff + mypy"
+	@echo "make dataset / train / bench - build the pose dataset, train the models, run benchmarks"
+
+# The venv is (re)installed whenever pyproject.toml changes. torch is pinned to the CPU
+# wheel available on this machine (pip finds it; uv does not).
+$(STAMP): pyproject.toml
+	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/pip install --quiet --upgrade pip
+	$(BIN)/pip install --quiet -e '.[service,train,dev]'
+	touch $(STAMP)
+
+venv: $(STAMP)
+
+run: $(STAMP)
+	$(BIN)/pose-service --host 127.0.0.1 --port 8000
+
+lint: $(STAMP)
+	$(BIN)/ruff check service trainer tests
+	$(BIN)/ruff format --check service trainer tests
+	$(BIN)/mypy
+
+format: $(STAMP)
+	$(BIN)/ruff format service trainer tests
+	$(BIN)/ruff check --fix service trainer tests
+
+test: $(STAMP) lint
+	$(BIN)/pytest
+
+test-fast: $(STAMP)
+	$(BIN)/pytest -m "not slow"
+
+dataset: $(STAMP)
+	$(BIN)/pose-trainer dataset --mocap $(MOCAP_DIR) --out $(DATASET)
+
+train: $(STAMP)
+	$(BIN)/pose-trainer train --config $(CONFIG)
+
+clean:
+	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache

@@ -1,0 +1,1 @@
+"""Marionette pose service (onnxruntime + numpy; never torch)."""

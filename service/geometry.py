@@ -1,0 +1,76 @@
+"""Batched pose geometry over ``[..., 21, 3]`` arrays (numpy only, no state).
+
+Canonical frame: the pelvis projected onto the floor plane (y = 0) sits at the origin
+and the character faces +Z (its left is +X). The same functions serve the dataset
+builder and the service, so training data and requests are canonicalised alike.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from service.skeleton import FACING_PAIRS, JOINT_INDEX
+
+FloatArray = npt.NDArray[np.floating]
+
+_LEFT = [JOINT_INDEX[left] for left, _ in FACING_PAIRS]
+_RIGHT = [JOINT_INDEX[right] for _, right in FACING_PAIRS]
+_PELVIS = JOINT_INDEX["pelvis"]
+
+
+def facing_yaw(positions: FloatArray) -> FloatArray:
+    """Yaw (radians about +Y) of the facing direction, ``[..., 21, 3] -> [...]``.
+
+    The across vector is the sum of (left - right) over hips and shoulders, projected on
+    the floor; forward = across x up. A yaw of 0 means facing +Z.
+    """
+    across = (positions[..., _LEFT, :] - positions[..., _RIGHT, :]).sum(axis=-2)
+    # forward = across x up, with up = +Y: (ax, ay, az) x (0, 1, 0) = (-az, 0, ax)
+    fx = -across[..., 2]
+    fz = across[..., 0]
+    return np.asarray(np.arctan2(fx, fz))
+
+
+def yaw_matrix(yaw: FloatArray) -> FloatArray:
+    """Rotation matrices about +Y by ``yaw`` radians, ``[...] -> [..., 3, 3]``."""
+    c, s = np.cos(yaw), np.sin(yaw)
+    zero, one = np.zeros_like(c), np.ones_like(c)
+    rows = [
+        np.stack([c, zero, s], axis=-1),
+        np.stack([zero, one, zero], axis=-1),
+        np.stack([-s, zero, c], axis=-1),
+    ]
+    return np.stack(rows, axis=-2)
+
+
+@dataclass(frozen=True)
+class RigidTransform:
+    """World = rotation @ canonical + translation (per pose; batched)."""
+
+    rotation: FloatArray  # [..., 3, 3]
+    translation: FloatArray  # [..., 3]
+
+    def to_world(self, canonical: FloatArray) -> FloatArray:
+        """``[..., J, 3]`` canonical -> world."""
+        return np.einsum("...ij,...kj->...ki", self.rotation, canonical) + self.translation[..., None, :]
+
+    def to_canonical(self, world: FloatArray) -> FloatArray:
+        """``[..., J, 3]`` world -> canonical."""
+        local = world - self.translation[..., None, :]
+        return np.einsum("...ji,...kj->...ki", self.rotation, local)
+
+
+def canonical_transform(positions: FloatArray) -> RigidTransform:
+    """The transform that maps the canonical pose back to the given world pose."""
+    yaw = facing_yaw(positions)
+    translation = positions[..., _PELVIS, :].copy()
+    translation[..., 1] = 0.0
+    return RigidTransform(rotation=yaw_matrix(yaw), translation=translation)
+
+
+def canonicalise(positions: FloatArray) -> FloatArray:
+    """Move the floor projection of the pelvis to the origin and turn to face +Z."""
+    return canonical_transform(positions).to_canonical(positions)

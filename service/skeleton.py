@@ -1,0 +1,152 @@
+"""The canonical skeleton: the one definition of joint names, parents and frame.
+
+Every model, endpoint and test refers to joints through this module; nothing else
+hard-codes joint indices.
+
+Frame conventions (glTF): metres, +Y up, right-handed, the character faces +Z, so its
+left side is +X.
+"""
+
+from __future__ import annotations
+
+from typing import Final
+
+import numpy as np
+import numpy.typing as npt
+
+#: Joint names in the canonical order (the order of every ``[..., 21, 3]`` array).
+JOINT_NAMES: Final[tuple[str, ...]] = (
+    "pelvis",
+    "spine1",
+    "spine2",
+    "neck",
+    "head",
+    "left_collar",
+    "left_shoulder",
+    "left_elbow",
+    "left_wrist",
+    "right_collar",
+    "right_shoulder",
+    "right_elbow",
+    "right_wrist",
+    "left_hip",
+    "left_knee",
+    "left_ankle",
+    "left_foot",
+    "right_hip",
+    "right_knee",
+    "right_ankle",
+    "right_foot",
+)
+
+#: Parent of each joint, by name (the root has ``None``).
+PARENT_NAMES: Final[dict[str, str | None]] = {
+    "pelvis": None,
+    "spine1": "pelvis",
+    "spine2": "spine1",
+    "neck": "spine2",
+    "head": "neck",
+    "left_collar": "spine2",
+    "left_shoulder": "left_collar",
+    "left_elbow": "left_shoulder",
+    "left_wrist": "left_elbow",
+    "right_collar": "spine2",
+    "right_shoulder": "right_collar",
+    "right_elbow": "right_shoulder",
+    "right_wrist": "right_elbow",
+    "left_hip": "pelvis",
+    "left_knee": "left_hip",
+    "left_ankle": "left_knee",
+    "left_foot": "left_ankle",
+    "right_hip": "pelvis",
+    "right_knee": "right_hip",
+    "right_ankle": "right_knee",
+    "right_foot": "right_ankle",
+}
+
+NUM_JOINTS: Final[int] = len(JOINT_NAMES)
+JOINT_INDEX: Final[dict[str, int]] = {name: i for i, name in enumerate(JOINT_NAMES)}
+ROOT: Final[str] = "pelvis"
+
+#: Parent index of each joint; -1 for the root. Parents always precede children, so
+#: the canonical order is a topological order (root outwards).
+PARENTS: Final[tuple[int, ...]] = tuple(
+    -1 if PARENT_NAMES[n] is None else JOINT_INDEX[str(PARENT_NAMES[n])] for n in JOINT_NAMES
+)
+
+#: Bones as (child, parent) index pairs, one per non-root joint, in topological order.
+BONES: Final[tuple[tuple[int, int], ...]] = tuple(
+    (child, parent) for child, parent in enumerate(PARENTS) if parent >= 0
+)
+BONE_CHILDREN: Final[npt.NDArray[np.intp]] = np.array([c for c, _ in BONES], dtype=np.intp)
+BONE_PARENTS: Final[npt.NDArray[np.intp]] = np.array([p for _, p in BONES], dtype=np.intp)
+
+
+def _mirror_name(name: str) -> str:
+    if name.startswith("left_"):
+        return "right_" + name[len("left_") :]
+    if name.startswith("right_"):
+        return "left_" + name[len("right_") :]
+    return name
+
+
+#: Index of each joint's mirror image (left <-> right); centre joints map to themselves.
+MIRROR: Final[tuple[int, ...]] = tuple(JOINT_INDEX[_mirror_name(n)] for n in JOINT_NAMES)
+
+#: Frame conventions, as served by ``GET /v1/skeleton`` and written into the manifest.
+FRAME: Final[dict[str, str]] = {
+    "units": "metres",
+    "up": "+Y",
+    "forward": "+Z",
+    "left": "+X",
+    "handedness": "right",
+    "convention": "glTF",
+}
+
+#: Joints whose horizontal layout defines the facing direction (left minus right).
+FACING_PAIRS: Final[tuple[tuple[str, str], ...]] = (
+    ("left_hip", "right_hip"),
+    ("left_shoulder", "right_shoulder"),
+)
+
+
+def _depths() -> tuple[int, ...]:
+    depth: list[int] = []
+    for parent in PARENTS:
+        depth.append(0 if parent < 0 else depth[parent] + 1)
+    return tuple(depth)
+
+
+#: Depth of each joint below the root (pelvis = 0).
+DEPTH: Final[tuple[int, ...]] = _depths()
+
+
+def indices(names: list[str] | tuple[str, ...]) -> list[int]:
+    """Joint indices for names; raises ``KeyError`` naming the first unknown joint."""
+    out = []
+    for name in names:
+        if name not in JOINT_INDEX:
+            raise KeyError(name)
+        out.append(JOINT_INDEX[name])
+    return out
+
+
+def chain_to_root(joint: str) -> list[str]:
+    """Joints strictly between ``joint`` and the root, nearest first (the "chain")."""
+    chain: list[str] = []
+    parent = PARENT_NAMES[joint]
+    while parent is not None and parent != ROOT:
+        chain.append(parent)
+        parent = PARENT_NAMES[parent]
+    return chain
+
+
+def bone_lengths(positions: npt.NDArray[np.floating]) -> npt.NDArray[np.floating]:
+    """Lengths of every bone, ``[..., 21, 3] -> [..., 20]`` in the order of ``BONES``."""
+    diff = positions[..., BONE_CHILDREN, :] - positions[..., BONE_PARENTS, :]
+    return np.asarray(np.linalg.norm(diff, axis=-1))
+
+
+def set_key(joints: list[str] | tuple[str, ...] | frozenset[str]) -> str:
+    """The manifest key of a target joint set: sorted names joined by '+'."""
+    return "+".join(sorted(joints))

@@ -1,0 +1,1 @@
+"""Marionette trainer: mocap -> canonical dataset -> models -> ONNX + manifest."""
