@@ -55,12 +55,13 @@ class RigidTransform:
 
     def to_world(self, canonical: FloatArray) -> FloatArray:
         """``[..., J, 3]`` canonical -> world."""
-        return np.einsum("...ij,...kj->...ki", self.rotation, canonical) + self.translation[..., None, :]
+        out = np.einsum("...ij,...kj->...ki", self.rotation, canonical)
+        return np.asarray(out + self.translation[..., None, :])
 
     def to_canonical(self, world: FloatArray) -> FloatArray:
         """``[..., J, 3]`` world -> canonical."""
         local = world - self.translation[..., None, :]
-        return np.einsum("...ji,...kj->...ki", self.rotation, local)
+        return np.asarray(np.einsum("...ji,...kj->...ki", self.rotation, local))
 
 
 def canonical_transform(positions: FloatArray) -> RigidTransform:

@@ -1,0 +1,236 @@
+"""The model manifest: one versioned schema, written by the trainer, validated on load.
+
+``models/manifest.json`` describes the skeleton the models were trained for, how poses
+are normalised (inside the exported graphs) and every ONNX file with its sha256, its
+inputs and outputs, its kind and target joint set, and where it came from.
+
+Schema version 1. Kinds:
+
+* ``autoencoder`` (``part`` = ``encoder``: ``pose [N,63] -> latent [N,D]``;
+  ``part`` = ``decoder``: ``latent [N,D] -> pose [N,63]``). Poses are canonical,
+  metres, joint-major (x, y, z per joint in skeleton order).
+* ``solver``: ``latent [N,D], targets [N,3k] -> solved_latent [N,D]``; ``joints`` lists the k
+  target joints in the order of the ``targets`` input; ``key`` is the sorted set key.
+* ``completion``: ``keypoints [N,3k] -> pose [N,63]``; ``joints`` lists the key points,
+  ``level`` orders the nested schemes (1 = the six base points).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import tempfile
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from service.skeleton import FRAME, JOINT_NAMES, NUM_JOINTS, PARENT_NAMES, set_key
+
+SCHEMA_VERSION = 1
+MANIFEST_NAME = "manifest.json"
+
+
+class ManifestError(Exception):
+    """The manifest or one of its model files is missing, malformed or tampered with."""
+
+    def __init__(self, path: Path | str, reason: str) -> None:
+        super().__init__(f"{path}: {reason}")
+        self.path = str(path)
+        self.reason = reason
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class TensorSpec(_Strict):
+    name: str
+    shape: list[int | str]
+    dtype: Literal["float32"] = "float32"
+
+
+class SkeletonSpec(_Strict):
+    joints: list[str]
+    parents: list[str | None]
+    reference_bone_lengths: dict[str, float] = Field(
+        description="Mean length (m) of the bone ending at each non-root joint, train split."
+    )
+    frame: dict[str, str]
+
+    @model_validator(mode="after")
+    def _matches_canonical(self) -> SkeletonSpec:
+        if tuple(self.joints) != JOINT_NAMES:
+            raise ValueError("skeleton joints differ from the canonical skeleton")
+        if self.parents != [PARENT_NAMES[j] for j in JOINT_NAMES]:
+            raise ValueError("skeleton parents differ from the canonical skeleton")
+        expected = {j for j in JOINT_NAMES if PARENT_NAMES[j] is not None}
+        if set(self.reference_bone_lengths) != expected:
+            raise ValueError("reference_bone_lengths must name every non-root joint")
+        if any(not (0.0 < v < 2.0) for v in self.reference_bone_lengths.values()):
+            raise ValueError("reference bone lengths must be in (0, 2) metres")
+        if self.frame != FRAME:
+            raise ValueError(f"frame conventions differ from {FRAME}")
+        return self
+
+
+class Normalisation(_Strict):
+    """Per-feature statistics of the train split; applied inside the exported graphs."""
+
+    inside_graphs: Literal[True] = True
+    mean: list[float] = Field(min_length=3 * NUM_JOINTS, max_length=3 * NUM_JOINTS)
+    std: list[float] = Field(min_length=3 * NUM_JOINTS, max_length=3 * NUM_JOINTS)
+    std_floor: float = Field(gt=0)
+
+
+class ModelEntry(_Strict):
+    name: str
+    kind: Literal["autoencoder", "solver", "completion"]
+    part: Literal["encoder", "decoder"] | None = None
+    file: str
+    sha256: str = Field(pattern=r"^[0-9a-f]{64}$")
+    bytes: int = Field(gt=0)
+    parameters: int = Field(gt=0)
+    inputs: list[TensorSpec]
+    outputs: list[TensorSpec]
+    joints: list[str] = Field(default_factory=list)
+    key: str | None = None
+    level: int | None = None
+    losses: dict[str, float] = Field(default_factory=dict)
+    metrics: dict[str, float] = Field(default_factory=dict)
+
+    @model_validator(mode="after")
+    def _consistent(self) -> ModelEntry:
+        unknown = [j for j in self.joints if j not in PARENT_NAMES]
+        if unknown:
+            raise ValueError(f"model {self.name}: unknown joints {unknown}")
+        if self.kind == "autoencoder" and self.part is None:
+            raise ValueError(f"model {self.name}: an autoencoder entry needs a part")
+        if self.kind == "solver" and (not self.joints or self.key != set_key(self.joints)):
+            raise ValueError(f"model {self.name}: solver key must be the sorted joint set")
+        if self.kind == "completion" and (self.level is None or not self.joints):
+            raise ValueError(f"model {self.name}: a completion entry needs joints and a level")
+        if Path(self.file).name != self.file:
+            raise ValueError(f"model {self.name}: file must be a bare file name")
+        return self
+
+
+class Provenance(_Strict):
+    data: list[dict[str, str]] = Field(description="Archives used: name and sha256.")
+    dataset: dict[str, Any] = Field(default_factory=dict)
+    split_seed: int
+    config: dict[str, Any]
+    git_commit: str
+    versions: dict[str, str]
+    training_seconds: dict[str, float] = Field(default_factory=dict)
+
+
+class Manifest(_Strict):
+    schema_version: Literal[1] = 1
+    version: str = Field(description="Model release identifier, served as `model`.")
+    licence: str
+    opset: int
+    latent_dim: int = Field(gt=0)
+    skeleton: SkeletonSpec
+    normalisation: Normalisation
+    models: list[ModelEntry]
+    provenance: Provenance
+
+    @model_validator(mode="after")
+    def _complete(self) -> Manifest:
+        names = [m.name for m in self.models]
+        if len(names) != len(set(names)):
+            raise ValueError("model names must be unique")
+        parts = {m.part for m in self.models if m.kind == "autoencoder"}
+        if parts != {"encoder", "decoder"}:
+            raise ValueError("the manifest needs one encoder and one decoder")
+        keys = [m.key for m in self.models if m.kind == "solver"]
+        if len(keys) != len(set(keys)):
+            raise ValueError("solver target sets must be unique")
+        levels = sorted(m.level for m in self.models if m.kind == "completion" and m.level)
+        if levels and levels != list(range(1, len(levels) + 1)):
+            raise ValueError("completion levels must be 1..n")
+        return self
+
+    # -- convenience views -------------------------------------------------------------
+    def autoencoder(self, part: Literal["encoder", "decoder"]) -> ModelEntry:
+        return next(m for m in self.models if m.kind == "autoencoder" and m.part == part)
+
+    def solvers(self) -> dict[str, ModelEntry]:
+        return {str(m.key): m for m in self.models if m.kind == "solver"}
+
+    def completion_levels(self) -> list[ModelEntry]:
+        return sorted(
+            (m for m in self.models if m.kind == "completion"), key=lambda m: m.level or 0
+        )
+
+
+def sha256_file(path: Path) -> str:
+    digest = hashlib.sha256()
+    with path.open("rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def load_manifest(models_dir: Path | str, *, verify: bool = True) -> Manifest:
+    """Read and validate ``models_dir/manifest.json``; with ``verify``, check every file.
+
+    Raises ``ManifestError`` naming the file and the reason (missing, not JSON, schema
+    violation, size or sha256 mismatch).
+    """
+    models_dir = Path(models_dir)
+    path = models_dir / MANIFEST_NAME
+    try:
+        raw = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise ManifestError(path, "missing") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ManifestError(path, f"not readable JSON ({exc})") from None
+    try:
+        manifest = Manifest.model_validate(raw)
+    except ValidationError as exc:
+        problems = "; ".join(
+            f"{'.'.join(str(p) for p in e['loc']) or '<root>'}: {e['msg']}" for e in exc.errors()
+        )
+        raise ManifestError(path, f"invalid manifest ({problems})") from None
+    if verify:
+        for entry in manifest.models:
+            verify_entry(models_dir, entry)
+    return manifest
+
+
+def verify_entry(models_dir: Path, entry: ModelEntry) -> None:
+    """Check one model file's presence, size and sha256 against the manifest."""
+    file = models_dir / entry.file
+    if not file.is_file():
+        raise ManifestError(file, "model file missing")
+    size = file.stat().st_size
+    if size != entry.bytes:
+        raise ManifestError(file, f"size {size} bytes, manifest says {entry.bytes}")
+    digest = sha256_file(file)
+    if digest != entry.sha256:
+        raise ManifestError(file, f"sha256 {digest[:12]}… does not match the manifest")
+
+
+def write_atomic(path: Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` through a temporary file and an atomic rename."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def write_manifest(models_dir: Path, manifest: Manifest) -> Path:
+    path = Path(models_dir) / MANIFEST_NAME
+    text = json.dumps(manifest.model_dump(mode="json"), indent=2, sort_keys=False) + "\n"
+    write_atomic(path, text.encode("utf-8"))
+    return path

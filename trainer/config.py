@@ -1,0 +1,160 @@
+"""Training configuration: one TOML file, validated; every number of the method lives here."""
+
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+from service.skeleton import JOINT_NAMES
+
+BASE_KEYPOINTS: tuple[str, ...] = (
+    "pelvis",
+    "neck",
+    "left_wrist",
+    "right_wrist",
+    "left_ankle",
+    "right_ankle",
+)
+
+
+class _Section(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+def _check_joints(sets: list[list[str]]) -> list[list[str]]:
+    for joints in sets:
+        unknown = [j for j in joints if j not in JOINT_NAMES]
+        if unknown:
+            raise ValueError(f"unknown joints {unknown}")
+        if not joints or len(set(joints)) != len(joints):
+            raise ValueError(f"a joint set must be non-empty and without repeats: {joints}")
+    return sets
+
+
+class AutoencoderConfig(_Section):
+    hidden: list[int] = Field(default=[200, 200], min_length=1)
+    latent: int = Field(default=64, gt=0)
+    lr: float = Field(default=1e-4, gt=0)
+    batch_size: int = Field(default=256, gt=0)
+    epochs: int = Field(default=20, ge=1)
+    std_floor: float = Field(default=0.01, gt=0, description="Floor of per-feature std (m).")
+
+
+class SolverConfig(_Section):
+    hidden: list[int] = Field(default=[126, 126, 126], min_length=1)
+    residual: bool = Field(default=True, description="Output z + f(z, targets).")
+    lr: float = Field(default=1e-4, gt=0)
+    batch_size: int = Field(default=256, gt=0)
+    epochs: int = Field(default=5, ge=1)
+    max_gap_seconds: float = Field(default=1.0, gt=0)
+    other_weight: float = Field(default=0.01, ge=0)
+    sets: list[list[str]] = Field(
+        default=[
+            ["head"],
+            ["pelvis"],
+            ["left_wrist"],
+            ["right_wrist"],
+            ["left_elbow"],
+            ["right_elbow"],
+            ["left_ankle"],
+            ["right_ankle"],
+            ["left_knee"],
+            ["right_knee"],
+            ["left_foot"],
+            ["right_foot"],
+            ["left_wrist", "right_wrist"],
+            ["left_ankle", "right_ankle"],
+        ]
+    )
+
+    _v = field_validator("sets")(_check_joints)
+
+
+class CompletionConfig(_Section):
+    schemes: list[list[str]] = Field(
+        default=[
+            list(BASE_KEYPOINTS),
+            ["head", "left_elbow", "right_elbow", "left_knee", "right_knee"],
+            ["spine2", "left_shoulder", "right_shoulder", "left_foot", "right_foot"],
+        ],
+        description="Nested schemes: level n's key points are the union of the first n lists.",
+    )
+    hidden: list[int] = Field(default=[300, 400, 300, 200], min_length=1)
+    activation: Literal["selu", "relu"] = "selu"
+    lr: float = Field(default=1e-3, gt=0)
+    weight_decay: float = Field(default=1e-5, ge=0, description="L2 regularisation.")
+    batch_size: int = Field(default=256, gt=0)
+    epochs: int = Field(default=6, ge=1)
+    mirror: bool = True
+    yaw: bool = True
+    fill_probability: float = Field(
+        default=0.5,
+        ge=0,
+        le=1,
+        description="Chance that an optional key point of level n>1 is replaced, in "
+        "training, by the previous level's prediction (as at serving time).",
+    )
+
+    _v = field_validator("schemes")(_check_joints)
+
+    @field_validator("schemes")
+    @classmethod
+    def _nested(cls, schemes: list[list[str]]) -> list[list[str]]:
+        if sorted(schemes[0]) != sorted(BASE_KEYPOINTS):
+            raise ValueError(f"scheme 1 must be the six base points {list(BASE_KEYPOINTS)}")
+        seen: set[str] = set()
+        for level in schemes:
+            if seen & set(level):
+                raise ValueError(f"schemes repeat joints: {sorted(seen & set(level))}")
+            seen |= set(level)
+        return schemes
+
+    def level_joints(self, level: int) -> list[str]:
+        """Key points of level ``level`` (1-based): the union of the first ``level`` lists."""
+        out: list[str] = []
+        for joints in self.schemes[:level]:
+            out.extend(joints)
+        return out
+
+
+class TrainConfig(_Section):
+    seed: int = 0
+    threads: int = Field(
+        default=2, ge=1, description="torch intra-op threads (results depend on it)."
+    )
+    dataset: str = "data/poses.npz"
+    run_dir: str = "runs/default"
+    out_dir: str = "models"
+    opset: int = 18
+    max_train_frames: int | None = Field(default=None, description="Cap, for smoke runs.")
+    max_eval_frames: int = 20000
+    autoencoder: AutoencoderConfig = AutoencoderConfig()
+    solver: SolverConfig = SolverConfig()
+    completion: CompletionConfig = CompletionConfig()
+
+
+def load_config(path: Path | str | None, overrides: dict[str, Any] | None = None) -> TrainConfig:
+    """Load a TOML config (or the defaults), then apply ``overrides`` (shallow per section)."""
+    data: dict[str, Any] = {}
+    if path is not None:
+        with Path(path).open("rb") as fh:
+            data = tomllib.load(fh)
+    for key, value in (overrides or {}).items():
+        if isinstance(value, dict):
+            data[key] = {**data.get(key, {}), **value}
+        else:
+            data[key] = value
+    return TrainConfig.model_validate(data)
+
+
+#: Overrides of ``--quick``: a seconds-long smoke run of every stage.
+QUICK: dict[str, Any] = {
+    "max_train_frames": 4000,
+    "max_eval_frames": 1000,
+    "autoencoder": {"epochs": 2},
+    "solver": {"epochs": 1},
+    "completion": {"epochs": 1},
+}

@@ -1,0 +1,319 @@
+"""Evaluation on val/test, ONNX export with parity checks, and the manifest."""
+
+from __future__ import annotations
+
+import hashlib
+import platform
+import subprocess
+import tempfile
+import warnings
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import onnx
+import onnxruntime as ort
+import torch
+from torch import nn
+
+from service.manifest import (
+    SCHEMA_VERSION,
+    Manifest,
+    ModelEntry,
+    Normalisation,
+    Provenance,
+    SkeletonSpec,
+    TensorSpec,
+    sha256_file,
+    write_atomic,
+    write_manifest,
+)
+from service.skeleton import BONES, FRAME, JOINT_NAMES, NUM_JOINTS, PARENT_NAMES, bone_lengths
+from trainer.config import TrainConfig
+from trainer.models import SingleSolver, TiedAutoencoder, target_columns
+from trainer.train import (
+    FPS,
+    PairSource,
+    Trained,
+    augment,
+    completion_inputs,
+    flat,
+    mpjpe_cm,
+    solver_metrics,
+)
+
+PARITY_TOLERANCE = 1e-5
+LICENCE = (
+    "CC BY-NC 4.0 (non-commercial): trained on the Bandai-Namco-Research-Motiondataset "
+    "(CC BY-NC 4.0) and CMU motion capture. See models/README.md."
+)
+
+
+class EncoderGraph(nn.Module):
+    def __init__(self, ae: TiedAutoencoder) -> None:
+        super().__init__()
+        self.ae = ae
+
+    def forward(self, pose: torch.Tensor) -> torch.Tensor:
+        return self.ae.encode(pose)
+
+
+class DecoderGraph(nn.Module):
+    def __init__(self, ae: TiedAutoencoder) -> None:
+        super().__init__()
+        self.ae = ae
+
+    def forward(self, latent: torch.Tensor) -> torch.Tensor:
+        return self.ae.decode(latent)
+
+
+def evaluate(cfg: TrainConfig, trained: Trained) -> dict[str, dict[str, dict[str, float]]]:
+    """Metrics (cm) on val and test for every model: ``{model name: {split: {metric}}}``."""
+    ae, bank = trained.ae, trained.bank
+    out: dict[str, dict[str, dict[str, float]]] = {}
+    max_gap = max(1, round(cfg.solver.max_gap_seconds * FPS))
+    with torch.no_grad():
+        for split in ("val", "test"):
+            data = getattr(trained.splits, split)
+            poses = flat(data.positions)
+            rng = np.random.default_rng(cfg.seed + 100)
+            if len(poses) > cfg.max_eval_frames:
+                sel = np.sort(rng.choice(len(poses), cfg.max_eval_frames, replace=False))
+                sub = poses[torch.from_numpy(sel)]
+            else:
+                sub = poses
+            out.setdefault("autoencoder", {})[split] = {"mpjpe_cm": mpjpe_cm(ae(sub), sub)}
+            src = PairSource.of(data, max_gap)
+            a, p = src.fixed_pairs(cfg.seed + 101, cfg.max_eval_frames)
+            for key, metrics in solver_metrics(ae, bank, src.poses[a], src.poses[p]).items():
+                out.setdefault(f"solver:{key}", {})[split] = metrics
+            aug = augment(sub, np.random.default_rng(cfg.seed + 102), True, True)
+            for level, net in enumerate(trained.completion, start=1):
+                pred = net(completion_inputs(trained.completion, level, aug, None))
+                out.setdefault(f"completion:{level}", {})[split] = {"mpjpe_cm": mpjpe_cm(pred, aug)}
+    return out
+
+
+def _export(
+    module: nn.Module,
+    args: tuple[torch.Tensor, ...],
+    input_names: list[str],
+    output_name: str,
+    path: Path,
+    opset: int,
+) -> None:
+    module.eval()
+    batch = torch.export.Dim("batch", min=1, max=1 << 20)
+    arg_names = list(module.forward.__code__.co_varnames[1 : 1 + len(args)])
+    dynamic = {n: {0: batch} for n in arg_names}
+    with warnings.catch_warnings(), tempfile.TemporaryDirectory() as tmp:
+        warnings.simplefilter("ignore")
+        program = torch.onnx.export(
+            module,
+            args,
+            input_names=input_names,
+            output_names=[output_name],
+            dynamic_shapes=dynamic,
+            opset_version=opset,
+            dynamo=True,
+            verbose=False,
+        )
+        assert program is not None
+        tmp_path = Path(tmp) / path.name
+        program.save(str(tmp_path))
+        model = onnx.load(str(tmp_path))
+    model.producer_name = "marionette-trainer"
+    model.doc_string = ""
+    onnx.checker.check_model(model, full_check=True)
+    write_atomic(path, model.SerializeToString())
+
+
+def _parity(path: Path, module: nn.Module, feeds: dict[str, torch.Tensor]) -> float:
+    """Max |ORT - torch| on real inputs; raises if above the tolerance."""
+    options = ort.SessionOptions()
+    options.intra_op_num_threads = 1
+    session = ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
+    got = session.run(None, {k: v.numpy() for k, v in feeds.items()})[0]
+    with torch.no_grad():
+        want = module(*feeds.values()).numpy()
+    err = float(np.abs(got - want).max())
+    if not err <= PARITY_TOLERANCE:
+        raise RuntimeError(f"{path.name}: ONNX/torch mismatch {err:.3g} > {PARITY_TOLERANCE}")
+    return err
+
+
+def _git_commit() -> str:
+    try:
+        head = subprocess.run(
+            ["git", "rev-parse", "HEAD"], capture_output=True, text=True, check=True
+        ).stdout.strip()
+        dirty = subprocess.run(
+            ["git", "status", "--porcelain", "--untracked-files=no"],
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout.strip()
+        return head + ("-dirty" if dirty else "")
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+
+
+def _params(module: nn.Module) -> int:
+    return sum(p.numel() for p in module.parameters())
+
+
+def export_all(
+    cfg: TrainConfig,
+    trained: Trained,
+    metrics: dict[str, dict[str, dict[str, float]]],
+    out_dir: Path | None = None,
+) -> Manifest:
+    """Export every network to ``out_dir`` and write the manifest (atomic writes)."""
+    out = Path(out_dir or cfg.out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    ae, bank = trained.ae, trained.bank
+    val = flat(trained.splits.val.positions)
+    sample = val[: min(len(val), 512)]
+    latent = ae.latent_dim
+    entries: list[ModelEntry] = []
+    losses = {k: s.history[-1] for k, s in trained.states.items() if s.history}
+
+    def add(
+        name: str,
+        file: str,
+        module: nn.Module,
+        feeds: dict[str, torch.Tensor],
+        output: str,
+        params: int,
+        **extra: Any,
+    ) -> None:
+        path = out / file
+        _export(module, tuple(feeds.values()), list(feeds), output, path, cfg.opset)
+        _parity(path, module, feeds)
+        with torch.no_grad():
+            out_dim = module(*feeds.values()).shape[1]
+        stage = extra.pop("stage")
+        entries.append(
+            ModelEntry(
+                name=name,
+                file=file,
+                sha256=sha256_file(path),
+                bytes=path.stat().st_size,
+                parameters=params,
+                inputs=[TensorSpec(name=k, shape=["batch", v.shape[1]]) for k, v in feeds.items()],
+                outputs=[TensorSpec(name=output, shape=["batch", out_dim])],
+                losses={k: float(v) for k, v in losses.get(stage, {}).items() if k != "epoch"},
+                metrics={
+                    f"{split}_{m}": v
+                    for split, values in (
+                        metrics.get(name) or metrics.get(name.split(":")[0], {})
+                    ).items()
+                    for m, v in values.items()
+                },
+                **extra,
+            )
+        )
+
+    with torch.no_grad():
+        z = ae.encode(sample)
+    ae_params = _params(ae)
+    add(
+        "autoencoder",
+        "encoder.onnx",
+        EncoderGraph(ae),
+        {"pose": sample},
+        "latent",
+        ae_params,
+        kind="autoencoder",
+        part="encoder",
+        stage="autoencoder",
+    )
+    add(
+        "autoencoder:decoder",
+        "decoder.onnx",
+        DecoderGraph(ae),
+        {"latent": z},
+        "pose",
+        ae_params,
+        kind="autoencoder",
+        part="decoder",
+        stage="autoencoder",
+    )
+    for index, joints in enumerate(bank.sets):
+        key = "+".join(sorted(joints))
+        solver = SingleSolver(bank, index).eval()
+        feeds = {"latent": z, "targets": sample[:, target_columns(joints)]}
+        add(
+            f"solver:{key}",
+            f"solver_{key}.onnx",
+            solver,
+            feeds,
+            "solved_latent",
+            _params(solver),
+            kind="solver",
+            joints=list(joints),
+            key=key,
+            stage="solvers",
+        )
+    aug = augment(sample, np.random.default_rng(0), True, True)
+    for level, net in enumerate(trained.completion, start=1):
+        keypoints = completion_inputs(trained.completion, level, aug, None)
+        add(
+            f"completion:{level}",
+            f"completion_{level}.onnx",
+            net,
+            {"keypoints": keypoints},
+            "pose",
+            _params(net),
+            kind="completion",
+            joints=list(net.joints),
+            level=level,
+            stage=f"completion{level}",
+        )
+
+    train_poses = trained.splits.train.positions
+    lengths = bone_lengths(train_poses.astype(np.float64)).mean(axis=0)
+    ref = {JOINT_NAMES[child]: round(float(lengths[i]), 6) for i, (child, _) in enumerate(BONES)}
+    data_meta = dict(trained.splits.train.meta)
+    archives = [
+        {"name": str(a.get("name")), "sha256": str(a.get("sha256"))}
+        for a in data_meta.get("archives", [])
+    ]
+    version = "mx1-" + hashlib.sha256("".join(e.sha256 for e in entries).encode()).hexdigest()[:12]
+    manifest = Manifest(
+        schema_version=SCHEMA_VERSION,
+        version=version,
+        licence=LICENCE,
+        opset=cfg.opset,
+        latent_dim=latent,
+        skeleton=SkeletonSpec(
+            joints=list(JOINT_NAMES),
+            parents=[PARENT_NAMES[j] for j in JOINT_NAMES],
+            reference_bone_lengths=ref,
+            frame=dict(FRAME),
+        ),
+        normalisation=Normalisation(
+            mean=[float(v) for v in ae.norm.mean],
+            std=[float(v) for v in ae.norm.std],
+            std_floor=cfg.autoencoder.std_floor,
+        ),
+        models=entries,
+        provenance=Provenance(
+            data=archives,
+            dataset={k: v for k, v in data_meta.items() if k != "archives"},
+            split_seed=int(data_meta.get("seed", 0)),
+            config=cfg.model_dump(mode="json"),
+            git_commit=_git_commit(),
+            versions={
+                "python": platform.python_version(),
+                "torch": torch.__version__,
+                "onnx": onnx.__version__,
+                "onnxruntime": ort.__version__,
+                "numpy": np.__version__,
+            },
+            training_seconds={k: round(s.seconds, 1) for k, s in trained.states.items()},
+        ),
+    )
+    write_manifest(out, manifest)
+    assert sample.shape[1] == NUM_JOINTS * 3
+    return manifest

@@ -1,0 +1,598 @@
+"""Training of the autoencoder, the solver bank and the completion levels.
+
+Single process or under ``torchrun --nproc_per_node N`` (DDP, gloo, DistributedSampler;
+rank 0 writes). Every stage checkpoints each epoch into ``run_dir`` and resumes from
+there; all randomness comes from generators seeded by (seed, stage, epoch), so a resumed
+run ends with the same weights as an uninterrupted one.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import math
+import os
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+import torch.distributed as dist
+from rich.console import Console
+from rich.table import Table
+from torch import nn
+from torch.nn.parallel import DistributedDataParallel
+from torch.utils.data import DistributedSampler
+from tqdm import tqdm
+
+from service.manifest import write_atomic
+from service.skeleton import JOINT_INDEX, MIRROR, NUM_JOINTS
+from trainer.config import TrainConfig
+from trainer.data.dataset import PoseDataset, load_dataset
+from trainer.models import (
+    CompletionNet,
+    Normaliser,
+    SolverBank,
+    TiedAutoencoder,
+    feature_stats,
+    target_columns,
+)
+from trainer.pairs import partner_ranges, sample_partners
+
+console = Console(stderr=True)
+FPS = 30
+
+
+# --------------------------------------------------------------------------------------
+# Process group
+# --------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Dist:
+    rank: int = 0
+    world: int = 1
+
+    @property
+    def main(self) -> bool:
+        return self.rank == 0
+
+    def barrier(self) -> None:
+        if self.world > 1:
+            dist.barrier()
+
+
+def init_distributed() -> Dist:
+    """Join the torchrun process group when launched by torchrun, else single process."""
+    world = int(os.environ.get("WORLD_SIZE", "1"))
+    if world > 1 and not dist.is_initialized():
+        dist.init_process_group(backend="gloo")
+    if world > 1:
+        return Dist(rank=dist.get_rank(), world=dist.get_world_size())
+    return Dist()
+
+
+def seed_all(seed: int) -> None:
+    torch.manual_seed(seed)
+
+
+def stage_rng(seed: int, stage: str, epoch: int) -> np.random.Generator:
+    digest = hashlib.sha256(f"{seed}:{stage}:{epoch}".encode()).digest()
+    return np.random.default_rng(int.from_bytes(digest[:8], "little"))
+
+
+# --------------------------------------------------------------------------------------
+# Data
+# --------------------------------------------------------------------------------------
+@dataclass
+class Splits:
+    train: PoseDataset
+    val: PoseDataset
+    test: PoseDataset
+
+
+def load_splits(cfg: TrainConfig) -> Splits:
+    data = load_dataset(cfg.dataset)
+    train = data.subset(data.split_mask("train"))
+    if cfg.max_train_frames is not None and len(train.positions) > cfg.max_train_frames:
+        # whole clips, in order, until the cap: keeps pairs inside clips
+        clips = np.unique(train.clip)
+        rng = np.random.default_rng(cfg.seed)
+        rng.shuffle(clips)
+        sizes = np.array([(train.clip == c).sum() for c in clips])
+        keep = clips[: max(1, int(np.searchsorted(np.cumsum(sizes), cfg.max_train_frames)) + 1)]
+        train = train.subset(np.isin(train.clip, keep))
+    return Splits(
+        train=train,
+        val=data.subset(data.split_mask("val")),
+        test=data.subset(data.split_mask("test")),
+    )
+
+
+def flat(positions: np.ndarray) -> torch.Tensor:
+    return torch.from_numpy(np.ascontiguousarray(positions.reshape(len(positions), -1), np.float32))
+
+
+def batches(n: int, batch_size: int, d: Dist, seed: int, epoch: int) -> Iterator[torch.Tensor]:
+    """Shuffled index batches of this rank's shard (DistributedSampler semantics)."""
+    sampler: DistributedSampler[int] = DistributedSampler(
+        range(n),  # type: ignore[arg-type]  # any Sized works num_replicas=d.world, rank=d.rank, shuffle=True, seed=seed, drop_last=True
+    )
+    sampler.set_epoch(epoch)
+    idx = torch.tensor(list(iter(sampler)), dtype=torch.long)
+    for start in range(0, len(idx) - batch_size + 1, batch_size):
+        yield idx[start : start + batch_size]
+
+
+def steps_per_epoch(n: int, batch_size: int, d: Dist) -> int:
+    return (n // d.world) // batch_size
+
+
+# --------------------------------------------------------------------------------------
+# Checkpoints
+# --------------------------------------------------------------------------------------
+@dataclass
+class StageState:
+    epoch: int = 0  # epochs completed
+    history: list[dict[str, float]] = field(default_factory=list)
+    seconds: float = 0.0
+
+
+def save_checkpoint(
+    path: Path, model: nn.Module, optim: torch.optim.Optimizer, state: StageState, tag: str
+) -> None:
+    buf = io.BytesIO()
+    torch.save(
+        {
+            "tag": tag,
+            "epoch": state.epoch,
+            "history": state.history,
+            "seconds": state.seconds,
+            "model": model.state_dict(),
+            "optim": optim.state_dict(),
+        },
+        buf,
+    )
+    write_atomic(path, buf.getvalue())
+
+
+def load_checkpoint(
+    path: Path, model: nn.Module, optim: torch.optim.Optimizer, tag: str
+) -> StageState:
+    if not path.exists():
+        return StageState()
+    ckpt = torch.load(path, map_location="cpu", weights_only=False)
+    if ckpt.get("tag") != tag:
+        console.print(f"[yellow]{path.name}: written by another config; starting the stage anew")
+        return StageState()
+    model.load_state_dict(ckpt["model"])
+    optim.load_state_dict(ckpt["optim"])
+    return StageState(epoch=ckpt["epoch"], history=ckpt["history"], seconds=ckpt["seconds"])
+
+
+def config_tag(cfg: TrainConfig, stage: str) -> str:
+    relevant: dict[str, Any] = {
+        "seed": cfg.seed,
+        "dataset": cfg.dataset,
+        "max_train_frames": cfg.max_train_frames,
+        "autoencoder": cfg.autoencoder.model_dump(),
+    }
+    if stage.startswith("solver"):
+        relevant["solver"] = cfg.solver.model_dump()
+    if stage.startswith("completion"):
+        relevant["completion"] = cfg.completion.model_dump()
+    text = json.dumps(relevant, sort_keys=True)
+    return f"{stage}:{hashlib.sha256(text.encode()).hexdigest()[:16]}"
+
+
+def epoch_table(title: str, history: list[dict[str, float]]) -> Table:
+    table = Table(title=title)
+    keys = list(history[0].keys()) if history else []
+    for key in keys:
+        table.add_column(key, justify="right")
+    for row in history:
+        table.add_row(*(f"{row[k]:.0f}" if k == "epoch" else f"{row[k]:.5g}" for k in keys))
+    return table
+
+
+def run_stage(
+    *,
+    name: str,
+    cfg: TrainConfig,
+    d: Dist,
+    model: nn.Module,
+    trainable: nn.Module,
+    optim: torch.optim.Optimizer,
+    epochs: int,
+    steps: int,
+    train_epoch: Callable[[int, tqdm[Any]], float],
+    validate: Callable[[], dict[str, float]],
+    fresh: bool,
+) -> StageState:
+    """The epoch loop shared by every stage: resume, train, validate, log, checkpoint."""
+    ckpt = Path(cfg.run_dir) / f"{name}.pt"
+    tag = config_tag(cfg, name)
+    state = StageState() if fresh else load_checkpoint(ckpt, trainable, optim, tag)
+    if d.world > 1:  # every rank starts from rank 0's weights
+        for p in trainable.state_dict().values():
+            dist.broadcast(p, src=0)
+    if state.epoch >= epochs:
+        if d.main:
+            console.print(f"[green]{name}: complete in checkpoint, skipping ({state.epoch} epochs)")
+        return state
+    if state.epoch and d.main:
+        console.print(f"[cyan]{name}: resuming after epoch {state.epoch}")
+    for epoch in range(state.epoch, epochs):
+        t0 = time.perf_counter()
+        model.train()
+        with tqdm(
+            total=steps, desc=f"{name} {epoch + 1}/{epochs}", disable=not d.main, leave=False
+        ) as bar:
+            train_loss = train_epoch(epoch, bar)
+        model.eval()
+        with torch.no_grad():
+            metrics = validate()
+        state.seconds += time.perf_counter() - t0
+        state.epoch = epoch + 1
+        row = {"epoch": float(epoch + 1), "train_loss": train_loss, **metrics}
+        state.history.append(row)
+        if d.main:
+            console.print(
+                f"{name} epoch {epoch + 1}/{epochs}: "
+                + ", ".join(f"{k}={v:.5g}" for k, v in row.items() if k != "epoch")
+                + f" ({time.perf_counter() - t0:.1f}s)"
+            )
+            save_checkpoint(ckpt, trainable, optim, state, tag)
+        d.barrier()
+    if d.main:
+        console.print(epoch_table(f"{name}: losses per epoch", state.history))
+    return state
+
+
+# --------------------------------------------------------------------------------------
+# Stages
+# --------------------------------------------------------------------------------------
+def _mean_loss(total: torch.Tensor, count: int, d: Dist) -> float:
+    if d.world > 1:
+        buf = torch.tensor([float(total), float(count)], dtype=torch.float64)
+        dist.all_reduce(buf)
+        return float(buf[0]) / max(float(buf[1]), 1.0)
+    return float(total) / max(count, 1)
+
+
+def mpjpe_cm(pred: torch.Tensor, true: torch.Tensor) -> float:
+    """Mean per-joint position error in cm between flattened ``[N, 63]`` poses."""
+    diff = (pred - true).reshape(len(pred), NUM_JOINTS, 3)
+    return float(diff.norm(dim=-1).mean()) * 100.0
+
+
+def train_autoencoder(
+    cfg: TrainConfig, d: Dist, train: torch.Tensor, val: torch.Tensor, fresh: bool
+) -> tuple[TiedAutoencoder, StageState]:
+    ac = cfg.autoencoder
+    mean, std = feature_stats(train, ac.std_floor)
+    torch.manual_seed(cfg.seed)
+    ae = TiedAutoencoder(Normaliser(mean, std), ac.hidden, ac.latent)
+    net: nn.Module = DistributedDataParallel(ae) if d.world > 1 else ae
+    optim = torch.optim.Adam(ae.parameters(), lr=ac.lr)
+    steps = steps_per_epoch(len(train), ac.batch_size, d)
+
+    def train_epoch(epoch: int, bar: tqdm[Any]) -> float:
+        total, count = torch.zeros((), dtype=torch.float64), 0
+        for idx in batches(len(train), ac.batch_size, d, cfg.seed, epoch):
+            x = train[idx]
+            recon = net(x)
+            loss = nn.functional.mse_loss(ae.norm.normalise(recon), ae.norm.normalise(x))
+            optim.zero_grad(set_to_none=True)
+            loss.backward()
+            optim.step()
+            total += loss.detach().double()
+            count += 1
+            bar.update()
+        return _mean_loss(total, count, d)
+
+    def validate() -> dict[str, float]:
+        recon = ae(val)
+        loss = float(nn.functional.mse_loss(ae.norm.normalise(recon), ae.norm.normalise(val)))
+        return {"val_loss": loss, "val_mpjpe_cm": mpjpe_cm(recon, val)}
+
+    state = run_stage(
+        name="autoencoder",
+        cfg=cfg,
+        d=d,
+        model=net,
+        trainable=ae,
+        optim=optim,
+        epochs=ac.epochs,
+        steps=steps,
+        train_epoch=train_epoch,
+        validate=validate,
+        fresh=fresh,
+    )
+    ae.eval()
+    for p in ae.parameters():
+        p.requires_grad_(False)
+    return ae, state
+
+
+@dataclass(frozen=True)
+class PairSource:
+    poses: torch.Tensor
+    lo: np.ndarray
+    hi: np.ndarray
+    frame: np.ndarray
+
+    @classmethod
+    def of(cls, data: PoseDataset, max_gap: int) -> PairSource:
+        lo, hi = partner_ranges(data.clip, data.frame, max_gap)
+        return cls(poses=flat(data.positions), lo=lo, hi=hi, frame=data.frame)
+
+    def fixed_pairs(self, seed: int, limit: int) -> tuple[torch.Tensor, torch.Tensor]:
+        rng = np.random.default_rng(seed)
+        anchors = np.arange(len(self.poses))
+        if len(anchors) > limit:
+            anchors = np.sort(rng.choice(anchors, size=limit, replace=False))
+        partners = sample_partners(self.lo, self.hi, anchors, rng)
+        keep = partners != anchors
+        return torch.from_numpy(anchors[keep]), torch.from_numpy(partners[keep])
+
+
+def solver_losses(
+    ae: TiedAutoencoder,
+    bank: SolverBank,
+    net: nn.Module,
+    start: torch.Tensor,
+    goal: torch.Tensor,
+    other_weight: float,
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Per-solver loss ``[S]`` and decoded poses ``[S, B, 63]`` for a batch of pairs."""
+    n_sets = len(bank.sets)
+    z = ae.encode(start)
+    z_s = z.unsqueeze(0).expand(n_sets, -1, -1)
+    goal_s = goal.unsqueeze(0).expand(n_sets, -1, -1)
+    new_z = net(z_s, goal_s)
+    decoded = ae.decode(new_z)
+    sq = (decoded - goal_s) ** 2  # [S, B, 63]
+    target_mask = torch.zeros(n_sets, 1, goal.shape[1])
+    for s, joints in enumerate(bank.sets):
+        target_mask[s, 0, target_columns(joints)] = 1.0
+    per_col = sq.mean(dim=1)  # [S, 63]
+    tm = target_mask[:, 0]
+    target_term = (per_col * tm).sum(-1) / tm.sum(-1)
+    other_term = (per_col * (1 - tm)).sum(-1) / (1 - tm).sum(-1)
+    return target_term + other_weight * other_term, decoded
+
+
+def solver_metrics(
+    ae: TiedAutoencoder, bank: SolverBank, start: torch.Tensor, goal: torch.Tensor
+) -> dict[str, dict[str, float]]:
+    """Per solver: mean reach error of its targets and MPJPE of the whole pose (cm)."""
+    n_sets = len(bank.sets)
+    z = ae.encode(start).unsqueeze(0).expand(n_sets, -1, -1)
+    decoded = ae.decode(bank(z, goal.unsqueeze(0).expand(n_sets, -1, -1)))
+    out: dict[str, dict[str, float]] = {}
+    for s, joints in enumerate(bank.sets):
+        err = (decoded[s] - goal).reshape(len(goal), NUM_JOINTS, 3).norm(dim=-1)
+        cols = [c // 3 for c in target_columns(joints)[::3]]
+        out["+".join(sorted(joints))] = {
+            "reach_cm": float(err[:, cols].mean()) * 100.0,
+            "mpjpe_cm": float(err.mean()) * 100.0,
+        }
+    return out
+
+
+def train_solvers(
+    cfg: TrainConfig, d: Dist, ae: TiedAutoencoder, splits: Splits, fresh: bool
+) -> tuple[SolverBank, StageState]:
+    sc = cfg.solver
+    max_gap = max(1, round(sc.max_gap_seconds * FPS))
+    src = PairSource.of(splits.train, max_gap)
+    val = PairSource.of(splits.val, max_gap)
+    va, vp = val.fixed_pairs(cfg.seed + 1, cfg.max_eval_frames)
+    torch.manual_seed(cfg.seed + 1)
+    bank = SolverBank(ae.norm, sc.sets, ae.latent_dim, sc.hidden, sc.residual)
+    net: nn.Module = DistributedDataParallel(bank) if d.world > 1 else bank
+    params = [p for n, p in bank.named_parameters() if not n.startswith("norm.")]
+    optim = torch.optim.Adam(params, lr=sc.lr)
+    steps = steps_per_epoch(len(src.poses), sc.batch_size, d)
+
+    def train_epoch(epoch: int, bar: tqdm[Any]) -> float:
+        rng = stage_rng(cfg.seed, "solver-pairs", epoch)
+        partners = torch.from_numpy(sample_partners(src.lo, src.hi, np.arange(len(src.poses)), rng))
+        total, count = torch.zeros((), dtype=torch.float64), 0
+        for idx in batches(len(src.poses), sc.batch_size, d, cfg.seed + 1, epoch):
+            loss, _ = solver_losses(
+                ae, bank, net, src.poses[idx], src.poses[partners[idx]], sc.other_weight
+            )
+            loss = loss.sum()
+            optim.zero_grad(set_to_none=True)
+            loss.backward()
+            optim.step()
+            total += loss.detach().double() / len(bank.sets)
+            count += 1
+            bar.update()
+        return _mean_loss(total, count, d)
+
+    def validate() -> dict[str, float]:
+        losses, _ = solver_losses(ae, bank, bank, val.poses[va], val.poses[vp], sc.other_weight)
+        metrics = solver_metrics(ae, bank, val.poses[va], val.poses[vp])
+        return {
+            "val_loss": float(losses.mean()),
+            "val_reach_cm": float(np.mean([m["reach_cm"] for m in metrics.values()])),
+            "val_mpjpe_cm": float(np.mean([m["mpjpe_cm"] for m in metrics.values()])),
+        }
+
+    state = run_stage(
+        name="solvers",
+        cfg=cfg,
+        d=d,
+        model=net,
+        trainable=bank,
+        optim=optim,
+        epochs=sc.epochs,
+        steps=steps,
+        train_epoch=train_epoch,
+        validate=validate,
+        fresh=fresh,
+    )
+    bank.eval()
+    return bank, state
+
+
+_MIRROR_COLS = torch.tensor([3 * MIRROR[j] + k for j in range(NUM_JOINTS) for k in range(3)])
+
+
+def augment(poses: torch.Tensor, rng: np.random.Generator, mirror: bool, yaw: bool) -> torch.Tensor:
+    """Random mirror (left <-> right, x -> -x) and yaw about +Y through the pelvis axis."""
+    out = poses.reshape(len(poses), NUM_JOINTS, 3)
+    if mirror:
+        flip = torch.from_numpy(rng.random(len(poses)) < 0.5)
+        mirrored = poses[:, _MIRROR_COLS].reshape(len(poses), NUM_JOINTS, 3) * torch.tensor(
+            [-1.0, 1.0, 1.0]
+        )
+        out = torch.where(flip[:, None, None], mirrored, out)
+    if yaw:
+        angle = torch.from_numpy(rng.uniform(0.0, 2.0 * math.pi, len(poses))).float()
+        c, s = torch.cos(angle)[:, None], torch.sin(angle)[:, None]
+        x, y, z = out[..., 0], out[..., 1], out[..., 2]
+        out = torch.stack([c * x + s * z, y, -s * x + c * z], dim=-1)
+    return out.reshape(len(poses), -1)
+
+
+def completion_inputs(
+    nets: list[CompletionNet], level: int, poses: torch.Tensor, keep: torch.Tensor | None
+) -> torch.Tensor:
+    """Inputs of completion level ``level`` (1-based) for true poses ``[B, 63]``.
+
+    ``keep [B, 21]`` says which joints are given; the others are filled with the previous
+    level's prediction, chaining from level 1 exactly as the service does.
+    """
+    pred: torch.Tensor | None = None
+    for lv in range(1, level + 1):
+        joints = nets[lv - 1].joints
+        cols = target_columns(joints)
+        given = poses[:, cols]
+        if pred is not None and keep is not None:
+            mask = keep[:, [JOINT_INDEX[j] for j in joints]].repeat_interleave(3, dim=1)
+            given = torch.where(mask, given, pred[:, cols])
+        if lv == level:
+            return given
+        with torch.no_grad():
+            pred = nets[lv - 1](given)
+    raise AssertionError("unreachable")
+
+
+def train_completion(
+    cfg: TrainConfig, d: Dist, splits: Splits, fresh: bool
+) -> tuple[list[CompletionNet], list[StageState]]:
+    cc = cfg.completion
+    train = flat(splits.train.positions)
+    val = flat(splits.val.positions)
+    if len(val) > cfg.max_eval_frames:
+        sel = np.random.default_rng(cfg.seed + 2).choice(
+            len(val), cfg.max_eval_frames, replace=False
+        )
+        val = val[torch.from_numpy(np.sort(sel))]
+    val_aug = augment(val, np.random.default_rng(cfg.seed + 3), cc.mirror, cc.yaw)
+    nets: list[CompletionNet] = []
+    states: list[StageState] = []
+    base = {JOINT_INDEX[j] for j in cc.schemes[0]}
+    for level in range(1, len(cc.schemes) + 1):
+        joints = cc.level_joints(level)
+        torch.manual_seed(cfg.seed + 10 + level)
+        model = CompletionNet(joints, cc.hidden, cc.activation)
+        nets.append(model)
+        net: nn.Module = DistributedDataParallel(model) if d.world > 1 else model
+        optim = torch.optim.Adam(model.parameters(), lr=cc.lr, weight_decay=cc.weight_decay)
+        steps = steps_per_epoch(len(train), cc.batch_size, d)
+        name = f"completion{level}"
+
+        def keep_mask(n: int, rng: np.random.Generator) -> torch.Tensor:
+            keep = torch.from_numpy(rng.random((n, NUM_JOINTS)) >= cc.fill_probability)
+            keep[:, sorted(base)] = True
+            return keep
+
+        def train_epoch(
+            epoch: int,
+            bar: tqdm[Any],
+            level: int = level,
+            net: nn.Module = net,
+            optim: torch.optim.Optimizer = optim,
+        ) -> float:
+            rng = stage_rng(cfg.seed, f"completion{level}", epoch)
+            total, count = torch.zeros((), dtype=torch.float64), 0
+            for idx in batches(len(train), cc.batch_size, d, cfg.seed + 10 + level, epoch):
+                poses = augment(train[idx], rng, cc.mirror, cc.yaw)
+                keep = keep_mask(len(poses), rng) if level > 1 else None
+                x = completion_inputs(nets, level, poses, keep)
+                loss = nn.functional.mse_loss(net(x), poses)
+                optim.zero_grad(set_to_none=True)
+                loss.backward()
+                optim.step()
+                total += loss.detach().double()
+                count += 1
+                bar.update()
+            return _mean_loss(total, count, d)
+
+        def validate(level: int = level, model: CompletionNet = model) -> dict[str, float]:
+            pred = model(completion_inputs(nets, level, val_aug, None))
+            return {
+                "val_loss": float(nn.functional.mse_loss(pred, val_aug)),
+                "val_mpjpe_cm": mpjpe_cm(pred, val_aug),
+            }
+
+        states.append(
+            run_stage(
+                name=name,
+                cfg=cfg,
+                d=d,
+                model=net,
+                trainable=model,
+                optim=optim,
+                epochs=cc.epochs,
+                steps=steps,
+                train_epoch=train_epoch,
+                validate=validate,
+                fresh=fresh,
+            )
+        )
+        model.eval()
+        for p in model.parameters():
+            p.requires_grad_(False)
+    return nets, states
+
+
+@dataclass
+class Trained:
+    ae: TiedAutoencoder
+    bank: SolverBank
+    completion: list[CompletionNet]
+    states: dict[str, StageState]
+    splits: Splits
+
+
+def train_all(cfg: TrainConfig, *, fresh: bool = False) -> Trained:
+    d = init_distributed()
+    torch.set_num_threads(cfg.threads)
+    torch.use_deterministic_algorithms(True)
+    seed_all(cfg.seed)
+    Path(cfg.run_dir).mkdir(parents=True, exist_ok=True)
+    splits = load_splits(cfg)
+    if d.main:
+        console.print(
+            f"train {len(splits.train.positions)} frames, val {len(splits.val.positions)}, "
+            f"test {len(splits.test.positions)}; world size {d.world}"
+        )
+    train = flat(splits.train.positions)
+    val = flat(splits.val.positions)
+    if len(val) > cfg.max_eval_frames:
+        sel = np.random.default_rng(cfg.seed).choice(len(val), cfg.max_eval_frames, replace=False)
+        val = val[torch.from_numpy(np.sort(sel))]
+    ae, ae_state = train_autoencoder(cfg, d, train, val, fresh)
+    bank, solver_state = train_solvers(cfg, d, ae, splits, fresh)
+    completion, completion_states = train_completion(cfg, d, splits, fresh)
+    states = {"autoencoder": ae_state, "solvers": solver_state}
+    states.update({f"completion{i + 1}": s for i, s in enumerate(completion_states)})
+    return Trained(ae=ae, bank=bank, completion=completion, states=states, splits=splits)
