@@ -118,7 +118,12 @@ def flat(positions: np.ndarray) -> torch.Tensor:
 def batches(n: int, batch_size: int, d: Dist, seed: int, epoch: int) -> Iterator[torch.Tensor]:
     """Shuffled index batches of this rank's shard (DistributedSampler semantics)."""
     sampler: DistributedSampler[int] = DistributedSampler(
-        range(n),  # type: ignore[arg-type]  # any Sized works num_replicas=d.world, rank=d.rank, shuffle=True, seed=seed, drop_last=True
+        range(n),  # type: ignore[arg-type]  # any Sized works
+        num_replicas=d.world,
+        rank=d.rank,
+        shuffle=True,
+        seed=seed,
+        drop_last=True,
     )
     sampler.set_epoch(epoch)
     idx = torch.tensor(list(iter(sampler)), dtype=torch.long)

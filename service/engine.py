@@ -1,0 +1,459 @@
+"""The data plane: validated requests in, poses out. onnxruntime + numpy, no torch.
+
+A solve, for each item (world space in, world space out):
+
+1. canonicalise the start pose like the dataset (pelvis floor projection to the origin,
+   yaw to face +Z) and divide by the character's scale (its summed bone lengths over the
+   reference skeleton's), so the networks see the size they were trained on;
+2. ``method=neural``: encode, run the solver sequence that covers the target set
+   (``composition_passes`` cycles through it), decode; targets on joints that no trained
+   solver covers are then placed by a FABRIK polish that holds the solved targets;
+   ``method=fabrik``: full-body FABRIK from the start pose, no learned prior;
+3. scale back, restore the INPUT pose's bone lengths (root outwards), optionally polish
+   onto the targets exactly (``reach=exact``), and transform back to the world.
+
+Batches run one onnxruntime call per stage: one encoder run for every neural item, one
+run per solver for the items whose sequence uses it, one decoder run.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+import onnxruntime as ort
+
+from service import kinematics
+from service.errors import InvalidRequest
+from service.geometry import canonical_transform
+from service.manifest import Manifest, ModelEntry, load_manifest
+from service.skeleton import (
+    BONES,
+    JOINT_INDEX,
+    JOINT_NAMES,
+    NUM_JOINTS,
+    bone_lengths,
+    set_key,
+)
+
+F64 = npt.NDArray[np.float64]
+MAX_COORDINATE = 1.0e4  # metres; beyond this a coordinate is rejected as nonsense
+MIN_BONE = 1.0e-4  # metres; shorter bones make a pose degenerate
+
+
+# --------------------------------------------------------------------------------------
+# Validated problems
+# --------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class SolveProblem:
+    pose: F64  # [21, 3] world
+    target_idx: npt.NDArray[np.intp]  # [K] targets, then pins
+    target_pos: F64  # [K, 3] world
+    weights: F64  # [K]
+    n_targets: int  # the first n entries are user targets; the rest are pins
+    method: str = "neural"
+    preserve_bone_lengths: bool = True
+    reach: str = "soft"
+    tolerance: float = 1e-3
+
+
+@dataclass(frozen=True)
+class SolveResult:
+    pose: F64  # [21, 3] world
+    errors: F64  # [K] for user targets (pins excluded)
+    reached: npt.NDArray[np.bool_]
+    max_bone_error: float
+    solvers: list[str]
+    iterations: int
+
+
+@dataclass(frozen=True)
+class CompleteResult:
+    pose: F64
+    errors: F64
+    reached: npt.NDArray[np.bool_]
+    levels: list[int]
+
+
+def _finite_vec(value: Sequence[float], where: str) -> F64:
+    arr = np.asarray(value, dtype=np.float64)
+    if arr.shape != (3,):
+        raise InvalidRequest(f"{where}: expected 3 numbers [x, y, z], got {len(value)}")
+    if not np.all(np.isfinite(arr)):
+        raise InvalidRequest(f"{where}: coordinates must be finite numbers, got {list(value)}")
+    if np.any(np.abs(arr) > MAX_COORDINATE):
+        raise InvalidRequest(f"{where}: coordinates beyond ±{MAX_COORDINATE:g} m")
+    return arr
+
+
+def _known_joint(name: str, where: str) -> int:
+    if name not in JOINT_INDEX:
+        raise InvalidRequest(
+            f"{where}: unknown joint {name!r}; joints are {', '.join(JOINT_NAMES)}"
+        )
+    return JOINT_INDEX[name]
+
+
+def parse_pose(pose: dict[str, list[float]], where: str = "pose") -> F64:
+    unknown = sorted(set(pose) - set(JOINT_NAMES))
+    if unknown:
+        raise InvalidRequest(
+            f"{where}: unknown joints {unknown}; joints are {', '.join(JOINT_NAMES)}"
+        )
+    missing = [j for j in JOINT_NAMES if j not in pose]
+    if missing:
+        raise InvalidRequest(f"{where}: missing joints {missing} (all 21 are required)")
+    arr = np.stack([_finite_vec(pose[j], f"{where}.{j}") for j in JOINT_NAMES])
+    lengths = bone_lengths(arr)
+    short = [JOINT_NAMES[c] for (c, _), n in zip(BONES, lengths, strict=True) if n < MIN_BONE]
+    if short:
+        raise InvalidRequest(
+            f"{where}: degenerate pose: zero-length bones ending at {short} "
+            f"(each joint must be at least {MIN_BONE * 1000:g} mm from its parent)"
+        )
+    return arr
+
+
+def parse_keypoints(keypoints: Sequence[tuple[str, Sequence[float]]]) -> dict[str, F64]:
+    """Validate key points: known, distinct joints with finite coordinates."""
+    points: dict[str, F64] = {}
+    for i, (joint, position) in enumerate(keypoints):
+        _known_joint(joint, f"keypoints[{i}].joint")
+        if joint in points:
+            raise InvalidRequest(f"keypoints[{i}]: duplicate key point {joint!r}")
+        points[joint] = _finite_vec(position, f"keypoints[{i}].position")
+    return points
+
+
+def parse_solve(
+    pose: dict[str, list[float]],
+    targets: Sequence[tuple[str, list[float], float]],
+    pins: Sequence[str],
+    *,
+    method: str,
+    preserve_bone_lengths: bool,
+    reach: str,
+    tolerance: float,
+    where: str = "",
+) -> SolveProblem:
+    """Validate one solve request; raises ``InvalidRequest`` with a precise detail."""
+    prefix = f"{where}." if where else ""
+    arr = parse_pose(pose, f"{prefix}pose")
+    idx: list[int] = []
+    pos: list[F64] = []
+    weights: list[float] = []
+    for i, (joint, position, weight) in enumerate(targets):
+        j = _known_joint(joint, f"{prefix}targets[{i}].joint")
+        if j in idx:
+            raise InvalidRequest(f"{prefix}targets[{i}]: duplicate target for joint {joint!r}")
+        idx.append(j)
+        pos.append(_finite_vec(position, f"{prefix}targets[{i}].position"))
+        weights.append(float(weight))
+    n_targets = len(idx)
+    for i, joint in enumerate(pins):
+        j = _known_joint(joint, f"{prefix}pins[{i}]")
+        if j in idx[:n_targets]:
+            raise InvalidRequest(f"{prefix}pins[{i}]: joint {joint!r} is both pinned and targeted")
+        if j in idx:
+            raise InvalidRequest(f"{prefix}pins[{i}]: joint {joint!r} is pinned twice")
+        idx.append(j)
+        pos.append(arr[j].copy())
+        weights.append(1.0)
+    return SolveProblem(
+        pose=arr,
+        target_idx=np.asarray(idx, dtype=np.intp),
+        target_pos=np.stack(pos),
+        weights=np.asarray(weights, dtype=np.float64),
+        n_targets=n_targets,
+        method=method,
+        preserve_bone_lengths=preserve_bone_lengths,
+        reach=reach,
+        tolerance=tolerance,
+    )
+
+
+# --------------------------------------------------------------------------------------
+# Engine
+# --------------------------------------------------------------------------------------
+class _Net:
+    """One onnxruntime session with a single input/output signature."""
+
+    def __init__(self, path: Path, entry: ModelEntry, options: ort.SessionOptions) -> None:
+        self.entry = entry
+        self.session = ort.InferenceSession(
+            str(path), options, providers=["CPUExecutionProvider"]
+        )
+        self.inputs = [i.name for i in entry.inputs]
+        self.output = entry.outputs[0].name
+        got = [i.name for i in self.session.get_inputs()]
+        if got != self.inputs:
+            raise ValueError(f"{path.name}: graph inputs {got}, manifest says {self.inputs}")
+
+    def __call__(self, *arrays: npt.NDArray[np.float32]) -> npt.NDArray[np.float32]:
+        feeds = dict(zip(self.inputs, arrays, strict=True))
+        out: npt.NDArray[np.float32] = self.session.run([self.output], feeds)[0]
+        return out
+
+
+class Engine:
+    """Loaded models and the solve / complete logic (stateless between calls)."""
+
+    def __init__(
+        self,
+        models_dir: Path,
+        *,
+        threads: int = 1,
+        composition_passes: int = 2,
+        fabrik_max_iterations: int = 64,
+    ) -> None:
+        self.models_dir = Path(models_dir)
+        self.manifest: Manifest = load_manifest(self.models_dir, verify=True)
+        options = ort.SessionOptions()
+        options.intra_op_num_threads = threads
+        options.inter_op_num_threads = 1
+        options.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
+        options.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
+        options.log_severity_level = 3
+
+        def net(entry: ModelEntry) -> _Net:
+            return _Net(self.models_dir / entry.file, entry, options)
+
+        m = self.manifest
+        self.encoder = net(m.autoencoder("encoder"))
+        self.decoder = net(m.autoencoder("decoder"))
+        self.solvers = {key: net(entry) for key, entry in m.solvers().items()}
+        self.solver_joints = {
+            key: np.asarray([JOINT_INDEX[j] for j in entry.joints], dtype=np.intp)
+            for key, entry in m.solvers().items()
+        }
+        self.completion = [net(entry) for entry in m.completion_levels()]
+        ref = m.skeleton.reference_bone_lengths
+        self.reference_lengths = np.asarray(
+            [ref[JOINT_NAMES[c]] for c, _ in BONES], dtype=np.float64
+        )
+        self.passes = composition_passes
+        self.fabrik_max_iterations = fabrik_max_iterations
+        self.version = m.version
+
+    # -- solver choice -------------------------------------------------------------------
+    def plan(self, joints: frozenset[str], weights: dict[str, float]) -> list[str]:
+        """Solver keys covering ``joints`` in the order they run (see ``_cover``)."""
+        order = _cover(joints, frozenset(self.solvers))
+        # heavier targets run later, so the last word is theirs; ties keep cover order
+        return sorted(order, key=lambda k: max(weights[j] for j in k.split("+")))
+
+    # -- solving ---------------------------------------------------------------------------
+    def solve(self, problems: Sequence[SolveProblem]) -> list[SolveResult]:
+        """Solve a batch; neural items share one ORT run per stage."""
+        n = len(problems)
+        results: list[SolveResult | None] = [None] * n
+        frames = [canonical_transform(p.pose) for p in problems]
+        canon = [f.to_canonical(p.pose) for f, p in zip(frames, problems, strict=True)]
+        lengths = [bone_lengths(p.pose) for p in problems]
+        scales = [float(np.sum(bl) / np.sum(self.reference_lengths)) for bl in lengths]
+        targets = [
+            f.to_canonical(p.target_pos[None])[0] for f, p in zip(frames, problems, strict=True)
+        ]
+
+        neural = [i for i, p in enumerate(problems) if p.method == "neural"]
+        solved: dict[int, F64] = {}
+        paths: dict[int, list[str]] = {}
+        if neural:
+            x = np.stack([canon[i] / scales[i] for i in neural]).reshape(len(neural), -1)
+            z = self.encoder(x.astype(np.float32))
+            groups: dict[tuple[str, ...], list[int]] = {}
+            for row, i in enumerate(neural):
+                p = problems[i]
+                names = [JOINT_NAMES[j] for j in p.target_idx]
+                w = {JOINT_NAMES[j]: float(wt) for j, wt in zip(p.target_idx, p.weights, strict=True)}
+                path = tuple(self.plan(frozenset(names), w))
+                paths[i] = list(path)
+                groups.setdefault(path, []).append(row)
+            for path, rows in groups.items():
+                if not path:
+                    continue
+                rows_arr = np.asarray(rows, dtype=np.intp)
+                zg = z[rows_arr]
+                tg = {
+                    key: np.stack(
+                        [self._solver_targets(problems[neural[r]], targets[neural[r]] / scales[neural[r]], key) for r in rows]
+                    ).astype(np.float32)
+                    for key in path
+                }
+                for _ in range(self.passes):
+                    for key in path:
+                        zg = self.solvers[key](zg, tg[key])
+                z[rows_arr] = zg
+            decoded = self.decoder(z).astype(np.float64).reshape(len(neural), NUM_JOINTS, 3)
+            for row, i in enumerate(neural):
+                solved[i] = decoded[row] * scales[i]
+
+        for i, p in enumerate(problems):
+            frame, start, tgt, bl = frames[i], canon[i], targets[i], lengths[i]
+            iterations = 0
+            if p.method == "fabrik":
+                res = kinematics.fabrik(
+                    start,
+                    bl,
+                    p.target_idx,
+                    tgt,
+                    weights=p.weights,
+                    tolerance=p.tolerance,
+                    max_iterations=self.fabrik_max_iterations,
+                )
+                pose, iterations, path = res.positions, res.iterations, ["fabrik"]
+            else:
+                pose, path = solved[i], paths[i]
+                if p.preserve_bone_lengths or p.reach == "exact":
+                    pose = kinematics.bone_pass(pose, bl, reference=start)
+                covered = {j for key in path for j in key.split("+")}
+                uncovered = [JOINT_NAMES[j] not in covered for j in p.target_idx]
+                if p.reach == "exact" or any(uncovered):
+                    goal = tgt if p.reach == "exact" else np.where(
+                        np.asarray(uncovered)[:, None], tgt, pose[p.target_idx]
+                    )
+                    res = kinematics.polish(
+                        pose,
+                        bl,
+                        p.target_idx,
+                        goal,
+                        weights=p.weights,
+                        tolerance=p.tolerance,
+                        max_iterations=self.fabrik_max_iterations,
+                    )
+                    pose, iterations = res.positions, res.iterations
+                    path = [*path, "fabrik-polish"]
+            world = frame.to_world(pose)
+            results[i] = self._result(p, world, bl, path, iterations)
+        return [r for r in results if r is not None]
+
+    def _solver_targets(self, p: SolveProblem, tgt: F64, key: str) -> F64:
+        lookup = {int(j): k for k, j in enumerate(p.target_idx)}
+        return np.concatenate([tgt[lookup[int(j)]] for j in self.solver_joints[key]])
+
+    @staticmethod
+    def _result(
+        p: SolveProblem, world: F64, lengths: F64, path: list[str], iterations: int
+    ) -> SolveResult:
+        k = p.n_targets
+        errors = np.linalg.norm(world[p.target_idx[:k]] - p.target_pos[:k], axis=-1)
+        bone_err = float(np.max(np.abs(bone_lengths(world) / lengths - 1.0)))
+        return SolveResult(
+            pose=world,
+            errors=errors,
+            reached=errors <= p.tolerance,
+            max_bone_error=bone_err,
+            solvers=path,
+            iterations=int(iterations),
+        )
+
+    # -- key-point completion -----------------------------------------------------------
+    def base_keypoints(self) -> list[str]:
+        return list(self.manifest.completion_levels()[0].joints)
+
+    def complete(
+        self,
+        keypoints: dict[str, F64],
+        given_lengths: dict[str, float] | None,
+        tolerance: float = 1e-3,
+    ) -> CompleteResult:
+        levels = self.manifest.completion_levels()
+        missing = [j for j in levels[0].joints if j not in keypoints]
+        if missing:
+            raise InvalidRequest(
+                f"keypoints: the six base points are required; missing {missing}",
+                missing=missing,
+            )
+        # pelvis floor projection to the origin; the networks were trained for any yaw
+        origin = keypoints["pelvis"].copy()
+        origin[1] = 0.0
+        ref = self.reference_lengths
+        bones = {JOINT_NAMES[c]: b for b, (c, _) in enumerate(BONES)}
+        lengths = ref.copy()
+        scale = 1.0
+        if given_lengths:
+            bad = sorted(set(given_lengths) - set(bones))
+            if bad:
+                raise InvalidRequest(
+                    f"bone_lengths: no bone ends at {bad} (name the child joint of each bone)"
+                )
+            ratios = [given_lengths[j] / ref[bones[j]] for j in given_lengths]
+            scale = float(np.median(ratios))
+            lengths = ref * scale
+            for j, value in given_lengths.items():
+                lengths[bones[j]] = value
+        given = {j: (v - origin) / scale for j, v in keypoints.items()}
+        last = len(levels)
+        for n, entry in enumerate(levels, start=1):
+            if set(given) <= set(entry.joints):
+                last = n
+                break
+        pred: F64 | None = None
+        run: list[int] = []
+        for n in range(1, last + 1):
+            joints = levels[n - 1].joints
+            rows = []
+            for j in joints:
+                if j in given:
+                    rows.append(given[j])
+                else:
+                    assert pred is not None
+                    rows.append(pred[JOINT_INDEX[j]])
+            x = np.concatenate(rows)[None].astype(np.float32)
+            pred = self.completion[n - 1](x)[0].astype(np.float64).reshape(NUM_JOINTS, 3)
+            run.append(n)
+        assert pred is not None
+        pose = kinematics.bone_pass(pred * scale, lengths)
+        idx = np.asarray([JOINT_INDEX[j] for j in keypoints], dtype=np.intp)
+        goal = np.stack([given[j] * scale for j in keypoints])
+        res = kinematics.polish(
+            pose, lengths, idx, goal, tolerance=tolerance,
+            max_iterations=self.fabrik_max_iterations,
+        )
+        world = res.positions + origin
+        errors = np.linalg.norm(world[idx] - np.stack(list(keypoints.values())), axis=-1)
+        return CompleteResult(pose=world, errors=errors, reached=errors <= tolerance, levels=run)
+
+    def warmup(self) -> None:
+        """A real solve on the reference rest pose; raises if anything is off."""
+        rest = kinematics.rest_pose()
+        rest = rest * (np.sum(self.reference_lengths) / np.sum(kinematics.rest_lengths()))
+        wrist = JOINT_INDEX["left_wrist"]
+        problem = SolveProblem(
+            pose=rest,
+            target_idx=np.asarray([wrist], dtype=np.intp),
+            target_pos=rest[[wrist]] + np.array([[0.05, 0.1, 0.05]]),
+            weights=np.ones(1),
+            n_targets=1,
+        )
+        for method in ("neural", "fabrik"):
+            (result,) = self.solve([SolveProblem(**{**problem.__dict__, "method": method})])
+            if not np.all(np.isfinite(result.pose)) or result.max_bone_error > 1e-5:
+                raise RuntimeError(f"warm-up {method} solve gave an invalid pose")
+
+
+@lru_cache(maxsize=4096)
+def _cover(joints: frozenset[str], available: frozenset[str]) -> tuple[str, ...]:
+    """Trained sets covering ``joints``: the exact set if trained, else greedily the
+    largest trained subsets of the target set (ties by name) until no trained set adds a
+    joint. Joints no trained set contains stay uncovered (placed by FABRIK)."""
+    key = set_key(joints)
+    if key in available:
+        return (key,)
+    candidates = sorted(
+        (k for k in available if set(k.split("+")) <= joints),
+        key=lambda k: (-len(k.split("+")), k),
+    )
+    chosen: list[str] = []
+    covered: set[str] = set()
+    for k in candidates:
+        members = set(k.split("+"))
+        if members - covered:
+            chosen.append(k)
+            covered |= members
+    return tuple(chosen)
+

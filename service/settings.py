@@ -1,0 +1,40 @@
+"""Service settings: the one place they are defined, read from the environment (POSE_*)."""
+
+from __future__ import annotations
+
+from functools import lru_cache
+from pathlib import Path
+from typing import Literal
+
+from pydantic import Field, SecretStr
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+#: The models shipped with the repository (``<repo>/models``).
+BUNDLED_MODELS = Path(__file__).resolve().parent.parent / "models"
+
+
+class Settings(BaseSettings):
+    """Every setting is an environment variable with the ``POSE_`` prefix, e.g.
+    ``POSE_MODELS_DIR=/srv/models``; lists are JSON (``POSE_CORS_ORIGINS='["http://x"]'``)."""
+
+    model_config = SettingsConfigDict(env_prefix="POSE_", extra="ignore", frozen=True)
+
+    host: str = "127.0.0.1"
+    port: int = Field(default=8000, ge=1, le=65535)
+    models_dir: Path = BUNDLED_MODELS
+    ort_threads: int = Field(default=1, ge=1, le=64, description="onnxruntime intra-op threads.")
+    max_batch_items: int = Field(default=1024, ge=1)
+    max_body_bytes: int = Field(default=8 * 1024 * 1024, ge=1024)
+    cors_origins: list[str] = Field(default_factory=list)
+    api_key: SecretStr | None = None
+    composition_passes: int = Field(
+        default=2, ge=1, le=8, description="Cycles through the solvers of a composed target set."
+    )
+    fabrik_max_iterations: int = Field(default=64, ge=1, le=10_000)
+    log_level: Literal["debug", "info", "warning", "error"] = "info"
+    access_log: bool = True
+
+
+@lru_cache(maxsize=1)
+def get_settings() -> Settings:
+    return Settings()
