@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+from typing import Annotated, Optional
+
 import typer
 
 app = typer.Typer(
@@ -12,6 +15,145 @@ app = typer.Typer(
 )
 
 
+def _train_and_export(
+    config: Path | None,
+    quick: bool,
+    fresh: bool,
+    dataset: Path | None,
+    out: Path | None,
+    run_dir: Path | None,
+    export: bool,
+) -> None:
+    import json
+    import time
+
+    from trainer.config import QUICK, load_config
+
+    overrides: dict[str, object] = dict(QUICK) if quick else {}
+    if dataset is not None:
+        overrides["dataset"] = str(dataset)
+    if out is not None:
+        overrides["out_dir"] = str(out)
+    if run_dir is not None:
+        overrides["run_dir"] = str(run_dir)
+    elif quick:
+        overrides["run_dir"] = "runs/quick"
+    cfg = load_config(config, overrides)
+
+    from rich.table import Table
+
+    from trainer.train import console, train_all
+
+    t0 = time.perf_counter()
+    trained = train_all(cfg, fresh=fresh)
+    if int(__import__("os").environ.get("RANK", "0")) != 0 or not export:
+        return
+    from trainer.export import evaluate, export_all
+
+    metrics = evaluate(cfg, trained)
+    manifest = export_all(cfg, trained, metrics)
+    seconds = time.perf_counter() - t0
+    table = Table(title=f"models in {cfg.out_dir} (manifest {manifest.version})")
+    for col in ("model", "params", "bytes", "val", "test"):
+        table.add_column(col, justify="right" if col != "model" else "left")
+    for entry in manifest.models:
+        vals = metrics.get(entry.name, {})
+
+        def fmt(split: str, vals: dict[str, dict[str, float]] = vals) -> str:
+            return ", ".join(f"{k} {v:.2f}" for k, v in vals.get(split, {}).items())
+
+        table.add_row(entry.name, str(entry.parameters), str(entry.bytes), fmt("val"), fmt("test"))
+    console.print(table)
+    training = {k: round(s.seconds, 1) for k, s in trained.states.items()}
+    console.print(f"training seconds per stage: {training}; wall {seconds:.1f}s")
+    report = {"metrics": metrics, "training_seconds": training, "wall_seconds": seconds}
+    Path(cfg.run_dir, "metrics.json").write_text(json.dumps(report, indent=2) + "\n")
+
+
+@app.command()
+def train(
+    config: Annotated[Optional[Path], typer.Option(help="Training config (TOML).")] = None,  # noqa: UP045
+    quick: Annotated[bool, typer.Option(help="Seconds-long smoke run of every stage.")] = False,
+    fresh: Annotated[bool, typer.Option(help="Ignore checkpoints; start anew.")] = False,
+    dataset: Annotated[Optional[Path], typer.Option(help="Override the dataset path.")] = None,  # noqa: UP045
+    out: Annotated[Optional[Path], typer.Option(help="Override the models directory.")] = None,  # noqa: UP045
+    run_dir: Annotated[Optional[Path], typer.Option(help="Checkpoint directory.")] = None,  # noqa: UP045
+    export: Annotated[bool, typer.Option(help="Export ONNX + manifest at the end.")] = True,
+) -> None:
+    """Train the autoencoder, the solvers and the completion levels, then export.
+
+    Resumes from the checkpoints in the run directory. Runs under
+    `torchrun --nproc_per_node N` as DDP (gloo); rank 0 writes."""
+    _train_and_export(config, quick, fresh, dataset, out, run_dir, export)
+
+
+@app.command("export")
+def export_cmd(
+    config: Annotated[Optional[Path], typer.Option(help="Training config (TOML).")] = None,  # noqa: UP045
+    quick: Annotated[bool, typer.Option(help="The --quick run's checkpoints.")] = False,
+    dataset: Annotated[Optional[Path], typer.Option(help="Override the dataset path.")] = None,  # noqa: UP045
+    out: Annotated[Optional[Path], typer.Option(help="Override the models directory.")] = None,  # noqa: UP045
+    run_dir: Annotated[Optional[Path], typer.Option(help="Checkpoint directory.")] = None,  # noqa: UP045
+) -> None:
+    """Evaluate and export finished checkpoints (trains whatever stage is unfinished)."""
+    _train_and_export(config, quick, False, dataset, out, run_dir, True)
+
+
+@app.command()
+def dataset(
+    mocap: Annotated[
+        Path, typer.Option(help="Folder with the mocap archives (or extracted folders).")
+    ] = Path("../shared/mocap"),
+    out: Annotated[Path, typer.Option(help="Output .npz file.")] = Path("data/poses.npz"),
+    seed: Annotated[int, typer.Option(help="Seed of the train/val/test split.")] = 0,
+    workers: Annotated[int, typer.Option(help="Worker processes.")] = 2,
+    maps: Annotated[
+        Optional[Path],  # noqa: UP045
+        typer.Option(help="Folder of joint maps (*.toml); default: trainer/maps."),
+    ] = None,
+) -> None:
+    """Build the canonical pose dataset (one .npz) from the mocap archives."""
+    import sys
+
+    from rich.console import Console
+
+    from trainer.data.build import BuildError, build_dataset, print_summary
+    from trainer.data.maps import MapError
+
+    console = Console() if sys.stdout.isatty() else Console(width=100)
+    try:
+        report = build_dataset(
+            mocap, out, maps_dir=maps, seed=seed, workers=workers, log=console.print
+        )
+    except (BuildError, MapError) as exc:
+        console.print(f"[red]error:[/red] {exc}")
+        raise typer.Exit(1) from None
+    print_summary(report, console)
+
+
+@app.command("plot-data")
+def plot_data(
+    dataset: Annotated[Path, typer.Option(help="Dataset .npz.")] = Path("data/poses.npz"),
+    out: Annotated[Path, typer.Option(help="Output PNG.")] = Path("docs/img/data_poses.png"),
+    per_source: Annotated[int, typer.Option(help="Poses drawn per source.")] = 12,
+    seed: Annotated[int, typer.Option(help="Seed of the pose draw.")] = 0,
+) -> None:
+    """Draw random canonical poses of each source as stick figures (PNG)."""
+    from trainer.data.dataset import DatasetError
+    from trainer.data.plot import plot_dataset
+
+    try:
+        path = plot_dataset(dataset, out, per_source=per_source, seed=seed)
+    except DatasetError as exc:
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(1) from None
+    typer.echo(f"wrote {path}")
+
+
 def main() -> None:
     """Console-script entry point."""
     app()
+
+
+if __name__ == "__main__":
+    main()

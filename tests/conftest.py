@@ -1,0 +1,106 @@
+"""Shared pytest fixtures.
+
+Mocap (real data, session-scoped):
+
+- ``mocap_dir``: the folder with the mocap archives (``../shared/mocap`` next to the repo,
+  or ``$MARIONETTE_MOCAP``); tests that need it are skipped when it is absent.
+- ``mocap_clips``: a few real clips extracted from both archives into a temp folder laid out
+  like the archives (so the dataset builder reads it as extracted folders).
+- ``small_dataset``: a real ``poses.npz`` built from ``mocap_clips`` by the same code path as
+  ``pose-trainer dataset`` (train/val/test all non-empty).
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+BANDAI_ARCHIVE = "bandai-namco-research-motiondataset.tar.xz"
+CMU_ARCHIVE = "cmu-dance.tar.xz"
+_B1 = "dataset/Bandai-Namco-Research-Motiondataset-1/data"
+_B2 = "dataset/Bandai-Namco-Research-Motiondataset-2/data"
+#: Bandai clips: 4 walks (2 per dataset) and 3 raise-up-left-hand, so both contents reach
+#: every split.
+BANDAI_MEMBERS: tuple[str, ...] = (
+    f"{_B1}/dataset-1_walk_normal_001.bvh",
+    f"{_B1}/dataset-1_walk_normal_002.bvh",
+    f"{_B2}/dataset-2_walk_normal_001.bvh",
+    f"{_B2}/dataset-2_walk_active_001.bvh",
+    f"{_B2}/dataset-2_raise-up-left-hand_normal_001.bvh",
+    f"{_B2}/dataset-2_raise-up-left-hand_normal_002.bvh",
+    f"{_B2}/dataset-2_raise-up-left-hand_active_001.bvh",
+)
+#: CMU clips: 3 salsa (60 fps), 1 martial (120 fps), and the rest skeleton (must be skipped).
+CMU_MEMBERS: tuple[str, ...] = (
+    "train_data_bvh/salsa/01.bvh",
+    "train_data_bvh/salsa/10.bvh",
+    "train_data_bvh/salsa/25.bvh",
+    "train_data_bvh/martial/04.bvh",
+    "train_data_bvh/standard.bvh",
+)
+
+
+@dataclass(frozen=True)
+class MocapClips:
+    """Real clips extracted into ``root`` (paths as in the archives)."""
+
+    root: Path
+    bandai: tuple[Path, ...]
+    cmu: tuple[Path, ...]
+
+    def path(self, member: str) -> Path:
+        return self.root / member
+
+
+@pytest.fixture(scope="session")
+def mocap_dir() -> Path:
+    """The mocap archive folder; skips the test when it is absent."""
+    env = os.environ.get("MARIONETTE_MOCAP")
+    path = Path(env) if env else REPO_ROOT.parent / "shared" / "mocap"
+    missing = [a for a in (BANDAI_ARCHIVE, CMU_ARCHIVE) if not (path / a).is_file()]
+    if missing:
+        pytest.skip(
+            f"mocap archives {missing} not found in {path} "
+            "(set MARIONETTE_MOCAP to the folder holding them)"
+        )
+    return path
+
+
+@pytest.fixture(scope="session")
+def mocap_clips(mocap_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> MocapClips:
+    """Extract a few real clips from both archives (once per session, both in parallel)."""
+    tar = shutil.which("tar")
+    if tar is None:
+        pytest.skip("the 'tar' command is needed to extract test clips")
+    root = tmp_path_factory.mktemp("mocap")
+    procs = [
+        subprocess.Popen(
+            [tar, "-xJf", str(mocap_dir / archive), "-C", str(root), *members],
+            stderr=subprocess.PIPE,
+        )
+        for archive, members in ((BANDAI_ARCHIVE, BANDAI_MEMBERS), (CMU_ARCHIVE, CMU_MEMBERS))
+    ]
+    for proc in procs:
+        _, err = proc.communicate()
+        assert proc.returncode == 0, f"tar failed: {err.decode(errors='replace')}"
+    return MocapClips(
+        root=root,
+        bandai=tuple(root / m for m in BANDAI_MEMBERS),
+        cmu=tuple(root / m for m in CMU_MEMBERS if not m.endswith("standard.bvh")),
+    )
+
+
+@pytest.fixture(scope="session")
+def small_dataset(mocap_clips: MocapClips, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A real dataset (.npz) of the few extracted clips, built like the CLI does (seed 0)."""
+    from trainer.data.build import build_dataset
+
+    out = tmp_path_factory.mktemp("dataset") / "poses.npz"
+    build_dataset(mocap_clips.root, out, seed=0, workers=2, progress=False)
+    return out

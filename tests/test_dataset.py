@@ -1,0 +1,276 @@
+"""Dataset builder, file format, loader, splits and the CLI (real clips)."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from service.geometry import canonicalise, yaw_matrix
+from service.skeleton import JOINT_INDEX, NUM_JOINTS, bone_lengths
+from trainer.data.build import (
+    DROP_REASONS,
+    assign_splits,
+    build_dataset,
+    drop_reasons,
+    interpolate_positions,
+    resample_indices,
+)
+from trainer.data.bvh import read_bvh
+from trainer.data.dataset import KEYS, SPLITS, DatasetError, load_dataset
+from trainer.data.maps import load_map
+
+MAPS = Path(__file__).resolve().parents[1] / "trainer" / "maps"
+
+
+def test_small_dataset_format(small_dataset: Path) -> None:
+    with np.load(small_dataset, allow_pickle=False) as npz:
+        assert sorted(npz.files) == sorted(KEYS)
+    ds = load_dataset(small_dataset)
+    assert ds.positions.dtype == np.float32
+    assert ds.positions.shape == (len(ds), NUM_JOINTS, 3)
+    assert ds.clip.dtype == np.int32
+    assert ds.frame.dtype == np.int32
+    assert ds.num_clips == 11  # 7 Bandai + 4 CMU; standard.bvh is not a clip
+    assert "cmu-dance/salsa/01" in ds.clip_name.tolist()
+    assert "bandai-namco/dataset-2_walk_active_001" in ds.clip_name.tolist()
+    assert not any("standard" in n for n in ds.clip_name.tolist())
+    assert set(ds.clip_source.tolist()) == {"bandai-namco", "cmu-dance"}
+    meta = ds.meta
+    assert meta["format_version"] == 1
+    assert meta["fps"] == 30
+    assert meta["seed"] == 0
+    assert set(meta["dropped_frames"]) == set(DROP_REASONS)
+    assert {m["source"] for m in meta["maps"]} == {"bandai-namco", "cmu-dance"}
+    assert all(a["kind"] == "folder" for a in meta["archives"])
+    bones = meta["mean_bone_lengths_m"]["bandai-namco"]
+    assert 0.3 < bones["left_knee"] < 0.5  # thigh, metres
+    assert meta["build_seconds"] > 0
+    # Canonical frame: pelvis above the origin, upright.
+    pelvis = ds.positions[:, JOINT_INDEX["pelvis"]]
+    np.testing.assert_allclose(pelvis[:, [0, 2]], 0.0, atol=1e-5)
+    assert (ds.positions[:, JOINT_INDEX["head"], 1] > pelvis[:, 1]).mean() > 0.99
+
+
+def test_bone_lengths_constant_within_a_bandai_clip(small_dataset: Path) -> None:
+    ds = load_dataset(small_dataset)
+    for c in np.flatnonzero(ds.clip_source == "bandai-namco"):
+        lengths = bone_lengths(ds.positions[ds.clip == c])
+        assert np.ptp(lengths, axis=0).max() < 1e-4, ds.clip_name[c]
+
+
+def test_resampling_gives_30_fps(small_dataset: Path, mocap_clips: Any) -> None:
+    ds = load_dataset(small_dataset)
+    names = ds.clip_name.tolist()
+    cases = [
+        ("cmu-dance/salsa/01", "train_data_bvh/salsa/01.bvh", 2),  # 60 fps (header says 120)
+        ("cmu-dance/martial/04", "train_data_bvh/martial/04.bvh", 4),  # 120 fps
+        (
+            "bandai-namco/dataset-2_walk_normal_001",
+            "dataset/Bandai-Namco-Research-Motiondataset-2/data/dataset-2_walk_normal_001.bvh",
+            1,
+        ),
+    ]
+    for name, member, k in cases:
+        n_source = read_bvh(mocap_clips.path(member)).num_frames
+        frames = ds.frame[ds.clip == names.index(name)]
+        assert len(frames) == -(-n_source // k), name  # ceil: frames 0, k, 2k, ...
+        np.testing.assert_array_equal(frames, np.arange(len(frames)))
+    # A 60 fps salsa clip lasts as long at 30 fps as at 60 fps: about 37 s for salsa/01.
+    salsa = ds.frame[ds.clip == names.index("cmu-dance/salsa/01")]
+    assert len(salsa) / 30 == pytest.approx(read_bvh(mocap_clips.cmu[0]).num_frames / 60, abs=0.1)
+
+
+def test_non_integer_ratio_interpolates_linearly() -> None:
+    assert resample_indices(121, 120.0) == (4, 31)
+    assert resample_indices(5, 30.0) == (1, 5)
+    k, n_out = resample_indices(6, 50.0)  # 0.1 s of 50 fps: t = 0, 1/30, 2/30, 3/30
+    assert (k, n_out) == (0, 4)
+    src = np.arange(6, dtype=float)[:, None, None] * np.ones((1, 2, 3))  # value = frame index
+    out = interpolate_positions(src, 50.0)
+    np.testing.assert_allclose(out[:, 0, 0], [0.0, 5 / 3, 10 / 3, 5.0])
+
+
+def test_drop_rule() -> None:
+    rng = np.random.default_rng(0)
+    base = rng.normal(size=(1, NUM_JOINTS, 3)) * 0.3
+    world = np.repeat(base, 10, axis=0) + np.linspace(0, 0.1, 10)[:, None, None]
+    world[2, 3, 1] = np.nan  # non-finite
+    world[5:] += np.array([2.0, 0.0, 0.0])  # teleport at frame 5 (then a steady shift)
+    world[8, JOINT_INDEX["left_wrist"]] += 0.2  # stretched forearm
+    codes = drop_reasons(world)
+    names = ["keep", *DROP_REASONS]
+    assert [names[c] for c in codes] == [
+        "keep",
+        "keep",
+        "non_finite",
+        "keep",
+        "keep",
+        "teleport",
+        "keep",
+        "keep",
+        "bone_length",
+        "keep",
+    ]
+
+
+def test_canonicalisation_invariant_to_yaw_and_translation(mocap_clips: Any) -> None:
+    m = load_map(MAPS / "bandai_namco.toml")
+    world = read_bvh(mocap_clips.bandai[2]).forward_kinematics(m.source_joints) * m.scale
+    rng = np.random.default_rng(1)
+    yaw = rng.uniform(-np.pi, np.pi, size=len(world))
+    shift = rng.uniform(-5, 5, size=(len(world), 3))
+    shift[:, 1] = 0.0  # horizontal: the floor stays at y = 0
+    moved = np.einsum("fij,fkj->fki", yaw_matrix(yaw), world) + shift[:, None, :]
+    np.testing.assert_allclose(canonicalise(moved), canonicalise(world), atol=1e-6)
+    # ... but not to a vertical shift (the floor is y = 0).
+    assert not np.allclose(canonicalise(world + np.array([0.0, 0.5, 0.0])), canonicalise(world))
+
+
+def test_real_frames_have_left_at_plus_x_and_face_plus_z(small_dataset: Path) -> None:
+    ds = load_dataset(small_dataset)
+    j = JOINT_INDEX
+    for source in ("bandai-namco", "cmu-dance"):
+        pos = ds.positions[ds.source_mask(source)]
+        assert (pos[:, j["left_hip"], 0] > 0).all(), source
+        toes = np.concatenate(
+            [
+                pos[:, j["left_foot"], 2] > pos[:, j["left_ankle"], 2],
+                pos[:, j["right_foot"], 2] > pos[:, j["right_ankle"], 2],
+            ]
+        )
+        assert toes.mean() > 0.8, f"{source}: toes point backwards (swapped sides?)"
+
+
+def test_splits_by_clip_stratified_and_seeded(small_dataset: Path) -> None:
+    ds = load_dataset(small_dataset)
+    masks = {s: ds.split_mask(s) for s in SPLITS}
+    assert sum(m.sum() for m in masks.values()) == len(ds)
+    clips = {s: set(ds.clip[m].tolist()) for s, m in masks.items()}
+    assert not clips["train"] & clips["val"]
+    assert not clips["train"] & clips["test"]
+    assert not clips["val"] & clips["test"]
+    assert all(clips[s] for s in SPLITS)  # the fixture has something in every split
+    # every source and content in test; in val where a stratum has >= 3 clips
+    for source in set(ds.clip_source.tolist()):
+        for content in set(ds.clip_content[ds.clip_source == source].tolist()):
+            sel = (ds.clip_source == source) & (ds.clip_content == content)
+            assert "test" in ds.clip_split[sel], (source, content)
+            if sel.sum() >= 3:
+                assert "val" in ds.clip_split[sel], (source, content)
+    # reproducible from the seed, independent of clip order
+    names, sources, contents = ds.clip_name, ds.clip_source, ds.clip_content
+    again = assign_splits(names.tolist(), sources.tolist(), contents.tolist(), seed=0)
+    np.testing.assert_array_equal(again, ds.clip_split)
+    rev = np.arange(ds.num_clips)[::-1]
+    shuffled = assign_splits(
+        names[rev].tolist(), sources[rev].tolist(), contents[rev].tolist(), seed=0
+    )
+    np.testing.assert_array_equal(shuffled, ds.clip_split[rev])
+
+
+def test_split_fractions_and_seed_dependence() -> None:
+    names = [f"s/{c}/{i:03d}" for c in ("walk", "run", "bow") for i in range(100)]
+    contents = [n.split("/")[1] for n in names]
+    sources = ["s"] * len(names)
+    a = assign_splits(names, sources, contents, seed=0)
+    b = assign_splits(names, sources, contents, seed=0)
+    c = assign_splits(names, sources, contents, seed=1)
+    np.testing.assert_array_equal(a, b)
+    assert (a != c).any()
+    for content in ("walk", "run", "bow"):
+        sel = np.array(contents) == content
+        counts = {s: int((a[sel] == s).sum()) for s in SPLITS}
+        assert counts == {"train": 90, "val": 5, "test": 5}
+    tiny = assign_splits(["x/1", "y/1", "y/2"], ["s"] * 3, ["x", "y", "y"], seed=0)
+    assert tiny[0] == "test"
+    assert sorted(tiny[1:].tolist()) == ["test", "train"]
+
+
+def test_subset_and_split_mask(small_dataset: Path) -> None:
+    ds = load_dataset(small_dataset)
+    test = ds.subset(ds.split_mask("test"))
+    assert len(test) == int(ds.split_mask("test").sum())
+    assert test.num_clips == ds.num_clips
+    assert set(test.clip_split[test.clip].tolist()) == {"test"}
+    with pytest.raises(ValueError, match="unknown split"):
+        ds.split_mask("holdout")
+
+
+def test_loader_rejects_bad_files(small_dataset: Path, tmp_path: Path) -> None:
+    with np.load(small_dataset, allow_pickle=False) as npz:
+        arrays = {k: npz[k] for k in npz.files}
+    with pytest.raises(DatasetError, match="no such dataset"):
+        load_dataset(tmp_path / "missing.npz")
+    (tmp_path / "junk.npz").write_bytes(b"not a zip")
+    with pytest.raises(DatasetError, match="not a readable"):
+        load_dataset(tmp_path / "junk.npz")
+    bad = dict(arrays)
+    del bad["clip_actor"]
+    np.savez(tmp_path / "missing_key.npz", **bad)
+    with pytest.raises(DatasetError, match=r"missing \['clip_actor'\]"):
+        load_dataset(tmp_path / "missing_key.npz")
+    bad = dict(arrays, positions=arrays["positions"].astype(np.float64))
+    np.savez(tmp_path / "dtype.npz", **bad)
+    with pytest.raises(DatasetError, match="'positions' must be float32"):
+        load_dataset(tmp_path / "dtype.npz")
+    meta = json.loads(str(arrays["meta"]))
+    bad = dict(arrays, meta=np.array(json.dumps(dict(meta, format_version=2))))
+    np.savez(tmp_path / "version.npz", **bad)
+    with pytest.raises(DatasetError, match="format_version"):
+        load_dataset(tmp_path / "version.npz")
+
+
+def test_broken_files_are_skipped_and_the_build_goes_on(mocap_clips: Any, tmp_path: Path) -> None:
+    root = tmp_path / "mocap"
+    data = root / "dataset/Bandai-Namco-Research-Motiondataset-1/data"
+    data.mkdir(parents=True)
+    good = mocap_clips.bandai[0]
+    shutil.copy(good, data / good.name)
+    text = good.read_text()
+    (data / "dataset-1_walk_broken_001.bvh").write_text(text[: len(text) * 2 // 3])
+    (data / "dataset-1_walk_garbage_001.bvh").write_bytes(b"\x00\x01garbage" * 100)
+    report = build_dataset(root, tmp_path / "out.npz", workers=1, progress=False)
+    skipped = {s["file"]: s["reason"] for s in report.meta["skipped_files"]}
+    prefix = "bandai-namco:dataset/Bandai-Namco-Research-Motiondataset-1/data/"
+    assert set(skipped) == {
+        prefix + "dataset-1_walk_broken_001.bvh",
+        prefix + "dataset-1_walk_garbage_001.bvh",
+    }
+    assert "expected 132 values per frame" in skipped[prefix + "dataset-1_walk_broken_001.bvh"]
+    assert "dataset-1_walk_broken_001.bvh" in skipped[prefix + "dataset-1_walk_broken_001.bvh"]
+    assert "not a BVH file" in skipped[prefix + "dataset-1_walk_garbage_001.bvh"]
+    ds = load_dataset(tmp_path / "out.npz")
+    assert ds.clip_name.tolist() == ["bandai-namco/dataset-1_walk_normal_001"]
+    assert len(ds) == read_bvh(good).num_frames
+
+
+def test_cli_dataset_and_plot(mocap_clips: Any, small_dataset: Path, tmp_path: Path) -> None:
+    from typer.testing import CliRunner
+
+    from trainer.cli import app
+
+    runner = CliRunner()
+    png = tmp_path / "poses.png"
+    result = runner.invoke(
+        app, ["plot-data", "--dataset", str(small_dataset), "--out", str(png), "--per-source", "3"]
+    )
+    assert result.exit_code == 0, result.output
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    out = tmp_path / "cli.npz"
+    result = runner.invoke(
+        app, ["dataset", "--mocap", str(mocap_clips.root), "--out", str(out), "--seed", "3"]
+    )
+    assert result.exit_code == 0, result.output
+    assert "bandai-namco" in result.output
+    assert "mean bone lengths" in result.output
+    ds = load_dataset(out)
+    assert ds.meta["seed"] == 3
+    assert ds.num_clips == 11
+    result = runner.invoke(app, ["dataset", "--mocap", str(tmp_path / "nowhere")])
+    assert result.exit_code == 1
+    assert "not found" in result.output

@@ -1,0 +1,10 @@
+"""Mocap -> canonical pose dataset: BVH reading, joint maps, the builder and the loader.
+
+Modules:
+
+- :mod:`trainer.data.bvh`: BVH parser and batched forward kinematics (numpy + scipy).
+- :mod:`trainer.data.maps`: per-source joint maps (``trainer/maps/*.toml``).
+- :mod:`trainer.data.build`: ``pose-trainer dataset`` (archives -> ``poses.npz``).
+- :mod:`trainer.data.dataset`: ``load_dataset`` / ``PoseDataset`` and the file format.
+- :mod:`trainer.data.plot`: ``pose-trainer plot-data`` (stick figures of random poses).
+"""

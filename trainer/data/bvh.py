@@ -1,0 +1,415 @@
+"""BVH reader and batched forward kinematics (numpy + scipy only).
+
+Conventions implemented here:
+
+- Any rotation channel order. BVH Euler channels are *intrinsic* rotations applied in the
+  listed order, ``R = R_c1 @ R_c2 @ R_c3``; this is scipy's ``Rotation.from_euler`` with an
+  UPPERCASE sequence (e.g. ``"ZXY"``), in degrees.
+- Position channels *replace* the matching component of the joint's OFFSET when present
+  (the root's translation, and every joint of files that carry 6 channels per joint, e.g.
+  Bandai-Namco, whose position values equal the offsets). Offsets are never added to them.
+- ``End Site`` blocks become pseudo-joints named ``<parent>_end`` (``_end2``... if a joint
+  has several), addressable by joint maps like any other joint.
+- The MOTION block is parsed in one go (``str.split`` + one ``np.array`` conversion), with a
+  per-line check only on the error path.
+
+Malformed input raises :class:`BVHError`, which names the file and the reason.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+from scipy.spatial.transform import Rotation
+
+FloatArray = npt.NDArray[np.float64]
+
+_POSITION_CHANNELS = {"xposition": 0, "yposition": 1, "zposition": 2}
+_ROTATION_CHANNELS = {"xrotation": "X", "yrotation": "Y", "zrotation": "Z"}
+_MOTION_RE = re.compile(r"^[ \t]*MOTION[ \t]*\r?$", re.MULTILINE)
+_FRAMES_RE = re.compile(r"^[ \t]*Frames:[ \t]*(\S+)[ \t]*\r?$")
+_FRAME_TIME_RE = re.compile(r"^[ \t]*Frame Time:[ \t]*(\S+)[ \t]*\r?$")
+
+
+class BVHError(ValueError):
+    """A malformed, truncated or unsupported BVH file; names the file and the reason."""
+
+    def __init__(self, file: str, reason: str) -> None:
+        super().__init__(f"{file}: {reason}")
+        self.file = file
+        self.reason = reason
+
+
+@dataclass(frozen=True)
+class BVHJoint:
+    """One joint (or End Site pseudo-joint) of a BVH hierarchy."""
+
+    name: str
+    parent: int  # index into BVH.joints, -1 for a root
+    offset: tuple[float, float, float]
+    channels: tuple[str, ...] = ()  # as written in the file, e.g. ("Zrotation", ...)
+    channel_start: int = 0  # column of the first channel in the MOTION rows
+    end_site: bool = False
+
+    @property
+    def rotation_order(self) -> str:
+        """Intrinsic Euler sequence of the rotation channels, e.g. ``"ZXY"`` ('' if none)."""
+        return "".join(
+            _ROTATION_CHANNELS[c.lower()] for c in self.channels if c.lower() in _ROTATION_CHANNELS
+        )
+
+
+@dataclass(frozen=True)
+class BVH:
+    """A parsed BVH file: the hierarchy (parents precede children) and the motion."""
+
+    name: str
+    joints: tuple[BVHJoint, ...]
+    frame_time: float
+    motion: FloatArray  # [F, C] channel values, one row per frame
+    _index: dict[str, int] = field(default_factory=dict, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        self._index.update({j.name: i for i, j in enumerate(self.joints)})
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        return tuple(j.name for j in self.joints)
+
+    @property
+    def num_frames(self) -> int:
+        return int(self.motion.shape[0])
+
+    @property
+    def num_channels(self) -> int:
+        return int(self.motion.shape[1])
+
+    @property
+    def fps(self) -> float:
+        """Frame rate from the header's Frame Time (the file may lie; see joint maps)."""
+        return 1.0 / self.frame_time
+
+    def index(self, name: str) -> int:
+        """Index of a joint by name; ``KeyError`` listing the known names if absent."""
+        try:
+            return self._index[name]
+        except KeyError:
+            raise KeyError(
+                f"{self.name}: no joint {name!r}; joints are {', '.join(self.joint_names)}"
+            ) from None
+
+    def forward_kinematics(
+        self,
+        names: Sequence[str] | None = None,
+        frames: slice | npt.NDArray[np.integer] | None = None,
+    ) -> FloatArray:
+        """World positions ``[F, K, 3]`` (file units) of ``names`` (default: all joints).
+
+        ``frames`` selects motion rows before FK (e.g. ``slice(None, None, 4)``), so that
+        sub-sampling costs nothing. Only the requested joints' ancestors are evaluated.
+        """
+        return forward_kinematics(self, names, frames)
+
+
+def _error(file: str, reason: str) -> BVHError:
+    return BVHError(file, reason)
+
+
+class _Tokens:
+    """Hierarchy tokens with their (1-based) line numbers."""
+
+    def __init__(self, file: str, lines: Iterable[str]) -> None:
+        self.file = file
+        self.items: list[tuple[str, int, int]] = []  # token, line number, position in line
+        for lineno, line in enumerate(lines, start=1):
+            for pos, tok in enumerate(line.split()):
+                self.items.append((tok, lineno, pos))
+        self.pos = 0
+
+    def line(self) -> int:
+        if self.pos < len(self.items):
+            return self.items[self.pos][1]
+        return self.items[-1][1] if self.items else 1
+
+    def peek(self) -> str | None:
+        return self.items[self.pos][0] if self.pos < len(self.items) else None
+
+    def next(self, what: str) -> str:
+        if self.pos >= len(self.items):
+            raise _error(self.file, f"unexpected end of HIERARCHY, expected {what}")
+        tok = self.items[self.pos][0]
+        self.pos += 1
+        return tok
+
+    def expect(self, word: str) -> None:
+        line = self.line()
+        tok = self.next(repr(word))
+        if tok != word:
+            raise _error(self.file, f"line {line}: expected {word!r}, got {tok!r}")
+
+    def rest_of_line(self, what: str) -> str:
+        """All remaining tokens on the current token's line (a joint name may have spaces)."""
+        if self.pos >= len(self.items):
+            raise _error(self.file, f"unexpected end of HIERARCHY, expected {what}")
+        lineno = self.items[self.pos][1]
+        words: list[str] = []
+        while self.pos < len(self.items) and self.items[self.pos][1] == lineno:
+            if self.items[self.pos][0] == "{":
+                break
+            words.append(self.items[self.pos][0])
+            self.pos += 1
+        return " ".join(words)
+
+    def floats(self, n: int, what: str) -> list[float]:
+        out: list[float] = []
+        for _ in range(n):
+            line = self.line()
+            tok = self.next(what)
+            try:
+                out.append(float(tok))
+            except ValueError:
+                raise _error(self.file, f"line {line}: {what}: not a number: {tok!r}") from None
+        return out
+
+
+def _parse_hierarchy(file: str, text: str) -> list[BVHJoint]:
+    toks = _Tokens(file, text.splitlines())
+    toks.expect("HIERARCHY")
+    joints: list[BVHJoint] = []
+    names: set[str] = set()
+    n_channels = 0
+
+    def parse_joint(parent: int) -> None:
+        nonlocal n_channels
+        line = toks.line()
+        name = toks.rest_of_line("a joint name")
+        if not name:
+            raise _error(file, f"line {line}: missing joint name")
+        if name in names:
+            raise _error(file, f"line {line}: duplicate joint name {name!r}")
+        names.add(name)
+        toks.expect("{")
+        toks.expect("OFFSET")
+        ox, oy, oz = toks.floats(3, f"OFFSET of {name}")
+        line = toks.line()
+        toks.expect("CHANNELS")
+        count_tok = toks.next("a channel count")
+        try:
+            count = int(count_tok)
+        except ValueError:
+            raise _error(file, f"line {line}: bad channel count {count_tok!r}") from None
+        channels: list[str] = []
+        for _ in range(count):
+            line = toks.line()
+            ch = toks.next("a channel name")
+            if ch.lower() not in _POSITION_CHANNELS and ch.lower() not in _ROTATION_CHANNELS:
+                raise _error(file, f"line {line}: unknown channel {ch!r} of joint {name!r}")
+            channels.append(ch)
+        index = len(joints)
+        joints.append(BVHJoint(name, parent, (ox, oy, oz), tuple(channels), n_channels))
+        n_channels += count
+        end_count = 0
+        while True:
+            line = toks.line()
+            tok = toks.next("JOINT, End Site or '}'")
+            if tok == "}":
+                return
+            if tok == "JOINT":
+                parse_joint(index)
+            elif tok == "End":
+                toks.expect("Site")
+                toks.expect("{")
+                toks.expect("OFFSET")
+                ex, ey, ez = toks.floats(3, f"End Site OFFSET of {name}")
+                toks.expect("}")
+                end_count += 1
+                end_name = f"{name}_end" if end_count == 1 else f"{name}_end{end_count}"
+                names.add(end_name)
+                joints.append(
+                    BVHJoint(end_name, index, (ex, ey, ez), (), n_channels, end_site=True)
+                )
+            else:
+                raise _error(file, f"line {line}: expected JOINT, End Site or '}}', got {tok!r}")
+
+    while toks.peek() == "ROOT":
+        toks.next("ROOT")
+        parse_joint(-1)
+    if not joints:
+        raise _error(file, f"line {toks.line()}: no ROOT joint in HIERARCHY")
+    if toks.peek() is not None:
+        raise _error(file, f"line {toks.line()}: unexpected {toks.peek()!r} after the hierarchy")
+    return joints
+
+
+def parse_bvh(text: str, name: str = "<string>") -> BVH:
+    """Parse BVH text; ``name`` is used in error messages."""
+    match = _MOTION_RE.search(text)
+    if match is None:
+        if "HIERARCHY" not in text:
+            raise _error(name, "not a BVH file (no HIERARCHY keyword)")
+        raise _error(name, "missing MOTION section")
+    head = text[: match.start()]
+    joints = _parse_hierarchy(name, head)
+    n_channels = sum(len(j.channels) for j in joints)
+    if n_channels == 0:
+        raise _error(name, "the hierarchy has no channels")
+
+    motion_line = head.count("\n") + 1  # 1-based line number of MOTION
+    rest = text[match.end() :].split("\n", 3)
+    # rest[0] is the remainder of the MOTION line (empty), then Frames, Frame Time, body.
+    if len(rest) < 3:
+        raise _error(name, f"line {motion_line}: truncated MOTION header")
+    frames_match = _FRAMES_RE.match(rest[1])
+    if frames_match is None:
+        raise _error(name, f"line {motion_line + 1}: expected 'Frames: <n>', got {rest[1]!r}")
+    time_match = _FRAME_TIME_RE.match(rest[2])
+    if time_match is None:
+        raise _error(
+            name, f"line {motion_line + 2}: expected 'Frame Time: <seconds>', got {rest[2]!r}"
+        )
+    try:
+        n_frames = int(frames_match.group(1))
+        frame_time = float(time_match.group(1))
+    except ValueError:
+        raise _error(name, f"line {motion_line + 1}: bad Frames / Frame Time values") from None
+    if n_frames < 0:
+        raise _error(name, f"line {motion_line + 1}: negative frame count {n_frames}")
+    if not np.isfinite(frame_time) or frame_time <= 0:
+        raise _error(name, f"line {motion_line + 2}: bad Frame Time {frame_time}")
+
+    body = rest[3] if len(rest) > 3 else ""
+    first_line = motion_line + 3
+    tokens = body.split()
+    expected = n_frames * n_channels
+    if len(tokens) != expected:
+        _explain_count(name, body, first_line, n_frames, n_channels)
+    try:
+        motion = np.array(tokens, dtype=np.float64).reshape(n_frames, n_channels)
+    except ValueError:
+        _explain_values(name, body, first_line)
+        raise  # pragma: no cover - _explain_values always raises
+    return BVH(name=name, joints=tuple(joints), frame_time=frame_time, motion=motion)
+
+
+def _explain_count(name: str, body: str, first_line: int, n_frames: int, n_channels: int) -> None:
+    """Raise a BVHError pointing at the first MOTION line with the wrong number of values."""
+    seen = 0
+    for offset, line in enumerate(body.split("\n")):
+        count = len(line.split())
+        if count == 0:
+            continue
+        if seen >= n_frames:
+            raise _error(
+                name,
+                f"line {first_line + offset}: more frame lines than the {n_frames} "
+                "declared in 'Frames:'",
+            )
+        if count != n_channels:
+            raise _error(
+                name,
+                f"line {first_line + offset}: expected {n_channels} values per frame, got {count}",
+            )
+        seen += 1
+    raise _error(name, f"truncated: 'Frames:' declares {n_frames} frames, found {seen}")
+
+
+def _explain_values(name: str, body: str, first_line: int) -> None:
+    for offset, line in enumerate(body.split("\n")):
+        for tok in line.split():
+            try:
+                float(tok)
+            except ValueError:
+                raise _error(name, f"line {first_line + offset}: not a number: {tok!r}") from None
+    raise _error(name, "could not convert the MOTION values")
+
+
+def read_bvh(path: str | Path, name: str | None = None) -> BVH:
+    """Read and parse a BVH file (``BVHError`` on malformed content or unreadable file)."""
+    path = Path(path)
+    label = name if name is not None else str(path)
+    try:
+        text = path.read_text(encoding="utf-8", errors="replace")
+    except OSError as exc:
+        raise _error(label, f"cannot read: {exc.strerror or exc}") from None
+    return parse_bvh(text, label)
+
+
+def forward_kinematics(
+    bvh: BVH,
+    names: Sequence[str] | None = None,
+    frames: slice | npt.NDArray[np.integer] | None = None,
+) -> FloatArray:
+    """World positions ``[F, K, 3]`` of the named joints (default: all), in file units.
+
+    Batched over frames; Euler rotations are converted per distinct channel order in one
+    scipy call each.
+    """
+    motion = bvh.motion if frames is None else bvh.motion[frames]
+    n_frames = motion.shape[0]
+    wanted = list(range(len(bvh.joints))) if names is None else [bvh.index(n) for n in names]
+
+    needed: set[int] = set()
+    for j in wanted:
+        while j >= 0 and j not in needed:
+            needed.add(j)
+            j = bvh.joints[j].parent
+    order = sorted(needed)  # file order: parents precede children
+
+    # Local rotations, batched per Euler sequence.
+    local_rot: dict[int, FloatArray] = {}
+    by_seq: dict[str, list[int]] = {}
+    for j in order:
+        seq = bvh.joints[j].rotation_order
+        if seq:
+            by_seq.setdefault(seq, []).append(j)
+    for seq, joint_ids in by_seq.items():
+        cols = []
+        for j in joint_ids:
+            joint = bvh.joints[j]
+            cols.append(
+                [
+                    joint.channel_start + k
+                    for k, c in enumerate(joint.channels)
+                    if c.lower() in _ROTATION_CHANNELS
+                ]
+            )
+        # angles: [F, n_joints, len(seq)] -> rotation matrices [F, n_joints, 3, 3]
+        angles = motion[:, np.asarray(cols, dtype=np.intp)]
+        flat = angles.reshape(-1, len(seq))
+        mats = Rotation.from_euler(seq, flat, degrees=True).as_matrix()
+        mats = mats.reshape(n_frames, len(joint_ids), 3, 3)
+        for k, j in enumerate(joint_ids):
+            local_rot[j] = mats[:, k]
+
+    glob_rot: dict[int, FloatArray] = {}
+    glob_pos: dict[int, FloatArray] = {}
+    for j in order:
+        joint = bvh.joints[j]
+        trans = np.broadcast_to(np.asarray(joint.offset, dtype=np.float64), (n_frames, 3))
+        pos_cols = [
+            (joint.channel_start + k, _POSITION_CHANNELS[c.lower()])
+            for k, c in enumerate(joint.channels)
+            if c.lower() in _POSITION_CHANNELS
+        ]
+        if pos_cols:
+            trans = trans.copy()
+            for col, axis in pos_cols:
+                trans[:, axis] = motion[:, col]
+        rot = local_rot.get(j)
+        if joint.parent < 0:
+            glob_pos[j] = np.array(trans)
+            glob_rot[j] = rot if rot is not None else np.broadcast_to(np.eye(3), (n_frames, 3, 3))
+        else:
+            prot = glob_rot[joint.parent]
+            glob_pos[j] = glob_pos[joint.parent] + np.einsum("fij,fj->fi", prot, trans)
+            glob_rot[j] = prot if rot is None else np.matmul(prot, rot)
+
+    out = np.empty((n_frames, len(wanted), 3), dtype=np.float64)
+    for k, j in enumerate(wanted):
+        out[:, k] = glob_pos[j]
+    return out
