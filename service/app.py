@@ -41,6 +41,7 @@ from service.schemas import (
     Health,
     ModelInfo,
     ModelsResponse,
+    Problem,
     SkeletonResponse,
     SolveRequest,
     SolveResponse,
@@ -114,13 +115,19 @@ def load_engine(state: State) -> None:
         engine.warmup()
     except Exception as exc:  # any failure means "not ready", with the reason logged
         state.error = str(exc)
-        log.error(json.dumps({"event": "models_not_ready", "models_dir": str(s.models_dir),
-                              "reason": str(exc)}))
+        log.error(
+            json.dumps(
+                {"event": "models_not_ready", "models_dir": str(s.models_dir), "reason": str(exc)}
+            )
+        )
         return
     state.engine = engine
     state.error = None
-    log.info(json.dumps({"event": "models_ready", "version": engine.version,
-                         "models_dir": str(s.models_dir)}))
+    log.info(
+        json.dumps(
+            {"event": "models_ready", "version": engine.version, "models_dir": str(s.models_dir)}
+        )
+    )
 
 
 class Gate:
@@ -165,7 +172,8 @@ class Gate:
                 )
                 if key != settings.api_key.get_secret_value():
                     raise Unauthorized("send the API key in the X-API-Key header")
-            if method in ("POST", "PUT", "PATCH"):
+            has_body = headers.get("content-length", "0") != "0" or "transfer-encoding" in headers
+            if method in ("POST", "PUT", "PATCH") and has_body:
                 ctype = headers.get("content-type", "").split(";")[0].strip().lower()
                 if ctype != "application/json":
                     raise UnsupportedMediaType(
@@ -229,7 +237,7 @@ def _pose_dict(pose: np.ndarray) -> dict[str, list[float]]:
 def _problem(req: SolveRequest, where: str = "") -> SolveProblem:
     o = req.options
     return parse_solve(
-        req.pose,
+        req.pose.model_dump(),
         [(t.joint, t.position, t.weight) for t in req.targets],
         req.pins,
         method=o.method,
@@ -253,6 +261,50 @@ def _response(p: SolveProblem, r: SolveResult, version: str) -> SolveResponse:
         method="fabrik" if p.method == "fabrik" else "neural",
         iterations=r.iterations,
     )
+
+
+_PROBLEM_STATUS = {
+    400: "Body is not decodable JSON (e.g. not UTF-8).",
+    401: "Missing or wrong API key (only when POSE_API_KEY is set).",
+    413: "Body or batch larger than the configured limit.",
+    415: "Body is not application/json.",
+    422: "Invalid request: the detail says which field and why.",
+    503: "Models not loaded yet, or broken (see /v2/health/ready).",
+}
+
+
+def _document_problems(app: FastAPI) -> None:
+    """Make the schema say what the app does: errors are problem+json (RFC 9457)."""
+
+    def openapi() -> dict[str, Any]:
+        if app.openapi_schema:
+            return app.openapi_schema
+        from fastapi.openapi.utils import get_openapi
+
+        schema = get_openapi(
+            title=app.title, version=app.version, summary=app.summary, routes=app.routes
+        )
+        components = schema.setdefault("components", {}).setdefault("schemas", {})
+        components["Problem"] = Problem.model_json_schema(
+            ref_template="#/components/schemas/{model}"
+        )
+        for name in ("HTTPValidationError", "ValidationError"):
+            components.pop(name, None)
+        ref = {"$ref": "#/components/schemas/Problem"}
+        for path, ops in schema["paths"].items():
+            for method, op in ops.items():
+                if not path.startswith("/v1/"):
+                    continue
+                codes = [400, 401, 413, 415, 422, 503] if method == "post" else [401, 503]
+                for code in codes:
+                    op["responses"][str(code)] = {
+                        "description": _PROBLEM_STATUS[code],
+                        "content": {"application/problem+json": {"schema": ref}},
+                    }
+        app.openapi_schema = schema
+        return schema
+
+    app.openapi = openapi  # type: ignore[method-assign]
 
 
 def create_app(settings: Settings | None = None, *, load_in_background: bool = True) -> FastAPI:
@@ -380,6 +432,7 @@ def create_app(settings: Settings | None = None, *, load_in_background: bool = T
     async def root() -> RedirectResponse:
         return RedirectResponse("/editor")
 
+    _document_problems(app)
     if settings.cors_origins:
         app.add_middleware(
             CORSMiddleware,

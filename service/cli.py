@@ -36,9 +36,7 @@ def serve(
             err=True,
         )
         raise typer.Exit(code=2)
-    logging.basicConfig(
-        level=settings.log_level.upper(), format="%(message)s", stream=sys.stderr
-    )
+    logging.basicConfig(level=settings.log_level.upper(), format="%(message)s", stream=sys.stderr)
     from service.app import create_app
 
     app = create_app(settings)

@@ -184,9 +184,7 @@ class _Net:
 
     def __init__(self, path: Path, entry: ModelEntry, options: ort.SessionOptions) -> None:
         self.entry = entry
-        self.session = ort.InferenceSession(
-            str(path), options, providers=["CPUExecutionProvider"]
-        )
+        self.session = ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
         self.inputs = [i.name for i in entry.inputs]
         self.output = entry.outputs[0].name
         got = [i.name for i in self.session.get_inputs()]
@@ -269,23 +267,30 @@ class Engine:
             for row, i in enumerate(neural):
                 p = problems[i]
                 names = [JOINT_NAMES[j] for j in p.target_idx]
-                w = {JOINT_NAMES[j]: float(wt) for j, wt in zip(p.target_idx, p.weights, strict=True)}
-                path = tuple(self.plan(frozenset(names), w))
-                paths[i] = list(path)
-                groups.setdefault(path, []).append(row)
-            for path, rows in groups.items():
-                if not path:
+                w = {
+                    JOINT_NAMES[j]: float(wt) for j, wt in zip(p.target_idx, p.weights, strict=True)
+                }
+                plan = tuple(self.plan(frozenset(names), w))
+                paths[i] = list(plan)
+                groups.setdefault(plan, []).append(row)
+            for sequence, rows in groups.items():
+                if not sequence:
                     continue
                 rows_arr = np.asarray(rows, dtype=np.intp)
                 zg = z[rows_arr]
                 tg = {
                     key: np.stack(
-                        [self._solver_targets(problems[neural[r]], targets[neural[r]] / scales[neural[r]], key) for r in rows]
+                        [
+                            self._solver_targets(
+                                problems[neural[r]], targets[neural[r]] / scales[neural[r]], key
+                            )
+                            for r in rows
+                        ]
                     ).astype(np.float32)
-                    for key in path
+                    for key in sequence
                 }
                 for _ in range(self.passes):
-                    for key in path:
+                    for key in sequence:
                         zg = self.solvers[key](zg, tg[key])
                 z[rows_arr] = zg
             decoded = self.decoder(z).astype(np.float64).reshape(len(neural), NUM_JOINTS, 3)
@@ -305,16 +310,19 @@ class Engine:
                     tolerance=p.tolerance,
                     max_iterations=self.fabrik_max_iterations,
                 )
-                pose, iterations, path = res.positions, res.iterations, ["fabrik"]
+                pose, iterations = res.positions, res.iterations
+                path = ["fabrik"]
             else:
-                pose, path = solved[i], paths[i]
+                pose, path = solved[i], list(paths[i])
                 if p.preserve_bone_lengths or p.reach == "exact":
                     pose = kinematics.bone_pass(pose, bl, reference=start)
                 covered = {j for key in path for j in key.split("+")}
                 uncovered = [JOINT_NAMES[j] not in covered for j in p.target_idx]
                 if p.reach == "exact" or any(uncovered):
-                    goal = tgt if p.reach == "exact" else np.where(
-                        np.asarray(uncovered)[:, None], tgt, pose[p.target_idx]
+                    goal = (
+                        tgt
+                        if p.reach == "exact"
+                        else np.where(np.asarray(uncovered)[:, None], tgt, pose[p.target_idx])
                     )
                     res = kinematics.polish(
                         pose,
@@ -327,8 +335,8 @@ class Engine:
                     )
                     pose, iterations = res.positions, res.iterations
                     path = [*path, "fabrik-polish"]
-            world = frame.to_world(pose)
-            results[i] = self._result(p, world, bl, path, iterations)
+            world = np.asarray(frame.to_world(pose), dtype=np.float64)
+            results[i] = self._result(p, world, np.asarray(bl, dtype=np.float64), path, iterations)
         return [r for r in results if r is not None]
 
     def _solver_targets(self, p: SolveProblem, tgt: F64, key: str) -> F64:
@@ -411,7 +419,11 @@ class Engine:
         idx = np.asarray([JOINT_INDEX[j] for j in keypoints], dtype=np.intp)
         goal = np.stack([given[j] * scale for j in keypoints])
         res = kinematics.polish(
-            pose, lengths, idx, goal, tolerance=tolerance,
+            pose,
+            lengths,
+            idx,
+            goal,
+            tolerance=tolerance,
             max_iterations=self.fabrik_max_iterations,
         )
         world = res.positions + origin
@@ -456,4 +468,3 @@ def _cover(joints: frozenset[str], available: frozenset[str]) -> tuple[str, ...]
             chosen.append(k)
             covered |= members
     return tuple(chosen)
-

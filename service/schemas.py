@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, create_model
 
 from service.skeleton import JOINT_NAMES
 
@@ -12,13 +12,23 @@ Vec3 = Annotated[
     list[float],
     Field(min_length=3, max_length=3, description="x, y, z in metres (world frame, +Y up)."),
 ]
-Joint = Annotated[str, Field(description=f"A joint name: one of {', '.join(JOINT_NAMES)}.")]
-PoseMap = Annotated[
-    dict[str, Vec3],
-    Field(description="Every one of the 21 joints, world space, metres."),
+Joint = Annotated[
+    str,
+    Field(
+        description="A joint name of the canonical skeleton.",
+        json_schema_extra={"enum": list(JOINT_NAMES)},
+    ),
 ]
 
-_REST_EXAMPLE = {
+#: A whole pose: exactly the 21 joints, each [x, y, z] in metres (world frame).
+Pose: type[BaseModel] = create_model(
+    "Pose",
+    __config__=ConfigDict(extra="forbid", strict=True),
+    __doc__="Every one of the 21 joints, world space, metres.",
+    **{name: (Vec3, ...) for name in JOINT_NAMES},  # type: ignore[call-overload]
+)
+
+_REST_EXAMPLE: dict[str, Any] = {
     "pelvis": [0.0, 0.95, 0.0],
     "spine1": [0.0, 1.1, -0.01],
     "spine2": [0.0, 1.21, -0.01],
@@ -44,7 +54,7 @@ _REST_EXAMPLE = {
 
 
 class _Body(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", strict=True)
 
 
 class Target(_Body):
@@ -68,6 +78,7 @@ class SolveOptions(_Body):
 class SolveRequest(_Body):
     model_config = ConfigDict(
         extra="forbid",
+        strict=True,
         json_schema_extra={
             "examples": [
                 {
@@ -80,7 +91,7 @@ class SolveRequest(_Body):
         },
     )
 
-    pose: PoseMap
+    pose: Pose
     targets: list[Target] = Field(min_length=1, max_length=21)
     pins: list[Joint] = Field(default_factory=list, max_length=21)
     options: SolveOptions = Field(default_factory=SolveOptions)
@@ -93,7 +104,7 @@ class TargetResult(BaseModel):
 
 
 class SolveResponse(BaseModel):
-    pose: dict[str, Vec3]
+    pose: Pose
     targets: list[TargetResult]
     max_bone_length_error: float = Field(description="Max relative bone-length error.")
     solvers: list[str] = Field(description="Solver sequence used (target-set keys).")
@@ -118,6 +129,7 @@ class Keypoint(_Body):
 class CompleteRequest(_Body):
     model_config = ConfigDict(
         extra="forbid",
+        strict=True,
         json_schema_extra={
             "examples": [
                 {
@@ -146,7 +158,7 @@ class CompleteRequest(_Body):
 
 
 class CompleteResponse(BaseModel):
-    pose: dict[str, Vec3]
+    pose: Pose
     keypoints: list[TargetResult]
     levels: list[int] = Field(description="Completion levels run (1 = six base points).")
     model: str
@@ -176,6 +188,21 @@ class ModelsResponse(BaseModel):
     solver_sets: list[str]
     completion_levels: list[list[str]]
     models: list[ModelInfo]
+
+
+class Problem(BaseModel):
+    """RFC 9457 problem details: every 4xx/5xx answer (``application/problem+json``)."""
+
+    model_config = ConfigDict(extra="allow")
+
+    type: str
+    title: str
+    status: int
+    detail: str
+    errors: list[dict[str, str]] | None = Field(
+        default=None, description="Per-field errors of an invalid body."
+    )
+    missing: list[str] | None = Field(default=None, description="Missing base key points.")
 
 
 class Health(BaseModel):

@@ -15,10 +15,15 @@ from __future__ import annotations
 import os
 import shutil
 import subprocess
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import pytest
+
+if TYPE_CHECKING:
+    from service.engine import Engine
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 BANDAI_ARCHIVE = "bandai-namco-research-motiondataset.tar.xz"
@@ -104,3 +109,71 @@ def small_dataset(mocap_clips: MocapClips, tmp_path_factory: pytest.TempPathFact
     out = tmp_path_factory.mktemp("dataset") / "poses.npz"
     build_dataset(mocap_clips.root, out, seed=0, workers=2, progress=False)
     return out
+
+
+# --------------------------------------------------------------------------------------
+# Models and the service (the shipped models by default; $MARIONETTE_MODELS overrides)
+# --------------------------------------------------------------------------------------
+@pytest.fixture(scope="session")
+def models_dir() -> Path:
+    env = os.environ.get("MARIONETTE_MODELS")
+    path = Path(env) if env else REPO_ROOT / "models"
+    assert (path / "manifest.json").is_file(), f"no trained models at {path}"
+    return path
+
+
+@pytest.fixture(scope="session")
+def engine(models_dir: Path) -> Engine:
+    from service.engine import Engine
+
+    return Engine(models_dir)
+
+
+@pytest.fixture(scope="session")
+def real_poses(small_dataset: Path) -> RealPoses:
+    """Real canonical poses (metres) and pairs 0.2-1 s apart from the same clip."""
+    import numpy as np
+
+    from trainer.data.dataset import load_dataset
+    from trainer.pairs import partner_ranges, sample_partners
+
+    data = load_dataset(small_dataset)
+    lo, hi = partner_ranges(data.clip, data.frame, 30)
+    rng = np.random.default_rng(0)
+    anchors = np.sort(rng.choice(len(data), size=200, replace=False))
+    partners = sample_partners(lo, hi, anchors, rng, frame=data.frame, min_gap=6)
+    keep = partners != anchors
+    return RealPoses(
+        poses=data.positions.astype(np.float64),
+        starts=anchors[keep],
+        goals=partners[keep],
+    )
+
+
+@dataclass(frozen=True)
+class RealPoses:
+    poses: Any  # (N, 21, 3) float64 canonical metres
+    starts: Any  # indices of start poses
+    goals: Any  # indices of target poses, same clip, 0.2-1 s from the start
+
+    def pose_dict(self, i: int, transform: Any = None) -> dict[str, list[float]]:
+        from service.skeleton import JOINT_NAMES
+
+        p = self.poses[i] if transform is None else transform(self.poses[i])
+        return {n: [float(v) for v in p[j]] for j, n in enumerate(JOINT_NAMES)}
+
+
+def make_client(models_dir: Path, **settings: Any) -> Any:
+    from fastapi.testclient import TestClient
+
+    from service.app import create_app
+    from service.settings import Settings
+
+    app = create_app(Settings(models_dir=models_dir, **settings), load_in_background=False)
+    return TestClient(app, raise_server_exceptions=False)
+
+
+@pytest.fixture(scope="session")
+def client(models_dir: Path) -> Iterator[Any]:
+    with make_client(models_dir) as c:
+        yield c

@@ -123,7 +123,7 @@ class CompletionConfig(_Section):
 class TrainConfig(_Section):
     seed: int = 0
     threads: int = Field(
-        default=2, ge=1, description="torch intra-op threads (results depend on it)."
+        default=1, ge=1, description="torch intra-op threads (results depend on it)."
     )
     dataset: str = "data/poses.npz"
     run_dir: str = "runs/default"

@@ -598,6 +598,13 @@ def train_all(cfg: TrainConfig, *, fresh: bool = False) -> Trained:
     ae, ae_state = train_autoencoder(cfg, d, train, val, fresh)
     bank, solver_state = train_solvers(cfg, d, ae, splits, fresh)
     completion, completion_states = train_completion(cfg, d, splits, fresh)
+    if d.world > 1:  # every rank reports what it ended with (ranks must agree)
+        digest = hashlib.sha256()
+        for module in (ae, bank, *completion):
+            for tensor in module.state_dict().values():
+                digest.update(tensor.detach().contiguous().numpy().tobytes())
+        print(f"weights digest rank {d.rank}: {digest.hexdigest()}", flush=True)
+        d.barrier()
     states = {"autoencoder": ae_state, "solvers": solver_state}
     states.update({f"completion{i + 1}": s for i, s in enumerate(completion_states)})
     return Trained(ae=ae, bank=bank, completion=completion, states=states, splits=splits)

@@ -1,0 +1,370 @@
+"""The REST API against the real models, through the ASGI app with its lifespan."""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import shutil
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from service.skeleton import JOINT_INDEX, JOINT_NAMES, bone_lengths
+from tests.conftest import RealPoses, make_client
+
+PROBLEM = "application/problem+json"
+
+
+def as_array(pose: dict[str, list[float]]) -> np.ndarray:
+    return np.array([pose[n] for n in JOINT_NAMES], dtype=np.float64)
+
+
+def yaw_shift(yaw: float, shift: tuple[float, float, float], scale: float = 1.0) -> Any:
+    c, s = math.cos(yaw), math.sin(yaw)
+    rot = np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
+
+    def apply(p: np.ndarray) -> np.ndarray:
+        return np.asarray((p * scale) @ rot.T + np.asarray(shift))
+
+    return apply
+
+
+def solve_body(
+    real: RealPoses, k: int, joints: list[str], transform: Any = None, **options: Any
+) -> dict[str, Any]:
+    start, goal = int(real.starts[k]), int(real.goals[k])
+    goal_pose = real.poses[goal] if transform is None else transform(real.poses[goal])
+    return {
+        "pose": real.pose_dict(start, transform),
+        "targets": [
+            {"joint": j, "position": [float(v) for v in goal_pose[JOINT_INDEX[j]]]} for j in joints
+        ],
+        "options": options,
+    }
+
+
+def assert_problem(resp: Any, status: int, *needles: str) -> dict[str, Any]:
+    assert resp.status_code == status, resp.text
+    assert resp.headers["content-type"].startswith(PROBLEM)
+    body: dict[str, Any] = resp.json()
+    assert body["status"] == status and body["title"] and body["detail"]
+    for needle in needles:
+        assert needle in body["detail"], body["detail"]
+    return body
+
+
+# -- solving ---------------------------------------------------------------------------
+def test_solve_reaches_real_targets_with_input_bone_lengths(
+    client: Any, real_poses: RealPoses
+) -> None:
+    reach = []
+    for k in range(20):
+        body = solve_body(real_poses, k, ["left_wrist", "right_wrist"])
+        resp = client.post("/v1/solve", json=body)
+        assert resp.status_code == 200, resp.text
+        out = resp.json()
+        assert set(out["pose"]) == set(JOINT_NAMES)
+        assert out["solvers"] == ["left_wrist+right_wrist"]
+        assert out["method"] == "neural"
+        start_len = bone_lengths(as_array(body["pose"]))
+        out_len = bone_lengths(as_array(out["pose"]))
+        assert np.max(np.abs(out_len / start_len - 1)) <= 1e-5
+        assert out["max_bone_length_error"] <= 1e-5
+        reach += [t["error"] for t in out["targets"]]
+    # soft reach on real edits: centimetres, not decimetres
+    assert float(np.mean(reach)) < 0.06, np.mean(reach)
+
+
+def test_exact_reach_and_pins(client: Any, real_poses: RealPoses) -> None:
+    for k in range(10):
+        body = solve_body(real_poses, k, ["left_wrist"], reach="exact", tolerance=0.001)
+        body["pins"] = ["left_ankle", "right_ankle"]
+        out = client.post("/v1/solve", json=body).json()
+        assert out["targets"][0]["reached"], out["targets"]
+        assert out["targets"][0]["error"] <= 0.001
+        start, end = as_array(body["pose"]), as_array(out["pose"])
+        for pin in ("left_ankle", "right_ankle"):
+            assert np.linalg.norm(end[JOINT_INDEX[pin]] - start[JOINT_INDEX[pin]]) <= 0.001
+        assert out["max_bone_length_error"] <= 1e-5
+
+
+def test_unreachable_target_is_approached_not_an_error(client: Any, real_poses: RealPoses) -> None:
+    body = solve_body(real_poses, 0, ["right_wrist"], reach="exact")
+    pose = as_array(body["pose"])
+    shoulder = pose[JOINT_INDEX["right_shoulder"]]
+    far = shoulder + np.array([-2.0, 0.0, 0.0])  # 2 m to the right: beyond any arm
+    body["targets"][0]["position"] = far.tolist()
+    resp = client.post("/v1/solve", json=body)
+    assert resp.status_code == 200
+    out = resp.json()
+    assert out["targets"][0]["reached"] is False
+    end = as_array(out["pose"])
+    assert np.all(np.isfinite(end))
+    assert out["max_bone_length_error"] <= 1e-5
+    # the wrist moved towards the target
+    assert np.linalg.norm(end[JOINT_INDEX["right_wrist"]] - far) < np.linalg.norm(
+        pose[JOINT_INDEX["right_wrist"]] - far
+    )
+
+
+@pytest.mark.parametrize("method", ["neural", "fabrik"])
+def test_world_space_in_world_space_out(client: Any, real_poses: RealPoses, method: str) -> None:
+    """A yawed, displaced copy of the problem gives the same answer, yawed and displaced."""
+    move = yaw_shift(-math.pi / 2, (50.0, 0.0, -30.0))
+    for k in range(3):
+        a = client.post("/v1/solve", json=solve_body(real_poses, k, ["head"], method=method))
+        b = client.post(
+            "/v1/solve", json=solve_body(real_poses, k, ["head"], transform=move, method=method)
+        )
+        pa, pb = as_array(a.json()["pose"]), as_array(b.json()["pose"])
+        assert np.abs(move(pa) - pb).max() < 1e-4
+
+
+def test_bigger_character_gets_the_same_pose_scaled(client: Any, real_poses: RealPoses) -> None:
+    big = yaw_shift(0.0, (0.0, 0.0, 0.0), scale=1.3)
+    a = client.post("/v1/solve", json=solve_body(real_poses, 1, ["left_ankle", "right_ankle"]))
+    b = client.post(
+        "/v1/solve", json=solve_body(real_poses, 1, ["left_ankle", "right_ankle"], transform=big)
+    )
+    pa, pb = as_array(a.json()["pose"]), as_array(b.json()["pose"])
+    assert np.abs(big(pa) - pb).max() < 1e-4
+    # and its own bone lengths, not the dataset's
+    start = as_array(solve_body(real_poses, 1, ["head"], transform=big)["pose"])
+    assert np.allclose(bone_lengths(pb), bone_lengths(start), rtol=1e-5)
+
+
+def test_same_request_same_bits(client: Any, real_poses: RealPoses) -> None:
+    body = solve_body(real_poses, 2, ["left_wrist", "head", "right_ankle"], reach="exact")
+    first = client.post("/v1/solve", json=body).content
+    for k in range(30):  # other traffic in between must not change the answer
+        client.post("/v1/solve", json=solve_body(real_poses, k, ["right_wrist"]))
+    assert client.post("/v1/solve", json=body).content == first
+
+
+def test_composition_and_uncovered_joints(client: Any, real_poses: RealPoses) -> None:
+    five = ["head", "left_wrist", "right_wrist", "left_ankle", "right_ankle"]
+    out = client.post("/v1/solve", json=solve_body(real_poses, 3, five)).json()
+    assert sorted(out["solvers"]) == ["head", "left_ankle+right_ankle", "left_wrist+right_wrist"]
+    assert max(t["error"] for t in out["targets"]) < 0.15
+    # spine2 has no trained solver: a FABRIK polish places it, holding the others
+    out = client.post(
+        "/v1/solve", json=solve_body(real_poses, 3, ["spine2", "left_wrist"], reach="soft")
+    ).json()
+    assert out["solvers"][-1] == "fabrik-polish"
+    spine = next(t for t in out["targets"] if t["joint"] == "spine2")
+    assert spine["error"] < 0.01
+
+
+def test_weights_order_the_solver_sequence(client: Any, real_poses: RealPoses) -> None:
+    body = solve_body(real_poses, 4, ["head", "left_knee"])
+    body["targets"][0]["weight"] = 5.0
+    assert client.post("/v1/solve", json=body).json()["solvers"] == ["left_knee", "head"]
+    body["targets"][0]["weight"] = 0.2
+    assert client.post("/v1/solve", json=body).json()["solvers"] == ["head", "left_knee"]
+
+
+def test_fabrik_method(client: Any, real_poses: RealPoses) -> None:
+    body = solve_body(real_poses, 5, ["left_wrist", "right_ankle"], method="fabrik")
+    out = client.post("/v1/solve", json=body).json()
+    assert out["method"] == "fabrik" and out["solvers"] == ["fabrik"]
+    assert out["iterations"] >= 1
+    assert out["max_bone_length_error"] <= 1e-5
+
+
+def test_batch_matches_single_solves(client: Any, real_poses: RealPoses) -> None:
+    sets = [["left_wrist"], ["left_ankle", "right_ankle"], ["head", "right_wrist"], ["pelvis"]]
+    items = [solve_body(real_poses, k, sets[k % 4]) for k in range(12)]
+    items.append(solve_body(real_poses, 12, ["left_knee"], method="fabrik"))
+    resp = client.post("/v1/solve/batch", json={"items": items})
+    assert resp.status_code == 200, resp.text
+    got = resp.json()["items"]
+    assert len(got) == len(items)
+    for item, out in zip(items, got, strict=True):
+        single = client.post("/v1/solve", json=item).json()
+        assert single["solvers"] == out["solvers"]
+        assert np.abs(as_array(single["pose"]) - as_array(out["pose"])).max() < 1e-5
+
+
+def test_batch_limit_is_a_413(models_dir: Path, real_poses: RealPoses) -> None:
+    with make_client(models_dir, max_batch_items=3) as small:
+        items = [solve_body(real_poses, k, ["head"]) for k in range(4)]
+        assert_problem(small.post("/v1/solve/batch", json={"items": items}), 413, "limit of 3")
+        assert small.post("/v1/solve/batch", json={"items": items[:3]}).status_code == 200
+
+
+def test_batch_error_names_the_item(client: Any, real_poses: RealPoses) -> None:
+    items = [solve_body(real_poses, k, ["head"]) for k in range(3)]
+    items[2]["targets"][0]["joint"] = "tail"
+    assert_problem(client.post("/v1/solve/batch", json={"items": items}), 422, "items[2]", "tail")
+
+
+# -- completion ----------------------------------------------------------------------------
+BASE = ["pelvis", "neck", "left_wrist", "right_wrist", "left_ankle", "right_ankle"]
+
+
+def test_complete_from_six_points(client: Any, real_poses: RealPoses) -> None:
+    errors = []
+    move = yaw_shift(2.0, (3.0, 0.0, -1.0))
+    for k in range(10):
+        true = move(real_poses.poses[real_poses.goals[k]])
+        body = {
+            "keypoints": [{"joint": j, "position": true[JOINT_INDEX[j]].tolist()} for j in BASE]
+        }
+        resp = client.post("/v1/complete", json=body)
+        assert resp.status_code == 200, resp.text
+        out = resp.json()
+        assert out["levels"] == [1]
+        pose = as_array(out["pose"])
+        errors.append(np.linalg.norm(pose - true, axis=-1).mean())
+        assert all(kp["error"] < 0.02 for kp in out["keypoints"])
+    assert float(np.mean(errors)) < 0.10, np.mean(errors)
+
+
+def test_complete_uses_larger_schemes_and_bone_lengths(client: Any, real_poses: RealPoses) -> None:
+    true = real_poses.poses[real_poses.goals[0]]
+    joints = [*BASE, "head", "left_elbow"]
+    lengths = {"left_elbow": 0.3, "left_wrist": 0.25}
+    body = {
+        "keypoints": [{"joint": j, "position": true[JOINT_INDEX[j]].tolist()} for j in joints],
+        "bone_lengths": lengths,
+    }
+    out = client.post("/v1/complete", json=body).json()
+    assert out["levels"] == [1, 2]
+    pose = as_array(out["pose"])
+    got = bone_lengths(pose)
+    from service.skeleton import BONES
+
+    for child, value in lengths.items():
+        b = next(i for i, (c, _) in enumerate(BONES) if c == JOINT_INDEX[child])
+        assert abs(got[b] - value) < 1e-6
+
+
+def test_complete_names_missing_base_points(client: Any) -> None:
+    body = {
+        "keypoints": [
+            {"joint": "pelvis", "position": [0, 1, 0]},
+            {"joint": "neck", "position": [0, 1.5, 0]},
+        ]
+    }
+    out = assert_problem(client.post("/v1/complete", json=body), 422, "left_wrist", "right_ankle")
+    assert out["missing"] == ["left_wrist", "right_wrist", "left_ankle", "right_ankle"]
+
+
+# -- bad input: always a precise problem+json, never a 500 ----------------------------------
+@pytest.mark.parametrize(
+    ("mutate", "needle"),
+    [
+        (lambda b: b["pose"].update(tail=[0, 0, 0]), "pose.tail: Extra inputs"),
+        (lambda b: b["pose"].pop("left_knee"), "pose.left_knee: Field required"),
+        (lambda b: b["pose"].update(head=[0.0, 1.0]), "pose.head"),
+        (lambda b: b["targets"].append(dict(b["targets"][0])), "duplicate target"),
+        (lambda b: b["targets"][0].update(joint="nose"), "unknown joint 'nose'"),
+        (lambda b: b.update(pins=["left_wrist"]), "both pinned and targeted"),
+        (lambda b: b.update(pins=["elbow"]), "unknown joint 'elbow'"),
+        (lambda b: b["targets"][0].update(position=[1, 2, 3, 4]), "targets.0.position"),
+        (lambda b: b["pose"].update(left_knee=b["pose"]["left_hip"]), "zero-length bones"),
+        (lambda b: b["options"].update(method="magic"), "options.method"),
+        (lambda b: b.update(targets=[]), "targets"),
+        (lambda b: b["targets"][0].update(position=[1e30, 0, 0]), "beyond"),
+    ],
+)
+def test_bad_requests_are_precise_problems(
+    client: Any, real_poses: RealPoses, mutate: Any, needle: str
+) -> None:
+    body = solve_body(real_poses, 0, ["left_wrist"])
+    mutate(body)
+    assert_problem(client.post("/v1/solve", json=body), 422, needle)
+
+
+def test_nan_and_malformed_json(client: Any, real_poses: RealPoses) -> None:
+    body = solve_body(real_poses, 0, ["left_wrist"])
+    text = json.dumps(body).replace(json.dumps(body["targets"][0]["position"][0]), "NaN", 1)
+    resp = client.post("/v1/solve", content=text, headers={"content-type": "application/json"})
+    assert_problem(resp, 422, "finite")
+    resp = client.post("/v1/solve", content=b"{", headers={"content-type": "application/json"})
+    assert_problem(resp, 422)
+
+
+def test_content_type_and_body_size(models_dir: Path, real_poses: RealPoses) -> None:
+    with make_client(models_dir, max_body_bytes=4096) as c:
+        body = json.dumps(solve_body(real_poses, 0, ["head"])).encode()
+        assert_problem(
+            c.post("/v1/solve", content=body, headers={"content-type": "text/plain"}),
+            415,
+            "application/json",
+        )
+        huge = body + b" " * 5000
+        assert_problem(
+            c.post("/v1/solve", content=huge, headers={"content-type": "application/json"}),
+            413,
+            "4096",
+        )
+
+
+# -- operations ------------------------------------------------------------------------------
+def test_request_id_and_timing_headers(client: Any, real_poses: RealPoses) -> None:
+    resp = client.post(
+        "/v1/solve", json=solve_body(real_poses, 0, ["head"]), headers={"X-Request-ID": "abc-123"}
+    )
+    assert resp.headers["x-request-id"] == "abc-123"
+    assert resp.headers["x-inference-time"].endswith("ms")
+    generated = client.get("/v2/health/live").headers["x-request-id"]
+    assert len(generated) == 32
+
+
+def test_health_metrics_skeleton_models(
+    client: Any, real_poses: RealPoses, models_dir: Path
+) -> None:
+    assert client.get("/v2/health/live").json()["status"] == "live"
+    assert client.get("/v2/health/ready").status_code == 200
+    client.post("/v1/solve", json=solve_body(real_poses, 0, ["left_wrist", "right_wrist"]))
+    metrics = client.get("/metrics").text
+    assert 'pose_solves_total{method="neural",solvers="left_wrist+right_wrist"}' in metrics
+    assert "pose_request_seconds_bucket" in metrics
+    sk = client.get("/v1/skeleton").json()
+    assert sk["joints"] == list(JOINT_NAMES) and sk["parents"]["left_elbow"] == "left_shoulder"
+    assert sk["frame"]["up"] == "+Y"
+    models = client.get("/v1/models").json()
+    manifest = json.loads((models_dir / "manifest.json").read_text())
+    assert models["version"] == manifest["version"]
+    assert "left_wrist+right_wrist" in models["solver_sets"]
+
+
+def test_corrupt_model_is_not_ready_with_a_reason(
+    models_dir: Path, tmp_path: Path, caplog: pytest.LogCaptureFixture, real_poses: RealPoses
+) -> None:
+    broken = tmp_path / "models"
+    shutil.copytree(models_dir, broken)
+    (broken / "decoder.onnx").write_bytes(b"garbage")
+    with caplog.at_level(logging.ERROR, logger="service"), make_client(broken) as c:
+        resp = c.get("/v2/health/ready")
+        assert resp.status_code == 503
+        assert "decoder.onnx" in resp.json()["detail"]
+        assert c.get("/v2/health/live").status_code == 200
+        assert_problem(c.post("/v1/skeleton"), 405)
+        out = c.post("/v1/solve", json=solve_body(real_poses, 0, ["head"]))
+        assert_problem(out, 503, "decoder.onnx")
+    assert any("decoder.onnx" in r.getMessage() for r in caplog.records)
+
+
+def test_api_key_guards_v1_only(models_dir: Path, real_poses: RealPoses) -> None:
+    with make_client(models_dir, api_key="s3cret") as c:
+        body = solve_body(real_poses, 0, ["head"])
+        assert_problem(c.post("/v1/solve", json=body), 401)
+        assert c.post("/v1/solve", json=body, headers={"X-API-Key": "s3cret"}).status_code == 200
+        assert c.get("/v2/health/ready").status_code == 200
+        assert c.get("/metrics").status_code == 200
+
+
+def test_cors_allow_list(models_dir: Path) -> None:
+    with make_client(models_dir, cors_origins=["http://editor.example"]) as c:
+        ok = c.options(
+            "/v1/solve",
+            headers={"Origin": "http://editor.example", "Access-Control-Request-Method": "POST"},
+        )
+        assert ok.headers.get("access-control-allow-origin") == "http://editor.example"
+        other = c.get("/v2/health/live", headers={"Origin": "http://evil.example"})
+        assert "access-control-allow-origin" not in other.headers

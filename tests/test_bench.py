@@ -1,0 +1,180 @@
+"""The benchmark and evaluation code on a handful of items (`--quick`) against the models:
+the report, results and plots are written and the metrics are finite and sane. No timing
+is asserted (only that timings were measured)."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.fixture(scope="module")
+def models_dir() -> Path:
+    env = os.environ.get("MARIONETTE_MODELS")
+    path = Path(env) if env else REPO_ROOT / "models"
+    if not (path / "manifest.json").is_file():
+        pytest.skip(f"no trained models in {path} (manifest.json missing)")
+    return path
+
+
+@pytest.fixture(scope="module")
+def dataset_path(request: pytest.FixtureRequest) -> Path:
+    path = REPO_ROOT / "data" / "poses.npz"
+    if path.is_file():
+        return path
+    built: Path = request.getfixturevalue("small_dataset")
+    return built
+
+
+def _walk_numbers(obj: Any, where: str = "") -> list[tuple[str, float]]:
+    if isinstance(obj, bool) or obj is None or isinstance(obj, str):
+        return []
+    if isinstance(obj, int | float):
+        return [(where, float(obj))]
+    if isinstance(obj, dict):
+        return [n for k, v in obj.items() for n in _walk_numbers(v, f"{where}.{k}")]
+    if isinstance(obj, list):
+        return [n for i, v in enumerate(obj) for n in _walk_numbers(v, f"{where}[{i}]")]
+    return []
+
+
+def _check_plots(out: Path, report: str) -> None:
+    images = re.findall(r"!\[[^\]]*\]\(([^)]+)\)", report)
+    assert images, "the report references no plot"
+    for name in images:
+        png = out / name
+        assert png.is_file(), f"{name} referenced but not written"
+        assert png.read_bytes()[:8] == PNG_MAGIC
+        assert png.stat().st_size > 5000
+
+
+def test_quick_bench_writes_a_sane_report(
+    models_dir: Path, dataset_path: Path, tmp_path: Path
+) -> None:
+    out = tmp_path / "reports"
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "bench",
+            "--quick",
+            "--models",
+            str(models_dir),
+            "--dataset",
+            str(dataset_path),
+            "--out",
+            str(out),
+        ],
+        cwd=REPO_ROOT,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    report = (out / "report.md").read_text()
+    results = json.loads((out / "results.json").read_text())
+    for section in (
+        "## Goals",
+        "### B1",
+        "### B2",
+        "### B3",
+        "### B4",
+        "### B5",
+        "### Determinism",
+        "### Composition ablation",
+        "### In-process latency",
+        "### HTTP",
+    ):
+        assert section in report
+    assert re.search(r"\*\*(met|not met)\*\*", report)
+    for plot in (
+        "reach_error.png",
+        "mpjpe_distributions.png",
+        "sample_poses.png",
+        "latency.png",
+        "throughput.png",
+    ):
+        assert f"]({plot})" in report
+    _check_plots(out, report)
+
+    for where, value in _walk_numbers(results):
+        if where.endswith("reach_p95") or where.endswith("loadavg"):
+            continue
+        assert math.isfinite(value), f"{where} = {value}"
+
+    b1 = results["B1"]
+    for name, block in b1.items():
+        ident = block["identity"]
+        assert ident["drift"] == 0.0, name
+        assert ident["bone_max"] < 1e-6, name
+        for method in ("fabrik", "neural_bone", "neural_exact"):
+            s = block[method]
+            assert s["finite"] == 100.0, (name, method)
+            assert s["bone_max"] <= 1e-5, (name, method, s["bone_max"])
+            assert 0.0 <= s["reach_mean"] < 200.0
+            assert 0.0 < s["mpjpe"] < 200.0
+        # the raw decoder output does not keep bone lengths; the bone pass does
+        assert block["neural_raw"]["bone_max"] > block["neural_bone"]["bone_max"]
+    for case, block in results["B5"].items():
+        for method in ("fabrik", "neural_bone", "neural_exact"):
+            assert block[method]["finite"] == 100.0, (case, method)
+    for method in ("fabrik", "neural_bone", "neural_exact"):
+        assert results["determinism"][method]["repeat_bitwise_equal"], method
+    assert set(results["ablation"]) == {"1", "2"}
+    assert results["B2"]
+    assert all(lvl["neural"]["mpjpe"] > 0 for lvl in results["B2"].values())
+
+    speed = results["speed"]
+    assert {r["targets"] for r in speed["latency"]} == {1, 2, 5}
+    assert all(r["p50_ms"] > 0 and r["p99_ms"] >= r["p50_ms"] for r in speed["latency"])
+    assert all(r["poses_per_s"] > 0 for r in speed["throughput"])
+    http = results["http"]
+    assert [r["concurrency"] for r in http["solve"]] == [1, 8, 64]
+    assert all(r["errors"] == 0 and r["requests"] > 0 for r in http["solve"])
+    assert http["batch"]["errors"] == 0
+    assert http["batch"]["poses_per_s"] > 0
+    assert all(v > 0 for v in http["rss_kb"].values())
+
+
+def test_evaluate_command_writes_accuracy_report(
+    models_dir: Path, dataset_path: Path, tmp_path: Path
+) -> None:
+    from typer.testing import CliRunner
+
+    from trainer.cli import app
+
+    out = tmp_path / "acc"
+    result = CliRunner().invoke(
+        app,
+        [
+            "evaluate",
+            "--quick",
+            "--models",
+            str(models_dir),
+            "--dataset",
+            str(dataset_path),
+            "--out",
+            str(out),
+        ],
+    )
+    assert result.exit_code == 0, result.output
+    report = (out / "accuracy.md").read_text()
+    assert "### B1" in report
+    assert "Not measured in this run" in report
+    _check_plots(out, report)
+    results = json.loads((out / "accuracy.json").read_text())
+    assert results["B1"]
+    assert results["B3"]
+    assert results["B5"]

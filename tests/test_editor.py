@@ -1,0 +1,364 @@
+"""The browser editor, end to end: the real server (uvicorn, real models) and a real
+headless Chromium driven by Playwright.
+
+Chromium: ``$MARIONETTE_CHROMIUM``, else ``/usr/bin/chromium`` (Debian: ``apt-get install -y
+chromium``), else ``chromium``/``chromium-browser``/``google-chrome`` on PATH. The test is
+skipped, saying so, only when none exists. ``$MARIONETTE_SCREENSHOT`` names where the
+screenshot goes (default: the test's temp folder); ``docs/img/editor.png`` is made that way.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import shutil
+import socket
+import subprocess
+import sys
+import time
+import urllib.error
+import urllib.request
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from service.skeleton import JOINT_NAMES
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+CHROMIUM_ARGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--no-first-run",
+    # WebGL on the CPU (SwiftShader); without the flag newer Chromium refuses it headless.
+    "--enable-unsafe-swiftshader",
+]
+
+# The service as `pose-service` runs it, plus the editor routes (a no-op once create_app
+# mounts them itself).
+SERVER = """
+import sys
+import uvicorn
+from service.app import create_app
+from service.editor import mount_editor
+from service.settings import Settings
+
+app = create_app(Settings(models_dir=sys.argv[1], access_log=False))
+if not any(getattr(r, "path", None) == "/editor" for r in app.routes):
+    mount_editor(app)
+uvicorn.run(app, host="127.0.0.1", port=int(sys.argv[2]), log_level="warning")
+"""
+
+
+def find_chromium() -> str | None:
+    env = os.environ.get("MARIONETTE_CHROMIUM")
+    if env:
+        return env
+    if Path("/usr/bin/chromium").is_file():
+        return "/usr/bin/chromium"
+    for name in ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable"):
+        found = shutil.which(name)
+        if found:
+            return found
+    return None
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@pytest.fixture(scope="module")
+def server(models_dir: Path) -> Iterator[str]:
+    """The real service on a free loopback port; yields its base URL once it is ready."""
+    port = free_port()
+    proc = subprocess.Popen(
+        [sys.executable, "-c", SERVER, str(models_dir), str(port)],
+        cwd=REPO_ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+    )
+    base = f"http://127.0.0.1:{port}"
+    try:
+        deadline = time.monotonic() + 60
+        while True:
+            if proc.poll() is not None:
+                out = proc.stdout.read().decode(errors="replace") if proc.stdout else ""
+                pytest.fail(f"the server exited with {proc.returncode}:\n{out}")
+            try:
+                with urllib.request.urlopen(f"{base}/v2/health/ready", timeout=2) as r:
+                    if r.status == 200:
+                        break
+            except (urllib.error.URLError, OSError):
+                pass
+            if time.monotonic() > deadline:
+                pytest.fail("the server was not ready within 60 s")
+            time.sleep(0.2)
+        yield base
+    finally:
+        proc.terminate()
+        try:
+            proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+@pytest.fixture(scope="module")
+def browser() -> Iterator[Any]:
+    executable = find_chromium()
+    if executable is None:
+        pytest.skip(
+            "no Chromium found: install it (Debian: apt-get install -y chromium) "
+            "or set MARIONETTE_CHROMIUM to a Chromium/Chrome executable"
+        )
+    sync_api = pytest.importorskip("playwright.sync_api", reason="the playwright package")
+    with sync_api.sync_playwright() as p:
+        b = p.chromium.launch(executable_path=executable, headless=True, args=CHROMIUM_ARGS)
+        try:
+            yield b
+        finally:
+            b.close()
+
+
+def dist(a: list[float], b: list[float]) -> float:
+    return math.dist(a, b)
+
+
+# -- without a browser: the files are there and served ------------------------------------
+STATIC = REPO_ROOT / "service" / "static"
+
+
+def test_editor_routes_serve_the_page_and_vendored_three(tmp_path: Path) -> None:
+    from fastapi import FastAPI
+    from fastapi.testclient import TestClient
+
+    from service.editor import mount_editor
+
+    app = FastAPI()
+    mount_editor(app)
+    c = TestClient(app)
+    page = c.get("/editor")
+    assert page.status_code == 200
+    assert page.headers["content-type"].startswith("text/html")
+    assert 'src="static/editor.js"' in page.text
+    assert "http://" not in page.text  # no CDN: everything comes from /static
+    assert "https://" not in page.text
+    for path in (
+        "/static/editor.js",
+        "/static/vendor/three/three.module.js",
+        "/static/vendor/three/three.core.js",
+        "/static/vendor/three/addons/controls/OrbitControls.js",
+    ):
+        r = c.get(path)
+        assert r.status_code == 200, path
+        assert "javascript" in r.headers["content-type"], (path, r.headers["content-type"])
+    assert c.get("/static/editor.css").headers["content-type"].startswith("text/css")
+    assert c.get("/static/nope.js").status_code == 404
+
+
+def test_vendored_three_is_pinned_and_licensed() -> None:
+    vendor = STATIC / "vendor" / "three"
+    assert "MIT License" in (vendor / "LICENSE").read_text()
+    version = (vendor / "VERSION").read_text().split()[0]
+    assert version.startswith("three@0.")
+    revision = version.removeprefix("three@0.").split(".")[0]
+    assert f"REVISION = '{revision}'" in (vendor / "three.core.js").read_text()
+    # offline: no module is fetched from anywhere but the vendored files
+    for js in (STATIC / "editor.js", vendor / "addons" / "controls" / "OrbitControls.js"):
+        text = js.read_text()
+        assert "from 'http" not in text
+        assert 'from "http' not in text
+
+
+def test_sample_poses_are_small_complete_and_from_the_test_split() -> None:
+    doc = json.loads((STATIC / "samples.json").read_text())
+    assert (STATIC / "samples.json").stat().st_size < 50_000
+    samples = doc["samples"]
+    assert 5 <= len(samples) <= 8
+    assert len({s["name"] for s in samples}) == len(samples)
+    for s in samples:
+        assert set(s["pose"]) == set(JOINT_NAMES), s["name"]
+        assert all(len(v) == 3 and all(math.isfinite(x) for x in v) for v in s["pose"].values())
+        pelvis = s["pose"]["pelvis"]
+        assert abs(pelvis[0]) < 1e-6, s["name"]
+        assert abs(pelvis[2]) < 1e-6, s["name"]
+        lowest = min(v[1] for v in s["pose"].values())
+        assert -0.05 < lowest < 0.5, s["name"]  # on (or just above) the floor
+    dataset = REPO_ROOT / "data" / "poses.npz"
+    if dataset.is_file():
+        from trainer.data.dataset import load_dataset
+
+        ds = load_dataset(dataset)
+        split = dict(zip(ds.clip_name.tolist(), ds.clip_split.tolist(), strict=True))
+        for s in samples:
+            assert split.get(s["clip"]) == "test", s["clip"]
+
+
+# -- in the browser -------------------------------------------------------------------------
+@pytest.mark.browser
+def test_editor_drag_solve_fabrik_errors(server: str, browser: Any, tmp_path: Path) -> None:
+    context = browser.new_context(
+        viewport={"width": 1280, "height": 800}, device_scale_factor=1, accept_downloads=True
+    )
+    page = context.new_page()
+    page.set_default_timeout(15_000)
+    console_errors: list[str] = []
+    page_errors: list[str] = []
+    page.on("console", lambda m: console_errors.append(m.text) if m.type == "error" else None)
+    page.on("pageerror", lambda e: page_errors.append(str(e)))
+    urls: list[str] = []
+    page.on("request", lambda r: urls.append(r.url))
+    solves: list[dict[str, Any]] = []
+    page.on(
+        "request",
+        lambda r: (
+            solves.append(json.loads(r.post_data or "{}")) if r.url.endswith("/v1/solve") else None
+        ),
+    )
+    m = "window.marionette"
+
+    def settled() -> None:
+        """Wait until no solve is waiting or in flight."""
+        page.wait_for_function(
+            f"{m} && (s => !s.dirty && !s.inflight)({m}.solveCount())", polling=50
+        )
+
+    try:
+        # -- the page: / redirects to /editor, the skeleton comes from the samples ----------
+        page.goto(server + "/")
+        assert page.url == server + "/editor"
+        page.wait_for_function(f"{m} && {m}.ready()")
+        page.wait_for_function("document.getElementById('status').textContent === 'connected'")
+        pose0 = page.evaluate(f"{m}.pose()")
+        assert set(pose0) == set(JOINT_NAMES)
+        assert page.evaluate(f"{m}.lastSolve()") is None
+
+        # -- pin both ankles (shift-click) ------------------------------------------------
+        for ankle in ("left_ankle", "right_ankle"):
+            xy = page.evaluate(f"{m}.projectJoint('{ankle}')")
+            page.keyboard.down("Shift")
+            page.mouse.click(xy["x"], xy["y"])
+            page.keyboard.up("Shift")
+        assert sorted(page.evaluate(f"{m}.pins()")) == ["left_ankle", "right_ankle"]
+        assert solves == []  # no target yet: nothing to solve
+
+        # -- drag the left wrist up and outwards with the mouse --------------------------
+        before_png = page.locator("#viewport canvas").screenshot()
+        wrist = page.evaluate(f"{m}.projectJoint('left_wrist')")
+        end = (wrist["x"] + 70, wrist["y"] - 160)
+        page.mouse.move(wrist["x"], wrist["y"])
+        page.mouse.down()
+        for i in range(1, 13):
+            t = i / 12
+            page.mouse.move(wrist["x"] + t * 70, wrist["y"] - t * 160)
+            page.wait_for_timeout(16)
+        page.mouse.up()
+        settled()
+
+        assert solves, "dragging sent no /v1/solve"
+        first = solves[0]
+        assert [t["joint"] for t in first["targets"]] == ["left_wrist"]
+        assert sorted(first["pins"]) == ["left_ankle", "right_ankle"]
+        assert first["options"]["method"] == "neural"
+        assert set(first["pose"]) == set(JOINT_NAMES)
+        # throttled: one request per frame at most, never more than the pointer moves
+        assert len(solves) <= 13
+
+        last = page.evaluate(f"{m}.lastSolve()")
+        assert last is not None
+        assert last["response"]["method"] == "neural"
+        assert last["serverTime"].endswith("ms")
+        target = page.evaluate(f"{m}.targets()")["left_wrist"]
+        on_screen = page.evaluate(f"{m}.projectPoint({json.dumps(target)})")
+        assert abs(on_screen["x"] - end[0]) < 2
+        assert abs(on_screen["y"] - end[1]) < 2
+        pose1 = page.evaluate(f"{m}.pose()")
+        assert pose1 == last["response"]["pose"]  # the drawn pose is the server's answer
+        assert dist(pose1["left_wrist"], pose0["left_wrist"]) > 0.1
+        assert pose1["left_wrist"][1] > pose0["left_wrist"][1] + 0.1  # it went up
+        after_png = page.locator("#viewport canvas").screenshot()
+        assert after_png != before_png, "the canvas did not change"
+        # the panel shows the latency and the target's reach error
+        assert page.locator("#latency").inner_text().endswith(")")
+        assert "ms" in page.locator("#latency").inner_text()
+        row = page.locator("#targets tbody tr[data-joint=left_wrist]")
+        assert "mm" in row.inner_text()
+        assert page.evaluate(f"{m}.history()") == {"length": 4, "index": 3}
+
+        # -- FABRIK --------------------------------------------------------------------------
+        n = len(solves)
+        page.locator(".segmented label", has_text="FABRIK").click()  # as a user does
+        settled()
+        assert len(solves) == n + 1
+        assert solves[-1]["options"]["method"] == "fabrik"
+        last = page.evaluate(f"{m}.lastSolve()")
+        assert last["response"]["method"] == "fabrik"
+        assert "fabrik" in page.locator("#solve-method").inner_text()
+        pose2 = page.evaluate(f"{m}.pose()")
+        # FABRIK reaches a reachable target and holds the pins where its input had them
+        # (its input is the committed pose: the neural answer to the drag)
+        assert last["request"]["pose"] == pose1
+        assert last["response"]["targets"][0]["error"] < 0.01
+        for ankle in ("left_ankle", "right_ankle"):
+            assert dist(pose2[ankle], pose1[ankle]) < 1e-3
+
+        # -- undo / redo, export -------------------------------------------------------------
+        page.click("#undo")
+        assert page.evaluate(f"{m}.pose()") == pose1
+        page.click("#redo")
+        assert page.evaluate(f"{m}.pose()") == pose2
+        with page.expect_download() as dl:
+            page.click("#export")
+        exported = json.loads(Path(dl.value.path()).read_text())
+        assert exported["pose"] == pose2
+        assert exported["options"]["method"] == "fabrik"
+        assert [t["joint"] for t in exported["targets"]] == ["left_wrist"]
+
+        shot = Path(os.environ.get("MARIONETTE_SCREENSHOT", tmp_path / "editor.png"))
+        shot.parent.mkdir(parents=True, exist_ok=True)
+        page.screenshot(path=str(shot))
+        assert shot.stat().st_size > 10_000
+
+        assert page_errors == []
+        assert console_errors == [], console_errors
+        # offline: nothing but the service itself (and the download's blob:) was fetched
+        assert all(u.startswith((server + "/", "blob:", "data:")) for u in urls), urls
+
+        # -- API errors are shown: a bad tolerance is the server's 422 ----------------------
+        page.fill("#tolerance", "0")
+        page.press("#tolerance", "Tab")
+        page.wait_for_function(f"{m}.error() !== null")
+        err = page.evaluate(f"{m}.error()")
+        assert err["status"] == 422, err
+        assert "tolerance" in err["detail"], err
+        banner = page.locator("#error")
+        assert banner.is_visible()
+        assert "422" in banner.inner_text()
+        assert "tolerance" in banner.inner_text()
+        assert page.evaluate(f"{m}.pose()") == pose2  # the failed solve changed nothing
+        page.fill("#tolerance", "0.001")
+        page.press("#tolerance", "Tab")
+        page.wait_for_function(f"{m}.error() === null")
+        assert not banner.is_visible()
+
+        # -- ... and so is an unreachable server ----------------------------------------
+        page.route("**/v1/solve", lambda route: route.abort())
+        page.get_by_label("Exact reach").check()
+        page.wait_for_function(f"{m}.error() !== null")
+        assert page.evaluate(f"{m}.error()")["status"] == 0
+        assert "unreachable" in banner.inner_text()
+        page.unroute("**/v1/solve")
+
+        # Only the browser's own log lines of the two forced failures.
+        assert page_errors == []
+        unexpected = [e for e in console_errors if not e.startswith("Failed to load resource")]
+        assert unexpected == [], unexpected
+    finally:
+        context.close()

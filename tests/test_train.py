@@ -1,0 +1,245 @@
+"""Trainer: a tiny end-to-end training on real clips, export, manifest, parity, resume,
+determinism and DDP."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import onnx
+import onnxruntime as ort
+import pytest
+import torch
+
+from service.manifest import ManifestError, load_manifest
+from service.skeleton import JOINT_INDEX
+from trainer.config import QUICK, TrainConfig, load_config
+from trainer.data.dataset import load_dataset
+from trainer.export import evaluate, export_all
+from trainer.models import Normaliser, TiedAutoencoder, feature_stats
+from trainer.train import Trained, flat, train_all
+
+REPO = Path(__file__).resolve().parents[1]
+
+#: A small but complete configuration: every kind of network, a pair solver included.
+TINY: dict[str, Any] = {
+    **QUICK,
+    "threads": 1,
+    "max_train_frames": 3000,
+    "max_eval_frames": 500,
+    "solver": {"epochs": 1, "sets": [["left_wrist"], ["left_ankle", "right_ankle"]]},
+    "completion": {
+        "epochs": 1,
+        "schemes": [
+            ["pelvis", "neck", "left_wrist", "right_wrist", "left_ankle", "right_ankle"],
+            ["head", "left_elbow", "right_elbow"],
+        ],
+        "hidden": [64, 64],
+    },
+}
+
+
+def tiny_config(dataset: Path, run_dir: Path, out_dir: Path, **extra: Any) -> TrainConfig:
+    overrides = {**TINY, "dataset": str(dataset), "run_dir": str(run_dir), "out_dir": str(out_dir)}
+    for key, value in extra.items():
+        if isinstance(value, dict):
+            overrides[key] = {**overrides.get(key, {}), **value}
+        else:
+            overrides[key] = value
+    return load_config(None, overrides)
+
+
+@pytest.fixture(scope="module")
+def trained(small_dataset: Path, tmp_path_factory: pytest.TempPathFactory) -> tuple[Trained, Path]:
+    root = tmp_path_factory.mktemp("tiny")
+    cfg = tiny_config(small_dataset, root / "run", root / "models")
+    result = train_all(cfg, fresh=True)
+    export_all(cfg, result, evaluate(cfg, result))
+    return result, root / "models"
+
+
+def test_manifest_is_valid_and_hashes_verify(trained: tuple[Trained, Path]) -> None:
+    _, models = trained
+    manifest = load_manifest(models, verify=True)
+    kinds = sorted(m.kind for m in manifest.models)
+    assert kinds.count("solver") == 2
+    assert kinds.count("completion") == 2
+    assert manifest.autoencoder("encoder").file == "encoder.onnx"
+    assert set(manifest.solvers()) == {"left_wrist", "left_ankle+right_ankle"}
+    assert manifest.provenance.split_seed == 0
+    assert manifest.provenance.config["solver"]["other_weight"] == 0.01
+    for entry in manifest.models:
+        assert entry.metrics, f"{entry.name} has no val/test metrics"
+        assert all(np.isfinite(v) for v in entry.metrics.values())
+        model = onnx.load(str(models / entry.file))
+        onnx.checker.check_model(model, full_check=True)
+        batch_dims = [i.type.tensor_type.shape.dim[0].dim_param for i in model.graph.input]
+        assert all(batch_dims), f"{entry.file}: batch axis is not dynamic"
+
+
+def test_onnx_matches_torch_on_real_poses(trained: tuple[Trained, Path]) -> None:
+    result, models = trained
+    poses = flat(result.splits.test.positions[:300])
+    session = ort.InferenceSession(str(models / "encoder.onnx"), providers=["CPUExecutionProvider"])
+    (z_ort,) = session.run(None, {"pose": poses.numpy()})
+    with torch.no_grad():
+        z_torch = result.ae.encode(poses).numpy()
+    assert np.abs(z_ort - z_torch).max() <= 1e-5
+    decoder = ort.InferenceSession(str(models / "decoder.onnx"), providers=["CPUExecutionProvider"])
+    (x_ort,) = decoder.run(None, {"latent": z_torch})
+    with torch.no_grad():
+        x_torch = result.ae.decode(torch.from_numpy(z_torch)).numpy()
+    assert np.abs(x_ort - x_torch).max() <= 1e-5
+    solver = ort.InferenceSession(
+        str(models / "solver_left_ankle+right_ankle.onnx"), providers=["CPUExecutionProvider"]
+    )
+    cols = [3 * JOINT_INDEX[j] + k for j in ("left_ankle", "right_ankle") for k in range(3)]
+    targets = poses.numpy()[::-1, cols].copy()
+    (z2,) = solver.run(None, {"latent": z_torch, "targets": targets})
+    bank = result.bank
+    s = bank.sets.index(["left_ankle", "right_ankle"])
+    with torch.no_grad():
+        want = bank(
+            torch.from_numpy(z_torch)[None].expand(len(bank.sets), -1, -1),
+            torch.from_numpy(poses.numpy()[::-1].copy())[None].expand(len(bank.sets), -1, -1),
+        )[s].numpy()
+    assert np.abs(z2 - want).max() <= 1e-5
+
+
+def test_tied_weights_are_really_tied(small_dataset: Path) -> None:
+    poses = flat(load_dataset(small_dataset).positions[:512])
+    ae = TiedAutoencoder(Normaliser(*feature_stats(poses, 0.01)), [200, 200], 64)
+    # three weight matrices shared by encoder and decoder, nothing else but biases
+    shapes = sorted(tuple(p.shape) for p in ae.weights)
+    assert shapes == [(64, 200), (200, 63), (200, 200)]
+    n_params = sum(p.numel() for p in ae.parameters())
+    assert n_params == 63 * 200 + 200 * 200 + 200 * 64 + (200 + 200 + 64) + (63 + 200 + 200)
+    z = ae.encode(poses[:4]).detach()
+    before = ae.decode(z).detach()
+    with torch.no_grad():
+        ae.weights[0].mul_(1.5)  # an encoder weight: the decoder must see the change
+    assert not torch.allclose(ae.decode(z), before)
+    # gradients of the decoder flow into the shared matrices
+    ae.zero_grad()
+    ae.decode(z).sum().backward()
+    assert ae.weights[0].grad is not None and ae.weights[0].grad.abs().sum() > 0
+
+
+def test_normalisation_stats_never_change(trained: tuple[Trained, Path]) -> None:
+    result, _ = trained
+    ae = result.ae
+    mean, std = ae.norm.mean.clone(), ae.norm.std.clone()
+    poses = flat(result.splits.val.positions[:64])
+    first = ae(poses).detach()
+    for _ in range(200):
+        ae(poses)
+    ae.train()
+    ae(poses)
+    ae.eval()
+    assert torch.equal(ae.norm.mean, mean) and torch.equal(ae.norm.std, std)
+    assert torch.equal(ae(poses).detach(), first)
+    # a feature with no spread (the canonical pelvis x/z is always 0) is floored, not 0
+    assert float(std.min()) >= 0.01
+
+
+def test_tampered_model_file_is_rejected(trained: tuple[Trained, Path], tmp_path: Path) -> None:
+    _, models = trained
+    copy = tmp_path / "models"
+    shutil.copytree(models, copy)
+    load_manifest(copy)  # intact: fine
+    target = copy / "solver_left_wrist.onnx"
+    data = bytearray(target.read_bytes())
+    data[len(data) // 2] ^= 0xFF
+    target.write_bytes(bytes(data))
+    with pytest.raises(ManifestError, match=r"solver_left_wrist\.onnx.*sha256"):
+        load_manifest(copy)
+    target.unlink()
+    with pytest.raises(ManifestError, match="model file missing"):
+        load_manifest(copy)
+
+
+def test_tampered_manifest_is_rejected(trained: tuple[Trained, Path], tmp_path: Path) -> None:
+    _, models = trained
+    copy = tmp_path / "models"
+    shutil.copytree(models, copy)
+    raw = json.loads((copy / "manifest.json").read_text())
+    raw["skeleton"]["joints"][0], raw["skeleton"]["joints"][1] = "spine1", "pelvis"
+    (copy / "manifest.json").write_text(json.dumps(raw))
+    with pytest.raises(ManifestError, match="canonical skeleton"):
+        load_manifest(copy)
+    (copy / "manifest.json").write_text("{not json")
+    with pytest.raises(ManifestError, match="not readable JSON"):
+        load_manifest(copy)
+
+
+def _state(result: Trained) -> dict[str, torch.Tensor]:
+    out = {f"ae.{k}": v for k, v in result.ae.state_dict().items()}
+    out.update({f"bank.{k}": v for k, v in result.bank.state_dict().items()})
+    for i, net in enumerate(result.completion):
+        out.update({f"c{i}.{k}": v for k, v in net.state_dict().items()})
+    return out
+
+
+@pytest.mark.slow
+def test_same_seed_same_models_and_resume_is_exact(small_dataset: Path, tmp_path: Path) -> None:
+    a = train_all(tiny_config(small_dataset, tmp_path / "a", tmp_path / "ma"), fresh=True)
+    b = train_all(tiny_config(small_dataset, tmp_path / "b", tmp_path / "mb"), fresh=True)
+    sa, sb = _state(a), _state(b)
+    assert all(torch.equal(sa[k], sb[k]) for k in sa)
+    # interrupted after one AE epoch, then resumed to two: equals two epochs straight
+    two = {"autoencoder": {"epochs": 2}}
+    straight = train_all(
+        tiny_config(small_dataset, tmp_path / "c", tmp_path / "mc", **two), fresh=True
+    )
+    train_all(tiny_config(small_dataset, tmp_path / "d", tmp_path / "md"), fresh=True)
+    resumed = train_all(tiny_config(small_dataset, tmp_path / "d", tmp_path / "md", **two))
+    assert resumed.states["autoencoder"].epoch == 2
+    s1, s2 = _state(straight), _state(resumed)
+    assert all(torch.equal(s1[k], s2[k]) for k in s1), "resume diverged from a straight run"
+    # a different seed gives different weights
+    other = train_all(
+        tiny_config(small_dataset, tmp_path / "e", tmp_path / "me", seed=1), fresh=True
+    )
+    assert not torch.equal(_state(other)["ae.weights.0"], sa["ae.weights.0"])
+
+
+@pytest.mark.slow
+def test_ddp_two_processes_end_with_equal_weights(small_dataset: Path, tmp_path: Path) -> None:
+    cfg_path = tmp_path / "tiny.toml"
+    lines = [
+        f'dataset = "{small_dataset}"',
+        f'run_dir = "{tmp_path / "run"}"',
+        f'out_dir = "{tmp_path / "models"}"',
+        "threads = 1",
+        "max_train_frames = 3000",
+        "max_eval_frames = 300",
+        "[autoencoder]\nepochs = 1",
+        '[solver]\nepochs = 1\nsets = [["left_wrist"]]',
+        "[completion]\nepochs = 1\nhidden = [32]\n"
+        'schemes = [["pelvis", "neck", "left_wrist", "right_wrist", "left_ankle", "right_ankle"]]',
+    ]
+    cfg_path.write_text("\n".join(lines) + "\n")
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    proc = subprocess.run(
+        [
+            sys.executable, "-m", "torch.distributed.run", "--standalone",
+            "--nproc_per_node", "2", "-m", "trainer.cli", "train",
+            "--config", str(cfg_path), "--no-export",
+        ],
+        capture_output=True, text=True, timeout=300, env=env, cwd=REPO,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    digests = {}
+    for line in (proc.stdout + proc.stderr).splitlines():
+        if line.startswith("weights digest rank"):
+            _, _, _, rank, digest = line.split()
+            digests[rank.rstrip(":")] = digest
+    assert set(digests) == {"0", "1"}, proc.stderr[-2000:]
+    assert digests["0"] == digests["1"]
+    assert (tmp_path / "run" / "autoencoder.pt").exists()  # rank 0 wrote its checkpoint
