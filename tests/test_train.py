@@ -145,7 +145,7 @@ def test_normalisation_stats_never_change(trained: tuple[Trained, Path]) -> None
     assert torch.equal(ae.norm.mean, mean) and torch.equal(ae.norm.std, std)
     assert torch.equal(ae(poses).detach(), first)
     # a feature with no spread (the canonical pelvis x/z is always 0) is floored, not 0
-    assert float(std.min()) >= 0.01
+    assert float(std.min()) >= np.float32(0.01)
 
 
 def test_tampered_model_file_is_rejected(trained: tuple[Trained, Path], tmp_path: Path) -> None:
