@@ -3,8 +3,8 @@
 A solve, for each item (world space in, world space out):
 
 1. canonicalise the start pose like the dataset (pelvis floor projection to the origin,
-   yaw to face +Z) and divide by the character's scale (its summed bone lengths over the
-   reference skeleton's), so the networks see the size they were trained on;
+   yaw to face +Z); a character whose summed bone lengths lie outside the range of the
+   training poses is scaled to the nearest bound, so the networks see a size they know;
 2. ``method=neural``: encode, run the solver sequence that covers the target set
    (``composition_passes`` cycles through it), decode; targets on joints that no trained
    solver covers are then placed by a FABRIK polish that holds the solved targets;
@@ -233,9 +233,18 @@ class Engine:
         self.reference_lengths = np.asarray(
             [ref[JOINT_NAMES[c]] for c, _ in BONES], dtype=np.float64
         )
+        self.size_range = m.skeleton.size_range
         self.passes = composition_passes
         self.fabrik_max_iterations = fabrik_max_iterations
         self.version = m.version
+
+    def scale_of(self, lengths: F64) -> float:
+        """How much bigger the character is than the sizes the networks were trained on:
+        1 inside the training range of summed bone lengths, else the ratio to the nearest
+        bound (a 1.9 m or a 1.2 m character is solved at a trained size)."""
+        total = float(np.sum(lengths))
+        low, high = self.size_range
+        return total / min(max(total, low), high)
 
     # -- solver choice -------------------------------------------------------------------
     def plan(self, joints: frozenset[str], weights: dict[str, float]) -> list[str]:
@@ -252,7 +261,7 @@ class Engine:
         frames = [canonical_transform(p.pose) for p in problems]
         canon = [f.to_canonical(p.pose) for f, p in zip(frames, problems, strict=True)]
         lengths = [bone_lengths(p.pose) for p in problems]
-        scales = [float(np.sum(bl) / np.sum(self.reference_lengths)) for bl in lengths]
+        scales = [self.scale_of(bl) for bl in lengths]
         targets = [
             f.to_canonical(p.target_pos[None])[0] for f, p in zip(frames, problems, strict=True)
         ]
@@ -389,9 +398,9 @@ class Engine:
                 raise InvalidRequest(
                     f"bone_lengths: no bone ends at {bad} (name the child joint of each bone)"
                 )
-            ratios = [given_lengths[j] / ref[bones[j]] for j in given_lengths]
-            scale = float(np.median(ratios))
-            lengths = ref * scale
+            ratio = float(np.median([given_lengths[j] / ref[bones[j]] for j in given_lengths]))
+            lengths = ref * ratio
+            scale = self.scale_of(lengths)
             for j, value in given_lengths.items():
                 lengths[bones[j]] = value
         given = {j: (v - origin) / scale for j, v in keypoints.items()}

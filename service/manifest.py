@@ -58,6 +58,10 @@ class SkeletonSpec(_Strict):
         description="Mean length (m) of the bone ending at each non-root joint, train split."
     )
     frame: dict[str, str]
+    size_range: tuple[float, float] = Field(
+        description="Summed bone lengths (m) of the training poses, 1st and 99th "
+        "percentile: characters outside are scaled to the nearest bound before solving."
+    )
 
     @model_validator(mode="after")
     def _matches_canonical(self) -> SkeletonSpec:
@@ -70,6 +74,8 @@ class SkeletonSpec(_Strict):
             raise ValueError("reference_bone_lengths must name every non-root joint")
         if any(not (0.0 < v < 2.0) for v in self.reference_bone_lengths.values()):
             raise ValueError("reference bone lengths must be in (0, 2) metres")
+        if not 0.0 < self.size_range[0] <= self.size_range[1]:
+            raise ValueError("size_range must be 0 < low <= high")
         if self.frame != FRAME:
             raise ValueError(f"frame conventions differ from {FRAME}")
         return self

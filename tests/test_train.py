@@ -243,3 +243,13 @@ def test_ddp_two_processes_end_with_equal_weights(small_dataset: Path, tmp_path:
     assert set(digests) == {"0", "1"}, proc.stderr[-2000:]
     assert digests["0"] == digests["1"]
     assert (tmp_path / "run" / "autoencoder.pt").exists()  # rank 0 wrote its checkpoint
+
+
+def test_model_card_lists_every_model(trained: tuple[Trained, Path]) -> None:
+    _, models = trained
+    card = (models / "README.md").read_text()
+    manifest = load_manifest(models)
+    assert manifest.version in card
+    assert "non-commercial" in card
+    for entry in manifest.models:
+        assert f"| {entry.name} | {entry.parameters:,} |" in card

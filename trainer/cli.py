@@ -182,6 +182,18 @@ def evaluate(
     typer.echo(f"wrote {path}")
 
 
+@app.command("model-card")
+def model_card(
+    models: Annotated[Path, typer.Option(help="Models directory.")] = Path("models"),
+) -> None:
+    """Render models/README.md (the model card) from the manifest."""
+    from service.manifest import load_manifest
+    from trainer.model_card import write_model_card
+
+    path = write_model_card(models, load_manifest(models, verify=True))
+    typer.echo(f"wrote {path}")
+
+
 def main() -> None:
     """Console-script entry point."""
     app()

@@ -51,6 +51,18 @@ class SolverConfig(_Section):
     epochs: int = Field(default=5, ge=1)
     max_gap_seconds: float = Field(default=1.0, gt=0)
     other_weight: float = Field(default=0.01, ge=0)
+    bone_weight: float = Field(
+        default=1.0,
+        ge=0,
+        description="Weight of MSE(decoded bone lengths - start bone lengths); 0 = the paper.",
+    )
+    identity_fraction: float = Field(
+        default=0.1,
+        ge=0,
+        lt=1,
+        description="Share of pairs whose target is the start pose itself (solvers learn to "
+        "leave a satisfied pose alone, which repeated passes and drags rely on).",
+    )
     sets: list[list[str]] = Field(
         default=[
             ["head"],
@@ -85,6 +97,9 @@ class CompletionConfig(_Section):
     hidden: list[int] = Field(default=[300, 400, 300, 200], min_length=1)
     activation: Literal["selu", "relu"] = "selu"
     lr: float = Field(default=1e-3, gt=0)
+    lr_schedule: Literal["constant", "cosine"] = Field(
+        default="cosine", description="Cosine decay of the learning rate to 0 over all steps."
+    )
     weight_decay: float = Field(default=1e-5, ge=0, description="L2 regularisation.")
     batch_size: int = Field(default=256, gt=0)
     epochs: int = Field(default=6, ge=1)

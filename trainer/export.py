@@ -30,6 +30,7 @@ from service.manifest import (
 )
 from service.skeleton import BONES, FRAME, JOINT_NAMES, NUM_JOINTS, PARENT_NAMES, bone_lengths
 from trainer.config import TrainConfig
+from trainer.model_card import write_model_card
 from trainer.models import SingleSolver, TiedAutoencoder, target_columns
 from trainer.train import (
     FPS,
@@ -272,7 +273,13 @@ def export_all(
         )
 
     train_poses = trained.splits.train.positions
-    lengths = bone_lengths(train_poses.astype(np.float64)).mean(axis=0)
+    all_lengths = bone_lengths(train_poses.astype(np.float64))
+    lengths = all_lengths.mean(axis=0)
+    totals = all_lengths.sum(axis=1)
+    size_range = (
+        round(float(np.percentile(totals, 1)), 6),
+        round(float(np.percentile(totals, 99)), 6),
+    )
     ref = {JOINT_NAMES[child]: round(float(lengths[i]), 6) for i, (child, _) in enumerate(BONES)}
     data_meta = dict(trained.splits.train.meta)
     archives = [
@@ -291,6 +298,7 @@ def export_all(
             parents=[PARENT_NAMES[j] for j in JOINT_NAMES],
             reference_bone_lengths=ref,
             frame=dict(FRAME),
+            size_range=size_range,
         ),
         normalisation=Normalisation(
             mean=[float(v) for v in ae.norm.mean],
@@ -315,5 +323,6 @@ def export_all(
         ),
     )
     write_manifest(out, manifest)
+    write_model_card(out, manifest)
     assert sample.shape[1] == NUM_JOINTS * 3
     return manifest

@@ -30,7 +30,7 @@ from torch.utils.data import DistributedSampler
 from tqdm import tqdm
 
 from service.manifest import write_atomic
-from service.skeleton import JOINT_INDEX, MIRROR, NUM_JOINTS
+from service.skeleton import BONE_CHILDREN, BONE_PARENTS, JOINT_INDEX, MIRROR, NUM_JOINTS
 from trainer.config import TrainConfig
 from trainer.data.dataset import PoseDataset, load_dataset
 from trainer.models import (
@@ -351,8 +351,11 @@ def solver_losses(
     start: torch.Tensor,
     goal: torch.Tensor,
     other_weight: float,
+    bone_weight: float = 0.0,
 ) -> tuple[torch.Tensor, torch.Tensor]:
-    """Per-solver loss ``[S]`` and decoded poses ``[S, B, 63]`` for a batch of pairs."""
+    """Per-solver loss ``[S]`` and decoded poses ``[S, B, 63]`` for a batch of pairs:
+    MSE(target joints) + other_weight * MSE(other joints)
+    + bone_weight * MSE(decoded bone lengths - start bone lengths) (same clip, same body)."""
     n_sets = len(bank.sets)
     z = ae.encode(start)
     z_s = z.unsqueeze(0).expand(n_sets, -1, -1)
@@ -367,7 +370,21 @@ def solver_losses(
     tm = target_mask[:, 0]
     target_term = (per_col * tm).sum(-1) / tm.sum(-1)
     other_term = (per_col * (1 - tm)).sum(-1) / (1 - tm).sum(-1)
-    return target_term + other_weight * other_term, decoded
+    loss = target_term + other_weight * other_term
+    if bone_weight > 0:
+        bone_err = bone_lengths_t(decoded) - bone_lengths_t(start).unsqueeze(0)
+        loss = loss + bone_weight * (bone_err**2).mean(dim=(1, 2))
+    return loss, decoded
+
+
+_CHILD = torch.from_numpy(BONE_CHILDREN.astype(np.int64))
+_PARENT = torch.from_numpy(BONE_PARENTS.astype(np.int64))
+
+
+def bone_lengths_t(flat_poses: torch.Tensor) -> torch.Tensor:
+    """Bone lengths ``[..., 20]`` of flattened poses ``[..., 63]`` (torch)."""
+    joints = flat_poses.reshape(*flat_poses.shape[:-1], NUM_JOINTS, 3)
+    return (joints[..., _CHILD, :] - joints[..., _PARENT, :]).norm(dim=-1)
 
 
 def solver_metrics(
@@ -381,9 +398,11 @@ def solver_metrics(
     for s, joints in enumerate(bank.sets):
         err = (decoded[s] - goal).reshape(len(goal), NUM_JOINTS, 3).norm(dim=-1)
         cols = [c // 3 for c in target_columns(joints)[::3]]
+        bone = (bone_lengths_t(decoded[s]) - bone_lengths_t(start)).abs()
         out["+".join(sorted(joints))] = {
             "reach_cm": float(err[:, cols].mean()) * 100.0,
             "mpjpe_cm": float(err.mean()) * 100.0,
+            "bone_cm": float(bone.mean()) * 100.0,
         }
     return out
 
@@ -405,11 +424,20 @@ def train_solvers(
 
     def train_epoch(epoch: int, bar: tqdm[Any]) -> float:
         rng = stage_rng(cfg.seed, "solver-pairs", epoch)
-        partners = torch.from_numpy(sample_partners(src.lo, src.hi, np.arange(len(src.poses)), rng))
+        partner_idx = sample_partners(src.lo, src.hi, np.arange(len(src.poses)), rng)
+        same = rng.random(len(partner_idx)) < sc.identity_fraction
+        partner_idx[same] = np.flatnonzero(same)  # "already there": learn to stay put
+        partners = torch.from_numpy(partner_idx)
         total, count = torch.zeros((), dtype=torch.float64), 0
         for idx in batches(len(src.poses), sc.batch_size, d, cfg.seed + 1, epoch):
             loss, _ = solver_losses(
-                ae, bank, net, src.poses[idx], src.poses[partners[idx]], sc.other_weight
+                ae,
+                bank,
+                net,
+                src.poses[idx],
+                src.poses[partners[idx]],
+                sc.other_weight,
+                sc.bone_weight,
             )
             loss = loss.sum()
             optim.zero_grad(set_to_none=True)
@@ -421,12 +449,15 @@ def train_solvers(
         return _mean_loss(total, count, d)
 
     def validate() -> dict[str, float]:
-        losses, _ = solver_losses(ae, bank, bank, val.poses[va], val.poses[vp], sc.other_weight)
+        losses, _ = solver_losses(
+            ae, bank, bank, val.poses[va], val.poses[vp], sc.other_weight, sc.bone_weight
+        )
         metrics = solver_metrics(ae, bank, val.poses[va], val.poses[vp])
         return {
             "val_loss": float(losses.mean()),
             "val_reach_cm": float(np.mean([m["reach_cm"] for m in metrics.values()])),
             "val_mpjpe_cm": float(np.mean([m["mpjpe_cm"] for m in metrics.values()])),
+            "val_bone_cm": float(np.mean([m["bone_cm"] for m in metrics.values()])),
         }
 
     state = run_stage(
@@ -528,7 +559,13 @@ def train_completion(
         ) -> float:
             rng = stage_rng(cfg.seed, f"completion{level}", epoch)
             total, count = torch.zeros((), dtype=torch.float64), 0
-            for idx in batches(len(train), cc.batch_size, d, cfg.seed + 10 + level, epoch):
+            for step, idx in enumerate(
+                batches(len(train), cc.batch_size, d, cfg.seed + 10 + level, epoch)
+            ):
+                if cc.lr_schedule == "cosine":  # a function of the step: resume-exact
+                    progress = (epoch * steps + step) / max(1, cc.epochs * steps)
+                    for group in optim.param_groups:
+                        group["lr"] = cc.lr * 0.5 * (1.0 + math.cos(math.pi * progress))
                 poses = augment(train[idx], rng, cc.mirror, cc.yaw)
                 keep = keep_mask(len(poses), rng) if level > 1 else None
                 x = completion_inputs(nets, level, poses, keep)

@@ -166,8 +166,14 @@ function restore(snap) {
 const history = { stack: [], index: -1 };
 
 function pushHistory() {
+  const snap = snapshot();
+  const top = history.stack[history.index];
+  if (top && JSON.stringify(top) === JSON.stringify(snap)) {
+    updateButtons(); // nothing changed (e.g. an option toggled with no targets)
+    return;
+  }
   history.stack.length = history.index + 1;
-  history.stack.push(snapshot());
+  history.stack.push(snap);
   if (history.stack.length > 200) history.stack.shift();
   history.index = history.stack.length - 1;
   updateButtons();
@@ -201,6 +207,8 @@ function loadSample(i) {
   endDrag(false);
   cancelSolves();
   state.sample = i;
+  hovered = null;
+  $('hud').hidden = true;
   const pose = state.samples[i].pose;
   restore({ pose, targets: [], pins: [] });
   pushHistory();
@@ -726,6 +734,7 @@ function wireControls() {
   $('clear-targets').addEventListener('click', clearTargets);
   $('export').addEventListener('click', exportPose);
   $('error-close').addEventListener('click', clearError);
+  $('connection').addEventListener('submit', (ev) => ev.preventDefault());
   $('api-key').addEventListener('change', () => {
     if (!connected) loadSkeleton();
     requestSolve(false);
