@@ -255,6 +255,10 @@ def _response(p: SolveProblem, r: SolveResult, version: str) -> SolveResponse:
             TargetResult(joint=JOINT_NAMES[int(j)], error=float(e), reached=bool(ok))
             for j, e, ok in zip(p.target_idx[: p.n_targets], r.errors, r.reached, strict=True)
         ],
+        pins=[
+            TargetResult(joint=JOINT_NAMES[int(j)], error=float(e), reached=bool(e <= p.tolerance))
+            for j, e in zip(p.target_idx[p.n_targets :], r.pin_errors, strict=True)
+        ],
         max_bone_length_error=r.max_bone_error,
         solvers=r.solvers,
         model=version,

@@ -22,6 +22,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -40,7 +41,7 @@ from service.skeleton import (
     set_key,
 )
 
-F64 = npt.NDArray[np.float64]
+F64 = npt.NDArray[np.floating[Any]]
 MAX_COORDINATE = 1.0e4  # metres; beyond this a coordinate is rejected as nonsense
 MIN_BONE = 1.0e-4  # metres; shorter bones make a pose degenerate
 
@@ -66,6 +67,7 @@ class SolveResult:
     pose: F64  # [21, 3] world
     errors: F64  # [K] for user targets (pins excluded)
     reached: npt.NDArray[np.bool_]
+    pin_errors: F64  # [P] distance of each pinned joint from where it was
     max_bone_error: float
     solvers: list[str]
     iterations: int
@@ -238,13 +240,13 @@ class Engine:
         self.fabrik_max_iterations = fabrik_max_iterations
         self.version = m.version
 
-    def scale_of(self, lengths: F64) -> float:
-        """How much bigger the character is than the sizes the networks were trained on:
-        1 inside the training range of summed bone lengths, else the ratio to the nearest
-        bound (a 1.9 m or a 1.2 m character is solved at a trained size)."""
-        total = float(np.sum(lengths))
+    def scales_of(self, lengths: F64) -> F64:
+        """How much bigger each character ``[..., 20]`` is than the sizes the networks were
+        trained on: 1 inside the training range of summed bone lengths, else the ratio to
+        the nearest bound (a 1.9 m or a 1.2 m character is solved at a trained size)."""
+        total = np.sum(lengths, axis=-1)
         low, high = self.size_range
-        return total / min(max(total, low), high)
+        return np.asarray(total / np.clip(total, low, high), dtype=np.float64)
 
     # -- solver choice -------------------------------------------------------------------
     def plan(self, joints: frozenset[str], weights: dict[str, float]) -> list[str]:
@@ -255,118 +257,151 @@ class Engine:
 
     # -- solving ---------------------------------------------------------------------------
     def solve(self, problems: Sequence[SolveProblem]) -> list[SolveResult]:
-        """Solve a batch; neural items share one ORT run per stage."""
+        """Solve a batch. Geometry, the bone pass and the answers are vectorised over the
+        batch; neural items share one ORT run per stage; only FABRIK runs per item."""
         n = len(problems)
-        results: list[SolveResult | None] = [None] * n
-        frames = [canonical_transform(p.pose) for p in problems]
-        canon = [f.to_canonical(p.pose) for f, p in zip(frames, problems, strict=True)]
-        lengths = [bone_lengths(p.pose) for p in problems]
-        scales = [self.scale_of(bl) for bl in lengths]
-        targets = [
-            f.to_canonical(p.target_pos[None])[0] for f, p in zip(frames, problems, strict=True)
-        ]
+        if n == 0:
+            return []
+        poses = np.stack([p.pose for p in problems])  # [B, 21, 3] world
+        frame = canonical_transform(poses)
+        canon = frame.to_canonical(poses)
+        lengths = bone_lengths(poses)  # [B, 20]
+        scales = self.scales_of(lengths)  # [B]
+        # ragged targets as padded arrays: [B, K] joints, [B, K, 3] world positions
+        k_max = max(len(p.target_idx) for p in problems)
+        tidx = np.zeros((n, k_max), dtype=np.intp)
+        tpos = np.zeros((n, k_max, 3))
+        for b, p in enumerate(problems):
+            k = len(p.target_idx)
+            tidx[b, :k] = p.target_idx
+            tpos[b, :k] = p.target_pos
+            tidx[b, k:] = p.target_idx[0]  # padding repeats a real target
+            tpos[b, k:] = p.target_pos[0]
+        tcan = frame.to_canonical(tpos)  # [B, K, 3]
 
-        neural = [i for i, p in enumerate(problems) if p.method == "neural"]
-        solved: dict[int, F64] = {}
-        paths: dict[int, list[str]] = {}
-        if neural:
-            x = np.stack([canon[i] / scales[i] for i in neural]).reshape(len(neural), -1)
-            z = self.encoder(x.astype(np.float32))
-            groups: dict[tuple[str, ...], list[int]] = {}
-            for row, i in enumerate(neural):
-                p = problems[i]
-                names = [JOINT_NAMES[j] for j in p.target_idx]
-                w = {
-                    JOINT_NAMES[j]: float(wt) for j, wt in zip(p.target_idx, p.weights, strict=True)
-                }
-                plan = tuple(self.plan(frozenset(names), w))
-                paths[i] = list(plan)
-                groups.setdefault(plan, []).append(row)
-            for sequence, rows in groups.items():
-                if not sequence:
-                    continue
-                rows_arr = np.asarray(rows, dtype=np.intp)
-                zg = z[rows_arr]
-                tg = {
-                    key: np.stack(
-                        [
-                            self._solver_targets(
-                                problems[neural[r]], targets[neural[r]] / scales[neural[r]], key
-                            )
-                            for r in rows
-                        ]
-                    ).astype(np.float32)
-                    for key in sequence
-                }
-                for _ in range(self.passes):
-                    for key in sequence:
-                        zg = self.solvers[key](zg, tg[key])
-                z[rows_arr] = zg
-            decoded = self.decoder(z).astype(np.float64).reshape(len(neural), NUM_JOINTS, 3)
-            for row, i in enumerate(neural):
-                solved[i] = decoded[row] * scales[i]
+        out = canon.copy()
+        paths: list[list[str]] = [["fabrik"]] * n
+        neural = np.flatnonzero([p.method == "neural" for p in problems])
+        if neural.size:
+            solved, neural_paths = self._neural(problems, neural, canon, tidx, tcan, scales)
+            out[neural] = solved
+            for row, item in enumerate(neural):
+                paths[int(item)] = neural_paths[row]
+            bone = [
+                int(i)
+                for i in neural
+                if problems[int(i)].preserve_bone_lengths or problems[int(i)].reach == "exact"
+            ]
+            if bone:
+                sel = np.asarray(bone, dtype=np.intp)
+                out[sel] = kinematics.bone_pass(out[sel], lengths[sel], reference=canon[sel])
 
-        for i, p in enumerate(problems):
-            frame, start, tgt, bl = frames[i], canon[i], targets[i], lengths[i]
-            iterations = 0
+        iterations = np.zeros(n, dtype=np.int64)
+        for b, p in enumerate(problems):
+            k = len(p.target_idx)
             if p.method == "fabrik":
                 res = kinematics.fabrik(
-                    start,
-                    bl,
-                    p.target_idx,
-                    tgt,
-                    weights=p.weights,
-                    tolerance=p.tolerance,
-                    max_iterations=self.fabrik_max_iterations,
+                    canon[b], lengths[b], p.target_idx, tcan[b, :k], weights=p.weights,
+                    tolerance=p.tolerance, max_iterations=self.fabrik_max_iterations,
+                )  # fmt: skip
+                out[b], iterations[b] = res.positions, res.iterations
+                continue
+            covered = {j for key in paths[b] for j in key.split("+")}
+            uncovered = np.asarray([JOINT_NAMES[j] not in covered for j in p.target_idx])
+            pinned = np.arange(k) >= p.n_targets
+            if p.reach != "exact" and not uncovered.any() and not pinned.any():
+                continue
+            if p.reach == "exact":
+                pose, its, path = self._exact(p, canon[b], out[b], lengths[b], tcan[b, :k])
+                out[b], iterations[b], paths[b] = pose, its, [*paths[b], *path]
+            else:  # pins and targets no solver covers go exactly where asked, by a
+                # FABRIK polish that holds the neurally solved targets where they are
+                exact = (uncovered | pinned)[:, None]
+                goal = np.where(exact, tcan[b, :k], out[b][p.target_idx])
+                res = kinematics.polish(
+                    out[b], lengths[b], p.target_idx, goal, weights=p.weights,
+                    tolerance=p.tolerance, max_iterations=self.fabrik_max_iterations,
+                )  # fmt: skip
+                out[b], iterations[b] = res.positions, res.iterations
+                paths[b] = [*paths[b], "fabrik-polish"]
+
+        world = frame.to_world(out)
+        rows = np.arange(n)[:, None]
+        errors = np.linalg.norm(world[rows, tidx] - tpos, axis=-1)  # [B, K]
+        bone_err = np.max(np.abs(bone_lengths(world) / lengths - 1.0), axis=-1)
+        results = []
+        for b, p in enumerate(problems):
+            e = errors[b, : p.n_targets]
+            pin_e = errors[b, p.n_targets : len(p.target_idx)]
+            results.append(
+                SolveResult(
+                    pose=world[b],
+                    errors=e,
+                    reached=e <= p.tolerance,
+                    pin_errors=pin_e,
+                    max_bone_error=float(bone_err[b]),
+                    solvers=paths[b],
+                    iterations=int(iterations[b]),
                 )
-                pose, iterations = res.positions, res.iterations
-                path = ["fabrik"]
-            else:
-                pose, path = solved[i], list(paths[i])
-                if p.preserve_bone_lengths or p.reach == "exact":
-                    pose = kinematics.bone_pass(pose, bl, reference=start)
-                covered = {j for key in path for j in key.split("+")}
-                uncovered = [JOINT_NAMES[j] not in covered for j in p.target_idx]
-                if p.reach == "exact" or any(uncovered):
-                    goal = (
-                        tgt
-                        if p.reach == "exact"
-                        else np.where(np.asarray(uncovered)[:, None], tgt, pose[p.target_idx])
-                    )
-                    res = kinematics.polish(
-                        pose,
-                        bl,
-                        p.target_idx,
-                        goal,
-                        weights=p.weights,
-                        tolerance=p.tolerance,
-                        max_iterations=self.fabrik_max_iterations,
-                    )
-                    pose, iterations = res.positions, res.iterations
-                    path = [*path, "fabrik-polish"]
-            world = np.asarray(frame.to_world(pose), dtype=np.float64)
-            results[i] = self._result(p, world, np.asarray(bl, dtype=np.float64), path, iterations)
-        return [r for r in results if r is not None]
+            )
+        return results
 
-    def _solver_targets(self, p: SolveProblem, tgt: F64, key: str) -> F64:
-        lookup = {int(j): k for k, j in enumerate(p.target_idx)}
-        return np.concatenate([tgt[lookup[int(j)]] for j in self.solver_joints[key]])
+    def _neural(
+        self,
+        problems: Sequence[SolveProblem],
+        items: npt.NDArray[np.intp],
+        canon: F64,
+        tidx: npt.NDArray[np.intp],
+        tcan: F64,
+        scales: F64,
+    ) -> tuple[F64, list[list[str]]]:
+        """Encode, run each item's solver sequence, decode: one ORT run per stage."""
+        m = len(items)
+        x = (canon[items] / scales[items, None, None]).reshape(m, -1).astype(np.float32)
+        z = self.encoder(x)
+        # every item's targets on a [21, 3] canvas, so a solver gathers its joints at once
+        canvas = np.zeros((m, NUM_JOINTS, 3), dtype=np.float32)
+        rows = np.arange(m)[:, None]
+        canvas[rows, tidx[items]] = tcan[items] / scales[items, None, None]
+        groups: dict[tuple[str, ...], list[int]] = {}
+        plans: list[list[str]] = []
+        for row, b in enumerate(items):
+            p = problems[int(b)]
+            weights = {
+                JOINT_NAMES[j]: float(w) for j, w in zip(p.target_idx, p.weights, strict=True)
+            }
+            plan = tuple(self.plan(frozenset(weights), weights))
+            plans.append(list(plan))
+            groups.setdefault(plan, []).append(row)
+        for sequence, members in groups.items():
+            if not sequence:
+                continue
+            sel = np.asarray(members, dtype=np.intp)
+            zg = z[sel]
+            # one solver needs one pass; a composed sequence cycles `passes` times
+            for _ in range(self.passes if len(sequence) > 1 else 1):
+                for key in sequence:
+                    targets = canvas[sel][:, self.solver_joints[key]].reshape(len(sel), -1)
+                    zg = self.solvers[key](zg, targets)
+            z[sel] = zg
+        decoded = self.decoder(z).astype(np.float64).reshape(m, NUM_JOINTS, 3)
+        return decoded * scales[items, None, None], plans
 
-    @staticmethod
-    def _result(
-        p: SolveProblem, world: F64, lengths: F64, path: list[str], iterations: int
-    ) -> SolveResult:
-        k = p.n_targets
-        errors = np.linalg.norm(world[p.target_idx[:k]] - p.target_pos[:k], axis=-1)
-        bone_err = float(np.max(np.abs(bone_lengths(world) / lengths - 1.0)))
-        return SolveResult(
-            pose=world,
-            errors=errors,
-            reached=errors <= p.tolerance,
-            max_bone_error=bone_err,
-            solvers=path,
-            iterations=int(iterations),
-        )
+    def _exact(
+        self, p: SolveProblem, start: F64, neural: F64, lengths: F64, goal: F64
+    ) -> tuple[F64, int, list[str]]:
+        """Exact reach: polish the neural pose onto the targets. When that leaves a target
+        the plain FABRIK solve from the start pose does reach (the network moved the
+        pelvis where a target is out of reach), the FABRIK answer, polished, is used."""
+        kw = {"weights": p.weights, "tolerance": p.tolerance,
+              "max_iterations": self.fabrik_max_iterations}  # fmt: skip
+        res = kinematics.polish(neural, lengths, p.target_idx, goal, **kw)  # type: ignore[arg-type]
+        if bool(np.all(res.reached)):
+            return res.positions, res.iterations, ["fabrik-polish"]
+        alt = kinematics.fabrik(start, lengths, p.target_idx, goal, **kw)  # type: ignore[arg-type]
+        if float(np.max(alt.errors)) < float(np.max(res.errors)):
+            return alt.positions, res.iterations + alt.iterations, ["fabrik-fallback"]
+        return res.positions, res.iterations, ["fabrik-polish"]
 
     # -- key-point completion -----------------------------------------------------------
     def base_keypoints(self) -> list[str]:
@@ -400,7 +435,7 @@ class Engine:
                 )
             ratio = float(np.median([given_lengths[j] / ref[bones[j]] for j in given_lengths]))
             lengths = ref * ratio
-            scale = self.scale_of(lengths)
+            scale = float(self.scales_of(lengths))
             for j, value in given_lengths.items():
                 lengths[bones[j]] = value
         given = {j: (v - origin) / scale for j, v in keypoints.items()}

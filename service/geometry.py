@@ -36,14 +36,18 @@ def facing_yaw(positions: FloatArray) -> FloatArray:
 
 def yaw_matrix(yaw: FloatArray) -> FloatArray:
     """Rotation matrices about +Y by ``yaw`` radians, ``[...] -> [..., 3, 3]``."""
-    c, s = np.cos(yaw), np.sin(yaw)
-    zero, one = np.zeros_like(c), np.ones_like(c)
-    rows = [
-        np.stack([c, zero, s], axis=-1),
-        np.stack([zero, one, zero], axis=-1),
-        np.stack([-s, zero, c], axis=-1),
-    ]
-    return np.stack(rows, axis=-2)
+    return _rotation_from_forward(np.sin(yaw), np.cos(yaw))
+
+
+def _rotation_from_forward(fx: FloatArray, fz: FloatArray) -> FloatArray:
+    """The yaw rotation taking +Z to the unit floor direction (fx, 0, fz)."""
+    out = np.zeros((*np.shape(fx), 3, 3))
+    out[..., 0, 0] = fz
+    out[..., 0, 2] = fx
+    out[..., 1, 1] = 1.0
+    out[..., 2, 0] = -fx
+    out[..., 2, 2] = fz
+    return out
 
 
 @dataclass(frozen=True)
@@ -65,11 +69,20 @@ class RigidTransform:
 
 
 def canonical_transform(positions: FloatArray) -> RigidTransform:
-    """The transform that maps the canonical pose back to the given world pose."""
-    yaw = facing_yaw(positions)
+    """The transform that maps the canonical pose back to the given world pose.
+
+    The facing is the floor direction of (left - right summed over hips and shoulders) x up;
+    a pose with no horizontal left-right extent (lying on its side) keeps yaw 0."""
+    across = (positions[..., _LEFT, :] - positions[..., _RIGHT, :]).sum(axis=-2)
+    fx, fz = -across[..., 2], across[..., 0]
+    norm = np.hypot(fx, fz)
+    flat = norm < 1e-12
+    safe = np.where(flat, 1.0, norm)
+    fx = np.where(flat, 0.0, fx / safe)
+    fz = np.where(flat, 1.0, fz / safe)
     translation = positions[..., _PELVIS, :].copy()
     translation[..., 1] = 0.0
-    return RigidTransform(rotation=yaw_matrix(yaw), translation=translation)
+    return RigidTransform(rotation=_rotation_from_forward(fx, fz), translation=translation)
 
 
 def canonicalise(positions: FloatArray) -> FloatArray:

@@ -106,6 +106,9 @@ class TargetResult(BaseModel):
 class SolveResponse(BaseModel):
     pose: Pose
     targets: list[TargetResult]
+    pins: list[TargetResult] = Field(
+        default_factory=list, description="How far each pinned joint moved (m)."
+    )
     max_bone_length_error: float = Field(description="Max relative bone-length error.")
     solvers: list[str] = Field(description="Solver sequence used (target-set keys).")
     model: str = Field(description="Manifest version of the models.")
