@@ -30,13 +30,13 @@ run: $(STAMP)
 	$(BIN)/pose-service --host 127.0.0.1 --port 8000
 
 lint: $(STAMP)
-	$(BIN)/ruff check service trainer tests
-	$(BIN)/ruff format --check service trainer tests
+	$(BIN)/ruff check service trainer tests bench
+	$(BIN)/ruff format --check service trainer tests bench
 	$(BIN)/mypy
 
 format: $(STAMP)
-	$(BIN)/ruff format service trainer tests
-	$(BIN)/ruff check --fix service trainer tests
+	$(BIN)/ruff format service trainer tests bench
+	$(BIN)/ruff check --fix service trainer tests bench
 
 test: $(STAMP) lint
 	$(BIN)/pytest
@@ -49,6 +49,11 @@ dataset: $(STAMP)
 
 train: $(STAMP)
 	$(BIN)/pose-trainer train --config $(CONFIG)
+
+# Accuracy and speed side by side: writes reports/report.md and its plots (<= 15 min).
+bench: $(STAMP)
+	test -f $(DATASET) || $(BIN)/pose-trainer dataset --mocap $(MOCAP_DIR) --out $(DATASET)
+	$(BIN)/python -m bench --models models --dataset $(DATASET) --out reports
 
 clean:
 	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache

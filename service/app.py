@@ -23,6 +23,7 @@ from prometheus_client import CONTENT_TYPE_LATEST, CollectorRegistry, Counter, H
 from prometheus_client import generate_latest as prometheus_latest
 from starlette.concurrency import run_in_threadpool
 
+from service.editor import mount_editor
 from service.engine import Engine, SolveProblem, SolveResult, parse_keypoints, parse_solve
 from service.errors import (
     NotReady,
@@ -437,6 +438,7 @@ def create_app(settings: Settings | None = None, *, load_in_background: bool = T
         return RedirectResponse("/editor")
 
     _document_problems(app)
+    mount_editor(app)
     if settings.cors_origins:
         app.add_middleware(
             CORSMiddleware,

@@ -123,17 +123,30 @@ def test_world_space_in_world_space_out(client: Any, real_poses: RealPoses, meth
         assert np.abs(move(pa) - pb).max() < 1e-4
 
 
-def test_bigger_character_gets_the_same_pose_scaled(client: Any, real_poses: RealPoses) -> None:
-    big = yaw_shift(0.0, (0.0, 0.0, 0.0), scale=1.3)
-    a = client.post("/v1/solve", json=solve_body(real_poses, 1, ["left_ankle", "right_ankle"]))
-    b = client.post(
-        "/v1/solve", json=solve_body(real_poses, 1, ["left_ankle", "right_ankle"], transform=big)
+def test_characters_beyond_the_trained_sizes_are_solved_at_scale(
+    client: Any, real_poses: RealPoses
+) -> None:
+    """A 1.5x and a 1.7x character are both solved at the largest trained size: their
+    answers are the same pose up to scale, with each character's own bone lengths."""
+    joints = ["left_ankle", "right_ankle"]
+    big, bigger = yaw_shift(0.0, (0, 0, 0), scale=1.5), yaw_shift(0.0, (0, 0, 0), scale=1.7)
+    a = as_array(
+        client.post("/v1/solve", json=solve_body(real_poses, 1, joints, transform=big)).json()[
+            "pose"
+        ]
     )
-    pa, pb = as_array(a.json()["pose"]), as_array(b.json()["pose"])
-    assert np.abs(big(pa) - pb).max() < 1e-4
-    # and its own bone lengths, not the dataset's
-    start = as_array(solve_body(real_poses, 1, ["head"], transform=big)["pose"])
-    assert np.allclose(bone_lengths(pb), bone_lengths(start), rtol=1e-5)
+    b = as_array(
+        client.post("/v1/solve", json=solve_body(real_poses, 1, joints, transform=bigger)).json()[
+            "pose"
+        ]
+    )
+    assert np.abs(a * (1.7 / 1.5) - b).max() < 1e-4
+    start = as_array(solve_body(real_poses, 1, joints, transform=bigger)["pose"])
+    assert np.allclose(bone_lengths(b), bone_lengths(start), rtol=1e-5)
+    tiny = yaw_shift(0.0, (0, 0, 0), scale=0.6)
+    c = client.post("/v1/solve", json=solve_body(real_poses, 1, joints, transform=tiny)).json()
+    assert c["max_bone_length_error"] <= 1e-5
+    assert max(t["error"] for t in c["targets"]) < 0.1
 
 
 def test_same_request_same_bits(client: Any, real_poses: RealPoses) -> None:

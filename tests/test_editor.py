@@ -95,7 +95,11 @@ def server(models_dir: Path) -> Iterator[str]:
                 with urllib.request.urlopen(f"{base}/v2/health/ready", timeout=2) as r:
                     if r.status == 200:
                         break
-            except (urllib.error.URLError, OSError):
+            except urllib.error.HTTPError as exc:  # 503: loading, or failed for good
+                detail = json.loads(exc.read() or b"{}").get("detail")
+                if detail and detail != "loading models":
+                    pytest.fail(f"the server cannot load the models in {models_dir}: {detail}")
+            except OSError:
                 pass
             if time.monotonic() > deadline:
                 pytest.fail("the server was not ready within 60 s")
@@ -135,7 +139,7 @@ def dist(a: list[float], b: list[float]) -> float:
 STATIC = REPO_ROOT / "service" / "static"
 
 
-def test_editor_routes_serve_the_page_and_vendored_three(tmp_path: Path) -> None:
+def test_editor_routes_serve_the_page_and_vendored_three() -> None:
     from fastapi import FastAPI
     from fastapi.testclient import TestClient
 

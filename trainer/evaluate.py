@@ -40,7 +40,7 @@ from service.skeleton import JOINT_INDEX, JOINT_NAMES, NUM_JOINTS, bone_lengths,
 from trainer.data.dataset import FPS, PoseDataset, load_dataset
 from trainer.pairs import partner_ranges, sample_partners
 
-F64 = npt.NDArray[np.float64]
+F64 = npt.NDArray[np.floating[Any]]
 IntArray = npt.NDArray[np.intp]
 Json = dict[str, Any]
 
@@ -1535,6 +1535,8 @@ def _speed_sections(results: Json, plots: dict[str, str]) -> list[str]:
     if not speed and not http:
         return ["## Speed", "", "Not measured in this run (run `make bench`).", ""]
     md: list[str] = ["## Speed", ""]
+    if results.get("http_error"):
+        md += [f"**The HTTP part failed:** `{results['http_error']}`", ""]
     if speed:
         rows = [
             [

@@ -68,7 +68,9 @@ Training configuration, git commit and library versions: `manifest.json` → `pr
 
 
 def _fmt(metrics: dict[str, float], split: str) -> str:
-    parts = [f"{k.removeprefix(split + '_')} {v:.2f}" for k, v in metrics.items() if k.startswith(split)]
+    parts = [
+        f"{k.removeprefix(split + '_')} {v:.2f}" for k, v in metrics.items() if k.startswith(split)
+    ]
     return ", ".join(parts) or "–"
 
 

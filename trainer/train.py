@@ -384,7 +384,8 @@ _PARENT = torch.from_numpy(BONE_PARENTS.astype(np.int64))
 def bone_lengths_t(flat_poses: torch.Tensor) -> torch.Tensor:
     """Bone lengths ``[..., 20]`` of flattened poses ``[..., 63]`` (torch)."""
     joints = flat_poses.reshape(*flat_poses.shape[:-1], NUM_JOINTS, 3)
-    return (joints[..., _CHILD, :] - joints[..., _PARENT, :]).norm(dim=-1)
+    lengths: torch.Tensor = (joints[..., _CHILD, :] - joints[..., _PARENT, :]).norm(dim=-1)
+    return lengths
 
 
 def solver_metrics(
@@ -556,6 +557,7 @@ def train_completion(
             level: int = level,
             net: nn.Module = net,
             optim: torch.optim.Optimizer = optim,
+            steps: int = steps,
         ) -> float:
             rng = stage_rng(cfg.seed, f"completion{level}", epoch)
             total, count = torch.zeros((), dtype=torch.float64), 0

@@ -1,0 +1,239 @@
+"""HTTP load against the real service: ``pose-service`` (uvicorn) as a subprocess on a
+free 127.0.0.1 port, a bounded httpx/asyncio load generator, RSS from /proc.
+
+Loopback only; every run is bounded in request count and in time."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import httpx
+import numpy as np
+
+from service.skeleton import JOINT_NAMES
+from trainer.evaluate import Edits
+
+Json = dict[str, Any]
+HOST = "127.0.0.1"
+
+
+@dataclass(frozen=True)
+class Server:
+    url: str
+    pid: int
+    command: str
+
+
+def free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind((HOST, 0))
+        return int(s.getsockname()[1])
+
+
+def rss_kb(pid: int) -> int:
+    """VmRSS of a process (kB) from /proc/<pid>/status; -1 if unavailable."""
+    try:
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1])
+    except OSError:
+        pass
+    return -1
+
+
+def _server_command(models: Path, port: int) -> list[str]:
+    script = Path(sys.executable).parent / "pose-service"
+    if not script.exists() and shutil.which("pose-service"):
+        script = Path(str(shutil.which("pose-service")))
+    base = (
+        [str(script)]
+        if script.exists()
+        else [sys.executable, "-c", "from service.cli import main; main()"]
+    )
+    return [*base, "--host", HOST, "--port", str(port), "--models-dir", str(models)]
+
+
+@contextlib.contextmanager
+def serve(
+    models: Path, *, ready_timeout: float = 90.0, log: Path | None = None
+) -> Iterator[Server]:
+    """Start the service, wait for /v2/health/ready, yield, then terminate it."""
+    port = free_port()
+    cmd = _server_command(models, port)
+    env = {
+        **os.environ,
+        "POSE_ORT_THREADS": "1",
+        "POSE_LOG_LEVEL": "warning",
+        "POSE_ACCESS_LOG": "false",
+        "OMP_NUM_THREADS": "1",
+    }
+    sink = open(log, "wb") if log else subprocess.DEVNULL  # noqa: SIM115
+    proc = subprocess.Popen(cmd, env=env, stdout=sink, stderr=subprocess.STDOUT)
+    url = f"http://{HOST}:{port}"
+    try:
+        deadline = time.monotonic() + ready_timeout
+        with httpx.Client(timeout=2.0) as client:
+            while True:
+                if proc.poll() is not None:
+                    raise RuntimeError(f"server exited with {proc.returncode}: {' '.join(cmd)}")
+                detail = ""
+                try:
+                    ready = client.get(f"{url}/v2/health/ready")
+                    if ready.status_code == 200:
+                        break
+                    detail = ready.text
+                except httpx.TransportError as exc:
+                    detail = repr(exc)
+                if time.monotonic() > deadline:
+                    raise RuntimeError(
+                        f"server not ready after {ready_timeout:.0f} s: {detail[:500]}"
+                    )
+                time.sleep(0.1)
+        yield Server(
+            url, proc.pid, " ".join(Path(c).name if i == 0 else c for i, c in enumerate(cmd))
+        )
+    finally:
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGTERM)
+            try:
+                proc.wait(timeout=15)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait(timeout=5)
+        if log:
+            sink.close()  # type: ignore[union-attr]
+
+
+def request_body(start: np.ndarray, joints: np.ndarray, targets: np.ndarray) -> Json:
+    return {
+        "pose": {n: [float(v) for v in start[i]] for i, n in enumerate(JOINT_NAMES)},
+        "targets": [
+            {"joint": JOINT_NAMES[int(j)], "position": [float(v) for v in t]}
+            for j, t in zip(joints, targets, strict=True)
+        ],
+        "options": {"method": "neural", "preserve_bone_lengths": True, "reach": "soft"},
+    }
+
+
+def bodies(edits: Edits) -> list[Json]:
+    return [
+        request_body(edits.start[i], edits.joints[i], edits.targets[i]) for i in range(len(edits))
+    ]
+
+
+async def _load(
+    url: str,
+    payloads: Sequence[bytes],
+    concurrency: int,
+    max_requests: int,
+    max_seconds: float,
+) -> Json:
+    latencies: list[float] = []
+    errors = 0
+    issued = 0
+    limits = httpx.Limits(max_connections=concurrency, max_keepalive_connections=concurrency)
+    headers = {"content-type": "application/json"}
+    async with httpx.AsyncClient(limits=limits, timeout=60.0) as client:
+        t_end = time.perf_counter() + max_seconds
+
+        async def worker() -> None:
+            nonlocal issued, errors
+            while issued < max_requests and time.perf_counter() < t_end:
+                body = payloads[issued % len(payloads)]
+                issued += 1
+                t0 = time.perf_counter()
+                try:
+                    r = await client.post(url, content=body, headers=headers)
+                    ok = r.status_code == 200
+                except httpx.HTTPError:
+                    ok = False
+                latencies.append(time.perf_counter() - t0)
+                errors += not ok
+
+        t0 = time.perf_counter()
+        await asyncio.gather(*(worker() for _ in range(concurrency)))
+        seconds = time.perf_counter() - t0
+    ms = np.asarray(latencies) * 1e3
+    return {
+        "concurrency": concurrency,
+        "requests": len(latencies),
+        "errors": errors,
+        "seconds": seconds,
+        "rps": len(latencies) / seconds,
+        "p50_ms": float(np.percentile(ms, 50)),
+        "p99_ms": float(np.percentile(ms, 99)),
+        "mean_ms": float(ms.mean()),
+    }
+
+
+def load(
+    url: str, payloads: Sequence[bytes], concurrency: int, max_requests: int, max_seconds: float
+) -> Json:
+    return asyncio.run(_load(url, payloads, concurrency, max_requests, max_seconds))
+
+
+def run_http(
+    models: Path,
+    edits: Edits,
+    *,
+    solve_set: str,
+    concurrency: Sequence[int] = (1, 8, 64),
+    requests: int = 3000,
+    seconds: float = 15.0,
+    batch_size: int = 1024,
+    batches: int = 12,
+    batch_seconds: float = 30.0,
+    warmup: int = 200,
+    log: Path | None = None,
+) -> Json:
+    """The whole HTTP measurement; returns a JSON-able dict."""
+    items = bodies(edits)
+    single = [json.dumps(b).encode() for b in items]
+    n_batch = max(1, min(4, -(-batch_size * 2 // len(items))))
+    batch_payloads = [
+        json.dumps(
+            {"items": [items[(s * batch_size + j) % len(items)] for j in range(batch_size)]}
+        ).encode()
+        for s in range(max(2, n_batch))
+    ]
+    out: Json = {
+        "solve_set": solve_set,
+        "limits": f"≤ {requests} requests or ≤ {seconds:g} s per concurrency level; "
+        f"batch ≤ {batches} batches or ≤ {batch_seconds:g} s",
+        "solve": [],
+    }
+    with serve(models, log=log) as server:
+        out["server"] = server.command
+        rss: Json = {"after_start": rss_kb(server.pid)}
+        load(f"{server.url}/v1/solve", single, 4, warmup, 30.0)
+        load(f"{server.url}/v1/solve/batch", batch_payloads[:1], 1, 1, 60.0)
+        rss["after_warm_up"] = rss_kb(server.pid)
+        for c in concurrency:
+            out["solve"].append(load(f"{server.url}/v1/solve", single, c, requests, seconds))
+        b = load(f"{server.url}/v1/solve/batch", batch_payloads, 1, batches, batch_seconds)
+        out["batch"] = {
+            "batch_size": batch_size,
+            "batches": b["requests"],
+            "concurrency": 1,
+            "errors": b["errors"],
+            "p50_ms": b["p50_ms"],
+            "seconds": b["seconds"],
+            "poses_per_s": b["requests"] * batch_size / b["seconds"],
+            "request_bytes": len(batch_payloads[0]),
+        }
+        rss["after_load"] = rss_kb(server.pid)
+        out["rss_kb"] = rss
+    return out
