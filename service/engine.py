@@ -459,6 +459,8 @@ class Engine:
             pred = self.completion[n - 1](x)[0].astype(np.float64).reshape(NUM_JOINTS, 3)
             run.append(n)
         assert pred is not None
+        if not given_lengths:  # the network's own estimate of this body's proportions
+            lengths = np.asarray(bone_lengths(pred), dtype=np.float64)
         pose = kinematics.bone_pass(pred * scale, lengths)
         idx = np.asarray([JOINT_INDEX[j] for j in keypoints], dtype=np.intp)
         goal = np.stack([given[j] * scale for j in keypoints])

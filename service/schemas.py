@@ -6,7 +6,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, create_model
 
-from service.skeleton import JOINT_NAMES
+from service.skeleton import BASE_KEYPOINTS, JOINT_NAMES
 
 Vec3 = Annotated[
     list[float],
@@ -135,19 +135,7 @@ class CompleteRequest(_Body):
         strict=True,
         json_schema_extra={
             "examples": [
-                {
-                    "keypoints": [
-                        {"joint": j, "position": _REST_EXAMPLE[j]}
-                        for j in (
-                            "pelvis",
-                            "neck",
-                            "left_wrist",
-                            "right_wrist",
-                            "left_ankle",
-                            "right_ankle",
-                        )
-                    ]
-                }
+                {"keypoints": [{"joint": j, "position": _REST_EXAMPLE[j]} for j in BASE_KEYPOINTS]}
             ]
         },
     )

@@ -93,6 +93,16 @@ def _mirror_name(name: str) -> str:
 #: Index of each joint's mirror image (left <-> right); centre joints map to themselves.
 MIRROR: Final[tuple[int, ...]] = tuple(JOINT_INDEX[_mirror_name(n)] for n in JOINT_NAMES)
 
+#: The six base key points of key-point completion (Cascadeur's scheme 1).
+BASE_KEYPOINTS: Final[tuple[str, ...]] = (
+    "pelvis",
+    "neck",
+    "left_wrist",
+    "right_wrist",
+    "left_ankle",
+    "right_ankle",
+)
+
 #: Frame conventions, as served by ``GET /v1/skeleton`` and written into the manifest.
 FRAME: Final[dict[str, str]] = {
     "units": "metres",

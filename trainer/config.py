@@ -8,16 +8,7 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
-from service.skeleton import JOINT_NAMES
-
-BASE_KEYPOINTS: tuple[str, ...] = (
-    "pelvis",
-    "neck",
-    "left_wrist",
-    "right_wrist",
-    "left_ankle",
-    "right_ankle",
-)
+from service.skeleton import BASE_KEYPOINTS, JOINT_NAMES
 
 
 class _Section(BaseModel):

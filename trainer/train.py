@@ -259,6 +259,13 @@ def run_stage(
 # --------------------------------------------------------------------------------------
 # Stages
 # --------------------------------------------------------------------------------------
+def freeze(module: nn.Module) -> None:
+    """Evaluation mode, no gradients: a finished stage's network is only read from now on."""
+    module.eval()
+    for p in module.parameters():
+        p.requires_grad_(False)
+
+
 def _mean_loss(total: torch.Tensor, count: int, d: Dist) -> float:
     if d.world > 1:
         buf = torch.tensor([float(total), float(count)], dtype=torch.float64)
@@ -316,9 +323,7 @@ def train_autoencoder(
         validate=validate,
         fresh=fresh,
     )
-    ae.eval()
-    for p in ae.parameters():
-        p.requires_grad_(False)
+    freeze(ae)
     return ae, state
 
 
@@ -602,9 +607,7 @@ def train_completion(
                 fresh=fresh,
             )
         )
-        model.eval()
-        for p in model.parameters():
-            p.requires_grad_(False)
+        freeze(model)
     return nets, states
 
 

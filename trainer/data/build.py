@@ -19,7 +19,6 @@ written atomically by :func:`trainer.data.dataset.save_dataset`.
 
 from __future__ import annotations
 
-import hashlib
 import multiprocessing
 import os
 import shutil
@@ -40,6 +39,7 @@ import numpy as np
 import numpy.typing as npt
 
 from service.geometry import canonicalise
+from service.manifest import sha256_file
 from service.skeleton import BONE_CHILDREN, JOINT_NAMES, NUM_JOINTS, bone_lengths
 from trainer.data.bvh import BVHError, read_bvh
 from trainer.data.dataset import FORMAT_VERSION, FPS, SPLITS, PoseDataset, save_dataset
@@ -196,14 +196,6 @@ def read_checksums(mocap_dir: Path) -> dict[str, str]:
             if len(parts) == 2:
                 sums[parts[1].lstrip("*")] = parts[0].lower()
     return sums
-
-
-def sha256_file(path: Path) -> str:
-    digest = hashlib.sha256()
-    with path.open("rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
 
 
 def _selected_files(root: Path, mocap_map: MocapMap) -> list[str]:
