@@ -111,6 +111,8 @@ def load_engine(state: State) -> None:
             s.models_dir,
             threads=s.ort_threads,
             composition_passes=s.composition_passes,
+            composition=s.composition,
+            composition_projections=s.composition_projections,
             fabrik_max_iterations=s.fabrik_max_iterations,
         )
         engine.warmup()

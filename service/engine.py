@@ -6,7 +6,8 @@ A solve, for each item (world space in, world space out):
    yaw to face +Z); a character whose summed bone lengths lie outside the range of the
    training poses is scaled to the nearest bound, so the networks see a size they know;
 2. ``method=neural``: encode, run the solver sequence that covers the target set
-   (``composition_passes`` cycles through it), decode; targets on joints that no trained
+   (re-encoding with the solved targets pasted between solvers), decode; targets on
+   joints that no trained
    solver covers are then placed by a FABRIK polish that holds the solved targets;
    ``method=fabrik``: full-body FABRIK from the start pose, no learned prior;
 3. scale back, restore the INPUT pose's bone lengths (root outwards), optionally polish
@@ -207,7 +208,9 @@ class Engine:
         models_dir: Path,
         *,
         threads: int = 1,
-        composition_passes: int = 2,
+        composition_passes: int = 1,
+        composition: str = "reencode",
+        composition_projections: int = 1,
         fabrik_max_iterations: int = 64,
     ) -> None:
         self.models_dir = Path(models_dir)
@@ -236,7 +239,11 @@ class Engine:
             [ref[JOINT_NAMES[c]] for c, _ in BONES], dtype=np.float64
         )
         self.size_range = m.skeleton.size_range
+        if composition not in ("reencode", "sequential"):
+            raise ValueError(f"unknown composition strategy {composition!r}")
         self.passes = composition_passes
+        self.composition = composition
+        self.projections = composition_projections
         self.fabrik_max_iterations = fabrik_max_iterations
         self.version = m.version
 
@@ -377,15 +384,46 @@ class Engine:
             if not sequence:
                 continue
             sel = np.asarray(members, dtype=np.intp)
-            zg = z[sel]
-            # one solver needs one pass; a composed sequence cycles `passes` times
-            for _ in range(self.passes if len(sequence) > 1 else 1):
-                for key in sequence:
-                    targets = canvas[sel][:, self.solver_joints[key]].reshape(len(sel), -1)
-                    zg = self.solvers[key](zg, targets)
-            z[sel] = zg
+            z[sel] = self._compose(z[sel], canvas[sel], sequence)
         decoded = self.decoder(z).astype(np.float64).reshape(m, NUM_JOINTS, 3)
         return decoded * scales[items, None, None], plans
+
+    def _compose(
+        self, z: npt.NDArray[np.float32], canvas: npt.NDArray[np.float32], sequence: tuple[str, ...]
+    ) -> npt.NDArray[np.float32]:
+        """Run a solver sequence on latents ``[M, D]`` whose targets are on ``canvas``.
+
+        ``composition="reencode"`` (default): before each solver after the first, decode,
+        paste the targets solved so far onto their joints and re-encode, so a later solver
+        starts from a pose that already meets the earlier targets; after the last solver,
+        ``projections`` rounds of paste-all-targets and re-encode. ``"sequential"``: the
+        paper's ẑ = S_t3(S_t2(S_t1(z))). Either cycles ``passes`` times through the
+        sequence (1 is best: a solver re-applied to its own output overshoots)."""
+        if len(sequence) == 1:
+            key = sequence[0]
+            return self.solvers[key](z, canvas[:, self.solver_joints[key]].reshape(len(z), -1))
+        flat = canvas.reshape(len(z), -1)
+        done: list[int] = []
+        for _ in range(self.passes):
+            for key in sequence:
+                joints = self.solver_joints[key]
+                if self.composition == "reencode" and done:
+                    z = self._paste(z, flat, done)
+                z = self.solvers[key](z, canvas[:, joints].reshape(len(z), -1))
+                done.extend(int(j) for j in joints if int(j) not in done)
+        if self.composition == "reencode":
+            for _ in range(self.projections):
+                z = self._paste(z, flat, done)
+        return z
+
+    def _paste(
+        self, z: npt.NDArray[np.float32], flat: npt.NDArray[np.float32], joints: list[int]
+    ) -> npt.NDArray[np.float32]:
+        """Decode, put ``joints`` on their targets, encode: back onto the pose manifold."""
+        x = self.decoder(z)
+        cols = np.asarray([3 * j + k for j in joints for k in range(3)], dtype=np.intp)
+        x[:, cols] = flat[:, cols]
+        return self.encoder(x)
 
     def _exact(
         self, p: SolveProblem, start: F64, neural: F64, lengths: F64, goal: F64

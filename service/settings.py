@@ -28,7 +28,15 @@ class Settings(BaseSettings):
     cors_origins: list[str] = Field(default_factory=list)
     api_key: SecretStr | None = None
     composition_passes: int = Field(
-        default=2, ge=1, le=8, description="Cycles through the solvers of a composed target set."
+        default=1, ge=1, le=8, description="Cycles through the solvers of a composed set."
+    )
+    composition: Literal["reencode", "sequential"] = Field(
+        default="reencode",
+        description="reencode: paste solved targets and re-encode between solvers; "
+        "sequential: the paper's plain chain of solvers.",
+    )
+    composition_projections: int = Field(
+        default=1, ge=0, le=8, description="Paste-all-targets-and-re-encode rounds at the end."
     )
     fabrik_max_iterations: int = Field(default=64, ge=1, le=10_000)
     log_level: Literal["debug", "info", "warning", "error"] = "info"
