@@ -4,19 +4,28 @@
 set -euo pipefail
 URL=${1:-http://127.0.0.1:8000}
 cd "$(dirname "$0")/.."
-abridge() {  # keep two joints of any "pose" so answers fit on a page
+abridge() {  # keep two joints of a "pose", round to 0.1 mm, one line per vector
   python3 -c '
-import json, sys
+import json, re, sys
 def cut(o):
     if isinstance(o, dict):
-        return {k: ({j: o[k][j] for j in list(o[k])[:2]} | {"...": "19 more joints"}
-                    if k == "pose" and isinstance(o[k], dict) else cut(v)) for k, v in o.items()}
+        out = {}
+        for k, v in o.items():
+            if k == "pose" and isinstance(v, dict):
+                out[k] = {j: cut(v[j]) for j in list(v)[:2]}
+                out[k]["..."] = f"{len(v) - 2} more joints"
+            else:
+                out[k] = cut(v)
+        return out
     if isinstance(o, list):
         return [cut(v) for v in o]
+    if isinstance(o, float):
+        return float(f"{o:.4g}") if abs(o) < 1e-3 else round(o, 4)
     return o
 text = sys.stdin.read()
 try:
-    print(json.dumps(cut(json.loads(text)), indent=1))
+    pretty = json.dumps(cut(json.loads(text)), indent=1)
+    print(re.sub(r"\[\s*([-\d.e]+),\s*([-\d.e]+),\s*([-\d.e]+)\s*\]", r"[\1, \2, \3]", pretty))
 except ValueError:
     print(text)
 '
