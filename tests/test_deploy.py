@@ -162,9 +162,15 @@ def test_base_image_is_an_arg_with_the_default(dockerfile: list[tuple[str, str]]
     first_from = next(i for i, (ins, _) in enumerate(dockerfile) if ins == "FROM")
     global_args = [a for ins, a in dockerfile[:first_from] if ins == "ARG"]
     assert f"BASE_IMAGE={DEFAULT_BASE_IMAGE}" in global_args
-    froms = [a.split()[0] for ins, a in dockerfile if ins == "FROM"]
-    assert len(froms) >= 2, "multi-stage: a builder and a runtime stage"
-    assert all(f in ("${BASE_IMAGE}", "$BASE_IMAGE") for f in froms), froms
+    froms = [a.split() for ins, a in dockerfile if ins == "FROM"]
+    assert len(froms) >= 2, "multi-stage: build stage(s) and a runtime stage"
+    base = ("${BASE_IMAGE}", "$BASE_IMAGE")
+    stages: set[str] = set()
+    for words in froms:  # each stage starts from the base or from an earlier stage
+        assert words[0] in base or words[0] in stages, words
+        if len(words) == 3 and words[1].upper() == "AS":
+            stages.add(words[2])
+    assert froms[-1][0] in base, "the runtime stage starts afresh from the base"
 
 
 def test_runtime_stage_runs_as_non_root(final_stage: list[tuple[str, str]]) -> None:
