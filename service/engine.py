@@ -3,8 +3,8 @@
 A solve, for each item (world space in, world space out):
 
 1. canonicalise the start pose like the dataset (pelvis floor projection to the origin,
-   yaw to face +Z); a character whose summed bone lengths lie outside the range of the
-   training poses is scaled to the nearest bound, so the networks see a size they know;
+   yaw to face +Z) and scale it to the size of the training skeleton whose proportions
+   it matches best, so the networks see a body they know;
 2. ``method=neural``: encode, run the solver sequence that covers the target set
    (re-encoding with the solved targets pasted between solvers), decode; targets on
    joints that no trained
@@ -238,7 +238,9 @@ class Engine:
         self.reference_lengths = np.asarray(
             [ref[JOINT_NAMES[c]] for c, _ in BONES], dtype=np.float64
         )
-        self.size_range = m.skeleton.size_range
+        known = np.asarray(m.skeleton.skeletons, dtype=np.float64)  # [C, 20]
+        self._shape_totals = known.sum(axis=-1)
+        self._shapes = known / self._shape_totals[:, None]
         if composition not in ("reencode", "sequential"):
             raise ValueError(f"unknown composition strategy {composition!r}")
         self.passes = composition_passes
@@ -248,12 +250,15 @@ class Engine:
         self.version = m.version
 
     def scales_of(self, lengths: F64) -> F64:
-        """How much bigger each character ``[..., 20]`` is than the sizes the networks were
-        trained on: 1 inside the training range of summed bone lengths, else the ratio to
-        the nearest bound (a 1.9 m or a 1.2 m character is solved at a trained size)."""
-        total = np.sum(lengths, axis=-1)
-        low, high = self.size_range
-        return np.asarray(total / np.clip(total, low, high), dtype=np.float64)
+        """How much bigger each character ``[..., 20]`` is than the training skeleton whose
+        proportions it matches best (relative bone lengths), so that any character is
+        solved at the size of a body the networks know: a 1.9 m or a 1.2 m copy of a
+        training actor is solved exactly as that actor."""
+        total = np.sum(lengths, axis=-1, keepdims=True)
+        shape = lengths / total
+        distance = np.linalg.norm(shape[..., None, :] - self._shapes, axis=-1)  # [..., C]
+        nearest = np.argmin(distance, axis=-1)
+        return np.asarray(total[..., 0] / self._shape_totals[nearest], dtype=np.float64)
 
     # -- solver choice -------------------------------------------------------------------
     def plan(self, joints: frozenset[str], weights: dict[str, float]) -> list[str]:

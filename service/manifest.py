@@ -58,9 +58,11 @@ class SkeletonSpec(_Strict):
         description="Mean length (m) of the bone ending at each non-root joint, train split."
     )
     frame: dict[str, str]
-    size_range: tuple[float, float] = Field(
-        description="Summed bone lengths (m) of the training poses, 1st and 99th "
-        "percentile: characters outside are scaled to the nearest bound before solving."
+    skeletons: list[list[float]] = Field(
+        min_length=1,
+        description="The body shapes of the training data: bone lengths (m, BONES order) "
+        "of each distinct skeleton with at least 1% of the training frames. A request's "
+        "character is scaled to the one whose proportions it matches best.",
     )
 
     @model_validator(mode="after")
@@ -74,8 +76,8 @@ class SkeletonSpec(_Strict):
             raise ValueError("reference_bone_lengths must name every non-root joint")
         if any(not (0.0 < v < 2.0) for v in self.reference_bone_lengths.values()):
             raise ValueError("reference bone lengths must be in (0, 2) metres")
-        if not 0.0 < self.size_range[0] <= self.size_range[1]:
-            raise ValueError("size_range must be 0 < low <= high")
+        if any(len(s) != len(expected) or min(s) <= 0.0 for s in self.skeletons):
+            raise ValueError(f"each skeleton needs {len(expected)} positive bone lengths")
         if self.frame != FRAME:
             raise ValueError(f"frame conventions differ from {FRAME}")
         return self
@@ -229,6 +231,9 @@ def write_atomic(path: Path, data: bytes) -> None:
             fh.write(data)
             fh.flush()
             os.fsync(fh.fileno())
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)  # as a plain open() would (mkstemp makes 0600)
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)

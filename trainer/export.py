@@ -143,6 +143,21 @@ def _parity(path: Path, module: nn.Module, feeds: dict[str, torch.Tensor]) -> fl
     return err
 
 
+def body_shapes(lengths: np.ndarray, min_share: float = 0.01, most: int = 16) -> list[list[float]]:
+    """Distinct skeletons of the training frames ``[N, 20]``: frames grouped by their summed
+    bone length to the centimetre; each group with >= ``min_share`` of the frames gives
+    its mean bone lengths (largest groups first, at most ``most``)."""
+    keys = np.round(lengths.sum(axis=1), 2)
+    values, counts = np.unique(keys, return_counts=True)
+    order = np.argsort(-counts)
+    shapes = []
+    for i in order[:most]:
+        if counts[i] < min_share * len(lengths):
+            continue
+        shapes.append([round(float(v), 6) for v in lengths[keys == values[i]].mean(axis=0)])
+    return shapes
+
+
 def _git_commit() -> str:
     try:
         head = subprocess.run(
@@ -275,11 +290,7 @@ def export_all(
     train_poses = trained.splits.train.positions
     all_lengths = bone_lengths(train_poses.astype(np.float64))
     lengths = all_lengths.mean(axis=0)
-    totals = all_lengths.sum(axis=1)
-    size_range = (
-        round(float(np.percentile(totals, 1)), 6),
-        round(float(np.percentile(totals, 99)), 6),
-    )
+    skeletons = body_shapes(all_lengths)
     ref = {JOINT_NAMES[child]: round(float(lengths[i]), 6) for i, (child, _) in enumerate(BONES)}
     data_meta = dict(trained.splits.train.meta)
     archives = [
@@ -298,7 +309,7 @@ def export_all(
             parents=[PARENT_NAMES[j] for j in JOINT_NAMES],
             reference_bone_lengths=ref,
             frame=dict(FRAME),
-            size_range=size_range,
+            skeletons=skeletons,
         ),
         normalisation=Normalisation(
             mean=[float(v) for v in ae.norm.mean],
