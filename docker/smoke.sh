@@ -17,7 +17,7 @@
 #   SMOKE_IMAGE                  tag to build          (localhost/marionette:smoke)
 #   BASE_IMAGE                   base for both stages  (python:3.11-slim-bookworm)
 #   SMOKE_STANDIN_IMAGE          stand-in base tag     (localhost/marionette-base:bookworm)
-#   DEBIAN_MIRROR                for debootstrap       (http://deb.debian.org/debian)
+#   DEBIAN_MIRROR                for debootstrap       (debootstrap's own default)
 #   SMOKE_NO_CACHE=1             build without the layer cache (a cold build)
 #   SMOKE_BUILD_TIMEOUT          seconds               (1800)
 #   SMOKE_READY_TIMEOUT          seconds               (240)
@@ -33,7 +33,7 @@ cd "$ROOT"
 IMAGE="${SMOKE_IMAGE:-localhost/marionette:smoke}"
 BASE_IMAGE="${BASE_IMAGE:-python:3.11-slim-bookworm}"
 STANDIN_IMAGE="${SMOKE_STANDIN_IMAGE:-localhost/marionette-base:bookworm}"
-DEBIAN_MIRROR="${DEBIAN_MIRROR:-http://deb.debian.org/debian}"
+DEBIAN_MIRROR="${DEBIAN_MIRROR:-}"
 BUILD_TIMEOUT="${SMOKE_BUILD_TIMEOUT:-1800}"
 READY_TIMEOUT="${SMOKE_READY_TIMEOUT:-240}"
 SOLVES="${SMOKE_SOLVES:-20}"
@@ -140,10 +140,10 @@ else
         [[ $(id -u) -eq 0 ]] || die "debootstrap needs root"
         t0=$(now)
         rootfs="$WORK/rootfs"
-        log "debootstrap bookworm from $DEBIAN_MIRROR (minbase + python3)"
+        log "debootstrap bookworm ${DEBIAN_MIRROR:+from $DEBIAN_MIRROR }(minbase + python3)"
         timeout 1200 debootstrap --variant=minbase \
             --include=python3,python3-venv,python3-pip,ca-certificates \
-            bookworm "$rootfs" "$DEBIAN_MIRROR" >"$WORK/debootstrap.log" 2>&1 \
+            bookworm "$rootfs" ${DEBIAN_MIRROR:+"$DEBIAN_MIRROR"} >"$WORK/debootstrap.log" 2>&1 \
             || { tail -n 30 "$WORK/debootstrap.log" >&2; die "debootstrap failed"; }
         # What the official slim image leaves out too: apt caches, docs, man pages, locales.
         rm -rf "$rootfs"/var/cache/apt/archives/*.deb "$rootfs"/var/lib/apt/lists/* \

@@ -213,6 +213,8 @@ class Engine:
         composition_projections: int = 1,
         fabrik_max_iterations: int = 64,
     ) -> None:
+        if hasattr(ort, "disable_telemetry_events"):  # no usage reporting from a server
+            ort.disable_telemetry_events()
         self.models_dir = Path(models_dir)
         self.manifest: Manifest = load_manifest(self.models_dir, verify=True)
         options = ort.SessionOptions()
