@@ -19,7 +19,7 @@ run per solver for the items whose sequence uses it, one decoder run.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -83,14 +83,24 @@ class CompleteResult:
 
 
 def _finite_vec(value: Sequence[float], where: str) -> F64:
-    arr = np.asarray(value, dtype=np.float64)
-    if arr.shape != (3,):
+    if len(value) != 3:
         raise InvalidRequest(f"{where}: expected 3 numbers [x, y, z], got {len(value)}")
-    if not np.all(np.isfinite(arr)):
-        raise InvalidRequest(f"{where}: coordinates must be finite numbers, got {list(value)}")
-    if np.any(np.abs(arr) > MAX_COORDINATE):
-        raise InvalidRequest(f"{where}: coordinates beyond ±{MAX_COORDINATE:g} m")
-    return arr
+    rows = _finite_rows(np.asarray([value], dtype=np.float64), lambda _: where)
+    return np.asarray(rows[0])
+
+
+def _finite_rows(arr: F64, where: Callable[[int], str]) -> F64:
+    """Check ``[N, 3]`` coordinates at once; on failure, name the first bad row."""
+    if np.isfinite(arr).all() and np.abs(arr).max() <= MAX_COORDINATE:
+        return arr
+    ok = np.isfinite(arr).all(axis=1)
+    if not ok.all():
+        i = int(np.argmin(ok))
+        raise InvalidRequest(
+            f"{where(i)}: coordinates must be finite numbers, got {arr[i].tolist()}"
+        )
+    i = int(np.argmax((np.abs(arr) > MAX_COORDINATE).any(axis=1)))
+    raise InvalidRequest(f"{where(i)}: coordinates beyond ±{MAX_COORDINATE:g} m")
 
 
 def _known_joint(name: str, where: str) -> int:
@@ -110,10 +120,17 @@ def parse_pose(pose: dict[str, list[float]], where: str = "pose") -> F64:
     missing = [j for j in JOINT_NAMES if j not in pose]
     if missing:
         raise InvalidRequest(f"{where}: missing joints {missing} (all 21 are required)")
-    arr = np.stack([_finite_vec(pose[j], f"{where}.{j}") for j in JOINT_NAMES])
+    try:
+        arr = np.array([pose[j] for j in JOINT_NAMES], dtype=np.float64)
+    except ValueError:  # ragged: some joint is not 3 numbers
+        arr = np.empty((0, 3))
+    if arr.shape != (NUM_JOINTS, 3):
+        bad = next(j for j in JOINT_NAMES if len(pose[j]) != 3)
+        raise InvalidRequest(f"{where}.{bad}: expected 3 numbers [x, y, z], got {len(pose[bad])}")
+    _finite_rows(arr, lambda i: f"{where}.{JOINT_NAMES[i]}")
     lengths = bone_lengths(arr)
-    short = [JOINT_NAMES[c] for (c, _), n in zip(BONES, lengths, strict=True) if n < MIN_BONE]
-    if short:
+    if lengths.min() < MIN_BONE:
+        short = [JOINT_NAMES[c] for (c, _), n in zip(BONES, lengths, strict=True) if n < MIN_BONE]
         raise InvalidRequest(
             f"{where}: degenerate pose: zero-length bones ending at {short} "
             f"(each joint must be at least {MIN_BONE * 1000:g} mm from its parent)"
@@ -147,16 +164,20 @@ def parse_solve(
     prefix = f"{where}." if where else ""
     arr = parse_pose(pose, f"{prefix}pose")
     idx: list[int] = []
-    pos: list[F64] = []
-    weights: list[float] = []
-    for i, (joint, position, weight) in enumerate(targets):
+    for i, (joint, position, _) in enumerate(targets):
         j = _known_joint(joint, f"{prefix}targets[{i}].joint")
         if j in idx:
             raise InvalidRequest(f"{prefix}targets[{i}]: duplicate target for joint {joint!r}")
+        if len(position) != 3:
+            raise InvalidRequest(
+                f"{prefix}targets[{i}].position: expected 3 numbers [x, y, z], got {len(position)}"
+            )
         idx.append(j)
-        pos.append(_finite_vec(position, f"{prefix}targets[{i}].position"))
-        weights.append(float(weight))
     n_targets = len(idx)
+    goal = _finite_rows(
+        np.array([t[1] for t in targets], dtype=np.float64),
+        lambda i: f"{prefix}targets[{i}].position",
+    )
     for i, joint in enumerate(pins):
         j = _known_joint(joint, f"{prefix}pins[{i}]")
         if j in idx[:n_targets]:
@@ -164,13 +185,14 @@ def parse_solve(
         if j in idx:
             raise InvalidRequest(f"{prefix}pins[{i}]: joint {joint!r} is pinned twice")
         idx.append(j)
-        pos.append(arr[j].copy())
-        weights.append(1.0)
+    target_idx = np.asarray(idx, dtype=np.intp)
+    weights = np.ones(len(idx))
+    weights[:n_targets] = [t[2] for t in targets]
     return SolveProblem(
         pose=arr,
-        target_idx=np.asarray(idx, dtype=np.intp),
-        target_pos=np.stack(pos),
-        weights=np.asarray(weights, dtype=np.float64),
+        target_idx=target_idx,
+        target_pos=np.concatenate([goal, arr[target_idx[n_targets:]]]),
+        weights=weights,
         n_targets=n_targets,
         method=method,
         preserve_bone_lengths=preserve_bone_lengths,
