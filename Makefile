@@ -54,6 +54,7 @@ train: $(STAMP)
 bench: $(STAMP)
 	test -f $(DATASET) || $(BIN)/pose-trainer dataset --mocap $(MOCAP_DIR) --out $(DATASET)
 	$(BIN)/python -m bench --models models --dataset $(DATASET) --out reports
+	$(BIN)/python -m bench.readme --report reports/report.md --readme README.md
 
 clean:
 	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache
