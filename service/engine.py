@@ -13,8 +13,9 @@ A solve, for each item (world space in, world space out):
 3. scale back, restore the INPUT pose's bone lengths (root outwards), optionally polish
    onto the targets exactly (``reach=exact``), and transform back to the world.
 
-Batches run one onnxruntime call per stage: one encoder run for every neural item, one
-run per solver for the items whose sequence uses it, one decoder run.
+Batches run one onnxruntime call per stage for all items that share a solver sequence; a
+single-solver sequence runs as one fused graph (encoder, solver and decoder composed at
+load time), a composed one as encoder, solvers (with re-encoding) and decoder.
 """
 
 from __future__ import annotations
@@ -27,6 +28,8 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
+import onnx
+import onnx.compose
 import onnxruntime as ort
 
 from service import kinematics
@@ -222,6 +225,40 @@ class _Net:
         return out
 
 
+class _Fused:
+    """encoder -> one solver -> decoder as ONE graph (``pose, targets -> pose``), composed
+    at load time from the verified files: a single-solver edit costs one onnxruntime run
+    instead of three, with bit-identical results."""
+
+    def __init__(
+        self, enc: ModelEntry, solver: ModelEntry, dec: ModelEntry, models_dir: Path,
+        options: ort.SessionOptions,
+    ) -> None:  # fmt: skip
+        def load(entry: ModelEntry, prefix: str) -> onnx.ModelProto:
+            return onnx.compose.add_prefix(onnx.load(str(models_dir / entry.file)), prefix)
+
+        first = onnx.compose.merge_models(
+            load(enc, "e_"), load(solver, "s_"),
+            io_map=[(f"e_{enc.outputs[0].name}", f"s_{solver.inputs[0].name}")],
+        )  # fmt: skip
+        graph = onnx.compose.merge_models(
+            first, load(dec, "d_"),
+            io_map=[(f"s_{solver.outputs[0].name}", f"d_{dec.inputs[0].name}")],
+        )  # fmt: skip
+        self.session = ort.InferenceSession(
+            graph.SerializeToString(), options, providers=["CPUExecutionProvider"]
+        )
+        self.inputs = [f"e_{enc.inputs[0].name}", f"s_{solver.inputs[1].name}"]
+        self.output = f"d_{dec.outputs[0].name}"
+
+    def __call__(
+        self, pose: npt.NDArray[np.float32], targets: npt.NDArray[np.float32]
+    ) -> npt.NDArray[np.float32]:
+        feeds = {self.inputs[0]: pose, self.inputs[1]: targets}
+        out: npt.NDArray[np.float32] = self.session.run([self.output], feeds)[0]
+        return out
+
+
 class Engine:
     """Loaded models and the solve / complete logic (stateless between calls)."""
 
@@ -258,6 +295,11 @@ class Engine:
             for key, entry in m.solvers().items()
         }
         self.completion = [net(entry) for entry in m.completion_levels()]
+        enc, dec = m.autoencoder("encoder"), m.autoencoder("decoder")
+        self.fused = {
+            key: _Fused(enc, entry, dec, self.models_dir, options)
+            for key, entry in m.solvers().items()
+        }
         ref = m.skeleton.reference_bone_lengths
         self.reference_lengths = np.asarray(
             [ref[JOINT_NAMES[c]] for c, _ in BONES], dtype=np.float64
@@ -267,6 +309,7 @@ class Engine:
         self._shapes = known / self._shape_totals[:, None]
         if composition not in ("reencode", "sequential"):
             raise ValueError(f"unknown composition strategy {composition!r}")
+        self._plans: dict[tuple[bytes, bytes], tuple[str, ...]] = {}
         self.passes = composition_passes
         self.composition = composition
         self.projections = composition_projections
@@ -290,6 +333,19 @@ class Engine:
         order = _cover(joints, frozenset(self.solvers))
         # heavier targets run later, so the last word is theirs; ties keep cover order
         return sorted(order, key=lambda k: max(weights[j] for j in k.split("+")))
+
+    def _plan_of(self, p: SolveProblem) -> tuple[str, ...]:
+        """``plan`` for a problem, memoised on its (joints, weights) bytes."""
+        key = (p.target_idx.tobytes(), p.weights.tobytes())
+        plan = self._plans.get(key)
+        if plan is None:
+            names = [JOINT_NAMES[j] for j in p.target_idx.tolist()]
+            weights = dict(zip(names, p.weights.tolist(), strict=True))
+            plan = tuple(self.plan(frozenset(names), weights))
+            if len(self._plans) >= 65536:  # bounded: forget everything, start again
+                self._plans.clear()
+            self._plans[key] = plan
+        return plan
 
     # -- solving ---------------------------------------------------------------------------
     def solve(self, problems: Sequence[SolveProblem]) -> list[SolveResult]:
@@ -394,28 +450,30 @@ class Engine:
         """Encode, run each item's solver sequence, decode: one ORT run per stage."""
         m = len(items)
         x = (canon[items] / scales[items, None, None]).reshape(m, -1).astype(np.float32)
-        z = self.encoder(x)
         # every item's targets on a [21, 3] canvas, so a solver gathers its joints at once
         canvas = np.zeros((m, NUM_JOINTS, 3), dtype=np.float32)
         rows = np.arange(m)[:, None]
         canvas[rows, tidx[items]] = tcan[items] / scales[items, None, None]
         groups: dict[tuple[str, ...], list[int]] = {}
         plans: list[list[str]] = []
-        for row, b in enumerate(items):
-            p = problems[int(b)]
-            weights = {
-                JOINT_NAMES[j]: float(w) for j, w in zip(p.target_idx, p.weights, strict=True)
-            }
-            plan = tuple(self.plan(frozenset(weights), weights))
+        for row, b in enumerate(items.tolist()):
+            plan = self._plan_of(problems[b])
             plans.append(list(plan))
             groups.setdefault(plan, []).append(row)
+        decoded = np.empty((m, 3 * NUM_JOINTS), dtype=np.float32)
         for sequence, members in groups.items():
-            if not sequence:
-                continue
             sel = np.asarray(members, dtype=np.intp)
-            z[sel] = self._compose(z[sel], canvas[sel], sequence)
-        decoded = self.decoder(z).astype(np.float64).reshape(m, NUM_JOINTS, 3)
-        return decoded * scales[items, None, None], plans
+            if len(sequence) == 1:  # one fused run: encode, solve, decode
+                key = sequence[0]
+                targets = canvas[sel][:, self.solver_joints[key]].reshape(len(sel), -1)
+                decoded[sel] = self.fused[key](x[sel], targets)
+            else:  # none (only uncovered joints) or a composed sequence
+                z = self.encoder(x[sel])
+                if sequence:
+                    z = self._compose(z, canvas[sel], sequence)
+                decoded[sel] = self.decoder(z)
+        out = decoded.astype(np.float64).reshape(m, NUM_JOINTS, 3)
+        return out * scales[items, None, None], plans
 
     def _compose(
         self, z: npt.NDArray[np.float32], canvas: npt.NDArray[np.float32], sequence: tuple[str, ...]
