@@ -517,7 +517,7 @@ class Engine:
     ) -> tuple[F64, int, list[str]]:
         """Exact reach: polish the neural pose onto the targets. When that leaves a target
         the plain FABRIK solve from the start pose does reach (the network moved the
-        pelvis where a target is out of reach), the FABRIK answer, polished, is used."""
+        pelvis where a target is out of reach), that FABRIK answer is used."""
         kw = {"weights": p.weights, "tolerance": p.tolerance,
               "max_iterations": self.fabrik_max_iterations}  # fmt: skip
         res = kinematics.polish(neural, lengths, p.target_idx, goal, **kw)  # type: ignore[arg-type]

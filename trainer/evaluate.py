@@ -1344,7 +1344,8 @@ def render_report(results: Json, plots: dict[str, str], title: str) -> str:
             "### B2 — completion from key points only",
             "",
             "Key points are the real pose's joints of each completion level (from the "
-            "manifest); no bone lengths are given, so the reference skeleton is used. The "
+            "manifest); no bone lengths are given, so the service uses the completion "
+            "network's own estimate of the body's proportions. The "
             "baseline FABRIKs the reference rest pose (moved onto the pelvis) onto the "
             "key points.",
             "",
@@ -1631,9 +1632,11 @@ def _speed_sections(results: Json, plots: dict[str, str]) -> list[str]:
             "### HTTP (uvicorn on loopback)",
             "",
             f"`{http.get('server')}` as a subprocess on 127.0.0.1, one worker "
-            "(POSE_ORT_THREADS=1). Load generator: httpx.AsyncClient in the benchmark "
-            "process with a bounded number of connections = concurrency, bounded in "
-            f"requests and time ({http.get('limits')}); request bodies pre-serialised. "
+            "(POSE_ORT_THREADS=1). Load generator: a raw asyncio HTTP/1.1 client in the "
+            "benchmark process (bench/http_load.py), closed loop, one kept-alive "
+            "connection per unit of concurrency, bounded in "
+            f"requests and time ({http.get('limits')}); requests pre-built, answers read "
+            "in full (status checked, bodies not parsed). "
             "The client shares the machine's "
             f"{results.get('machine_start', {}).get('cpus')} CPUs with the server.",
             "",
