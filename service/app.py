@@ -25,7 +25,14 @@ from prometheus_client import generate_latest as prometheus_latest
 from starlette.concurrency import run_in_threadpool
 
 from service.editor import mount_editor
-from service.engine import Engine, SolveProblem, SolveResult, parse_keypoints, parse_solve
+from service.engine import (
+    Engine,
+    SolveProblem,
+    SolveResult,
+    parse_keypoints,
+    parse_poses,
+    parse_solve,
+)
 from service.errors import (
     NotReady,
     PayloadTooLarge,
@@ -238,10 +245,10 @@ def _pose_dict(pose: np.ndarray) -> dict[str, list[float]]:
     return {name: _vec(pose[i]) for i, name in enumerate(JOINT_NAMES)}
 
 
-def _problem(req: SolveRequest, where: str = "") -> SolveProblem:
+def _problem(req: SolveRequest, where: str = "", pose: np.ndarray | None = None) -> SolveProblem:
     o = req.options
     return parse_solve(
-        req.pose.model_dump(),
+        req.pose.model_dump() if pose is None else {},
         [(t.joint, t.position, t.weight) for t in req.targets],
         req.pins,
         method=o.method,
@@ -249,6 +256,7 @@ def _problem(req: SolveRequest, where: str = "") -> SolveProblem:
         reach=o.reach,
         tolerance=o.tolerance,
         where=where,
+        parsed_pose=pose,
     )
 
 
@@ -364,7 +372,11 @@ def create_app(settings: Settings | None = None, *, load_in_background: bool = T
         limit = settings.max_batch_items
         if len(req.items) > limit:
             raise TooManyItems(f"{len(req.items)} items exceed the limit of {limit} per batch")
-        problems = [_problem(item, f"items[{i}]") for i, item in enumerate(req.items)]
+        poses = parse_poses(
+            [[getattr(item.pose, j) for j in JOINT_NAMES] for item in req.items],
+            [f"items[{i}].pose" for i in range(len(req.items))],
+        )
+        problems = [_problem(item, f"items[{i}]", poses[i]) for i, item in enumerate(req.items)]
         results = await run_in_threadpool(engine.solve, problems)
         state.metrics.batch.observe(len(problems))
         items = [_payload(p, r, engine.version) for p, r in zip(problems, results, strict=True)]

@@ -141,6 +141,23 @@ def parse_pose(pose: dict[str, list[float]], where: str = "pose") -> F64:
     return arr
 
 
+def parse_poses(poses: Sequence[Sequence[Sequence[float]]], where: Sequence[str]) -> F64:
+    """Validate many joint-ordered poses ``[B][21][3]`` at once (a batch); on any problem,
+    the offending pose is parsed alone so the error names it and its joint."""
+    try:
+        arr = np.array(poses, dtype=np.float64)
+        ok = arr.shape == (len(poses), NUM_JOINTS, 3)
+    except ValueError:
+        ok = False
+    if ok:
+        finite = np.isfinite(arr).all() and np.abs(arr).max() <= MAX_COORDINATE
+        if finite and bone_lengths(arr).min() >= MIN_BONE:
+            return arr
+    for pose, name in zip(poses, where, strict=True):  # find and name the culprit
+        parse_pose({j: list(v) for j, v in zip(JOINT_NAMES, pose, strict=True)}, name)
+    raise AssertionError("a batch failed validation but no pose did")  # pragma: no cover
+
+
 def parse_keypoints(keypoints: Sequence[tuple[str, Sequence[float]]]) -> dict[str, F64]:
     """Validate key points: known, distinct joints with finite coordinates."""
     points: dict[str, F64] = {}
@@ -162,10 +179,12 @@ def parse_solve(
     reach: str,
     tolerance: float,
     where: str = "",
+    parsed_pose: F64 | None = None,
 ) -> SolveProblem:
-    """Validate one solve request; raises ``InvalidRequest`` with a precise detail."""
+    """Validate one solve request; raises ``InvalidRequest`` with a precise detail.
+    ``parsed_pose``: the pose already validated by ``parse_poses`` (batches)."""
     prefix = f"{where}." if where else ""
-    arr = parse_pose(pose, f"{prefix}pose")
+    arr = parse_pose(pose, f"{prefix}pose") if parsed_pose is None else parsed_pose
     idx: list[int] = []
     for i, (joint, position, _) in enumerate(targets):
         j = _known_joint(joint, f"{prefix}targets[{i}].joint")

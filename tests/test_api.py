@@ -381,3 +381,11 @@ def test_cors_allow_list(models_dir: Path) -> None:
         assert ok.headers.get("access-control-allow-origin") == "http://editor.example"
         other = c.get("/v2/health/live", headers={"Origin": "http://evil.example"})
         assert "access-control-allow-origin" not in other.headers
+
+
+def test_batch_pose_error_names_the_item_and_joint(client: Any, real_poses: RealPoses) -> None:
+    items = [solve_body(real_poses, k, ["head"]) for k in range(3)]
+    items[1]["pose"]["left_knee"] = items[1]["pose"]["left_hip"]
+    assert_problem(
+        client.post("/v1/solve/batch", json={"items": items}), 422, "items[1].pose", "left_knee"
+    )
