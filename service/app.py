@@ -7,6 +7,7 @@ Routes translate JSON to validated problems and call the data plane (``Engine``)
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 import logging
 import time
@@ -42,6 +43,7 @@ from service.errors import (
     install_handlers,
     problem,
 )
+from service.manifest import ManifestError, SkeletonSpec, load_manifest
 from service.schemas import (
     BatchRequest,
     BatchResponse,
@@ -102,6 +104,7 @@ class State:
     def __init__(self, settings: Settings) -> None:
         self.settings = settings
         self.engine: Engine | None = None
+        self.skeleton: SkeletonSpec | None = None
         self.error: str | None = "loading models"
         self.metrics = Metrics()
 
@@ -114,6 +117,10 @@ class State:
 def load_engine(state: State) -> None:
     """Load, verify and warm up the models; record why not when anything fails."""
     s = state.settings
+    # the skeleton is served as soon as the manifest parses (before verification); a bad
+    # manifest is reported with its reason by the Engine below
+    with contextlib.suppress(ManifestError):
+        state.skeleton = load_manifest(s.models_dir, verify=False).skeleton
     try:
         engine = Engine(
             s.models_dir,
@@ -400,12 +407,16 @@ def create_app(settings: Settings | None = None, *, load_in_background: bool = T
 
     @app.get("/v1/skeleton", response_model=SkeletonResponse, tags=["info"])
     async def skeleton() -> SkeletonResponse:
-        """Joint names, parents, reference bone lengths (m) and frame conventions."""
-        engine = state.ready_engine()
+        """Joint names, parents, reference bone lengths (m) and frame conventions
+        (available as soon as the manifest parses, before the models are ready)."""
+        spec = state.engine.manifest.skeleton if state.engine else state.skeleton
+        if spec is None:
+            state.ready_engine()  # raises NotReady with the reason
+        assert spec is not None
         return SkeletonResponse(
             joints=list(JOINT_NAMES),
             parents=dict(PARENT_NAMES),
-            reference_bone_lengths=dict(engine.manifest.skeleton.reference_bone_lengths),
+            reference_bone_lengths=dict(spec.reference_bone_lengths),
             frame=dict(FRAME),
         )
 

@@ -358,6 +358,8 @@ def test_corrupt_model_is_not_ready_with_a_reason(
         assert "decoder.onnx" in resp.json()["detail"]
         assert c.get("/v2/health/live").status_code == 200
         assert_problem(c.post("/v1/skeleton"), 405)
+        # the skeleton comes from the manifest alone, so it is served while not ready
+        assert c.get("/v1/skeleton").json()["joints"] == list(JOINT_NAMES)
         out = c.post("/v1/solve", json=solve_body(real_poses, 0, ["head"]))
         assert_problem(out, 503, "decoder.onnx")
     assert any("decoder.onnx" in r.getMessage() for r in caplog.records)
