@@ -548,9 +548,6 @@ class Engine:
         return res.positions, res.iterations, ["fabrik-polish"]
 
     # -- key-point completion -----------------------------------------------------------
-    def base_keypoints(self) -> list[str]:
-        return list(self.manifest.completion_levels()[0].joints)
-
     def complete(
         self,
         keypoints: dict[str, F64],

@@ -21,19 +21,6 @@ _RIGHT = [JOINT_INDEX[right] for _, right in FACING_PAIRS]
 _PELVIS = JOINT_INDEX["pelvis"]
 
 
-def facing_yaw(positions: FloatArray) -> FloatArray:
-    """Yaw (radians about +Y) of the facing direction, ``[..., 21, 3] -> [...]``.
-
-    The across vector is the sum of (left - right) over hips and shoulders, projected on
-    the floor; forward = across x up. A yaw of 0 means facing +Z.
-    """
-    across = (positions[..., _LEFT, :] - positions[..., _RIGHT, :]).sum(axis=-2)
-    # forward = across x up, with up = +Y: (ax, ay, az) x (0, 1, 0) = (-az, 0, ax)
-    fx = -across[..., 2]
-    fz = across[..., 0]
-    return np.asarray(np.arctan2(fx, fz))
-
-
 def yaw_matrix(yaw: FloatArray) -> FloatArray:
     """Rotation matrices about +Y by ``yaw`` radians, ``[...] -> [..., 3, 3]``."""
     return _rotation_from_forward(np.sin(yaw), np.cos(yaw))
