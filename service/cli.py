@@ -23,12 +23,16 @@ def serve(
 ) -> None:
     """Serve /v1/solve and friends; settings come from POSE_* environment variables,
     options override them."""
+    import os
+
     import uvicorn
 
     overrides = {
         k: v for k, v in {"host": host, "port": port, "models_dir": models_dir}.items() if v
     }
-    settings = Settings(**overrides)  # type: ignore[arg-type]
+    for key, value in overrides.items():  # worker processes read settings from the env
+        os.environ[f"POSE_{key.upper()}"] = str(value)
+    settings = Settings()
     if not (settings.models_dir / "manifest.json").is_file():
         typer.echo(
             f"no models at {settings.models_dir} (manifest.json missing): train them with "
@@ -37,11 +41,9 @@ def serve(
         )
         raise typer.Exit(code=2)
     logging.basicConfig(level=settings.log_level.upper(), format="%(message)s", stream=sys.stderr)
-    from service.app import create_app
-
-    app = create_app(settings)
     uvicorn.run(
-        app,
+        "service.app:create_app",
+        factory=True,
         host=settings.host,
         port=settings.port,
         workers=workers,

@@ -64,6 +64,7 @@ class SolveProblem:
     preserve_bone_lengths: bool = True
     reach: str = "soft"
     tolerance: float = 1e-3
+    floor: float = 0.0  # world y of the ground under the character
 
 
 @dataclass(frozen=True)
@@ -180,6 +181,7 @@ def parse_solve(
     tolerance: float,
     where: str = "",
     parsed_pose: F64 | None = None,
+    floor: float = 0.0,
 ) -> SolveProblem:
     """Validate one solve request; raises ``InvalidRequest`` with a precise detail.
     ``parsed_pose``: the pose already validated by ``parse_poses`` (batches)."""
@@ -220,6 +222,7 @@ def parse_solve(
         preserve_bone_lengths=preserve_bone_lengths,
         reach=reach,
         tolerance=tolerance,
+        floor=floor,
     )
 
 
@@ -374,6 +377,10 @@ class Engine:
         if n == 0:
             return []
         poses = np.stack([p.pose for p in problems])  # [B, 21, 3] world
+        floors = np.asarray([p.floor for p in problems])
+        up = np.zeros((n, 1, 3))
+        up[:, 0, 1] = floors  # the networks know a floor at y = 0
+        poses = poses - up
         frame = canonical_transform(poses)
         canon = frame.to_canonical(poses)
         lengths = bone_lengths(poses)  # [B, 20]
@@ -388,6 +395,7 @@ class Engine:
             tpos[b, :k] = p.target_pos
             tidx[b, k:] = p.target_idx[0]  # padding repeats a real target
             tpos[b, k:] = p.target_pos[0]
+        tpos = tpos - up
         tcan = frame.to_canonical(tpos)  # [B, K, 3]
 
         out = canon.copy()
@@ -439,6 +447,7 @@ class Engine:
         world = frame.to_world(out)
         rows = np.arange(n)[:, None]
         errors = np.linalg.norm(world[rows, tidx] - tpos, axis=-1)  # [B, K]
+        world = world + up
         bone_err = np.max(np.abs(bone_lengths(world) / lengths - 1.0), axis=-1)
         results = []
         for b, p in enumerate(problems):
@@ -553,6 +562,7 @@ class Engine:
         keypoints: dict[str, F64],
         given_lengths: dict[str, float] | None,
         tolerance: float = 1e-3,
+        floor: float = 0.0,
     ) -> CompleteResult:
         levels = self.manifest.completion_levels()
         missing = [j for j in levels[0].joints if j not in keypoints]
@@ -563,7 +573,7 @@ class Engine:
             )
         # pelvis floor projection to the origin; the networks were trained for any yaw
         origin = keypoints["pelvis"].copy()
-        origin[1] = 0.0
+        origin[1] = floor
         ref = self.reference_lengths
         bones = {JOINT_NAMES[c]: b for b, (c, _) in enumerate(BONES)}
         lengths = ref.copy()

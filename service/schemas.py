@@ -72,7 +72,16 @@ class SolveOptions(_Body):
     method: Literal["neural", "fabrik"] = "neural"
     preserve_bone_lengths: bool = True
     reach: Literal["soft", "exact"] = "soft"
-    tolerance: float = Field(default=0.001, gt=0.0, le=1.0, description="Metres (exact reach).")
+    tolerance: float = Field(
+        default=0.001, ge=1e-6, le=1.0, description="Metres: `reached` and exact reach."
+    )
+    floor: float = Field(
+        default=0.0,
+        ge=-1e4,
+        le=1e4,
+        description="Height (m, world y) of the ground the character stands on. The "
+        "networks learned poses over a floor at y = 0; a character on a 1 m box needs 1.0.",
+    )
 
 
 class SolveRequest(_Body):
@@ -141,7 +150,10 @@ class CompleteRequest(_Body):
     )
 
     keypoints: list[Keypoint] = Field(min_length=1, max_length=21)
-    bone_lengths: dict[str, Annotated[float, Field(gt=0.0, le=2.0)]] | None = Field(
+    floor: float = Field(
+        default=0.0, ge=-1e4, le=1e4, description="Height (m, world y) of the ground."
+    )
+    bone_lengths: dict[str, Annotated[float, Field(ge=1e-3, le=2.0)]] | None = Field(
         default=None,
         description="Length (m) of the bone ending at each named joint; missing bones "
         "take the reference length scaled like the given ones.",

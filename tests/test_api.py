@@ -391,3 +391,84 @@ def test_batch_pose_error_names_the_item_and_joint(client: Any, real_poses: Real
     assert_problem(
         client.post("/v1/solve/batch", json={"items": items}), 422, "items[1].pose", "left_knee"
     )
+
+
+def test_floor_option_makes_raised_characters_solve_alike(
+    client: Any, real_poses: RealPoses
+) -> None:
+    lift = yaw_shift(0.0, (0.0, 1.0, 0.0))
+    ground = client.post("/v1/solve", json=solve_body(real_poses, 6, ["left_wrist"])).json()
+    body = solve_body(real_poses, 6, ["left_wrist"], transform=lift)
+    body["options"]["floor"] = 1.0
+    raised = client.post("/v1/solve", json=body).json()
+    assert np.abs(lift(as_array(ground["pose"])) - as_array(raised["pose"])).max() < 1e-6
+    true = real_poses.poses[real_poses.goals[0]]
+    points = [{"joint": j, "position": lift(true)[JOINT_INDEX[j]].tolist()} for j in BASE]
+    done = client.post("/v1/complete", json={"keypoints": points, "floor": 1.0}).json()
+    flat = [{"joint": j, "position": true[JOINT_INDEX[j]].tolist()} for j in BASE]
+    base = client.post("/v1/complete", json={"keypoints": flat}).json()
+    assert np.abs(lift(as_array(base["pose"])) - as_array(done["pose"])).max() < 1e-6
+
+
+def test_chunked_body_over_the_limit_is_a_413(models_dir: Path, real_poses: RealPoses) -> None:
+    body = json.dumps(solve_body(real_poses, 0, ["head"])).encode() + b" " * 6000
+    chunks = [body[i : i + 1000] for i in range(0, len(body), 1000)]
+    with make_client(models_dir, max_body_bytes=4096) as c:
+        resp = c.post(
+            "/v1/solve", content=iter(chunks), headers={"content-type": "application/json"}
+        )
+        assert_problem(resp, 413, "4096")
+        small = json.dumps(solve_body(real_poses, 0, ["head"])).encode()
+        ok = c.post(
+            "/v1/solve",
+            content=iter([small[:500], small[500:]]),
+            headers={"content-type": "application/json"},
+        )
+        assert ok.status_code == 200, ok.text
+
+
+def test_gate_rejections_carry_cors_and_keys_are_strict(
+    models_dir: Path, real_poses: RealPoses
+) -> None:
+    origin = {"Origin": "http://editor.example"}
+    with make_client(models_dir, api_key="s3cret", cors_origins=["http://editor.example"]) as c:
+        body = solve_body(real_poses, 0, ["head"])
+        resp = c.post("/v1/solve", json=body, headers=origin)
+        assert_problem(resp, 401)
+        assert resp.headers["access-control-allow-origin"] == "http://editor.example"
+        assert (
+            c.post("/v1/solve", json=body, headers={"Authorization": "s3cret"}).status_code == 401
+        )
+        bearer = {"Authorization": "Bearer s3cret"}
+        assert c.post("/v1/solve", json=body, headers=bearer).status_code == 200
+    with make_client(models_dir, api_key="") as c:  # an empty key means no key
+        assert c.post("/v1/solve", json=solve_body(real_poses, 0, ["head"])).status_code == 200
+
+
+def test_unexpected_errors_keep_the_request_id(
+    models_dir: Path, real_poses: RealPoses, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    with make_client(models_dir) as c:
+        engine = c.app.state.pose.engine
+
+        def boom(*_: Any) -> None:
+            raise RuntimeError("injected fault")
+
+        monkeypatch.setattr(engine, "solve", boom)
+        resp = c.post(
+            "/v1/solve", json=solve_body(real_poses, 0, ["head"]), headers={"X-Request-ID": "r-1"}
+        )
+        assert_problem(resp, 500)
+        assert resp.headers["x-request-id"] == "r-1"
+        assert "injected" not in resp.text  # no internals leak to the client
+
+
+def test_degenerate_completion_inputs_are_rejected(client: Any, real_poses: RealPoses) -> None:
+    true = real_poses.poses[real_poses.goals[0]]
+    points = [{"joint": j, "position": true[JOINT_INDEX[j]].tolist()} for j in BASE]
+    resp = client.post(
+        "/v1/complete", json={"keypoints": points, "bone_lengths": {"left_knee": 1e-200}}
+    )
+    assert_problem(resp, 422, "bone_lengths")
+    body = solve_body(real_poses, 0, ["head"], reach="exact", tolerance=1e-300)
+    assert_problem(client.post("/v1/solve", json=body), 422, "tolerance")
