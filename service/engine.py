@@ -171,7 +171,7 @@ def parse_keypoints(keypoints: Sequence[tuple[str, Sequence[float]]]) -> dict[st
 
 
 def parse_solve(
-    pose: dict[str, list[float]],
+    pose: F64,
     targets: Sequence[tuple[str, list[float], float]],
     pins: Sequence[str],
     *,
@@ -180,13 +180,13 @@ def parse_solve(
     reach: str,
     tolerance: float,
     where: str = "",
-    parsed_pose: F64 | None = None,
     floor: float = 0.0,
 ) -> SolveProblem:
-    """Validate one solve request; raises ``InvalidRequest`` with a precise detail.
-    ``parsed_pose``: the pose already validated by ``parse_poses`` (batches)."""
+    """Validate one solve request's targets and pins against its ``pose`` ``[21, 3]``
+    (already validated by ``parse_pose`` or ``parse_poses``); raises ``InvalidRequest``
+    with a precise detail."""
     prefix = f"{where}." if where else ""
-    arr = parse_pose(pose, f"{prefix}pose") if parsed_pose is None else parsed_pose
+    arr = pose
     idx: list[int] = []
     for i, (joint, position, _) in enumerate(targets):
         j = _known_joint(joint, f"{prefix}targets[{i}].joint")

@@ -115,5 +115,10 @@ def install_handlers(app: FastAPI) -> None:
 
     @app.exception_handler(Exception)
     async def _unexpected(request: Request, exc: Exception) -> JSONResponse:
-        log.exception("unhandled error on %s %s", request.method, request.url.path)
-        return problem(500, "Internal error", "an unexpected error occurred; see the server log")
+        return internal_error(request.method, request.url.path)
+
+
+def internal_error(method: str, path: str) -> JSONResponse:
+    """Log the exception being handled and answer a 500 problem (no internals leak)."""
+    log.exception("unhandled error on %s %s", method, path)
+    return problem(500, "Internal error", "an unexpected error occurred; see the server log")
