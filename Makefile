@@ -30,13 +30,13 @@ run: $(STAMP)
 	$(BIN)/pose-service --host 127.0.0.1 --port 8000
 
 lint: $(STAMP)
-	$(BIN)/ruff check service trainer tests bench
-	$(BIN)/ruff format --check service trainer tests bench
+	$(BIN)/ruff check core service trainer tests bench
+	$(BIN)/ruff format --check core service trainer tests bench
 	$(BIN)/mypy
 
 format: $(STAMP)
-	$(BIN)/ruff format service trainer tests bench
-	$(BIN)/ruff check --fix service trainer tests bench
+	$(BIN)/ruff format core service trainer tests bench
+	$(BIN)/ruff check --fix core service trainer tests bench
 
 test: $(STAMP) lint
 	$(BIN)/pytest

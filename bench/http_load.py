@@ -24,7 +24,7 @@ from urllib.parse import urlsplit
 import httpx
 import numpy as np
 
-from service.skeleton import JOINT_NAMES
+from core.skeleton import JOINT_NAMES
 from trainer.evaluate import Edits
 
 Json = dict[str, Any]

@@ -24,7 +24,7 @@ import numpy.typing as npt
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from service.skeleton import JOINT_INDEX, JOINT_NAMES  # noqa: E402
+from core.skeleton import JOINT_INDEX, JOINT_NAMES  # noqa: E402
 from trainer.data.dataset import PoseDataset, load_dataset  # noqa: E402
 
 Poses = npt.NDArray[np.float32]

@@ -26,6 +26,8 @@ from prometheus_client import CONTENT_TYPE_LATEST, CollectorRegistry, Counter, H
 from prometheus_client import generate_latest as prometheus_latest
 from starlette.concurrency import run_in_threadpool
 
+from core.manifest import ManifestError, SkeletonSpec, load_manifest
+from core.skeleton import FRAME, JOINT_NAMES, PARENT_NAMES
 from service.editor import mount_editor
 from service.engine import (
     Engine,
@@ -46,7 +48,6 @@ from service.errors import (
     internal_error,
     problem,
 )
-from service.manifest import ManifestError, SkeletonSpec, load_manifest
 from service.schemas import (
     BatchRequest,
     BatchResponse,
@@ -62,7 +63,6 @@ from service.schemas import (
     TargetResult,
 )
 from service.settings import Settings, get_settings
-from service.skeleton import FRAME, JOINT_NAMES, PARENT_NAMES
 
 log = logging.getLogger("service")
 access_log = logging.getLogger("service.access")

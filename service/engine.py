@@ -32,11 +32,11 @@ import onnx
 import onnx.compose
 import onnxruntime as ort
 
-from service import kinematics
-from service.errors import InvalidRequest
-from service.geometry import canonical_transform
-from service.manifest import Manifest, ModelEntry, load_manifest
-from service.skeleton import (
+from core import kinematics
+from core.geometry import canonical_transform
+from core.manifest import Manifest, ModelEntry, load_manifest
+from core.rest import rest_lengths, rest_pose
+from core.skeleton import (
     BONES,
     JOINT_INDEX,
     JOINT_NAMES,
@@ -44,6 +44,7 @@ from service.skeleton import (
     bone_lengths,
     set_key,
 )
+from service.errors import InvalidRequest
 
 F64 = npt.NDArray[np.floating[Any]]
 MAX_COORDINATE = 1.0e4  # metres; beyond this a coordinate is rejected as nonsense
@@ -629,8 +630,8 @@ class Engine:
 
     def warmup(self) -> None:
         """A real solve on the reference rest pose; raises if anything is off."""
-        rest = kinematics.rest_pose()
-        rest = rest * (np.sum(self.reference_lengths) / np.sum(kinematics.rest_lengths()))
+        rest = rest_pose()
+        rest = rest * (np.sum(self.reference_lengths) / np.sum(rest_lengths()))
         wrist = JOINT_INDEX["left_wrist"]
         problem = SolveProblem(
             pose=rest,

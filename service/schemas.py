@@ -6,7 +6,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, create_model
 
-from service.skeleton import BASE_KEYPOINTS, JOINT_NAMES
+from core.skeleton import BASE_KEYPOINTS, JOINT_NAMES
 
 Vec3 = Annotated[
     list[float],

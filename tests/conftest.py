@@ -157,7 +157,7 @@ class RealPoses:
     goals: Any  # indices of target poses, same clip, 0.2-1 s from the start
 
     def pose_dict(self, i: int, transform: Any = None) -> dict[str, list[float]]:
-        from service.skeleton import JOINT_NAMES
+        from core.skeleton import JOINT_NAMES
 
         p = self.poses[i] if transform is None else transform(self.poses[i])
         return {n: [float(v) for v in p[j]] for j, n in enumerate(JOINT_NAMES)}

@@ -187,7 +187,7 @@ def model_card(
     models: Annotated[Path, typer.Option(help="Models directory.")] = Path("models"),
 ) -> None:
     """Render models/README.md (the model card) from the manifest."""
-    from service.manifest import load_manifest
+    from core.manifest import load_manifest
     from trainer.model_card import write_model_card
 
     path = write_model_card(models, load_manifest(models, verify=True))

@@ -8,7 +8,7 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
-from service.skeleton import BASE_KEYPOINTS, JOINT_NAMES
+from core.skeleton import BASE_KEYPOINTS, JOINT_NAMES
 
 
 class _Section(BaseModel):

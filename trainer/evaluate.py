@@ -33,10 +33,11 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from service import kinematics
+from core import kinematics
+from core.geometry import yaw_matrix
+from core.rest import rest_pose
+from core.skeleton import JOINT_INDEX, JOINT_NAMES, NUM_JOINTS, bone_lengths, chain_to_root
 from service.engine import Engine, SolveProblem
-from service.geometry import yaw_matrix
-from service.skeleton import JOINT_INDEX, JOINT_NAMES, NUM_JOINTS, bone_lengths, chain_to_root
 from trainer.data.dataset import FPS, PoseDataset, load_dataset
 from trainer.pairs import partner_ranges, sample_partners
 
@@ -251,7 +252,7 @@ def _chain(joints: IntArray) -> IntArray:
 def _root_reach(start: F64) -> tuple[F64, F64]:
     """``[N, 21]`` shortest and longest distance from the root (pelvis) at which each joint
     can be placed with the root held: the reach shell of its chain of bones."""
-    from service.skeleton import PARENTS
+    from core.skeleton import PARENTS
 
     lengths = np.linalg.norm(start[:, 1:] - start[:, list(PARENTS[1:])], axis=-1)
     longest = np.zeros(start.shape[:2])
@@ -442,7 +443,7 @@ def eval_completion(engine: Engine, test: PoseDataset, cfg: EvalConfig, acc: Acc
     """B2: a pose from key points only; baseline: the rest pose FABRIK'd onto them."""
     rng = np.random.default_rng(cfg.seed + 2)
     ref = engine.reference_lengths
-    rest = np.asarray(kinematics.bone_pass(kinematics.rest_pose(), ref), dtype=np.float64)
+    rest = np.asarray(kinematics.bone_pass(rest_pose(), ref), dtype=np.float64)
     out: Json = {}
     for level, entry in enumerate(engine.manifest.completion_levels(), start=1):
         rows = rng.choice(len(test), size=min(cfg.completions, len(test)), replace=False)
@@ -558,7 +559,7 @@ def eval_stress(engine: Engine, base: Edits, cfg: EvalConfig) -> Json:
     out: Json = {"canonical": {m: summarise(per_item(canon, ref_poses[m])) for m in methods}}
 
     # characters of another size, and one far away facing -X: the same problems
-    rest = kinematics.rest_pose()
+    rest = rest_pose()
     heights = np.asarray(
         [
             stand[JOINT_INDEX["head"], 1] - stand[_idx(FLOOR_JOINTS), 1].min()
@@ -892,7 +893,7 @@ def plot_mpjpe(mpjpe: dict[str, dict[str, F64]], path: Path) -> None:
 
 
 def _stick(ax: Any, pose: F64, colour: str, lw: float = 1.6, ls: str = "-") -> None:
-    from service.skeleton import BONES
+    from core.skeleton import BONES
 
     for child, parent in BONES:
         ax.plot(

@@ -16,7 +16,8 @@ import onnxruntime as ort
 import torch
 from torch import nn
 
-from service.manifest import (
+from core.io import sha256_file, write_atomic
+from core.manifest import (
     SCHEMA_VERSION,
     Manifest,
     ModelEntry,
@@ -24,11 +25,9 @@ from service.manifest import (
     Provenance,
     SkeletonSpec,
     TensorSpec,
-    sha256_file,
-    write_atomic,
     write_manifest,
 )
-from service.skeleton import BONES, FRAME, JOINT_NAMES, NUM_JOINTS, PARENT_NAMES, bone_lengths
+from core.skeleton import BONES, FRAME, JOINT_NAMES, NUM_JOINTS, PARENT_NAMES, bone_lengths
 from trainer.config import TrainConfig
 from trainer.model_card import write_model_card
 from trainer.models import SingleSolver, TiedAutoencoder, target_columns

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from service.manifest import Manifest, write_atomic
+from core.io import write_atomic
+from core.manifest import Manifest
 
 _INTRO = """\
 # Marionette models — model card

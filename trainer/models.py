@@ -10,7 +10,7 @@ import math
 import torch
 from torch import nn
 
-from service.skeleton import JOINT_INDEX
+from core.skeleton import JOINT_INDEX
 
 POSE_DIM = 63
 

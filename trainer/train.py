@@ -29,8 +29,8 @@ from torch.nn.parallel import DistributedDataParallel
 from torch.utils.data import DistributedSampler
 from tqdm import tqdm
 
-from service.manifest import write_atomic
-from service.skeleton import BONE_CHILDREN, BONE_PARENTS, JOINT_INDEX, MIRROR, NUM_JOINTS
+from core.io import write_atomic
+from core.skeleton import BONE_CHILDREN, BONE_PARENTS, JOINT_INDEX, MIRROR, NUM_JOINTS
 from trainer.config import TrainConfig
 from trainer.data.dataset import PoseDataset, load_dataset
 from trainer.models import (

@@ -11,7 +11,7 @@ Pipeline, per clip (in worker processes):
    ``teleport`` (pelvis moved more than 1 m since the previous 30-fps frame),
    ``bone_length`` (any bone deviates from the clip's median length of that bone by more
    than 5 % + 1 mm);
-5. canonicalise every pose with :func:`service.geometry.canonicalise`.
+5. canonicalise every pose with :func:`core.geometry.canonicalise`.
 
 Then clips are split by clip (stratified by source and content, seeded) and everything is
 written atomically by :func:`trainer.data.dataset.save_dataset`.
@@ -38,9 +38,9 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from service.geometry import canonicalise
-from service.manifest import sha256_file
-from service.skeleton import BONE_CHILDREN, JOINT_NAMES, NUM_JOINTS, bone_lengths
+from core.geometry import canonicalise
+from core.io import sha256_file
+from core.skeleton import BONE_CHILDREN, JOINT_NAMES, NUM_JOINTS, bone_lengths
 from trainer.data.bvh import BVHError, read_bvh
 from trainer.data.dataset import FORMAT_VERSION, FPS, SPLITS, PoseDataset, save_dataset
 from trainer.data.maps import MapError, MocapMap, load_maps
@@ -56,7 +56,7 @@ RESAMPLING = (
     "integer ratio k = source_fps / 30: keep frames 0, k, 2k, ... (before FK); "
     "otherwise linear interpolation of joint positions at t = n / 30"
 )
-#: Names of the bones (by child joint) in the order of ``service.skeleton.BONES``.
+#: Names of the bones (by child joint) in the order of ``core.skeleton.BONES``.
 BONE_NAMES: tuple[str, ...] = tuple(JOINT_NAMES[c] for c in BONE_CHILDREN)
 
 

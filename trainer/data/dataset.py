@@ -2,7 +2,7 @@
 
 One ``np.savez_compressed`` file with exactly these keys:
 
-- ``positions`` float32 ``(N, 21, 3)``: canonical poses in metres (``service.geometry``).
+- ``positions`` float32 ``(N, 21, 3)``: canonical poses in metres (``core.geometry``).
 - ``clip`` int32 ``(N,)``: index into the clip table; ``frame`` int32 ``(N,)``: frame index at
   30 fps within the clip (gaps where frames were dropped).
 - clip table, unicode ``(C,)``: ``clip_name``, ``clip_source``, ``clip_content``,
@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from service.skeleton import NUM_JOINTS
+from core.skeleton import NUM_JOINTS
 
 FORMAT_VERSION = 1
 FPS = 30

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from service.skeleton import JOINT_NAMES, MIRROR
+from core.skeleton import JOINT_NAMES, MIRROR
 
 MAP_FORMAT = 1
 

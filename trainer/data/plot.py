@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from service.skeleton import BONES, JOINT_NAMES
+from core.skeleton import BONES, JOINT_NAMES
 from trainer.data.dataset import load_dataset
 
 LEFT_COLOUR = "#d62728"  # red

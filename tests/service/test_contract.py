@@ -15,7 +15,7 @@ from schemathesis.specs.openapi.checks import positive_data_acceptance
 from service.openapi import CONTRACT, app_schema, render
 from tests.conftest import make_client
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 
 def test_openapi_yaml_matches_the_app() -> None:

@@ -8,12 +8,12 @@ from typing import Any
 import numpy as np
 import pytest
 
-from service.geometry import canonicalise
-from service.skeleton import JOINT_INDEX, bone_lengths
+from core.geometry import canonicalise
+from core.skeleton import JOINT_INDEX, bone_lengths
 from trainer.data.bvh import BVHError, parse_bvh, read_bvh
 from trainer.data.maps import MapError, load_map, load_maps
 
-MAPS = Path(__file__).resolve().parents[1] / "trainer" / "maps"
+MAPS = Path(__file__).resolve().parents[2] / "trainer" / "maps"
 
 # Root: 6 channels (position + Z X Y rotation), child 10 up, end site 5 up the child.
 TINY = """HIERARCHY

@@ -1,4 +1,4 @@
-"""Behaviour of the bone-length pass and the FABRIK solvers (service.kinematics)."""
+"""Behaviour of the bone-length pass and the FABRIK solvers (core.kinematics)."""
 
 from __future__ import annotations
 
@@ -6,8 +6,9 @@ import numpy as np
 import numpy.typing as npt
 import pytest
 
-from service.kinematics import FabrikResult, bone_pass, fabrik, polish, rest_lengths, rest_pose
-from service.skeleton import (
+from core.kinematics import FabrikResult, bone_pass, fabrik, polish
+from core.rest import rest_lengths, rest_pose
+from core.skeleton import (
     BONES,
     DEPTH,
     JOINT_INDEX,

@@ -17,16 +17,14 @@ Schema version 1. Kinds:
 
 from __future__ import annotations
 
-import hashlib
 import json
-import os
-import tempfile
 from pathlib import Path
 from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from service.skeleton import FRAME, JOINT_NAMES, NUM_JOINTS, PARENT_NAMES, set_key
+from core.io import sha256_file, write_atomic
+from core.skeleton import FRAME, JOINT_NAMES, NUM_JOINTS, PARENT_NAMES, set_key
 
 SCHEMA_VERSION = 1
 MANIFEST_NAME = "manifest.json"
@@ -174,14 +172,6 @@ class Manifest(_Strict):
         )
 
 
-def sha256_file(path: Path) -> str:
-    digest = hashlib.sha256()
-    with path.open("rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
-
-
 def load_manifest(models_dir: Path | str, *, verify: bool = True) -> Manifest:
     """Read and validate ``models_dir/manifest.json``; with ``verify``, check every file.
 
@@ -220,24 +210,6 @@ def verify_entry(models_dir: Path, entry: ModelEntry) -> None:
     digest = sha256_file(file)
     if digest != entry.sha256:
         raise ManifestError(file, f"sha256 {digest[:12]}… does not match the manifest")
-
-
-def write_atomic(path: Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` through a temporary file and an atomic rename."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-            fh.flush()
-            os.fsync(fh.fileno())
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)  # as a plain open() would (mkstemp makes 0600)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def write_manifest(models_dir: Path, manifest: Manifest) -> Path:

@@ -17,15 +17,15 @@ import onnxruntime as ort
 import pytest
 import torch
 
-from service.manifest import ManifestError, load_manifest
-from service.skeleton import JOINT_INDEX
+from core.manifest import ManifestError, load_manifest
+from core.skeleton import JOINT_INDEX
 from trainer.config import QUICK, TrainConfig, load_config
 from trainer.data.dataset import load_dataset
 from trainer.export import evaluate, export_all
 from trainer.models import Normaliser, TiedAutoencoder, feature_stats
 from trainer.train import Trained, flat, train_all
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 #: A small but complete configuration: every kind of network, a pair solver included.
 TINY: dict[str, Any] = {

@@ -2,7 +2,7 @@
 
 Everything here is numpy-only, batched over leading axes, float64 inside, stateless and
 deterministic (same input, bit-identical output). The skeleton topology comes from
-:mod:`service.skeleton` only: chains, sub-bases and depth levels are derived from
+:mod:`core.skeleton` only: chains, sub-bases and depth levels are derived from
 ``PARENTS``; no joint index is hard-coded.
 
 * :func:`bone_pass` -- the FABRIK backward step over the whole tree, root outwards:
@@ -28,7 +28,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from service.skeleton import BONE_CHILDREN, DEPTH, JOINT_NAMES, NUM_JOINTS, PARENTS
+from core.rest import REST_DIRS
+from core.skeleton import BONE_CHILDREN, DEPTH, NUM_JOINTS, PARENTS
 
 F64 = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.intp]
@@ -43,82 +44,6 @@ _MAX_DEPTH = max(DEPTH)
 
 #: Bone index (position in ``BONES`` / the ``lengths`` axis) of each non-root joint.
 _BONE_OF: dict[int, int] = {int(c): b for b, c in enumerate(BONE_CHILDREN)}
-
-# --------------------------------------------------------------------------------------
-# Rest pose
-# --------------------------------------------------------------------------------------
-
-#: Offset of each joint from its parent in the canonical T-pose (metres, +Y up, faces
-#: +Z, left = +X), by name. Left/right are mirror images (x -> -x).
-_REST_OFFSETS: dict[str, tuple[float, float, float]] = {
-    "spine1": (0.0, 0.12, -0.01),
-    "spine2": (0.0, 0.25, 0.0),
-    "neck": (0.0, 0.17, 0.0),
-    "head": (0.0, 0.12, 0.03),
-    "left_collar": (0.07, 0.11, 0.0),
-    "left_shoulder": (0.12, 0.02, 0.0),
-    "left_elbow": (0.27, 0.0, 0.0),
-    "left_wrist": (0.25, 0.0, 0.0),
-    "left_hip": (0.09, -0.07, 0.0),
-    "left_knee": (0.0, -0.40, 0.0),
-    "left_ankle": (0.0, -0.40, -0.02),
-    "left_foot": (0.0, -0.05, 0.13),
-}
-_REST_PELVIS_HEIGHT = 0.95
-
-
-def _offset(name: str) -> tuple[float, float, float]:
-    if name in _REST_OFFSETS:
-        return _REST_OFFSETS[name]
-    if name.startswith("right_"):
-        x, y, z = _REST_OFFSETS["left_" + name[len("right_") :]]
-        return (-x, y, z)
-    raise KeyError(name)
-
-
-def _build_rest_pose() -> F64:
-    pose = np.zeros((NUM_JOINTS, 3), dtype=np.float64)
-    for j, parent in enumerate(PARENTS):
-        if parent < 0:
-            pose[j] = (0.0, _REST_PELVIS_HEIGHT, 0.0)
-        else:
-            pose[j] = pose[parent] + np.asarray(_offset(JOINT_NAMES[j]), dtype=np.float64)
-    pose.flags.writeable = False
-    return pose
-
-
-_REST: F64 = _build_rest_pose()  # read-only constant
-
-
-def _rest_dirs() -> F64:
-    out = np.zeros((NUM_JOINTS, 3), dtype=np.float64)
-    for j, parent in enumerate(PARENTS):
-        if parent >= 0:
-            d = _REST[j] - _REST[parent]
-            out[j] = d / np.linalg.norm(d)
-    out.flags.writeable = False
-    return out
-
-
-#: Unit direction of each joint's bone (from its parent) in the rest pose, per joint.
-_REST_DIRS = _rest_dirs()
-
-
-def rest_pose() -> F64:
-    """The canonical T-pose, ``[21, 3]`` float64 metres (a fresh, writable copy).
-
-    Pelvis at 0.95 m above the floor, facing +Z, arms along +-X. Built from ``PARENTS``
-    and per-joint-name bone offsets; used as the fallback direction of degenerate bones.
-    """
-    return np.array(_REST, dtype=np.float64)
-
-
-def rest_lengths() -> F64:
-    """Bone lengths of :func:`rest_pose`, ``[20]`` in ``BONES`` order."""
-    return np.asarray(
-        np.linalg.norm(_REST[BONE_CHILDREN] - _REST[[PARENTS[c] for c in BONE_CHILDREN]], axis=-1)
-    )
-
 
 # --------------------------------------------------------------------------------------
 # Internal layout
@@ -156,7 +81,7 @@ def _depth_slices() -> tuple[tuple[int, int, IntArray], ...]:
 #: Per depth level 1..max: (first rank, end rank, parent ranks).
 _SLICES = _depth_slices()
 #: Rest-pose unit bone directions per rank 1..20, ``[20, 3, 1]``.
-_REST_DIRS_I: F64 = np.ascontiguousarray(_REST_DIRS[_ORDER[1:]][:, :, None])
+_REST_DIRS_I: F64 = np.ascontiguousarray(REST_DIRS[_ORDER[1:]][:, :, None])
 _REST_DIRS_I.flags.writeable = False
 
 

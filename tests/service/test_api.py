@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from service.skeleton import JOINT_INDEX, JOINT_NAMES, bone_lengths
+from core.skeleton import JOINT_INDEX, JOINT_NAMES, bone_lengths
 from tests.conftest import RealPoses, make_client
 
 PROBLEM = "application/problem+json"
@@ -248,7 +248,7 @@ def test_complete_uses_larger_schemes_and_bone_lengths(client: Any, real_poses: 
     assert out["levels"] == [1, 2]
     pose = as_array(out["pose"])
     got = bone_lengths(pose)
-    from service.skeleton import BONES
+    from core.skeleton import BONES
 
     for child, value in lengths.items():
         b = next(i for i, (c, _) in enumerate(BONES) if c == JOINT_INDEX[child])

@@ -10,8 +10,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from service.geometry import canonicalise, yaw_matrix
-from service.skeleton import JOINT_INDEX, NUM_JOINTS, bone_lengths
+from core.geometry import canonicalise, yaw_matrix
+from core.skeleton import JOINT_INDEX, NUM_JOINTS, bone_lengths
 from trainer.data.build import (
     DROP_REASONS,
     assign_splits,
@@ -24,7 +24,7 @@ from trainer.data.bvh import read_bvh
 from trainer.data.dataset import KEYS, SPLITS, DatasetError, load_dataset
 from trainer.data.maps import load_map
 
-MAPS = Path(__file__).resolve().parents[1] / "trainer" / "maps"
+MAPS = Path(__file__).resolve().parents[2] / "trainer" / "maps"
 
 
 def test_small_dataset_format(small_dataset: Path) -> None:

@@ -25,9 +25,9 @@ from typing import Any
 
 import pytest
 
-from service.skeleton import JOINT_NAMES
+from core.skeleton import JOINT_NAMES
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
+REPO_ROOT = Path(__file__).resolve().parents[2]
 CHROMIUM_ARGS = [
     "--headless",
     "--no-sandbox",

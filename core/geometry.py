@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from service.skeleton import FACING_PAIRS, JOINT_INDEX
+from core.skeleton import FACING_PAIRS, JOINT_INDEX
 
 FloatArray = npt.NDArray[np.floating]
 
