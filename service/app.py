@@ -29,15 +29,7 @@ from starlette.concurrency import run_in_threadpool
 from core.manifest import ManifestError, SkeletonSpec, load_manifest
 from core.skeleton import FRAME, JOINT_NAMES, PARENT_NAMES
 from service.editor import mount_editor
-from service.engine import (
-    Engine,
-    SolveProblem,
-    SolveResult,
-    parse_keypoints,
-    parse_pose,
-    parse_poses,
-    parse_solve,
-)
+from service.engine import Engine, SolveProblem, SolveResult
 from service.errors import (
     NotReady,
     PayloadTooLarge,
@@ -63,6 +55,7 @@ from service.schemas import (
     TargetResult,
 )
 from service.settings import Settings, get_settings
+from service.validation import parse_keypoints, parse_pose, parse_poses, parse_solve
 
 log = logging.getLogger("service")
 access_log = logging.getLogger("service.access")

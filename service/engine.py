@@ -20,7 +20,7 @@ load time), a composed one as encoder, solvers (with re-encoding) and decoder.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -28,9 +28,6 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-import onnx
-import onnx.compose
-import onnxruntime as ort
 
 from core import kinematics
 from core.geometry import canonical_transform
@@ -45,10 +42,9 @@ from core.skeleton import (
     set_key,
 )
 from service.errors import InvalidRequest
+from service.runtime import Fused, Net, session_options
 
 F64 = npt.NDArray[np.floating[Any]]
-MAX_COORDINATE = 1.0e4  # metres; beyond this a coordinate is rejected as nonsense
-MIN_BONE = 1.0e-4  # metres; shorter bones make a pose degenerate
 
 
 # --------------------------------------------------------------------------------------
@@ -87,201 +83,9 @@ class CompleteResult:
     levels: list[int]
 
 
-def _finite_vec(value: Sequence[float], where: str) -> F64:
-    if len(value) != 3:
-        raise InvalidRequest(f"{where}: expected 3 numbers [x, y, z], got {len(value)}")
-    rows = _finite_rows(np.asarray([value], dtype=np.float64), lambda _: where)
-    return np.asarray(rows[0])
-
-
-def _finite_rows(arr: F64, where: Callable[[int], str]) -> F64:
-    """Check ``[N, 3]`` coordinates at once; on failure, name the first bad row."""
-    if np.isfinite(arr).all() and np.abs(arr).max() <= MAX_COORDINATE:
-        return arr
-    ok = np.isfinite(arr).all(axis=1)
-    if not ok.all():
-        i = int(np.argmin(ok))
-        raise InvalidRequest(
-            f"{where(i)}: coordinates must be finite numbers, got {arr[i].tolist()}"
-        )
-    i = int(np.argmax((np.abs(arr) > MAX_COORDINATE).any(axis=1)))
-    raise InvalidRequest(f"{where(i)}: coordinates beyond ±{MAX_COORDINATE:g} m")
-
-
-def _known_joint(name: str, where: str) -> int:
-    if name not in JOINT_INDEX:
-        raise InvalidRequest(
-            f"{where}: unknown joint {name!r}; joints are {', '.join(JOINT_NAMES)}"
-        )
-    return JOINT_INDEX[name]
-
-
-def parse_pose(pose: dict[str, list[float]], where: str = "pose") -> F64:
-    unknown = sorted(set(pose) - set(JOINT_NAMES))
-    if unknown:
-        raise InvalidRequest(
-            f"{where}: unknown joints {unknown}; joints are {', '.join(JOINT_NAMES)}"
-        )
-    missing = [j for j in JOINT_NAMES if j not in pose]
-    if missing:
-        raise InvalidRequest(f"{where}: missing joints {missing} (all 21 are required)")
-    try:
-        arr = np.array([pose[j] for j in JOINT_NAMES], dtype=np.float64)
-    except ValueError:  # ragged: some joint is not 3 numbers
-        arr = np.empty((0, 3))
-    if arr.shape != (NUM_JOINTS, 3):
-        bad = next(j for j in JOINT_NAMES if len(pose[j]) != 3)
-        raise InvalidRequest(f"{where}.{bad}: expected 3 numbers [x, y, z], got {len(pose[bad])}")
-    _finite_rows(arr, lambda i: f"{where}.{JOINT_NAMES[i]}")
-    lengths = bone_lengths(arr)
-    if lengths.min() < MIN_BONE:
-        short = [JOINT_NAMES[c] for (c, _), n in zip(BONES, lengths, strict=True) if n < MIN_BONE]
-        raise InvalidRequest(
-            f"{where}: degenerate pose: zero-length bones ending at {short} "
-            f"(each joint must be at least {MIN_BONE * 1000:g} mm from its parent)"
-        )
-    return arr
-
-
-def parse_poses(poses: Sequence[Sequence[Sequence[float]]], where: Sequence[str]) -> F64:
-    """Validate many joint-ordered poses ``[B][21][3]`` at once (a batch); on any problem,
-    the offending pose is parsed alone so the error names it and its joint."""
-    try:
-        arr = np.array(poses, dtype=np.float64)
-        ok = arr.shape == (len(poses), NUM_JOINTS, 3)
-    except ValueError:
-        ok = False
-    if ok:
-        finite = np.isfinite(arr).all() and np.abs(arr).max() <= MAX_COORDINATE
-        if finite and bone_lengths(arr).min() >= MIN_BONE:
-            return arr
-    for pose, name in zip(poses, where, strict=True):  # find and name the culprit
-        parse_pose({j: list(v) for j, v in zip(JOINT_NAMES, pose, strict=True)}, name)
-    raise AssertionError("a batch failed validation but no pose did")  # pragma: no cover
-
-
-def parse_keypoints(keypoints: Sequence[tuple[str, Sequence[float]]]) -> dict[str, F64]:
-    """Validate key points: known, distinct joints with finite coordinates."""
-    points: dict[str, F64] = {}
-    for i, (joint, position) in enumerate(keypoints):
-        _known_joint(joint, f"keypoints[{i}].joint")
-        if joint in points:
-            raise InvalidRequest(f"keypoints[{i}]: duplicate key point {joint!r}")
-        points[joint] = _finite_vec(position, f"keypoints[{i}].position")
-    return points
-
-
-def parse_solve(
-    pose: F64,
-    targets: Sequence[tuple[str, list[float], float]],
-    pins: Sequence[str],
-    *,
-    method: str,
-    preserve_bone_lengths: bool,
-    reach: str,
-    tolerance: float,
-    where: str = "",
-    floor: float = 0.0,
-) -> SolveProblem:
-    """Validate one solve request's targets and pins against its ``pose`` ``[21, 3]``
-    (already validated by ``parse_pose`` or ``parse_poses``); raises ``InvalidRequest``
-    with a precise detail."""
-    prefix = f"{where}." if where else ""
-    arr = pose
-    idx: list[int] = []
-    for i, (joint, position, _) in enumerate(targets):
-        j = _known_joint(joint, f"{prefix}targets[{i}].joint")
-        if j in idx:
-            raise InvalidRequest(f"{prefix}targets[{i}]: duplicate target for joint {joint!r}")
-        if len(position) != 3:
-            raise InvalidRequest(
-                f"{prefix}targets[{i}].position: expected 3 numbers [x, y, z], got {len(position)}"
-            )
-        idx.append(j)
-    n_targets = len(idx)
-    goal = _finite_rows(
-        np.array([t[1] for t in targets], dtype=np.float64),
-        lambda i: f"{prefix}targets[{i}].position",
-    )
-    for i, joint in enumerate(pins):
-        j = _known_joint(joint, f"{prefix}pins[{i}]")
-        if j in idx[:n_targets]:
-            raise InvalidRequest(f"{prefix}pins[{i}]: joint {joint!r} is both pinned and targeted")
-        if j in idx:
-            raise InvalidRequest(f"{prefix}pins[{i}]: joint {joint!r} is pinned twice")
-        idx.append(j)
-    target_idx = np.asarray(idx, dtype=np.intp)
-    weights = np.ones(len(idx))
-    weights[:n_targets] = [t[2] for t in targets]
-    return SolveProblem(
-        pose=arr,
-        target_idx=target_idx,
-        target_pos=np.concatenate([goal, arr[target_idx[n_targets:]]]),
-        weights=weights,
-        n_targets=n_targets,
-        method=method,
-        preserve_bone_lengths=preserve_bone_lengths,
-        reach=reach,
-        tolerance=tolerance,
-        floor=floor,
-    )
-
-
 # --------------------------------------------------------------------------------------
 # Engine
 # --------------------------------------------------------------------------------------
-class _Net:
-    """One onnxruntime session with a single input/output signature."""
-
-    def __init__(self, path: Path, entry: ModelEntry, options: ort.SessionOptions) -> None:
-        self.entry = entry
-        self.session = ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
-        self.inputs = [i.name for i in entry.inputs]
-        self.output = entry.outputs[0].name
-        got = [i.name for i in self.session.get_inputs()]
-        if got != self.inputs:
-            raise ValueError(f"{path.name}: graph inputs {got}, manifest says {self.inputs}")
-
-    def __call__(self, *arrays: npt.NDArray[np.float32]) -> npt.NDArray[np.float32]:
-        feeds = dict(zip(self.inputs, arrays, strict=True))
-        out: npt.NDArray[np.float32] = self.session.run([self.output], feeds)[0]
-        return out
-
-
-class _Fused:
-    """encoder -> one solver -> decoder as ONE graph (``pose, targets -> pose``), composed
-    at load time from the verified files: a single-solver edit costs one onnxruntime run
-    instead of three, with bit-identical results."""
-
-    def __init__(
-        self, enc: ModelEntry, solver: ModelEntry, dec: ModelEntry, models_dir: Path,
-        options: ort.SessionOptions,
-    ) -> None:  # fmt: skip
-        def load(entry: ModelEntry, prefix: str) -> onnx.ModelProto:
-            return onnx.compose.add_prefix(onnx.load(str(models_dir / entry.file)), prefix)
-
-        first = onnx.compose.merge_models(
-            load(enc, "e_"), load(solver, "s_"),
-            io_map=[(f"e_{enc.outputs[0].name}", f"s_{solver.inputs[0].name}")],
-        )  # fmt: skip
-        graph = onnx.compose.merge_models(
-            first, load(dec, "d_"),
-            io_map=[(f"s_{solver.outputs[0].name}", f"d_{dec.inputs[0].name}")],
-        )  # fmt: skip
-        self.session = ort.InferenceSession(
-            graph.SerializeToString(), options, providers=["CPUExecutionProvider"]
-        )
-        self.inputs = [f"e_{enc.inputs[0].name}", f"s_{solver.inputs[1].name}"]
-        self.output = f"d_{dec.outputs[0].name}"
-
-    def __call__(
-        self, pose: npt.NDArray[np.float32], targets: npt.NDArray[np.float32]
-    ) -> npt.NDArray[np.float32]:
-        feeds = {self.inputs[0]: pose, self.inputs[1]: targets}
-        out: npt.NDArray[np.float32] = self.session.run([self.output], feeds)[0]
-        return out
-
-
 class Engine:
     """Loaded models and the solve / complete logic (stateless between calls)."""
 
@@ -295,19 +99,12 @@ class Engine:
         composition_projections: int = 1,
         fabrik_max_iterations: int = 64,
     ) -> None:
-        if hasattr(ort, "disable_telemetry_events"):  # no usage reporting from a server
-            ort.disable_telemetry_events()
         self.models_dir = Path(models_dir)
         self.manifest: Manifest = load_manifest(self.models_dir, verify=True)
-        options = ort.SessionOptions()
-        options.intra_op_num_threads = threads
-        options.inter_op_num_threads = 1
-        options.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
-        options.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
-        options.log_severity_level = 3
+        options = session_options(threads)
 
-        def net(entry: ModelEntry) -> _Net:
-            return _Net(self.models_dir / entry.file, entry, options)
+        def net(entry: ModelEntry) -> Net:
+            return Net(self.models_dir / entry.file, entry, options)
 
         m = self.manifest
         self.encoder = net(m.autoencoder("encoder"))
@@ -320,7 +117,7 @@ class Engine:
         self.completion = [net(entry) for entry in m.completion_levels()]
         enc, dec = m.autoencoder("encoder"), m.autoencoder("decoder")
         self.fused = {
-            key: _Fused(enc, entry, dec, self.models_dir, options)
+            key: Fused(enc, entry, dec, self.models_dir, options)
             for key, entry in m.solvers().items()
         }
         ref = m.skeleton.reference_bone_lengths
@@ -400,7 +197,7 @@ class Engine:
         tcan = frame.to_canonical(tpos)  # [B, K, 3]
 
         out = canon.copy()
-        paths: list[list[str]] = [["fabrik"]] * n
+        paths: list[list[str]] = [["fabrik"] for _ in range(n)]
         neural = np.flatnonzero([p.method == "neural" for p in problems])
         if neural.size:
             solved, neural_paths = self._neural(problems, neural, canon, tidx, tcan, scales)
