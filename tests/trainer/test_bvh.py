@@ -8,9 +8,9 @@ from typing import Any
 import numpy as np
 import pytest
 
+from core.bvh import BVHError, parse_bvh, read_bvh
 from core.geometry import canonicalise
 from core.skeleton import JOINT_INDEX, bone_lengths
-from trainer.data.bvh import BVHError, parse_bvh, read_bvh
 from trainer.data.maps import MapError, load_map, load_maps
 
 MAPS = Path(__file__).resolve().parents[2] / "trainer" / "maps"

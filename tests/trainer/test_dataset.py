@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from core.bvh import read_bvh
 from core.geometry import canonicalise, yaw_matrix
 from core.skeleton import JOINT_INDEX, NUM_JOINTS, bone_lengths
 from trainer.data.build import (
@@ -20,7 +21,6 @@ from trainer.data.build import (
     interpolate_positions,
     resample_indices,
 )
-from trainer.data.bvh import read_bvh
 from trainer.data.dataset import KEYS, SPLITS, DatasetError, load_dataset
 from trainer.data.maps import load_map
 

@@ -2,7 +2,8 @@
 
 Modules:
 
-- :mod:`trainer.data.bvh`: BVH parser and batched forward kinematics (numpy + scipy).
+- :mod:`core.bvh` (shared with the service): BVH parser and batched forward kinematics.
+- :mod:`trainer.data.asf`: Acclaim ASF/AMC reader (CMU subjects) with the same interface.
 - :mod:`trainer.data.maps`: per-source joint maps (``trainer/maps/*.toml``).
 - :mod:`trainer.data.build`: ``pose-trainer dataset`` (archives -> ``poses.npz``).
 - :mod:`trainer.data.dataset`: ``load_dataset`` / ``PoseDataset`` and the file format.

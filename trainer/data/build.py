@@ -38,10 +38,10 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from core.bvh import BVHError, read_bvh
 from core.geometry import canonicalise
 from core.io import sha256_file
 from core.skeleton import BONE_CHILDREN, JOINT_NAMES, NUM_JOINTS, bone_lengths
-from trainer.data.bvh import BVHError, read_bvh
 from trainer.data.dataset import FORMAT_VERSION, FPS, SPLITS, PoseDataset, save_dataset
 from trainer.data.maps import MapError, MocapMap, load_maps
 

@@ -1,19 +1,24 @@
-"""BVH reader and batched forward kinematics (numpy + scipy only).
+"""BVH reader and batched forward kinematics (numpy only: the service reads BVH too).
 
 Conventions implemented here:
 
-- Any rotation channel order. BVH Euler channels are *intrinsic* rotations applied in the
-  listed order, ``R = R_c1 @ R_c2 @ R_c3``; this is scipy's ``Rotation.from_euler`` with an
-  UPPERCASE sequence (e.g. ``"ZXY"``), in degrees.
-- Position channels *replace* the matching component of the joint's OFFSET when present
-  (the root's translation, and every joint of files that carry 6 channels per joint, e.g.
-  Bandai-Namco, whose position values equal the offsets). Offsets are never added to them.
+- Any rotation channel order, on any joint. BVH Euler channels are *intrinsic* rotations
+  applied in the listed order, ``R = R_c1 @ R_c2 @ R_c3`` (degrees); e.g. ``Zrotation
+  Xrotation Yrotation`` gives ``Rz @ Rx @ Ry``. Any number of rotation channels works.
+- Position channels, on any joint (6-channel joints: Bandai-Namco, ReActIdle), *replace*
+  the matching component of the joint's OFFSET. Offsets are never added to them.
 - ``End Site`` blocks become pseudo-joints named ``<parent>_end`` (``_end2``... if a joint
   has several), addressable by joint maps like any other joint.
+- Nothing of the file is lost, so a writer can round-trip it: every joint keeps its
+  channel names in file order (:attr:`BVHJoint.channels`) and first MOTION column
+  (:attr:`BVHJoint.channel_start`); :attr:`BVH.motion` holds the raw channel values, one
+  row per frame; :attr:`BVH.text` is the file's text and :meth:`BVH.frame_lines` its
+  frame lines, unchanged.
 - The MOTION block is parsed in one go (``str.split`` + one ``np.array`` conversion), with a
   per-line check only on the error path.
 
-Malformed input raises :class:`BVHError`, which names the file and the reason.
+Malformed input raises :class:`BVHError`, which names the file and the reason (with the line
+number where there is one).
 """
 
 from __future__ import annotations
@@ -25,7 +30,6 @@ from pathlib import Path
 
 import numpy as np
 import numpy.typing as npt
-from scipy.spatial.transform import Rotation
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -72,6 +76,10 @@ class BVH:
     joints: tuple[BVHJoint, ...]
     frame_time: float
     motion: FloatArray  # [F, C] channel values, one row per frame
+    #: The file's text, unchanged ('' when built in code), and the offset in it of the first
+    #: frame line (just after the ``Frame Time`` line): a writer keeps untouched parts as-is.
+    text: str = field(default="", repr=False, compare=False)
+    motion_offset: int = field(default=0, repr=False, compare=False)
     _index: dict[str, int] = field(default_factory=dict, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -93,6 +101,19 @@ class BVH:
     def fps(self) -> float:
         """Frame rate from the header's Frame Time (the file may lie; see joint maps)."""
         return 1.0 / self.frame_time
+
+    @property
+    def rotation_joints(self) -> tuple[int, ...]:
+        """Indices of the joints that carry at least one rotation channel."""
+        return tuple(i for i, j in enumerate(self.joints) if j.rotation_order)
+
+    def frame_lines(self) -> list[str]:
+        """The raw text of each frame line of the MOTION block (``num_frames`` strings, line
+        endings stripped), exactly as in the file; empty if the BVH was not parsed from text."""
+        if not self.text:
+            return []
+        lines = [ln.rstrip("\r") for ln in self.text[self.motion_offset :].split("\n")]
+        return [ln for ln in lines if ln.strip()]
 
     def index(self, name: str) -> int:
         """Index of a joint by name; ``KeyError`` listing the known names if absent."""
@@ -229,6 +250,8 @@ def _parse_hierarchy(file: str, text: str) -> list[BVHJoint]:
                 toks.expect("}")
                 end_count += 1
                 end_name = f"{name}_end" if end_count == 1 else f"{name}_end{end_count}"
+                if end_name in names:
+                    raise _error(file, f"line {line}: End Site name {end_name!r} is taken")
                 names.add(end_name)
                 joints.append(
                     BVHJoint(end_name, index, (ex, ey, ez), (), n_channels, end_site=True)
@@ -293,7 +316,15 @@ def parse_bvh(text: str, name: str = "<string>") -> BVH:
     except ValueError:
         _explain_values(name, body, first_line)
         raise  # pragma: no cover - _explain_values always raises
-    return BVH(name=name, joints=tuple(joints), frame_time=frame_time, motion=motion)
+    body_offset = len(text) - len(body)
+    return BVH(
+        name=name,
+        joints=tuple(joints),
+        frame_time=frame_time,
+        motion=motion,
+        text=text,
+        motion_offset=body_offset,
+    )
 
 
 def _explain_count(name: str, body: str, first_line: int, n_frames: int, n_channels: int) -> None:
@@ -339,6 +370,35 @@ def read_bvh(path: str | Path, name: str | None = None) -> BVH:
     return parse_bvh(text, label)
 
 
+def axis_rotations(axis: str, radians: FloatArray) -> FloatArray:
+    """Rotation matrices ``[..., 3, 3]`` about ``axis`` ("X", "Y" or "Z") by ``radians``."""
+    c, s = np.cos(radians), np.sin(radians)
+    one, zero = np.ones_like(c), np.zeros_like(c)
+    if axis == "X":
+        rows = ((one, zero, zero), (zero, c, -s), (zero, s, c))
+    elif axis == "Y":
+        rows = ((c, zero, s), (zero, one, zero), (-s, zero, c))
+    elif axis == "Z":
+        rows = ((c, -s, zero), (s, c, zero), (zero, zero, one))
+    else:
+        raise ValueError(f"unknown rotation axis {axis!r}")
+    return np.stack([np.stack(r, axis=-1) for r in rows], axis=-2)
+
+
+def euler_matrices(seq: str, radians: FloatArray) -> FloatArray:
+    """Intrinsic Euler rotations ``R = R_seq[0] @ R_seq[1] @ ...`` as ``[..., 3, 3]``.
+
+    ``radians[..., k]`` is the angle about axis ``seq[k]`` (any length, repeats allowed: the
+    BVH channel order as written).
+    """
+    if radians.shape[-1] != len(seq):
+        raise ValueError(f"{len(seq)} angles expected for {seq!r}, got {radians.shape[-1]}")
+    out = axis_rotations(seq[0], radians[..., 0])
+    for k in range(1, len(seq)):
+        out = np.matmul(out, axis_rotations(seq[k], radians[..., k]))
+    return out
+
+
 def forward_kinematics(
     bvh: BVH,
     names: Sequence[str] | None = None,
@@ -347,7 +407,7 @@ def forward_kinematics(
     """World positions ``[F, K, 3]`` of the named joints (default: all), in file units.
 
     Batched over frames; Euler rotations are converted per distinct channel order in one
-    scipy call each.
+    vectorised call each.
     """
     motion = bvh.motion if frames is None else bvh.motion[frames]
     n_frames = motion.shape[0]
@@ -368,21 +428,17 @@ def forward_kinematics(
         if seq:
             by_seq.setdefault(seq, []).append(j)
     for seq, joint_ids in by_seq.items():
-        cols = []
-        for j in joint_ids:
-            joint = bvh.joints[j]
-            cols.append(
-                [
-                    joint.channel_start + k
-                    for k, c in enumerate(joint.channels)
-                    if c.lower() in _ROTATION_CHANNELS
-                ]
-            )
+        cols = [
+            [
+                bvh.joints[j].channel_start + k
+                for k, c in enumerate(bvh.joints[j].channels)
+                if c.lower() in _ROTATION_CHANNELS
+            ]
+            for j in joint_ids
+        ]
         # angles: [F, n_joints, len(seq)] -> rotation matrices [F, n_joints, 3, 3]
-        angles = motion[:, np.asarray(cols, dtype=np.intp)]
-        flat = angles.reshape(-1, len(seq))
-        mats = Rotation.from_euler(seq, flat, degrees=True).as_matrix()
-        mats = mats.reshape(n_frames, len(joint_ids), 3, 3)
+        angles = np.deg2rad(motion[:, np.asarray(cols, dtype=np.intp)])
+        mats = euler_matrices(seq, angles)
         for k, j in enumerate(joint_ids):
             local_rot[j] = mats[:, k]
 
