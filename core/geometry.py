@@ -72,6 +72,12 @@ def canonical_transform(positions: FloatArray) -> RigidTransform:
     return RigidTransform(rotation=_rotation_from_forward(fx, fz), translation=translation)
 
 
+def transform_yaw(transform: RigidTransform) -> FloatArray:
+    """The facing angle (radians about +Y, 0 = facing +Z) of a transform's rotation, so that
+    ``yaw_matrix(transform_yaw(t))`` equals ``t.rotation``."""
+    return np.asarray(np.arctan2(transform.rotation[..., 0, 2], transform.rotation[..., 0, 0]))
+
+
 def canonicalise(positions: FloatArray) -> FloatArray:
     """Move the floor projection of the pelvis to the origin and turn to face +Z."""
     return canonical_transform(positions).to_canonical(positions)

@@ -41,7 +41,7 @@ def test_small_dataset_format(small_dataset: Path) -> None:
     assert not any("standard" in n for n in ds.clip_name.tolist())
     assert set(ds.clip_source.tolist()) == {"bandai-namco", "cmu-dance"}
     meta = ds.meta
-    assert meta["format_version"] == 1
+    assert meta["format_version"] == 2
     assert meta["fps"] == 30
     assert meta["seed"] == 0
     assert set(meta["dropped_frames"]) == set(DROP_REASONS)
@@ -54,6 +54,21 @@ def test_small_dataset_format(small_dataset: Path) -> None:
     pelvis = ds.positions[:, JOINT_INDEX["pelvis"]]
     np.testing.assert_allclose(pelvis[:, [0, 2]], 0.0, atol=1e-5)
     assert (ds.positions[:, JOINT_INDEX["head"], 1] > pelvis[:, 1]).mean() > 0.99
+
+
+def test_world_poses_keep_root_motion_and_facing(small_dataset: Path) -> None:
+    """world() puts every frame back where it was recorded: canonicalising it gives the
+    stored pose again, and a clip's pelvis moves continuously (no jump back to the origin)."""
+    ds = load_dataset(small_dataset)
+    world = ds.world()
+    np.testing.assert_allclose(canonicalise(world), ds.positions, atol=1e-5)
+    np.testing.assert_allclose(world[:, JOINT_INDEX["pelvis"], 1], ds.positions[:, 0, 1], atol=1e-6)
+    same = np.flatnonzero((ds.clip[1:] == ds.clip[:-1]) & (np.diff(ds.frame) == 1))
+    step = np.linalg.norm(world[same + 1, 0] - world[same, 0], axis=-1)
+    assert step.max() < 0.2  # metres per 1/30 s
+    travelled = [np.ptp(world[ds.clip == c, 0, 0]) for c in range(ds.num_clips)]
+    assert max(travelled) > 1.0  # someone walks: root motion is kept
+    assert np.ptp(ds.yaw) > 3.0  # and turns: facing is kept
 
 
 def test_bone_lengths_constant_within_a_bandai_clip(small_dataset: Path) -> None:
@@ -154,7 +169,7 @@ def test_splits_by_clip_stratified_and_seeded(small_dataset: Path) -> None:
     assert not clips["train"] & clips["val"]
     assert not clips["train"] & clips["test"]
     assert not clips["val"] & clips["test"]
-    assert all(clips[s] for s in SPLITS)  # the fixture has something in every split
+    assert all(clips[s] for s in ("train", "val", "test"))  # the fixture fills these
     # every source and content in test; in val where a stratum has >= 3 clips
     for source in set(ds.clip_source.tolist()):
         for content in set(ds.clip_content[ds.clip_source == source].tolist()):

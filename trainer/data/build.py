@@ -39,7 +39,7 @@ import numpy as np
 import numpy.typing as npt
 
 from core.bvh import BVHError, read_bvh
-from core.geometry import canonicalise
+from core.geometry import canonical_transform, transform_yaw
 from core.io import sha256_file
 from core.skeleton import BONE_CHILDREN, JOINT_NAMES, NUM_JOINTS, bone_lengths
 from trainer.data.dataset import FORMAT_VERSION, FPS, SPLITS, PoseDataset, save_dataset
@@ -79,6 +79,8 @@ class ClipJob:
 class ClipResult:
     job: ClipJob
     positions: npt.NDArray[np.float32] | None = None  # [n, 21, 3] canonical metres
+    yaw: npt.NDArray[np.float32] | None = None  # [n] canonical transform: facing angle
+    root: npt.NDArray[np.float32] | None = None  # [n, 3] canonical transform: translation
     frames: npt.NDArray[np.int32] | None = None  # [n] frame index at 30 fps
     source_frames: int = 0
     source_fps: float = 0.0
@@ -165,8 +167,11 @@ def process_clip(job: ClipJob) -> ClipResult:
         code = drop_reasons(world)
         result.drops = {r: int((code == i + 1).sum()) for i, r in enumerate(DROP_REASONS)}
         keep = code == 0
-        canon = canonicalise(world[keep])
+        frame = canonical_transform(world[keep])
+        canon = frame.to_canonical(world[keep])
         result.positions = canon.astype(np.float32)
+        result.yaw = transform_yaw(frame).astype(np.float32)
+        result.root = frame.translation.astype(np.float32)
         result.frames = np.flatnonzero(keep).astype(np.int32)
         result.bone_sum = bone_lengths(canon).sum(axis=0)
     except (BVHError, MapError) as exc:
@@ -446,6 +451,8 @@ def build_dataset(
     clip_infos = [infos[r.job.path] for r in kept]
     positions = np.concatenate([r.positions for r in kept if r.positions is not None])
     frames = np.concatenate([r.frames for r in kept if r.frames is not None])
+    yaw = np.concatenate([r.yaw for r in kept if r.yaw is not None])
+    root = np.concatenate([r.root for r in kept if r.root is not None])
     clip = np.concatenate(
         [
             np.full(len(r.positions), i, dtype=np.int32)
@@ -517,6 +524,8 @@ def build_dataset(
     }
     dataset = PoseDataset(
         positions=positions.astype(np.float32),
+        yaw=yaw.astype(np.float32),
+        root=root.astype(np.float32),
         clip=clip.astype(np.int32),
         frame=frames.astype(np.int32),
         clip_name=clip_name,

@@ -3,6 +3,9 @@
 One ``np.savez_compressed`` file with exactly these keys:
 
 - ``positions`` float32 ``(N, 21, 3)``: canonical poses in metres (``core.geometry``).
+- ``yaw`` float32 ``(N,)`` and ``root`` float32 ``(N, 3)``: each frame's canonical transform, so
+  that world = R_y(yaw) @ canonical + root (metres, +Y up, the clip's floor at y = 0). Root
+  motion and facing are kept: two frames of a clip can be put in one frame of reference.
 - ``clip`` int32 ``(N,)``: index into the clip table; ``frame`` int32 ``(N,)``: frame index at
   30 fps within the clip (gaps where frames were dropped).
 - clip table, unicode ``(C,)``: ``clip_name``, ``clip_source``, ``clip_content``,
@@ -23,11 +26,13 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from core.geometry import RigidTransform, yaw_matrix
 from core.skeleton import NUM_JOINTS
 
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
 FPS = 30
-SPLITS: tuple[str, ...] = ("train", "val", "test")
+#: ``holdout``: bodies kept out of training entirely (named in their joint maps).
+SPLITS: tuple[str, ...] = ("train", "val", "test", "holdout")
 CLIP_KEYS: tuple[str, ...] = (
     "clip_name",
     "clip_source",
@@ -36,7 +41,7 @@ CLIP_KEYS: tuple[str, ...] = (
     "clip_actor",
     "clip_split",
 )
-KEYS: tuple[str, ...] = ("positions", "clip", "frame", *CLIP_KEYS, "meta")
+KEYS: tuple[str, ...] = ("positions", "yaw", "root", "clip", "frame", *CLIP_KEYS, "meta")
 
 
 class DatasetError(ValueError):
@@ -48,6 +53,8 @@ class PoseDataset:
     """Canonical poses with their clip table (see the module docstring for the fields)."""
 
     positions: npt.NDArray[np.float32]
+    yaw: npt.NDArray[np.float32]
+    root: npt.NDArray[np.float32]
     clip: npt.NDArray[np.int32]
     frame: npt.NDArray[np.int32]
     clip_name: npt.NDArray[np.str_]
@@ -64,6 +71,18 @@ class PoseDataset:
     @property
     def num_clips(self) -> int:
         return int(self.clip_name.shape[0])
+
+    def world(self) -> npt.NDArray[np.float64]:
+        """World poses ``[N, 21, 3]`` (float64 metres): each canonical pose put back with its
+        frame's transform, so frames of one clip share one frame of reference."""
+        return np.asarray(self.transform().to_world(self.positions.astype(np.float64)))
+
+    def transform(self) -> RigidTransform:
+        """Each frame's canonical transform (world = rotation @ canonical + translation)."""
+        return RigidTransform(
+            rotation=yaw_matrix(self.yaw.astype(np.float64)),
+            translation=self.root.astype(np.float64),
+        )
 
     def split_mask(self, name: str) -> npt.NDArray[np.bool_]:
         """Per-frame mask of the frames whose clip is in split ``name``."""
@@ -82,6 +101,8 @@ class PoseDataset:
             raise ValueError(f"mask has shape {mask.shape}, expected ({len(self)},)")
         return PoseDataset(
             positions=self.positions[mask],
+            yaw=self.yaw[mask],
+            root=self.root[mask],
             clip=self.clip[mask],
             frame=self.frame[mask],
             clip_name=self.clip_name,
@@ -97,6 +118,8 @@ class PoseDataset:
         """The arrays exactly as stored in the file (``meta`` as a JSON 0-d string)."""
         return {
             "positions": self.positions,
+            "yaw": self.yaw,
+            "root": self.root,
             "clip": self.clip,
             "frame": self.frame,
             "clip_name": self.clip_name,
@@ -124,6 +147,10 @@ def validate_arrays(arrays: dict[str, npt.NDArray[Any]], where: str = "dataset")
             f"got {pos.dtype} {pos.shape}"
         )
     n = pos.shape[0]
+    if arrays["yaw"].dtype != np.float32 or arrays["yaw"].shape != (n,):
+        raise DatasetError(f"{where}: 'yaw' must be float32 ({n},), got {arrays['yaw'].shape}")
+    if arrays["root"].dtype != np.float32 or arrays["root"].shape != (n, 3):
+        raise DatasetError(f"{where}: 'root' must be float32 ({n}, 3), got {arrays['root'].shape}")
     for key in ("clip", "frame"):
         arr = arrays[key]
         if arr.dtype != np.int32 or arr.shape != (n,):
@@ -147,7 +174,7 @@ def validate_arrays(arrays: dict[str, npt.NDArray[Any]], where: str = "dataset")
         raise DatasetError(f"{where}: unknown clip_split values {bad_splits}")
     if len(set(arrays["clip_name"].tolist())) != n_clips:
         raise DatasetError(f"{where}: duplicate clip names")
-    if not np.isfinite(pos).all():
+    if not (np.isfinite(pos).all() and np.isfinite(arrays["yaw"]).all()):
         raise DatasetError(f"{where}: non-finite values in 'positions'")
     meta_arr = arrays["meta"]
     if meta_arr.dtype.kind != "U" or meta_arr.shape != ():
@@ -200,6 +227,8 @@ def load_dataset(path: str | Path) -> PoseDataset:
     meta = validate_arrays(arrays, str(path))
     return PoseDataset(
         positions=arrays["positions"],
+        yaw=arrays["yaw"],
+        root=arrays["root"],
         clip=arrays["clip"],
         frame=arrays["frame"],
         clip_name=arrays["clip_name"],
