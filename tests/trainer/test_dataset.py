@@ -200,7 +200,7 @@ def test_split_fractions_and_seed_dependence() -> None:
     for content in ("walk", "run", "bow"):
         sel = np.array(contents) == content
         counts = {s: int((a[sel] == s).sum()) for s in SPLITS}
-        assert counts == {"train": 90, "val": 5, "test": 5}
+        assert counts == {"train": 90, "val": 5, "test": 5, "holdout": 0}
     tiny = assign_splits(["x/1", "y/1", "y/2"], ["s"] * 3, ["x", "y", "y"], seed=0)
     assert tiny[0] == "test"
     assert sorted(tiny[1:].tolist()) == ["test", "train"]
@@ -213,7 +213,7 @@ def test_subset_and_split_mask(small_dataset: Path) -> None:
     assert test.num_clips == ds.num_clips
     assert set(test.clip_split[test.clip].tolist()) == {"test"}
     with pytest.raises(ValueError, match="unknown split"):
-        ds.split_mask("holdout")
+        ds.split_mask("heldout")
 
 
 def test_loader_rejects_bad_files(small_dataset: Path, tmp_path: Path) -> None:
@@ -234,7 +234,7 @@ def test_loader_rejects_bad_files(small_dataset: Path, tmp_path: Path) -> None:
     with pytest.raises(DatasetError, match="'positions' must be float32"):
         load_dataset(tmp_path / "dtype.npz")
     meta = json.loads(str(arrays["meta"]))
-    bad = dict(arrays, meta=np.array(json.dumps(dict(meta, format_version=2))))
+    bad = dict(arrays, meta=np.array(json.dumps(dict(meta, format_version=1))))
     np.savez(tmp_path / "version.npz", **bad)
     with pytest.raises(DatasetError, match="format_version"):
         load_dataset(tmp_path / "version.npz")
