@@ -1,6 +1,14 @@
-"""`python -m bench`: the benchmark behind `make bench` (accuracy + speed + HTTP load).
+"""`python -m bench`: the benchmark behind `make bench` (accuracy + held-out bodies + speed
++ HTTP load), writing ``reports/``. See docs/benchmarks.md.
 
-Accuracy comes from :mod:`trainer.evaluate`; this package adds the in-process speed
-measurements (:mod:`bench.speed`), the HTTP load test against a real uvicorn server on
-loopback (:mod:`bench.http_load`), the speed plots and the full report (``reports/``).
+Modules: :mod:`bench.edits` (problems, solving through the service engine),
+:mod:`bench.metrics`, :mod:`bench.accuracy` (B1-B5, determinism, composition ablation),
+:mod:`bench.heldout` (world-space edits on held-out bodies, the stress set),
+:mod:`bench.speed`, :mod:`bench.http_load`, :mod:`bench.plots`, :mod:`bench.report`.
 """
+
+import os
+
+# one thread everywhere, before numpy / onnxruntime are imported by any bench module
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
