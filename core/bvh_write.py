@@ -1,0 +1,180 @@
+"""BVH writer: a whole file from a parsed :class:`core.bvh.BVH`, or one frame spliced in.
+
+- :func:`format_bvh` writes the hierarchy (same joints, offsets, channel names and order,
+  End Sites) and the motion, numbers in Python's shortest round-trip form, so that
+  ``parse_bvh(format_bvh(b))`` has the same hierarchy, offsets, frame time and motion.
+- :func:`splice_frame` keeps the file's own text and rewrites only the changed values of one
+  frame line (every other byte of the file is unchanged); values are written with
+  :data:`DECIMALS` decimals.
+- :func:`skeleton_of`, :func:`pose_of` and :func:`row_of` bridge a BVH frame to a
+  :class:`core.characters.Skeleton` / :class:`core.characters.Pose` and back: a joint is
+  *rotatable* if it has exactly three rotation channels, *translatable* if it has all three
+  position channels; Euler angles written back are the solution nearest the old angles
+  (same rotation, angles shifted by whole turns or the other branch), so curves stay smooth.
+"""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+
+from core.bvh import BVH, BVHError, euler_matrices
+from core.characters import F64, Pose, Skeleton, build_skeleton
+
+DECIMALS = 6
+_POS = {"xposition": 0, "yposition": 1, "zposition": 2}
+_ROT = {"xrotation", "yrotation", "zrotation"}
+
+
+def _num(v: float) -> str:
+    return repr(float(v))
+
+
+def format_bvh(bvh: BVH, motion: F64 | None = None) -> str:
+    """The whole file as text (``motion`` replaces the BVH's own rows when given)."""
+    rows = bvh.motion if motion is None else motion
+    kids: dict[int, list[int]] = {}
+    for i, j in enumerate(bvh.joints):
+        kids.setdefault(j.parent, []).append(i)
+    out = ["HIERARCHY"]
+
+    def emit(i: int, depth: int) -> None:
+        j = bvh.joints[i]
+        pad = "\t" * depth
+        offset = " ".join(_num(v) for v in j.offset)
+        if j.end_site:
+            out.extend([f"{pad}End Site", f"{pad}{{", f"{pad}\tOFFSET {offset}", f"{pad}}}"])
+            return
+        out.append(f"{pad}{'ROOT' if j.parent < 0 else 'JOINT'} {j.name}")
+        out.append(f"{pad}{{")
+        out.append(f"{pad}\tOFFSET {offset}")
+        out.append(f"{pad}\tCHANNELS {len(j.channels)} {' '.join(j.channels)}".rstrip())
+        for k in kids.get(i, []):
+            emit(k, depth + 1)
+        out.append(f"{pad}}}")
+
+    for root in kids.get(-1, []):
+        emit(root, 0)
+    out += ["MOTION", f"Frames: {len(rows)}", f"Frame Time: {_num(bvh.frame_time)}"]
+    out += [" ".join(_num(v) for v in row) for row in rows]
+    return "\n".join(out) + "\n"
+
+
+def _frame_span(bvh: BVH, frame: int) -> tuple[int, int] | None:
+    """(start, end) character offsets of a frame's line in ``bvh.text``; None if the
+    file does not hold one frame per line."""
+    if not bvh.text or len(bvh.frame_lines()) != bvh.num_frames:
+        return None
+    pos = bvh.motion_offset
+    seen = -1
+    text = bvh.text
+    while pos <= len(text):
+        end = text.find("\n", pos)
+        end = len(text) if end < 0 else end
+        if text[pos:end].strip():
+            seen += 1
+            if seen == frame:
+                return pos, end
+        pos = end + 1
+    return None  # pragma: no cover - frame_lines() said the count matches
+
+
+def splice_frame(bvh: BVH, frame: int, row: F64, columns: list[int]) -> str:
+    """The file's text with ``columns`` of frame ``frame`` set from ``row`` (whole motion
+    row); every other byte is kept. A file whose frames are not one per line is written
+    whole by :func:`format_bvh` instead."""
+    if not 0 <= frame < bvh.num_frames:
+        raise IndexError(f"frame {frame} out of range: the file has {bvh.num_frames} frames")
+    span = _frame_span(bvh, frame)
+    if span is None:
+        motion = bvh.motion.copy()
+        motion[frame] = row
+        return format_bvh(bvh, motion)
+    start, end = span
+    line = bvh.text[start:end]
+    tokens = list(re.finditer(r"\S+", line))
+    parts: list[str] = []
+    last = 0
+    wanted = set(columns)
+    for k, m in enumerate(tokens):
+        parts.append(line[last : m.start()])
+        parts.append(f"{row[k]:.{DECIMALS}f}" if k in wanted else m.group())
+        last = m.end()
+    parts.append(line[last:])
+    return bvh.text[:start] + "".join(parts) + bvh.text[end:]
+
+
+def skeleton_of(bvh: BVH) -> Skeleton:
+    """The BVH hierarchy as a :class:`Skeleton` (same joint order: the file's)."""
+    skel, order = build_skeleton(
+        [j.name for j in bvh.joints],
+        [None if j.parent < 0 else bvh.joints[j.parent].name for j in bvh.joints],
+        [j.offset for j in bvh.joints],
+        rotatable=[len(j.rotation_order) == 3 for j in bvh.joints],
+        translatable=[sum(c.lower() in _POS for c in j.channels) == 3 for j in bvh.joints],
+        where=bvh.name,
+    )
+    if order != list(range(len(bvh.joints))):  # pragma: no cover - the reader keeps file order
+        raise BVHError(bvh.name, "joints are not in parents-first order")
+    return skel
+
+
+def pose_of(bvh: BVH, frame: int, row: F64 | None = None) -> Pose:
+    """Local rotations and translations of one frame (of ``row`` instead, when given)."""
+    row = bvh.motion[frame] if row is None else row
+    n = len(bvh.joints)
+    rot = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()
+    trans = np.array([j.offset for j in bvh.joints], dtype=np.float64)
+    for i, j in enumerate(bvh.joints):
+        seq = j.rotation_order
+        if seq:
+            cols = [j.channel_start + k for k, c in enumerate(j.channels) if c.lower() in _ROT]
+            rot[i] = euler_matrices(seq, np.deg2rad(row[cols])[None])[0]
+        for k, c in enumerate(j.channels):
+            if c.lower() in _POS:
+                trans[i, _POS[c.lower()]] = row[j.channel_start + k]
+    return Pose(rot, trans)
+
+
+def _nearest_euler(seq: str, matrix: F64, old: F64) -> F64:
+    """Euler angles (degrees, intrinsic ``seq``) of ``matrix`` nearest to ``old``."""
+    from scipy.spatial.transform import Rotation
+
+    first = Rotation.from_matrix(matrix).as_euler(seq, degrees=True)
+    a, b, c = first
+    proper = seq[0] == seq[2]
+    other = np.array([a + 180.0, -b if proper else 180.0 - b, c + 180.0])
+    best, best_cost = first, np.inf
+    for cand in (first, other):
+        cand = old + (cand - old + 180.0) % 360.0 - 180.0  # whole turns towards old
+        if not np.allclose(euler_matrices(seq, np.deg2rad(cand)[None])[0], matrix, atol=1e-9):
+            continue
+        cost = float(np.abs(cand - old).max())
+        if cost < best_cost:
+            best, best_cost = cand, cost
+    return np.asarray(best, dtype=np.float64)
+
+
+def row_of(
+    bvh: BVH, frame: int, pose: Pose, joints: set[int] | frozenset[int]
+) -> tuple[F64, list[int]]:
+    """The motion row of ``pose`` for the changed ``joints`` (others keep their values), and
+    the columns that changed, as they will be written (rounded to :data:`DECIMALS`)."""
+    row = bvh.motion[frame].copy()
+    columns: list[int] = []
+    for i in sorted(joints):
+        j = bvh.joints[i]
+        rot_cols = [j.channel_start + k for k, c in enumerate(j.channels) if c.lower() in _ROT]
+        if len(rot_cols) == 3:
+            angles = _nearest_euler(j.rotation_order, pose.rotations[i], row[rot_cols])
+            row[rot_cols] = angles
+            columns += rot_cols
+        for k, c in enumerate(j.channels):
+            value = float(pose.translations[i, _POS.get(c.lower(), 0)])
+            if c.lower() in _POS and value != row[j.channel_start + k]:
+                row[j.channel_start + k] = value
+                columns.append(j.channel_start + k)
+    for col in columns:  # the values as they will be read back
+        row[col] = float(f"{row[col]:.{DECIMALS}f}")
+    return row, sorted(set(columns))

@@ -1,0 +1,260 @@
+"""A character in its own skeleton: joints, rest offsets, local rotations and FK (numpy).
+
+Conventions (the contract; ``docs/characters.md`` says the same):
+
+- **Quaternions** are ``[x, y, z, w]`` (scalar last, as glTF and scipy), active rotations of
+  a right-handed frame; any non-zero length is accepted and normalised.
+- **Local rotation** of a joint: its frame relative to its parent's frame. World rotation
+  ``G[j] = G[parent] @ R[j]``; world position ``P[j] = P[parent] + G[parent] @ T[j]``
+  where ``T[j]`` is the joint's rest offset (or, on BVH joints with position channels, the
+  values of those channels). The root's ``P`` is the root position, ``G`` its rotation.
+- **Units and up axis** are the client's: :data:`UNITS` gives metres per unit, :data:`UP_AXES`
+  the rotation taking the up axis to +Y (the service's frame). Nothing here converts: the
+  solve converts the 21 mapped points on their way to and from the engine.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any, Final
+
+import numpy as np
+import numpy.typing as npt
+
+F64 = npt.NDArray[np.float64]
+
+#: Metres per file unit, by name ("m", "cm", "mm", "in", "ft").
+UNITS: Final[dict[str, float]] = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254, "ft": 0.3048}
+
+#: Rotation taking a frame's up axis to +Y (right-handed to right-handed).
+UP_AXES: Final[dict[str, F64]] = {
+    "+Y": np.eye(3),
+    # Z-up: (x, y, z) -> (x, z, -y), a -90 degree turn about +X.
+    "+Z": np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]]),
+}
+
+
+class CharacterError(ValueError):
+    """A skeleton, pose or joint map that cannot be used; the message says what and why."""
+
+
+@dataclass(frozen=True)
+class Skeleton:
+    """A character's joints in topological order (every parent precedes its children)."""
+
+    names: tuple[str, ...]
+    parents: tuple[int, ...]  # -1 for a root
+    offsets: F64  # [J, 3] rest offset from the parent, in the character's units
+    rotatable: tuple[bool, ...]  # may the solve change this joint's local rotation?
+    translatable: tuple[bool, ...]  # does the pose carry this joint's own translation?
+    index: dict[str, int] = field(default_factory=dict, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        self.index.update({n: i for i, n in enumerate(self.names)})
+
+    @property
+    def size(self) -> int:
+        return len(self.names)
+
+    def children(self, j: int) -> list[int]:
+        return [k for k, p in enumerate(self.parents) if p == j]
+
+    def is_ancestor(self, a: int, b: int) -> bool:
+        """True if ``a`` is ``b`` or one of its ancestors."""
+        while b >= 0:
+            if b == a:
+                return True
+            b = self.parents[b]
+        return False
+
+    def rest_positions(self) -> F64:
+        """World positions of the rest pose (identity rotations, offsets as given)."""
+        out = np.zeros((self.size, 3))
+        for j, p in enumerate(self.parents):
+            out[j] = self.offsets[j] if p < 0 else out[p] + self.offsets[j]
+        return out
+
+
+@dataclass
+class Pose:
+    """Local rotations ``[J, 3, 3]`` and local translations ``[J, 3]`` of one frame."""
+
+    rotations: F64
+    translations: F64
+
+    def copy(self) -> Pose:
+        return Pose(self.rotations.copy(), self.translations.copy())
+
+
+def build_skeleton(
+    names: Sequence[str],
+    parents: Sequence[str | None],
+    offsets: Sequence[Sequence[float]],
+    *,
+    rotatable: Sequence[bool] | None = None,
+    translatable: Sequence[bool] | None = None,
+    where: str = "skeleton.joints",
+) -> tuple[Skeleton, list[int]]:
+    """Validate joints given in any order by parent *name*; return the skeleton (sorted
+    parents-first) and, for each of its joints, the index of that joint in the input.
+
+    Raises :class:`CharacterError` on an empty skeleton, an empty or duplicate name, an
+    unknown parent, a cycle, no root, or an offset that is not 3 finite numbers."""
+    n = len(names)
+    if n == 0:
+        raise CharacterError(f"{where}: the skeleton has no joints")
+    seen: dict[str, int] = {}
+    for i, name in enumerate(names):
+        if not name:
+            raise CharacterError(f"{where}[{i}].name: empty joint name")
+        if name in seen:
+            raise CharacterError(
+                f"{where}[{i}].name: duplicate joint name {name!r} (also joints[{seen[name]}])"
+            )
+        seen[name] = i
+    off = np.zeros((n, 3))
+    for i, o in enumerate(offsets):
+        if len(o) != 3:
+            raise CharacterError(f"{where}[{i}].offset: expected 3 numbers, got {len(o)}")
+        off[i] = o
+        if not np.isfinite(off[i]).all():
+            raise CharacterError(f"{where}[{i}].offset: not finite: {list(o)}")
+    parent_of: list[int] = []
+    for i, p in enumerate(parents):
+        if p is None:
+            parent_of.append(-1)
+        elif p not in seen:
+            raise CharacterError(f"{where}[{i}].parent: unknown joint {p!r}")
+        elif p == names[i]:
+            raise CharacterError(f"{where}[{i}].parent: joint {p!r} is its own parent")
+        else:
+            parent_of.append(seen[p])
+    roots = [i for i, pi in enumerate(parent_of) if pi < 0]
+    if not roots:
+        raise CharacterError(f"{where}: no root joint (every joint has a parent: a cycle)")
+    # topological order by depth-first walk from the roots
+    kids: dict[int, list[int]] = {}
+    for i, pi in enumerate(parent_of):
+        kids.setdefault(pi, []).append(i)
+    order: list[int] = []
+    stack = list(reversed(roots))
+    while stack:
+        j = stack.pop()
+        order.append(j)
+        stack.extend(reversed(kids.get(j, [])))
+    if len(order) != n:
+        stuck = sorted(set(range(n)) - set(order))
+        raise CharacterError(
+            f"{where}: parent cycle through joints {[names[i] for i in stuck][:8]} "
+            "(they never reach a root)"
+        )
+    rank = {j: r for r, j in enumerate(order)}
+    rot = [True] * n if rotatable is None else list(rotatable)
+    tra = [p < 0 for p in parent_of] if translatable is None else list(translatable)
+    skel = Skeleton(
+        names=tuple(names[j] for j in order),
+        parents=tuple(-1 if parent_of[j] < 0 else rank[parent_of[j]] for j in order),
+        offsets=off[order],
+        rotatable=tuple(rot[j] for j in order),
+        translatable=tuple(tra[j] for j in order),
+    )
+    return skel, order
+
+
+def forward_kinematics(skel: Skeleton, pose: Pose) -> tuple[F64, F64]:
+    """World rotations ``[J, 3, 3]`` and positions ``[J, 3]`` of every joint."""
+    g_rot = np.empty((skel.size, 3, 3))
+    g_pos = np.empty((skel.size, 3))
+    for j, p in enumerate(skel.parents):
+        if p < 0:
+            g_rot[j] = pose.rotations[j]
+            g_pos[j] = pose.translations[j]
+        else:
+            g_rot[j] = g_rot[p] @ pose.rotations[j]
+            g_pos[j] = g_pos[p] + g_rot[p] @ pose.translations[j]
+    return g_rot, g_pos
+
+
+# --------------------------------------------------------------------------------------
+# Rotations
+# --------------------------------------------------------------------------------------
+def quat_to_matrix(q: npt.ArrayLike) -> F64:
+    """``[..., 4]`` quaternions ``[x, y, z, w]`` (normalised here) -> ``[..., 3, 3]``."""
+    a = np.asarray(q, dtype=np.float64)
+    a = a / np.linalg.norm(a, axis=-1, keepdims=True)
+    x, y, z, w = a[..., 0], a[..., 1], a[..., 2], a[..., 3]
+    rows = (
+        (1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)),
+        (2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)),
+        (2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)),
+    )
+    return np.stack([np.stack(r, axis=-1) for r in rows], axis=-2)
+
+
+def matrix_to_quat(m: F64) -> F64:
+    """``[..., 3, 3]`` rotation matrices -> unit quaternions ``[x, y, z, w]`` with w >= 0."""
+    from scipy.spatial.transform import Rotation
+
+    flat = np.asarray(m, dtype=np.float64).reshape(-1, 3, 3)
+    q: F64 = Rotation.from_matrix(flat).as_quat()
+    q = np.where(q[:, 3:4] < 0, -q, q)
+    return q.reshape(*np.shape(m)[:-2], 4)
+
+
+def swing(a: F64, b: F64) -> F64:
+    """The minimal rotation taking the direction of ``a`` to the direction of ``b``."""
+    ua = a / np.linalg.norm(a)
+    ub = b / np.linalg.norm(b)
+    axis = np.cross(ua, ub)
+    s = float(np.linalg.norm(axis))
+    c = float(np.dot(ua, ub))
+    if s < 1e-12:
+        if c > 0:
+            return np.eye(3)
+        # opposite: half a turn about any axis perpendicular to a
+        perp = np.cross(ua, np.eye(3)[int(np.argmin(np.abs(ua)))])
+        perp /= np.linalg.norm(perp)
+        return np.asarray(2.0 * np.outer(perp, perp) - np.eye(3))
+    k = axis / s
+    kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    return np.asarray(np.eye(3) + s * kx + (1.0 - c) * (kx @ kx))
+
+
+def best_rotation(v: F64, u: F64, weights: F64 | None = None) -> F64:
+    """The rotation ``R`` minimising ``sum w |R v_k - u_k|^2`` (Kabsch / Wahba), ``[K, 3]``."""
+    w = np.ones(len(v)) if weights is None else weights
+    h = (v * w[:, None]).T @ u
+    uu, _, vt = np.linalg.svd(h)
+    d = np.sign(np.linalg.det(vt.T @ uu.T)) or 1.0
+    return np.asarray(vt.T @ np.diag([1.0, 1.0, d]) @ uu.T)
+
+
+def twist_angle(delta: F64, axis: F64) -> float:
+    """Angle (radians) of the twist of rotation ``delta`` about ``axis`` (swing-twist split)."""
+    q = matrix_to_quat(delta)
+    k = axis / np.linalg.norm(axis)
+    along = float(np.dot(q[:3], k))
+    return float(2.0 * np.arctan2(abs(along), q[3]))
+
+
+def units_scale(units: str | float) -> float:
+    """Metres per unit for a unit name or a positive number; ``CharacterError`` otherwise."""
+    if isinstance(units, str):
+        if units not in UNITS:
+            raise CharacterError(f"unknown units {units!r}; use one of {sorted(UNITS)} or a number")
+        return UNITS[units]
+    value = float(units)
+    if not np.isfinite(value) or value <= 0:
+        raise CharacterError(f"units must be a positive number of metres per unit, got {units}")
+    return value
+
+
+def up_rotation(up: str) -> F64:
+    if up not in UP_AXES:
+        raise CharacterError(f"unknown up axis {up!r}; use one of {sorted(UP_AXES)}")
+    return UP_AXES[up]
+
+
+def as_f64(a: Any) -> F64:
+    return np.asarray(a, dtype=np.float64)

@@ -1,0 +1,425 @@
+"""Joint maps: which point of a character's skeleton is each of the 21 canonical joints.
+
+A canonical joint is a *point*: the origin of one of the character's joints (where that
+joint's bone starts), or a point fixed in one joint's frame (an End Site, or a point part-way
+along a bone where the skeleton has no joint there). :class:`Anchor` holds that.
+
+:func:`auto_map` tries every naming scheme of :data:`SCHEMES` (names compared without case
+and without a ``namespace:`` prefix such as ``mixamorig:``) and keeps the one that resolves
+all 21 joints with the most names; an explicit map (canonical -> joint name) always wins
+over it, joint by joint. Then two structural rules apply to every map:
+
+- ``spine2`` (the chest) is, unless named, the lowest common ancestor of the two collars,
+  and ``spine1``, unless named, the first joint below the pelvis on the way to it that is
+  not on the pelvis;
+- a canonical joint that lands on its canonical parent (zero rest length) is moved part-way
+  along its own bone: a collar a quarter of the way to the shoulder (CMU skeletons start
+  both clavicles on the midline), the chest half-way to the neck (ReActIdle has one chest
+  joint). Any other zero-length canonical bone is an error asking for an explicit map.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Final
+
+import numpy as np
+
+from core.characters import F64, CharacterError, Skeleton
+from core.skeleton import JOINT_INDEX, JOINT_NAMES, PARENT_NAMES
+
+_LIMBS = ("collar", "shoulder", "elbow", "wrist", "hip", "knee", "ankle", "foot")
+
+
+@dataclass(frozen=True)
+class Scheme:
+    description: str
+    sides: tuple[tuple[str, str], ...]  # (left token, right token) pairs to try for "{s}"
+    joints: Mapping[str, tuple[str, ...]]  # canonical (or "collar"...) -> candidate names
+
+
+def _scheme(description: str, sides: tuple[tuple[str, str], ...], **joints: str) -> Scheme:
+    return Scheme(description, sides, {k: tuple(v.split("|")) for k, v in joints.items()})
+
+
+#: Naming schemes found automatically. "{s}" is the side token; "a|b" tries a, then b;
+#: "X_end" is the End Site of joint X. spine1/spine2 are structural unless named.
+SCHEMES: Final[dict[str, Scheme]] = {
+    "bandai-namco": _scheme(
+        "Bandai-Namco Research Motiondataset",
+        (("L", "R"),),
+        pelvis="Hips",
+        spine1="Spine",
+        spine2="Chest",
+        neck="Neck",
+        head="Head",
+        collar="Shoulder_{s}",
+        shoulder="UpperArm_{s}",
+        elbow="LowerArm_{s}",
+        wrist="Hand_{s}",
+        hip="UpperLeg_{s}",
+        knee="LowerLeg_{s}",
+        ankle="Foot_{s}",
+        foot="Toes_{s}",
+    ),
+    "cmu-daz": _scheme(
+        "CMU BVH, 'daz-friendly' conversion (acRNN cmu-dance), Poser/DAZ",
+        (("l", "r"),),
+        pelvis="hip|hips",
+        spine1="abdomen",
+        spine2="chest",
+        neck="neck",
+        head="head",
+        collar="{s}Collar",
+        shoulder="{s}Shldr",
+        elbow="{s}ForeArm",
+        wrist="{s}Hand",
+        hip="{s}Thigh",
+        knee="{s}Shin",
+        ankle="{s}Foot",
+        foot="{s}Toe|{s}Foot_end",
+    ),
+    "cmu-asf-bvh": _scheme(
+        "CMU ASF/AMC converted to BVH (e.g. AnimatedDrawings cmu1)",
+        (("Left", "Right"),),
+        pelvis="Hips",
+        spine1="Chest",
+        spine2="Chest2",
+        neck="Neck",
+        head="Head",
+        collar="{s}Collar",
+        shoulder="{s}Shoulder",
+        elbow="{s}Elbow",
+        wrist="{s}Wrist",
+        hip="{s}Hip",
+        knee="{s}Knee",
+        ankle="{s}Ankle",
+        foot="{s}Toe",
+    ),
+    "cmu-asf": _scheme(
+        "CMU ASF bone names (a joint = the start of its bone)",
+        (("l", "r"),),
+        pelvis="root",
+        spine2="thorax",
+        neck="upperneck",
+        head="head",
+        collar="{s}clavicle",
+        shoulder="{s}humerus",
+        elbow="{s}radius",
+        wrist="{s}hand",
+        hip="{s}femur",
+        knee="{s}tibia",
+        ankle="{s}foot",
+        foot="{s}toes",
+    ),
+    "mixamo": _scheme(
+        "Mixamo (mixamorig:), MotionBuilder / CMU 'mb-friendly', AnimatedDrawings fair1",
+        (("Left", "Right"), ("L", "R")),
+        pelvis="Hips",
+        neck="Neck",
+        head="Head",
+        collar="{s}Shoulder",
+        shoulder="{s}Arm",
+        elbow="{s}ForeArm",
+        wrist="{s}Hand",
+        hip="{s}UpLeg",
+        knee="{s}Leg",
+        ankle="{s}Foot",
+        foot="{s}ToeBase|{s}Toe|{s}Foot_end",
+    ),
+    "unreal": _scheme(
+        "Unreal Engine mannequin (UE4 and UE5)",
+        (("l", "r"),),
+        pelvis="pelvis",
+        neck="neck_01",
+        head="head",
+        collar="clavicle_{s}",
+        shoulder="upperarm_{s}",
+        elbow="lowerarm_{s}",
+        wrist="hand_{s}",
+        hip="thigh_{s}",
+        knee="calf_{s}",
+        ankle="foot_{s}",
+        foot="ball_{s}",
+    ),
+    "vrm": _scheme(
+        "VRM humanoid bone names",
+        (("left", "right"),),
+        pelvis="hips",
+        neck="neck",
+        head="head",
+        collar="{s}Shoulder",
+        shoulder="{s}UpperArm",
+        elbow="{s}LowerArm",
+        wrist="{s}Hand",
+        hip="{s}UpperLeg",
+        knee="{s}LowerLeg",
+        ankle="{s}Foot",
+        foot="{s}Toes",
+    ),
+    "vroid": _scheme(
+        "VRoid / VRM node names (J_Bip_*)",
+        (("L", "R"),),
+        pelvis="J_Bip_C_Hips",
+        neck="J_Bip_C_Neck",
+        head="J_Bip_C_Head",
+        collar="J_Bip_{s}_Shoulder",
+        shoulder="J_Bip_{s}_UpperArm",
+        elbow="J_Bip_{s}_LowerArm",
+        wrist="J_Bip_{s}_Hand",
+        hip="J_Bip_{s}_UpperLeg",
+        knee="J_Bip_{s}_LowerLeg",
+        ankle="J_Bip_{s}_Foot",
+        foot="J_Bip_{s}_ToeBase",
+    ),
+    "rigify": _scheme(
+        "Blender Rigify / metarig .L/.R (DEF- bones too), ReActIdle",
+        (("L", "R"),),
+        pelvis="pelvis|DEF-spine|spine|hips",
+        neck="neck|DEF-spine.004|spine.004",
+        head="head|DEF-spine.006|spine.006|face",
+        collar="DEF-shoulder.{s}|shoulder.{s}",
+        shoulder="DEF-upper_arm.{s}|upper_arm.{s}",
+        elbow="DEF-forearm.{s}|forearm.{s}",
+        wrist="DEF-hand.{s}|hand.{s}|forearm.{s}_end",
+        hip="DEF-thigh.{s}|thigh.{s}",
+        knee="DEF-shin.{s}|shin.{s}",
+        ankle="DEF-foot.{s}|foot.{s}",
+        foot="DEF-toe.{s}|toe.{s}|foot.{s}_end",
+    ),
+}
+
+#: Fraction of its own bone by which a canonical joint sitting on its parent is moved.
+_SLIDE: Final[dict[str, float]] = {
+    "left_collar": 0.25,
+    "right_collar": 0.25,
+    "spine2": 0.5,
+}
+
+
+@dataclass(frozen=True)
+class Anchor:
+    """A point fixed in joint ``joint``'s frame: ``offset`` (character units) from its origin."""
+
+    joint: int
+    offset: F64
+    label: str  # how the point was found, e.g. "LeftHand" or "0.25 of LeftCollar->LeftShoulder"
+
+
+@dataclass(frozen=True)
+class JointMap:
+    anchors: tuple[Anchor, ...]  # one per canonical joint, canonical order
+    scheme: str  # the automatic scheme used, "explicit", or "<scheme>+explicit"
+
+    def describe(self) -> dict[str, str]:
+        return {n: a.label for n, a in zip(JOINT_NAMES, self.anchors, strict=True)}
+
+
+def _key(name: str) -> str:
+    return name.rsplit(":", 1)[-1].lower()
+
+
+def _canonical_key(name: str) -> tuple[str, int] | None:
+    """("collar", side) for limb joints, (name, -1) for centre joints."""
+    for side, prefix in enumerate(("left_", "right_")):
+        if name.startswith(prefix):
+            return name[len(prefix) :], side
+    return name, -1
+
+
+def _resolve_scheme(
+    skel: Skeleton, lookup: dict[str, int], scheme: Scheme
+) -> tuple[dict[str, int], int]:
+    """Best resolution of a scheme over its side-token pairs: (canonical -> joint, names hit)."""
+    best: tuple[dict[str, int], int] = ({}, -1)
+    for sides in scheme.sides:
+        found: dict[str, int] = {}
+        for canon in JOINT_NAMES:
+            base, side = _canonical_key(canon) or (canon, -1)
+            for cand in scheme.joints.get(base, ()):
+                name = cand.replace("{s}", sides[side]) if side >= 0 else cand
+                if _key(name) in lookup:
+                    found[canon] = lookup[_key(name)]
+                    break
+        if len(found) > best[1]:
+            best = (found, len(found))
+    return best
+
+
+def _lca(skel: Skeleton, a: int, b: int) -> int:
+    ancestors = set()
+    while a >= 0:
+        ancestors.add(a)
+        a = skel.parents[a]
+    while b >= 0 and b not in ancestors:
+        b = skel.parents[b]
+    return b
+
+
+def _structural(skel: Skeleton, found: dict[str, int]) -> None:
+    """Fill spine2 (lowest common ancestor of the collars) and spine1 (first joint below the
+    pelvis towards it, off the pelvis) where no name gave them."""
+    rest = skel.rest_positions()
+    if "spine2" not in found and "left_collar" in found and "right_collar" in found:
+        chest = _lca(skel, found["left_collar"], found["right_collar"])
+        if chest >= 0:
+            found["spine2"] = chest
+    if "spine1" not in found and "pelvis" in found and "spine2" in found:
+        path = []
+        j = found["spine2"]
+        while j >= 0 and j != found["pelvis"]:
+            path.append(j)
+            j = skel.parents[j]
+        if j == found["pelvis"]:
+            scale = float(np.linalg.norm(rest[found["spine2"]] - rest[found["pelvis"]])) or 1.0
+            for k in reversed(path):
+                if np.linalg.norm(rest[k] - rest[found["pelvis"]]) > 0.05 * scale:
+                    found["spine1"] = k
+                    break
+
+
+def _local_path(skel: Skeleton, top: int, bottom: int) -> F64:
+    """Rest-pose vector from ``top``'s origin to ``bottom``'s, in ``top``'s frame."""
+    v = np.zeros(3)
+    j = bottom
+    while j != top:
+        v += skel.offsets[j]
+        j = skel.parents[j]
+    return v
+
+
+def resolve_map(
+    skel: Skeleton, explicit: Mapping[str, str] | None = None, *, where: str = "joint_map"
+) -> JointMap:
+    """The joint map of ``skel``: automatic, overridden joint by joint by ``explicit``."""
+    lookup: dict[str, int] = {}
+    for i, name in enumerate(skel.names):
+        lookup.setdefault(_key(name), i)
+    given: dict[str, int] = {}
+    for canon, name in (explicit or {}).items():
+        if canon not in JOINT_INDEX:
+            raise CharacterError(
+                f"{where}: unknown canonical joint {canon!r}; joints are {', '.join(JOINT_NAMES)}"
+            )
+        if name not in skel.index:
+            raise CharacterError(f"{where}.{canon}: the skeleton has no joint {name!r}")
+        given[canon] = skel.index[name]
+
+    best_name, best_found, best_hits = "", dict(given), -1
+    for scheme_name, scheme in SCHEMES.items():
+        found, hits = _resolve_scheme(skel, lookup, scheme)
+        found.update(given)
+        _structural(skel, found)
+        complete = len(found) == len(JOINT_NAMES)
+        score = hits + (1000 if complete else 0)
+        if score > best_hits:
+            best_name, best_found, best_hits = scheme_name, found, score
+    if given:
+        best_name = "explicit" if len(given) == len(JOINT_NAMES) else f"{best_name}+explicit"
+    missing = [c for c in JOINT_NAMES if c not in best_found]
+    if missing:
+        raise CharacterError(
+            f"{where}: no joint found for {missing} (closest naming scheme: {best_name}); "
+            "give them in joint_map as {canonical: joint name}; schemes found automatically: "
+            + ", ".join(SCHEMES)
+        )
+    return _anchors(skel, best_found, best_name, where)
+
+
+def _anchors(skel: Skeleton, found: dict[str, int], scheme: str, where: str) -> JointMap:
+    rest = skel.rest_positions()
+    span = max(float(np.ptp(rest, axis=0).max()), 1e-9)
+    anchors: dict[str, Anchor] = {}
+    for canon in JOINT_NAMES:  # parents first
+        j = found[canon]
+        anchors[canon] = Anchor(j, np.zeros(3), skel.names[j])
+        parent = PARENT_NAMES[canon]
+        if parent is None:
+            continue
+        pj = anchors[parent].joint
+        if not skel.is_ancestor(pj, j):
+            raise CharacterError(
+                f"{where}: {canon} -> {skel.names[j]!r} is not below {parent} -> "
+                f"{skel.names[pj]!r} in the skeleton"
+            )
+    # zero-length canonical bones: slide the child part-way along its own bone
+    for canon in JOINT_NAMES:
+        parent = PARENT_NAMES[canon]
+        if parent is None:
+            continue
+        a, pa = anchors[canon], anchors[parent]
+        here = rest[a.joint] + a.offset
+        there = rest[pa.joint] + pa.offset
+        if np.linalg.norm(here - there) > 1e-3 * span:
+            continue
+        child = next((c for c in JOINT_NAMES if PARENT_NAMES[c] == canon), None)
+        if canon not in _SLIDE or child is None:
+            raise CharacterError(
+                f"{where}: {canon} ({a.label}) sits on {parent} ({pa.label}) in the rest pose; "
+                "map them to distinct points"
+            )
+        cj = anchors[child].joint if child in anchors else found[child]
+        if not skel.is_ancestor(a.joint, cj) or cj == a.joint:
+            raise CharacterError(f"{where}: {canon} ({a.label}) has no bone to slide along")
+        frac = _SLIDE[canon]
+        anchors[canon] = Anchor(
+            a.joint,
+            frac * _local_path(skel, a.joint, cj),
+            f"{frac:g} of {skel.names[a.joint]}->{skel.names[cj]}",
+        )
+    return JointMap(tuple(anchors[c] for c in JOINT_NAMES), scheme)
+
+
+#: Leg length (hip to ankle, rest pose) bands that make a unit plain: (low, high, unit).
+LEG_BANDS: Final[tuple[tuple[float, float, str], ...]] = (
+    (0.3, 1.3, "m"),
+    (45.0, 130.0, "cm"),
+    (450.0, 1300.0, "mm"),
+)
+
+
+def rest_points(skel: Skeleton, jmap: JointMap) -> F64:
+    """The 21 canonical points of the rest pose (identity rotations)."""
+    rest = skel.rest_positions()
+    return np.stack([rest[a.joint] + a.offset for a in jmap.anchors])
+
+
+def infer_units(skel: Skeleton, jmap: JointMap) -> tuple[str | None, float]:
+    """The unit the rest-pose leg length (hip -> knee -> ankle, mean of both sides) makes
+    plain by :data:`LEG_BANDS`, else None; and that leg length in file units."""
+    pts = rest_points(skel, jmap)
+    legs = []
+    for side in ("left", "right"):
+        hip, knee, ankle = (JOINT_INDEX[f"{side}_{n}"] for n in ("hip", "knee", "ankle"))
+        legs.append(
+            float(np.linalg.norm(pts[knee] - pts[hip]) + np.linalg.norm(pts[ankle] - pts[knee]))
+        )
+    leg = float(np.mean(legs))
+    for low, high, unit in LEG_BANDS:
+        if low <= leg <= high:
+            return unit, leg
+    return None, leg
+
+
+def infer_up(skel: Skeleton, jmap: JointMap, frame_points: F64 | None = None) -> str | None:
+    """ "+Y" or "+Z" when the rest pose's ankles-to-head vector lies within ~37 degrees of
+    that axis (its component along it at least 0.8 of its length); failing that, the same
+    test on ``frame_points`` (the 21 points of the frame being edited); else None."""
+    found = _up_of(rest_points(skel, jmap))
+    if found is None and frame_points is not None:
+        found = _up_of(frame_points)
+    return found
+
+
+def _up_of(pts: F64) -> str | None:
+    v = pts[JOINT_INDEX["head"]] - 0.5 * (
+        pts[JOINT_INDEX["left_ankle"]] + pts[JOINT_INDEX["right_ankle"]]
+    )
+    n = float(np.linalg.norm(v))
+    if n == 0:
+        return None
+    for axis, name in ((1, "+Y"), (2, "+Z")):
+        if v[axis] >= 0.8 * n:
+            return name
+    return None

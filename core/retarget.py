@@ -1,0 +1,195 @@
+"""From solved canonical points back to a character's own local rotations (numpy).
+
+:func:`canonical_points` gives the 21 mapped points of a character's pose;
+:func:`retarget` changes that pose so its mapped points go where a solve put them:
+
+1. **Root**: the nearest joint at or above the pelvis's joint that carries its own
+   translation (the root position, or a BVH joint with position channels) is moved so the
+   pelvis point lands on the solved pelvis.
+2. **Aim pass**, joints in skeleton order (parents first). A joint that carries canonical
+   joints with canonical children (its *aim group*) turns so those children point from its
+   origin to their solved positions. One child: the *swing* only, the minimal rotation
+   taking the old bone direction to the new one, applied in the parent's frame, so the bone
+   keeps its twist. Several children (pelvis, chest): the least-squares rotation over all
+   of them (Kabsch), the one rotation a rigid bone can take.
+3. **Exact reach** (optional): for each target, the chain of single-child aims above it is
+   FABRIK-ed, in the character's own bone lengths, from its fixed top onto the target, and
+   the aim pass re-run, so the target is met whenever that chain can reach it.
+
+Joints in no aim group (fingers, twist bones, props, spine joints between mapped ones)
+keep their local rotation; every joint keeps its offset, so bone lengths are the
+character's own.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from core.characters import F64, Pose, Skeleton, best_rotation, forward_kinematics, swing
+from core.characters_maps import JointMap
+from core.skeleton import JOINT_INDEX, PARENTS
+
+_PELVIS = JOINT_INDEX["pelvis"]
+
+
+def canonical_points(skel: Skeleton, pose: Pose, jmap: JointMap) -> F64:
+    """The 21 canonical points ``[21, 3]`` of a pose, in the character's units and axes."""
+    g_rot, g_pos = forward_kinematics(skel, pose)
+    return anchor_points(jmap, g_rot, g_pos)
+
+
+def anchor_points(jmap: JointMap, g_rot: F64, g_pos: F64) -> F64:
+    return np.stack([g_pos[a.joint] + g_rot[a.joint] @ a.offset for a in jmap.anchors])
+
+
+@dataclass(frozen=True)
+class _Plan:
+    groups: dict[int, list[int]]  # aim joint -> canonical children it aims
+    aim_of: dict[int, int]  # canonical joint -> aim joint of its bone to its parent
+
+
+def _plan(skel: Skeleton, jmap: JointMap) -> _Plan:
+    groups: dict[int, list[int]] = {}
+    aim_of: dict[int, int] = {}
+    for c, p in enumerate(PARENTS):
+        if p < 0:
+            continue
+        b = jmap.anchors[p].joint
+        if not skel.rotatable[b]:
+            continue
+        groups.setdefault(b, []).append(c)
+        aim_of[c] = b
+    return _Plan(groups, aim_of)
+
+
+def _aim_pass(skel: Skeleton, pose: Pose, jmap: JointMap, plan: _Plan, goal: F64) -> set[int]:
+    changed: set[int] = set()
+    for b in sorted(plan.groups):
+        g_rot, g_pos = forward_kinematics(skel, pose)
+        pivot = g_pos[b]
+        kids = plan.groups[b]
+        v = anchor_points(jmap, g_rot, g_pos)[kids] - pivot
+        u = goal[kids] - pivot
+        nv, nu = np.linalg.norm(v, axis=1), np.linalg.norm(u, axis=1)
+        ok = (nv > 1e-9 * max(1.0, float(nv.max()))) & (nu > 1e-12)
+        if not ok.any():
+            continue
+        if ok.sum() == 1:
+            k = int(np.argmax(ok))
+            turn = swing(v[k], u[k])
+        else:
+            turn = best_rotation(
+                v[ok] / nv[ok, None], u[ok] / nu[ok, None], weights=nv[ok] / nv[ok].sum()
+            )
+        new_global = turn @ g_rot[b]
+        parent = skel.parents[b]
+        local = new_global if parent < 0 else g_rot[parent].T @ new_global
+        if not np.allclose(local, pose.rotations[b], rtol=0.0, atol=1e-15):
+            pose.rotations[b] = local
+            changed.add(b)
+    return changed
+
+
+def _move_root(skel: Skeleton, pose: Pose, jmap: JointMap, goal: F64) -> int | None:
+    anchor = jmap.anchors[_PELVIS]
+    t = anchor.joint
+    while t >= 0 and not skel.translatable[t]:
+        t = skel.parents[t]
+    if t < 0:
+        return None
+    g_rot, g_pos = forward_kinematics(skel, pose)
+    now = g_pos[anchor.joint] + g_rot[anchor.joint] @ anchor.offset
+    delta = goal[_PELVIS] - now
+    parent = skel.parents[t]
+    pose.translations[t] = pose.translations[t] + (delta if parent < 0 else g_rot[parent].T @ delta)
+    return t
+
+
+def _chain(plan: _Plan, jmap: JointMap, target: int) -> list[int]:
+    """Canonical joints [top, ..., target] whose aims each carry that one child; the top's
+    own aim joint is fixed by the joints above. Empty when no aim is free to move."""
+    chain = [target]
+    c = target
+    while True:
+        b = plan.aim_of.get(c)
+        if b is None or plan.groups[b] != [c]:
+            break
+        p = PARENTS[c]
+        chain.insert(0, p)
+        c = p
+    if len(chain) < 2:
+        return []
+    # every point inside the chain must be the origin of the next aim joint (no End Site
+    # or part-way point), so that each aim turns the chain about that point
+    if any(np.any(jmap.anchors[c].offset != 0) for c in chain[1:-1]):
+        return []
+    return chain
+
+
+def _fabrik(points: F64, goal: F64, tol: float, iterations: int = 64) -> F64:
+    """Single-chain FABRIK, first point fixed; points ``[n, 3]``."""
+    p = points.copy()
+    lengths = np.linalg.norm(np.diff(p, axis=0), axis=1)
+    base = p[0].copy()
+    if np.linalg.norm(goal - base) >= lengths.sum():  # out of reach: straighten towards it
+        d = (goal - base) / max(np.linalg.norm(goal - base), 1e-300)
+        for i in range(1, len(p)):
+            p[i] = p[i - 1] + d * lengths[i - 1]
+        return p
+    for _ in range(iterations):
+        if np.linalg.norm(p[-1] - goal) <= tol:
+            break
+        p[-1] = goal
+        for i in range(len(p) - 2, -1, -1):
+            d = p[i] - p[i + 1]
+            p[i] = p[i + 1] + d * (lengths[i] / max(np.linalg.norm(d), 1e-300))
+        p[0] = base
+        for i in range(1, len(p)):
+            d = p[i] - p[i - 1]
+            p[i] = p[i - 1] + d * (lengths[i - 1] / max(np.linalg.norm(d), 1e-300))
+    return p
+
+
+@dataclass(frozen=True)
+class Retargeted:
+    pose: Pose
+    points: F64  # [21, 3] canonical points of the new pose (character units and axes)
+    changed: frozenset[int]  # joints whose local rotation or translation changed
+
+
+def retarget(
+    skel: Skeleton,
+    pose: Pose,
+    jmap: JointMap,
+    solved: F64,
+    *,
+    exact: Sequence[tuple[int, F64]] = (),
+    tolerance: float = 0.0,
+) -> Retargeted:
+    """A copy of ``pose`` whose canonical points follow ``solved`` ``[21, 3]`` (character
+    units and axes); ``exact`` lists (canonical joint, goal) pairs to meet within
+    ``tolerance`` where the character's own chain can (see the module docstring)."""
+    new = pose.copy()
+    plan = _plan(skel, jmap)
+    goal = np.array(solved, dtype=np.float64)
+    changed: set[int] = set()
+    root = _move_root(skel, new, jmap, goal)
+    changed |= _aim_pass(skel, new, jmap, plan, goal)
+    for joint, target in exact:
+        chain = _chain(plan, jmap, joint)
+        if not chain:
+            continue
+        g_rot, g_pos = forward_kinematics(skel, new)
+        pts = anchor_points(jmap, g_rot, g_pos)
+        top = jmap.anchors[chain[0]].joint
+        line = np.concatenate([g_pos[top][None], pts[chain[1:]]])
+        done = _fabrik(line, np.asarray(target, dtype=np.float64), tolerance * 0.01)
+        goal[chain[1:]] = done[1:]
+        changed |= _aim_pass(skel, new, jmap, plan, goal)
+    if root is not None and not np.array_equal(new.translations[root], pose.translations[root]):
+        changed.add(root)
+    g_rot, g_pos = forward_kinematics(skel, new)
+    return Retargeted(new, anchor_points(jmap, g_rot, g_pos), frozenset(changed))
