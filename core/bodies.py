@@ -9,9 +9,9 @@ body". Nothing here is random unless a ``numpy.random.Generator`` is passed in.
 - :func:`random_bodies` draws bodies (symmetric or not);
 - :func:`shift_joints` moves the joints (pose-relative, so it follows any pose);
 - :func:`body_lengths` gives a body's exact bone lengths, measured on one reference pose;
-- :func:`rebuild` applies a body to poses: shifted joints, then exactly those lengths
-  (``core.kinematics.bone_pass``: each bone keeps its direction, root outwards, the
-  root stays where it is).
+- :func:`rebuild` applies a body to poses: shifted joints, then exactly those lengths,
+  each bone vector scaled root outwards (every bone keeps its direction, a joint's
+  subtree follows it, the root stays where it is).
 
 To give the start and the target pose of an edit the *same* body, measure the lengths on
 one of them and pass them to both: ``lengths = body_lengths(start, body)``,
@@ -27,8 +27,16 @@ from typing import Any, Final
 import numpy as np
 import numpy.typing as npt
 
-from core.kinematics import bone_pass
-from core.skeleton import BONE_CHILDREN, JOINT_INDEX, MIRROR, NUM_JOINTS, PARENTS, bone_lengths
+from core.skeleton import (
+    BONE_CHILDREN,
+    BONE_PARENTS,
+    BONES,
+    JOINT_INDEX,
+    MIRROR,
+    NUM_JOINTS,
+    PARENTS,
+    bone_lengths,
+)
 
 F64 = npt.NDArray[np.floating[Any]]
 
@@ -124,9 +132,21 @@ def body_lengths(reference: F64, body: Body) -> F64:
 
 def rebuild(positions: F64, body: Body, lengths: F64 | None = None) -> F64:
     """Poses ``[..., 21, 3]`` with ``body`` applied: joints shifted, then every bone given
-    exactly ``lengths`` (default: :func:`body_lengths` of each pose itself), keeping its
-    direction, root outwards. The root keeps its shifted position. Returns float64."""
+    exactly ``lengths`` ``[..., 20]`` (default: :func:`body_lengths` of each pose itself):
+    root outwards, ``new[child] = new[parent] + length * unit(old[child] - old[parent])``,
+    so every bone keeps its direction. The root keeps its shifted position. Bones of zero
+    length in the input cannot be given a direction: they raise ``ValueError``."""
     moved = shift_joints(positions, body.shift)
     if lengths is None:
         lengths = bone_lengths(moved) * body.bone_scale
-    return np.asarray(bone_pass(moved, lengths, reference=moved), dtype=np.float64)
+    lengths = np.asarray(lengths, dtype=np.float64)
+    vectors = moved[..., BONE_CHILDREN, :] - moved[..., BONE_PARENTS, :]
+    norms = np.linalg.norm(vectors, axis=-1, keepdims=True)
+    if not np.all(norms > 0):
+        raise ValueError("a bone of zero length has no direction to keep")
+    vectors = vectors / norms * lengths[..., :, None]
+    batch = np.broadcast_shapes(moved.shape[:-2], vectors.shape[:-2])
+    out = np.broadcast_to(moved, (*batch, NUM_JOINTS, 3)).copy()
+    for b, (child, parent) in enumerate(BONES):  # parents come first
+        out[..., child, :] = out[..., parent, :] + vectors[..., b, :]
+    return out

@@ -1,0 +1,214 @@
+"""Held-out benchmark: the world-space edits are built as specified, core.bodies gives
+exactly the bodies asked for, and a quick run produces every family, set and method."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from core.bodies import Body, body_lengths, random_bodies, rebuild, shift_joints
+from core.kinematics import bone_pass
+from core.rest import rest_lengths, rest_pose
+from core.skeleton import BONES, JOINT_INDEX, MIRROR, NUM_JOINTS, PARENTS, bone_lengths
+
+PELVIS = JOINT_INDEX["pelvis"]
+
+
+def _poses(n: int, seed: int = 0) -> np.ndarray:
+    """Valid poses (rest lengths) with random joint directions: rest pose + noise."""
+    rng = np.random.default_rng(seed)
+    noisy = rest_pose()[None] + rng.normal(scale=0.08, size=(n, NUM_JOINTS, 3))
+    return np.asarray(bone_pass(noisy, rest_lengths()))
+
+
+# --------------------------------------------------------------------------------------
+# core.bodies (no data needed)
+# --------------------------------------------------------------------------------------
+def test_rebuild_gives_exactly_the_requested_lengths_and_keeps_topology() -> None:
+    poses = _poses(64)
+    body = random_bodies(np.random.default_rng(1), 64, symmetric=False)
+    lengths = body_lengths(poses[:1], Body(body.bone_scale[:1], body.shift[:1]))
+    out = rebuild(poses, Body(body.bone_scale[:1], body.shift[:1]), lengths)
+    assert out.shape == poses.shape
+    np.testing.assert_allclose(bone_lengths(out), np.broadcast_to(lengths, (64, 20)), rtol=1e-12)
+    # same topology: every bone still points from its parent in (about) the same direction
+    # when nothing is shifted
+    plain = rebuild(poses, Body(body.bone_scale, np.zeros((64, NUM_JOINTS))))
+    for child, parent in BONES:
+        a = poses[:, child] - poses[:, parent]
+        b = plain[:, child] - plain[:, parent]
+        cos = np.sum(a * b, axis=-1) / np.linalg.norm(a, axis=-1) / np.linalg.norm(b, axis=-1)
+        assert cos.min() > 1 - 1e-9, (child, parent)
+    np.testing.assert_allclose(bone_lengths(plain), bone_lengths(poses) * body.bone_scale)
+    np.testing.assert_array_equal(plain[:, PELVIS], poses[:, PELVIS])  # the root stays
+
+
+def test_one_body_for_two_poses_gives_both_the_same_bones() -> None:
+    a, b = _poses(2, seed=3)
+    body = random_bodies(np.random.default_rng(2), 1)
+    lengths = body_lengths(a, body)
+    np.testing.assert_allclose(
+        bone_lengths(rebuild(a, body, lengths)), bone_lengths(rebuild(b, body, lengths))
+    )
+
+
+def test_random_bodies_ranges_symmetry_and_seed() -> None:
+    sym = random_bodies(np.random.default_rng(5), 2000, scale=0.25, symmetric=True)
+    again = random_bodies(np.random.default_rng(5), 2000, scale=0.25, symmetric=True)
+    np.testing.assert_array_equal(sym.bone_scale, again.bone_scale)
+    assert sym.bone_scale.min() >= 1 / 1.25 - 1e-12 and sym.bone_scale.max() <= 1.25 + 1e-12
+    assert sym.bone_scale.min() < 0.82 and sym.bone_scale.max() > 1.2  # at least +-20 %
+    child_bone = {c: k for k, (c, _) in enumerate(BONES)}
+    mirror = [child_bone[MIRROR[c]] for c, _ in BONES]
+    np.testing.assert_array_equal(sym.bone_scale, sym.bone_scale[:, mirror])
+    np.testing.assert_array_equal(sym.shift, sym.shift[:, list(MIRROR)])
+    asym = random_bodies(np.random.default_rng(5), 2000, symmetric=False)
+    assert not np.array_equal(asym.bone_scale, asym.bone_scale[:, mirror])
+    moved = {j for j in range(NUM_JOINTS) if np.any(sym.shift[:, j] != 0)}
+    names = {"pelvis", "neck", "head", "left_collar", "right_collar"}
+    assert moved == {JOINT_INDEX[n] for n in names}
+
+
+def test_shift_moves_a_joint_along_its_bone_only() -> None:
+    pose = _poses(1)[0]
+    shift = np.zeros(NUM_JOINTS)
+    shift[PELVIS] = 0.5
+    shift[JOINT_INDEX["neck"]] = -0.25
+    out = shift_joints(pose, shift)
+    spine1 = JOINT_INDEX["spine1"]
+    np.testing.assert_allclose(out[PELVIS], pose[PELVIS] + 0.5 * (pose[spine1] - pose[PELVIS]))
+    neck, parent = JOINT_INDEX["neck"], PARENTS[JOINT_INDEX["neck"]]
+    np.testing.assert_allclose(out[neck], pose[neck] - 0.25 * (pose[neck] - pose[parent]))
+    others = [j for j in range(NUM_JOINTS) if j not in (PELVIS, neck)]
+    np.testing.assert_array_equal(out[others], pose[others])
+
+
+def test_bodies_reject_bad_input() -> None:
+    with pytest.raises(ValueError, match="bone_scale"):
+        Body(np.ones(19), np.zeros(NUM_JOINTS))
+    with pytest.raises(ValueError, match="positive"):
+        Body(-np.ones(20), np.zeros(NUM_JOINTS))
+    with pytest.raises(ValueError, match="unknown joints"):
+        random_bodies(np.random.default_rng(0), 2, placement={"tail": 0.1})
+
+
+# --------------------------------------------------------------------------------------
+# World-space edits (real clips)
+# --------------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def holdout_dataset(small_dataset: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The small real dataset with its cmu-dance clips relabelled as held-out bodies and
+    one Bandai val clip too (two held-out sources), the rest as built."""
+    from trainer.data.dataset import load_dataset, save_dataset
+
+    data = load_dataset(small_dataset)
+    split = data.clip_split.astype("<U16")
+    split[data.clip_source == "cmu-dance"] = "holdout"
+    bandai_val = np.flatnonzero((data.clip_source == "bandai-namco") & (split == "val"))
+    split[bandai_val[:1]] = "holdout"
+    assert (split == "test").any()
+    path = tmp_path_factory.mktemp("holdout") / "poses.npz"
+    save_dataset(path, dataclasses.replace(data, clip_split=split))
+    return path
+
+
+def test_world_edits_put_the_start_on_the_target_pelvis(holdout_dataset: Path) -> None:
+    from bench.edits import MAX_GAP, MIN_GAP, sample_pairs
+    from bench.heldout import world_pairs
+    from trainer.data.dataset import load_dataset
+
+    data = load_dataset(holdout_dataset)
+    held = data.subset(data.split_mask("holdout"))
+    world = held.world()
+    a, b = sample_pairs(held, 300, np.random.default_rng(7))
+    pairs = world_pairs(held, world, a, b)
+    assert len(pairs) == 300
+    np.testing.assert_allclose(pairs.start[:, PELVIS], pairs.goal[:, PELVIS], atol=1e-12)
+    np.testing.assert_array_equal(pairs.goal, world[b])
+    # the start is frame i's world pose, only translated
+    np.testing.assert_allclose(
+        pairs.start - pairs.start[:, :1], world[a] - world[a][:, :1], atol=1e-12
+    )
+    assert np.all(held.clip[a] == held.clip[b])
+    gap = np.abs(held.frame[b] - held.frame[a])
+    assert gap.min() >= MIN_GAP == 6 and gap.max() <= MAX_GAP == 30
+    assert np.all((pairs.turn >= 0) & (pairs.turn <= 180))
+    assert pairs.turn.max() > 0  # real clips turn
+    a2, b2 = sample_pairs(held, 300, np.random.default_rng(7))
+    np.testing.assert_array_equal(a, a2)
+    np.testing.assert_array_equal(b, b2)
+    a3, _ = sample_pairs(held, 300, np.random.default_rng(8))
+    assert not np.array_equal(a, a3)
+
+
+def test_rebodied_pairs_share_one_body(holdout_dataset: Path) -> None:
+    from bench.edits import sample_pairs
+    from bench.heldout import rebodied, world_pairs
+    from trainer.data.dataset import load_dataset
+
+    data = load_dataset(holdout_dataset)
+    test = data.subset(data.split_mask("test"))
+    pairs = world_pairs(test, test.world(), *sample_pairs(test, 50, np.random.default_rng(0)))
+    body = rebodied(pairs, np.random.default_rng(1), symmetric=False, scale=0.25)
+    np.testing.assert_allclose(bone_lengths(body.start), bone_lengths(body.goal), rtol=1e-9)
+    ratio = bone_lengths(body.goal) / bone_lengths(pairs.goal)
+    assert ratio.min() < 0.85 and ratio.max() > 1.15  # other bodies, not the captured one
+    np.testing.assert_allclose(body.start[:, PELVIS], body.goal[:, PELVIS], atol=1e-12)
+
+
+# --------------------------------------------------------------------------------------
+# A quick run against the models
+# --------------------------------------------------------------------------------------
+def test_quick_heldout_run_has_every_family_set_and_method(
+    models_dir: Path, holdout_dataset: Path, tmp_path: Path
+) -> None:
+    import typer
+    from typer.testing import CliRunner
+
+    from bench.heldout import COMPLETION, FIVE, METHODS, RANDOM_SET, main
+
+    out = tmp_path / "heldout.json"
+    app = typer.Typer()
+    app.command()(main)
+    args = ["--quick", "--models", str(models_dir), "--dataset", str(holdout_dataset)]
+    result = CliRunner().invoke(app, [*args, "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    assert "holdout: all" in result.output
+    res = json.loads(out.read_text())
+    names = [f["name"] for f in res["families"]]
+    assert names == [
+        "holdout: bandai-namco",
+        "holdout: cmu-dance",
+        "holdout: all",
+        "test: as captured",
+        "test: symmetric bodies",
+        "test: asymmetric bodies",
+    ]
+    for fam in res["families"]:
+        sets = fam["sets"]
+        for name in ("left_wrist", "left_wrist+right_wrist", "left_ankle+right_ankle", FIVE):
+            assert name in sets, (fam["name"], name)
+        assert RANDOM_SET in sets
+        assert set(sets[COMPLETION]) == {"identity", "fabrik", "completion"}
+        for set_name, block in sets.items():
+            if set_name == COMPLETION:
+                continue
+            assert set(block) == set(METHODS), (fam["name"], set_name)
+            assert block["identity"]["bone_max"] < 1e-9
+            assert block["identity"]["mpjpe"] > 0  # the start is not the target
+            for method in ("fabrik", "neural_bone", "neural_exact"):
+                s = block[method]
+                assert math.isfinite(s["mpjpe"]) and 0 < s["mpjpe"] < 100, (set_name, method)
+                assert s["bone_max"] <= 1e-5, (fam["name"], set_name, method, s["bone_max"])
+                assert s["ms_per_edit"] > 0
+            if set_name != "pelvis":  # the start already has the target's pelvis
+                assert block["neural_exact"]["reach_mean"] < block["identity"]["reach_mean"]
+        assert [r["bucket"] for r in fam["by_turn"]] == ["0–5°", "5–15°", "15–45°", "45–180°"]
+    pooled = res["families"][2]["sets"][FIVE]["fabrik"]["n"]
+    parts = [f["sets"][FIVE]["fabrik"]["n"] for f in res["families"][:2]]
+    assert pooled == sum(parts)
