@@ -1,0 +1,371 @@
+"""Characters as users have them: their own skeleton (JSON) or a BVH file, solved through
+the canonical 21 joints and answered in their own terms.
+
+The flow of both endpoints: the client's skeleton and pose (``core.characters``) -> its
+joint map (``core.characters_maps``: automatic for common naming schemes, or explicit) ->
+the 21 mapped points, converted to metres and +Y up -> ``Engine.solve`` -> back to the
+client's units and axes -> local rotations by ``core.retarget`` (swing-only, twist kept,
+bone lengths the character's own) -> rotations (JSON) or the file with that frame edited
+(``core.bvh_write``). Every target and pin is reported as measured on the answer itself
+(forward kinematics of the returned rotations), in metres. Conventions: docs/characters.md.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Annotated, Any, Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
+
+from core.bvh import BVH, BVHError, parse_bvh
+from core.bvh_write import pose_of, row_of, skeleton_of, splice_frame
+from core.characters import (
+    F64,
+    CharacterError,
+    Pose,
+    Skeleton,
+    build_skeleton,
+    forward_kinematics,
+    matrix_to_quat,
+    quat_to_matrix,
+    units_scale,
+    up_rotation,
+)
+from core.characters_maps import JointMap, infer_units, infer_up, resolve_map
+from core.retarget import anchor_points, canonical_points, retarget
+from core.skeleton import BONES, JOINT_INDEX, JOINT_NAMES
+from service.engine import Engine, SolveProblem, SolveResult
+from service.errors import InvalidRequest
+from service.schemas import SolveOptions, TargetResult
+
+MAX_COORDINATE = 1.0e7  # client units; beyond this a coordinate is nonsense
+MIN_BONE = 1.0e-4  # metres, as /v1/solve
+
+Number = Annotated[float, Field(allow_inf_nan=False, ge=-MAX_COORDINATE, le=MAX_COORDINATE)]
+Vec3 = Annotated[
+    list[Number], Field(min_length=3, max_length=3, description="x, y, z in the client's units.")
+]
+Quat = Annotated[
+    list[Annotated[float, Field(allow_inf_nan=False)]],
+    Field(min_length=4, max_length=4, description="[x, y, z, w] (scalar last), any length > 0."),
+]
+Units = Annotated[
+    Literal["m", "cm", "mm", "in", "ft"] | Annotated[float, Field(gt=0, allow_inf_nan=False)],
+    Field(description="Unit name, or metres per unit (e.g. 0.0564444 for CMU ASF units)."),
+]
+
+
+class _Body(BaseModel):
+    model_config = ConfigDict(extra="forbid", strict=True)
+
+
+class CharacterTarget(_Body):
+    joint: str = Field(description="The client's joint name (mapped) or a canonical name.")
+    position: Vec3
+    weight: float = Field(default=1.0, gt=0.0, le=1000.0, allow_inf_nan=False)
+
+
+class _Frame(_Body):
+    targets: list[CharacterTarget] = Field(min_length=1, max_length=21)
+    pins: list[str] = Field(default_factory=list, max_length=21)
+    options: SolveOptions = Field(default_factory=SolveOptions)
+    joint_map: dict[str, str] | None = Field(
+        default=None, description="canonical joint -> the client's joint name; wins over the "
+        "automatic map joint by joint.",
+    )  # fmt: skip
+
+
+class JointSpec(_Body):
+    name: str = Field(min_length=1, max_length=200)
+    parent: str | None = None
+    offset: Vec3 = Field(description="Rest offset from the parent (root: rest position).")
+
+
+class CharacterSkeleton(_Body):
+    joints: list[JointSpec] = Field(min_length=1, max_length=2000)
+    units: Units = "m"
+    up: Literal["+Y", "+Z"] = "+Y"
+
+
+class CharacterSolveRequest(_Frame):
+    skeleton: CharacterSkeleton
+    rotations: dict[str, Quat] = Field(
+        default_factory=dict, description="Local rotation per joint; missing joints: identity."
+    )
+    root_position: Vec3 | None = Field(default=None, description="Default: the root's offset.")
+
+
+class BVHSolveRequest(_Frame):
+    bvh: str = Field(min_length=1, description="The whole BVH file.")
+    frame: int = Field(ge=0, description="Index of the frame to edit (0 = first).")
+    units: Units | None = Field(default=None, description="Default: inferred from the file.")
+    up: Literal["+Y", "+Z"] | None = Field(default=None, description="Default: inferred.")
+
+
+class _Answer(BaseModel):
+    targets: list[TargetResult]
+    pins: list[TargetResult]
+    joint_map: dict[str, str] = Field(description="canonical joint -> the point it was mapped to")
+    scheme: str = Field(description="Naming scheme of the automatic map, or 'explicit'.")
+    units: str | float
+    up: str
+    solvers: list[str]
+    model: str
+    method: Literal["neural", "fabrik"]
+    iterations: int
+
+
+class CharacterSolveResponse(_Answer):
+    rotations: dict[str, list[float]] = Field(description="Every joint: [x, y, z, w].")
+    root_position: list[float]
+    positions: dict[str, list[float]] = Field(description="Every joint, by FK of the answer.")
+
+
+class BVHSolveResponse(_Answer):
+    bvh: str = Field(description="The same file with that frame edited.")
+    frame: int
+    changed_joints: list[str]
+
+
+@dataclass(frozen=True)
+class Character:
+    skel: Skeleton
+    pose: Pose
+    jmap: JointMap
+    scale: float  # metres per unit
+    up: F64  # rotation taking the client's up axis to +Y
+    units: str | float
+    up_name: str
+
+    def to_service(self, p: F64) -> F64:
+        return np.asarray(self.scale * (p @ self.up.T))
+
+    def from_service(self, p: F64) -> F64:
+        return np.asarray((p / self.scale) @ self.up)
+
+
+def _invalid(exc: Exception) -> InvalidRequest:
+    return InvalidRequest(str(exc))
+
+
+def _character(
+    skel: Skeleton,
+    pose: Pose,
+    jmap: JointMap,
+    units: Any,
+    up: str | None,
+    points: F64 | None = None,
+) -> Character:
+    if units is None:
+        name, leg = infer_units(skel, jmap)
+        if name is None:
+            raise InvalidRequest(
+                f"units: not plain from the file (rest-pose leg, hip to ankle, is {leg:.4g} "
+                "units: not 0.3-1.3 m, 45-130 cm or 450-1300 mm); state them, e.g. "
+                '"units": "in" or "units": 0.0564444'
+            )
+        units = name
+    if up is None:
+        found = infer_up(skel, jmap, points)
+        if found is None:
+            raise InvalidRequest(
+                "up: neither the rest pose nor this frame stands up along +Y or +Z; "
+                'state it, e.g. "up": "+Z"'
+            )
+        up = found
+    return Character(skel, pose, jmap, units_scale(units), up_rotation(up), units, up)
+
+
+def _resolve_joint(ch: Character, name: str, where: str) -> int:
+    for k, a in enumerate(ch.jmap.anchors):
+        if ch.skel.names[a.joint] == name and not a.offset.any():
+            return k
+    if name in JOINT_INDEX:
+        return JOINT_INDEX[name]
+    mapped = ", ".join(f"{n} ({lbl})" for n, lbl in ch.jmap.describe().items())
+    raise InvalidRequest(
+        f"{where}: {name!r} is neither a mapped joint of this skeleton nor a canonical "
+        f"joint; mapped: {mapped}"
+    )
+
+
+def _problem(ch: Character, req: _Frame, start: F64) -> SolveProblem:
+    """The canonical solve problem, in metres and +Y up."""
+    pts = ch.to_service(start)
+    lengths = np.linalg.norm(pts[[c for c, _ in BONES]] - pts[[p for _, p in BONES]], axis=1)
+    if lengths.min() < MIN_BONE:
+        short = [JOINT_NAMES[c] for (c, _), n in zip(BONES, lengths, strict=True) if n < MIN_BONE]
+        raise InvalidRequest(
+            f"joint_map: the mapped points make zero-length bones ending at {short} "
+            f"(each canonical joint must be at least {MIN_BONE * 1000:g} mm from its parent)"
+        )
+    idx: list[int] = []
+    goals = []
+    for i, t in enumerate(req.targets):
+        k = _resolve_joint(ch, t.joint, f"targets[{i}].joint")
+        if k in idx:
+            raise InvalidRequest(f"targets[{i}]: a second target for {JOINT_NAMES[k]!r}")
+        idx.append(k)
+        goals.append(ch.to_service(np.asarray(t.position, dtype=np.float64)))
+    n = len(idx)
+    for i, name in enumerate(req.pins):
+        k = _resolve_joint(ch, name, f"pins[{i}]")
+        if k in idx:
+            what = "targeted" if idx.index(k) < n else "pinned twice"
+            raise InvalidRequest(f"pins[{i}]: joint {JOINT_NAMES[k]!r} is {what}")
+        idx.append(k)
+        goals.append(pts[k])
+    weights = np.ones(len(idx))
+    weights[:n] = [t.weight for t in req.targets]
+    o = req.options
+    return SolveProblem(
+        pose=pts,
+        target_idx=np.asarray(idx, dtype=np.intp),
+        target_pos=np.stack(goals),
+        weights=weights,
+        n_targets=n,
+        method=o.method,
+        preserve_bone_lengths=o.preserve_bone_lengths,
+        reach=o.reach,
+        tolerance=o.tolerance,
+        floor=o.floor,
+    )
+
+
+@dataclass(frozen=True)
+class Edit:
+    pose: Pose
+    changed: frozenset[int]  # joints whose local rotation or translation changed
+    problem: SolveProblem
+    result: SolveResult
+    version: str
+
+
+def solve_character(engine: Engine, ch: Character, req: _Frame) -> Edit:
+    """Solve one frame of a character: the new pose and what it took."""
+    start = canonical_points(ch.skel, ch.pose, ch.jmap)
+    p = _problem(ch, req, start)
+    (result,) = engine.solve([p])
+    solved = ch.from_service(np.asarray(result.pose, dtype=np.float64))
+    pairs = zip(p.target_idx.tolist(), p.target_pos, strict=True)
+    exact = [(j, ch.from_service(g)) for j, g in pairs] if p.reach == "exact" else []
+    out = retarget(ch.skel, ch.pose, ch.jmap, solved, exact=exact, tolerance=p.tolerance / ch.scale)
+    return Edit(out.pose, out.changed, p, result, engine.version)
+
+
+def _report(ch: Character, edit: Edit, points: F64) -> dict[str, Any]:
+    """The fields of :class:`_Answer`, targets and pins measured on ``points`` (the 21
+    mapped points of the answer, client units)."""
+    p, r = edit.problem, edit.result
+    got = ch.to_service(points)[p.target_idx]
+    errors = np.linalg.norm(got - p.target_pos, axis=1).tolist()
+    rows = [
+        {"joint": JOINT_NAMES[int(j)], "error": e, "reached": e <= p.tolerance}
+        for j, e in zip(p.target_idx, errors, strict=True)
+    ]
+    return {
+        "targets": rows[: p.n_targets],
+        "pins": rows[p.n_targets :],
+        "joint_map": ch.jmap.describe(),
+        "scheme": ch.jmap.scheme,
+        "units": ch.units,
+        "up": ch.up_name,
+        "solvers": r.solvers,
+        "model": edit.version,
+        "method": "fabrik" if p.method == "fabrik" else "neural",
+        "iterations": r.iterations,
+    }
+
+
+# --------------------------------------------------------------------------------------
+# JSON characters
+# --------------------------------------------------------------------------------------
+def character_from_request(req: CharacterSolveRequest) -> Character:
+    joints = req.skeleton.joints
+    try:
+        skel, _ = build_skeleton(
+            [j.name for j in joints], [j.parent for j in joints], [j.offset for j in joints]
+        )
+        unknown = sorted(set(req.rotations) - set(skel.names))
+        if unknown:
+            raise CharacterError(f"rotations: unknown joints {unknown[:8]}")
+        rot = np.broadcast_to(np.eye(3), (skel.size, 3, 3)).copy()
+        for name, q in req.rotations.items():
+            if float(np.linalg.norm(q)) < 1e-6:
+                raise CharacterError(f"rotations.{name}: zero-length quaternion {q}")
+            rot[skel.index[name]] = quat_to_matrix(q)
+        trans = skel.offsets.copy()
+        roots = [j for j, p in enumerate(skel.parents) if p < 0]
+        if len(roots) != 1:
+            raise CharacterError(
+                f"skeleton.joints: {len(roots)} roots {[skel.names[r] for r in roots][:8]}; "
+                "one is needed"
+            )
+        if req.root_position is not None:
+            trans[roots[0]] = req.root_position
+        pose = Pose(rot, trans)
+        jmap = resolve_map(skel, req.joint_map)
+        return _character(skel, pose, jmap, req.skeleton.units, req.skeleton.up)
+    except CharacterError as exc:
+        raise _invalid(exc) from None
+
+
+def character_answer(ch: Character, edit: Edit) -> dict[str, Any]:
+    g_rot, g_pos = forward_kinematics(ch.skel, edit.pose)
+    quats = matrix_to_quat(edit.pose.rotations)
+    root = ch.skel.parents.index(-1)
+    return {
+        "rotations": dict(zip(ch.skel.names, quats.tolist(), strict=True)),
+        "root_position": edit.pose.translations[root].tolist(),
+        "positions": dict(zip(ch.skel.names, g_pos.tolist(), strict=True)),
+        **_report(ch, edit, anchor_points(ch.jmap, g_rot, g_pos)),
+    }
+
+
+# --------------------------------------------------------------------------------------
+# BVH
+# --------------------------------------------------------------------------------------
+def read_request_bvh(text: str) -> BVH:
+    """Parse and check a BVH body: every failure is a 422 naming the line and the reason."""
+    try:
+        bvh = parse_bvh(text, "bvh")
+    except BVHError as exc:
+        raise _invalid(exc) from None
+    bad = ~np.isfinite(bvh.motion)
+    if bad.any():
+        f, c = (int(v) for v in np.argwhere(bad)[0])
+        line = bvh.text[: bvh.motion_offset].count("\n") + 1 + f
+        joint = next(j for j in reversed(bvh.joints) if j.channel_start <= c and j.channels)
+        raise InvalidRequest(
+            f"bvh: line {line}: frame {f}, channel {joint.name}.{joint.channels[c - joint.channel_start]}"  # noqa: E501
+            f" is {bvh.motion[f, c]!r}: channel values must be finite numbers"
+        )
+    return bvh
+
+
+def character_from_bvh(bvh: BVH, req: BVHSolveRequest) -> Character:
+    if req.frame >= bvh.num_frames:
+        raise InvalidRequest(f"frame: {req.frame} is out of range: the file has {bvh.num_frames}")
+    try:
+        skel = skeleton_of(bvh)
+        pose = pose_of(bvh, req.frame)
+        jmap = resolve_map(skel, req.joint_map)
+        g_rot, g_pos = forward_kinematics(skel, pose)
+        points = anchor_points(jmap, g_rot, g_pos)
+        return _character(skel, pose, jmap, req.units, req.up, points)
+    except (CharacterError, BVHError) as exc:
+        raise _invalid(exc) from None
+
+
+def bvh_answer(bvh: BVH, ch: Character, req: BVHSolveRequest, edit: Edit) -> dict[str, Any]:
+    row, columns = row_of(bvh, req.frame, edit.pose, edit.changed)
+    text = splice_frame(bvh, req.frame, row, columns)
+    # the report is measured on the values as written (rounded), read back
+    points = canonical_points(ch.skel, pose_of(bvh, req.frame, row), ch.jmap)
+    return {
+        "bvh": text,
+        "frame": req.frame,
+        "changed_joints": [ch.skel.names[j] for j in sorted(edit.changed)],
+        **_report(ch, edit, points),
+    }

@@ -1,0 +1,58 @@
+"""``POST /v1/character/solve`` (a skeleton of the client's own, local rotations in and
+out) and ``POST /v1/bvh/solve`` (a BVH file in, the same file with one frame edited out).
+The work is ``service.characters``; conventions: docs/characters.md."""
+
+from __future__ import annotations
+
+from fastapi import APIRouter, Response
+from starlette.concurrency import run_in_threadpool
+
+from service.body import BodyRoute
+from service.characters import (
+    BVHSolveRequest,
+    BVHSolveResponse,
+    CharacterSolveRequest,
+    CharacterSolveResponse,
+    bvh_answer,
+    character_answer,
+    character_from_bvh,
+    character_from_request,
+    read_request_bvh,
+    solve_character,
+)
+from service.deps import ReadyEngine, State
+from service.engine import Engine
+from service.responses import json_response
+
+router = APIRouter(route_class=BodyRoute, tags=["characters"])
+
+
+@router.post("/v1/character/solve", response_model=CharacterSolveResponse)
+async def character_solve(
+    req: CharacterSolveRequest, engine: ReadyEngine, state: State
+) -> Response:
+    """Solve a character given in its own skeleton: local rotations of every joint out."""
+
+    def work(engine: Engine) -> dict[str, object]:
+        ch = character_from_request(req)
+        edit = solve_character(engine, ch, req)
+        state.metrics.solved(edit.problem.method, edit.result.solvers)
+        return character_answer(ch, edit)
+
+    return json_response(await run_in_threadpool(work, engine))
+
+
+@router.post("/v1/bvh/solve", response_model=BVHSolveResponse)
+async def bvh_solve(req: BVHSolveRequest, engine: ReadyEngine, state: State) -> Response:
+    """Edit one frame of a BVH file: targets in the file's units and axes, the same file
+    back with that frame changed (hierarchy, offsets, channel orders, the other frames and
+    the frame time untouched)."""
+
+    def work(engine: Engine) -> dict[str, object]:
+        bvh = read_request_bvh(req.bvh)
+        ch = character_from_bvh(bvh, req)
+        edit = solve_character(engine, ch, req)
+        state.metrics.solved(edit.problem.method, edit.result.solvers)
+        return bvh_answer(bvh, ch, req, edit)
+
+    return json_response(await run_in_threadpool(work, engine))
