@@ -37,6 +37,10 @@ class AutoencoderConfig(_Section):
 class SolverConfig(_Section):
     hidden: list[int] = Field(default=[126, 126, 126], min_length=1)
     residual: bool = Field(default=True, description="Output z + f(z, targets).")
+    delta: bool = Field(
+        default=True,
+        description="Answer start + D(z') - D(z) (trained and served so); False: D(z').",
+    )
     lr: float = Field(default=1e-4, gt=0)
     batch_size: int = Field(default=256, gt=0)
     epochs: int = Field(default=5, ge=1)
@@ -126,6 +130,44 @@ class CompletionConfig(_Section):
         return out
 
 
+class AugmentConfig(_Section):
+    """Training-time variety of bodies, facing and frames (``trainer/augment.py``)."""
+
+    body_fraction: float = Field(
+        default=0.8, ge=0, le=1, description="Share of samples rebuilt on a random body."
+    )
+    bone_sigma: float = Field(default=0.12, ge=0, description="Log-normal sigma per bone.")
+    limb_sigma: float = Field(default=0.05, ge=0, description="Log-normal sigma per body.")
+    symmetric_fraction: float = Field(default=0.5, ge=0, le=1)
+    min_scale: float = Field(default=0.6, gt=0)
+    max_scale: float = Field(default=1.6, gt=0)
+    pelvis_shift: float = Field(
+        default=0.35, ge=0, description="Pelvis moved up to this share of pelvis->spine1."
+    )
+    mirror: bool = True
+    normalise_size: bool = Field(
+        default=True,
+        description="Scale every body to the reference total bone length (the service does "
+        "the same), instead of the old nearest-training-skeleton scale.",
+    )
+    yaw_sigma_deg: float = Field(
+        default=25.0, ge=0, description="Autoencoder: random facing of a pose (goals turn)."
+    )
+    offset_fraction: float = Field(default=0.3, ge=0, le=1)
+    offset_sigma: float = Field(default=0.08, ge=0, description="Autoencoder: floor offset (m).")
+    align_pelvis: float = Field(
+        default=0.5, ge=0, le=1, description="Pairs: start moved onto the goal's pelvis."
+    )
+    align_floor: float = Field(
+        default=0.3, ge=0, le=1, description="Pairs: start moved onto the goal's floor point."
+    )
+    world_pairs: bool = Field(
+        default=True,
+        description="Pairs in the start's frame (False: both canonicalised, the old way).",
+    )
+    enabled: bool = Field(default=True, description="False: no augmentation at all.")
+
+
 class TrainConfig(_Section):
     seed: int = 0
     threads: int = Field(
@@ -140,20 +182,38 @@ class TrainConfig(_Section):
     autoencoder: AutoencoderConfig = AutoencoderConfig()
     solver: SolverConfig = SolverConfig()
     completion: CompletionConfig = CompletionConfig()
+    augment: AugmentConfig = AugmentConfig()
+
+
+def _read_toml(path: Path, seen: tuple[Path, ...] = ()) -> dict[str, Any]:
+    """A config file's table; ``extends = "other.toml"`` (relative to the file) loads that
+    file first and overrides it section by section, so a variant states only its change."""
+    path = path.resolve()
+    if path in seen:
+        raise ValueError(f"{path}: 'extends' loops back to itself")
+    with path.open("rb") as fh:
+        data = tomllib.load(fh)
+    parent = data.pop("extends", None)
+    if parent is None:
+        return data
+    base = _read_toml(path.parent / str(parent), (*seen, path))
+    return _merge(base, data)
+
+
+def _merge(base: dict[str, Any], overrides: dict[str, Any]) -> dict[str, Any]:
+    out = dict(base)
+    for key, value in overrides.items():
+        if isinstance(value, dict) and isinstance(out.get(key), dict):
+            out[key] = {**out[key], **value}
+        else:
+            out[key] = value
+    return out
 
 
 def load_config(path: Path | str | None, overrides: dict[str, Any] | None = None) -> TrainConfig:
     """Load a TOML config (or the defaults), then apply ``overrides`` (shallow per section)."""
-    data: dict[str, Any] = {}
-    if path is not None:
-        with Path(path).open("rb") as fh:
-            data = tomllib.load(fh)
-    for key, value in (overrides or {}).items():
-        if isinstance(value, dict):
-            data[key] = {**data.get(key, {}), **value}
-        else:
-            data[key] = value
-    return TrainConfig.model_validate(data)
+    data: dict[str, Any] = {} if path is None else _read_toml(Path(path))
+    return TrainConfig.model_validate(_merge(data, overrides or {}))
 
 
 #: Overrides of ``--quick``: a seconds-long smoke run of every stage.

@@ -1,0 +1,125 @@
+"""The training ablation's table: one row per variant, scored on held-out bodies.
+
+``scripts/ablation.sh`` trains every variant of ``trainer/configs/ablation/`` at a small
+budget and scores it with ``python -m bench.heldout`` into ``reports/ablation/<name>.json``;
+``python -m bench.ablation`` reads those files and writes ``reports/ablation.md``.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Annotated, Any
+
+import numpy as np
+import typer
+
+from core.io import write_atomic
+
+#: What each variant changes against ``full`` (the shipped recipe at the ablation budget).
+VARIANTS: dict[str, str] = {
+    "shipped-before": "the models shipped before issue 11 (full budget, old recipe)",
+    "no_augment": "no random bodies, mirror, facing or offsets; pairs canonicalised apart",
+    "canonical_pairs": "random bodies kept; each pose of a pair canonicalised on its own",
+    "no_bodies": "world-frame pairs and mirror kept; recorded bodies only, no size norm",
+    "no_delta": "answer D(z') instead of start + D(z') - D(z)",
+    "full": "everything: world-frame pairs, random bodies, mirror, delta, size norm",
+    "shipped": "the shipped recipe at its full budget (trainer/configs/default.toml)",
+}
+COMPLETION = "6-point completion"
+
+
+@dataclass(frozen=True)
+class Row:
+    variant: str
+    family: str
+    soft: float  # mean MPJPE over edit sets (cm), neural soft + bone pass
+    exact: float
+    fabrik: float
+    start: float
+    soft_wins: str  # sets where soft < FABRIK
+    five_ratio: float  # 5 end effectors: soft / FABRIK
+    reach: float  # mean soft reach over edit sets (cm)
+    completion: float
+    recon: float
+
+
+def _rows(name: str, data: dict[str, Any], families: list[str] | None) -> list[Row]:
+    out = []
+    for fam in data["families"]:
+        if families is not None and fam["name"] not in families:
+            continue
+        sets = {k: v for k, v in fam["sets"].items() if k != COMPLETION}
+        if not sets:
+            continue
+
+        def mean(method: str, key: str = "mpjpe", sets: dict[str, Any] = sets) -> float:
+            return float(np.mean([s[method][key] for s in sets.values()]))
+
+        wins = sum(s["neural_bone"]["mpjpe"] < s["fabrik"]["mpjpe"] for s in sets.values())
+        five = sets.get("5 end effectors")
+        comp = fam["sets"].get(COMPLETION, {}).get("completion", {}).get("mpjpe", float("nan"))
+        out.append(
+            Row(
+                variant=name,
+                family=fam["name"],
+                soft=mean("neural_bone"),
+                exact=mean("neural_exact"),
+                fabrik=mean("fabrik"),
+                start=mean("identity"),
+                soft_wins=f"{wins}/{len(sets)}",
+                five_ratio=(
+                    five["neural_bone"]["mpjpe"] / five["fabrik"]["mpjpe"] if five else float("nan")
+                ),
+                reach=mean("neural_bone", "reach_mean"),
+                completion=float(comp),
+                recon=float(fam.get("recon", {}).get("mean", float("nan"))),
+            )
+        )
+    return out
+
+
+def render(rows: list[Row]) -> str:
+    head = (
+        "| variant | bodies | start | FABRIK | soft | exact | soft < FABRIK | "
+        "5 eff. soft/FABRIK | reach soft | 6-pt | AE recon |\n"
+        "|---|---|---|---|---|---|---|---|---|---|---|\n"
+    )
+    body = "".join(
+        f"| {r.variant} | {r.family} | {r.start:.2f} | {r.fabrik:.2f} | {r.soft:.2f} | "
+        f"{r.exact:.2f} | {r.soft_wins} | {r.five_ratio:.2f} | {r.reach:.2f} | "
+        f"{r.completion:.2f} | {r.recon:.2f} |\n"
+        for r in rows
+    )
+    legend = "".join(f"- **{k}**: {v}\n" for k, v in VARIANTS.items())
+    return (
+        "MPJPE to the real pose in cm, mean over the edit sets of a family "
+        "(`python -m bench.heldout`); lower is better.\n\n" + head + body + "\n" + legend
+    )
+
+
+def main(
+    folder: Annotated[Path, typer.Option(help="Folder of <variant>.json files.")] = Path(
+        "reports/ablation"
+    ),
+    out: Annotated[Path, typer.Option(help="Markdown table to write.")] = Path(
+        "reports/ablation.md"
+    ),
+    family: Annotated[
+        list[str] | None, typer.Option(help="Families to show (default: every one).")
+    ] = None,
+) -> None:
+    """Summarise the ablation's held-out results into one markdown table."""
+    rows: list[Row] = []
+    for name in VARIANTS:
+        path = folder / f"{name}.json"
+        if path.is_file():
+            rows.extend(_rows(name, json.loads(path.read_text()), family))
+    text = "# Training ablation on held-out bodies\n\n" + render(rows)
+    write_atomic(out, text.encode())
+    typer.echo(text)
+
+
+if __name__ == "__main__":
+    typer.run(main)
