@@ -1,21 +1,35 @@
 """Domain errors and their one mapping to HTTP problem details (RFC 9457).
 
-The data plane raises these; ``install_handlers`` turns them (and FastAPI's own request
-validation errors, and anything unexpected) into ``application/problem+json``.
+Everything a client can get wrong or run into is a ``PoseError`` (or, for the body
+reader, ``BodyError``); ``install_handlers`` turns those, FastAPI's request validation
+errors and anything unexpected into ``application/problem+json``. Details quote at most
+``QUOTE`` characters of the client's input.
 """
 
 from __future__ import annotations
 
 import logging
+from collections.abc import Sequence
 from typing import Any
 
-from fastapi import FastAPI, Request
+from fastapi import FastAPI, HTTPException, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
+from core.skeleton import JOINT_NAMES
+
 PROBLEM_JSON = "application/problem+json"
+PROBLEM_BASE = "https://marionette.dev/problems/"
+REASON = "pose.reason"  # scope key: why a request was refused (a problem type), for metrics
+QUOTE = 100  # characters of client input an error detail may quote
 log = logging.getLogger("service")
+
+
+def clip(text: object, limit: int = QUOTE) -> str:
+    """``text`` as a string of at most ``limit`` characters (``…`` marks a cut)."""
+    s = str(text)
+    return s if len(s) <= limit else s[: limit - 1] + "…"
 
 
 class PoseError(Exception):
@@ -24,6 +38,7 @@ class PoseError(Exception):
     status = 422
     title = "Unprocessable pose request"
     type_ = "invalid-request"
+    retry_after: int | None = None
 
     def __init__(self, detail: str, **extra: Any) -> None:
         super().__init__(detail)
@@ -32,7 +47,13 @@ class PoseError(Exception):
 
 
 class InvalidRequest(PoseError):
-    """Unknown joint, duplicate target, NaN, wrong vector length, degenerate pose…"""
+    """Duplicate target, pin on a target, degenerate pose, missing base points…"""
+
+
+class MalformedBody(PoseError):
+    status = 400
+    title = "Malformed request body"
+    type_ = "malformed-body"
 
 
 class TooManyItems(PoseError):
@@ -59,10 +80,63 @@ class Unauthorized(PoseError):
     type_ = "unauthorized"
 
 
+class Forbidden(PoseError):
+    status = 403
+    title = "Origin not allowed"
+    type_ = "cors-rejected"
+
+
+class TooManyRequests(PoseError):
+    status = 429
+    title = "Too many concurrent requests"
+    type_ = "too-many-requests"
+    retry_after = 1
+
+
 class NotReady(PoseError):
     status = 503
     title = "Models not ready"
     type_ = "not-ready"
+    retry_after = 5
+
+
+class ShuttingDown(PoseError):
+    status = 503
+    title = "Shutting down"
+    type_ = "shutting-down"
+    retry_after = 1
+
+
+class DeadlineExceeded(PoseError):
+    status = 504
+    title = "Deadline exceeded"
+    type_ = "deadline-exceeded"
+    retry_after = 1
+
+
+class ClientDisconnected(PoseError):
+    """The client went away: work stopped; logged as 499, never sent."""
+
+    status = 499
+    title = "Client closed request"
+    type_ = "client-disconnected"
+
+
+class BodyError(HTTPException):
+    """A ``PoseError`` raised while FastAPI reads the body (which lets only
+    ``HTTPException`` through), carried to the same problem mapping."""
+
+    def __init__(self, error: PoseError) -> None:
+        super().__init__(error.status, error.detail)
+        self.error = error
+
+
+class BodyInvalid(HTTPException):
+    """Field errors found while validating the body off the event loop."""
+
+    def __init__(self, errors: Sequence[Any]) -> None:
+        super().__init__(422, "invalid request body")
+        self.errors = list(errors)
 
 
 def problem(
@@ -75,43 +149,80 @@ def problem(
     **extra: Any,
 ) -> JSONResponse:
     body: dict[str, Any] = {
-        "type": type_ if type_ == "about:blank" else f"https://marionette.dev/problems/{type_}",
+        "type": type_ if type_ == "about:blank" else PROBLEM_BASE + type_,
         "title": title,
         "status": status,
         "detail": detail,
     }
     body.update(extra)
     if status == 401:
-        headers = {**(headers or {}), "WWW-Authenticate": "ApiKey"}
+        headers = {**(headers or {}), "WWW-Authenticate": "ApiKey, Bearer"}
     return JSONResponse(body, status_code=status, media_type=PROBLEM_JSON, headers=headers)
 
 
-def _location(loc: tuple[Any, ...] | list[Any]) -> str:
-    parts = [str(p) for p in loc if p != "body"]
-    return ".".join(parts) or "body"
+def error_response(exc: PoseError) -> JSONResponse:
+    """The one problem+json answer of a domain error (with ``Retry-After`` when useful)."""
+    headers = {"Retry-After": str(exc.retry_after)} if exc.retry_after is not None else None
+    return problem(exc.status, exc.title, exc.detail, type_=exc.type_, headers=headers, **exc.extra)
+
+
+def _location(loc: Sequence[Any]) -> str:
+    """``items[2].targets[0].joint``: the same notation as the cross-field checks."""
+    out = ""
+    for part in loc:
+        if part == "body" and not out:
+            continue
+        out += f"[{part}]" if isinstance(part, int) else f"{'.' if out else ''}{clip(part, 40)}"
+    return clip(out or "body", QUOTE)
+
+
+def _message(error: Any) -> str:
+    """pydantic's message, made specific where it is vague and never echoing much input."""
+    kind = error.get("type", "")
+    ctx = error.get("ctx") or {}
+    value = error.get("input")
+    if kind == "literal_error" and "'pelvis'" in str(ctx.get("expected", "")):
+        where = "no bone ends at" if "[key]" in error.get("loc", ()) else "unknown joint"
+        return f"{where} {clip(repr(value))}; joints are {', '.join(JOINT_NAMES)}"
+    if kind == "finite_number":
+        return "must be a finite number (NaN and infinities are not)"
+    if (
+        kind in ("less_than_equal", "greater_than_equal")
+        and abs(float(ctx.get("le", ctx.get("ge", 0)))) == 1.0e4
+    ):
+        return f"coordinate {clip(value, 30)} beyond ±10000 m"
+    return clip(error.get("msg", "invalid"), 2 * QUOTE)
+
+
+def validation_problem(raw: Sequence[Any]) -> JSONResponse:
+    errors = [{"location": _location(e.get("loc", ())), "message": _message(e)} for e in raw]
+    detail = "; ".join(f"{e['location']}: {e['message']}" for e in errors[:3])
+    if len(errors) > 3:
+        detail += f"; and {len(errors) - 3} more"
+    return problem(422, "Invalid request body", detail, type_="invalid-request", errors=errors[:20])
 
 
 def install_handlers(app: FastAPI) -> None:
     @app.exception_handler(PoseError)
-    async def _pose_error(_: Request, exc: PoseError) -> JSONResponse:
-        return problem(exc.status, exc.title, exc.detail, type_=exc.type_, **exc.extra)
+    async def _pose_error(request: Request, exc: PoseError) -> JSONResponse:
+        request.scope[REASON] = exc.type_
+        return error_response(exc)
 
     @app.exception_handler(RequestValidationError)
-    async def _validation(_: Request, exc: RequestValidationError) -> JSONResponse:
-        errors = [
-            {"location": _location(e.get("loc", ())), "message": str(e.get("msg", ""))}
-            for e in exc.errors()
-        ]
-        detail = "; ".join(f"{e['location']}: {e['message']}" for e in errors[:10])
-        return problem(
-            422, "Invalid request body", detail, type_="invalid-request", errors=errors[:50]
-        )
+    async def _validation(request: Request, exc: RequestValidationError) -> JSONResponse:
+        request.scope[REASON] = "invalid-request"
+        return validation_problem(exc.errors())
 
     @app.exception_handler(StarletteHTTPException)
-    async def _http(_: Request, exc: StarletteHTTPException) -> JSONResponse:
-        return problem(
-            exc.status_code, str(exc.detail), str(exc.detail), headers=dict(exc.headers or {})
-        )
+    async def _http(request: Request, exc: StarletteHTTPException) -> JSONResponse:
+        if isinstance(exc, BodyError):
+            request.scope[REASON] = exc.error.type_
+            return error_response(exc.error)
+        if isinstance(exc, BodyInvalid):
+            request.scope[REASON] = "invalid-request"
+            return validation_problem(exc.errors)
+        detail = clip(exc.detail)
+        return problem(exc.status_code, detail, detail, headers=dict(exc.headers or {}))
 
     @app.exception_handler(Exception)
     async def _unexpected(request: Request, exc: Exception) -> JSONResponse:
@@ -120,5 +231,5 @@ def install_handlers(app: FastAPI) -> None:
 
 def internal_error(method: str, path: str) -> JSONResponse:
     """Log the exception being handled and answer a 500 problem (no internals leak)."""
-    log.exception("unhandled error on %s %s", method, path)
+    log.exception("unhandled error on %s %s", method, clip(path))
     return problem(500, "Internal error", "an unexpected error occurred; see the server log")

@@ -2,23 +2,38 @@
 
 from __future__ import annotations
 
-from typing import Annotated, Any, Literal
+from typing import TYPE_CHECKING, Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, create_model
 
-from core.skeleton import BASE_KEYPOINTS, JOINT_NAMES
+from core.rest import rest_pose
+from core.skeleton import BASE_KEYPOINTS, JOINT_NAMES, PARENT_NAMES
 
-Vec3 = Annotated[
-    list[float],
-    Field(min_length=3, max_length=3, description="x, y, z in metres (world frame, +Y up)."),
+#: Coordinates beyond this (metres) are rejected as nonsense.
+MAX_COORDINATE = 1.0e4
+
+if TYPE_CHECKING:  # the names are only known at run time
+    JointName = str
+    BoneName = str
+else:
+    JointName = Literal[JOINT_NAMES]
+    #: The joint a bone ends at (every joint but the root) names that bone.
+    BoneName = Literal[tuple(j for j in JOINT_NAMES if PARENT_NAMES[j] is not None)]
+
+Coordinate = Annotated[
+    float,
+    Field(allow_inf_nan=False, ge=-MAX_COORDINATE, le=MAX_COORDINATE),
 ]
-Joint = Annotated[
-    str,
+Vec3 = Annotated[
+    list[Coordinate],
     Field(
-        description="A joint name of the canonical skeleton.",
-        json_schema_extra={"enum": list(JOINT_NAMES)},
+        min_length=3,
+        max_length=3,
+        description=f"x, y, z in metres (world frame, +Y up), each within ±{MAX_COORDINATE:g}.",
     ),
 ]
+Joint = Annotated[JointName, Field(description="A joint name of the canonical skeleton.")]
+Finite = Annotated[float, Field(allow_inf_nan=False)]
 
 #: A whole pose: exactly the 21 joints, each [x, y, z] in metres (world frame).
 Pose: type[BaseModel] = create_model(
@@ -28,28 +43,18 @@ Pose: type[BaseModel] = create_model(
     **{name: (Vec3, ...) for name in JOINT_NAMES},  # type: ignore[call-overload]
 )
 
+#: An answered pose: the 21 joints, world space, metres (not bounded like the input: a
+#: pose near the coordinate limit may be answered just beyond it).
+PoseOut: type[BaseModel] = create_model(
+    "PoseOut",
+    __doc__="Every one of the 21 joints, world space, metres.",
+    **{name: (list[float], ...) for name in JOINT_NAMES},  # type: ignore[call-overload]
+)
+
+#: The example pose of the contract: the canonical rest pose (``core.rest``), mm-rounded.
 _REST_EXAMPLE: dict[str, Any] = {
-    "pelvis": [0.0, 0.95, 0.0],
-    "spine1": [0.0, 1.1, -0.01],
-    "spine2": [0.0, 1.21, -0.01],
-    "neck": [0.0, 1.43, -0.03],
-    "head": [0.0, 1.52, -0.01],
-    "left_collar": [0.03, 1.39, -0.05],
-    "left_shoulder": [0.17, 1.39, -0.05],
-    "left_elbow": [0.2, 1.12, -0.07],
-    "left_wrist": [0.22, 0.89, -0.04],
-    "right_collar": [-0.03, 1.39, -0.05],
-    "right_shoulder": [-0.17, 1.39, -0.05],
-    "right_elbow": [-0.2, 1.12, -0.07],
-    "right_wrist": [-0.22, 0.89, -0.04],
-    "left_hip": [0.09, 0.9, 0.0],
-    "left_knee": [0.1, 0.49, 0.01],
-    "left_ankle": [0.1, 0.08, -0.02],
-    "left_foot": [0.11, 0.02, 0.1],
-    "right_hip": [-0.09, 0.9, 0.0],
-    "right_knee": [-0.1, 0.49, 0.01],
-    "right_ankle": [-0.1, 0.08, -0.02],
-    "right_foot": [-0.11, 0.02, 0.1],
+    name: [round(float(v), 3) for v in xyz]
+    for name, xyz in zip(JOINT_NAMES, rest_pose(), strict=True)
 }
 
 
@@ -60,7 +65,7 @@ class _Body(BaseModel):
 class Target(_Body):
     joint: Joint
     position: Vec3
-    weight: float = Field(
+    weight: Finite = Field(
         default=1.0,
         gt=0.0,
         le=1000.0,
@@ -72,13 +77,13 @@ class SolveOptions(_Body):
     method: Literal["neural", "fabrik"] = "neural"
     preserve_bone_lengths: bool = True
     reach: Literal["soft", "exact"] = "soft"
-    tolerance: float = Field(
+    tolerance: Finite = Field(
         default=0.001, ge=1e-6, le=1.0, description="Metres: `reached` and exact reach."
     )
-    floor: float = Field(
+    floor: Finite = Field(
         default=0.0,
-        ge=-1e4,
-        le=1e4,
+        ge=-MAX_COORDINATE,
+        le=MAX_COORDINATE,
         description="Height (m, world y) of the ground the character stands on. The "
         "networks learned poses over a floor at y = 0; a character on a 1 m box needs 1.0.",
     )
@@ -102,7 +107,13 @@ class SolveRequest(_Body):
 
     pose: Pose
     targets: list[Target] = Field(min_length=1, max_length=21)
-    pins: list[Joint] = Field(default_factory=list, max_length=21)
+    pins: list[Joint] = Field(
+        default_factory=list,
+        max_length=21,
+        description="Joints held where they are in `pose`; distinct, and none of them "
+        "targeted (a request that pins a targeted joint is a 422).",
+        json_schema_extra={"uniqueItems": True},
+    )
     options: SolveOptions = Field(default_factory=SolveOptions)
 
 
@@ -113,7 +124,7 @@ class TargetResult(BaseModel):
 
 
 class SolveResponse(BaseModel):
-    pose: Pose
+    pose: PoseOut
     targets: list[TargetResult]
     pins: list[TargetResult] = Field(
         default_factory=list, description="How far each pinned joint moved (m)."
@@ -150,10 +161,13 @@ class CompleteRequest(_Body):
     )
 
     keypoints: list[Keypoint] = Field(min_length=1, max_length=21)
-    floor: float = Field(
-        default=0.0, ge=-1e4, le=1e4, description="Height (m, world y) of the ground."
+    floor: Finite = Field(
+        default=0.0,
+        ge=-MAX_COORDINATE,
+        le=MAX_COORDINATE,
+        description="Height (m, world y) of the ground.",
     )
-    bone_lengths: dict[str, Annotated[float, Field(ge=1e-3, le=2.0)]] | None = Field(
+    bone_lengths: dict[BoneName, Annotated[Finite, Field(ge=1e-3, le=2.0)]] | None = Field(
         default=None,
         description="Length (m) of the bone ending at each named joint; missing bones "
         "take the reference length scaled like the given ones.",
@@ -161,7 +175,7 @@ class CompleteRequest(_Body):
 
 
 class CompleteResponse(BaseModel):
-    pose: Pose
+    pose: PoseOut
     keypoints: list[TargetResult]
     levels: list[int] = Field(description="Completion levels run (1 = six base points).")
     model: str

@@ -25,6 +25,25 @@ class Settings(BaseSettings):
     ort_threads: int = Field(default=1, ge=1, le=64, description="onnxruntime intra-op threads.")
     max_batch_items: int = Field(default=1024, ge=1)
     max_body_bytes: int = Field(default=8 * 1024 * 1024, ge=1024)
+    max_concurrency: int = Field(
+        default=64,
+        ge=1,
+        description="Admitted /v1 POST requests in flight per worker; 429 past it.",
+    )
+    max_inflight_bytes: int = Field(
+        default=64 * 1024 * 1024,
+        ge=1024,
+        description="Request bodies (declared or streamed) held at once per worker; 429 past it.",
+    )
+    deadline_seconds: float = Field(
+        default=2.0, gt=0, le=600, description="Wall time one request may take; 504 past it."
+    )
+    compute_threads: int = Field(
+        default=2, ge=1, le=64, description="Threads solving or parsing big bodies at once."
+    )
+    shutdown_grace_seconds: int = Field(
+        default=10, ge=0, le=3600, description="After SIGTERM, time to finish in-flight work."
+    )
     cors_origins: list[str] = Field(default_factory=list)
     api_key: SecretStr | None = None
     composition_passes: int = Field(

@@ -1,0 +1,110 @@
+"""Request bodies: strict JSON, parsed and validated off the event loop when large.
+
+FastAPI reads a JSON body with ``await request.json()`` and then validates it on the
+event loop. :class:`BodyRoute` hands its endpoints a request whose ``json()`` returns the
+body already validated into the endpoint's pydantic model (FastAPI passes an instance of
+the model through unchanged), so that:
+
+- malformed JSON is a 400 that says where (line, column), as are bodies that are not
+  UTF-8, nest deeper than the parser's recursion limit or carry integers longer than
+  Python converts; duplicate keys in an object are a 400 naming the key;
+- bodies of ``INLINE_BYTES`` or more are decoded and validated in a worker thread
+  (bounded by the app's compute limiter), so a flood of big bodies never stalls the
+  event loop (liveness keeps answering).
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable, Coroutine
+from typing import Any
+
+import anyio
+import anyio.to_thread
+from fastapi import Request, Response
+from fastapi.routing import APIRoute
+from pydantic import BaseModel, ValidationError
+
+from service.errors import BodyError, BodyInvalid, MalformedBody, clip
+
+INLINE_BYTES = 64 * 1024  # smaller bodies are parsed on the loop (a thread hop costs more)
+
+
+def _object(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    out = dict(pairs)
+    if len(out) != len(pairs):
+        seen: set[str] = set()
+        dup = next(k for k, _ in pairs if k in seen or seen.add(k))  # type: ignore[func-returns-value]
+        raise MalformedBody(f"duplicate key {clip(repr(dup))} in a JSON object")
+    return out
+
+
+def decode(body: bytes) -> Any:
+    """Strict JSON: UTF-8, no duplicate keys; every failure a ``MalformedBody`` that says
+    where. (``NaN`` and ``Infinity`` tokens decode; the schemas then reject them by field.)"""
+    try:
+        text = body.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise MalformedBody(
+            f"body is not UTF-8: byte 0x{body[exc.start]:02x} at offset {exc.start}"
+        ) from None
+    try:
+        return json.loads(text, object_pairs_hook=_object)
+    except json.JSONDecodeError as exc:
+        raise MalformedBody(
+            f"malformed JSON at line {exc.lineno} column {exc.colno} (char {exc.pos}): {exc.msg}"
+        ) from None
+    except RecursionError:
+        raise MalformedBody("JSON nested too deeply (arrays/objects within each other)") from None
+    except ValueError as exc:  # integer longer than Python converts (4300 digits)
+        raise MalformedBody(f"JSON number not accepted: {clip(exc, 80)}") from None
+
+
+def parse(body: bytes, model: type[BaseModel] | None) -> Any:
+    """Decode ``body`` and validate it into ``model``; raises ``BodyError`` (400) or
+    ``BodyInvalid`` (422), the exceptions FastAPI's body reader lets through."""
+    try:
+        data = decode(body)
+    except MalformedBody as exc:
+        raise BodyError(exc) from None
+    if model is None:
+        return data
+    try:
+        return model.model_validate(data)
+    except ValidationError as exc:
+        raise BodyInvalid(exc.errors(include_url=False, include_context=True)) from None
+
+
+class _Request(Request):
+    model: type[BaseModel] | None = None
+
+    async def json(self) -> Any:
+        if not hasattr(self, "_json"):
+            body = await self.body()
+            if len(body) < INLINE_BYTES:
+                self._json = parse(body, self.model)
+            else:
+                limiter = getattr(self.app.state, "compute_limiter", None)
+                self._json = await anyio.to_thread.run_sync(
+                    parse, body, self.model, limiter=limiter
+                )
+        return self._json
+
+
+class BodyRoute(APIRoute):
+    """An ``APIRoute`` whose JSON body is read by :class:`_Request` (see the module doc)."""
+
+    def get_route_handler(self) -> Callable[[Request], Coroutine[Any, Any, Response]]:
+        handler = super().get_route_handler()
+        annotation = self.body_field.field_info.annotation if self.body_field else None
+        model = (
+            annotation
+            if isinstance(annotation, type) and issubclass(annotation, BaseModel)
+            else None
+        )
+        request_class = type("BodyRequest", (_Request,), {"model": model})
+
+        async def route_handler(request: Request) -> Response:
+            return await handler(request_class(request.scope, request.receive))
+
+        return route_handler

@@ -1,0 +1,55 @@
+"""The API's documentation: the OpenAPI schema says what the app does (every error is
+problem+json, RFC 9457), and ``/docs`` renders it without any asset from the internet."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from fastapi import FastAPI
+
+from service.schemas import Problem
+
+_PROBLEM_STATUS = {
+    400: "Body is not valid JSON (the detail says where), not UTF-8, or has duplicate keys.",
+    401: "Missing or wrong API key (only when POSE_API_KEY is set).",
+    413: "Body or batch larger than the configured limit.",
+    415: "Body is not application/json.",
+    422: "Invalid request: the detail says which field and why.",
+    429: "Too many requests in flight on this worker: retry after Retry-After seconds.",
+    503: "Models not loaded yet, or broken (see /v2/health/ready), or shutting down.",
+    504: "The request needed more than the deadline: send smaller batches.",
+}
+
+
+def document_problems(app: FastAPI) -> None:
+    """Make the schema say what the app does: errors are problem+json (RFC 9457)."""
+
+    def openapi() -> dict[str, Any]:
+        if app.openapi_schema:
+            return app.openapi_schema
+        from fastapi.openapi.utils import get_openapi
+
+        schema = get_openapi(
+            title=app.title, version=app.version, summary=app.summary, routes=app.routes
+        )
+        components = schema.setdefault("components", {}).setdefault("schemas", {})
+        components["Problem"] = Problem.model_json_schema(
+            ref_template="#/components/schemas/{model}"
+        )
+        for name in ("HTTPValidationError", "ValidationError"):
+            components.pop(name, None)
+        ref = {"$ref": "#/components/schemas/Problem"}
+        for path, ops in schema["paths"].items():
+            for method, op in ops.items():
+                if not path.startswith("/v1/"):
+                    continue
+                codes = [400, 401, 413, 415, 422, 429, 503, 504] if method == "post" else [401, 503]
+                for code in codes:
+                    op["responses"][str(code)] = {
+                        "description": _PROBLEM_STATUS[code],
+                        "content": {"application/problem+json": {"schema": ref}},
+                    }
+        app.openapi_schema = schema
+        return schema
+
+    app.openapi = openapi  # type: ignore[method-assign]

@@ -1,0 +1,52 @@
+"""Prometheus collectors of one app instance (own registry: apps don't collide).
+
+Every label has a bounded set of values: routes are route templates (or ``unmatched``),
+solver sequences are a trained key, ``composed``, ``none`` or ``fabrik``."""
+
+from __future__ import annotations
+
+from prometheus_client import CollectorRegistry, Counter, Histogram
+
+
+class Metrics:
+    def __init__(self) -> None:
+        self.registry = CollectorRegistry()
+        self.requests = Counter(
+            "pose_requests_total", "HTTP requests", ["route", "status"], registry=self.registry
+        )
+        self.latency = Histogram(
+            "pose_request_seconds",
+            "HTTP request latency",
+            ["route"],
+            buckets=(0.0005, 0.001, 0.002, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 1.0, 5.0),
+            registry=self.registry,
+        )
+        self.rejections = Counter(
+            "pose_rejections_total",
+            "Requests refused before or instead of any work, by reason",
+            ["route", "reason"],
+            registry=self.registry,
+        )
+        self.solves = Counter(
+            "pose_solves_total",
+            "Solves by method and solver sequence (a trained key, composed, none, fabrik)",
+            ["method", "solvers"],
+            registry=self.registry,
+        )
+        self.batch = Histogram(
+            "pose_batch_items",
+            "Items per /v1/solve/batch request",
+            buckets=(1, 2, 4, 8, 16, 32, 64, 128, 256, 512, 1024, 4096),
+            registry=self.registry,
+        )
+
+    def solved(self, method: str, solvers: list[str]) -> None:
+        """Count one solve under a bounded label (never an open-ended combination)."""
+        neural = [s for s in solvers if not s.startswith("fabrik")]
+        if method == "fabrik":
+            label = "fabrik"
+        elif not neural:
+            label = "none"
+        else:
+            label = neural[0] if len(neural) == 1 else "composed"
+        self.solves.labels(method, label).inc()

@@ -1,0 +1,40 @@
+"""Pure-ASGI middleware, one concern per module, installed by :func:`install`.
+
+Outermost first: CORS (``cors``), request id + access log + last-resort answers
+(``context``), ``x-total-time`` (``timing``), Prometheus metrics (``metrics``), hardening
+headers (``headers``), and the gate (``gate``: API key, content type, body limits and the
+per-worker admission bound). Every rejection is problem+json.
+"""
+
+from __future__ import annotations
+
+from fastapi import FastAPI
+
+from service.metrics import Metrics
+from service.middleware.context import RequestContext
+from service.middleware.cors import ProblemCORS
+from service.middleware.gate import Gate
+from service.middleware.headers import SecurityHeaders
+from service.middleware.metrics import RequestMetrics
+from service.middleware.timing import Timing
+from service.settings import Settings
+
+#: Headers a browser client may read.
+EXPOSED = ["X-Request-ID", "X-Total-Time", "X-Compute-Time", "Retry-After"]
+
+
+def install(app: FastAPI, settings: Settings, metrics: Metrics) -> None:
+    """Add the stack; ``add_middleware`` puts each new one outside the previous."""
+    app.add_middleware(Gate, settings=settings)
+    app.add_middleware(SecurityHeaders)
+    app.add_middleware(RequestMetrics, metrics=metrics, app_routes=app.router.routes)
+    app.add_middleware(Timing)
+    app.add_middleware(RequestContext, access_log=settings.access_log)
+    if settings.cors_origins:  # outermost: even the gate's rejections carry CORS headers
+        app.add_middleware(
+            ProblemCORS,
+            allow_origins=settings.cors_origins,
+            allow_methods=["GET", "POST", "OPTIONS"],
+            allow_headers=["Content-Type", "X-API-Key", "X-Request-ID", "Authorization"],
+            expose_headers=EXPOSED,
+        )

@@ -1,0 +1,83 @@
+"""Request id (``X-Request-ID``, the client's or a new one), one JSON access-log line per
+request, and the last-resort answers: a 500 problem for anything unhandled and, when the
+server cancels a request at the end of its shutdown grace period, a 503 problem."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+import time
+import uuid
+
+from service.errors import ShuttingDown, error_response, internal_error
+from service.middleware.types import (
+    REASON,
+    REQUEST_ID,
+    T0,
+    ASGIApp,
+    Message,
+    Receive,
+    Scope,
+    Send,
+    header_map,
+)
+
+access_log = logging.getLogger("service.access")
+_OUTCOME = {499: "client_disconnected", 503: "unavailable", 504: "deadline_exceeded"}
+
+
+class RequestContext:
+    def __init__(self, app: ASGIApp, access_log: bool = True) -> None:
+        self.app = app
+        self.access_log = access_log
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        t0: float = scope.setdefault(T0, time.perf_counter())
+        given = header_map(scope).get("x-request-id", "")
+        request_id = "".join(c for c in given[:128] if c.isprintable()) or uuid.uuid4().hex
+        scope[REQUEST_ID] = request_id
+        status = [500]
+        started = [False]
+
+        async def tagged(message: Message) -> None:
+            if message["type"] == "http.response.start":
+                started[0] = True
+                status[0] = int(message["status"])
+                message["headers"] = [
+                    *message.get("headers", []),
+                    (b"x-request-id", request_id.encode("latin-1", "replace")),
+                ]
+            await send(message)
+
+        try:
+            await self.app(scope, receive, tagged)
+        except asyncio.CancelledError:  # the shutdown grace period ran out
+            scope[REASON] = "shutting-down"
+            if not started[0]:
+                busy = ShuttingDown("the server is shutting down; retry on another instance")
+                await error_response(busy)(scope, receive, tagged)
+            self._log(scope, request_id, status[0], t0)
+            return  # answered: the cancellation ends here
+        except Exception:  # the app's own 500 handler would run outside the middleware
+            if not started[0]:
+                await internal_error(scope["method"], scope["path"])(scope, receive, tagged)
+        self._log(scope, request_id, status[0], t0)
+
+    def _log(self, scope: Scope, request_id: str, status: int, t0: float) -> None:
+        if not self.access_log:
+            return
+        line = {
+            "event": "request",
+            "request_id": request_id,
+            "method": scope["method"],
+            "path": scope["path"][:200],
+            "status": status,
+            "ms": round((time.perf_counter() - t0) * 1000, 3),
+        }
+        if status in _OUTCOME:
+            line["outcome"] = _OUTCOME[status]
+        access_log.info(json.dumps(line))

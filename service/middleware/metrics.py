@@ -1,0 +1,58 @@
+"""Prometheus request metrics, labelled by route template (``/v1/solve``), also for
+requests refused before routing (matched here against the app's routes), plus a
+rejection counter by reason (the problem type)."""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from collections.abc import Sequence
+from typing import Any
+
+from starlette.routing import BaseRoute, Match
+
+from service.metrics import Metrics
+from service.middleware.types import REASON, T0, ASGIApp, Message, Receive, Scope, Send
+
+
+class RequestMetrics:
+    def __init__(self, app: ASGIApp, metrics: Metrics, app_routes: Sequence[BaseRoute]) -> None:
+        self.app = app
+        self.metrics = metrics
+        self.routes = app_routes
+
+    def route_of(self, scope: Scope) -> str:
+        route: Any = scope.get("route")
+        if route is not None and getattr(route, "path", None):
+            return str(route.path)
+        for candidate in self.routes:  # refused before routing: find the template anyway
+            match, _ = candidate.matches(scope)
+            if match is Match.FULL and getattr(candidate, "path", None):
+                return str(candidate.path)  # type: ignore[attr-defined]
+        return "unmatched"
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        t0: float = scope.setdefault(T0, time.perf_counter())
+        status = [500]
+
+        async def observe(message: Message) -> None:
+            if message["type"] == "http.response.start":
+                status[0] = int(message["status"])
+            await send(message)
+
+        try:
+            await self.app(scope, receive, observe)
+        except asyncio.CancelledError:  # shutdown: RequestContext answers a 503
+            status[0] = 503 if status[0] == 500 else status[0]
+            scope[REASON] = "shutting-down"
+            raise
+        finally:
+            route = self.route_of(scope)
+            m = self.metrics
+            m.requests.labels(route, str(status[0])).inc()
+            m.latency.labels(route).observe(time.perf_counter() - t0)
+            if status[0] >= 400:
+                m.rejections.labels(route, str(scope.get(REASON, status[0]))).inc()

@@ -1,0 +1,83 @@
+"""The model repository: loads, verifies and warms up the models, and holds readiness
+(as in kserve, readiness belongs to the repository, not to the transport)."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import logging
+import time
+
+from core.manifest import ManifestError, SkeletonSpec, load_manifest
+from service.engine import Engine
+from service.errors import NotReady
+from service.settings import Settings
+
+log = logging.getLogger("service")
+
+
+def _redact(reason: str, settings: Settings) -> str:
+    """A failure reason that names files, never where they live on the server."""
+    for path in sorted({str(settings.models_dir.resolve()), str(settings.models_dir)}, key=len):
+        reason = reason.replace(path.rstrip("/") + "/", "").replace(path, "<models>")
+    return reason
+
+
+class ModelRepository:
+    """The loaded :class:`Engine` once it is ready, else why not."""
+
+    def __init__(self, settings: Settings) -> None:
+        self.settings = settings
+        self.engine: Engine | None = None
+        self.skeleton: SkeletonSpec | None = None
+        self.reason: str = "loading models"
+
+    @property
+    def ready(self) -> bool:
+        return self.engine is not None
+
+    def ready_engine(self) -> Engine:
+        if self.engine is None:
+            raise NotReady(f"models not ready: {self.reason}")
+        return self.engine
+
+    def skeleton_spec(self) -> SkeletonSpec:
+        """The skeleton, served as soon as the manifest parses (before verification)."""
+        spec = self.engine.manifest.skeleton if self.engine else self.skeleton
+        if spec is None:
+            raise NotReady(f"models not ready: {self.reason}")
+        return spec
+
+    def load(self) -> None:
+        """Load, verify and warm up the models; record why not when anything fails."""
+        s = self.settings
+        t0 = time.perf_counter()
+        with contextlib.suppress(ManifestError):
+            self.skeleton = load_manifest(s.models_dir, verify=False).skeleton
+        try:
+            engine = Engine(
+                s.models_dir,
+                threads=s.ort_threads,
+                composition_passes=s.composition_passes,
+                composition=s.composition,
+                composition_projections=s.composition_projections,
+                fabrik_max_iterations=s.fabrik_max_iterations,
+            )
+            engine.warmup()
+        except Exception as exc:  # any failure means "not ready", with the reason logged
+            self.reason = _redact(str(exc), s)
+            log.error(
+                json.dumps(
+                    {"event": "models_not_ready", "models_dir": str(s.models_dir),
+                     "reason": str(exc)}
+                )
+            )  # fmt: skip
+            return
+        self.engine = engine
+        self.reason = ""
+        log.info(
+            json.dumps(
+                {"event": "models_ready", "version": engine.version,
+                 "models_dir": str(s.models_dir), "s": round(time.perf_counter() - t0, 3)}
+            )
+        )  # fmt: skip

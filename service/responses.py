@@ -1,0 +1,60 @@
+"""Response bodies as plain JSON types, encoded once with orjson (the schemas document
+them; building dicts is ~40x cheaper than pydantic models and jsonable_encoder: 4 ms
+instead of 200 ms for 1024 poses)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import orjson
+from fastapi import Response
+
+from core.skeleton import JOINT_NAMES
+from service.engine import CompleteResult, SolveProblem, SolveResult
+
+
+def pose_dict(pose: np.ndarray) -> dict[str, list[float]]:
+    """A ``[21, 3]`` array as the API's joint-name -> [x, y, z] object."""
+    return dict(zip(JOINT_NAMES, pose.tolist(), strict=True))
+
+
+def solve_payload(p: SolveProblem, r: SolveResult, version: str) -> dict[str, Any]:
+    k = p.n_targets
+    names = [JOINT_NAMES[int(j)] for j in p.target_idx]
+    return {
+        "pose": pose_dict(r.pose),
+        "targets": [
+            {"joint": n, "error": e, "reached": e <= p.tolerance}
+            for n, e in zip(names[:k], r.errors.tolist(), strict=True)
+        ],
+        "pins": [
+            {"joint": n, "error": e, "reached": e <= p.tolerance}
+            for n, e in zip(names[k:], r.pin_errors.tolist(), strict=True)
+        ],
+        "max_bone_length_error": r.max_bone_error,
+        "solvers": r.solvers,
+        "model": version,
+        "method": "fabrik" if p.method == "fabrik" else "neural",
+        "iterations": r.iterations,
+    }
+
+
+def complete_payload(joints: list[str], r: CompleteResult, version: str) -> dict[str, Any]:
+    return {
+        "pose": pose_dict(r.pose),
+        "keypoints": [
+            {"joint": j, "error": float(e), "reached": bool(ok)}
+            for j, e, ok in zip(joints, r.errors, r.reached, strict=True)
+        ],
+        "levels": list(r.levels),
+        "model": version,
+    }
+
+
+def json_response(body: Any, compute_seconds: float | None = None) -> Response:
+    """An orjson-encoded answer; ``X-Compute-Time`` is the engine's own time in ms."""
+    headers = None
+    if compute_seconds is not None:
+        headers = {"X-Compute-Time": f"{compute_seconds * 1000:.3f}ms"}
+    return Response(orjson.dumps(body), media_type="application/json", headers=headers)

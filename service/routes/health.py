@@ -1,0 +1,47 @@
+"""Open Inference Protocol health (``/v2/health/live``, ``/v2/health/ready``) and
+Prometheus ``/metrics``. None of them reads a body or touches the engine."""
+
+from __future__ import annotations
+
+from fastapi import APIRouter, Response
+from fastapi.responses import RedirectResponse
+from prometheus_client import CONTENT_TYPE_LATEST
+from prometheus_client import generate_latest as prometheus_latest
+
+from service.deps import State
+from service.schemas import Health
+
+router = APIRouter(tags=["health"])
+
+
+@router.get("/v2/health/live", response_model=Health)
+async def live() -> Health:
+    """The process is up (Open Inference Protocol liveness)."""
+    return Health(status="live")
+
+
+@router.get(
+    "/v2/health/ready",
+    response_model=Health,
+    responses={503: {"model": Health, "description": "Models not loaded or broken."}},
+)
+async def ready(response: Response, state: State) -> Health:
+    """200 once every model is loaded, verified and a warm-up solve passed; else 503
+    with the reason (file names, never server paths)."""
+    repo = state.repository
+    if not repo.ready:
+        response.status_code = 503
+        response.headers["Retry-After"] = "5"
+        return Health(status="not ready", detail=repo.reason)
+    return Health(status="ready")
+
+
+@router.get("/metrics", response_class=Response)
+async def metrics(state: State) -> Response:
+    """Prometheus metrics."""
+    return Response(prometheus_latest(state.metrics.registry), media_type=CONTENT_TYPE_LATEST)
+
+
+@router.get("/", include_in_schema=False)
+async def root() -> RedirectResponse:
+    return RedirectResponse("/editor")

@@ -1,0 +1,50 @@
+"""``GET /v1/skeleton`` and ``GET /v1/models``."""
+
+from __future__ import annotations
+
+from fastapi import APIRouter
+
+from core.skeleton import FRAME, JOINT_NAMES, PARENT_NAMES
+from service.deps import ReadyEngine, State
+from service.schemas import ModelInfo, ModelsResponse, SkeletonResponse
+
+router = APIRouter(tags=["info"])
+MODEL_CARD = "https://github.com/marionette/marionette/blob/main/models/README.md"
+
+
+@router.get("/v1/skeleton", response_model=SkeletonResponse)
+async def skeleton(state: State) -> SkeletonResponse:
+    """Joint names, parents, reference bone lengths (m) and frame conventions
+    (available as soon as the manifest parses, before the models are ready)."""
+    spec = state.repository.skeleton_spec()
+    return SkeletonResponse(
+        joints=list(JOINT_NAMES),
+        parents=dict(PARENT_NAMES),
+        reference_bone_lengths=dict(spec.reference_bone_lengths),
+        frame=dict(FRAME),
+    )
+
+
+@router.get("/v1/models", response_model=ModelsResponse)
+async def models(engine: ReadyEngine) -> ModelsResponse:
+    """The loaded models: version, licence, solver sets, completion levels, metrics."""
+    m = engine.manifest
+    return ModelsResponse(
+        version=m.version,
+        licence=m.licence,
+        model_card=MODEL_CARD,
+        solver_sets=sorted(m.solvers()),
+        completion_levels=[list(e.joints) for e in m.completion_levels()],
+        models=[
+            ModelInfo(
+                name=e.name,
+                kind=e.kind,
+                key=e.key,
+                joints=list(e.joints),
+                parameters=e.parameters,
+                bytes=e.bytes,
+                metrics=dict(e.metrics),
+            )
+            for e in m.models
+        ],
+    )
