@@ -90,6 +90,23 @@ class Normalisation(_Strict):
     std_floor: float = Field(gt=0)
 
 
+class Serving(_Strict):
+    """How the engine must feed the networks (fixed by how they were trained)."""
+
+    body: Literal["nearest_skeleton", "total_length"] = Field(
+        default="nearest_skeleton",
+        description="How a character is sized for the networks: scaled to the training "
+        "skeleton it matches best in proportions (`nearest_skeleton`), or so that its total "
+        "bone length equals the reference skeleton's (`total_length`; networks trained on "
+        "many random bodies).",
+    )
+    delta: bool = Field(
+        default=False,
+        description="The solved pose is start + D(z') - D(z) (the autoencoder's error on the "
+        "start pose left out) instead of D(z').",
+    )
+
+
 class ModelEntry(_Strict):
     name: str
     kind: Literal["autoencoder", "solver", "completion"]
@@ -140,6 +157,7 @@ class Manifest(_Strict):
     latent_dim: int = Field(gt=0)
     skeleton: SkeletonSpec
     normalisation: Normalisation
+    serving: Serving = Serving()
     models: list[ModelEntry]
     provenance: Provenance
 

@@ -124,6 +124,8 @@ class Engine:
         self.reference_lengths = np.asarray(
             [ref[JOINT_NAMES[c]] for c, _ in BONES], dtype=np.float64
         )
+        self.body = m.serving.body
+        self.delta = m.serving.delta
         known = np.asarray(m.skeleton.skeletons, dtype=np.float64)  # [C, 20]
         self._shape_totals = known.sum(axis=-1)
         self._shapes = known / self._shape_totals[:, None]
@@ -137,11 +139,14 @@ class Engine:
         self.version = m.version
 
     def scales_of(self, lengths: F64) -> F64:
-        """How much bigger each character ``[..., 20]`` is than the training skeleton whose
-        proportions it matches best (relative bone lengths), so that any character is
-        solved at the size of a body the networks know: a 1.9 m or a 1.2 m copy of a
-        training actor is solved exactly as that actor."""
+        """How much bigger each character ``[..., 20]`` is than the body size the networks
+        know. Networks trained on many random bodies (``serving.body = total_length``) see
+        every character at the reference skeleton's total bone length; older ones see it at
+        the size of the training skeleton whose proportions it matches best. Either way a
+        1.9 m or a 1.2 m copy of a character is solved exactly as that character."""
         total = np.sum(lengths, axis=-1, keepdims=True)
+        if self.body == "total_length":
+            return np.asarray(total[..., 0] / np.sum(self.reference_lengths), dtype=np.float64)
         shape = lengths / total
         distance = np.linalg.norm(shape[..., None, :] - self._shapes, axis=-1)  # [..., C]
         nearest = np.argmin(distance, axis=-1)
@@ -289,7 +294,9 @@ class Engine:
         decoded = np.empty((m, 3 * NUM_JOINTS), dtype=np.float32)
         for sequence, members in groups.items():
             sel = np.asarray(members, dtype=np.intp)
-            if len(sequence) == 1:  # one fused run: encode, solve, decode
+            if self.delta:
+                decoded[sel] = self._delta(x[sel], canvas[sel], sequence)
+            elif len(sequence) == 1:  # one fused run: encode, solve, decode
                 key = sequence[0]
                 targets = canvas[sel][:, self.solver_joints[key]].reshape(len(sel), -1)
                 decoded[sel] = self.fused[key](x[sel], targets)
@@ -300,6 +307,41 @@ class Engine:
                 decoded[sel] = self.decoder(z)
         out = decoded.astype(np.float64).reshape(m, NUM_JOINTS, 3)
         return out * scales[items, None, None], plans
+
+    def _delta(
+        self, x: npt.NDArray[np.float32], canvas: npt.NDArray[np.float32], sequence: tuple[str, ...]
+    ) -> npt.NDArray[np.float32]:
+        """Delta answers (``serving.delta``): each solver moves the CURRENT pose by what it
+        changes in the decoded pose, P <- P + D(S(E(P), t)) - D(E(P)), so the autoencoder's
+        own error on the start pose never reaches the answer. Between solvers the targets
+        solved so far are pasted onto P (``composition="reencode"``)."""
+        pose = x.copy()
+        flat = canvas.reshape(len(x), -1)
+        done: list[int] = []
+        for key in sequence:
+            joints = self.solver_joints[key]
+            if self.composition == "reencode" and done:
+                cols = np.asarray([3 * j + k for j in done for k in range(3)], dtype=np.intp)
+                pose[:, cols] = flat[:, cols]
+            targets = canvas[:, joints].reshape(len(x), -1)
+            if len(sequence) == 1:
+                pose = pose + self.fused[key](pose, targets) - self.decoder(self.encoder(pose))
+            else:
+                z = self.encoder(pose)
+                pose = pose + self.decoder(self.solvers[key](z, targets)) - self.decoder(z)
+            done.extend(int(j) for j in joints if int(j) not in done)
+        return pose
+
+    def reconstruct(self, world: F64) -> F64:
+        """The autoencoder's round trip of world poses ``[B, 21, 3]`` through the same body
+        mapping as a solve (canonical frame, size): how well the pose space holds a body."""
+        world = np.asarray(world, dtype=np.float64)
+        frame = canonical_transform(world)
+        canon = frame.to_canonical(world)
+        scales = self.scales_of(bone_lengths(world))[:, None, None]
+        x = (canon / scales).reshape(len(world), -1).astype(np.float32)
+        out = self.decoder(self.encoder(x)).astype(np.float64).reshape(len(world), NUM_JOINTS, 3)
+        return np.asarray(frame.to_world(out * scales))
 
     def _compose(
         self, z: npt.NDArray[np.float32], canvas: npt.NDArray[np.float32], sequence: tuple[str, ...]
@@ -384,7 +426,9 @@ class Engine:
                 )
             ratio = float(np.median([given_lengths[j] / ref[bones[j]] for j in given_lengths]))
             lengths = ref * ratio
-            scale = float(self.scales_of(lengths))
+            # networks trained on random bodies at random sizes read the size from the key
+            # points; older ones are fed the size of their nearest training skeleton
+            scale = 1.0 if self.body == "total_length" else float(self.scales_of(lengths))
             for j, value in given_lengths.items():
                 lengths[bones[j]] = value
         given = {j: (v - origin) / scale for j, v in keypoints.items()}

@@ -23,6 +23,7 @@ from core.manifest import (
     ModelEntry,
     Normalisation,
     Provenance,
+    Serving,
     SkeletonSpec,
     TensorSpec,
     write_manifest,
@@ -35,10 +36,12 @@ from trainer.train import (
     FPS,
     PairSource,
     Trained,
+    ae_samples,
     augment,
     completion_inputs,
     flat,
     mpjpe_cm,
+    reference_lengths,
     solver_metrics,
 )
 
@@ -72,6 +75,7 @@ def evaluate(cfg: TrainConfig, trained: Trained) -> dict[str, dict[str, dict[str
     ae, bank = trained.ae, trained.bank
     out: dict[str, dict[str, dict[str, float]]] = {}
     max_gap = max(1, round(cfg.solver.max_gap_seconds * FPS))
+    total = float(reference_lengths(trained.splits.train).sum())
     with torch.no_grad():
         for split in ("val", "test"):
             data = getattr(trained.splits, split)
@@ -83,11 +87,15 @@ def evaluate(cfg: TrainConfig, trained: Trained) -> dict[str, dict[str, dict[str
             else:
                 sub = poses
             out.setdefault("autoencoder", {})[split] = {"mpjpe_cm": mpjpe_cm(ae(sub), sub)}
+            bodies = ae_samples(sub, np.random.default_rng(cfg.seed + 104), cfg.augment, total)
+            out["autoencoder"][split]["new_bodies_mpjpe_cm"] = mpjpe_cm(ae(bodies), bodies)
             src = PairSource.of(data, max_gap)
             a, p = src.fixed_pairs(cfg.seed + 101, cfg.max_eval_frames)
-            for key, metrics in solver_metrics(ae, bank, src.poses[a], src.poses[p]).items():
+            start, goal = src.pairs(a, p, np.random.default_rng(cfg.seed + 103), cfg.augment, total)
+            metrics_by_key = solver_metrics(ae, bank, start, goal, cfg.solver.delta)
+            for key, metrics in metrics_by_key.items():
                 out.setdefault(f"solver:{key}", {})[split] = metrics
-            aug = augment(sub, np.random.default_rng(cfg.seed + 102), True, True)
+            aug = augment(sub, np.random.default_rng(cfg.seed + 102), True, True, cfg.augment)
             for level, net in enumerate(trained.completion, start=1):
                 pred = net(completion_inputs(trained.completion, level, aug, None))
                 out.setdefault(f"completion:{level}", {})[split] = {"mpjpe_cm": mpjpe_cm(pred, aug)}
@@ -288,12 +296,12 @@ def export_all(
 
     train_poses = trained.splits.train.positions
     all_lengths = bone_lengths(train_poses.astype(np.float64))
-    lengths = all_lengths.mean(axis=0)
+    lengths = reference_lengths(trained.splits.train)
     skeletons = body_shapes(all_lengths)
     ref = {JOINT_NAMES[child]: round(float(lengths[i]), 6) for i, (child, _) in enumerate(BONES)}
     data_meta = dict(trained.splits.train.meta)
     archives = [
-        {"name": str(a.get("name")), "sha256": str(a.get("sha256"))}
+        {"name": str(a.get("file") or a.get("path")), "sha256": str(a.get("sha256"))}
         for a in data_meta.get("archives", [])
     ]
     version = "mx1-" + hashlib.sha256("".join(e.sha256 for e in entries).encode()).hexdigest()[:12]
@@ -314,6 +322,12 @@ def export_all(
             mean=[float(v) for v in ae.norm.mean],
             std=[float(v) for v in ae.norm.std],
             std_floor=cfg.autoencoder.std_floor,
+        ),
+        serving=Serving(
+            body="total_length"
+            if cfg.augment.enabled and cfg.augment.normalise_size
+            else "nearest_skeleton",
+            delta=cfg.solver.delta,
         ),
         models=entries,
         provenance=Provenance(

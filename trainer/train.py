@@ -30,8 +30,19 @@ from torch.utils.data import DistributedSampler
 from tqdm import tqdm
 
 from core.io import write_atomic
-from core.skeleton import BONE_CHILDREN, BONE_PARENTS, JOINT_INDEX, MIRROR, NUM_JOINTS
-from trainer.config import TrainConfig
+from core.skeleton import BONE_CHILDREN, BONE_PARENTS, JOINT_INDEX, NUM_JOINTS
+from core.skeleton import bone_lengths as bone_lengths_np
+from trainer.augment import (
+    FrameSource,
+    augment_pairs,
+    augment_poses,
+    goal_in_start_frame,
+    random_bodies,
+    rebuild,
+    turn,
+)
+from trainer.augment import mirror as mirror_poses
+from trainer.config import AugmentConfig, TrainConfig
 from trainer.data.dataset import PoseDataset, load_dataset
 from trainer.models import (
     CompletionNet,
@@ -113,6 +124,16 @@ def load_splits(cfg: TrainConfig) -> Splits:
 
 def flat(positions: np.ndarray) -> torch.Tensor:
     return torch.from_numpy(np.ascontiguousarray(positions.reshape(len(positions), -1), np.float32))
+
+
+def reference_lengths(data: PoseDataset) -> np.ndarray:
+    """Mean length of every bone over the frames of ``data`` ``[20]`` (metres): the
+    manifest's reference skeleton, and the size every body is normalised to."""
+    return np.asarray(bone_lengths_np(data.positions.astype(np.float64)).mean(axis=0))
+
+
+def as_joints(flat_poses: torch.Tensor) -> torch.Tensor:
+    return flat_poses.reshape(len(flat_poses), NUM_JOINTS, 3)
 
 
 def batches(n: int, batch_size: int, d: Dist, seed: int, epoch: int) -> Iterator[torch.Tensor]:
@@ -280,11 +301,25 @@ def mpjpe_cm(pred: torch.Tensor, true: torch.Tensor) -> float:
     return float(diff.norm(dim=-1).mean()) * 100.0
 
 
+def ae_samples(
+    poses: torch.Tensor, rng: np.random.Generator, aug: AugmentConfig, total: float
+) -> torch.Tensor:
+    """What the autoencoder learns from: poses on random bodies, facings and offsets (or the
+    poses as recorded when augmentation is off), flattened ``[B, 63]``."""
+    if not aug.enabled:
+        return poses
+    out = augment_poses(as_joints(poses), rng, aug, total)
+    return out.reshape(len(poses), -1)
+
+
 def train_autoencoder(
-    cfg: TrainConfig, d: Dist, train: torch.Tensor, val: torch.Tensor, fresh: bool
+    cfg: TrainConfig, d: Dist, train: torch.Tensor, val: torch.Tensor, total: float, fresh: bool
 ) -> tuple[TiedAutoencoder, StageState]:
-    ac = cfg.autoencoder
-    mean, std = feature_stats(train, ac.std_floor)
+    ac, aug = cfg.autoencoder, cfg.augment
+    stats_sample = train[:: max(1, len(train) // 100_000)]
+    stats_sample = ae_samples(stats_sample, np.random.default_rng(cfg.seed + 7), aug, total)
+    mean, std = feature_stats(stats_sample, ac.std_floor)
+    val = ae_samples(val, np.random.default_rng(cfg.seed + 8), aug, total)
     torch.manual_seed(cfg.seed)
     ae = TiedAutoencoder(Normaliser(mean, std), ac.hidden, ac.latent)
     net: nn.Module = DistributedDataParallel(ae) if d.world > 1 else ae
@@ -292,18 +327,19 @@ def train_autoencoder(
     steps = steps_per_epoch(len(train), ac.batch_size, d)
 
     def train_epoch(epoch: int, bar: tqdm[Any]) -> float:
-        total, count = torch.zeros((), dtype=torch.float64), 0
+        rng = stage_rng(cfg.seed, "autoencoder", epoch)
+        total_loss, count = torch.zeros((), dtype=torch.float64), 0
         for idx in batches(len(train), ac.batch_size, d, cfg.seed, epoch):
-            x = train[idx]
+            x = ae_samples(train[idx], rng, aug, total)
             recon = net(x)
             loss = nn.functional.mse_loss(ae.norm.normalise(recon), ae.norm.normalise(x))
             optim.zero_grad(set_to_none=True)
             loss.backward()
             optim.step()
-            total += loss.detach().double()
+            total_loss += loss.detach().double()
             count += 1
             bar.update()
-        return _mean_loss(total, count, d)
+        return _mean_loss(total_loss, count, d)
 
     def validate() -> dict[str, float]:
         recon = ae(val)
@@ -329,15 +365,24 @@ def train_autoencoder(
 
 @dataclass(frozen=True)
 class PairSource:
-    poses: torch.Tensor
+    frames: FrameSource
     lo: np.ndarray
     hi: np.ndarray
     frame: np.ndarray
 
+    @property
+    def poses(self) -> torch.Tensor:
+        return self.frames.poses.reshape(len(self.frames.poses), -1)
+
     @classmethod
     def of(cls, data: PoseDataset, max_gap: int) -> PairSource:
         lo, hi = partner_ranges(data.clip, data.frame, max_gap)
-        return cls(poses=flat(data.positions), lo=lo, hi=hi, frame=data.frame)
+        frames = FrameSource(
+            poses=torch.from_numpy(np.ascontiguousarray(data.positions, np.float32)),
+            yaw=torch.from_numpy(np.ascontiguousarray(data.yaw, np.float32)),
+            root=torch.from_numpy(np.ascontiguousarray(data.root, np.float32)),
+        )
+        return cls(frames=frames, lo=lo, hi=hi, frame=data.frame)
 
     def fixed_pairs(self, seed: int, limit: int) -> tuple[torch.Tensor, torch.Tensor]:
         rng = np.random.default_rng(seed)
@@ -348,6 +393,24 @@ class PairSource:
         keep = partners != anchors
         return torch.from_numpy(anchors[keep]), torch.from_numpy(partners[keep])
 
+    def pairs(
+        self,
+        start: torch.Tensor,
+        goal: torch.Tensor,
+        rng: np.random.Generator,
+        aug: AugmentConfig,
+        total: float,
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Flattened ``(start, goal)`` ``[B, 63]`` as the service sees an edit: the goal in
+        the start's frame, both on one random body (see ``trainer.augment``)."""
+        if aug.enabled and aug.world_pairs:
+            s, g = goal_in_start_frame(self.frames, start, goal, rng, aug)
+        else:
+            s, g = self.frames.poses[start], self.frames.poses[goal]
+        if aug.enabled:
+            s, g = augment_pairs(s, g, rng, aug, total)
+        return s.reshape(len(s), -1), g.reshape(len(g), -1)
+
 
 def solver_losses(
     ae: TiedAutoencoder,
@@ -357,8 +420,10 @@ def solver_losses(
     goal: torch.Tensor,
     other_weight: float,
     bone_weight: float = 0.0,
+    delta: bool = False,
 ) -> tuple[torch.Tensor, torch.Tensor]:
-    """Per-solver loss ``[S]`` and decoded poses ``[S, B, 63]`` for a batch of pairs:
+    """Per-solver loss ``[S]`` and decoded poses ``[S, B, 63]`` for a batch of pairs
+    (``delta``: the answer is start + D(z') - D(z), as the service returns it):
     MSE(target joints) + other_weight * MSE(other joints)
     + bone_weight * MSE(decoded bone lengths - start bone lengths) (same clip, same body)."""
     n_sets = len(bank.sets)
@@ -366,7 +431,7 @@ def solver_losses(
     z_s = z.unsqueeze(0).expand(n_sets, -1, -1)
     goal_s = goal.unsqueeze(0).expand(n_sets, -1, -1)
     new_z = net(z_s, goal_s)
-    decoded = ae.decode(new_z)
+    decoded = solved_poses(ae, start, z, new_z, delta)
     sq = (decoded - goal_s) ** 2  # [S, B, 63]
     target_mask = torch.zeros(n_sets, 1, goal.shape[1])
     for s, joints in enumerate(bank.sets):
@@ -382,6 +447,17 @@ def solver_losses(
     return loss, decoded
 
 
+def solved_poses(
+    ae: TiedAutoencoder, start: torch.Tensor, z: torch.Tensor, new_z: torch.Tensor, delta: bool
+) -> torch.Tensor:
+    """Decoded answers ``[S, B, 63]``: D(z'), or with ``delta`` start + D(z') - D(z), which
+    leaves the autoencoder's own error on the start pose out of the answer."""
+    decoded = ae.decode(new_z)
+    if delta:
+        decoded = decoded + (start - ae.decode(z)).unsqueeze(0)
+    return decoded
+
+
 _CHILD = torch.from_numpy(BONE_CHILDREN.astype(np.int64))
 _PARENT = torch.from_numpy(BONE_PARENTS.astype(np.int64))
 
@@ -394,12 +470,17 @@ def bone_lengths_t(flat_poses: torch.Tensor) -> torch.Tensor:
 
 
 def solver_metrics(
-    ae: TiedAutoencoder, bank: SolverBank, start: torch.Tensor, goal: torch.Tensor
+    ae: TiedAutoencoder,
+    bank: SolverBank,
+    start: torch.Tensor,
+    goal: torch.Tensor,
+    delta: bool = False,
 ) -> dict[str, dict[str, float]]:
     """Per solver: mean reach error of its targets and MPJPE of the whole pose (cm)."""
     n_sets = len(bank.sets)
-    z = ae.encode(start).unsqueeze(0).expand(n_sets, -1, -1)
-    decoded = ae.decode(bank(z, goal.unsqueeze(0).expand(n_sets, -1, -1)))
+    z = ae.encode(start)
+    new_z = bank(z.unsqueeze(0).expand(n_sets, -1, -1), goal.unsqueeze(0).expand(n_sets, -1, -1))
+    decoded = solved_poses(ae, start, z, new_z, delta)
     out: dict[str, dict[str, float]] = {}
     for s, joints in enumerate(bank.sets):
         err = (decoded[s] - goal).reshape(len(goal), NUM_JOINTS, 3).norm(dim=-1)
@@ -414,13 +495,14 @@ def solver_metrics(
 
 
 def train_solvers(
-    cfg: TrainConfig, d: Dist, ae: TiedAutoencoder, splits: Splits, fresh: bool
+    cfg: TrainConfig, d: Dist, ae: TiedAutoencoder, splits: Splits, total: float, fresh: bool
 ) -> tuple[SolverBank, StageState]:
-    sc = cfg.solver
+    sc, aug = cfg.solver, cfg.augment
     max_gap = max(1, round(sc.max_gap_seconds * FPS))
     src = PairSource.of(splits.train, max_gap)
     val = PairSource.of(splits.val, max_gap)
     va, vp = val.fixed_pairs(cfg.seed + 1, cfg.max_eval_frames)
+    v_start, v_goal = val.pairs(va, vp, np.random.default_rng(cfg.seed + 9), aug, total)
     torch.manual_seed(cfg.seed + 1)
     bank = SolverBank(ae.norm, sc.sets, ae.latent_dim, sc.hidden, sc.residual)
     net: nn.Module = DistributedDataParallel(bank) if d.world > 1 else bank
@@ -434,31 +516,26 @@ def train_solvers(
         same = rng.random(len(partner_idx)) < sc.identity_fraction
         partner_idx[same] = np.flatnonzero(same)  # "already there": learn to stay put
         partners = torch.from_numpy(partner_idx)
-        total, count = torch.zeros((), dtype=torch.float64), 0
+        total_loss, count = torch.zeros((), dtype=torch.float64), 0
         for idx in batches(len(src.poses), sc.batch_size, d, cfg.seed + 1, epoch):
+            start, goal = src.pairs(idx, partners[idx], rng, aug, total)
             loss, _ = solver_losses(
-                ae,
-                bank,
-                net,
-                src.poses[idx],
-                src.poses[partners[idx]],
-                sc.other_weight,
-                sc.bone_weight,
+                ae, bank, net, start, goal, sc.other_weight, sc.bone_weight, sc.delta
             )
             loss = loss.sum()
             optim.zero_grad(set_to_none=True)
             loss.backward()
             optim.step()
-            total += loss.detach().double() / len(bank.sets)
+            total_loss += loss.detach().double() / len(bank.sets)
             count += 1
             bar.update()
-        return _mean_loss(total, count, d)
+        return _mean_loss(total_loss, count, d)
 
     def validate() -> dict[str, float]:
         losses, _ = solver_losses(
-            ae, bank, bank, val.poses[va], val.poses[vp], sc.other_weight, sc.bone_weight
+            ae, bank, bank, v_start, v_goal, sc.other_weight, sc.bone_weight, sc.delta
         )
-        metrics = solver_metrics(ae, bank, val.poses[va], val.poses[vp])
+        metrics = solver_metrics(ae, bank, v_start, v_goal, sc.delta)
         return {
             "val_loss": float(losses.mean()),
             "val_reach_cm": float(np.mean([m["reach_cm"] for m in metrics.values()])),
@@ -483,24 +560,29 @@ def train_solvers(
     return bank, state
 
 
-_MIRROR_COLS = torch.tensor([3 * MIRROR[j] + k for j in range(NUM_JOINTS) for k in range(3)])
-
-
-def augment(poses: torch.Tensor, rng: np.random.Generator, mirror: bool, yaw: bool) -> torch.Tensor:
-    """Random mirror (left <-> right, x -> -x) and yaw about +Y through the pelvis axis."""
-    out = poses.reshape(len(poses), NUM_JOINTS, 3)
+def augment(
+    poses: torch.Tensor,
+    rng: np.random.Generator,
+    mirror: bool,
+    yaw: bool,
+    aug: AugmentConfig | None = None,
+) -> torch.Tensor:
+    """Completion samples ``[B, 63]``: with ``aug``, a random body at a random size (key
+    points tell the size: completion is never size-normalised); a random mirror; a random
+    yaw about +Y through the pelvis floor point."""
+    out = as_joints(poses)
+    n = len(out)
+    if aug is not None and aug.enabled:
+        scale, shift = random_bodies(n, rng, aug)
+        out = rebuild(out, scale, shift)
+        size = np.where(rng.random(n) < 0.5, 1.0, rng.uniform(0.6, 1.2, n))
+        out = out * torch.from_numpy(size).float()[:, None, None]
     if mirror:
-        flip = torch.from_numpy(rng.random(len(poses)) < 0.5)
-        mirrored = poses[:, _MIRROR_COLS].reshape(len(poses), NUM_JOINTS, 3) * torch.tensor(
-            [-1.0, 1.0, 1.0]
-        )
-        out = torch.where(flip[:, None, None], mirrored, out)
+        flip = torch.from_numpy(rng.random(n) < 0.5)[:, None, None]
+        out = torch.where(flip, mirror_poses(out), out)
     if yaw:
-        angle = torch.from_numpy(rng.uniform(0.0, 2.0 * math.pi, len(poses))).float()
-        c, s = torch.cos(angle)[:, None], torch.sin(angle)[:, None]
-        x, y, z = out[..., 0], out[..., 1], out[..., 2]
-        out = torch.stack([c * x + s * z, y, -s * x + c * z], dim=-1)
-    return out.reshape(len(poses), -1)
+        out = turn(out, torch.from_numpy(rng.uniform(0.0, 2.0 * math.pi, n)).float())
+    return out.reshape(n, -1)
 
 
 def completion_inputs(
@@ -537,7 +619,7 @@ def train_completion(
             len(val), cfg.max_eval_frames, replace=False
         )
         val = val[torch.from_numpy(np.sort(sel))]
-    val_aug = augment(val, np.random.default_rng(cfg.seed + 3), cc.mirror, cc.yaw)
+    val_aug = augment(val, np.random.default_rng(cfg.seed + 3), cc.mirror, cc.yaw, cfg.augment)
     nets: list[CompletionNet] = []
     states: list[StageState] = []
     base = {JOINT_INDEX[j] for j in cc.schemes[0]}
@@ -573,7 +655,7 @@ def train_completion(
                     progress = (epoch * steps + step) / max(1, cc.epochs * steps)
                     for group in optim.param_groups:
                         group["lr"] = cc.lr * 0.5 * (1.0 + math.cos(math.pi * progress))
-                poses = augment(train[idx], rng, cc.mirror, cc.yaw)
+                poses = augment(train[idx], rng, cc.mirror, cc.yaw, cfg.augment)
                 keep = keep_mask(len(poses), rng) if level > 1 else None
                 x = completion_inputs(nets, level, poses, keep)
                 loss = nn.functional.mse_loss(net(x), poses)
@@ -637,8 +719,9 @@ def train_all(cfg: TrainConfig, *, fresh: bool = False) -> Trained:
     if len(val) > cfg.max_eval_frames:
         sel = np.random.default_rng(cfg.seed).choice(len(val), cfg.max_eval_frames, replace=False)
         val = val[torch.from_numpy(np.sort(sel))]
-    ae, ae_state = train_autoencoder(cfg, d, train, val, fresh)
-    bank, solver_state = train_solvers(cfg, d, ae, splits, fresh)
+    total = float(reference_lengths(splits.train).sum())
+    ae, ae_state = train_autoencoder(cfg, d, train, val, total, fresh)
+    bank, solver_state = train_solvers(cfg, d, ae, splits, total, fresh)
     completion, completion_states = train_completion(cfg, d, splits, fresh)
     if d.world > 1:  # every rank reports what it ended with (ranks must agree)
         digest = hashlib.sha256()
