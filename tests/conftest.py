@@ -8,6 +8,8 @@ Mocap (real data, session-scoped):
   like the archives (so the dataset builder reads it as extracted folders).
 - ``small_dataset``: a real ``poses.npz`` built from ``mocap_clips`` by the same code path as
   ``pose-trainer dataset`` (train/val/test all non-empty).
+- ``more_mocap``: a few real files of the three multi-body archives (CMU ASF/AMC, ReActIdle,
+  AnimatedDrawings), laid out like the archives; skipped when those archives are absent.
 """
 
 from __future__ import annotations
@@ -99,6 +101,59 @@ def mocap_clips(mocap_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Mo
         bandai=tuple(root / m for m in BANDAI_MEMBERS),
         cmu=tuple(root / m for m in CMU_MEMBERS if not m.endswith("standard.bvh")),
     )
+
+
+#: Files of the three multi-body archives (archive -> members), for readers, maps and the
+#: holdout split: CMU subjects 07 and 124 (held out) and 10 and 16 (not), the 124_02 copy
+#: (excluded by the map), two ReActIdle clips, both fair1 skeletons and cmu1.
+_ASF = "cmu_asfamc_subset/terryum+Athletic_Movement_Detection@06b5ebe/MocapData"
+_KAY = "cmu_asfamc_subset/Kay1794+Mocap-Keyframe-Interpolation@f19d313/mocapPlayer-starter"
+_RI = "reactidle_bvh/Enekoassets+ReActIdle@90b0ac7"
+_FAIR = "animateddrawings_fair_bvh/facebookresearch+AnimatedDrawings@74ee7f0/examples/bvh"
+MORE_MOCAP: dict[str, tuple[str, ...]] = {
+    "cmu_asfamc_subset.tar.xz": (
+        f"{_KAY}/07-walk.asf",
+        f"{_KAY}/07_05-walk.amc",
+        f"{_ASF}/10.asf",
+        f"{_ASF}/10_01.amc",
+        f"{_ASF}/16.asf",
+        f"{_ASF}/16_01.amc",
+        f"{_ASF}/16_05.amc",
+        f"{_ASF}/124.asf",
+        f"{_ASF}/124_02.amc",
+        f"{_ASF}/124_02 - Copy.amc",
+    ),
+    "reactidle_bvh.tar.xz": (f"{_RI}/genuine/003_genuine.bvh", f"{_RI}/genuine/002_genuine.bvh"),
+    "animateddrawings_fair_bvh.tar.xz": (
+        f"{_FAIR}/fair1/dab.bvh",
+        f"{_FAIR}/fair1/wave_hello.bvh",
+        f"{_FAIR}/cmu1/jumping_jacks.bvh",
+    ),
+}
+
+
+@pytest.fixture(scope="session")
+def more_mocap(mocap_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Extract :data:`MORE_MOCAP` (once per session, the archives in parallel); the root of
+    the archive layout. Skips when the archives or ``tar`` are absent."""
+    missing = [a for a in MORE_MOCAP if not (mocap_dir / a).is_file()]
+    if missing:
+        pytest.skip(f"mocap archives {missing} not found in {mocap_dir}")
+    tar = shutil.which("tar")
+    if tar is None:
+        pytest.skip("the 'tar' command is needed to extract test clips")
+    root = tmp_path_factory.mktemp("more_mocap")
+    procs = [
+        subprocess.Popen(
+            [tar, "-xJf", str(mocap_dir / archive), "-C", str(root), *members],
+            stderr=subprocess.PIPE,
+        )
+        for archive, members in MORE_MOCAP.items()
+    ]
+    for proc in procs:
+        _, err = proc.communicate()
+        assert proc.returncode == 0, f"tar failed: {err.decode(errors='replace')}"
+    return root
 
 
 @pytest.fixture(scope="session")

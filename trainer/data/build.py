@@ -2,7 +2,9 @@
 
 Pipeline, per clip (in worker processes):
 
-1. read the BVH (:mod:`trainer.data.bvh`); the joint map picks the 21 source joints;
+1. read the clip (BVH: :mod:`core.bvh`; Acclaim ASF/AMC: :mod:`trainer.data.asf`, the AMC
+   paired with its subject's ASF by the map); the joint map picks the 21 source joints (or
+   points part-way between two of them);
 2. resample to 30 fps: keep every k-th frame when the source rate is an integer multiple
    ``k`` of 30 (done *before* forward kinematics, so it is exact and cheap), otherwise
    linear interpolation of the joint positions at ``t = n / 30``;
@@ -13,8 +15,9 @@ Pipeline, per clip (in worker processes):
    than 5 % + 1 mm);
 5. canonicalise every pose with :func:`core.geometry.canonicalise`.
 
-Then clips are split by clip (stratified by source and content, seeded) and everything is
-written atomically by :func:`trainer.data.dataset.save_dataset`.
+Then clips are split by clip: the clips a map holds out go to ``holdout``, the others to
+train/val/test (stratified by source, content and actor, seeded); everything is written
+atomically by :func:`trainer.data.dataset.save_dataset`.
 """
 
 from __future__ import annotations
@@ -38,12 +41,13 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from core.bvh import BVHError, read_bvh
+from core.bvh import BVH, BVHError, read_bvh
 from core.geometry import canonical_transform, transform_yaw
 from core.io import sha256_file
 from core.skeleton import BONE_CHILDREN, JOINT_NAMES, NUM_JOINTS, bone_lengths
+from trainer.data.asf import AMC, ASFError, read_amc, read_asf
 from trainer.data.dataset import FORMAT_VERSION, FPS, SPLITS, PoseDataset, save_dataset
-from trainer.data.maps import MapError, MocapMap, load_maps
+from trainer.data.maps import MapError, MocapMap, glob_to_regex, joint_positions, load_maps
 
 #: Default split fractions (train, val, test).
 SPLIT_FRACTIONS: dict[str, float] = {"train": 0.90, "val": 0.05, "test": 0.05}
@@ -73,6 +77,7 @@ class ClipJob:
     relpath: str  # path relative to the source root, '/'-separated (for maps and messages)
     label: str  # "<source>:<relpath>", used in messages
     map: MocapMap
+    skeleton: str | None = None  # absolute path of the ASF of an AMC clip (reader "asf")
 
 
 @dataclass
@@ -145,24 +150,48 @@ def drop_reasons(world: npt.NDArray[np.float64]) -> npt.NDArray[np.int8]:
     return code
 
 
+def read_world(job: ClipJob) -> tuple[npt.NDArray[np.float64], int, float, int]:
+    """Read one clip and give its 21 canonical joints at 30 fps in world metres, +Y up:
+    ``(world [n_out, 21, 3], source frames, source fps, n_out)``. Raises ``BVHError`` /
+    ``ASFError`` / ``MapError`` for unreadable files and maps that do not fit them."""
+    clip: BVH | AMC
+    scale_hint: float | None = None
+    if job.map.reader == "asf":
+        if job.skeleton is None:
+            raise MapError(f"{job.label}: no ASF skeleton paired with this AMC")
+        skeleton = read_asf(job.skeleton)
+        clip = read_amc(job.path, skeleton, name=job.label)
+        scale_hint = skeleton.metres_per_unit
+    else:
+        clip = read_bvh(job.path, name=job.label)
+    joints = job.map.joints_for(job.relpath)
+    missing = sorted({n for j in joints for n in j.names} - set(clip.joint_names))
+    if missing:
+        raise MapError(f"{job.label}: joints {missing} of map {job.map.path} not in the file")
+    fps = _clean_fps(job.map.fps_for(job.relpath, clip.fps))
+    k, n_out = resample_indices(clip.num_frames, fps)
+    if k:
+        world = joint_positions(clip, joints, frames=slice(None, None, k))
+    else:
+        world = interpolate_positions(joint_positions(clip, joints), fps)
+    if job.map.root_position == "add" and isinstance(clip, BVH):
+        # The root's position channels are a displacement from its OFFSET: add the OFFSET
+        # on the axes they replaced (the whole figure moves with the root).
+        root = clip.joints[0]
+        for ch in root.channels:
+            axis = "xyz".find(ch[0].lower()) if ch.lower().endswith("position") else -1
+            if axis >= 0:
+                world[..., axis] += root.offset[axis]
+    scale = job.map.scale_for(job.relpath, scale_hint)
+    world = np.einsum("ij,fkj->fki", job.map.up_matrix_for(job.relpath), world * scale)
+    return world, clip.num_frames, fps, n_out
+
+
 def process_clip(job: ClipJob) -> ClipResult:
     """Read, resample, convert, filter and canonicalise one clip (runs in a worker)."""
     result = ClipResult(job=job)
     try:
-        bvh = read_bvh(job.path, name=job.label)
-        names = list(job.map.source_joints)
-        missing = [n for n in names if n not in bvh.joint_names]
-        if missing:
-            raise BVHError(job.label, f"joints {missing} of map {job.map.path} not in the file")
-        fps = _clean_fps(job.map.fps_for(job.relpath, bvh.fps))
-        result.source_frames = bvh.num_frames
-        result.source_fps = fps
-        k, n_out = resample_indices(bvh.num_frames, fps)
-        if k:
-            world = bvh.forward_kinematics(names, frames=slice(None, None, k))
-        else:
-            world = interpolate_positions(bvh.forward_kinematics(names), fps)
-        world = np.einsum("ij,fkj->fki", job.map.up_matrix, world * job.map.scale)
+        world, result.source_frames, result.source_fps, n_out = read_world(job)
         result.resampled_frames = n_out
         code = drop_reasons(world)
         result.drops = {r: int((code == i + 1).sum()) for i, r in enumerate(DROP_REASONS)}
@@ -174,7 +203,7 @@ def process_clip(job: ClipJob) -> ClipResult:
         result.root = frame.translation.astype(np.float32)
         result.frames = np.flatnonzero(keep).astype(np.int32)
         result.bone_sum = bone_lengths(canon).sum(axis=0)
-    except (BVHError, MapError) as exc:
+    except (BVHError, ASFError, MapError) as exc:
         result.error = str(exc)
     except Exception as exc:  # one bad file must not stop the build
         result.error = f"{job.label}: {type(exc).__name__}: {exc}"
@@ -203,16 +232,31 @@ def read_checksums(mocap_dir: Path) -> dict[str, str]:
     return sums
 
 
-def _selected_files(root: Path, mocap_map: MocapMap) -> list[str]:
+def _all_files(root: Path) -> list[str]:
+    """Every file under ``root``, as sorted '/'-separated relative paths."""
     out: list[str] = []
     for dirpath, dirnames, filenames in os.walk(root):
         dirnames.sort()
         rel_dir = Path(dirpath).relative_to(root).as_posix()
         for name in sorted(filenames):
-            rel = name if rel_dir == "." else f"{rel_dir}/{name}"
-            if mocap_map.selects(rel):
-                out.append(rel)
+            out.append(name if rel_dir == "." else f"{rel_dir}/{name}")
     return out
+
+
+def _selected_files(root: Path, mocap_map: MocapMap) -> list[str]:
+    return [rel for rel in _all_files(root) if mocap_map.selects(rel)]
+
+
+def pair_skeleton(mocap_map: MocapMap, relpath: str, files: Sequence[str]) -> str:
+    """The one file of ``files`` (relative paths) matching the map's ``skeleton`` globs for
+    a motion file; ``MapError`` naming the globs when none or several match."""
+    patterns = mocap_map.skeleton_globs(relpath)
+    regexes = [glob_to_regex(p) for p in patterns]
+    found = [f for f in files if any(r.match(f) for r in regexes)]
+    if len(found) != 1:
+        what = "no file" if not found else f"{len(found)} files ({', '.join(found[:3])})"
+        raise MapError(f"{mocap_map.path}: skeleton globs {patterns} match {what}")
+    return found[0]
 
 
 def _start_extract(archive: Path, dest: Path) -> subprocess.Popen[bytes] | None:
@@ -247,7 +291,11 @@ def locate_sources(
         candidates.append(mocap_dir)
         for root in candidates:
             if root.is_dir() and _selected_files(root, m):
-                found.append(SourceInput(m, root, {"kind": "folder", "path": str(root)}))
+                origin: dict[str, Any] = {"kind": "folder", "path": str(root)}
+                if m.archive and m.archive in checksums:
+                    # Not verifiable from a folder: the sum SHA256SUMS lists for its archive.
+                    origin.update(file=m.archive, sha256=checksums[m.archive], verified=False)
+                found.append(SourceInput(m, root, origin))
                 break
         else:
             if log is not None:
@@ -295,22 +343,34 @@ def assign_splits(
     contents: Sequence[str],
     seed: int,
     fractions: dict[str, float] | None = None,
+    *,
+    actors: Sequence[str] | None = None,
+    holdout: Sequence[bool] | None = None,
 ) -> npt.NDArray[np.str_]:
-    """Split clips by clip, stratified by (source, content), deterministic from ``seed``.
+    """Split clips by clip, stratified by (source, content, actor), deterministic from
+    ``seed``; clips flagged in ``holdout`` go to ``holdout`` and nothing else does.
 
     Per stratum of n clips (shuffled by a generator seeded with ``seed`` and the stratum):
     n = 1 -> test; n = 2 -> 1 test + 1 train; n >= 3 -> max(1, round(n * f_test)) test,
-    max(1, round(n * f_val)) val, the rest train. So every source and content appears in
-    test, and in val where it has at least 3 clips. Independent of clip order.
+    max(1, round(n * f_val)) val, the rest train. So every source, content and actor appears
+    in test, and in val where it has at least 3 clips. Independent of clip order. (An empty
+    actor leaves the stratum, and so the split, as it was before actors were used.)
     """
     fr = fractions or SPLIT_FRACTIONS
-    out = np.full(len(names), "train", dtype="<U5")
-    strata: dict[tuple[str, str], list[int]] = defaultdict(list)
-    for i, key in enumerate(zip(sources, contents, strict=True)):
-        strata[key].append(i)
-    for (source, content), idx in strata.items():
+    out = np.full(len(names), "train", dtype="<U7")
+    held = np.zeros(len(names), dtype=bool) if holdout is None else np.asarray(holdout, bool)
+    if held.shape != (len(names),):
+        raise ValueError(f"holdout has {held.shape[0]} flags for {len(names)} clips")
+    out[held] = "holdout"
+    who = [""] * len(names) if actors is None else list(actors)
+    strata: dict[tuple[str, str, str], list[int]] = defaultdict(list)
+    for i, key in enumerate(zip(sources, contents, who, strict=True)):
+        if not held[i]:
+            strata[key].append(i)
+    for (source, content, actor), idx in strata.items():
         idx = sorted(idx, key=lambda i: names[i])
-        crc = zlib.crc32(f"{source}\0{content}".encode())
+        stratum = f"{source}\0{content}" + (f"\0{actor}" if actor else "")
+        crc = zlib.crc32(stratum.encode())
         rng = np.random.default_rng([seed & 0xFFFFFFFF, crc])
         order = [idx[i] for i in rng.permutation(len(idx))]
         n = len(order)
@@ -408,8 +468,20 @@ def build_dataset(
         jobs: list[ClipJob] = []
         skipped: list[dict[str, str]] = []
         for src in sources:
-            for rel in _selected_files(src.root, src.map):
-                jobs.append(ClipJob(str(src.root / rel), rel, f"{src.map.source}:{rel}", src.map))
+            files = _all_files(src.root)
+            for rel in files:
+                if not src.map.selects(rel):
+                    continue
+                label = f"{src.map.source}:{rel}"
+                skeleton = None
+                if src.map.reader == "asf":
+                    try:
+                        skeleton = str(src.root / pair_skeleton(src.map, rel, files))
+                    except MapError as exc:
+                        skipped.append({"file": label, "reason": str(exc)})
+                        say(f"[yellow]skipped {label}: {exc}")
+                        continue
+                jobs.append(ClipJob(str(src.root / rel), rel, label, src.map, skeleton))
         # Largest files first: better load balance across workers.
         jobs.sort(key=lambda j: -os.path.getsize(j.path))
         infos = {}
@@ -463,7 +535,15 @@ def build_dataset(
     clip_name = np.array([c.name for c in clip_infos], dtype=str)
     clip_source = np.array([c.source for c in clip_infos], dtype=str)
     clip_content = np.array([c.content for c in clip_infos], dtype=str)
-    split = assign_splits(clip_name.tolist(), clip_source.tolist(), clip_content.tolist(), seed)
+    clip_actor = np.array([c.actor for c in clip_infos], dtype=str)
+    split = assign_splits(
+        clip_name.tolist(),
+        clip_source.tolist(),
+        clip_content.tolist(),
+        seed,
+        actors=clip_actor.tolist(),
+        holdout=[r.job.map.is_holdout(r.job.relpath) for r in kept],
+    )
 
     drops: dict[str, int] = dict.fromkeys(DROP_REASONS, 0)
     drops_by_source: dict[str, dict[str, int]] = {}
@@ -480,14 +560,24 @@ def build_dataset(
         bone_means[source] = {
             b: round(float(v), 4) for b, v in zip(BONE_NAMES, total / count, strict=True)
         }
+    # Per body: (source, actor) -> mean canonical bone lengths (the held-out bodies' spread).
+    bone_means_by_actor: dict[str, dict[str, dict[str, float]]] = {}
+    for (source, actor), sel in _group_by_actor(kept, infos).items():
+        total = np.sum([r.bone_sum for r in sel if r.bone_sum is not None], axis=0)
+        count = sum(len(r.positions) for r in sel if r.positions is not None)
+        bone_means_by_actor.setdefault(source, {})[actor] = {
+            b: round(float(v), 4) for b, v in zip(BONE_NAMES, total / count, strict=True)
+        }
 
     meta: dict[str, Any] = {
         "format_version": FORMAT_VERSION,
         "fps": FPS,
         "seed": seed,
         "split_fractions": SPLIT_FRACTIONS,
-        "split_rule": "by clip, stratified by (source, content); per stratum of n clips: "
+        "split_rule": "by clip; clips a map holds out -> holdout; the others stratified by "
+        "(source, content, actor); per stratum of n clips: "
         "n=1 -> test, n=2 -> test+train, else max(1, round(n*f)) test and val",
+        "holdout": {s.map.source: list(s.map.holdout) for s in sources if s.map.holdout},
         "units": "metres",
         "frame": "canonical: pelvis floor projection at the origin, facing +Z, left +X, +Y up",
         "joints": list(JOINT_NAMES),
@@ -518,6 +608,7 @@ def build_dataset(
             for s in sources
         },
         "mean_bone_lengths_m": bone_means,
+        "mean_bone_lengths_m_by_actor": bone_means_by_actor,
         "num_clips": len(kept),
         "num_frames": len(positions),
         "created_utc": datetime.now(UTC).isoformat(timespec="seconds"),
@@ -532,13 +623,22 @@ def build_dataset(
         clip_source=clip_source,
         clip_content=clip_content,
         clip_style=np.array([c.style for c in clip_infos], dtype=str),
-        clip_actor=np.array([c.actor for c in clip_infos], dtype=str),
+        clip_actor=clip_actor,
         clip_split=split.astype(str),
         meta=meta,
     )
     meta["build_seconds"] = round(time.perf_counter() - t0, 1)
     out = save_dataset(out, dataset)
     return BuildReport(meta=meta, dataset=dataset, out=out)
+
+
+def _group_by_actor(
+    kept: Sequence[ClipResult], infos: dict[str, Any]
+) -> dict[tuple[str, str], list[ClipResult]]:
+    groups: dict[tuple[str, str], list[ClipResult]] = defaultdict(list)
+    for r in kept:
+        groups[(r.job.map.source, infos[r.job.path].actor)].append(r)
+    return dict(sorted(groups.items()))
 
 
 def _display_path(path: str) -> str:

@@ -1,29 +1,38 @@
 """Joint maps: one TOML file per mocap source (``trainer/maps/*.toml``).
 
 A map says where a source's files are (archive name, include/exclude globs), how to read
-them (unit, up axis, frame-rate overrides, swapped sides), how to name clips and derive their
-metadata from the path, and which source joint (or ``<Joint>_end`` End Site) feeds each of
-the 21 canonical joints. The format is documented in ``docs/data.md``.
+them (reader: BVH or ASF/AMC; unit, up axis, frame rate, swapped sides, per-file overrides),
+how to name clips and derive their metadata from the path, which clips are held out of
+training, and which source joint (or ``<Joint>_end`` End Site, or a point part-way between
+two source joints) feeds each of the 21 canonical joints. The format is documented in
+``docs/data.md``.
 """
 
 from __future__ import annotations
 
+import functools
 import hashlib
+import math
 import re
 import tomllib
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 import numpy.typing as npt
 
 from core.skeleton import JOINT_NAMES, MIRROR
 
-MAP_FORMAT = 1
+MAP_FORMAT = 2
 
-#: Metres per file unit.
+#: Metres per file unit. ``asf``: from the ASF skeleton's ``:units length`` (CMU: values
+#: are inches x 0.45, so metres = value x 0.0254 / 0.45); only with ``reader = "asf"``.
 UNITS: dict[str, float] = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254, "ft": 0.3048}
+ASF_UNIT = "asf"
+READERS: tuple[str, ...] = ("bvh", "asf")
+ROOT_POSITIONS: tuple[str, ...] = ("replace", "add")
 
 #: Rotation taking a source's up axis to +Y (right-handed to right-handed).
 UP_AXES: dict[str, tuple[tuple[float, float, float], ...]] = {
@@ -38,22 +47,41 @@ _TOP_KEYS = {
     "description",
     "licence",
     "archive",
+    "reader",
+    "skeleton",
     "unit",
     "up_axis",
+    "root_position",
     "swap_sides",
     "include",
     "exclude",
-    "fps_override",
+    "holdout",
+    "override",
     "metadata",
     "joints",
 }
 _META_KEYS = {"pattern", "name", "content", "style", "actor"}
+_OVERRIDE_KEYS = {"glob", "fps", "unit", "up_axis", "joints", "content", "style", "actor"}
 
 
 class MapError(ValueError):
     """An invalid joint-map file (names the file and the problem)."""
 
 
+class Reader(Protocol):
+    """What a map needs of a parsed file (:class:`core.bvh.BVH`, :class:`trainer.data.asf.AMC`)."""
+
+    @property
+    def joint_names(self) -> tuple[str, ...]: ...
+
+    def forward_kinematics(
+        self,
+        names: Sequence[str] | None = None,
+        frames: slice | npt.NDArray[np.integer] | None = None,
+    ) -> npt.NDArray[np.float64]: ...
+
+
+@functools.lru_cache(maxsize=1024)
 def glob_to_regex(pattern: str) -> re.Pattern[str]:
     """Compile a path glob: ``*`` and ``?`` stay within one folder, ``**`` crosses folders."""
     out: list[str] = []
@@ -88,6 +116,46 @@ def glob_to_regex(pattern: str) -> re.Pattern[str]:
     return re.compile("".join(out) + r"\Z")
 
 
+def _matches(patterns: Sequence[str], relpath: str) -> bool:
+    return any(glob_to_regex(p).match(relpath) for p in patterns)
+
+
+@dataclass(frozen=True)
+class JointSource:
+    """Where a canonical joint comes from: a source joint, or the point ``at`` of the way
+    from ``joint`` to ``towards`` (``joint + at * (towards - joint)``)."""
+
+    joint: str
+    towards: str | None = None
+    at: float = 0.0
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return (self.joint,) if self.towards is None else (self.joint, self.towards)
+
+    def __str__(self) -> str:
+        if self.towards is None:
+            return self.joint
+        return f"{self.at:g} of {self.joint} -> {self.towards}"
+
+
+def joint_positions(
+    reader: Reader,
+    joints: Sequence[JointSource],
+    frames: slice | npt.NDArray[np.integer] | None = None,
+) -> npt.NDArray[np.float64]:
+    """World positions ``[F, len(joints), 3]`` (file units) of the mapped joints: one FK
+    pass over the source joints they need, then the part-way points interpolated."""
+    names = list(dict.fromkeys(n for j in joints for n in j.names))
+    fk = reader.forward_kinematics(names, frames=frames)
+    col = {n: k for k, n in enumerate(names)}
+    out = np.empty((fk.shape[0], len(joints), 3), dtype=np.float64)
+    for k, j in enumerate(joints):
+        a = fk[:, col[j.joint]]
+        out[:, k] = a if j.towards is None else a + j.at * (fk[:, col[j.towards]] - a)
+    return out
+
+
 @dataclass(frozen=True)
 class ClipInfo:
     """Metadata of one clip, derived from its path by a map's ``[metadata]`` section."""
@@ -100,6 +168,17 @@ class ClipInfo:
 
 
 @dataclass(frozen=True)
+class Override:
+    """One ``[[override]]`` entry: settings for the files its glob matches."""
+
+    glob: str
+    values: tuple[tuple[str, Any], ...]  # (key, value), keys from _OVERRIDE_KEYS - {glob}
+
+    def get(self, key: str) -> Any:
+        return dict(self.values).get(key)
+
+
+@dataclass(frozen=True)
 class MocapMap:
     """A parsed, validated joint map."""
 
@@ -109,27 +188,80 @@ class MocapMap:
     description: str
     licence: str
     archive: str | None
+    reader: str  # "bvh" or "asf"
+    skeleton: tuple[str, ...]  # ASF glob templates (reader "asf"), filled from [metadata] groups
     unit: str
-    scale: float
+    scale: float  # metres per unit; 0.0 for unit "asf" (from the skeleton)
     up_axis: str
+    root_position: str  # "replace" (BVH standard) or "add" (root channels offset the OFFSET)
     swap_sides: bool
     include: tuple[str, ...]
     exclude: tuple[str, ...]
-    fps_overrides: tuple[tuple[str, float], ...]
+    holdout: tuple[str, ...]
+    overrides: tuple[Override, ...]
     pattern: str
     templates: tuple[tuple[str, str], ...]  # (field, template) for name/content/style/actor
-    joints: tuple[str, ...]  # source joint per canonical joint, as written (canonical order)
+    joints: tuple[JointSource, ...]  # per canonical joint, as written (canonical order)
+
+    # ------------------------------------------------------------------ per file
+
+    def _override(self, relpath: str, key: str) -> Any:
+        """The value of ``key`` from the first override matching ``relpath`` that sets it."""
+        for o in self.overrides:
+            value = o.get(key)
+            if value is not None and glob_to_regex(o.glob).match(relpath):
+                return value
+        return None
+
+    def joints_for(self, relpath: str) -> tuple[JointSource, ...]:
+        """Source of each canonical joint for this file (overrides and ``swap_sides``
+        applied), in canonical order."""
+        table: dict[str, JointSource] | None = self._override(relpath, "joints")
+        joints = list(self.joints)
+        if table:
+            joints = [table.get(n, j) for n, j in zip(JOINT_NAMES, joints, strict=True)]
+        if self.swap_sides:
+            joints = [joints[MIRROR[i]] for i in range(len(JOINT_NAMES))]
+        return tuple(joints)
 
     @property
     def source_joints(self) -> tuple[str, ...]:
-        """Source joint feeding each canonical joint, with ``swap_sides`` applied."""
-        if not self.swap_sides:
-            return self.joints
-        return tuple(self.joints[MIRROR[i]] for i in range(len(JOINT_NAMES)))
+        """Source joint feeding each canonical joint (``swap_sides`` applied), for maps whose
+        joints are all plain names (else use :meth:`joints_for` and :func:`joint_positions`)."""
+        joints = self.joints_for("")
+        if any(j.towards is not None for j in joints):
+            raise MapError(f"{self.path}: part-way joints: use joints_for / joint_positions")
+        return tuple(j.joint for j in joints)
+
+    def scale_for(self, relpath: str, asf_metres_per_unit: float | None = None) -> float:
+        """Metres per file unit for this file (``asf``: the skeleton's own unit)."""
+        unit = self._override(relpath, "unit")
+        scale = self.scale if unit is None else _unit_scale(unit)[0]
+        if scale == 0.0:
+            if asf_metres_per_unit is None:
+                raise MapError(f"{self.path}: unit 'asf' needs an ASF skeleton ({relpath})")
+            return asf_metres_per_unit
+        return scale
+
+    def up_axis_for(self, relpath: str) -> str:
+        value = self._override(relpath, "up_axis")
+        return str(value) if value is not None else self.up_axis
+
+    def up_matrix_for(self, relpath: str) -> npt.NDArray[np.float64]:
+        return np.asarray(UP_AXES[self.up_axis_for(relpath)], dtype=np.float64)
 
     @property
     def up_matrix(self) -> npt.NDArray[np.float64]:
         return np.asarray(UP_AXES[self.up_axis], dtype=np.float64)
+
+    def fps_for(self, relpath: str, header_fps: float) -> float:
+        """The true frame rate of a file: the first matching override, else the header's."""
+        fps = self._override(relpath, "fps")
+        return float(fps) if fps is not None else header_fps
+
+    def is_holdout(self, relpath: str) -> bool:
+        """Whether the file is held out of training (its clip goes to split ``holdout``)."""
+        return _matches(self.holdout, relpath)
 
     @property
     def archive_stem(self) -> str | None:
@@ -143,26 +275,25 @@ class MocapMap:
 
     def selects(self, relpath: str) -> bool:
         """Whether a file (path relative to the source root, with '/') is a clip to read."""
-        if not any(glob_to_regex(p).match(relpath) for p in self.include):
-            return False
-        return not any(glob_to_regex(p).match(relpath) for p in self.exclude)
+        return _matches(self.include, relpath) and not _matches(self.exclude, relpath)
 
-    def fps_for(self, relpath: str, header_fps: float) -> float:
-        """The true frame rate of a file: the first matching override, else the header's."""
-        for pattern, fps in self.fps_overrides:
-            if glob_to_regex(pattern).match(relpath):
-                return fps
-        return header_fps
-
-    def clip_info(self, relpath: str) -> ClipInfo:
-        """Clip name and metadata from the path; ``MapError`` if the pattern does not match."""
+    def _groups(self, relpath: str) -> dict[str, str]:
         match = re.match(self.pattern, relpath)
         if match is None:
             raise MapError(f"{self.path}: [metadata] pattern does not match {relpath!r}")
         groups = {k: (v or "") for k, v in match.groupdict().items()}
         groups.setdefault("source", self.source)
+        groups.setdefault("dir", relpath.rpartition("/")[0])
+        return groups
+
+    def clip_info(self, relpath: str) -> ClipInfo:
+        """Clip name and metadata from the path; ``MapError`` if the pattern does not match."""
+        groups = self._groups(relpath)
         values: dict[str, str] = {}
         for key, template in self.templates:
+            override = self._override(relpath, key)
+            if override is not None:
+                template = str(override)
             try:
                 values[key] = template.format(**groups)
             except (KeyError, IndexError, ValueError) as exc:
@@ -175,6 +306,20 @@ class MocapMap:
             actor=values.get("actor", ""),
         )
 
+    def skeleton_globs(self, relpath: str) -> list[str]:
+        """The ``skeleton`` templates filled for one motion file (globs relative to the
+        source root; the builder requires exactly one file to match any of them)."""
+        if not self.skeleton:
+            raise MapError(f"{self.path}: no 'skeleton' template (needed by reader 'asf')")
+        groups = self._groups(relpath)
+        try:
+            return [t.format(**groups) for t in self.skeleton]
+        except (KeyError, IndexError, ValueError) as exc:
+            raise MapError(f"{self.path}: skeleton = {list(self.skeleton)!r}: {exc}") from None
+
+
+# --------------------------------------------------------------------------- parsing
+
 
 def _str_list(data: dict[str, Any], key: str, file: str) -> tuple[str, ...]:
     value = data.get(key, [])
@@ -183,6 +328,101 @@ def _str_list(data: dict[str, Any], key: str, file: str) -> tuple[str, ...]:
     if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
         raise MapError(f"{file}: {key!r} must be a list of glob strings")
     return tuple(value)
+
+
+def _unit_scale(unit: Any) -> tuple[float, str]:
+    """``(metres per unit, display name)``; 0.0 for ``asf``; ``ValueError`` if invalid."""
+    if isinstance(unit, int | float) and not isinstance(unit, bool) and unit > 0:
+        return float(unit), f"{float(unit)} m"
+    if isinstance(unit, str) and unit in UNITS:
+        return UNITS[unit], unit
+    if unit == ASF_UNIT:
+        return 0.0, ASF_UNIT
+    raise ValueError(unit)
+
+
+def _parse_unit(unit: Any, where: str, reader: str) -> tuple[float, str]:
+    try:
+        scale, name = _unit_scale(unit)
+    except ValueError:
+        raise MapError(
+            f"{where}: 'unit' must be one of {sorted(UNITS)}, 'asf' or metres per unit"
+        ) from None
+    if name == ASF_UNIT and reader != "asf":
+        raise MapError(f"{where}: unit 'asf' needs reader = 'asf'")
+    return scale, name
+
+
+def _parse_joint(value: Any, where: str) -> JointSource:
+    if isinstance(value, str) and value:
+        return JointSource(value)
+    if isinstance(value, dict):
+        between, at = value.get("between"), value.get("at")
+        if (
+            set(value) == {"between", "at"}
+            and isinstance(between, list)
+            and len(between) == 2
+            and all(isinstance(b, str) and b for b in between)
+            and isinstance(at, int | float)
+            and not isinstance(at, bool)
+            and math.isfinite(at)
+            and 0.0 <= at <= 1.0
+        ):
+            return JointSource(between[0], between[1], float(at))
+        raise MapError(
+            f'{where}: a part-way joint is {{ between = ["from", "to"], at = 0.25 }} '
+            f"with 0 <= at <= 1, got {value!r}"
+        )
+    raise MapError(f"{where}: must be a source joint name or {{ between = [...], at = ... }}")
+
+
+def _parse_joints(table: Any, where: str, complete: bool) -> dict[str, JointSource]:
+    if not isinstance(table, dict):
+        raise MapError(f"{where}: must be a table of canonical joint = source joint")
+    unknown = sorted(set(table) - set(JOINT_NAMES))
+    missing = [n for n in JOINT_NAMES if n not in table] if complete else []
+    if unknown or missing:
+        raise MapError(
+            f"{where} must map exactly the 21 canonical joints; missing {missing}, "
+            f"unknown {unknown}"
+            if complete
+            else f"{where}: unknown canonical joints {unknown}"
+        )
+    return {n: _parse_joint(v, f"{where} {n}") for n, v in table.items()}
+
+
+def _parse_override(item: Any, index: int, file: str, reader: str) -> Override:
+    where = f"{file}: [[override]] #{index + 1}"
+    if not isinstance(item, dict) or not isinstance(item.get("glob"), str):
+        raise MapError(f"{where}: needs glob = '...'")
+    unknown = sorted(set(item) - _OVERRIDE_KEYS)
+    if unknown or len(item) < 2:
+        raise MapError(
+            f"{where}: unknown keys {unknown}; an override sets some of "
+            f"{sorted(_OVERRIDE_KEYS - {'glob'})}"
+        )
+    values: dict[str, Any] = {}
+    for key, value in item.items():
+        if key == "glob":
+            continue
+        if key == "fps":
+            if not isinstance(value, int | float) or isinstance(value, bool) or value <= 0:
+                raise MapError(f"{where}: fps must be > 0")
+            values[key] = float(value)
+        elif key == "unit":
+            _parse_unit(value, where, reader)
+            values[key] = value
+        elif key == "up_axis":
+            if value not in UP_AXES:
+                raise MapError(f"{where}: 'up_axis' must be one of {sorted(UP_AXES)}")
+            values[key] = value
+        elif key == "joints":
+            values[key] = _parse_joints(value, f"{where} joints", complete=False)
+        else:
+            if not isinstance(value, str):
+                raise MapError(f"{where}: {key} must be a string template")
+            values[key] = value
+    return Override(item["glob"], tuple(values.items()))
 
 
 def load_map(path: str | Path) -> MocapMap:
@@ -195,25 +435,37 @@ def load_map(path: str | Path) -> MocapMap:
     except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
         raise MapError(f"{file}: cannot read map: {exc}") from None
 
+    if data.get("format") != MAP_FORMAT:
+        hint = (
+            " (format 1: rename [[fps_override]] to [[override]])"
+            if data.get("format") == 1
+            else ""
+        )
+        raise MapError(
+            f"{file}: format = {data.get('format')!r}; this reader wants {MAP_FORMAT}{hint}"
+        )
     unknown = sorted(set(data) - _TOP_KEYS)
     if unknown:
         raise MapError(f"{file}: unknown keys {unknown}; known: {sorted(_TOP_KEYS)}")
-    if data.get("format", MAP_FORMAT) != MAP_FORMAT:
-        raise MapError(f"{file}: format {data.get('format')!r} is not supported (want 1)")
     source = data.get("source")
     if not isinstance(source, str) or not re.fullmatch(r"[a-z0-9][a-z0-9._-]*", source):
         raise MapError(f"{file}: 'source' must be a lower-case slug like 'my-studio'")
 
-    unit = data.get("unit", "m")
-    if isinstance(unit, int | float) and not isinstance(unit, bool) and unit > 0:
-        scale, unit_name = float(unit), f"{float(unit)} m"
-    elif isinstance(unit, str) and unit in UNITS:
-        scale, unit_name = UNITS[unit], unit
-    else:
-        raise MapError(f"{file}: 'unit' must be one of {sorted(UNITS)} or metres per unit")
+    reader = data.get("reader", "bvh")
+    if reader not in READERS:
+        raise MapError(f"{file}: 'reader' must be one of {list(READERS)}")
+    skeleton = _str_list(data, "skeleton", file)
+    if reader == "asf" and not skeleton:
+        raise MapError(f"{file}: reader 'asf' needs skeleton = ['<ASF glob template>', ...]")
+    if reader != "asf" and skeleton:
+        raise MapError(f"{file}: 'skeleton' is only for reader = 'asf'")
+    scale, unit_name = _parse_unit(data.get("unit", "m"), file, reader)
     up_axis = data.get("up_axis", "+Y")
     if up_axis not in UP_AXES:
         raise MapError(f"{file}: 'up_axis' must be one of {sorted(UP_AXES)}")
+    root_position = data.get("root_position", "replace")
+    if root_position not in ROOT_POSITIONS or (root_position == "add" and reader != "bvh"):
+        raise MapError(f"{file}: 'root_position' must be one of {list(ROOT_POSITIONS)} (BVH)")
     swap_sides = data.get("swap_sides", False)
     if not isinstance(swap_sides, bool):
         raise MapError(f"{file}: 'swap_sides' must be true or false")
@@ -225,18 +477,11 @@ def load_map(path: str | Path) -> MocapMap:
     if not include:
         raise MapError(f"{file}: 'include' needs at least one glob pattern")
     exclude = _str_list(data, "exclude", file)
-
-    overrides: list[tuple[str, float]] = []
-    for item in data.get("fps_override", []):
-        if (
-            not isinstance(item, dict)
-            or set(item) != {"glob", "fps"}
-            or not isinstance(item["glob"], str)
-            or not isinstance(item["fps"], int | float)
-            or item["fps"] <= 0
-        ):
-            raise MapError(f"{file}: each [[fps_override]] needs glob = '...' and fps > 0")
-        overrides.append((item["glob"], float(item["fps"])))
+    holdout = _str_list(data, "holdout", file)
+    items = data.get("override", [])
+    if not isinstance(items, list):
+        raise MapError(f"{file}: 'override' must be an array of tables ([[override]])")
+    overrides = tuple(_parse_override(item, i, file, reader) for i, item in enumerate(items))
 
     meta = data.get("metadata", {})
     if not isinstance(meta, dict):
@@ -244,10 +489,11 @@ def load_map(path: str | Path) -> MocapMap:
     unknown = sorted(set(meta) - _META_KEYS)
     if unknown:
         raise MapError(f"{file}: unknown [metadata] keys {unknown}; known: {sorted(_META_KEYS)}")
-    pattern = meta.get("pattern", r"^(?P<path>.*?)(?:\.bvh)?$")
+    default_pattern = r"^(?P<path>.*?)(?:\.(?:bvh|amc))?$"
+    pattern = meta.get("pattern", default_pattern)
     try:
         re.compile(pattern)
-    except re.error as exc:
+    except (re.error, TypeError) as exc:
         raise MapError(f"{file}: [metadata] pattern: {exc}") from None
     templates = {
         "name": meta.get("name", "{source}/{path}"),
@@ -258,18 +504,9 @@ def load_map(path: str | Path) -> MocapMap:
     if not all(isinstance(v, str) for v in templates.values()):
         raise MapError(f"{file}: [metadata] templates must be strings")
 
-    joints = data.get("joints")
-    if not isinstance(joints, dict):
+    if "joints" not in data:
         raise MapError(f"{file}: missing [joints] table")
-    unknown = sorted(set(joints) - set(JOINT_NAMES))
-    missing = [n for n in JOINT_NAMES if n not in joints]
-    if unknown or missing:
-        raise MapError(
-            f"{file}: [joints] must map exactly the 21 canonical joints; "
-            f"missing {missing}, unknown {unknown}"
-        )
-    if not all(isinstance(v, str) and v for v in joints.values()):
-        raise MapError(f"{file}: [joints] values must be source joint names")
+    joints = _parse_joints(data["joints"], f"{file}: [joints]", complete=True)
 
     return MocapMap(
         path=file,
@@ -278,13 +515,17 @@ def load_map(path: str | Path) -> MocapMap:
         description=str(data.get("description", "")),
         licence=str(data.get("licence", "")),
         archive=archive,
+        reader=reader,
+        skeleton=skeleton,
         unit=unit_name,
         scale=scale,
         up_axis=up_axis,
+        root_position=root_position,
         swap_sides=swap_sides,
         include=include,
         exclude=exclude,
-        fps_overrides=tuple(overrides),
+        holdout=holdout,
+        overrides=overrides,
         pattern=pattern,
         templates=tuple(templates.items()),
         joints=tuple(joints[n] for n in JOINT_NAMES),

@@ -1,0 +1,238 @@
+"""BVH reader (core/bvh.py): hand-computed forward kinematics, any channel order, 6-channel
+joints, End Sites, what a writer needs kept, clear errors, and real files of four studios."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from core.bvh import BVHError, euler_matrices, parse_bvh, read_bvh
+
+# Root: 6 channels (position + Z X Y rotation), child 10 up, end site 5 up the child.
+TINY = """HIERARCHY
+ROOT root
+{
+  OFFSET 0 0 0
+  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation
+  JOINT child
+  {
+    OFFSET 0 10 0
+    CHANNELS 3 Zrotation Xrotation Yrotation
+    End Site
+    {
+      OFFSET 0 5 0
+    }
+  }
+}
+MOTION
+Frames: 4
+Frame Time: 0.0333333
+1 2 3 0 0 0 0 0 0
+1 2 3 90 0 0 0 90 0
+0 0 0 90 90 0 0 0 0
+0 0 0 0 0 0 0 0 90
+"""
+
+
+def test_fk_matches_hand_computed_poses(tmp_path: Path) -> None:
+    path = tmp_path / "tiny.bvh"
+    path.write_text(TINY)
+    bvh = read_bvh(path)
+    assert bvh.joint_names == ("root", "child", "child_end")
+    assert bvh.num_frames == 4
+    assert bvh.num_channels == 9
+    assert bvh.fps == pytest.approx(30.0, rel=1e-5)
+    pos = bvh.forward_kinematics()
+    expected = np.array(
+        [
+            # rest: root at its position channels, child 10 up, end 5 further up.
+            [[1, 2, 3], [1, 12, 3], [1, 17, 3]],
+            # root Rz(90) turns the child offset (0,10,0) to (-10,0,0); the child's Rx(90)
+            # turns the end offset (0,5,0) to (0,0,5), and Rz(90) leaves +Z alone.
+            [[1, 2, 3], [-9, 2, 3], [-9, 2, 8]],
+            # intrinsic Z then X: R = Rz(90) @ Rx(90); Rx takes (0,10,0) to (0,0,10), Rz keeps
+            # it. (The extrinsic reading, Rx @ Rz, would give (-10, 0, 0).)
+            [[0, 0, 0], [0, 0, 10], [0, 0, 15]],
+            # a child yaw does not move its own end site along its Y axis.
+            [[0, 0, 0], [0, 10, 0], [0, 15, 0]],
+        ],
+        dtype=float,
+    )
+    np.testing.assert_allclose(pos, expected, atol=1e-9)
+    # Subsets and frame selection give the same numbers.
+    np.testing.assert_allclose(
+        bvh.forward_kinematics(["child_end"], frames=slice(1, 3)), expected[1:3, 2:3], atol=1e-9
+    )
+
+
+def test_position_channels_replace_offsets_and_any_channel_order() -> None:
+    text = """HIERARCHY
+ROOT a
+{
+  OFFSET 100 100 100
+  CHANNELS 6 Yrotation Xposition Zposition Yposition Xrotation Zrotation
+  JOINT b
+  {
+    OFFSET 50 50 50
+    CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation
+    End Site
+    {
+      OFFSET 1 0 0
+    }
+  }
+}
+MOTION
+Frames: 1
+Frame Time: 0.01
+90 1 3 2 0 0 0 10 0 0 0 0
+"""
+    bvh = parse_bvh(text, "order.bvh")
+    assert bvh.joints[0].rotation_order == "YXZ"
+    pos = bvh.forward_kinematics()
+    # root at (1, 2, 3) (offset replaced), rotated Ry(90): x -> -z, z -> x.
+    # b's offset replaced by (0, 10, 0) -> unchanged by Ry; end (1,0,0) -> (0,0,-1).
+    np.testing.assert_allclose(pos[0], [[1, 2, 3], [1, 12, 3], [1, 12, 2]], atol=1e-9)
+
+
+@pytest.mark.parametrize(
+    ("mutate", "message"),
+    [
+        (lambda t: t.replace("MOTION", "MOTON"), "missing MOTION section"),
+        (
+            lambda t: t[: t.rindex("0 0 0 0 0 0 0 0 90")] + "0 0 0 0\n",
+            "line 22: expected 9 values per frame, got 4",
+        ),
+        (lambda t: t.replace("Frames: 4", "Frames: 5"), "declares 5 frames, found 4"),
+        (lambda t: t.replace("Frames: 4", "Frames: 3"), "more frame lines than the 3"),
+        (
+            lambda t: t.replace("1 2 3 90 0 0 0 90 0", "1 2 3 90 x 0 0 90 0"),
+            "line 20: not a number",
+        ),
+        (lambda t: t.replace("CHANNELS 3 Zrotation", "CHANNELS 3 Wrotation"), "unknown channel"),
+        (lambda t: t.replace("  }\n}\nMOTION", "MOTION"), "unexpected end of HIERARCHY"),
+        (lambda t: "garbage\x00\x01 not a bvh at all", "not a BVH file"),
+        (lambda t: t.replace("Frame Time: 0.0333333", "Frame Time: 0"), "bad Frame Time"),
+    ],
+)
+def test_malformed_files_raise_bvherror_naming_file_and_reason(
+    tmp_path: Path, mutate: Any, message: str
+) -> None:
+    path = tmp_path / "broken.bvh"
+    path.write_text(mutate(TINY))
+    with pytest.raises(BVHError) as info:
+        read_bvh(path)
+    assert message in str(info.value)
+    assert str(path) in str(info.value)
+    assert info.value.file == str(path)
+
+
+def _axis(axis: str, deg: float) -> np.ndarray[Any, Any]:
+    c, s = np.cos(np.radians(deg)), np.sin(np.radians(deg))
+    return {
+        "X": np.array([[1, 0, 0], [0, c, -s], [0, s, c]]),
+        "Y": np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]]),
+        "Z": np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]]),
+    }[axis]
+
+
+@pytest.mark.parametrize("order", ["XYZ", "XZY", "YXZ", "YZX", "ZXY", "ZYX", "ZX", "Y"])
+def test_any_rotation_order_on_a_6_channel_child(order: str) -> None:
+    """A child with position AND rotation channels (in any order, interleaved), its rotation
+    the product of the listed axes, first listed outermost."""
+    angles = {"X": 30.0, "Y": -50.0, "Z": 70.0}
+    names = [f"{a}rotation" for a in order]
+    chans = ["Xposition", *names[:1], "Yposition", "Zposition", *names[1:]]
+    values = {"Xposition": 1.0, "Yposition": 2.0, "Zposition": 3.0}
+    values.update({f"{a}rotation": angles[a] for a in order})
+    text = f"""HIERARCHY
+ROOT r
+{{
+  OFFSET 0 0 0
+  CHANNELS 0
+  JOINT c
+  {{
+    OFFSET 9 9 9
+    CHANNELS {len(chans)} {" ".join(chans)}
+    End Site
+    {{
+      OFFSET 0 0 10
+    }}
+  }}
+}}
+MOTION
+Frames: 1
+Frame Time: 0.01
+{" ".join(str(values[c]) for c in chans)}
+"""
+    bvh = parse_bvh(text, "order.bvh")
+    assert bvh.joints[1].channels == tuple(chans)  # kept in file order for a writer
+    assert bvh.joints[1].rotation_order == order
+    rot = np.eye(3)
+    for a in order:
+        rot = rot @ _axis(a, angles[a])
+    pos = bvh.forward_kinematics(["c", "c_end"])[0]
+    np.testing.assert_allclose(pos[0], [1, 2, 3], atol=1e-12)  # positions replace the offset
+    np.testing.assert_allclose(pos[1], [1, 2, 3] + rot @ [0, 0, 10], atol=1e-9)
+    np.testing.assert_allclose(
+        euler_matrices(order, np.radians([angles[a] for a in order])), rot, atol=1e-12
+    )
+
+
+def test_raw_text_and_frame_lines_are_kept_for_a_writer() -> None:
+    text = TINY.replace("\n", "\r\n").replace("1 2 3 90 0 0 0 90 0", "1 2 3  90.000 0 0 0 90 0")
+    bvh = parse_bvh(text, "crlf.bvh")
+    assert bvh.text == text
+    lines = bvh.frame_lines()
+    assert len(lines) == bvh.num_frames == 4
+    assert lines[1] == "1 2 3  90.000 0 0 0 90 0"  # as written, spacing and all
+    assert text[bvh.motion_offset :].startswith("1 2 3 0 0 0 0 0 0")
+    np.testing.assert_array_equal(bvh.motion[1], [1, 2, 3, 90, 0, 0, 0, 90, 0])
+
+
+def test_end_site_name_clash_is_an_error() -> None:
+    # The root's End Site would be "root_end", the name of a joint already read.
+    clash = TINY.replace("JOINT child", "JOINT root_end").replace(
+        "  }\n}\nMOTION", "  }\n  End Site\n  {\n    OFFSET 1 0 0\n  }\n}\nMOTION"
+    )
+    with pytest.raises(BVHError, match="End Site name 'root_end' is taken"):
+        parse_bvh(clash, "clash.bvh")
+    renamed = parse_bvh(TINY.replace("JOINT child", "JOINT child_end"), "ok.bvh")
+    assert renamed.joint_names == ("root", "child_end", "child_end_end")
+
+
+def test_reactidle_file_with_6_channel_joints(more_mocap: Path) -> None:
+    """ReActIdle: most joints carry 6 channels (positions within 2 cm of the offsets), one
+    joint ``YXZ``; metres; 24 fps; the root's positions are a displacement from its OFFSET."""
+    from tests.conftest import _RI
+
+    bvh = read_bvh(more_mocap / f"{_RI}/genuine/003_genuine.bvh")
+    assert bvh.fps == pytest.approx(24.0, rel=1e-4)
+    six = [j.name for j in bvh.joints if len(j.channels) == 6]
+    assert len(six) >= 15 and "thigh.L" in six and "forearm.R" in six
+    assert bvh.joints[bvh.index("shoulder.L")].rotation_order == "YXZ"
+    assert {"forearm.L_end", "foot.R_end", "face_end"} <= set(bvh.joint_names)
+    j = bvh.joints[bvh.index("shin.L")]
+    cols = [j.channel_start + k for k, c in enumerate(j.channels) if c.endswith("position")]
+    np.testing.assert_allclose(
+        bvh.motion[:, cols], np.broadcast_to(j.offset, (bvh.num_frames, 3)), atol=0.02
+    )
+    pos = bvh.forward_kinematics(["pelvis", "shin.L", "foot.L"])
+    thigh = np.linalg.norm(pos[:, 1] - pos[:, 0], axis=-1)
+    assert 0.3 < np.median(thigh) < 0.45  # metres
+    # Root positions replace the OFFSET: the pelvis is near y = 0, about an OFFSET too low.
+    assert abs(pos[:, 0, 1].mean()) < 0.05 < bvh.joints[0].offset[1]
+
+
+def test_fair_child_file_in_inches_z_up(more_mocap: Path) -> None:
+    from tests.conftest import _FAIR
+
+    bvh = read_bvh(more_mocap / f"{_FAIR}/fair1/dab.bvh")
+    assert bvh.fps == pytest.approx(30.0, rel=1e-4)
+    pos = bvh.forward_kinematics(["Hips", "Head", "LeftToeBase", "LeftArm", "RightArm"])
+    # +Z up: the head is above the toes along Z, not Y; inches (a child's ~1 m in metres).
+    height_in = np.median(pos[:, 1, 2] - pos[:, 2, 2])
+    assert 30 < height_in < 45
+    assert np.median(np.abs(pos[:, 1, 1] - pos[:, 2, 1])) < 10
