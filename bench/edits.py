@@ -26,6 +26,16 @@ IntArray = npt.NDArray[np.intp]
 
 #: Methods compared on every edit set, in table order.
 METHODS: tuple[str, ...] = ("identity", "fabrik", "neural_raw", "neural_bone", "neural_exact")
+METHOD_LABEL: dict[str, str] = {
+    "identity": "identity",
+    "fabrik": "FABRIK",
+    "neural_raw": "neural raw",
+    "neural_bone": "neural + bone pass",
+    "neural_exact": "neural + exact reach",
+    "rest_fabrik": "rest pose + FABRIK",  # B2 baseline
+    "neural": "completion",  # B2
+    "completion": "completion",  # held-out 6-point completion
+}
 #: Engine options (method, preserve_bone_lengths, reach) of each solving method.
 METHOD_OPTIONS: dict[str, tuple[str, bool, str]] = {
     "fabrik": ("fabrik", True, "soft"),
@@ -39,6 +49,16 @@ FLOOR_JOINTS: tuple[str, ...] = ("left_ankle", "left_foot", "right_ankle", "righ
 TOLERANCE = 1e-3  # metres, the service's default
 MIN_GAP, MAX_GAP = int(0.2 * FPS), int(1.0 * FPS)  # pair distance in frames (0.2-1 s)
 CM = 100.0
+
+
+def short(name: str) -> str:
+    """A set name shortened for tables and plot labels."""
+    return (
+        name.replace("left_", "L ")
+        .replace("right_", "R ")
+        .replace("+", " + ")
+        .replace("end effectors", "end eff.")
+    )
 
 
 def joint_idx(names: Sequence[str]) -> IntArray:

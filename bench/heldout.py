@@ -270,6 +270,25 @@ class HeldoutResults:
     def to_json(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
 
+    @staticmethod
+    def from_json(d: dict[str, Any]) -> HeldoutResults:
+        """The results back from :meth:`to_json` (e.g. read from results.json)."""
+        families = [
+            Family(
+                **{
+                    **f,
+                    "sets": {
+                        s: {m: MethodStats(**v) for m, v in block.items()}
+                        for s, block in f["sets"].items()
+                    },
+                    "by_turn": [TurnRow(**r) for r in f["by_turn"]],
+                    "recon": None if f["recon"] is None else Recon(**f["recon"]),
+                }
+            )
+            for f in d["families"]
+        ]
+        return HeldoutResults(**{**d, "families": families})
+
 
 def _items(edits: Edits, poses: F64, turn: F64, seconds: float) -> Items:
     m = per_item(edits, poses)

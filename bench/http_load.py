@@ -24,8 +24,8 @@ from urllib.parse import urlsplit
 import httpx
 import numpy as np
 
+from bench.edits import Edits
 from core.skeleton import JOINT_NAMES
-from trainer.evaluate import Edits
 
 Json = dict[str, Any]
 HOST = "127.0.0.1"

@@ -1,18 +1,24 @@
-"""Copy the benchmark report's headline tables into README.md (between markers).
+"""Copy the benchmark report's headline tables into README.md, between the markers
+``<!-- bench:start -->`` and ``<!-- bench:end -->`` (everything between them is replaced).
 
 ``python -m bench.readme [--report reports/report.md] [--readme README.md]``; `make bench`
 runs it, so the README's results always come from the last measured run."""
 
 from __future__ import annotations
 
-import argparse
 import re
 from pathlib import Path
+from typing import Annotated
 
-START, END = "<!-- results:start -->", "<!-- results:end -->"
-#: Report sections quoted in the README (by heading), in this order.
+import typer
+
+START, END = "<!-- bench:start -->", "<!-- bench:end -->"
+#: Report sections quoted in the README (by heading), in this order; a section the run
+#: did not measure is left out.
 SECTIONS = (
     "## Goals",
+    "### Goals on held-out bodies (issue 11)",
+    "### Held-out bodies beside the in-studio test split",
     "### B2 — completion from key points only",
     "### Composition ablation",
     "### In-process latency (one thread)",
@@ -21,10 +27,12 @@ SECTIONS = (
 )
 
 
-def section(report: str, heading: str) -> str:
+def section(report: str, heading: str) -> str | None:
     """The text under ``heading`` up to the next heading of the same or higher level."""
     level = heading.split(" ")[0]
-    start = report.index(heading + "\n")
+    start = report.find(heading + "\n")
+    if start < 0:
+        return None
     pattern = re.compile(rf"^#{{1,{len(level)}}} ", re.M)
     nxt = pattern.search(report, start + len(heading) + 1)
     return report[start : nxt.start() if nxt else len(report)].strip()
@@ -35,6 +43,8 @@ def render(report: str, prefix: str) -> str:
     parts = [header, ""]
     for heading in SECTIONS:
         text = section(report, heading)
+        if text is None:
+            continue
         text = re.sub(r"^#+ ", "#### ", text, count=1)
         # images in the report are relative to reports/
         text = re.sub(r"\]\((?!http)([^)]+\.png)\)", rf"]({prefix}\1)", text)
@@ -44,21 +54,37 @@ def render(report: str, prefix: str) -> str:
     return "\n".join(parts)
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--report", type=Path, default=Path("reports/report.md"))
-    parser.add_argument("--readme", type=Path, default=Path("README.md"))
-    args = parser.parse_args()
-    readme = args.readme.read_text(encoding="utf-8")
-    if START not in readme or END not in readme:
-        raise SystemExit(f"{args.readme}: markers {START} / {END} not found")
-    prefix = args.report.parent.as_posix().rstrip("/") + "/"
-    body = render(args.report.read_text(encoding="utf-8"), prefix)
+def splice(readme: str, body: str, where: str = "README") -> str:
+    """``readme`` with the text between the markers replaced by ``body``."""
+    if (
+        readme.count(START) != 1
+        or readme.count(END) != 1
+        or readme.index(START) > readme.index(END)
+    ):
+        raise ValueError(f"{where}: expected one {START} followed by one {END}")
     head, rest = readme.split(START, 1)
     _, tail = rest.split(END, 1)
-    args.readme.write_text(f"{head}{START}\n{body}\n{END}{tail}", encoding="utf-8")
-    print(f"updated {args.readme} from {args.report}")
+    return f"{head}{START}\n{body}\n{END}{tail}"
+
+
+def main(
+    report: Annotated[Path, typer.Option(help="The benchmark report.")] = Path("reports/report.md"),
+    readme: Annotated[Path, typer.Option(help="The README to update.")] = Path("README.md"),
+) -> None:
+    """Copy the report's headline tables into the README between the markers."""
+    for path, hint in ((report, "--report"), (readme, "--readme")):
+        if not path.is_file():
+            raise typer.BadParameter(f"no such file: {path}", param_hint=hint)
+    text = readme.read_text(encoding="utf-8")
+    prefix = report.parent.as_posix().rstrip("/") + "/"
+    body = render(report.read_text(encoding="utf-8"), prefix)
+    try:
+        updated = splice(text, body, str(readme))
+    except ValueError as exc:
+        raise typer.BadParameter(str(exc), param_hint="--readme") from None
+    readme.write_text(updated, encoding="utf-8")
+    typer.echo(f"updated {readme} from {report}")
 
 
 if __name__ == "__main__":
-    main()
+    typer.run(main)

@@ -9,8 +9,8 @@ from typing import Any
 
 import numpy as np
 
+from bench.edits import Edits, problems
 from service.engine import Engine, SolveProblem
-from trainer.evaluate import Edits, problems
 
 Json = dict[str, Any]
 

@@ -1,4 +1,5 @@
-"""`pose-trainer`: build the dataset, train, export and evaluate the pose models."""
+"""`pose-trainer`: build the dataset, train and export the pose models (the accuracy
+benchmark is `python -m bench`)."""
 
 from __future__ import annotations
 
@@ -147,38 +148,6 @@ def plot_data(
     except DatasetError as exc:
         typer.echo(f"error: {exc}", err=True)
         raise typer.Exit(1) from None
-    typer.echo(f"wrote {path}")
-
-
-@app.command()
-def evaluate(
-    models: Annotated[Path, typer.Option(help="Models directory (manifest.json).")] = Path(
-        "models"
-    ),
-    dataset: Annotated[Path, typer.Option(help="Dataset .npz (TEST split).")] = Path(
-        "data/poses.npz"
-    ),
-    out: Annotated[Path, typer.Option(help="Report folder.")] = Path("reports"),
-    quick: Annotated[bool, typer.Option(help="A handful of items per set (smoke run).")] = False,
-    seed: Annotated[int, typer.Option(help="Seed of every sample.")] = 0,
-) -> None:
-    """Accuracy on the TEST split (B1-B5, determinism, composition ablation) through the
-    service Engine; writes <out>/accuracy.md, accuracy.json and PNG plots."""
-    import dataclasses
-    import sys
-
-    from trainer.evaluate import QUICK, EvalConfig, evaluate_accuracy, write_accuracy_report
-
-    if not (models / "manifest.json").is_file():
-        typer.echo(f"error: no manifest.json in {models}", err=True)
-        raise typer.Exit(1)
-    if not dataset.is_file():
-        typer.echo(f"error: no dataset at {dataset} (build it: pose-trainer dataset)", err=True)
-        raise typer.Exit(1)
-    cfg = dataclasses.replace(QUICK if quick else EvalConfig(), seed=seed)
-    acc = evaluate_accuracy(models, dataset, cfg)
-    command = "pose-trainer " + " ".join(sys.argv[1:])
-    path = write_accuracy_report(acc, out, command.strip())
     typer.echo(f"wrote {path}")
 
 

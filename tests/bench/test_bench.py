@@ -1,6 +1,6 @@
-"""The benchmark and evaluation code on a handful of items (`--quick`) against the models:
-the report, results and plots are written and the metrics are finite and sane. No timing
-is asserted (only that timings were measured)."""
+"""The benchmark on a handful of items (`--quick`) against the models: the report,
+results and plots are written and the metrics are finite and sane. No timing is asserted
+(only that timings were measured)."""
 
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ from typing import Any
 
 import pytest
 
-from trainer.evaluate import QUICK
+from bench.accuracy import QUICK
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
@@ -28,15 +28,6 @@ def models_dir() -> Path:
     if not (path / "manifest.json").is_file():
         pytest.skip(f"no trained models in {path} (manifest.json missing)")
     return path
-
-
-@pytest.fixture(scope="module")
-def dataset_path(request: pytest.FixtureRequest) -> Path:
-    path = REPO_ROOT / "data" / "poses.npz"
-    if path.is_file():
-        return path
-    built: Path = request.getfixturevalue("small_dataset")
-    return built
 
 
 def _walk_numbers(obj: Any, where: str = "") -> list[tuple[str, float]]:
@@ -62,7 +53,7 @@ def _check_plots(out: Path, report: str) -> None:
 
 
 def test_quick_bench_writes_a_sane_report(
-    models_dir: Path, dataset_path: Path, tmp_path: Path
+    models_dir: Path, bench_dataset: Path, tmp_path: Path
 ) -> None:
     out = tmp_path / "reports"
     proc = subprocess.run(
@@ -74,7 +65,7 @@ def test_quick_bench_writes_a_sane_report(
             "--models",
             str(models_dir),
             "--dataset",
-            str(dataset_path),
+            str(bench_dataset),
             "--out",
             str(out),
         ],
@@ -96,6 +87,9 @@ def test_quick_bench_writes_a_sane_report(
         "### B5",
         "### Determinism",
         "### Composition ablation",
+        "## Held-out bodies",
+        "### Goals on held-out bodies (issue 11)",
+        "### Held-out bodies beside the in-studio test split",
         "### In-process latency",
         "### HTTP",
     ):
@@ -107,6 +101,7 @@ def test_quick_bench_writes_a_sane_report(
         "sample_poses.png",
         "latency.png",
         "throughput.png",
+        "heldout.png",
     ):
         assert f"]({plot})" in report
     _check_plots(out, report)
@@ -138,6 +133,10 @@ def test_quick_bench_writes_a_sane_report(
     assert results["B2"]
     assert all(lvl["neural"]["mpjpe"] > 0 for lvl in results["B2"].values())
 
+    families = [f["name"] for f in results["heldout"]["families"]]
+    assert any(n.endswith(": all") for n in families)
+    assert "test: asymmetric bodies" in families
+
     speed = results["speed"]
     assert {r["targets"] for r in speed["latency"]} == {1, 2, 5}
     assert all(r["p50_ms"] > 0 and r["p99_ms"] >= r["p50_ms"] for r in speed["latency"])
@@ -150,33 +149,41 @@ def test_quick_bench_writes_a_sane_report(
     assert all(v > 0 for v in http["rss_kb"].values())
 
 
-def test_evaluate_command_writes_accuracy_report(
-    models_dir: Path, dataset_path: Path, tmp_path: Path
+def test_accuracy_only_run_writes_a_report_without_speed(
+    models_dir: Path, bench_dataset: Path, tmp_path: Path
 ) -> None:
+    """What `pose-trainer evaluate` did: accuracy only (python -m bench --skip-...)."""
+    import typer
     from typer.testing import CliRunner
 
-    from trainer.cli import app
+    from bench.__main__ import run
 
+    app = typer.Typer()
+    app.command()(run)
     out = tmp_path / "acc"
     result = CliRunner().invoke(
         app,
         [
-            "evaluate",
             "--quick",
+            "--skip-heldout",
+            "--skip-speed",
+            "--skip-http",
             "--models",
             str(models_dir),
             "--dataset",
-            str(dataset_path),
+            str(bench_dataset),
             "--out",
             str(out),
         ],
     )
     assert result.exit_code == 0, result.output
-    report = (out / "accuracy.md").read_text()
+    report = (out / "report.md").read_text()
     assert "### B1" in report
     assert "Not measured in this run" in report
+    assert "## Held-out bodies" not in report
     _check_plots(out, report)
-    results = json.loads((out / "accuracy.json").read_text())
+    results = json.loads((out / "results.json").read_text())
     assert results["B1"]
     assert results["B3"]
     assert results["B5"]
+    assert "speed" not in results and "heldout" not in results

@@ -3,7 +3,6 @@ exactly the bodies asked for, and a quick run produces every family, set and met
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import math
 from pathlib import Path
@@ -100,23 +99,6 @@ def test_bodies_reject_bad_input() -> None:
 # --------------------------------------------------------------------------------------
 # World-space edits (real clips)
 # --------------------------------------------------------------------------------------
-@pytest.fixture(scope="module")
-def holdout_dataset(small_dataset: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """The small real dataset with its cmu-dance clips relabelled as held-out bodies and
-    one Bandai val clip too (two held-out sources), the rest as built."""
-    from trainer.data.dataset import load_dataset, save_dataset
-
-    data = load_dataset(small_dataset)
-    split = data.clip_split.astype("<U16")
-    split[data.clip_source == "cmu-dance"] = "holdout"
-    bandai_val = np.flatnonzero((data.clip_source == "bandai-namco") & (split == "val"))
-    split[bandai_val[:1]] = "holdout"
-    assert (split == "test").any()
-    path = tmp_path_factory.mktemp("holdout") / "poses.npz"
-    save_dataset(path, dataclasses.replace(data, clip_split=split))
-    return path
-
-
 def test_world_edits_put_the_start_on_the_target_pelvis(holdout_dataset: Path) -> None:
     from bench.edits import MAX_GAP, MIN_GAP, sample_pairs
     from bench.heldout import world_pairs

@@ -1,0 +1,236 @@
+"""Goals, evaluated mechanically from a run's numbers: the product goals (in-studio
+accuracy, speed, HTTP) and issue 11's held-out goals. "not measured" means that part of
+the benchmark was skipped."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from bench.edits import FIVE, short
+from bench.heldout import COMPLETION, Family, HeldoutResults
+from bench.markdown import status
+
+Json = dict[str, Any]
+Goal = tuple[str, str, str, str]  # (goal, target, measured, status)
+
+
+def goals(results: Json) -> list[Goal]:
+    """(goal, target, measured, status) rows, computed from the results only."""
+    rows: list[Goal] = []
+    b1, b3 = results.get("B1", {}), results.get("B3", {})
+    sets = [(f"B1 {k}", v) for k, v in b1.items()] + [(f"B3 {k}", v) for k, v in b3.items()]
+    if sets:
+        wins = [(n, v["neural_bone"]["mpjpe"], v["fabrik"]["mpjpe"]) for n, v in sets]
+        better = [w for w in wins if w[1] < w[2]]
+        worst = max(wins, key=lambda w: w[1] / w[2])
+        rows.append(
+            (
+                "Neural + bone pass beats FABRIK in MPJPE to the real pose on every B1 and B3 set",
+                "all sets",
+                f"{len(better)}/{len(wins)} sets; worst {worst[0]}: "
+                f"{worst[1]:.2f} vs {worst[2]:.2f} cm",
+                status(len(better) == len(wins)),
+            )
+        )
+        cw = [
+            (n, v["neural_bone"]["chain"], v["fabrik"]["chain"])
+            for n, v in sets
+            if v["neural_bone"]["chain"] is not None
+        ]
+        rows.append(
+            (
+                "(info) chain MPJPE: neural + bone pass below FABRIK",
+                "–",
+                f"{sum(c[1] < c[2] for c in cw)}/{len(cw)} sets",
+                "info",
+            )
+        )
+    if FIVE in b1:
+        n5, f5 = b1[FIVE]["neural_bone"]["mpjpe"], b1[FIVE]["fabrik"]["mpjpe"]
+        rows.append(
+            (
+                "5-target composed: neural + bone MPJPE ≤ 0.7 × FABRIK's",
+                "≤ 0.70",
+                f"{n5:.2f} / {f5:.2f} cm = {n5 / f5:.2f}",
+                status(n5 <= 0.7 * f5),
+            )
+        )
+        r5 = b1[FIVE]["neural_bone"]["reach_mean"]
+        rows.append(
+            (
+                "5-target composed reach error, soft method (neural + bone pass), mean",
+                "≤ 2 cm",
+                f"{r5:.2f} cm (median {b1[FIVE]['neural_bone']['reach_median']:.2f}, "
+                f"p95 {b1[FIVE]['neural_bone']['reach_p95']:.2f})",
+                status(r5 <= 2.0),
+            )
+        )
+    if sets:
+        exact = [(n, v["neural_exact"]) for n, v in sets]
+        reach_ok = [(n, e) for n, e in exact if e["reachable_reach_max"] is not None]
+        worst_n, worst_e = max(reach_ok, key=lambda ne: ne[1]["reachable_reach_max"])
+        share = min(e["reachable_within_1mm"] for _, e in reach_ok)
+        flagged = float(np.mean([e["reachable_pct"] for _, e in reach_ok]))
+        all_max = max(e["reach_max"] for _, e in exact)
+        rows.append(
+            (
+                "Exact reach ≤ 1 mm on reachable targets (B1 + B3; reachable = inside its "
+                "chain's reach shell around the start pelvis)",
+                "≤ 1 mm",
+                f"max {worst_e['reachable_reach_max'] * 10:.3f} mm ({short(worst_n)}); worst "
+                f"set {share:.1f}% within 1 mm; {flagged:.1f}% of targets flagged reachable; "
+                f"max over all targets {all_max * 10:.1f} mm",
+                status(worst_e["reachable_reach_max"] <= 0.1 + 1e-9),
+            )
+        )
+        bone = max(
+            v[m]["bone_max"] for _, v in sets for m in ("fabrik", "neural_bone", "neural_exact")
+        )
+        rows.append(
+            (
+                "Bone-length error (relative, max over B1 + B3, FABRIK and neural + bone/exact)",
+                "≤ 1e-5",
+                f"{bone:.2e}",
+                status(bone <= 1e-5),
+            )
+        )
+    b2 = results.get("B2", {})
+    if b2:
+        first = next(iter(b2.values()))
+        rows.append(
+            (
+                "6-point completion MPJPE (level 1)",
+                "≤ 4 cm",
+                f"{first['neural']['mpjpe']:.2f} cm",
+                status(first["neural"]["mpjpe"] <= 4.0),
+            )
+        )
+    speed = results.get("speed", {})
+    lat = {(r["targets"], r["method"]): r for r in speed.get("latency", [])}
+    ratios = speed.get("ratio", {})
+    if ratios:
+        worst_ratio = min(ratios.values())
+        rows.append(
+            (
+                "Neural ≥ 10× faster than FABRIK, one thread (p50 ratio, 1/2/5 targets)",
+                "≥ 10×",
+                ", ".join(f"{k} targets {v:.1f}×" for k, v in ratios.items()),
+                status(worst_ratio >= 10.0),
+            )
+        )
+    else:
+        rows.append(("Neural ≥ 10× faster than FABRIK, one thread", "≥ 10×", "–", status(None)))
+    for k, limit in ((2, 0.1), (5, 0.3)):
+        r = lat.get((k, "neural_bone"))
+        rows.append(
+            (
+                f"In-process {k}-target solve with the bone pass, p50 (one thread)",
+                f"≤ {limit} ms",
+                "–" if r is None else f"{r['p50_ms']:.3f} ms (p99 {r['p99_ms']:.3f})",
+                status(None if r is None else r["p50_ms"] <= limit),
+            )
+        )
+    http = results.get("http", {})
+    one = next((r for r in http.get("solve", []) if r["concurrency"] == 1), None)
+    rows.append(
+        (
+            "HTTP /v1/solve on loopback, p50 (concurrency 1)",
+            "≤ 2 ms",
+            "–" if one is None else f"{one['p50_ms']:.2f} ms",
+            status(None if one is None else one["p50_ms"] <= 2.0),
+        )
+    )
+    batch = http.get("batch")
+    rows.append(
+        (
+            "HTTP /v1/solve/batch throughput",
+            "≥ 20,000 poses/s",
+            "–" if not batch else f"{batch['poses_per_s']:,.0f} poses/s",
+            status(None if not batch else batch["poses_per_s"] >= 20000),
+        )
+    )
+    return rows
+
+
+def _edit_sets(fam: Family) -> dict[str, dict[str, Any]]:
+    return {k: v for k, v in fam.sets.items() if k != COMPLETION}
+
+
+def _wins(families: list[Family], better: str, worse: str) -> tuple[int, int, str]:
+    """How many (family, set) pairs have ``better``'s MPJPE below ``worse``'s, of how many,
+    and the worst one (largest ratio) as text."""
+    rows = [
+        (f"{f.name} / {short(s)}", b[better].mpjpe, b[worse].mpjpe)
+        for f in families
+        for s, b in _edit_sets(f).items()
+    ]
+    if not rows:
+        return 0, 0, "–"
+    name, x, y = max(rows, key=lambda r: r[1] / r[2])
+    return sum(r[1] < r[2] for r in rows), len(rows), f"worst {name}: {x:.2f} vs {y:.2f} cm"
+
+
+def heldout_goals(h: HeldoutResults) -> list[Goal]:
+    """Issue 11's "done when" list, on the held-out families (each source and all pooled)."""
+    held = [f for f in h.families if f.kind == "holdout"]
+    pooled = next((f for f in held if f.name.endswith(": all")), None)
+    rows: list[Goal] = []
+    if pooled is None:
+        return [("Held-out bodies", "–", "no held-out families in this run", status(None))]
+    for better, worse, what in (
+        ("neural_bone", "fabrik", "Neural soft + bone pass: lower MPJPE than FABRIK"),
+        ("neural_bone", "identity", "Neural soft + bone pass: lower MPJPE than the start pose"),
+        ("neural_exact", "fabrik", "Neural exact: lower MPJPE than FABRIK"),
+    ):
+        k, n, worst = _wins(held, better, worse)
+        rows.append(
+            (f"{what} on every held-out set", "all sets", f"{k}/{n} sets; {worst}", status(k == n))
+        )
+    five = pooled.sets.get(FIVE)
+    if five:
+        n5, f5 = five["neural_bone"].mpjpe, five["fabrik"].mpjpe
+        rows.append(
+            (
+                "5-target composed: neural soft MPJPE ≤ 0.7 × FABRIK's",
+                "≤ 0.70",
+                f"{n5:.2f} / {f5:.2f} cm = {n5 / f5:.2f}",
+                status(n5 <= 0.7 * f5),
+            )
+        )
+    sets = _edit_sets(pooled)
+    reach = [v["neural_bone"].reach_mean for v in sets.values()]
+    worst = max(sets, key=lambda s: sets[s]["neural_bone"].reach_mean)
+    mean_reach = float(np.mean(reach))
+    rows.append(
+        (
+            "Neural soft mean reach (mean over the held-out sets)",
+            "≤ 2 cm",
+            f"{mean_reach:.2f} cm (worst set {short(worst)}: {max(reach):.2f})",
+            status(mean_reach <= 2.0),
+        )
+    )
+    comp = pooled.sets.get(COMPLETION, {}).get("completion")
+    rows.append(
+        (
+            "6-point completion MPJPE (held-out)",
+            "≤ 5 cm",
+            "–" if comp is None else f"{comp.mpjpe:.2f} cm",
+            status(None if comp is None else comp.mpjpe <= 5.0),
+        )
+    )
+    rec = pooled.recon
+    rows.append(
+        (
+            "Autoencoder reconstruction of held-out poses (mean per joint)",
+            "≤ 1.5 cm",
+            "–" if rec is None else f"{rec.mean:.2f} cm (wrists {rec.wrists:.2f})",
+            status(None if rec is None else rec.mean <= 1.5),
+        )
+    )
+    stress = [f for f in h.families if f.kind == "stress"]
+    for f in stress:
+        k, n, _ = _wins([f], "neural_bone", "fabrik")
+        rows.append((f"(info) {f.name}: neural soft below FABRIK", "–", f"{k}/{n} sets", "info"))
+    return rows
