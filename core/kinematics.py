@@ -440,7 +440,21 @@ def _clamp_root(proposal: F64, start: F64, tpos: F64, radii: F64, anchors: BoolA
     s = (np.sqrt(disc) - ed) / np.where(moving, dd, 1.0)
     s = np.where(anchors & moving, np.clip(s, 0.0, 1.0), 1.0)
     out: F64 = start + d * s.min(axis=0, initial=1.0)
-    return out
+    return _project_root(out, tpos, radii, anchors)
+
+
+def _project_root(root: F64, tpos: F64, radii: F64, anchors: BoolArray, rounds: int = 32) -> F64:
+    """``root`` ``[3, N]`` into every anchor's ball by alternating projections (a no-op inside)."""
+    for _ in range(rounds):
+        over = anchors & (_norm3(root[None] - tpos) > radii * (1.0 + 1e-9))
+        if not over.any():
+            break
+        for k in np.flatnonzero(over.any(axis=1)).tolist():
+            dk = root - tpos[k]
+            nk = np.maximum(_norm3(dk[None])[0], _TINY)
+            fix = anchors[k] & (nk > radii[k] * (1.0 + 1e-9))
+            root = np.where(fix[None], tpos[k] + dk * (radii[k] / nk)[None], root)
+    return root
 
 
 @dataclass(frozen=True)
@@ -527,6 +541,7 @@ def _solve(
     plan: _Plan,
     tolerance: float,
     max_iterations: int,
+    pinned: BoolArray | None = None,
 ) -> _Solved:
     """Multi-end-effector FABRIK on internal arrays from ``x0`` (exact lengths)."""
     stall = tolerance * 1e-3
@@ -540,12 +555,16 @@ def _solve(
     joint_t = (plan.joint_targets @ tpos.reshape(k, -1)).reshape(len(plan.targeted), 3, -1)
     proposal[plan.targeted] = joint_t
     clamp = None
-    if plan.root_free:
+    hold = pinned if pinned is not None and bool(np.any(pinned)) else None
+    if plan.root_free or (hold is not None and plan.root_moves):
         # Reach of each target's chain from the root, 1% short of full stretch so pinned
         # limbs never lock straight (FABRIK crawls at full stretch); the start is inside.
-        start = x0[0]
-        radii = np.maximum(0.99 * (plan.path @ lens), _norm3(start[None] - tpos))
-        clamp = _RootClamp(start, tpos, radii, errors <= tolerance)
+        reach, dist = plan.path @ lens, _norm3(x0[0][None] - tpos)
+        anchors = errors <= tolerance
+        if hold is not None:  # pins, wherever the start put them
+            anchors = np.broadcast_to(hold[:, None], anchors.shape) & (reach > 0)
+            dist = np.minimum(dist, reach)
+        clamp = _RootClamp(x0[0], tpos, np.maximum(0.99 * reach, dist), anchors)
 
     level_lengths = _level_lengths(lens, plan)
     strikes = np.zeros(x0.shape[-1], dtype=np.intp)
@@ -671,6 +690,7 @@ def fabrik(
     tolerance: float = 1e-3,
     max_iterations: int = 100,
     free_root: bool = True,
+    pinned: Sequence[bool] | npt.ArrayLike | None = None,
 ) -> FabrikResult:
     """Full-body multi-end-effector FABRIK (Aristidou & Lasenby 2011, 2016).
 
@@ -697,13 +717,24 @@ def fabrik(
     closest stretch); or after ``max_iterations``. Never raises for unreachable
     targets and returns finite poses for finite input; raises ``ValueError`` on
     malformed shapes, indices or weights.
+
+    ``pinned`` (K booleans): hard targets; a moving root stays within reach of them from
+    any start, so a target beyond reach is approached only as far as the pins allow.
     """
     pb = _prepare(positions, lengths, target_idx, target_pos, weights)
     if len(pb.idx) == 0:
         return _result(pb, _no_targets(pb), tolerance, 0)
+    pins = _pinned(pinned, len(pb.idx))
     plan = _make_plan(pb.idx, pb.weights, frozenset(), free_root)
-    solved = _solve(pb.x0, pb.lens, pb.tpos, plan, tolerance, max_iterations)
+    solved = _solve(pb.x0, pb.lens, pb.tpos, plan, tolerance, max_iterations, pins)
     return _result(pb, solved, tolerance, solved.iterations)
+
+
+def _pinned(pinned: Sequence[bool] | npt.ArrayLike | None, k: int) -> BoolArray | None:
+    mask = None if pinned is None else np.asarray(pinned, dtype=bool).reshape(-1)
+    if mask is not None and mask.shape != (k,):
+        raise ValueError(f"pinned must be {k} booleans (one per target), got {mask.shape}")
+    return mask
 
 
 def _trunk_locks(idx: IntArray) -> frozenset[int] | None:
@@ -732,6 +763,7 @@ def polish(
     tolerance: float = 1e-3,
     max_iterations: int = 100,
     free_root: bool = True,
+    pinned: Sequence[bool] | npt.ArrayLike | None = None,
 ) -> FabrikResult:
     """Exact reach from a good pose: targeted joints onto their targets, the rest still.
 
@@ -749,11 +781,12 @@ def polish(
 
     Untargeted branches are carried rigidly, so they do not wander. Unreachable targets
     end at the closest feasible stretch with ``reached`` False. ``iterations`` counts
-    both stages.
+    both stages. ``pinned`` as in :func:`fabrik` (also when the start has left the pins).
     """
     pb = _prepare(positions, lengths, target_idx, target_pos, weights)
     if len(pb.idx) == 0:
         return _result(pb, _no_targets(pb), tolerance, 0)
+    pins = _pinned(pinned, len(pb.idx))
     x0, iterations = pb.x0, 0
     locks = _trunk_locks(pb.idx)
     if locks is not None:
@@ -763,5 +796,5 @@ def polish(
             return _result(pb, local, tolerance, local.iterations)
         x0, iterations = local.x, local.iterations
     plan = _make_plan(pb.idx, pb.weights, frozenset(), free_root)
-    solved = _solve(x0, pb.lens, pb.tpos, plan, tolerance, max_iterations)
+    solved = _solve(x0, pb.lens, pb.tpos, plan, tolerance, max_iterations, pins)
     return _result(pb, solved, tolerance, iterations + solved.iterations)

@@ -1,0 +1,64 @@
+"""Pins hold under absurd targets (core.kinematics ``pinned``): a target far beyond the
+body's reach is approached only as far as the pinned joints allow, from any start."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from core.kinematics import fabrik, polish
+from core.rest import rest_lengths, rest_pose
+from core.skeleton import JOINT_INDEX, bone_lengths
+
+J = JOINT_INDEX
+ANKLES = [J["left_ankle"], J["right_ankle"]]
+TOL = 1e-3
+
+
+def problem(joint: str, distance: float) -> tuple[np.ndarray, list[int], np.ndarray]:
+    pose = rest_pose()
+    idx = [J[joint], *ANKLES]
+    far = pose[J[joint]] + np.array([distance, 0.3 * distance, 0.2 * distance])
+    return pose, idx, np.stack([far, pose[ANKLES[0]], pose[ANKLES[1]]])
+
+
+@pytest.mark.parametrize("distance", [2.0, 1e3, 9.99e3])
+@pytest.mark.parametrize("joint", ["left_wrist", "head", "pelvis"])
+@pytest.mark.parametrize("solver", [fabrik, polish])
+def test_pins_hold_and_the_target_is_approached(solver, joint: str, distance: float) -> None:  # type: ignore[no-untyped-def]
+    pose, idx, goal = problem(joint, distance)
+    res = solver(pose, rest_lengths(), idx, goal, pinned=[False, True, True], max_iterations=64)
+    drift = np.linalg.norm(res.positions[ANKLES] - pose[ANKLES], axis=-1)
+    assert drift.max() <= TOL, drift
+    assert bool(res.reached[1]) and bool(res.reached[2])
+    assert not bool(res.reached[0])  # reported: beyond what the pins allow
+    before = np.linalg.norm(pose[idx[0]] - goal[0])
+    assert res.errors[0] < before  # approached
+    assert np.allclose(bone_lengths(res.positions), rest_lengths(), rtol=1e-6)
+
+
+def test_polish_brings_a_start_that_left_the_pins_back() -> None:
+    """A network's answer 100 m off (an absurd target) is polished back onto the pins."""
+    pose, idx, goal = problem("left_wrist", 9.99e3)
+    start = pose + np.array([100.0, 5.0, 0.0])
+    held = np.stack([goal[0], goal[1], goal[2]])
+    loose = polish(start, rest_lengths(), idx, held, max_iterations=64)
+    assert np.linalg.norm(loose.positions[ANKLES] - pose[ANKLES], axis=-1).max() > 1.0
+    res = polish(start, rest_lengths(), idx, held, pinned=[False, True, True], max_iterations=64)
+    assert np.linalg.norm(res.positions[ANKLES] - pose[ANKLES], axis=-1).max() <= TOL
+
+
+def test_pinned_changes_nothing_when_the_pins_are_not_in_the_way() -> None:
+    pose = rest_pose()
+    idx = [J["left_wrist"], *ANKLES]
+    goal = np.stack([pose[J["left_wrist"]] + [0.1, -0.2, 0.1], pose[ANKLES[0]], pose[ANKLES[1]]])
+    a = fabrik(pose, rest_lengths(), idx, goal)
+    b = fabrik(pose, rest_lengths(), idx, goal, pinned=[False, True, True])
+    assert np.abs(a.positions - b.positions).max() < 1e-9
+    assert bool(np.all(b.reached))
+
+
+def test_pinned_must_match_the_targets() -> None:
+    pose, idx, goal = problem("head", 1.0)
+    with pytest.raises(ValueError, match="pinned"):
+        fabrik(pose, rest_lengths(), idx, goal, pinned=[True])
