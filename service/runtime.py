@@ -1,7 +1,8 @@
 """onnxruntime wrappers: one session per model file, and load-time fused graphs.
 
-``onnx`` is imported only inside :class:`Fused` (graph composition at load time), so a
-service install whose manifest ships pre-fused graphs never needs it.
+``onnx`` is imported only inside :class:`Fused` (graph composition at load time); without
+it (``pip install .[service]`` does not bring it) a fused graph runs as its three
+sessions in sequence, with the same results.
 """
 
 from __future__ import annotations
@@ -59,8 +60,17 @@ class Fused:
         self, enc: ModelEntry, solver: ModelEntry, dec: ModelEntry, models_dir: Path,
         options: ort.SessionOptions,
     ) -> None:  # fmt: skip
-        import onnx  # only here: composing graphs is a load-time job
-        import onnx.compose
+        self.chain: tuple[Net, Net, Net] | None = None
+        try:
+            import onnx  # only here: composing graphs is a load-time job
+            import onnx.compose
+        except ImportError:  # a slim install: the same three runs, one after the other
+            self.chain = (
+                Net(models_dir / enc.file, enc, options),
+                Net(models_dir / solver.file, solver, options),
+                Net(models_dir / dec.file, dec, options),
+            )
+            return
 
         def load(entry: ModelEntry, prefix: str) -> onnx.ModelProto:
             return onnx.compose.add_prefix(onnx.load(str(models_dir / entry.file)), prefix)
@@ -82,6 +92,9 @@ class Fused:
     def __call__(
         self, pose: npt.NDArray[np.float32], targets: npt.NDArray[np.float32]
     ) -> npt.NDArray[np.float32]:
+        if self.chain is not None:
+            encode, solve, decode = self.chain
+            return decode(solve(encode(pose), targets))
         feeds = {self.inputs[0]: pose, self.inputs[1]: targets}
         out: npt.NDArray[np.float32] = self.session.run([self.output], feeds)[0]
         return out
