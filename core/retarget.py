@@ -33,6 +33,7 @@ from core.characters_maps import JointMap
 from core.skeleton import JOINT_INDEX, PARENTS
 
 _PELVIS = JOINT_INDEX["pelvis"]
+_HIPS = (JOINT_INDEX["left_hip"], JOINT_INDEX["right_hip"])
 
 
 def canonical_points(skel: Skeleton, pose: Pose, jmap: JointMap) -> F64:
@@ -65,9 +66,23 @@ def _plan(skel: Skeleton, jmap: JointMap) -> _Plan:
     return _Plan(groups, aim_of)
 
 
-def _aim_pass(skel: Skeleton, pose: Pose, jmap: JointMap, plan: _Plan, goal: F64) -> set[int]:
+def _aim_pass(
+    skel: Skeleton,
+    pose: Pose,
+    jmap: JointMap,
+    plan: _Plan,
+    goal: F64,
+    skip: int | None,
+    original: Pose,
+) -> set[int]:
+    """Aim every group (parents first). Each turn starts from the joint's *original* local
+    rotation, so a joint aimed again (exact reach) still differs from the input by one
+    swing, never by a twist."""
     changed: set[int] = set()
     for b in sorted(plan.groups):
+        if b == skip:
+            continue
+        pose.rotations[b] = original.rotations[b]
         g_rot, g_pos = forward_kinematics(skel, pose)
         pivot = g_pos[b]
         kids = plan.groups[b]
@@ -87,25 +102,48 @@ def _aim_pass(skel: Skeleton, pose: Pose, jmap: JointMap, plan: _Plan, goal: F64
         new_global = turn @ g_rot[b]
         parent = skel.parents[b]
         local = new_global if parent < 0 else g_rot[parent].T @ new_global
-        if not np.allclose(local, pose.rotations[b], rtol=0.0, atol=1e-15):
+        if not np.allclose(local, original.rotations[b], rtol=0.0, atol=1e-15):
             pose.rotations[b] = local
             changed.add(b)
     return changed
 
 
-def _move_root(skel: Skeleton, pose: Pose, jmap: JointMap, goal: F64) -> int | None:
+def _place_pelvis(
+    skel: Skeleton, pose: Pose, jmap: JointMap, plan: _Plan, goal: F64, pelvis_weight: float
+) -> tuple[int | None, int | None]:
+    """Move and turn the pelvis's joint as one rigid body onto the solved pelvis, spine1 and
+    hips (weighted Kabsch with translation; the hips weigh most, since the legs hang from
+    them). Returns (the joint translated, the joint turned), None where none could be."""
     anchor = jmap.anchors[_PELVIS]
     t = anchor.joint
     while t >= 0 and not skel.translatable[t]:
         t = skel.parents[t]
     if t < 0:
-        return None
+        return None, None
+    b = anchor.joint
+    kids = plan.groups.get(b, [])
+    members = [_PELVIS, *kids]
+    weights = np.array([pelvis_weight] + [1.0 if c in _HIPS else 0.25 for c in kids])
     g_rot, g_pos = forward_kinematics(skel, pose)
-    now = g_pos[anchor.joint] + g_rot[anchor.joint] @ anchor.offset
-    delta = goal[_PELVIS] - now
+    now = anchor_points(jmap, g_rot, g_pos)[members]
+    want = goal[members]
+    w = weights / weights.sum()
+    c_now, c_want = w @ now, w @ want
+    turn = np.eye(3)
+    if kids and skel.rotatable[b]:
+        turn = best_rotation(now - c_now, want - c_want, weights=w)
+    origin = turn @ (g_pos[b] - c_now) + c_want
+    delta = origin - g_pos[b]
     parent = skel.parents[t]
     pose.translations[t] = pose.translations[t] + (delta if parent < 0 else g_rot[parent].T @ delta)
-    return t
+    if not kids or not skel.rotatable[b]:
+        return t, None
+    new_global = turn @ g_rot[b]
+    parent = skel.parents[b]
+    if parent >= 0:
+        g_rot, _ = forward_kinematics(skel, pose)
+    pose.rotations[b] = new_global if parent < 0 else g_rot[parent].T @ new_global
+    return t, b
 
 
 def _chain(plan: _Plan, jmap: JointMap, target: int) -> list[int]:
@@ -153,6 +191,51 @@ def _fabrik(points: F64, goal: F64, tol: float, iterations: int = 64) -> F64:
     return p
 
 
+_ROUNDS = 8
+
+
+def _attempt(
+    skel: Skeleton,
+    pose: Pose,
+    jmap: JointMap,
+    plan: _Plan,
+    goal: F64,
+    exact: Sequence[tuple[int, F64]],
+    tolerance: float,
+) -> tuple[Pose, set[int], F64 | None]:
+    """One retarget onto ``goal``; the shift of the pelvis that would bring the exact
+    targets out of reach of their chains within reach (None if none is needed)."""
+    new = pose.copy()
+    goal = goal.copy()
+    changed: set[int] = set()
+    pelvis_weight = 100.0 if any(j == _PELVIS for j, _ in exact) else 0.25
+    root, turned = _place_pelvis(skel, new, jmap, plan, goal, pelvis_weight)
+    if turned is not None:
+        changed.add(turned)
+    changed |= _aim_pass(skel, new, jmap, plan, goal, turned, pose)
+    moves = []
+    for joint, target in exact:
+        chain = _chain(plan, jmap, joint)
+        if not chain:
+            continue
+        g_rot, g_pos = forward_kinematics(skel, new)
+        pts = anchor_points(jmap, g_rot, g_pos)
+        top = jmap.anchors[chain[0]].joint
+        line = np.concatenate([g_pos[top][None], pts[chain[1:]]])
+        reach = float(np.linalg.norm(np.diff(line, axis=0), axis=1).sum())
+        gap = np.asarray(target, dtype=np.float64) - g_pos[top]
+        far = float(np.linalg.norm(gap)) - reach * (1.0 - 1e-6)
+        if far > tolerance * 0.1:
+            moves.append(gap / np.linalg.norm(gap) * (far + tolerance * 0.5))
+        done = _fabrik(line, np.asarray(target, dtype=np.float64), tolerance * 0.01)
+        goal[chain[1:]] = done[1:]
+        changed |= _aim_pass(skel, new, jmap, plan, goal, turned, pose)
+    if root is not None and not np.array_equal(new.translations[root], pose.translations[root]):
+        changed.add(root)
+    shift = np.mean(moves, axis=0) if moves else None
+    return new, changed, shift
+
+
 @dataclass(frozen=True)
 class Retargeted:
     pose: Pose
@@ -172,24 +255,13 @@ def retarget(
     """A copy of ``pose`` whose canonical points follow ``solved`` ``[21, 3]`` (character
     units and axes); ``exact`` lists (canonical joint, goal) pairs to meet within
     ``tolerance`` where the character's own chain can (see the module docstring)."""
-    new = pose.copy()
     plan = _plan(skel, jmap)
     goal = np.array(solved, dtype=np.float64)
-    changed: set[int] = set()
-    root = _move_root(skel, new, jmap, goal)
-    changed |= _aim_pass(skel, new, jmap, plan, goal)
-    for joint, target in exact:
-        chain = _chain(plan, jmap, joint)
-        if not chain:
-            continue
-        g_rot, g_pos = forward_kinematics(skel, new)
-        pts = anchor_points(jmap, g_rot, g_pos)
-        top = jmap.anchors[chain[0]].joint
-        line = np.concatenate([g_pos[top][None], pts[chain[1:]]])
-        done = _fabrik(line, np.asarray(target, dtype=np.float64), tolerance * 0.01)
-        goal[chain[1:]] = done[1:]
-        changed |= _aim_pass(skel, new, jmap, plan, goal)
-    if root is not None and not np.array_equal(new.translations[root], pose.translations[root]):
-        changed.add(root)
+    body = [_PELVIS, *plan.groups.get(jmap.anchors[_PELVIS].joint, [])]
+    for _ in range(_ROUNDS):
+        new, changed, shift = _attempt(skel, pose, jmap, plan, goal, exact, tolerance)
+        if shift is None:
+            break
+        goal[body] += shift  # out of reach from the pelvis: move the whole body towards it
     g_rot, g_pos = forward_kinematics(skel, new)
     return Retargeted(new, anchor_points(jmap, g_rot, g_pos), frozenset(changed))

@@ -311,12 +311,18 @@ def character_from_request(req: CharacterSolveRequest) -> Character:
         raise _invalid(exc) from None
 
 
-def character_answer(ch: Character, edit: Edit) -> dict[str, Any]:
+def character_answer(ch: Character, edit: Edit, given: dict[str, list[float]]) -> dict[str, Any]:
+    """The answer: untouched joints give back the request's own quaternion (identity if it
+    gave none), changed ones their new rotation with w >= 0."""
     g_rot, g_pos = forward_kinematics(ch.skel, edit.pose)
-    quats = matrix_to_quat(edit.pose.rotations)
+    quats = matrix_to_quat(edit.pose.rotations).tolist()
+    rotations = {
+        n: quats[j] if j in edit.changed else given.get(n, [0.0, 0.0, 0.0, 1.0])
+        for j, n in enumerate(ch.skel.names)
+    }
     root = ch.skel.parents.index(-1)
     return {
-        "rotations": dict(zip(ch.skel.names, quats.tolist(), strict=True)),
+        "rotations": rotations,
         "root_position": edit.pose.translations[root].tolist(),
         "positions": dict(zip(ch.skel.names, g_pos.tolist(), strict=True)),
         **_report(ch, edit, anchor_points(ch.jmap, g_rot, g_pos)),

@@ -37,7 +37,7 @@ async def character_solve(
         ch = character_from_request(req)
         edit = solve_character(engine, ch, req)
         state.metrics.solved(edit.problem.method, edit.result.solvers)
-        return character_answer(ch, edit)
+        return character_answer(ch, edit, req.rotations)
 
     return json_response(await run_in_threadpool(work, engine))
 

@@ -1,0 +1,275 @@
+"""Characters as users have them, over HTTP: BVH files of five studios edited and checked
+by an independent reader's forward kinematics; a skeleton of the client's own answered in
+local rotations; bad files and skeletons refused with a 422 that says why."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from core.bvh import parse_bvh
+from core.bvh_write import pose_of, skeleton_of
+from core.characters import UNITS, matrix_to_quat
+from core.characters_maps import resolve_map
+from core.retarget import canonical_points
+from core.skeleton import JOINT_INDEX
+from tests.character_files import FILES, RefBVH, extract_bvh
+
+MM = 1e-3
+ROUND_TRIP: dict[str, dict[str, float]] = {}  # measured errors, printed at the end
+
+
+@pytest.fixture(scope="module")
+def files(mocap_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    return extract_bvh(mocap_dir, tmp_path_factory.mktemp("characters"))
+
+
+def _goal(text: str, frame: int) -> tuple[str, np.ndarray, str]:
+    """A reachable target for the left wrist: its arm swung 25 degrees about the shoulder's
+    up axis and drawn in by 10%. Returns (the file's wrist name, goal, right ankle name)."""
+    bvh = parse_bvh(text)
+    skel = skeleton_of(bvh)
+    jmap = resolve_map(skel)
+    pts = canonical_points(skel, pose_of(bvh, frame), jmap)
+    head = pts[JOINT_INDEX["head"]] - pts[JOINT_INDEX["pelvis"]]
+    up = np.eye(3)[int(np.argmax(np.abs(head)))]
+    sh, wr = pts[JOINT_INDEX["left_shoulder"]], pts[JOINT_INDEX["left_wrist"]]
+    goal = sh + 0.9 * Rotation.from_rotvec(np.deg2rad(25) * up).apply(wr - sh)
+    label = jmap.describe()
+    return label["left_wrist"], goal, label["right_ankle"]
+
+
+@pytest.mark.parametrize("name", list(FILES))
+def test_bvh_round_trip(client: Any, files: dict[str, Path], name: str) -> None:
+    _, _, units, frame = FILES[name]
+    text = files[name].read_text()
+    wrist, goal, ankle = _goal(text, frame)
+    body: dict[str, Any] = {
+        "bvh": text,
+        "frame": frame,
+        "targets": [{"joint": wrist, "position": goal.tolist()}],
+        "pins": [ankle],
+        "options": {"reach": "exact"},
+    }
+    if units is not None:
+        body["units"] = units
+    r = client.post("/v1/bvh/solve", json=body)
+    assert r.status_code == 200, r.text
+    out = r.json()
+    scale = UNITS[units] if isinstance(units, str) else units or UNITS[str(out["units"])]
+    new = out["bvh"]
+
+    # everything but the edited frame's line is byte-equal; that line changed
+    old_lines, new_lines = text.split("\n"), new.split("\n")
+    assert len(old_lines) == len(new_lines)
+    differ = [i for i, (a, b) in enumerate(zip(old_lines, new_lines, strict=True)) if a != b]
+    assert len(differ) == 1
+    ref_old, ref_new = RefBVH(text), RefBVH(new)
+    assert ref_new.rows[frame] != ref_old.rows[frame]
+    assert [r for i, r in enumerate(ref_new.rows) if i != frame] == [
+        r for i, r in enumerate(ref_old.rows) if i != frame
+    ]
+    assert ref_new.frame_time == ref_old.frame_time and ref_new.frames == ref_old.frames
+    for a, b in zip(ref_old.joints, ref_new.joints, strict=True):
+        assert (a.name, a.parent, a.channels) == (b.name, b.parent, b.channels)
+        np.testing.assert_array_equal(a.offset, b.offset)
+
+    # the independent reader's FK: target reached, pin kept (exact mode: within 1 mm)
+    before, after = ref_old.positions(frame), ref_new.positions(frame)
+    target_mm = float(np.linalg.norm(after[wrist] - goal)) * scale / MM
+    pin_mm = float(np.linalg.norm(after[ankle] - before[ankle])) * scale / MM
+    ROUND_TRIP[name] = {"target_mm": target_mm, "pin_mm": pin_mm}
+    assert target_mm <= 1.0, (name, target_mm)
+    assert pin_mm <= 1.0, (name, pin_mm)
+    # the service's own report agrees with the independent measure
+    assert out["targets"][0]["reached"] is True
+    assert abs(out["targets"][0]["error"] / MM - target_mm) < 1e-3
+    # the pose changed for real, other frames did not move
+    assert float(np.linalg.norm(after[wrist] - before[wrist])) * scale > 0.01
+    other = frame - 1
+    for j in ref_old.joints:
+        np.testing.assert_array_equal(
+            ref_old.positions(other)[j.name], ref_new.positions(other)[j.name]
+        )
+
+
+def test_round_trip_report() -> None:
+    """Prints the measured round-trip errors (run with -s)."""
+    print(json.dumps(ROUND_TRIP, indent=1))
+
+
+def test_bvh_units_and_up_inferred(client: Any, files: dict[str, Path]) -> None:
+    text = files["fair1-child-inches-zup"].read_text()
+    wrist, goal, _ = _goal(text, 120)
+    body = {"bvh": text, "frame": 120, "targets": [{"joint": wrist, "position": goal.tolist()}]}
+    r = client.post("/v1/bvh/solve", json=body)  # a child in inches is not plain: asked
+    assert r.status_code == 422
+    assert "units" in r.json()["detail"]
+    r = client.post("/v1/bvh/solve", json={**body, "units": "in"})
+    assert r.status_code == 200, r.text
+    assert r.json()["up"] == "+Z" and r.json()["scheme"] == "mixamo"
+    text = files["reactidle-6ch"].read_text()
+    wrist, goal, _ = _goal(text, 0)
+    body = {
+        "bvh": text,
+        "frame": 0,
+        "targets": [{"joint": "left_wrist", "position": goal.tolist()}],
+    }
+    out = client.post("/v1/bvh/solve", json=body).json()
+    assert (out["units"], out["up"], out["scheme"]) == ("m", "+Y", "rigify")
+    assert out["joint_map"]["spine2"] == "0.5 of spine.001->neck"
+
+
+# --------------------------------------------------------------------------------------
+# A skeleton of the client's own: local rotations in and out
+# --------------------------------------------------------------------------------------
+def _character_body(text: str, frame: int) -> tuple[dict[str, Any], Any, Any]:
+    bvh = parse_bvh(text)
+    skel = skeleton_of(bvh)
+    pose = pose_of(bvh, frame)
+    quats = matrix_to_quat(pose.rotations)
+    joints = [
+        {"name": n, "parent": None if p < 0 else skel.names[p], "offset": skel.offsets[i].tolist()}
+        for i, (n, p) in enumerate(zip(skel.names, skel.parents, strict=True))
+    ]
+    body = {
+        "skeleton": {"joints": joints, "units": "cm"},
+        "rotations": {n: q.tolist() for n, q in zip(skel.names, quats, strict=True)},
+        "root_position": pose.translations[0].tolist(),
+    }
+    return body, skel, pose
+
+
+def _fk(
+    body: dict[str, Any], rotations: dict[str, list[float]], root: list[float]
+) -> dict[str, np.ndarray]:
+    """Independent FK over the request's joints (scipy quaternions, [x, y, z, w])."""
+    g_rot: dict[str, np.ndarray] = {}
+    g_pos: dict[str, np.ndarray] = {}
+    for j in body["skeleton"]["joints"]:  # written parents first
+        r = Rotation.from_quat(rotations[j["name"]]).as_matrix()
+        if j["parent"] is None:
+            g_rot[j["name"]], g_pos[j["name"]] = r, np.asarray(root)
+        else:
+            p = j["parent"]
+            g_pos[j["name"]] = g_pos[p] + g_rot[p] @ np.asarray(j["offset"])
+            g_rot[j["name"]] = g_rot[p] @ r
+    return g_pos
+
+
+def test_character_rotations(client: Any, files: dict[str, Path]) -> None:
+    text = files["cmu-daz-salsa"].read_text()  # 43 joints: fingers and eyes are unmapped
+    body, skel, _ = _character_body(text, 300)
+    start = _fk(body, body["rotations"], body["root_position"])
+    sh, wr = start["lShldr"], start["lHand"]
+    goal = sh + 0.9 * Rotation.from_rotvec([0.0, 0.5, 0.0]).apply(wr - sh)
+    body |= {
+        "targets": [{"joint": "lHand", "position": goal.tolist()}],
+        "pins": ["right_ankle"],
+        "options": {"reach": "exact"},
+    }
+    r = client.post("/v1/character/solve", json=body)
+    assert r.status_code == 200, r.text
+    out = r.json()
+    assert out["scheme"] == "cmu-daz"
+    assert set(out["rotations"]) == set(skel.names)
+    fk = _fk(body, out["rotations"], out["root_position"])
+    for name, p in out["positions"].items():  # FK of the answer = its positions, 1e-6 m
+        assert np.linalg.norm(fk[name] - np.asarray(p)) * 0.01 <= 1e-6, name
+    assert np.linalg.norm(fk["lHand"] - goal) * 0.01 <= 1e-3
+    assert out["targets"][0]["reached"] and out["pins"][0]["reached"]
+    # bone lengths are the skeleton's own
+    for j in body["skeleton"]["joints"]:
+        if j["parent"] is not None:
+            got = np.linalg.norm(fk[j["name"]] - fk[j["parent"]])
+            assert abs(got - np.linalg.norm(j["offset"])) < 1e-9
+    # unmapped joints (fingers, eyes, ...) keep their local rotation exactly
+    # (the joints that carry a canonical joint with canonical children are the turned ones)
+    leaves = {"head", "left_wrist", "right_wrist", "left_foot", "right_foot"}
+    mapped = {label for canon, label in out["joint_map"].items() if canon not in leaves}
+    assert {"lShldr", "rFoot", "chest"} <= mapped
+    for name in skel.names:
+        if name not in mapped:
+            assert out["rotations"][name] == body["rotations"][name], name
+    # twist kept: the change of a limb bone's local rotation has no twist about that bone
+    for joint, child in (("lShldr", "lForeArm"), ("lForeArm", "lHand"), ("rThigh", "rShin")):
+        old = Rotation.from_quat(body["rotations"][joint])
+        new = Rotation.from_quat(out["rotations"][joint])
+        delta = (old.inv() * new).as_quat()
+        axis = np.asarray(skel.offsets[skel.index[child]])
+        axis /= np.linalg.norm(axis)
+        assert abs(float(np.dot(delta[:3], axis))) < 1e-9, joint
+    moved = (
+        Rotation.from_quat(out["rotations"]["lShldr"])
+        * Rotation.from_quat(body["rotations"]["lShldr"]).inv()
+    )
+    assert moved.magnitude() > 0.05  # the arm did move
+
+
+# --------------------------------------------------------------------------------------
+# Bad files and skeletons: a 422 problem that says what, never a 500
+# --------------------------------------------------------------------------------------
+def _bad(client: Any, path: str, body: dict[str, Any], *needles: str) -> str:
+    r = client.post(path, json=body)
+    assert r.status_code == 422, r.text
+    assert r.headers["content-type"].startswith("application/problem+json")
+    detail: str = r.json()["detail"]
+    for needle in needles:
+        assert needle in detail, detail
+    return detail
+
+
+def test_bad_bvh_files(client: Any, files: dict[str, Path]) -> None:
+    text = files["bandai"].read_text()
+    target = [{"joint": "Hand_L", "position": [0.0, 100.0, 0.0]}]
+
+    def post(bvh: str, *needles: str) -> str:
+        return _bad(client, "/v1/bvh/solve", {"bvh": bvh, "frame": 0, "targets": target}, *needles)
+
+    post(text[: len(text) // 2], "line")  # truncated mid-frame
+    post(text[:200], "missing MOTION")  # truncated in the hierarchy
+    lines = text.split("\n")
+    motion = lines.index("MOTION")
+    row = lines[motion + 5].split(" ")
+    row[4] = "nan"
+    post(
+        "\n".join([*lines[: motion + 5], " ".join(row), *lines[motion + 6 :]]),
+        f"line {motion + 6}",
+        "finite",
+    )
+    post(text.replace("Zrotation", "Wrotation", 1), "unknown channel", "line")
+    post(text.replace("JOINT Spine", "JOINT Hips", 1), "duplicate joint name", "line")
+    post("not a bvh", "HIERARCHY")
+    _bad(client, "/v1/bvh/solve", {"bvh": text, "frame": 10**6, "targets": target}, "frame")
+    unmapped = [{"joint": "Wrist_L_nope", "position": [0.0, 1.0, 0.0]}]
+    _bad(client, "/v1/bvh/solve", {"bvh": text, "frame": 0, "targets": unmapped}, "Wrist_L_nope")
+
+
+def test_bad_character_skeletons(client: Any) -> None:
+    def body(joints: list[dict[str, Any]]) -> dict[str, Any]:
+        return {
+            "skeleton": {"joints": joints},
+            "targets": [{"joint": "left_wrist", "position": [0.0, 1.0, 0.0]}],
+        }
+
+    cycle = [
+        {"name": "a", "parent": "b", "offset": [0, 1, 0]},
+        {"name": "b", "parent": "a", "offset": [0, 1, 0]},
+    ]
+    _bad(client, "/v1/character/solve", body(cycle), "cycle")
+    dup = [
+        {"name": "a", "parent": None, "offset": [0, 1, 0]},
+        {"name": "a", "parent": "a", "offset": [0, 1, 0]},
+    ]
+    _bad(client, "/v1/character/solve", body(dup), "duplicate joint name 'a'")
+    unknown = [{"name": "a", "parent": "zz", "offset": [0, 1, 0]}]
+    _bad(client, "/v1/character/solve", body(unknown), "unknown joint 'zz'")
+    few = [{"name": "Hips", "parent": None, "offset": [0, 1, 0]}]
+    _bad(client, "/v1/character/solve", body(few), "no joint found for", "joint_map")
+    r = client.post("/v1/character/solve", json={**body(few), "rotations": {"Hips": [0, 0, 0]}})
+    assert r.status_code == 422  # a quaternion has 4 numbers
