@@ -36,5 +36,15 @@ run "curl -s $URL/v1/solve -H 'content-type: application/json' -d @docs/examples
 run "curl -s $URL/v1/complete -H 'content-type: application/json' -d @docs/examples/complete.json"
 run "curl -s $URL/v1/solve/batch -H 'content-type: application/json' -d @docs/examples/batch.json"
 run "curl -s $URL/v1/solve -H 'content-type: application/json' -d @docs/examples/bad.json"
+# characters: a BVH file edited in place (the edited frame's line shown), and a skeleton of
+# the client's own answered in local rotations (three joints shown)
+echo "\$ curl -s $URL/v1/bvh/solve -H 'content-type: application/json' -d @docs/examples/bvh_solve.json"
+curl -s "$URL/v1/bvh/solve" -H 'content-type: application/json' -d @docs/examples/bvh_solve.json \
+  | python3 -c 'import json, sys; a = json.load(sys.stdin); rows = a.pop("bvh").splitlines(); a["bvh"] = ["...", rows[-2][:60] + " ...", "..."]; a.pop("joint_map"); print(json.dumps(a, indent=1))' | abridge
+echo
+echo "\$ curl -s $URL/v1/character/solve -H 'content-type: application/json' -d @docs/examples/character_solve.json"
+curl -s "$URL/v1/character/solve" -H 'content-type: application/json' -d @docs/examples/character_solve.json \
+  | python3 -c 'import json, sys; a = json.load(sys.stdin); a.pop("joint_map"); [a[k].__setitem__("...", f"{len(a[k]) - 3} more joints") or [a[k].pop(n) for n in list(a[k])[3:-1]] for k in ("rotations", "positions")]; print(json.dumps(a, indent=1))' | abridge
+echo
 echo "\$ curl -si $URL/v1/solve -H 'content-type: application/json' -d @docs/examples/solve.json | grep -i '^x-'"
 curl -si "$URL/v1/solve" -H 'content-type: application/json' -d @docs/examples/solve.json | grep -i '^x-'
