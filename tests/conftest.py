@@ -104,8 +104,9 @@ def mocap_clips(mocap_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Mo
 
 
 #: Files of the three multi-body archives (archive -> members), for readers, maps and the
-#: holdout split: CMU subjects 07 and 124 (held out) and 10 and 16 (not), the 124_02 copy
-#: (excluded by the map), two ReActIdle clips, both fair1 skeletons and cmu1.
+#: holdout split: CMU subjects 07 and 124 (held out) and 10, 16 and 135 (not; 135_06 is also
+#: in cmu-dance as martial/06), the 124_02 copy (excluded by the map), two ReActIdle clips,
+#: both fair1 skeletons and cmu1.
 _ASF = "cmu_asfamc_subset/terryum+Athletic_Movement_Detection@06b5ebe/MocapData"
 _KAY = "cmu_asfamc_subset/Kay1794+Mocap-Keyframe-Interpolation@f19d313/mocapPlayer-starter"
 _RI = "reactidle_bvh/Enekoassets+ReActIdle@90b0ac7"
@@ -122,6 +123,8 @@ MORE_MOCAP: dict[str, tuple[str, ...]] = {
         f"{_ASF}/124.asf",
         f"{_ASF}/124_02.amc",
         f"{_ASF}/124_02 - Copy.amc",
+        f"{_KAY}/135-martialArts.asf",
+        f"{_KAY}/135_06-martialArts.amc",
     ),
     "reactidle_bvh.tar.xz": (f"{_RI}/genuine/003_genuine.bvh", f"{_RI}/genuine/002_genuine.bvh"),
     "animateddrawings_fair_bvh.tar.xz": (

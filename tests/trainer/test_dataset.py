@@ -289,3 +289,55 @@ def test_cli_dataset_and_plot(mocap_clips: Any, small_dataset: Path, tmp_path: P
     result = runner.invoke(app, ["dataset", "--mocap", str(tmp_path / "nowhere")])
     assert result.exit_code == 1
     assert "not found" in result.output
+
+
+def test_builder_reads_the_multi_body_archives_and_holds_out_what_the_maps_name(
+    more_mocap: Path, mocap_dir: Path, tmp_path: Path
+) -> None:
+    """ASF/AMC, 6-channel BVH and inch/Z-up BVH in one build: the held-out clips (all of
+    ReActIdle and AnimatedDrawings, CMU subjects 07 and 124 here) are in "holdout" and
+    nothing else is; archive checksums are recorded; bodies are child- or adult-sized."""
+    root = tmp_path / "mocap"
+    for top in ("cmu_asfamc_subset", "reactidle_bvh", "animateddrawings_fair_bvh"):
+        shutil.copytree(more_mocap / top, root / top)
+    shutil.copy(mocap_dir / "SHA256SUMS", root / "SHA256SUMS")
+    report = build_dataset(root, tmp_path / "p.npz", seed=0, workers=1, progress=False)
+    ds = load_dataset(report.out)
+    columns = (ds.clip_name, ds.clip_source, ds.clip_actor, ds.clip_split)
+    table = {n: (s, a, sp) for n, s, a, sp in zip(*columns, strict=True)}
+    held = {n for n, (_, _, sp) in table.items() if sp == "holdout"}
+    assert held == {
+        "cmu-asf/07_05",
+        "cmu-asf/124_02",
+        "reactidle/genuine/002",
+        "reactidle/genuine/003",
+        "fair/fair1/dab",
+        "fair/fair1/wave_hello",
+        "fair/cmu1/jumping_jacks",
+    }
+    assert "holdout" in SPLITS
+    others = {n: t for n, t in table.items() if n not in held}
+    assert set(others) == {"cmu-asf/10_01", "cmu-asf/16_01", "cmu-asf/16_05", "cmu-asf/135_06"}
+    assert {t[2] for t in others.values()} <= {"train", "val", "test"}
+    assert table["cmu-asf/16_01"][1] == "16" and table["fair/fair1/wave_hello"][1] == "fair1-b"
+    assert table["reactidle/genuine/002"][:2] == ("reactidle", "002")
+    assert not any("Copy" in n for n in table)
+    meta = ds.meta
+    sums = {a["file"]: a["sha256"] for a in meta["archives"] if "sha256" in a}
+    assert sums["cmu_asfamc_subset.tar.xz"].startswith("41e7874f")
+    assert set(sums) == {
+        "cmu_asfamc_subset.tar.xz",
+        "reactidle_bvh.tar.xz",
+        "animateddrawings_fair_bvh.tar.xz",
+    }
+    assert meta["holdout"]["reactidle"] == ["**"]
+    assert sum(meta["dropped_frames"].values()) == 0
+    # Bodies: a child's thigh, adults' thighs (metres), from the per-actor bone table.
+    by_actor = meta["mean_bone_lengths_m_by_actor"]
+    assert 0.25 < by_actor["fair"]["fair1-a"]["left_knee"] < 0.32
+    assert 0.38 < by_actor["cmu-asf"]["16"]["left_knee"] < 0.45
+    assert 0.3 < by_actor["reactidle"]["003"]["left_knee"] < 0.45
+    # World poses are back on the floor, upright, at 30 fps.
+    world = ds.world()
+    assert np.abs(world[ds.source_mask("reactidle"), :, 1].min(axis=1)).max() < 0.05
+    assert (ds.positions[:, JOINT_INDEX["head"], 1] > ds.positions[:, 0, 1]).all()

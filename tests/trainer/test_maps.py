@@ -11,9 +11,11 @@ import pytest
 from core.bvh import read_bvh
 from core.geometry import canonicalise
 from core.skeleton import JOINT_INDEX, bone_lengths
+from tests.conftest import _ASF, _FAIR, _KAY
 from trainer.data.maps import MapError, load_map, load_maps
 
 MAPS = Path(__file__).resolve().parents[2] / "trainer" / "maps"
+
 
 def test_maps_load_and_validate(tmp_path: Path) -> None:
     maps = {m.source: m for m in load_maps(MAPS)}
@@ -125,3 +127,144 @@ def test_docs_example_map_is_valid(tmp_path: Path) -> None:
     assert m.fps_for("takes/old/jump_01.bvh", 120.0) == 50.0
     info = m.clip_info("takes/anna/jump_01.bvh")
     assert (info.name, info.content, info.actor) == ("studio-x/anna/jump_01", "jump", "anna")
+
+
+# ------------------------------------------------------------------ the multi-body archives
+
+
+def _reader(more_mocap: Path, m: Any, rel: str) -> Any:
+    from trainer.data.asf import read_amc, read_asf
+    from trainer.data.build import _all_files, pair_skeleton
+
+    if m.reader == "asf":
+        sk = read_asf(more_mocap / pair_skeleton(m, rel, _all_files(more_mocap)))
+        return read_amc(more_mocap / rel, sk), sk.metres_per_unit
+    return read_bvh(more_mocap / rel), None
+
+
+def _world(more_mocap: Path, m: Any, rel: str) -> np.ndarray[Any, Any]:
+    """World metres, +Y up, as the builder makes them (before resampling and canonicalising)."""
+    from trainer.data.build import ClipJob, read_world
+
+    skeleton = None
+    if m.reader == "asf":
+        from trainer.data.build import _all_files, pair_skeleton
+
+        skeleton = str(more_mocap / pair_skeleton(m, rel, _all_files(more_mocap)))
+    job = ClipJob(str(more_mocap / rel), rel, f"{m.source}:{rel}", m, skeleton)
+    return read_world(job)[0]
+
+
+def test_every_new_map_maps_all_21_joints_on_its_real_files(more_mocap: Path) -> None:
+    from tests.conftest import MORE_MOCAP
+
+    maps = {m.source: m for m in load_maps(MAPS)}
+    archives = {m.archive: m for m in maps.values()}
+    for archive, members in MORE_MOCAP.items():
+        m = archives[archive]
+        clips = [r for r in members if m.selects(r)]
+        assert clips, archive
+        for rel in clips:
+            joints = m.joints_for(rel)
+            assert len(joints) == 21
+            clip, _ = _reader(more_mocap, m, rel)
+            missing = {n for j in joints for n in j.names} - set(clip.joint_names)
+            assert not missing, (rel, missing)
+            world = _world(more_mocap, m, rel)
+            assert world.shape[1:] == (21, 3) and np.isfinite(world).all()
+    # The edited duplicate is not a clip; the others are.
+    asf = maps["cmu-asf"]
+    assert not asf.selects(f"{_ASF}/124_02 - Copy.amc")
+    assert asf.selects(f"{_ASF}/124_02.amc")
+
+
+def test_cmu_asf_pairs_each_amc_with_its_subjects_asf(more_mocap: Path) -> None:
+    from trainer.data.build import _all_files, pair_skeleton
+
+    m = load_map(MAPS / "cmu_asf.toml")
+    files = _all_files(more_mocap)
+    assert pair_skeleton(m, f"{_KAY}/07_05-walk.amc", files) == f"{_KAY}/07-walk.asf"
+    assert pair_skeleton(m, f"{_ASF}/10_01.amc", files) == f"{_ASF}/10.asf"  # not 124.asf
+    with pytest.raises(MapError, match="match no file"):
+        pair_skeleton(m, f"{_ASF}/64_01.amc", files)
+    info = m.clip_info(f"{_KAY}/07_05-walk.amc")
+    assert (info.name, info.content, info.actor) == ("cmu-asf/07_05", "walk", "07")
+    assert m.fps_for(f"{_ASF}/10_01.amc", 0.0) == 120.0  # AMC has no rate: CMU's 120 Hz
+    assert m.is_holdout(f"{_ASF}/124_02.amc") and not m.is_holdout(f"{_ASF}/10_01.amc")
+    # metres = ASF units x 0.0254 / 0.45: a thigh of 0.39-0.45 m (README).
+    sk = _reader(more_mocap, m, f"{_ASF}/16_01.amc")[0].skeleton
+    assert 0.39 < sk.bone_lengths()["lfemur"] * sk.metres_per_unit < 0.45
+
+
+def test_fair_child_is_inches_z_up_and_child_sized(more_mocap: Path) -> None:
+    """fair1 (inches, +Z up) comes out in metres, +Y up, facing +Z with left at +X, a child's
+    height; cmu1/jumping_jacks (ASF units, +Y up, other names) through its override."""
+    m = load_map(MAPS / "fair.toml")
+    j = JOINT_INDEX
+    for rel, fps, lo, hi in [
+        (f"{_FAIR}/fair1/dab.bvh", 30.0, 0.85, 1.2),
+        (f"{_FAIR}/fair1/wave_hello.bvh", 120.0, 0.75, 1.1),
+        (f"{_FAIR}/cmu1/jumping_jacks.bvh", 30.0, 1.35, 1.7),
+    ]:
+        assert m.fps_for(rel, 0.0) == fps
+        pos = canonicalise(_world(more_mocap, m, rel))
+        head = pos[:, j["head"], 1] - pos[:, [j["left_foot"], j["right_foot"]], 1].min(axis=1)
+        assert lo < np.median(head) < hi, (rel, np.median(head))  # head joint above the toes
+        assert (pos[:, j["left_hip"], 0] > 0).all()
+        assert _toes_forward(pos) > 0.9, rel
+    info = m.clip_info(f"{_FAIR}/fair1/wave_hello.bvh")
+    assert (info.source, info.actor) == ("fair", "fair1-b")
+    assert m.clip_info(f"{_FAIR}/cmu1/jumping_jacks.bvh").actor == "cmu1"
+    assert m.is_holdout(f"{_FAIR}/fair1/dab.bvh")
+
+
+def test_reactidle_floor_spine2_and_collars(more_mocap: Path) -> None:
+    m = load_map(MAPS / "reactidle.toml")
+    rel = "reactidle_bvh/Enekoassets+ReActIdle@90b0ac7/genuine/002_genuine.bvh"
+    world = _world(more_mocap, m, rel)
+    j = JOINT_INDEX
+    # root_position = "add": the toes on the floor, the pelvis at a standing height
+    # (person 002 is among the smallest: thigh 0.33 m).
+    lowest = world[:, :, 1].min(axis=1)
+    assert np.abs(lowest).max() < 0.05
+    assert 0.65 < world[:, j["pelvis"], 1].mean() < 1.05
+    # spine2 is 35 % of the way from spine1 to the neck; collars off the midline.
+    spine2 = world[:, j["spine1"]] + 0.35 * (world[:, j["neck"]] - world[:, j["spine1"]])
+    np.testing.assert_allclose(world[:, j["spine2"]], spine2, atol=1e-9)
+    canon = canonicalise(world)
+    assert (canon[:, j["left_collar"], 0] > 0).all() and (canon[:, j["right_collar"], 0] < 0).all()
+    assert np.median(canon[:, j["left_collar"], 0] - canon[:, j["right_collar"], 0]) > 0.06
+    assert _toes_forward(canon) > 0.95
+    info = m.clip_info(rel)
+    assert (info.name, info.content, info.style, info.actor) == (
+        "reactidle/genuine/002",
+        "idle",
+        "genuine",
+        "002",
+    )
+
+
+@pytest.mark.parametrize(
+    ("edit", "message"),
+    [
+        (lambda t: t.replace("at = 0.25", "at = 1.5", 1), "0 <= at <= 1"),
+        (lambda t: t.replace('"thorax", "lclavicle"', '"thorax"', 1), "part-way joint"),
+        (lambda t: t.replace('content = "walk"', 'colour = "walk"'), "unknown keys ['colour']"),
+        (lambda t: t.replace('reader = "asf"', 'reader = "bvh"'), "'skeleton' is only for"),
+        (
+            lambda t: t.replace('reader = "asf"', 'reader = "bvh"').replace("skeleton =", "#"),
+            "unit 'asf' needs reader",
+        ),
+        (lambda t: t.replace('reader = "asf"', 'reader = "c3d"'), "'reader' must be one of"),
+        (lambda t: t.replace("format = 2", "format = 1"), "rename [[fps_override]]"),
+        (lambda t: t.replace("skeleton = [", "# skeleton = ["), "needs skeleton"),
+        (lambda t: t.replace("fps = 120", "fps = -1"), "fps must be > 0"),
+    ],
+)
+def test_bad_new_map_keys_are_named(tmp_path: Path, edit: Any, message: str) -> None:
+    bad = tmp_path / "bad.toml"
+    bad.write_text(edit((MAPS / "cmu_asf.toml").read_text()))
+    with pytest.raises(MapError) as info:
+        load_map(bad)
+    assert message in str(info.value)
+    assert str(bad) in str(info.value)
