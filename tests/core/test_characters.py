@@ -1,0 +1,154 @@
+"""Core of characters: BVH writer round trip, joint maps of every naming scheme, swing-only
+retarget (numpy only; real files where the archives are present)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from core.bvh import parse_bvh, read_bvh
+from core.bvh_write import format_bvh, pose_of, row_of, skeleton_of, splice_frame
+from core.characters import CharacterError, Pose, build_skeleton, forward_kinematics, twist_angle
+from core.characters_maps import resolve_map
+from core.rest import rest_pose
+from core.retarget import canonical_points, retarget
+from core.skeleton import JOINT_INDEX, JOINT_NAMES, PARENTS
+from tests.character_files import extract_bvh
+
+
+@pytest.fixture(scope="module")
+def files(mocap_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    return extract_bvh(mocap_dir, tmp_path_factory.mktemp("core-characters"))
+
+
+def test_writer_round_trip(files: dict[str, Path]) -> None:
+    for path in files.values():
+        bvh = read_bvh(path)
+        again = parse_bvh(format_bvh(bvh))
+        assert again.joints == bvh.joints
+        assert again.frame_time == bvh.frame_time
+        np.testing.assert_array_equal(again.motion, bvh.motion)
+        # splicing an unchanged frame with no columns gives the file back byte for byte
+        assert splice_frame(bvh, 3, bvh.motion[3], []) == bvh.text
+
+
+def test_real_files_map_automatically(files: dict[str, Path]) -> None:
+    schemes = {n: resolve_map(skeleton_of(read_bvh(p))).scheme for n, p in files.items()}
+    assert schemes == {
+        "fair1-child-inches-zup": "mixamo",
+        "cmu-asf-bvh": "cmu-asf-bvh",
+        "cmu-daz-salsa": "cmu-daz",
+        "bandai": "bandai-namco",
+        "reactidle-6ch": "rigify",
+    }
+
+
+_NAMES = {
+    "unreal": ("pelvis spine_01 spine_03 neck_01 head clavicle_{s} upperarm_{s} lowerarm_{s} "
+               "hand_{s} thigh_{s} calf_{s} foot_{s} ball_{s}", ("l", "r")),
+    "mixamo": ("mixamorig:Hips mixamorig:Spine mixamorig:Spine2 mixamorig:Neck mixamorig:Head "
+               "mixamorig:{s}Shoulder mixamorig:{s}Arm mixamorig:{s}ForeArm mixamorig:{s}Hand "
+               "mixamorig:{s}UpLeg mixamorig:{s}Leg mixamorig:{s}Foot mixamorig:{s}ToeBase",
+               ("Left", "Right")),
+    "vrm": ("hips spine upperChest neck head {s}Shoulder {s}UpperArm {s}LowerArm {s}Hand "
+            "{s}UpperLeg {s}LowerLeg {s}Foot {s}Toes", ("left", "right")),
+    "vroid": ("J_Bip_C_Hips J_Bip_C_Spine J_Bip_C_Chest J_Bip_C_Neck J_Bip_C_Head "
+              "J_Bip_{s}_Shoulder J_Bip_{s}_UpperArm J_Bip_{s}_LowerArm J_Bip_{s}_Hand "
+              "J_Bip_{s}_UpperLeg J_Bip_{s}_LowerLeg J_Bip_{s}_Foot J_Bip_{s}_ToeBase",
+              ("L", "R")),
+    "rigify": ("DEF-spine DEF-spine.001 DEF-spine.003 DEF-spine.004 DEF-spine.006 "
+               "DEF-shoulder.{s} DEF-upper_arm.{s} DEF-forearm.{s} DEF-hand.{s} DEF-thigh.{s} "
+               "DEF-shin.{s} DEF-foot.{s} DEF-toe.{s}", ("L", "R")),
+    "cmu-asf": ("root upperback thorax upperneck head {s}clavicle {s}humerus {s}radius "
+                "{s}hand {s}femur {s}tibia {s}foot {s}toes", ("l", "r")),
+}  # fmt: skip
+_ORDER = ["pelvis", "spine1", "spine2", "neck", "head", "collar", "shoulder", "elbow", "wrist",
+          "hip", "knee", "ankle", "foot"]  # fmt: skip
+
+
+def _named_skeleton(scheme: str) -> tuple[list[str], list[str | None], list[list[float]]]:
+    """The canonical rest pose under a scheme's names, with a twist bone in each upper arm
+    and an extra spine joint (as real rigs have)."""
+    pattern, sides = _NAMES[scheme]
+    table = dict(zip(_ORDER, pattern.split(), strict=True))
+    rest = rest_pose()
+
+    def name(canon: str) -> str:
+        for side, prefix in enumerate(("left_", "right_")):
+            if canon.startswith(prefix):
+                return table[canon[len(prefix) :]].replace("{s}", sides[side])
+        return table[canon]
+
+    names, parents, offsets = [], [], []
+    for j, canon in enumerate(JOINT_NAMES):
+        p = PARENTS[j]
+        names.append(name(canon))
+        parents.append(None if p < 0 else name(JOINT_NAMES[p]))
+        offsets.append((rest[j] - (rest[p] if p >= 0 else 0.0)).tolist())
+    # an extra spine joint between spine1 and spine2, and an upper-arm twist bone
+    k = names.index(name("spine2"))
+    names.append("extra_spine")
+    parents.append(name("spine1"))
+    offsets.append([0.0, 0.1, 0.0])
+    parents[k] = "extra_spine"
+    offsets[k] = [offsets[k][0], offsets[k][1] - 0.1, offsets[k][2]]
+    names.append("arm_twist")
+    parents.append(name("left_shoulder"))
+    offsets.append([0.1, 0.0, 0.0])
+    return names, parents, offsets
+
+
+@pytest.mark.parametrize("scheme", list(_NAMES))
+def test_synthetic_schemes(scheme: str) -> None:
+    names, parents, offsets = _named_skeleton(scheme)
+    skel, _ = build_skeleton(names, parents, offsets)
+    jmap = resolve_map(skel)
+    assert jmap.scheme == scheme
+    got = jmap.describe()
+    assert got["left_wrist"] == names[JOINT_INDEX["left_wrist"]]
+    assert got["spine2"] == names[JOINT_INDEX["spine2"]]
+    # an explicit map wins joint by joint
+    forced = resolve_map(skel, {"spine1": "extra_spine"})
+    assert forced.describe()["spine1"] == "extra_spine"
+    assert forced.scheme == f"{scheme}+explicit"
+
+
+def test_bad_skeletons() -> None:
+    with pytest.raises(CharacterError, match="cycle"):
+        build_skeleton(["a", "b", "c"], [None, "c", "b"], [[0, 0, 0]] * 3)
+    with pytest.raises(CharacterError, match="duplicate"):
+        build_skeleton(["a", "a"], [None, "a"], [[0, 0, 0]] * 2)
+    with pytest.raises(CharacterError, match="not finite"):
+        build_skeleton(["a"], [None], [[0, float("nan"), 0]])
+
+
+def test_retarget_swing_only_and_exact(files: dict[str, Path]) -> None:
+    bvh = read_bvh(files["cmu-daz-salsa"])
+    skel = skeleton_of(bvh)
+    jmap = resolve_map(skel)
+    pose = pose_of(bvh, 200)
+    start = canonical_points(skel, pose, jmap)
+    goal = start.copy()
+    w, e = JOINT_INDEX["left_wrist"], JOINT_INDEX["left_elbow"]
+    goal[w] = start[e] + 0.95 * (start[w] - start[e]) + np.array([0.0, 5.0, 0.0])
+    out = retarget(skel, pose, jmap, start, exact=[(w, goal[w])], tolerance=0.01)
+    assert np.linalg.norm(out.points[w] - goal[w]) < 0.01
+    for name, child in (("lShldr", "lForeArm"), ("lForeArm", "lHand")):
+        j = skel.index[name]
+        delta = pose.rotations[j].T @ out.pose.rotations[j]
+        assert twist_angle(delta, skel.offsets[skel.index[child]]) < 1e-9
+    # FK of the answer = its points; offsets and unmapped joints untouched
+    g_rot, g_pos = forward_kinematics(skel, out.pose)
+    assert np.allclose(canonical_points(skel, out.pose, jmap), out.points, atol=1e-12)
+    np.testing.assert_array_equal(out.pose.translations[1:], pose.translations[1:])
+    for j in range(skel.size):
+        if j not in out.changed:
+            np.testing.assert_array_equal(out.pose.rotations[j], pose.rotations[j])
+    # written back and read again: the same pose to 1e-6 degrees
+    row, cols = row_of(bvh, 200, out.pose, out.changed)
+    again = pose_of(bvh, 200, row)
+    assert np.abs(again.rotations - out.pose.rotations).max() < 1e-7
+    assert isinstance(out.pose, Pose) and cols
+    assert g_pos.shape == (skel.size, 3) and g_rot.shape == (skel.size, 3, 3)
