@@ -19,7 +19,7 @@ from fastapi import FastAPI
 
 from service import middleware
 from service.deps import ServiceState
-from service.docs import document_problems
+from service.docs import document_problems, mount_docs
 from service.editor import mount_editor
 from service.errors import install_handlers
 from service.metrics import Metrics
@@ -47,13 +47,20 @@ def create_app(settings: Settings | None = None, *, load_in_background: bool = T
         version="1.0.0",
         summary="Drag a few joints; get a natural full-body pose with exact bone lengths.",
         lifespan=lifespan,
+        docs_url=None,  # mount_docs: self-hosted Swagger UI
+        redoc_url=None,
     )
     app.state.pose = state
     app.state.compute_limiter = anyio.CapacityLimiter(settings.compute_threads)
     install_handlers(app)
-    for router in (solve.router, complete.router, info.router, health.router, characters.router):
+    routers = (solve.router, complete.router, info.router, health.router, characters.router)
+    for router in routers:
         app.include_router(router)
     document_problems(app)
+    mount_docs(app)
     mount_editor(app)
-    middleware.install(app, settings, state.metrics)
+    # route templates for the metrics of requests refused before routing
+    templates = [r for router in routers for r in router.routes]
+    templates += [r for r in app.router.routes if getattr(r, "path", None)]
+    middleware.install(app, settings, state.metrics, templates)
     return app

@@ -170,7 +170,7 @@ def _location(loc: Sequence[Any]) -> str:
     """``items[2].targets[0].joint``: the same notation as the cross-field checks."""
     out = ""
     for part in loc:
-        if part == "body" and not out:
+        if (part == "body" and not out) or part == "[key]":
             continue
         out += f"[{part}]" if isinstance(part, int) else f"{'.' if out else ''}{clip(part, 40)}"
     return clip(out or "body", QUOTE)
@@ -181,7 +181,7 @@ def _message(error: Any) -> str:
     kind = error.get("type", "")
     ctx = error.get("ctx") or {}
     value = error.get("input")
-    if kind == "literal_error" and "'pelvis'" in str(ctx.get("expected", "")):
+    if kind == "literal_error" and "'spine1'" in str(ctx.get("expected", "")):
         where = "no bone ends at" if "[key]" in error.get("loc", ()) else "unknown joint"
         return f"{where} {clip(repr(value))}; joints are {', '.join(JOINT_NAMES)}"
     if kind == "finite_number":

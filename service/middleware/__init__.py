@@ -8,7 +8,10 @@ per-worker admission bound). Every rejection is problem+json.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 from fastapi import FastAPI
+from starlette.routing import BaseRoute
 
 from service.metrics import Metrics
 from service.middleware.context import RequestContext
@@ -23,11 +26,14 @@ from service.settings import Settings
 EXPOSED = ["X-Request-ID", "X-Total-Time", "X-Compute-Time", "Retry-After"]
 
 
-def install(app: FastAPI, settings: Settings, metrics: Metrics) -> None:
-    """Add the stack; ``add_middleware`` puts each new one outside the previous."""
+def install(
+    app: FastAPI, settings: Settings, metrics: Metrics, routes: Sequence[BaseRoute]
+) -> None:
+    """Add the stack; ``add_middleware`` puts each new one outside the previous.
+    ``routes``: every route (flattened), to label refused requests by template."""
     app.add_middleware(Gate, settings=settings)
     app.add_middleware(SecurityHeaders)
-    app.add_middleware(RequestMetrics, metrics=metrics, app_routes=app.router.routes)
+    app.add_middleware(RequestMetrics, metrics=metrics, app_routes=routes)
     app.add_middleware(Timing)
     app.add_middleware(RequestContext, access_log=settings.access_log)
     if settings.cors_origins:  # outermost: even the gate's rejections carry CORS headers

@@ -54,12 +54,10 @@ def app_port() -> int:
 def app_routes() -> dict[str, set[str]]:
     """``{path: methods}`` of the service's FastAPI app (built, not started: no models)."""
     pytest.importorskip("fastapi")
-    from fastapi.routing import APIRoute
-
     from service.app import create_app
 
-    app = create_app()
-    return {r.path: set(r.methods) for r in app.routes if isinstance(r, APIRoute)}
+    paths = create_app().openapi()["paths"]  # routers included: their routes, flattened
+    return {path: {m.upper() for m in ops} for path, ops in paths.items()}
 
 
 def _health_path(routes: dict[str, set[str]], kind: str) -> str:

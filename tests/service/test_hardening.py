@@ -1,0 +1,196 @@
+"""Issue 12 in-process: small specific errors, strict JSON, limits with their statuses,
+headers, offline docs, readiness without server paths, bounded metric labels."""
+
+from __future__ import annotations
+
+import json
+import re
+import shutil
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from core.rest import rest_pose
+from core.skeleton import JOINT_NAMES
+from tests.conftest import make_client
+from tests.service.test_api import assert_problem
+
+JSON = {"content-type": "application/json"}
+
+
+def body(**extra: Any) -> dict[str, Any]:
+    pose = dict(zip(JOINT_NAMES, rest_pose().tolist(), strict=True))
+    return {
+        "pose": pose,
+        "targets": [{"joint": "left_wrist", "position": [0.5, 1.2, 0.3]}],
+        **extra,
+    }
+
+
+def post(client: Any, data: bytes | str, path: str = "/v1/solve") -> Any:
+    return client.post(path, content=data, headers=JSON)
+
+
+# -- strict JSON: 400 saying where ---------------------------------------------------------
+@pytest.mark.parametrize(
+    ("data", "needle"),
+    [
+        (b'{"pose": ', "line 1 column 10"),
+        (b'{"a": 1}\xff', "not UTF-8: byte 0xff at offset 8"),
+        (b"[" * 100_000 + b"]" * 100_000, "nested too deeply"),
+        (b'{"x": ' + b"7" * 5000 + b"}", "JSON number"),
+        (b'{"pose": {}, "pose": {}}', "duplicate key 'pose'"),
+    ],
+)
+def test_malformed_bodies_are_400s_that_say_where(client: Any, data: bytes, needle: str) -> None:
+    problem = assert_problem(post(client, data), 400, needle)
+    assert problem["type"].endswith("/malformed-body")
+
+
+def test_duplicate_keys_deep_inside_are_refused(client: Any) -> None:
+    text = json.dumps(body()).replace('"weight"', '"x"')
+    text = text.replace('"joint": "left_wrist"', '"joint": "left_wrist", "joint": "head"')
+    assert_problem(post(client, text), 400, "duplicate key 'joint'")
+
+
+# -- small, specific errors ------------------------------------------------------------------
+def test_errors_quote_at_most_about_100_characters(client: Any) -> None:
+    b = body()
+    b["targets"][0]["joint"] = "x" * 1_000_000
+    resp = client.post("/v1/solve", json=b)
+    assert_problem(resp, 422, "unknown joint 'xxxx")
+    assert len(resp.content) < 3000, len(resp.content)
+    b = body()
+    b["pose"]["y" * 1_000_000] = [0, 0, 0]
+    resp = client.post("/v1/solve", json=b)
+    assert_problem(resp, 422, "Extra inputs")
+    assert len(resp.content) < 3000, len(resp.content)
+
+
+@pytest.mark.parametrize(
+    ("mutate", "needle"),
+    [
+        (lambda b: b["targets"][0].update(weight=float("nan")), "weight: must be a finite"),
+        (lambda b: b.update(options={"tolerance": float("nan")}), "tolerance: must be a finite"),
+        (lambda b: b.update(options={"floor": float("inf")}), "floor: must be a finite"),
+    ],
+)
+def test_nan_is_reported_as_not_finite(client: Any, mutate: Any, needle: str) -> None:
+    b = body()
+    mutate(b)
+    assert_problem(post(client, json.dumps(b)), 422, needle)
+
+
+def test_nan_bone_length_and_unknown_bone_are_field_errors(client: Any) -> None:
+    points = [{"joint": j, "position": rest_pose()[i].tolist()} for i, j in enumerate(JOINT_NAMES)]
+    data = json.dumps({"keypoints": points[:6], "bone_lengths": {"left_knee": float("nan")}})
+    assert_problem(post(client, data, "/v1/complete"), 422, "bone_lengths.left_knee: must be")
+    data = json.dumps({"keypoints": points[:6], "bone_lengths": {"pelvis": 0.3}})
+    assert_problem(post(client, data, "/v1/complete"), 422, "no bone ends at 'pelvis'")
+
+
+# -- limits ------------------------------------------------------------------------------------
+def test_past_the_inflight_bytes_bound_is_a_429(models_dir: Path) -> None:
+    with make_client(models_dir, max_inflight_bytes=2048) as c:
+        resp = post(c, json.dumps(body()) + " " * 4096)
+        problem = assert_problem(resp, 429, "body bytes in flight")
+        assert resp.headers["retry-after"] == "1"
+        assert problem["type"].endswith("/too-many-requests")
+        assert c.post("/v1/solve", json=body()).status_code == 200
+
+
+def test_past_the_deadline_is_a_504_with_retry_after(models_dir: Path) -> None:
+    items = [body(options={"reach": "exact", "method": "fabrik"}) for _ in range(64)]
+    for k, item in enumerate(items):
+        item["targets"][0]["position"] = [0.3 + 0.01 * k, 1.9, 0.4]
+    with make_client(models_dir, deadline_seconds=0.001) as c:
+        resp = c.post("/v1/solve/batch", json={"items": items})
+        assert_problem(resp, 504, "deadline", "smaller batches")
+        assert resp.headers["retry-after"] == "1"
+        metrics = c.get("/metrics").text
+        assert (
+            'pose_rejections_total{reason="deadline-exceeded",route="/v1/solve/batch"}' in metrics
+        )
+
+
+def test_lower_case_bearer_scheme_is_accepted(models_dir: Path) -> None:
+    with make_client(models_dir, api_key="s3cret") as c:
+        for auth in ("bearer s3cret", "BEARER s3cret", "Bearer  s3cret"):
+            resp = c.post("/v1/solve", json=body(), headers={"Authorization": auth})
+            assert resp.status_code == 200, (auth, resp.text)
+        assert_problem(
+            c.post("/v1/solve", json=body(), headers={"Authorization": "Basic s3cret"}), 401
+        )
+        metrics = c.get("/metrics").text
+        # refused before routing, yet counted under the route's template
+        assert 'pose_requests_total{route="/v1/solve",status="401"}' in metrics
+        assert 'reason="unauthorized",route="/v1/solve"' in metrics
+
+
+def test_cors_rejections_are_problems(models_dir: Path) -> None:
+    with make_client(models_dir, cors_origins=["http://editor.example"]) as c:
+        resp = c.options(
+            "/v1/solve",
+            headers={"Origin": "http://evil.example", "Access-Control-Request-Method": "POST"},
+        )
+        assert_problem(resp, 400, "Disallowed CORS origin")
+
+
+# -- headers, docs, readiness, metrics -------------------------------------------------------
+def test_hardening_headers_everywhere(client: Any) -> None:
+    for path in ("/editor", "/docs", "/v2/health/live", "/openapi.json"):
+        resp = client.get(path)
+        assert resp.status_code == 200, path
+        assert resp.headers["x-content-type-options"] == "nosniff"
+        assert resp.headers["x-frame-options"] == "DENY"
+        assert "frame-ancestors 'none'" in resp.headers["content-security-policy"]
+    resp = client.post("/v1/solve", json=body())
+    assert resp.headers["content-security-policy"].startswith("default-src 'none'")
+
+
+def test_editor_csp_allows_its_import_map_only(client: Any) -> None:
+    resp = client.get("/editor")
+    csp = resp.headers["content-security-policy"]
+    assert re.search(r"script-src 'self' 'sha256-[A-Za-z0-9+/=]+'", csp), csp
+    assert "unsafe-eval" not in csp and "http" not in csp
+
+
+def test_docs_work_offline(client: Any) -> None:
+    page = client.get("/docs").text
+    assert "http://" not in page and "https://" not in page  # nothing from other origins
+    for asset in re.findall(r'(?:src|href)="(docs/assets/[^"]+)"', page):
+        resp = client.get("/" + asset)
+        assert resp.status_code == 200 and len(resp.content) > 100, asset
+    assert client.get("/redoc").status_code == 404
+
+
+def test_readiness_names_files_not_server_paths(models_dir: Path, tmp_path: Path) -> None:
+    broken = tmp_path / "secret-place" / "models"
+    shutil.copytree(models_dir, broken)
+    (broken / "decoder.onnx").write_bytes(b"garbage")
+    with make_client(broken) as c:
+        ready = c.get("/v2/health/ready")
+        assert ready.status_code == 503 and "decoder.onnx" in ready.json()["detail"]
+        solve = c.post("/v1/solve", json=body())
+        for resp in (ready, solve):
+            assert "secret-place" not in resp.text and str(tmp_path) not in resp.text
+        assert solve.headers["retry-after"]
+
+
+def test_solver_metric_labels_are_bounded(client: Any) -> None:
+    b = body()
+    b["targets"] = [
+        {"joint": j, "position": p}
+        for j, p in (
+            ("head", [0, 1.6, 0.1]),
+            ("left_wrist", [0.5, 1.2, 0.3]),
+            ("right_knee", [-0.1, 0.6, 0.2]),
+        )
+    ]
+    assert client.post("/v1/solve", json=b).status_code == 200
+    labels = re.findall(
+        r'pose_solves_total\{method="(\w+)",solvers="([^"]+)"\}', client.get("/metrics").text
+    )
+    assert labels and all("+" not in s or s.count("+") <= 1 for _, s in labels)
+    assert all(not s.startswith("fabrik-") for _, s in labels)
