@@ -13,6 +13,9 @@ Schema version 1. Kinds:
   target joints in the order of the ``targets`` input; ``key`` is the sorted set key.
 * ``completion``: ``keypoints [N,3k] -> pose [N,63]``; ``joints`` lists the key points,
   ``level`` orders the nested schemes (1 = the six base points).
+* ``fused`` (optional): ``pose [N,63], targets [N,3k] -> solved_pose [N,63]``, one solver's whole
+  edit in one graph (encoder, solver, decoder; with ``serving.delta`` the answer
+  ``pose + D(z') - D(z)``), fused at export time so the service needs no ``onnx``.
 """
 
 from __future__ import annotations
@@ -109,7 +112,7 @@ class Serving(_Strict):
 
 class ModelEntry(_Strict):
     name: str
-    kind: Literal["autoencoder", "solver", "completion"]
+    kind: Literal["autoencoder", "solver", "completion", "fused"]
     part: Literal["encoder", "decoder"] | None = None
     file: str
     sha256: str = Field(pattern=r"^[0-9a-f]{64}$")
@@ -130,7 +133,9 @@ class ModelEntry(_Strict):
             raise ValueError(f"model {self.name}: unknown joints {unknown}")
         if self.kind == "autoencoder" and self.part is None:
             raise ValueError(f"model {self.name}: an autoencoder entry needs a part")
-        if self.kind == "solver" and (not self.joints or self.key != set_key(self.joints)):
+        if self.kind in ("solver", "fused") and (
+            not self.joints or self.key != set_key(self.joints)
+        ):
             raise ValueError(f"model {self.name}: solver key must be the sorted joint set")
         if self.kind == "completion" and (self.level is None or not self.joints):
             raise ValueError(f"model {self.name}: a completion entry needs joints and a level")
@@ -172,6 +177,9 @@ class Manifest(_Strict):
         keys = [m.key for m in self.models if m.kind == "solver"]
         if len(keys) != len(set(keys)):
             raise ValueError("solver target sets must be unique")
+        fused = [m.key for m in self.models if m.kind == "fused"]
+        if len(fused) != len(set(fused)) or not set(fused) <= set(keys):
+            raise ValueError("fused graphs must be unique and each match a solver's set")
         levels = sorted(m.level for m in self.models if m.kind == "completion" and m.level)
         if levels and levels != list(range(1, len(levels) + 1)):
             raise ValueError("completion levels must be 1..n")
@@ -183,6 +191,11 @@ class Manifest(_Strict):
 
     def solvers(self) -> dict[str, ModelEntry]:
         return {str(m.key): m for m in self.models if m.kind == "solver"}
+
+    def fused(self) -> dict[str, ModelEntry]:
+        """Pre-fused single-solver graphs (``pose, targets -> pose``: encoder, solver,
+        decoder and, with ``serving.delta``, the delta answer in one graph)."""
+        return {str(m.key): m for m in self.models if m.kind == "fused"}
 
     def completion_levels(self) -> list[ModelEntry]:
         return sorted(

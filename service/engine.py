@@ -116,10 +116,17 @@ class Engine:
         }
         self.completion = [net(entry) for entry in m.completion_levels()]
         enc, dec = m.autoencoder("encoder"), m.autoencoder("decoder")
-        self.fused = {
-            key: Fused(enc, entry, dec, self.models_dir, options)
-            for key, entry in m.solvers().items()
-        }
+        # one graph per single-solver edit: shipped fused at export time (then it already
+        # gives the served answer, delta included), else composed here at load time
+        self.prefused = bool(m.fused())
+        self.fused: dict[str, Net | Fused] = (
+            {key: net(entry) for key, entry in m.fused().items()}
+            if self.prefused
+            else {
+                key: Fused(enc, entry, dec, self.models_dir, options)
+                for key, entry in m.solvers().items()
+            }
+        )
         ref = m.skeleton.reference_bone_lengths
         self.reference_lengths = np.asarray(
             [ref[JOINT_NAMES[c]] for c, _ in BONES], dtype=np.float64
@@ -294,7 +301,11 @@ class Engine:
         decoded = np.empty((m, 3 * NUM_JOINTS), dtype=np.float32)
         for sequence, members in groups.items():
             sel = np.asarray(members, dtype=np.intp)
-            if self.delta:
+            if len(sequence) == 1 and (self.prefused or not self.delta):
+                key = sequence[0]  # one fused run: encode, solve, decode (, delta)
+                targets = canvas[sel][:, self.solver_joints[key]].reshape(len(sel), -1)
+                decoded[sel] = self.fused[key](x[sel], targets)
+            elif self.delta:
                 decoded[sel] = self._delta(x[sel], canvas[sel], sequence)
             elif len(sequence) == 1:  # one fused run: encode, solve, decode
                 key = sequence[0]
@@ -324,7 +335,9 @@ class Engine:
                 cols = np.asarray([3 * j + k for j in done for k in range(3)], dtype=np.intp)
                 pose[:, cols] = flat[:, cols]
             targets = canvas[:, joints].reshape(len(x), -1)
-            if len(sequence) == 1:
+            if self.prefused:  # the shipped graph gives the delta answer itself
+                pose = self.fused[key](pose, targets)
+            elif len(sequence) == 1:
                 pose = pose + self.fused[key](pose, targets) - self.decoder(self.encoder(pose))
             else:
                 z = self.encoder(pose)

@@ -70,6 +70,22 @@ class DecoderGraph(nn.Module):
         return self.ae.decode(latent)
 
 
+class FusedGraph(nn.Module):
+    """One solver's whole edit, ``pose, targets -> pose``: encode, solve, decode and, for
+    delta models, answer ``pose + D(z') - D(z)`` (what ``service.engine`` serves)."""
+
+    def __init__(self, ae: TiedAutoencoder, solver: SingleSolver, delta: bool) -> None:
+        super().__init__()
+        self.ae, self.solver, self.delta = ae, solver, delta
+
+    def forward(self, pose: torch.Tensor, targets: torch.Tensor) -> torch.Tensor:
+        z = self.ae.encode(pose)
+        out = self.ae.decode(self.solver(z, targets))
+        if self.delta:
+            out = pose + (out - self.ae.decode(z))
+        return out
+
+
 def evaluate(cfg: TrainConfig, trained: Trained) -> dict[str, dict[str, dict[str, float]]]:
     """Metrics (cm) on val and test for every model: ``{model name: {split: {metric}}}``."""
     ae, bank = trained.ae, trained.bank
@@ -274,6 +290,18 @@ def export_all(
             "solved_latent",
             _params(solver),
             kind="solver",
+            joints=list(joints),
+            key=key,
+            stage="solvers",
+        )
+        add(
+            f"fused:{key}",
+            f"fused_{key}.onnx",
+            FusedGraph(ae, solver, cfg.solver.delta).eval(),
+            {"pose": sample, "targets": sample[:, target_columns(joints)]},
+            "solved_pose",
+            ae_params + _params(solver),
+            kind="fused",
             joints=list(joints),
             key=key,
             stage="solvers",
