@@ -1,0 +1,128 @@
+"""A real ``pose-service`` (uvicorn) on 127.0.0.1 for the fault and soak tests, and a
+few raw HTTP helpers (http.client, sockets: no client library between test and server)."""
+
+from __future__ import annotations
+
+import contextlib
+import http.client
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from core.rest import rest_pose
+from core.skeleton import JOINT_NAMES
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port: int = s.getsockname()[1]
+        return port
+
+
+@dataclass
+class Server:
+    proc: subprocess.Popen[bytes]
+    port: int
+    log: Path
+
+    def request(
+        self, method: str, path: str, body: bytes | None = None, timeout: float = 60.0
+    ) -> tuple[int, dict[str, str], bytes]:
+        conn = http.client.HTTPConnection("127.0.0.1", self.port, timeout=timeout)
+        try:
+            headers = {"content-type": "application/json"} if body is not None else {}
+            conn.request(method, path, body=body, headers=headers)
+            resp = conn.getresponse()
+            return resp.status, {k.lower(): v for k, v in resp.getheaders()}, resp.read()
+        finally:
+            conn.close()
+
+    def cpu_seconds(self) -> float:
+        """User + system CPU time of the server process so far."""
+        fields = Path(f"/proc/{self.proc.pid}/stat").read_text().rsplit(")", 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+    def rss_mib(self) -> float:
+        for line in Path(f"/proc/{self.proc.pid}/status").read_text().splitlines():
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024
+        return float("nan")
+
+    def log_lines(self) -> list[dict[str, Any]]:
+        out = []
+        for line in self.log.read_text(errors="replace").splitlines():
+            with contextlib.suppress(ValueError):
+                out.append(json.loads(line))
+        return out
+
+
+@contextlib.contextmanager
+def serve(models_dir: Path, tmp: Path, ready: bool = True, **env: str) -> Iterator[Server]:
+    port = free_port()
+    log = tmp / f"server-{port}.log"
+    environ = {**os.environ, "POSE_MODELS_DIR": str(models_dir), "POSE_PORT": str(port), **env}
+    with log.open("wb") as sink:
+        proc = subprocess.Popen(
+            [sys.executable, "-c", "from service.cli import main; main()"],
+            cwd=REPO, env=environ, stdout=sink, stderr=subprocess.STDOUT,
+        )  # fmt: skip
+    server = Server(proc, port, log)
+    try:
+        deadline = time.monotonic() + 120
+        want = "/v2/health/ready" if ready else "/v2/health/live"
+        while True:
+            with contextlib.suppress(OSError):
+                if server.request("GET", want, timeout=2)[0] == 200:
+                    break
+            assert proc.poll() is None, log.read_text()
+            assert time.monotonic() < deadline, "server did not start"
+            time.sleep(0.2)
+        yield server
+    finally:
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGTERM)
+            try:
+                proc.wait(30)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+
+
+def solve_item(seed: int, exact: bool = True) -> dict[str, Any]:
+    """A distinct solve: its own target set, weights and positions (so a batch of them
+    shares no solver plan), exact reach, both ankles pinned."""
+    rng = np.random.default_rng(seed)
+    pose = rest_pose()
+    joints = ["left_wrist", "right_wrist", "head", "left_knee", "right_knee", "spine2"]
+    k = int(rng.integers(1, 4))
+    chosen = rng.choice(joints, size=k, replace=False)
+    return {
+        "pose": dict(zip(JOINT_NAMES, pose.round(4).tolist(), strict=True)),
+        "targets": [
+            {
+                "joint": str(j),
+                "position": (pose[JOINT_NAMES.index(str(j))] + rng.normal(0, 0.4, 3)).tolist(),
+                "weight": float(rng.uniform(0.5, 2.0)),
+            }
+            for j in chosen
+        ],
+        "pins": ["left_ankle", "right_ankle"],
+        "options": {"reach": "exact" if exact else "soft"},
+    }
+
+
+def heavy_batch(n: int = 1024, seed: int = 0) -> bytes:
+    return json.dumps({"items": [solve_item(seed + i) for i in range(n)]}).encode()

@@ -1,0 +1,162 @@
+"""Fault tests on a real uvicorn on 127.0.0.1 (issue 12): heavy and abandoned batches,
+big bodies against liveness, SIGTERM under load, a corrupt model, a truncated manifest.
+Each prints the figure it measures (``pytest -s`` shows them)."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import signal
+import socket
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from tests.service.server import heavy_batch, serve
+
+pytestmark = pytest.mark.slow
+PROBLEM = "application/problem+json"
+
+
+def assert_problem(status: int, headers: dict[str, str], data: bytes, *codes: int) -> Any:
+    assert status in codes, (status, data[:300])
+    assert headers["content-type"].startswith(PROBLEM), headers
+    return json.loads(data)
+
+
+def test_heavy_batches_are_bounded_by_the_deadline(models_dir: Path, tmp_path: Path) -> None:
+    body = heavy_batch()
+    with serve(models_dir, tmp_path, POSE_DEADLINE_SECONDS="2") as s:
+        results: list[tuple[float, int]] = []
+
+        def one() -> None:
+            t = time.perf_counter()
+            status, headers, data = s.request("POST", "/v1/solve/batch", body)
+            if status != 200:
+                assert_problem(status, headers, data, 504)
+                assert headers["retry-after"] == "1"
+            results.append((time.perf_counter() - t, status))
+
+        threads = [threading.Thread(target=one) for _ in range(4)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+        worst = max(w for w, _ in results)
+        print(f"\n4 heavy batches at once ({len(body) / 1e6:.1f} MB each): {results}")
+        assert worst < 2 + 1.5, results  # the deadline plus one chunk and the answer
+        assert s.request("GET", "/v2/health/live")[0] == 200
+
+
+def _abandon(port: int, body: bytes, after: float) -> None:
+    with socket.create_connection(("127.0.0.1", port)) as sock:
+        head = (
+            f"POST /v1/solve/batch HTTP/1.1\r\nhost: x\r\ncontent-type: application/json\r\n"
+            f"content-length: {len(body)}\r\n\r\n"
+        )
+        sock.sendall(head.encode() + body)
+        time.sleep(after)
+
+
+def test_abandoned_batches_stop_and_say_so(models_dir: Path, tmp_path: Path) -> None:
+    body = heavy_batch()
+    with serve(models_dir, tmp_path, POSE_DEADLINE_SECONDS="120") as s:
+        threads = [threading.Thread(target=_abandon, args=(s.port, body, 0.5)) for _ in range(6)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+        time.sleep(2.0)  # the chunk running when each client left finishes
+        c0, t0 = s.cpu_seconds(), time.perf_counter()
+        time.sleep(3.0)
+        cores = (s.cpu_seconds() - c0) / (time.perf_counter() - t0)
+        print(f"\nCPU 2-5 s after 6 abandoned heavy batches: {cores:.3f} cores")
+        assert cores < 0.1
+        gone = [x for x in s.log_lines() if x.get("path") == "/v1/solve/batch"]
+        assert len(gone) == 6 and all(x["status"] == 499 for x in gone), gone
+        assert all(x["outcome"] == "client_disconnected" for x in gone)
+
+
+def test_liveness_answers_while_big_bodies_are_parsed(models_dir: Path, tmp_path: Path) -> None:
+    body = json.dumps(json.loads(heavy_batch(seed=7)), indent=1).encode()
+    with serve(models_dir, tmp_path, POSE_DEADLINE_SECONDS="1") as s:
+        done = threading.Event()
+        latencies: list[float] = []
+
+        def flood() -> None:
+            s.request("POST", "/v1/solve/batch", body)
+
+        def probe() -> None:
+            while not done.is_set():
+                t = time.perf_counter()
+                assert s.request("GET", "/v2/health/live", timeout=10)[0] == 200
+                latencies.append(time.perf_counter() - t)
+                time.sleep(0.05)
+
+        floods = [threading.Thread(target=flood) for _ in range(16)]
+        prober = threading.Thread(target=probe)
+        prober.start()
+        for t in floods:
+            t.start()
+        for t in floods:
+            t.join()
+        done.set()
+        prober.join()
+        rss = s.rss_mib()
+        print(
+            f"\nliveness during 16 x {len(body) / 2**20:.1f} MiB bodies: max "
+            f"{max(latencies) * 1000:.0f} ms over {len(latencies)} probes; RSS {rss:.0f} MiB"
+        )
+        assert max(latencies) < 1.0
+
+
+def test_sigterm_under_load_answers_problems_not_text(models_dir: Path, tmp_path: Path) -> None:
+    body = heavy_batch(seed=3)
+    env = {"POSE_DEADLINE_SECONDS": "120", "POSE_SHUTDOWN_GRACE_SECONDS": "1"}
+    with serve(models_dir, tmp_path, **env) as s:
+        answers: list[tuple[int, dict[str, str], bytes]] = []
+
+        def one() -> None:
+            answers.append(s.request("POST", "/v1/solve/batch", body))
+
+        threads = [threading.Thread(target=one) for _ in range(3)]
+        for t in threads:
+            t.start()
+        time.sleep(1.5)
+        s.proc.send_signal(signal.SIGTERM)
+        for t in threads:
+            t.join(30)
+        s.proc.wait(30)
+        assert len(answers) == 3
+        for status, headers, data in answers:
+            problem = assert_problem(status, headers, data, 503)
+            assert problem["type"].endswith("/shutting-down") and headers["retry-after"]
+        lines = [x for x in s.log_lines() if x.get("path") == "/v1/solve/batch"]
+        assert len(lines) == 3 and all(x["status"] == 503 for x in lines), lines
+        assert "Traceback" not in s.log.read_text()
+
+
+@pytest.mark.parametrize("fault", ["corrupt-model", "truncated-manifest"])
+def test_broken_models_are_not_ready_with_file_names(
+    models_dir: Path, tmp_path: Path, fault: str
+) -> None:
+    broken = tmp_path / "private" / "models"
+    shutil.copytree(models_dir, broken)
+    if fault == "corrupt-model":
+        (broken / "encoder.onnx").write_bytes(b"\x00" * 100)
+        name = "encoder.onnx"
+    else:
+        text = (broken / "manifest.json").read_text()
+        (broken / "manifest.json").write_text(text[: len(text) // 2])
+        name = "manifest.json"
+    with serve(broken, tmp_path, ready=False) as s:
+        status, _, data = s.request("GET", "/v2/health/ready")
+        assert status == 503 and name in data.decode()
+        answer = s.request("POST", "/v1/solve", b"{}")
+        assert answer[0] in (422, 503)
+        for d in (data, answer[2]):
+            assert str(tmp_path) not in d.decode()
+        assert s.request("GET", "/v2/health/live")[0] == 200
