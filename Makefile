@@ -8,7 +8,7 @@ MOCAP_DIR ?= ../shared/mocap
 DATASET ?= data/poses.npz
 CONFIG ?= trainer/configs/default.toml
 
-.PHONY: help venv run test test-fast lint format dataset train export bench clean
+.PHONY: help venv run test test-fast lint format dataset train export bench soak clean
 
 help:
 	@echo "make run    - create the venv, install, serve the bundled models on http://127.0.0.1:8000"
@@ -55,6 +55,11 @@ bench: $(STAMP)
 	test -f $(DATASET) || $(BIN)/pose-trainer dataset --mocap $(MOCAP_DIR) --out $(DATASET)
 	$(BIN)/python -m bench --models models --dataset $(DATASET) --out reports
 	$(BIN)/python -m bench.readme --report reports/report.md --readme README.md
+
+# A bounded soak of the real service at saturation: 60 s, 32 connections; prints
+# requests, errors and RSS (start, peak, end); fails on any error. Not part of `make test`.
+soak: $(STAMP)
+	$(BIN)/python -m tests.service.soak --seconds 60 --concurrency 32
 
 clean:
 	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache
