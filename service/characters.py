@@ -103,6 +103,46 @@ class BVHSolveRequest(_Frame):
     up: Literal["+Y", "+Z"] | None = Field(default=None, description="Default: inferred.")
 
 
+class BVHInspectRequest(_Body):
+    bvh: str = Field(min_length=1, description="The whole BVH file.")
+    frame: int = Field(default=0, ge=0, description="Frame whose positions are answered.")
+    units: Units | None = Field(default=None, description="Default: inferred from the file.")
+    up: Literal["+Y", "+Z"] | None = Field(default=None, description="Default: inferred.")
+    joint_map: dict[str, str] | None = Field(
+        default=None, description="canonical joint -> the file's joint name (as in solve)."
+    )
+
+
+class BVHJointInfo(BaseModel):
+    name: str
+    parent: int = Field(description="Index in `joints` (-1 for a root).")
+    offset: list[float]
+    channels: list[str] = Field(description="As written in the file ([] for an End Site).")
+    channel_start: int = Field(description="Column of the first channel in a MOTION row.")
+    end_site: bool
+
+
+class BVHAnchor(BaseModel):
+    joint: str = Field(description="The file's joint the point is fixed to.")
+    offset: list[float] = Field(description="From that joint's origin, in its frame (units).")
+    label: str
+
+
+class BVHInspectResponse(BaseModel):
+    joints: list[BVHJointInfo] = Field(description="File order (parents first).")
+    anchors: dict[str, BVHAnchor] = Field(description="canonical joint -> its point.")
+    joint_map: dict[str, str]
+    scheme: str
+    units: str | float
+    metres_per_unit: float
+    up: str
+    frames: int
+    frame_time: float
+    frame: int
+    positions: list[list[float]] = Field(description="World position of every joint (units).")
+    points: dict[str, list[float]] = Field(description="The 21 canonical points (units).")
+
+
 class _Answer(BaseModel):
     targets: list[TargetResult]
     pins: list[TargetResult]
@@ -350,7 +390,7 @@ def read_request_bvh(text: str) -> BVH:
     return bvh
 
 
-def character_from_bvh(bvh: BVH, req: BVHSolveRequest) -> Character:
+def character_from_bvh(bvh: BVH, req: BVHSolveRequest | BVHInspectRequest) -> Character:
     if req.frame >= bvh.num_frames:
         raise InvalidRequest(f"frame: {req.frame} is out of range: the file has {bvh.num_frames}")
     try:
@@ -374,4 +414,39 @@ def bvh_answer(bvh: BVH, ch: Character, req: BVHSolveRequest, edit: Edit) -> dic
         "frame": req.frame,
         "changed_joints": [ch.skel.names[j] for j in sorted(edit.changed)],
         **_report(ch, edit, points),
+    }
+
+
+def bvh_inspect(bvh: BVH, ch: Character, frame: int) -> dict[str, Any]:
+    """What an editor needs to draw and pose the file: its joints and channels, where the 21
+    canonical joints sit on them, units and axes, and one frame's world positions."""
+    g_rot, g_pos = forward_kinematics(ch.skel, ch.pose)
+    points = anchor_points(ch.jmap, g_rot, g_pos)
+    names = ch.skel.names
+    return {
+        "joints": [
+            {
+                "name": j.name,
+                "parent": j.parent,
+                "offset": list(j.offset),
+                "channels": list(j.channels),
+                "channel_start": j.channel_start,
+                "end_site": j.end_site,
+            }
+            for j in bvh.joints
+        ],
+        "anchors": {
+            c: {"joint": names[a.joint], "offset": a.offset.tolist(), "label": a.label}
+            for c, a in zip(JOINT_NAMES, ch.jmap.anchors, strict=True)
+        },
+        "joint_map": ch.jmap.describe(),
+        "scheme": ch.jmap.scheme,
+        "units": ch.units,
+        "metres_per_unit": ch.scale,
+        "up": ch.up_name,
+        "frames": bvh.num_frames,
+        "frame_time": bvh.frame_time,
+        "frame": frame,
+        "positions": g_pos.tolist(),
+        "points": dict(zip(JOINT_NAMES, points.tolist(), strict=True)),
     }

@@ -1,5 +1,6 @@
 """``POST /v1/character/solve`` (a skeleton of the client's own, local rotations in and
-out) and ``POST /v1/bvh/solve`` (a BVH file in, the same file with one frame edited out).
+out), ``POST /v1/bvh/solve`` (a BVH file in, the same file with one frame edited out) and
+``POST /v1/bvh/inspect`` (read-only: the file's joints, joint map, units, axes, one frame).
 The work is ``service.characters``; conventions: docs/characters.md."""
 
 from __future__ import annotations
@@ -9,11 +10,14 @@ from starlette.concurrency import run_in_threadpool
 
 from service.body import BodyRoute
 from service.characters import (
+    BVHInspectRequest,
+    BVHInspectResponse,
     BVHSolveRequest,
     BVHSolveResponse,
     CharacterSolveRequest,
     CharacterSolveResponse,
     bvh_answer,
+    bvh_inspect,
     character_answer,
     character_from_bvh,
     character_from_request,
@@ -56,3 +60,16 @@ async def bvh_solve(req: BVHSolveRequest, engine: ReadyEngine, state: State) -> 
         return bvh_answer(bvh, ch, req, edit)
 
     return json_response(await run_in_threadpool(work, engine))
+
+
+@router.post("/v1/bvh/inspect", response_model=BVHInspectResponse)
+async def bvh_inspect_route(req: BVHInspectRequest) -> Response:
+    """Read a BVH file without solving: its joints and channels, the joint map (where each
+    canonical joint sits), units, up axis, frame count and time, and the world positions of
+    one frame (``frame``, default 0), in the file's units and axes."""
+
+    def work() -> dict[str, object]:
+        bvh = read_request_bvh(req.bvh)
+        return bvh_inspect(bvh, character_from_bvh(bvh, req), req.frame)
+
+    return json_response(await run_in_threadpool(work))
