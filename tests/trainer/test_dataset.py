@@ -319,6 +319,7 @@ def test_builder_reads_the_multi_body_archives_and_holds_out_what_the_maps_name(
     others = {n: t for n, t in table.items() if n not in held}
     assert set(others) == {"cmu-asf/10_01", "cmu-asf/16_01", "cmu-asf/16_05", "cmu-asf/135_06"}
     assert {t[2] for t in others.values()} <= {"train", "val", "test"}
+    assert table["cmu-asf/135_06"][2] == "train"  # forced by the map (a cmu-dance take)
     assert table["cmu-asf/16_01"][1] == "16" and table["fair/fair1/wave_hello"][1] == "fair1-b"
     assert table["reactidle/genuine/002"][:2] == ("reactidle", "002")
     assert not any("Copy" in n for n in table)

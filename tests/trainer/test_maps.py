@@ -259,6 +259,7 @@ def test_reactidle_floor_spine2_and_collars(more_mocap: Path) -> None:
         (lambda t: t.replace("format = 2", "format = 1"), "rename [[fps_override]]"),
         (lambda t: t.replace("skeleton = [", "# skeleton = ["), "needs skeleton"),
         (lambda t: t.replace("fps = 120", "fps = -1"), "fps must be > 0"),
+        (lambda t: t.replace('split = "train"', 'split = "holdout"'), "split must be one of"),
     ],
 )
 def test_bad_new_map_keys_are_named(tmp_path: Path, edit: Any, message: str) -> None:

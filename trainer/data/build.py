@@ -345,10 +345,12 @@ def assign_splits(
     fractions: dict[str, float] | None = None,
     *,
     actors: Sequence[str] | None = None,
-    holdout: Sequence[bool] | None = None,
+    fixed: Sequence[str] | None = None,
 ) -> npt.NDArray[np.str_]:
     """Split clips by clip, stratified by (source, content, actor), deterministic from
-    ``seed``; clips flagged in ``holdout`` go to ``holdout`` and nothing else does.
+    ``seed``. A clip whose ``fixed`` entry is a split name (``holdout``, or a split a map
+    forces) goes there and takes no part in the strata; ``holdout`` is never assigned
+    otherwise.
 
     Per stratum of n clips (shuffled by a generator seeded with ``seed`` and the stratum):
     n = 1 -> test; n = 2 -> 1 test + 1 train; n >= 3 -> max(1, round(n * f_test)) test,
@@ -358,10 +360,13 @@ def assign_splits(
     """
     fr = fractions or SPLIT_FRACTIONS
     out = np.full(len(names), "train", dtype="<U7")
-    held = np.zeros(len(names), dtype=bool) if holdout is None else np.asarray(holdout, bool)
-    if held.shape != (len(names),):
-        raise ValueError(f"holdout has {held.shape[0]} flags for {len(names)} clips")
-    out[held] = "holdout"
+    given = [""] * len(names) if fixed is None else list(fixed)
+    if len(given) != len(names):
+        raise ValueError(f"fixed has {len(given)} entries for {len(names)} clips")
+    held = np.array([bool(g) for g in given], dtype=bool)
+    for i, g in enumerate(given):
+        if g:
+            out[i] = g
     who = [""] * len(names) if actors is None else list(actors)
     strata: dict[tuple[str, str, str], list[int]] = defaultdict(list)
     for i, key in enumerate(zip(sources, contents, who, strict=True)):
@@ -542,7 +547,7 @@ def build_dataset(
         clip_content.tolist(),
         seed,
         actors=clip_actor.tolist(),
-        holdout=[r.job.map.is_holdout(r.job.relpath) for r in kept],
+        fixed=[r.job.map.split_for(r.job.relpath) for r in kept],
     )
 
     drops: dict[str, int] = dict.fromkeys(DROP_REASONS, 0)
@@ -574,8 +579,9 @@ def build_dataset(
         "fps": FPS,
         "seed": seed,
         "split_fractions": SPLIT_FRACTIONS,
-        "split_rule": "by clip; clips a map holds out -> holdout; the others stratified by "
-        "(source, content, actor); per stratum of n clips: "
+        "split_rule": "by clip; clips a map holds out -> holdout, clips a map's override "
+        "puts in a split -> that split; the others stratified by (source, content, actor); "
+        "per stratum of n clips: "
         "n=1 -> test, n=2 -> test+train, else max(1, round(n*f)) test and val",
         "holdout": {s.map.source: list(s.map.holdout) for s in sources if s.map.holdout},
         "units": "metres",

@@ -61,7 +61,19 @@ _TOP_KEYS = {
     "joints",
 }
 _META_KEYS = {"pattern", "name", "content", "style", "actor"}
-_OVERRIDE_KEYS = {"glob", "fps", "unit", "up_axis", "joints", "content", "style", "actor"}
+_OVERRIDE_KEYS = {
+    "glob",
+    "fps",
+    "unit",
+    "up_axis",
+    "joints",
+    "content",
+    "style",
+    "actor",
+    "split",
+}
+#: Splits an override may force (``holdout`` is set by the ``holdout`` globs).
+FIXED_SPLITS: tuple[str, ...] = ("train", "val", "test")
 
 
 class MapError(ValueError):
@@ -263,6 +275,13 @@ class MocapMap:
         """Whether the file is held out of training (its clip goes to split ``holdout``)."""
         return _matches(self.holdout, relpath)
 
+    def split_for(self, relpath: str) -> str:
+        """The split the map fixes for a file: ``holdout``, an override's ``split``, or ''
+        (the builder's stratified split decides)."""
+        if self.is_holdout(relpath):
+            return "holdout"
+        return str(self._override(relpath, "split") or "")
+
     @property
     def archive_stem(self) -> str | None:
         if self.archive is None:
@@ -418,6 +437,10 @@ def _parse_override(item: Any, index: int, file: str, reader: str) -> Override:
             values[key] = value
         elif key == "joints":
             values[key] = _parse_joints(value, f"{where} joints", complete=False)
+        elif key == "split":
+            if value not in FIXED_SPLITS:
+                raise MapError(f"{where}: split must be one of {list(FIXED_SPLITS)}")
+            values[key] = value
         else:
             if not isinstance(value, str):
                 raise MapError(f"{where}: {key} must be a string template")
