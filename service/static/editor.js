@@ -9,10 +9,18 @@
 // starts from the *committed* pose (the pose before the current gesture), so a gesture
 // cannot drift; the final answer of a gesture is committed and goes into the undo history.
 //
+// A BVH file (Open BVH..., or dropped on the page) is shown with its OWN bones (every joint
+// of the file, thin grey) and the 21 canonical joints as handles, placed by the service's
+// joint map (POST v1/bvh/inspect). Dragging solves with POST v1/bvh/solve (the whole file,
+// the frame, targets in the file's units and axes) and the answer's `bvh` becomes the file;
+// the frame slider scrubs; Export downloads the edited file. The page's world is the file's
+// mapped to metres, +Y up, the character (as opened) facing +Z on the grid.
+//
 // Tests read the page through `window.marionette` (read-only).
 
 import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
+import { anchorPoints, forwardKinematics, parseMotion } from './bvh.js';
 
 // ------------------------------------------------------------------------------------
 // Skeleton (replaced by GET v1/skeleton once the server answers)
@@ -93,7 +101,7 @@ async function api(method, path, body) {
   if (data === null) {
     throw new ApiError(res.status, 'Bad response', `${method} /${path}: the body is not JSON`, requestId);
   }
-  return { data, rtt, serverTime: res.headers.get('X-Inference-Time'), requestId };
+  return { data, rtt, serverTime: res.headers.get('X-Total-Time') || res.headers.get('X-Inference-Time'), requestId };
 }
 
 // ------------------------------------------------------------------------------------
@@ -146,14 +154,65 @@ const solver = {
   latencies: [],
 };
 
+// The open BVH file (doc.active). doc.text is the committed file (solves start from it),
+// doc.shown the file whose frame is on screen (the latest answer during a gesture).
+const doc = {
+  active: false,
+  name: '',
+  original: '', // as opened (Reset)
+  text: '',
+  shown: '',
+  info: null, // the v1/bvh/inspect answer: joints, anchors, units, up, frames, ...
+  frame: 0,
+  toWorld: new THREE.Matrix4(),
+  fromWorld: new THREE.Matrix4(),
+  tried: null, // {text, name} of the last file opened (re-opened when units / up change)
+  drawn: { text: null, frame: -1 }, // what the character's bones show
+  world: [], // world positions of every joint of the file, as drawn
+};
+const motionCache = new Map(); // text -> MOTION values (the last few texts)
+
+function motionOf(text) {
+  let values = motionCache.get(text);
+  if (!values) {
+    values = parseMotion(text);
+    motionCache.set(text, values);
+    if (motionCache.size > 6) motionCache.delete(motionCache.keys().next().value);
+  }
+  return values;
+}
+
+// Forward kinematics of one frame of a text: every joint, and the canonical points (file units).
+function fileFrame(text, frame) {
+  const joints = doc.info.joints;
+  const n = joints.reduce((acc, j) => acc + j.channels.length, 0);
+  const row = motionOf(text).subarray(frame * n, (frame + 1) * n);
+  const fk = forwardKinematics(joints, row);
+  return { fk, points: anchorPoints(joints, doc.info.anchors, fk) };
+}
+
+const toWorld = (p) => new THREE.Vector3(p[0], p[1], p[2]).applyMatrix4(doc.toWorld).toArray();
+const toFile = (p) => new THREE.Vector3(p[0], p[1], p[2]).applyMatrix4(doc.fromWorld).toArray();
+
+// The 21 handles (world) of a frame of a text.
+function filePose(text, frame) {
+  const { points } = fileFrame(text, frame);
+  return Object.fromEntries(Object.entries(points).map(([k, p]) => [k, toWorld(p)]));
+}
+
 const clonePose = (pose) => Object.fromEntries(Object.entries(pose).map(([k, v]) => [k, [...v]]));
 
 function snapshot() {
-  return {
+  const snap = {
     pose: clonePose(state.committed),
     targets: [...state.targets].map(([j, p]) => [j, [...p]]),
     pins: [...state.pins],
   };
+  if (doc.active) {
+    snap.text = doc.text; // shared, not copied: a string is immutable
+    snap.frame = doc.frame;
+  }
+  return snap;
 }
 
 function restore(snap) {
@@ -161,6 +220,22 @@ function restore(snap) {
   state.pose = clonePose(snap.pose);
   state.targets = new Map(snap.targets.map(([j, p]) => [j, [...p]]));
   state.pins = new Set(snap.pins);
+  if (doc.active && snap.text !== undefined) {
+    doc.text = snap.text;
+    doc.shown = snap.text;
+    doc.frame = snap.frame;
+  }
+}
+
+function sameSnapshot(a, b) {
+  if (!a || a.text !== b.text || a.frame !== b.frame) return false;
+  return JSON.stringify({ ...a, text: null }) === JSON.stringify({ ...b, text: null });
+}
+
+// The pose on screen becomes the committed one (solves start from it).
+function commitShown() {
+  state.committed = clonePose(state.pose);
+  doc.text = doc.shown;
 }
 
 const history = { stack: [], index: -1 };
@@ -168,7 +243,7 @@ const history = { stack: [], index: -1 };
 function pushHistory() {
   const snap = snapshot();
   const top = history.stack[history.index];
-  if (top && JSON.stringify(top) === JSON.stringify(snap)) {
+  if (sameSnapshot(top, snap)) {
     updateButtons(); // nothing changed (e.g. an option toggled with no targets)
     return;
   }
@@ -206,6 +281,7 @@ function redo() {
 function loadSample(i) {
   endDrag(false);
   cancelSolves();
+  if (doc.active) closeFile();
   state.sample = i;
   hovered = null;
   $('hud').hidden = true;
@@ -217,7 +293,16 @@ function loadSample(i) {
 }
 
 function reset() {
-  loadSample(state.sample);
+  if (!doc.active) {
+    loadSample(state.sample);
+    return;
+  }
+  endDrag(false);
+  cancelSolves();
+  doc.text = doc.original;
+  restore({ pose: filePose(doc.original, doc.frame), targets: [], pins: [], text: doc.original, frame: doc.frame });
+  pushHistory();
+  refresh();
 }
 
 function options() {
@@ -230,6 +315,17 @@ function options() {
 }
 
 function solveBody() {
+  if (doc.active) {
+    return {
+      bvh: doc.text,
+      frame: doc.frame,
+      units: doc.info.units,
+      up: doc.info.up,
+      targets: [...state.targets].map(([joint, p]) => ({ joint, position: toFile(p), weight: 1.0 })),
+      pins: [...state.pins].filter((j) => !state.targets.has(j)),
+      options: options(),
+    };
+  }
   return {
     pose: state.committed,
     targets: [...state.targets].map(([joint, position]) => ({ joint, position, weight: 1.0 })),
@@ -245,6 +341,7 @@ function requestSolve(commit) {
     // Nothing to reach: the committed pose stands.
     solver.dirty = false;
     state.pose = clonePose(state.committed);
+    doc.shown = doc.text;
     if (solver.commitPending) {
       solver.commitPending = false;
       pushHistory();
@@ -264,10 +361,15 @@ async function sendSolve() {
   solver.sent += 1;
   $('solve-count').textContent = String(solver.sent);
   try {
-    const res = await api('POST', 'v1/solve', body);
-    if (epoch !== solver.epoch) return; // undone / reset meanwhile
+    const res = await api('POST', body.bvh === undefined ? 'v1/solve' : 'v1/bvh/solve', body);
+    if (epoch !== solver.epoch) return; // undone / reset / scrubbed meanwhile
     solver.answered += 1;
-    state.pose = res.data.pose;
+    if (body.bvh === undefined) {
+      state.pose = res.data.pose;
+    } else {
+      doc.shown = res.data.bvh;
+      state.pose = filePose(doc.shown, body.frame);
+    }
     state.model = res.data.model;
     const server = parseFloat(res.serverTime);
     solver.latencies.push(server);
@@ -282,7 +384,7 @@ async function sendSolve() {
     };
     clearError();
     if (commit && !solver.dirty && solver.commitPending && !drag) {
-      state.committed = clonePose(state.pose);
+      commitShown();
       solver.commitPending = false;
       pushHistory();
     }
@@ -366,7 +468,7 @@ function buildSkeleton() {
   pinRings.clear();
   for (const name of state.joints) {
     const mesh = new THREE.Mesh(sphereGeometry, materials[side(name)]);
-    const r = name === 'head' ? HEAD_RADIUS : JOINT_RADIUS;
+    const r = name === 'head' && !doc.active ? HEAD_RADIUS : JOINT_RADIUS;
     mesh.scale.setScalar(r);
     mesh.name = name;
     skeleton.add(mesh);
@@ -388,6 +490,44 @@ const UP = new THREE.Vector3(0, 1, 0);
 const tmpA = new THREE.Vector3();
 const tmpB = new THREE.Vector3();
 
+// The open file's own bones: one thin grey cylinder per joint with a parent.
+const characterBones = new THREE.Group();
+scene.add(characterBones);
+const ownBoneMaterial = new THREE.MeshStandardMaterial({ color: 0x9aa3b5, roughness: 0.6 });
+const ownJointGeometry = new THREE.SphereGeometry(0.011, 12, 8);
+
+function buildCharacterBones() {
+  characterBones.clear();
+  doc.drawn = { text: null, frame: -1 };
+  if (!doc.active) return;
+  for (const j of doc.info.joints) {
+    if (j.parent >= 0) characterBones.add(new THREE.Mesh(boneGeometry, ownBoneMaterial));
+    else characterBones.add(new THREE.Mesh(ownJointGeometry, ownBoneMaterial));
+  }
+}
+
+function placeBone(bone, a, b, radius) {
+  tmpA.set(a[0], a[1], a[2]);
+  tmpB.set(b[0], b[1], b[2]);
+  const length = tmpA.distanceTo(tmpB);
+  bone.position.copy(tmpA).add(tmpB).multiplyScalar(0.5);
+  bone.scale.set(radius, Math.max(length, 1e-6), radius);
+  if (length > 1e-9) bone.quaternion.setFromUnitVectors(UP, tmpB.sub(tmpA).divideScalar(length));
+}
+
+function drawCharacter() {
+  characterBones.visible = doc.active;
+  if (!doc.active || (doc.drawn.text === doc.shown && doc.drawn.frame === doc.frame)) return;
+  const { fk } = fileFrame(doc.shown, doc.frame);
+  doc.world = fk.pos.map(toWorld);
+  doc.info.joints.forEach((j, i) => {
+    const mesh = characterBones.children[i];
+    if (j.parent >= 0) placeBone(mesh, doc.world[j.parent], doc.world[i], 0.45);
+    else mesh.position.set(...doc.world[i]);
+  });
+  doc.drawn = { text: doc.shown, frame: doc.frame };
+}
+
 let hovered = null;
 let needsRender = true;
 
@@ -406,15 +546,10 @@ function drawPose() {
     ring.quaternion.copy(camera.quaternion); // face the camera
   }
   for (const [child, bone] of boneMeshes) {
-    const a = pose[state.parents[child]];
-    const b = pose[child];
-    tmpA.set(a[0], a[1], a[2]);
-    tmpB.set(b[0], b[1], b[2]);
-    const length = tmpA.distanceTo(tmpB);
-    bone.position.copy(tmpA).add(tmpB).multiplyScalar(0.5);
-    bone.scale.set(1, Math.max(length, 1e-6), 1);
-    if (length > 1e-9) bone.quaternion.setFromUnitVectors(UP, tmpB.sub(tmpA).divideScalar(length));
+    bone.visible = !doc.active; // a file shows its own bones instead
+    placeBone(bone, pose[state.parents[child]], pose[child], 1);
   }
+  drawCharacter();
   // Targets: a red marker each, and a thin line to its joint while it is not reached.
   for (const [joint, marker] of targetMarkers) {
     if (!state.targets.has(joint)) {
@@ -488,7 +623,7 @@ function pick(clientX, clientY) {
   };
   for (const [joint, p] of state.targets) consider('target', joint, p, 2);
   for (const joint of state.joints) {
-    const bias = joint === 'head' ? 10 : 0;
+    const bias = joint === 'head' && !doc.active ? 10 : 0;
     if (state.pose && state.pose[joint]) consider('joint', joint, state.pose[joint], bias);
   }
   return best;
@@ -591,7 +726,8 @@ function updateHover(ev) {
 
 function moveHud(x, y, text) {
   const hud = $('hud');
-  hud.textContent = text;
+  const anchor = doc.active && doc.info.anchors[text];
+  hud.textContent = anchor ? `${text} (${anchor.label})` : text;
   hud.style.left = `${x + 14}px`;
   hud.style.top = `${y + 10}px`;
   hud.hidden = false;
@@ -604,7 +740,7 @@ function togglePin(joint) {
     state.pins.add(joint);
     if (state.targets.delete(joint)) {
       // It was targeted: it now stays where the last solve put it.
-      state.committed = clonePose(state.pose);
+      commitShown();
     }
   }
   requestSolve(true);
@@ -613,7 +749,7 @@ function togglePin(joint) {
 
 function removeTarget(joint) {
   state.targets.delete(joint);
-  state.committed = clonePose(state.pose);
+  commitShown();
   requestSolve(true);
   refresh();
 }
@@ -622,7 +758,7 @@ function clearTargets() {
   if (state.targets.size === 0) return;
   cancelSolves();
   state.targets.clear();
-  state.committed = clonePose(state.pose);
+  commitShown();
   requestSolve(true);
 }
 
@@ -668,12 +804,14 @@ function refreshPanel() {
   if (last) {
     const med = [...solver.latencies].sort((a, b) => a - b)[Math.floor(solver.latencies.length / 2)];
     $('latency').textContent = `${last.serverMs.toFixed(2)} ms (median ${med.toFixed(2)})`;
-    $('latency').title = 'X-Inference-Time of the last solve; median of the last 50';
+    $('latency').title = 'X-Total-Time of the last solve (the server, arrival to answer); median of the last 50';
     $('rtt').textContent = `${last.rttMs.toFixed(1)} ms`;
     const r = last.response;
     $('solve-method').textContent = r.iterations ? `${r.method}, ${r.iterations} FABRIK it.` : r.method;
     $('solvers').textContent = r.solvers.join(' → ') || '–';
-    $('bone-error').textContent = `${(r.max_bone_length_error * 100).toPrecision(2)} %`;
+    $('bone-error').textContent = r.max_bone_length_error === undefined
+      ? 'the file\'s own' // BVH: rotations only, offsets untouched
+      : `${(r.max_bone_length_error * 100).toPrecision(2)} %`;
   }
   $('model').textContent = `model: ${state.model || '–'}`;
   updateButtons();
@@ -688,9 +826,13 @@ function updateButtons() {
 function refresh() {
   drawPose();
   refreshPanel();
+  refreshFrame();
 }
 
 function exportDocument() {
+  if (doc.active) {
+    return { format: 'bvh', name: exportName(), frame: doc.frame, bvh: doc.text };
+  }
   return {
     format: 'marionette-pose',
     version: 1,
@@ -704,16 +846,152 @@ function exportDocument() {
   };
 }
 
+function exportName() {
+  return `${doc.name.replace(/\.bvh$/i, '')}-edited.bvh`;
+}
+
 function exportPose() {
-  const blob = new Blob([JSON.stringify(exportDocument(), null, 2)], { type: 'application/json' });
+  const blob = doc.active
+    ? new Blob([doc.text], { type: 'text/plain' })
+    : new Blob([JSON.stringify(exportDocument(), null, 2)], { type: 'application/json' });
   const url = URL.createObjectURL(blob);
   const a = document.createElement('a');
   a.href = url;
-  a.download = 'marionette-pose.json';
+  a.download = doc.active ? exportName() : 'marionette-pose.json';
   document.body.appendChild(a);
   a.click();
   a.remove();
   setTimeout(() => URL.revokeObjectURL(url), 1000);
+}
+
+// ------------------------------------------------------------------------------------
+// BVH files: open (picker or drop), scrub, close
+// ------------------------------------------------------------------------------------
+function fileSettings() {
+  const units = $('bvh-units').value;
+  const up = $('bvh-up').value;
+  const out = {};
+  if (units !== 'auto') out.units = Number.isFinite(Number(units)) ? Number(units) : units;
+  if (up !== 'auto') out.up = up;
+  return out;
+}
+
+// The page's world: metres, +Y up, the character as opened facing +Z with its pelvis
+// above the origin and its lowest joint on the grid.
+function worldMapping(info, frame0) {
+  const s = info.metres_per_unit;
+  const m = new THREE.Matrix4().makeScale(s, s, s);
+  if (info.up === '+Z') m.premultiply(new THREE.Matrix4().makeRotationX(-Math.PI / 2)); // (x, y, z) -> (x, z, -y)
+  const at = (p) => new THREE.Vector3(...p).applyMatrix4(m);
+  const left = at(frame0.points.left_hip).sub(at(frame0.points.right_hip));
+  const forward = new THREE.Vector3().crossVectors(left, UP);
+  const yaw = Math.atan2(forward.x, forward.z);
+  m.premultiply(new THREE.Matrix4().makeRotationY(-yaw));
+  const pelvis = at(frame0.points.pelvis);
+  const lowest = Math.min(...frame0.fk.pos.map((p) => at(p).y));
+  m.premultiply(new THREE.Matrix4().makeTranslation(-pelvis.x, -lowest, -pelvis.z));
+  return m;
+}
+
+let opening = 0;
+
+async function openText(text, name) {
+  doc.tried = { text, name };
+  const ticket = ++opening;
+  $('status').textContent = `opening ${name}…`;
+  let res;
+  try {
+    res = await api('POST', 'v1/bvh/inspect', { bvh: text, frame: 0, ...fileSettings() });
+    if (ticket !== opening) return;
+  } catch (err) {
+    if (ticket !== opening) return;
+    showError(err);
+    $('status').textContent = connected ? 'connected' : 'server not ready';
+    return;
+  }
+  endDrag(false);
+  cancelSolves();
+  motionCache.clear();
+  const info = res.data;
+  Object.assign(doc, { active: true, name, original: text, text, shown: text, info, frame: 0 });
+  const frame0 = fileFrame(text, 0);
+  doc.toWorld = worldMapping(info, frame0);
+  doc.fromWorld = doc.toWorld.clone().invert();
+  buildSkeleton();
+  buildCharacterBones();
+  hovered = null;
+  history.stack = [];
+  history.index = -1;
+  restore({ pose: filePose(text, 0), targets: [], pins: [], text, frame: 0 });
+  pushHistory();
+  const pelvis = state.pose.pelvis;
+  controls.target.set(0, pelvis[1], 0);
+  camera.position.set(0.75, pelvis[1] + 0.45, 2.9);
+  controls.update();
+  const slider = $('bvh-frame');
+  slider.max = String(Math.max(info.frames - 1, 0));
+  slider.value = '0';
+  $('bvh-loaded').hidden = false;
+  $('bvh-name').textContent = name;
+  const fps = info.frame_time > 0 ? ` @ ${(1 / info.frame_time).toFixed(4).replace(/\.?0+$/, '')} fps` : '';
+  $('bvh-meta').textContent = `${info.joints.length} joints, ${info.frames} frames${fps}; `
+    + `${info.scheme} map, units ${info.units}, up ${info.up}`;
+  $('export').textContent = 'Export BVH';
+  $('export').title = 'Download the edited BVH file';
+  $('sample').value = '';
+  $('status').textContent = connected ? 'connected' : 'server not ready';
+  clearError();
+  refresh();
+}
+
+async function openFile(file) {
+  if (!file) return;
+  let text;
+  try {
+    text = await file.text();
+  } catch (err) {
+    showError(new ApiError(-1, 'Cannot read the file', `${file.name}: ${err.message}`));
+    return;
+  }
+  await openText(text, file.name);
+}
+
+function closeFile() {
+  doc.active = false;
+  doc.info = null;
+  motionCache.clear();
+  buildSkeleton();
+  buildCharacterBones();
+  $('bvh-loaded').hidden = true;
+  $('export').textContent = 'Export JSON';
+  $('export').title = 'Download the pose as JSON';
+  history.stack = [];
+  history.index = -1;
+  controls.target.set(0, 0.85, 0);
+  camera.position.set(0.75, 1.3, 2.9);
+  controls.update();
+}
+
+// Show another frame of the file: its targets go (they were for the other frame), pins stay.
+function setFrame(frame) {
+  if (!doc.active || frame === doc.frame) return;
+  endDrag(false);
+  cancelSolves();
+  doc.frame = frame;
+  doc.shown = doc.text;
+  state.targets.clear();
+  state.committed = filePose(doc.text, frame);
+  state.pose = clonePose(state.committed);
+  // not an undo step: the current history entry follows the frame
+  if (history.index >= 0) history.stack[history.index] = snapshot();
+  refresh();
+}
+
+function refreshFrame() {
+  if (!doc.active) return;
+  $('bvh-frame').value = String(doc.frame);
+  const t = doc.frame * doc.info.frame_time;
+  $('bvh-frame-label').textContent = `${doc.frame} / ${doc.info.frames - 1} (${t.toFixed(2)} s)`;
 }
 
 function wireControls() {
@@ -728,6 +1006,37 @@ function wireControls() {
     input.addEventListener('change', () => requestSolve(true));
   }
   $('sample').addEventListener('change', (ev) => loadSample(Number(ev.target.value)));
+  $('bvh-file').addEventListener('change', (ev) => {
+    openFile(ev.target.files[0]);
+    ev.target.value = ''; // the same file can be opened again
+  });
+  for (const id of ['bvh-units', 'bvh-up']) {
+    $(id).addEventListener('change', () => {
+      if (doc.tried) openText(doc.active ? doc.text : doc.tried.text, doc.tried.name);
+    });
+  }
+  $('bvh-frame').addEventListener('input', (ev) => setFrame(Number(ev.target.value)));
+  let dragDepth = 0;
+  const hasFiles = (ev) => ev.dataTransfer && [...ev.dataTransfer.types].includes('Files');
+  window.addEventListener('dragenter', (ev) => {
+    if (!hasFiles(ev)) return;
+    dragDepth += 1;
+    $('drop-hint').hidden = false;
+  });
+  window.addEventListener('dragleave', () => {
+    dragDepth = Math.max(dragDepth - 1, 0);
+    if (dragDepth === 0) $('drop-hint').hidden = true;
+  });
+  window.addEventListener('dragover', (ev) => {
+    if (hasFiles(ev)) ev.preventDefault(); // allows the drop
+  });
+  window.addEventListener('drop', (ev) => {
+    ev.preventDefault();
+    dragDepth = 0;
+    $('drop-hint').hidden = true;
+    const file = ev.dataTransfer && ev.dataTransfer.files[0];
+    if (file) openFile(file);
+  });
   $('undo').addEventListener('click', undo);
   $('redo').addEventListener('click', redo);
   $('reset').addEventListener('click', reset);
@@ -740,7 +1049,7 @@ function wireControls() {
     requestSolve(false);
   });
   window.addEventListener('keydown', (ev) => {
-    if (ev.target instanceof HTMLInputElement && ev.target.type !== 'checkbox' && ev.target.type !== 'radio') return;
+    if (ev.target instanceof HTMLInputElement && !['checkbox', 'radio', 'range'].includes(ev.target.type)) return;
     const mod = ev.ctrlKey || ev.metaKey;
     if (ev.key === 'Escape') {
       endDrag(false);
@@ -866,6 +1175,21 @@ window.marionette = Object.freeze({
     return { x: s.x, y: s.y };
   },
   exportDocument: () => exportDocument(),
+  // the open BVH file (null when none): what it is and what is drawn
+  bvh: () => (doc.active ? {
+    name: doc.name,
+    frame: doc.frame,
+    frames: doc.info.frames,
+    units: doc.info.units,
+    up: doc.info.up,
+    scheme: doc.info.scheme,
+    joints: doc.info.joints.map((j) => j.name),
+    edited: doc.text !== doc.original,
+  } : null),
+  bvhText: () => (doc.active ? doc.text : null),
+  // every joint of the file on screen: file units and axes, and page (world) coordinates
+  bvhPositions: () => (doc.active ? fileFrame(doc.shown, doc.frame).fk.pos : null),
+  bvhWorld: () => (doc.active ? doc.world.map((p) => [...p]) : null),
 });
 
 main();

@@ -231,15 +231,17 @@ def test_editor_drag_solve_fabrik_errors(server: str, browser: Any, tmp_path: Pa
     def settled() -> None:
         """Wait until no solve is waiting or in flight."""
         page.wait_for_function(
-            f"{m} && (s => !s.dirty && !s.inflight)({m}.solveCount())", polling=50
+            f"() => {m} && (s => !s.dirty && !s.inflight)({m}.solveCount())", polling=50
         )
 
     try:
         # -- the page: / redirects to /editor, the skeleton comes from the samples ----------
         page.goto(server + "/")
         assert page.url == server + "/editor"
-        page.wait_for_function(f"{m} && {m}.ready()")
-        page.wait_for_function("document.getElementById('status').textContent === 'connected'")
+        page.wait_for_function(f"() => {m} && {m}.ready()")
+        page.wait_for_function(
+            "() => document.getElementById('status').textContent === 'connected'"
+        )
         pose0 = page.evaluate(f"{m}.pose()")
         assert set(pose0) == set(JOINT_NAMES)
         assert page.evaluate(f"{m}.lastSolve()") is None
@@ -338,7 +340,7 @@ def test_editor_drag_solve_fabrik_errors(server: str, browser: Any, tmp_path: Pa
         # -- API errors are shown: a bad tolerance is the server's 422 ----------------------
         page.fill("#tolerance", "0")
         page.press("#tolerance", "Tab")
-        page.wait_for_function(f"{m}.error() !== null")
+        page.wait_for_function(f"() => {m}.error() !== null")
         err = page.evaluate(f"{m}.error()")
         assert err["status"] == 422, err
         assert "tolerance" in err["detail"], err
@@ -349,13 +351,13 @@ def test_editor_drag_solve_fabrik_errors(server: str, browser: Any, tmp_path: Pa
         assert page.evaluate(f"{m}.pose()") == pose2  # the failed solve changed nothing
         page.fill("#tolerance", "0.001")
         page.press("#tolerance", "Tab")
-        page.wait_for_function(f"{m}.error() === null")
+        page.wait_for_function(f"() => {m}.error() === null")
         assert not banner.is_visible()
 
         # -- ... and so is an unreachable server ----------------------------------------
         page.route("**/v1/solve", lambda route: route.abort())
-        page.get_by_label("Exact reach").check()
-        page.wait_for_function(f"{m}.error() !== null")
+        page.get_by_label("Exact reach").uncheck()  # on by default (issue 11)
+        page.wait_for_function(f"() => {m}.error() !== null")
         assert page.evaluate(f"{m}.error()")["status"] == 0
         assert "unreachable" in banner.inner_text()
         page.unroute("**/v1/solve")
@@ -364,5 +366,205 @@ def test_editor_drag_solve_fabrik_errors(server: str, browser: Any, tmp_path: Pa
         assert page_errors == []
         unexpected = [e for e in console_errors if not e.startswith("Failed to load resource")]
         assert unexpected == [], unexpected
+    finally:
+        context.close()
+
+
+def post_json(url: str, body: dict[str, Any]) -> Any:
+    req = urllib.request.Request(
+        url, data=json.dumps(body).encode(), headers={"Content-Type": "application/json"}
+    )
+    with urllib.request.urlopen(req, timeout=30) as r:
+        return json.loads(r.read())
+
+
+@pytest.mark.browser
+def test_editor_opens_poses_scrubs_and_exports_a_real_bvh_file(
+    server: str, browser: Any, more_mocap: Path, tmp_path: Path
+) -> None:
+    """A real CMU file (AnimatedDrawings' cmu1, CMU ASF units, 38 joints with End Sites):
+    opened with the file picker (units first refused, then stated), and again by dropping
+    it; its own bones drawn where the service's FK puts them; a frame posed by dragging the
+    left wrist (exact reach by default), undone and redone, another frame shown, the file
+    exported: only the edited frame's line differs."""
+    from core.bvh import parse_bvh
+
+    path = next(more_mocap.rglob("cmu1/jumping_jacks.bvh"))
+    original = path.read_text()
+    units = 0.0564444  # CMU ASF units: the file's leg is ~15 of them, not plain
+    context = browser.new_context(
+        viewport={"width": 1280, "height": 800}, device_scale_factor=1, accept_downloads=True
+    )
+    page = context.new_page()
+    page.set_default_timeout(20_000)
+    console_errors: list[str] = []
+    page_errors: list[str] = []
+    page.on("console", lambda m: console_errors.append(m.text) if m.type == "error" else None)
+    page.on("pageerror", lambda e: page_errors.append(str(e)))
+    urls: list[str] = []
+    page.on("request", lambda r: urls.append(r.url))
+    solves: list[dict[str, Any]] = []
+    page.on(
+        "request",
+        lambda r: (
+            solves.append(json.loads(r.post_data or "{}"))
+            if r.url.endswith("/v1/bvh/solve")
+            else None
+        ),
+    )
+    m = "window.marionette"
+
+    def settled() -> None:
+        page.wait_for_function(
+            f"() => {m} && (s => !s.dirty && !s.inflight)({m}.solveCount())", polling=50
+        )
+
+    def inspect(text: str, frame: int) -> Any:
+        body = {"bvh": text, "frame": frame, "units": units}
+        return post_json(server + "/v1/bvh/inspect", body)
+
+    def assert_drawn_as_served(text: str, frame: int) -> None:
+        want = inspect(text, frame)["positions"]
+        got = page.evaluate(f"{m}.bvhPositions()")
+        assert len(got) == len(want) == 38
+        worst = max(dist(a, b) for a, b in zip(got, want, strict=True))
+        assert worst < 1e-6, worst  # the page's FK is the service's
+
+    def scrub(frame: int) -> None:
+        page.locator("#bvh-frame").fill(str(frame))
+        page.wait_for_function(f"() => {m}.bvh().frame === {frame}")
+
+    try:
+        page.goto(server + "/editor")
+        page.wait_for_function(f"() => {m} && {m}.ready()")
+        page.wait_for_function(
+            "() => document.getElementById('status').textContent === 'connected'"
+        )
+        assert page.evaluate(f"{m}.options()")["reach"] == "exact"  # the default (issue 11)
+        assert page.evaluate(f"{m}.bvh()") is None
+
+        # -- the file picker; units 'auto' cannot be inferred for this file: a clear 422 --------
+        page.set_input_files("#bvh-file", str(path))
+        page.wait_for_function(f"() => {m}.error() !== null")
+        err = page.evaluate(f"{m}.error()")
+        assert err["status"] == 422, err
+        assert "units" in err["detail"], err
+        assert page.evaluate(f"{m}.bvh()") is None
+        # stating the units re-opens the file
+        page.select_option("#bvh-units", str(units))
+        page.wait_for_function(f"() => {m}.bvh() !== null")
+        info = page.evaluate(f"{m}.bvh()")
+        assert info["name"] == "jumping_jacks.bvh"
+        assert info["frames"] == 125
+        assert info["scheme"] == "cmu-asf-bvh"
+        assert info["units"] == units
+        assert info["up"] == "+Y"
+        assert info["joints"] == list(parse_bvh(original).joint_names)
+        assert page.evaluate(f"{m}.error()") is None
+        assert set(page.evaluate(f"{m}.pose()")) == set(JOINT_NAMES)  # the 21 handles
+        assert_drawn_as_served(original, 0)
+        # standing on the grid, head up, about a person's height (metres in the page)
+        world = page.evaluate(f"{m}.bvhWorld()")
+        heights = [p[1] for p in world]
+        assert abs(min(heights)) < 1e-9
+        assert 1.3 < max(heights) < 2.1, max(heights)
+
+        # -- drag and drop opens a file too --------------------------------------------------
+        scrub(10)
+        with page.expect_response("**/v1/bvh/inspect") as dropped:
+            page.evaluate(
+                """([text, name]) => {
+                  const dt = new DataTransfer();
+                  dt.items.add(new File([text], name, { type: 'text/plain' }));
+                  document.getElementById('viewport').dispatchEvent(
+                    new DragEvent('drop', { dataTransfer: dt, bubbles: true, cancelable: true }));
+                }""",
+                [original, "dropped.bvh"],
+            )
+        assert dropped.value.status == 200
+        page.wait_for_function(f"() => {m}.bvh().name === 'dropped.bvh'")
+        assert page.evaluate(f"{m}.bvh().frame") == 0
+
+        # -- scrub to frame 40 and drag the left wrist -------------------------------------
+        edited_frame = 40
+        scrub(edited_frame)
+        assert_drawn_as_served(original, edited_frame)
+        world_before = page.evaluate(f"{m}.bvhWorld()")
+        pose_before = page.evaluate(f"{m}.pose()")
+        before_png = page.locator("#viewport canvas").screenshot()
+        wrist = page.evaluate(f"{m}.projectJoint('left_wrist')")
+        dx, dy = 50, -110
+        page.mouse.move(wrist["x"], wrist["y"])
+        page.mouse.down()
+        for i in range(1, 13):
+            t = i / 12
+            page.mouse.move(wrist["x"] + t * dx, wrist["y"] + t * dy)
+            page.wait_for_timeout(16)
+        page.mouse.up()
+        settled()
+
+        assert solves, "dragging sent no /v1/bvh/solve"
+        assert len(solves) <= 13  # throttled, latest wins
+        first = solves[0]
+        assert first["bvh"] == original  # every solve starts from the committed file
+        assert first["frame"] == edited_frame
+        assert first["units"] == units
+        assert [t["joint"] for t in first["targets"]] == ["left_wrist"]
+        assert first["options"]["reach"] == "exact"
+        last = page.evaluate(f"{m}.lastSolve()")
+        assert last["response"]["frame"] == edited_frame
+        assert last["response"]["targets"][0]["reached"], last["response"]["targets"]
+        target = page.evaluate(f"{m}.targets()")["left_wrist"]
+        on_screen = page.evaluate(f"{m}.projectPoint({json.dumps(target)})")
+        assert abs(on_screen["x"] - (wrist["x"] + dx)) < 2
+        assert abs(on_screen["y"] - (wrist["y"] + dy)) < 2
+        pose_after = page.evaluate(f"{m}.pose()")
+        assert dist(pose_after["left_wrist"], target) < 0.002  # exact: under the cursor
+        assert pose_after["left_wrist"][1] > pose_before["left_wrist"][1] + 0.1
+        edited = page.evaluate(f"{m}.bvhText()")
+        assert edited == last["response"]["bvh"]  # the answer is the file now
+        assert_drawn_as_served(edited, edited_frame)
+        world_after = page.evaluate(f"{m}.bvhWorld()")
+        moved = [dist(a, b) for a, b in zip(world_before, world_after, strict=True)]
+        assert max(moved) > 0.1
+        assert page.locator("#viewport canvas").screenshot() != before_png
+        assert "mm" in page.locator("#targets tbody tr[data-joint=left_wrist]").inner_text()
+
+        shot = Path(os.environ.get("MARIONETTE_SCREENSHOT_BVH", tmp_path / "editor_bvh.png"))
+        shot.parent.mkdir(parents=True, exist_ok=True)
+        page.screenshot(path=str(shot))
+        assert shot.stat().st_size > 10_000
+
+        # -- undo / redo ---------------------------------------------------------------------
+        page.click("#undo")
+        assert page.evaluate(f"{m}.bvhText()") == original
+        page.click("#redo")
+        assert page.evaluate(f"{m}.bvhText()") == edited
+
+        # -- another frame: the file's own, no targets -----------------------------------------
+        scrub(80)
+        assert page.evaluate(f"{m}.targets()") == {}
+        assert_drawn_as_served(edited, 80)
+
+        # -- export: the edited file; only the edited frame's line differs -------------------
+        with page.expect_download() as dl:
+            page.click("#export")
+        assert dl.value.suggested_filename == "dropped-edited.bvh"
+        exported = Path(dl.value.path()).read_text()
+        assert exported == edited
+        a, b = parse_bvh(original), parse_bvh(exported)
+        assert a.joints == b.joints and a.frame_time == b.frame_time
+        assert b.num_frames == a.num_frames
+        old_lines, new_lines = original.split("\n"), exported.split("\n")
+        assert len(old_lines) == len(new_lines)
+        motion = old_lines.index("MOTION")
+        changed = [i for i, (x, y) in enumerate(zip(old_lines, new_lines, strict=True)) if x != y]
+        assert changed == [motion + 3 + edited_frame], changed
+
+        assert page_errors == []
+        # only the browser's own log line of the refused (422) first open
+        unexpected = [e for e in console_errors if not e.startswith("Failed to load resource")]
+        assert unexpected == [], unexpected
+        assert all(u.startswith((server + "/", "blob:", "data:")) for u in urls), urls
     finally:
         context.close()

@@ -1,0 +1,100 @@
+// BVH motion values and forward kinematics in the browser, for drawing a file's frames.
+//
+// The hierarchy is not parsed here: the service reads it (POST v1/bvh/inspect answers each
+// joint's name, parent, offset, channels and first MOTION column, End Sites included, in
+// file order), so the page and the service agree on every joint. Conventions as
+// core/bvh.py: Euler channels are intrinsic rotations in the listed order, in degrees
+// (R = R_c1 @ R_c2 @ R_c3); position channels replace the matching OFFSET component;
+// world G[j] = G[parent] @ R[j], P[j] = P[parent] + G[parent] @ t[j].
+
+const MOTION_RE = /^[ \t]*MOTION[ \t]*\r?$/m;
+const POSITION = { xposition: 0, yposition: 1, zposition: 2 };
+const ROTATION = { xrotation: 'X', yrotation: 'Y', zrotation: 'Z' };
+const DEG = Math.PI / 180;
+
+// Every MOTION value of the file, frame after frame (Float64Array).
+export function parseMotion(text) {
+  const m = MOTION_RE.exec(text);
+  if (!m) throw new Error('not a BVH file: no MOTION line');
+  let i = m.index + m[0].length;
+  for (let k = 0; k < 3; k += 1) {
+    // the rest of the MOTION line, then "Frames:" and "Frame Time:"
+    i = text.indexOf('\n', i);
+    if (i < 0) throw new Error('truncated MOTION header');
+    i += 1;
+  }
+  const tokens = text.slice(i).split(/\s+/);
+  const out = new Float64Array(tokens.length);
+  let n = 0;
+  for (const t of tokens) if (t) out[n++] = Number(t);
+  return out.subarray(0, n);
+}
+
+// 3x3 matrices as row-major arrays of 9.
+function mul(a, b) {
+  const o = new Array(9);
+  for (let r = 0; r < 3; r += 1) {
+    for (let c = 0; c < 3; c += 1) {
+      o[3 * r + c] = a[3 * r] * b[c] + a[3 * r + 1] * b[3 + c] + a[3 * r + 2] * b[6 + c];
+    }
+  }
+  return o;
+}
+
+function apply(m, v) {
+  return [
+    m[0] * v[0] + m[1] * v[1] + m[2] * v[2],
+    m[3] * v[0] + m[4] * v[1] + m[5] * v[2],
+    m[6] * v[0] + m[7] * v[1] + m[8] * v[2],
+  ];
+}
+
+function axisRotation(axis, radians) {
+  const c = Math.cos(radians);
+  const s = Math.sin(radians);
+  if (axis === 'X') return [1, 0, 0, 0, c, -s, 0, s, c];
+  if (axis === 'Y') return [c, 0, s, 0, 1, 0, -s, 0, c];
+  return [c, -s, 0, s, c, 0, 0, 0, 1];
+}
+
+const IDENTITY = [1, 0, 0, 0, 1, 0, 0, 0, 1];
+
+// World rotations and positions (file units and axes) of every joint for one MOTION row.
+export function forwardKinematics(joints, row) {
+  const rot = new Array(joints.length);
+  const pos = new Array(joints.length);
+  joints.forEach((j, i) => {
+    let r = IDENTITY;
+    const t = [...j.offset];
+    j.channels.forEach((name, k) => {
+      const key = name.toLowerCase();
+      const v = row[j.channel_start + k];
+      if (key in POSITION) t[POSITION[key]] = v;
+      else r = mul(r, axisRotation(ROTATION[key], v * DEG));
+    });
+    if (j.parent < 0) {
+      rot[i] = r;
+      pos[i] = t;
+    } else {
+      const g = rot[j.parent];
+      const p = pos[j.parent];
+      const d = apply(g, t);
+      rot[i] = mul(g, r);
+      pos[i] = [p[0] + d[0], p[1] + d[1], p[2] + d[2]];
+    }
+  });
+  return { rot, pos };
+}
+
+// The canonical points: each anchor is fixed in one joint's frame.
+export function anchorPoints(joints, anchors, fk) {
+  const index = new Map(joints.map((j, i) => [j.name, i]));
+  const out = {};
+  for (const [canonical, a] of Object.entries(anchors)) {
+    const i = index.get(a.joint);
+    const d = apply(fk.rot[i], a.offset);
+    const p = fk.pos[i];
+    out[canonical] = [p[0] + d[0], p[1] + d[1], p[2] + d[2]];
+  }
+  return out;
+}
