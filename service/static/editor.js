@@ -926,7 +926,7 @@ async function openText(text, name) {
   pushHistory();
   const pelvis = state.pose.pelvis;
   controls.target.set(0, pelvis[1], 0);
-  camera.position.set(0.75, pelvis[1] + 0.45, 2.9);
+  camera.position.set(0.85, pelvis[1] + 0.5, 3.3);
   controls.update();
   const slider = $('bvh-frame');
   slider.max = String(Math.max(info.frames - 1, 0));
