@@ -232,6 +232,7 @@ class Engine:
                 res = kinematics.fabrik(
                     canon[b], lengths[b], p.target_idx, tcan[b, :k], weights=p.weights,
                     tolerance=p.tolerance, max_iterations=self.fabrik_max_iterations,
+                    pinned=np.arange(k) >= p.n_targets,
                 )  # fmt: skip
                 out[b], iterations[b] = res.positions, res.iterations
                 continue
@@ -250,6 +251,7 @@ class Engine:
                 res = kinematics.polish(
                     out[b], lengths[b], p.target_idx, goal, weights=p.weights,
                     tolerance=p.tolerance, max_iterations=self.fabrik_max_iterations,
+                    pinned=pinned,
                 )  # fmt: skip
                 out[b], iterations[b] = res.positions, res.iterations
                 paths[b] = [*paths[b], "fabrik-polish"]
@@ -291,7 +293,9 @@ class Engine:
         # every item's targets on a [21, 3] canvas, so a solver gathers its joints at once
         canvas = np.zeros((m, NUM_JOINTS, 3), dtype=np.float32)
         rows = np.arange(m)[:, None]
-        canvas[rows, tidx[items]] = tcan[items] / scales[items, None, None]
+        canvas[rows, tidx[items]] = self._within_reach(canon[items], tidx[items], tcan[items]) / (
+            scales[items, None, None]
+        )
         groups: dict[tuple[str, ...], list[int]] = {}
         plans: list[list[str]] = []
         for row, b in enumerate(items.tolist()):
@@ -318,6 +322,21 @@ class Engine:
                 decoded[sel] = self.decoder(z)
         out = decoded.astype(np.float64).reshape(m, NUM_JOINTS, 3)
         return out * scales[items, None, None], plans
+
+    @staticmethod
+    def _within_reach(start: F64, tidx: npt.NDArray[np.intp], targets: F64) -> F64:
+        """Targets ``[M, K, 3]`` as the networks see them: one beyond the body's reach (its
+        chain from the pelvis plus a leg's length of root travel) is pulled back along
+        the line from the pelvis, so a target 10 km away asks for a full stretch towards it
+        rather than for a pose the networks never saw. Reach errors are still measured
+        against the real target."""
+        lengths = bone_lengths(start)  # [M, 20]
+        chain = lengths @ _CHAIN.T  # [M, 21]: pelvis -> joint along the skeleton
+        radius = np.take_along_axis(chain, tidx, axis=1) + chain[:, [_LEG]]
+        offset = targets - start[:, :1]
+        dist = np.linalg.norm(offset, axis=-1)
+        factor = np.minimum(1.0, radius / np.maximum(dist, 1e-12))
+        return np.asarray(start[:, :1] + offset * factor[..., None])
 
     def _delta(
         self, x: npt.NDArray[np.float32], canvas: npt.NDArray[np.float32], sequence: tuple[str, ...]
@@ -400,7 +419,8 @@ class Engine:
         the plain FABRIK solve from the start pose does reach (the network moved the
         pelvis where a target is out of reach), that FABRIK answer is used."""
         kw = {"weights": p.weights, "tolerance": p.tolerance,
-              "max_iterations": self.fabrik_max_iterations}  # fmt: skip
+              "max_iterations": self.fabrik_max_iterations,
+              "pinned": np.arange(len(p.target_idx)) >= p.n_targets}  # fmt: skip
         res = kinematics.polish(neural, lengths, p.target_idx, goal, **kw)  # type: ignore[arg-type]
         if bool(np.all(res.reached)):
             return res.positions, res.iterations, ["fabrik-polish"]
@@ -498,6 +518,22 @@ class Engine:
             (result,) = self.solve([SolveProblem(**{**problem.__dict__, "method": method})])
             if not np.all(np.isfinite(result.pose)) or result.max_bone_error > 1e-5:
                 raise RuntimeError(f"warm-up {method} solve gave an invalid pose")
+
+
+def _chain_matrix() -> npt.NDArray[np.float64]:
+    """``[21, 20]``: 1 where a bone lies on the path from the pelvis to a joint."""
+    out = np.zeros((NUM_JOINTS, len(BONES)))
+    bone_of = {child: b for b, (child, _) in enumerate(BONES)}
+    for joint in range(NUM_JOINTS):
+        j = joint
+        while j in bone_of:
+            out[joint, bone_of[j]] = 1.0
+            j = BONES[bone_of[j]][1]
+    return out
+
+
+_CHAIN = _chain_matrix()
+_LEG = JOINT_INDEX["left_ankle"]
 
 
 @lru_cache(maxsize=4096)
