@@ -399,6 +399,41 @@ def euler_matrices(seq: str, radians: FloatArray) -> FloatArray:
     return out
 
 
+_AXIS = {"X": 0, "Y": 1, "Z": 2}
+
+
+def euler_angles(seq: str, matrices: FloatArray) -> FloatArray:
+    """The inverse of :func:`euler_matrices` for three axes: ``[..., 3, 3]`` -> radians
+    ``[..., 3]`` with ``R = R_seq[0](a) @ R_seq[1](b) @ R_seq[2](c)``.
+
+    ``seq`` is Tait-Bryan (``"ZXY"``: three different axes, ``b`` in [-90, 90] degrees) or
+    proper Euler (``"ZXZ"``, ``b`` in [0, 180]); ``a`` and ``c`` lie in [-180, 180]. In
+    gimbal lock (``b`` at a bound) only ``a + c`` or ``a - c`` is defined: ``c`` is 0 then.
+    """
+    if len(seq) != 3 or seq[0] == seq[1] or seq[1] == seq[2] or any(a not in _AXIS for a in seq):
+        raise ValueError(f"an Euler sequence of three axes, none twice in a row, expected: {seq!r}")
+    m = np.asarray(matrices, dtype=np.float64)
+    i, j = _AXIS[seq[0]], _AXIS[seq[1]]
+    k = 3 - i - j  # the axis not in (i, j)
+    s = 1.0 if (j - i) % 3 == 1 else -1.0  # +1 when (i, j, k) is a cyclic order of (X, Y, Z)
+    if seq[0] != seq[2]:  # Tait-Bryan: R[i, k] = s sin b
+        cos_b = np.hypot(m[..., i, i], m[..., i, j])
+        b = np.arctan2(s * m[..., i, k], cos_b)
+        a = np.arctan2(-s * m[..., j, k], m[..., k, k])
+        c = np.arctan2(-s * m[..., i, j], m[..., i, i])
+        locked = cos_b < 1e-7
+    else:  # proper: R[i, i] = cos b
+        sin_b = np.hypot(m[..., i, j], m[..., i, k])
+        b = np.arctan2(sin_b, m[..., i, i])
+        a = np.arctan2(m[..., j, i], -s * m[..., k, i])
+        c = np.arctan2(m[..., i, j], s * m[..., i, k])
+        locked = sin_b < 1e-7
+    # Column j of R is R_i(a) e_j whatever b is: with c = 0 it alone gives a.
+    a = np.where(locked, np.arctan2(s * m[..., k, j], m[..., j, j]), a)
+    c = np.where(locked, 0.0, c)
+    return np.stack([a, b, c], axis=-1)
+
+
 def forward_kinematics(
     bvh: BVH,
     names: Sequence[str] | None = None,

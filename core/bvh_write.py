@@ -19,7 +19,7 @@ import re
 
 import numpy as np
 
-from core.bvh import BVH, BVHError, euler_matrices
+from core.bvh import BVH, BVHError, euler_angles, euler_matrices
 from core.characters import F64, Pose, Skeleton, build_skeleton
 
 DECIMALS = 6
@@ -139,9 +139,7 @@ def pose_of(bvh: BVH, frame: int, row: F64 | None = None) -> Pose:
 
 def _nearest_euler(seq: str, matrix: F64, old: F64) -> F64:
     """Euler angles (degrees, intrinsic ``seq``) of ``matrix`` nearest to ``old``."""
-    from scipy.spatial.transform import Rotation
-
-    first = Rotation.from_matrix(matrix).as_euler(seq, degrees=True)
+    first = np.rad2deg(euler_angles(seq, matrix))
     a, b, c = first
     proper = seq[0] == seq[2]
     other = np.array([a + 180.0, -b if proper else 180.0 - b, c + 180.0])

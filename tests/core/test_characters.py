@@ -152,3 +152,64 @@ def test_retarget_swing_only_and_exact(files: dict[str, Path]) -> None:
     assert np.abs(again.rotations - out.pose.rotations).max() < 1e-7
     assert isinstance(out.pose, Pose) and cols
     assert g_pos.shape == (skel.size, 3) and g_rot.shape == (skel.size, 3, 3)
+
+
+# --------------------------------------------------------------------------------------
+# numpy rotations against an independent reference (scipy: a dev dependency, never the
+# service's)
+# --------------------------------------------------------------------------------------
+EULER_SEQS = [a + b + c for a in "XYZ" for b in "XYZ" for c in "XYZ" if a != b and b != c]
+
+
+@pytest.mark.parametrize("seq", EULER_SEQS)
+def test_euler_angles_match_scipy_and_invert_euler_matrices(seq: str) -> None:
+    from scipy.spatial.transform import Rotation
+
+    from core.bvh import euler_angles, euler_matrices
+
+    rots = Rotation.random(500, random_state=7)
+    mats = rots.as_matrix()
+    ours = euler_angles(seq, mats)
+    wrap = (ours - rots.as_euler(seq) + np.pi) % (2 * np.pi) - np.pi
+    assert np.abs(wrap).max() < 1e-12
+    assert np.allclose(euler_matrices(seq, ours), mats, atol=1e-12)
+    # gimbal lock: the middle angle at its bound; the answer still rebuilds the matrix
+    angles = np.random.default_rng(1).uniform(-np.pi, np.pi, (40, 3))
+    angles[:, 1] = np.pi / 2 * np.sign(angles[:, 1]) if seq[0] != seq[2] else 0.0
+    locked = euler_matrices(seq, angles)
+    assert np.allclose(euler_matrices(seq, euler_angles(seq, locked)), locked, atol=1e-9)
+    with pytest.raises(ValueError, match="Euler sequence"):
+        euler_angles(seq[0] * 3, mats)
+
+
+def test_matrix_to_quat_matches_scipy() -> None:
+    from scipy.spatial.transform import Rotation
+
+    from core.characters import matrix_to_quat, quat_to_matrix
+
+    mats = np.concatenate(
+        [
+            Rotation.random(2000, random_state=3).as_matrix(),
+            np.stack([np.eye(3), np.diag([1.0, -1, -1]), np.diag([-1.0, 1, -1])]),
+        ]
+    )
+    noisy = mats + 1e-5 * np.random.default_rng(4).normal(size=mats.shape)
+    for m in (mats, noisy):
+        ref = Rotation.from_matrix(m).as_quat()
+        ref = np.where(ref[:, 3:4] < 0, -ref, ref)
+        ours = matrix_to_quat(m)
+        assert np.minimum(abs(ours - ref).max(1), abs(ours + ref).max(1)).max() < 1e-12
+        assert (ours[:, 3] >= 0).all()
+    assert np.allclose(quat_to_matrix(matrix_to_quat(mats)), mats, atol=1e-12)
+    assert matrix_to_quat(mats.reshape(-1, 1, 3, 3)).shape == (len(mats), 1, 4)
+
+
+def test_character_modules_import_no_scipy() -> None:
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, core.bvh, core.bvh_write, core.characters, core.characters_maps, "
+        "core.retarget, service.characters; assert 'scipy' not in sys.modules, 'scipy'"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True)
