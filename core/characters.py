@@ -17,22 +17,14 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any, Final
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
+from core.units import UNITS, UP_AXES
+
 F64 = npt.NDArray[np.float64]
-
-#: Metres per file unit, by name ("m", "cm", "mm", "in", "ft").
-UNITS: Final[dict[str, float]] = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254, "ft": 0.3048}
-
-#: Rotation taking a frame's up axis to +Y (right-handed to right-handed).
-UP_AXES: Final[dict[str, F64]] = {
-    "+Y": np.eye(3),
-    # Z-up: (x, y, z) -> (x, z, -y), a -90 degree turn about +X.
-    "+Z": np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]]),
-}
 
 
 class CharacterError(ValueError):

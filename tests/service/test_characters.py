@@ -14,10 +14,11 @@ from scipy.spatial.transform import Rotation
 
 from core.bvh import parse_bvh
 from core.bvh_write import pose_of, skeleton_of
-from core.characters import UNITS, matrix_to_quat
+from core.characters import matrix_to_quat
 from core.characters_maps import resolve_map
 from core.retarget import canonical_points
 from core.skeleton import JOINT_INDEX
+from core.units import UNITS
 from tests.character_files import FILES, RefBVH, extract_bvh
 
 MM = 1e-3
@@ -262,7 +263,7 @@ def test_bad_character_skeletons(client: Any) -> None:
         {"name": "b", "parent": "a", "offset": [0, 1, 0]},
     ]
     _bad(client, "/v1/character/solve", body(cycle), "cycle")
-    dup = [
+    dup: list[dict[str, Any]] = [
         {"name": "a", "parent": None, "offset": [0, 1, 0]},
         {"name": "a", "parent": "a", "offset": [0, 1, 0]},
     ]
@@ -273,3 +274,19 @@ def test_bad_character_skeletons(client: Any) -> None:
     _bad(client, "/v1/character/solve", body(few), "no joint found for", "joint_map")
     r = client.post("/v1/character/solve", json={**body(few), "rotations": {"Hips": [0, 0, 0]}})
     assert r.status_code == 422  # a quaternion has 4 numbers
+
+
+def test_unit_and_up_axis_names_in_the_contract_are_the_core_ones() -> None:
+    from typing import get_args
+
+    from core.units import UP_AXES
+    from service.characters import BVHInspectRequest, BVHSolveRequest, CharacterSkeleton, Units
+
+    def literals(tp: object) -> set[str]:
+        return {a for a in get_args(tp) if isinstance(a, str)} | {
+            s for a in get_args(tp) for s in literals(a)
+        }
+
+    assert literals(Units) == set(UNITS)
+    for model in (CharacterSkeleton, BVHSolveRequest, BVHInspectRequest):
+        assert literals(model.model_fields["up"].annotation) == set(UP_AXES), model

@@ -24,22 +24,16 @@ import numpy as np
 import numpy.typing as npt
 
 from core.skeleton import JOINT_NAMES, MIRROR
+from core.units import UNITS, UP_AXES
 
 MAP_FORMAT = 2
 
-#: Metres per file unit. ``asf``: from the ASF skeleton's ``:units length`` (CMU: values
-#: are inches x 0.45, so metres = value x 0.0254 / 0.45); only with ``reader = "asf"``.
-UNITS: dict[str, float] = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254, "ft": 0.3048}
+#: Units (``core.units.UNITS``, metres per file unit) and one more: ``asf``, from the ASF
+#: skeleton's ``:units length`` (CMU: values are inches x 0.45, so metres = value x 0.0254 /
+#: 0.45); only with ``reader = "asf"``. Up axes are ``core.units.UP_AXES``.
 ASF_UNIT = "asf"
 READERS: tuple[str, ...] = ("bvh", "asf")
 ROOT_POSITIONS: tuple[str, ...] = ("replace", "add")
-
-#: Rotation taking a source's up axis to +Y (right-handed to right-handed).
-UP_AXES: dict[str, tuple[tuple[float, float, float], ...]] = {
-    "+Y": ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)),
-    # Z-up: (x, y, z) -> (x, z, -y), a -90 degree turn about +X.
-    "+Z": ((1.0, 0.0, 0.0), (0.0, 0.0, 1.0), (0.0, -1.0, 0.0)),
-}
 
 _TOP_KEYS = {
     "format",
@@ -260,11 +254,11 @@ class MocapMap:
         return str(value) if value is not None else self.up_axis
 
     def up_matrix_for(self, relpath: str) -> npt.NDArray[np.float64]:
-        return np.asarray(UP_AXES[self.up_axis_for(relpath)], dtype=np.float64)
+        return np.array(UP_AXES[self.up_axis_for(relpath)])
 
     @property
     def up_matrix(self) -> npt.NDArray[np.float64]:
-        return np.asarray(UP_AXES[self.up_axis], dtype=np.float64)
+        return np.array(UP_AXES[self.up_axis])
 
     def fps_for(self, relpath: str, header_fps: float) -> float:
         """The true frame rate of a file: the first matching override, else the header's."""
