@@ -5,15 +5,21 @@ The work is ``service.characters``; conventions: docs/characters.md."""
 
 from __future__ import annotations
 
-from fastapi import APIRouter, Response
-from starlette.concurrency import run_in_threadpool
+import time
+from collections.abc import Callable
+from typing import TypeVar
 
+import anyio.to_thread
+from fastapi import APIRouter, Response
+
+from core.bvh import BVH
 from service.body import BodyRoute
 from service.characters import (
     BVHInspectRequest,
     BVHInspectResponse,
     BVHSolveRequest,
     BVHSolveResponse,
+    Character,
     CharacterSolveRequest,
     CharacterSolveResponse,
     bvh_answer,
@@ -24,46 +30,71 @@ from service.characters import (
     read_request_bvh,
     solve_character,
 )
-from service.deps import ReadyEngine, State
-from service.engine import Engine
+from service.deps import ReadyEngine, RequestBudget, State
+from service.errors import DeadlineExceeded
+from service.limits import Budget
 from service.responses import json_response
 
 router = APIRouter(route_class=BodyRoute, tags=["characters"])
+R = TypeVar("R")
+
+
+async def step(budget: Budget, stage: str, work: Callable[[], R]) -> R:
+    """One stage of the work, as the solve routes run theirs: first the deadline and the
+    client (504 / 499), then ``work`` in a worker thread under the app's compute limiter."""
+    try:
+        await budget.check()
+    except DeadlineExceeded:
+        raise DeadlineExceeded(
+            f"the request needed more than the {budget.deadline_seconds:g} s deadline "
+            f"(before {stage}); retry, or send a smaller request"
+        ) from None
+    limiter = budget.request.app.state.compute_limiter
+    t = time.perf_counter()
+    out = await anyio.to_thread.run_sync(work, limiter=limiter)
+    budget.compute += time.perf_counter() - t
+    return out
 
 
 @router.post("/v1/character/solve", response_model=CharacterSolveResponse)
 async def character_solve(
-    req: CharacterSolveRequest, engine: ReadyEngine, state: State
+    req: CharacterSolveRequest, engine: ReadyEngine, budget: RequestBudget, state: State
 ) -> Response:
     """Solve a character given in its own skeleton: local rotations of every joint out."""
+    ch = await step(budget, "reading the skeleton", lambda: character_from_request(req))
 
-    def work(engine: Engine) -> dict[str, object]:
-        ch = character_from_request(req)
+    def work() -> dict[str, object]:
         edit = solve_character(engine, ch, req)
         state.metrics.solved(edit.problem.method, edit.result.solvers)
         return character_answer(ch, edit, req.rotations)
 
-    return json_response(await run_in_threadpool(work, engine))
+    return json_response(await step(budget, "the solve", work), budget.compute)
 
 
 @router.post("/v1/bvh/solve", response_model=BVHSolveResponse)
-async def bvh_solve(req: BVHSolveRequest, engine: ReadyEngine, state: State) -> Response:
+async def bvh_solve(
+    req: BVHSolveRequest, engine: ReadyEngine, budget: RequestBudget, state: State
+) -> Response:
     """Edit one frame of a BVH file: targets in the file's units and axes, the same file
     back with that frame changed (hierarchy, offsets, channel orders, the other frames and
     the frame time untouched)."""
 
-    def work(engine: Engine) -> dict[str, object]:
+    def read() -> tuple[BVH, Character]:
         bvh = read_request_bvh(req.bvh)
-        ch = character_from_bvh(bvh, req)
+        return bvh, character_from_bvh(bvh, req)
+
+    bvh, ch = await step(budget, "reading the file", read)
+
+    def work() -> dict[str, object]:
         edit = solve_character(engine, ch, req)
         state.metrics.solved(edit.problem.method, edit.result.solvers)
         return bvh_answer(bvh, ch, req, edit)
 
-    return json_response(await run_in_threadpool(work, engine))
+    return json_response(await step(budget, "the solve", work), budget.compute)
 
 
 @router.post("/v1/bvh/inspect", response_model=BVHInspectResponse)
-async def bvh_inspect_route(req: BVHInspectRequest) -> Response:
+async def bvh_inspect_route(req: BVHInspectRequest, budget: RequestBudget) -> Response:
     """Read a BVH file without solving: its joints and channels, the joint map (where each
     canonical joint sits), units, up axis, frame count and time, and the world positions of
     one frame (``frame``, default 0), in the file's units and axes."""
@@ -72,4 +103,4 @@ async def bvh_inspect_route(req: BVHInspectRequest) -> Response:
         bvh = read_request_bvh(req.bvh)
         return bvh_inspect(bvh, character_from_bvh(bvh, req), req.frame)
 
-    return json_response(await run_in_threadpool(work))
+    return json_response(await step(budget, "reading the file", work), budget.compute)

@@ -1,0 +1,87 @@
+"""The character routes keep the solve routes' limits: the deadline (504) checked before each
+stage, the admission bound (429), the work in worker threads under the compute limiter,
+``X-Compute-Time`` on the answer."""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from service.characters import read_request_bvh, solve_character
+from service.routes import characters as routes
+from tests.conftest import REPO_ROOT, make_client
+from tests.service.test_api import assert_problem
+
+EXAMPLES = REPO_ROOT / "docs" / "examples"
+ROUTES = ["/v1/character/solve", "/v1/bvh/solve", "/v1/bvh/inspect"]
+
+
+def example(route: str) -> dict[str, Any]:
+    if route == "/v1/character/solve":
+        body: dict[str, Any] = json.loads((EXAMPLES / "character_solve.json").read_text())
+        return body
+    body = json.loads((EXAMPLES / "bvh_solve.json").read_text())
+    if route == "/v1/bvh/inspect":
+        return {"bvh": body["bvh"], "frame": body["frame"]}
+    return body
+
+
+@pytest.mark.parametrize("route", ROUTES)
+def test_past_the_deadline_is_a_504_problem(models_dir: Path, route: str) -> None:
+    with make_client(models_dir, deadline_seconds=0.001) as c:
+        resp = c.post(route, json=example(route))
+        assert_problem(resp, 504, "0.001 s deadline", "before ")
+        assert resp.headers["retry-after"] == "1"
+        metrics = c.get("/metrics").text
+        assert f'pose_rejections_total{{reason="deadline-exceeded",route="{route}"}}' in metrics
+
+
+def test_the_deadline_is_checked_between_reading_and_solving(
+    models_dir: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    def read(text: str) -> Any:
+        time.sleep(0.6)
+        return read_request_bvh(text)
+
+    solved: list[int] = []
+    monkeypatch.setattr(routes, "read_request_bvh", read)
+    monkeypatch.setattr(routes, "solve_character", lambda *a: solved.append(1))
+    with make_client(models_dir, deadline_seconds=0.5) as c:
+        resp = c.post("/v1/bvh/solve", json=example("/v1/bvh/solve"))
+        assert_problem(resp, 504, "0.5 s deadline", "before the solve")
+    assert not solved  # stopped before computing an answer nobody would read
+
+
+@pytest.mark.parametrize("route", ROUTES)
+def test_past_the_admission_bound_is_a_429_problem(models_dir: Path, route: str) -> None:
+    with make_client(models_dir, max_inflight_bytes=2048) as c:
+        body = example(route)
+        if route == "/v1/character/solve":  # the example is small: pad it past the bound
+            body["pad"] = " " * 4096
+        resp = c.post(route, content=json.dumps(body), headers={"content-type": "application/json"})
+        assert_problem(resp, 429, "body bytes in flight")
+        assert resp.headers["retry-after"] == "1"
+
+
+def test_the_work_runs_under_the_compute_limiter(
+    models_dir: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    borrowed: list[float] = []
+
+    def solve(*args: Any) -> Any:
+        borrowed.append(app.state.compute_limiter.borrowed_tokens)
+        return solve_character(*args)
+
+    monkeypatch.setattr(routes, "solve_character", solve)
+    with make_client(models_dir, compute_threads=1) as c:
+        app = c.app
+        for route in ROUTES[:2]:
+            resp = c.post(route, json=example(route))
+            assert resp.status_code == 200, resp.text
+            assert resp.headers["x-compute-time"].endswith("ms")
+            assert float(resp.headers["x-compute-time"][:-2]) > 0
+    assert borrowed == [1, 1]
