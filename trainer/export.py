@@ -232,6 +232,7 @@ def export_all(
         with torch.no_grad():
             out_dim = module(*feeds.values()).shape[1]
         stage = extra.pop("stage")
+        of = extra.pop("metrics_of", name)  # a fused graph reports its solver's metrics
         entries.append(
             ModelEntry(
                 name=name,
@@ -245,7 +246,7 @@ def export_all(
                 metrics={
                     f"{split}_{m}": v
                     for split, values in (
-                        metrics.get(name) or metrics.get(name.split(":")[0], {})
+                        metrics.get(of) or metrics.get(of.split(":")[0], {})
                     ).items()
                     for m, v in values.items()
                 },
@@ -305,6 +306,7 @@ def export_all(
             joints=list(joints),
             key=key,
             stage="solvers",
+            metrics_of=f"solver:{key}",
         )
     aug = augment(sample, np.random.default_rng(0), True, True)
     for level, net in enumerate(trained.completion, start=1):
