@@ -4,7 +4,7 @@ Kubernetes manifests and the container health check.
 The app side is read from the code, not restated here: the port from the defaults of
 ``service.settings.Settings``, the health paths from the routes of ``service.app``'s
 FastAPI app. The container side is parsed from docker/ and deploy/k8s/. Fast: no image is
-built (the container smoke test is ``docker/smoke.sh``).
+built (the container check is ``tests/deploy/test_container.py``).
 """
 
 from __future__ import annotations

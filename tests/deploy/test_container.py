@@ -1,0 +1,302 @@
+"""The container image built and run for real: its content, a run as Kubernetes runs it,
+readiness, real solves (the 21-joint and the BVH routes), problem answers, a graceful stop
+and the models volume override. Figures: ``SMOKE name=value`` lines after the run.
+
+The engine and the base image come from ``bash docker/smoke.sh --bootstrap`` (docker when
+its daemon answers, else podman; the base pulled, else a debootstrap stand-in). Without
+them the module skips and says why, unless ``SMOKE_REQUIRE=1`` (CI), where that fails.
+
+Knobs: ``SMOKE_ENGINE`` (docker|podman), ``SMOKE_IMAGE`` (localhost/marionette:smoke),
+``BASE_IMAGE``, ``SMOKE_STANDIN_IMAGE``, ``SMOKE_NO_CACHE=1`` (a cold build),
+``SMOKE_SOLVES`` (20 timed solves), ``SMOKE_READY_TIMEOUT`` (240 s).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import shutil
+import statistics
+import subprocess
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from core.rest import rest_pose
+from core.skeleton import JOINT_INDEX, JOINT_NAMES, bone_lengths
+from tests.service.server import free_port
+from tests.service.test_api import as_array, assert_problem
+
+httpx = pytest.importorskip("httpx")
+
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(1800)]
+
+ROOT = Path(__file__).resolve().parents[2]
+EXAMPLES = ROOT / "docs" / "examples"
+IMAGE = os.environ.get("SMOKE_IMAGE", "localhost/marionette:smoke")
+STANDIN = os.environ.get("SMOKE_STANDIN_IMAGE", "localhost/marionette-base:bookworm")
+# As in deploy/k8s: read-only root, a tmpfs /tmp, no capabilities, no privilege gain.
+SECURITY = ["--read-only", "--tmpfs", "/tmp", "--cap-drop", "ALL"]
+SECURITY += ["--security-opt", "no-new-privileges"]
+
+
+def unavailable(reason: str) -> None:
+    if os.environ.get("SMOKE_REQUIRE") == "1":
+        pytest.fail(reason)
+    pytest.skip(reason)
+
+
+@dataclass
+class Engine:
+    name: str
+    cmd: list[str]
+    env: dict[str, str]
+
+    def run(self, *args: str, timeout: float = 120, check: bool = True) -> str:
+        proc = subprocess.run(
+            [*self.cmd, *args], env=self.env, capture_output=True, text=True, timeout=timeout
+        )
+        if check and proc.returncode != 0:
+            raise AssertionError(f"{self.name} {args[0]}: exit {proc.returncode}\n{proc.stderr}")
+        return proc.stdout.strip()
+
+    def inspect(self, kind: str, obj: str, fmt: str) -> str:
+        return self.run(kind, "inspect", "--format", fmt, obj)
+
+    def has_image(self, image: str) -> bool:
+        return subprocess.run([*self.cmd, "image", "inspect", image], env=self.env,
+                              capture_output=True, timeout=60).returncode == 0  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def engine() -> Engine:
+    name = os.environ.get("SMOKE_ENGINE")
+    if not name:
+        name = "podman"
+        if shutil.which("docker"):
+            ok = subprocess.run(["docker", "info"], capture_output=True, timeout=20)
+            name = "docker" if ok.returncode == 0 else name
+    if shutil.which(name) is None:
+        unavailable(f"{name} is not installed: `bash docker/smoke.sh` installs podman")
+    env = dict(os.environ)
+    cmd = [name]
+    if name == "podman":  # no systemd here: cgroupfs, runc, no raised ulimits
+        env.setdefault("CONTAINERS_CONF", str(ROOT / "docker" / "containers.conf"))
+        cmd += ["--runtime", "runc"]
+    info = subprocess.run([*cmd, "info"], env=env, capture_output=True, text=True, timeout=60)
+    if info.returncode != 0:
+        unavailable(f"{name} does not work here: {info.stderr.strip()[-300:]}")
+    return Engine(name, cmd, env)
+
+
+@pytest.fixture(scope="module")
+def base_image(engine: Engine) -> str:
+    base = os.environ.get("BASE_IMAGE", "python:3.11-slim-bookworm")
+    if engine.name == "podman" and "/" not in base:
+        base = f"docker.io/library/{base}"
+    for image in (base, STANDIN):
+        if engine.has_image(image):
+            return image
+    unavailable(f"no base image ({base} or {STANDIN}): run `bash docker/smoke.sh --bootstrap`")
+    raise AssertionError("unreachable")
+
+
+@pytest.fixture(scope="module")
+def image(engine: Engine, base_image: str, figures: dict[str, str]) -> str:
+    flags = ["--network", "host", "--build-arg", f"BASE_IMAGE={base_image}"]
+    flags += ["-f", "docker/Dockerfile", "-t", IMAGE]
+    if engine.name == "podman":
+        flags += ["--format", "docker"]  # OCI would drop the HEALTHCHECK
+    ca = Path(os.environ.get("SMOKE_CA_BUNDLE", "/etc/ssl/certs/ca-certificates.crt"))
+    if ca.is_file() and ca.stat().st_size:  # for pip behind a TLS-inspecting proxy
+        flags += ["--secret", f"id=cacert,src={ca}"]
+    if os.environ.get("PIP_INDEX_URL", "").startswith("http"):
+        flags += ["--build-arg", f"PIP_INDEX_URL={os.environ['PIP_INDEX_URL']}"]
+    if os.environ.get("SMOKE_NO_CACHE") == "1":
+        flags.append("--no-cache")
+    t0 = time.perf_counter()
+    proc = subprocess.run([*engine.cmd, "build", *flags, str(ROOT)], env=engine.env,
+                          capture_output=True, text=True, timeout=1800, cwd=ROOT)  # fmt: skip
+    assert proc.returncode == 0, "image build failed:\n" + (proc.stdout + proc.stderr)[-4000:]
+    figures["build_seconds"] = f"{time.perf_counter() - t0:.1f}"
+    figures["image_size_mb"] = str(round(int(engine.inspect("image", IMAGE, "{{.Size}}")) / 1e6))
+    figures["base_image"] = base_image
+    return IMAGE
+
+
+@dataclass
+class Container:
+    name: str
+    url: str
+    client: Any  # httpx.Client on the published port
+
+
+def start(engine: Engine, image: str, name: str, *extra: str) -> str:
+    port = free_port()
+    flags = [*SECURITY, "-p", f"127.0.0.1:{port}:8000", *extra]
+    if engine.name == "podman":  # podman runs health checks from systemd timers: none here
+        flags += ["--health-interval", "disable"]
+    engine.run("run", "-d", "--name", name, *flags, image)
+    return f"http://127.0.0.1:{port}"
+
+
+def remove(engine: Engine, name: str) -> None:
+    engine.run("rm", "-f", "-t", "5", name, timeout=90, check=False)
+
+
+def running(engine: Engine, name: str) -> bool:
+    return engine.inspect("container", name, "{{.State.Running}}") == "true"
+
+
+def status(client: Any, path: str) -> int:
+    try:
+        code: int = client.get(path, timeout=3).status_code
+        return code
+    except httpx.HTTPError:
+        return 0
+
+
+@pytest.fixture(scope="module")
+def service(engine: Engine, image: str, figures: dict[str, str]) -> Iterator[Container]:
+    name = f"marionette-smoke-{os.getpid()}"
+    t0 = time.perf_counter()
+    url = start(engine, image, name)
+    client = httpx.Client(base_url=url)
+    try:
+        limit = t0 + float(os.environ.get("SMOKE_READY_TIMEOUT", "240"))
+        while (code := status(client, "/v2/health/ready")) != 200:
+            if code == 503:  # the service gives up for good on a load failure, saying why
+                detail = client.get("/v2/health/ready").json().get("detail") or ""
+                assert "loading" in detail or not detail, f"cannot get ready: {detail}"
+            assert running(engine, name), "exited before ready:\n" + engine.run("logs", name)
+            assert time.perf_counter() < limit, f"not ready: {code}"
+            time.sleep(0.25)
+        figures["start_to_ready_seconds"] = f"{time.perf_counter() - t0:.1f}"
+        yield Container(name, url, client)
+    finally:
+        client.close()
+        remove(engine, name)
+
+
+# --------------------------------------------------------------------------- the image
+def test_image_runs_unprivileged_with_a_healthcheck_and_only_the_service(
+    engine: Engine, image: str
+) -> None:
+    user = engine.inspect("image", image, "{{.Config.User}}")
+    assert user and user.split(":")[0] not in ("0", "root"), f"runs as root: {user!r}"
+    assert "healthcheck.py" in engine.inspect("image", image, "{{json .Config.Healthcheck}}")
+    script = (
+        "import importlib.util as u, shutil\n"
+        "tools = [t for t in ('gcc', 'cc', 'g++', 'make', 'curl', 'wget') if shutil.which(t)]\n"
+        "bad = [m for m in ('torch', 'scipy', 'rich', 'onnx', 'trainer', 'pytest')"
+        " if u.find_spec(m)]\n"
+        "need = [m for m in ('numpy', 'onnxruntime', 'fastapi', 'uvicorn', 'service', 'core')"
+        " if not u.find_spec(m)]\n"
+        "assert not (tools or bad or need), (tools, bad, need)\n"
+    )
+    engine.run("run", "--rm", "--entrypoint", "/opt/venv/bin/python", image, "-c", script)
+
+
+# --------------------------------------------------------------------------- the running service
+def test_ready_live_healthcheck_and_not_root(engine: Engine, service: Container) -> None:
+    assert status(service.client, "/v2/health/live") == 200
+    # the image's own HEALTHCHECK command, run the way the engine runs it
+    engine.run("exec", service.name, "/opt/venv/bin/python", "/opt/marionette/healthcheck.py")
+    assert engine.run("exec", service.name, "id", "-u") != "0"
+
+
+def test_solve_default_and_exact_reach(service: Container, figures: dict[str, str]) -> None:
+    pose = rest_pose()
+    shoulder = pose[JOINT_INDEX["left_shoulder"]]
+    reach = (-0.02, -0.30, 0.30)  # forward, inside the arm's reach
+    target = [float(s + d) for s, d in zip(shoulder, reach, strict=True)]
+    body = {
+        "pose": dict(zip(JOINT_NAMES, pose.tolist(), strict=True)),
+        "targets": [{"joint": "left_wrist", "position": target}],
+    }
+    start = math.dist(pose[JOINT_INDEX["left_wrist"]], target)
+    # the default reach is the learned solver's alone: near (and most of the way), not exact
+    limits = {"default": min(0.10, 0.5 * start), "exact": 1e-3 + 1e-6}
+    for options in ({}, {"reach": "exact"}):
+        reach_name = options.get("reach", "default")
+        resp = service.client.post("/v1/solve", json={**body, "options": options})
+        assert resp.status_code == 200, resp.text
+        out = resp.json()
+        solved = as_array(out["pose"])
+        assert sorted(out["pose"]) == sorted(JOINT_NAMES) and all(map(math.isfinite, solved.flat))
+        (t,) = out["targets"]
+        assert t["error"] <= limits[reach_name], (t, limits)
+        assert abs(math.dist(out["pose"]["left_wrist"], target) - t["error"]) < 1e-3
+        assert abs(bone_lengths(solved) / bone_lengths(pose) - 1).max() <= 0.01
+        figures[f"target_error_mm_{reach_name}"] = f"{t['error'] * 1e3:.2f}"
+    times = []
+    for _ in range(int(os.environ.get("SMOKE_SOLVES", "20"))):
+        t0 = time.perf_counter()
+        assert service.client.post("/v1/solve", json=body).status_code == 200
+        times.append((time.perf_counter() - t0) * 1e3)
+    figures["solve_latency_ms_median"] = f"{statistics.median(times):.1f}"
+    figures["solve_latency_ms_max"] = f"{max(times):.1f}"
+
+
+def test_character_and_bvh_routes(service: Container, figures: dict[str, str]) -> None:
+    body = json.loads((EXAMPLES / "bvh_solve.json").read_text())
+    t0 = time.perf_counter()
+    resp = service.client.post("/v1/bvh/solve", json=body)
+    figures["bvh_solve_ms"] = f"{(time.perf_counter() - t0) * 1e3:.1f}"
+    assert resp.status_code == 200, resp.text
+    out = resp.json()
+    assert out["bvh"].startswith("HIERARCHY") and out["targets"][0]["reached"] is True
+    character = json.loads((EXAMPLES / "character_solve.json").read_text())
+    resp = service.client.post("/v1/character/solve", json=character)
+    assert resp.status_code == 200, resp.text
+    inspect = {"bvh": body["bvh"], "frame": 0}
+    assert service.client.post("/v1/bvh/inspect", json=inspect).status_code == 200
+
+
+def test_bad_requests_are_problems(service: Container) -> None:
+    bad = json.loads((EXAMPLES / "bad.json").read_text())
+    assert_problem(service.client.post("/v1/solve", json=bad), 422)
+    resp = service.client.post("/v1/bvh/solve", json={"bvh": "HIERARCHY\nROOT", "targets": []})
+    assert_problem(resp, 422)
+
+
+def test_sigterm_is_a_graceful_stop(
+    engine: Engine, service: Container, figures: dict[str, str]
+) -> None:
+    t0 = time.perf_counter()
+    engine.run("stop", "-t", "30", service.name, timeout=90)
+    figures["stop_seconds"] = f"{time.perf_counter() - t0:.1f}"
+    code = engine.inspect("container", service.name, "{{.State.ExitCode}}")
+    # 0, or 143 when the server re-raises SIGTERM after its graceful shutdown; 137 = killed
+    assert code in ("0", "143"), f"exit code {code} after SIGTERM"
+
+
+def test_a_models_volume_overrides_the_bundled_models(
+    engine: Engine, image: str, tmp_path: Path
+) -> None:
+    """An empty directory mounted over the models: the service must never become ready."""
+    empty = tmp_path / "models"
+    empty.mkdir(mode=0o755)
+    name = f"marionette-smoke-models-{os.getpid()}"
+    url = start(engine, image, name, "-v", f"{empty}:/opt/marionette/models:ro")
+    try:
+        with httpx.Client(base_url=url) as client:
+            limit = time.perf_counter() + 90
+            while running(engine, name):
+                ready = status(client, "/v2/health/ready")
+                assert ready != 200, "ready with an empty models directory"
+                if ready and status(client, "/v2/health/live") == 200:
+                    time.sleep(3)  # time to (wrongly) turn ready before judging
+                    assert status(client, "/v2/health/ready") != 200
+                    return
+                assert time.perf_counter() < limit, "neither exited nor answered in 90 s"
+                time.sleep(0.5)
+        code = engine.inspect("container", name, "{{.State.ExitCode}}")
+        assert code != "0", "exited 0 without models"
+    finally:
+        remove(engine, name)
