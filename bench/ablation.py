@@ -23,8 +23,9 @@ VARIANTS: dict[str, str] = {
     "no_augment": "no random bodies, mirror, facing or offsets; pairs canonicalised apart",
     "canonical_pairs": "random bodies kept; each pose of a pair canonicalised on its own",
     "no_bodies": "world-frame pairs and mirror kept; recorded bodies only, no size norm",
-    "no_delta": "answer D(z') instead of start + D(z') - D(z)",
-    "full": "everything: world-frame pairs, random bodies, mirror, delta, size norm",
+    "no_delta": "the paper's answer D(S(z, t))",
+    "no_anchor": "delta answer start + D(S(z, t)) - D(z), not anchored",
+    "full": "everything: world-frame pairs, random bodies, mirror, size norm, anchored delta",
     "shipped": "the shipped recipe at its full budget (trainer/configs/default.toml)",
 }
 COMPLETION = "6-point completion"
@@ -60,6 +61,7 @@ def _rows(name: str, data: dict[str, Any], families: list[str] | None) -> list[R
         wins = sum(s["neural_bone"]["mpjpe"] < s["fabrik"]["mpjpe"] for s in sets.values())
         five = sets.get("5 end effectors")
         comp = fam["sets"].get(COMPLETION, {}).get("completion", {}).get("mpjpe", float("nan"))
+        recon = fam.get("recon") or {}
         out.append(
             Row(
                 variant=name,
@@ -74,7 +76,7 @@ def _rows(name: str, data: dict[str, Any], families: list[str] | None) -> list[R
                 ),
                 reach=mean("neural_bone", "reach_mean"),
                 completion=float(comp),
-                recon=float(fam.get("recon", {}).get("mean", float("nan"))),
+                recon=float(recon.get("mean", float("nan"))),
             )
         )
     return out

@@ -108,6 +108,12 @@ class Serving(_Strict):
         description="The solved pose is start + D(z') - D(z) (the autoencoder's error on the "
         "start pose left out) instead of D(z').",
     )
+    anchor: bool = Field(
+        default=False,
+        description="With delta: subtract what the solver does when asked to stay put, "
+        "start + D(S(z, t)) - D(S(z, x_t)), so an edit that asks for no change changes "
+        "nothing and the network's bias never reaches the answer.",
+    )
 
 
 class ModelEntry(_Strict):

@@ -133,6 +133,7 @@ class Engine:
         )
         self.body = m.serving.body
         self.delta = m.serving.delta
+        self.anchor = m.serving.anchor
         known = np.asarray(m.skeleton.skeletons, dtype=np.float64)  # [C, 20]
         self._shape_totals = known.sum(axis=-1)
         self._shapes = known / self._shape_totals[:, None]
@@ -293,8 +294,8 @@ class Engine:
         # every item's targets on a [21, 3] canvas, so a solver gathers its joints at once
         canvas = np.zeros((m, NUM_JOINTS, 3), dtype=np.float32)
         rows = np.arange(m)[:, None]
-        canvas[rows, tidx[items]] = self._within_reach(canon[items], tidx[items], tcan[items]) / (
-            scales[items, None, None]
+        canvas[rows, tidx[items]] = (
+            self._within_reach(canon[items], tidx[items], tcan[items]) / (scales[items, None, None])
         )
         groups: dict[tuple[str, ...], list[int]] = {}
         plans: list[list[str]] = []
@@ -356,6 +357,11 @@ class Engine:
             targets = canvas[:, joints].reshape(len(x), -1)
             if self.prefused:  # the shipped graph gives the delta answer itself
                 pose = self.fused[key](pose, targets)
+            elif self.anchor:  # what the solver changes beyond asking for "stay put"
+                z = self.encoder(pose)
+                here = pose[:, [3 * int(j) + k for j in joints for k in range(3)]]
+                moved = self.decoder(self.solvers[key](z, targets))
+                pose = pose + moved - self.decoder(self.solvers[key](z, here))
             elif len(sequence) == 1:
                 pose = pose + self.fused[key](pose, targets) - self.decoder(self.encoder(pose))
             else:

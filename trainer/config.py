@@ -41,6 +41,11 @@ class SolverConfig(_Section):
         default=True,
         description="Answer start + D(z') - D(z) (trained and served so); False: D(z').",
     )
+    anchor: bool = Field(
+        default=True,
+        description="With delta: answer start + D(S(z, t)) - D(S(z, x_t)) (trained and served "
+        "so): what the solver does when asked to stay put is subtracted.",
+    )
     lr: float = Field(default=1e-4, gt=0)
     batch_size: int = Field(default=256, gt=0)
     epochs: int = Field(default=5, ge=1)

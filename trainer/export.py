@@ -37,6 +37,7 @@ from trainer.train import (
     PairSource,
     Trained,
     ae_samples,
+    answer_mode,
     augment,
     completion_inputs,
     flat,
@@ -71,18 +72,26 @@ class DecoderGraph(nn.Module):
 
 
 class FusedGraph(nn.Module):
-    """One solver's whole edit, ``pose, targets -> pose``: encode, solve, decode and, for
-    delta models, answer ``pose + D(z') - D(z)`` (what ``service.engine`` serves)."""
+    """One solver's whole edit, ``pose, targets -> solved_pose``, answered as the service
+    serves it (``trainer.train.solved_poses``): plain D(S(z, t)), delta
+    ``pose + D(S(z, t)) - D(z)`` or anchored ``pose + D(S(z, t)) - D(S(z, x_t))``."""
 
-    def __init__(self, ae: TiedAutoencoder, solver: SingleSolver, delta: bool) -> None:
+    def __init__(
+        self, ae: TiedAutoencoder, solver: SingleSolver, joints: list[str], mode: str
+    ) -> None:
         super().__init__()
-        self.ae, self.solver, self.delta = ae, solver, delta
+        self.ae, self.solver, self.mode = ae, solver, mode
+        self.cols: torch.Tensor
+        self.register_buffer("cols", torch.tensor(target_columns(joints)))
 
     def forward(self, pose: torch.Tensor, targets: torch.Tensor) -> torch.Tensor:
         z = self.ae.encode(pose)
         out = self.ae.decode(self.solver(z, targets))
-        if self.delta:
+        if self.mode == "delta":
             out = pose + (out - self.ae.decode(z))
+        elif self.mode == "anchored":
+            stay = self.ae.decode(self.solver(z, pose.index_select(1, self.cols)))
+            out = pose + (out - stay)
         return out
 
 
@@ -108,7 +117,8 @@ def evaluate(cfg: TrainConfig, trained: Trained) -> dict[str, dict[str, dict[str
             src = PairSource.of(data, max_gap)
             a, p = src.fixed_pairs(cfg.seed + 101, cfg.max_eval_frames)
             start, goal = src.pairs(a, p, np.random.default_rng(cfg.seed + 103), cfg.augment, total)
-            metrics_by_key = solver_metrics(ae, bank, start, goal, cfg.solver.delta)
+            mode = answer_mode(cfg.solver.delta, cfg.solver.anchor)
+            metrics_by_key = solver_metrics(ae, bank, start, goal, mode)
             for key, metrics in metrics_by_key.items():
                 out.setdefault(f"solver:{key}", {})[split] = metrics
             aug = augment(sub, np.random.default_rng(cfg.seed + 102), True, True, cfg.augment)
@@ -298,7 +308,9 @@ def export_all(
         add(
             f"fused:{key}",
             f"fused_{key}.onnx",
-            FusedGraph(ae, solver, cfg.solver.delta).eval(),
+            FusedGraph(
+                ae, solver, list(joints), answer_mode(cfg.solver.delta, cfg.solver.anchor)
+            ).eval(),
             {"pose": sample, "targets": sample[:, target_columns(joints)]},
             "solved_pose",
             ae_params + _params(solver),
@@ -358,6 +370,7 @@ def export_all(
             if cfg.augment.enabled and cfg.augment.normalise_size
             else "nearest_skeleton",
             delta=cfg.solver.delta,
+            anchor=cfg.solver.delta and cfg.solver.anchor,
         ),
         models=entries,
         provenance=Provenance(

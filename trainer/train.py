@@ -412,6 +412,11 @@ class PairSource:
         return s.reshape(len(s), -1), g.reshape(len(g), -1)
 
 
+def answer_mode(delta: bool, anchor: bool) -> str:
+    """How a solver's latent becomes the answer (see :func:`solved_poses`)."""
+    return "anchored" if delta and anchor else "delta" if delta else "plain"
+
+
 def solver_losses(
     ae: TiedAutoencoder,
     bank: SolverBank,
@@ -420,18 +425,15 @@ def solver_losses(
     goal: torch.Tensor,
     other_weight: float,
     bone_weight: float = 0.0,
-    delta: bool = False,
+    mode: str = "plain",
 ) -> tuple[torch.Tensor, torch.Tensor]:
-    """Per-solver loss ``[S]`` and decoded poses ``[S, B, 63]`` for a batch of pairs
-    (``delta``: the answer is start + D(z') - D(z), as the service returns it):
+    """Per-solver loss ``[S]`` and answers ``[S, B, 63]`` for a batch of pairs (``mode`` as
+    the service answers, :func:`solved_poses`):
     MSE(target joints) + other_weight * MSE(other joints)
     + bone_weight * MSE(decoded bone lengths - start bone lengths) (same clip, same body)."""
     n_sets = len(bank.sets)
-    z = ae.encode(start)
-    z_s = z.unsqueeze(0).expand(n_sets, -1, -1)
+    decoded = solved_poses(ae, net, start, goal, n_sets, mode)
     goal_s = goal.unsqueeze(0).expand(n_sets, -1, -1)
-    new_z = net(z_s, goal_s)
-    decoded = solved_poses(ae, start, z, new_z, delta)
     sq = (decoded - goal_s) ** 2  # [S, B, 63]
     target_mask = torch.zeros(n_sets, 1, goal.shape[1])
     for s, joints in enumerate(bank.sets):
@@ -448,13 +450,27 @@ def solver_losses(
 
 
 def solved_poses(
-    ae: TiedAutoencoder, start: torch.Tensor, z: torch.Tensor, new_z: torch.Tensor, delta: bool
+    ae: TiedAutoencoder,
+    net: nn.Module,
+    start: torch.Tensor,
+    goal: torch.Tensor,
+    n_sets: int,
+    mode: str,
 ) -> torch.Tensor:
-    """Decoded answers ``[S, B, 63]``: D(z'), or with ``delta`` start + D(z') - D(z), which
-    leaves the autoencoder's own error on the start pose out of the answer."""
-    decoded = ae.decode(new_z)
-    if delta:
-        decoded = decoded + (start - ae.decode(z)).unsqueeze(0)
+    """Every solver's answer ``[S, B, 63]`` for pairs ``[B, 63]``, z = E(start):
+
+    * ``plain``: D(S(z, t)) (the paper);
+    * ``delta``: start + D(S(z, t)) - D(z): the autoencoder's error on the start pose
+      stays out of the answer;
+    * ``anchored``: start + D(S(z, t)) - D(S(z, x_t)): also what the solver does when
+      asked to stay where it is, so an edit that asks for nothing changes nothing."""
+    z = ae.encode(start).unsqueeze(0).expand(n_sets, -1, -1)
+    decoded = ae.decode(net(z, goal.unsqueeze(0).expand(n_sets, -1, -1)))
+    if mode == "delta":
+        decoded = decoded + (start - ae.decode(z[0])).unsqueeze(0)
+    elif mode == "anchored":
+        stay = ae.decode(net(z, start.unsqueeze(0).expand(n_sets, -1, -1)))
+        decoded = decoded + (start.unsqueeze(0) - stay)
     return decoded
 
 
@@ -474,13 +490,10 @@ def solver_metrics(
     bank: SolverBank,
     start: torch.Tensor,
     goal: torch.Tensor,
-    delta: bool = False,
+    mode: str = "plain",
 ) -> dict[str, dict[str, float]]:
     """Per solver: mean reach error of its targets and MPJPE of the whole pose (cm)."""
-    n_sets = len(bank.sets)
-    z = ae.encode(start)
-    new_z = bank(z.unsqueeze(0).expand(n_sets, -1, -1), goal.unsqueeze(0).expand(n_sets, -1, -1))
-    decoded = solved_poses(ae, start, z, new_z, delta)
+    decoded = solved_poses(ae, bank, start, goal, len(bank.sets), mode)
     out: dict[str, dict[str, float]] = {}
     for s, joints in enumerate(bank.sets):
         err = (decoded[s] - goal).reshape(len(goal), NUM_JOINTS, 3).norm(dim=-1)
@@ -498,6 +511,7 @@ def train_solvers(
     cfg: TrainConfig, d: Dist, ae: TiedAutoencoder, splits: Splits, total: float, fresh: bool
 ) -> tuple[SolverBank, StageState]:
     sc, aug = cfg.solver, cfg.augment
+    mode = answer_mode(sc.delta, sc.anchor)
     max_gap = max(1, round(sc.max_gap_seconds * FPS))
     src = PairSource.of(splits.train, max_gap)
     val = PairSource.of(splits.val, max_gap)
@@ -520,7 +534,7 @@ def train_solvers(
         for idx in batches(len(src.poses), sc.batch_size, d, cfg.seed + 1, epoch):
             start, goal = src.pairs(idx, partners[idx], rng, aug, total)
             loss, _ = solver_losses(
-                ae, bank, net, start, goal, sc.other_weight, sc.bone_weight, sc.delta
+                ae, bank, net, start, goal, sc.other_weight, sc.bone_weight, mode
             )
             loss = loss.sum()
             optim.zero_grad(set_to_none=True)
@@ -533,9 +547,9 @@ def train_solvers(
 
     def validate() -> dict[str, float]:
         losses, _ = solver_losses(
-            ae, bank, bank, v_start, v_goal, sc.other_weight, sc.bone_weight, sc.delta
+            ae, bank, bank, v_start, v_goal, sc.other_weight, sc.bone_weight, mode
         )
-        metrics = solver_metrics(ae, bank, v_start, v_goal, sc.delta)
+        metrics = solver_metrics(ae, bank, v_start, v_goal, mode)
         return {
             "val_loss": float(losses.mean()),
             "val_reach_cm": float(np.mean([m["reach_cm"] for m in metrics.values()])),
