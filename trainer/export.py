@@ -162,8 +162,11 @@ def _export(
     write_atomic(path, model.SerializeToString())
 
 
-def _parity(path: Path, module: nn.Module, feeds: dict[str, torch.Tensor]) -> float:
-    """Max |ORT - torch| on real inputs; raises if above the tolerance."""
+def _parity(
+    path: Path, module: nn.Module, feeds: dict[str, torch.Tensor], graphs: int = 1
+) -> float:
+    """Max |ORT - torch| on real inputs; raises if above the tolerance (``PARITY_TOLERANCE``
+    per network the graph chains: a fused anchored edit runs five)."""
     options = ort.SessionOptions()
     options.intra_op_num_threads = 1
     session = ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
@@ -171,8 +174,10 @@ def _parity(path: Path, module: nn.Module, feeds: dict[str, torch.Tensor]) -> fl
     with torch.no_grad():
         want = module(*feeds.values()).numpy()
     err = float(np.abs(got - want).max())
-    if not err <= PARITY_TOLERANCE:
-        raise RuntimeError(f"{path.name}: ONNX/torch mismatch {err:.3g} > {PARITY_TOLERANCE}")
+    if not err <= PARITY_TOLERANCE * graphs:
+        raise RuntimeError(
+            f"{path.name}: ONNX/torch mismatch {err:.3g} > {PARITY_TOLERANCE * graphs:.3g}"
+        )
     return err
 
 
@@ -238,7 +243,7 @@ def export_all(
     ) -> None:
         path = out / file
         _export(module, tuple(feeds.values()), list(feeds), output, path, cfg.opset)
-        _parity(path, module, feeds)
+        _parity(path, module, feeds, extra.pop("graphs", 1))
         with torch.no_grad():
             out_dim = module(*feeds.values()).shape[1]
         stage = extra.pop("stage")
@@ -319,6 +324,7 @@ def export_all(
             key=key,
             stage="solvers",
             metrics_of=f"solver:{key}",
+            graphs=5,  # encoder, solver twice, decoder twice
         )
     aug = augment(sample, np.random.default_rng(0), True, True)
     for level, net in enumerate(trained.completion, start=1):
