@@ -10,6 +10,15 @@ Mocap (real data, session-scoped):
   ``pose-trainer dataset`` (train/val/test all non-empty).
 - ``more_mocap``: a few real files of the three multi-body archives (CMU ASF/AMC, ReActIdle,
   AnimatedDrawings), laid out like the archives; skipped when those archives are absent.
+- ``real_poses``: real canonical poses and (start, goal) pairs from ``small_dataset``.
+
+Every test that uses one of these (directly or through another fixture) is marked
+``mocap`` by :func:`pytest_collection_modifyitems`: ``pytest -m "not mocap"`` runs the
+archive-free part; CI runs everything.
+
+Synthetic (no mocap): ``synthetic_poses`` has the same shape as ``real_poses``, built from
+the rest pose with random bone rotations; use it wherever any valid pose will do, and keep
+``real_poses`` for assertions about real motion (accuracy on real edits).
 """
 
 from __future__ import annotations
@@ -169,6 +178,19 @@ def small_dataset(mocap_clips: MocapClips, tmp_path_factory: pytest.TempPathFact
     return out
 
 
+#: Fixtures that need the mocap archives; a test using any of them is marked ``mocap``.
+MOCAP_FIXTURES = frozenset(
+    {"mocap_dir", "mocap_clips", "more_mocap", "small_dataset", "real_poses"}
+)
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Mark every test that (transitively) uses a mocap fixture with ``mocap``."""
+    for item in items:
+        if MOCAP_FIXTURES.intersection(getattr(item, "fixturenames", ())):
+            item.add_marker(pytest.mark.mocap)
+
+
 # --------------------------------------------------------------------------------------
 # Models and the service (the shipped models by default; $MARIONETTE_MODELS overrides)
 # --------------------------------------------------------------------------------------
@@ -188,7 +210,7 @@ def engine(models_dir: Path) -> Engine:
 
 
 @pytest.fixture(scope="session")
-def real_poses(small_dataset: Path) -> RealPoses:
+def real_poses(small_dataset: Path) -> PosePairs:
     """Real canonical poses (metres) and pairs 0.2-1 s apart from the same clip."""
     import numpy as np
 
@@ -201,7 +223,7 @@ def real_poses(small_dataset: Path) -> RealPoses:
     anchors = np.sort(rng.choice(len(data), size=200, replace=False))
     partners = sample_partners(lo, hi, anchors, rng, frame=data.frame, min_gap=6)
     keep = partners != anchors
-    return RealPoses(
+    return PosePairs(
         poses=data.positions.astype(np.float64),
         starts=anchors[keep],
         goals=partners[keep],
@@ -209,16 +231,123 @@ def real_poses(small_dataset: Path) -> RealPoses:
 
 
 @dataclass(frozen=True)
-class RealPoses:
-    poses: Any  # (N, 21, 3) float64 canonical metres
+class PosePairs:
+    """Poses and (start, goal) pairs of indices into them: ``real_poses`` (canonical frames
+    of real clips) or ``synthetic_poses`` (the rest pose plus random rotations)."""
+
+    poses: Any  # (N, 21, 3) float64 metres
     starts: Any  # indices of start poses
-    goals: Any  # indices of target poses, same clip, 0.2-1 s from the start
+    goals: Any  # indices of target poses: a moderate change of the start
 
     def pose_dict(self, i: int, transform: Any = None) -> dict[str, list[float]]:
         from core.skeleton import JOINT_NAMES
 
         p = self.poses[i] if transform is None else transform(self.poses[i])
         return {n: [float(v) for v in p[j]] for j, n in enumerate(JOINT_NAMES)}
+
+
+#: The older name (the real set came first).
+RealPoses = PosePairs
+
+#: Largest random turn (degrees) of a bone about its parent joint, by the child joint's
+#: name without its side: the spine and head bend a little, the limbs more, so every pose
+#: stays upright.
+SYNTH_MAX_DEG: dict[str, float] = {
+    "spine1": 10.0,
+    "spine2": 10.0,
+    "neck": 15.0,
+    "head": 20.0,
+    "collar": 10.0,
+    "shoulder": 45.0,
+    "elbow": 50.0,
+    "wrist": 30.0,
+    "hip": 30.0,
+    "knee": 35.0,
+    "ankle": 30.0,
+    "foot": 20.0,
+}
+SYNTH_PAIRS = 64
+SYNTH_SEED = 20240610
+
+
+def axis_angle(axis: Any, angle: Any) -> Any:
+    """Rotation matrices ``[..., 3, 3]`` from unit axes ``[..., 3]`` and angles ``[...]``
+    in radians (Rodrigues)."""
+    import numpy as np
+
+    x, y, z = axis[..., 0], axis[..., 1], axis[..., 2]
+    c, s = np.cos(angle), np.sin(angle)
+    t = 1.0 - c
+    return np.stack(
+        [
+            np.stack([c + x * x * t, x * y * t - z * s, x * z * t + y * s], axis=-1),
+            np.stack([y * x * t + z * s, c + y * y * t, y * z * t - x * s], axis=-1),
+            np.stack([z * x * t - y * s, z * y * t + x * s, c + z * z * t], axis=-1),
+        ],
+        axis=-2,
+    )
+
+
+def pose_from_rotations(local: Any, yaw: Any, root: Any) -> Any:
+    """Forward kinematics of the rest pose: ``local[..., j, :, :]`` turns joint ``j``'s bone
+    (and everything below it) about its parent joint, root outwards; then the whole body
+    turns by ``yaw`` about +Y and moves by ``root``. Bone lengths stay the rest lengths."""
+    import numpy as np
+
+    from core.rest import rest_pose
+    from core.skeleton import NUM_JOINTS, PARENTS
+
+    rest = rest_pose()
+    c, s = np.cos(yaw), np.sin(yaw)
+    zero, one = np.zeros_like(yaw), np.ones_like(yaw)
+    heading = np.stack(
+        [np.stack([c, zero, s], -1), np.stack([zero, one, zero], -1), np.stack([-s, zero, c], -1)],
+        axis=-2,
+    )
+    turn = [heading] * NUM_JOINTS  # accumulated rotation of each joint's bone
+    pos = np.zeros((*np.shape(yaw), NUM_JOINTS, 3))
+    pos[..., 0, :] = rest[0] + root
+    for j, parent in enumerate(PARENTS):
+        if parent >= 0:
+            turn[j] = turn[parent] @ local[..., j, :, :]
+            pos[..., j, :] = pos[..., parent, :] + turn[j] @ (rest[j] - rest[parent])
+    return pos
+
+
+def make_synthetic_poses(seed: int = SYNTH_SEED, n: int = SYNTH_PAIRS) -> PosePairs:
+    """``n`` synthetic start poses, then ``n`` goals (see :func:`synthetic_poses`)."""
+    import numpy as np
+
+    from core.skeleton import JOINT_NAMES, NUM_JOINTS
+
+    rng = np.random.default_rng(seed)
+    max_deg = np.array([0.0] + [SYNTH_MAX_DEG[j.split("_")[-1]] for j in JOINT_NAMES[1:]])
+    axis = rng.normal(size=(n, NUM_JOINTS, 3))
+    axis /= np.linalg.norm(axis, axis=-1, keepdims=True)
+    local = axis_angle(axis, np.radians(rng.uniform(0.0, 1.0, (n, NUM_JOINTS)) * max_deg))
+    yaw = rng.uniform(-np.pi, np.pi, size=n)
+    root = rng.uniform(-0.5, 0.5, size=(n, 3)) * np.array([1.0, 0.05, 1.0])
+    edit = np.broadcast_to(np.eye(3), (n, NUM_JOINTS, 3, 3)).copy()
+    for i in range(n):
+        joints = rng.choice(np.arange(1, NUM_JOINTS), size=int(rng.integers(2, 5)), replace=False)
+        turn_axis = rng.normal(size=(len(joints), 3))
+        turn_axis /= np.linalg.norm(turn_axis, axis=-1, keepdims=True)
+        angle = np.radians(rng.uniform(10.0, 40.0, len(joints)))
+        edit[i, joints] = axis_angle(turn_axis, angle)
+    starts = pose_from_rotations(local, yaw, root)
+    goals = pose_from_rotations(local @ edit, yaw, root)
+    return PosePairs(
+        poses=np.concatenate([starts, goals]), starts=np.arange(n), goals=np.arange(n, 2 * n)
+    )
+
+
+@pytest.fixture(scope="session")
+def synthetic_poses() -> PosePairs:
+    """Synthetic poses (numpy only, seeded; no mocap needed), shaped like ``real_poses``:
+    the rest pose with each bone turned at random about its parent joint, root outwards
+    (bone lengths exact, upright), under a random yaw and root offset; each goal turns 2-4
+    bones of its start by a further 10-40 degrees."""
+    return make_synthetic_poses()
 
 
 def make_client(models_dir: Path, **settings: Any) -> Any:
