@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from core.skeleton import JOINT_INDEX, JOINT_NAMES, bone_lengths
-from tests.conftest import RealPoses, make_client
+from tests.conftest import PosePairs, make_client
 
 PROBLEM = "application/problem+json"
 
@@ -33,12 +33,12 @@ def yaw_shift(yaw: float, shift: tuple[float, float, float], scale: float = 1.0)
 
 
 def solve_body(
-    real: RealPoses, k: int, joints: list[str], transform: Any = None, **options: Any
+    pairs: PosePairs, k: int, joints: list[str], transform: Any = None, **options: Any
 ) -> dict[str, Any]:
-    start, goal = int(real.starts[k]), int(real.goals[k])
-    goal_pose = real.poses[goal] if transform is None else transform(real.poses[goal])
+    start, goal = int(pairs.starts[k]), int(pairs.goals[k])
+    goal_pose = pairs.poses[goal] if transform is None else transform(pairs.poses[goal])
     return {
-        "pose": real.pose_dict(start, transform),
+        "pose": pairs.pose_dict(start, transform),
         "targets": [
             {"joint": j, "position": [float(v) for v in goal_pose[JOINT_INDEX[j]]]} for j in joints
         ],
@@ -58,7 +58,7 @@ def assert_problem(resp: Any, status: int, *needles: str) -> dict[str, Any]:
 
 # -- solving ---------------------------------------------------------------------------
 def test_solve_reaches_real_targets_with_input_bone_lengths(
-    client: Any, real_poses: RealPoses
+    client: Any, real_poses: PosePairs
 ) -> None:
     reach = []
     for k in range(20):
@@ -78,9 +78,9 @@ def test_solve_reaches_real_targets_with_input_bone_lengths(
     assert float(np.mean(reach)) < 0.06, np.mean(reach)
 
 
-def test_exact_reach_and_pins(client: Any, real_poses: RealPoses) -> None:
+def test_exact_reach_and_pins(client: Any, synthetic_poses: PosePairs) -> None:
     for k in range(10):
-        body = solve_body(real_poses, k, ["left_wrist"], reach="exact", tolerance=0.001)
+        body = solve_body(synthetic_poses, k, ["left_wrist"], reach="exact", tolerance=0.001)
         body["pins"] = ["left_ankle", "right_ankle"]
         out = client.post("/v1/solve", json=body).json()
         assert out["targets"][0]["reached"], out["targets"]
@@ -91,8 +91,10 @@ def test_exact_reach_and_pins(client: Any, real_poses: RealPoses) -> None:
         assert out["max_bone_length_error"] <= 1e-5
 
 
-def test_unreachable_target_is_approached_not_an_error(client: Any, real_poses: RealPoses) -> None:
-    body = solve_body(real_poses, 0, ["right_wrist"], reach="exact")
+def test_unreachable_target_is_approached_not_an_error(
+    client: Any, synthetic_poses: PosePairs
+) -> None:
+    body = solve_body(synthetic_poses, 0, ["right_wrist"], reach="exact")
     pose = as_array(body["pose"])
     shoulder = pose[JOINT_INDEX["right_shoulder"]]
     far = shoulder + np.array([-2.0, 0.0, 0.0])  # 2 m to the right: beyond any arm
@@ -111,53 +113,56 @@ def test_unreachable_target_is_approached_not_an_error(client: Any, real_poses: 
 
 
 @pytest.mark.parametrize("method", ["neural", "fabrik"])
-def test_world_space_in_world_space_out(client: Any, real_poses: RealPoses, method: str) -> None:
+def test_world_space_in_world_space_out(
+    client: Any, synthetic_poses: PosePairs, method: str
+) -> None:
     """A yawed, displaced copy of the problem gives the same answer, yawed and displaced."""
     move = yaw_shift(-math.pi / 2, (50.0, 0.0, -30.0))
     for k in range(3):
-        a = client.post("/v1/solve", json=solve_body(real_poses, k, ["head"], method=method))
+        a = client.post("/v1/solve", json=solve_body(synthetic_poses, k, ["head"], method=method))
         b = client.post(
-            "/v1/solve", json=solve_body(real_poses, k, ["head"], transform=move, method=method)
+            "/v1/solve",
+            json=solve_body(synthetic_poses, k, ["head"], transform=move, method=method),
         )
         pa, pb = as_array(a.json()["pose"]), as_array(b.json()["pose"])
         assert np.abs(move(pa) - pb).max() < 1e-4
 
 
 def test_characters_beyond_the_trained_sizes_are_solved_at_scale(
-    client: Any, real_poses: RealPoses
+    client: Any, synthetic_poses: PosePairs
 ) -> None:
     """A 1.5x and a 1.7x character are both solved at the largest trained size: their
     answers are the same pose up to scale, with each character's own bone lengths."""
     joints = ["left_ankle", "right_ankle"]
     big, bigger = yaw_shift(0.0, (0, 0, 0), scale=1.5), yaw_shift(0.0, (0, 0, 0), scale=1.7)
     a = as_array(
-        client.post("/v1/solve", json=solve_body(real_poses, 1, joints, transform=big)).json()[
+        client.post("/v1/solve", json=solve_body(synthetic_poses, 1, joints, transform=big)).json()[
             "pose"
         ]
     )
     b = as_array(
-        client.post("/v1/solve", json=solve_body(real_poses, 1, joints, transform=bigger)).json()[
-            "pose"
-        ]
+        client.post(
+            "/v1/solve", json=solve_body(synthetic_poses, 1, joints, transform=bigger)
+        ).json()["pose"]
     )
     assert np.abs(a * (1.7 / 1.5) - b).max() < 1e-4
-    start = as_array(solve_body(real_poses, 1, joints, transform=bigger)["pose"])
+    start = as_array(solve_body(synthetic_poses, 1, joints, transform=bigger)["pose"])
     assert np.allclose(bone_lengths(b), bone_lengths(start), rtol=1e-5)
     tiny = yaw_shift(0.0, (0, 0, 0), scale=0.6)
-    c = client.post("/v1/solve", json=solve_body(real_poses, 1, joints, transform=tiny)).json()
+    c = client.post("/v1/solve", json=solve_body(synthetic_poses, 1, joints, transform=tiny)).json()
     assert c["max_bone_length_error"] <= 1e-5
     assert max(t["error"] for t in c["targets"]) < 0.1
 
 
-def test_same_request_same_bits(client: Any, real_poses: RealPoses) -> None:
-    body = solve_body(real_poses, 2, ["left_wrist", "head", "right_ankle"], reach="exact")
+def test_same_request_same_bits(client: Any, synthetic_poses: PosePairs) -> None:
+    body = solve_body(synthetic_poses, 2, ["left_wrist", "head", "right_ankle"], reach="exact")
     first = client.post("/v1/solve", json=body).content
     for k in range(30):  # other traffic in between must not change the answer
-        client.post("/v1/solve", json=solve_body(real_poses, k, ["right_wrist"]))
+        client.post("/v1/solve", json=solve_body(synthetic_poses, k, ["right_wrist"]))
     assert client.post("/v1/solve", json=body).content == first
 
 
-def test_composition_and_uncovered_joints(client: Any, real_poses: RealPoses) -> None:
+def test_composition_and_uncovered_joints(client: Any, real_poses: PosePairs) -> None:
     five = ["head", "left_wrist", "right_wrist", "left_ankle", "right_ankle"]
     out = client.post("/v1/solve", json=solve_body(real_poses, 3, five)).json()
     assert sorted(out["solvers"]) == ["head", "left_ankle+right_ankle", "left_wrist+right_wrist"]
@@ -171,26 +176,26 @@ def test_composition_and_uncovered_joints(client: Any, real_poses: RealPoses) ->
     assert spine["error"] < 0.01
 
 
-def test_weights_order_the_solver_sequence(client: Any, real_poses: RealPoses) -> None:
-    body = solve_body(real_poses, 4, ["head", "left_knee"])
+def test_weights_order_the_solver_sequence(client: Any, synthetic_poses: PosePairs) -> None:
+    body = solve_body(synthetic_poses, 4, ["head", "left_knee"])
     body["targets"][0]["weight"] = 5.0
     assert client.post("/v1/solve", json=body).json()["solvers"] == ["left_knee", "head"]
     body["targets"][0]["weight"] = 0.2
     assert client.post("/v1/solve", json=body).json()["solvers"] == ["head", "left_knee"]
 
 
-def test_fabrik_method(client: Any, real_poses: RealPoses) -> None:
-    body = solve_body(real_poses, 5, ["left_wrist", "right_ankle"], method="fabrik")
+def test_fabrik_method(client: Any, synthetic_poses: PosePairs) -> None:
+    body = solve_body(synthetic_poses, 5, ["left_wrist", "right_ankle"], method="fabrik")
     out = client.post("/v1/solve", json=body).json()
     assert out["method"] == "fabrik" and out["solvers"] == ["fabrik"]
     assert out["iterations"] >= 1
     assert out["max_bone_length_error"] <= 1e-5
 
 
-def test_batch_matches_single_solves(client: Any, real_poses: RealPoses) -> None:
+def test_batch_matches_single_solves(client: Any, synthetic_poses: PosePairs) -> None:
     sets = [["left_wrist"], ["left_ankle", "right_ankle"], ["head", "right_wrist"], ["pelvis"]]
-    items = [solve_body(real_poses, k, sets[k % 4]) for k in range(12)]
-    items.append(solve_body(real_poses, 12, ["left_knee"], method="fabrik"))
+    items = [solve_body(synthetic_poses, k, sets[k % 4]) for k in range(12)]
+    items.append(solve_body(synthetic_poses, 12, ["left_knee"], method="fabrik"))
     resp = client.post("/v1/solve/batch", json={"items": items})
     assert resp.status_code == 200, resp.text
     got = resp.json()["items"]
@@ -201,15 +206,15 @@ def test_batch_matches_single_solves(client: Any, real_poses: RealPoses) -> None
         assert np.abs(as_array(single["pose"]) - as_array(out["pose"])).max() < 1e-5
 
 
-def test_batch_limit_is_a_413(models_dir: Path, real_poses: RealPoses) -> None:
+def test_batch_limit_is_a_413(models_dir: Path, synthetic_poses: PosePairs) -> None:
     with make_client(models_dir, max_batch_items=3) as small:
-        items = [solve_body(real_poses, k, ["head"]) for k in range(4)]
+        items = [solve_body(synthetic_poses, k, ["head"]) for k in range(4)]
         assert_problem(small.post("/v1/solve/batch", json={"items": items}), 413, "limit of 3")
         assert small.post("/v1/solve/batch", json={"items": items[:3]}).status_code == 200
 
 
-def test_batch_error_names_the_item(client: Any, real_poses: RealPoses) -> None:
-    items = [solve_body(real_poses, k, ["head"]) for k in range(3)]
+def test_batch_error_names_the_item(client: Any, synthetic_poses: PosePairs) -> None:
+    items = [solve_body(synthetic_poses, k, ["head"]) for k in range(3)]
     items[2]["targets"][0]["joint"] = "tail"
     assert_problem(client.post("/v1/solve/batch", json={"items": items}), 422, "items[2]", "tail")
 
@@ -218,7 +223,7 @@ def test_batch_error_names_the_item(client: Any, real_poses: RealPoses) -> None:
 BASE = ["pelvis", "neck", "left_wrist", "right_wrist", "left_ankle", "right_ankle"]
 
 
-def test_complete_from_six_points(client: Any, real_poses: RealPoses) -> None:
+def test_complete_from_six_points(client: Any, real_poses: PosePairs) -> None:
     errors = []
     move = yaw_shift(2.0, (3.0, 0.0, -1.0))
     for k in range(10):
@@ -236,8 +241,10 @@ def test_complete_from_six_points(client: Any, real_poses: RealPoses) -> None:
     assert float(np.mean(errors)) < 0.10, np.mean(errors)
 
 
-def test_complete_uses_larger_schemes_and_bone_lengths(client: Any, real_poses: RealPoses) -> None:
-    true = real_poses.poses[real_poses.goals[0]]
+def test_complete_uses_larger_schemes_and_bone_lengths(
+    client: Any, synthetic_poses: PosePairs
+) -> None:
+    true = synthetic_poses.poses[synthetic_poses.goals[0]]
     joints = [*BASE, "head", "left_elbow"]
     lengths = {"left_elbow": 0.3, "left_wrist": 0.25}
     body = {
@@ -285,15 +292,15 @@ def test_complete_names_missing_base_points(client: Any) -> None:
     ],
 )
 def test_bad_requests_are_precise_problems(
-    client: Any, real_poses: RealPoses, mutate: Any, needle: str
+    client: Any, synthetic_poses: PosePairs, mutate: Any, needle: str
 ) -> None:
-    body = solve_body(real_poses, 0, ["left_wrist"])
+    body = solve_body(synthetic_poses, 0, ["left_wrist"])
     mutate(body)
     assert_problem(client.post("/v1/solve", json=body), 422, needle)
 
 
-def test_nan_and_malformed_json(client: Any, real_poses: RealPoses) -> None:
-    body = solve_body(real_poses, 0, ["left_wrist"])
+def test_nan_and_malformed_json(client: Any, synthetic_poses: PosePairs) -> None:
+    body = solve_body(synthetic_poses, 0, ["left_wrist"])
     text = json.dumps(body).replace(json.dumps(body["targets"][0]["position"][0]), "NaN", 1)
     resp = client.post("/v1/solve", content=text, headers={"content-type": "application/json"})
     assert_problem(resp, 422, "finite")
@@ -301,9 +308,9 @@ def test_nan_and_malformed_json(client: Any, real_poses: RealPoses) -> None:
     assert_problem(resp, 400, "line 1 column 2")
 
 
-def test_content_type_and_body_size(models_dir: Path, real_poses: RealPoses) -> None:
+def test_content_type_and_body_size(models_dir: Path, synthetic_poses: PosePairs) -> None:
     with make_client(models_dir, max_body_bytes=4096) as c:
-        body = json.dumps(solve_body(real_poses, 0, ["head"])).encode()
+        body = json.dumps(solve_body(synthetic_poses, 0, ["head"])).encode()
         assert_problem(
             c.post("/v1/solve", content=body, headers={"content-type": "text/plain"}),
             415,
@@ -318,9 +325,11 @@ def test_content_type_and_body_size(models_dir: Path, real_poses: RealPoses) -> 
 
 
 # -- operations ------------------------------------------------------------------------------
-def test_request_id_and_timing_headers(client: Any, real_poses: RealPoses) -> None:
+def test_request_id_and_timing_headers(client: Any, synthetic_poses: PosePairs) -> None:
     resp = client.post(
-        "/v1/solve", json=solve_body(real_poses, 0, ["head"]), headers={"X-Request-ID": "abc-123"}
+        "/v1/solve",
+        json=solve_body(synthetic_poses, 0, ["head"]),
+        headers={"X-Request-ID": "abc-123"},
     )
     assert resp.headers["x-request-id"] == "abc-123"
     total = float(resp.headers["x-total-time"].removesuffix("ms"))
@@ -331,11 +340,11 @@ def test_request_id_and_timing_headers(client: Any, real_poses: RealPoses) -> No
 
 
 def test_health_metrics_skeleton_models(
-    client: Any, real_poses: RealPoses, models_dir: Path
+    client: Any, synthetic_poses: PosePairs, models_dir: Path
 ) -> None:
     assert client.get("/v2/health/live").json()["status"] == "live"
     assert client.get("/v2/health/ready").status_code == 200
-    client.post("/v1/solve", json=solve_body(real_poses, 0, ["left_wrist", "right_wrist"]))
+    client.post("/v1/solve", json=solve_body(synthetic_poses, 0, ["left_wrist", "right_wrist"]))
     metrics = client.get("/metrics").text
     assert 'pose_solves_total{method="neural",solvers="left_wrist+right_wrist"}' in metrics
     assert "pose_request_seconds_bucket" in metrics
@@ -349,7 +358,7 @@ def test_health_metrics_skeleton_models(
 
 
 def test_corrupt_model_is_not_ready_with_a_reason(
-    models_dir: Path, tmp_path: Path, caplog: pytest.LogCaptureFixture, real_poses: RealPoses
+    models_dir: Path, tmp_path: Path, caplog: pytest.LogCaptureFixture, synthetic_poses: PosePairs
 ) -> None:
     broken = tmp_path / "models"
     shutil.copytree(models_dir, broken)
@@ -362,14 +371,14 @@ def test_corrupt_model_is_not_ready_with_a_reason(
         assert_problem(c.post("/v1/skeleton"), 405)
         # the skeleton comes from the manifest alone, so it is served while not ready
         assert c.get("/v1/skeleton").json()["joints"] == list(JOINT_NAMES)
-        out = c.post("/v1/solve", json=solve_body(real_poses, 0, ["head"]))
+        out = c.post("/v1/solve", json=solve_body(synthetic_poses, 0, ["head"]))
         assert_problem(out, 503, "decoder.onnx")
     assert any("decoder.onnx" in r.getMessage() for r in caplog.records)
 
 
-def test_api_key_guards_v1_only(models_dir: Path, real_poses: RealPoses) -> None:
+def test_api_key_guards_v1_only(models_dir: Path, synthetic_poses: PosePairs) -> None:
     with make_client(models_dir, api_key="s3cret") as c:
-        body = solve_body(real_poses, 0, ["head"])
+        body = solve_body(synthetic_poses, 0, ["head"])
         assert_problem(c.post("/v1/solve", json=body), 401)
         assert c.post("/v1/solve", json=body, headers={"X-API-Key": "s3cret"}).status_code == 200
         assert c.get("/v2/health/ready").status_code == 200
@@ -387,8 +396,8 @@ def test_cors_allow_list(models_dir: Path) -> None:
         assert "access-control-allow-origin" not in other.headers
 
 
-def test_batch_pose_error_names_the_item_and_joint(client: Any, real_poses: RealPoses) -> None:
-    items = [solve_body(real_poses, k, ["head"]) for k in range(3)]
+def test_batch_pose_error_names_the_item_and_joint(client: Any, synthetic_poses: PosePairs) -> None:
+    items = [solve_body(synthetic_poses, k, ["head"]) for k in range(3)]
     items[1]["pose"]["left_knee"] = items[1]["pose"]["left_hip"]
     assert_problem(
         client.post("/v1/solve/batch", json={"items": items}), 422, "items[1].pose", "left_knee"
@@ -396,15 +405,15 @@ def test_batch_pose_error_names_the_item_and_joint(client: Any, real_poses: Real
 
 
 def test_floor_option_makes_raised_characters_solve_alike(
-    client: Any, real_poses: RealPoses
+    client: Any, synthetic_poses: PosePairs
 ) -> None:
     lift = yaw_shift(0.0, (0.0, 1.0, 0.0))
-    ground = client.post("/v1/solve", json=solve_body(real_poses, 6, ["left_wrist"])).json()
-    body = solve_body(real_poses, 6, ["left_wrist"], transform=lift)
+    ground = client.post("/v1/solve", json=solve_body(synthetic_poses, 6, ["left_wrist"])).json()
+    body = solve_body(synthetic_poses, 6, ["left_wrist"], transform=lift)
     body["options"]["floor"] = 1.0
     raised = client.post("/v1/solve", json=body).json()
     assert np.abs(lift(as_array(ground["pose"])) - as_array(raised["pose"])).max() < 1e-6
-    true = real_poses.poses[real_poses.goals[0]]
+    true = synthetic_poses.poses[synthetic_poses.goals[0]]
     points = [{"joint": j, "position": lift(true)[JOINT_INDEX[j]].tolist()} for j in BASE]
     done = client.post("/v1/complete", json={"keypoints": points, "floor": 1.0}).json()
     flat = [{"joint": j, "position": true[JOINT_INDEX[j]].tolist()} for j in BASE]
@@ -412,15 +421,15 @@ def test_floor_option_makes_raised_characters_solve_alike(
     assert np.abs(lift(as_array(base["pose"])) - as_array(done["pose"])).max() < 1e-6
 
 
-def test_chunked_body_over_the_limit_is_a_413(models_dir: Path, real_poses: RealPoses) -> None:
-    body = json.dumps(solve_body(real_poses, 0, ["head"])).encode() + b" " * 6000
+def test_chunked_body_over_the_limit_is_a_413(models_dir: Path, synthetic_poses: PosePairs) -> None:
+    body = json.dumps(solve_body(synthetic_poses, 0, ["head"])).encode() + b" " * 6000
     chunks = [body[i : i + 1000] for i in range(0, len(body), 1000)]
     with make_client(models_dir, max_body_bytes=4096) as c:
         resp = c.post(
             "/v1/solve", content=iter(chunks), headers={"content-type": "application/json"}
         )
         assert_problem(resp, 413, "4096")
-        small = json.dumps(solve_body(real_poses, 0, ["head"])).encode()
+        small = json.dumps(solve_body(synthetic_poses, 0, ["head"])).encode()
         ok = c.post(
             "/v1/solve",
             content=iter([small[:500], small[500:]]),
@@ -430,11 +439,11 @@ def test_chunked_body_over_the_limit_is_a_413(models_dir: Path, real_poses: Real
 
 
 def test_gate_rejections_carry_cors_and_keys_are_strict(
-    models_dir: Path, real_poses: RealPoses
+    models_dir: Path, synthetic_poses: PosePairs
 ) -> None:
     origin = {"Origin": "http://editor.example"}
     with make_client(models_dir, api_key="s3cret", cors_origins=["http://editor.example"]) as c:
-        body = solve_body(real_poses, 0, ["head"])
+        body = solve_body(synthetic_poses, 0, ["head"])
         resp = c.post("/v1/solve", json=body, headers=origin)
         assert_problem(resp, 401)
         assert resp.headers["access-control-allow-origin"] == "http://editor.example"
@@ -444,11 +453,11 @@ def test_gate_rejections_carry_cors_and_keys_are_strict(
         bearer = {"Authorization": "Bearer s3cret"}
         assert c.post("/v1/solve", json=body, headers=bearer).status_code == 200
     with make_client(models_dir, api_key="") as c:  # an empty key means no key
-        assert c.post("/v1/solve", json=solve_body(real_poses, 0, ["head"])).status_code == 200
+        assert c.post("/v1/solve", json=solve_body(synthetic_poses, 0, ["head"])).status_code == 200
 
 
 def test_unexpected_errors_keep_the_request_id(
-    models_dir: Path, real_poses: RealPoses, monkeypatch: pytest.MonkeyPatch
+    models_dir: Path, synthetic_poses: PosePairs, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     with make_client(models_dir) as c:
         engine = c.app.state.pose.repository.engine
@@ -458,19 +467,21 @@ def test_unexpected_errors_keep_the_request_id(
 
         monkeypatch.setattr(engine, "solve", boom)
         resp = c.post(
-            "/v1/solve", json=solve_body(real_poses, 0, ["head"]), headers={"X-Request-ID": "r-1"}
+            "/v1/solve",
+            json=solve_body(synthetic_poses, 0, ["head"]),
+            headers={"X-Request-ID": "r-1"},
         )
         assert_problem(resp, 500)
         assert resp.headers["x-request-id"] == "r-1"
         assert "injected" not in resp.text  # no internals leak to the client
 
 
-def test_degenerate_completion_inputs_are_rejected(client: Any, real_poses: RealPoses) -> None:
-    true = real_poses.poses[real_poses.goals[0]]
+def test_degenerate_completion_inputs_are_rejected(client: Any, synthetic_poses: PosePairs) -> None:
+    true = synthetic_poses.poses[synthetic_poses.goals[0]]
     points = [{"joint": j, "position": true[JOINT_INDEX[j]].tolist()} for j in BASE]
     resp = client.post(
         "/v1/complete", json={"keypoints": points, "bone_lengths": {"left_knee": 1e-200}}
     )
     assert_problem(resp, 422, "bone_lengths")
-    body = solve_body(real_poses, 0, ["head"], reach="exact", tolerance=1e-300)
+    body = solve_body(synthetic_poses, 0, ["head"], reach="exact", tolerance=1e-300)
     assert_problem(client.post("/v1/solve", json=body), 422, "tolerance")
