@@ -26,6 +26,7 @@ VARIANTS: dict[str, str] = {
     "no_delta": "the paper's answer D(S(z, t))",
     "no_anchor": "delta answer start + D(S(z, t)) - D(z), not anchored",
     "full": "everything: world-frame pairs, random bodies, mirror, size norm, anchored delta",
+    "long_solvers": "full budget but 5 solver epochs (8k steps) and no stay term",
     "shipped": "the shipped recipe at its full budget (trainer/configs/default.toml)",
 }
 COMPLETION = "6-point completion"

@@ -51,6 +51,12 @@ class SolverConfig(_Section):
     epochs: int = Field(default=5, ge=1)
     max_gap_seconds: float = Field(default=1.0, gt=0)
     other_weight: float = Field(default=0.01, ge=0)
+    stay_weight: float = Field(
+        default=0.0,
+        ge=0,
+        description="Weight of MSE(non-target joints - their start positions): the joints "
+        "not asked for move as little as the targets allow.",
+    )
     bone_weight: float = Field(
         default=1.0,
         ge=0,

@@ -426,11 +426,13 @@ def solver_losses(
     other_weight: float,
     bone_weight: float = 0.0,
     mode: str = "plain",
+    stay_weight: float = 0.0,
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """Per-solver loss ``[S]`` and answers ``[S, B, 63]`` for a batch of pairs (``mode`` as
     the service answers, :func:`solved_poses`):
     MSE(target joints) + other_weight * MSE(other joints)
-    + bone_weight * MSE(decoded bone lengths - start bone lengths) (same clip, same body)."""
+    + bone_weight * MSE(decoded bone lengths - start bone lengths) (same clip, same body)
+    + stay_weight * MSE(other joints - their start positions)."""
     n_sets = len(bank.sets)
     decoded = solved_poses(ae, net, start, goal, n_sets, mode)
     goal_s = goal.unsqueeze(0).expand(n_sets, -1, -1)
@@ -443,6 +445,9 @@ def solver_losses(
     target_term = (per_col * tm).sum(-1) / tm.sum(-1)
     other_term = (per_col * (1 - tm)).sum(-1) / (1 - tm).sum(-1)
     loss = target_term + other_weight * other_term
+    if stay_weight > 0:  # the joints not asked for move as little as the targets allow
+        moved = ((decoded - start.unsqueeze(0)) ** 2).mean(dim=1)  # [S, 63]
+        loss = loss + stay_weight * (moved * (1 - tm)).sum(-1) / (1 - tm).sum(-1)
     if bone_weight > 0:
         bone_err = bone_lengths_t(decoded) - bone_lengths_t(start).unsqueeze(0)
         loss = loss + bone_weight * (bone_err**2).mean(dim=(1, 2))
@@ -534,7 +539,7 @@ def train_solvers(
         for idx in batches(len(src.poses), sc.batch_size, d, cfg.seed + 1, epoch):
             start, goal = src.pairs(idx, partners[idx], rng, aug, total)
             loss, _ = solver_losses(
-                ae, bank, net, start, goal, sc.other_weight, sc.bone_weight, mode
+                ae, bank, net, start, goal, sc.other_weight, sc.bone_weight, mode, sc.stay_weight
             )
             loss = loss.sum()
             optim.zero_grad(set_to_none=True)
@@ -547,7 +552,7 @@ def train_solvers(
 
     def validate() -> dict[str, float]:
         losses, _ = solver_losses(
-            ae, bank, bank, v_start, v_goal, sc.other_weight, sc.bone_weight, mode
+            ae, bank, bank, v_start, v_goal, sc.other_weight, sc.bone_weight, mode, sc.stay_weight
         )
         metrics = solver_metrics(ae, bank, v_start, v_goal, mode)
         return {
