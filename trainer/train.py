@@ -23,11 +23,11 @@ import numpy as np
 import torch
 import torch.distributed as dist
 from rich.console import Console
+from rich.progress import Progress
 from rich.table import Table
 from torch import nn
 from torch.nn.parallel import DistributedDataParallel
 from torch.utils.data import DistributedSampler
-from tqdm import tqdm
 
 from core.io import write_atomic
 from core.skeleton import BONE_CHILDREN, BONE_PARENTS, JOINT_INDEX, NUM_JOINTS
@@ -43,7 +43,7 @@ from trainer.augment import (
 )
 from trainer.augment import mirror as mirror_poses
 from trainer.config import AugmentConfig, TrainConfig
-from trainer.data.dataset import PoseDataset, load_dataset
+from trainer.data.dataset import FPS, PoseDataset, load_dataset
 from trainer.models import (
     CompletionNet,
     Normaliser,
@@ -55,7 +55,6 @@ from trainer.models import (
 from trainer.pairs import partner_ranges, sample_partners
 
 console = Console(stderr=True)
-FPS = 30
 
 
 # --------------------------------------------------------------------------------------
@@ -159,6 +158,17 @@ def steps_per_epoch(n: int, batch_size: int, d: Dist) -> int:
 # --------------------------------------------------------------------------------------
 # Checkpoints
 # --------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Bar:
+    """One epoch's progress bar (rich); ``update()`` after every step."""
+
+    progress: Progress
+    task: Any
+
+    def update(self) -> None:
+        self.progress.advance(self.task)
+
+
 @dataclass
 class StageState:
     epoch: int = 0  # epochs completed
@@ -233,7 +243,7 @@ def run_stage(
     optim: torch.optim.Optimizer,
     epochs: int,
     steps: int,
-    train_epoch: Callable[[int, tqdm[Any]], float],
+    train_epoch: Callable[[int, Bar], float],
     validate: Callable[[], dict[str, float]],
     fresh: bool,
 ) -> StageState:
@@ -253,10 +263,9 @@ def run_stage(
     for epoch in range(state.epoch, epochs):
         t0 = time.perf_counter()
         model.train()
-        with tqdm(
-            total=steps, desc=f"{name} {epoch + 1}/{epochs}", disable=not d.main, leave=False
-        ) as bar:
-            train_loss = train_epoch(epoch, bar)
+        with Progress(console=console, transient=True, disable=not d.main) as progress:
+            task = progress.add_task(f"{name} {epoch + 1}/{epochs}", total=steps)
+            train_loss = train_epoch(epoch, Bar(progress, task))
         model.eval()
         with torch.no_grad():
             metrics = validate()
@@ -326,7 +335,7 @@ def train_autoencoder(
     optim = torch.optim.Adam(ae.parameters(), lr=ac.lr)
     steps = steps_per_epoch(len(train), ac.batch_size, d)
 
-    def train_epoch(epoch: int, bar: tqdm[Any]) -> float:
+    def train_epoch(epoch: int, bar: Bar) -> float:
         rng = stage_rng(cfg.seed, "autoencoder", epoch)
         total_loss, count = torch.zeros((), dtype=torch.float64), 0
         for idx in batches(len(train), ac.batch_size, d, cfg.seed, epoch):
@@ -529,7 +538,7 @@ def train_solvers(
     optim = torch.optim.Adam(params, lr=sc.lr)
     steps = steps_per_epoch(len(src.poses), sc.batch_size, d)
 
-    def train_epoch(epoch: int, bar: tqdm[Any]) -> float:
+    def train_epoch(epoch: int, bar: Bar) -> float:
         rng = stage_rng(cfg.seed, "solver-pairs", epoch)
         partner_idx = sample_partners(src.lo, src.hi, np.arange(len(src.poses)), rng)
         same = rng.random(len(partner_idx)) < sc.identity_fraction
@@ -659,7 +668,7 @@ def train_completion(
 
         def train_epoch(
             epoch: int,
-            bar: tqdm[Any],
+            bar: Bar,
             level: int = level,
             net: nn.Module = net,
             optim: torch.optim.Optimizer = optim,

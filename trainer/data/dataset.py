@@ -15,9 +15,8 @@ One ``np.savez_compressed`` file with exactly these keys:
 
 from __future__ import annotations
 
+import io
 import json
-import os
-import tempfile
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -27,6 +26,7 @@ import numpy as np
 import numpy.typing as npt
 
 from core.geometry import RigidTransform, yaw_matrix
+from core.io import write_atomic
 from core.skeleton import NUM_JOINTS
 
 FORMAT_VERSION = 2
@@ -193,24 +193,13 @@ def validate_arrays(arrays: dict[str, npt.NDArray[Any]], where: str = "dataset")
 
 
 def save_dataset(path: str | Path, dataset: PoseDataset) -> Path:
-    """Validate and write ``dataset`` atomically (temp file in the same folder + os.replace)."""
+    """Validate and write ``dataset`` atomically (``core.io.write_atomic``)."""
     path = Path(path)
     arrays = dataset.arrays()
     validate_arrays(arrays, str(path))
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            np.savez_compressed(f, **arrays)  # type: ignore[arg-type]
-            f.flush()
-            os.fsync(f.fileno())
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)  # mkstemp creates 0600; give the usual permissions
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    buf = io.BytesIO()
+    np.savez_compressed(buf, **arrays)  # type: ignore[arg-type]
+    write_atomic(path, buf.getvalue())
     return path
 
 

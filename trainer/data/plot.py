@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-import os
-import tempfile
+import io
 from pathlib import Path
 
 import numpy as np
 
+from core.io import write_atomic
 from core.skeleton import BONES, JOINT_NAMES
 from trainer.data.dataset import load_dataset
 
@@ -86,16 +86,10 @@ def plot_dataset(
     )
     fig.tight_layout(rect=(0, 0, 1, 0.97), h_pad=0.4, w_pad=0.2)
     out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".png", dir=out.parent)
-    os.close(fd)
     try:
-        fig.savefig(tmp, dpi=110)
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, out)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+        buf = io.BytesIO()
+        fig.savefig(buf, dpi=110, format="png")
+        write_atomic(out, buf.getvalue())
     finally:
         plt.close(fig)
     return out
