@@ -209,14 +209,18 @@ def load_checkpoint(
 
 
 def config_tag(cfg: TrainConfig, stage: str) -> str:
+    augment = cfg.augment.model_dump()
+    pairs_only = ("world_pairs", "align_pelvis", "align_floor")  # read by the solvers alone
     relevant: dict[str, Any] = {
         "seed": cfg.seed,
         "dataset": cfg.dataset,
         "max_train_frames": cfg.max_train_frames,
         "autoencoder": cfg.autoencoder.model_dump(),
+        "augment": {k: v for k, v in augment.items() if k not in pairs_only},
     }
     if stage.startswith("solver"):
         relevant["solver"] = cfg.solver.model_dump()
+        relevant["augment"] = augment
     if stage.startswith("completion"):
         relevant["completion"] = cfg.completion.model_dump()
     text = json.dumps(relevant, sort_keys=True)
