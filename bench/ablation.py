@@ -20,13 +20,15 @@ from core.io import write_atomic
 #: What each variant changes against ``full`` (the shipped recipe at the ablation budget).
 VARIANTS: dict[str, str] = {
     "shipped-before": "the models shipped before issue 11 (full budget, old recipe)",
-    "no_augment": "no random bodies, mirror, facing or offsets; pairs canonicalised apart",
-    "canonical_pairs": "random bodies kept; each pose of a pair canonicalised on its own",
-    "no_bodies": "world-frame pairs and mirror kept; recorded bodies only, no size norm",
+    "no_augment": "no random bodies, no mirror, no size normalisation",
+    "no_bodies": "mirror kept; recorded bodies only, no size normalisation",
+    "world_pairs": "solver pairs in the start's frame (goal turned and moved), AE sees turns",
     "no_delta": "the paper's answer D(S(z, t))",
     "no_anchor": "delta answer start + D(S(z, t)) - D(z), not anchored",
-    "full": "everything: world-frame pairs, random bodies, mirror, size norm, anchored delta",
-    "long_solvers": "full budget but 5 solver epochs (8k steps) and no stay term",
+    "full": "the shipped recipe at the small budget: canonical pairs, random bodies, mirror, "
+    "size normalisation, anchored delta, stay term",
+    "long_solvers": "full budget, world-frame pairs, 5 solver epochs (8k steps), no stay term",
+    "shipped-world-pairs": "full budget, world-frame pairs, 1 solver epoch, stay term",
     "shipped": "the shipped recipe at its full budget (trainer/configs/default.toml)",
 }
 COMPLETION = "6-point completion"

@@ -13,7 +13,7 @@ DATASET=${DATASET:-data/poses.npz}  # held-out bodies are read from it
 TRAIN_DATASET=${TRAIN_DATASET:-$DATASET}  # what the variants train on
 variants=("$@")
 if [ ${#variants[@]} -eq 0 ]; then
-  variants=(full no_anchor no_delta canonical_pairs no_bodies no_augment)
+  variants=(full world_pairs no_bodies no_anchor no_delta no_augment)
 fi
 mkdir -p reports/ablation
 for v in "${variants[@]}"; do
