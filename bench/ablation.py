@@ -121,7 +121,15 @@ def main(
         path = folder / f"{name}.json"
         if path.is_file():
             rows.extend(_rows(name, json.loads(path.read_text()), family))
-    text = "# Training ablation on held-out bodies\n\n" + render(rows)
+    fams = " ".join(f'--family "{f}"' for f in family or [])
+    text = (
+        "# Training ablation on held-out bodies\n\n"
+        f"Written by `scripts/ablation.sh` then `python -m bench.ablation {fams}`.\n"
+        "Variants train at a small budget (trainer/configs/ablation/full.toml); `shipped`, "
+        "`shipped-before`, `shipped-world-pairs` and `long_solvers` are full-budget models "
+        "scored with `python -m bench.heldout --models DIR --out reports/ablation/NAME.json`."
+        "\n\n" + render(rows)
+    )
     write_atomic(out, text.encode())
     typer.echo(text)
 
