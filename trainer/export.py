@@ -30,10 +30,10 @@ from core.manifest import (
 )
 from core.skeleton import BONES, FRAME, JOINT_NAMES, NUM_JOINTS, PARENT_NAMES, bone_lengths
 from trainer.config import TrainConfig
+from trainer.data.dataset import FPS
 from trainer.model_card import write_model_card
 from trainer.models import SingleSolver, TiedAutoencoder, target_columns
 from trainer.train import (
-    FPS,
     PairSource,
     Trained,
     ae_samples,
