@@ -38,9 +38,9 @@ from core.skeleton import BONES, JOINT_INDEX, JOINT_NAMES
 from service.engine import Engine, SolveProblem, SolveResult
 from service.errors import InvalidRequest
 from service.schemas import SolveOptions, TargetResult
+from service.validation import MIN_BONE, problem_of
 
 MAX_COORDINATE = 1.0e7  # client units; beyond this a coordinate is nonsense
-MIN_BONE = 1.0e-4  # metres, as /v1/solve
 
 Number = Annotated[float, Field(allow_inf_nan=False, ge=-MAX_COORDINATE, le=MAX_COORDINATE)]
 Vec3 = Annotated[
@@ -240,36 +240,14 @@ def _problem(ch: Character, req: _Frame, start: F64) -> SolveProblem:
             f"joint_map: the mapped points make zero-length bones ending at {short} "
             f"(each canonical joint must be at least {MIN_BONE * 1000:g} mm from its parent)"
         )
-    idx: list[int] = []
-    goals = []
-    for i, t in enumerate(req.targets):
-        k = _resolve_joint(ch, t.joint, f"targets[{i}].joint")
-        if k in idx:
-            raise InvalidRequest(f"targets[{i}]: a second target for {JOINT_NAMES[k]!r}")
-        idx.append(k)
-        goals.append(ch.to_service(np.asarray(t.position, dtype=np.float64)))
-    n = len(idx)
-    for i, name in enumerate(req.pins):
-        k = _resolve_joint(ch, name, f"pins[{i}]")
-        if k in idx:
-            what = "targeted" if idx.index(k) < n else "pinned twice"
-            raise InvalidRequest(f"pins[{i}]: joint {JOINT_NAMES[k]!r} is {what}")
-        idx.append(k)
-        goals.append(pts[k])
-    weights = np.ones(len(idx))
-    weights[:n] = [t.weight for t in req.targets]
-    o = req.options
-    return SolveProblem(
-        pose=pts,
-        target_idx=np.asarray(idx, dtype=np.intp),
-        target_pos=np.stack(goals),
-        weights=weights,
-        n_targets=n,
-        method=o.method,
-        preserve_bone_lengths=o.preserve_bone_lengths,
-        reach=o.reach,
-        tolerance=o.tolerance,
-        floor=o.floor,
+    goals = [ch.to_service(np.asarray(t.position, dtype=np.float64)) for t in req.targets]
+    return problem_of(
+        pts,
+        [_resolve_joint(ch, t.joint, f"targets[{i}].joint") for i, t in enumerate(req.targets)],
+        np.asarray(goals, dtype=np.float64),
+        [t.weight for t in req.targets],
+        [_resolve_joint(ch, name, f"pins[{i}]") for i, name in enumerate(req.pins)],
+        req.options,
     )
 
 

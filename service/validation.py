@@ -14,7 +14,7 @@ import numpy.typing as npt
 from core.skeleton import BONES, JOINT_INDEX, JOINT_NAMES, bone_lengths
 from service.engine import SolveProblem
 from service.errors import InvalidRequest
-from service.schemas import CompleteRequest, SolveRequest
+from service.schemas import CompleteRequest, SolveOptions, SolveRequest
 
 F64 = npt.NDArray[np.floating[Any]]
 MIN_BONE = 1.0e-4  # metres; shorter bones make a pose degenerate
@@ -41,31 +41,54 @@ def poses(requests: Sequence[SolveRequest], where: Sequence[str]) -> F64:
 
 def solve_problem(req: SolveRequest, pose: F64, where: str = "") -> SolveProblem:
     """One solve's targets and pins against its ``pose`` ``[21, 3]``."""
+    return problem_of(
+        pose,
+        [JOINT_INDEX[t.joint] for t in req.targets],
+        np.array([t.position for t in req.targets], dtype=np.float64),
+        [t.weight for t in req.targets],
+        [JOINT_INDEX[p] for p in req.pins],
+        req.options,
+        where,
+    )
+
+
+def problem_of(
+    pose: F64,
+    targets: Sequence[int],
+    goals: F64,
+    weights: Sequence[float],
+    pins: Sequence[int],
+    options: SolveOptions,
+    where: str = "",
+) -> SolveProblem:
+    """The engine problem of canonical joint indices ``targets`` (at ``goals`` ``[K, 3]``)
+    and ``pins`` (held where ``pose`` has them); refuses a joint targeted twice, pinned
+    twice, or both. Shared by ``/v1/solve`` and the character routes."""
     prefix = f"{where}." if where else ""
     idx: list[int] = []
-    for i, t in enumerate(req.targets):
-        j = JOINT_INDEX[t.joint]
+    for i, j in enumerate(targets):
         if j in idx:
-            raise InvalidRequest(f"{prefix}targets[{i}]: duplicate target for joint {t.joint!r}")
+            raise InvalidRequest(
+                f"{prefix}targets[{i}]: duplicate target for joint {JOINT_NAMES[j]!r}"
+            )
         idx.append(j)
     n_targets = len(idx)
-    for i, joint in enumerate(req.pins):
-        j = JOINT_INDEX[joint]
+    for i, j in enumerate(pins):
+        name = JOINT_NAMES[j]
         if j in idx[:n_targets]:
-            raise InvalidRequest(f"{prefix}pins[{i}]: joint {joint!r} is both pinned and targeted")
+            raise InvalidRequest(f"{prefix}pins[{i}]: joint {name!r} is both pinned and targeted")
         if j in idx:
-            raise InvalidRequest(f"{prefix}pins[{i}]: joint {joint!r} is pinned twice")
+            raise InvalidRequest(f"{prefix}pins[{i}]: joint {name!r} is pinned twice")
         idx.append(j)
     target_idx = np.asarray(idx, dtype=np.intp)
-    weights = np.ones(len(idx))
-    weights[:n_targets] = [t.weight for t in req.targets]
-    goal = np.array([t.position for t in req.targets], dtype=np.float64)
-    o = req.options
+    w = np.ones(len(idx))
+    w[:n_targets] = weights
+    o = options
     return SolveProblem(
         pose=pose,
         target_idx=target_idx,
-        target_pos=np.concatenate([goal, pose[target_idx[n_targets:]]]),
-        weights=weights,
+        target_pos=np.concatenate([np.reshape(goals, (-1, 3)), pose[target_idx[n_targets:]]]),
+        weights=w,
         n_targets=n_targets,
         method=o.method,
         preserve_bone_lengths=o.preserve_bone_lengths,
