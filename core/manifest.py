@@ -186,6 +186,8 @@ class Manifest(_Strict):
         fused = [m.key for m in self.models if m.kind == "fused"]
         if len(fused) != len(set(fused)) or not set(fused) <= set(keys):
             raise ValueError("fused graphs must be unique and each match a solver's set")
+        if self.serving.delta and set(fused) != set(keys):
+            raise ValueError("delta answers are served by fused graphs: one per solver set")
         levels = sorted(m.level for m in self.models if m.kind == "completion" and m.level)
         if levels and levels != list(range(1, len(levels) + 1)):
             raise ValueError("completion levels must be 1..n")

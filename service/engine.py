@@ -118,10 +118,9 @@ class Engine:
         enc, dec = m.autoencoder("encoder"), m.autoencoder("decoder")
         # one graph per single-solver edit: shipped fused at export time (then it already
         # gives the served answer, delta included), else composed here at load time
-        self.prefused = bool(m.fused())
         self.fused: dict[str, Net | Fused] = (
             {key: net(entry) for key, entry in m.fused().items()}
-            if self.prefused
+            if m.fused()
             else {
                 key: Fused(enc, entry, dec, self.models_dir, options)
                 for key, entry in m.solvers().items()
@@ -133,7 +132,6 @@ class Engine:
         )
         self.body = m.serving.body
         self.delta = m.serving.delta
-        self.anchor = m.serving.anchor
         known = np.asarray(m.skeleton.skeletons, dtype=np.float64)  # [C, 20]
         self._shape_totals = known.sum(axis=-1)
         self._shapes = known / self._shape_totals[:, None]
@@ -306,11 +304,7 @@ class Engine:
         decoded = np.empty((m, 3 * NUM_JOINTS), dtype=np.float32)
         for sequence, members in groups.items():
             sel = np.asarray(members, dtype=np.intp)
-            if len(sequence) == 1 and (self.prefused or not self.delta):
-                key = sequence[0]  # one fused run: encode, solve, decode (, delta)
-                targets = canvas[sel][:, self.solver_joints[key]].reshape(len(sel), -1)
-                decoded[sel] = self.fused[key](x[sel], targets)
-            elif self.delta:
+            if self.delta:  # shipped fused graphs give the (anchored) delta answer
                 decoded[sel] = self._delta(x[sel], canvas[sel], sequence)
             elif len(sequence) == 1:  # one fused run: encode, solve, decode
                 key = sequence[0]
@@ -342,10 +336,10 @@ class Engine:
     def _delta(
         self, x: npt.NDArray[np.float32], canvas: npt.NDArray[np.float32], sequence: tuple[str, ...]
     ) -> npt.NDArray[np.float32]:
-        """Delta answers (``serving.delta``): each solver moves the CURRENT pose by what it
-        changes in the decoded pose, P <- P + D(S(E(P), t)) - D(E(P)), so the autoencoder's
-        own error on the start pose never reaches the answer. Between solvers the targets
-        solved so far are pasted onto P (``composition="reencode"``)."""
+        """Delta answers (``serving.delta``): each solver's fused graph moves the CURRENT
+        pose by what it changes in the decoded pose (anchored or not, as exported), so the
+        autoencoder's own error on the start pose never reaches the answer. Between solvers
+        the targets solved so far are pasted onto the pose (``composition="reencode"``)."""
         pose = x.copy()
         flat = canvas.reshape(len(x), -1)
         done: list[int] = []
@@ -354,19 +348,7 @@ class Engine:
             if self.composition == "reencode" and done:
                 cols = np.asarray([3 * j + k for j in done for k in range(3)], dtype=np.intp)
                 pose[:, cols] = flat[:, cols]
-            targets = canvas[:, joints].reshape(len(x), -1)
-            if self.prefused:  # the shipped graph gives the delta answer itself
-                pose = self.fused[key](pose, targets)
-            elif self.anchor:  # what the solver changes beyond asking for "stay put"
-                z = self.encoder(pose)
-                here = pose[:, [3 * int(j) + k for j in joints for k in range(3)]]
-                moved = self.decoder(self.solvers[key](z, targets))
-                pose = pose + moved - self.decoder(self.solvers[key](z, here))
-            elif len(sequence) == 1:
-                pose = pose + self.fused[key](pose, targets) - self.decoder(self.encoder(pose))
-            else:
-                z = self.encoder(pose)
-                pose = pose + self.decoder(self.solvers[key](z, targets)) - self.decoder(z)
+            pose = self.fused[key](pose, canvas[:, joints].reshape(len(x), -1))
             done.extend(int(j) for j in joints if int(j) not in done)
         return pose
 
