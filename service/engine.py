@@ -211,7 +211,9 @@ class Engine:
         paths: list[list[str]] = [["fabrik"] for _ in range(n)]
         neural = np.flatnonzero([p.method == "neural" for p in problems])
         if neural.size:
-            solved, neural_paths = self._neural(problems, neural, canon, tidx, tcan, scales)
+            solved, neural_paths = self._neural(
+                problems, neural, canon, lengths, tidx, tcan, scales
+            )
             out[neural] = solved
             for row, item in enumerate(neural):
                 paths[int(item)] = neural_paths[row]
@@ -282,6 +284,7 @@ class Engine:
         problems: Sequence[SolveProblem],
         items: npt.NDArray[np.intp],
         canon: F64,
+        lengths: F64,
         tidx: npt.NDArray[np.intp],
         tcan: F64,
         scales: F64,
@@ -293,7 +296,8 @@ class Engine:
         canvas = np.zeros((m, NUM_JOINTS, 3), dtype=np.float32)
         rows = np.arange(m)[:, None]
         canvas[rows, tidx[items]] = (
-            self._within_reach(canon[items], tidx[items], tcan[items]) / (scales[items, None, None])
+            self._within_reach(canon[items], lengths[items], tidx[items], tcan[items])
+            / (scales[items, None, None])
         )
         groups: dict[tuple[str, ...], list[int]] = {}
         plans: list[list[str]] = []
@@ -319,13 +323,12 @@ class Engine:
         return out * scales[items, None, None], plans
 
     @staticmethod
-    def _within_reach(start: F64, tidx: npt.NDArray[np.intp], targets: F64) -> F64:
+    def _within_reach(start: F64, lengths: F64, tidx: npt.NDArray[np.intp], targets: F64) -> F64:
         """Targets ``[M, K, 3]`` as the networks see them: one beyond the body's reach (its
         chain from the pelvis plus a leg's length of root travel) is pulled back along
         the line from the pelvis, so a target 10 km away asks for a full stretch towards it
         rather than for a pose the networks never saw. Reach errors are still measured
         against the real target."""
-        lengths = bone_lengths(start)  # [M, 20]
         chain = lengths @ _CHAIN.T  # [M, 21]: pelvis -> joint along the skeleton
         radius = np.take_along_axis(chain, tidx, axis=1) + chain[:, [_LEG]]
         offset = targets - start[:, :1]
