@@ -16,7 +16,18 @@ from dataclasses import dataclass
 from typing import Annotated, Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Discriminator,
+    Field,
+    RootModel,
+    Tag,
+    ValidationError,
+    ValidatorFunctionWrapHandler,
+    model_validator,
+)
+from pydantic_core import InitErrorDetails, PydanticCustomError
 
 from core.bvh import BVH, BVHError, parse_bvh
 from core.bvh_write import pose_of, row_of, skeleton_of, splice_frame
@@ -37,7 +48,7 @@ from core.retarget import anchor_points, canonical_points, retarget
 from core.skeleton import BONES, JOINT_INDEX, JOINT_NAMES
 from service.engine import Engine, SolveProblem, SolveResult
 from service.errors import InvalidRequest
-from service.schemas import SolveOptions, TargetResult
+from service.schemas import SolveOptions, SolveRequest, SolveResponse, TargetResult
 from service.validation import MIN_BONE, problem_of
 
 MAX_COORDINATE = 1.0e7  # client units; beyond this a coordinate is nonsense
@@ -89,11 +100,37 @@ class CharacterSkeleton(_Body):
 
 
 class CharacterSolveRequest(_Frame):
-    skeleton: CharacterSkeleton
+    """The character form of `POST /v1/solve`: a skeleton of the client's own, its local
+    rotations and root position; targets and pins name its joints or canonical ones."""
+
+    character: CharacterSkeleton = Field(description="The skeleton: joints, units, up axis.")
     rotations: dict[str, Quat] = Field(
         default_factory=dict, description="Local rotation per joint; missing joints: identity."
     )
     root_position: Vec3 | None = Field(default=None, description="Default: the root's offset.")
+
+
+def _field_error(title: str, loc: tuple[str, ...], message: str, data: Any) -> ValidationError:
+    """A validation error at ``loc`` (relative to the model being validated: nested in a
+    batch it becomes ``items[i].<loc>``)."""
+    error = InitErrorDetails(type=PydanticCustomError("request_form", message), loc=loc, input=data)
+    return ValidationError.from_exception_data(title, [error])
+
+
+class CharacterAliasRequest(CharacterSolveRequest):
+    """The body of `POST /v1/character/solve`, an alias of the character form of
+    `POST /v1/solve`: the same fields; `skeleton` is accepted as the earlier name of
+    `character`."""
+
+    @model_validator(mode="before")
+    @classmethod
+    def _earlier_name(cls, data: Any) -> Any:
+        if isinstance(data, dict) and "skeleton" in data:
+            if "character" in data:
+                message = "give `character` or its earlier name `skeleton`, not both"
+                raise _field_error(cls.__name__, ("skeleton",), message, data)
+            data = {("character" if k == "skeleton" else k): v for k, v in data.items()}
+        return data
 
 
 class BVHSolveRequest(_Frame):
@@ -168,6 +205,60 @@ class BVHSolveResponse(_Answer):
     changed_joints: list[str]
 
 
+# --------------------------------------------------------------------------------------
+# The body of /v1/solve and of each /v1/solve/batch item: either form
+# --------------------------------------------------------------------------------------
+FORMS = (
+    "give either `pose` (the 21 canonical joints, world space, metres) or `character` "
+    "(a skeleton of your own: joints with name, parent and rest offset)"
+)
+
+
+def _form_of(data: Any) -> str:
+    if isinstance(data, dict):
+        return "character" if "character" in data else "pose"
+    return "character" if isinstance(data, CharacterSolveRequest) else "pose"
+
+
+class SolveBody(
+    RootModel[
+        Annotated[
+            Annotated[SolveRequest, Tag("pose")]
+            | Annotated[CharacterSolveRequest, Tag("character")],
+            Discriminator(_form_of),
+        ]
+    ]
+):
+    """A solve request in one of two forms: the **pose form** (`pose`: the 21 canonical
+    joints) answered with `pose`, or the **character form** (`character`: the client's own
+    skeleton, `rotations`, `root_position`) answered with `rotations` of every joint,
+    `root_position` and `positions` (docs/characters.md). Exactly one of `pose` and
+    `character` is given."""
+
+    @model_validator(mode="wrap")
+    @classmethod
+    def _form(cls, data: Any, handler: ValidatorFunctionWrapHandler) -> Any:
+        if isinstance(data, dict):
+            if "character" in data and "pose" in data:
+                raise _field_error(cls.__name__, ("character",), f"{FORMS}, not both", data)
+            if "character" not in data and "pose" not in data:
+                raise _field_error(cls.__name__, ("pose",), f"Field required: {FORMS}", data)
+        try:
+            return handler(data)
+        except ValidationError:  # again, for the errors located without the union's tag
+            form = CharacterSolveRequest if _form_of(data) == "character" else SolveRequest
+            form.model_validate(data)
+            raise
+
+
+class BatchRequest(_Body):
+    items: list[SolveBody] = Field(min_length=1, description="Each in either form.")
+
+
+class BatchResponse(BaseModel):
+    items: list[SolveResponse | CharacterSolveResponse] = Field(description="In request order.")
+
+
 @dataclass(frozen=True)
 class Character:
     skel: Skeleton
@@ -230,24 +321,30 @@ def _resolve_joint(ch: Character, name: str, where: str) -> int:
     )
 
 
-def _problem(ch: Character, req: _Frame, start: F64) -> SolveProblem:
-    """The canonical solve problem, in metres and +Y up."""
-    pts = ch.to_service(start)
+def character_problem(ch: Character, req: _Frame, where: str = "") -> SolveProblem:
+    """The canonical solve problem of one frame, in metres and +Y up; errors name their
+    field under ``where`` (e.g. ``items[3]``)."""
+    prefix = f"{where}." if where else ""
+    pts = ch.to_service(canonical_points(ch.skel, ch.pose, ch.jmap))
     lengths = np.linalg.norm(pts[[c for c, _ in BONES]] - pts[[p for _, p in BONES]], axis=1)
     if lengths.min() < MIN_BONE:
         short = [JOINT_NAMES[c] for (c, _), n in zip(BONES, lengths, strict=True) if n < MIN_BONE]
         raise InvalidRequest(
-            f"joint_map: the mapped points make zero-length bones ending at {short} "
+            f"{prefix}joint_map: the mapped points make zero-length bones ending at {short} "
             f"(each canonical joint must be at least {MIN_BONE * 1000:g} mm from its parent)"
         )
     goals = [ch.to_service(np.asarray(t.position, dtype=np.float64)) for t in req.targets]
     return problem_of(
         pts,
-        [_resolve_joint(ch, t.joint, f"targets[{i}].joint") for i, t in enumerate(req.targets)],
+        [
+            _resolve_joint(ch, t.joint, f"{prefix}targets[{i}].joint")
+            for i, t in enumerate(req.targets)
+        ],
         np.asarray(goals, dtype=np.float64),
         [t.weight for t in req.targets],
-        [_resolve_joint(ch, name, f"pins[{i}]") for i, name in enumerate(req.pins)],
+        [_resolve_joint(ch, name, f"{prefix}pins[{i}]") for i, name in enumerate(req.pins)],
         req.options,
+        where,
     )
 
 
@@ -262,8 +359,12 @@ class Edit:
 
 def solve_character(engine: Engine, ch: Character, req: _Frame) -> Edit:
     """Solve one frame of a character: the new pose and what it took."""
-    start = canonical_points(ch.skel, ch.pose, ch.jmap)
-    p = _problem(ch, req, start)
+    return solve_prepared(engine, ch, character_problem(ch, req))
+
+
+def solve_prepared(engine: Engine, ch: Character, p: SolveProblem) -> Edit:
+    """Solve ``p`` (from :func:`character_problem`) alone and retarget the answer onto the
+    character: every character solve, single or a batch item, runs exactly this."""
     (result,) = engine.solve([p])
     solved = ch.from_service(np.asarray(result.pose, dtype=np.float64))
     pairs = zip(p.target_idx.tolist(), p.target_pos, strict=True)
@@ -299,32 +400,38 @@ def _report(ch: Character, edit: Edit, points: F64) -> dict[str, Any]:
 # --------------------------------------------------------------------------------------
 # JSON characters
 # --------------------------------------------------------------------------------------
-def character_from_request(req: CharacterSolveRequest) -> Character:
-    joints = req.skeleton.joints
+def character_from_request(req: CharacterSolveRequest, where: str = "") -> Character:
+    """The client's skeleton, pose and joint map; errors name their field under ``where``
+    (e.g. ``items[3].character.joints[5].parent``)."""
+    prefix = f"{where}." if where else ""
+    joints = req.character.joints
     try:
         skel, _ = build_skeleton(
-            [j.name for j in joints], [j.parent for j in joints], [j.offset for j in joints]
+            [j.name for j in joints],
+            [j.parent for j in joints],
+            [j.offset for j in joints],
+            where=f"{prefix}character.joints",
         )
         unknown = sorted(set(req.rotations) - set(skel.names))
         if unknown:
-            raise CharacterError(f"rotations: unknown joints {unknown[:8]}")
+            raise CharacterError(f"{prefix}rotations: unknown joints {unknown[:8]}")
         rot = np.broadcast_to(np.eye(3), (skel.size, 3, 3)).copy()
         for name, q in req.rotations.items():
             if float(np.linalg.norm(q)) < 1e-6:
-                raise CharacterError(f"rotations.{name}: zero-length quaternion {q}")
+                raise CharacterError(f"{prefix}rotations.{name}: zero-length quaternion {q}")
             rot[skel.index[name]] = quat_to_matrix(q)
         trans = skel.offsets.copy()
         roots = [j for j, p in enumerate(skel.parents) if p < 0]
         if len(roots) != 1:
             raise CharacterError(
-                f"skeleton.joints: {len(roots)} roots {[skel.names[r] for r in roots][:8]}; "
-                "one is needed"
+                f"{prefix}character.joints: {len(roots)} roots "
+                f"{[skel.names[r] for r in roots][:8]}; one is needed"
             )
         if req.root_position is not None:
             trans[roots[0]] = req.root_position
         pose = Pose(rot, trans)
-        jmap = resolve_map(skel, req.joint_map)
-        return _character(skel, pose, jmap, req.skeleton.units, req.skeleton.up)
+        jmap = resolve_map(skel, req.joint_map, where=f"{prefix}joint_map")
+        return _character(skel, pose, jmap, req.character.units, req.character.up)
     except CharacterError as exc:
         raise _invalid(exc) from None
 

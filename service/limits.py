@@ -83,3 +83,20 @@ class Budget:
             results.extend(await anyio.to_thread.run_sync(fn, problems[part], limiter=limiter))
             self.compute += time.perf_counter() - t
         return results
+
+
+#: A character item of a batch (its own solve, joint map, retargeting and answer, in
+#: Python: measured ~10 ms for a 57-joint skeleton, ~46 ms for 557 joints, about twice
+#: that with exact reach) costs FABRIK_PRICE plus one unit per CHARACTER_JOINTS joints,
+#: doubled when its solve runs FABRIK.
+CHARACTER_JOINTS = 8
+
+
+def character_price(joints: int, slow: bool) -> int:
+    return (FABRIK_PRICE + -(-joints // CHARACTER_JOINTS)) * (2 if slow else 1)
+
+
+def batch_price_limit(max_items: int) -> int:
+    """The most one batch may cost: ``max_items`` of the costliest pose items (a batch of
+    pose items is bounded by its item count alone; character items also by their joints)."""
+    return max_items * FABRIK_PRICE

@@ -136,14 +136,6 @@ class SolveResponse(BaseModel):
     iterations: int = Field(description="FABRIK iterations used (0 when none ran).")
 
 
-class BatchRequest(_Body):
-    items: list[SolveRequest] = Field(min_length=1)
-
-
-class BatchResponse(BaseModel):
-    items: list[SolveResponse]
-
-
 class Keypoint(_Body):
     joint: Joint
     position: Vec3

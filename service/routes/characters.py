@@ -1,7 +1,9 @@
-"""``POST /v1/character/solve`` (a skeleton of the client's own, local rotations in and
-out), ``POST /v1/bvh/solve`` (a BVH file in, the same file with one frame edited out) and
-``POST /v1/bvh/inspect`` (read-only: the file's joints, joint map, units, axes, one frame).
-The work is ``service.characters``; conventions: docs/characters.md."""
+"""``POST /v1/character/solve`` (an alias of the character form of ``POST /v1/solve``: a
+skeleton of the client's own, local rotations in and out), ``POST /v1/bvh/solve`` (a BVH
+file in, the same file with one frame edited out) and ``POST /v1/bvh/inspect`` (read-only:
+the file's joints, joint map, units, axes, one frame). The work is ``service.characters``;
+:func:`answer_character` is the one path of every character solve (``/v1/solve``, its batch
+items, the alias); conventions: docs/characters.md."""
 
 from __future__ import annotations
 
@@ -20,6 +22,7 @@ from service.characters import (
     BVHSolveRequest,
     BVHSolveResponse,
     Character,
+    CharacterAliasRequest,
     CharacterSolveRequest,
     CharacterSolveResponse,
     bvh_answer,
@@ -27,10 +30,13 @@ from service.characters import (
     character_answer,
     character_from_bvh,
     character_from_request,
+    character_problem,
     read_request_bvh,
     solve_character,
+    solve_prepared,
 )
-from service.deps import ReadyEngine, RequestBudget, State
+from service.deps import ReadyEngine, RequestBudget, ServiceState, State
+from service.engine import Engine, SolveProblem
 from service.errors import DeadlineExceeded
 from service.limits import Budget
 from service.responses import json_response
@@ -56,19 +62,54 @@ async def step(budget: Budget, stage: str, work: Callable[[], R]) -> R:
     return out
 
 
-@router.post("/v1/character/solve", response_model=CharacterSolveResponse)
-async def character_solve(
-    req: CharacterSolveRequest, engine: ReadyEngine, budget: RequestBudget, state: State
-) -> Response:
-    """Solve a character given in its own skeleton: local rotations of every joint out."""
-    ch = await step(budget, "reading the skeleton", lambda: character_from_request(req))
+Prepared = tuple[Character, SolveProblem]
+
+
+async def read_character(budget: Budget, req: CharacterSolveRequest, where: str = "") -> Prepared:
+    """Stage one of a character solve: the skeleton, its joint map and the canonical problem
+    (every 422 of the request found here, before any solving); errors name ``where``."""
+
+    def read() -> Prepared:
+        ch = character_from_request(req, where)
+        return ch, character_problem(ch, req, where)
+
+    return await step(budget, f"reading {where or 'the skeleton'}", read)
+
+
+async def solve_read(
+    budget: Budget,
+    engine: Engine,
+    state: ServiceState,
+    req: CharacterSolveRequest,
+    prepared: Prepared,
+) -> dict[str, object]:
+    """Stage two: solve alone, retarget, answer (the same for a single request and a batch
+    item, so both give the same bits)."""
+    ch, p = prepared
 
     def work() -> dict[str, object]:
-        edit = solve_character(engine, ch, req)
+        edit = solve_prepared(engine, ch, p)
         state.metrics.solved(edit.problem.method, edit.result.solvers)
         return character_answer(ch, edit, req.rotations)
 
-    return json_response(await step(budget, "the solve", work), budget.compute)
+    return await step(budget, "the solve", work)
+
+
+async def answer_character(
+    req: CharacterSolveRequest, engine: Engine, budget: Budget, state: ServiceState
+) -> dict[str, object]:
+    """A character solve's answer: rotations of every joint, root position, positions."""
+    return await solve_read(budget, engine, state, req, await read_character(budget, req))
+
+
+@router.post("/v1/character/solve", response_model=CharacterSolveResponse)
+async def character_solve(
+    req: CharacterAliasRequest, engine: ReadyEngine, budget: RequestBudget, state: State
+) -> Response:
+    """Alias of the character form of `POST /v1/solve` (same body, same answer; the
+    skeleton may also be sent under its earlier name `skeleton`): a character given in its
+    own skeleton, local rotations of every joint out."""
+    return json_response(await answer_character(req, engine, budget, state), budget.compute)
 
 
 @router.post("/v1/bvh/solve", response_model=BVHSolveResponse)

@@ -1,5 +1,7 @@
 """``POST /v1/solve`` and ``POST /v1/solve/batch``: to-canonical -> solve -> to-world is
-the engine's; here: cross-field checks, the work budget, the answer."""
+the engine's; here: cross-field checks, the work budget, the answer. A request (or batch
+item) is in the pose form (the 21 canonical joints) or the character form (a skeleton of
+the client's own), answered by ``service.routes.characters.answer_character``'s path."""
 
 from __future__ import annotations
 
@@ -11,11 +13,20 @@ import anyio.to_thread
 from fastapi import APIRouter, Request, Response
 
 from service.body import BodyRoute
+from service.characters import (
+    BatchRequest,
+    BatchResponse,
+    CharacterSolveRequest,
+    CharacterSolveResponse,
+    SolveBody,
+)
 from service.deps import ReadyEngine, RequestBudget, State
 from service.engine import SolveProblem
 from service.errors import TooManyItems
+from service.limits import CHARACTER_JOINTS, FABRIK_PRICE, batch_price_limit, character_price
 from service.responses import json_response, solve_payload
-from service.schemas import BatchRequest, BatchResponse, SolveRequest, SolveResponse
+from service.routes.characters import answer_character, read_character, solve_read
+from service.schemas import SolveRequest, SolveResponse
 from service.validation import poses, solve_problem
 
 router = APIRouter(route_class=BodyRoute, tags=["solve"])
@@ -23,10 +34,15 @@ INLINE_ITEMS = 32  # bigger batches are prepared and answered in a worker thread
 R = TypeVar("R")
 
 
-@router.post("/v1/solve", response_model=SolveResponse)
-async def solve(req: SolveRequest, engine: ReadyEngine, budget: RequestBudget,
+@router.post("/v1/solve", response_model=SolveResponse | CharacterSolveResponse)
+async def solve(body: SolveBody, engine: ReadyEngine, budget: RequestBudget,
                 state: State) -> Response:  # fmt: skip
-    """Solve one pose edit: reach the targets, keep the pins, keep bone lengths."""
+    """Solve one pose edit: reach the targets, keep the pins, keep bone lengths. The pose
+    form answers the 21 joints; the character form the local rotations of every joint of
+    the client's skeleton and its root position (docs/characters.md)."""
+    req = body.root
+    if isinstance(req, CharacterSolveRequest):
+        return json_response(await answer_character(req, engine, budget, state), budget.compute)
     p = solve_problem(req, poses([req], ["pose"])[0])
     if p.method == "neural" and p.reach == "soft" and not req.pins:
         t = time.perf_counter()  # ~0.3 ms: inline beats a thread hop
@@ -41,28 +57,70 @@ async def solve(req: SolveRequest, engine: ReadyEngine, budget: RequestBudget,
 @router.post("/v1/solve/batch", response_model=BatchResponse)
 async def solve_batch(req: BatchRequest, engine: ReadyEngine, budget: RequestBudget,
                       state: State, request: Request) -> Response:  # fmt: skip
-    """Many independent solves in one call, vectorised per solver sequence, run in
-    priced chunks within the request deadline."""
+    """Many independent solves in one call, each in either form, answered in order. Pose
+    items are vectorised per solver sequence and run in priced chunks within the request
+    deadline; character items are solved one by one, as singles are, between deadline
+    checks, and priced by their joints."""
     limit = state.settings.max_batch_items
     if len(req.items) > limit:
         raise TooManyItems(f"{len(req.items)} items exceed the limit of {limit} per batch")
+    forms = [item.root for item in req.items]
+    chars = {i: f for i, f in enumerate(forms) if isinstance(f, CharacterSolveRequest)}
+    if chars:
+        check_price(forms, limit)
+    where = [i for i, f in enumerate(forms) if i not in chars]
+    items = [f for f in forms if isinstance(f, SolveRequest)]  # the pose form, in order
 
     def prepare() -> list[SolveProblem]:
-        arr = poses(req.items, [f"items[{i}].pose" for i in range(len(req.items))])
-        return [solve_problem(item, arr[i], f"items[{i}]") for i, item in enumerate(req.items)]
+        arr = poses(items, [f"items[{i}].pose" for i in where])
+        return [solve_problem(item, arr[k], f"items[{i}]") for k, (i, item) in
+                enumerate(zip(where, items, strict=True))]  # fmt: skip
 
-    problems = await off_loop(request, prepare, len(req.items))
+    problems = await off_loop(request, prepare, len(items))
+    prepared = {i: await read_character(budget, f, f"items[{i}]") for i, f in chars.items()}
     results = await budget.run(engine.solve, problems)
-    state.metrics.batch.observe(len(problems))
+    state.metrics.batch.observe(len(forms))
     for p, r in zip(problems, results, strict=True):
         state.metrics.solved(p.method, r.solvers)
+    solved = {i: await solve_read(budget, engine, state, chars[i], prepared[i]) for i in chars}
 
     def answer() -> Response:
-        pairs = zip(problems, results, strict=True)
-        items = [solve_payload(p, r, engine.version) for p, r in pairs]
-        return json_response({"items": items}, budget.compute)
+        pairs = iter(zip(problems, results, strict=True))
+        out = [solved[i] if i in solved else solve_payload(*next(pairs), engine.version)
+               for i in range(len(forms))]  # fmt: skip
+        return json_response({"items": out}, budget.compute)
 
-    return await off_loop(request, answer, len(problems))
+    return await off_loop(request, answer, len(forms))
+
+
+def check_price(forms: list[SolveRequest | CharacterSolveRequest], max_items: int) -> None:
+    """Refuse (413) a batch that costs more than ``max_items`` of the costliest pose items:
+    a character item costs by its joints (``service.limits.character_price``)."""
+    prices = [
+        character_price(len(f.character.joints), _slow(f))
+        if isinstance(f, CharacterSolveRequest)
+        else FABRIK_PRICE
+        if _slow(f)
+        else 1
+        for f in forms
+    ]
+    total, cap = sum(prices), batch_price_limit(max_items)
+    if total > cap:
+        i = max(range(len(prices)), key=prices.__getitem__)
+        big = forms[i]
+        joints = len(big.character.joints) if isinstance(big, CharacterSolveRequest) else 21
+        raise TooManyItems(
+            f"items: the batch costs {total} work units, beyond the limit of {cap} "
+            f"({max_items} items of at most {FABRIK_PRICE} units); a character item costs "
+            f"{FABRIK_PRICE} + 1 per {CHARACTER_JOINTS} joints, doubled for exact reach, pins "
+            "or FABRIK "
+            f"(items[{i}], {joints} joints: {prices[i]}); send smaller batches"
+        )
+
+
+def _slow(form: SolveRequest | CharacterSolveRequest) -> bool:
+    o = form.options
+    return o.method == "fabrik" or o.reach == "exact" or bool(form.pins)
 
 
 async def off_loop(request: Request, work: Callable[[], R], items: int) -> R:
