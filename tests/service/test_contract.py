@@ -37,6 +37,19 @@ def test_openapi_yaml_matches_the_app() -> None:
         assert path in spec["paths"], path
     solve = spec["components"]["schemas"]["SolveRequest"]
     assert solve["examples"], "the solve request carries an example"
+    # /v1/solve and each batch item take either form; the character route is their alias
+    body = "#/components/schemas/SolveBody"
+    assert spec["paths"]["/v1/solve"]["post"]["requestBody"]["content"]["application/json"][
+        "schema"
+    ] == {"$ref": body}
+    forms = spec["components"]["schemas"]["SolveBody"]["oneOf"]
+    assert forms == [
+        {"$ref": "#/components/schemas/SolveRequest"},
+        {"$ref": "#/components/schemas/CharacterSolveRequest"},
+    ]
+    batch = spec["components"]["schemas"]["BatchRequest"]["properties"]["items"]
+    assert batch["items"] == {"$ref": body}
+    assert "/v1/character/solve" in spec["paths"]
 
 
 schema = schemathesis.openapi.from_path(CONTRACT)
