@@ -30,6 +30,7 @@ from core.characters_maps import resolve_map
 from core.retarget import canonical_points
 from core.skeleton import JOINT_INDEX, JOINT_NAMES
 from core.units import UNITS
+from service import characters
 from service.routes import characters as character_routes
 from tests.character_files import FILES, extract_bvh
 from tests.conftest import make_client
@@ -253,7 +254,7 @@ def test_oversized_character_batch_is_refused(
     models_dir: Path, files: dict[str, Path], monkeypatch: pytest.MonkeyPatch
 ) -> None:
     read: list[str] = []
-    original = character_routes.character_from_request
+    original = characters.character_from_request
 
     def counting(req: Any, where: str = "") -> Any:
         read.append(where)
