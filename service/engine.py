@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from core import kinematics
+from core import compiled, compiled_fabrik, kinematics
 from core.geometry import canonical_transform
 from core.manifest import Manifest, ModelEntry, load_manifest
 from core.rest import rest_lengths, rest_pose
@@ -45,6 +45,8 @@ from service.errors import InvalidRequest
 from service.runtime import Fused, Net, session_options
 
 F64 = npt.NDArray[np.floating[Any]]
+#: Metres by which the exact-reach fallback must beat the polish to be used.
+_TIE = 1e-12
 
 
 # --------------------------------------------------------------------------------------
@@ -73,6 +75,72 @@ class SolveResult:
     max_bone_error: float
     solvers: list[str]
     iterations: int
+
+
+@dataclass(frozen=True)
+class BatchAnswer:
+    """Answers of :meth:`Engine.solve_arrays` (B items, K target columns)."""
+
+    pose: F64  # [B, 21, 3] world
+    errors: F64  # [B, K] distance of each targeted joint (targets, then pins; 0 padding)
+    max_bone_error: F64  # [B] relative, against the input pose's bone lengths
+    iterations: npt.NDArray[np.int64]  # [B] FABRIK / polish iterations
+    paths: tuple[tuple[str, ...], ...]  # the distinct solver paths of the batch
+    path_of: npt.NDArray[np.int64]  # [B] index into ``paths``
+
+
+@dataclass(frozen=True)
+class _Group:
+    """Items of a batch with one target set: joints, weights and number of user targets."""
+
+    idx: npt.NDArray[np.int64]  # [k]
+    weights: F64  # [k]
+    n_targets: int
+    members: npt.NDArray[np.intp]
+
+
+def _groups(
+    cnt: npt.NDArray[np.int64], n_t: npt.NDArray[np.int64], tidx: npt.NDArray[np.int64], w: F64
+) -> list[_Group]:
+    """The batch split by target set (joints, weights, targets vs pins), vectorised."""
+    n, k = tidx.shape
+    if n == 1:
+        c = int(cnt[0])
+        return [_Group(tidx[0, :c].copy(), w[0, :c].copy(), int(n_t[0]), np.zeros(1, np.intp))]
+    valid = np.arange(k)[None, :] < cnt[:, None]
+    key = np.concatenate(
+        [cnt[:, None], n_t[:, None], np.where(valid, tidx, -1),
+         np.ascontiguousarray(np.where(valid, w, 0.0)).view(np.int64)],
+        axis=1,
+    )  # fmt: skip
+    if n == 1 or bool((key == key[0]).all()):
+        firsts, members = [0], [np.arange(n)]
+    else:
+        _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
+        inverse = inverse.reshape(-1)
+        order = np.argsort(inverse, kind="stable")
+        bounds = np.cumsum(np.bincount(inverse, minlength=len(first)))[:-1]
+        firsts, members = first.tolist(), np.split(order, bounds)
+    out = []
+    for f, m in zip(firsts, members, strict=True):
+        c = int(cnt[f])
+        out.append(_Group(tidx[f, :c].copy(), w[f, :c].copy(), int(n_t[f]), m))
+    return out
+
+
+def _per_item(value: npt.ArrayLike, n: int, dtype: type[np.generic], k: int | None = None) -> Any:
+    """A per-item option as a contiguous ``[n]`` (or ``[n, k]``) array; scalars repeat."""
+    shape = (n,) if k is None else (n, k)
+    if np.ndim(value) == 0:
+        return np.full(shape, value, dtype=dtype)
+    return np.ascontiguousarray(np.broadcast_to(np.asarray(value, dtype=dtype), shape))
+
+
+@lru_cache(maxsize=4096)
+def _uncovered(sequence: tuple[str, ...], idx: tuple[int, ...]) -> npt.NDArray[np.bool_]:
+    """Which targets of ``idx`` no solver of ``sequence`` covers."""
+    covered = {j for key in sequence for j in key.split("+")}
+    return np.asarray([JOINT_NAMES[j] not in covered for j in idx], dtype=np.bool_)
 
 
 @dataclass(frozen=True)
@@ -135,6 +203,10 @@ class Engine:
         known = np.asarray(m.skeleton.skeletons, dtype=np.float64)  # [C, 20]
         self._shape_totals = known.sum(axis=-1)
         self._shapes = known / self._shape_totals[:, None]
+        self._shapes_c = np.ascontiguousarray(self._shapes, dtype=np.float64)
+        self._reference_total = float(np.sum(self.reference_lengths))
+        compiled.warm()  # compile the kernels, or load them from numba's cache
+        compiled_fabrik.warm()
         if composition not in ("reencode", "sequential"):
             raise ValueError(f"unknown composition strategy {composition!r}")
         self._plans: dict[tuple[bytes, bytes], tuple[str, ...]] = {}
@@ -165,176 +237,236 @@ class Engine:
         # heavier targets run later, so the last word is theirs; ties keep cover order
         return sorted(order, key=lambda k: max(weights[j] for j in k.split("+")))
 
-    def _plan_of(self, p: SolveProblem) -> tuple[str, ...]:
-        """``plan`` for a problem, memoised on its (joints, weights) bytes."""
-        key = (p.target_idx.tobytes(), p.weights.tobytes())
+    # -- solving ---------------------------------------------------------------------------
+    def solve(self, problems: Sequence[SolveProblem]) -> list[SolveResult]:
+        """Solve a batch of validated problems: :meth:`solve_arrays` on their padded
+        arrays, then one :class:`SolveResult` per item."""
+        n = len(problems)
+        if n == 0:
+            return []
+        counts = np.fromiter((len(p.target_idx) for p in problems), np.int64, n)
+        k_max = int(counts.max())
+        tidx = np.zeros((n, k_max), dtype=np.int64)
+        tpos = np.zeros((n, k_max, 3))
+        weights = np.ones((n, k_max))
+        for b, p in enumerate(problems):
+            k = len(p.target_idx)
+            tidx[b, :k] = p.target_idx
+            tpos[b, :k] = p.target_pos
+            weights[b, :k] = p.weights
+        ans = self.solve_arrays(
+            np.stack([p.pose for p in problems]), tidx, tpos,
+            counts=counts,
+            n_targets=np.fromiter((p.n_targets for p in problems), np.int64, n),
+            weights=weights,
+            fabrik=np.fromiter((p.method == "fabrik" for p in problems), np.bool_, n),
+            preserve_bone_lengths=np.fromiter(
+                (p.preserve_bone_lengths for p in problems), np.bool_, n
+            ),
+            exact=np.fromiter((p.reach == "exact" for p in problems), np.bool_, n),
+            tolerance=np.fromiter((p.tolerance for p in problems), np.float64, n),
+            floor=np.fromiter((p.floor for p in problems), np.float64, n),
+        )  # fmt: skip
+        results = []
+        for b, p in enumerate(problems):
+            e = ans.errors[b, : p.n_targets]
+            results.append(
+                SolveResult(
+                    pose=ans.pose[b],
+                    errors=e,
+                    reached=e <= p.tolerance,
+                    pin_errors=ans.errors[b, p.n_targets : len(p.target_idx)],
+                    max_bone_error=float(ans.max_bone_error[b]),
+                    solvers=list(ans.paths[ans.path_of[b]]),
+                    iterations=int(ans.iterations[b]),
+                )
+            )
+        return results
+
+    def solve_arrays(
+        self,
+        poses: npt.ArrayLike,
+        target_idx: npt.ArrayLike,
+        target_pos: npt.ArrayLike,
+        *,
+        counts: npt.ArrayLike | None = None,
+        n_targets: npt.ArrayLike | None = None,
+        weights: npt.ArrayLike | None = None,
+        fabrik: npt.ArrayLike = False,
+        preserve_bone_lengths: npt.ArrayLike = True,
+        exact: npt.ArrayLike = False,
+        tolerance: npt.ArrayLike = 1e-3,
+        floor: npt.ArrayLike = 0.0,
+    ) -> BatchAnswer:
+        """Solve a batch given as arrays (validated like :class:`SolveProblem`), no
+        per-item objects: ``poses [B, 21, 3]`` world; ``target_idx [B, K]`` joints (per
+        item its first ``counts[b]`` entries: targets, then pins from ``n_targets[b]``
+        on; the rest is padding), ``target_pos [B, K, 3]`` world, ``weights [B, K]``.
+        Per-item options are ``[B]`` arrays or scalars: ``fabrik`` (method), ``exact``
+        (reach), ``preserve_bone_lengths``, ``tolerance`` (m), ``floor`` (world y).
+
+        Geometry runs in compiled kernels (:mod:`core.compiled`), one call per stage for
+        the whole batch; items that share a solver sequence share one onnxruntime run per
+        stage; FABRIK and the polish run per target set (:mod:`core.compiled_fabrik`).
+        Every item is computed alone: its answer does not depend on the batch."""
+        pose_a = compiled.as_f64(poses)
+        n = pose_a.shape[0]
+        tidx = compiled.as_i64(target_idx).reshape(n, -1)
+        k_max = tidx.shape[1]
+        tpos = np.array(target_pos, dtype=np.float64).reshape(n, k_max, 3)
+        cnt = _per_item(k_max if counts is None else counts, n, np.int64)
+        n_t = cnt if n_targets is None else _per_item(n_targets, n, np.int64)
+        w = _per_item(1.0 if weights is None else weights, n, np.float64, k_max)
+        fab = _per_item(fabrik, n, np.bool_)
+        keep = _per_item(preserve_bone_lengths, n, np.bool_)
+        ex = _per_item(exact, n, np.bool_)
+        tols = _per_item(tolerance, n, np.float64)
+        floors = _per_item(floor, n, np.float64)
+        tpos[:, :, 1] -= floors[:, None]  # the networks know a floor at y = 0
+        neural = np.ascontiguousarray(~fab)
+        canon, facing, trans, lengths, scales, tcan, x, canvas = compiled.prepare(
+            pose_a, floors, tidx, tpos, cnt, neural, self._shapes_c, self._shape_totals,
+            self.body == "total_length", self._reference_total,
+        )  # fmt: skip
+        groups = _groups(cnt, n_t, tidx, w)
+        iterations = np.zeros(n, dtype=np.int64)
+        suffix = np.zeros(n, dtype=np.int64)  # 0: none, 1: fabrik-polish, 2: fabrik-fallback
+        seq_of = np.full(n, -1, dtype=np.int64)  # index into `sequences`; -1: FABRIK
+        sequences: list[tuple[str, ...]] = []
+        out = canon
+        if neural.any():
+            seq_ids: dict[tuple[str, ...], int] = {}
+            for g in groups:
+                mine = g.members[neural[g.members]]
+                if mine.size:
+                    seq = self._plan_for(g.idx, g.weights)
+                    seq_of[mine] = seq_ids.setdefault(seq, len(seq_ids))
+            sequences = list(seq_ids)
+            bone = keep | ex
+            if len(sequences) == 1 and neural.all():  # the common case: no gathers
+                decoded = self._run_sequence(x, canvas, sequences[0])
+                out = compiled.unscale(decoded, scales, canon, lengths, bone)
+            else:
+                items = np.flatnonzero(neural)
+                decoded = np.empty((n, 3 * NUM_JOINTS), dtype=np.float32)
+                for s, seq in enumerate(sequences):
+                    sel = np.flatnonzero(seq_of == s)
+                    decoded[sel] = self._run_sequence(x[sel], canvas[sel], seq)
+                out = canon.copy()
+                out[items] = compiled.unscale(
+                    decoded[items], scales[items], canon[items], lengths[items], bone[items]
+                )
+        for g in groups:
+            self._finish_group(g, fab, ex, seq_of, sequences, canon, out, lengths, tcan,
+                               tols, iterations, suffix)  # fmt: skip
+        world, errors, bone_err = compiled.finish(
+            out, facing, trans, floors, tidx, tpos, cnt, lengths
+        )
+        paths, path_of = self._paths(seq_of, suffix, sequences)
+        return BatchAnswer(world, errors, bone_err, iterations, paths, path_of)
+
+    def _plan_for(self, idx: npt.NDArray[np.int64], weights: F64) -> tuple[str, ...]:
+        """``plan`` of a target set, memoised on its (joints, weights) bytes."""
+        key = (idx.tobytes(), weights.tobytes())
         plan = self._plans.get(key)
         if plan is None:
-            names = [JOINT_NAMES[j] for j in p.target_idx.tolist()]
-            weights = dict(zip(names, p.weights.tolist(), strict=True))
-            plan = tuple(self.plan(frozenset(names), weights))
+            names = [JOINT_NAMES[j] for j in idx.tolist()]
+            plan = tuple(
+                self.plan(frozenset(names), dict(zip(names, weights.tolist(), strict=True)))
+            )
             if len(self._plans) >= 65536:  # bounded: forget everything, start again
                 self._plans.clear()
             self._plans[key] = plan
         return plan
 
-    # -- solving ---------------------------------------------------------------------------
-    def solve(self, problems: Sequence[SolveProblem]) -> list[SolveResult]:
-        """Solve a batch. Geometry, the bone pass and the answers are vectorised over the
-        batch; neural items share one ORT run per stage; only FABRIK runs per item."""
-        n = len(problems)
-        if n == 0:
-            return []
-        poses = np.stack([p.pose for p in problems])  # [B, 21, 3] world
-        floors = np.asarray([p.floor for p in problems])
-        up = np.zeros((n, 1, 3))
-        up[:, 0, 1] = floors  # the networks know a floor at y = 0
-        poses = poses - up
-        frame = canonical_transform(poses)
-        canon = frame.to_canonical(poses)
-        lengths = bone_lengths(poses)  # [B, 20]
-        scales = self.scales_of(lengths)  # [B]
-        # ragged targets as padded arrays: [B, K] joints, [B, K, 3] world positions
-        k_max = max(len(p.target_idx) for p in problems)
-        tidx = np.zeros((n, k_max), dtype=np.intp)
-        tpos = np.zeros((n, k_max, 3))
-        for b, p in enumerate(problems):
-            k = len(p.target_idx)
-            tidx[b, :k] = p.target_idx
-            tpos[b, :k] = p.target_pos
-            tidx[b, k:] = p.target_idx[0]  # padding repeats a real target
-            tpos[b, k:] = p.target_pos[0]
-        tpos = tpos - up
-        tcan = frame.to_canonical(tpos)  # [B, K, 3]
+    def _finish_group(
+        self, g: _Group, fab: npt.NDArray[np.bool_], ex: npt.NDArray[np.bool_],
+        seq_of: npt.NDArray[np.int64], sequences: list[tuple[str, ...]], canon: F64, out: F64,
+        lengths: F64, tcan: F64, tols: F64, iterations: npt.NDArray[np.int64],
+        suffix: npt.NDArray[np.int64],
+    ) -> None:  # fmt: skip
+        """FABRIK items, and the polish of neural items that need one, of one target set
+        (``out``, ``iterations``, ``suffix`` are written in place)."""
+        k = len(g.idx)
+        pinned = np.arange(k) >= g.n_targets
 
-        out = canon.copy()
-        paths: list[list[str]] = [["fabrik"] for _ in range(n)]
-        neural = np.flatnonzero([p.method == "neural" for p in problems])
-        if neural.size:
-            solved, neural_paths = self._neural(
-                problems, neural, canon, lengths, tidx, tcan, scales
-            )
-            out[neural] = solved
-            for row, item in enumerate(neural):
-                paths[int(item)] = neural_paths[row]
-            bone = [
-                int(i)
-                for i in neural
-                if problems[int(i)].preserve_bone_lengths or problems[int(i)].reach == "exact"
-            ]
-            if bone:
-                sel = np.asarray(bone, dtype=np.intp)
-                out[sel] = kinematics.bone_pass(out[sel], lengths[sel], reference=canon[sel])
+        def run(
+            polish: bool, sel: npt.NDArray[np.intp], start: F64, goal: F64
+        ) -> tuple[F64, npt.NDArray[np.int64], F64]:
+            plans = compiled_fabrik.packed_plans(g.idx, g.weights)
+            pose, its, errs, _ = compiled_fabrik.solve_batch(
+                polish, np.ascontiguousarray(start), np.ascontiguousarray(lengths[sel]),
+                np.ascontiguousarray(goal), np.ascontiguousarray(tols[sel]),
+                self.fabrik_max_iterations, plans.local_ints, plans.local_floats,
+                plans.has_local, plans.ints, plans.floats, pinned, True,
+            )  # fmt: skip
+            return pose, its, errs
 
-        iterations = np.zeros(n, dtype=np.int64)
-        for b, p in enumerate(problems):
-            k = len(p.target_idx)
-            if p.method == "fabrik":
-                res = kinematics.fabrik(
-                    canon[b], lengths[b], p.target_idx, tcan[b, :k], weights=p.weights,
-                    tolerance=p.tolerance, max_iterations=self.fabrik_max_iterations,
-                    pinned=np.arange(k) >= p.n_targets,
-                )  # fmt: skip
-                out[b], iterations[b] = res.positions, res.iterations
-                continue
-            covered = {j for key in paths[b] for j in key.split("+")}
-            uncovered = np.asarray([JOINT_NAMES[j] not in covered for j in p.target_idx])
-            pinned = np.arange(k) >= p.n_targets
-            if p.reach != "exact" and not uncovered.any() and not pinned.any():
-                continue
-            if p.reach == "exact":
-                pose, its, path = self._exact(p, canon[b], out[b], lengths[b], tcan[b, :k])
-                out[b], iterations[b], paths[b] = pose, its, [*paths[b], *path]
-            else:  # pins and targets no solver covers go exactly where asked, by a
-                # FABRIK polish that holds the neurally solved targets where they are
-                exact = (uncovered | pinned)[:, None]
-                goal = np.where(exact, tcan[b, :k], out[b][p.target_idx])
-                res = kinematics.polish(
-                    out[b], lengths[b], p.target_idx, goal, weights=p.weights,
-                    tolerance=p.tolerance, max_iterations=self.fabrik_max_iterations,
-                    pinned=pinned,
-                )  # fmt: skip
-                out[b], iterations[b] = res.positions, res.iterations
-                paths[b] = [*paths[b], "fabrik-polish"]
-
-        world = frame.to_world(out)
-        rows = np.arange(n)[:, None]
-        errors = np.linalg.norm(world[rows, tidx] - tpos, axis=-1)  # [B, K]
-        world = world + up
-        bone_err = np.max(np.abs(bone_lengths(world) / lengths - 1.0), axis=-1)
-        results = []
-        for b, p in enumerate(problems):
-            e = errors[b, : p.n_targets]
-            pin_e = errors[b, p.n_targets : len(p.target_idx)]
-            results.append(
-                SolveResult(
-                    pose=world[b],
-                    errors=e,
-                    reached=e <= p.tolerance,
-                    pin_errors=pin_e,
-                    max_bone_error=float(bone_err[b]),
-                    solvers=paths[b],
-                    iterations=int(iterations[b]),
-                )
-            )
-        return results
-
-    def _neural(
-        self,
-        problems: Sequence[SolveProblem],
-        items: npt.NDArray[np.intp],
-        canon: F64,
-        lengths: F64,
-        tidx: npt.NDArray[np.intp],
-        tcan: F64,
-        scales: F64,
-    ) -> tuple[F64, list[list[str]]]:
-        """Encode, run each item's solver sequence, decode: one ORT run per stage."""
-        m = len(items)
-        x = (canon[items] / scales[items, None, None]).reshape(m, -1).astype(np.float32)
-        # every item's targets on a [21, 3] canvas, so a solver gathers its joints at once
-        canvas = np.zeros((m, NUM_JOINTS, 3), dtype=np.float32)
-        rows = np.arange(m)[:, None]
-        canvas[rows, tidx[items]] = (
-            self._within_reach(canon[items], lengths[items], tidx[items], tcan[items])
-            / (scales[items, None, None])
-        )
-        groups: dict[tuple[str, ...], list[int]] = {}
-        plans: list[list[str]] = []
-        for row, b in enumerate(items.tolist()):
-            plan = self._plan_of(problems[b])
-            plans.append(list(plan))
-            groups.setdefault(plan, []).append(row)
-        decoded = np.empty((m, 3 * NUM_JOINTS), dtype=np.float32)
-        for sequence, members in groups.items():
-            sel = np.asarray(members, dtype=np.intp)
-            if self.delta:  # shipped fused graphs give the (anchored) delta answer
-                decoded[sel] = self._delta(x[sel], canvas[sel], sequence)
-            elif len(sequence) == 1:  # one fused run: encode, solve, decode
-                key = sequence[0]
-                targets = canvas[sel][:, self.solver_joints[key]].reshape(len(sel), -1)
-                decoded[sel] = self.fused[key](x[sel], targets)
-            else:  # none (only uncovered joints) or a composed sequence
-                z = self.encoder(x[sel])
-                if sequence:
-                    z = self._compose(z, canvas[sel], sequence)
-                decoded[sel] = self.decoder(z)
-        out = decoded.astype(np.float64).reshape(m, NUM_JOINTS, 3)
-        return out * scales[items, None, None], plans
+        members = g.members
+        sel = members[fab[members]]
+        if sel.size:
+            out[sel], iterations[sel], _ = run(False, sel, canon[sel], tcan[sel, :k])
+        neural = members[~fab[members]]
+        if not neural.size:
+            return
+        sel = neural[ex[neural]]
+        if sel.size:  # exact reach: the polish, or plain FABRIK where that reaches closer
+            goal = tcan[sel, :k]
+            pose, its, errs = run(True, sel, out[sel], goal)
+            missed = np.flatnonzero(np.any(errs > tols[sel, None], axis=1))
+            suffix[sel] = 1
+            if missed.size:
+                alt, alt_its, alt_errs = run(False, sel[missed], canon[sel[missed]], goal[missed])
+                # ties (equal to rounding: e.g. both at the stretch a pin allows) keep
+                # the polish, whose pose is nearer the network's
+                better = np.max(alt_errs, axis=1) < np.max(errs[missed], axis=1) - _TIE
+                take = missed[better]
+                pose[take], its[take] = alt[better], its[take] + alt_its[better]
+                suffix[sel[take]] = 2
+            out[sel], iterations[sel] = pose, its
+        sel = neural[~ex[neural]]
+        if not sel.size:
+            return
+        uncovered = _uncovered(sequences[int(seq_of[neural[0]])], tuple(g.idx.tolist()))
+        if uncovered.any() or pinned.any():
+            # pins and targets no solver covers go exactly where asked, by a FABRIK
+            # polish that holds the neurally solved targets where they are
+            place = (uncovered | pinned)[None, :, None]
+            goal = np.where(place, tcan[sel, :k], out[sel][:, g.idx])
+            out[sel], iterations[sel], _ = run(True, sel, out[sel], goal)
+            suffix[sel] = 1
 
     @staticmethod
-    def _within_reach(start: F64, lengths: F64, tidx: npt.NDArray[np.intp], targets: F64) -> F64:
-        """Targets ``[M, K, 3]`` as the networks see them: one beyond the body's reach (its
-        chain from the pelvis plus a leg's length of root travel) is pulled back along
-        the line from the pelvis, so a target 10 km away asks for a full stretch towards it
-        rather than for a pose the networks never saw. Reach errors are still measured
-        against the real target."""
-        chain = lengths @ _CHAIN.T  # [M, 21]: pelvis -> joint along the skeleton
-        radius = np.take_along_axis(chain, tidx, axis=1) + chain[:, [_LEG]]
-        offset = targets - start[:, :1]
-        dist = np.linalg.norm(offset, axis=-1)
-        factor = np.minimum(1.0, radius / np.maximum(dist, 1e-12))
-        return np.asarray(start[:, :1] + offset * factor[..., None])
+    def _paths(
+        seq_of: npt.NDArray[np.int64], suffix: npt.NDArray[np.int64],
+        sequences: list[tuple[str, ...]],
+    ) -> tuple[tuple[tuple[str, ...], ...], npt.NDArray[np.int64]]:  # fmt: skip
+        """Each item's solver path as an index into the distinct paths of the batch."""
+        code = (seq_of + 1) * 3 + suffix
+        if len(code) == 1 or bool((code == code[0]).all()):
+            distinct, path_of = code[:1], np.zeros(len(code), dtype=np.int64)
+        else:
+            distinct, path_of = np.unique(code, return_inverse=True)
+        ends: tuple[tuple[str, ...], ...] = ((), ("fabrik-polish",), ("fabrik-fallback",))
+        paths = tuple(
+            ("fabrik",) if c < 3 else (*sequences[c // 3 - 1], *ends[c % 3])
+            for c in distinct.tolist()
+        )
+        return paths, path_of.astype(np.int64).reshape(-1)
+
+    def _run_sequence(
+        self, x: npt.NDArray[np.float32], canvas: npt.NDArray[np.float32], sequence: tuple[str, ...]
+    ) -> npt.NDArray[np.float32]:
+        """Encode, run a solver sequence, decode: one ORT run per stage."""
+        if self.delta:  # shipped fused graphs give the (anchored) delta answer
+            return self._delta(x, canvas, sequence)
+        if len(sequence) == 1:  # one fused run: encode, solve, decode
+            key = sequence[0]
+            return self.fused[key](x, canvas[:, self.solver_joints[key]].reshape(len(x), -1))
+        z = self.encoder(x)  # none (only uncovered joints) or a composed sequence
+        if sequence:
+            z = self._compose(z, canvas, sequence)
+        return self.decoder(z)
 
     def _delta(
         self, x: npt.NDArray[np.float32], canvas: npt.NDArray[np.float32], sequence: tuple[str, ...]
@@ -402,23 +534,6 @@ class Engine:
         cols = np.asarray([3 * j + k for j in joints for k in range(3)], dtype=np.intp)
         x[:, cols] = flat[:, cols]
         return self.encoder(x)
-
-    def _exact(
-        self, p: SolveProblem, start: F64, neural: F64, lengths: F64, goal: F64
-    ) -> tuple[F64, int, list[str]]:
-        """Exact reach: polish the neural pose onto the targets. When that leaves a target
-        the plain FABRIK solve from the start pose does reach (the network moved the
-        pelvis where a target is out of reach), that FABRIK answer is used."""
-        kw = {"weights": p.weights, "tolerance": p.tolerance,
-              "max_iterations": self.fabrik_max_iterations,
-              "pinned": np.arange(len(p.target_idx)) >= p.n_targets}  # fmt: skip
-        res = kinematics.polish(neural, lengths, p.target_idx, goal, **kw)  # type: ignore[arg-type]
-        if bool(np.all(res.reached)):
-            return res.positions, res.iterations, ["fabrik-polish"]
-        alt = kinematics.fabrik(start, lengths, p.target_idx, goal, **kw)  # type: ignore[arg-type]
-        if float(np.max(alt.errors)) < float(np.max(res.errors)):
-            return alt.positions, res.iterations + alt.iterations, ["fabrik-fallback"]
-        return res.positions, res.iterations, ["fabrik-polish"]
 
     # -- key-point completion -----------------------------------------------------------
     def complete(
@@ -509,22 +624,6 @@ class Engine:
             (result,) = self.solve([SolveProblem(**{**problem.__dict__, "method": method})])
             if not np.all(np.isfinite(result.pose)) or result.max_bone_error > 1e-5:
                 raise RuntimeError(f"warm-up {method} solve gave an invalid pose")
-
-
-def _chain_matrix() -> npt.NDArray[np.float64]:
-    """``[21, 20]``: 1 where a bone lies on the path from the pelvis to a joint."""
-    out = np.zeros((NUM_JOINTS, len(BONES)))
-    bone_of = {child: b for b, (child, _) in enumerate(BONES)}
-    for joint in range(NUM_JOINTS):
-        j = joint
-        while j in bone_of:
-            out[joint, bone_of[j]] = 1.0
-            j = BONES[bone_of[j]][1]
-    return out
-
-
-_CHAIN = _chain_matrix()
-_LEG = JOINT_INDEX["left_ankle"]
 
 
 @lru_cache(maxsize=4096)

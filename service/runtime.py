@@ -7,6 +7,7 @@ sessions in sequence, with the same results.
 
 from __future__ import annotations
 
+import threading
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -33,6 +34,36 @@ def session_options(threads: int = 1) -> ort.SessionOptions:
     return options
 
 
+class _SingleRow:
+    """Batch-of-one runs through an I/O binding with buffers bound once per thread: the
+    inputs are copied into the bound arrays and the output read from its bound array,
+    which saves onnxruntime's per-call feed conversion and output allocation (measured
+    30 vs 36 us per fused call; rebinding per call was slower than ``run``). Results
+    are bit-identical to ``session.run``."""
+
+    def __init__(self, session: ort.InferenceSession, inputs: list[str], output: str) -> None:
+        self.session, self.inputs, self.output = session, inputs, output
+        self.local = threading.local()
+
+    def __call__(self, arrays: tuple[npt.NDArray[np.float32], ...]) -> npt.NDArray[np.float32]:
+        state = getattr(self.local, "state", None)
+        if state is None or any(b.shape != a.shape for b, a in zip(state[1], arrays, strict=True)):
+            first = self.session.run([self.output], dict(zip(self.inputs, arrays, strict=True)))
+            bufs = [np.empty(a.shape, dtype=np.float32) for a in arrays]
+            out = np.empty(first[0].shape, dtype=np.float32)
+            io = self.session.io_binding()
+            for name, buf in zip(self.inputs, bufs, strict=True):
+                io.bind_ortvalue_input(name, ort.OrtValue.ortvalue_from_numpy(buf))
+            io.bind_ortvalue_output(self.output, ort.OrtValue.ortvalue_from_numpy(out))
+            state = self.local.state = (io, bufs, out)
+        io, bufs, out = state
+        for buf, a in zip(bufs, arrays, strict=True):
+            np.copyto(buf, a)
+        self.session.run_with_iobinding(io)
+        result: npt.NDArray[np.float32] = out.copy()
+        return result
+
+
 class Net:
     """One onnxruntime session with a single input/output signature."""
 
@@ -44,8 +75,11 @@ class Net:
         got = [i.name for i in self.session.get_inputs()]
         if got != self.inputs:
             raise ValueError(f"{path.name}: graph inputs {got}, manifest says {self.inputs}")
+        self.single = _SingleRow(self.session, self.inputs, self.output)
 
     def __call__(self, *arrays: npt.NDArray[np.float32]) -> npt.NDArray[np.float32]:
+        if arrays[0].shape[0] == 1:
+            return self.single(arrays)
         feeds = dict(zip(self.inputs, arrays, strict=True))
         out: npt.NDArray[np.float32] = self.session.run([self.output], feeds)[0]
         return out

@@ -1,0 +1,417 @@
+"""Compiled geometry of a solve: canonical frame, body size, the within-reach targets,
+the bone pass and the way back to the world, over whole batches in one call each.
+
+These kernels compute what :mod:`core.geometry`, :mod:`core.kinematics` (``bone_pass``)
+and the numpy glue of ``service.engine`` compute, item by item in machine code (numba,
+:mod:`core.jit`): the same formulas in the same order, so they agree with the numpy
+reference to rounding (tests/core/test_compiled.py holds them to 1e-12) and give
+bit-identical answers run to run and batch vs single (every item is computed alone).
+The numpy modules stay the reference implementation and the readable specification.
+
+Layout: poses ``[B, 21, 3]`` in joint order, lengths ``[B, 20]`` in ``BONES`` order,
+float64 (the network inputs float32). Inside, a pose is walked in depth order (ranks,
+:data:`ORDER`), parents before children.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+
+from core.jit import jit
+from core.rest import REST_DIRS
+from core.skeleton import (
+    BONE_CHILDREN,
+    BONE_PARENTS,
+    BONES,
+    DEPTH,
+    FACING_PAIRS,
+    JOINT_INDEX,
+    NUM_JOINTS,
+    PARENTS,
+)
+
+F64 = npt.NDArray[np.float64]
+F32 = npt.NDArray[np.float32]
+I64 = npt.NDArray[np.int64]
+Bool = npt.NDArray[np.bool_]
+
+#: Joints in depth order (stable), and its inverse.
+ORDER: I64 = np.argsort(np.asarray(DEPTH), kind="stable").astype(np.int64)
+RANK: I64 = np.argsort(ORDER, kind="stable").astype(np.int64)
+#: Rank of the parent of each rank (-1 for the root).
+PARENT_RANK: I64 = np.asarray(
+    [-1 if PARENTS[int(j)] < 0 else int(RANK[PARENTS[int(j)]]) for j in ORDER], dtype=np.int64
+)
+_BONE_OF = {int(c): b for b, c in enumerate(BONE_CHILDREN)}
+#: Bone (``lengths`` axis) ending at each rank 1..20.
+LEN_ORDER: I64 = np.asarray([_BONE_OF[int(j)] for j in ORDER[1:]], dtype=np.int64)
+#: Rest-pose unit bone directions per rank 1..20, ``[20, 3]``.
+REST_DIRS_RANK: F64 = np.ascontiguousarray(REST_DIRS[ORDER[1:]], dtype=np.float64)
+_CHILDREN: I64 = BONE_CHILDREN.astype(np.int64)
+_PARENTS: I64 = BONE_PARENTS.astype(np.int64)
+_LEFT: I64 = np.asarray([JOINT_INDEX[a] for a, _ in FACING_PAIRS], dtype=np.int64)
+_RIGHT: I64 = np.asarray([JOINT_INDEX[b] for _, b in FACING_PAIRS], dtype=np.int64)
+_PELVIS = JOINT_INDEX["pelvis"]
+_LEG = JOINT_INDEX["left_ankle"]
+#: Distance at or below which a direction is undefined (as in core.kinematics).
+TINY = 1e-300
+
+
+def _chain_matrix() -> F64:
+    """``[21, 20]``: 1 where a bone lies on the path from the pelvis to a joint."""
+    out = np.zeros((NUM_JOINTS, len(BONES)))
+    bone_of = {child: b for b, (child, _) in enumerate(BONES)}
+    for joint in range(NUM_JOINTS):
+        j = joint
+        while j in bone_of:
+            out[joint, bone_of[j]] = 1.0
+            j = BONES[bone_of[j]][1]
+    return out
+
+
+#: Pelvis-to-joint bone membership, shared with ``service.engine``.
+CHAIN: F64 = _chain_matrix()
+
+
+# --------------------------------------------------------------------------------------
+# Scalar helpers (compiled inline into the kernels)
+# --------------------------------------------------------------------------------------
+@jit
+def _sum_pairwise(a: F64) -> float:  # pragma: no cover - compiled
+    """numpy's pairwise sum for n < 128 (8 interleaved partial sums), so a total over
+    20 bones rounds exactly like ``np.sum`` does."""
+    n = a.shape[0]
+    if n < 8:
+        t = 0.0
+        for i in range(n):
+            t += a[i]
+        return t
+    r = np.empty(8)
+    for j in range(8):
+        r[j] = a[j]
+    i = 8
+    while i + 8 <= n:
+        for j in range(8):
+            r[j] += a[i + j]
+        i += 8
+    s: float = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
+    while i < n:
+        s += a[i]
+        i += 1
+    return s
+
+
+@jit
+def _norm(x: float, y: float, z: float) -> float:  # pragma: no cover - compiled
+    return float(np.sqrt(x * x + y * y + z * z))
+
+
+@jit
+def bone_lengths_item(pose: F64, out: F64) -> None:  # pragma: no cover - compiled
+    """``out[20]`` = lengths of ``pose [21, 3]`` in ``BONES`` order."""
+    for b in range(_CHILDREN.shape[0]):
+        c, p = _CHILDREN[b], _PARENTS[b]
+        out[b] = _norm(pose[c, 0] - pose[p, 0], pose[c, 1] - pose[p, 1], pose[c, 2] - pose[p, 2])
+
+
+# --------------------------------------------------------------------------------------
+# Bone pass
+# --------------------------------------------------------------------------------------
+@jit
+def bone_pass_rank(x: F64, lens: F64) -> bool:  # pragma: no cover - compiled
+    """In-place bone pass on a rank-ordered pose ``x [21, 3]`` (``lens [20]`` rank order,
+    row r - 1 for rank r): ``parent + d * (length / |d|)``. False if a direction was
+    undefined (then ``x`` holds non-finite values and the caller takes the safe path)."""
+    ok = True
+    for r in range(1, x.shape[0]):
+        p = PARENT_RANK[r]
+        dx, dy, dz = x[r, 0] - x[p, 0], x[r, 1] - x[p, 1], x[r, 2] - x[p, 2]
+        f = lens[r - 1] / np.sqrt(dx * dx + dy * dy + dz * dz)
+        x[r, 0] = x[p, 0] + dx * f
+        x[r, 1] = x[p, 1] + dy * f
+        x[r, 2] = x[p, 2] + dz * f
+        if not (np.isfinite(x[r, 0]) and np.isfinite(x[r, 1]) and np.isfinite(x[r, 2])):
+            ok = False
+    return ok
+
+
+@jit
+def _unit_into(v: F64, out: F64) -> bool:  # pragma: no cover - compiled
+    n = np.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+    if n > TINY:
+        out[0], out[1], out[2] = v[0] / n, v[1] / n, v[2] / n
+        return True
+    return False
+
+
+@jit
+def bone_pass_rank_safe(
+    src: F64, lens: F64, ref: F64, has_ref: bool, out: F64
+) -> None:  # pragma: no cover - compiled
+    """Bone pass with per-bone fallbacks (``kinematics._bone_pass_safe``): a direction
+    that is undefined falls back to the bone's direction in ``ref`` (if ``has_ref`` and
+    defined there), else to the rest pose's."""
+    v = np.empty(3)
+    u = np.empty(3)
+    out[0, :] = src[0, :]
+    for r in range(1, src.shape[0]):
+        p = PARENT_RANK[r]
+        for i in range(3):
+            v[i] = src[r, i] - out[p, i]
+        if not _unit_into(v, u):
+            done = False
+            if has_ref:
+                for i in range(3):
+                    v[i] = ref[r, i] - ref[p, i]
+                done = _unit_into(v, u)
+            if not done:
+                for i in range(3):
+                    u[i] = REST_DIRS_RANK[r - 1, i]
+        for i in range(3):
+            out[r, i] = out[p, i] + u[i] * lens[r - 1]
+
+
+@jit
+def bone_pass_item(
+    pose: F64, lengths: F64, ref: F64, has_ref: bool, out: F64, xr: F64, lr: F64, rr: F64
+) -> None:  # pragma: no cover - compiled
+    """``out [21, 3]`` = ``kinematics.bone_pass(pose, lengths, reference=ref)`` for one
+    pose in joint order; ``xr``, ``lr``, ``rr`` are scratch (``[21, 3]``, ``[20]``,
+    ``[21, 3]``)."""
+    for r in range(NUM_JOINTS):
+        j = ORDER[r]
+        for i in range(3):
+            xr[r, i] = pose[j, i]
+    for r in range(1, NUM_JOINTS):
+        lr[r - 1] = lengths[LEN_ORDER[r - 1]]
+    if not bone_pass_rank(xr, lr):
+        for r in range(NUM_JOINTS):
+            j = ORDER[r]
+            for i in range(3):
+                xr[r, i] = pose[j, i]
+                rr[r, i] = ref[j, i] if has_ref else 0.0
+        src = xr.copy()
+        bone_pass_rank_safe(src, lr, rr, has_ref, xr)
+    for r in range(NUM_JOINTS):
+        j = ORDER[r]
+        for i in range(3):
+            out[j, i] = xr[r, i]
+
+
+@jit
+def bone_pass_batch(
+    poses: F64, lengths: F64, refs: F64, has_ref: bool
+) -> F64:  # pragma: no cover - compiled
+    """``kinematics.bone_pass`` over ``poses [B, 21, 3]``, ``lengths [B, 20]`` (and
+    ``refs [B, 21, 3]`` when ``has_ref``), each pose alone."""
+    out = np.empty_like(poses)
+    xr, rr, lr = np.empty((NUM_JOINTS, 3)), np.empty((NUM_JOINTS, 3)), np.empty(NUM_JOINTS - 1)
+    for b in range(poses.shape[0]):
+        bone_pass_item(poses[b], lengths[b], refs[b if has_ref else 0], has_ref, out[b], xr, lr, rr)
+    return out
+
+
+# --------------------------------------------------------------------------------------
+# A solve's way in and out
+# --------------------------------------------------------------------------------------
+@jit
+def prepare(
+    poses: F64,
+    floors: F64,
+    tidx: I64,
+    tpos: F64,
+    counts: I64,
+    neural: Bool,
+    shapes: F64,
+    shape_totals: F64,
+    total_length: bool,
+    reference_total: float,
+) -> tuple[F64, F64, F64, F64, F64, F64, F32, F32]:  # pragma: no cover - compiled
+    """Everything before the networks, per item (``service.engine``'s numpy steps):
+
+    the floor taken off, the canonical transform (``core.geometry.canonical_transform``:
+    facing from the hips and shoulders, pelvis floor projection to the origin), the
+    canonical pose and targets, bone lengths, the body scale (``Engine.scales_of``), and
+    for ``neural`` items the network inputs: the pose over its scale (float32, ``[B, 63]``)
+    and the within-reach targets over the scale on a ``[B, 21, 3]`` canvas (float32).
+
+    Returns ``canon, facing [B, 2] (fx, fz), translation [B, 3], lengths [B, 20],
+    scales [B], tcan [B, K, 3], x [B, 63], canvas [B, 21, 3]``. ``tpos`` comes in world
+    space with the floor already taken off (padded rows beyond ``counts`` are ignored).
+    """
+    n, k_max = tidx.shape[0], tidx.shape[1]
+    canon = np.empty((n, NUM_JOINTS, 3))
+    facing = np.empty((n, 2))
+    trans = np.empty((n, 3))
+    lengths = np.empty((n, NUM_JOINTS - 1))
+    scales = np.empty(n)
+    tcan = np.zeros((n, k_max, 3))
+    x = np.zeros((n, 3 * NUM_JOINTS), dtype=np.float32)
+    canvas = np.zeros((n, NUM_JOINTS, 3), dtype=np.float32)
+    local = np.empty(3)
+    chain = np.empty(NUM_JOINTS)
+    for b in range(n):
+        pose = poses[b]
+        up = floors[b]
+        ax, az = 0.0, 0.0
+        for q in range(_LEFT.shape[0]):
+            ax += pose[_LEFT[q], 0] - pose[_RIGHT[q], 0]
+            az += pose[_LEFT[q], 2] - pose[_RIGHT[q], 2]
+        fx, fz = -az, ax
+        norm = np.hypot(fx, fz)
+        if norm < 1e-12:
+            fx, fz = 0.0, 1.0
+        else:
+            fx, fz = fx / norm, fz / norm
+        facing[b, 0], facing[b, 1] = fx, fz
+        tx, tz = pose[_PELVIS, 0], pose[_PELVIS, 2]
+        trans[b, 0], trans[b, 1], trans[b, 2] = tx, 0.0, tz
+        # rotation R = [[fz, 0, fx], [0, 1, 0], [-fx, 0, fz]]; canonical = R^T (world - t)
+        for j in range(NUM_JOINTS):
+            local[0], local[1], local[2] = pose[j, 0] - tx, (pose[j, 1] - up) - 0.0, pose[j, 2] - tz
+            canon[b, j, 0] = fz * local[0] + 0.0 * local[1] + -fx * local[2]
+            canon[b, j, 1] = 0.0 * local[0] + 1.0 * local[1] + 0.0 * local[2]
+            canon[b, j, 2] = fx * local[0] + 0.0 * local[1] + fz * local[2]
+        for q in range(counts[b]):
+            local[0] = tpos[b, q, 0] - tx
+            local[1] = tpos[b, q, 1] - 0.0
+            local[2] = tpos[b, q, 2] - tz
+            tcan[b, q, 0] = fz * local[0] + 0.0 * local[1] + -fx * local[2]
+            tcan[b, q, 1] = 0.0 * local[0] + 1.0 * local[1] + 0.0 * local[2]
+            tcan[b, q, 2] = fx * local[0] + 0.0 * local[1] + fz * local[2]
+        bone_lengths_item(pose, lengths[b])
+        total = _sum_pairwise(lengths[b])
+        if total_length:
+            scales[b] = total / reference_total
+        else:  # the nearest training skeleton's proportions
+            best, best_d = 0, np.inf
+            for c in range(shapes.shape[0]):
+                d = 0.0
+                for i in range(NUM_JOINTS - 1):
+                    e = lengths[b, i] / total - shapes[c, i]
+                    d += e * e
+                d = np.sqrt(d)
+                if d < best_d:
+                    best, best_d = c, d
+            scales[b] = total / shape_totals[best]
+        if not neural[b]:
+            continue
+        s = scales[b]
+        for j in range(NUM_JOINTS):
+            for i in range(3):
+                x[b, 3 * j + i] = np.float32(canon[b, j, i] / s)
+        # within reach: the pelvis-to-target chain plus a leg of root travel
+        for j in range(NUM_JOINTS):
+            acc = 0.0
+            for i in range(NUM_JOINTS - 1):
+                acc += lengths[b, i] * CHAIN[j, i]
+            chain[j] = acc
+        for q in range(counts[b]):
+            j = tidx[b, q]
+            radius = chain[j] + chain[_LEG]
+            ox = tcan[b, q, 0] - canon[b, _PELVIS, 0]
+            oy = tcan[b, q, 1] - canon[b, _PELVIS, 1]
+            oz = tcan[b, q, 2] - canon[b, _PELVIS, 2]
+            dist = _norm(ox, oy, oz)
+            f = min(1.0, radius / max(dist, 1e-12))
+            canvas[b, j, 0] = np.float32((canon[b, _PELVIS, 0] + ox * f) / s)
+            canvas[b, j, 1] = np.float32((canon[b, _PELVIS, 1] + oy * f) / s)
+            canvas[b, j, 2] = np.float32((canon[b, _PELVIS, 2] + oz * f) / s)
+    return canon, facing, trans, lengths, scales, tcan, x, canvas
+
+
+@jit
+def unscale(
+    decoded: F32, scales: F64, canon: F64, lengths: F64, bone: Bool
+) -> F64:  # pragma: no cover - compiled
+    """Network answers ``[M, 63]`` (float32, at the networks' size) back to the body's
+    size (float64), with the bone pass (reference: the start pose) where ``bone``."""
+    m = decoded.shape[0]
+    out = np.empty((m, NUM_JOINTS, 3))
+    pose = np.empty((NUM_JOINTS, 3))
+    xr, rr, lr = np.empty((NUM_JOINTS, 3)), np.empty((NUM_JOINTS, 3)), np.empty(NUM_JOINTS - 1)
+    for b in range(m):
+        s = scales[b]
+        for j in range(NUM_JOINTS):
+            for i in range(3):
+                pose[j, i] = np.float64(decoded[b, 3 * j + i]) * s
+        if bone[b]:
+            bone_pass_item(pose, lengths[b], canon[b], True, out[b], xr, lr, rr)
+        else:
+            out[b] = pose
+    return out
+
+
+@jit
+def finish(
+    canon_out: F64,
+    facing: F64,
+    trans: F64,
+    floors: F64,
+    tidx: I64,
+    tpos: F64,
+    counts: I64,
+    lengths: F64,
+) -> tuple[F64, F64, F64]:  # pragma: no cover - compiled
+    """Back to the world: ``world [B, 21, 3]`` (floor added back), the distance of each
+    targeted joint to its target ``[B, K]`` (0 beyond ``counts``) and the largest relative
+    bone-length error against ``lengths`` ``[B]``. ``tpos`` as given to :func:`prepare`."""
+    n, k_max = tidx.shape[0], tidx.shape[1]
+    world = np.empty_like(canon_out)
+    errors = np.zeros((n, k_max))
+    bone_err = np.empty(n)
+    now = np.empty(NUM_JOINTS - 1)
+    for b in range(n):
+        fx, fz = facing[b, 0], facing[b, 1]
+        tx, ty, tz = trans[b, 0], trans[b, 1], trans[b, 2]
+        c = canon_out[b]
+        for j in range(NUM_JOINTS):
+            world[b, j, 0] = (fz * c[j, 0] + 0.0 * c[j, 1] + fx * c[j, 2]) + tx
+            world[b, j, 1] = (0.0 * c[j, 0] + 1.0 * c[j, 1] + 0.0 * c[j, 2]) + ty
+            world[b, j, 2] = (-fx * c[j, 0] + 0.0 * c[j, 1] + fz * c[j, 2]) + tz
+        for q in range(counts[b]):
+            j = tidx[b, q]
+            errors[b, q] = _norm(
+                world[b, j, 0] - tpos[b, q, 0],
+                world[b, j, 1] - tpos[b, q, 1],
+                world[b, j, 2] - tpos[b, q, 2],
+            )
+        for j in range(NUM_JOINTS):
+            world[b, j, 1] = world[b, j, 1] + floors[b]
+        bone_lengths_item(world[b], now)
+        worst = 0.0
+        for i in range(NUM_JOINTS - 1):
+            e = abs(now[i] / lengths[b, i] - 1.0)
+            if e > worst or np.isnan(e):
+                worst = e
+        bone_err[b] = worst
+    return world, errors, bone_err
+
+
+def warm() -> None:
+    """Compile (or load from the cache) every kernel of this module on tiny inputs."""
+    from core.rest import rest_pose
+
+    pose = rest_pose()[None].astype(np.float64)
+    lens = np.ones((1, NUM_JOINTS - 1))
+    bone_pass_batch(pose, lens, pose, True)
+    bone_pass_batch(pose, lens, pose, False)
+    tidx = np.zeros((1, 1), dtype=np.int64)
+    tpos = np.zeros((1, 1, 3))
+    counts = np.ones(1, dtype=np.int64)
+    shapes = np.ones((1, NUM_JOINTS - 1)) / (NUM_JOINTS - 1)
+    out = prepare(
+        pose, np.zeros(1), tidx, tpos, counts, np.ones(1, dtype=np.bool_), shapes,
+        np.ones(1), True, 1.0,
+    )  # fmt: skip
+    unscale(out[6], out[4], out[0], out[3], np.ones(1, dtype=np.bool_))
+    finish(out[0], out[1], out[2], np.zeros(1), tidx, tpos, counts, out[3])
+
+
+def as_i64(a: npt.ArrayLike) -> I64:
+    return np.ascontiguousarray(a, dtype=np.int64)
+
+
+def as_f64(a: npt.ArrayLike) -> F64:
+    return np.ascontiguousarray(a, dtype=np.float64)

@@ -1,0 +1,428 @@
+"""Compiled full-body FABRIK and the exact-reach polish (numba, :mod:`core.jit`).
+
+The same algorithm as :func:`core.kinematics.fabrik` and :func:`core.kinematics.polish`,
+step for step: the topology of a solve is the numpy module's own plan
+(``kinematics._make_plan``, cached per target set and packed into two flat arrays by
+:func:`packed_plans`), and the iteration -- forward reaching to the sub-bases (weighted
+centroids), the free root pulled back within reach of the pins, backward reaching, the
+stall rule, the rigid carry of untargeted branches, the trunk-locked first stage of the
+polish -- runs per item in machine code. Each item is solved alone, so an item's answer
+does not depend on its batch (the numpy version runs a batch in lock step: same answers
+for single items, which is how the engine called it).
+
+The numpy module remains the reference: tests/core/test_compiled.py checks these kernels
+against it on real poses to 1e-12.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+import numpy.typing as npt
+
+from core import kinematics
+from core.compiled import LEN_ORDER, ORDER, PARENT_RANK, REST_DIRS_RANK, TINY, bone_pass_item
+from core.jit import jit
+from core.skeleton import JOINT_INDEX, NUM_JOINTS
+
+F64 = npt.NDArray[np.float64]
+I64 = npt.NDArray[np.int64]
+Bool = npt.NDArray[np.bool_]
+
+_NB = NUM_JOINTS - 1
+# header slots of a packed plan (ints)
+_K, _T, _ROOT_MOVES, _ROOT_FREE, _LF, _LB, _C = range(7)
+_O_TR, _O_TGT, _O_FWP, _O_FWK, _O_FWPAR, _O_FWMIX, _O_BWP, _O_BWK, _O_BWPAR = range(7, 16)
+_O_CAR, _O_ANC, _O_JT, _O_FWW, _O_PATH = range(16, 21)
+_HEADER = 21
+
+
+def pack_plan(plan: kinematics._Plan) -> tuple[I64, F64]:
+    """A numpy FABRIK plan as (ints, floats) for the kernels (layout: the header slots)."""
+    k, t = len(plan.target_ranks), len(plan.targeted)
+    fw_ptr, fw_kids, fw_par, fw_mix, fw_w = [0], [], [], [], []
+    for fw in plan.forward:
+        fw_kids += fw.kids.tolist()
+        fw_par += fw.parents.tolist()
+        fw_mix.append(0 if fw.mix is None else 1)
+        if fw.mix is None:
+            fw_w += [1.0] * len(fw.kids)
+        else:
+            rows = fw.rows.tolist()
+            fw_w += [float(fw.mix[rows.index(p), c]) for c, p in enumerate(fw.parents.tolist())]
+        fw_ptr.append(len(fw_kids))
+    bw_ptr, bw_kids, bw_par = [0], [], []
+    for kids, parents, _ in plan.backward:
+        bw_kids += kids.tolist()
+        bw_par += parents.tolist()
+        bw_ptr.append(len(bw_kids))
+    sections: list[list[int]] = [
+        plan.target_ranks.tolist(), plan.targeted.tolist(), fw_ptr, fw_kids, fw_par, fw_mix,
+        bw_ptr, bw_kids, bw_par, plan.carried_joints.tolist(), plan.carried_anchors.tolist(),
+    ]  # fmt: skip
+    head = [k, t, int(plan.root_moves), int(plan.root_free), len(plan.forward),
+            len(plan.backward), len(plan.carried_joints)]  # fmt: skip
+    offsets, at = [], _HEADER
+    for s in sections:
+        offsets.append(at)
+        at += len(s)
+    floats = [plan.joint_targets.reshape(-1).tolist(), fw_w, plan.path.reshape(-1).tolist()]
+    f_off, f_at = [], 0
+    for f in floats:
+        f_off.append(f_at)
+        f_at += len(f)
+    ints = np.asarray(head + offsets + f_off + [v for s in sections for v in s], dtype=np.int64)
+    return ints, np.asarray([v for f in floats for v in f], dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class Plans:
+    """Packed plans of one target set: the polish's trunk-locked stage (if any) and the
+    full-body plan (shared by FABRIK and the polish's second stage)."""
+
+    local_ints: I64
+    local_floats: F64
+    has_local: bool
+    ints: I64
+    floats: F64
+
+
+@lru_cache(maxsize=4096)
+def _plans(idx: tuple[int, ...], weights: tuple[float, ...]) -> Plans:
+    target = np.asarray(idx, dtype=np.intp)
+    w = np.asarray(weights, dtype=np.float64)
+    ints, floats = pack_plan(kinematics._make_plan(target, w, frozenset(), True))
+    locks = kinematics._trunk_locks(target)
+    if locks is None:
+        return Plans(ints, floats, False, ints, floats)
+    li, lf = pack_plan(kinematics._make_plan(target, w, locks, False))
+    return Plans(li, lf, True, ints, floats)
+
+
+def packed_plans(target_idx: npt.ArrayLike, weights: npt.ArrayLike) -> Plans:
+    """The packed plans of a target set (K joint indices, K positive weights), cached."""
+    idx = tuple(int(i) for i in np.asarray(target_idx).reshape(-1))
+    w = tuple(float(v) for v in np.asarray(weights, dtype=np.float64).reshape(-1))
+    if len(w) != len(idx) or not all(np.isfinite(w)) or any(v <= 0 for v in w):
+        raise ValueError("weights must be one positive finite number per target")
+    if any(i < 0 or i >= NUM_JOINTS for i in idx):
+        raise ValueError(f"target indices must be integers in [0, {NUM_JOINTS})")
+    return _plans(idx, w)
+
+
+# --------------------------------------------------------------------------------------
+# Kernels
+# --------------------------------------------------------------------------------------
+@jit
+def _unit_or(v: F64, f1: F64, f2: F64, out: F64, n_fallbacks: int) -> None:  # pragma: no cover
+    """``kinematics._unit_or(v, f1, f2)`` for one 3-vector (``n_fallbacks`` of them used):
+    the first vector with a direction, the last one divided by its norm or by 1."""
+    for level in range(n_fallbacks + 1):
+        a = v if level == 0 else (f1 if level == 1 else f2)
+        n = np.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
+        if n > TINY or level == n_fallbacks:
+            d = n if n > TINY else 1.0
+            out[0], out[1], out[2] = a[0] / d, a[1] / d, a[2] / d
+            return
+
+
+@jit
+def _clamp_root(
+    p: F64, start: F64, tpos: F64, radii: F64, anchors: Bool
+) -> None:  # pragma: no cover - compiled
+    """``kinematics._clamp_root`` then ``_project_root`` for one item, ``p`` in place."""
+    d0, d1, d2 = p[0] - start[0], p[1] - start[1], p[2] - start[2]
+    dd = (d0 * d0 + d1 * d1) + d2 * d2
+    moving = dd > TINY * TINY
+    smin = 1.0
+    for k in range(tpos.shape[0]):
+        e0, e1, e2 = start[0] - tpos[k, 0], start[1] - tpos[k, 1], start[2] - tpos[k, 2]
+        ed = e0 * d0 + e1 * d1 + e2 * d2
+        ee = e0 * e0 + e1 * e1 + e2 * e2
+        disc = max(ed * ed - dd * (ee - radii[k] * radii[k]), 0.0)
+        s = (np.sqrt(disc) - ed) / (dd if moving else 1.0)
+        if not (anchors[k] and moving):
+            s = 1.0
+        elif not np.isnan(s):  # np.clip: NaN stays NaN
+            s = min(max(s, 0.0), 1.0)
+        if s < smin or np.isnan(s):
+            smin = s
+    p[0], p[1], p[2] = start[0] + d0 * smin, start[1] + d1 * smin, start[2] + d2 * smin
+    over = np.zeros(tpos.shape[0], dtype=np.bool_)
+    for _ in range(32):
+        anyover = False
+        for k in range(tpos.shape[0]):
+            a0, a1, a2 = p[0] - tpos[k, 0], p[1] - tpos[k, 1], p[2] - tpos[k, 2]
+            over[k] = anchors[k] and np.sqrt(a0 * a0 + a1 * a1 + a2 * a2) > radii[k] * (1.0 + 1e-9)
+            anyover = anyover or over[k]
+        if not anyover:
+            break
+        for k in range(tpos.shape[0]):
+            if not over[k]:
+                continue
+            a0, a1, a2 = p[0] - tpos[k, 0], p[1] - tpos[k, 1], p[2] - tpos[k, 2]
+            nk = max(np.sqrt(a0 * a0 + a1 * a1 + a2 * a2), TINY)
+            if anchors[k] and nk > radii[k] * (1.0 + 1e-9):
+                f = radii[k] / nk
+                p[0], p[1], p[2] = tpos[k, 0] + a0 * f, tpos[k, 1] + a1 * f, tpos[k, 2] + a2 * f
+
+
+@jit
+def _iterate(
+    x: F64, proposal: F64, y: F64, lens: F64, pi: I64, pf: F64, clamp: bool, start: F64,
+    tpos: F64, radii: F64, anchors: Bool, safe: bool,
+) -> bool:  # pragma: no cover - compiled  # fmt: skip
+    """One FABRIK iteration (``kinematics._iterate``) into ``y``; False if not finite."""
+    v, f1, f2, u = np.empty(3), np.empty(3), np.empty(3), np.empty(3)
+    fwp, fwk, fwpar = pi[pi[_O_FWP] :], pi[pi[_O_FWK] :], pi[pi[_O_FWPAR] :]
+    fwmix, fww = pi[pi[_O_FWMIX] :], pf[pi[_O_FWW] :]
+    for level in range(pi[_LF]):
+        a, b = fwp[level], fwp[level + 1]
+        mixed = fwmix[level] == 1
+        if mixed:
+            for i in range(a, b):
+                proposal[fwpar[i], 0] = 0.0
+                proposal[fwpar[i], 1] = 0.0
+                proposal[fwpar[i], 2] = 0.0
+        for i in range(a, b):
+            kid, par = fwk[i], fwpar[i]
+            ln = lens[kid - 1]
+            for c in range(3):
+                v[c] = x[par, c] - proposal[kid, c]
+            if safe:
+                for c in range(3):
+                    f1[c] = x[par, c] - x[kid, c]
+                    f2[c] = -REST_DIRS_RANK[kid - 1, c]
+                _unit_or(v, f1, f2, u, 2)
+                q0 = proposal[kid, 0] + u[0] * ln
+                q1 = proposal[kid, 1] + u[1] * ln
+                q2 = proposal[kid, 2] + u[2] * ln
+            else:
+                f = ln / np.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+                q0 = proposal[kid, 0] + v[0] * f
+                q1 = proposal[kid, 1] + v[1] * f
+                q2 = proposal[kid, 2] + v[2] * f
+            if mixed:
+                w = fww[i]
+                proposal[par, 0] += w * q0
+                proposal[par, 1] += w * q1
+                proposal[par, 2] += w * q2
+            else:
+                proposal[par, 0], proposal[par, 1], proposal[par, 2] = q0, q1, q2
+    if clamp:
+        _clamp_root(proposal[0], start, tpos, radii, anchors)
+    y[:, :] = x
+    if pi[_ROOT_MOVES] == 1:
+        y[0, :] = proposal[0, :]
+    bwp, bwk, bwpar = pi[pi[_O_BWP] :], pi[pi[_O_BWK] :], pi[pi[_O_BWPAR] :]
+    ok = True
+    for level in range(pi[_LB]):
+        for i in range(bwp[level], bwp[level + 1]):
+            kid, par = bwk[i], bwpar[i]
+            ln = lens[kid - 1]
+            for c in range(3):
+                v[c] = proposal[kid, c] - y[par, c]
+            if safe:
+                for c in range(3):
+                    f1[c] = x[kid, c] - x[par, c]
+                    f2[c] = REST_DIRS_RANK[kid - 1, c]
+                _unit_or(v, f1, f2, u, 2)
+                for c in range(3):
+                    y[kid, c] = y[par, c] + u[c] * ln
+            else:
+                f = ln / np.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+                for c in range(3):
+                    y[kid, c] = y[par, c] + v[c] * f
+            for c in range(3):
+                ok = ok and np.isfinite(y[kid, c])
+    return ok and np.isfinite(y[0, 0]) and np.isfinite(y[0, 1]) and np.isfinite(y[0, 2])
+
+
+@jit
+def _swing_into(a: F64, b: F64, v: F64, out: F64) -> None:  # pragma: no cover - compiled
+    """``kinematics._swing`` for one vector: ``v`` turned by the rotation taking a to b."""
+    au, bu, zero = np.empty(3), np.empty(3), np.zeros(3)
+    _unit_or(a, zero, zero, au, 1)
+    _unit_or(b, zero, zero, bu, 1)
+    c = au[0] * bu[0] + au[1] * bu[1] + au[2] * bu[2]
+    w0 = au[1] * bu[2] - au[2] * bu[1]
+    w1 = au[2] * bu[0] - au[0] * bu[2]
+    w2 = au[0] * bu[1] - au[1] * bu[0]
+    scale = (w0 * v[0] + w1 * v[1] + w2 * v[2]) / max(1.0 + c, 1e-12)
+    same = (a[0] == b[0] and a[1] == b[1] and a[2] == b[2]) or not (
+        au[0] != 0.0 or au[1] != 0.0 or au[2] != 0.0
+    ) or not (bu[0] != 0.0 or bu[1] != 0.0 or bu[2] != 0.0)  # fmt: skip
+    if same:
+        out[0], out[1], out[2] = v[0], v[1], v[2]
+        return
+    out[0] = (c * v[0] + (w1 * v[2] - w2 * v[1])) + w0 * scale
+    out[1] = (c * v[1] + (w2 * v[0] - w0 * v[2])) + w1 * scale
+    out[2] = (c * v[2] + (w0 * v[1] - w1 * v[0])) + w2 * scale
+
+
+@jit
+def _carry(x0: F64, x: F64, pi: I64) -> None:  # pragma: no cover - compiled
+    """``kinematics._carry`` in place on ``x``: untargeted branches carried rigidly."""
+    kids, anchors = pi[pi[_O_CAR] :], pi[pi[_O_ANC] :]
+    a0, a1, off, out = np.empty(3), np.empty(3), np.empty(3), np.empty(3)
+    placed = np.empty((pi[_C], 3))
+    for i in range(pi[_C]):
+        kid, anc = kids[i], anchors[i]
+        ap = 0 if anc == 0 else PARENT_RANK[anc]
+        for c in range(3):
+            a0[c] = x0[anc, c] - x0[ap, c]
+            a1[c] = x[anc, c] - x[ap, c]
+            off[c] = x0[kid, c] - x0[anc, c]
+        keep = True
+        for c in range(3):
+            keep = keep and a0[c] == a1[c] and x[anc, c] == x0[anc, c]
+        if keep:
+            placed[i, :] = x0[kid, :]
+        else:
+            _swing_into(a0, a1, off, out)
+            for c in range(3):
+                placed[i, c] = x[anc, c] + out[c]
+    for i in range(pi[_C]):
+        x[kids[i], :] = placed[i, :]
+
+
+@jit
+def _errors(x: F64, tpos: F64, pi: I64, out: F64) -> None:  # pragma: no cover - compiled
+    tr = pi[pi[_O_TR] :]
+    for k in range(pi[_K]):
+        r = tr[k]
+        d0, d1, d2 = x[r, 0] - tpos[k, 0], x[r, 1] - tpos[k, 1], x[r, 2] - tpos[k, 2]
+        out[k] = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+
+
+@jit
+def _solve(
+    x0: F64, lens: F64, tpos: F64, pi: I64, pf: F64, tol: float, max_it: int,
+    hold: Bool, has_hold: bool, x: F64, errors: F64,
+) -> tuple[int, bool]:  # pragma: no cover - compiled  # fmt: skip
+    """``kinematics._solve`` for one item (rank order); ``x``/``errors`` receive the answer."""
+    k_n, t_n = pi[_K], pi[_T]
+    stall = tol * 1e-3
+    x[:, :] = x0
+    _errors(x, tpos, pi, errors)
+    done = True
+    for k in range(k_n):
+        done = done and errors[k] <= tol
+    converged = done
+    proposal = x0.copy()
+    targeted, jt = pi[pi[_O_TGT] :], pf[pi[_O_JT] :]
+    for t in range(t_n):
+        for c in range(3):
+            s = 0.0
+            for k in range(k_n):
+                s += jt[t * k_n + k] * tpos[k, c]
+            proposal[targeted[t], c] = s
+    hold_any = False
+    if has_hold:
+        for k in range(k_n):
+            hold_any = hold_any or hold[k]
+    clamp = pi[_ROOT_FREE] == 1 or (hold_any and pi[_ROOT_MOVES] == 1)
+    radii, anchors, start = np.empty(k_n), np.zeros(k_n, dtype=np.bool_), x0[0].copy()
+    if clamp:
+        path = pf[pi[_O_PATH] :]
+        for k in range(k_n):
+            reach = 0.0
+            for b in range(lens.shape[0]):
+                reach += path[k * _NB + b] * lens[b]
+            d0, d1, d2 = x0[0, 0] - tpos[k, 0], x0[0, 1] - tpos[k, 1], x0[0, 2] - tpos[k, 2]
+            dist = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+            anchors[k] = errors[k] <= tol
+            if hold_any:
+                anchors[k] = hold[k] and reach > 0
+                dist = min(dist, reach)
+            radii[k] = max(0.99 * reach, dist)
+    new_errors = np.empty(k_n)
+    y = np.empty_like(x)
+    strikes, its = 0, 0
+    while its < max_it and not done:
+        its += 1
+        if not _iterate(x, proposal, y, lens, pi, pf, clamp, start, tpos, radii, anchors, False):
+            _iterate(x, proposal, y, lens, pi, pf, clamp, start, tpos, radii, anchors, True)
+        x[:, :] = y
+        _errors(x, tpos, pi, new_errors)
+        progress, newly, all_ok = 0.0, False, True
+        for k in range(k_n):
+            if new_errors[k] > tol:
+                progress += errors[k] - new_errors[k]
+                all_ok = False
+            elif errors[k] > tol:
+                newly = True
+        strikes = 0 if (newly or progress >= stall) else strikes + 1
+        finished = all_ok or strikes >= 3
+        converged = converged or finished
+        errors[:] = new_errors
+        done = finished
+    if its:
+        _carry(x0, x, pi)
+        _errors(x, tpos, pi, errors)
+    return its, converged
+
+
+@jit
+def solve_batch(
+    polish: bool, starts: F64, lengths: F64, goals: F64, tols: F64, max_it: int,
+    li: I64, lf: F64, has_local: bool, gi: I64, gf: F64, hold: Bool, has_hold: bool,
+) -> tuple[F64, I64, F64, Bool]:  # pragma: no cover - compiled  # fmt: skip
+    """``kinematics.fabrik`` (``polish`` False) or ``kinematics.polish`` of every item:
+    ``starts [M, 21, 3]``, ``lengths [M, 20]``, ``goals [M, K, 3]``, ``tols [M]``; one
+    target set (its packed plans) and pin mask ``hold [K]`` for all. Returns poses
+    ``[M, 21, 3]``, iterations ``[M]``, errors ``[M, K]``, converged ``[M]``."""
+    m, k_n = starts.shape[0], goals.shape[1]
+    out = np.empty_like(starts)
+    its = np.zeros(m, dtype=np.int64)
+    errs = np.empty((m, k_n))
+    conv = np.zeros(m, dtype=np.bool_)
+    pose, xr, rr, lr = (np.empty((NUM_JOINTS, 3)), np.empty((NUM_JOINTS, 3)),
+                        np.empty((NUM_JOINTS, 3)), np.empty(_NB))  # fmt: skip
+    x0, x = np.empty((NUM_JOINTS, 3)), np.empty((NUM_JOINTS, 3))
+    lens, tp = np.empty(_NB), np.empty((k_n, 3))
+    for b in range(m):
+        bone_pass_item(starts[b], lengths[b], starts[b], False, pose, xr, lr, rr)
+        for r in range(NUM_JOINTS):
+            x0[r, :] = pose[ORDER[r], :]
+        for r in range(_NB):
+            lens[r] = lengths[b, LEN_ORDER[r]]
+        tp[:, :] = goals[b]
+        tol = tols[b]
+        n_it = 0
+        solved = False
+        if polish and has_local:
+            n_it, c = _solve(x0, lens, tp, li, lf, tol, max_it, hold, False, x, errs[b])
+            solved = True
+            for k in range(k_n):
+                solved = solved and errs[b, k] <= tol
+            conv[b] = c
+            if not solved:
+                x0[:, :] = x
+        if not solved:
+            g_it, c = _solve(x0, lens, tp, gi, gf, tol, max_it, hold, has_hold, x, errs[b])
+            n_it += g_it
+            conv[b] = c
+        its[b] = n_it
+        for r in range(NUM_JOINTS):
+            out[b, ORDER[r], :] = x[r, :]
+    return out, its, errs, conv
+
+
+def warm() -> None:
+    """Compile (or load from the cache) the kernels on a tiny problem."""
+    from core.rest import rest_lengths, rest_pose
+
+    pose = rest_pose()[None].astype(np.float64)
+    lens = rest_lengths()[None].astype(np.float64)
+    idx = np.asarray([JOINT_INDEX["left_wrist"], JOINT_INDEX["left_ankle"]], dtype=np.intp)
+    plans = packed_plans(idx, np.ones(2))
+    goals = pose[:, idx] + 0.05
+    hold = np.asarray([False, True])
+    for polish in (False, True):
+        solve_batch(
+            polish, pose, lens, goals, np.full(1, 1e-3), 8, plans.local_ints,
+            plans.local_floats, plans.has_local, plans.ints, plans.floats, hold, True,
+        )  # fmt: skip
