@@ -24,7 +24,7 @@ def _problems(real: PosePairs, names: tuple[str, ...], **kw: object) -> list[Sol
             n_targets=len(idx),
             floor=0.2,
             **kw,  # type: ignore[arg-type]
-        )  # fmt: skip
+        )
         for s, g in zip(real.starts[:40], real.goals[:40], strict=True)
     ]
 
