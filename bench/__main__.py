@@ -100,11 +100,30 @@ def run(
             min_seconds=0.05 if quick else 0.5,
             min_items=64 if quick else 4096,
         )
+        console.log("issue 14: compiled solve vs compiled and numpy FABRIK, batch rate")
+        i14 = speed.issue14(
+            engine,
+            {k: edit_sets[k] for k in (2, 5)},
+            calls=40 if quick else 2000,
+            warmup=5 if quick else 50,
+            batch=64 if quick else 4096,
+            batch_rounds=2 if quick else 5,
+        )
         results["speed"] = {
             **lat,
             "throughput": thr,
             "throughput_set": "both wrists (2 targets), B1 edits",
+            "issue14": i14,
         }
+        for row in i14["latency"]:
+            console.log(
+                f"  issue 14, {row['targets']} targets: neural {row['neural']['p50_ms']:.3f} ms,"
+                f" FABRIK compiled {row['fabrik_compiled']['p50_ms']:.3f} ms"
+                f" (kernel {row['fabrik_kernel']['p50_ms']:.4f}),"
+                f" FABRIK numpy {row['fabrik_numpy']['p50_ms']:.3f} ms"
+            )
+        for label, rate in i14["batch_poses_per_s"].items():
+            console.log(f"  issue 14, batch {i14['batch']} via {label}: {rate:,.0f} poses/s")
         for row in lat["latency"]:
             console.log(f"  {row['targets']} targets {row['method']}: p50 {row['p50_ms']:.3f} ms")
         seconds["speed"] = round(time.perf_counter() - t0, 1)

@@ -132,6 +132,7 @@ def goals(results: Json) -> list[Goal]:
                 status(None if r is None else r["p50_ms"] <= limit),
             )
         )
+    rows += issue14_goals(speed.get("issue14"))
     http = results.get("http", {})
     one = next((r for r in http.get("solve", []) if r["concurrency"] == 1), None)
     rows.append(
@@ -233,4 +234,54 @@ def heldout_goals(h: HeldoutResults) -> list[Goal]:
     for f in stress:
         k, n, _ = _wins([f], "neural_bone", "fabrik")
         rows.append((f"(info) {f.name}: neural soft below FABRIK", "–", f"{k}/{n} sets", "info"))
+    return rows
+
+
+def issue14_goals(i14: Json | None) -> list[Goal]:
+    """Issue 14's "done when" list (compiled solve geometry), from ``speed.issue14``."""
+    if not i14:
+        return [("Issue 14 (compiled solve)", "–", "–", status(None))]
+    lat = {r["targets"]: r for r in i14["latency"]}
+    rows: list[Goal] = []
+    for k, limit in ((2, 0.1), (5, 0.2)):
+        r = lat.get(k)
+        shown = (
+            "–"
+            if r is None
+            else f"{r['neural']['p50_ms']:.3f} ms (p99 {r['neural']['p99_ms']:.3f})"
+        )
+        rows.append(
+            (
+                f"Issue 14: neural {k}-target soft solve compute p50 (one thread)",
+                f"≤ {limit} ms",
+                shown,
+                status(None if r is None else r["neural"]["p50_ms"] <= limit),
+            )
+        )
+    ratios = {k: r["fabrik_compiled"]["p50_ms"] / r["neural"]["p50_ms"] for k, r in lat.items()}
+    rows.append(
+        (
+            f"Issue 14: neural ≥ 5× faster than the compiled FABRIK (p50, same edits, "
+            f"tolerance {i14['tolerance_m'] * 1000:g} mm, cap {i14['iteration_cap']})",
+            "≥ 5×",
+            ", ".join(
+                f"{k} targets {v:.2f}× (FABRIK {lat[k]['fabrik_compiled']['p50_ms']:.3f} ms, "
+                f"kernel alone {lat[k]['fabrik_kernel']['p50_ms'] * 1000:.1f} µs; numpy "
+                f"FABRIK {lat[k]['fabrik_numpy']['p50_ms']:.3f} ms)"
+                for k, v in ratios.items()
+            ),
+            status(min(ratios.values()) >= 5.0),
+        )
+    )
+    rate = i14["batch_poses_per_s"]
+    rows.append(
+        (
+            f"Issue 14: in-process batch of {i14['batch']} (2 targets, "
+            f"{i14['threads']} onnxruntime thread)",
+            "≥ 200,000 poses/s",
+            f"{rate['solve_arrays']:,.0f} poses/s via solve_arrays; "
+            f"{rate['solve']:,.0f} via solve(problems)",
+            status(rate["solve_arrays"] >= 200_000),
+        )
+    )
     return rows

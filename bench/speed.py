@@ -3,8 +3,9 @@ throughput. Timings use ``time.perf_counter_ns`` around ``Engine.solve``."""
 
 from __future__ import annotations
 
+import dataclasses
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -104,3 +105,107 @@ def throughput(
                 }
             )
     return rows
+
+
+def issue14(
+    engine: Engine,
+    sets: dict[int, tuple[str, Edits]],
+    *,
+    calls: int = 2000,
+    warmup: int = 50,
+    tolerance: float = 1e-4,
+    batch: int = 4096,
+    batch_rounds: int = 5,
+) -> Json:
+    """Issue 14's figures, side by side in one loop per target count (one thread):
+
+    - ``neural``: ``engine.solve([p])``, neural + bone pass (soft), a different edit per call;
+    - ``fabrik_compiled``: the same call with ``method=fabrik`` (the engine's compiled
+      FABRIK), and ``fabrik_kernel``: the compiled FABRIK kernel alone on the canonical
+      edit (no engine glue);
+    - ``fabrik_numpy``: ``core.kinematics.fabrik`` (the numpy FABRIK the engine ran before);
+
+    FABRIK with ``tolerance`` (m) and the engine's iteration cap. Then in-process batch
+    throughput of ``engine.solve_arrays`` and ``engine.solve`` on ``batch`` edits (2 targets)."""
+    rows = [
+        _issue14_set(engine, k, name, edits, calls, warmup, tolerance)
+        for k, (name, edits) in sets.items()
+    ]
+    two = sets[2][1]
+    reps = -(-batch // len(two))
+    starts = np.concatenate([two.start] * reps)[:batch]
+    tidx = np.stack(two.joints * reps)[:batch]
+    tpos = np.concatenate([np.stack(two.targets)] * reps)[:batch]
+    probs = [p for _ in range(reps) for p in problems(two, "neural_bone")][:batch]
+    engine.solve_arrays(starts, tidx, tpos)
+    engine.solve(probs)
+    through = {
+        "solve_arrays": batch
+        / min(_timed(lambda: engine.solve_arrays(starts, tidx, tpos)) for _ in range(batch_rounds)),
+        "solve": batch / min(_timed(lambda: engine.solve(probs)) for _ in range(batch_rounds)),
+    }
+    ort_threads = engine.encoder.session.get_session_options().intra_op_num_threads
+    return {
+        "latency": rows,
+        "tolerance_m": tolerance,
+        "iteration_cap": engine.fabrik_max_iterations,
+        "batch": batch,
+        "batch_poses_per_s": through,
+        "threads": ort_threads,
+    }
+
+
+def _issue14_set(
+    engine: Engine, k: int, name: str, edits: Edits, calls: int, warmup: int, tolerance: float
+) -> Json:
+    """One target count of :func:`issue14`: the four timings interleaved per call."""
+    from core import compiled_fabrik, kinematics
+    from core.skeleton import bone_lengths
+
+    cap = engine.fabrik_max_iterations
+    neural = problems(edits, "neural_bone")
+    fab = [dataclasses.replace(p, tolerance=tolerance) for p in problems(edits, "fabrik")]
+    n = len(edits)
+    start = np.ascontiguousarray(edits.start, dtype=np.float64)
+    lens = np.ascontiguousarray(bone_lengths(start), dtype=np.float64)
+    idx = edits.joints[0]
+    goals = [np.ascontiguousarray(t[None], dtype=np.float64) for t in edits.targets]
+    plans = compiled_fabrik.packed_plans(idx, np.ones(len(idx)))
+    pinned = np.zeros(len(idx), dtype=bool)
+    tol = np.full(1, tolerance)
+
+    def kernel(i: int) -> object:
+        return compiled_fabrik.solve_batch(
+            False, start[i : i + 1], lens[i : i + 1], goals[i], tol, cap, plans.local_ints,
+            plans.local_floats, plans.has_local, plans.ints, plans.floats, pinned, False,
+        )  # fmt: skip
+
+    def numpy_fabrik(i: int) -> object:
+        return kinematics.fabrik(
+            start[i], lens[i], idx, edits.targets[i], tolerance=tolerance, max_iterations=cap
+        )
+
+    runs: dict[str, Callable[[int], object]] = {
+        "neural": lambda i: engine.solve([neural[i]]),
+        "fabrik_compiled": lambda i: engine.solve([fab[i]]),
+        "fabrik_kernel": kernel,
+        "fabrik_numpy": numpy_fabrik,
+    }
+    for i in range(warmup):
+        for fn in runs.values():
+            fn(i % n)
+    times: dict[str, list[int]] = {m: [] for m in runs}
+    for i in range(calls):
+        for m, fn in runs.items():
+            if m == "fabrik_numpy" and i % 8:
+                continue  # the slow reference: every 8th call
+            t0 = time.perf_counter_ns()
+            fn(i % n)
+            times[m].append(time.perf_counter_ns() - t0)
+    return {"targets": k, "set": name, **{m: _stats(ns) for m, ns in times.items()}}
+
+
+def _timed(fn: Callable[[], object]) -> float:
+    t0 = time.perf_counter_ns()
+    fn()
+    return (time.perf_counter_ns() - t0) / 1e9

@@ -1,10 +1,11 @@
 """The numeric JIT the compiled kernels are built with (numba), configured in one place.
 
 * ``cache=True``: compiled machine code is kept on disk, so a second start loads it in
-  well under a second instead of compiling. Numba writes it next to the sources when
-  that folder is writable; otherwise (a read-only container) into ``$NUMBA_CACHE_DIR``,
-  which is set here to a per-user folder under the temp dir when the environment does
-  not set it.
+  about a second instead of compiling (20-40 s cold). Numba writes it next to the
+  sources when that folder is writable; otherwise (a read-only container) into
+  ``$NUMBA_CACHE_DIR``, set here to a per-user folder under the temp dir when the
+  environment does not set it, first filled from ``$MARIONETTE_NUMBA_SEED`` if given
+  (the image compiles the kernels at build time into such a seed).
 * no ``fastmath``, no ``parallel``: IEEE arithmetic in source order (no reassociation,
   no fused multiply-add contraction), one thread, so a kernel's answer for an item is
   bit-identical from run to run and whatever batch the item is in.
@@ -17,6 +18,7 @@ signature of each kernel.
 from __future__ import annotations
 
 import os
+import shutil
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
@@ -24,14 +26,23 @@ from typing import Any, TypeVar, cast
 
 
 def _cache_dir() -> None:
-    """Point numba's cache at a writable folder when the package folder is not one."""
-    if os.environ.get("NUMBA_CACHE_DIR"):
-        return
-    here = Path(__file__).resolve().parent
-    if os.access(here, os.W_OK):
-        return
-    uid = os.getuid() if hasattr(os, "getuid") else 0
-    os.environ["NUMBA_CACHE_DIR"] = str(Path(tempfile.gettempdir()) / f"marionette-numba-{uid}")
+    """Point numba's cache at a writable folder when the package folder is not one, and
+    seed it from ``$MARIONETTE_NUMBA_SEED`` (a cache compiled at image build time, read
+    only) when it is empty: a read-only container then starts without compiling."""
+    seed = os.environ.get("MARIONETTE_NUMBA_SEED")
+    target = os.environ.get("NUMBA_CACHE_DIR")
+    if not target:
+        here = Path(__file__).resolve().parent
+        if os.access(here, os.W_OK) and not seed:
+            return
+        uid = os.getuid() if hasattr(os, "getuid") else 0
+        target = str(Path(tempfile.gettempdir()) / f"marionette-numba-{uid}")
+        os.environ["NUMBA_CACHE_DIR"] = target
+    if seed and Path(seed).is_dir() and not Path(target).exists():
+        try:
+            shutil.copytree(seed, target)
+        except OSError:  # no seed then: the kernels compile at warm-up
+            pass
 
 
 _cache_dir()

@@ -244,6 +244,15 @@ class Engine:
         n = len(problems)
         if n == 0:
             return []
+        if n == 1:  # one edit (the interactive case): its arrays as they are
+            p = problems[0]
+            ans = self.solve_arrays(
+                p.pose[None], p.target_idx[None], p.target_pos[None], n_targets=p.n_targets,
+                weights=p.weights[None], fabrik=p.method == "fabrik",
+                preserve_bone_lengths=p.preserve_bone_lengths, exact=p.reach == "exact",
+                tolerance=p.tolerance, floor=p.floor,
+            )  # fmt: skip
+            return [self._result(p, ans, 0)]
         counts = np.fromiter((len(p.target_idx) for p in problems), np.int64, n)
         k_max = int(counts.max())
         tidx = np.zeros((n, k_max), dtype=np.int64)
@@ -267,21 +276,20 @@ class Engine:
             tolerance=np.fromiter((p.tolerance for p in problems), np.float64, n),
             floor=np.fromiter((p.floor for p in problems), np.float64, n),
         )  # fmt: skip
-        results = []
-        for b, p in enumerate(problems):
-            e = ans.errors[b, : p.n_targets]
-            results.append(
-                SolveResult(
-                    pose=ans.pose[b],
-                    errors=e,
-                    reached=e <= p.tolerance,
-                    pin_errors=ans.errors[b, p.n_targets : len(p.target_idx)],
-                    max_bone_error=float(ans.max_bone_error[b]),
-                    solvers=list(ans.paths[ans.path_of[b]]),
-                    iterations=int(ans.iterations[b]),
-                )
-            )
-        return results
+        return [self._result(p, ans, b) for b, p in enumerate(problems)]
+
+    @staticmethod
+    def _result(p: SolveProblem, ans: BatchAnswer, b: int) -> SolveResult:
+        e = ans.errors[b, : p.n_targets]
+        return SolveResult(
+            pose=ans.pose[b],
+            errors=e,
+            reached=e <= p.tolerance,
+            pin_errors=ans.errors[b, p.n_targets : len(p.target_idx)],
+            max_bone_error=float(ans.max_bone_error[b]),
+            solvers=list(ans.paths[ans.path_of[b]]),
+            iterations=int(ans.iterations[b]),
+        )
 
     def solve_arrays(
         self,
