@@ -17,6 +17,7 @@ signature of each kernel.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import tempfile
@@ -39,10 +40,8 @@ def _cache_dir() -> None:
         target = str(Path(tempfile.gettempdir()) / f"marionette-numba-{uid}")
         os.environ["NUMBA_CACHE_DIR"] = target
     if seed and Path(seed).is_dir() and not Path(target).exists():
-        try:
+        with contextlib.suppress(OSError):  # no seed then: the kernels compile at warm-up
             shutil.copytree(seed, target)
-        except OSError:  # no seed then: the kernels compile at warm-up
-            pass
 
 
 _cache_dir()
