@@ -36,16 +36,20 @@ def price(p: SolveProblem) -> int:
 
 def chunks(problems: Sequence[SolveProblem]) -> list[slice]:
     """Consecutive slices of at most ``CHUNK_PRICE`` units (at least one item each)."""
+    return chunks_of([price(p) for p in problems])
+
+
+def chunks_of(prices: Sequence[int]) -> list[slice]:
+    """:func:`chunks` of items priced ``prices`` (the array path's items have no objects)."""
     out: list[slice] = []
     start, total = 0, 0
-    for i, p in enumerate(problems):
-        cost = price(p)
+    for i, cost in enumerate(prices):
         if i > start and total + cost > CHUNK_PRICE:
             out.append(slice(start, i))
             start, total = i, 0
         total += cost
-    if start < len(problems):
-        out.append(slice(start, len(problems)))
+    if start < len(prices):
+        out.append(slice(start, len(prices)))
     return out
 
 
@@ -83,6 +87,19 @@ class Budget:
             results.extend(await anyio.to_thread.run_sync(fn, problems[part], limiter=limiter))
             self.compute += time.perf_counter() - t
         return results
+
+    async def run_parts(self, fn: Callable[[slice], R], parts: Sequence[slice]) -> list[R]:
+        """``fn`` over consecutive ``parts`` of a batch of ``parts[-1].stop`` items (the
+        array path): like :meth:`run`, each part in a worker thread within budget."""
+        limiter = getattr(self.request.app.state, "compute_limiter", None)
+        total = parts[-1].stop if parts else 0
+        out: list[R] = []
+        for part in parts:
+            await self.check(part.start, total)
+            t = time.perf_counter()
+            out.append(await anyio.to_thread.run_sync(fn, part, limiter=limiter))
+            self.compute += time.perf_counter() - t
+        return out
 
 
 #: A character item of a batch (its own solve, joint map, retargeting and answer, in

@@ -5,6 +5,10 @@ solver sequences are a trained key, ``composed``, ``none`` or ``fabrik``."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
+import numpy as np
+import numpy.typing as npt
 from prometheus_client import CollectorRegistry, Counter, Histogram
 
 
@@ -40,8 +44,8 @@ class Metrics:
             registry=self.registry,
         )
 
-    def solved(self, method: str, solvers: list[str]) -> None:
-        """Count one solve under a bounded label (never an open-ended combination)."""
+    def solved(self, method: str, solvers: list[str], n: int = 1) -> None:
+        """Count ``n`` solves under a bounded label (never an open-ended combination)."""
         neural = [s for s in solvers if not s.startswith("fabrik")]
         if method == "fabrik":
             label = "fabrik"
@@ -49,4 +53,12 @@ class Metrics:
             label = "none"
         else:
             label = neural[0] if len(neural) == 1 else "composed"
-        self.solves.labels(method, label).inc()
+        self.solves.labels(method, label).inc(n)
+
+    def solved_paths(
+        self, method: str, paths: Sequence[Sequence[str]], path_of: npt.NDArray[np.int64]
+    ) -> None:
+        """Count a batch's solves by solver path (``BatchAnswer.paths`` / ``path_of``)."""
+        for path, n in zip(paths, np.bincount(path_of, minlength=len(paths)).tolist(),
+                           strict=True):  # fmt: skip
+            self.solved(method, list(path), n)

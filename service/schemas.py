@@ -217,3 +217,77 @@ class Problem(BaseModel):
 class Health(BaseModel):
     status: Literal["live", "ready", "not ready"]
     detail: str | None = None
+
+
+# -- the columnar batch (service.columnar validates it vectorised; these models are its
+# -- contract, and validate it when it reaches the route itself) --------------------------
+PoseRow = Annotated[
+    list[Coordinate],
+    Field(
+        min_length=3 * len(JOINT_NAMES),
+        max_length=3 * len(JOINT_NAMES),
+        description="The 21 joints' x, y, z in the order of `/v1/info/skeleton` `joints` "
+        "(pelvis x, y, z, spine1 x, y, z, …), metres, world frame.",
+    ),
+]
+Weight = Annotated[float, Field(allow_inf_nan=False, gt=0.0, le=1000.0)]
+JointRow = Annotated[list[Joint], Field(min_length=1, max_length=21)]
+
+
+class ColumnarTargets(_Body):
+    joints: list[Joint] | list[JointRow] = Field(
+        min_length=1,
+        description="K joint names shared by every item, or one row of K names per item "
+        "(every row the same length K).",
+    )
+    positions: list[list[Coordinate]] = Field(
+        description="One row per item: the K targets' x, y, z in the order of `joints`."
+    )
+    weights: list[Weight] | list[list[Weight]] | None = Field(
+        default=None, description="K weights shared by every item, or one row per item."
+    )
+
+
+class ColumnarBatch(_Body):
+    """The **columnar form** of a batch: arrays instead of items, for throughput (parsed
+    straight into arrays, answered from arrays). Every item has K targets and P pins;
+    joint names are shared or given per item; the options hold for every item."""
+
+    model_config = ConfigDict(
+        extra="forbid",
+        strict=True,
+        json_schema_extra={
+            "examples": [
+                {
+                    "poses": [[v for name in JOINT_NAMES for v in _REST_EXAMPLE[name]]],
+                    "targets": {"joints": ["left_wrist"], "positions": [[0.3, 1.4, 0.2]]},
+                    "pins": ["left_ankle", "right_ankle"],
+                    "options": {"method": "neural", "reach": "soft"},
+                }
+            ]
+        },
+    )
+
+    poses: list[PoseRow] = Field(min_length=1, description="One row of 63 numbers per item.")
+    targets: ColumnarTargets
+    pins: list[Joint] | list[list[Joint]] = Field(
+        default_factory=list,
+        description="P joints held where they are, shared or one row per item; distinct "
+        "and none of them targeted.",
+    )
+    options: SolveOptions = Field(default_factory=SolveOptions)
+
+
+class ColumnarResponse(BaseModel):
+    """The answer to a columnar batch: arrays, row b for item b."""
+
+    poses: list[list[float]] = Field(description="One row of 63 numbers per item.")
+    errors: list[list[float]] = Field(description="Distance (m) of each target, [B][K].")
+    reached: list[list[bool]] = Field(description="errors <= tolerance, [B][K].")
+    pin_errors: list[list[float]] = Field(description="How far each pin moved (m), [B][P].")
+    max_bone_length_error: list[float] = Field(description="Per item, relative.")
+    iterations: list[int] = Field(description="FABRIK iterations per item.")
+    solvers: list[list[str]] = Field(description="The distinct solver sequences used.")
+    solver_of: list[int] = Field(description="Per item: its index into `solvers`.")
+    model: str
+    method: Literal["neural", "fabrik"]

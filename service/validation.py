@@ -5,7 +5,7 @@ field."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -26,6 +26,13 @@ def poses(requests: Sequence[SolveRequest], where: Sequence[str]) -> F64:
     arr = np.array(
         [[getattr(r.pose, j) for j in JOINT_NAMES] for r in requests], dtype=np.float64
     ).reshape(len(requests), len(JOINT_NAMES), 3)
+    check_bones(arr, where.__getitem__)
+    return arr
+
+
+def check_bones(arr: F64, where: Callable[[int], str]) -> None:
+    """Refuse poses ``[B, 21, 3]`` with a zero-length bone, naming the first such pose
+    (``where(b)``) and its joints."""
     lengths = bone_lengths(arr)
     if lengths.size and lengths.min() < MIN_BONE:
         b = int(np.argmax(lengths.min(axis=-1) < MIN_BONE))
@@ -33,10 +40,9 @@ def poses(requests: Sequence[SolveRequest], where: Sequence[str]) -> F64:
             JOINT_NAMES[c] for (c, _), n in zip(BONES, lengths[b], strict=True) if n < MIN_BONE
         ]
         raise InvalidRequest(
-            f"{where[b]}: degenerate pose: zero-length bones ending at {short} "
+            f"{where(b)}: degenerate pose: zero-length bones ending at {short} "
             f"(each joint must be at least {MIN_BONE * 1000:g} mm from its parent)"
         )
-    return arr
 
 
 def solve_problem(req: SolveRequest, pose: F64, where: str = "") -> SolveProblem:

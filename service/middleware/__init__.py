@@ -3,7 +3,9 @@
 Outermost first: CORS (``cors``), request id + access log + last-resort answers
 (``context``), ``x-total-time`` (``timing``), Prometheus metrics (``metrics``), hardening
 headers (``headers``), and the gate (``gate``: API key, content type, body limits and the
-per-worker admission bound). Every rejection is problem+json.
+per-worker admission bound), and innermost the hot paths (``fastpath``: the pose form of
+``/v1/solve`` and the columnar batch answered without the router). Every rejection is
+problem+json.
 """
 
 from __future__ import annotations
@@ -31,6 +33,9 @@ def install(
 ) -> None:
     """Add the stack; ``add_middleware`` puts each new one outside the previous.
     ``routes``: every route (flattened), to label refused requests by template."""
+    from service.middleware.fastpath import FastPath  # imports the routes' modules
+
+    app.add_middleware(FastPath, app_routes=routes)
     app.add_middleware(Gate, settings=settings)
     app.add_middleware(SecurityHeaders)
     app.add_middleware(RequestMetrics, metrics=metrics, app_routes=routes)

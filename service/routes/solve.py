@@ -7,11 +7,20 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from typing import TypeVar
+from typing import Annotated, Any, TypeVar
 
 import anyio.to_thread
 from fastapi import APIRouter, Request, Response
+from pydantic import (
+    Discriminator,
+    RootModel,
+    Tag,
+    ValidationError,
+    ValidatorFunctionWrapHandler,
+    model_validator,
+)
 
+from service import columnar
 from service.body import BodyRoute
 from service.characters import (
     BatchRequest,
@@ -20,18 +29,51 @@ from service.characters import (
     CharacterSolveResponse,
     SolveBody,
 )
-from service.deps import ReadyEngine, RequestBudget, State
-from service.engine import SolveProblem
+from service.deps import ReadyEngine, RequestBudget, ServiceState, State
+from service.engine import Engine, SolveProblem
 from service.errors import TooManyItems
-from service.limits import CHARACTER_JOINTS, FABRIK_PRICE, batch_price_limit, character_price
+from service.limits import (
+    CHARACTER_JOINTS,
+    FABRIK_PRICE,
+    Budget,
+    batch_price_limit,
+    character_price,
+)
 from service.responses import json_response, solve_payload
 from service.routes.characters import answer_character, read_character, solve_read
-from service.schemas import SolveRequest, SolveResponse
+from service.schemas import ColumnarBatch, ColumnarResponse, SolveRequest, SolveResponse
 from service.validation import poses, solve_problem
 
 router = APIRouter(route_class=BodyRoute, tags=["solve"])
 INLINE_ITEMS = 32  # bigger batches are prepared and answered in a worker thread
 R = TypeVar("R")
+
+
+def _batch_form(data: Any) -> str:
+    return "columns" if columnar.is_columnar(data) or isinstance(data, ColumnarBatch) else "items"
+
+
+class BatchBody(
+    RootModel[
+        Annotated[
+            Annotated[BatchRequest, Tag("items")] | Annotated[ColumnarBatch, Tag("columns")],
+            Discriminator(_batch_form),
+        ]
+    ]
+):
+    """A batch in one of two forms: the **item list** (`items`, each in the pose or the
+    character form, answered item by item) or the **columnar form** (`poses`, `targets`,
+    `pins`, `options`: arrays in, arrays out; docs/service.md)."""
+
+    @model_validator(mode="wrap")
+    @classmethod
+    def _form(cls, data: Any, handler: ValidatorFunctionWrapHandler) -> Any:
+        try:
+            return handler(data)
+        except ValidationError:  # again, for the errors located without the union's tag
+            form = ColumnarBatch if _batch_form(data) == "columns" else BatchRequest
+            form.model_validate(data)
+            raise
 
 
 @router.post("/v1/solve", response_model=SolveResponse | CharacterSolveResponse)
@@ -54,13 +96,20 @@ async def solve(body: SolveBody, engine: ReadyEngine, budget: RequestBudget,
     return json_response(solve_payload(p, result, engine.version), budget.compute)
 
 
-@router.post("/v1/solve/batch", response_model=BatchResponse)
-async def solve_batch(req: BatchRequest, engine: ReadyEngine, budget: RequestBudget,
+@router.post("/v1/solve/batch", response_model=BatchResponse | ColumnarResponse)
+async def solve_batch(body: BatchBody, engine: ReadyEngine, budget: RequestBudget,
                       state: State, request: Request) -> Response:  # fmt: skip
-    """Many independent solves in one call, each in either form, answered in order. Pose
-    items are vectorised per solver sequence and run in priced chunks within the request
-    deadline; character items are solved one by one, as singles are, between deadline
-    checks, and priced by their joints."""
+    """Many independent solves in one call, in one of two forms. The **item list**: each
+    item in either solve form, answered in order; pose items are vectorised per solver
+    sequence and run in priced chunks within the request deadline; character items are
+    solved one by one, as singles are, between deadline checks, and priced by their
+    joints. The **columnar form**: arrays in (`poses`, `targets`, `pins`), arrays out,
+    the same answers as the item list, bit for bit, for throughput."""
+    if isinstance(body.root, ColumnarBatch):
+        data = body.root.model_dump()
+        cols = columnar.parse(data, state.settings.max_batch_items, suspect=False)
+        return await solve_columns(cols, engine, budget, state, request)
+    req = body.root
     limit = state.settings.max_batch_items
     if len(req.items) > limit:
         raise TooManyItems(f"{len(req.items)} items exceed the limit of {limit} per batch")
@@ -129,3 +178,21 @@ async def off_loop(request: Request, work: Callable[[], R], items: int) -> R:
         return work()
     limiter = request.app.state.compute_limiter
     return await anyio.to_thread.run_sync(work, limiter=limiter)
+
+
+async def solve_columns(cols: columnar.Columns, engine: Engine, budget: Budget,
+                        state: ServiceState, request: Request) -> Response:  # fmt: skip
+    """A validated columnar batch: solved in priced parts within the budget, answered
+    from the arrays (``service.columnar``)."""
+    parts = await budget.run_parts(lambda part: columnar.solve(engine, cols, part), cols.parts())
+    ans = columnar.merge(parts)
+    state.metrics.batch.observe(cols.size)
+    state.metrics.solved_paths(cols.options.method, ans.paths, ans.path_of)
+    body = await off_loop(request, lambda: columnar.answer(cols, ans, engine.version), cols.size)
+    return raw_response(body, budget.compute)
+
+
+def raw_response(body: bytes, compute_seconds: float) -> Response:
+    """An encoded JSON answer with ``X-Compute-Time`` (as ``json_response``)."""
+    headers = {"X-Compute-Time": f"{compute_seconds * 1000:.3f}ms"}
+    return Response(body, media_type="application/json", headers=headers)

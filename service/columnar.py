@@ -1,0 +1,300 @@
+"""The columnar form of ``POST /v1/solve/batch``: arrays in, arrays out, no per-item
+Python objects (docs/service.md, "The columnar batch").
+
+The body is decoded by orjson into lists, turned into numpy arrays at once and checked
+vectorised (shapes, finite numbers, bounds, joint names -> indices, repeats, degenerate
+poses); the batch is solved by ``Engine.solve_arrays`` in priced parts and answered with
+JSON built from the answer arrays (orjson serialises numpy arrays directly). Every error
+names the offending item and field (``poses[17][4]: must be a finite number``), in the
+notation and with the messages of the pydantic field errors (``service.errors``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+import orjson
+from pydantic import ValidationError
+
+from core.skeleton import JOINT_INDEX, JOINT_NAMES, NUM_JOINTS
+from service.engine import BatchAnswer, Engine
+from service.errors import BodyInvalid, TooManyItems
+from service.limits import FABRIK_PRICE, chunks_of
+from service.schemas import MAX_COORDINATE, SolveOptions
+from service.validation import check_bones
+
+F64 = npt.NDArray[np.float64]
+I64 = npt.NDArray[np.int64]
+WIDTH = 3 * NUM_JOINTS  # numbers per pose row
+MAX_ERRORS = 20
+_TOP = ("poses", "targets", "pins", "options")
+_TARGETS = ("joints", "positions", "weights")
+
+
+class _Errors:
+    """Field errors in pydantic's shape (``loc``, ``type``, ``msg``, ``ctx``, ``input``),
+    so that ``service.errors.validation_problem`` words them as for the other forms."""
+
+    def __init__(self) -> None:
+        self.raw: list[dict[str, Any]] = []
+
+    def add(self, loc: tuple[Any, ...], kind: str, msg: str, **extra: Any) -> None:
+        if len(self.raw) < MAX_ERRORS:
+            self.raw.append({"loc": loc, "type": kind, "msg": msg, **extra})
+
+    def raise_any(self) -> None:
+        if self.raw:
+            raise BodyInvalid(self.raw)
+
+
+def is_columnar(data: Any) -> bool:
+    """The columnar form is told from the item list by its ``poses`` key."""
+    return isinstance(data, dict) and "poses" in data and "items" not in data
+
+
+@dataclass(frozen=True)
+class Columns:
+    """A validated columnar batch: B items, K targets and P pins each."""
+
+    poses: F64  # [B, 21, 3]
+    tidx: I64  # [B, K + P] targets, then pins
+    tpos: F64  # [B, K + P, 3]
+    weights: F64  # [B, K + P]
+    n_targets: int
+    n_pins: int
+    options: SolveOptions
+
+    @property
+    def size(self) -> int:
+        return int(self.poses.shape[0])
+
+    def parts(self) -> list[slice]:
+        """Priced parts (``service.limits``): every item costs the same here."""
+        o = self.options
+        slow = o.method == "fabrik" or o.reach == "exact" or self.n_pins > 0
+        return chunks_of([FABRIK_PRICE if slow else 1] * self.size)
+
+
+def _numbers(rows: Any, loc: tuple[Any, ...], width: int, n: int, errs: _Errors,
+             suspect: bool, bound: float | None = MAX_COORDINATE) -> F64 | None:  # fmt: skip
+    """``rows`` (a list of ``n`` lists of ``width`` numbers) as a ``[n, width]`` array, or
+    None with the errors added. ``suspect``: the body may hold booleans among numbers
+    (numpy would take ``true`` for 1.0), so every element's type is checked."""
+    if not isinstance(rows, list):
+        errs.add(loc, "list_type", "Input should be a valid list")
+        return None
+    if len(rows) != n:
+        errs.add(loc, "rows", f"{len(rows)} rows for {n} poses: one row per pose")
+        return None
+    arr: np.ndarray[Any, Any] | None = None
+    if not suspect:
+        try:
+            arr = np.array(rows)
+        except ValueError:  # ragged rows
+            arr = None
+    if arr is None or arr.dtype.kind not in "fi" or arr.shape != (n, width):
+        for b, row in enumerate(rows):  # the precise (slow) look, only for a bad body
+            if not isinstance(row, list):
+                errs.add((*loc, b), "list_type", "Input should be a valid list")
+            elif len(row) != width:
+                errs.add((*loc, b), "row_length", f"must hold {width} numbers, got {len(row)}")
+            else:
+                for i, v in enumerate(row):
+                    if type(v) is not float and type(v) is not int:
+                        errs.add((*loc, b, i), "float_type", "Input should be a valid number")
+            if len(errs.raw) >= MAX_ERRORS:
+                break
+        if errs.raw:
+            return None
+        arr = np.array(rows, dtype=np.float64)
+    out = np.ascontiguousarray(arr, dtype=np.float64)
+    bad = ~np.isfinite(out)
+    if bad.any():
+        for b, i in np.argwhere(bad)[:MAX_ERRORS].tolist():
+            errs.add((*loc, b, i), "finite_number", "Input should be a finite number")
+        return None
+    far = np.abs(out) > (np.inf if bound is None else bound)
+    if far.any():
+        for b, i in np.argwhere(far)[:MAX_ERRORS].tolist():
+            v = float(out[b, i])
+            kind, key = ("less_than_equal", "le") if v > 0 else ("greater_than_equal", "ge")
+            sign = MAX_COORDINATE if v > 0 else -MAX_COORDINATE
+            errs.add((*loc, b, i), kind, f"beyond {sign:g}", ctx={key: sign}, input=v)
+        return None
+    return out
+
+
+def _names(value: Any, loc: tuple[Any, ...], n: int, errs: _Errors, least: int
+           ) -> I64 | None:  # fmt: skip
+    """Joint names, shared (a list of names) or per item (``n`` rows of as many names),
+    as ``[n, k]`` canonical indices; unknown names are errors naming where."""
+    if not isinstance(value, list):
+        errs.add(loc, "list_type", "Input should be a valid list of joint names")
+        return None
+    shared = not value or not isinstance(value[0], list)
+    rows = [value] if shared else value
+    if not shared and len(rows) != n:
+        errs.add(loc, "rows", f"{len(rows)} rows for {n} poses: one row per pose")
+        return None
+    k = len(rows[0])
+    if not all(isinstance(r, list) and len(r) == k for r in rows):
+        errs.add(loc, "rows", "rows of joint names, all of one length")
+        return None
+    if not least <= k <= NUM_JOINTS:
+        errs.add(loc, "length", f"from {least} to {NUM_JOINTS} joints per item, got {k}")
+        return None
+    idx = np.array(
+        [[JOINT_INDEX.get(x, -1) if type(x) is str else -1 for x in r] for r in rows],
+        dtype=np.int64,
+    ).reshape(len(rows), k)
+    if (idx < 0).any():
+        for b, i in np.argwhere(idx < 0)[:MAX_ERRORS].tolist():
+            where = (*loc, i) if shared else (*loc, b, i)
+            errs.add(where, "literal_error", "unknown joint", ctx={"expected": "'spine1'"},
+                     input=rows[b][i])  # fmt: skip
+        return None
+    out: I64 = np.ascontiguousarray(np.broadcast_to(idx, (n, k)))
+    return out
+
+
+def _repeats(tidx: I64, k: int, shared_t: bool, shared_p: bool) -> None:
+    """A joint targeted twice, pinned twice or both is a 422 naming the first such item."""
+    s = np.sort(tidx, axis=1)
+    rep = (s[:, 1:] == s[:, :-1]).any(axis=1)
+    if not rep.any():
+        return
+    b = int(np.argmax(rep))
+    row = tidx[b].tolist()
+    for i, j in enumerate(row):
+        if j not in row[:i]:
+            continue
+        name = JOINT_NAMES[j]
+        loc: tuple[Any, ...]
+        if i < k:
+            msg = f"duplicate target for joint {name!r}"
+            loc = ("targets", "joints", i) if shared_t else ("targets", "joints", b, i)
+        else:
+            loc = ("pins", i - k) if shared_p else ("pins", b, i - k)
+            both = j in row[:k]
+            msg = f"joint {name!r} is both pinned and targeted" if both else (
+                f"joint {name!r} is pinned twice")  # fmt: skip
+        raise BodyInvalid([{"loc": loc, "type": "repeat", "msg": f"{msg} (item {b})"}])
+
+
+def parse(data: dict[str, Any], max_items: int, suspect: bool = True) -> Columns:
+    """Validate a decoded columnar body into :class:`Columns`; raises ``BodyInvalid``
+    (422, field errors), ``TooManyItems`` (413) or ``InvalidRequest`` (422)."""
+    errs = _Errors()
+    for key in data:
+        if key not in _TOP:
+            errs.add((key,), "extra_forbidden", "Extra inputs are not permitted")
+    targets = data.get("targets")
+    for key in ("poses", "targets"):
+        if key not in data:
+            errs.add((key,), "missing", "Field required")
+    errs.raise_any()
+    rows = data["poses"]
+    n = len(rows) if isinstance(rows, list) else 0
+    if n > max_items:
+        raise TooManyItems(f"{n} items exceed the limit of {max_items} per batch")
+    if isinstance(rows, list) and n == 0:
+        errs.add(("poses",), "too_short", "List should have at least 1 item, not 0")
+    errs.raise_any()
+    poses = _numbers(rows, ("poses",), WIDTH, n, errs, suspect)
+    if not isinstance(targets, dict):
+        errs.add(("targets",), "dict_type", "Input should be an object")
+        errs.raise_any()
+        raise AssertionError  # unreachable
+    for key in targets:
+        if key not in _TARGETS:
+            errs.add(("targets", key), "extra_forbidden", "Extra inputs are not permitted")
+    for key in ("joints", "positions"):
+        if key not in targets:
+            errs.add(("targets", key), "missing", "Field required")
+    errs.raise_any()
+    tj = _names(targets["joints"], ("targets", "joints"), n, errs, 1)
+    pj = _names(data.get("pins", []), ("pins",), n, errs, 0)
+    try:
+        options = SolveOptions.model_validate(data.get("options", {}))
+    except ValidationError as exc:
+        for e in exc.errors(include_url=False, include_context=True):
+            errs.add(("options", *e["loc"]), e["type"], e["msg"], ctx=e.get("ctx"),
+                     input=e.get("input"))  # fmt: skip
+    errs.raise_any()
+    assert poses is not None and tj is not None and pj is not None
+    k, p = tj.shape[1], pj.shape[1]
+    goals = _numbers(targets["positions"], ("targets", "positions"), 3 * k, n, errs, suspect)
+    weights = np.ones((n, k + p))
+    if targets.get("weights") is not None:
+        w = targets["weights"]
+        shared = isinstance(w, list) and bool(w) and not isinstance(w[0], list)
+        got = _numbers([w] * n if shared else w, ("targets", "weights"), k, n, errs, suspect, None)
+        if got is not None and not ((got > 0) & (got <= 1000.0)).all():
+            b, i = np.argwhere(~((got > 0) & (got <= 1000.0)))[0].tolist()
+            loc = ("targets", "weights", i) if shared else ("targets", "weights", b, i)
+            errs.add(loc, "weight", "must be greater than 0 and at most 1000")
+        if got is not None:
+            weights[:, :k] = got
+    errs.raise_any()
+    assert goals is not None
+    tidx = np.concatenate([tj, pj], axis=1)
+    _repeats(tidx, k, not isinstance(targets["joints"][0], list),
+             not (data.get("pins") and isinstance(data["pins"][0], list)))  # fmt: skip
+    pose3 = poses.reshape(n, NUM_JOINTS, 3)
+    check_bones(pose3, lambda b: f"poses[{b}]")
+    tpos = np.concatenate([goals.reshape(n, k, 3), np.take_along_axis(pose3, pj[:, :, None], 1)],
+                          axis=1)  # fmt: skip
+    return Columns(pose3, tidx, tpos, weights, k, p, options)
+
+
+def solve(engine: Engine, cols: Columns, part: slice) -> BatchAnswer:
+    """One part of the batch, as arrays."""
+    o = cols.options
+    return engine.solve_arrays(
+        cols.poses[part], cols.tidx[part], cols.tpos[part], n_targets=cols.n_targets,
+        weights=cols.weights[part], fabrik=o.method == "fabrik",
+        preserve_bone_lengths=o.preserve_bone_lengths, exact=o.reach == "exact",
+        tolerance=o.tolerance, floor=o.floor,
+    )  # fmt: skip
+
+
+def merge(parts: Sequence[BatchAnswer]) -> BatchAnswer:
+    """The answers of consecutive parts as one (solver paths renumbered)."""
+    if len(parts) == 1:
+        return parts[0]
+    index: dict[tuple[str, ...], int] = {}
+    path_of = []
+    for a in parts:
+        remap = np.array([index.setdefault(path, len(index)) for path in a.paths])
+        path_of.append(remap[a.path_of])
+    return BatchAnswer(
+        np.concatenate([a.pose for a in parts]),
+        np.concatenate([a.errors for a in parts]),
+        np.concatenate([a.max_bone_error for a in parts]),
+        np.concatenate([a.iterations for a in parts]),
+        tuple(index),
+        np.concatenate(path_of).astype(np.int64),
+    )
+
+
+def answer(cols: Columns, ans: BatchAnswer, version: str) -> bytes:
+    """The columnar answer, encoded from the arrays (no per-item objects)."""
+    n, k, p = cols.size, cols.n_targets, cols.n_pins
+    errors = np.ascontiguousarray(ans.errors[:, :k], dtype=np.float64)
+    body = {
+        "poses": np.ascontiguousarray(ans.pose, dtype=np.float64).reshape(n, WIDTH),
+        "errors": errors,
+        "reached": errors <= cols.options.tolerance,
+        "pin_errors": np.ascontiguousarray(ans.errors[:, k : k + p], dtype=np.float64),
+        "max_bone_length_error": np.ascontiguousarray(ans.max_bone_error, dtype=np.float64),
+        "iterations": np.ascontiguousarray(ans.iterations, dtype=np.int64),
+        "solvers": [list(path) for path in ans.paths],
+        "solver_of": np.ascontiguousarray(ans.path_of, dtype=np.int64),
+        "model": version,
+        "method": "fabrik" if cols.options.method == "fabrik" else "neural",
+    }
+    return orjson.dumps(body, option=orjson.OPT_SERIALIZE_NUMPY)

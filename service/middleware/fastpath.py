@@ -1,0 +1,197 @@
+"""The hot paths, answered without the router: ``POST /v1/solve`` in the pose form and
+``POST /v1/solve/batch`` in the columnar form.
+
+Innermost (inside the gate: the API key, content type, body limits and admission hold),
+so the request id, access log, timing, metrics and hardening headers are as for any
+request. What it answers, it answers exactly as the routes would (the same problem
+assembly, engine call and answer; for the columnar form the same code). Anything else - the
+character form, the item list, a body that is not plainly valid, models not ready - goes
+on to the app with the body replayed, so every error is the routes' own.
+
+Why: FastAPI's routing, dependency injection and response classes cost ~0.3 ms per
+request, twice the engine's own time of a solve (docs/service.md, "The hot path").
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from typing import Any
+
+import anyio.to_thread
+import orjson
+from pydantic import ValidationError
+from starlette.requests import Request
+from starlette.routing import BaseRoute
+
+from service import columnar
+from service.body import INLINE_BYTES, decode
+from service.deps import ServiceState
+from service.errors import BodyError, BodyInvalid, PoseError, error_response, validation_problem
+from service.limits import Budget
+from service.middleware.types import REASON, ASGIApp, Message, Receive, Scope, Send
+from service.responses import solve_payload
+from service.schemas import SolveRequest
+from service.validation import poses, solve_problem
+
+SOLVE, BATCH = "/v1/solve", "/v1/solve/batch"
+
+
+def _keys(req: SolveRequest) -> int:
+    """Object keys of a pose-form body as validated (to tell a repeated key: see below)."""
+    n = len(JOINTS) + 2 * len(req.targets) + len(req.model_fields_set)
+    n += sum("weight" in t.model_fields_set for t in req.targets)
+    return n + (len(req.options.model_fields_set) if "options" in req.model_fields_set else 0)
+
+
+JOINTS = SolveRequest.model_fields["pose"].annotation.model_fields  # type: ignore[union-attr]
+
+
+def pose_form(body: bytes) -> SolveRequest | None:
+    """The body as a pose-form request when it is plainly valid, else None (the route
+    then reads it and words the error). pydantic's JSON parser keeps the last of a
+    repeated key where the routes' strict decoder refuses the body; a repeated key shows
+    as fewer keys parsed than colons in the body (a colon outside strings follows a key;
+    one inside a string only makes the count differ, which sends the body to the route)."""
+    try:
+        req = SolveRequest.model_validate_json(body)
+    except ValidationError:
+        return None
+    return req if body.count(b":") == _keys(req) else None
+
+
+class FastPath:
+    def __init__(self, app: ASGIApp, app_routes: Sequence[BaseRoute]) -> None:
+        self.app = app
+        self.routes = {
+            getattr(r, "path", ""): r
+            for r in app_routes
+            if getattr(r, "path", "") in (SOLVE, BATCH)
+        }
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        path = scope.get("path")
+        if scope["type"] != "http" or scope["method"] != "POST" or path not in self.routes:
+            await self.app(scope, receive, send)
+            return
+        messages: list[Message] = []
+        chunks: list[bytes] = []
+        while True:
+            message = await receive()
+            messages.append(message)
+            if message["type"] != "http.request":
+                break
+            chunks.append(message.get("body", b""))
+            if not message.get("more_body", False):
+                break
+        state: ServiceState = scope["app"].state.pose
+        body = b"".join(chunks)
+        scope["route"] = self.routes[path]  # the metrics' label
+        done = False
+        if messages[-1]["type"] == "http.request" and state.repository.ready:
+            if path == SOLVE:
+                done = await self._solve(scope, receive, send, state, body)
+            else:
+                done = await self._columns(scope, receive, send, state, body)
+        if done:
+            return
+        replay = list(reversed(messages))
+
+        async def replayed() -> Message:
+            return replay.pop() if replay else await receive()
+
+        await self.app(scope, replayed, send)
+
+    async def _solve(self, scope: Scope, receive: Receive, send: Send, state: ServiceState,
+                     body: bytes) -> bool:  # fmt: skip
+        if len(body) >= INLINE_BYTES or (req := pose_form(body)) is None:
+            return False
+        engine = state.repository.ready_engine()
+        budget = Budget(Request(scope, receive), state.settings.deadline_seconds)
+        try:
+            p = solve_problem(req, poses([req], ["pose"])[0])
+        except PoseError:
+            return False  # the route words it
+        if p.method == "neural" and p.reach == "soft" and not req.pins:
+            t = time.perf_counter()  # ~0.15 ms: inline beats a thread hop
+            (result,) = engine.solve([p])
+            budget.compute += time.perf_counter() - t
+        else:  # FABRIK iterations can take milliseconds: keep the event loop free
+            try:
+                (result,) = await budget.run(engine.solve, [p])
+            except PoseError as exc:
+                await _problem(scope, receive, send, exc)
+                return True
+        state.metrics.solved(p.method, result.solvers)
+        await _json(send, orjson.dumps(solve_payload(p, result, engine.version)), budget.compute)
+        return True
+
+    async def _columns(self, scope: Scope, receive: Receive, send: Send, state: ServiceState,
+                       body: bytes) -> bool:  # fmt: skip
+        app_state = scope["app"].state
+        limit = state.settings.max_batch_items
+
+        def read() -> columnar.Columns | None:
+            try:
+                data: Any = orjson.loads(body)
+                strict = True
+            except orjson.JSONDecodeError:  # NaN, or malformed: the strict decoder says which
+                try:
+                    data = decode(body)
+                except PoseError as exc:
+                    raise BodyError(exc) from None
+                strict = False
+            if not columnar.is_columnar(data):
+                return None
+            # booleans only where options hold one, else every number's type is checked
+            bools = body.count(b"true") + body.count(b"false")
+            options = data.get("options")
+            legit = isinstance(options, dict) and type(options.get("preserve_bone_lengths")) is bool
+            return columnar.parse(data, limit, suspect=not strict or bools != int(legit))
+
+        try:
+            if len(body) < INLINE_BYTES:
+                cols = read()
+            else:
+                limiter = app_state.compute_limiter
+                cols = await anyio.to_thread.run_sync(read, limiter=limiter)
+            if cols is None:
+                return False
+            from service.routes.solve import solve_columns  # the route's own path
+
+            engine = state.repository.ready_engine()
+            request = Request(scope, receive)
+            budget = Budget(request, state.settings.deadline_seconds)
+            response = await solve_columns(cols, engine, budget, state, request)
+        except BodyError as exc:
+            await _problem(scope, receive, send, exc.error)
+            return True
+        except BodyInvalid as exc:
+            scope[REASON] = "invalid-request"
+            await validation_problem(exc.errors)(scope, receive, send)
+            return True
+        except PoseError as exc:
+            await _problem(scope, receive, send, exc)
+            return True
+        await response(scope, receive, send)
+        return True
+
+
+async def _problem(scope: Scope, receive: Receive, send: Send, exc: PoseError) -> None:
+    scope[REASON] = exc.type_
+    await error_response(exc)(scope, receive, send)
+
+
+async def _json(send: Send, body: bytes, compute_seconds: float) -> None:
+    await send(
+        {
+            "type": "http.response.start",
+            "status": 200,
+            "headers": [
+                (b"content-length", str(len(body)).encode()),
+                (b"content-type", b"application/json"),
+                (b"x-compute-time", f"{compute_seconds * 1000:.3f}ms".encode()),
+            ],
+        }
+    )
+    await send({"type": "http.response.body", "body": body})
