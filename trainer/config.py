@@ -62,6 +62,12 @@ class SolverConfig(_Section):
         ge=0,
         description="Weight of MSE(decoded bone lengths - start bone lengths); 0 = the paper.",
     )
+    rigid_loss: bool = Field(
+        default=False,
+        description="Measure the joint losses on the answer after the service's bone pass "
+        "to the start's bone lengths (trainer.rigid), i.e. on what is served; False: on the "
+        "decoded answer.",
+    )
     identity_fraction: float = Field(
         default=0.1,
         ge=0,

@@ -30,7 +30,7 @@ from torch.nn.parallel import DistributedDataParallel
 from torch.utils.data import DistributedSampler
 
 from core.io import write_atomic
-from core.skeleton import BONE_CHILDREN, BONE_PARENTS, JOINT_INDEX, NUM_JOINTS
+from core.skeleton import JOINT_INDEX, NUM_JOINTS
 from core.skeleton import bone_lengths as bone_lengths_np
 from trainer.augment import (
     FrameSource,
@@ -53,6 +53,7 @@ from trainer.models import (
     target_columns,
 )
 from trainer.pairs import partner_ranges, sample_partners
+from trainer.rigid import bone_lengths_t, bone_pass_t
 
 console = Console(stderr=True)
 
@@ -440,16 +441,20 @@ def solver_losses(
     bone_weight: float = 0.0,
     mode: str = "plain",
     stay_weight: float = 0.0,
+    rigid: bool = False,
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """Per-solver loss ``[S]`` and answers ``[S, B, 63]`` for a batch of pairs (``mode`` as
     the service answers, :func:`solved_poses`):
     MSE(target joints) + other_weight * MSE(other joints)
     + bone_weight * MSE(decoded bone lengths - start bone lengths) (same clip, same body)
-    + stay_weight * MSE(other joints - their start positions)."""
+    + stay_weight * MSE(other joints - their start positions).
+    ``rigid``: the joint terms are measured on the answer after the service's bone pass
+    to the start's bone lengths (:mod:`trainer.rigid`), i.e. on what is served."""
     n_sets = len(bank.sets)
     decoded = solved_poses(ae, net, start, goal, n_sets, mode)
+    answer = bone_pass_t(decoded, bone_lengths_t(start)) if rigid else decoded
     goal_s = goal.unsqueeze(0).expand(n_sets, -1, -1)
-    sq = (decoded - goal_s) ** 2  # [S, B, 63]
+    sq = (answer - goal_s) ** 2  # [S, B, 63]
     target_mask = torch.zeros(n_sets, 1, goal.shape[1])
     for s, joints in enumerate(bank.sets):
         target_mask[s, 0, target_columns(joints)] = 1.0
@@ -459,7 +464,7 @@ def solver_losses(
     other_term = (per_col * (1 - tm)).sum(-1) / (1 - tm).sum(-1)
     loss = target_term + other_weight * other_term
     if stay_weight > 0:  # the joints not asked for move as little as the targets allow
-        moved = ((decoded - start.unsqueeze(0)) ** 2).mean(dim=1)  # [S, 63]
+        moved = ((answer - start.unsqueeze(0)) ** 2).mean(dim=1)  # [S, 63]
         loss = loss + stay_weight * (moved * (1 - tm)).sum(-1) / (1 - tm).sum(-1)
     if bone_weight > 0:
         bone_err = bone_lengths_t(decoded) - bone_lengths_t(start).unsqueeze(0)
@@ -492,17 +497,6 @@ def solved_poses(
     return decoded
 
 
-_CHILD = torch.from_numpy(BONE_CHILDREN.astype(np.int64))
-_PARENT = torch.from_numpy(BONE_PARENTS.astype(np.int64))
-
-
-def bone_lengths_t(flat_poses: torch.Tensor) -> torch.Tensor:
-    """Bone lengths ``[..., 20]`` of flattened poses ``[..., 63]`` (torch)."""
-    joints = flat_poses.reshape(*flat_poses.shape[:-1], NUM_JOINTS, 3)
-    lengths: torch.Tensor = (joints[..., _CHILD, :] - joints[..., _PARENT, :]).norm(dim=-1)
-    return lengths
-
-
 def solver_metrics(
     ae: TiedAutoencoder,
     bank: SolverBank,
@@ -517,8 +511,11 @@ def solver_metrics(
         err = (decoded[s] - goal).reshape(len(goal), NUM_JOINTS, 3).norm(dim=-1)
         cols = [c // 3 for c in target_columns(joints)[::3]]
         bone = (bone_lengths_t(decoded[s]) - bone_lengths_t(start)).abs()
+        rigid = bone_pass_t(decoded[s], bone_lengths_t(start))
+        served = (rigid - goal).reshape(len(goal), NUM_JOINTS, 3).norm(dim=-1)
         out["+".join(sorted(joints))] = {
             "reach_cm": float(err[:, cols].mean()) * 100.0,
+            "served_reach_cm": float(served[:, cols].mean()) * 100.0,
             "mpjpe_cm": float(err.mean()) * 100.0,
             "bone_cm": float(bone.mean()) * 100.0,
         }
@@ -552,8 +549,9 @@ def train_solvers(
         for idx in batches(len(src.poses), sc.batch_size, d, cfg.seed + 1, epoch):
             start, goal = src.pairs(idx, partners[idx], rng, aug, total)
             loss, _ = solver_losses(
-                ae, bank, net, start, goal, sc.other_weight, sc.bone_weight, mode, sc.stay_weight
-            )
+                ae, bank, net, start, goal, sc.other_weight, sc.bone_weight, mode,
+                sc.stay_weight, sc.rigid_loss,
+            )  # fmt: skip
             loss = loss.sum()
             optim.zero_grad(set_to_none=True)
             loss.backward()
@@ -565,12 +563,14 @@ def train_solvers(
 
     def validate() -> dict[str, float]:
         losses, _ = solver_losses(
-            ae, bank, bank, v_start, v_goal, sc.other_weight, sc.bone_weight, mode, sc.stay_weight
-        )
+            ae, bank, bank, v_start, v_goal, sc.other_weight, sc.bone_weight, mode,
+            sc.stay_weight, sc.rigid_loss,
+        )  # fmt: skip
         metrics = solver_metrics(ae, bank, v_start, v_goal, mode)
         return {
             "val_loss": float(losses.mean()),
             "val_reach_cm": float(np.mean([m["reach_cm"] for m in metrics.values()])),
+            "val_served_reach_cm": float(np.mean([m["served_reach_cm"] for m in metrics.values()])),
             "val_mpjpe_cm": float(np.mean([m["mpjpe_cm"] for m in metrics.values()])),
             "val_bone_cm": float(np.mean([m["bone_cm"] for m in metrics.values()])),
         }
