@@ -262,7 +262,7 @@ class HeldoutResults:
     families: list[Family] = field(default_factory=list)
     recon_available: bool = True
     seconds: dict[str, float] = field(default_factory=dict)
-    models: dict[str, str] = field(default_factory=dict)
+    models: dict[str, Any] = field(default_factory=dict)
 
     def family(self, name: str) -> Family:
         return next(f for f in self.families if f.name == name)
@@ -611,6 +611,10 @@ def main(
     quick: Annotated[bool, typer.Option(help="A handful of edits per set (smoke run).")] = False,
     seed: Annotated[int, typer.Option(help="Seed of every sample.")] = 0,
     split: Annotated[str, typer.Option(help="Split of the held-out bodies.")] = "holdout",
+    passes: Annotated[
+        Optional[int],  # noqa: UP045
+        typer.Option(help="Neural solves per edit (default: the manifest's serving.passes)."),
+    ] = None,
 ) -> None:
     """Held-out bodies and the stress set only, against any models folder."""
     from rich.console import Console
@@ -623,9 +627,9 @@ def main(
         raise typer.BadParameter(f"no dataset file at {dataset}", param_hint="--dataset")
     console = Console(stderr=True)
     cfg = dataclasses.replace(QUICK if quick else HeldoutConfig(), seed=seed)
-    engine = Engine(models, threads=1)
+    engine = Engine(models, threads=1, solve_passes=passes)
     res = run_heldout(engine, load_dataset(dataset), cfg, split=split, log=console.log)
-    res.models = {"dir": str(models), "version": engine.version}
+    res.models = {"dir": str(models), "version": engine.version, "passes": engine.solve_passes}
     if out is not None:
         out.parent.mkdir(parents=True, exist_ok=True)
         write_atomic(out, (json.dumps(res.to_json(), indent=1) + "\n").encode())

@@ -114,6 +114,14 @@ class Serving(_Strict):
         "start + D(S(z, t)) - D(S(z, x_t)), so an edit that asks for no change changes "
         "nothing and the network's bias never reaches the answer.",
     )
+    passes: int = Field(
+        default=1,
+        ge=1,
+        le=8,
+        description="Neural solves per edit: each pass after the first starts from the "
+        "previous pass's answer (bone lengths restored, canonicalised anew) with the same "
+        "targets, so what the bone pass took from the reach is asked for again.",
+    )
 
 
 class ModelEntry(_Strict):

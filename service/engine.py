@@ -166,6 +166,7 @@ class Engine:
         composition: str = "reencode",
         composition_projections: int = 1,
         fabrik_max_iterations: int = 64,
+        solve_passes: int | None = None,
     ) -> None:
         self.models_dir = Path(models_dir)
         self.manifest: Manifest = load_manifest(self.models_dir, verify=True)
@@ -211,6 +212,10 @@ class Engine:
             raise ValueError(f"unknown composition strategy {composition!r}")
         self._plans: dict[tuple[bytes, bytes], tuple[str, ...]] = {}
         self.passes = composition_passes
+        #: neural solves per edit (``serving.passes`` unless overridden, e.g. by a bench)
+        self.solve_passes = m.serving.passes if solve_passes is None else int(solve_passes)
+        if self.solve_passes < 1:
+            raise ValueError(f"solve_passes must be at least 1, got {self.solve_passes}")
         self.composition = composition
         self.projections = composition_projections
         self.fabrik_max_iterations = fabrik_max_iterations
@@ -316,7 +321,57 @@ class Engine:
         Geometry runs in compiled kernels (:mod:`core.compiled`), one call per stage for
         the whole batch; items that share a solver sequence share one onnxruntime run per
         stage; FABRIK and the polish run per target set (:mod:`core.compiled_fabrik`).
-        Every item is computed alone: its answer does not depend on the batch."""
+        Every item is computed alone: its answer does not depend on the batch.
+
+        With ``passes`` > 1 (the manifest's ``serving.passes``), neural items are first
+        solved ``passes - 1`` times in soft reach with their bone lengths restored, each
+        pass starting from the previous answer; the last pass is the one asked for."""
+        n = int(np.shape(poses)[0])
+        fab = _per_item(fabrik, n, np.bool_)
+        neural = np.flatnonzero(~fab)
+        if self.solve_passes > 1 and neural.size:
+            pose_a = compiled.as_f64(poses).copy()
+            tidx = compiled.as_i64(target_idx).reshape(n, -1)
+            k_max = tidx.shape[1]
+            tpos = np.asarray(target_pos, dtype=np.float64).reshape(n, k_max, 3)
+
+            def sel(
+                value: npt.ArrayLike | None, dtype: type[np.generic], k: int | None = None
+            ) -> Any:
+                return None if value is None else _per_item(value, n, dtype, k)[neural]
+
+            for _ in range(self.solve_passes - 1):
+                ans = self._solve_once(
+                    pose_a[neural], tidx[neural], tpos[neural],
+                    counts=sel(counts, np.int64), n_targets=sel(n_targets, np.int64),
+                    weights=sel(weights, np.float64, k_max), fabrik=False,
+                    preserve_bone_lengths=True, exact=False,
+                    tolerance=sel(tolerance, np.float64), floor=sel(floor, np.float64),
+                )  # fmt: skip
+                pose_a[neural] = ans.pose
+            poses = pose_a
+        return self._solve_once(
+            poses, target_idx, target_pos, counts=counts, n_targets=n_targets,
+            weights=weights, fabrik=fab, preserve_bone_lengths=preserve_bone_lengths,
+            exact=exact, tolerance=tolerance, floor=floor,
+        )  # fmt: skip
+
+    def _solve_once(
+        self,
+        poses: npt.ArrayLike,
+        target_idx: npt.ArrayLike,
+        target_pos: npt.ArrayLike,
+        *,
+        counts: npt.ArrayLike | None = None,
+        n_targets: npt.ArrayLike | None = None,
+        weights: npt.ArrayLike | None = None,
+        fabrik: npt.ArrayLike = False,
+        preserve_bone_lengths: npt.ArrayLike = True,
+        exact: npt.ArrayLike = False,
+        tolerance: npt.ArrayLike = 1e-3,
+        floor: npt.ArrayLike = 0.0,
+    ) -> BatchAnswer:
+        """One pass of :meth:`solve_arrays` (the same arguments)."""
         pose_a = compiled.as_f64(poses)
         n = pose_a.shape[0]
         tidx = compiled.as_i64(target_idx).reshape(n, -1)

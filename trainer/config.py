@@ -68,6 +68,13 @@ class SolverConfig(_Section):
         "to the start's bone lengths (trainer.rigid), i.e. on what is served; False: on the "
         "decoded answer.",
     )
+    passes: int = Field(
+        default=1,
+        ge=1,
+        le=8,
+        description="Serving: neural solves per edit, each from the previous answer "
+        "(manifest serving.passes; not a training setting).",
+    )
     identity_fraction: float = Field(
         default=0.1,
         ge=0,

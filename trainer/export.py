@@ -377,6 +377,7 @@ def export_all(
             else "nearest_skeleton",
             delta=cfg.solver.delta,
             anchor=cfg.solver.delta and cfg.solver.anchor,
+            passes=cfg.solver.passes,
         ),
         models=entries,
         provenance=Provenance(

@@ -220,7 +220,7 @@ def config_tag(cfg: TrainConfig, stage: str) -> str:
         "augment": {k: v for k, v in augment.items() if k not in pairs_only},
     }
     if stage.startswith("solver"):
-        relevant["solver"] = cfg.solver.model_dump()
+        relevant["solver"] = cfg.solver.model_dump(exclude={"passes"})  # serving only
         relevant["augment"] = augment
     if stage.startswith("completion"):
         relevant["completion"] = cfg.completion.model_dump()
