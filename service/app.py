@@ -11,6 +11,7 @@ maps every error to problem+json in one place.
 from __future__ import annotations
 
 import asyncio
+import gc
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 
@@ -29,6 +30,9 @@ from service.settings import Settings, get_settings
 
 
 def create_app(settings: Settings | None = None, *, load_in_background: bool = True) -> FastAPI:
+    """The app. Once the models are loaded, everything alive then (modules, sessions,
+    schemas) is moved out of the garbage collector's reach (``gc.freeze``): collections
+    then walk only what requests allocate (measured: p99 of /v1/solve, docs/service.md)."""
     settings = settings or get_settings()
     state = ServiceState(settings, ModelRepository(settings), Metrics())
 
@@ -36,10 +40,12 @@ def create_app(settings: Settings | None = None, *, load_in_background: bool = T
     async def lifespan(_: FastAPI) -> AsyncIterator[None]:
         if load_in_background:
             task = asyncio.create_task(asyncio.to_thread(state.repository.load))
+            task.add_done_callback(lambda _: gc.freeze())
             yield
             await task
         else:
             state.repository.load()
+            gc.freeze()
             yield
 
     app = FastAPI(
@@ -49,6 +55,9 @@ def create_app(settings: Settings | None = None, *, load_in_background: bool = T
         lifespan=lifespan,
         docs_url=None,  # mount_docs: self-hosted Swagger UI
         redoc_url=None,
+        # metrics are Prometheus (service.metrics); FastAPI's OpenTelemetry hooks would
+        # only look up unconfigured providers on every request (~10 µs)
+        telemetry={"tracing": False, "metrics": False, "logs": False},
     )
     app.state.pose = state
     app.state.compute_limiter = anyio.CapacityLimiter(settings.compute_threads)

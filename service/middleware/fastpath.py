@@ -107,7 +107,6 @@ class FastPath:
         if len(body) >= INLINE_BYTES or (req := pose_form(body)) is None:
             return False
         engine = state.repository.ready_engine()
-        budget = Budget(Request(scope, receive), state.settings.deadline_seconds)
         try:
             p = solve_problem(req, poses([req], ["pose"])[0])
         except PoseError:
@@ -115,15 +114,17 @@ class FastPath:
         if p.method == "neural" and p.reach == "soft" and not req.pins:
             t = time.perf_counter()  # ~0.15 ms: inline beats a thread hop
             (result,) = engine.solve([p])
-            budget.compute += time.perf_counter() - t
+            compute = time.perf_counter() - t
         else:  # FABRIK iterations can take milliseconds: keep the event loop free
+            budget = Budget(Request(scope, receive), state.settings.deadline_seconds)
             try:
                 (result,) = await budget.run(engine.solve, [p])
             except PoseError as exc:
                 await _problem(scope, receive, send, exc)
                 return True
+            compute = budget.compute
         state.metrics.solved(p.method, result.solvers)
-        await _json(send, orjson.dumps(solve_payload(p, result, engine.version)), budget.compute)
+        await _json(send, orjson.dumps(solve_payload(p, result, engine.version)), compute)
         return True
 
     async def _columns(self, scope: Scope, receive: Receive, send: Send, state: ServiceState,

@@ -20,6 +20,7 @@ class RequestMetrics:
         self.app = app
         self.metrics = metrics
         self.routes = app_routes
+        self.children: dict[tuple[str, int], tuple[Any, Any]] = {}  # bounded: routes x statuses
 
     def route_of(self, scope: Scope) -> str:
         route: Any = scope.get("route")
@@ -52,7 +53,12 @@ class RequestMetrics:
         finally:
             route = self.route_of(scope)
             m = self.metrics
-            m.requests.labels(route, str(status[0])).inc()
-            m.latency.labels(route).observe(time.perf_counter() - t0)
+            key = (route, status[0])
+            children = self.children.get(key)
+            if children is None:  # labels() looks up and locks: once per (route, status)
+                children = (m.requests.labels(route, str(status[0])), m.latency.labels(route))
+                self.children[key] = children
+            children[0].inc()
+            children[1].observe(time.perf_counter() - t0)
             if status[0] >= 400:
                 m.rejections.labels(route, str(scope.get(REASON, status[0]))).inc()

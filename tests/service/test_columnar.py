@@ -1,0 +1,218 @@
+"""The columnar batch and the hot path of /v1/solve (issue 14, part B), on real poses:
+the same answers, bit for bit, as the item list and as single requests, run after run;
+every bad input a problem naming the item and the field."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from core.skeleton import JOINT_INDEX, JOINT_NAMES
+from service.middleware import fastpath
+from tests.conftest import PosePairs, make_client
+
+PROBLEM = "application/problem+json"
+SETS = [["left_wrist", "right_wrist"], ["head", "left_ankle"], ["right_wrist", "spine2"]]
+
+
+def columns(pairs: PosePairs, n: int, **options: Any) -> dict[str, Any]:
+    """``n`` real edits in the columnar form: target joints per item (three sets in
+    turn), goals from the pair's goal pose."""
+    k = [i % len(pairs.starts) for i in range(n)]
+    starts = pairs.poses[pairs.starts[k]]
+    goals = pairs.poses[pairs.goals[k]]
+    joints = [SETS[i % len(SETS)] for i in range(n)]
+    idx = np.array([[JOINT_INDEX[j] for j in row] for row in joints])
+    return {
+        "poses": starts.reshape(n, -1).tolist(),
+        "targets": {
+            "joints": joints,
+            "positions": np.take_along_axis(goals, idx[:, :, None], 1).reshape(n, -1).tolist(),
+        },
+        "options": options,
+    }
+
+
+def items(body: dict[str, Any]) -> list[dict[str, Any]]:
+    """The same edits as items of the item list (pose form)."""
+    out = []
+    for b, row in enumerate(body["poses"]):
+        joints = body["targets"]["joints"]
+        joints = joints if isinstance(joints[0], str) else joints[b]
+        xyz = body["targets"]["positions"][b]
+        item: dict[str, Any] = {
+            "pose": {n: row[3 * j : 3 * j + 3] for j, n in enumerate(JOINT_NAMES)},
+            "targets": [
+                {"joint": name, "position": xyz[3 * i : 3 * i + 3]} for i, name in enumerate(joints)
+            ],
+            "options": body["options"],
+        }
+        pins = body.get("pins")
+        if pins:
+            item["pins"] = pins
+        out.append(item)
+    return out
+
+
+def assert_same(col: dict[str, Any], answers: list[dict[str, Any]]) -> None:
+    """Item b of the columnar answer equals ``answers[b]`` exactly (floats after JSON)."""
+    assert len(col["poses"]) == len(answers)
+    for b, a in enumerate(answers):
+        assert col["poses"][b] == [v for n in JOINT_NAMES for v in a["pose"][n]], b
+        assert col["errors"][b] == [t["error"] for t in a["targets"]], b
+        assert col["reached"][b] == [t["reached"] for t in a["targets"]], b
+        assert col["pin_errors"][b] == [t["error"] for t in a["pins"]], b
+        assert col["max_bone_length_error"][b] == a["max_bone_length_error"], b
+        assert col["iterations"][b] == a["iterations"], b
+        assert col["solvers"][col["solver_of"][b]] == a["solvers"], b
+        assert col["method"] == a["method"] and col["model"] == a["model"]
+
+
+@pytest.mark.parametrize(
+    ("options", "pins", "n"),
+    [
+        ({}, None, 300),  # more than one priced part (256 units each)
+        ({"reach": "exact"}, ["left_foot"], 24),
+        ({"method": "fabrik"}, None, 24),
+        ({"preserve_bone_lengths": False, "floor": 0.0, "tolerance": 0.01}, None, 24),
+    ],
+)
+def test_columnar_equals_item_list_and_singles(
+    client: Any, real_poses: PosePairs, options: dict[str, Any], pins: list[str] | None, n: int
+) -> None:
+    body = columns(real_poses, n, **options)
+    if pins:
+        body["pins"] = pins
+    col = client.post("/v1/solve/batch", json=body)
+    assert col.status_code == 200, col.text
+    assert float(col.headers["x-compute-time"].removesuffix("ms")) > 0
+    listed = client.post("/v1/solve/batch", json={"items": items(body)})
+    assert listed.status_code == 200, listed.text
+    assert_same(col.json(), listed.json()["items"])
+    singles = [client.post("/v1/solve", json=item).json() for item in items(body)[:6]]
+    assert singles == listed.json()["items"][:6]
+    again = client.post("/v1/solve/batch", json=body)
+    assert again.content == col.content  # run to run, byte for byte
+
+
+def test_shared_joints_weights_and_pins_per_item(client: Any, real_poses: PosePairs) -> None:
+    body = columns(real_poses, 8)
+    body["targets"]["joints"] = ["left_wrist", "right_wrist"]
+    body["targets"]["weights"] = [1.0, 3.0]
+    idx = [JOINT_INDEX["left_wrist"], JOINT_INDEX["right_wrist"]]
+    goals = real_poses.poses[real_poses.goals[:8]][:, idx]
+    body["targets"]["positions"] = goals.reshape(8, -1).tolist()
+    body["pins"] = [["left_ankle"] if b % 2 else ["right_ankle"] for b in range(8)]
+    col = client.post("/v1/solve/batch", json=body)
+    assert col.status_code == 200, col.text
+    listed = items(body)
+    for b, item in enumerate(listed):
+        item["targets"] = [
+            {"joint": j, "position": goals[b, i].tolist(), "weight": w}
+            for i, (j, w) in enumerate(zip(["left_wrist", "right_wrist"], [1.0, 3.0], strict=True))
+        ]
+        item["pins"] = body["pins"][b]
+    answers = [client.post("/v1/solve", json=item).json() for item in listed]
+    assert_same(col.json(), answers)
+    out = col.json()
+    assert np.array(out["poses"]).shape == (8, 63) and np.array(out["pin_errors"]).shape == (8, 1)
+
+
+def test_single_hot_path_equals_the_route(
+    client: Any, real_poses: PosePairs, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The pose form answered without the router gives the route's bytes; what the hot
+    path does not take (here: everything) the route answers."""
+    bodies = items(columns(real_poses, 6, reach="soft"))
+    bodies[1]["pins"] = ["right_foot"]
+    bodies[2]["options"] = {"reach": "exact"}
+    fast = [client.post("/v1/solve", json=b) for b in bodies]
+    monkeypatch.setattr(fastpath, "pose_form", lambda body: None)
+    slow = [client.post("/v1/solve", json=b) for b in bodies]
+    for f, s in zip(fast, slow, strict=True):
+        assert f.status_code == s.status_code == 200
+        assert f.content == s.content
+        assert f.headers["content-type"] == s.headers["content-type"] == "application/json"
+        for h in ("x-compute-time", "x-total-time", "x-request-id", "content-security-policy"):
+            assert h in f.headers and h in s.headers
+
+
+def test_hot_path_leaves_bad_bodies_to_the_route(client: Any, real_poses: PosePairs) -> None:
+    body = json.dumps(items(columns(real_poses, 1))[0])
+    twice = body[:-1] + ', "options": {}, "options": {}}'
+    resp = client.post("/v1/solve", content=twice, headers={"content-type": "application/json"})
+    assert resp.status_code == 400 and "duplicate key 'options'" in resp.json()["detail"]
+    bad = json.loads(body)
+    bad["pose"]["head"] = bad["pose"]["neck"]  # a zero-length bone
+    resp = client.post("/v1/solve", json=bad)
+    assert resp.status_code == 422 and "degenerate pose" in resp.json()["detail"]
+    assert resp.headers["content-type"] == PROBLEM
+
+
+def _problem(client: Any, body: Any, status: int = 422, raw: str | None = None) -> str:
+    content = json.dumps(body) if raw is None else raw  # NaN and Infinity tokens as written
+    headers = {"content-type": "application/json"}
+    resp = client.post("/v1/solve/batch", content=content, headers=headers)
+    assert resp.status_code == status, resp.text
+    assert resp.headers["content-type"] == PROBLEM
+    detail: str = resp.json()["detail"]
+    return detail
+
+
+def test_columnar_errors_name_item_and_field(client: Any, synthetic_poses: PosePairs) -> None:
+    good = columns(synthetic_poses, 20)
+    assert client.post("/v1/solve/batch", json=good).status_code == 200
+
+    def edited(path: str, value: Any) -> dict[str, Any]:
+        body = json.loads(json.dumps(good))
+        *keys, last = path.split("/")
+        node: Any = body
+        for key in keys:
+            node = node[int(key)] if isinstance(node, list) else node[key]
+        node[int(last) if isinstance(node, list) else last] = value
+        return body
+
+    row0 = good["poses"][0]
+    cases = [
+        (edited("poses/17/4", "1.0"), "poses[17][4]: Input should be a valid number"),
+        (edited("poses/3/0", True), "poses[3][0]: Input should be a valid number"),
+        (edited("poses/5/2", 2e4), "poses[5][2]: coordinate 20000.0 beyond ±10000 m"),
+        (edited("poses/6", row0[:60]), "poses[6]: must hold 63 numbers, got 60"),
+        (edited("targets/joints/4/1", "left_wirst"), "targets.joints[4][1]: unknown joint"),
+        (edited("targets/joints/4/1", SETS[1][0]), "targets.joints[4][1]: duplicate target"),
+        (edited("targets/positions/9/5", float("inf")), "targets.positions[9][5]: must be a fin"),
+        (edited("targets/positions", good["targets"]["positions"][:3]), "3 rows for 20 poses"),
+        (edited("targets/extra", 1), "targets.extra: Extra inputs are not permitted"),
+        (edited("pins", ["left_foot", "left_foot"]), "pins[1]: joint 'left_foot' is pinned twice"),
+        (edited("options/reach", "close"), "options.reach"),
+        (edited("poses/8", [0.0] * 63), "poses[8]: degenerate pose"),
+    ]
+    for body, needle in cases:
+        assert needle in _problem(client, body), needle
+    pinned = edited("pins", [["left_wrist"]] * 20)
+    assert "pins[0][0]: joint 'left_wrist' is both pinned and targeted" in _problem(client, pinned)
+    nan = edited("poses/0/1", float("nan"))  # json.dumps writes the NaN token
+    assert "poses[0][1]: must be a finite number" in _problem(client, nan)
+    assert "malformed JSON" in _problem(client, None, 400, raw=json.dumps(good)[:-1])
+    del good["targets"]
+    assert "targets: Field required" in _problem(client, good)
+
+
+def test_columnar_limits(models_dir: Path, synthetic_poses: PosePairs) -> None:
+    body = columns(synthetic_poses, 5)
+    with make_client(models_dir, max_batch_items=4) as small:
+        detail = _problem(small, body, 413)
+        assert "5 items exceed the limit of 4 per batch" in detail
+    with make_client(models_dir, deadline_seconds=1e-9) as late:
+        resp = late.post("/v1/solve/batch", json=body)
+        assert resp.status_code == 504 and resp.headers["retry-after"] == "1"
+        assert "0 of 5 items done" in resp.json()["detail"]
+    with make_client(models_dir) as c:
+        assert c.post("/v1/solve/batch", json=body).status_code == 200
+        metrics = c.get("/metrics").text
+        assert 'pose_solves_total{method="neural",solvers="composed"}' in metrics
+        assert 'pose_requests_total{route="/v1/solve/batch",status="200"} 1.0' in metrics
