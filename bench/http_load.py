@@ -129,6 +129,19 @@ def request_body(start: np.ndarray, joints: np.ndarray, targets: np.ndarray) -> 
     }
 
 
+def columnar_body(edits: Edits, rows: Sequence[int]) -> Json:
+    """The columnar form of the edits ``rows`` (docs/service.md): one row of 63 numbers per
+    pose, target joints per item, one row of 3K numbers per item."""
+    return {
+        "poses": edits.start[np.asarray(rows)].reshape(len(rows), -1).tolist(),
+        "targets": {
+            "joints": [[JOINT_NAMES[int(j)] for j in edits.joints[i]] for i in rows],
+            "positions": [np.asarray(edits.targets[i]).reshape(-1).tolist() for i in rows],
+        },
+        "options": {"method": "neural", "preserve_bone_lengths": True, "reach": "soft"},
+    }
+
+
 def bodies(edits: Edits) -> list[Json]:
     return [
         request_body(edits.start[i], edits.joints[i], edits.targets[i]) for i in range(len(edits))
@@ -217,7 +230,143 @@ async def _load(
 def load(
     url: str, payloads: Sequence[bytes], concurrency: int, max_requests: int, max_seconds: float
 ) -> Json:
-    return asyncio.run(_load(url, payloads, concurrency, max_requests, max_seconds))
+    """Concurrency 1: :func:`_load_one` (a blocking socket: the least client time per
+    request). More: :func:`_load` on uvloop when installed (uvicorn serves on uvloop too),
+    else on asyncio."""
+    if concurrency == 1:
+        return _load_one(url, payloads, max_requests, max_seconds)
+    run = _loop_runner()
+    out: Json = run(_load(url, payloads, concurrency, max_requests, max_seconds))
+    return out
+
+
+def _request_bytes(url: str, body: bytes) -> tuple[str, int, bytes]:
+    parsed = urlsplit(url)
+    host, port = parsed.hostname or HOST, parsed.port or 80
+    head = (
+        f"POST {parsed.path} HTTP/1.1\r\nHost: {host}:{port}\r\n"
+        f"Content-Type: application/json\r\nContent-Length: {len(body)}\r\n\r\n"
+    )
+    return host, port, head.encode() + body
+
+
+def _load_one(url: str, payloads: Sequence[bytes], max_requests: int, max_seconds: float) -> Json:
+    """One kept-alive connection on a blocking socket (TCP_NODELAY), each request sent
+    when the previous answer is in; also the server's own ``X-Total-Time`` (from the
+    request's arrival in the app to its answer's headers)."""
+    requests = [_request_bytes(url, body) for body in payloads]
+    host, port = requests[0][0], requests[0][1]
+    latencies: list[float] = []
+    server: list[float] = []
+    errors = 0
+    sock = socket.create_connection((host, port), timeout=60.0)
+    sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+    buf = b""
+    t_start = time.perf_counter()
+    t_end = t_start + max_seconds
+    try:
+        while len(latencies) < max_requests and time.perf_counter() < t_end:
+            request = requests[len(latencies) % len(requests)][2]
+            t0 = time.perf_counter()
+            sock.sendall(request)
+            while b"\r\n\r\n" not in buf:
+                chunk = sock.recv(1 << 16)
+                if not chunk:
+                    raise RuntimeError("the server closed the connection")
+                buf += chunk
+            head, _, rest = buf.partition(b"\r\n\r\n")
+            fields = {}
+            for line in head.split(b"\r\n")[1:]:
+                name, _, value = line.partition(b":")
+                fields[name.strip().lower()] = value.strip()
+            length = int(fields.get(b"content-length", b"0"))
+            parts, have = [rest], len(rest)
+            while have < length:
+                chunk = sock.recv(max(1 << 16, length - have))
+                if not chunk:
+                    raise RuntimeError("the server closed the connection")
+                parts.append(chunk)
+                have += len(chunk)
+            data = b"".join(parts)
+            buf = data[length:]
+            latencies.append(time.perf_counter() - t0)
+            errors += int(head.split(b" ", 2)[1]) != 200
+            total = fields.get(b"x-total-time", b"").removesuffix(b"ms")
+            if total:
+                server.append(float(total))
+    finally:
+        sock.close()
+    seconds = time.perf_counter() - t_start
+    ms = np.asarray(latencies) * 1e3
+    return {
+        "concurrency": 1,
+        "requests": len(latencies),
+        "errors": errors,
+        "seconds": seconds,
+        "rps": len(latencies) / seconds,
+        "p50_ms": float(np.percentile(ms, 50)),
+        "p99_ms": float(np.percentile(ms, 99)),
+        "mean_ms": float(ms.mean()),
+        "server_p50_ms": float(np.percentile(server, 50)) if server else None,
+        "client": "blocking socket",
+    }
+
+
+def _loop_runner() -> Any:
+    try:
+        import uvloop
+    except ImportError:
+        return asyncio.run
+    return uvloop.run
+
+
+def client_loop() -> str:
+    return "uvloop" if _loop_runner() is not asyncio.run else "asyncio"
+
+
+def _batch_row(b: Json, batch_size: int, request_bytes: int) -> Json:
+    return {
+        "batch_size": batch_size,
+        "batches": b["requests"],
+        "concurrency": 1,
+        "errors": b["errors"],
+        "p50_ms": b["p50_ms"],
+        "seconds": b["seconds"],
+        "poses_per_s": b["requests"] * batch_size / b["seconds"],
+        "request_bytes": request_bytes,
+    }
+
+
+#: Issue 14's HTTP goals (loopback, one worker).
+SOLVE_P50_MS = 0.5
+BATCH_POSES_PER_S = 30_000.0
+
+
+def goal_rows(http: Json | None) -> list[tuple[str, str, str, bool | None]]:
+    """Issue 14's HTTP goals as (name, target, measured, met) from :func:`run_http`'s
+    result (``met`` None: not measured)."""
+    http = http or {}
+    one = next((r for r in http.get("solve", []) if r["concurrency"] == 1), None)
+    rows: list[tuple[str, str, str, bool | None]] = [
+        (
+            "HTTP /v1/solve p50 at concurrency 1 (loopback)",
+            f"≤ {SOLVE_P50_MS} ms",
+            "–" if one is None else f"{one['p50_ms']:.3f} ms (p99 {one['p99_ms']:.2f})",
+            None if one is None else one["p50_ms"] <= SOLVE_P50_MS,
+        )
+    ]
+    col, items = http.get("batch_columnar"), http.get("batch")
+    also = f"; item list {items['poses_per_s']:,.0f}" if items else ""
+    rows.append(
+        (
+            "HTTP /v1/solve/batch poses/s (columnar form, "
+            f"{col['batch_size'] if col else '–'} per request)",
+            f"≥ {BATCH_POSES_PER_S:,.0f} poses/s",
+            "–" if not col else f"{col['poses_per_s']:,.0f} poses/s{also}",
+            None if not col else col["poses_per_s"] >= BATCH_POSES_PER_S,
+        )
+    )
+    return rows
 
 
 def run_http(
@@ -244,8 +393,15 @@ def run_http(
         ).encode()
         for s in range(max(2, n_batch))
     ]
+    columns = [
+        json.dumps(
+            columnar_body(edits, [(s * batch_size + j) % len(items) for j in range(batch_size)])
+        ).encode()
+        for s in range(max(2, n_batch))
+    ]
     out: Json = {
         "solve_set": solve_set,
+        "client": f"raw HTTP/1.1: concurrency 1 on a blocking socket, more on {client_loop()}",
         "limits": f"≤ {requests} requests or ≤ {seconds:g} s per concurrency level; "
         f"batch ≤ {batches} batches or ≤ {batch_seconds:g} s",
         "solve": [],
@@ -255,20 +411,14 @@ def run_http(
         rss: Json = {"after_start": rss_kb(server.pid)}
         load(f"{server.url}/v1/solve", single, 4, warmup, 30.0)
         load(f"{server.url}/v1/solve/batch", batch_payloads[:1], 1, 1, 60.0)
+        load(f"{server.url}/v1/solve/batch", columns[:1], 1, 2, 60.0)
         rss["after_warm_up"] = rss_kb(server.pid)
         for c in concurrency:
             out["solve"].append(load(f"{server.url}/v1/solve", single, c, requests, seconds))
         b = load(f"{server.url}/v1/solve/batch", batch_payloads, 1, batches, batch_seconds)
-        out["batch"] = {
-            "batch_size": batch_size,
-            "batches": b["requests"],
-            "concurrency": 1,
-            "errors": b["errors"],
-            "p50_ms": b["p50_ms"],
-            "seconds": b["seconds"],
-            "poses_per_s": b["requests"] * batch_size / b["seconds"],
-            "request_bytes": len(batch_payloads[0]),
-        }
+        out["batch"] = _batch_row(b, batch_size, len(batch_payloads[0]))
+        col = load(f"{server.url}/v1/solve/batch", columns, 1, 4 * batches, batch_seconds)
+        out["batch_columnar"] = _batch_row(col, batch_size, len(columns[0]))
         rss["after_load"] = rss_kb(server.pid)
         out["rss_kb"] = rss
     return out
