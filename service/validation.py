@@ -6,6 +6,7 @@ field."""
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from operator import attrgetter
 from typing import Any
 
 import numpy as np
@@ -18,14 +19,15 @@ from service.schemas import CompleteRequest, SolveOptions, SolveRequest
 
 F64 = npt.NDArray[np.floating[Any]]
 MIN_BONE = 1.0e-4  # metres; shorter bones make a pose degenerate
+_JOINTS = attrgetter(*JOINT_NAMES)  # a Pose's 21 [x, y, z], in joint order
 
 
 def poses(requests: Sequence[SolveRequest], where: Sequence[str]) -> F64:
     """The start poses ``[B, 21, 3]`` (joint order) of validated requests; a pose with a
     zero-length bone is refused, naming the pose and the joints."""
-    arr = np.array(
-        [[getattr(r.pose, j) for j in JOINT_NAMES] for r in requests], dtype=np.float64
-    ).reshape(len(requests), len(JOINT_NAMES), 3)
+    arr = np.array([_JOINTS(r.pose) for r in requests], dtype=np.float64).reshape(
+        len(requests), len(JOINT_NAMES), 3
+    )
     check_bones(arr, where.__getitem__)
     return arr
 

@@ -1,14 +1,15 @@
-"""Request id (``X-Request-ID``, the client's or a new one), one JSON access-log line per
-request, and the last-resort answers: a 500 problem for anything unhandled and, when the
-server cancels a request at the end of its shutdown grace period, a 503 problem."""
+"""Request id (``X-Request-ID``, the client's or a new one: 32 random hex digits), one
+JSON access-log line per request, and the last-resort answers: a 500 problem for anything
+unhandled and, when the server cancels a request at the end of its shutdown grace period,
+a 503 problem."""
 
 from __future__ import annotations
 
 import asyncio
 import json
 import logging
+import os
 import time
-import uuid
 
 from service.errors import ShuttingDown, error_response, internal_error
 from service.middleware.types import (
@@ -20,7 +21,6 @@ from service.middleware.types import (
     Receive,
     Scope,
     Send,
-    header_map,
 )
 
 access_log = logging.getLogger("service.access")
@@ -37,8 +37,9 @@ class RequestContext:
             await self.app(scope, receive, send)
             return
         t0: float = scope.setdefault(T0, time.perf_counter())
-        given = header_map(scope).get("x-request-id", "")
-        request_id = "".join(c for c in given[:128] if c.isprintable()) or uuid.uuid4().hex
+        given = next((v for k, v in scope["headers"] if k.lower() == b"x-request-id"), b"")
+        given = given.decode("latin-1")
+        request_id = "".join(c for c in given[:128] if c.isprintable()) or os.urandom(16).hex()
         scope[REQUEST_ID] = request_id
         status = [500]
         started = [False]
