@@ -60,6 +60,18 @@ def pose_form(body: bytes) -> SolveRequest | None:
     return req if body.count(b":") == _keys(req) else None
 
 
+def _columnar_keys(data: Any) -> int:
+    """Keys of a columnar body where it has objects (top level, ``targets``, ``options``);
+    -1 when it is not the columnar form."""
+    if not columnar.is_columnar(data):
+        return -1
+    n = len(data)
+    for key in ("targets", "options"):
+        if isinstance(data.get(key), dict):
+            n += len(data[key])
+    return n
+
+
 class FastPath:
     def __init__(self, app: ASGIApp, app_routes: Sequence[BaseRoute]) -> None:
         self.app = app
@@ -106,11 +118,11 @@ class FastPath:
                      body: bytes) -> bool:  # fmt: skip
         if len(body) >= INLINE_BYTES or (req := pose_form(body)) is None:
             return False
-        engine = state.repository.ready_engine()
         try:
             p = solve_problem(req, poses([req], ["pose"])[0])
         except PoseError:
             return False  # the route words it
+        engine = state.repository.ready_engine()
         if p.method == "neural" and p.reach == "soft" and not req.pins:
             t = time.perf_counter()  # ~0.15 ms: inline beats a thread hop
             (result,) = engine.solve([p])
@@ -135,13 +147,16 @@ class FastPath:
         def read() -> columnar.Columns | None:
             try:
                 data: Any = orjson.loads(body)
-                strict = True
+                if not columnar.is_columnar(data):
+                    return None  # the item list: the route reads it
+                strict = _columnar_keys(data) == body.count(b":")  # see pose_form
             except orjson.JSONDecodeError:  # NaN, or malformed: the strict decoder says which
+                strict = False
+            if not strict:
                 try:
                     data = decode(body)
                 except PoseError as exc:
                     raise BodyError(exc) from None
-                strict = False
             if not columnar.is_columnar(data):
                 return None
             # booleans only where options hold one, else every number's type is checked

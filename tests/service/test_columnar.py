@@ -198,6 +198,12 @@ def test_columnar_errors_name_item_and_field(client: Any, synthetic_poses: PoseP
     nan = edited("poses/0/1", float("nan"))  # json.dumps writes the NaN token
     assert "poses[0][1]: must be a finite number" in _problem(client, nan)
     assert "malformed JSON" in _problem(client, None, 400, raw=json.dumps(good)[:-1])
+    twice = json.dumps(good)[:-1] + ', "options": {"reach": "exact"}}'
+    assert "duplicate key 'options'" in _problem(client, None, 400, raw=twice)
+    inner = json.dumps(good).replace('"targets": {', '"targets": {"joints": ["head"], ', 1)
+    assert "duplicate key 'joints'" in _problem(client, None, 400, raw=inner)
+    colon = edited("targets/joints/0/0", "a:b")  # a colon in a string: the strict decoder
+    assert "targets.joints[0][0]: unknown joint 'a:b'" in _problem(client, colon)
     del good["targets"]
     assert "targets: Field required" in _problem(client, good)
 
