@@ -220,7 +220,10 @@ def config_tag(cfg: TrainConfig, stage: str) -> str:
         "augment": {k: v for k, v in augment.items() if k not in pairs_only},
     }
     if stage.startswith("solver"):
-        relevant["solver"] = cfg.solver.model_dump(exclude={"passes"})  # serving only
+        solver = cfg.solver.model_dump(exclude={"passes"})  # passes: serving only
+        if not solver["rigid_loss"]:  # added later: in the tag only when on, so that
+            del solver["rigid_loss"]  # checkpoints from before it stay valid
+        relevant["solver"] = solver
         relevant["augment"] = augment
     if stage.startswith("completion"):
         relevant["completion"] = cfg.completion.model_dump()
