@@ -29,7 +29,17 @@ VARIANTS: dict[str, str] = {
     "size normalisation, anchored delta, stay term",
     "long_solvers": "full budget, world-frame pairs, 5 solver epochs (8k steps), no stay term",
     "shipped-world-pairs": "full budget, world-frame pairs, 1 solver epoch, stay term",
-    "shipped": "the shipped recipe at its full budget (trainer/configs/default.toml)",
+    "previous": "the models shipped before this round: `full`'s recipe at its full budget "
+    "(200x200 -> 64 autoencoder, one pass)",
+    "previous_2passes": "`previous` served with two passes (`--passes 2`)",
+    "rigid": "`previous` + solvers trained on the bone-passed answer "
+    "(trainer/configs/ablation/rigid.toml), one pass",
+    "rigid_2passes": "`rigid` served with two passes",
+    "shipped_1pass": "the shipped models (512x512 -> 128 autoencoder, rigid loss) served with "
+    "one pass",
+    "shipped": "the shipped recipe at its full budget (trainer/configs/default.toml): "
+    "512x512 -> 128 autoencoder, rigid loss, two passes",
+    "shipped_3passes": "the shipped models served with three passes",
 }
 COMPLETION = "6-point completion"
 
@@ -125,9 +135,12 @@ def main(
     text = (
         "# Training ablation on held-out bodies\n\n"
         f"Written by `scripts/ablation.sh` then `python -m bench.ablation {fams}`.\n"
-        "Variants train at a small budget (trainer/configs/ablation/full.toml); `shipped`, "
-        "`shipped-before`, `shipped-world-pairs` and `long_solvers` are full-budget models "
-        "scored with `python -m bench.heldout --models DIR --out reports/ablation/NAME.json`."
+        "Variants train at a small budget (trainer/configs/ablation/full.toml, the recipe of "
+        "`previous`); `shipped*`, `previous*`, `rigid*`, `shipped-before`, "
+        "`shipped-world-pairs` and `long_solvers` are full-budget models scored with "
+        "`python -m bench.heldout --models DIR [--passes N] --out reports/ablation/NAME.json`."
+        " Rows scored before the compiled engine (all but `*passes*`, `rigid`, `shipped`) "
+        "match it to 5e-14 m."
         "\n\n" + render(rows)
     )
     write_atomic(out, text.encode())
