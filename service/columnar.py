@@ -23,7 +23,7 @@ from pydantic import ValidationError
 from core.skeleton import JOINT_INDEX, JOINT_NAMES, NUM_JOINTS
 from service.engine import BatchAnswer, Engine
 from service.errors import BodyInvalid, TooManyItems
-from service.limits import FABRIK_PRICE, chunks_of
+from service.limits import FABRIK_PRICE, chunks_of, neural_price
 from service.schemas import MAX_COORDINATE, SolveOptions
 from service.validation import check_bones
 
@@ -72,11 +72,17 @@ class Columns:
     def size(self) -> int:
         return int(self.poses.shape[0])
 
-    def parts(self) -> list[slice]:
-        """Priced parts (``service.limits``): every item costs the same here."""
+    def parts(self, passes: int) -> list[slice]:
+        """Priced parts (``service.limits``): every item costs the same here (``passes``:
+        the engine's default, when the options do not say)."""
         o = self.options
-        slow = o.method == "fabrik" or o.reach == "exact" or self.n_pins > 0
-        return chunks_of([FABRIK_PRICE if slow else 1] * self.size)
+        slow = o.reach == "exact" or self.n_pins > 0
+        cost = (
+            FABRIK_PRICE
+            if o.method == "fabrik"
+            else neural_price(slow, passes if o.passes is None else o.passes)
+        )
+        return chunks_of([cost] * self.size)
 
 
 def _numbers(rows: Any, loc: tuple[Any, ...], width: int, n: int, errs: _Errors,
@@ -258,7 +264,7 @@ def solve(engine: Engine, cols: Columns, part: slice) -> BatchAnswer:
         cols.poses[part], cols.tidx[part], cols.tpos[part], n_targets=cols.n_targets,
         weights=cols.weights[part], fabrik=o.method == "fabrik",
         preserve_bone_lengths=o.preserve_bone_lengths, exact=o.reach == "exact",
-        tolerance=o.tolerance, floor=o.floor,
+        tolerance=o.tolerance, floor=o.floor, passes=o.passes,
     )  # fmt: skip
 
 

@@ -64,6 +64,7 @@ class SolveProblem:
     reach: str = "soft"
     tolerance: float = 1e-3
     floor: float = 0.0  # world y of the ground under the character
+    passes: int | None = None  # neural solves (None: the engine's ``solve_passes``)
 
 
 @dataclass(frozen=True)
@@ -255,7 +256,7 @@ class Engine:
                 p.pose[None], p.target_idx[None], p.target_pos[None], n_targets=p.n_targets,
                 weights=p.weights[None], fabrik=p.method == "fabrik",
                 preserve_bone_lengths=p.preserve_bone_lengths, exact=p.reach == "exact",
-                tolerance=p.tolerance, floor=p.floor,
+                tolerance=p.tolerance, floor=p.floor, passes=p.passes,
             )  # fmt: skip
             return [self._result(p, ans, 0)]
         counts = np.fromiter((len(p.target_idx) for p in problems), np.int64, n)
@@ -280,8 +281,13 @@ class Engine:
             exact=np.fromiter((p.reach == "exact" for p in problems), np.bool_, n),
             tolerance=np.fromiter((p.tolerance for p in problems), np.float64, n),
             floor=np.fromiter((p.floor for p in problems), np.float64, n),
+            passes=np.fromiter((self.passes_of(p) for p in problems), np.int64, n),
         )  # fmt: skip
         return [self._result(p, ans, b) for b, p in enumerate(problems)]
+
+    def passes_of(self, p: SolveProblem) -> int:
+        """The neural passes ``p`` asks for (``solve_passes`` unless it says)."""
+        return self.solve_passes if p.passes is None else p.passes
 
     @staticmethod
     def _result(p: SolveProblem, ans: BatchAnswer, b: int) -> SolveResult:
@@ -310,45 +316,58 @@ class Engine:
         exact: npt.ArrayLike = False,
         tolerance: npt.ArrayLike = 1e-3,
         floor: npt.ArrayLike = 0.0,
+        passes: npt.ArrayLike | None = None,
     ) -> BatchAnswer:
         """Solve a batch given as arrays (validated like :class:`SolveProblem`), no
         per-item objects: ``poses [B, 21, 3]`` world; ``target_idx [B, K]`` joints (per
         item its first ``counts[b]`` entries: targets, then pins from ``n_targets[b]``
         on; the rest is padding), ``target_pos [B, K, 3]`` world, ``weights [B, K]``.
         Per-item options are ``[B]`` arrays or scalars: ``fabrik`` (method), ``exact``
-        (reach), ``preserve_bone_lengths``, ``tolerance`` (m), ``floor`` (world y).
+        (reach), ``preserve_bone_lengths``, ``tolerance`` (m), ``floor`` (world y),
+        ``passes`` (neural solves; default the engine's ``solve_passes``).
 
         Geometry runs in compiled kernels (:mod:`core.compiled`), one call per stage for
         the whole batch; items that share a solver sequence share one onnxruntime run per
         stage; FABRIK and the polish run per target set (:mod:`core.compiled_fabrik`).
         Every item is computed alone: its answer does not depend on the batch.
 
-        With ``passes`` > 1 (the manifest's ``serving.passes``), neural items are first
-        solved ``passes - 1`` times in soft reach with their bone lengths restored, each
-        pass starting from the previous answer; the last pass is the one asked for."""
+        A neural item with ``passes`` = p > 1 is first solved p - 1 times in soft reach
+        with its bone lengths restored, each pass starting from the previous answer; the
+        last pass is the one asked for. At refinement pass k (from 0) the items with
+        p > k + 1 take part, the others keep their pose: an item with p passes gets what
+        an engine built with ``solve_passes=p`` gives it. FABRIK items ignore ``passes``."""
         n = int(np.shape(poses)[0])
         fab = _per_item(fabrik, n, np.bool_)
-        neural = np.flatnonzero(~fab)
-        if self.solve_passes > 1 and neural.size:
+        reps = _per_item(self.solve_passes if passes is None else passes, n, np.int64)
+        if n and int(reps.min()) < 1:
+            raise ValueError(f"passes must be at least 1, got {int(reps.min())}")
+        reps = np.where(fab, 1, reps)  # FABRIK items: one solve (and not the caller's array)
+        rounds = int(reps.max()) - 1 if n else 0
+        if rounds > 0:
             pose_a = compiled.as_f64(poses).copy()
             tidx = compiled.as_i64(target_idx).reshape(n, -1)
             k_max = tidx.shape[1]
             tpos = np.asarray(target_pos, dtype=np.float64).reshape(n, k_max, 3)
 
-            def sel(
-                value: npt.ArrayLike | None, dtype: type[np.generic], k: int | None = None
+            def full(
+                value: npt.ArrayLike | None, dtype: type[np.generic], width: int | None = None
             ) -> Any:
-                return None if value is None else _per_item(value, n, dtype, k)[neural]
+                return None if value is None else _per_item(value, n, dtype, width)
 
-            for _ in range(self.solve_passes - 1):
+            cnt, n_t = full(counts, np.int64), full(n_targets, np.int64)
+            w = full(weights, np.float64, k_max)
+            tols, floors = _per_item(tolerance, n, np.float64), _per_item(floor, n, np.float64)
+            for k in range(rounds):
+                now = np.flatnonzero(reps > k + 1)  # these items take part in pass k
                 ans = self._solve_once(
-                    pose_a[neural], tidx[neural], tpos[neural],
-                    counts=sel(counts, np.int64), n_targets=sel(n_targets, np.int64),
-                    weights=sel(weights, np.float64, k_max), fabrik=False,
+                    pose_a[now], tidx[now], tpos[now],
+                    counts=None if cnt is None else cnt[now],
+                    n_targets=None if n_t is None else n_t[now],
+                    weights=None if w is None else w[now], fabrik=False,
                     preserve_bone_lengths=True, exact=False,
-                    tolerance=sel(tolerance, np.float64), floor=sel(floor, np.float64),
+                    tolerance=tols[now], floor=floors[now],
                 )  # fmt: skip
-                pose_a[neural] = ans.pose
+                pose_a[now] = ans.pose
             poses = pose_a
         return self._solve_once(
             poses, target_idx, target_pos, counts=counts, n_targets=n_targets,

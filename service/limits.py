@@ -2,10 +2,11 @@
 priced chunks so that one request never holds the worker for long.
 
 A batch is cut into chunks of at most ``CHUNK_PRICE`` units (a plain neural item costs
-1, an item that runs FABRIK - exact reach, pins, the fabrik method - costs
-``FABRIK_PRICE``). Each chunk runs in a worker thread under the app's compute limiter;
-between chunks the request checks its deadline and its client, and stops (504 or
-499) instead of computing answers nobody will read.
+1 per neural pass, ``options.passes`` or the models' default; an item that runs FABRIK -
+exact reach, pins, the fabrik method - costs ``FABRIK_PRICE``, a neural one that also
+polishes ``FABRIK_PRICE - 1`` plus its passes). Each chunk runs in a worker thread
+under the app's compute limiter; between chunks the request checks its deadline and its
+client, and stops (504 or 499) instead of computing answers nobody will read.
 """
 
 from __future__ import annotations
@@ -27,16 +28,25 @@ FABRIK_PRICE = 16
 R = TypeVar("R")
 
 
-def price(p: SolveProblem) -> int:
-    """Relative cost of one item (measured: an exact-reach item ~10 ms, a neural one
-    well under 1 ms in a batch)."""
-    slow = p.method == "fabrik" or p.reach == "exact" or len(p.target_idx) > p.n_targets
-    return FABRIK_PRICE if slow else 1
+def price(p: SolveProblem, passes: int) -> int:
+    """Relative cost of one item (measured: an exact-reach item ~10 ms, a neural pass
+    well under 0.1 ms in a batch); ``passes``: the engine's default for ``p.passes``."""
+    if p.method == "fabrik":
+        return FABRIK_PRICE
+    slow = p.reach == "exact" or len(p.target_idx) > p.n_targets
+    return neural_price(slow, passes if p.passes is None else p.passes)
 
 
-def chunks(problems: Sequence[SolveProblem]) -> list[slice]:
-    """Consecutive slices of at most ``CHUNK_PRICE`` units (at least one item each)."""
-    return chunks_of([price(p) for p in problems])
+def neural_price(slow: bool, passes: int) -> int:
+    """A neural item of ``passes`` passes: one unit per pass, plus the FABRIK polish's
+    ``FABRIK_PRICE - 1`` when it runs one (exact reach, pins)."""
+    return passes + (FABRIK_PRICE - 1 if slow else 0)
+
+
+def chunks(problems: Sequence[SolveProblem], passes: int) -> list[slice]:
+    """Consecutive slices of at most ``CHUNK_PRICE`` units (at least one item each);
+    ``passes``: the engine's default for items that do not say."""
+    return chunks_of([price(p, passes) for p in problems])
 
 
 def chunks_of(prices: Sequence[int]) -> list[slice]:
@@ -77,11 +87,12 @@ class Budget:
             )
 
     async def run(self, fn: Callable[[Sequence[SolveProblem]], list[R]],
-                  problems: Sequence[SolveProblem]) -> list[R]:  # fmt: skip
-        """``fn`` over ``problems`` chunk by chunk, off the event loop, within budget."""
+                  problems: Sequence[SolveProblem], passes: int) -> list[R]:  # fmt: skip
+        """``fn`` over ``problems`` chunk by chunk, off the event loop, within budget
+        (``passes``: the engine's default, for the price of items that do not say)."""
         limiter = getattr(self.request.app.state, "compute_limiter", None)
         results: list[R] = []
-        for part in chunks(problems):
+        for part in chunks(problems, passes):
             await self.check(len(results), len(problems))
             t = time.perf_counter()
             results.extend(await anyio.to_thread.run_sync(fn, problems[part], limiter=limiter))
@@ -105,7 +116,9 @@ class Budget:
 #: A character item of a batch (its own solve, joint map, retargeting and answer, in
 #: Python: measured ~10 ms for a 57-joint skeleton, ~46 ms for 557 joints, about twice
 #: that with exact reach) costs FABRIK_PRICE plus one unit per CHARACTER_JOINTS joints,
-#: doubled when its solve runs FABRIK.
+#: doubled when its solve runs FABRIK. Its neural passes are not counted: at well under
+#: 0.1 ms each they are lost in the Python around them (even 4 passes, < 1 ms, are less
+#: than one unit's worth of the ~10 ms of a character item).
 CHARACTER_JOINTS = 8
 
 

@@ -11,6 +11,8 @@ from core.skeleton import BASE_KEYPOINTS, JOINT_NAMES, PARENT_NAMES
 
 #: Coordinates beyond this (metres) are rejected as nonsense.
 MAX_COORDINATE = 1.0e4
+#: The most neural passes a request may ask for (``options.passes``).
+MAX_PASSES = 4
 
 if TYPE_CHECKING:  # the names are only known at run time
     JointName = str
@@ -86,6 +88,15 @@ class SolveOptions(_Body):
         le=MAX_COORDINATE,
         description="Height (m, world y) of the ground the character stands on. The "
         "networks learned poses over a floor at y = 0; a character on a 1 m box needs 1.0.",
+    )
+    passes: int | None = Field(
+        default=None,
+        ge=1,
+        le=MAX_PASSES,
+        description="Neural solves per edit, each from the previous answer with the bone "
+        "lengths restored (absent: the models' default, `passes` of `GET /v1/models`). "
+        "More passes reach closer on bodies unlike the training ones; each costs about one "
+        "more solve. 1 is the fastest. `method: fabrik` ignores it.",
     )
 
 
@@ -196,6 +207,10 @@ class ModelsResponse(BaseModel):
     model_card: str
     solver_sets: list[str]
     completion_levels: list[list[str]]
+    passes: int = Field(
+        description="Neural solves per edit when a request's `options.passes` is absent "
+        "(the manifest's `serving.passes`)."
+    )
     models: list[ModelInfo]
 
 

@@ -103,6 +103,7 @@ def problem_of(
         reach=o.reach,
         tolerance=o.tolerance,
         floor=o.floor,
+        passes=o.passes,
     )
 
 

@@ -130,7 +130,7 @@ class FastPath:
         else:  # FABRIK iterations can take milliseconds: keep the event loop free
             budget = Budget(Request(scope, receive), state.settings.deadline_seconds)
             try:
-                (result,) = await budget.run(engine.solve, [p])
+                (result,) = await budget.run(engine.solve, [p], engine.solve_passes)
             except PoseError as exc:
                 await _problem(scope, receive, send, exc)
                 return True

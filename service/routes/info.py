@@ -35,6 +35,7 @@ async def models(engine: ReadyEngine) -> ModelsResponse:
         model_card=MODEL_CARD,
         solver_sets=sorted(m.solvers()),
         completion_levels=[list(e.joints) for e in m.completion_levels()],
+        passes=engine.solve_passes,
         models=[
             ModelInfo(
                 name=e.name,

@@ -38,6 +38,7 @@ from service.limits import (
     Budget,
     batch_price_limit,
     character_price,
+    neural_price,
 )
 from service.responses import json_response, solve_payload
 from service.routes.characters import answer_character, read_character, solve_read
@@ -91,7 +92,7 @@ async def solve(body: SolveBody, engine: ReadyEngine, budget: RequestBudget,
         (result,) = engine.solve([p])
         budget.compute += time.perf_counter() - t
     else:  # FABRIK iterations can take milliseconds: keep the event loop free
-        (result,) = await budget.run(engine.solve, [p])
+        (result,) = await budget.run(engine.solve, [p], engine.solve_passes)
     state.metrics.solved(p.method, result.solvers)
     return json_response(solve_payload(p, result, engine.version), budget.compute)
 
@@ -116,7 +117,7 @@ async def solve_batch(body: BatchBody, engine: ReadyEngine, budget: RequestBudge
     forms = [item.root for item in req.items]
     chars = {i: f for i, f in enumerate(forms) if isinstance(f, CharacterSolveRequest)}
     if chars:
-        check_price(forms, limit)
+        check_price(forms, limit, engine.solve_passes)
     where = [i for i, f in enumerate(forms) if i not in chars]
     items = [f for f in forms if isinstance(f, SolveRequest)]  # the pose form, in order
 
@@ -127,7 +128,7 @@ async def solve_batch(body: BatchBody, engine: ReadyEngine, budget: RequestBudge
 
     problems = await off_loop(request, prepare, len(items))
     prepared = {i: await read_character(budget, f, f"items[{i}]") for i, f in chars.items()}
-    results = await budget.run(engine.solve, problems)
+    results = await budget.run(engine.solve, problems, engine.solve_passes)
     state.metrics.batch.observe(len(forms))
     for p, r in zip(problems, results, strict=True):
         state.metrics.solved(p.method, r.solvers)
@@ -142,15 +143,15 @@ async def solve_batch(body: BatchBody, engine: ReadyEngine, budget: RequestBudge
     return await off_loop(request, answer, len(forms))
 
 
-def check_price(forms: list[SolveRequest | CharacterSolveRequest], max_items: int) -> None:
+def check_price(forms: list[SolveRequest | CharacterSolveRequest], max_items: int,
+                passes: int) -> None:  # fmt: skip
     """Refuse (413) a batch that costs more than ``max_items`` of the costliest pose items:
-    a character item costs by its joints (``service.limits.character_price``)."""
+    a character item costs by its joints (``service.limits.character_price``), a pose
+    item as ``service.limits.price`` (``passes``: the engine's default)."""
     prices = [
         character_price(len(f.character.joints), _slow(f))
         if isinstance(f, CharacterSolveRequest)
-        else FABRIK_PRICE
-        if _slow(f)
-        else 1
+        else _pose_price(f, passes)
         for f in forms
     ]
     total, cap = sum(prices), batch_price_limit(max_items)
@@ -165,6 +166,14 @@ def check_price(forms: list[SolveRequest | CharacterSolveRequest], max_items: in
             "or FABRIK "
             f"(items[{i}], {joints} joints: {prices[i]}); send smaller batches"
         )
+
+
+def _pose_price(form: SolveRequest, passes: int) -> int:
+    o = form.options
+    if o.method == "fabrik":
+        return FABRIK_PRICE
+    slow = o.reach == "exact" or bool(form.pins)
+    return neural_price(slow, passes if o.passes is None else o.passes)
 
 
 def _slow(form: SolveRequest | CharacterSolveRequest) -> bool:
@@ -184,7 +193,9 @@ async def solve_columns(cols: columnar.Columns, engine: Engine, budget: Budget,
                         state: ServiceState, request: Request) -> Response:  # fmt: skip
     """A validated columnar batch: solved in priced parts within the budget, answered
     from the arrays (``service.columnar``)."""
-    parts = await budget.run_parts(lambda part: columnar.solve(engine, cols, part), cols.parts())
+    parts = await budget.run_parts(
+        lambda part: columnar.solve(engine, cols, part), cols.parts(engine.solve_passes)
+    )
     ans = columnar.merge(parts)
     state.metrics.batch.observe(cols.size)
     state.metrics.solved_paths(cols.options.method, ans.paths, ans.path_of)

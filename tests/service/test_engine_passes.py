@@ -99,3 +99,52 @@ def test_passes_close_the_reach_on_other_bodies(
         np.allclose(bone_lengths(r.pose), bone_lengths(p.pose), rtol=1e-5)
         for p, r in zip(probs, three.solve(probs), strict=True)
     )
+
+
+# -- per-item passes (``options.passes``) -----------------------------------------------
+def test_per_item_passes_equal_an_engine_built_with_them(
+    models_dir: Path, engines: tuple[Engine, Engine], real_poses: PosePairs
+) -> None:
+    """One batch mixing 1, 2, 3 and 4 passes (and FABRIK, and exact reach) answers each
+    item bit for bit as an engine built with ``solve_passes`` = its passes, as its single
+    solve, and as the same batch again."""
+    one, three = engines
+    by_passes = {1: one, 2: Engine(models_dir, solve_passes=2), 3: three,
+                 4: Engine(models_dir, solve_passes=4)}  # fmt: skip
+    starts, goals = _other_bodies(real_poses)
+    mixed = (
+        _problems(starts[:20], goals[:20], WRISTS)
+        + _problems(starts[20:30], goals[20:30], ("head", "left_ankle", "right_ankle"))
+        + _problems(starts[30:36], goals[30:36], WRISTS, reach="exact")
+        + _problems(starts[36:42], goals[36:42], ("left_wrist",), method="fabrik")
+    )
+    mixed = [dataclasses.replace(p, passes=1 + i % 4) for i, p in enumerate(mixed)]
+    batch, again = three.solve(mixed), three.solve(mixed)
+    for p, a, b in zip(mixed, batch, again, strict=True):
+        assert p.passes is not None
+        (alone,) = by_passes[p.passes].solve([dataclasses.replace(p, passes=None)])
+        (single,) = one.solve([p])  # the engine's own default does not matter
+        assert np.array_equal(a.pose, b.pose) and np.array_equal(a.pose, alone.pose)
+        assert np.array_equal(a.pose, single.pose) and a.solvers == alone.solvers
+        assert a.max_bone_error <= 1e-5
+
+
+def test_solve_arrays_takes_passes_as_array_or_scalar(
+    engines: tuple[Engine, Engine], real_poses: PosePairs
+) -> None:
+    one, three = engines
+    starts, goals = _other_bodies(real_poses)
+    idx = np.asarray([JOINT_INDEX[n] for n in WRISTS])
+    tidx = np.broadcast_to(idx, (20, 2))
+    tpos = goals[:20][:, idx]
+    mine = np.asarray([1, 3] * 10, dtype=np.int64)
+    mixed = three.solve_arrays(starts[:20], tidx, tpos, passes=mine)
+    assert np.array_equal(mine, [1, 3] * 10)  # the caller's array is left alone
+    at_one = three.solve_arrays(starts[:20], tidx, tpos, passes=1)
+    default = three.solve_arrays(starts[:20], tidx, tpos)
+    assert np.array_equal(at_one.pose, one.solve_arrays(starts[:20], tidx, tpos).pose)
+    assert np.array_equal(mixed.pose[::2], at_one.pose[::2])
+    assert np.array_equal(mixed.pose[1::2], default.pose[1::2])
+    assert not np.array_equal(mixed.pose[1::2], at_one.pose[1::2])
+    with pytest.raises(ValueError, match="passes"):
+        three.solve_arrays(starts[:2], tidx[:2], tpos[:2], passes=0)
