@@ -120,7 +120,8 @@ def run(
                 f"  issue 14, {row['targets']} targets: neural {row['neural']['p50_ms']:.3f} ms,"
                 f" FABRIK compiled {row['fabrik_compiled']['p50_ms']:.3f} ms"
                 f" (kernel {row['fabrik_kernel']['p50_ms']:.4f}),"
-                f" FABRIK numpy {row['fabrik_numpy']['p50_ms']:.3f} ms"
+                f" FABRIK numpy {row['fabrik_numpy']['p50_ms']:.3f} ms;"
+                f" neural at passes=1 {row['neural_passes1']['p50_ms']:.3f} ms"
             )
         for label, rate in i14["batch_poses_per_s"].items():
             console.log(f"  issue 14, batch {i14['batch']} via {label}: {rate:,.0f} poses/s")
@@ -154,7 +155,13 @@ def run(
                 f"  c={row['concurrency']}: p50 {row['p50_ms']:.2f} ms, {row['rps']:.0f} req/s"
             )
         if results.get("http"):
-            console.log(f"  batch: {results['http']['batch']['poses_per_s']:.0f} poses/s")
+            h = results["http"]
+            console.log(
+                f"  c=1 at passes=1: p50 {h['solve_passes1']['p50_ms']:.2f} ms;"
+                f" batch: {h['batch']['poses_per_s']:.0f} poses/s (item list),"
+                f" columnar {h['batch_columnar']['poses_per_s']:.0f},"
+                f" columnar at passes=1 {h['batch_columnar_passes1']['poses_per_s']:.0f}"
+            )
         seconds["http"] = round(time.perf_counter() - t0, 1)
     if "speed" in results:
         plots.plot_throughput(results["speed"], results.get("http"), out / "throughput.png")

@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 
+from bench import http_load
 from bench.edits import FIVE, short
 from bench.heldout import COMPLETION, Family, HeldoutResults
 from bench.markdown import status
@@ -133,25 +134,10 @@ def goals(results: Json) -> list[Goal]:
             )
         )
     rows += issue14_goals(speed.get("issue14"))
-    http = results.get("http", {})
-    one = next((r for r in http.get("solve", []) if r["concurrency"] == 1), None)
-    rows.append(
-        (
-            "HTTP /v1/solve on loopback, p50 (concurrency 1)",
-            "≤ 2 ms",
-            "–" if one is None else f"{one['p50_ms']:.2f} ms",
-            status(None if one is None else one["p50_ms"] <= 2.0),
-        )
-    )
-    batch = http.get("batch")
-    rows.append(
-        (
-            "HTTP /v1/solve/batch throughput",
-            "≥ 20,000 poses/s",
-            "–" if not batch else f"{batch['poses_per_s']:,.0f} poses/s",
-            status(None if not batch else batch["poses_per_s"] >= 20000),
-        )
-    )
+    rows += [
+        (name, target, measured, status(met))
+        for name, target, measured, met in http_load.goal_rows(results.get("http"))
+    ]
     return rows
 
 
@@ -238,21 +224,29 @@ def heldout_goals(h: HeldoutResults) -> list[Goal]:
 
 
 def issue14_goals(i14: Json | None) -> list[Goal]:
-    """Issue 14's "done when" list (compiled solve geometry), from ``speed.issue14``."""
+    """Issue 14's "done when" list (compiled solve geometry), from ``speed.issue14``. The
+    goals judge the default configuration (the models' passes, what users get); the
+    ``passes=1`` figure is shown beside it when measured."""
     if not i14:
         return [("Issue 14 (compiled solve)", "–", "–", status(None))]
     lat = {r["targets"]: r for r in i14["latency"]}
     rows: list[Goal] = []
     for k, limit in ((2, 0.1), (5, 0.2)):
         r = lat.get(k)
+        at1 = (
+            f"; {r['neural_passes1']['p50_ms']:.3f} ms at passes=1"
+            if r and "neural_passes1" in r
+            else ""
+        )
         shown = (
             "–"
             if r is None
-            else f"{r['neural']['p50_ms']:.3f} ms (p99 {r['neural']['p99_ms']:.3f})"
+            else f"{r['neural']['p50_ms']:.3f} ms (p99 {r['neural']['p99_ms']:.3f}{at1})"
         )
         rows.append(
             (
-                f"Issue 14: neural {k}-target soft solve compute p50 (one thread)",
+                f"Issue 14: neural {k}-target soft solve compute p50 (one thread, "
+                f"{i14.get('passes', 1)} passes)",
                 f"≤ {limit} ms",
                 shown,
                 status(None if r is None else r["neural"]["p50_ms"] <= limit),
@@ -274,13 +268,19 @@ def issue14_goals(i14: Json | None) -> list[Goal]:
         )
     )
     rate = i14["batch_poses_per_s"]
+    at1 = (
+        f"; at passes=1: {rate['solve_arrays_passes1']:,.0f} via solve_arrays, "
+        f"{rate['solve_passes1']:,.0f} via solve(problems)"
+        if "solve_arrays_passes1" in rate
+        else ""
+    )
     rows.append(
         (
             f"Issue 14: in-process batch of {i14['batch']} (2 targets, "
-            f"{i14['threads']} onnxruntime thread)",
+            f"{i14['threads']} onnxruntime thread, {i14.get('passes', 1)} passes)",
             "≥ 200,000 poses/s",
             f"{rate['solve_arrays']:,.0f} poses/s via solve_arrays; "
-            f"{rate['solve']:,.0f} via solve(problems)",
+            f"{rate['solve']:,.0f} via solve(problems){at1}",
             status(rate["solve_arrays"] >= 200_000),
         )
     )

@@ -118,18 +118,26 @@ def serve(
             sink.close()  # type: ignore[union-attr]
 
 
-def request_body(start: np.ndarray, joints: np.ndarray, targets: np.ndarray) -> Json:
+def request_body(
+    start: np.ndarray, joints: np.ndarray, targets: np.ndarray, passes: int | None = None
+) -> Json:
+    """A pose-form body; ``passes``: ``options.passes`` (None: the models' default)."""
     return {
         "pose": {n: [float(v) for v in start[i]] for i, n in enumerate(JOINT_NAMES)},
         "targets": [
             {"joint": JOINT_NAMES[int(j)], "position": [float(v) for v in t]}
             for j, t in zip(joints, targets, strict=True)
         ],
-        "options": {"method": "neural", "preserve_bone_lengths": True, "reach": "soft"},
+        "options": _options(passes),
     }
 
 
-def columnar_body(edits: Edits, rows: Sequence[int]) -> Json:
+def _options(passes: int | None) -> Json:
+    o: Json = {"method": "neural", "preserve_bone_lengths": True, "reach": "soft"}
+    return o if passes is None else {**o, "passes": passes}
+
+
+def columnar_body(edits: Edits, rows: Sequence[int], passes: int | None = None) -> Json:
     """The columnar form of the edits ``rows`` (docs/service.md): one row of 63 numbers per
     pose, target joints per item, one row of 3K numbers per item."""
     return {
@@ -138,13 +146,14 @@ def columnar_body(edits: Edits, rows: Sequence[int]) -> Json:
             "joints": [[JOINT_NAMES[int(j)] for j in edits.joints[i]] for i in rows],
             "positions": [np.asarray(edits.targets[i]).reshape(-1).tolist() for i in rows],
         },
-        "options": {"method": "neural", "preserve_bone_lengths": True, "reach": "soft"},
+        "options": _options(passes),
     }
 
 
-def bodies(edits: Edits) -> list[Json]:
+def bodies(edits: Edits, passes: int | None = None) -> list[Json]:
     return [
-        request_body(edits.start[i], edits.joints[i], edits.targets[i]) for i in range(len(edits))
+        request_body(edits.start[i], edits.joints[i], edits.targets[i], passes)
+        for i in range(len(edits))
     ]
 
 
@@ -344,19 +353,23 @@ BATCH_POSES_PER_S = 30_000.0
 
 def goal_rows(http: Json | None) -> list[tuple[str, str, str, bool | None]]:
     """Issue 14's HTTP goals as (name, target, measured, met) from :func:`run_http`'s
-    result (``met`` None: not measured)."""
+    result (``met`` None: not measured). The goals judge the default configuration (the
+    models' passes, what users get); the ``passes: 1`` figure is shown beside it."""
     http = http or {}
     one = next((r for r in http.get("solve", []) if r["concurrency"] == 1), None)
+    p1, col1 = http.get("solve_passes1"), http.get("batch_columnar_passes1")
+    at1 = f"; {p1['p50_ms']:.3f} ms at passes=1" if p1 else ""
     rows: list[tuple[str, str, str, bool | None]] = [
         (
-            "HTTP /v1/solve p50 at concurrency 1 (loopback)",
+            "HTTP /v1/solve p50 at concurrency 1 (loopback, the models' passes)",
             f"≤ {SOLVE_P50_MS} ms",
-            "–" if one is None else f"{one['p50_ms']:.3f} ms (p99 {one['p99_ms']:.2f})",
+            "–" if one is None else f"{one['p50_ms']:.3f} ms (p99 {one['p99_ms']:.2f}{at1})",
             None if one is None else one["p50_ms"] <= SOLVE_P50_MS,
         )
     ]
     col, items = http.get("batch_columnar"), http.get("batch")
     also = f"; item list {items['poses_per_s']:,.0f}" if items else ""
+    also += f"; {col1['poses_per_s']:,.0f} at passes=1" if col1 else ""
     rows.append(
         (
             "HTTP /v1/solve/batch poses/s (columnar form, "
@@ -383,9 +396,12 @@ def run_http(
     warmup: int = 200,
     log: Path | None = None,
 ) -> Json:
-    """The whole HTTP measurement; returns a JSON-able dict."""
+    """The whole HTTP measurement; returns a JSON-able dict. /v1/solve at concurrency 1
+    and the columnar batch are measured twice: with the models' passes (the default) and
+    with ``options.passes = 1`` (``solve_passes1``, ``batch_columnar_passes1``)."""
     items = bodies(edits)
     single = [json.dumps(b).encode() for b in items]
+    single1 = [json.dumps(b).encode() for b in bodies(edits, passes=1)]
     n_batch = max(1, min(4, -(-batch_size * 2 // len(items))))
     batch_payloads = [
         json.dumps(
@@ -396,6 +412,14 @@ def run_http(
     columns = [
         json.dumps(
             columnar_body(edits, [(s * batch_size + j) % len(items) for j in range(batch_size)])
+        ).encode()
+        for s in range(max(2, n_batch))
+    ]
+    columns1 = [
+        json.dumps(
+            columnar_body(
+                edits, [(s * batch_size + j) % len(items) for j in range(batch_size)], passes=1
+            )
         ).encode()
         for s in range(max(2, n_batch))
     ]
@@ -410,15 +434,20 @@ def run_http(
         out["server"] = server.command
         rss: Json = {"after_start": rss_kb(server.pid)}
         load(f"{server.url}/v1/solve", single, 4, warmup, 30.0)
+        load(f"{server.url}/v1/solve", single1, 1, warmup, 30.0)
         load(f"{server.url}/v1/solve/batch", batch_payloads[:1], 1, 1, 60.0)
         load(f"{server.url}/v1/solve/batch", columns[:1], 1, 2, 60.0)
+        load(f"{server.url}/v1/solve/batch", columns1[:1], 1, 2, 60.0)
         rss["after_warm_up"] = rss_kb(server.pid)
         for c in concurrency:
             out["solve"].append(load(f"{server.url}/v1/solve", single, c, requests, seconds))
+        out["solve_passes1"] = load(f"{server.url}/v1/solve", single1, 1, requests, seconds)
         b = load(f"{server.url}/v1/solve/batch", batch_payloads, 1, batches, batch_seconds)
         out["batch"] = _batch_row(b, batch_size, len(batch_payloads[0]))
         col = load(f"{server.url}/v1/solve/batch", columns, 1, 4 * batches, batch_seconds)
         out["batch_columnar"] = _batch_row(col, batch_size, len(columns[0]))
+        col1 = load(f"{server.url}/v1/solve/batch", columns1, 1, 4 * batches, batch_seconds)
+        out["batch_columnar_passes1"] = _batch_row(col1, batch_size, len(columns1[0]))
         rss["after_load"] = rss_kb(server.pid)
         out["rss_kb"] = rss
     return out

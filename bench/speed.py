@@ -125,8 +125,12 @@ def issue14(
       edit (no engine glue);
     - ``fabrik_numpy``: ``core.kinematics.fabrik`` (the numpy FABRIK the engine ran before);
 
+    - ``neural_passes1``: the ``neural`` call with ``passes=1`` (``options.passes``), beside
+      the engine's default (``solve_passes``, the models' ``serving.passes``);
+
     FABRIK with ``tolerance`` (m) and the engine's iteration cap. Then in-process batch
-    throughput of ``engine.solve_arrays`` and ``engine.solve`` on ``batch`` edits (2 targets)."""
+    throughput of ``engine.solve_arrays`` and ``engine.solve`` on ``batch`` edits (2
+    targets), at the default passes and at ``passes=1`` (``*_passes1``)."""
     rows = [
         _issue14_set(engine, k, name, edits, calls, warmup, tolerance)
         for k, (name, edits) in sets.items()
@@ -137,12 +141,17 @@ def issue14(
     tidx = np.stack(two.joints * reps)[:batch]
     tpos = np.concatenate([np.stack(two.targets)] * reps)[:batch]
     probs = [p for _ in range(reps) for p in problems(two, "neural_bone")][:batch]
-    engine.solve_arrays(starts, tidx, tpos)
-    engine.solve(probs)
+    probs1 = [dataclasses.replace(p, passes=1) for p in probs]
+    runs: dict[str, Callable[[], object]] = {
+        "solve_arrays": lambda: engine.solve_arrays(starts, tidx, tpos),
+        "solve": lambda: engine.solve(probs),
+        "solve_arrays_passes1": lambda: engine.solve_arrays(starts, tidx, tpos, passes=1),
+        "solve_passes1": lambda: engine.solve(probs1),
+    }
+    for fn in runs.values():
+        fn()
     through = {
-        "solve_arrays": batch
-        / min(_timed(lambda: engine.solve_arrays(starts, tidx, tpos)) for _ in range(batch_rounds)),
-        "solve": batch / min(_timed(lambda: engine.solve(probs)) for _ in range(batch_rounds)),
+        label: batch / min(_timed(fn) for _ in range(batch_rounds)) for label, fn in runs.items()
     }
     ort_threads = engine.encoder.session.get_session_options().intra_op_num_threads
     return {
@@ -152,6 +161,7 @@ def issue14(
         "batch": batch,
         "batch_poses_per_s": through,
         "threads": ort_threads,
+        "passes": engine.solve_passes,
     }
 
 
@@ -164,6 +174,7 @@ def _issue14_set(
 
     cap = engine.fabrik_max_iterations
     neural = problems(edits, "neural_bone")
+    neural1 = [dataclasses.replace(p, passes=1) for p in neural]
     fab = [dataclasses.replace(p, tolerance=tolerance) for p in problems(edits, "fabrik")]
     n = len(edits)
     start = np.ascontiguousarray(edits.start, dtype=np.float64)
@@ -187,6 +198,7 @@ def _issue14_set(
 
     runs: dict[str, Callable[[int], object]] = {
         "neural": lambda i: engine.solve([neural[i]]),
+        "neural_passes1": lambda i: engine.solve([neural1[i]]),
         "fabrik_compiled": lambda i: engine.solve([fab[i]]),
         "fabrik_kernel": kernel,
         "fabrik_numpy": numpy_fabrik,

@@ -147,6 +147,13 @@ def test_quick_bench_writes_a_sane_report(
     assert http["batch"]["errors"] == 0
     assert http["batch"]["poses_per_s"] > 0
     assert all(v > 0 for v in http["rss_kb"].values())
+    # the default passes and passes=1 side by side (issue 14's goals judge the default)
+    for row in (http["solve_passes1"], http["batch_columnar_passes1"]):
+        assert row["errors"] == 0 and row["p50_ms"] > 0
+    i14 = speed["issue14"]
+    assert all(r["neural_passes1"]["p50_ms"] > 0 for r in i14["latency"])
+    assert i14["batch_poses_per_s"]["solve_arrays_passes1"] > 0
+    assert "at passes=1" in report
 
 
 def test_accuracy_only_run_writes_a_report_without_speed(
