@@ -368,11 +368,13 @@ class Engine:
                     tolerance=tols[now], floor=floors[now],
                 )  # fmt: skip
                 pose_a[now] = ans.pose
+            origin, moved = compiled.as_f64(poses), reps > 1
             poses = pose_a
         return self._solve_once(
             poses, target_idx, target_pos, counts=counts, n_targets=n_targets,
             weights=weights, fabrik=fab, preserve_bone_lengths=preserve_bone_lengths,
             exact=exact, tolerance=tolerance, floor=floor,
+            origin=origin if rounds > 0 else None, moved=moved if rounds > 0 else None,
         )  # fmt: skip
 
     def _solve_once(
@@ -389,8 +391,13 @@ class Engine:
         exact: npt.ArrayLike = False,
         tolerance: npt.ArrayLike = 1e-3,
         floor: npt.ArrayLike = 0.0,
+        origin: F64 | None = None,
+        moved: npt.NDArray[np.bool_] | None = None,
     ) -> BatchAnswer:
-        """One pass of :meth:`solve_arrays` (the same arguments)."""
+        """One pass of :meth:`solve_arrays` (the same arguments). ``origin`` ``[B, 21, 3]``:
+        the caller's own start poses of the items ``moved`` by earlier passes; exact reach
+        falls back to plain FABRIK from there, not from the previous pass's answer (whose
+        pelvis the network may have moved out of a target's reach)."""
         pose_a = compiled.as_f64(poses)
         n = pose_a.shape[0]
         tidx = compiled.as_i64(target_idx).reshape(n, -1)
@@ -438,8 +445,17 @@ class Engine:
                 out[items] = compiled.unscale(
                     decoded[items], scales[items], canon[items], lengths[items], bone[items]
                 )
+        start = canon
+        if origin is not None and moved is not None and moved.any():
+            start = canon.copy()  # the caller's start poses in this pass's canonical frame
+            local = origin[moved] - trans[moved, None, :]
+            local[..., 1] -= floors[moved, None]
+            fx, fz = facing[moved, 0, None], facing[moved, 1, None]
+            start[moved, :, 0] = fz * local[..., 0] - fx * local[..., 2]
+            start[moved, :, 1] = local[..., 1]
+            start[moved, :, 2] = fx * local[..., 0] + fz * local[..., 2]
         for g in groups:
-            self._finish_group(g, fab, ex, seq_of, sequences, canon, out, lengths, tcan,
+            self._finish_group(g, fab, ex, seq_of, sequences, start, out, lengths, tcan,
                                tols, iterations, suffix)  # fmt: skip
         world, errors, bone_err = compiled.finish(
             out, facing, trans, floors, tidx, tpos, cnt, lengths
