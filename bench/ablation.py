@@ -17,7 +17,8 @@ import typer
 
 from core.io import write_atomic
 
-#: What each variant changes against ``full`` (the shipped recipe at the ablation budget).
+#: What each variant changes against ``full`` (the recipe of ``previous`` at the ablation
+#: budget), or, for full-budget rows, what it is.
 VARIANTS: dict[str, str] = {
     "shipped-before": "the models shipped before issue 11 (full budget, old recipe)",
     "no_augment": "no random bodies, no mirror, no size normalisation",
@@ -25,7 +26,7 @@ VARIANTS: dict[str, str] = {
     "world_pairs": "solver pairs in the start's frame (goal turned and moved), AE sees turns",
     "no_delta": "the paper's answer D(S(z, t))",
     "no_anchor": "delta answer start + D(S(z, t)) - D(z), not anchored",
-    "full": "the shipped recipe at the small budget: canonical pairs, random bodies, mirror, "
+    "full": "`previous`'s recipe at the small budget: canonical pairs, random bodies, mirror, "
     "size normalisation, anchored delta, stay term",
     "long_solvers": "full budget, world-frame pairs, 5 solver epochs (8k steps), no stay term",
     "shipped-world-pairs": "full budget, world-frame pairs, 1 solver epoch, stay term",
@@ -34,11 +35,12 @@ VARIANTS: dict[str, str] = {
     "previous_2passes": "`previous` served with two passes (`--passes 2`)",
     "rigid": "`previous` + solvers trained on the bone-passed answer "
     "(trainer/configs/ablation/rigid.toml), one pass",
-    "rigid_2passes": "`rigid` served with two passes",
-    "shipped_1pass": "the shipped models (512x512 -> 128 autoencoder, rigid loss) served with "
+    "ae512": "`rigid` with a 512x512 -> 128 autoencoder (trainer/configs/ablation/ae512.toml), "
     "one pass",
-    "shipped": "the shipped recipe at its full budget (trainer/configs/default.toml): "
-    "512x512 -> 128 autoencoder, rigid loss, two passes",
+    "ae512_2passes": "`ae512` served with two passes",
+    "ae512_3passes": "`ae512` served with three passes",
+    "shipped": "the shipped recipe at its full budget (trainer/configs/default.toml): `rigid` "
+    "served with two passes",
     "shipped_3passes": "the shipped models served with three passes",
 }
 COMPLETION = "6-point completion"
@@ -136,11 +138,11 @@ def main(
         "# Training ablation on held-out bodies\n\n"
         f"Written by `scripts/ablation.sh` then `python -m bench.ablation {fams}`.\n"
         "Variants train at a small budget (trainer/configs/ablation/full.toml, the recipe of "
-        "`previous`); `shipped*`, `previous*`, `rigid*`, `shipped-before`, "
+        "`previous`); `shipped*`, `previous*`, `rigid`, `ae512*`, `shipped-before`, "
         "`shipped-world-pairs` and `long_solvers` are full-budget models scored with "
         "`python -m bench.heldout --models DIR [--passes N] --out reports/ablation/NAME.json`."
-        " Rows scored before the compiled engine (all but `*passes*`, `rigid`, `shipped`) "
-        "match it to 5e-14 m."
+        " Rows scored with the numpy engine, before the compiled one, agree with it to "
+        "5e-14 m (docs/benchmarks.md)."
         "\n\n" + render(rows)
     )
     write_atomic(out, text.encode())
