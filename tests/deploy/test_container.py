@@ -202,6 +202,19 @@ def test_image_runs_unprivileged_with_a_healthcheck_and_only_the_service(
     engine.run("run", "--rm", "--entrypoint", "/opt/venv/bin/python", image, "-c", script)
 
 
+def test_compiled_kernels_load_from_the_seed_not_compiled(engine: Engine, image: str) -> None:
+    """The image's numba cache seed matches the installed sources: on a read-only root with
+    a fresh /tmp, every kernel is loaded, none compiled (a stale or misnamed seed means a
+    20-40 s JIT compile at every start)."""
+    script = "from core import compiled, compiled_fabrik\ncompiled.warm(); compiled_fabrik.warm()\n"
+    log = engine.run(
+        "run", "--rm", *SECURITY, "-e", "NUMBA_DEBUG_CACHE=1", "--entrypoint",
+        "/opt/venv/bin/python", image, "-P", "-c", script,
+    )  # fmt: skip
+    assert "data loaded" in log, log[-2000:]
+    assert "data saved" not in log, log[-2000:]
+
+
 # --------------------------------------------------------------------------- the running service
 def test_ready_live_healthcheck_and_not_root(engine: Engine, service: Container) -> None:
     assert status(service.client, "/v2/health/live") == 200
