@@ -42,8 +42,8 @@ echo "\$ curl -s $URL/v1/bvh/solve -H 'content-type: application/json' -d @docs/
 curl -s "$URL/v1/bvh/solve" -H 'content-type: application/json' -d @docs/examples/bvh_solve.json \
   | python3 -c 'import json, sys; a = json.load(sys.stdin); rows = a.pop("bvh").splitlines(); a["bvh"] = ["...", rows[-2][:60] + " ...", "..."]; a.pop("joint_map"); print(json.dumps(a, indent=1))' | abridge
 echo
-echo "\$ curl -s $URL/v1/character/solve -H 'content-type: application/json' -d @docs/examples/character_solve.json"
-curl -s "$URL/v1/character/solve" -H 'content-type: application/json' -d @docs/examples/character_solve.json \
+echo "\$ curl -s $URL/v1/solve -H 'content-type: application/json' -d @docs/examples/solve_character.json"
+curl -s "$URL/v1/solve" -H 'content-type: application/json' -d @docs/examples/solve_character.json \
   | python3 -c 'import json, sys; a = json.load(sys.stdin); a.pop("joint_map"); [a[k].__setitem__("...", f"{len(a[k]) - 3} more joints") or [a[k].pop(n) for n in list(a[k])[3:-1]] for k in ("rotations", "positions")]; print(json.dumps(a, indent=1))' | abridge
 echo
 echo "\$ curl -si $URL/v1/solve -H 'content-type: application/json' -d @docs/examples/solve.json | grep -i '^x-'"
