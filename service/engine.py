@@ -20,6 +20,7 @@ load time), a composed one as encoder, solvers (with re-encoding) and decoder.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import lru_cache
@@ -88,6 +89,33 @@ class BatchAnswer:
     iterations: npt.NDArray[np.int64]  # [B] FABRIK / polish iterations
     paths: tuple[tuple[str, ...], ...]  # the distinct solver paths of the batch
     path_of: npt.NDArray[np.int64]  # [B] index into ``paths``
+
+
+@dataclass(frozen=True)
+class _Items:
+    """A batch's inputs as contiguous per-item arrays (what :meth:`Engine.solve_arrays`
+    takes, normalised once): B items, K target columns, positions in world space."""
+
+    poses: compiled.F64  # [B, 21, 3]
+    tidx: npt.NDArray[np.int64]  # [B, K]
+    tpos: compiled.F64  # [B, K, 3]
+    cnt: npt.NDArray[np.int64]  # [B] columns in use (targets, then pins)
+    n_t: npt.NDArray[np.int64]  # [B] user targets
+    w: compiled.F64  # [B, K]
+    fab: npt.NDArray[np.bool_]  # [B] method=fabrik
+    keep: npt.NDArray[np.bool_]  # [B] preserve_bone_lengths
+    ex: npt.NDArray[np.bool_]  # [B] reach=exact
+    tols: compiled.F64  # [B]
+    floors: compiled.F64  # [B]
+
+    def soft(self, sel: npt.NDArray[np.intp], poses: compiled.F64) -> _Items:
+        """Items ``sel`` from ``poses`` as a refinement pass solves them: neural, soft
+        reach, bone lengths restored."""
+        no = np.zeros(len(sel), dtype=np.bool_)
+        return _Items(
+            poses[sel], self.tidx[sel], self.tpos[sel], self.cnt[sel], self.n_t[sel],
+            self.w[sel], no, ~no, no, self.tols[sel], self.floors[sel],
+        )  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -336,81 +364,48 @@ class Engine:
         last pass is the one asked for. At refinement pass k (from 0) the items with
         p > k + 1 take part, the others keep their pose: an item with p passes gets what
         an engine built with ``solve_passes=p`` gives it. FABRIK items ignore ``passes``."""
-        n = int(np.shape(poses)[0])
+        pose_a = compiled.as_f64(poses)
+        n = pose_a.shape[0]
+        tidx = compiled.as_i64(target_idx).reshape(n, -1)
+        k_max = tidx.shape[1]
+        cnt = _per_item(k_max if counts is None else counts, n, np.int64)
         fab = _per_item(fabrik, n, np.bool_)
+        items = _Items(
+            pose_a, tidx, np.array(target_pos, dtype=np.float64).reshape(n, k_max, 3), cnt,
+            cnt if n_targets is None else _per_item(n_targets, n, np.int64),
+            _per_item(1.0 if weights is None else weights, n, np.float64, k_max), fab,
+            _per_item(preserve_bone_lengths, n, np.bool_), _per_item(exact, n, np.bool_),
+            _per_item(tolerance, n, np.float64), _per_item(floor, n, np.float64),
+        )  # fmt: skip
         reps = _per_item(self.solve_passes if passes is None else passes, n, np.int64)
         if n and int(reps.min()) < 1:
             raise ValueError(f"passes must be at least 1, got {int(reps.min())}")
         reps = np.where(fab, 1, reps)  # FABRIK items: one solve (and not the caller's array)
         rounds = int(reps.max()) - 1 if n else 0
-        if rounds > 0:
-            pose_a = compiled.as_f64(poses).copy()
-            tidx = compiled.as_i64(target_idx).reshape(n, -1)
-            k_max = tidx.shape[1]
-            tpos = np.asarray(target_pos, dtype=np.float64).reshape(n, k_max, 3)
-
-            def full(
-                value: npt.ArrayLike | None, dtype: type[np.generic], width: int | None = None
-            ) -> Any:
-                return None if value is None else _per_item(value, n, dtype, width)
-
-            cnt, n_t = full(counts, np.int64), full(n_targets, np.int64)
-            w = full(weights, np.float64, k_max)
-            tols, floors = _per_item(tolerance, n, np.float64), _per_item(floor, n, np.float64)
-            for k in range(rounds):
-                now = np.flatnonzero(reps > k + 1)  # these items take part in pass k
-                ans = self._solve_once(
-                    pose_a[now], tidx[now], tpos[now],
-                    counts=None if cnt is None else cnt[now],
-                    n_targets=None if n_t is None else n_t[now],
-                    weights=None if w is None else w[now], fabrik=False,
-                    preserve_bone_lengths=True, exact=False,
-                    tolerance=tols[now], floor=floors[now],
-                )  # fmt: skip
-                pose_a[now] = ans.pose
-            origin, moved = compiled.as_f64(poses), reps > 1
-            poses = pose_a
+        if rounds == 0:
+            return self._solve_once(items)
+        current = pose_a.copy()
+        for k in range(rounds):
+            now = np.flatnonzero(reps > k + 1)  # these items take part in pass k
+            current[now] = self._solve_once(items.soft(now, current)).pose
         return self._solve_once(
-            poses, target_idx, target_pos, counts=counts, n_targets=n_targets,
-            weights=weights, fabrik=fab, preserve_bone_lengths=preserve_bone_lengths,
-            exact=exact, tolerance=tolerance, floor=floor,
-            origin=origin if rounds > 0 else None, moved=moved if rounds > 0 else None,
-        )  # fmt: skip
+            dataclasses.replace(items, poses=current), origin=pose_a, moved=reps > 1
+        )
 
     def _solve_once(
         self,
-        poses: npt.ArrayLike,
-        target_idx: npt.ArrayLike,
-        target_pos: npt.ArrayLike,
-        *,
-        counts: npt.ArrayLike | None = None,
-        n_targets: npt.ArrayLike | None = None,
-        weights: npt.ArrayLike | None = None,
-        fabrik: npt.ArrayLike = False,
-        preserve_bone_lengths: npt.ArrayLike = True,
-        exact: npt.ArrayLike = False,
-        tolerance: npt.ArrayLike = 1e-3,
-        floor: npt.ArrayLike = 0.0,
+        batch: _Items,
         origin: F64 | None = None,
         moved: npt.NDArray[np.bool_] | None = None,
     ) -> BatchAnswer:
-        """One pass of :meth:`solve_arrays` (the same arguments). ``origin`` ``[B, 21, 3]``:
-        the caller's own start poses of the items ``moved`` by earlier passes; exact reach
-        falls back to plain FABRIK from there, not from the previous pass's answer (whose
-        pelvis the network may have moved out of a target's reach)."""
-        pose_a = compiled.as_f64(poses)
+        """One pass of :meth:`solve_arrays`. ``origin`` ``[B, 21, 3]``: the caller's own
+        start poses of the items ``moved`` by earlier passes; exact reach falls back to
+        plain FABRIK from there, not from the previous pass's answer (whose pelvis the
+        network may have moved out of a target's reach)."""
+        pose_a, tidx, cnt, n_t, w = batch.poses, batch.tidx, batch.cnt, batch.n_t, batch.w
+        fab, keep, ex, tols, floors = batch.fab, batch.keep, batch.ex, batch.tols, batch.floors
         n = pose_a.shape[0]
-        tidx = compiled.as_i64(target_idx).reshape(n, -1)
-        k_max = tidx.shape[1]
-        tpos = np.array(target_pos, dtype=np.float64).reshape(n, k_max, 3)
-        cnt = _per_item(k_max if counts is None else counts, n, np.int64)
-        n_t = cnt if n_targets is None else _per_item(n_targets, n, np.int64)
-        w = _per_item(1.0 if weights is None else weights, n, np.float64, k_max)
-        fab = _per_item(fabrik, n, np.bool_)
-        keep = _per_item(preserve_bone_lengths, n, np.bool_)
-        ex = _per_item(exact, n, np.bool_)
-        tols = _per_item(tolerance, n, np.float64)
-        floors = _per_item(floor, n, np.float64)
+        tpos = batch.tpos.copy()
         tpos[:, :, 1] -= floors[:, None]  # the networks know a floor at y = 0
         neural = np.ascontiguousarray(~fab)
         canon, facing, trans, lengths, scales, tcan, x, canvas = compiled.prepare(
