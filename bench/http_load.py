@@ -222,7 +222,13 @@ async def _load(
 
     t0 = time.perf_counter()
     await asyncio.gather(*(worker() for _ in range(concurrency)))
-    seconds = time.perf_counter() - t0
+    return _summary(concurrency, latencies, errors, time.perf_counter() - t0)
+
+
+def _summary(
+    concurrency: int, latencies: Sequence[float], errors: int, seconds: float
+) -> dict[str, Any]:
+    """Requests, errors, rate and latency percentiles (ms) of one load run."""
     ms = np.asarray(latencies) * 1e3
     return {
         "concurrency": concurrency,
@@ -305,17 +311,8 @@ def _load_one(url: str, payloads: Sequence[bytes], max_requests: int, max_second
                 server.append(float(total))
     finally:
         sock.close()
-    seconds = time.perf_counter() - t_start
-    ms = np.asarray(latencies) * 1e3
     return {
-        "concurrency": 1,
-        "requests": len(latencies),
-        "errors": errors,
-        "seconds": seconds,
-        "rps": len(latencies) / seconds,
-        "p50_ms": float(np.percentile(ms, 50)),
-        "p99_ms": float(np.percentile(ms, 99)),
-        "mean_ms": float(ms.mean()),
+        **_summary(1, latencies, errors, time.perf_counter() - t_start),
         "server_p50_ms": float(np.percentile(server, 50)) if server else None,
         "client": "blocking socket",
     }
