@@ -49,7 +49,7 @@ from core.skeleton import BONES, JOINT_INDEX, JOINT_NAMES
 from service.engine import Engine, SolveProblem, SolveResult
 from service.errors import InvalidRequest
 from service.schemas import SolveOptions, SolveRequest, SolveResponse, TargetResult
-from service.validation import MIN_BONE, problem_of
+from service.validation import MIN_BONE, problem_of, validate_as
 
 MAX_COORDINATE = 1.0e7  # client units; beyond this a coordinate is nonsense
 
@@ -243,12 +243,11 @@ class SolveBody(
                 raise _field_error(cls.__name__, ("character",), f"{FORMS}, not both", data)
             if "character" not in data and "pose" not in data:
                 raise _field_error(cls.__name__, ("pose",), f"Field required: {FORMS}", data)
-        try:
-            return handler(data)
-        except ValidationError:  # again, for the errors located without the union's tag
-            form = CharacterSolveRequest if _form_of(data) == "character" else SolveRequest
-            form.model_validate(data)
-            raise
+        return validate_as(
+            data,
+            handler,
+            lambda d: CharacterSolveRequest if _form_of(d) == "character" else SolveRequest,
+        )
 
 
 class BatchRequest(_Body):

@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
+from pydantic import BaseModel, ValidationError, ValidatorFunctionWrapHandler
 
 from core.skeleton import BONES, JOINT_INDEX, JOINT_NAMES, bone_lengths
 from service.engine import SolveProblem
@@ -115,3 +116,16 @@ def keypoints(req: CompleteRequest) -> dict[str, F64]:
             raise InvalidRequest(f"keypoints[{i}]: duplicate key point {kp.joint!r}")
         points[kp.joint] = np.asarray(kp.position, dtype=np.float64)
     return points
+
+
+def validate_as(
+    data: Any, handler: ValidatorFunctionWrapHandler, form: Callable[[Any], type[BaseModel]]
+) -> Any:
+    """A union body's wrap validator: validate with ``handler``; on failure validate again as
+    the one form ``form(data)`` names, so the errors are located as in that form (without
+    the union's tag), and raise those."""
+    try:
+        return handler(data)
+    except ValidationError:
+        form(data).model_validate(data)
+        raise

@@ -15,7 +15,6 @@ from pydantic import (
     Discriminator,
     RootModel,
     Tag,
-    ValidationError,
     ValidatorFunctionWrapHandler,
     model_validator,
 )
@@ -43,7 +42,7 @@ from service.limits import (
 from service.responses import json_response, solve_payload
 from service.routes.characters import answer_character, read_character, solve_read
 from service.schemas import ColumnarBatch, ColumnarResponse, SolveRequest, SolveResponse
-from service.validation import poses, solve_problem
+from service.validation import poses, solve_problem, validate_as
 
 router = APIRouter(route_class=BodyRoute, tags=["solve"])
 INLINE_ITEMS = 32  # bigger batches are prepared and answered in a worker thread
@@ -69,12 +68,9 @@ class BatchBody(
     @model_validator(mode="wrap")
     @classmethod
     def _form(cls, data: Any, handler: ValidatorFunctionWrapHandler) -> Any:
-        try:
-            return handler(data)
-        except ValidationError:  # again, for the errors located without the union's tag
-            form = ColumnarBatch if _batch_form(data) == "columns" else BatchRequest
-            form.model_validate(data)
-            raise
+        return validate_as(
+            data, handler, lambda d: ColumnarBatch if _batch_form(d) == "columns" else BatchRequest
+        )
 
 
 @router.post("/v1/solve", response_model=SolveResponse | CharacterSolveResponse)
