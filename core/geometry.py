@@ -55,6 +55,12 @@ class RigidTransform:
         return np.asarray(np.einsum("...ji,...kj->...ki", self.rotation, local))
 
 
+def facing_transform(fx: FloatArray, fz: FloatArray, translation: FloatArray) -> RigidTransform:
+    """The transform of a canonical frame facing the unit floor direction (fx, 0, fz), its
+    origin at ``translation`` (e.g. rebuilt from ``core.compiled.prepare``'s outputs)."""
+    return RigidTransform(rotation=_rotation_from_forward(fx, fz), translation=translation)
+
+
 def canonical_transform(positions: FloatArray) -> RigidTransform:
     """The transform that maps the canonical pose back to the given world pose.
 
@@ -69,7 +75,7 @@ def canonical_transform(positions: FloatArray) -> RigidTransform:
     fz = np.where(flat, 1.0, fz / safe)
     translation = positions[..., _PELVIS, :].copy()
     translation[..., 1] = 0.0
-    return RigidTransform(rotation=_rotation_from_forward(fx, fz), translation=translation)
+    return facing_transform(fx, fz, translation)
 
 
 def transform_yaw(transform: RigidTransform) -> FloatArray:

@@ -31,7 +31,7 @@ import numpy as np
 import numpy.typing as npt
 
 from core import compiled, compiled_fabrik, kinematics
-from core.geometry import canonical_transform
+from core.geometry import canonical_transform, facing_transform
 from core.manifest import Manifest, ModelEntry, load_manifest
 from core.rest import rest_lengths, rest_pose
 from core.skeleton import (
@@ -443,12 +443,10 @@ class Engine:
         start = canon
         if origin is not None and moved is not None and moved.any():
             start = canon.copy()  # the caller's start poses in this pass's canonical frame
-            local = origin[moved] - trans[moved, None, :]
-            local[..., 1] -= floors[moved, None]
-            fx, fz = facing[moved, 0, None], facing[moved, 1, None]
-            start[moved, :, 0] = fz * local[..., 0] - fx * local[..., 2]
-            start[moved, :, 1] = local[..., 1]
-            start[moved, :, 2] = fx * local[..., 0] + fz * local[..., 2]
+            frame = facing_transform(facing[moved, 0], facing[moved, 1], trans[moved])
+            lifted = origin[moved].copy()
+            lifted[..., 1] -= floors[moved, None]
+            start[moved] = frame.to_canonical(lifted)
         for g in groups:
             self._finish_group(g, fab, ex, seq_of, sequences, start, out, lengths, tcan,
                                tols, iterations, suffix)  # fmt: skip
