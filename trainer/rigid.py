@@ -15,6 +15,7 @@ from __future__ import annotations
 import torch
 
 from core.skeleton import BONES, NUM_JOINTS
+from trainer.augment import bone_lengths
 
 #: Eps of the direction's norm: keeps the gradient finite where a child sits on its parent.
 EPS = 1e-9
@@ -22,11 +23,7 @@ EPS = 1e-9
 
 def bone_lengths_t(flat_poses: torch.Tensor) -> torch.Tensor:
     """Bone lengths ``[..., 20]`` of flattened poses ``[..., 63]`` (``BONES`` order)."""
-    joints = flat_poses.reshape(*flat_poses.shape[:-1], NUM_JOINTS, 3)
-    child = [c for c, _ in BONES]
-    parent = [p for _, p in BONES]
-    lengths: torch.Tensor = (joints[..., child, :] - joints[..., parent, :]).norm(dim=-1)
-    return lengths
+    return bone_lengths(flat_poses.reshape(*flat_poses.shape[:-1], NUM_JOINTS, 3))
 
 
 def bone_pass_t(flat_poses: torch.Tensor, lengths: torch.Tensor) -> torch.Tensor:
