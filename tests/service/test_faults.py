@@ -121,9 +121,16 @@ def test_liveness_answers_while_big_bodies_are_parsed(models_dir: Path, tmp_path
 
 
 def test_sigterm_under_load_answers_problems_not_text(models_dir: Path, tmp_path: Path) -> None:
-    body = heavy_batch(seed=3)
-    env = {"POSE_DEADLINE_SECONDS": "120", "POSE_SHUTDOWN_GRACE_SECONDS": "1"}
-    with serve(models_dir, tmp_path, **env) as s:
+    # 4096 exact-reach items take ~4 s to solve here (1024 took ~1 s once the engine was
+    # compiled, so a batch could finish before the signal): all three are still in flight
+    body = heavy_batch(n=4096, seed=3)
+    env: dict[str, str] = {
+        "POSE_DEADLINE_SECONDS": "120",
+        "POSE_SHUTDOWN_GRACE_SECONDS": "1",
+        "POSE_MAX_BATCH_ITEMS": "4096",
+        "POSE_MAX_BODY_BYTES": str(64 << 20),
+    }
+    with serve(models_dir, tmp_path, True, **env) as s:
         answers: list[tuple[int, dict[str, str], bytes]] = []
 
         def one() -> None:
