@@ -43,6 +43,7 @@ from core.skeleton import (
     set_key,
 )
 from service.errors import InvalidRequest
+from service.lean import covering, lean_sequence, solve_lean, uncovered
 from service.runtime import Fused, Net, session_options
 
 F64 = npt.NDArray[np.floating[Any]]
@@ -160,16 +161,9 @@ def _groups(
 def _per_item(value: npt.ArrayLike, n: int, dtype: type[np.generic], k: int | None = None) -> Any:
     """A per-item option as a contiguous ``[n]`` (or ``[n, k]``) array; scalars repeat."""
     shape = (n,) if k is None else (n, k)
-    if np.ndim(value) == 0:
+    if isinstance(value, (bool, int, float)) or np.ndim(value) == 0:
         return np.full(shape, value, dtype=dtype)
     return np.ascontiguousarray(np.broadcast_to(np.asarray(value, dtype=dtype), shape))
-
-
-@lru_cache(maxsize=4096)
-def _uncovered(sequence: tuple[str, ...], idx: tuple[int, ...]) -> npt.NDArray[np.bool_]:
-    """Which targets of ``idx`` no solver of ``sequence`` covers."""
-    covered = {j for key in sequence for j in key.split("+")}
-    return np.asarray([JOINT_NAMES[j] not in covered for j in idx], dtype=np.bool_)
 
 
 @dataclass(frozen=True)
@@ -280,6 +274,9 @@ class Engine:
             return []
         if n == 1:  # one edit (the interactive case): its arrays as they are
             p = problems[0]
+            lean = self._lean_single(p)
+            if lean is not None:
+                return [lean]
             ans = self.solve_arrays(
                 p.pose[None], p.target_idx[None], p.target_pos[None], n_targets=p.n_targets,
                 weights=p.weights[None], fabrik=p.method == "fabrik",
@@ -312,6 +309,31 @@ class Engine:
             passes=np.fromiter((self.passes_of(p) for p in problems), np.int64, n),
         )  # fmt: skip
         return [self._result(p, ans, b) for b, p in enumerate(problems)]
+
+    def _lean_single(self, p: SolveProblem) -> SolveResult | None:
+        """One edit on the lean path (:mod:`service.lean`) straight from its problem, if
+        it qualifies: what :meth:`solve_arrays` gives it, without the batch's arrays."""
+        if not (
+            p.method == "neural" and p.reach == "soft" and p.preserve_bone_lengths
+            and p.n_targets == len(p.target_idx)
+        ):  # fmt: skip
+            return None
+        tidx = compiled.as_i64(p.target_idx)
+        seq = covering(self, tidx, compiled.as_f64(p.weights))
+        passes = self.passes_of(p)
+        if seq is None or passes < 1:
+            return None
+        k = len(tidx)
+        world, errors, bone_err = solve_lean(
+            self, compiled.as_f64(p.pose)[None], tidx[None],
+            compiled.as_f64(p.target_pos).reshape(1, k, 3), np.full(1, k, dtype=np.int64),
+            np.full(1, p.floor, dtype=np.float64), passes, seq,
+        )  # fmt: skip
+        e = errors[0]
+        return SolveResult(
+            pose=world[0], errors=e, reached=e <= p.tolerance, pin_errors=e[k:],
+            max_bone_error=float(bone_err[0]), solvers=list(seq), iterations=0,
+        )  # fmt: skip
 
     def passes_of(self, p: SolveProblem) -> int:
         """The neural passes ``p`` asks for (``solve_passes`` unless it says)."""
@@ -381,6 +403,13 @@ class Engine:
         if n and int(reps.min()) < 1:
             raise ValueError(f"passes must be at least 1, got {int(reps.min())}")
         reps = np.where(fab, 1, reps)  # FABRIK items: one solve (and not the caller's array)
+        lean = lean_sequence(self, items, reps)
+        if lean is not None:  # all alike: neural, soft, no pins, covered (service.lean)
+            world, errors, bone_err = solve_lean(
+                self, pose_a, tidx, items.tpos, cnt, items.floors, int(reps[0]), lean
+            )
+            zeros = np.zeros(n, dtype=np.int64)
+            return BatchAnswer(world, errors, bone_err, zeros, (lean,), zeros.copy())
         rounds = int(reps.max()) - 1 if n else 0
         if rounds == 0:
             return self._solve_once(items)
@@ -518,11 +547,11 @@ class Engine:
         sel = neural[~ex[neural]]
         if not sel.size:
             return
-        uncovered = _uncovered(sequences[int(seq_of[neural[0]])], tuple(g.idx.tolist()))
-        if uncovered.any() or pinned.any():
+        free = uncovered(sequences[int(seq_of[neural[0]])], tuple(g.idx.tolist()))
+        if free.any() or pinned.any():
             # pins and targets no solver covers go exactly where asked, by a FABRIK
             # polish that holds the neurally solved targets where they are
-            place = (uncovered | pinned)[None, :, None]
+            place = (free | pinned)[None, :, None]
             goal = np.where(place, tcan[sel, :k], out[sel][:, g.idx])
             out[sel], iterations[sel], _ = run(True, sel, out[sel], goal)
             suffix[sel] = 1
@@ -566,6 +595,9 @@ class Engine:
         pose by what it changes in the decoded pose (anchored or not, as exported), so the
         autoencoder's own error on the start pose never reaches the answer. Between solvers
         the targets solved so far are pasted onto the pose (``composition="reencode"``)."""
+        if len(sequence) == 1:  # one solver: its graph on the start pose, nothing to paste
+            key = sequence[0]
+            return self.fused[key](x, canvas[:, self.solver_joints[key]].reshape(len(x), -1))
         pose = x.copy()
         flat = canvas.reshape(len(x), -1)
         done: list[int] = []

@@ -1,0 +1,96 @@
+"""The lean path (:mod:`service.lean`): batches whose items all ask for the same neural
+soft solve skip the general path's bookkeeping, and answer bit for bit as it does."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from core.skeleton import JOINT_INDEX
+from service.engine import Engine, SolveProblem, _Items
+from service.lean import lean_sequence
+from tests.conftest import PosePairs
+
+WRISTS = ("left_wrist", "right_wrist")
+OFFSET = np.array([2.0, 0.3, -1.0])  # a world position away from the origin
+
+
+def _problems(real: PosePairs, names: tuple[str, ...], **kw: object) -> list[SolveProblem]:
+    idx = np.asarray([JOINT_INDEX[n] for n in names], dtype=np.intp)
+    turn = np.array([[0.6, 0.0, 0.8], [0.0, 1.0, 0.0], [-0.8, 0.0, 0.6]])  # a yaw
+    return [
+        SolveProblem(
+            pose=real.poses[s] @ turn.T + OFFSET,
+            target_idx=idx,
+            target_pos=real.poses[g][idx] @ turn.T + OFFSET,
+            weights=np.ones(len(idx)),
+            n_targets=len(idx),
+            floor=0.3,
+            **kw,  # type: ignore[arg-type]
+        )
+        for s, g in zip(real.starts[:30], real.goals[:30], strict=True)
+    ]
+
+
+def _fabrik_item(real: PosePairs) -> SolveProblem:
+    return _problems(real, ("left_ankle",), method="fabrik")[0]
+
+
+@pytest.mark.parametrize("passes", [1, 2, 3])
+@pytest.mark.parametrize("names", [WRISTS, ("left_knee",), ("head", "left_wrist", "right_ankle")])
+def test_lean_answers_are_the_general_paths(
+    engine: Engine, real_poses: PosePairs, passes: int, names: tuple[str, ...]
+) -> None:
+    """Alone (lean, from the problem), as a one-set batch (lean, from arrays) and inside a
+    batch with a FABRIK item (the general path): the same bits, solvers and errors."""
+    probs = [dataclasses.replace(p, passes=passes) for p in _problems(real_poses, names)]
+    together = engine.solve(probs)
+    general = engine.solve([*probs, _fabrik_item(real_poses)])[:-1]
+    for p, a, g in zip(probs, together, general, strict=True):
+        (one,) = engine.solve([p])
+        for r in (a, one):
+            assert np.array_equal(r.pose, g.pose)
+            assert np.array_equal(r.errors, g.errors) and np.array_equal(r.reached, g.reached)
+            assert r.max_bone_error == g.max_bone_error
+            assert r.solvers == g.solvers and r.iterations == g.iterations == 0
+        assert one.max_bone_error < 1e-5
+
+
+def _items(probs: list[SolveProblem], engine: Engine) -> tuple[_Items, np.ndarray]:
+    k = max(len(p.target_idx) for p in probs)
+    n = len(probs)
+    tidx, tpos, w = np.zeros((n, k), np.int64), np.zeros((n, k, 3)), np.ones((n, k))
+    for b, p in enumerate(probs):
+        c = len(p.target_idx)
+        tidx[b, :c], tpos[b, :c], w[b, :c] = p.target_idx, p.target_pos, p.weights
+    cnt = np.asarray([len(p.target_idx) for p in probs], np.int64)
+    items = _Items(
+        np.stack([p.pose for p in probs]), tidx, tpos, cnt,
+        np.asarray([p.n_targets for p in probs], np.int64), w,
+        np.asarray([p.method == "fabrik" for p in probs]),
+        np.asarray([p.preserve_bone_lengths for p in probs]),
+        np.asarray([p.reach == "exact" for p in probs]),
+        np.full(n, 1e-3), np.zeros(n),
+    )  # fmt: skip
+    passes = np.asarray([engine.passes_of(p) for p in probs], np.int64)
+    return items, passes
+
+
+def test_which_batches_take_the_lean_path(engine: Engine, real_poses: PosePairs) -> None:
+    wrists = _problems(real_poses, WRISTS)[:4]
+    assert lean_sequence(engine, *_items(wrists, engine)) == ("left_wrist+right_wrist",)
+    pinned = [dataclasses.replace(p, n_targets=1) for p in wrists]  # right wrist: a pin
+    others = {
+        "a FABRIK item": [*wrists, _fabrik_item(real_poses)],
+        "exact reach": [dataclasses.replace(wrists[0], reach="exact"), *wrists[1:]],
+        "free bone lengths": [dataclasses.replace(wrists[0], preserve_bone_lengths=False)],
+        "a pin": pinned,
+        "two target sets": [*wrists, *_problems(real_poses, ("left_knee",))[:1]],
+        "other weights": [dataclasses.replace(wrists[0], weights=np.array([1.0, 2.0])), wrists[1]],
+        "other passes": [dataclasses.replace(wrists[0], passes=1), wrists[1]],
+        "a target no solver covers": _problems(real_poses, ("left_elbow", "spine2"))[:2],
+    }
+    for why, probs in others.items():
+        assert lean_sequence(engine, *_items(probs, engine)) is None, why
