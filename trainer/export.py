@@ -32,6 +32,7 @@ from core.skeleton import BONES, FRAME, JOINT_NAMES, NUM_JOINTS, PARENT_NAMES, b
 from trainer.config import TrainConfig
 from trainer.data.dataset import FPS
 from trainer.model_card import write_model_card
+from trainer.fused import FusedGraph, LeanFusedGraph
 from trainer.models import SingleSolver, TiedAutoencoder, target_columns
 from trainer.train import (
     PairSource,
@@ -69,30 +70,6 @@ class DecoderGraph(nn.Module):
 
     def forward(self, latent: torch.Tensor) -> torch.Tensor:
         return self.ae.decode(latent)
-
-
-class FusedGraph(nn.Module):
-    """One solver's whole edit, ``pose, targets -> solved_pose``, answered as the service
-    serves it (``trainer.train.solved_poses``): plain D(S(z, t)), delta
-    ``pose + D(S(z, t)) - D(z)`` or anchored ``pose + D(S(z, t)) - D(S(z, x_t))``."""
-
-    def __init__(
-        self, ae: TiedAutoencoder, solver: SingleSolver, joints: list[str], mode: str
-    ) -> None:
-        super().__init__()
-        self.ae, self.solver, self.mode = ae, solver, mode
-        self.cols: torch.Tensor
-        self.register_buffer("cols", torch.tensor(target_columns(joints)))
-
-    def forward(self, pose: torch.Tensor, targets: torch.Tensor) -> torch.Tensor:
-        z = self.ae.encode(pose)
-        out = self.ae.decode(self.solver(z, targets))
-        if self.mode == "delta":
-            out = pose + (out - self.ae.decode(z))
-        elif self.mode == "anchored":
-            stay = self.ae.decode(self.solver(z, pose.index_select(1, self.cols)))
-            out = pose + (out - stay)
-        return out
 
 
 def evaluate(cfg: TrainConfig, trained: Trained) -> dict[str, dict[str, dict[str, float]]]:
@@ -243,7 +220,9 @@ def export_all(
     ) -> None:
         path = out / file
         _export(module, tuple(feeds.values()), list(feeds), output, path, cfg.opset)
-        _parity(path, module, feeds, extra.pop("graphs", 1))
+        # the graph answers as the module it came from, and as its readable reference
+        _parity(path, module, feeds, extra.get("graphs", 1))
+        _parity(path, extra.pop("reference", module), feeds, extra.pop("graphs", 1))
         with torch.no_grad():
             out_dim = module(*feeds.values()).shape[1]
         stage = extra.pop("stage")
@@ -310,12 +289,11 @@ def export_all(
             key=key,
             stage="solvers",
         )
+        mode = answer_mode(cfg.solver.delta, cfg.solver.anchor)
         add(
             f"fused:{key}",
             f"fused_{key}.onnx",
-            FusedGraph(
-                ae, solver, list(joints), answer_mode(cfg.solver.delta, cfg.solver.anchor)
-            ).eval(),
+            LeanFusedGraph(ae, solver, list(joints), mode).eval(),
             {"pose": sample, "targets": sample[:, target_columns(joints)]},
             "solved_pose",
             ae_params + _params(solver),
@@ -325,6 +303,7 @@ def export_all(
             stage="solvers",
             metrics_of=f"solver:{key}",
             graphs=5,  # encoder, solver twice, decoder twice
+            reference=FusedGraph(ae, solver, list(joints), mode).eval(),
         )
     aug = augment(sample, np.random.default_rng(0), True, True)
     for level, net in enumerate(trained.completion, start=1):

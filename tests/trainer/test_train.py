@@ -22,7 +22,8 @@ from core.skeleton import JOINT_INDEX
 from trainer.config import QUICK, TrainConfig, load_config
 from trainer.data.dataset import load_dataset
 from trainer.export import evaluate, export_all
-from trainer.models import Normaliser, TiedAutoencoder, feature_stats
+from trainer.fused import FusedGraph, LeanFusedGraph
+from trainer.models import Normaliser, SingleSolver, TiedAutoencoder, feature_stats
 from trainer.train import Trained, flat, train_all
 
 REPO = Path(__file__).resolve().parents[2]
@@ -110,6 +111,31 @@ def test_onnx_matches_torch_on_real_poses(trained: tuple[Trained, Path]) -> None
             torch.from_numpy(poses.numpy()[::-1].copy())[None].expand(len(bank.sets), -1, -1),
         )[s].numpy()
     assert np.abs(z2 - want).max() <= 1e-5
+
+
+@pytest.mark.parametrize("mode", ["plain", "delta", "anchored"])
+def test_lean_fused_graph_answers_as_the_reference(
+    trained: tuple[Trained, Path], mode: str
+) -> None:
+    """The exported fused graph (folded normalisation, solver and decoder run once on a
+    doubled batch) answers as the readable composition of the trainer's own modules."""
+    result, models = trained
+    poses = flat(result.splits.test.positions[:300])
+    joints = ["left_ankle", "right_ankle"]
+    solver = SingleSolver(result.bank, result.bank.sets.index(joints)).eval()
+    cols = [3 * JOINT_INDEX[j] + k for j in joints for k in range(3)]
+    targets = poses[torch.arange(len(poses) - 1, -1, -1)][:, cols]
+    with torch.no_grad():
+        want = FusedGraph(result.ae, solver, joints, mode)(poses, targets)
+        got = LeanFusedGraph(result.ae, solver, joints, mode)(poses, targets)
+    assert float((got - want).abs().max()) <= 2e-5
+    assert float((want - poses).abs().max()) > 1e-3  # the edit moves the pose
+    if mode == "anchored":  # what the tiny run exported
+        session = ort.InferenceSession(
+            str(models / "fused_left_ankle+right_ankle.onnx"), providers=["CPUExecutionProvider"]
+        )
+        (onnx_out,) = session.run(None, {"pose": poses.numpy(), "targets": targets.numpy()})
+        assert np.abs(onnx_out - want.numpy()).max() <= 2e-5
 
 
 def test_tied_weights_are_really_tied(small_dataset: Path) -> None:
