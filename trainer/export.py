@@ -31,8 +31,8 @@ from core.manifest import (
 from core.skeleton import BONES, FRAME, JOINT_NAMES, NUM_JOINTS, PARENT_NAMES, bone_lengths
 from trainer.config import TrainConfig
 from trainer.data.dataset import FPS
-from trainer.model_card import write_model_card
 from trainer.fused import FusedGraph, LeanFusedGraph
+from trainer.model_card import write_model_card
 from trainer.models import SingleSolver, TiedAutoencoder, target_columns
 from trainer.train import (
     PairSource,
@@ -135,6 +135,8 @@ def _export(
         model = onnx.load(str(tmp_path))
     model.producer_name = "marionette-trainer"
     model.doc_string = ""
+    for node in model.graph.node:  # the exporter's notes: source paths and line numbers
+        del node.metadata_props[:]
     onnx.checker.check_model(model, full_check=True)
     write_atomic(path, model.SerializeToString())
 

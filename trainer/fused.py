@@ -58,7 +58,10 @@ def _linear(weight: torch.Tensor, bias: torch.Tensor | None) -> nn.Linear:
 
 
 class LeanFusedGraph(nn.Module):
-    """:class:`FusedGraph`'s answer in fewer operations (see the module's note)."""
+    """:class:`FusedGraph`'s answer in fewer operations (see the module's note). The
+    autoencoder's inner layers keep their tied weights (one copy in the file; onnxruntime
+    folds the transposes when it loads the graph); only the outer layers, which carry the
+    folded normalisation, have a copy of their own."""
 
     def __init__(
         self, ae: TiedAutoencoder, solver: SingleSolver, joints: list[str], mode: str
@@ -70,9 +73,10 @@ class LeanFusedGraph(nn.Module):
             w = [p.detach().double() for p in ae.weights]
             enc_b = [p.detach().double() for p in ae.enc_bias]
             dec_b = [p.detach().double() for p in ae.dec_bias]
-            # encoder: (x - mean) / std folded into its first layer
-            enc = [_linear(w[0] / std[None, :], enc_b[0] - w[0] @ (mean / std))]
-            enc += [_linear(w[i], enc_b[i]) for i in range(1, len(w))]
+            # (x - mean) / std folded into the encoder's first layer, * std (+ mean) into
+            # the decoder's last
+            self.enc_first = _linear(w[0] / std[None, :], enc_b[0] - w[0] @ (mean / std))
+            self.dec_last = _linear(w[0].t() * std[:, None], dec_b[0] * std)
             # solver: latent part and (targets - mean) / std part of its first layer
             first = solver.layers[0]
             fw, fb = first.weight.detach().double(), first.bias.detach().double()
@@ -84,44 +88,57 @@ class LeanFusedGraph(nn.Module):
                 _linear(layer.weight.detach().double(), layer.bias.detach().double())
                 for layer in solver.layers[1:]
             ]
-            # decoder: tied weights transposed; * std (+ mean) folded into its last layer
-            dec = [_linear(w[i].t(), dec_b[i]) for i in range(len(w) - 1, 0, -1)]
-            dec.append(_linear(w[0].t() * std[:, None], dec_b[0] * std))
-        self.encoder = nn.ModuleList(enc)
         self.rest = nn.ModuleList(rest)
-        self.decoder = nn.ModuleList(dec)
+        self.tied = nn.ParameterList([nn.Parameter(p.detach().clone()) for p in ae.weights[1:]])
+        self.enc_bias = nn.ParameterList(
+            [nn.Parameter(p.detach().clone()) for p in ae.enc_bias[1:]]
+        )
+        self.dec_bias = nn.ParameterList(
+            [nn.Parameter(p.detach().clone()) for p in ae.dec_bias[1:]]
+        )
         self.mean: torch.Tensor
         self.cols: torch.Tensor
         self.register_buffer("mean", mean.float())
         self.register_buffer("cols", torch.tensor(target_columns(joints)))
 
-    @staticmethod
-    def _mlp(layers: nn.ModuleList, h: torch.Tensor) -> torch.Tensor:
-        last = len(layers) - 1
-        for i, layer in enumerate(layers):
-            h = layer(h)
+    def _encode(self, pose: torch.Tensor) -> torch.Tensor:
+        h = torch.relu(self.enc_first(pose))
+        last = len(self.tied) - 1
+        for i, (w, b) in enumerate(zip(self.tied, self.enc_bias, strict=True)):
+            h = nn.functional.linear(h, w, b)
             if i < last:
                 h = torch.relu(h)
         return h
+
+    def _decode(self, latent: torch.Tensor) -> torch.Tensor:
+        """Denormalised but for the mean (it cancels in a difference of two decodes)."""
+        h = latent
+        for i in reversed(range(len(self.tied))):
+            h = torch.relu(nn.functional.linear(h, self.tied[i].t(), self.dec_bias[i]))
+        return self.dec_last(h)
 
     def _solve(self, z: torch.Tensor, targets: torch.Tensor, copies: int) -> torch.Tensor:
         """The solver on ``copies`` stacked target batches for one batch of latents."""
         h = self.from_latent(z)
         h = torch.cat([h] * copies, 0) if copies > 1 else h
         h = torch.relu(h + self.from_targets(targets))
-        step = self._mlp(self.rest, h)
+        last = len(self.rest) - 1
+        for i, layer in enumerate(self.rest):
+            h = layer(h)
+            if i < last:
+                h = torch.relu(h)
         z = torch.cat([z] * copies, 0) if copies > 1 else z
-        return z + step if self.residual else step
+        return z + h if self.residual else h
 
     def forward(self, pose: torch.Tensor, targets: torch.Tensor) -> torch.Tensor:
-        z = self._mlp(self.encoder, pose)
+        z = self._encode(pose)
         n = pose.shape[0]
         if self.mode == "plain":
-            return self._mlp(self.decoder, self._solve(z, targets, 1)) + self.mean
+            return self._decode(self._solve(z, targets, 1)) + self.mean
         if self.mode == "anchored":
             both = torch.cat([targets, pose.index_select(1, self.cols)], 0)
             latents = self._solve(z, both, 2)
         else:  # delta: the solved latent and the start's own
             latents = torch.cat([self._solve(z, targets, 1), z], 0)
-        y = self._mlp(self.decoder, latents)
+        y = self._decode(latents)
         return pose + (y[:n] - y[n:])
