@@ -17,6 +17,8 @@ Its answers equal the reference's to float32 rounding (export checks 1e-5 per ne
 
 from __future__ import annotations
 
+from typing import cast
+
 import torch
 from torch import nn
 
@@ -78,7 +80,7 @@ class LeanFusedGraph(nn.Module):
             self.enc_first = _linear(w[0] / std[None, :], enc_b[0] - w[0] @ (mean / std))
             self.dec_last = _linear(w[0].t() * std[:, None], dec_b[0] * std)
             # solver: latent part and (targets - mean) / std part of its first layer
-            first = solver.layers[0]
+            first = cast(nn.Linear, solver.layers[0])
             fw, fb = first.weight.detach().double(), first.bias.detach().double()
             d = ae.latent_dim
             t_mean, t_std = solver.mean.double(), solver.std.double()
@@ -86,7 +88,7 @@ class LeanFusedGraph(nn.Module):
             self.from_targets = _linear(fw[:, d:] / t_std[None, :], None)
             rest = [
                 _linear(layer.weight.detach().double(), layer.bias.detach().double())
-                for layer in solver.layers[1:]
+                for layer in (cast(nn.Linear, m) for m in solver.layers[1:])
             ]
         self.rest = nn.ModuleList(rest)
         self.tied = nn.ParameterList([nn.Parameter(p.detach().clone()) for p in ae.weights[1:]])
@@ -115,7 +117,8 @@ class LeanFusedGraph(nn.Module):
         h = latent
         for i in reversed(range(len(self.tied))):
             h = torch.relu(nn.functional.linear(h, self.tied[i].t(), self.dec_bias[i]))
-        return self.dec_last(h)
+        out: torch.Tensor = self.dec_last(h)
+        return out
 
     def _solve(self, z: torch.Tensor, targets: torch.Tensor, copies: int) -> torch.Tensor:
         """The solver on ``copies`` stacked target batches for one batch of latents."""
@@ -124,7 +127,7 @@ class LeanFusedGraph(nn.Module):
         h = torch.relu(h + self.from_targets(targets))
         last = len(self.rest) - 1
         for i, layer in enumerate(self.rest):
-            h = layer(h)
+            h = cast(torch.Tensor, layer(h))
             if i < last:
                 h = torch.relu(h)
         z = torch.cat([z] * copies, 0) if copies > 1 else z
