@@ -175,13 +175,21 @@ def body_shapes(lengths: np.ndarray, min_share: float = 0.01, most: int = 16) ->
     return shapes
 
 
-def _git_commit() -> str:
+def _git_commit(out: Path) -> str:
+    """HEAD, with ``-dirty`` if a tracked file other than the export's own (``out``) is
+    modified."""
     try:
         head = subprocess.run(
             ["git", "rev-parse", "HEAD"], capture_output=True, text=True, check=True
         ).stdout.strip()
+        top = subprocess.run(
+            ["git", "rev-parse", "--show-toplevel"], capture_output=True, text=True, check=True
+        ).stdout.strip()
+        spec = ["--", top]
+        if out.resolve().is_relative_to(Path(top).resolve()):
+            spec.append(f":(exclude){out.resolve()}")
         dirty = subprocess.run(
-            ["git", "status", "--porcelain", "--untracked-files=no"],
+            ["git", "status", "--porcelain", "--untracked-files=no", *spec],
             capture_output=True,
             text=True,
             check=True,
@@ -366,7 +374,7 @@ def export_all(
             dataset={k: v for k, v in data_meta.items() if k != "archives"},
             split_seed=int(data_meta.get("seed", 0)),
             config=cfg.model_dump(mode="json"),
-            git_commit=_git_commit(),
+            git_commit=_git_commit(out),
             versions={
                 "python": platform.python_version(),
                 "torch": torch.__version__,
