@@ -42,6 +42,12 @@ VARIANTS: dict[str, str] = {
     "shipped": "the shipped recipe at its full budget (trainer/configs/default.toml): `rigid` "
     "served with two passes",
     "shipped_3passes": "the shipped models served with three passes",
+    "stay0": "`shipped` with no stay term (solver.stay_weight 0 against 0.1; only the solvers "
+    "retrained, trainer/configs/ablation/stay0.toml)",
+    "stay03e2": "`shipped` with stay_weight 0.3 and two solver epochs (stay03e2.toml)",
+    "stay1": "`shipped` with stay_weight 1.0 (stay1.toml)",
+    "solver256": "`shipped` with wider solvers, 3 x 256 hidden against 3 x 126 "
+    "(solver256.toml): ~2x the time per network run",
 }
 COMPLETION = "6-point completion"
 
