@@ -17,7 +17,8 @@ import numpy as np
 import numpy.typing as npt
 
 from core.skeleton import JOINT_INDEX, NUM_JOINTS
-from service.engine import Engine, SolveProblem
+from service.engine import Engine
+from service.problems import SolveProblem
 from trainer.data.dataset import FPS, PoseDataset
 from trainer.pairs import partner_ranges, sample_partners
 

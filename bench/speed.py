@@ -11,7 +11,8 @@ from typing import Any
 import numpy as np
 
 from bench.edits import Edits, problems
-from service.engine import Engine, SolveProblem
+from service.engine import Engine
+from service.problems import SolveProblem
 
 Json = dict[str, Any]
 

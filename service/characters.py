@@ -46,8 +46,9 @@ from core.characters import (
 from core.characters_maps import JointMap, infer_units, infer_up, resolve_map
 from core.retarget import anchor_points, canonical_points, retarget
 from core.skeleton import BONES, JOINT_INDEX, JOINT_NAMES
-from service.engine import Engine, SolveProblem, SolveResult
+from service.engine import Engine
 from service.errors import InvalidRequest
+from service.problems import SolveProblem, SolveResult
 from service.schemas import SolveOptions, SolveRequest, SolveResponse, TargetResult
 from service.validation import MIN_BONE, problem_of, validate_as
 

@@ -21,9 +21,10 @@ import orjson
 from pydantic import ValidationError
 
 from core.skeleton import JOINT_INDEX, JOINT_NAMES, NUM_JOINTS
-from service.engine import BatchAnswer, Engine
+from service.engine import Engine
 from service.errors import BodyInvalid, TooManyItems
 from service.limits import FABRIK_PRICE, chunks_of, neural_price
+from service.problems import BatchAnswer
 from service.schemas import MAX_COORDINATE, SolveOptions
 from service.validation import check_bones
 

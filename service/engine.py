@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Sequence
-from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
 from typing import Any
@@ -44,134 +43,21 @@ from core.skeleton import (
 )
 from service.errors import InvalidRequest
 from service.lean import covering, lean_sequence, solve_lean, uncovered
+from service.problems import (
+    BatchAnswer,
+    CompleteResult,
+    SolveProblem,
+    SolveResult,
+    _Group,
+    _groups,
+    _Items,
+    _per_item,
+)
 from service.runtime import Fused, Net, session_options
 
 F64 = npt.NDArray[np.floating[Any]]
 #: Metres by which the exact-reach fallback must beat the polish to be used.
 _TIE = 1e-12
-
-
-# --------------------------------------------------------------------------------------
-# Validated problems
-# --------------------------------------------------------------------------------------
-@dataclass(frozen=True)
-class SolveProblem:
-    pose: F64  # [21, 3] world
-    target_idx: npt.NDArray[np.intp]  # [K] targets, then pins
-    target_pos: F64  # [K, 3] world
-    weights: F64  # [K]
-    n_targets: int  # the first n entries are user targets; the rest are pins
-    method: str = "neural"
-    preserve_bone_lengths: bool = True
-    reach: str = "soft"
-    tolerance: float = 1e-3
-    floor: float = 0.0  # world y of the ground under the character
-    passes: int | None = None  # neural solves (None: the engine's ``solve_passes``)
-
-
-@dataclass(frozen=True)
-class SolveResult:
-    pose: F64  # [21, 3] world
-    errors: F64  # [K] for user targets (pins excluded)
-    reached: npt.NDArray[np.bool_]
-    pin_errors: F64  # [P] distance of each pinned joint from where it was
-    max_bone_error: float
-    solvers: list[str]
-    iterations: int
-
-
-@dataclass(frozen=True)
-class BatchAnswer:
-    """Answers of :meth:`Engine.solve_arrays` (B items, K target columns)."""
-
-    pose: F64  # [B, 21, 3] world
-    errors: F64  # [B, K] distance of each targeted joint (targets, then pins; 0 padding)
-    max_bone_error: F64  # [B] relative, against the input pose's bone lengths
-    iterations: npt.NDArray[np.int64]  # [B] FABRIK / polish iterations
-    paths: tuple[tuple[str, ...], ...]  # the distinct solver paths of the batch
-    path_of: npt.NDArray[np.int64]  # [B] index into ``paths``
-
-
-@dataclass(frozen=True)
-class _Items:
-    """A batch's inputs as contiguous per-item arrays (what :meth:`Engine.solve_arrays`
-    takes, normalised once): B items, K target columns, positions in world space."""
-
-    poses: compiled.F64  # [B, 21, 3]
-    tidx: npt.NDArray[np.int64]  # [B, K]
-    tpos: compiled.F64  # [B, K, 3]
-    cnt: npt.NDArray[np.int64]  # [B] columns in use (targets, then pins)
-    n_t: npt.NDArray[np.int64]  # [B] user targets
-    w: compiled.F64  # [B, K]
-    fab: npt.NDArray[np.bool_]  # [B] method=fabrik
-    keep: npt.NDArray[np.bool_]  # [B] preserve_bone_lengths
-    ex: npt.NDArray[np.bool_]  # [B] reach=exact
-    tols: compiled.F64  # [B]
-    floors: compiled.F64  # [B]
-
-    def soft(self, sel: npt.NDArray[np.intp], poses: compiled.F64) -> _Items:
-        """Items ``sel`` from ``poses`` as a refinement pass solves them: neural, soft
-        reach, bone lengths restored."""
-        no = np.zeros(len(sel), dtype=np.bool_)
-        return _Items(
-            poses[sel], self.tidx[sel], self.tpos[sel], self.cnt[sel], self.n_t[sel],
-            self.w[sel], no, ~no, no, self.tols[sel], self.floors[sel],
-        )  # fmt: skip
-
-
-@dataclass(frozen=True)
-class _Group:
-    """Items of a batch with one target set: joints, weights and number of user targets."""
-
-    idx: npt.NDArray[np.int64]  # [k]
-    weights: F64  # [k]
-    n_targets: int
-    members: npt.NDArray[np.intp]
-
-
-def _groups(
-    cnt: npt.NDArray[np.int64], n_t: npt.NDArray[np.int64], tidx: npt.NDArray[np.int64], w: F64
-) -> list[_Group]:
-    """The batch split by target set (joints, weights, targets vs pins), vectorised."""
-    n, k = tidx.shape
-    if n == 1:
-        c = int(cnt[0])
-        return [_Group(tidx[0, :c].copy(), w[0, :c].copy(), int(n_t[0]), np.zeros(1, np.intp))]
-    valid = np.arange(k)[None, :] < cnt[:, None]
-    key = np.concatenate(
-        [cnt[:, None], n_t[:, None], np.where(valid, tidx, -1),
-         np.ascontiguousarray(np.where(valid, w, 0.0)).view(np.int64)],
-        axis=1,
-    )  # fmt: skip
-    if n == 1 or bool((key == key[0]).all()):
-        firsts, members = [0], [np.arange(n)]
-    else:
-        _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
-        inverse = inverse.reshape(-1)
-        order = np.argsort(inverse, kind="stable")
-        bounds = np.cumsum(np.bincount(inverse, minlength=len(first)))[:-1]
-        firsts, members = first.tolist(), np.split(order, bounds)
-    out = []
-    for f, m in zip(firsts, members, strict=True):
-        c = int(cnt[f])
-        out.append(_Group(tidx[f, :c].copy(), w[f, :c].copy(), int(n_t[f]), m))
-    return out
-
-
-def _per_item(value: npt.ArrayLike, n: int, dtype: type[np.generic], k: int | None = None) -> Any:
-    """A per-item option as a contiguous ``[n]`` (or ``[n, k]``) array; scalars repeat."""
-    shape = (n,) if k is None else (n, k)
-    if isinstance(value, (bool, int, float)) or np.ndim(value) == 0:
-        return np.full(shape, value, dtype=dtype)
-    return np.ascontiguousarray(np.broadcast_to(np.asarray(value, dtype=dtype), shape))
-
-
-@dataclass(frozen=True)
-class CompleteResult:
-    pose: F64
-    errors: F64
-    reached: npt.NDArray[np.bool_]
-    levels: list[int]
 
 
 # --------------------------------------------------------------------------------------
@@ -234,6 +120,9 @@ class Engine:
         if composition not in ("reencode", "sequential"):
             raise ValueError(f"unknown composition strategy {composition!r}")
         self._plans: dict[tuple[bytes, bytes], tuple[str, ...]] = {}
+        self._delta_steps: dict[
+            tuple[str, ...], list[tuple[str, npt.NDArray[np.intp], npt.NDArray[np.intp] | None]]
+        ] = {}
         self.passes = composition_passes
         #: neural solves per edit (``serving.passes`` unless overridden, e.g. by a bench)
         self.solve_passes = m.serving.passes if solve_passes is None else int(solve_passes)
@@ -600,15 +489,31 @@ class Engine:
             return self.fused[key](x, canvas[:, self.solver_joints[key]].reshape(len(x), -1))
         pose = x.copy()
         flat = canvas.reshape(len(x), -1)
-        done: list[int] = []
-        for key in sequence:
-            joints = self.solver_joints[key]
-            if self.composition == "reencode" and done:
-                cols = np.asarray([3 * j + k for j in done for k in range(3)], dtype=np.intp)
+        for key, joints, cols in self._steps(sequence):
+            if cols is not None:
                 pose[:, cols] = flat[:, cols]
             pose = self.fused[key](pose, canvas[:, joints].reshape(len(x), -1))
-            done.extend(int(j) for j in joints if int(j) not in done)
         return pose
+
+    def _steps(
+        self, sequence: tuple[str, ...]
+    ) -> list[tuple[str, npt.NDArray[np.intp], npt.NDArray[np.intp] | None]]:
+        """Per solver of a delta sequence: its key, its joints, and the pose columns of
+        the targets solved before it, pasted first (None: nothing to paste). Memoised."""
+        steps = self._delta_steps.get(sequence)
+        if steps is None:
+            steps, done = [], list[int]()
+            for key in sequence:
+                joints = self.solver_joints[key]
+                cols = None
+                if self.composition == "reencode" and done:
+                    cols = np.asarray([3 * j + k for j in done for k in range(3)], dtype=np.intp)
+                steps.append((key, joints, cols))
+                done.extend(int(j) for j in joints if int(j) not in done)
+            if len(self._delta_steps) >= 4096:  # bounded: forget everything, start again
+                self._delta_steps.clear()
+            self._delta_steps[sequence] = steps
+        return steps
 
     def reconstruct(self, world: F64) -> F64:
         """The autoencoder's round trip of world poses ``[B, 21, 3]`` through the same body

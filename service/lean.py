@@ -22,7 +22,8 @@ from core import compiled
 from core.skeleton import JOINT_NAMES
 
 if TYPE_CHECKING:  # pragma: no cover
-    from service.engine import Engine, _Items
+    from service.engine import Engine
+    from service.problems import _Items
 
 F64 = compiled.F64
 

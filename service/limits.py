@@ -19,9 +19,9 @@ import anyio
 import anyio.to_thread
 from fastapi import Request
 
-from service.engine import SolveProblem
 from service.errors import ClientDisconnected, DeadlineExceeded
 from service.middleware.types import T0
+from service.problems import SolveProblem
 
 CHUNK_PRICE = 256
 FABRIK_PRICE = 16

@@ -11,7 +11,7 @@ import orjson
 from fastapi import Response
 
 from core.skeleton import JOINT_NAMES
-from service.engine import CompleteResult, SolveProblem, SolveResult
+from service.problems import CompleteResult, SolveProblem, SolveResult
 
 
 def pose_dict(pose: np.ndarray) -> dict[str, list[float]]:

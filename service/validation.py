@@ -14,8 +14,8 @@ import numpy.typing as npt
 from pydantic import BaseModel, ValidationError, ValidatorFunctionWrapHandler
 
 from core.skeleton import BONES, JOINT_INDEX, JOINT_NAMES, bone_lengths
-from service.engine import SolveProblem
 from service.errors import InvalidRequest
+from service.problems import SolveProblem
 from service.schemas import CompleteRequest, SolveOptions, SolveRequest
 
 F64 = npt.NDArray[np.floating[Any]]

@@ -36,9 +36,10 @@ from service.characters import (
     solve_prepared,
 )
 from service.deps import ReadyEngine, RequestBudget, ServiceState, State
-from service.engine import Engine, SolveProblem
+from service.engine import Engine
 from service.errors import DeadlineExceeded
 from service.limits import Budget
+from service.problems import SolveProblem
 from service.responses import json_response
 
 router = APIRouter(route_class=BodyRoute, tags=["characters"])

@@ -29,7 +29,7 @@ from service.characters import (
     SolveBody,
 )
 from service.deps import ReadyEngine, RequestBudget, ServiceState, State
-from service.engine import Engine, SolveProblem
+from service.engine import Engine
 from service.errors import TooManyItems
 from service.limits import (
     CHARACTER_JOINTS,
@@ -39,6 +39,7 @@ from service.limits import (
     character_price,
     neural_price,
 )
+from service.problems import SolveProblem
 from service.responses import json_response, solve_payload
 from service.routes.characters import answer_character, read_character, solve_read
 from service.schemas import ColumnarBatch, ColumnarResponse, SolveRequest, SolveResponse

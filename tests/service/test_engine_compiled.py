@@ -7,7 +7,8 @@ import numpy as np
 
 from core import kinematics
 from core.skeleton import JOINT_INDEX, bone_lengths
-from service.engine import Engine, SolveProblem
+from service.engine import Engine
+from service.problems import SolveProblem
 from tests.conftest import PosePairs
 
 FIVE = ("head", "left_wrist", "right_wrist", "left_ankle", "right_ankle")

@@ -12,7 +12,8 @@ import pytest
 
 from core.bodies import body_lengths, random_bodies, rebuild
 from core.skeleton import JOINT_INDEX, bone_lengths
-from service.engine import Engine, SolveProblem
+from service.engine import Engine
+from service.problems import SolveProblem
 from tests.conftest import PosePairs
 
 WRISTS = ("left_wrist", "right_wrist")

@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 
 from core.skeleton import JOINT_INDEX
-from service.engine import Engine, SolveProblem, _Items
+from service.engine import Engine
 from service.lean import lean_sequence
+from service.problems import SolveProblem, _Items
 from tests.conftest import PosePairs
 
 WRISTS = ("left_wrist", "right_wrist")

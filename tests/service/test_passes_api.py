@@ -15,7 +15,8 @@ import pytest
 
 from core.skeleton import JOINT_INDEX
 from service import limits
-from service.engine import Engine, SolveProblem
+from service.engine import Engine
+from service.problems import SolveProblem
 from tests.character_files import FILES, extract_bvh
 from tests.conftest import PosePairs
 from tests.service.test_api import as_array, assert_problem, solve_body
