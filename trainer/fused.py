@@ -22,7 +22,7 @@ from typing import cast
 import torch
 from torch import nn
 
-from trainer.models import SingleSolver, TiedAutoencoder, target_columns
+from trainer.models import SingleSolver, TiedAutoencoder, relu_stack, target_columns
 
 
 class FusedGraph(nn.Module):
@@ -105,12 +105,7 @@ class LeanFusedGraph(nn.Module):
 
     def _encode(self, pose: torch.Tensor) -> torch.Tensor:
         h = torch.relu(self.enc_first(pose))
-        last = len(self.tied) - 1
-        for i, (w, b) in enumerate(zip(self.tied, self.enc_bias, strict=True)):
-            h = nn.functional.linear(h, w, b)
-            if i < last:
-                h = torch.relu(h)
-        return h
+        return relu_stack(h, zip(self.tied, self.enc_bias, strict=True))
 
     def _decode(self, latent: torch.Tensor) -> torch.Tensor:
         """Denormalised but for the mean (it cancels in a difference of two decodes)."""
@@ -125,11 +120,8 @@ class LeanFusedGraph(nn.Module):
         h = self.from_latent(z)
         h = torch.cat([h] * copies, 0) if copies > 1 else h
         h = torch.relu(h + self.from_targets(targets))
-        last = len(self.rest) - 1
-        for i, layer in enumerate(self.rest):
-            h = cast(torch.Tensor, layer(h))
-            if i < last:
-                h = torch.relu(h)
+        layers = (cast(nn.Linear, layer) for layer in self.rest)
+        h = relu_stack(h, ((layer.weight, layer.bias) for layer in layers))
         z = torch.cat([z] * copies, 0) if copies > 1 else z
         return z + h if self.residual else h
 

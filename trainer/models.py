@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Iterable
 
 import torch
 from torch import nn
@@ -41,6 +42,19 @@ def feature_stats(poses: torch.Tensor, std_floor: float) -> tuple[torch.Tensor, 
     return mean.float(), std.float()
 
 
+def relu_stack(
+    h: torch.Tensor, layers: Iterable[tuple[torch.Tensor, torch.Tensor | None]]
+) -> torch.Tensor:
+    """Linear layers ``(weight [out, in], bias)`` in turn, ReLU between them (not after
+    the last)."""
+    layers = list(layers)
+    for i, (w, b) in enumerate(layers):
+        h = nn.functional.linear(h, w, b)
+        if i < len(layers) - 1:
+            h = torch.relu(h)
+    return h
+
+
 class TiedAutoencoder(nn.Module):
     """63 -> 200 -> 200 -> 64 (ReLU, linear latent); the decoder reuses the encoder's
     weight matrices transposed in reverse order, with biases of its own."""
@@ -62,13 +76,7 @@ class TiedAutoencoder(nn.Module):
         self.latent_dim = latent
 
     def encode(self, pose: torch.Tensor) -> torch.Tensor:
-        h = self.norm.normalise(pose)
-        last = len(self.weights) - 1
-        for i, (w, b) in enumerate(zip(self.weights, self.enc_bias, strict=True)):
-            h = nn.functional.linear(h, w, b)
-            if i < last:
-                h = torch.relu(h)
-        return h
+        return relu_stack(self.norm.normalise(pose), zip(self.weights, self.enc_bias, strict=True))
 
     def decode(self, latent: torch.Tensor) -> torch.Tensor:
         h = latent
