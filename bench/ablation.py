@@ -48,6 +48,8 @@ VARIANTS: dict[str, str] = {
     "stay1": "`shipped` with stay_weight 1.0 (stay1.toml)",
     "solver256": "`shipped` with wider solvers, 3 x 256 hidden against 3 x 126 "
     "(solver256.toml): ~2x the time per network run",
+    "completion512": "`shipped` with wider completion networks, 512-512-512-256 against "
+    "300-400-300-200 (completion512.toml; autoencoder and solvers the shipped ones)",
 }
 COMPLETION = "6-point completion"
 
