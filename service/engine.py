@@ -203,25 +203,31 @@ class Engine:
         """One edit on the lean path (:mod:`service.lean`) straight from its problem, if
         it qualifies: what :meth:`solve_arrays` gives it, without the batch's arrays."""
         if not (
-            p.method == "neural" and p.reach == "soft" and p.preserve_bone_lengths
-            and p.n_targets == len(p.target_idx)
-        ):  # fmt: skip
+            p.method == "neural" and p.preserve_bone_lengths and p.n_targets == len(p.target_idx)
+        ):
             return None
         tidx = compiled.as_i64(p.target_idx)
-        seq = covering(self, tidx, compiled.as_f64(p.weights))
+        weights = compiled.as_f64(p.weights)
+        seq = covering(self, tidx, weights)
         passes = self.passes_of(p)
         if seq is None or passes < 1:
             return None
         k = len(tidx)
-        world, errors, bone_err = solve_lean(
+        exact = p.reach == "exact"
+        got = solve_lean(
             self, compiled.as_f64(p.pose)[None], tidx[None],
             compiled.as_f64(p.target_pos).reshape(1, k, 3), np.full(1, k, dtype=np.int64),
             np.full(1, p.floor, dtype=np.float64), passes, seq,
+            np.full(1, p.tolerance, dtype=np.float64) if exact else None, weights,
         )  # fmt: skip
+        if got is None:  # the polish missed: the general path also tries plain FABRIK
+            return None
+        world, errors, bone_err, its = got
         e = errors[0]
         return SolveResult(
             pose=world[0], errors=e, reached=e <= p.tolerance, pin_errors=e[k:],
-            max_bone_error=float(bone_err[0]), solvers=list(seq), iterations=0,
+            max_bone_error=float(bone_err[0]),
+            solvers=[*seq, "fabrik-polish"] if exact else list(seq), iterations=int(its[0]),
         )  # fmt: skip
 
     def passes_of(self, p: SolveProblem) -> int:
@@ -293,19 +299,32 @@ class Engine:
             raise ValueError(f"passes must be at least 1, got {int(reps.min())}")
         reps = np.where(fab, 1, reps)  # FABRIK items: one solve (and not the caller's array)
         lean = lean_sequence(self, items, reps)
-        if lean is not None:  # all alike: neural, soft, no pins, covered (service.lean)
-            world, errors, bone_err = solve_lean(
-                self, pose_a, tidx, items.tpos, cnt, items.floors, int(reps[0]), lean
-            )
-            zeros = np.zeros(n, dtype=np.int64)
-            return BatchAnswer(world, errors, bone_err, zeros, (lean,), zeros.copy())
+        if lean is not None:  # all alike: neural, no pins, covered (service.lean)
+            exact = bool(items.ex[0])
+            got = solve_lean(
+                self, pose_a, tidx, items.tpos, cnt, items.floors, int(reps[0]), lean,
+                items.tols if exact else None, items.w[0, : int(cnt[0])],
+            )  # fmt: skip
+            if got is not None:
+                world, errors, bone_err, its = got
+                path = (*lean, "fabrik-polish") if exact else lean
+                return BatchAnswer(world, errors, bone_err, its, (path,), np.zeros(n, np.int64))
         rounds = int(reps.max()) - 1 if n else 0
         if rounds == 0:
             return self._solve_once(items)
         current = pose_a.copy()
         for k in range(rounds):
             now = np.flatnonzero(reps > k + 1)  # these items take part in pass k
-            current[now] = self._solve_once(items.soft(now, current)).pose
+            soft = items.soft(now, current)
+            lean = lean_sequence(self, soft, np.ones(len(now), dtype=np.int64))
+            if lean is None:
+                current[now] = self._solve_once(soft).pose
+            else:  # e.g. exact reach's soft passes before its last (service.lean)
+                done = solve_lean(
+                    self, soft.poses, soft.tidx, soft.tpos, soft.cnt, soft.floors, 1, lean
+                )
+                assert done is not None  # soft: never falls back
+                current[now] = done[0]
         return self._solve_once(
             dataclasses.replace(items, poses=current), origin=pose_a, moved=reps > 1
         )

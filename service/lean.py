@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import numpy.typing as npt
 
-from core import compiled
+from core import compiled, compiled_fabrik
 from core.skeleton import JOINT_NAMES
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -41,7 +41,9 @@ def lean_sequence(
     """The solver sequence every item of ``items`` runs, if the batch can take the lean
     path; else None (the general path solves it)."""
     n = items.poses.shape[0]
-    if n == 0 or items.fab.any() or items.ex.any() or not items.keep.all():
+    if n == 0 or items.fab.any() or not items.keep.all():
+        return None
+    if n > 1 and not (items.ex == items.ex[0]).all():  # all exact reach, or none
         return None
     if not np.array_equal(items.cnt, items.n_t):  # pins: a FABRIK polish holds them
         return None
@@ -75,23 +77,46 @@ def solve_lean(
     floors: F64,
     passes: int,
     sequence: tuple[str, ...],
-) -> tuple[F64, F64, F64]:
-    """``passes`` neural soft solves of every item, each from the previous answer (inputs
-    as :meth:`Engine.solve_arrays` normalises them): world poses ``[B, 21, 3]``, each
-    target's distance ``[B, K]`` and the relative bone error ``[B]``."""
+    exact: F64 | None = None,
+    weights: F64 | None = None,
+) -> tuple[F64, F64, F64, npt.NDArray[np.int64]] | None:
+    """``passes`` neural solves of every item, each from the previous answer (inputs as
+    :meth:`Engine.solve_arrays` normalises them): world poses ``[B, 21, 3]``, each
+    target's distance ``[B, K]``, the relative bone error ``[B]`` and FABRIK iterations
+    ``[B]``. ``exact``: the items' tolerances ``[B]`` for exact reach: the last pass ends
+    with the FABRIK polish (``weights [K]``: the target set's); if it leaves any item
+    beyond its tolerance, None (the general path then also tries plain FABRIK from the
+    caller's start, and keeps the closer)."""
     n = poses.shape[0]
     tpos = tpos.copy()
     tpos[:, :, 1] -= floors[:, None]  # the networks know a floor at y = 0
     every = np.ones(n, dtype=np.bool_)
     pose = poses
     errors, bone_err = np.zeros(tidx.shape), np.zeros(n)
-    for _ in range(passes):
-        canon, facing, trans, lengths, scales, _tcan, x, canvas = compiled.prepare(
+    iterations = np.zeros(n, dtype=np.int64)
+    for k in range(passes):
+        canon, facing, trans, lengths, scales, tcan, x, canvas = compiled.prepare(
             pose, floors, tidx, tpos, counts, every, engine._shapes_c, engine._shape_totals,
             engine.body == "total_length", engine._reference_total,
         )  # fmt: skip
         decoded = engine._run_sequence(x, canvas, sequence)
-        pose, errors, bone_err = compiled.settle(
-            decoded, scales, canon, lengths, facing, trans, floors, tidx, tpos, counts
+        if exact is None or k < passes - 1:
+            pose, errors, bone_err = compiled.settle(
+                decoded, scales, canon, lengths, facing, trans, floors, tidx, tpos, counts
+            )
+            continue
+        out = compiled.unscale(decoded, scales, canon, lengths, every)
+        c = int(counts[0])
+        w = np.ones(c) if weights is None else weights
+        plans = compiled_fabrik.packed_plans(tidx[0, :c], w)
+        out, iterations, errs, _ = compiled_fabrik.solve_batch(
+            True, out, lengths, np.ascontiguousarray(tcan[:, :c]), exact,
+            engine.fabrik_max_iterations, plans.local_ints, plans.local_floats, plans.has_local,
+            plans.ints, plans.floats, np.zeros(c, dtype=np.bool_), True,
+        )  # fmt: skip
+        if np.any(errs > exact[:, None]):
+            return None
+        pose, errors, bone_err = compiled.finish(
+            out, facing, trans, floors, tidx, tpos, counts, lengths
         )
-    return pose, errors, bone_err
+    return pose, errors, bone_err, iterations

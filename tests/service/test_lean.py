@@ -10,7 +10,7 @@ import pytest
 
 from core.skeleton import JOINT_INDEX
 from service.engine import Engine
-from service.lean import lean_sequence
+from service.lean import lean_sequence, solve_lean
 from service.problems import SolveProblem, _Items
 from tests.conftest import PosePairs
 
@@ -39,14 +39,18 @@ def _fabrik_item(real: PosePairs) -> SolveProblem:
     return _problems(real, ("left_ankle",), method="fabrik")[0]
 
 
+@pytest.mark.parametrize("reach", ["soft", "exact"])
 @pytest.mark.parametrize("passes", [1, 2, 3])
 @pytest.mark.parametrize("names", [WRISTS, ("left_knee",), ("head", "left_wrist", "right_ankle")])
 def test_lean_answers_are_the_general_paths(
-    engine: Engine, real_poses: PosePairs, passes: int, names: tuple[str, ...]
+    engine: Engine, real_poses: PosePairs, passes: int, names: tuple[str, ...], reach: str
 ) -> None:
     """Alone (lean, from the problem), as a one-set batch (lean, from arrays) and inside a
-    batch with a FABRIK item (the general path): the same bits, solvers and errors."""
-    probs = [dataclasses.replace(p, passes=passes) for p in _problems(real_poses, names)]
+    batch with a FABRIK item (the general path): the same bits, solvers, iterations and
+    errors. Exact reach ends with the FABRIK polish and reaches."""
+    probs = [
+        dataclasses.replace(p, passes=passes, reach=reach) for p in _problems(real_poses, names)
+    ]
     together = engine.solve(probs)
     general = engine.solve([*probs, _fabrik_item(real_poses)])[:-1]
     for p, a, g in zip(probs, together, general, strict=True):
@@ -55,8 +59,37 @@ def test_lean_answers_are_the_general_paths(
             assert np.array_equal(r.pose, g.pose)
             assert np.array_equal(r.errors, g.errors) and np.array_equal(r.reached, g.reached)
             assert r.max_bone_error == g.max_bone_error
-            assert r.solvers == g.solvers and r.iterations == g.iterations == 0
+            assert r.solvers == g.solvers and r.iterations == g.iterations
         assert one.max_bone_error < 1e-5
+        if reach == "exact":
+            assert one.solvers[-1] == "fabrik-polish" and one.reached.all()
+        else:
+            assert one.iterations == 0 and "fabrik-polish" not in one.solvers
+
+
+def test_exact_reach_out_of_reach_falls_back_as_the_general_path(
+    engine: Engine, real_poses: PosePairs
+) -> None:
+    """A target the polish cannot reach leaves the lean path (``solve_lean`` says None):
+    the general path also tries plain FABRIK from the caller's start and keeps the closer,
+    as it always did; a reachable one stays on it."""
+    probs = _problems(real_poses, ("left_wrist",), reach="exact")[:6]
+    far = [
+        dataclasses.replace(p, target_pos=p.target_pos + np.array([0.0, 3.0, 0.0])) for p in probs
+    ]
+    for batch, lean in ((probs, True), (far, False)):
+        arrays, _ = _items(batch, engine)
+        got = solve_lean(
+            engine, arrays.poses, arrays.tidx, arrays.tpos, arrays.cnt, np.full(6, 0.3), 2,
+            ("left_wrist",), np.full(6, 1e-3), np.ones(1),
+        )  # fmt: skip
+        assert (got is not None) == lean
+    general = engine.solve([*far, _fabrik_item(real_poses)])[:-1]
+    for p, g in zip(far, general, strict=True):
+        (one,) = engine.solve([p])
+        assert not one.reached.any()
+        assert np.array_equal(one.pose, g.pose) and one.solvers == g.solvers
+        assert one.iterations == g.iterations
 
 
 def _items(probs: list[SolveProblem], engine: Engine) -> tuple[_Items, np.ndarray]:
@@ -82,10 +115,12 @@ def _items(probs: list[SolveProblem], engine: Engine) -> tuple[_Items, np.ndarra
 def test_which_batches_take_the_lean_path(engine: Engine, real_poses: PosePairs) -> None:
     wrists = _problems(real_poses, WRISTS)[:4]
     assert lean_sequence(engine, *_items(wrists, engine)) == ("left_wrist+right_wrist",)
+    exact = [dataclasses.replace(p, reach="exact") for p in wrists]
+    assert lean_sequence(engine, *_items(exact, engine)) == ("left_wrist+right_wrist",)
     pinned = [dataclasses.replace(p, n_targets=1) for p in wrists]  # right wrist: a pin
     others = {
         "a FABRIK item": [*wrists, _fabrik_item(real_poses)],
-        "exact reach": [dataclasses.replace(wrists[0], reach="exact"), *wrists[1:]],
+        "exact and soft reach": [dataclasses.replace(wrists[0], reach="exact"), *wrists[1:]],
         "free bone lengths": [dataclasses.replace(wrists[0], preserve_bone_lengths=False)],
         "a pin": pinned,
         "two target sets": [*wrists, *_problems(real_poses, ("left_knee",))[:1]],
