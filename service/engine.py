@@ -42,7 +42,14 @@ from core.skeleton import (
     set_key,
 )
 from service.errors import InvalidRequest
-from service.lean import covering, lean_sequence, solve_lean, uncovered
+from service.lean import (
+    covering,
+    fabrik_batch,
+    lean_sequence,
+    solve_fabrik,
+    solve_lean,
+    uncovered,
+)
 from service.problems import (
     BatchAnswer,
     CompleteResult,
@@ -202,17 +209,30 @@ class Engine:
     def _lean_single(self, p: SolveProblem) -> SolveResult | None:
         """One edit on the lean path (:mod:`service.lean`) straight from its problem, if
         it qualifies: what :meth:`solve_arrays` gives it, without the batch's arrays."""
+        tidx = compiled.as_i64(p.target_idx)
+        weights = compiled.as_f64(p.weights)
+        k = len(tidx)
+        if p.method == "fabrik":
+            world, errors, bone_err, its = solve_fabrik(
+                self, compiled.as_f64(p.pose)[None], tidx[None],
+                compiled.as_f64(p.target_pos).reshape(1, k, 3), np.full(1, k, dtype=np.int64),
+                np.full(1, p.floor, dtype=np.float64), np.full(1, p.tolerance, dtype=np.float64),
+                weights, p.n_targets,
+            )  # fmt: skip
+            e = errors[0]
+            return SolveResult(
+                pose=world[0], errors=e[: p.n_targets], reached=e[: p.n_targets] <= p.tolerance,
+                pin_errors=e[p.n_targets : k], max_bone_error=float(bone_err[0]),
+                solvers=["fabrik"], iterations=int(its[0]),
+            )  # fmt: skip
         if not (
             p.method == "neural" and p.preserve_bone_lengths and p.n_targets == len(p.target_idx)
         ):
             return None
-        tidx = compiled.as_i64(p.target_idx)
-        weights = compiled.as_f64(p.weights)
         seq = covering(self, tidx, weights)
         passes = self.passes_of(p)
         if seq is None or passes < 1:
             return None
-        k = len(tidx)
         exact = p.reach == "exact"
         got = solve_lean(
             self, compiled.as_f64(p.pose)[None], tidx[None],
@@ -298,6 +318,13 @@ class Engine:
         if n and int(reps.min()) < 1:
             raise ValueError(f"passes must be at least 1, got {int(reps.min())}")
         reps = np.where(fab, 1, reps)  # FABRIK items: one solve (and not the caller's array)
+        if fabrik_batch(items):  # all FABRIK on one target set (service.lean)
+            c = int(cnt[0])
+            world, errors, bone_err, its = solve_fabrik(
+                self, pose_a, tidx, items.tpos, cnt, items.floors, items.tols,
+                items.w[0, :c], int(items.n_t[0]),
+            )  # fmt: skip
+            return BatchAnswer(world, errors, bone_err, its, (("fabrik",),), np.zeros(n, np.int64))
         lean = lean_sequence(self, items, reps)
         if lean is not None:  # all alike: neural, no pins, covered (service.lean)
             exact = bool(items.ex[0])

@@ -120,3 +120,52 @@ def solve_lean(
             out, facing, trans, floors, tidx, tpos, counts, lengths
         )
     return pose, errors, bone_err, iterations
+
+
+def fabrik_batch(items: _Items) -> bool:
+    """Whether every item of ``items`` is a FABRIK solve of one target set (the same joints,
+    weights and number of pins): :func:`solve_fabrik` answers it."""
+    n = items.poses.shape[0]
+    if n == 0 or not items.fab.all():
+        return False
+    c = int(items.cnt[0])
+    return n == 1 or (
+        bool((items.cnt == c).all())
+        and bool((items.n_t == items.n_t[0]).all())
+        and bool((items.tidx[:, :c] == items.tidx[0, :c]).all())
+        and bool((items.w[:, :c] == items.w[0, :c]).all())
+    )
+
+
+def solve_fabrik(
+    engine: Engine,
+    poses: F64,
+    tidx: npt.NDArray[np.int64],
+    tpos: F64,
+    counts: npt.NDArray[np.int64],
+    floors: F64,
+    tols: F64,
+    weights: F64,
+    n_targets: int,
+) -> tuple[F64, F64, F64, npt.NDArray[np.int64]]:
+    """FABRIK for every item (one target set, ``weights [K]``, the first ``n_targets``
+    targets and the rest pins): the canonical frame, the compiled FABRIK, the way back.
+    The general path's kernels in its order (bit-identical to it)."""
+    n = poses.shape[0]
+    tpos = tpos.copy()
+    tpos[:, :, 1] -= floors[:, None]
+    canon, facing, trans, lengths, _scales, tcan, _x, _canvas = compiled.prepare(
+        poses, floors, tidx, tpos, counts, np.zeros(n, dtype=np.bool_), engine._shapes_c,
+        engine._shape_totals, engine.body == "total_length", engine._reference_total,
+    )  # fmt: skip
+    c = int(counts[0])
+    plans = compiled_fabrik.packed_plans(tidx[0, :c], weights)
+    out, iterations, _, _ = compiled_fabrik.solve_batch(
+        False, canon, lengths, np.ascontiguousarray(tcan[:, :c]), tols,
+        engine.fabrik_max_iterations, plans.local_ints, plans.local_floats, plans.has_local,
+        plans.ints, plans.floats, np.arange(c) >= n_targets, True,
+    )  # fmt: skip
+    pose, errors, bone_err = compiled.finish(
+        out, facing, trans, floors, tidx, tpos, counts, lengths
+    )
+    return pose, errors, bone_err, iterations

@@ -92,6 +92,29 @@ def test_exact_reach_out_of_reach_falls_back_as_the_general_path(
         assert one.iterations == g.iterations
 
 
+@pytest.mark.parametrize("pins", [0, 2])
+@pytest.mark.parametrize("names", [WRISTS, ("head", "left_wrist", "right_ankle", "left_knee")])
+def test_fabrik_answers_are_the_general_paths(
+    engine: Engine, real_poses: PosePairs, names: tuple[str, ...], pins: int
+) -> None:
+    """FABRIK alone, as a one-set batch and inside a batch with a neural item (the
+    general path): the same bits, iterations and errors, pins included."""
+    probs = [
+        dataclasses.replace(p, n_targets=len(names) - pins, weights=np.arange(1.0, len(names) + 1))
+        for p in _problems(real_poses, names, method="fabrik")
+    ]
+    neural = _problems(real_poses, WRISTS)[0]
+    together = engine.solve(probs)
+    general = engine.solve([*probs, neural])[:-1]
+    for p, a, g in zip(probs, together, general, strict=True):
+        (one,) = engine.solve([p])
+        for r in (a, one):
+            assert np.array_equal(r.pose, g.pose) and r.iterations == g.iterations
+            assert np.array_equal(r.errors, g.errors) and np.array_equal(r.pin_errors, g.pin_errors)
+            assert r.max_bone_error == g.max_bone_error and r.solvers == g.solvers == ["fabrik"]
+        assert len(one.pin_errors) == pins and one.iterations > 0
+
+
 def _items(probs: list[SolveProblem], engine: Engine) -> tuple[_Items, np.ndarray]:
     k = max(len(p.target_idx) for p in probs)
     n = len(probs)
