@@ -47,15 +47,23 @@ def lean_sequence(
         return None
     if not np.array_equal(items.cnt, items.n_t):  # pins: a FABRIK polish holds them
         return None
+    if not (one_set(items) and int(passes.min()) == int(passes.max())):
+        return None
     c = int(items.cnt[0])
-    if n > 1 and not (
-        int(passes.min()) == int(passes.max())
-        and bool((items.cnt == c).all())
+    return covering(engine, items.tidx[0, :c], items.w[0, :c])
+
+
+def one_set(items: _Items) -> bool:
+    """Whether every item has the first one's target set: joints, weights, targets vs pins."""
+    if items.poses.shape[0] <= 1:
+        return True
+    c = int(items.cnt[0])
+    return (
+        bool((items.cnt == c).all())
+        and bool((items.n_t == items.n_t[0]).all())
         and bool((items.tidx[:, :c] == items.tidx[0, :c]).all())
         and bool((items.w[:, :c] == items.w[0, :c]).all())
-    ):
-        return None
-    return covering(engine, items.tidx[0, :c], items.w[0, :c])
+    )
 
 
 def covering(engine: Engine, idx: npt.NDArray[np.int64], weights: F64) -> tuple[str, ...] | None:
@@ -125,16 +133,7 @@ def solve_lean(
 def fabrik_batch(items: _Items) -> bool:
     """Whether every item of ``items`` is a FABRIK solve of one target set (the same joints,
     weights and number of pins): :func:`solve_fabrik` answers it."""
-    n = items.poses.shape[0]
-    if n == 0 or not items.fab.all():
-        return False
-    c = int(items.cnt[0])
-    return n == 1 or (
-        bool((items.cnt == c).all())
-        and bool((items.n_t == items.n_t[0]).all())
-        and bool((items.tidx[:, :c] == items.tidx[0, :c]).all())
-        and bool((items.w[:, :c] == items.w[0, :c]).all())
-    )
+    return items.poses.shape[0] > 0 and bool(items.fab.all()) and one_set(items)
 
 
 def solve_fabrik(
