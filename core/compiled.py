@@ -215,6 +215,11 @@ def bone_pass_batch(
 # --------------------------------------------------------------------------------------
 # A solve's way in and out
 # --------------------------------------------------------------------------------------
+#: What :func:`prepare` gives: canonical poses, facing, translation, bone lengths,
+#: scales, canonical targets, network inputs and the targets' canvas.
+Prepared = tuple[F64, F64, F64, F64, F64, F64, F32, F32]
+
+
 @jit
 def prepare(
     poses: F64,
@@ -227,7 +232,7 @@ def prepare(
     shape_totals: F64,
     total_length: bool,
     reference_total: float,
-) -> tuple[F64, F64, F64, F64, F64, F64, F32, F32]:  # pragma: no cover - compiled
+) -> Prepared:  # pragma: no cover - compiled
     """Everything before the networks, per item (``service.engine``'s numpy steps):
 
     the floor taken off, the canonical transform (``core.geometry.canonical_transform``:

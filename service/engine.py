@@ -45,8 +45,8 @@ from service.errors import InvalidRequest
 from service.lean import (
     covering,
     fabrik_batch,
+    lean_answer,
     lean_sequence,
-    solve_fabrik,
     solve_lean,
     uncovered,
 )
@@ -208,47 +208,27 @@ class Engine:
 
     def _lean_single(self, p: SolveProblem) -> SolveResult | None:
         """One edit on the lean path (:mod:`service.lean`) straight from its problem, if
-        it qualifies: what :meth:`solve_arrays` gives it, without the batch's arrays."""
+        it qualifies: what :meth:`solve_arrays` gives it, without its option arrays."""
         tidx = compiled.as_i64(p.target_idx)
         weights = compiled.as_f64(p.weights)
+        passes, seq = 1, None
+        if p.method != "fabrik":
+            if not (p.preserve_bone_lengths and p.n_targets == len(tidx)):
+                return None  # the bone pass left out, or pins: the general path
+            passes, seq = self.passes_of(p), covering(self, tidx, weights)
+            if seq is None or passes < 1:
+                return None
         k = len(tidx)
-        if p.method == "fabrik":
-            world, errors, bone_err, its = solve_fabrik(
-                self, compiled.as_f64(p.pose)[None], tidx[None],
-                compiled.as_f64(p.target_pos).reshape(1, k, 3), np.full(1, k, dtype=np.int64),
-                np.full(1, p.floor, dtype=np.float64), np.full(1, p.tolerance, dtype=np.float64),
-                weights, p.n_targets,
-            )  # fmt: skip
-            e = errors[0]
-            return SolveResult(
-                pose=world[0], errors=e[: p.n_targets], reached=e[: p.n_targets] <= p.tolerance,
-                pin_errors=e[p.n_targets : k], max_bone_error=float(bone_err[0]),
-                solvers=["fabrik"], iterations=int(its[0]),
-            )  # fmt: skip
-        if not (
-            p.method == "neural" and p.preserve_bone_lengths and p.n_targets == len(p.target_idx)
-        ):
-            return None
-        seq = covering(self, tidx, weights)
-        passes = self.passes_of(p)
-        if seq is None or passes < 1:
-            return None
-        exact = p.reach == "exact"
-        got = solve_lean(
-            self, compiled.as_f64(p.pose)[None], tidx[None],
+        one = np.ones(1, dtype=np.bool_)
+        items = _Items(
+            compiled.as_f64(p.pose)[None], tidx[None],
             compiled.as_f64(p.target_pos).reshape(1, k, 3), np.full(1, k, dtype=np.int64),
-            np.full(1, p.floor, dtype=np.float64), passes, seq,
-            np.full(1, p.tolerance, dtype=np.float64) if exact else None, weights,
+            np.full(1, p.n_targets, dtype=np.int64), weights[None], one & (seq is None), one,
+            one & (p.reach == "exact"), np.full(1, p.tolerance, dtype=np.float64),
+            np.full(1, p.floor, dtype=np.float64),
         )  # fmt: skip
-        if got is None:  # the polish missed: the general path also tries plain FABRIK
-            return None
-        world, errors, bone_err, its = got
-        e = errors[0]
-        return SolveResult(
-            pose=world[0], errors=e, reached=e <= p.tolerance, pin_errors=e[k:],
-            max_bone_error=float(bone_err[0]),
-            solvers=[*seq, "fabrik-polish"] if exact else list(seq), iterations=int(its[0]),
-        )  # fmt: skip
+        ans = lean_answer(self, items, passes, seq)
+        return None if ans is None else self._result(p, ans, 0)
 
     def passes_of(self, p: SolveProblem) -> int:
         """The neural passes ``p`` asks for (``solve_passes`` unless it says)."""
@@ -318,24 +298,13 @@ class Engine:
         if n and int(reps.min()) < 1:
             raise ValueError(f"passes must be at least 1, got {int(reps.min())}")
         reps = np.where(fab, 1, reps)  # FABRIK items: one solve (and not the caller's array)
-        if fabrik_batch(items):  # all FABRIK on one target set (service.lean)
-            c = int(cnt[0])
-            world, errors, bone_err, its = solve_fabrik(
-                self, pose_a, tidx, items.tpos, cnt, items.floors, items.tols,
-                items.w[0, :c], int(items.n_t[0]),
-            )  # fmt: skip
-            return BatchAnswer(world, errors, bone_err, its, (("fabrik",),), np.zeros(n, np.int64))
-        lean = lean_sequence(self, items, reps)
-        if lean is not None:  # all alike: neural, no pins, covered (service.lean)
-            exact = bool(items.ex[0])
-            got = solve_lean(
-                self, pose_a, tidx, items.tpos, cnt, items.floors, int(reps[0]), lean,
-                items.tols if exact else None, items.w[0, : int(cnt[0])],
-            )  # fmt: skip
-            if got is not None:
-                world, errors, bone_err, its = got
-                path = (*lean, "fabrik-polish") if exact else lean
-                return BatchAnswer(world, errors, bone_err, its, (path,), np.zeros(n, np.int64))
+        # a batch all alike (service.lean): FABRIK on one target set, or neural with no
+        # pins and every target on a solver
+        lean = None if fabrik_batch(items) else lean_sequence(self, items, reps)
+        if lean is not None or fabrik_batch(items):
+            ans = lean_answer(self, items, int(reps[0]), lean)
+            if ans is not None:
+                return ans
         rounds = int(reps.max()) - 1 if n else 0
         if rounds == 0:
             return self._solve_once(items)
@@ -347,9 +316,7 @@ class Engine:
             if lean is None:
                 current[now] = self._solve_once(soft).pose
             else:  # e.g. exact reach's soft passes before its last (service.lean)
-                done = solve_lean(
-                    self, soft.poses, soft.tidx, soft.tpos, soft.cnt, soft.floors, 1, lean
-                )
+                done = solve_lean(self, soft, 1, lean)
                 assert done is not None  # soft: never falls back
                 current[now] = done[0]
         return self._solve_once(
@@ -369,13 +336,10 @@ class Engine:
         pose_a, tidx, cnt, n_t, w = batch.poses, batch.tidx, batch.cnt, batch.n_t, batch.w
         fab, keep, ex, tols, floors = batch.fab, batch.keep, batch.ex, batch.tols, batch.floors
         n = pose_a.shape[0]
-        tpos = batch.tpos.copy()
-        tpos[:, :, 1] -= floors[:, None]  # the networks know a floor at y = 0
         neural = np.ascontiguousarray(~fab)
-        canon, facing, trans, lengths, scales, tcan, x, canvas = compiled.prepare(
-            pose_a, floors, tidx, tpos, cnt, neural, self._shapes_c, self._shape_totals,
-            self.body == "total_length", self._reference_total,
-        )  # fmt: skip
+        tpos, (canon, facing, trans, lengths, scales, tcan, x, canvas) = self._prepare(
+            pose_a, batch, neural
+        )
         groups = _groups(cnt, n_t, tidx, w)
         iterations = np.zeros(n, dtype=np.int64)
         suffix = np.zeros(n, dtype=np.int64)  # 0: none, 1: fabrik-polish, 2: fabrik-fallback
@@ -420,6 +384,35 @@ class Engine:
         paths, path_of = self._paths(seq_of, suffix, sequences)
         return BatchAnswer(world, errors, bone_err, iterations, paths, path_of)
 
+    def _prepare(
+        self, poses: compiled.F64, items: _Items, neural: npt.NDArray[np.bool_]
+    ) -> tuple[compiled.F64, compiled.Prepared]:
+        """``compiled.prepare`` of ``poses`` with the targets, counts and floors of
+        ``items`` and this engine's body mapping; first the targets with the floor taken
+        off (the networks know a floor at y = 0), which ``compiled.finish`` takes too."""
+        tpos = items.tpos.copy()
+        tpos[:, :, 1] -= items.floors[:, None]
+        return tpos, compiled.prepare(
+            poses, items.floors, items.tidx, tpos, items.cnt, neural, self._shapes_c,
+            self._shape_totals, self.body == "total_length", self._reference_total,
+        )  # fmt: skip
+
+    def _fabrik(
+        self, polish: bool, starts: F64, lengths: F64, goals: F64, tols: F64,
+        idx: npt.NDArray[np.int64], weights: F64, hold: npt.NDArray[np.bool_],
+    ) -> tuple[compiled.F64, npt.NDArray[np.int64], compiled.F64]:  # fmt: skip
+        """The compiled FABRIK (``polish``: the exact-reach polish) of canonical ``starts``
+        onto ``goals`` for one target set (joints ``idx``, ``weights``, pins ``hold``):
+        poses, iterations and each target's error."""
+        plans = compiled_fabrik.packed_plans(idx, weights)
+        pose, its, errs, _ = compiled_fabrik.solve_batch(
+            polish, np.ascontiguousarray(starts), np.ascontiguousarray(lengths),
+            np.ascontiguousarray(goals), np.ascontiguousarray(tols), self.fabrik_max_iterations,
+            plans.local_ints, plans.local_floats, plans.has_local, plans.ints, plans.floats,
+            hold, True,
+        )  # fmt: skip
+        return pose, its, errs
+
     def _plan_for(self, idx: npt.NDArray[np.int64], weights: F64) -> tuple[str, ...]:
         """``plan`` of a target set, memoised on its (joints, weights) bytes."""
         key = (idx.tobytes(), weights.tobytes())
@@ -448,14 +441,8 @@ class Engine:
         def run(
             polish: bool, sel: npt.NDArray[np.intp], start: F64, goal: F64
         ) -> tuple[F64, npt.NDArray[np.int64], F64]:
-            plans = compiled_fabrik.packed_plans(g.idx, g.weights)
-            pose, its, errs, _ = compiled_fabrik.solve_batch(
-                polish, np.ascontiguousarray(start), np.ascontiguousarray(lengths[sel]),
-                np.ascontiguousarray(goal), np.ascontiguousarray(tols[sel]),
-                self.fabrik_max_iterations, plans.local_ints, plans.local_floats,
-                plans.has_local, plans.ints, plans.floats, pinned, True,
-            )  # fmt: skip
-            return pose, its, errs
+            return self._fabrik(polish, start, lengths[sel], goal, tols[sel], g.idx, g.weights,
+                                pinned)  # fmt: skip
 
         members = g.members
         sel = members[fab[members]]

@@ -18,14 +18,16 @@ from typing import TYPE_CHECKING
 import numpy as np
 import numpy.typing as npt
 
-from core import compiled, compiled_fabrik
+from core import compiled
 from core.skeleton import JOINT_NAMES
+from service.problems import BatchAnswer, _Items
 
 if TYPE_CHECKING:  # pragma: no cover
     from service.engine import Engine
-    from service.problems import _Items
 
 F64 = compiled.F64
+#: A lean solve's world poses, target distances, bone errors and FABRIK iterations.
+Solved = tuple[F64, F64, F64, npt.NDArray[np.int64]]
 
 
 @lru_cache(maxsize=4096)
@@ -76,53 +78,58 @@ def covering(engine: Engine, idx: npt.NDArray[np.int64], weights: F64) -> tuple[
     return seq
 
 
+def lean_answer(
+    engine: Engine, items: _Items, passes: int, sequence: tuple[str, ...] | None
+) -> BatchAnswer | None:
+    """The answer of a batch that :func:`lean_sequence` (``sequence``) or
+    :func:`fabrik_batch` (``sequence`` None: FABRIK) let through, or None where exact reach's
+    polish missed (the general path then solves the batch)."""
+    n = items.poses.shape[0]
+    if sequence is None:
+        got: Solved | None = solve_fabrik(engine, items)
+        path: tuple[str, ...] = ("fabrik",)
+    else:
+        exact = bool(items.ex[0])
+        got = solve_lean(engine, items, passes, sequence, exact)
+        path = (*sequence, "fabrik-polish") if exact else sequence
+    if got is None:
+        return None
+    world, errors, bone_err, iterations = got
+    return BatchAnswer(world, errors, bone_err, iterations, (path,), np.zeros(n, np.int64))
+
+
 def solve_lean(
-    engine: Engine,
-    poses: F64,
-    tidx: npt.NDArray[np.int64],
-    tpos: F64,
-    counts: npt.NDArray[np.int64],
-    floors: F64,
-    passes: int,
-    sequence: tuple[str, ...],
-    exact: F64 | None = None,
-    weights: F64 | None = None,
-) -> tuple[F64, F64, F64, npt.NDArray[np.int64]] | None:
-    """``passes`` neural solves of every item, each from the previous answer (inputs as
-    :meth:`Engine.solve_arrays` normalises them): world poses ``[B, 21, 3]``, each
-    target's distance ``[B, K]``, the relative bone error ``[B]`` and FABRIK iterations
-    ``[B]``. ``exact``: the items' tolerances ``[B]`` for exact reach: the last pass ends
-    with the FABRIK polish (``weights [K]``: the target set's); if it leaves any item
-    beyond its tolerance, None (the general path then also tries plain FABRIK from the
-    caller's start, and keeps the closer)."""
-    n = poses.shape[0]
-    tpos = tpos.copy()
-    tpos[:, :, 1] -= floors[:, None]  # the networks know a floor at y = 0
+    engine: Engine, items: _Items, passes: int, sequence: tuple[str, ...], exact: bool = False
+) -> Solved | None:
+    """``passes`` neural solves of every item of ``items`` (one target set, no pins), each
+    from the previous answer: world poses ``[B, 21, 3]``, each target's distance
+    ``[B, K]``, the relative bone error ``[B]`` and FABRIK iterations ``[B]``. ``exact``:
+    the last pass ends with the FABRIK polish onto each item's tolerance; if it leaves any
+    item beyond it, None (the general path then also tries plain FABRIK from the caller's
+    start, and keeps the closer)."""
+    n = items.poses.shape[0]
+    c = int(items.cnt[0])
+    tidx, counts, floors = items.tidx, items.cnt, items.floors
     every = np.ones(n, dtype=np.bool_)
-    pose = poses
+    pose = items.poses
     errors, bone_err = np.zeros(tidx.shape), np.zeros(n)
     iterations = np.zeros(n, dtype=np.int64)
     for k in range(passes):
-        canon, facing, trans, lengths, scales, tcan, x, canvas = compiled.prepare(
-            pose, floors, tidx, tpos, counts, every, engine._shapes_c, engine._shape_totals,
-            engine.body == "total_length", engine._reference_total,
-        )  # fmt: skip
+        tpos, (canon, facing, trans, lengths, scales, tcan, x, canvas) = engine._prepare(
+            pose, items, every
+        )
         decoded = engine._run_sequence(x, canvas, sequence)
-        if exact is None or k < passes - 1:
+        if not exact or k < passes - 1:
             pose, errors, bone_err = compiled.settle(
                 decoded, scales, canon, lengths, facing, trans, floors, tidx, tpos, counts
             )
             continue
         out = compiled.unscale(decoded, scales, canon, lengths, every)
-        c = int(counts[0])
-        w = np.ones(c) if weights is None else weights
-        plans = compiled_fabrik.packed_plans(tidx[0, :c], w)
-        out, iterations, errs, _ = compiled_fabrik.solve_batch(
-            True, out, lengths, np.ascontiguousarray(tcan[:, :c]), exact,
-            engine.fabrik_max_iterations, plans.local_ints, plans.local_floats, plans.has_local,
-            plans.ints, plans.floats, np.zeros(c, dtype=np.bool_), True,
+        out, iterations, errs = engine._fabrik(
+            True, out, lengths, tcan[:, :c], items.tols, tidx[0, :c], items.w[0, :c],
+            np.zeros(c, dtype=np.bool_),
         )  # fmt: skip
-        if np.any(errs > exact[:, None]):
+        if np.any(errs > items.tols[:, None]):
             return None
         pose, errors, bone_err = compiled.finish(
             out, facing, trans, floors, tidx, tpos, counts, lengths
@@ -136,35 +143,19 @@ def fabrik_batch(items: _Items) -> bool:
     return items.poses.shape[0] > 0 and bool(items.fab.all()) and one_set(items)
 
 
-def solve_fabrik(
-    engine: Engine,
-    poses: F64,
-    tidx: npt.NDArray[np.int64],
-    tpos: F64,
-    counts: npt.NDArray[np.int64],
-    floors: F64,
-    tols: F64,
-    weights: F64,
-    n_targets: int,
-) -> tuple[F64, F64, F64, npt.NDArray[np.int64]]:
-    """FABRIK for every item (one target set, ``weights [K]``, the first ``n_targets``
-    targets and the rest pins): the canonical frame, the compiled FABRIK, the way back.
-    The general path's kernels in its order (bit-identical to it)."""
-    n = poses.shape[0]
-    tpos = tpos.copy()
-    tpos[:, :, 1] -= floors[:, None]
-    canon, facing, trans, lengths, _scales, tcan, _x, _canvas = compiled.prepare(
-        poses, floors, tidx, tpos, counts, np.zeros(n, dtype=np.bool_), engine._shapes_c,
-        engine._shape_totals, engine.body == "total_length", engine._reference_total,
-    )  # fmt: skip
-    c = int(counts[0])
-    plans = compiled_fabrik.packed_plans(tidx[0, :c], weights)
-    out, iterations, _, _ = compiled_fabrik.solve_batch(
-        False, canon, lengths, np.ascontiguousarray(tcan[:, :c]), tols,
-        engine.fabrik_max_iterations, plans.local_ints, plans.local_floats, plans.has_local,
-        plans.ints, plans.floats, np.arange(c) >= n_targets, True,
+def solve_fabrik(engine: Engine, items: _Items) -> Solved:
+    """FABRIK for every item of ``items`` (one target set, its targets then its pins): the
+    canonical frame, the compiled FABRIK, the way back; as :func:`solve_lean` answers."""
+    n = items.poses.shape[0]
+    c = int(items.cnt[0])
+    tpos, (canon, facing, trans, lengths, _scales, tcan, _x, _canvas) = engine._prepare(
+        items.poses, items, np.zeros(n, dtype=np.bool_)
+    )
+    out, iterations, _ = engine._fabrik(
+        False, canon, lengths, tcan[:, :c], items.tols, items.tidx[0, :c], items.w[0, :c],
+        np.arange(c) >= int(items.n_t[0]),
     )  # fmt: skip
     pose, errors, bone_err = compiled.finish(
-        out, facing, trans, floors, tidx, tpos, counts, lengths
+        out, facing, trans, items.floors, items.tidx, tpos, items.cnt, lengths
     )
     return pose, errors, bone_err, iterations

@@ -79,10 +79,8 @@ def test_exact_reach_out_of_reach_falls_back_as_the_general_path(
     ]
     for batch, lean in ((probs, True), (far, False)):
         arrays, _ = _items(batch, engine)
-        got = solve_lean(
-            engine, arrays.poses, arrays.tidx, arrays.tpos, arrays.cnt, np.full(6, 0.3), 2,
-            ("left_wrist",), np.full(6, 1e-3), np.ones(1),
-        )  # fmt: skip
+        arrays = dataclasses.replace(arrays, floors=np.full(6, 0.3), tols=np.full(6, 1e-3))
+        got = solve_lean(engine, arrays, 2, ("left_wrist",), exact=True)
         assert (got is not None) == lean
     general = engine.solve([*far, _fabrik_item(real_poses)])[:-1]
     for p, g in zip(far, general, strict=True):
