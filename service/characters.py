@@ -49,7 +49,7 @@ from core.skeleton import BONES, JOINT_INDEX, JOINT_NAMES
 from service.engine import Engine
 from service.errors import InvalidRequest
 from service.problems import SolveProblem, SolveResult
-from service.schemas import SolveOptions, SolveRequest, SolveResponse, TargetResult
+from service.schemas import MAX_WEIGHT, SolveOptions, SolveRequest, SolveResponse, TargetResult
 from service.validation import MIN_BONE, problem_of, validate_as
 
 MAX_COORDINATE = 1.0e7  # client units; beyond this a coordinate is nonsense
@@ -75,7 +75,7 @@ class _Body(BaseModel):
 class CharacterTarget(_Body):
     joint: str = Field(description="The client's joint name (mapped) or a canonical name.")
     position: Vec3
-    weight: float = Field(default=1.0, gt=0.0, le=1000.0, allow_inf_nan=False)
+    weight: float = Field(default=1.0, gt=0.0, le=MAX_WEIGHT, allow_inf_nan=False)
 
 
 class _Frame(_Body):

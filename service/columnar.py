@@ -23,9 +23,9 @@ from pydantic import ValidationError
 from core.skeleton import JOINT_INDEX, JOINT_NAMES, NUM_JOINTS
 from service.engine import Engine
 from service.errors import BodyInvalid, TooManyItems
-from service.limits import FABRIK_PRICE, chunks_of, neural_price
+from service.limits import chunks_of, price_of
 from service.problems import BatchAnswer
-from service.schemas import MAX_COORDINATE, SolveOptions
+from service.schemas import MAX_COORDINATE, MAX_WEIGHT, SolveOptions
 from service.validation import check_bones
 
 F64 = npt.NDArray[np.float64]
@@ -76,14 +76,7 @@ class Columns:
     def parts(self, passes: int) -> list[slice]:
         """Priced parts (``service.limits``): every item costs the same here (``passes``:
         the engine's default, when the options do not say)."""
-        o = self.options
-        slow = o.reach == "exact" or self.n_pins > 0
-        cost = (
-            FABRIK_PRICE
-            if o.method == "fabrik"
-            else neural_price(slow, passes if o.passes is None else o.passes)
-        )
-        return chunks_of([cost] * self.size)
+        return chunks_of([price_of(self.options, self.n_pins > 0, passes)] * self.size)
 
 
 def _numbers(rows: Any, loc: tuple[Any, ...], width: int, n: int, errs: _Errors,
@@ -240,10 +233,10 @@ def parse(data: dict[str, Any], max_items: int, suspect: bool = True) -> Columns
         w = targets["weights"]
         shared = isinstance(w, list) and bool(w) and not isinstance(w[0], list)
         got = _numbers([w] * n if shared else w, ("targets", "weights"), k, n, errs, suspect, None)
-        if got is not None and not ((got > 0) & (got <= 1000.0)).all():
-            b, i = np.argwhere(~((got > 0) & (got <= 1000.0)))[0].tolist()
+        if got is not None and not ((got > 0) & (got <= MAX_WEIGHT)).all():
+            b, i = np.argwhere(~((got > 0) & (got <= MAX_WEIGHT)))[0].tolist()
             loc = ("targets", "weights", i) if shared else ("targets", "weights", b, i)
-            errs.add(loc, "weight", "must be greater than 0 and at most 1000")
+            errs.add(loc, "weight", f"must be greater than 0 and at most {MAX_WEIGHT:g}")
         if got is not None:
             weights[:, :k] = got
     errs.raise_any()

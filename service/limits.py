@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
-from typing import TypeVar
+from typing import Protocol, TypeVar
 
 import anyio
 import anyio.to_thread
@@ -28,13 +28,29 @@ FABRIK_PRICE = 16
 R = TypeVar("R")
 
 
-def price(p: SolveProblem, passes: int) -> int:
-    """Relative cost of one item (measured: an exact-reach item ~10 ms, a neural pass
-    well under 0.1 ms in a batch); ``passes``: the engine's default for ``p.passes``."""
-    if p.method == "fabrik":
+class Priced(Protocol):
+    """What an item's price reads: a problem's or a request's options."""
+
+    @property
+    def method(self) -> str: ...
+    @property
+    def reach(self) -> str: ...
+    @property
+    def passes(self) -> int | None: ...
+
+
+def price_of(o: Priced, pinned: bool, passes: int) -> int:
+    """Relative cost of one pose item (measured: an exact-reach item ~10 ms, a neural pass
+    well under 0.1 ms in a batch) with options ``o`` (``pinned``: it has pins);
+    ``passes``: the engine's default, where ``o.passes`` does not say."""
+    if o.method == "fabrik":
         return FABRIK_PRICE
-    slow = p.reach == "exact" or len(p.target_idx) > p.n_targets
-    return neural_price(slow, passes if p.passes is None else p.passes)
+    return neural_price(o.reach == "exact" or pinned, passes if o.passes is None else o.passes)
+
+
+def price(p: SolveProblem, passes: int) -> int:
+    """:func:`price_of` a validated problem."""
+    return price_of(p, len(p.target_idx) > p.n_targets, passes)
 
 
 def neural_price(slow: bool, passes: int) -> int:
@@ -90,14 +106,8 @@ class Budget:
                   problems: Sequence[SolveProblem], passes: int) -> list[R]:  # fmt: skip
         """``fn`` over ``problems`` chunk by chunk, off the event loop, within budget
         (``passes``: the engine's default, for the price of items that do not say)."""
-        limiter = getattr(self.request.app.state, "compute_limiter", None)
-        results: list[R] = []
-        for part in chunks(problems, passes):
-            await self.check(len(results), len(problems))
-            t = time.perf_counter()
-            results.extend(await anyio.to_thread.run_sync(fn, problems[part], limiter=limiter))
-            self.compute += time.perf_counter() - t
-        return results
+        parts = await self.run_parts(lambda part: fn(problems[part]), chunks(problems, passes))
+        return [r for part in parts for r in part]
 
     async def run_parts(self, fn: Callable[[slice], R], parts: Sequence[slice]) -> list[R]:
         """``fn`` over consecutive ``parts`` of a batch of ``parts[-1].stop`` items (the

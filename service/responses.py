@@ -54,7 +54,15 @@ def complete_payload(joints: list[str], r: CompleteResult, version: str) -> dict
 
 def json_response(body: Any, compute_seconds: float | None = None) -> Response:
     """An orjson-encoded answer; ``X-Compute-Time`` is the engine's own time in ms."""
-    headers = None
-    if compute_seconds is not None:
-        headers = {"X-Compute-Time": f"{compute_seconds * 1000:.3f}ms"}
-    return Response(orjson.dumps(body), media_type="application/json", headers=headers)
+    return raw_response(orjson.dumps(body), compute_seconds)
+
+
+def compute_time(seconds: float) -> str:
+    """The ``X-Compute-Time`` value: the engine's own time in ms."""
+    return f"{seconds * 1000:.3f}ms"
+
+
+def raw_response(body: bytes, compute_seconds: float | None = None) -> Response:
+    """An already encoded JSON answer, with ``X-Compute-Time`` where given."""
+    headers = None if compute_seconds is None else {"X-Compute-Time": compute_time(compute_seconds)}
+    return Response(body, media_type="application/json", headers=headers)

@@ -13,6 +13,8 @@ from core.skeleton import BASE_KEYPOINTS, JOINT_NAMES, PARENT_NAMES
 MAX_COORDINATE = 1.0e4
 #: The most neural passes a request may ask for (``options.passes``).
 MAX_PASSES = 4
+#: The largest relative weight of a target.
+MAX_WEIGHT = 1000.0
 
 if TYPE_CHECKING:  # the names are only known at run time
     JointName = str
@@ -70,7 +72,7 @@ class Target(_Body):
     weight: Finite = Field(
         default=1.0,
         gt=0.0,
-        le=1000.0,
+        le=MAX_WEIGHT,
         description="Relative importance: later in the solver sequence, more pull in FABRIK.",
     )
 
@@ -245,7 +247,7 @@ PoseRow = Annotated[
         "(pelvis x, y, z, spine1 x, y, z, …), metres, world frame.",
     ),
 ]
-Weight = Annotated[float, Field(allow_inf_nan=False, gt=0.0, le=1000.0)]
+Weight = Annotated[float, Field(allow_inf_nan=False, gt=0.0, le=MAX_WEIGHT)]
 JointRow = Annotated[list[Joint], Field(min_length=1, max_length=21)]
 
 

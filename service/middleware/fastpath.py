@@ -30,7 +30,7 @@ from service.deps import ServiceState
 from service.errors import BodyError, BodyInvalid, PoseError, error_response, validation_problem
 from service.limits import Budget
 from service.middleware.types import REASON, ASGIApp, Message, Receive, Scope, Send
-from service.responses import solve_payload
+from service.responses import compute_time, solve_payload
 from service.schemas import SolveRequest
 from service.validation import poses, solve_problem
 
@@ -206,7 +206,7 @@ async def _json(send: Send, body: bytes, compute_seconds: float) -> None:
             "headers": [
                 (b"content-length", str(len(body)).encode()),
                 (b"content-type", b"application/json"),
-                (b"x-compute-time", f"{compute_seconds * 1000:.3f}ms".encode()),
+                (b"x-compute-time", compute_time(compute_seconds).encode()),
             ],
         }
     )

@@ -37,10 +37,10 @@ from service.limits import (
     Budget,
     batch_price_limit,
     character_price,
-    neural_price,
+    price_of,
 )
 from service.problems import SolveProblem
-from service.responses import json_response, solve_payload
+from service.responses import json_response, raw_response, solve_payload
 from service.routes.characters import answer_character, read_character, solve_read
 from service.schemas import ColumnarBatch, ColumnarResponse, SolveRequest, SolveResponse
 from service.validation import poses, solve_problem, validate_as
@@ -148,7 +148,7 @@ def check_price(forms: list[SolveRequest | CharacterSolveRequest], max_items: in
     prices = [
         character_price(len(f.character.joints), _slow(f))
         if isinstance(f, CharacterSolveRequest)
-        else _pose_price(f, passes)
+        else price_of(f.options, bool(f.pins), passes)
         for f in forms
     ]
     total, cap = sum(prices), batch_price_limit(max_items)
@@ -163,14 +163,6 @@ def check_price(forms: list[SolveRequest | CharacterSolveRequest], max_items: in
             "or FABRIK "
             f"(items[{i}], {joints} joints: {prices[i]}); send smaller batches"
         )
-
-
-def _pose_price(form: SolveRequest, passes: int) -> int:
-    o = form.options
-    if o.method == "fabrik":
-        return FABRIK_PRICE
-    slow = o.reach == "exact" or bool(form.pins)
-    return neural_price(slow, passes if o.passes is None else o.passes)
 
 
 def _slow(form: SolveRequest | CharacterSolveRequest) -> bool:
@@ -198,9 +190,3 @@ async def solve_columns(cols: columnar.Columns, engine: Engine, budget: Budget,
     state.metrics.solved_paths(cols.options.method, ans.paths, ans.path_of)
     body = await off_loop(request, lambda: columnar.answer(cols, ans, engine.version), cols.size)
     return raw_response(body, budget.compute)
-
-
-def raw_response(body: bytes, compute_seconds: float) -> Response:
-    """An encoded JSON answer with ``X-Compute-Time`` (as ``json_response``)."""
-    headers = {"X-Compute-Time": f"{compute_seconds * 1000:.3f}ms"}
-    return Response(body, media_type="application/json", headers=headers)
