@@ -50,9 +50,6 @@ import numba  # noqa: E402  (after the cache folder is chosen: numba reads it on
 
 F = TypeVar("F", bound=Callable[..., Any])
 
-#: The numba version compiled with (reported by the benchmark).
-NUMBA_VERSION: str = str(numba.__version__)
-
 
 def jit(fn: F) -> F:
     """``numba.njit`` with the project's fixed options (see the module docstring)."""

@@ -9,7 +9,6 @@ the engine in soft reach with and without the bone pass; prints the mean reach e
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import sys
 from pathlib import Path
 
@@ -18,7 +17,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench.edits import joint_idx, problems, sample_pairs  # noqa: E402
-from bench.heldout import _rng, world_pairs  # noqa: E402
+from bench.heldout import world_pairs  # noqa: E402
 from service.engine import Engine  # noqa: E402
 from trainer.data.dataset import load_dataset  # noqa: E402
 
@@ -38,11 +37,11 @@ def main() -> None:
     for source in sorted(set(held.clip_source[np.unique(held.clip)].tolist())):
         mask = held.source_mask(source)
         part = held.subset(mask)
-        pairs = world_pairs(part, world[mask], *sample_pairs(part, args.edits, _rng(0, 98)))
+        rng = np.random.default_rng([0, 98])
+        pairs = world_pairs(part, world[mask], *sample_pairs(part, args.edits, rng))
         for joint in ("left_wrist", "left_elbow", "left_knee", "left_ankle"):
             edits = pairs.edits([joint_idx((joint,))] * len(pairs))
-            kept = problems(edits, "neural_bone")
-            raw = [dataclasses.replace(p, preserve_bone_lengths=False) for p in kept]
+            kept, raw = problems(edits, "neural_bone"), problems(edits, "neural_raw")
             r_raw = np.mean([r.errors.mean() for r in engine.solve(raw)]) * 100
             r_kept = np.mean([r.errors.mean() for r in engine.solve(kept)]) * 100
             print(f"{source:10s} {joint:12s} {r_raw:6.2f} / {r_kept:6.2f}")

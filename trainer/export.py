@@ -230,9 +230,11 @@ def export_all(
     ) -> None:
         path = out / file
         _export(module, tuple(feeds.values()), list(feeds), output, path, cfg.opset)
-        # the graph answers as the module it came from, and as its readable reference
-        _parity(path, module, feeds, extra.get("graphs", 1))
-        _parity(path, extra.pop("reference", module), feeds, extra.pop("graphs", 1))
+        # the graph answers as the module it came from (and as its readable reference)
+        reference, graphs = extra.pop("reference", None), extra.pop("graphs", 1)
+        _parity(path, module, feeds, graphs)
+        if reference is not None:
+            _parity(path, reference, feeds, graphs)
         with torch.no_grad():
             out_dim = module(*feeds.values()).shape[1]
         stage = extra.pop("stage")

@@ -455,7 +455,8 @@ def solver_losses(
     to the start's bone lengths (:mod:`trainer.rigid`), i.e. on what is served."""
     n_sets = len(bank.sets)
     decoded = solved_poses(ae, net, start, goal, n_sets, mode)
-    answer = bone_pass_t(decoded, bone_lengths_t(start)) if rigid else decoded
+    start_lengths = bone_lengths_t(start)
+    answer = bone_pass_t(decoded, start_lengths) if rigid else decoded
     goal_s = goal.unsqueeze(0).expand(n_sets, -1, -1)
     sq = (answer - goal_s) ** 2  # [S, B, 63]
     target_mask = torch.zeros(n_sets, 1, goal.shape[1])
@@ -470,7 +471,7 @@ def solver_losses(
         moved = ((answer - start.unsqueeze(0)) ** 2).mean(dim=1)  # [S, 63]
         loss = loss + stay_weight * (moved * (1 - tm)).sum(-1) / (1 - tm).sum(-1)
     if bone_weight > 0:
-        bone_err = bone_lengths_t(decoded) - bone_lengths_t(start).unsqueeze(0)
+        bone_err = bone_lengths_t(decoded) - start_lengths.unsqueeze(0)
         loss = loss + bone_weight * (bone_err**2).mean(dim=(1, 2))
     return loss, decoded
 
@@ -509,12 +510,13 @@ def solver_metrics(
 ) -> dict[str, dict[str, float]]:
     """Per solver: mean reach error of its targets and MPJPE of the whole pose (cm)."""
     decoded = solved_poses(ae, bank, start, goal, len(bank.sets), mode)
+    start_lengths = bone_lengths_t(start)
     out: dict[str, dict[str, float]] = {}
     for s, joints in enumerate(bank.sets):
         err = (decoded[s] - goal).reshape(len(goal), NUM_JOINTS, 3).norm(dim=-1)
         cols = [c // 3 for c in target_columns(joints)[::3]]
-        bone = (bone_lengths_t(decoded[s]) - bone_lengths_t(start)).abs()
-        rigid = bone_pass_t(decoded[s], bone_lengths_t(start))
+        bone = (bone_lengths_t(decoded[s]) - start_lengths).abs()
+        rigid = bone_pass_t(decoded[s], start_lengths)
         served = (rigid - goal).reshape(len(goal), NUM_JOINTS, 3).norm(dim=-1)
         out["+".join(sorted(joints))] = {
             "reach_cm": float(err[:, cols].mean()) * 100.0,
