@@ -164,15 +164,18 @@ async def _exchange(
     response; return its status."""
     writer.write(request)
     await writer.drain()
-    head = await reader.readuntil(b"\r\n\r\n")
-    status = int(head.split(b" ", 2)[1])
-    length = 0
+    status, fields = _parse_head(await reader.readuntil(b"\r\n\r\n"))
+    await reader.readexactly(int(fields.get(b"content-length", b"0")))
+    return status
+
+
+def _parse_head(head: bytes) -> tuple[int, dict[bytes, bytes]]:
+    """A response head's status and its header fields (lower-cased names)."""
+    fields = {}
     for line in head.split(b"\r\n")[1:]:
         name, _, value = line.partition(b":")
-        if name.strip().lower() == b"content-length":
-            length = int(value)
-    await reader.readexactly(length)
-    return status
+        fields[name.strip().lower()] = value.strip()
+    return int(head.split(b" ", 2)[1]), fields
 
 
 async def _load(
@@ -189,16 +192,8 @@ async def _load(
     latencies: list[float] = []
     errors = 0
     issued = 0
-    parsed = urlsplit(url)
-    host, port, path = parsed.hostname or "127.0.0.1", parsed.port or 80, parsed.path
-    requests = [
-        (
-            f"POST {path} HTTP/1.1\r\nHost: {host}:{port}\r\n"
-            f"Content-Type: application/json\r\nContent-Length: {len(body)}\r\n\r\n"
-        ).encode()
-        + body
-        for body in payloads
-    ]
+    built = [_request_bytes(url, body) for body in payloads]
+    host, port, requests = built[0][0], built[0][1], [r for _, _, r in built]
     t_end = time.perf_counter() + max_seconds
 
     async def worker() -> None:
@@ -290,10 +285,7 @@ def _load_one(url: str, payloads: Sequence[bytes], max_requests: int, max_second
                     raise RuntimeError("the server closed the connection")
                 buf += chunk
             head, _, rest = buf.partition(b"\r\n\r\n")
-            fields = {}
-            for line in head.split(b"\r\n")[1:]:
-                name, _, value = line.partition(b":")
-                fields[name.strip().lower()] = value.strip()
+            status, fields = _parse_head(head)
             length = int(fields.get(b"content-length", b"0"))
             parts, have = [rest], len(rest)
             while have < length:
@@ -305,7 +297,7 @@ def _load_one(url: str, payloads: Sequence[bytes], max_requests: int, max_second
             data = b"".join(parts)
             buf = data[length:]
             latencies.append(time.perf_counter() - t0)
-            errors += int(head.split(b" ", 2)[1]) != 200
+            errors += status != 200
             total = fields.get(b"x-total-time", b"").removesuffix(b"ms")
             if total:
                 server.append(float(total))
@@ -400,26 +392,14 @@ def run_http(
     single = [json.dumps(b).encode() for b in items]
     single1 = [json.dumps(b).encode() for b in bodies(edits, passes=1)]
     n_batch = max(1, min(4, -(-batch_size * 2 // len(items))))
-    batch_payloads = [
-        json.dumps(
-            {"items": [items[(s * batch_size + j) % len(items)] for j in range(batch_size)]}
-        ).encode()
+    rows = [
+        [(s * batch_size + j) % len(items) for j in range(batch_size)]
         for s in range(max(2, n_batch))
     ]
-    columns = [
-        json.dumps(
-            columnar_body(edits, [(s * batch_size + j) % len(items) for j in range(batch_size)])
-        ).encode()
-        for s in range(max(2, n_batch))
-    ]
-    columns1 = [
-        json.dumps(
-            columnar_body(
-                edits, [(s * batch_size + j) % len(items) for j in range(batch_size)], passes=1
-            )
-        ).encode()
-        for s in range(max(2, n_batch))
-    ]
+    batch_payloads = [json.dumps({"items": [items[i] for i in r]}).encode() for r in rows]
+    columns, columns1 = (
+        [json.dumps(columnar_body(edits, r, passes=p)).encode() for r in rows] for p in (None, 1)
+    )
     out: Json = {
         "solve_set": solve_set,
         "client": f"raw HTTP/1.1: concurrency 1 on a blocking socket, more on {client_loop()}",
