@@ -14,7 +14,6 @@ request, twice the engine's own time of a solve (docs/service.md, "The hot path"
 
 from __future__ import annotations
 
-import time
 from collections.abc import Sequence
 from typing import Any
 
@@ -31,6 +30,7 @@ from service.errors import BodyError, BodyInvalid, PoseError, error_response, va
 from service.limits import Budget
 from service.middleware.types import REASON, ASGIApp, Message, Receive, Scope, Send
 from service.responses import compute_time, solve_payload
+from service.routes.solve import solve_columns, solve_one
 from service.schemas import SolveRequest
 from service.validation import poses, solve_problem
 
@@ -123,20 +123,14 @@ class FastPath:
         except PoseError:
             return False  # the route words it
         engine = state.repository.ready_engine()
-        if p.method == "neural" and p.reach == "soft" and not req.pins:
-            t = time.perf_counter()  # ~0.15 ms: inline beats a thread hop
-            (result,) = engine.solve([p])
-            compute = time.perf_counter() - t
-        else:  # FABRIK iterations can take milliseconds: keep the event loop free
-            budget = Budget(Request(scope, receive), state.settings.deadline_seconds)
-            try:
-                (result,) = await budget.run(engine.solve, [p], engine.solve_passes)
-            except PoseError as exc:
-                await _problem(scope, receive, send, exc)
-                return True
-            compute = budget.compute
+        budget = Budget(Request(scope, receive), state.settings.deadline_seconds)
+        try:
+            result = await solve_one(p, bool(req.pins), engine, budget)  # the route's own
+        except PoseError as exc:
+            await _problem(scope, receive, send, exc)
+            return True
         state.metrics.solved(p.method, result.solvers)
-        await _json(send, orjson.dumps(solve_payload(p, result, engine.version)), compute)
+        await _json(send, orjson.dumps(solve_payload(p, result, engine.version)), budget.compute)
         return True
 
     async def _columns(self, scope: Scope, receive: Receive, send: Send, state: ServiceState,
@@ -173,8 +167,6 @@ class FastPath:
                 cols = await anyio.to_thread.run_sync(read, limiter=limiter)
             if cols is None:
                 return False
-            from service.routes.solve import solve_columns  # the route's own path
-
             engine = state.repository.ready_engine()
             request = Request(scope, receive)
             budget = Budget(request, state.settings.deadline_seconds)
