@@ -22,6 +22,7 @@ from fastapi import Request
 from service.errors import ClientDisconnected, DeadlineExceeded
 from service.middleware.types import T0
 from service.problems import SolveProblem
+from service.schemas import MAX_PASSES
 
 CHUNK_PRICE = 256
 FABRIK_PRICE = 16
@@ -136,7 +137,13 @@ def character_price(joints: int, slow: bool) -> int:
     return (FABRIK_PRICE + -(-joints // CHARACTER_JOINTS)) * (2 if slow else 1)
 
 
+def max_item_price() -> int:
+    """The costliest pose item: neural with the FABRIK polish at the most passes a request
+    may ask for (dearer than a FABRIK item)."""
+    return max(FABRIK_PRICE, neural_price(True, MAX_PASSES))
+
+
 def batch_price_limit(max_items: int) -> int:
     """The most one batch may cost: ``max_items`` of the costliest pose items (a batch of
     pose items is bounded by its item count alone; character items also by their joints)."""
-    return max_items * FABRIK_PRICE
+    return max_items * max_item_price()

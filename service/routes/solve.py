@@ -37,6 +37,7 @@ from service.limits import (
     Budget,
     batch_price_limit,
     character_price,
+    max_item_price,
     price_of,
 )
 from service.problems import SolveProblem, SolveResult
@@ -166,7 +167,7 @@ def check_price(forms: list[SolveRequest | CharacterSolveRequest], max_items: in
         joints = len(big.character.joints) if isinstance(big, CharacterSolveRequest) else 21
         raise TooManyItems(
             f"items: the batch costs {total} work units, beyond the limit of {cap} "
-            f"({max_items} items of at most {FABRIK_PRICE} units); a character item costs "
+            f"({max_items} items of at most {max_item_price()} units); a character item costs "
             f"{FABRIK_PRICE} + 1 per {CHARACTER_JOINTS} joints, doubled for exact reach, pins "
             "or FABRIK "
             f"(items[{i}], {joints} joints: {prices[i]}); send smaller batches"

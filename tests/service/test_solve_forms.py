@@ -267,6 +267,8 @@ def test_oversized_character_batch_is_refused(
     with make_client(models_dir, max_batch_items=4) as small:
         # 4 of the costliest pose items fit; so do 2 small characters; 3 big ones do not
         assert small.post("/v1/solve/batch", json={"items": [exact_pose] * 4}).status_code == 200
+        dearest = {**pose, "options": {"reach": "exact", "passes": 4}}  # 4 + 15 units
+        assert small.post("/v1/solve/batch", json={"items": [dearest] * 4}).status_code == 200
         soft = {**char, "pins": [], "options": {}}
         assert small.post("/v1/solve/batch", json={"items": [soft, pose]}).status_code == 200
         read.clear()
@@ -274,9 +276,9 @@ def test_oversized_character_batch_is_refused(
         body = assert_problem(r, 413, "work units", "items[1]", "joints")
         assert body["type"].endswith("/too-many-items")
         assert not read  # refused before any skeleton was read
-    # the default limit: 400 items (within the 1024 item limit) of a 57-joint skeleton
-    # with exact reach cost 400 x 48 units, beyond 1024 x 16
+    # the default limit: 420 items (within the 1024 item limit) of a 57-joint skeleton
+    # with exact reach cost 420 x 48 units, beyond 1024 x 19 (exact reach at 4 passes)
     with make_client(models_dir) as c:
-        r = c.post("/v1/solve/batch", json={"items": [char] * 400})
+        r = c.post("/v1/solve/batch", json={"items": [char] * 420})
         assert_problem(r, 413, "items[0], 57 joints")
     assert not read
