@@ -167,8 +167,30 @@ def _chain(plan: _Plan, jmap: JointMap, target: int) -> list[int]:
     return chain
 
 
+def _two_bone(points: F64, goal: F64, lengths: F64) -> F64 | None:
+    """A two-bone chain ``[3, 3]`` onto ``goal`` in closed form (law of cosines), its middle
+    joint kept in the plane it bends in now, on the same side; None where that plane is
+    undefined (the chain straight along the goal) or the goal is nearer than the bones
+    allow. FABRIK crawls near full stretch (2 mm short after 64 rounds, a standing leg)."""
+    a, b = float(lengths[0]), float(lengths[1])
+    base, mid = points[0], points[1]
+    to_goal = goal - base
+    d = float(np.linalg.norm(to_goal))
+    if d <= abs(a - b) or d <= 1e-12 or d > a + b:
+        return None
+    u = to_goal / d
+    side = (mid - base) - float((mid - base) @ u) * u
+    n = float(np.linalg.norm(side))
+    if n <= 1e-9 * a:
+        return None
+    x = (a * a - b * b + d * d) / (2.0 * d)
+    h = np.sqrt(max(a * a - x * x, 0.0))
+    return np.stack([base, base + x * u + h * (side / n), np.asarray(goal, dtype=np.float64)])
+
+
 def _fabrik(points: F64, goal: F64, tol: float, iterations: int = 64) -> F64:
-    """Single-chain FABRIK, first point fixed; points ``[n, 3]``."""
+    """Single-chain FABRIK, first point fixed; points ``[n, 3]`` (two bones: in closed
+    form, :func:`_two_bone`, where it applies)."""
     p = points.copy()
     lengths = np.linalg.norm(np.diff(p, axis=0), axis=1)
     base = p[0].copy()
@@ -177,6 +199,8 @@ def _fabrik(points: F64, goal: F64, tol: float, iterations: int = 64) -> F64:
         for i in range(1, len(p)):
             p[i] = p[i - 1] + d * lengths[i - 1]
         return p
+    if len(p) == 3 and (closed := _two_bone(p, goal, lengths)) is not None:
+        return closed
     for _ in range(iterations):
         if np.linalg.norm(p[-1] - goal) <= tol:
             break

@@ -52,5 +52,6 @@ def test_character_examples_answer_alike(client: Any) -> None:
     assert r.content == client.post("/v1/character/solve", json=old).content
     out = r.json()
     assert set(out["rotations"]) == {j["name"] for j in new["character"]["joints"]}
-    assert out["targets"][0]["reached"] and len(out["pins"]) == 2
+    assert len(out["pins"]) == 2  # feet pinned on legs almost straight: every one held
+    assert all(t["reached"] for t in out["targets"] + out["pins"]), out["pins"]
     assert out["scheme"] == "mixamo"
