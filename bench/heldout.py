@@ -145,7 +145,8 @@ def edit_sets(
     rng: np.random.Generator,
 ) -> dict[str, Edits]:
     """Every solver single joint, both wrists, both ankles, the five end effectors (the
-    same pairs) and random subsets of 2-6 solver joints (``random_pairs``)."""
+    same pairs) and random subsets of 2-6 solver joints (``random_pairs``; none where the
+    models have fewer single-joint solvers than that, e.g. a 5-end-effector solver alone)."""
     pool = solver_joints(engine)
     n = len(pairs)
     sets: dict[str, Edits] = {j: pairs.edits([joint_idx((j,))] * n) for j in pool}
@@ -153,6 +154,8 @@ def edit_sets(
         sets[name] = pairs.edits([joint_idx(joints)] * n)
     sets[FIVE] = pairs.edits([joint_idx(END_EFFECTORS)] * n)
     hi = min(cfg.random_max, len(pool))
+    if hi < cfg.random_min:  # too few single-joint solvers to draw subsets from
+        return sets
     sizes = rng.integers(cfg.random_min, hi + 1, size=len(random_pairs))
     subsets = [
         np.sort(joint_idx([pool[int(k)] for k in rng.choice(len(pool), s, replace=False)]))

@@ -137,6 +137,16 @@ def goal_in_start_frame(
     return s, g
 
 
+def lift_onto(start: torch.Tensor, goal: torch.Tensor, which: torch.Tensor) -> torch.Tensor:
+    """Canonical starts ``[B, 21, 3]`` moved up or down, where ``which`` ``[B]``, so that
+    their pelvis is at the goal's height: both canonical pelvises are over the origin, so
+    they then coincide, as in a world-space edit made on the goal's pelvis."""
+    dy = goal[:, _PELVIS, 1] - start[:, _PELVIS, 1]
+    out = start.clone()
+    out[:, :, 1] += torch.where(which, dy, torch.zeros_like(dy))[:, None]
+    return out
+
+
 def augment_pairs(
     start: torch.Tensor, goal: torch.Tensor, rng: np.random.Generator, cfg: AugmentConfig,
     reference_total: float,

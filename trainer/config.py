@@ -6,7 +6,7 @@ import tomllib
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from core.skeleton import BASE_KEYPOINTS, JOINT_NAMES
 
@@ -101,7 +101,21 @@ class SolverConfig(_Section):
         ]
     )
 
-    _v = field_validator("sets")(_check_joints)
+    long_sets: list[list[str]] = Field(
+        default=[],
+        description="Sets trained apart, in a bank of their own, for long_epochs: a set of "
+        "many targets keeps improving past the one epoch after which single joints drift.",
+    )
+    long_epochs: int = Field(default=8, ge=1)
+
+    _v = field_validator("sets", "long_sets")(_check_joints)
+
+    @model_validator(mode="after")
+    def _apart(self) -> SolverConfig:
+        both = {tuple(sorted(j)) for j in self.sets} & {tuple(sorted(j)) for j in self.long_sets}
+        if both:
+            raise ValueError(f"solver sets in both sets and long_sets: {sorted(both)}")
+        return self
 
 
 class CompletionConfig(_Section):
@@ -188,6 +202,14 @@ class AugmentConfig(_Section):
     world_pairs: bool = Field(
         default=True,
         description="Pairs in the start's frame (False: both canonicalised, the old way).",
+    )
+    lift_start: float = Field(
+        default=0.0,
+        ge=0,
+        le=1,
+        description="Canonicalised pairs (world_pairs false): the share of pairs whose start "
+        "is lifted onto the goal's pelvis height, as a world-space edit made on the goal's "
+        "pelvis has it (both pelvises then coincide; facing still canonical apart).",
     )
     enabled: bool = Field(default=True, description="False: no augmentation at all.")
 

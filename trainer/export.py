@@ -285,8 +285,10 @@ def export_all(
         part="decoder",
         stage="autoencoder",
     )
+    long = {tuple(sorted(j)) for j in cfg.solver.long_sets}
     for index, joints in enumerate(bank.sets):
         key = "+".join(sorted(joints))
+        stage = "solvers_long" if tuple(sorted(joints)) in long else "solvers"
         solver = SingleSolver(bank, index).eval()
         feeds = {"latent": z, "targets": sample[:, target_columns(joints)]}
         add(
@@ -299,7 +301,7 @@ def export_all(
             kind="solver",
             joints=list(joints),
             key=key,
-            stage="solvers",
+            stage=stage,
         )
         mode = answer_mode(cfg.solver.delta, cfg.solver.anchor)
         add(
@@ -312,7 +314,7 @@ def export_all(
             kind="fused",
             joints=list(joints),
             key=key,
-            stage="solvers",
+            stage=stage,
             metrics_of=f"solver:{key}",
             graphs=5,  # encoder, solver twice, decoder twice
             reference=FusedGraph(ae, solver, list(joints), mode).eval(),

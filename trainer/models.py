@@ -158,6 +158,26 @@ class SolverBank(nn.Module):
         return latent + h if self.residual else h
 
 
+def merge_banks(*banks: SolverBank) -> SolverBank:
+    """One bank holding every solver of ``banks`` (same normaliser, latent and layer
+    sizes), each answering exactly as in its own bank: the first layer's target rows are
+    zero-padded to the widest set, like any set smaller than the largest."""
+    first = banks[0]
+    sets = [joints for b in banks for joints in b.sets]
+    hidden = [w.shape[2] for w in first.weights[:-1]]
+    out = SolverBank(first.norm, sets, first.latent_dim, hidden, first.residual)
+    with torch.no_grad():
+        for i in range(len(out.weights)):
+            out.weights[i].zero_()
+            row = 0
+            for b in banks:
+                w = b.weights[i]
+                out.weights[i][row : row + len(w), : w.shape[1]] = w
+                out.biases[i][row : row + len(w)] = b.biases[i]
+                row += len(w)
+    return out
+
+
 class SingleSolver(nn.Module):
     """One solver sliced out of a bank, with the export signature
     ``(latent [N, D], targets [N, 3k] in metres) -> latent [N, D]``."""

@@ -37,6 +37,7 @@ from trainer.augment import (
     augment_pairs,
     augment_poses,
     goal_in_start_frame,
+    lift_onto,
     random_bodies,
     rebuild,
     turn,
@@ -50,6 +51,7 @@ from trainer.models import (
     SolverBank,
     TiedAutoencoder,
     feature_stats,
+    merge_banks,
     target_columns,
 )
 from trainer.pairs import partner_ranges, sample_partners
@@ -211,7 +213,7 @@ def load_checkpoint(
 
 def config_tag(cfg: TrainConfig, stage: str) -> str:
     augment = cfg.augment.model_dump()
-    pairs_only = ("world_pairs", "align_pelvis", "align_floor")  # read by the solvers alone
+    pairs_only = ("world_pairs", "align_pelvis", "align_floor", "lift_start")  # solvers only
     relevant: dict[str, Any] = {
         "seed": cfg.seed,
         "dataset": cfg.dataset,
@@ -223,7 +225,11 @@ def config_tag(cfg: TrainConfig, stage: str) -> str:
         solver = cfg.solver.model_dump(exclude={"passes"})  # passes: serving only
         if not solver["rigid_loss"]:  # added later: in the tag only when on, so that
             del solver["rigid_loss"]  # checkpoints from before it stay valid
+        if not solver["long_sets"]:  # likewise
+            del solver["long_sets"], solver["long_epochs"]
         relevant["solver"] = solver
+        if not augment["lift_start"]:  # added later: in the tag only when on (see above)
+            del augment["lift_start"]
         relevant["augment"] = augment
     if stage.startswith("completion"):
         relevant["completion"] = cfg.completion.model_dump()
@@ -424,6 +430,8 @@ class PairSource:
             s, g = goal_in_start_frame(self.frames, start, goal, rng, aug)
         else:
             s, g = self.frames.poses[start], self.frames.poses[goal]
+            if aug.enabled and aug.lift_start > 0:
+                s = lift_onto(s, g, torch.from_numpy(rng.random(len(s)) < aug.lift_start))
         if aug.enabled:
             s, g = augment_pairs(s, g, rng, aug, total)
         return s.reshape(len(s), -1), g.reshape(len(g), -1)
@@ -528,24 +536,31 @@ def solver_metrics(
 
 
 def train_solvers(
-    cfg: TrainConfig, d: Dist, ae: TiedAutoencoder, splits: Splits, total: float, fresh: bool
-) -> tuple[SolverBank, StageState]:
+    cfg: TrainConfig, d: Dist, ae: TiedAutoencoder, splits: Splits, total: float, fresh: bool,
+    long: bool = False,
+) -> tuple[SolverBank, StageState]:  # fmt: skip
+    """The solver bank of ``solver.sets`` (stage ``solvers``), or with ``long`` the bank of
+    ``solver.long_sets`` trained apart for ``solver.long_epochs`` (stage ``solvers_long``,
+    its own initialisation and pair stream)."""
     sc, aug = cfg.solver, cfg.augment
+    sets, epochs = (sc.long_sets, sc.long_epochs) if long else (sc.sets, sc.epochs)
+    stage = "solvers_long" if long else "solvers"
+    stream = "solver-long-pairs" if long else "solver-pairs"
     mode = answer_mode(sc.delta, sc.anchor)
     max_gap = max(1, round(sc.max_gap_seconds * FPS))
     src = PairSource.of(splits.train, max_gap)
     val = PairSource.of(splits.val, max_gap)
     va, vp = val.fixed_pairs(cfg.seed + 1, cfg.max_eval_frames)
     v_start, v_goal = val.pairs(va, vp, np.random.default_rng(cfg.seed + 9), aug, total)
-    torch.manual_seed(cfg.seed + 1)
-    bank = SolverBank(ae.norm, sc.sets, ae.latent_dim, sc.hidden, sc.residual)
+    torch.manual_seed(cfg.seed + (2 if long else 1))
+    bank = SolverBank(ae.norm, sets, ae.latent_dim, sc.hidden, sc.residual)
     net: nn.Module = DistributedDataParallel(bank) if d.world > 1 else bank
     params = [p for n, p in bank.named_parameters() if not n.startswith("norm.")]
     optim = torch.optim.Adam(params, lr=sc.lr)
     steps = steps_per_epoch(len(src.poses), sc.batch_size, d)
 
     def train_epoch(epoch: int, bar: Bar) -> float:
-        rng = stage_rng(cfg.seed, "solver-pairs", epoch)
+        rng = stage_rng(cfg.seed, stream, epoch)
         partner_idx = sample_partners(src.lo, src.hi, np.arange(len(src.poses)), rng)
         same = rng.random(len(partner_idx)) < sc.identity_fraction
         partner_idx[same] = np.flatnonzero(same)  # "already there": learn to stay put
@@ -581,13 +596,13 @@ def train_solvers(
         }
 
     state = run_stage(
-        name="solvers",
+        name=stage,
         cfg=cfg,
         d=d,
         model=net,
         trainable=bank,
         optim=optim,
-        epochs=sc.epochs,
+        epochs=epochs,
         steps=steps,
         train_epoch=train_epoch,
         validate=validate,
@@ -759,6 +774,12 @@ def train_all(cfg: TrainConfig, *, fresh: bool = False) -> Trained:
     total = float(reference_lengths(splits.train).sum())
     ae, ae_state = train_autoencoder(cfg, d, train, val, total, fresh)
     bank, solver_state = train_solvers(cfg, d, ae, splits, total, fresh)
+    states = {"autoencoder": ae_state, "solvers": solver_state}
+    if cfg.solver.long_sets:
+        long_bank, states["solvers_long"] = train_solvers(
+            cfg, d, ae, splits, total, fresh, long=True
+        )
+        bank = merge_banks(bank, long_bank)
     completion, completion_states = train_completion(cfg, d, splits, fresh)
     if d.world > 1:  # every rank reports what it ended with (ranks must agree)
         digest = hashlib.sha256()
@@ -767,6 +788,5 @@ def train_all(cfg: TrainConfig, *, fresh: bool = False) -> Trained:
                 digest.update(tensor.detach().contiguous().numpy().tobytes())
         print(f"weights digest rank {d.rank}: {digest.hexdigest()}", flush=True)
         d.barrier()
-    states = {"autoencoder": ae_state, "solvers": solver_state}
     states.update({f"completion{i + 1}": s for i, s in enumerate(completion_states)})
     return Trained(ae=ae, bank=bank, completion=completion, states=states, splits=splits)

@@ -14,6 +14,7 @@ from trainer.augment import (
     FrameSource,
     augment_pairs,
     goal_in_start_frame,
+    lift_onto,
     mirror,
     rebuild,
     turn,
@@ -61,6 +62,22 @@ def test_aligned_pairs_put_the_start_on_the_goals_pelvis(small_dataset: Path) ->
     # the start keeps its own shape: only lifted
     lift = (s - src.poses[start])[..., 1]
     torch.testing.assert_close(lift, lift[:, :1].expand_as(lift))
+
+
+def test_lifted_canonical_starts_share_the_goals_pelvis(small_dataset: Path) -> None:
+    """``augment.lift_start``: a canonical start lifted onto the goal's pelvis height has
+    the goal's pelvis (both are over the origin) and its own shape; the others unmoved."""
+    src, world = _source(small_dataset)
+    start, goal = _pairs(world, 64, 4)
+    s, g = src.poses[start], src.poses[goal]
+    which = torch.arange(64) % 2 == 0
+    out = lift_onto(s, g, which)
+    torch.testing.assert_close(out[which, PELVIS], g[which, PELVIS], atol=1e-6, rtol=0)
+    assert (s[which, PELVIS, 1] - g[which, PELVIS, 1]).abs().max() > 0.01  # it did move
+    torch.testing.assert_close(out[~which], s[~which], atol=0, rtol=0)
+    d = out - s
+    torch.testing.assert_close(d[..., [0, 2]], torch.zeros_like(d[..., [0, 2]]))
+    torch.testing.assert_close(d[..., 1], d[:, :1, 1].expand_as(d[..., 1]))
 
 
 def test_rebuild_gives_the_requested_bone_lengths(small_dataset: Path) -> None:

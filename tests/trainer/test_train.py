@@ -24,7 +24,15 @@ from trainer.config import QUICK, TrainConfig, load_config
 from trainer.data.dataset import load_dataset
 from trainer.export import evaluate, export_all
 from trainer.fused import FusedGraph, LeanFusedGraph
-from trainer.models import Normaliser, SingleSolver, TiedAutoencoder, feature_stats
+from trainer.models import (
+    Normaliser,
+    SingleSolver,
+    SolverBank,
+    TiedAutoencoder,
+    feature_stats,
+    merge_banks,
+    target_columns,
+)
 from trainer.train import Trained, flat, train_all
 
 REPO = Path(__file__).resolve().parents[2]
@@ -35,7 +43,12 @@ TINY: dict[str, Any] = {
     "threads": 1,
     "max_train_frames": 3000,
     "max_eval_frames": 500,
-    "solver": {"epochs": 1, "sets": [["left_wrist"], ["left_ankle", "right_ankle"]]},
+    "solver": {
+        "epochs": 1,
+        "sets": [["left_wrist"], ["left_ankle", "right_ankle"]],
+        "long_sets": [["head", "left_wrist", "right_wrist"]],  # a bank of its own
+        "long_epochs": 2,
+    },
     "completion": {
         "epochs": 1,
         "schemes": [
@@ -70,10 +83,12 @@ def test_manifest_is_valid_and_hashes_verify(trained: tuple[Trained, Path]) -> N
     _, models = trained
     manifest = load_manifest(models, verify=True)
     kinds = sorted(m.kind for m in manifest.models)
-    assert kinds.count("solver") == 2
+    assert kinds.count("solver") == 3
     assert kinds.count("completion") == 2
     assert manifest.autoencoder("encoder").file == "encoder.onnx"
-    assert set(manifest.solvers()) == {"left_wrist", "left_ankle+right_ankle"}
+    assert set(manifest.solvers()) == {
+        "left_wrist", "left_ankle+right_ankle", "head+left_wrist+right_wrist"
+    }  # fmt: skip
     assert manifest.provenance.split_seed == 0
     assert manifest.provenance.config["solver"]["other_weight"] == 0.01
     for entry in manifest.models:
@@ -112,6 +127,33 @@ def test_onnx_matches_torch_on_real_poses(trained: tuple[Trained, Path]) -> None
             torch.from_numpy(poses.numpy()[::-1].copy())[None].expand(len(bank.sets), -1, -1),
         )[s].numpy()
     assert np.abs(z2 - want).max() <= 1e-5
+
+
+def test_long_sets_train_apart_and_answer_as_their_own_bank(
+    trained: tuple[Trained, Path],
+) -> None:
+    """``solver.long_sets`` train in a bank of their own for ``long_epochs`` (stage
+    ``solvers_long``); the merged bank answers, per solver, exactly as its own bank."""
+    result, _ = trained
+    assert result.states["solvers"].epoch == 1 and result.states["solvers_long"].epoch == 2
+    assert result.bank.sets[-1] == ["head", "left_wrist", "right_wrist"]
+    torch.manual_seed(3)
+    norm = result.bank.norm
+    a = SolverBank(norm, [["left_wrist"], ["left_ankle", "right_ankle"]], 8, [16, 16], True)
+    b = SolverBank(norm, [["head", "left_wrist", "right_wrist", "left_ankle"]], 8, [16, 16], True)
+    merged = merge_banks(a, b)
+    z = torch.randn(5, 8)
+    pose = flat(result.splits.test.positions[:5])
+    for m, (bank, i) in enumerate([(a, 0), (a, 1), (b, 0)]):
+        cols = target_columns(bank.sets[i])
+        with torch.no_grad():
+            want = SingleSolver(bank, i)(z, pose[:, cols])
+            got = SingleSolver(merged, m)(z, pose[:, cols])
+            batched = merged(z[None].expand(3, -1, -1), pose[None].expand(3, -1, -1))[m]
+        assert torch.equal(got, want)
+        torch.testing.assert_close(batched, want, atol=1e-6, rtol=0)
+    with pytest.raises(ValueError, match="both sets and long_sets"):
+        load_config(None, {"solver": {"sets": [["head"]], "long_sets": [["head"]]}})
 
 
 @pytest.mark.parametrize("mode", ["plain", "delta", "anchored"])
