@@ -85,6 +85,9 @@ def run(
             k: (name, edits_from_pairs(test, a, b, [joint_idx(j)] * len(a)))
             for k, (name, j) in target_sets.items()
         }
+        # five targets no trained set covers whole: composed of five single-joint solvers
+        limbs = ("head", "left_elbow", "right_elbow", "left_knee", "right_knee")
+        composed = ("+".join(limbs), edits_from_pairs(test, a, b, [joint_idx(limbs)] * len(a)))
     if not skip_speed:
         t0 = time.perf_counter()
         console.log("in-process latency")
@@ -104,6 +107,7 @@ def run(
         i14 = speed.issue14(
             engine,
             {k: edit_sets[k] for k in (2, 5)},
+            composed={5: composed},
             calls=40 if quick else 2000,
             warmup=5 if quick else 50,
             batch=64 if quick else 4096,
@@ -115,9 +119,10 @@ def run(
             "throughput_set": "both wrists (2 targets), B1 edits",
             "issue14": i14,
         }
-        for row in i14["latency"]:
+        for row in i14["latency"] + i14["composed"]:
             console.log(
-                f"  issue 14, {row['targets']} targets: neural {row['neural']['p50_ms']:.3f} ms,"
+                f"  issue 14, {row['targets']} targets ({row['set']}):"
+                f" neural {row['neural']['p50_ms']:.3f} ms,"
                 f" FABRIK compiled {row['fabrik_compiled']['p50_ms']:.3f} ms"
                 f" (kernel {row['fabrik_kernel']['p50_ms']:.4f}),"
                 f" FABRIK numpy {row['fabrik_numpy']['p50_ms']:.3f} ms;"

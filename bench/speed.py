@@ -31,6 +31,7 @@ def latency(
     engine: Engine,
     sets: dict[int, tuple[str, Edits]],
     *,
+    composed: dict[int, tuple[str, Edits]] | None = None,
     calls: int = 2000,
     fabrik_every: int = 4,
     warmup: int = 50,
@@ -112,6 +113,7 @@ def issue14(
     engine: Engine,
     sets: dict[int, tuple[str, Edits]],
     *,
+    composed: dict[int, tuple[str, Edits]] | None = None,
     calls: int = 2000,
     warmup: int = 50,
     tolerance: float = 1e-4,
@@ -125,9 +127,10 @@ def issue14(
       FABRIK), and ``fabrik_kernel``: the compiled FABRIK kernel alone on the canonical
       edit (no engine glue);
     - ``fabrik_numpy``: ``core.kinematics.fabrik`` (the numpy FABRIK the engine ran before);
-
     - ``neural_passes1``: the ``neural`` call with ``passes=1`` (``options.passes``), beside
       the engine's default (``solve_passes``, the models' ``serving.passes``);
+    - ``composed``: the same timings on sets no trained solver covers whole (several
+      solvers composed), beside the goals' sets.
 
     FABRIK with ``tolerance`` (m) and the engine's iteration cap. Then in-process batch
     throughput of ``engine.solve_arrays`` and ``engine.solve`` on ``batch`` edits (2
@@ -135,6 +138,10 @@ def issue14(
     rows = [
         _issue14_set(engine, k, name, edits, calls, warmup, tolerance)
         for k, (name, edits) in sets.items()
+    ]
+    extra = [
+        _issue14_set(engine, k, name, edits, calls, warmup, tolerance)
+        for k, (name, edits) in (composed or {}).items()
     ]
     two = sets[2][1]
     reps = -(-batch // len(two))
@@ -157,6 +164,7 @@ def issue14(
     ort_threads = engine.encoder.session.get_session_options().intra_op_num_threads
     return {
         "latency": rows,
+        "composed": extra,
         "tolerance_m": tolerance,
         "iteration_cap": engine.fabrik_max_iterations,
         "batch": batch,
