@@ -39,17 +39,29 @@ VARIANTS: dict[str, str] = {
     "one pass",
     "ae512_2passes": "`ae512` served with two passes",
     "ae512_3passes": "`ae512` served with three passes",
-    "shipped": "the shipped recipe at its full budget (trainer/configs/default.toml): `rigid` "
-    "served with two passes",
-    "shipped_3passes": "the shipped models served with three passes",
-    "stay0": "`shipped` with no stay term (solver.stay_weight 0 against 0.1; only the solvers "
+    "c12": "the models shipped before this round (mx1-66cae476c74c, run exp_c12, "
+    "ablation/base_c12.toml): `rigid` served with two passes",
+    "c12_3passes": "`c12` served with three passes",
+    "stay0": "`c12` with no stay term (solver.stay_weight 0 against 0.1; only the solvers "
     "retrained, trainer/configs/ablation/stay0.toml)",
-    "stay03e2": "`shipped` with stay_weight 0.3 and two solver epochs (stay03e2.toml)",
-    "stay1": "`shipped` with stay_weight 1.0 (stay1.toml)",
-    "solver256": "`shipped` with wider solvers, 3 x 256 hidden against 3 x 126 "
+    "stay03e2": "`c12` with stay_weight 0.3 and two solver epochs (stay03e2.toml)",
+    "stay1": "`c12` with stay_weight 1.0 (stay1.toml)",
+    "solver256": "`c12` with wider solvers, 3 x 256 hidden against 3 x 126 "
     "(solver256.toml): ~2x the time per network run",
-    "completion512": "`shipped` with wider completion networks, 512-512-512-256 against "
+    "completion512": "`c12` with wider completion networks, 512-512-512-256 against "
     "300-400-300-200 (completion512.toml; autoencoder and solvers the shipped ones)",
+    "eff5": "`c12` with a 5-end-effector solver added to the shared bank, one epoch (eff5.toml)",
+    "eff5only_e1": "a bank of the 5-end-effector solver alone, 1 epoch (eff5only_e1.toml; "
+    "the other sets have no solver there: read its 5 end effectors row only)",
+    "eff5only_e3": "the same, 3 epochs",
+    "eff5only_e8": "the same, 8 epochs",
+    "eff5only_e16": "the same, 16 epochs",
+    "lift1": "`c12` with every solver pair's start lifted onto the goal's pelvis height "
+    "(augment.lift_start 1.0, lift1.toml)",
+    "lift075": "`c12` with three quarters of the starts lifted (lift075.toml)",
+    "lift05": "`c12` with half of the starts lifted (lift05.toml)",
+    "shipped": "the shipped recipe (trainer/configs/default.toml, run exp_c13): `lift05` "
+    "plus the 5-end-effector solver trained apart for 8 epochs (solver.long_sets)",
 }
 COMPLETION = "6-point completion"
 
@@ -146,8 +158,9 @@ def main(
         "# Training ablation on held-out bodies\n\n"
         f"Written by `scripts/ablation.sh` then `python -m bench.ablation {fams}`.\n"
         "Variants train at a small budget (trainer/configs/ablation/full.toml, the recipe of "
-        "`previous`); `shipped*`, `previous*`, `rigid`, `ae512*`, `shipped-before`, "
-        "`shipped-world-pairs` and `long_solvers` are full-budget models scored with "
+        "`previous`); `shipped`, `c12*`, `previous*`, `rigid`, `ae512*`, `shipped-before`, "
+        "`shipped-world-pairs`, `long_solvers`, `stay*`, `solver256`, `completion512`, "
+        "`eff5*` and `lift*` are full-budget models scored with "
         "`python -m bench.heldout --models DIR [--passes N] --out reports/ablation/NAME.json`."
         " Rows scored with the numpy engine, before the compiled one, agree with it to "
         "5e-14 m (docs/benchmarks.md)."

@@ -151,10 +151,15 @@ def edits_from_pairs(
 
 
 def b1_sets(engine: Engine) -> dict[str, tuple[str, ...]]:
-    """B1 target sets: every trained single joint, every trained pair, the five composed."""
+    """B1 target sets: every trained single joint, every trained pair, the five end
+    effectors (one trained solver, or composed where the models have none for them)."""
     solvers = engine.manifest.solvers()
     singles = {k: tuple(e.joints) for k, e in solvers.items() if len(e.joints) == 1}
-    multi = {k: tuple(e.joints) for k, e in solvers.items() if len(e.joints) > 1}
+    multi = {
+        k: tuple(e.joints)
+        for k, e in solvers.items()
+        if len(e.joints) > 1 and set(e.joints) != set(END_EFFECTORS)  # that one is FIVE
+    }
     return {**singles, **multi, FIVE: END_EFFECTORS}
 
 
