@@ -60,6 +60,8 @@ VARIANTS: dict[str, str] = {
     "(augment.lift_start 1.0, lift1.toml)",
     "lift075": "`c12` with three quarters of the starts lifted (lift075.toml)",
     "lift05": "`c12` with half of the starts lifted (lift05.toml)",
+    "pairs_long": "`shipped` with the two pair solvers (wrists, ankles) also trained apart "
+    "for 8 epochs (pairs_long.toml; the single-joint bank then holds 12 sets)",
     "shipped": "the shipped recipe (trainer/configs/default.toml, run exp_c13): `lift05` "
     "plus the 5-end-effector solver trained apart for 8 epochs (solver.long_sets)",
 }

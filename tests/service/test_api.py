@@ -165,8 +165,15 @@ def test_same_request_same_bits(client: Any, synthetic_poses: PosePairs) -> None
 def test_composition_and_uncovered_joints(client: Any, real_poses: PosePairs) -> None:
     five = ["head", "left_wrist", "right_wrist", "left_ankle", "right_ankle"]
     out = client.post("/v1/solve", json=solve_body(real_poses, 3, five)).json()
-    assert sorted(out["solvers"]) == ["head", "left_ankle+right_ankle", "left_wrist+right_wrist"]
+    key = "head+left_ankle+left_wrist+right_ankle+right_wrist"
+    assert out["solvers"] == [key]  # a trained set: its own solver
     assert max(t["error"] for t in out["targets"]) < 0.15
+    # a superset composes: the largest trained subset first, then what it leaves
+    out = client.post("/v1/solve", json=solve_body(real_poses, 3, [*five, "left_knee"])).json()
+    assert out["solvers"] == [key, "left_knee"]
+    assert max(t["error"] for t in out["targets"]) < 0.15
+    out = client.post("/v1/solve", json=solve_body(real_poses, 3, five[:3])).json()
+    assert sorted(out["solvers"]) == ["head", "left_wrist+right_wrist"]
     # spine2 has no trained solver: a FABRIK polish places it, holding the others
     out = client.post(
         "/v1/solve", json=solve_body(real_poses, 3, ["spine2", "left_wrist"], reach="soft")
