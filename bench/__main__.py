@@ -30,7 +30,14 @@ def run(
 ) -> Path:
     """Run the benchmark and write the report."""
     from bench import accuracy, heldout, http_load, plots, speed
-    from bench.edits import FIVE, edits_from_pairs, joint_idx, sample_pairs, test_split
+    from bench.edits import (
+        FIVE,
+        LIMBS5,
+        edits_from_pairs,
+        joint_idx,
+        sample_pairs,
+        test_split,
+    )
     from bench.report import render_report, write_json
     from service.engine import Engine
     from trainer.data.dataset import load_dataset
@@ -86,8 +93,7 @@ def run(
             for k, (name, j) in target_sets.items()
         }
         # five targets no trained set covers whole: composed of five single-joint solvers
-        limbs = ("head", "left_elbow", "right_elbow", "left_knee", "right_knee")
-        composed = ("+".join(limbs), edits_from_pairs(test, a, b, [joint_idx(limbs)] * len(a)))
+        composed = ("+".join(LIMBS5), edits_from_pairs(test, a, b, [joint_idx(LIMBS5)] * len(a)))
     if not skip_speed:
         t0 = time.perf_counter()
         console.log("in-process latency")

@@ -46,6 +46,10 @@ METHOD_OPTIONS: dict[str, tuple[str, bool, str]] = {
 }
 END_EFFECTORS: tuple[str, ...] = ("head", "left_wrist", "right_wrist", "left_ankle", "right_ankle")
 FIVE = "5 end effectors"
+#: Five targets no trained set covers whole (several solvers composed): the composition
+#: ablation and issue 14's composed timing.
+LIMBS5 = ("head", "left_elbow", "right_elbow", "left_knee", "right_knee")
+COMPOSED5 = "head, elbows, knees"
 FLOOR_JOINTS: tuple[str, ...] = ("left_ankle", "left_foot", "right_ankle", "right_foot")
 TOLERANCE = 1e-3  # metres, the service's default
 MIN_GAP, MAX_GAP = int(0.2 * FPS), int(1.0 * FPS)  # pair distance in frames (0.2-1 s)

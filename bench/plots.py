@@ -10,7 +10,7 @@ import numpy as np
 import numpy.typing as npt
 
 from bench.accuracy import Accuracy
-from bench.edits import FIVE, METHOD_LABEL, METHODS, short
+from bench.edits import COMPOSED5, FIVE, METHOD_LABEL, METHODS, short
 from trainer.data.dataset import FPS
 
 F64 = npt.NDArray[np.floating[Any]]
@@ -170,7 +170,7 @@ def plot_ablation(results: Json, path: Path) -> None:
     abl = results.get("ablation", {})
     labels = list(abl)
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.6))
-    cols = [(f"B1 {FIVE}", "neural_bone"), ("B3 2+ joints", "neural_bone")]
+    cols = [(f"B1 {COMPOSED5}", "neural_bone"), ("B3 2+ joints", "neural_bone")]
     width = 0.8 / len(cols)
     x = np.arange(len(labels))
     for i, (key, method) in enumerate(cols):

@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from bench.accuracy import STRESS_METHODS
-from bench.edits import FIVE, METHOD_LABEL, METHODS, short
+from bench.edits import COMPOSED5, FIVE, METHOD_LABEL, METHODS, short
 from bench.goals import goals, heldout_goals
 from bench.heldout import COMPLETION, HeldoutResults
 from bench.heldout import METHODS as HELD_METHODS
@@ -319,7 +319,7 @@ def render_report(results: Json, plots: dict[str, str], title: str) -> str:
         abl = results["ablation"]
         rows = []
         for p, row in abl.items():
-            for key in (f"B1 {FIVE}", "B3 2+ joints"):
+            for key in (f"B1 {COMPOSED5}", "B3 2+ joints"):
                 for m in ("neural_raw", "neural_bone"):
                     s = row[f"{key}|{m}"]
                     rows.append(
@@ -341,8 +341,9 @@ def render_report(results: Json, plots: dict[str, str], title: str) -> str:
             "ẑ = S_t3(S_t2(S_t1(z))); *passes*: cycles through that sequence; *re-encode*: "
             "before each later solver, decode, paste the targets solved so far and "
             "re-encode; *projections*: rounds of paste-all-targets and re-encode at the end "
-            "(docs/service.md). Same edits as B1 (five end effectors) and B3 (subsets of 2 or "
-            "more joints).",
+            "(docs/service.md). B1's pairs with five targets no trained set covers whole (head, "
+            "both elbows, both knees: five single-joint solvers) and B3's subsets of 2 or "
+            "more joints.",
             "",
             table(
                 [
