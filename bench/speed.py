@@ -31,7 +31,6 @@ def latency(
     engine: Engine,
     sets: dict[int, tuple[str, Edits]],
     *,
-    composed: dict[int, tuple[str, Edits]] | None = None,
     calls: int = 2000,
     fabrik_every: int = 4,
     warmup: int = 50,

@@ -169,9 +169,10 @@ def _chain(plan: _Plan, jmap: JointMap, target: int) -> list[int]:
 
 def _two_bone(points: F64, goal: F64, lengths: F64) -> F64 | None:
     """A two-bone chain ``[3, 3]`` onto ``goal`` in closed form (law of cosines), its middle
-    joint kept in the plane it bends in now, on the same side; None where that plane is
-    undefined (the chain straight along the goal) or the goal is nearer than the bones
-    allow. FABRIK crawls near full stretch (2 mm short after 64 rounds, a standing leg)."""
+    joint kept in the plane through the base, the middle joint and the goal, on the middle
+    joint's side; None where that plane is undefined (the middle joint on the line to the
+    goal) or the goal is nearer than the bones allow. FABRIK crawls near full stretch
+    (2 mm short after 64 rounds, a standing leg)."""
     a, b = float(lengths[0]), float(lengths[1])
     base, mid = points[0], points[1]
     to_goal = goal - base
@@ -199,6 +200,8 @@ def _fabrik(points: F64, goal: F64, tol: float, iterations: int = 64) -> F64:
         for i in range(1, len(p)):
             p[i] = p[i - 1] + d * lengths[i - 1]
         return p
+    if np.linalg.norm(p[-1] - goal) <= tol:
+        return p  # already there (an untouched pin stays bit for bit)
     if len(p) == 3 and (closed := _two_bone(p, goal, lengths)) is not None:
         return closed
     for _ in range(iterations):

@@ -137,13 +137,15 @@ def character_price(joints: int, slow: bool) -> int:
     return (FABRIK_PRICE + -(-joints // CHARACTER_JOINTS)) * (2 if slow else 1)
 
 
-def max_item_price() -> int:
+def max_item_price(passes: int) -> int:
     """The costliest pose item: neural with the FABRIK polish at the most passes a request
-    may ask for (dearer than a FABRIK item)."""
-    return max(FABRIK_PRICE, neural_price(True, MAX_PASSES))
+    may ask for or the models' default (``passes``), whichever is more; dearer than a
+    FABRIK item."""
+    return max(FABRIK_PRICE, neural_price(True, max(MAX_PASSES, passes)))
 
 
-def batch_price_limit(max_items: int) -> int:
+def batch_price_limit(max_items: int, passes: int) -> int:
     """The most one batch may cost: ``max_items`` of the costliest pose items (a batch of
-    pose items is bounded by its item count alone; character items also by their joints)."""
-    return max_items * max_item_price()
+    pose items is bounded by its item count alone; character items also by their joints);
+    ``passes``: the models' default."""
+    return max_items * max_item_price(passes)

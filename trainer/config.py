@@ -267,6 +267,6 @@ QUICK: dict[str, Any] = {
     "max_train_frames": 4000,
     "max_eval_frames": 1000,
     "autoencoder": {"epochs": 2},
-    "solver": {"epochs": 1},
+    "solver": {"epochs": 1, "long_epochs": 1},
     "completion": {"epochs": 1},
 }

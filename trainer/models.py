@@ -163,8 +163,13 @@ def merge_banks(*banks: SolverBank) -> SolverBank:
     sizes), each answering exactly as in its own bank: the first layer's target rows are
     zero-padded to the widest set, like any set smaller than the largest."""
     first = banks[0]
-    sets = [joints for b in banks for joints in b.sets]
     hidden = [w.shape[2] for w in first.weights[:-1]]
+    for b in banks[1:]:
+        if (b.norm is not first.norm or b.latent_dim != first.latent_dim
+                or b.residual != first.residual or len(b.weights) != len(first.weights)
+                or [w.shape[2] for w in b.weights[:-1]] != hidden):  # fmt: skip
+            raise ValueError("merge_banks: the banks differ in normaliser, latent or layers")
+    sets = [joints for b in banks for joints in b.sets]
     out = SolverBank(first.norm, sets, first.latent_dim, hidden, first.residual)
     with torch.no_grad():
         for i in range(len(out.weights)):
@@ -175,7 +180,7 @@ def merge_banks(*banks: SolverBank) -> SolverBank:
                 out.weights[i][row : row + len(w), : w.shape[1]] = w
                 out.biases[i][row : row + len(w)] = b.biases[i]
                 row += len(w)
-    return out
+    return out.train(first.training)
 
 
 class SingleSolver(nn.Module):

@@ -225,8 +225,11 @@ def config_tag(cfg: TrainConfig, stage: str) -> str:
         solver = cfg.solver.model_dump(exclude={"passes"})  # passes: serving only
         if not solver["rigid_loss"]:  # added later: in the tag only when on, so that
             del solver["rigid_loss"]  # checkpoints from before it stay valid
-        if not solver["long_sets"]:  # likewise
-            del solver["long_sets"], solver["long_epochs"]
+        # each bank reads only its own sets and epochs (its own seed and pair stream), so
+        # neither is retrained when only the other's change
+        mine, other = ("long_sets", "long_epochs"), ("sets", "epochs")
+        for key in other if stage == "solvers_long" else mine:
+            del solver[key]
         relevant["solver"] = solver
         if not augment["lift_start"]:  # added later: in the tag only when on (see above)
             del augment["lift_start"]
@@ -540,8 +543,8 @@ def train_solvers(
     long: bool = False,
 ) -> tuple[SolverBank, StageState]:  # fmt: skip
     """The solver bank of ``solver.sets`` (stage ``solvers``), or with ``long`` the bank of
-    ``solver.long_sets`` trained apart for ``solver.long_epochs`` (stage ``solvers_long``,
-    its own initialisation and pair stream)."""
+    ``solver.long_sets`` trained apart for ``solver.long_epochs`` (stage ``solvers_long``:
+    its own initialisation and partners; the same batch order)."""
     sc, aug = cfg.solver, cfg.augment
     sets, epochs = (sc.long_sets, sc.long_epochs) if long else (sc.sets, sc.epochs)
     stage = "solvers_long" if long else "solvers"

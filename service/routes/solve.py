@@ -160,16 +160,16 @@ def check_price(forms: list[SolveRequest | CharacterSolveRequest], max_items: in
         else price_of(f.options, bool(f.pins), passes)
         for f in forms
     ]
-    total, cap = sum(prices), batch_price_limit(max_items)
+    total, cap = sum(prices), batch_price_limit(max_items, passes)
     if total > cap:
         i = max(range(len(prices)), key=prices.__getitem__)
         big = forms[i]
         joints = len(big.character.joints) if isinstance(big, CharacterSolveRequest) else 21
         raise TooManyItems(
             f"items: the batch costs {total} work units, beyond the limit of {cap} "
-            f"({max_items} items of at most {max_item_price()} units); a character item costs "
-            f"{FABRIK_PRICE} + 1 per {CHARACTER_JOINTS} joints, doubled for exact reach, pins "
-            "or FABRIK "
+            f"({max_items} items of at most {max_item_price(passes)} units); a character item "
+            f"costs {FABRIK_PRICE} + 1 per {CHARACTER_JOINTS} joints, doubled for exact reach, "
+            "pins or FABRIK "
             f"(items[{i}], {joints} joints: {prices[i]}); send smaller batches"
         )
 

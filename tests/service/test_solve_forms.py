@@ -267,9 +267,13 @@ def test_oversized_character_batch_is_refused(
     with make_client(models_dir, max_batch_items=4) as small:
         # 4 of the costliest pose items fit; so do 2 small characters; 3 big ones do not
         assert small.post("/v1/solve/batch", json={"items": [exact_pose] * 4}).status_code == 200
-        dearest = {**pose, "options": {"reach": "exact", "passes": 4}}  # 4 + 15 units
-        assert small.post("/v1/solve/batch", json={"items": [dearest] * 4}).status_code == 200
-        soft = {**char, "pins": [], "options": {}}
+        # the limit is 4 of the costliest pose items: exact reach at 4 passes, 4 + 15 units
+        # (it was 4 x 16, refusing this mixed batch of 19 + 19 + 24 + 4 = 66 units)
+        dearest = {**pose, "options": {"reach": "exact", "passes": 4}}
+        four = {**pose, "options": {"passes": 4}}
+        soft = {**char, "pins": [], "options": {}}  # 16 + 1 per 8 of its 57 joints
+        mixed = {"items": [dearest, dearest, soft, four]}
+        assert small.post("/v1/solve/batch", json=mixed).status_code == 200
         assert small.post("/v1/solve/batch", json={"items": [soft, pose]}).status_code == 200
         read.clear()
         r = small.post("/v1/solve/batch", json={"items": [pose, char, char]})

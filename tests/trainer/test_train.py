@@ -33,7 +33,7 @@ from trainer.models import (
     merge_banks,
     target_columns,
 )
-from trainer.train import Trained, flat, train_all
+from trainer.train import Trained, config_tag, flat, train_all
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -152,8 +152,19 @@ def test_long_sets_train_apart_and_answer_as_their_own_bank(
             batched = merged(z[None].expand(3, -1, -1), pose[None].expand(3, -1, -1))[m]
         assert torch.equal(got, want)
         torch.testing.assert_close(batched, want, atol=1e-6, rtol=0)
+    with pytest.raises(ValueError, match="differ"):
+        merge_banks(a, SolverBank(norm, [["head"]], 8, [32, 16], True))
     with pytest.raises(ValueError, match="both sets and long_sets"):
         load_config(None, {"solver": {"sets": [["head"]], "long_sets": [["head"]]}})
+    # each bank's checkpoint tag reads only its own sets and epochs
+    base = {"sets": [["head"]], "long_sets": [["left_wrist", "right_wrist"]]}
+    cfg = load_config(None, {"solver": base})
+    more = load_config(None, {"solver": {**base, "long_epochs": 3}})
+    other = load_config(None, {"solver": {**base, "sets": [["pelvis"]], "epochs": 2}})
+    assert config_tag(cfg, "solvers") == config_tag(more, "solvers")
+    assert config_tag(cfg, "solvers_long") != config_tag(more, "solvers_long")
+    assert config_tag(cfg, "solvers_long") == config_tag(other, "solvers_long")
+    assert config_tag(cfg, "solvers") != config_tag(other, "solvers")
 
 
 @pytest.mark.parametrize("mode", ["plain", "delta", "anchored"])
