@@ -547,6 +547,9 @@ def evaluate_accuracy(
     multi = [k for k in b3 if not k.startswith("1 ")]
     limbs = edits_from_pairs(test, a, b, [joint_idx(LIMBS5)] * len(a))
     res["ablation"] = eval_ablation(models_dir, limbs, pooled(b3, multi), cfg)
+    res["ablation_fabrik"] = {  # the baseline on the composed five (an info goal row)
+        f"B1 {COMPOSED5}": summarise(per_item(limbs, solve(engine, limbs, "fabrik", cfg.chunk)))
+    }
     timings["ablation"] = time.perf_counter() - t0
 
     timings["total"] = time.perf_counter() - t_start

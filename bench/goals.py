@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from bench import http_load
-from bench.edits import FIVE, short
+from bench.edits import COMPOSED5, FIVE, short
 from bench.heldout import COMPLETION, Family, HeldoutResults
 from bench.markdown import status
 
@@ -67,6 +67,20 @@ def goals(results: Json) -> list[Goal]:
                 f"{r5:.2f} cm (median {b1[FIVE]['neural_bone']['reach_median']:.2f}, "
                 f"p95 {b1[FIVE]['neural_bone']['reach_p95']:.2f})",
                 status(r5 <= 2.0),
+            )
+        )
+    abl, base = results.get("ablation", {}), results.get("ablation_fabrik", {})
+    default = [row for label, row in abl.items() if "(default)" in label]
+    key = f"B1 {COMPOSED5}"
+    if default and key in base and f"{key}|neural_bone" in default[0]:
+        nc, fc = default[0][f"{key}|neural_bone"]["mpjpe"], base[key]["mpjpe"]
+        rows.append(
+            (
+                f"(info) 5 targets composed of five solvers ({COMPOSED5}): neural + bone "
+                "MPJPE / FABRIK's",
+                "–",
+                f"{nc:.2f} / {fc:.2f} cm = {nc / fc:.2f}",
+                "info",
             )
         )
     if sets:
