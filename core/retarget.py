@@ -167,12 +167,13 @@ def _chain(plan: _Plan, jmap: JointMap, target: int) -> list[int]:
     return chain
 
 
-def _two_bone(points: F64, goal: F64, lengths: F64) -> F64 | None:
+def _two_bone(points: F64, goal: F64, lengths: F64, bend: F64 | None = None) -> F64 | None:
     """A two-bone chain ``[3, 3]`` onto ``goal`` in closed form (law of cosines), its middle
     joint kept in the plane through the base, the middle joint and the goal, on the middle
-    joint's side; None where that plane is undefined (the middle joint on the line to the
-    goal) or the goal is nearer than the bones allow. FABRIK crawls near full stretch
-    (2 mm short after 64 rounds, a standing leg)."""
+    joint's side; where the middle joint is on the line to the goal (a straight leg), on the
+    side of ``bend`` (e.g. where the foot points, so a knee bends forward). None where no
+    side is known or the goal is nearer than the bones allow. FABRIK crawls near full
+    stretch (2 mm short after 64 rounds, a standing leg) and cannot bend a straight chain."""
     a, b = float(lengths[0]), float(lengths[1])
     base, mid = points[0], points[1]
     to_goal = goal - base
@@ -182,6 +183,9 @@ def _two_bone(points: F64, goal: F64, lengths: F64) -> F64 | None:
     u = to_goal / d
     side = (mid - base) - float((mid - base) @ u) * u
     n = float(np.linalg.norm(side))
+    if n <= 1e-9 * a and bend is not None:
+        side = bend - float(bend @ u) * u
+        n = float(np.linalg.norm(side))
     if n <= 1e-9 * a:
         return None
     x = (a * a - b * b + d * d) / (2.0 * d)
@@ -189,7 +193,9 @@ def _two_bone(points: F64, goal: F64, lengths: F64) -> F64 | None:
     return np.stack([base, base + x * u + h * (side / n), np.asarray(goal, dtype=np.float64)])
 
 
-def _fabrik(points: F64, goal: F64, tol: float, iterations: int = 64) -> F64:
+def _fabrik(
+    points: F64, goal: F64, tol: float, iterations: int = 64, bend: F64 | None = None
+) -> F64:
     """Single-chain FABRIK, first point fixed; points ``[n, 3]`` (two bones: in closed
     form, :func:`_two_bone`, where it applies)."""
     p = points.copy()
@@ -202,7 +208,7 @@ def _fabrik(points: F64, goal: F64, tol: float, iterations: int = 64) -> F64:
         return p
     if np.linalg.norm(p[-1] - goal) <= tol:
         return p  # already there (an untouched pin stays bit for bit)
-    if len(p) == 3 and (closed := _two_bone(p, goal, lengths)) is not None:
+    if len(p) == 3 and (closed := _two_bone(p, goal, lengths, bend)) is not None:
         return closed
     for _ in range(iterations):
         if np.linalg.norm(p[-1] - goal) <= tol:
@@ -254,7 +260,9 @@ def _attempt(
         far = float(np.linalg.norm(gap)) - reach * (1.0 - 1e-6)
         if far > tolerance * 0.1:
             moves.append(gap / np.linalg.norm(gap) * (far + tolerance * 0.5))
-        done = _fabrik(line, np.asarray(target, dtype=np.float64), tolerance * 0.01)
+        kids = [c for c, p in enumerate(PARENTS) if p == joint]  # e.g. the foot of an ankle
+        bend = pts[kids[0]] - pts[joint] if kids else None
+        done = _fabrik(line, np.asarray(target, dtype=np.float64), tolerance * 0.01, bend=bend)
         goal[chain[1:]] = done[1:]
         changed |= _aim_pass(skel, new, jmap, plan, goal, turned, pose)
     if root is not None and not np.array_equal(new.translations[root], pose.translations[root]):

@@ -178,6 +178,33 @@ def test_retarget_exact_reach_near_full_stretch(files: dict[str, Path], stretch:
     assert bent @ before > 0
 
 
+def test_retarget_exact_reach_bends_a_straight_leg_forward(files: dict[str, Path]) -> None:
+    """A leg solved dead straight, its ankle then pinned nearer the hip along that line
+    (a T-pose leg under a lowered pelvis): no bend plane exists, and FABRIK cannot bend a
+    straight chain; the closed form bends the knee towards where the foot points."""
+    bvh = read_bvh(files["cmu-daz-salsa"])
+    skel = skeleton_of(bvh)
+    jmap = resolve_map(skel)
+    pose = pose_of(bvh, 200)
+    start = canonical_points(skel, pose, jmap)
+    h, k, a, f = (JOINT_INDEX[n] for n in ("left_hip", "left_knee", "left_ankle", "left_foot"))
+    _, g_pos = forward_kinematics(skel, pose)
+    hip = g_pos[jmap.anchors[h].joint]
+    thigh = np.linalg.norm(start[k] - hip)
+    leg = thigh + np.linalg.norm(start[a] - start[k])
+    down = (start[a] - hip) / np.linalg.norm(start[a] - hip)
+    solved = start.copy()
+    solved[k] = hip + thigh * down  # straight: the knee on the hip-ankle line
+    solved[a] = hip + leg * down
+    solved[f] = solved[a] + (start[f] - start[a])
+    goal = hip + 0.9 * leg * down
+    out = retarget(skel, pose, jmap, solved, exact=[(a, goal)], tolerance=1e-6 * leg)
+    assert np.linalg.norm(out.points[a] - goal) < 1e-9 * leg
+    toes = start[f] - start[a]
+    knee = out.points[k] - (hip + goal) / 2
+    assert knee @ (toes - (toes @ down) * down) > 0  # forward, where the foot points
+
+
 # --------------------------------------------------------------------------------------
 # numpy rotations against an independent reference (scipy: a dev dependency, never the
 # service's)
