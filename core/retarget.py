@@ -34,6 +34,8 @@ from core.skeleton import JOINT_INDEX, PARENTS
 
 _PELVIS = JOINT_INDEX["pelvis"]
 _HIPS = (JOINT_INDEX["left_hip"], JOINT_INDEX["right_hip"])
+#: each canonical joint's first child (joints without children absent)
+_FIRST_CHILD = {p: c for c, p in reversed(list(enumerate(PARENTS))) if p >= 0}
 
 
 def canonical_points(skel: Skeleton, pose: Pose, jmap: JointMap) -> F64:
@@ -260,8 +262,8 @@ def _attempt(
         far = float(np.linalg.norm(gap)) - reach * (1.0 - 1e-6)
         if far > tolerance * 0.1:
             moves.append(gap / np.linalg.norm(gap) * (far + tolerance * 0.5))
-        kids = [c for c, p in enumerate(PARENTS) if p == joint]  # e.g. the foot of an ankle
-        bend = pts[kids[0]] - pts[joint] if kids else None
+        kid = _FIRST_CHILD.get(joint)  # e.g. the foot of an ankle: where a knee bends to
+        bend = None if kid is None else pts[kid] - pts[joint]
         done = _fabrik(line, np.asarray(target, dtype=np.float64), tolerance * 0.01, bend=bend)
         goal[chain[1:]] = done[1:]
         changed |= _aim_pass(skel, new, jmap, plan, goal, turned, pose)

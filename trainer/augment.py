@@ -122,7 +122,7 @@ def goal_in_start_frame(
     (``align_floor``), or the recorded root motion kept (the rest)."""
     rel = src.yaw[goal] - src.yaw[start]
     g = turn(src.poses[goal], rel)  # goal in the start's facing, its own floor point
-    s = src.poses[start].clone()
+    s = src.poses[start]
     u = rng.random(len(start))
     keep_motion = torch.from_numpy(u >= cfg.align_pelvis + cfg.align_floor)
     lift = torch.from_numpy(u < cfg.align_pelvis)
@@ -132,9 +132,7 @@ def goal_in_start_frame(
         [c * moved[:, 0] - si * moved[:, 2], moved[:, 1], si * moved[:, 0] + c * moved[:, 2]], 1
     )
     g = g + torch.where(keep_motion[:, None], local, torch.zeros_like(local))[:, None, :]
-    dy = g[:, _PELVIS, 1] - s[:, _PELVIS, 1]
-    s[:, :, 1] += torch.where(lift, dy, torch.zeros_like(dy))[:, None]
-    return s, g
+    return lift_onto(s, g, lift), g
 
 
 def lift_onto(start: torch.Tensor, goal: torch.Tensor, which: torch.Tensor) -> torch.Tensor:
