@@ -48,7 +48,14 @@ from bench.edits import (
 from bench.metrics import per_item
 from core.bodies import body_lengths, random_bodies, rebuild
 from core.io import write_atomic
-from core.skeleton import BASE_KEYPOINTS, JOINT_INDEX, JOINT_NAMES, NUM_JOINTS
+from core.skeleton import (
+    BASE_KEYPOINTS,
+    BONE_CHILDREN,
+    JOINT_INDEX,
+    JOINT_NAMES,
+    NUM_JOINTS,
+    bone_lengths,
+)
 from service.engine import Engine
 from trainer.data.dataset import PoseDataset
 
@@ -313,7 +320,9 @@ def run_sets(
 
 def run_completion(engine: Engine, pairs: WorldPairs, chunk: int) -> dict[str, Items]:
     """The six base key points of the target pose: the start unchanged, FABRIK from the
-    start onto them, and ``Engine.complete`` (no bone lengths given, as in B2)."""
+    start onto them, and ``Engine.complete`` (``completion``: no bone lengths given, as in
+    B2; ``completion_lengths``: given the target body's own bone lengths, as a user who
+    has the character's skeleton can)."""
     key = joint_idx(BASE_KEYPOINTS)
     edits = pairs.edits([key] * len(pairs))
     out: dict[str, Items] = {}
@@ -328,6 +337,17 @@ def run_completion(engine: Engine, pairs: WorldPairs, chunk: int) -> dict[str, I
     ]
     poses = np.stack(done) if done else np.zeros((0, NUM_JOINTS, 3))
     out["completion"] = _items(edits, poses, pairs.turn, time.perf_counter() - t0)
+    t0 = time.perf_counter()
+    names = [JOINT_NAMES[c] for c in BONE_CHILDREN]
+    done = [
+        engine.complete(
+            {name: goal[JOINT_INDEX[name]] for name in BASE_KEYPOINTS},
+            dict(zip(names, bone_lengths(goal).tolist(), strict=True)),
+        ).pose
+        for goal in pairs.goal
+    ]
+    poses = np.stack(done) if done else np.zeros((0, NUM_JOINTS, 3))
+    out["completion_lengths"] = _items(edits, poses, pairs.turn, time.perf_counter() - t0)
     return out
 
 

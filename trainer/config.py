@@ -68,6 +68,12 @@ class SolverConfig(_Section):
         "to the start's bone lengths (trainer.rigid), i.e. on what is served; False: on the "
         "decoded answer.",
     )
+    joint_loss: Literal["mse", "distance"] = Field(
+        default="mse",
+        description="How the joint terms (targets, other joints, stay) measure an answer: "
+        "mean squared coordinate error, or mean per-joint distance (what MPJPE and reach "
+        "score; it tolerates a few joints moving far less than many moving a little).",
+    )
     passes: int = Field(
         default=1,
         ge=1,
@@ -136,6 +142,12 @@ class CompletionConfig(_Section):
     weight_decay: float = Field(default=1e-5, ge=0, description="L2 regularisation.")
     batch_size: int = Field(default=256, gt=0)
     epochs: int = Field(default=6, ge=1)
+    loss: Literal["mse", "mpjpe"] = Field(
+        default="mse",
+        description="Training loss: mean squared coordinate error, or the mean per-joint "
+        "distance (MPJPE, what the benchmarks score; where key points leave a joint "
+        "ambiguous it pulls towards the likeliest place, not the mean of the places).",
+    )
     mirror: bool = True
     yaw: bool = True
     fill_probability: float = Field(

@@ -225,6 +225,8 @@ def config_tag(cfg: TrainConfig, stage: str) -> str:
         solver = cfg.solver.model_dump(exclude={"passes"})  # passes: serving only
         if not solver["rigid_loss"]:  # added later: in the tag only when on, so that
             del solver["rigid_loss"]  # checkpoints from before it stay valid
+        if solver["joint_loss"] == "mse":  # likewise: only when not the default
+            del solver["joint_loss"]
         # each bank reads only its own sets and epochs (its own seed and pair stream), so
         # neither is retrained when only the other's change
         mine, other = ("long_sets", "long_epochs"), ("sets", "epochs")
@@ -235,7 +237,10 @@ def config_tag(cfg: TrainConfig, stage: str) -> str:
             del augment["lift_start"]
         relevant["augment"] = augment
     if stage.startswith("completion"):
-        relevant["completion"] = cfg.completion.model_dump()
+        completion = cfg.completion.model_dump()
+        if completion["loss"] == "mse":  # added later: in the tag only when not the default
+            del completion["loss"]
+        relevant["completion"] = completion
     text = json.dumps(relevant, sort_keys=True)
     return f"{stage}:{hashlib.sha256(text.encode()).hexdigest()[:16]}"
 
@@ -456,6 +461,7 @@ def solver_losses(
     mode: str = "plain",
     stay_weight: float = 0.0,
     rigid: bool = False,
+    distance: bool = False,
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """Per-solver loss ``[S]`` and answers ``[S, B, 63]`` for a batch of pairs (``mode`` as
     the service answers, :func:`solved_poses`):
@@ -463,23 +469,34 @@ def solver_losses(
     + bone_weight * MSE(decoded bone lengths - start bone lengths) (same clip, same body)
     + stay_weight * MSE(other joints - their start positions).
     ``rigid``: the joint terms are measured on the answer after the service's bone pass
-    to the start's bone lengths (:mod:`trainer.rigid`), i.e. on what is served."""
+    to the start's bone lengths (:mod:`trainer.rigid`), i.e. on what is served.
+    ``distance``: the joint terms are mean per-joint distances instead of MSEs."""
     n_sets = len(bank.sets)
     decoded = solved_poses(ae, net, start, goal, n_sets, mode)
     start_lengths = bone_lengths_t(start)
     answer = bone_pass_t(decoded, start_lengths) if rigid else decoded
     goal_s = goal.unsqueeze(0).expand(n_sets, -1, -1)
-    sq = (answer - goal_s) ** 2  # [S, B, 63]
     target_mask = torch.zeros(n_sets, 1, goal.shape[1])
     for s, joints in enumerate(bank.sets):
         target_mask[s, 0, target_columns(joints)] = 1.0
-    per_col = sq.mean(dim=1)  # [S, 63]
     tm = target_mask[:, 0]
+    if distance:  # per joint: the mask's x column marks the joint
+        tm = tm[:, 0::3]
+
+    def per_item(diff: torch.Tensor) -> torch.Tensor:
+        """``[S, B, 63]`` -> per column (MSE) or per joint (distance), mean over B."""
+        if distance:
+            n, b = diff.shape[0], diff.shape[1]
+            dist: torch.Tensor = torch.linalg.vector_norm(diff.reshape(n, b, -1, 3), dim=-1)
+            return dist.mean(dim=1)
+        return (diff**2).mean(dim=1)
+
+    per_col = per_item(answer - goal_s)  # [S, 63] or [S, 21]
     target_term = (per_col * tm).sum(-1) / tm.sum(-1)
     other_term = (per_col * (1 - tm)).sum(-1) / (1 - tm).sum(-1)
     loss = target_term + other_weight * other_term
     if stay_weight > 0:  # the joints not asked for move as little as the targets allow
-        moved = ((answer - start.unsqueeze(0)) ** 2).mean(dim=1)  # [S, 63]
+        moved = per_item(answer - start.unsqueeze(0))
         loss = loss + stay_weight * (moved * (1 - tm)).sum(-1) / (1 - tm).sum(-1)
     if bone_weight > 0:
         bone_err = bone_lengths_t(decoded) - start_lengths.unsqueeze(0)
@@ -573,7 +590,7 @@ def train_solvers(
             start, goal = src.pairs(idx, partners[idx], rng, aug, total)
             loss, _ = solver_losses(
                 ae, bank, net, start, goal, sc.other_weight, sc.bone_weight, mode,
-                sc.stay_weight, sc.rigid_loss,
+                sc.stay_weight, sc.rigid_loss, sc.joint_loss == "distance",
             )  # fmt: skip
             loss = loss.sum()
             optim.zero_grad(set_to_none=True)
@@ -587,7 +604,7 @@ def train_solvers(
     def validate() -> dict[str, float]:
         losses, _ = solver_losses(
             ae, bank, bank, v_start, v_goal, sc.other_weight, sc.bone_weight, mode,
-            sc.stay_weight, sc.rigid_loss,
+            sc.stay_weight, sc.rigid_loss, sc.joint_loss == "distance",
         )  # fmt: skip
         metrics = solver_metrics(ae, bank, v_start, v_goal, mode)
         return {
@@ -663,6 +680,15 @@ def completion_inputs(
     raise AssertionError("unreachable")
 
 
+def completion_loss(pred: torch.Tensor, poses: torch.Tensor, kind: str) -> torch.Tensor:
+    """The completion training loss of ``pred`` against ``poses`` (both ``[B, 63]``, m):
+    MSE, or the mean per-joint distance (``mpjpe``)."""
+    if kind == "mse":
+        return nn.functional.mse_loss(pred, poses)
+    dist: torch.Tensor = torch.linalg.vector_norm((pred - poses).reshape(len(pred), -1, 3), dim=-1)
+    return dist.mean()
+
+
 def train_completion(
     cfg: TrainConfig, d: Dist, splits: Splits, fresh: bool
 ) -> tuple[list[CompletionNet], list[StageState]]:
@@ -713,7 +739,7 @@ def train_completion(
                 poses = augment(train[idx], rng, cc.mirror, cc.yaw, cfg.augment)
                 keep = keep_mask(len(poses), rng) if level > 1 else None
                 x = completion_inputs(nets, level, poses, keep)
-                loss = nn.functional.mse_loss(net(x), poses)
+                loss = completion_loss(net(x), poses, cc.loss)
                 optim.zero_grad(set_to_none=True)
                 loss.backward()
                 optim.step()

@@ -176,7 +176,12 @@ def test_quick_heldout_run_has_every_family_set_and_method(
         for name in ("left_wrist", "left_wrist+right_wrist", "left_ankle+right_ankle", FIVE):
             assert name in sets, (fam["name"], name)
         assert RANDOM_SET in sets
-        assert set(sets[COMPLETION]) == {"identity", "fabrik", "completion"}
+        completions = sets[COMPLETION]
+        assert set(completions) == {"identity", "fabrik", "completion", "completion_lengths"}
+        # given the body's own bone lengths, the completed pose has them exactly; left to
+        # guess them from six key points, it does not
+        assert completions["completion_lengths"]["bone_max"] < 1e-5  # the service bound
+        assert completions["completion"]["bone_max"] > 1e-3
         for set_name, block in sets.items():
             if set_name == COMPLETION:
                 continue

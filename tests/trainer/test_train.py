@@ -33,7 +33,15 @@ from trainer.models import (
     merge_banks,
     target_columns,
 )
-from trainer.train import Trained, config_tag, flat, train_all
+from trainer.train import (
+    Trained,
+    completion_loss,
+    config_tag,
+    flat,
+    mpjpe_cm,
+    solver_losses,
+    train_all,
+)
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -331,3 +339,58 @@ def test_model_card_lists_every_model(trained: tuple[Trained, Path]) -> None:
     assert "non-commercial" in card
     for entry in manifest.models:
         assert f"| {entry.name} | {entry.parameters:,} |" in card
+
+
+def test_completion_loss_mpjpe_is_the_mean_joint_distance(trained: tuple[Trained, Path]) -> None:
+    """``completion.loss = "mpjpe"`` trains on the figure the benchmarks score (the mean
+    per-joint distance of real poses), ``mse`` on the squared coordinates; only a loss other
+    than the default enters the completion checkpoints' tag (older runs stay valid)."""
+    result, _ = trained
+    true = flat(result.splits.test.positions[:64])
+    pred = true.roll(1, dims=0)  # other real poses: errors of every size
+    got = completion_loss(pred, true, "mpjpe")
+    assert float(got) * 100.0 == pytest.approx(mpjpe_cm(pred, true), rel=1e-6)
+    assert float(completion_loss(pred, true, "mse")) == pytest.approx(
+        float(((pred - true) ** 2).mean()), rel=1e-6
+    )
+    mse = load_config(None, {"completion": {"loss": "mse"}})
+    mpjpe = load_config(None, {"completion": {"loss": "mpjpe"}})
+    assert config_tag(mse, "completion1") == config_tag(load_config(None, {}), "completion1")
+    assert config_tag(mpjpe, "completion1") != config_tag(mse, "completion1")
+    assert config_tag(mpjpe, "solvers") == config_tag(mse, "solvers")
+
+
+@pytest.mark.parametrize("distance", [False, True])
+def test_solver_joint_terms_measure_what_they_say(
+    trained: tuple[Trained, Path], distance: bool
+) -> None:
+    """``solver.joint_loss``: the target and stay terms are the MSE of the target columns /
+    of the other joints' moves, or (``distance``) the mean per-joint distances, on real
+    pairs; only the non-default choice enters the solvers' checkpoint tag."""
+    result, _ = trained
+    ae, bank = result.ae, result.bank
+    poses = flat(result.splits.test.positions[:48])
+    start, goal = poses[:24], poses[24:]
+    with torch.no_grad():
+        target, answers = solver_losses(ae, bank, bank, start, goal, 0.0, 0.0, "plain",
+                                        0.0, False, distance)  # fmt: skip
+        both, _ = solver_losses(ae, bank, bank, start, goal, 0.0, 0.0, "plain", 1.0, False,
+                                distance)  # fmt: skip
+    for s, joints in enumerate(bank.sets):
+        idx = [JOINT_INDEX[j] for j in joints]
+        rest = [j for j in range(21) if j not in idx]
+        diff = (answers[s] - goal).reshape(len(goal), 21, 3)
+        moved = (answers[s] - start).reshape(len(goal), 21, 3)
+        if distance:
+            want_t = diff[:, idx].norm(dim=-1).mean()
+            want_s = moved[:, rest].norm(dim=-1).mean()
+        else:
+            want_t = (diff[:, idx] ** 2).mean()
+            want_s = (moved[:, rest] ** 2).mean()
+        torch.testing.assert_close(target[s], want_t, rtol=1e-5, atol=0)
+        torch.testing.assert_close(both[s] - target[s], want_s, rtol=1e-4, atol=0)
+    tags = {
+        config_tag(load_config(None, {"solver": {"joint_loss": k}}), "solvers")
+        for k in ("mse", "distance")
+    }
+    assert config_tag(load_config(None, {}), "solvers") in tags and len(tags) == 2
