@@ -87,3 +87,32 @@ def transform_yaw(transform: RigidTransform) -> FloatArray:
 def canonicalise(positions: FloatArray) -> FloatArray:
     """Move the floor projection of the pelvis to the origin and turn to face +Z."""
     return canonical_transform(positions).to_canonical(positions)
+
+
+def symmetry_views(
+    points: FloatArray, mirror_of: npt.ArrayLike, yaws: int, mirror: bool
+) -> FloatArray:
+    """Views of floor-centred ``points [K, 3]`` under the floor symmetries of a body:
+    turned about +Y by ``2 pi k / yaws`` (k = 0 .. yaws-1), then, if ``mirror``, the same
+    turns of their mirror image (x -> -x, point i taking the place of its mirror
+    ``mirror_of[i]``). ``[V, K, 3]``, V = yaws (x 2 with ``mirror``); view 0 is ``points``.
+    :func:`unview` takes answers in each view's frame back to the first."""
+    turns = yaw_matrix(2.0 * np.pi * np.arange(yaws) / yaws)  # [Y, 3, 3]
+    sides = [points]
+    if mirror:
+        sides.append(points[np.asarray(mirror_of)] * _FLIP)
+    return np.concatenate([np.einsum("yij,kj->yki", turns, s) for s in sides])
+
+
+def unview(poses: FloatArray, mirror_of: npt.ArrayLike, yaws: int, mirror: bool) -> FloatArray:
+    """The inverse of :func:`symmetry_views` on answers ``[V, J, 3]`` (``mirror_of``: each
+    joint's mirror joint): each turned back, the mirrored ones mirrored back."""
+    turns = yaw_matrix(2.0 * np.pi * np.arange(yaws) / yaws)
+    sides = poses.reshape(2 if mirror else 1, yaws, *poses.shape[1:])
+    back = np.stack([np.einsum("yji,ykj->yki", turns, s) for s in sides])  # R^T p
+    if mirror:
+        back[1] = back[1][:, np.asarray(mirror_of)] * _FLIP
+    return np.asarray(back.reshape(poses.shape))
+
+
+_FLIP = np.array([-1.0, 1.0, 1.0])

@@ -27,7 +27,7 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from core.io import sha256_file, write_atomic
-from core.skeleton import FRAME, JOINT_NAMES, NUM_JOINTS, PARENT_NAMES, set_key
+from core.skeleton import FRAME, JOINT_INDEX, JOINT_NAMES, MIRROR, NUM_JOINTS, PARENT_NAMES, set_key
 
 SCHEMA_VERSION = 1
 MANIFEST_NAME = "manifest.json"
@@ -122,6 +122,20 @@ class Serving(_Strict):
         "previous pass's answer (bone lengths restored, canonicalised anew) with the same "
         "targets, so what the bone pass took from the reach is asked for again.",
     )
+    completion_yaws: int = Field(
+        default=1,
+        ge=1,
+        le=16,
+        description="Key-point completion answers the mean of its networks' answers over "
+        "this many turns of the key points about +Y (evenly spaced, each turned back): the "
+        "networks were trained for any yaw, so the mean cancels what their answers owe to "
+        "the facing. 1 = the key points as given.",
+    )
+    completion_mirror: bool = Field(
+        default=False,
+        description="Completion also averages over the mirror image of every view (left and "
+        "right swapped, x -> -x; the networks were trained mirrored too).",
+    )
 
 
 class ModelEntry(_Strict):
@@ -199,6 +213,13 @@ class Manifest(_Strict):
         levels = sorted(m.level for m in self.models if m.kind == "completion" and m.level)
         if levels and levels != list(range(1, len(levels) + 1)):
             raise ValueError("completion levels must be 1..n")
+        for m in self.models if self.serving.completion_mirror else ():
+            mirrored = {JOINT_NAMES[MIRROR[JOINT_INDEX[j]]] for j in m.joints or ()}
+            if m.kind == "completion" and mirrored != set(m.joints or ()):
+                raise ValueError(
+                    f"serving.completion_mirror: completion level {m.level}'s key points "
+                    "are not their own mirror image"
+                )
         return self
 
     # -- convenience views -------------------------------------------------------------

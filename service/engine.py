@@ -30,13 +30,14 @@ import numpy as np
 import numpy.typing as npt
 
 from core import compiled, compiled_fabrik, kinematics
-from core.geometry import canonical_transform, facing_transform
+from core.geometry import canonical_transform, facing_transform, symmetry_views, unview
 from core.manifest import Manifest, ModelEntry, load_manifest
 from core.rest import rest_lengths, rest_pose
 from core.skeleton import (
     BONES,
     JOINT_INDEX,
     JOINT_NAMES,
+    MIRROR,
     NUM_JOINTS,
     bone_lengths,
     set_key,
@@ -100,6 +101,14 @@ class Engine:
             for key, entry in m.solvers().items()
         }
         self.completion = [net(entry) for entry in m.completion_levels()]
+        # each completion level's key points in its input order, and where each one's
+        # mirror image sits in that order (the symmetry views of serving.completion_*)
+        self._level_mirror = [
+            [entry.joints.index(JOINT_NAMES[MIRROR[JOINT_INDEX[j]]]) for j in entry.joints]
+            if m.serving.completion_mirror
+            else list(range(len(entry.joints)))
+            for entry in m.completion_levels()
+        ]
         enc, dec = m.autoencoder("encoder"), m.autoencoder("decoder")
         # one graph per single-solver edit: shipped fused at export time (then it already
         # gives the served answer, delta included), else composed here at load time
@@ -648,8 +657,7 @@ class Engine:
                 else:
                     assert pred is not None
                     rows.append(pred[JOINT_INDEX[j]])
-            x = np.concatenate(rows)[None].astype(np.float32)
-            pred = self.completion[n - 1](x)[0].astype(np.float64).reshape(NUM_JOINTS, 3)
+            pred = self._complete_level(n - 1, np.stack(rows))
             run.append(n)
         assert pred is not None
         if not given_lengths:  # the network's own estimate of this body's proportions
@@ -668,6 +676,21 @@ class Engine:
         world = res.positions + origin
         errors = np.linalg.norm(world[idx] - np.stack(list(keypoints.values())), axis=-1)
         return CompleteResult(pose=world, errors=errors, reached=errors <= tolerance, levels=run)
+
+    def _complete_level(self, level: int, keys: F64) -> F64:
+        """Completion level ``level`` (0-based) of key points ``[K, 3]`` (floor-centred,
+        the networks' scale): the mean of its answers over the symmetry views the manifest
+        asks for (``serving.completion_yaws`` turns about +Y, each also mirrored with
+        ``serving.completion_mirror``), each answer taken back to the first view; one
+        network run for all views. One view: the network's answer as it is."""
+        yaws, mirror = (
+            self.manifest.serving.completion_yaws,
+            self.manifest.serving.completion_mirror,
+        )
+        views = symmetry_views(keys, self._level_mirror[level], yaws, mirror)
+        x = views.reshape(len(views), -1).astype(np.float32)
+        out = self.completion[level](x).astype(np.float64).reshape(len(views), NUM_JOINTS, 3)
+        return np.asarray(unview(out, MIRROR, yaws, mirror).mean(axis=0))
 
     def warmup(self) -> None:
         """A real solve on the reference rest pose; raises if anything is off."""

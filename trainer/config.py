@@ -150,6 +150,18 @@ class CompletionConfig(_Section):
     )
     mirror: bool = True
     yaw: bool = True
+    serving_yaws: int = Field(
+        default=1,
+        ge=1,
+        le=16,
+        description="Serving (manifest serving.completion_yaws): the answer is the mean over "
+        "this many turns of the key points about +Y.",
+    )
+    serving_mirror: bool = Field(
+        default=False,
+        description="Serving (manifest serving.completion_mirror): also over each turn's "
+        "mirror image.",
+    )
     fill_probability: float = Field(
         default=0.5,
         ge=0,

@@ -371,6 +371,8 @@ def export_all(
             delta=cfg.solver.delta,
             anchor=cfg.solver.delta and cfg.solver.anchor,
             passes=cfg.solver.passes,
+            completion_yaws=cfg.completion.serving_yaws,
+            completion_mirror=cfg.completion.serving_mirror,
         ),
         models=entries,
         provenance=Provenance(

@@ -237,7 +237,7 @@ def config_tag(cfg: TrainConfig, stage: str) -> str:
             del augment["lift_start"]
         relevant["augment"] = augment
     if stage.startswith("completion"):
-        completion = cfg.completion.model_dump()
+        completion = cfg.completion.model_dump(exclude={"serving_yaws", "serving_mirror"})
         if completion["loss"] == "mse":  # added later: in the tag only when not the default
             del completion["loss"]
         relevant["completion"] = completion
