@@ -60,10 +60,20 @@ VARIANTS: dict[str, str] = {
     "(augment.lift_start 1.0, lift1.toml)",
     "lift075": "`c12` with three quarters of the starts lifted (lift075.toml)",
     "lift05": "`c12` with half of the starts lifted (lift05.toml)",
-    "pairs_long": "`shipped` with the two pair solvers (wrists, ankles) also trained apart "
+    "pairs_long": "`c13` with the two pair solvers (wrists, ankles) also trained apart "
     "for 8 epochs (pairs_long.toml; the single-joint bank then holds 12 sets)",
-    "shipped": "the shipped recipe (trainer/configs/default.toml, run exp_c13): `lift05` "
-    "plus the 5-end-effector solver trained apart for 8 epochs (solver.long_sets)",
+    "c13": "the models shipped before this round (run exp_c13, ablation/base_c13.toml): "
+    "`lift05` plus the 5-end-effector solver trained apart for 8 epochs (solver.long_sets)",
+    "solver_distance": "`c13` with the solvers' joint terms as mean per-joint distances "
+    "instead of MSEs (solver.joint_loss, solver_distance.toml; both banks retrained)",
+    "views": "`c13` served with completion over 4 turns x mirror (serving.completion_yaws, "
+    "completion_mirror; views.toml, no training)",
+    "completion_mpjpe": "`c13` with completion trained on the mean per-joint distance "
+    "(completion.loss, completion_mpjpe.toml; 12 epochs, one view)",
+    "completion_mpjpe_views": "`completion_mpjpe` served over 4 turns x mirror",
+    "completion_mpjpe_e20": "`completion_mpjpe` with 20 completion epochs, one view",
+    "shipped": "the shipped recipe (trainer/configs/default.toml, run exp_c14): `c13`'s "
+    "autoencoder and solvers, completion_mpjpe_e20's completion, served over 4 turns x mirror",
 }
 COMPLETION = "6-point completion"
 
@@ -162,7 +172,8 @@ def main(
         "Variants train at a small budget (trainer/configs/ablation/full.toml, the recipe of "
         "`previous`); `shipped`, `c12*`, `previous*`, `rigid`, `ae512*`, `shipped-before`, "
         "`shipped-world-pairs`, `long_solvers`, `stay*`, `solver256`, `completion512`, "
-        "`eff5*` and `lift*` are full-budget models scored with "
+        "`eff5*`, `lift*`, `pairs_long`, `c13`, `solver_distance`, `views` and "
+        "`completion_mpjpe*` are full-budget models scored with "
         "`python -m bench.heldout --models DIR [--passes N] --out reports/ablation/NAME.json`."
         " Rows scored with the numpy engine, before the compiled one, agree with it to "
         "5e-14 m (docs/benchmarks.md)."

@@ -199,6 +199,14 @@ def _git_commit(out: Path) -> str:
         return "unknown"
 
 
+def model_version(entries: list[ModelEntry], serving: Serving) -> str:
+    """The models' version: a hash of every file's sha256 and of the serving section, which
+    changes answers as much as a file does (models exported before completion views hashed
+    the files alone)."""
+    text = "".join(e.sha256 for e in entries) + serving.model_dump_json()
+    return "mx1-" + hashlib.sha256(text.encode()).hexdigest()[:12]
+
+
 def _params(module: nn.Module) -> int:
     return sum(p.numel() for p in module.parameters())
 
@@ -345,10 +353,18 @@ def export_all(
         {"name": str(a.get("file") or a.get("path")), "sha256": str(a.get("sha256"))}
         for a in data_meta.get("archives", [])
     ]
-    version = "mx1-" + hashlib.sha256("".join(e.sha256 for e in entries).encode()).hexdigest()[:12]
+    serving = Serving(
+        body="total_length" if cfg.augment.enabled and cfg.augment.normalise_size
+        else "nearest_skeleton",
+        delta=cfg.solver.delta,
+        anchor=cfg.solver.delta and cfg.solver.anchor,
+        passes=cfg.solver.passes,
+        completion_yaws=cfg.completion.serving_yaws,
+        completion_mirror=cfg.completion.serving_mirror,
+    )  # fmt: skip
     manifest = Manifest(
         schema_version=SCHEMA_VERSION,
-        version=version,
+        version=model_version(entries, serving),
         licence=LICENCE,
         opset=cfg.opset,
         latent_dim=latent,
@@ -364,16 +380,7 @@ def export_all(
             std=[float(v) for v in ae.norm.std],
             std_floor=cfg.autoencoder.std_floor,
         ),
-        serving=Serving(
-            body="total_length"
-            if cfg.augment.enabled and cfg.augment.normalise_size
-            else "nearest_skeleton",
-            delta=cfg.solver.delta,
-            anchor=cfg.solver.delta and cfg.solver.anchor,
-            passes=cfg.solver.passes,
-            completion_yaws=cfg.completion.serving_yaws,
-            completion_mirror=cfg.completion.serving_mirror,
-        ),
+        serving=serving,
         models=entries,
         provenance=Provenance(
             data=archives,

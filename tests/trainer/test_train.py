@@ -22,7 +22,7 @@ from core.manifest import ManifestError, load_manifest
 from core.skeleton import JOINT_INDEX
 from trainer.config import QUICK, TrainConfig, load_config
 from trainer.data.dataset import load_dataset
-from trainer.export import evaluate, export_all
+from trainer.export import evaluate, export_all, model_version
 from trainer.fused import FusedGraph, LeanFusedGraph
 from trainer.models import (
     Normaliser,
@@ -394,3 +394,13 @@ def test_solver_joint_terms_measure_what_they_say(
         for k in ("mse", "distance")
     }
     assert config_tag(load_config(None, {}), "solvers") in tags and len(tags) == 2
+
+
+def test_version_names_the_files_and_the_serving(trained: tuple[Trained, Path]) -> None:
+    """Two exports of the same networks served differently (completion views) are two
+    versions; the same files and serving, one."""
+    _, models = trained
+    manifest = load_manifest(models)
+    viewed = manifest.serving.model_copy(update={"completion_yaws": 4})
+    assert model_version(manifest.models, manifest.serving) == manifest.version
+    assert model_version(manifest.models, viewed) != manifest.version
