@@ -36,6 +36,7 @@ METHOD_LABEL: dict[str, str] = {
     "rest_fabrik": "rest pose + FABRIK",  # B2 baseline
     "neural": "completion",  # B2
     "completion": "completion",  # held-out 6-point completion
+    "completion_lengths": "completion, bone lengths given",
 }
 #: Engine options (method, preserve_bone_lengths, reach) of each solving method.
 METHOD_OPTIONS: dict[str, tuple[str, bool, str]] = {

@@ -28,15 +28,23 @@ from tests.conftest import PosePairs
 FLIP = np.array([-1.0, 1.0, 1.0])
 
 
-@pytest.fixture(scope="module")
-def viewed(models_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Engine:
-    """The shipped models served over 4 turns x mirror."""
-    out = tmp_path_factory.mktemp("views") / "models"
+def served(models_dir: Path, out: Path, yaws: int, mirror: bool) -> Engine:
+    """The shipped networks with completion served over ``yaws`` turns (x ``mirror``)."""
     shutil.copytree(models_dir, out)
     manifest = json.loads((out / "manifest.json").read_text())
-    manifest["serving"].update(completion_yaws=4, completion_mirror=True)
+    manifest["serving"].update(completion_yaws=yaws, completion_mirror=mirror)
     (out / "manifest.json").write_text(json.dumps(manifest))
     return Engine(out)
+
+
+@pytest.fixture(scope="module")
+def viewed(models_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Engine:
+    return served(models_dir, tmp_path_factory.mktemp("views") / "models", 4, True)
+
+
+@pytest.fixture(scope="module")
+def plain(models_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Engine:
+    return served(models_dir, tmp_path_factory.mktemp("plain") / "models", 1, False)
 
 
 def keypoints(pose: np.ndarray) -> dict[str, np.ndarray]:
@@ -54,11 +62,11 @@ def test_views_of_real_key_points_undo_exactly(real_poses: PosePairs) -> None:
 
 
 def test_viewed_completion_turns_and_mirrors_with_its_key_points(
-    engine: Engine, viewed: Engine, real_poses: PosePairs
+    plain: Engine, viewed: Engine, real_poses: PosePairs
 ) -> None:
     """Over 4 turns x mirror, completing key points turned by 90 degrees (or mirrored) gives
     the completion turned (mirrored): the views are the same set. The network alone (one
-    view, as shipped) is not so: its answer depends on the facing."""
+    view) is not so: its answer depends on the facing."""
     turn = yaw_matrix(np.array(np.pi / 2))
     gap_plain, gap_viewed = 0.0, 0.0
     for i in real_poses.starts[:12]:
@@ -66,7 +74,7 @@ def test_viewed_completion_turns_and_mirrors_with_its_key_points(
         kp = keypoints(pose)
         turned = {j: turn @ p for j, p in kp.items()}
         mirrored = {JOINT_NAMES[MIRROR[JOINT_INDEX[j]]]: p * FLIP for j, p in kp.items()}
-        for eng in (engine, viewed):
+        for eng in (plain, viewed):
             base = eng.complete(kp, None).pose
             got_turn = eng.complete(turned, None).pose @ turn  # turned back
             got_mirror = eng.complete(mirrored, None).pose[list(MIRROR)] * FLIP
