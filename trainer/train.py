@@ -218,7 +218,9 @@ def config_tag(cfg: TrainConfig, stage: str) -> str:
         "seed": cfg.seed,
         "dataset": cfg.dataset,
         "max_train_frames": cfg.max_train_frames,
-        "autoencoder": cfg.autoencoder.model_dump(),
+        "autoencoder": cfg.autoencoder.model_dump(
+            exclude={"loss"} if cfg.autoencoder.loss == "mse" else None  # added later
+        ),
         "augment": {k: v for k, v in augment.items() if k not in pairs_only},
     }
     if stage.startswith("solver"):
@@ -332,6 +334,12 @@ def mpjpe_cm(pred: torch.Tensor, true: torch.Tensor) -> float:
     return float(diff.norm(dim=-1).mean()) * 100.0
 
 
+def mpjpe_loss(pred: torch.Tensor, true: torch.Tensor) -> torch.Tensor:
+    """Mean per-joint distance (m) between flattened ``[N, 63]`` poses, differentiable."""
+    dist: torch.Tensor = torch.linalg.vector_norm((pred - true).reshape(len(pred), -1, 3), dim=-1)
+    return dist.mean()
+
+
 def ae_samples(
     poses: torch.Tensor, rng: np.random.Generator, aug: AugmentConfig, total: float
 ) -> torch.Tensor:
@@ -363,7 +371,10 @@ def train_autoencoder(
         for idx in batches(len(train), ac.batch_size, d, cfg.seed, epoch):
             x = ae_samples(train[idx], rng, aug, total)
             recon = net(x)
-            loss = nn.functional.mse_loss(ae.norm.normalise(recon), ae.norm.normalise(x))
+            if ac.loss == "mpjpe":
+                loss = mpjpe_loss(recon, x)
+            else:
+                loss = nn.functional.mse_loss(ae.norm.normalise(recon), ae.norm.normalise(x))
             optim.zero_grad(set_to_none=True)
             loss.backward()
             optim.step()
@@ -685,8 +696,7 @@ def completion_loss(pred: torch.Tensor, poses: torch.Tensor, kind: str) -> torch
     MSE, or the mean per-joint distance (``mpjpe``)."""
     if kind == "mse":
         return nn.functional.mse_loss(pred, poses)
-    dist: torch.Tensor = torch.linalg.vector_norm((pred - poses).reshape(len(pred), -1, 3), dim=-1)
-    return dist.mean()
+    return mpjpe_loss(pred, poses)
 
 
 def train_completion(

@@ -404,3 +404,13 @@ def test_version_names_the_files_and_the_serving(trained: tuple[Trained, Path]) 
     viewed = manifest.serving.model_copy(update={"completion_yaws": 4})
     assert model_version(manifest.models, manifest.serving) == manifest.version
     assert model_version(manifest.models, viewed) != manifest.version
+
+
+def test_autoencoder_loss_choice_reaches_every_stage_tag() -> None:
+    """``autoencoder.loss``: the default leaves every checkpoint tag as it was; ``mpjpe``
+    retrains the autoencoder and all that is trained on its latent space."""
+    mse = load_config(None, {"autoencoder": {"loss": "mse"}})
+    mpjpe = load_config(None, {"autoencoder": {"loss": "mpjpe"}})
+    for stage in ("autoencoder", "solvers", "solvers_long", "completion1"):
+        assert config_tag(mse, stage) == config_tag(load_config(None, {}), stage)
+        assert config_tag(mpjpe, stage) != config_tag(mse, stage)
