@@ -43,7 +43,8 @@ def _train_and_export(
 
     from rich.table import Table
 
-    from trainer.train import console, train_all
+    from trainer.stages import console
+    from trainer.train import train_all
 
     t0 = time.perf_counter()
     trained = train_all(cfg, fresh=fresh)

@@ -33,10 +33,10 @@ from trainer.models import (
     merge_banks,
     target_columns,
 )
+from trainer.stages import config_tag
 from trainer.train import (
     Trained,
     completion_loss,
-    config_tag,
     flat,
     mpjpe_cm,
     solver_losses,

@@ -1,0 +1,262 @@
+"""The machinery every training stage shares: the process group, seeded batches, the
+epoch loop with its checkpoints, and the checkpoint tag that says which configuration
+fields a stage's weights depend on.
+
+Single process or under ``torchrun --nproc_per_node N`` (DDP, gloo, DistributedSampler;
+rank 0 writes). Every stage checkpoints each epoch into ``run_dir`` and resumes from
+there; all randomness comes from generators seeded by (seed, stage, epoch), so a resumed
+run ends with the same weights as an uninterrupted one.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import os
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+import torch.distributed as dist
+from rich.console import Console
+from rich.progress import Progress
+from rich.table import Table
+from torch import nn
+from torch.utils.data import DistributedSampler
+
+from core.io import write_atomic
+from trainer.config import TrainConfig
+
+console = Console(stderr=True)
+
+
+# --------------------------------------------------------------------------------------
+# Process group
+# --------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Dist:
+    rank: int = 0
+    world: int = 1
+
+    @property
+    def main(self) -> bool:
+        return self.rank == 0
+
+    def barrier(self) -> None:
+        if self.world > 1:
+            dist.barrier()
+
+
+def init_distributed() -> Dist:
+    """Join the torchrun process group when launched by torchrun, else single process."""
+    world = int(os.environ.get("WORLD_SIZE", "1"))
+    if world > 1 and not dist.is_initialized():
+        dist.init_process_group(backend="gloo")
+    if world > 1:
+        return Dist(rank=dist.get_rank(), world=dist.get_world_size())
+    return Dist()
+
+
+def seed_all(seed: int) -> None:
+    torch.manual_seed(seed)
+
+
+def stage_rng(seed: int, stage: str, epoch: int) -> np.random.Generator:
+    digest = hashlib.sha256(f"{seed}:{stage}:{epoch}".encode()).digest()
+    return np.random.default_rng(int.from_bytes(digest[:8], "little"))
+
+
+# --------------------------------------------------------------------------------------
+# Batches
+# --------------------------------------------------------------------------------------
+def batches(n: int, batch_size: int, d: Dist, seed: int, epoch: int) -> Iterator[torch.Tensor]:
+    """Shuffled index batches of this rank's shard (DistributedSampler semantics)."""
+    sampler: DistributedSampler[int] = DistributedSampler(
+        range(n),  # type: ignore[arg-type]  # any Sized works
+        num_replicas=d.world,
+        rank=d.rank,
+        shuffle=True,
+        seed=seed,
+        drop_last=True,
+    )
+    sampler.set_epoch(epoch)
+    idx = torch.tensor(list(iter(sampler)), dtype=torch.long)
+    for start in range(0, len(idx) - batch_size + 1, batch_size):
+        yield idx[start : start + batch_size]
+
+
+def steps_per_epoch(n: int, batch_size: int, d: Dist) -> int:
+    return (n // d.world) // batch_size
+
+
+# --------------------------------------------------------------------------------------
+# Checkpoints
+# --------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Bar:
+    """One epoch's progress bar (rich); ``update()`` after every step."""
+
+    progress: Progress
+    task: Any
+
+    def update(self) -> None:
+        self.progress.advance(self.task)
+
+
+@dataclass
+class StageState:
+    epoch: int = 0  # epochs completed
+    history: list[dict[str, float]] = field(default_factory=list)
+    seconds: float = 0.0
+
+
+def save_checkpoint(
+    path: Path, model: nn.Module, optim: torch.optim.Optimizer, state: StageState, tag: str
+) -> None:
+    buf = io.BytesIO()
+    torch.save(
+        {
+            "tag": tag,
+            "epoch": state.epoch,
+            "history": state.history,
+            "seconds": state.seconds,
+            "model": model.state_dict(),
+            "optim": optim.state_dict(),
+        },
+        buf,
+    )
+    write_atomic(path, buf.getvalue())
+
+
+def load_checkpoint(
+    path: Path, model: nn.Module, optim: torch.optim.Optimizer, tag: str
+) -> StageState:
+    if not path.exists():
+        return StageState()
+    ckpt = torch.load(path, map_location="cpu", weights_only=False)
+    if ckpt.get("tag") != tag:
+        console.print(f"[yellow]{path.name}: written by another config; starting the stage anew")
+        return StageState()
+    model.load_state_dict(ckpt["model"])
+    optim.load_state_dict(ckpt["optim"])
+    return StageState(epoch=ckpt["epoch"], history=ckpt["history"], seconds=ckpt["seconds"])
+
+
+def config_tag(cfg: TrainConfig, stage: str) -> str:
+    augment = cfg.augment.model_dump()
+    pairs_only = ("world_pairs", "align_pelvis", "align_floor", "lift_start")  # solvers only
+    relevant: dict[str, Any] = {
+        "seed": cfg.seed,
+        "dataset": cfg.dataset,
+        "max_train_frames": cfg.max_train_frames,
+        "autoencoder": cfg.autoencoder.model_dump(
+            exclude={"loss"} if cfg.autoencoder.loss == "mse" else None  # added later
+        ),
+        "augment": {k: v for k, v in augment.items() if k not in pairs_only},
+    }
+    if stage.startswith("solver"):
+        solver = cfg.solver.model_dump(exclude={"passes"})  # passes: serving only
+        if not solver["rigid_loss"]:  # added later: in the tag only when on, so that
+            del solver["rigid_loss"]  # checkpoints from before it stay valid
+        if solver["joint_loss"] == "mse":  # likewise: only when not the default
+            del solver["joint_loss"]
+        # each bank reads only its own sets and epochs (its own seed and pair stream), so
+        # neither is retrained when only the other's change
+        mine, other = ("long_sets", "long_epochs"), ("sets", "epochs")
+        for key in other if stage == "solvers_long" else mine:
+            del solver[key]
+        relevant["solver"] = solver
+        if not augment["lift_start"]:  # added later: in the tag only when on (see above)
+            del augment["lift_start"]
+        relevant["augment"] = augment
+    if stage.startswith("completion"):
+        completion = cfg.completion.model_dump(exclude={"serving_yaws", "serving_mirror"})
+        if completion["loss"] == "mse":  # added later: in the tag only when not the default
+            del completion["loss"]
+        relevant["completion"] = completion
+    text = json.dumps(relevant, sort_keys=True)
+    return f"{stage}:{hashlib.sha256(text.encode()).hexdigest()[:16]}"
+
+
+def epoch_table(title: str, history: list[dict[str, float]]) -> Table:
+    table = Table(title=title)
+    keys = list(history[0].keys()) if history else []
+    for key in keys:
+        table.add_column(key, justify="right")
+    for row in history:
+        table.add_row(*(f"{row[k]:.0f}" if k == "epoch" else f"{row[k]:.5g}" for k in keys))
+    return table
+
+
+def run_stage(
+    *,
+    name: str,
+    cfg: TrainConfig,
+    d: Dist,
+    model: nn.Module,
+    trainable: nn.Module,
+    optim: torch.optim.Optimizer,
+    epochs: int,
+    steps: int,
+    train_epoch: Callable[[int, Bar], float],
+    validate: Callable[[], dict[str, float]],
+    fresh: bool,
+) -> StageState:
+    """The epoch loop shared by every stage: resume, train, validate, log, checkpoint."""
+    ckpt = Path(cfg.run_dir) / f"{name}.pt"
+    tag = config_tag(cfg, name)
+    state = StageState() if fresh else load_checkpoint(ckpt, trainable, optim, tag)
+    if d.world > 1:  # every rank starts from rank 0's weights
+        for p in trainable.state_dict().values():
+            dist.broadcast(p, src=0)
+    if state.epoch >= epochs:
+        if d.main:
+            console.print(f"[green]{name}: complete in checkpoint, skipping ({state.epoch} epochs)")
+        return state
+    if state.epoch and d.main:
+        console.print(f"[cyan]{name}: resuming after epoch {state.epoch}")
+    for epoch in range(state.epoch, epochs):
+        t0 = time.perf_counter()
+        model.train()
+        with Progress(console=console, transient=True, disable=not d.main) as progress:
+            task = progress.add_task(f"{name} {epoch + 1}/{epochs}", total=steps)
+            train_loss = train_epoch(epoch, Bar(progress, task))
+        model.eval()
+        with torch.no_grad():
+            metrics = validate()
+        state.seconds += time.perf_counter() - t0
+        state.epoch = epoch + 1
+        row = {"epoch": float(epoch + 1), "train_loss": train_loss, **metrics}
+        state.history.append(row)
+        if d.main:
+            console.print(
+                f"{name} epoch {epoch + 1}/{epochs}: "
+                + ", ".join(f"{k}={v:.5g}" for k, v in row.items() if k != "epoch")
+                + f" ({time.perf_counter() - t0:.1f}s)"
+            )
+            save_checkpoint(ckpt, trainable, optim, state, tag)
+        d.barrier()
+    if d.main:
+        console.print(epoch_table(f"{name}: losses per epoch", state.history))
+    return state
+
+
+def freeze(module: nn.Module) -> None:
+    """Evaluation mode, no gradients: a finished stage's network is only read from now on."""
+    module.eval()
+    for p in module.parameters():
+        p.requires_grad_(False)
+
+
+def mean_loss(total: torch.Tensor, count: int, d: Dist) -> float:
+    """The mean of an epoch's step losses over every rank."""
+    if d.world > 1:
+        buf = torch.tensor([float(total), float(count)], dtype=torch.float64)
+        dist.all_reduce(buf)
+        return float(buf[0]) / max(float(buf[1]), 1.0)
+    return float(total) / max(count, 1)
