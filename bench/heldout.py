@@ -330,24 +330,18 @@ def run_completion(engine: Engine, pairs: WorldPairs, chunk: int) -> dict[str, I
         t0 = time.perf_counter()
         poses = solve(engine, edits, method, chunk)
         out[method] = _items(edits, poses, pairs.turn, time.perf_counter() - t0)
-    t0 = time.perf_counter()
-    done = [
-        engine.complete({name: goal[JOINT_INDEX[name]] for name in BASE_KEYPOINTS}, None).pose
-        for goal in pairs.goal
-    ]
-    poses = np.stack(done) if done else np.zeros((0, NUM_JOINTS, 3))
-    out["completion"] = _items(edits, poses, pairs.turn, time.perf_counter() - t0)
-    t0 = time.perf_counter()
     names = [JOINT_NAMES[c] for c in BONE_CHILDREN]
-    done = [
-        engine.complete(
-            {name: goal[JOINT_INDEX[name]] for name in BASE_KEYPOINTS},
-            dict(zip(names, bone_lengths(goal).tolist(), strict=True)),
-        ).pose
-        for goal in pairs.goal
-    ]
-    poses = np.stack(done) if done else np.zeros((0, NUM_JOINTS, 3))
-    out["completion_lengths"] = _items(edits, poses, pairs.turn, time.perf_counter() - t0)
+    for method, given in (("completion", False), ("completion_lengths", True)):
+        t0 = time.perf_counter()
+        done = [
+            engine.complete(
+                {name: goal[JOINT_INDEX[name]] for name in BASE_KEYPOINTS},
+                dict(zip(names, bone_lengths(goal).tolist(), strict=True)) if given else None,
+            ).pose
+            for goal in pairs.goal
+        ]
+        poses = np.stack(done) if done else np.zeros((0, NUM_JOINTS, 3))
+        out[method] = _items(edits, poses, pairs.turn, time.perf_counter() - t0)
     return out
 
 

@@ -147,38 +147,47 @@ def load_checkpoint(
     return StageState(epoch=ckpt["epoch"], history=ckpt["history"], seconds=ckpt["seconds"])
 
 
+#: Fields added after checkpoints of their stages existed: in a tag only where they differ
+#: from their default, so that runs from before them stay valid.
+_ADDED_LATER: dict[str, tuple[str, ...]] = {
+    "autoencoder": ("loss",),
+    "solver": ("rigid_loss", "joint_loss"),
+    "augment": ("lift_start",),
+    "completion": ("loss",),
+}
+
+
+def _section(cfg: TrainConfig, name: str, exclude: tuple[str, ...] = ()) -> dict[str, Any]:
+    """A config section as a checkpoint tag sees it: without ``exclude`` and without the
+    fields of :data:`_ADDED_LATER` that are at their default."""
+    section = getattr(cfg, name)
+    out: dict[str, Any] = section.model_dump(exclude=set(exclude))
+    fields = type(section).model_fields
+    for key in _ADDED_LATER.get(name, ()):
+        if key in out and out[key] == fields[key].default:
+            del out[key]
+    return out
+
+
 def config_tag(cfg: TrainConfig, stage: str) -> str:
-    augment = cfg.augment.model_dump()
+    """The fields of ``cfg`` the weights of ``stage`` depend on, hashed: a checkpoint of
+    another tag is trained anew."""
     pairs_only = ("world_pairs", "align_pelvis", "align_floor", "lift_start")  # solvers only
     relevant: dict[str, Any] = {
         "seed": cfg.seed,
         "dataset": cfg.dataset,
         "max_train_frames": cfg.max_train_frames,
-        "autoencoder": cfg.autoencoder.model_dump(
-            exclude={"loss"} if cfg.autoencoder.loss == "mse" else None  # added later
-        ),
-        "augment": {k: v for k, v in augment.items() if k not in pairs_only},
+        "autoencoder": _section(cfg, "autoencoder"),
+        "augment": _section(cfg, "augment", pairs_only),
     }
     if stage.startswith("solver"):
-        solver = cfg.solver.model_dump(exclude={"passes"})  # passes: serving only
-        if not solver["rigid_loss"]:  # added later: in the tag only when on, so that
-            del solver["rigid_loss"]  # checkpoints from before it stay valid
-        if solver["joint_loss"] == "mse":  # likewise: only when not the default
-            del solver["joint_loss"]
         # each bank reads only its own sets and epochs (its own seed and pair stream), so
-        # neither is retrained when only the other's change
-        mine, other = ("long_sets", "long_epochs"), ("sets", "epochs")
-        for key in other if stage == "solvers_long" else mine:
-            del solver[key]
-        relevant["solver"] = solver
-        if not augment["lift_start"]:  # added later: in the tag only when on (see above)
-            del augment["lift_start"]
-        relevant["augment"] = augment
-    if stage.startswith("completion"):
-        completion = cfg.completion.model_dump(exclude={"serving_yaws", "serving_mirror"})
-        if completion["loss"] == "mse":  # added later: in the tag only when not the default
-            del completion["loss"]
-        relevant["completion"] = completion
+        # neither is retrained when only the other's change; passes: serving only
+        other = ("sets", "epochs") if stage == "solvers_long" else ("long_sets", "long_epochs")
+        relevant["solver"] = _section(cfg, "solver", ("passes", *other))
+        relevant["augment"] = _section(cfg, "augment")
+    if stage.startswith("completion"):  # serving_*: serving only
+        relevant["completion"] = _section(cfg, "completion", ("serving_yaws", "serving_mirror"))
     text = json.dumps(relevant, sort_keys=True)
     return f"{stage}:{hashlib.sha256(text.encode()).hexdigest()[:16]}"
 

@@ -102,16 +102,15 @@ def as_joints(flat_poses: torch.Tensor) -> torch.Tensor:
 # --------------------------------------------------------------------------------------
 # Stages
 # --------------------------------------------------------------------------------------
-def mpjpe_cm(pred: torch.Tensor, true: torch.Tensor) -> float:
-    """Mean per-joint position error in cm between flattened ``[N, 63]`` poses."""
-    diff = (pred - true).reshape(len(pred), NUM_JOINTS, 3)
-    return float(diff.norm(dim=-1).mean()) * 100.0
-
-
 def mpjpe_loss(pred: torch.Tensor, true: torch.Tensor) -> torch.Tensor:
     """Mean per-joint distance (m) between flattened ``[N, 63]`` poses, differentiable."""
     dist: torch.Tensor = torch.linalg.vector_norm((pred - true).reshape(len(pred), -1, 3), dim=-1)
     return dist.mean()
+
+
+def mpjpe_cm(pred: torch.Tensor, true: torch.Tensor) -> float:
+    """Mean per-joint position error in cm between flattened ``[N, 63]`` poses."""
+    return float(mpjpe_loss(pred, true)) * 100.0
 
 
 def ae_samples(
