@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 import shutil
 import socket
 import subprocess
@@ -137,6 +138,9 @@ def dist(a: list[float], b: list[float]) -> float:
 
 # -- without a browser: the files are there and served ------------------------------------
 STATIC = REPO_ROOT / "service" / "static"
+# The page's own modules: the entry editor.js, bvh.js and the editor's modules in editor/.
+EDITOR_JS = [STATIC / "editor.js", STATIC / "bvh.js", *sorted((STATIC / "editor").glob("*.js"))]
+RELATIVE_IMPORT = re.compile(r"^import [^;]*? from '(\.{1,2}/[^']+)';", re.M)
 
 
 def test_editor_routes_serve_the_page_and_vendored_three() -> None:
@@ -154,8 +158,9 @@ def test_editor_routes_serve_the_page_and_vendored_three() -> None:
     assert 'src="static/editor.js"' in page.text
     assert "http://" not in page.text  # no CDN: everything comes from /static
     assert "https://" not in page.text
+    assert len(EDITOR_JS) > 2  # the editor's modules are there
     for path in (
-        "/static/editor.js",
+        *(f"/static/{js.relative_to(STATIC).as_posix()}" for js in EDITOR_JS),
         "/static/vendor/three/three.module.js",
         "/static/vendor/three/three.core.js",
         "/static/vendor/three/addons/controls/OrbitControls.js",
@@ -175,10 +180,15 @@ def test_vendored_three_is_pinned_and_licensed() -> None:
     revision = version.removeprefix("three@0.").split(".")[0]
     assert f"REVISION = '{revision}'" in (vendor / "three.core.js").read_text()
     # offline: no module is fetched from anywhere but the vendored files
-    for js in (STATIC / "editor.js", vendor / "addons" / "controls" / "OrbitControls.js"):
+    for js in (*EDITOR_JS, vendor / "addons" / "controls" / "OrbitControls.js"):
         text = js.read_text()
-        assert "from 'http" not in text
-        assert 'from "http' not in text
+        assert "from 'http" not in text, js
+        assert 'from "http' not in text, js
+    # ... and every relative import of the page's modules names one of its files
+    imports = [(js, spec) for js in EDITOR_JS for spec in RELATIVE_IMPORT.findall(js.read_text())]
+    assert len(imports) >= len(EDITOR_JS)
+    for js, spec in imports:
+        assert (js.parent / spec).resolve().is_file(), (js, spec)
 
 
 def test_sample_poses_are_small_complete_and_from_the_test_split() -> None:

@@ -1,0 +1,174 @@
+// A BVH file: its frames in the page's world (the service's joint map, static/bvh.js's forward
+// kinematics), and open (picker or drop), scrub, close.
+
+import * as THREE from 'three';
+import { anchorPoints, forwardKinematics, parseMotion } from '../bvh.js';
+import { $, doc, history, state, ui } from './state.js';
+import { api, ApiError, clearError, showError } from './api.js';
+import { cancelSolves, clonePose, pushHistory, restore, snapshot } from './solve.js';
+import { buildCharacterBones, buildSkeleton, camera, controls, UP } from './scene.js';
+import { endDrag } from './interaction.js';
+import { refresh } from './panel.js';
+
+// ------------------------------------------------------------------------------------
+// A file's frames: forward kinematics, the page's world
+// ------------------------------------------------------------------------------------
+const motionCache = new Map(); // text -> MOTION values (the last few texts)
+
+function motionOf(text) {
+  let values = motionCache.get(text);
+  if (!values) {
+    values = parseMotion(text);
+    motionCache.set(text, values);
+    if (motionCache.size > 6) motionCache.delete(motionCache.keys().next().value);
+  }
+  return values;
+}
+
+// Forward kinematics of one frame of a text: every joint, and the canonical points (file units).
+export function fileFrame(text, frame) {
+  const joints = doc.info.joints;
+  const n = joints.reduce((acc, j) => acc + j.channels.length, 0);
+  const row = motionOf(text).subarray(frame * n, (frame + 1) * n);
+  const fk = forwardKinematics(joints, row);
+  return { fk, points: anchorPoints(joints, doc.info.anchors, fk) };
+}
+
+export const toWorld = (p) => new THREE.Vector3(p[0], p[1], p[2]).applyMatrix4(doc.toWorld).toArray();
+export const toFile = (p) => new THREE.Vector3(p[0], p[1], p[2]).applyMatrix4(doc.fromWorld).toArray();
+
+// The 21 handles (world) of a frame of a text.
+export function filePose(text, frame) {
+  const { points } = fileFrame(text, frame);
+  return Object.fromEntries(Object.entries(points).map(([k, p]) => [k, toWorld(p)]));
+}
+
+// ------------------------------------------------------------------------------------
+// BVH files: open (picker or drop), scrub, close
+// ------------------------------------------------------------------------------------
+function fileSettings() {
+  const units = $('bvh-units').value;
+  const up = $('bvh-up').value;
+  const out = {};
+  if (units !== 'auto') out.units = Number.isFinite(Number(units)) ? Number(units) : units;
+  if (up !== 'auto') out.up = up;
+  return out;
+}
+
+// The page's world: metres, +Y up, the character as opened facing +Z with its pelvis
+// above the origin and its lowest joint on the grid.
+function worldMapping(info, frame0) {
+  const s = info.metres_per_unit;
+  const m = new THREE.Matrix4().makeScale(s, s, s);
+  if (info.up === '+Z') m.premultiply(new THREE.Matrix4().makeRotationX(-Math.PI / 2)); // (x, y, z) -> (x, z, -y)
+  const at = (p) => new THREE.Vector3(...p).applyMatrix4(m);
+  const left = at(frame0.points.left_hip).sub(at(frame0.points.right_hip));
+  const forward = new THREE.Vector3().crossVectors(left, UP);
+  const yaw = Math.atan2(forward.x, forward.z);
+  m.premultiply(new THREE.Matrix4().makeRotationY(-yaw));
+  const pelvis = at(frame0.points.pelvis);
+  const lowest = Math.min(...frame0.fk.pos.map((p) => at(p).y));
+  m.premultiply(new THREE.Matrix4().makeTranslation(-pelvis.x, -lowest, -pelvis.z));
+  return m;
+}
+
+let opening = 0;
+
+export async function openText(text, name) {
+  doc.tried = { text, name };
+  const ticket = ++opening;
+  $('status').textContent = `opening ${name}…`;
+  let res;
+  try {
+    res = await api('POST', 'v1/bvh/inspect', { bvh: text, frame: 0, ...fileSettings() });
+    if (ticket !== opening) return;
+  } catch (err) {
+    if (ticket !== opening) return;
+    showError(err);
+    $('status').textContent = ui.connected ? 'connected' : 'server not ready';
+    return;
+  }
+  endDrag(false);
+  cancelSolves();
+  motionCache.clear();
+  const info = res.data;
+  Object.assign(doc, { active: true, name, original: text, text, shown: text, info, frame: 0 });
+  const frame0 = fileFrame(text, 0);
+  doc.toWorld = worldMapping(info, frame0);
+  doc.fromWorld = doc.toWorld.clone().invert();
+  buildSkeleton();
+  buildCharacterBones();
+  ui.hovered = null;
+  history.stack = [];
+  history.index = -1;
+  restore({ pose: filePose(text, 0), targets: [], pins: [], text, frame: 0 });
+  pushHistory();
+  const pelvis = state.pose.pelvis;
+  controls.target.set(0, pelvis[1], 0);
+  camera.position.set(0.85, pelvis[1] + 0.5, 3.3);
+  controls.update();
+  const slider = $('bvh-frame');
+  slider.max = String(Math.max(info.frames - 1, 0));
+  slider.value = '0';
+  $('bvh-loaded').hidden = false;
+  $('bvh-name').textContent = name;
+  const fps = info.frame_time > 0 ? ` @ ${(1 / info.frame_time).toFixed(4).replace(/\.?0+$/, '')} fps` : '';
+  $('bvh-meta').textContent = `${info.joints.length} joints, ${info.frames} frames${fps}; `
+    + `${info.scheme} map, units ${info.units}, up ${info.up}`;
+  $('export').textContent = 'Export BVH';
+  $('export').title = 'Download the edited BVH file';
+  $('sample').value = '';
+  $('status').textContent = ui.connected ? 'connected' : 'server not ready';
+  clearError();
+  refresh();
+}
+
+export async function openFile(file) {
+  if (!file) return;
+  let text;
+  try {
+    text = await file.text();
+  } catch (err) {
+    showError(new ApiError(-1, 'Cannot read the file', `${file.name}: ${err.message}`));
+    return;
+  }
+  await openText(text, file.name);
+}
+
+export function closeFile() {
+  doc.active = false;
+  doc.info = null;
+  motionCache.clear();
+  buildSkeleton();
+  buildCharacterBones();
+  $('bvh-loaded').hidden = true;
+  $('export').textContent = 'Export JSON';
+  $('export').title = 'Download the pose as JSON';
+  history.stack = [];
+  history.index = -1;
+  controls.target.set(0, 0.85, 0);
+  camera.position.set(0.75, 1.3, 2.9);
+  controls.update();
+}
+
+// Show another frame of the file: its targets go (they were for the other frame), pins stay.
+export function setFrame(frame) {
+  if (!doc.active || frame === doc.frame) return;
+  endDrag(false);
+  cancelSolves();
+  doc.frame = frame;
+  doc.shown = doc.text;
+  state.targets.clear();
+  state.committed = filePose(doc.text, frame);
+  state.pose = clonePose(state.committed);
+  // not an undo step: the current history entry follows the frame
+  if (history.index >= 0) history.stack[history.index] = snapshot();
+  refresh();
+}
+
+export function refreshFrame() {
+  if (!doc.active) return;
+  $('bvh-frame').value = String(doc.frame);
+  const t = doc.frame * doc.info.frame_time;
+  $('bvh-frame-label').textContent = `${doc.frame} / ${doc.info.frames - 1} (${t.toFixed(2)} s)`;
+}

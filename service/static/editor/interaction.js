@@ -1,0 +1,172 @@
+// Pointer interaction: screen-space picking, ray-plane dragging of joints and targets, the
+// hover label, pins and target removal.
+
+import * as THREE from 'three';
+import { $, doc, state, ui } from './state.js';
+import { cancelSolves, commitShown, requestSolve, restore, snapshot } from './solve.js';
+import { camera, controls, drawPose, renderer, viewport } from './scene.js';
+import { refresh, refreshPanel } from './panel.js';
+
+const PICK_PIXELS = 18;
+
+// ------------------------------------------------------------------------------------
+// Screen-space picking and ray-plane dragging
+// ------------------------------------------------------------------------------------
+export function toScreen(p) {
+  const v = new THREE.Vector3(p[0], p[1], p[2]).project(camera);
+  const rect = renderer.domElement.getBoundingClientRect();
+  return {
+    x: rect.left + ((v.x + 1) / 2) * rect.width,
+    y: rect.top + ((1 - v.y) / 2) * rect.height,
+    depth: v.z,
+  };
+}
+
+// The nearest joint or target marker within PICK_PIXELS of the pointer (targets first).
+function pick(clientX, clientY) {
+  let best = null;
+  const consider = (kind, joint, p, bias) => {
+    const s = toScreen(p);
+    if (s.depth < -1 || s.depth > 1) return;
+    const d = Math.hypot(s.x - clientX, s.y - clientY) - bias;
+    if (d <= PICK_PIXELS && (!best || d < best.d)) best = { kind, joint, d };
+  };
+  for (const [joint, p] of state.targets) consider('target', joint, p, 2);
+  for (const joint of state.joints) {
+    const bias = joint === 'head' && !doc.active ? 10 : 0;
+    if (state.pose && state.pose[joint]) consider('joint', joint, state.pose[joint], bias);
+  }
+  return best;
+}
+
+const raycaster = new THREE.Raycaster();
+
+function pointerRay(clientX, clientY) {
+  const rect = renderer.domElement.getBoundingClientRect();
+  const ndc = new THREE.Vector2(
+    ((clientX - rect.left) / rect.width) * 2 - 1,
+    -((clientY - rect.top) / rect.height) * 2 + 1,
+  );
+  raycaster.setFromCamera(ndc, camera);
+  return raycaster.ray;
+}
+
+export function onPointerDown(ev) {
+  if (ev.button !== 0 || !state.pose) return;
+  const hit = pick(ev.clientX, ev.clientY);
+  if (!hit) return; // empty space: OrbitControls gets the event
+  ev.stopPropagation();
+  ev.preventDefault();
+  const { joint } = hit;
+  if (ev.altKey) {
+    if (state.targets.has(joint)) removeTarget(joint);
+    return;
+  }
+  if (ev.shiftKey) {
+    togglePin(joint);
+    return;
+  }
+  // Drag in the plane through the grabbed point, facing the camera.
+  const start = hit.kind === 'target' ? state.targets.get(joint) : state.pose[joint];
+  const point = new THREE.Vector3(start[0], start[1], start[2]);
+  const normal = new THREE.Vector3();
+  camera.getWorldDirection(normal);
+  const ray = pointerRay(ev.clientX, ev.clientY);
+  const plane = new THREE.Plane().setFromNormalAndCoplanarPoint(normal, point);
+  const grabbed = new THREE.Vector3();
+  const offset = ray.intersectPlane(plane, grabbed) ? point.clone().sub(grabbed) : new THREE.Vector3();
+  ui.drag = { joint, plane, offset, moved: false, before: snapshot(), hadTarget: state.targets.has(joint), pointerId: ev.pointerId };
+  controls.enabled = false;
+  viewport.style.cursor = 'grabbing';
+}
+
+export function onPointerMove(ev) {
+  if (!ui.drag) {
+    updateHover(ev);
+    return;
+  }
+  const ray = pointerRay(ev.clientX, ev.clientY);
+  const hitPoint = new THREE.Vector3();
+  if (!ray.intersectPlane(ui.drag.plane, hitPoint)) return;
+  hitPoint.add(ui.drag.offset);
+  if (!ui.drag.moved) {
+    ui.drag.moved = true;
+    state.pins.delete(ui.drag.joint); // a dragged joint follows its target, not its pin
+  }
+  state.targets.set(ui.drag.joint, [hitPoint.x, hitPoint.y, hitPoint.z]);
+  requestSolve(false);
+  refreshPanel();
+  drawPose();
+  moveHud(ev.clientX, ev.clientY, ui.drag.joint);
+}
+
+export function onPointerUp() {
+  if (ui.drag) endDrag(true);
+}
+
+// End the gesture: commit its last solve, or (cancel) go back to where it started.
+export function endDrag(commit) {
+  if (!ui.drag) return;
+  const d = ui.drag;
+  ui.drag = null;
+  controls.enabled = true;
+  viewport.style.cursor = '';
+  if (!d.moved) return; // a click, not a drag
+  if (commit) {
+    requestSolve(true);
+  } else {
+    cancelSolves();
+    restore(d.before);
+    refresh();
+  }
+}
+
+function updateHover(ev) {
+  const hit = ev.target === renderer.domElement ? pick(ev.clientX, ev.clientY) : null;
+  const name = hit ? hit.joint : null;
+  viewport.style.cursor = hit ? 'grab' : '';
+  if (name !== ui.hovered) {
+    ui.hovered = name;
+    drawPose();
+  }
+  if (hit) moveHud(ev.clientX, ev.clientY, hit.kind === 'target' ? `target: ${name}` : name);
+  else $('hud').hidden = true;
+}
+
+function moveHud(x, y, text) {
+  const hud = $('hud');
+  const anchor = doc.active && doc.info.anchors[text];
+  hud.textContent = anchor ? `${text} (${anchor.label})` : text;
+  hud.style.left = `${x + 14}px`;
+  hud.style.top = `${y + 10}px`;
+  hud.hidden = false;
+}
+
+function togglePin(joint) {
+  if (state.pins.has(joint)) {
+    state.pins.delete(joint);
+  } else {
+    state.pins.add(joint);
+    if (state.targets.delete(joint)) {
+      // It was targeted: it now stays where the last solve put it.
+      commitShown();
+    }
+  }
+  requestSolve(true);
+  refresh();
+}
+
+export function removeTarget(joint) {
+  state.targets.delete(joint);
+  commitShown();
+  requestSolve(true);
+  refresh();
+}
+
+export function clearTargets() {
+  if (state.targets.size === 0) return;
+  cancelSolves();
+  state.targets.clear();
+  commitShown();
+  requestSolve(true);
+}

@@ -1,0 +1,212 @@
+// The three.js scene: renderer, camera, orbit controls, and the drawing of the skeleton
+// (joints, bones, pin rings), of an open file's own bones, and of the targets.
+
+import * as THREE from 'three';
+import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
+import { $, doc, state, ui } from './state.js';
+import { ApiError, showError } from './api.js';
+import { fileFrame, toWorld } from './file.js';
+
+const COLORS = {
+  left: 0x3b82f6,
+  right: 0xf59e0b,
+  centre: 0xc3c8d2,
+  pin: 0xa855f7,
+  target: 0xef4444,
+  hover: 0xffffff,
+};
+const JOINT_RADIUS = 0.026;
+const BONE_RADIUS = 0.016;
+const HEAD_RADIUS = 0.075;
+
+// ------------------------------------------------------------------------------------
+// Scene
+// ------------------------------------------------------------------------------------
+export const viewport = $('viewport');
+export let renderer;
+try {
+  renderer = new THREE.WebGLRenderer({ antialias: true, preserveDrawingBuffer: true });
+} catch (err) {
+  showError(new ApiError(-1, 'WebGL unavailable', `the 3D view cannot start: ${err.message}`));
+  throw err;
+}
+renderer.setPixelRatio(Math.min(window.devicePixelRatio, 2));
+viewport.appendChild(renderer.domElement);
+
+export const scene = new THREE.Scene();
+scene.background = new THREE.Color(0x1c2028);
+export const camera = new THREE.PerspectiveCamera(38, 1, 0.05, 100);
+camera.position.set(0.75, 1.3, 2.9);
+
+scene.add(new THREE.HemisphereLight(0xffffff, 0x404552, 2.2));
+const sun = new THREE.DirectionalLight(0xffffff, 2.0);
+sun.position.set(2, 4, 3);
+scene.add(sun);
+
+// Floor: a 4 m grid of 25 cm squares.
+scene.add(new THREE.GridHelper(4, 16, 0x6b7280, 0x394050));
+
+// Facing arrow on the floor (+Z, towards the default camera).
+const facing = new THREE.ArrowHelper(new THREE.Vector3(0, 0, 1), new THREE.Vector3(0, 0.003, 0.15), 0.25, 0x6b7280, 0.07, 0.045);
+scene.add(facing);
+
+export const controls = new OrbitControls(camera, renderer.domElement);
+controls.target.set(0, 0.85, 0);
+controls.enableDamping = false;
+controls.update();
+
+const side = (name) => (name.startsWith('left_') ? 'left' : name.startsWith('right_') ? 'right' : 'centre');
+const materials = {
+  left: new THREE.MeshStandardMaterial({ color: COLORS.left, roughness: 0.5 }),
+  right: new THREE.MeshStandardMaterial({ color: COLORS.right, roughness: 0.5 }),
+  centre: new THREE.MeshStandardMaterial({ color: COLORS.centre, roughness: 0.5 }),
+  pin: new THREE.MeshStandardMaterial({ color: COLORS.pin, roughness: 0.4, emissive: 0x3b0764 }),
+  target: new THREE.MeshStandardMaterial({ color: COLORS.target, roughness: 0.4, emissive: 0x450a0a, transparent: true, opacity: 0.85 }),
+  hover: new THREE.MeshStandardMaterial({ color: COLORS.hover, roughness: 0.3, emissive: 0x555555 }),
+};
+const sphereGeometry = new THREE.SphereGeometry(1, 24, 16);
+const boneGeometry = new THREE.CylinderGeometry(BONE_RADIUS, BONE_RADIUS, 1, 16, 1);
+const pinRingGeometry = new THREE.TorusGeometry(0.045, 0.007, 8, 32);
+
+const skeleton = new THREE.Group();
+scene.add(skeleton);
+const jointMeshes = new Map();
+const boneMeshes = new Map(); // child -> mesh
+export const pinRings = new Map();
+const targetMarkers = new Map();
+const targetLines = new Map();
+
+export function buildSkeleton() {
+  skeleton.clear();
+  jointMeshes.clear();
+  boneMeshes.clear();
+  pinRings.clear();
+  for (const name of state.joints) {
+    const mesh = new THREE.Mesh(sphereGeometry, materials[side(name)]);
+    const r = name === 'head' && !doc.active ? HEAD_RADIUS : JOINT_RADIUS;
+    mesh.scale.setScalar(r);
+    mesh.name = name;
+    skeleton.add(mesh);
+    jointMeshes.set(name, mesh);
+    const parent = state.parents[name];
+    if (parent) {
+      const bone = new THREE.Mesh(boneGeometry, materials[side(name)]);
+      skeleton.add(bone);
+      boneMeshes.set(name, bone);
+    }
+    const ring = new THREE.Mesh(pinRingGeometry, materials.pin);
+    ring.visible = false;
+    skeleton.add(ring);
+    pinRings.set(name, ring);
+  }
+}
+
+export const UP = new THREE.Vector3(0, 1, 0);
+const tmpA = new THREE.Vector3();
+const tmpB = new THREE.Vector3();
+
+// The open file's own bones: one thin grey cylinder per joint with a parent.
+const characterBones = new THREE.Group();
+scene.add(characterBones);
+const ownBoneMaterial = new THREE.MeshStandardMaterial({ color: 0x9aa3b5, roughness: 0.6 });
+const ownJointGeometry = new THREE.SphereGeometry(0.011, 12, 8);
+
+export function buildCharacterBones() {
+  characterBones.clear();
+  doc.drawn = { text: null, frame: -1 };
+  if (!doc.active) return;
+  for (const j of doc.info.joints) {
+    if (j.parent >= 0) characterBones.add(new THREE.Mesh(boneGeometry, ownBoneMaterial));
+    else characterBones.add(new THREE.Mesh(ownJointGeometry, ownBoneMaterial));
+  }
+}
+
+function placeBone(bone, a, b, radius) {
+  tmpA.set(a[0], a[1], a[2]);
+  tmpB.set(b[0], b[1], b[2]);
+  const length = tmpA.distanceTo(tmpB);
+  bone.position.copy(tmpA).add(tmpB).multiplyScalar(0.5);
+  bone.scale.set(radius, Math.max(length, 1e-6), radius);
+  if (length > 1e-9) bone.quaternion.setFromUnitVectors(UP, tmpB.sub(tmpA).divideScalar(length));
+}
+
+function drawCharacter() {
+  characterBones.visible = doc.active;
+  if (!doc.active || (doc.drawn.text === doc.shown && doc.drawn.frame === doc.frame)) return;
+  const { fk } = fileFrame(doc.shown, doc.frame);
+  doc.world = fk.pos.map(toWorld);
+  doc.info.joints.forEach((j, i) => {
+    const mesh = characterBones.children[i];
+    if (j.parent >= 0) placeBone(mesh, doc.world[j.parent], doc.world[i], 0.45);
+    else mesh.position.set(...doc.world[i]);
+  });
+  doc.drawn = { text: doc.shown, frame: doc.frame };
+}
+
+export function drawPose() {
+  const pose = state.pose;
+  if (!pose) return;
+  for (const [name, mesh] of jointMeshes) {
+    const p = pose[name];
+    if (!p) continue;
+    mesh.position.set(p[0], p[1], p[2]);
+    const pinned = state.pins.has(name);
+    mesh.material = name === ui.hovered ? materials.hover : pinned ? materials.pin : materials[side(name)];
+    const ring = pinRings.get(name);
+    ring.visible = pinned;
+    ring.position.copy(mesh.position);
+    ring.quaternion.copy(camera.quaternion); // face the camera
+  }
+  for (const [child, bone] of boneMeshes) {
+    bone.visible = !doc.active; // a file shows its own bones instead
+    placeBone(bone, pose[state.parents[child]], pose[child], 1);
+  }
+  drawCharacter();
+  // Targets: a red marker each, and a thin line to its joint while it is not reached.
+  for (const [joint, marker] of targetMarkers) {
+    if (!state.targets.has(joint)) {
+      scene.remove(marker);
+      scene.remove(targetLines.get(joint));
+      targetMarkers.delete(joint);
+      targetLines.delete(joint);
+    }
+  }
+  for (const [joint, pos] of state.targets) {
+    let marker = targetMarkers.get(joint);
+    if (!marker) {
+      marker = new THREE.Mesh(sphereGeometry, materials.target);
+      marker.scale.setScalar(0.036);
+      scene.add(marker);
+      targetMarkers.set(joint, marker);
+      const line = new THREE.Line(
+        new THREE.BufferGeometry().setFromPoints([new THREE.Vector3(), new THREE.Vector3()]),
+        new THREE.LineBasicMaterial({ color: COLORS.target }),
+      );
+      scene.add(line);
+      targetLines.set(joint, line);
+    }
+    marker.position.set(pos[0], pos[1], pos[2]);
+    const line = targetLines.get(joint);
+    const j = pose[joint];
+    line.geometry.attributes.position.setXYZ(0, pos[0], pos[1], pos[2]);
+    line.geometry.attributes.position.setXYZ(1, j[0], j[1], j[2]);
+    line.geometry.attributes.position.needsUpdate = true;
+    line.geometry.computeBoundingSphere();
+  }
+  ui.needsRender = true;
+}
+
+export function resize() {
+  const w = viewport.clientWidth || 1;
+  const h = viewport.clientHeight || 1;
+  renderer.setSize(w, h, false);
+  renderer.domElement.style.width = `${w}px`;
+  renderer.domElement.style.height = `${h}px`;
+  camera.aspect = w / h;
+  camera.updateProjectionMatrix();
+  ui.needsRender = true;
+}
+new ResizeObserver(resize).observe(viewport);
+controls.addEventListener('change', () => {
+  ui.needsRender = true;
+});

@@ -1,0 +1,216 @@
+// Edits, undo history and solving: snapshots (pose, targets, pins; a file's text and frame),
+// undo / redo / reset / sample, and the solve requests (editor.js's frame loop sends them).
+
+import { $, doc, history, solver, state, ui } from './state.js';
+import { api, clearError, showError } from './api.js';
+import { endDrag } from './interaction.js';
+import { refresh, updateButtons } from './panel.js';
+import { closeFile, filePose, toFile } from './file.js';
+
+// ------------------------------------------------------------------------------------
+// Snapshots and undo history; undo, redo, samples, reset
+// ------------------------------------------------------------------------------------
+export const clonePose = (pose) => Object.fromEntries(Object.entries(pose).map(([k, v]) => [k, [...v]]));
+
+export function snapshot() {
+  const snap = {
+    pose: clonePose(state.committed),
+    targets: [...state.targets].map(([j, p]) => [j, [...p]]),
+    pins: [...state.pins],
+  };
+  if (doc.active) {
+    snap.text = doc.text; // shared, not copied: a string is immutable
+    snap.frame = doc.frame;
+  }
+  return snap;
+}
+
+export function restore(snap) {
+  state.committed = clonePose(snap.pose);
+  state.pose = clonePose(snap.pose);
+  state.targets = new Map(snap.targets.map(([j, p]) => [j, [...p]]));
+  state.pins = new Set(snap.pins);
+  if (doc.active && snap.text !== undefined) {
+    doc.text = snap.text;
+    doc.shown = snap.text;
+    doc.frame = snap.frame;
+  }
+}
+
+function sameSnapshot(a, b) {
+  if (!a || a.text !== b.text || a.frame !== b.frame) return false;
+  return JSON.stringify({ ...a, text: null }) === JSON.stringify({ ...b, text: null });
+}
+
+// The pose on screen becomes the committed one (solves start from it).
+export function commitShown() {
+  state.committed = clonePose(state.pose);
+  doc.text = doc.shown;
+}
+
+export function pushHistory() {
+  const snap = snapshot();
+  const top = history.stack[history.index];
+  if (sameSnapshot(top, snap)) {
+    updateButtons(); // nothing changed (e.g. an option toggled with no targets)
+    return;
+  }
+  history.stack.length = history.index + 1;
+  history.stack.push(snap);
+  if (history.stack.length > 200) history.stack.shift();
+  history.index = history.stack.length - 1;
+  updateButtons();
+}
+
+export function cancelSolves() {
+  solver.epoch += 1;
+  solver.dirty = false;
+  solver.commitPending = false;
+}
+
+export function undo() {
+  if (history.index <= 0) return;
+  endDrag(false);
+  cancelSolves();
+  history.index -= 1;
+  restore(history.stack[history.index]);
+  refresh();
+}
+
+export function redo() {
+  if (history.index >= history.stack.length - 1) return;
+  endDrag(false);
+  cancelSolves();
+  history.index += 1;
+  restore(history.stack[history.index]);
+  refresh();
+}
+
+export function loadSample(i) {
+  endDrag(false);
+  cancelSolves();
+  if (doc.active) closeFile();
+  state.sample = i;
+  ui.hovered = null;
+  $('hud').hidden = true;
+  const pose = state.samples[i].pose;
+  restore({ pose, targets: [], pins: [] });
+  pushHistory();
+  $('sample').value = String(i);
+  refresh();
+}
+
+export function reset() {
+  if (!doc.active) {
+    loadSample(state.sample);
+    return;
+  }
+  endDrag(false);
+  cancelSolves();
+  doc.text = doc.original;
+  restore({ pose: filePose(doc.original, doc.frame), targets: [], pins: [], text: doc.original, frame: doc.frame });
+  pushHistory();
+  refresh();
+}
+
+// ------------------------------------------------------------------------------------
+// Solving: the request body, throttled requests, answers
+// ------------------------------------------------------------------------------------
+export function options() {
+  return {
+    method: document.querySelector('input[name=method]:checked').value,
+    preserve_bone_lengths: $('preserve').checked,
+    reach: $('exact').checked ? 'exact' : 'soft',
+    tolerance: $('tolerance').valueAsNumber,
+  };
+}
+
+function solveBody() {
+  if (doc.active) {
+    return {
+      bvh: doc.text,
+      frame: doc.frame,
+      units: doc.info.units,
+      up: doc.info.up,
+      targets: [...state.targets].map(([joint, p]) => ({ joint, position: toFile(p), weight: 1.0 })),
+      pins: [...state.pins].filter((j) => !state.targets.has(j)),
+      options: options(),
+    };
+  }
+  return {
+    pose: state.committed,
+    targets: [...state.targets].map(([joint, position]) => ({ joint, position, weight: 1.0 })),
+    pins: [...state.pins].filter((j) => !state.targets.has(j)),
+    options: options(),
+  };
+}
+
+// An edit happened: solve it on the next frame (commit = it ends a gesture).
+export function requestSolve(commit) {
+  if (commit) solver.commitPending = true;
+  if (state.targets.size === 0) {
+    // Nothing to reach: the committed pose stands.
+    solver.dirty = false;
+    state.pose = clonePose(state.committed);
+    doc.shown = doc.text;
+    if (solver.commitPending) {
+      solver.commitPending = false;
+      pushHistory();
+    }
+    refresh();
+    return;
+  }
+  solver.dirty = true;
+}
+
+export async function sendSolve() {
+  solver.dirty = false;
+  solver.inflight = true;
+  const epoch = solver.epoch;
+  const commit = solver.commitPending;
+  const body = solveBody();
+  solver.sent += 1;
+  $('solve-count').textContent = String(solver.sent);
+  try {
+    const res = await api('POST', body.bvh === undefined ? 'v1/solve' : 'v1/bvh/solve', body);
+    if (epoch !== solver.epoch) return; // undone / reset / scrubbed meanwhile
+    solver.answered += 1;
+    if (body.bvh === undefined) {
+      state.pose = res.data.pose;
+    } else {
+      doc.shown = res.data.bvh;
+      state.pose = filePose(doc.shown, body.frame);
+    }
+    state.model = res.data.model;
+    const server = parseFloat(res.serverTime);
+    solver.latencies.push(server);
+    if (solver.latencies.length > 50) solver.latencies.shift();
+    solver.last = {
+      request: body,
+      response: res.data,
+      serverTime: res.serverTime,
+      serverMs: server,
+      rttMs: res.rtt,
+      requestId: res.requestId,
+    };
+    clearError();
+    if (commit && !solver.dirty && solver.commitPending && !ui.drag) {
+      commitShown();
+      solver.commitPending = false;
+      pushHistory();
+    }
+    refresh();
+  } catch (err) {
+    if (epoch !== solver.epoch) return;
+    if (commit && !solver.dirty) {
+      // The gesture's final solve failed: keep its targets (so it can be retried) but not
+      // a pose the server never produced.
+      solver.commitPending = false;
+      pushHistory();
+    }
+    showError(err);
+    refresh();
+  } finally {
+    solver.inflight = false;
+  }
+}

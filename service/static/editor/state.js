@@ -1,0 +1,74 @@
+// The editor's shared state: the skeleton, the pose and its edits, the solver's bookkeeping,
+// the open BVH file, the undo history, and `ui` (the few flags several modules read and
+// write). Every module imports these objects; none keeps a copy.
+
+import * as THREE from 'three';
+
+// ------------------------------------------------------------------------------------
+// Skeleton (replaced by GET v1/skeleton once the server answers)
+// ------------------------------------------------------------------------------------
+const FALLBACK_PARENTS = {
+  pelvis: null, spine1: 'pelvis', spine2: 'spine1', neck: 'spine2', head: 'neck',
+  left_collar: 'spine2', left_shoulder: 'left_collar', left_elbow: 'left_shoulder',
+  left_wrist: 'left_elbow', right_collar: 'spine2', right_shoulder: 'right_collar',
+  right_elbow: 'right_shoulder', right_wrist: 'right_elbow', left_hip: 'pelvis',
+  left_knee: 'left_hip', left_ankle: 'left_knee', left_foot: 'left_ankle',
+  right_hip: 'pelvis', right_knee: 'right_hip', right_ankle: 'right_knee',
+  right_foot: 'right_ankle',
+};
+
+export const $ = (id) => document.getElementById(id);
+
+// ------------------------------------------------------------------------------------
+// State
+// ------------------------------------------------------------------------------------
+export const state = {
+  joints: Object.keys(FALLBACK_PARENTS),
+  parents: { ...FALLBACK_PARENTS },
+  samples: [],
+  sample: 0,
+  committed: null, // pose the solves start from
+  pose: null, // pose on screen
+  targets: new Map(), // joint -> [x, y, z]
+  pins: new Set(),
+  model: null,
+};
+
+export const solver = {
+  dirty: false, // an edit is waiting to be solved
+  inflight: false,
+  epoch: 0, // bumped by undo/redo/reset/sample: answers of older epochs are dropped
+  commitPending: false, // commit the answer to the latest edit (end of a gesture)
+  sent: 0,
+  answered: 0,
+  last: null,
+  latencies: [],
+};
+
+// The open BVH file (doc.active). doc.text is the committed file (solves start from it),
+// doc.shown the file whose frame is on screen (the latest answer during a gesture).
+export const doc = {
+  active: false,
+  name: '',
+  original: '', // as opened (Reset)
+  text: '',
+  shown: '',
+  info: null, // the v1/bvh/inspect answer: joints, anchors, units, up, frames, ...
+  frame: 0,
+  toWorld: new THREE.Matrix4(),
+  fromWorld: new THREE.Matrix4(),
+  tried: null, // {text, name} of the last file opened (re-opened when units / up change)
+  drawn: { text: null, frame: -1 }, // what the character's bones show
+  world: [], // world positions of every joint of the file, as drawn
+};
+
+export const history = { stack: [], index: -1 };
+
+// Flags several modules read and write (an importer cannot assign a module's `let`).
+export const ui = {
+  currentError: null, // the error on the banner (api.js), or null
+  hovered: null, // the joint (or target) under the pointer
+  needsRender: true, // the frame loop renders when set
+  drag: null, // the gesture in progress (interaction.js), or null
+  connected: false, // GET v1/skeleton has answered
+};
