@@ -6,10 +6,11 @@ a 503 problem."""
 from __future__ import annotations
 
 import asyncio
-import json
 import logging
 import os
 import time
+
+import orjson
 
 from service.errors import ShuttingDown, error_response, internal_error
 from service.middleware.types import (
@@ -69,8 +70,8 @@ class RequestContext:
         self._log(scope, request_id, status[0], t0)
 
     def _log(self, scope: Scope, request_id: str, status: int, t0: float) -> None:
-        if not self.access_log:
-            return
+        if not self.access_log or not access_log.isEnabledFor(logging.INFO):
+            return  # not even built when nobody reads it (~10 us of a 0.4 ms solve)
         line = {
             "event": "request",
             "request_id": request_id,
@@ -81,4 +82,4 @@ class RequestContext:
         }
         if status in _OUTCOME:
             line["outcome"] = _OUTCOME[status]
-        access_log.info(json.dumps(line))
+        access_log.info(orjson.dumps(line).decode())
