@@ -141,6 +141,25 @@ def test_single_hot_path_equals_the_route(
             assert h in f.headers and h in s.headers
 
 
+@pytest.mark.parametrize(
+    "body",
+    [
+        b"",
+        b"true",
+        b"false",
+        b'{"a": true, "b": [false, 1e-5, 2E3], "c": "untrue falsehood"}',
+        b"e:e:true:false:truefalse:fals:rue:eeee",
+    ],
+)
+def test_tokens_count_as_bytes_count_does(body: bytes, real_poses: PosePairs) -> None:
+    assert fastpath.tokens(body) == (
+        body.count(b":"),
+        body.count(b"true") + body.count(b"false"),
+    )
+    real = json.dumps(columns(real_poses, 50, preserve_bone_lengths=True)).encode()
+    assert fastpath.tokens(real) == (real.count(b":"), 1)
+
+
 def test_hot_path_leaves_bad_bodies_to_the_route(client: Any, real_poses: PosePairs) -> None:
     body = json.dumps(items(columns(real_poses, 1))[0])
     twice = body[:-1] + ', "options": {}, "options": {}}'
