@@ -153,6 +153,8 @@ def test_quick_bench_writes_a_sane_report(
     i14 = speed["issue14"]
     assert all(r["neural_passes1"]["p50_ms"] > 0 for r in i14["latency"])
     assert i14["batch_poses_per_s"]["solve_arrays_passes1"] > 0
+    assert i14["batch_poses_per_s"]["solve_arrays_2threads"] > 0
+    assert "on 2 threads" in report
     assert "at passes=1" in report
 
 
