@@ -134,12 +134,13 @@ def save_checkpoint(
 
 
 def load_checkpoint(
-    path: Path, model: nn.Module, optim: torch.optim.Optimizer, tag: str
+    path: Path, model: nn.Module, optim: torch.optim.Optimizer, tags: tuple[str, ...]
 ) -> StageState:
+    """The checkpoint at ``path`` if its tag is one of ``tags`` (see :func:`stage_tags`)."""
     if not path.exists():
         return StageState()
     ckpt = torch.load(path, map_location="cpu", weights_only=False)
-    if ckpt.get("tag") != tag:
+    if ckpt.get("tag") not in tags:
         console.print(f"[yellow]{path.name}: written by another config; starting the stage anew")
         return StageState()
     model.load_state_dict(ckpt["model"])
@@ -169,17 +170,20 @@ def _section(cfg: TrainConfig, name: str, exclude: tuple[str, ...] = ()) -> dict
     return out
 
 
-def config_tag(cfg: TrainConfig, stage: str) -> str:
+def config_tag(cfg: TrainConfig, stage: str, *, legacy: bool = False) -> str:
     """The fields of ``cfg`` the weights of ``stage`` depend on, hashed: a checkpoint of
-    another tag is trained anew."""
+    another tag is trained anew. The completion levels read nothing of the autoencoder
+    (their own networks, seeds and sample streams), so its section is not in their tags;
+    ``legacy``: the tag as it was before that, with it."""
     pairs_only = ("world_pairs", "align_pelvis", "align_floor", "lift_start")  # solvers only
     relevant: dict[str, Any] = {
         "seed": cfg.seed,
         "dataset": cfg.dataset,
         "max_train_frames": cfg.max_train_frames,
-        "autoencoder": _section(cfg, "autoencoder"),
         "augment": _section(cfg, "augment", pairs_only),
     }
+    if legacy or not stage.startswith("completion"):
+        relevant["autoencoder"] = _section(cfg, "autoencoder")
     if stage.startswith("solver"):
         # each bank reads only its own sets and epochs (its own seed and pair stream), so
         # neither is retrained when only the other's change; passes: serving only
@@ -190,6 +194,13 @@ def config_tag(cfg: TrainConfig, stage: str) -> str:
         relevant["completion"] = _section(cfg, "completion", ("serving_yaws", "serving_mirror"))
     text = json.dumps(relevant, sort_keys=True)
     return f"{stage}:{hashlib.sha256(text.encode()).hexdigest()[:16]}"
+
+
+def stage_tags(cfg: TrainConfig, stage: str) -> tuple[str, ...]:
+    """The tag a checkpoint of ``stage`` is written with, then the older forms of it still
+    accepted (so that runs from before a tag changed stay valid)."""
+    tags = (config_tag(cfg, stage), config_tag(cfg, stage, legacy=True))
+    return tuple(dict.fromkeys(tags))
 
 
 def epoch_table(title: str, history: list[dict[str, float]]) -> Table:
@@ -218,8 +229,9 @@ def run_stage(
 ) -> StageState:
     """The epoch loop shared by every stage: resume, train, validate, log, checkpoint."""
     ckpt = Path(cfg.run_dir) / f"{name}.pt"
-    tag = config_tag(cfg, name)
-    state = StageState() if fresh else load_checkpoint(ckpt, trainable, optim, tag)
+    tags = stage_tags(cfg, name)
+    tag = tags[0]
+    state = StageState() if fresh else load_checkpoint(ckpt, trainable, optim, tags)
     if d.world > 1:  # every rank starts from rank 0's weights
         for p in trainable.state_dict().values():
             dist.broadcast(p, src=0)

@@ -33,7 +33,13 @@ from trainer.models import (
     merge_banks,
     target_columns,
 )
-from trainer.stages import config_tag
+from trainer.stages import (
+    StageState,
+    config_tag,
+    load_checkpoint,
+    save_checkpoint,
+    stage_tags,
+)
 from trainer.train import (
     Trained,
     completion_loss,
@@ -406,11 +412,30 @@ def test_version_names_the_files_and_the_serving(trained: tuple[Trained, Path]) 
     assert model_version(manifest.models, viewed) != manifest.version
 
 
-def test_autoencoder_loss_choice_reaches_every_stage_tag() -> None:
+def test_autoencoder_loss_choice_reaches_the_tags_of_its_latent_space() -> None:
     """``autoencoder.loss``: the default leaves every checkpoint tag as it was; ``mpjpe``
-    retrains the autoencoder and all that is trained on its latent space."""
+    retrains the autoencoder and the solvers trained on its latent space, not the
+    completion levels, which read nothing of it."""
     mse = load_config(None, {"autoencoder": {"loss": "mse"}})
     mpjpe = load_config(None, {"autoencoder": {"loss": "mpjpe"}})
     for stage in ("autoencoder", "solvers", "solvers_long", "completion1"):
         assert config_tag(mse, stage) == config_tag(load_config(None, {}), stage)
-        assert config_tag(mpjpe, stage) != config_tag(mse, stage)
+        changes = config_tag(mpjpe, stage) != config_tag(mse, stage)
+        assert changes == (not stage.startswith("completion")), stage
+
+
+def test_completion_checkpoints_tagged_with_the_autoencoder_stay_valid(tmp_path: Path) -> None:
+    """Completion tags used to hash the autoencoder's section too: such a checkpoint is
+    still resumed under the same config, and not under another autoencoder."""
+    cfg = load_config(None, {})
+    other = load_config(None, {"autoencoder": {"epochs": 3}})
+    net = torch.nn.Linear(2, 2)
+    optim = torch.optim.Adam(net.parameters())
+    ckpt = tmp_path / "completion1.pt"
+    save_checkpoint(
+        ckpt, net, optim, StageState(epoch=4), config_tag(cfg, "completion1", legacy=True)
+    )
+    assert stage_tags(cfg, "completion1")[0] == stage_tags(other, "completion1")[0]
+    assert load_checkpoint(ckpt, net, optim, stage_tags(cfg, "completion1")).epoch == 4
+    assert load_checkpoint(ckpt, net, optim, stage_tags(other, "completion1")).epoch == 0
+    assert stage_tags(cfg, "solvers") == (config_tag(cfg, "solvers"),)
