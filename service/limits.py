@@ -117,8 +117,9 @@ class Budget:
         """``fn`` over consecutive ``parts`` of a batch of ``parts[-1].stop`` items (the
         array path): like :meth:`run`, each part in a worker thread within budget.
 
-        Parts run in waves as wide as the compute limiter (``compute_threads``), so one
-        big batch uses every compute thread; the budget is checked before each wave. An
+        Parts run in waves of up to ``compute_threads`` parts, each wave on the compute
+        tokens free when it starts (:func:`_wave`), so a lone big batch uses every compute
+        thread; the budget is checked before each wave. An
         item's answer does not depend on its part or on what runs beside it (the engine
         computes every item alone), so the answers are the same whatever the width."""
         limiter = getattr(self.request.app.state, "compute_limiter", None)

@@ -71,7 +71,7 @@ class RequestContext:
 
     def _log(self, scope: Scope, request_id: str, status: int, t0: float) -> None:
         if not self.access_log or not access_log.isEnabledFor(logging.INFO):
-            return  # not even built when nobody reads it (~10 us of a 0.4 ms solve)
+            return  # not even built when nobody reads it
         line = {
             "event": "request",
             "request_id": request_id,
