@@ -74,6 +74,8 @@ VARIANTS: dict[str, str] = {
     "completion_mpjpe_e20": "`completion_mpjpe` with 20 completion epochs, one view",
     "shipped": "the shipped recipe (trainer/configs/default.toml, run exp_c14): `c13`'s "
     "autoencoder and solvers, completion_mpjpe_e20's completion, served over 4 turns x mirror",
+    "ae40": "`shipped` with the autoencoder trained 40 epochs instead of 20 (ae40.toml); "
+    "both solver banks retrained on it, the shipped completion reused",
 }
 COMPLETION = "6-point completion"
 
@@ -172,8 +174,8 @@ def main(
         "Variants train at a small budget (trainer/configs/ablation/full.toml, the recipe of "
         "`previous`); `shipped`, `c12*`, `previous*`, `rigid`, `ae512*`, `shipped-before`, "
         "`shipped-world-pairs`, `long_solvers`, `stay*`, `solver256`, `completion512`, "
-        "`eff5*`, `lift*`, `pairs_long`, `c13`, `solver_distance`, `views` and "
-        "`completion_mpjpe*` are full-budget models scored with "
+        "`eff5*`, `lift*`, `pairs_long`, `c13`, `solver_distance`, `views`, "
+        "`completion_mpjpe*`, `ae40` are full-budget models scored with "
         "`python -m bench.heldout --models DIR [--passes N] --out reports/ablation/NAME.json`."
         " Rows scored with the numpy engine, before the compiled one, agree with it to "
         "5e-14 m (docs/benchmarks.md)."
