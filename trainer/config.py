@@ -62,6 +62,12 @@ class SolverConfig(_Section):
         description="Weight of MSE(non-target joints - their start positions): the joints "
         "not asked for move as little as the targets allow.",
     )
+    stay_frame: Literal["world", "local"] = Field(
+        default="world",
+        description="Where the stay term measures how far a joint not asked for moved: its "
+        "world position, or its offset from its parent joint (the root: its position), so "
+        "that a joint carried along by a moved parent, as FABRIK carries it, has stayed put.",
+    )
     bone_weight: float = Field(
         default=1.0,
         ge=0,

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import torch
 
-from core.skeleton import BONES, NUM_JOINTS
+from core.skeleton import BONE_CHILDREN, BONE_PARENTS, BONES, NUM_JOINTS
 from trainer.augment import bone_lengths
 
 #: Eps of the direction's norm: keeps the gradient finite where a child sits on its parent.
@@ -24,6 +24,15 @@ EPS = 1e-9
 def bone_lengths_t(flat_poses: torch.Tensor) -> torch.Tensor:
     """Bone lengths ``[..., 20]`` of flattened poses ``[..., 63]`` (``BONES`` order)."""
     return bone_lengths(flat_poses.reshape(*flat_poses.shape[:-1], NUM_JOINTS, 3))
+
+
+def parent_offsets_t(flat_poses: torch.Tensor) -> torch.Tensor:
+    """Each joint relative to its parent, the root as it is: ``[..., 63] -> [..., 63]``
+    in the same joint-major columns (a joint carried along by its parent keeps its offset)."""
+    joints = flat_poses.reshape(*flat_poses.shape[:-1], NUM_JOINTS, 3)
+    children, parents = torch.as_tensor(BONE_CHILDREN), torch.as_tensor(BONE_PARENTS)
+    out = joints.index_copy(-2, children, joints[..., children, :] - joints[..., parents, :])
+    return out.reshape(flat_poses.shape)
 
 
 def bone_pass_t(flat_poses: torch.Tensor, lengths: torch.Tensor) -> torch.Tensor:

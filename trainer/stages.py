@@ -152,7 +152,7 @@ def load_checkpoint(
 #: from their default, so that runs from before them stay valid.
 _ADDED_LATER: dict[str, tuple[str, ...]] = {
     "autoencoder": ("loss",),
-    "solver": ("rigid_loss", "joint_loss"),
+    "solver": ("rigid_loss", "joint_loss", "stay_frame"),
     "augment": ("lift_start",),
     "completion": ("loss",),
 }

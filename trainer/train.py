@@ -40,7 +40,7 @@ from trainer.models import (
     target_columns,
 )
 from trainer.pairs import partner_ranges, sample_partners
-from trainer.rigid import bone_lengths_t, bone_pass_t
+from trainer.rigid import bone_lengths_t, bone_pass_t, parent_offsets_t
 from trainer.stages import (
     Bar,
     Dist,
@@ -246,6 +246,7 @@ def solver_losses(
     stay_weight: float = 0.0,
     rigid: bool = False,
     distance: bool = False,
+    stay_local: bool = False,
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """Per-solver loss ``[S]`` and answers ``[S, B, 63]`` for a batch of pairs (``mode`` as
     the service answers, :func:`solved_poses`):
@@ -254,7 +255,9 @@ def solver_losses(
     + stay_weight * MSE(other joints - their start positions).
     ``rigid``: the joint terms are measured on the answer after the service's bone pass
     to the start's bone lengths (:mod:`trainer.rigid`), i.e. on what is served.
-    ``distance``: the joint terms are mean per-joint distances instead of MSEs."""
+    ``distance``: the joint terms are mean per-joint distances instead of MSEs.
+    ``stay_local``: the stay term on each joint's offset from its parent (the root: its
+    position), not on its world position (:func:`trainer.rigid.parent_offsets_t`)."""
     n_sets = len(bank.sets)
     decoded = solved_poses(ae, net, start, goal, n_sets, mode)
     start_lengths = bone_lengths_t(start)
@@ -280,7 +283,8 @@ def solver_losses(
     other_term = (per_col * (1 - tm)).sum(-1) / (1 - tm).sum(-1)
     loss = target_term + other_weight * other_term
     if stay_weight > 0:  # the joints not asked for move as little as the targets allow
-        moved = per_item(answer - start.unsqueeze(0))
+        frame = parent_offsets_t if stay_local else (lambda x: x)
+        moved = per_item(frame(answer) - frame(start).unsqueeze(0))
         loss = loss + stay_weight * (moved * (1 - tm)).sum(-1) / (1 - tm).sum(-1)
     if bone_weight > 0:
         bone_err = bone_lengths_t(decoded) - start_lengths.unsqueeze(0)
@@ -375,6 +379,7 @@ def train_solvers(
             loss, _ = solver_losses(
                 ae, bank, net, start, goal, sc.other_weight, sc.bone_weight, mode,
                 sc.stay_weight, sc.rigid_loss, sc.joint_loss == "distance",
+                sc.stay_frame == "local",
             )  # fmt: skip
             loss = loss.sum()
             optim.zero_grad(set_to_none=True)
@@ -389,6 +394,7 @@ def train_solvers(
         losses, _ = solver_losses(
             ae, bank, bank, v_start, v_goal, sc.other_weight, sc.bone_weight, mode,
             sc.stay_weight, sc.rigid_loss, sc.joint_loss == "distance",
+            sc.stay_frame == "local",
         )  # fmt: skip
         metrics = solver_metrics(ae, bank, v_start, v_goal, mode)
         return {

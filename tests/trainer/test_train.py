@@ -33,6 +33,7 @@ from trainer.models import (
     merge_banks,
     target_columns,
 )
+from trainer.rigid import parent_offsets_t
 from trainer.stages import (
     StageState,
     config_tag,
@@ -439,3 +440,34 @@ def test_completion_checkpoints_tagged_with_the_autoencoder_stay_valid(tmp_path:
     assert load_checkpoint(ckpt, net, optim, stage_tags(cfg, "completion1")).epoch == 4
     assert load_checkpoint(ckpt, net, optim, stage_tags(other, "completion1")).epoch == 0
     assert stage_tags(cfg, "solvers") == (config_tag(cfg, "solvers"),)
+
+
+def test_stay_term_in_the_local_frame_measures_offsets_from_parents(
+    trained: tuple[Trained, Path],
+) -> None:
+    """``solver.stay_frame = "local"``: the stay term is the MSE of the moves of the other
+    joints' offsets from their parents (the root's position), on real pairs; a pose moved
+    as a whole costs only its root's move; only the non-default choice enters the solvers'
+    checkpoint tag."""
+    result, _ = trained
+    ae, bank = result.ae, result.bank
+    poses = flat(result.splits.test.positions[:48])
+    start, goal = poses[:24], poses[24:]
+    with torch.no_grad():
+        target, answers = solver_losses(ae, bank, bank, start, goal, 0.0, 0.0, "plain")
+        both, _ = solver_losses(ae, bank, bank, start, goal, 0.0, 0.0, "plain", 1.0,
+                                stay_local=True)  # fmt: skip
+    offsets = parent_offsets_t(answers) - parent_offsets_t(start).unsqueeze(0)
+    for s, joints in enumerate(bank.sets):
+        rest = [j for j in range(21) if j not in [JOINT_INDEX[n] for n in joints]]
+        want = (offsets[s].reshape(len(goal), 21, 3)[:, rest] ** 2).mean()
+        torch.testing.assert_close(both[s] - target[s], want, rtol=1e-4, atol=0)
+    shifted = start + torch.tensor([0.1, 0.0, 0.0]).repeat(21)
+    moved = (parent_offsets_t(shifted) - parent_offsets_t(start)).reshape(-1, 21, 3)
+    assert torch.count_nonzero(moved.abs() > 1e-6) == len(start)  # the root's x only
+    assert config_tag(load_config(None, {"solver": {"stay_frame": "world"}}), "solvers") == (
+        config_tag(load_config(None, {}), "solvers")
+    )
+    local = load_config(None, {"solver": {"stay_frame": "local"}})
+    assert config_tag(local, "solvers") != config_tag(load_config(None, {}), "solvers")
+    assert config_tag(local, "completion1") == config_tag(load_config(None, {}), "completion1")
