@@ -72,10 +72,20 @@ VARIANTS: dict[str, str] = {
     "(completion.loss, completion_mpjpe.toml; 12 epochs, one view)",
     "completion_mpjpe_views": "`completion_mpjpe` served over 4 turns x mirror",
     "completion_mpjpe_e20": "`completion_mpjpe` with 20 completion epochs, one view",
-    "shipped": "the shipped recipe (trainer/configs/default.toml, run exp_c14): `c13`'s "
-    "autoencoder and solvers, completion_mpjpe_e20's completion, served over 4 turns x mirror",
+    "shipped": "the recipe shipped before this round (run exp_c14, ablation/base_c14.toml): "
+    "`c13`'s autoencoder and solvers, completion_mpjpe_e20's completion, served over 4 turns "
+    "x mirror",
     "ae40": "`shipped` with the autoencoder trained 40 epochs instead of 20 (ae40.toml); "
     "both solver banks retrained on it, the shipped completion reused",
+    "stay_local": "`shipped` with the stay term on each joint's offset from its parent "
+    "(solver.stay_frame local, stay_local.toml; both solver banks retrained)",
+    "stay_local03": "`stay_local` with the stay term weighted 0.3 (stay_local03.toml)",
+    "other003": "`shipped` (exp_c14) with the goal's other joints weighted 0.03 instead of 0.01 "
+    "(solver.other_weight, other003.toml; both solver banks retrained): shipped since, run "
+    "exp_c15",
+    "other01": "`shipped` (exp_c14) with solver.other_weight 0.1 (other01.toml)",
+    "other01_local": "`other01` with the stay term in the local frame (other01_local.toml)",
+    "other03": "`shipped` (exp_c14) with solver.other_weight 0.3 (other03.toml)",
 }
 COMPLETION = "6-point completion"
 
@@ -175,7 +185,7 @@ def main(
         "`previous`); `shipped`, `c12*`, `previous*`, `rigid`, `ae512*`, `shipped-before`, "
         "`shipped-world-pairs`, `long_solvers`, `stay*`, `solver256`, `completion512`, "
         "`eff5*`, `lift*`, `pairs_long`, `c13`, `solver_distance`, `views`, "
-        "`completion_mpjpe*`, `ae40` are full-budget models scored with "
+        "`completion_mpjpe*`, `ae40`, `stay_local*`, `other*` are full-budget models scored with "
         "`python -m bench.heldout --models DIR [--passes N] --out reports/ablation/NAME.json`."
         " Rows scored with the numpy engine, before the compiled one, agree with it to "
         "5e-14 m (docs/benchmarks.md)."
