@@ -6,9 +6,9 @@ A batch is cut into chunks of at most ``CHUNK_PRICE`` units (a plain neural item
 exact reach, pins, the fabrik method - costs ``FABRIK_PRICE``, a neural one that also
 polishes ``FABRIK_PRICE - 1`` plus its passes). Chunks run in worker threads under the
 app's compute limiter, in waves as wide as the compute tokens free at the time (so one big
-batch uses every compute thread: 1.6-1.9x the engine's poses/s on 2); between waves the request checks
-its deadline and its client, and stops (504 or 499) instead of computing answers nobody
-will read.
+batch uses every compute thread: 1.6-1.9x the engine's poses/s on 2); between waves the
+request checks its deadline and its client, and stops (504 or 499) instead of computing
+answers nobody will read.
 """
 
 from __future__ import annotations
