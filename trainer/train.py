@@ -367,6 +367,15 @@ def train_solvers(
     optim = torch.optim.Adam(params, lr=sc.lr)
     steps = steps_per_epoch(len(src.poses), sc.batch_size, d)
 
+    def losses(model: nn.Module, start: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
+        """:func:`solver_losses` with this config's terms (training and validation alike)."""
+        out, _ = solver_losses(
+            ae, bank, model, start, goal, sc.other_weight, sc.bone_weight, mode,
+            sc.stay_weight, sc.rigid_loss, sc.joint_loss == "distance",
+            sc.stay_frame == "local",
+        )  # fmt: skip
+        return out
+
     def train_epoch(epoch: int, bar: Bar) -> float:
         rng = stage_rng(cfg.seed, stream, epoch)
         partner_idx = sample_partners(src.lo, src.hi, np.arange(len(src.poses)), rng)
@@ -376,12 +385,7 @@ def train_solvers(
         total_loss, count = torch.zeros((), dtype=torch.float64), 0
         for idx in batches(len(src.poses), sc.batch_size, d, cfg.seed + 1, epoch):
             start, goal = src.pairs(idx, partners[idx], rng, aug, total)
-            loss, _ = solver_losses(
-                ae, bank, net, start, goal, sc.other_weight, sc.bone_weight, mode,
-                sc.stay_weight, sc.rigid_loss, sc.joint_loss == "distance",
-                sc.stay_frame == "local",
-            )  # fmt: skip
-            loss = loss.sum()
+            loss = losses(net, start, goal).sum()
             optim.zero_grad(set_to_none=True)
             loss.backward()
             optim.step()
@@ -391,14 +395,10 @@ def train_solvers(
         return mean_loss(total_loss, count, d)
 
     def validate() -> dict[str, float]:
-        losses, _ = solver_losses(
-            ae, bank, bank, v_start, v_goal, sc.other_weight, sc.bone_weight, mode,
-            sc.stay_weight, sc.rigid_loss, sc.joint_loss == "distance",
-            sc.stay_frame == "local",
-        )  # fmt: skip
+        val_losses = losses(bank, v_start, v_goal)
         metrics = solver_metrics(ae, bank, v_start, v_goal, mode)
         return {
-            "val_loss": float(losses.mean()),
+            "val_loss": float(val_losses.mean()),
             "val_reach_cm": float(np.mean([m["reach_cm"] for m in metrics.values()])),
             "val_served_reach_cm": float(np.mean([m["served_reach_cm"] for m in metrics.values()])),
             "val_mpjpe_cm": float(np.mean([m["mpjpe_cm"] for m in metrics.values()])),
