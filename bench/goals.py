@@ -314,8 +314,8 @@ def issue14_goals(i14: Json | None) -> list[Goal]:
             f"{rate['solve_arrays']:,.0f} poses/s via solve_arrays; "
             f"{rate['solve']:,.0f} via solve(problems){at1}"
             + (
-                f"; {rate['solve_arrays_2threads']:,.0f} on 2 threads (parts of 128, as the "
-                "service's 2 compute threads run a batch)"
+                f"; {rate['solve_arrays_2threads']:,.0f} on 2 threads (the service's priced "
+                "parts, as its 2 compute threads run a batch)"
                 if "solve_arrays_2threads" in rate
                 else ""
             ),

@@ -6,13 +6,13 @@ from __future__ import annotations
 import dataclasses
 import time
 from collections.abc import Callable, Sequence
-from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 import numpy as np
 
 from bench.edits import Edits, problems
 from service.engine import Engine
+from service.limits import chunks_of, fan_out, neural_price
 from service.problems import SolveProblem
 
 Json = dict[str, Any]
@@ -135,8 +135,8 @@ def issue14(
     FABRIK with ``tolerance`` (m) and the engine's iteration cap. Then in-process batch
     throughput of ``engine.solve_arrays`` and ``engine.solve`` on ``batch`` edits (2
     targets), at the default passes and at ``passes=1`` (``*_passes1``), and of
-    ``solve_arrays`` in parts of 128 items on 2 threads (``solve_arrays_2threads``: a
-    batch's parts as the service runs them on its 2 compute threads)."""
+    ``solve_arrays`` on 2 threads (``solve_arrays_2threads``: the batch's priced parts
+    fanned out as the service runs them on its 2 compute threads, ``service.limits``)."""
     rows = [
         _issue14_set(engine, k, name, edits, calls, warmup, tolerance)
         for k, (name, edits) in sets.items()
@@ -152,12 +152,11 @@ def issue14(
     tpos = np.concatenate([np.stack(two.targets)] * reps)[:batch]
     probs = [p for _ in range(reps) for p in problems(two, "neural_bone")][:batch]
     probs1 = [dataclasses.replace(p, passes=1) for p in probs]
-    pool = ThreadPoolExecutor(2)
+    # a batch as the service runs it on 2 compute threads: its priced parts, fanned out
+    parts = chunks_of([neural_price(False, engine.solve_passes)] * batch)
 
-    def two_threads() -> object:  # the service's waves: parts of 128 items on 2 threads
-        parts = range(0, batch, 128)
-        return list(pool.map(lambda a: engine.solve_arrays(*(x[a : a + 128] for x in (
-            starts, tidx, tpos))), parts))  # fmt: skip
+    def two_threads() -> object:
+        return fan_out(lambda p: engine.solve_arrays(starts[p], tidx[p], tpos[p]), parts, 2)
 
     runs: dict[str, Callable[[], object]] = {
         "solve_arrays": lambda: engine.solve_arrays(starts, tidx, tpos),
@@ -171,7 +170,6 @@ def issue14(
     through = {
         label: batch / min(_timed(fn) for _ in range(batch_rounds)) for label, fn in runs.items()
     }
-    pool.shutdown()
     ort_threads = engine.encoder.session.get_session_options().intra_op_num_threads
     return {
         "latency": rows,

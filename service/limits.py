@@ -165,13 +165,13 @@ async def _wave(fn: Callable[[slice], R], wave: Sequence[slice],
                 await limiter.acquire_on_behalf_of(borrower)
             held.append(borrower)
         width = len(held)
-        return await anyio.to_thread.run_sync(_fan_out, fn, wave, width)
+        return await anyio.to_thread.run_sync(fan_out, fn, wave, width)
     finally:
         for borrower in held:
             limiter.release_on_behalf_of(borrower)
 
 
-def _fan_out(fn: Callable[[slice], R], wave: Sequence[slice], width: int) -> list[R]:
+def fan_out(fn: Callable[[slice], R], wave: Sequence[slice], width: int) -> list[R]:
     """The parts of ``wave``, ``width`` at a time: the first of each group in this
     thread, the others in :data:`_PARTS`."""
     out: list[R] = []
