@@ -86,6 +86,12 @@ VARIANTS: dict[str, str] = {
     "other01": "`shipped` (exp_c14) with solver.other_weight 0.1 (other01.toml)",
     "other01_local": "`other01` with the stay term in the local frame (other01_local.toml)",
     "other03": "`shipped` (exp_c14) with solver.other_weight 0.3 (other03.toml)",
+    "carry025": "`other003`'s networks (exp_c15) served with the branch below each target "
+    "turned 0.25 of the way with the target's bone (serving.carry; `python -m bench.heldout "
+    "--carry 0.25`)",
+    "carry05": "`other003` served with serving.carry 0.5: shipped since (mx1-405fce5f4421)",
+    "carry075": "`other003` served with serving.carry 0.75",
+    "carry1": "`other003` served with serving.carry 1 (the branch carried rigidly, as FABRIK)",
 }
 COMPLETION = "6-point completion"
 

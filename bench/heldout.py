@@ -632,6 +632,10 @@ def main(
         Optional[int],  # noqa: UP045
         typer.Option(help="Neural solves per edit (default: the manifest's serving.passes)."),
     ] = None,
+    carry: Annotated[
+        Optional[float],  # noqa: UP045
+        typer.Option(help="Carry below targets, 0-1 (default: the manifest's serving.carry)."),
+    ] = None,
 ) -> None:
     """Held-out bodies and the stress set only, against any models folder."""
     from rich.console import Console
@@ -644,9 +648,12 @@ def main(
         raise typer.BadParameter(f"no dataset file at {dataset}", param_hint="--dataset")
     console = Console(stderr=True)
     cfg = dataclasses.replace(QUICK if quick else HeldoutConfig(), seed=seed)
-    engine = Engine(models, threads=1, solve_passes=passes)
+    engine = Engine(models, threads=1, solve_passes=passes, carry=carry)
     res = run_heldout(engine, load_dataset(dataset), cfg, split=split, log=console.log)
-    res.models = {"dir": str(models), "version": engine.version, "passes": engine.solve_passes}
+    res.models = {
+        "dir": str(models), "version": engine.version, "passes": engine.solve_passes,
+        "carry": engine.carry,
+    }  # fmt: skip
     if out is not None:
         out.parent.mkdir(parents=True, exist_ok=True)
         write_atomic(out, (json.dumps(res.to_json(), indent=1) + "\n").encode())

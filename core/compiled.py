@@ -18,6 +18,7 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
+from core.carry import OPPOSITE
 from core.jit import jit
 from core.rest import REST_DIRS
 from core.skeleton import (
@@ -53,6 +54,10 @@ _PARENTS: I64 = BONE_PARENTS.astype(np.int64)
 _LEFT: I64 = np.asarray([JOINT_INDEX[a] for a, _ in FACING_PAIRS], dtype=np.int64)
 _RIGHT: I64 = np.asarray([JOINT_INDEX[b] for _, b in FACING_PAIRS], dtype=np.int64)
 _PELVIS = JOINT_INDEX["pelvis"]
+#: Parent of each joint (joint order; the root's is itself) and the bone ending at it.
+PARENTS_J: I64 = np.asarray([max(p, 0) for p in PARENTS], dtype=np.int64)
+BONE_OF_JOINT: I64 = np.asarray([_BONE_OF.get(j, 0) for j in range(NUM_JOINTS)], dtype=np.int64)
+
 _LEG = JOINT_INDEX["left_ankle"]
 #: Distance at or below which a direction is undefined (as in core.kinematics).
 TINY = 1e-300
@@ -327,11 +332,85 @@ def prepare(
 
 
 @jit
+def carry_item(
+    out: F64, start: F64, lengths: F64, tidx: I64, count: int, weight: float, scratch: F64
+) -> None:  # pragma: no cover - compiled
+    """``core.carry.carry_below`` for one pose ``out [21, 3]`` (joint order, bone lengths
+    exact), in place: every joint below a targeted joint (not the root) with no target
+    below it turns, from ``start``, with its anchor's bone, by ``weight`` (``scratch``:
+    ``[21, 3]``)."""
+    flags = np.zeros(NUM_JOINTS, dtype=np.int64)  # 1 targeted, 2 has a target below
+    anchor = np.full(NUM_JOINTS, -1, dtype=np.int64)
+    for q in range(count):
+        flags[tidx[q]] = 1
+    for j in range(NUM_JOINTS - 1, 0, -1):
+        if flags[j] != 0:
+            p = PARENTS_J[j]
+            flags[p] = flags[p] | 2
+    found = False
+    for j in range(1, NUM_JOINTS):
+        p = PARENTS_J[j]
+        if flags[j] != 0:
+            continue
+        if flags[p] & 1 and p != _PELVIS:
+            anchor[j] = p
+            found = True
+        elif anchor[p] >= 0:
+            anchor[j] = anchor[p]
+    if not found:
+        return
+    for j in range(NUM_JOINTS):
+        for i in range(3):
+            scratch[j, i] = out[j, i]
+    a_s, a_o, v, u, d = np.empty(3), np.empty(3), np.empty(3), np.empty(3), np.empty(3)
+    for j in range(1, NUM_JOINTS):
+        a = anchor[j]
+        if a < 0:
+            continue
+        p, pa = PARENTS_J[j], PARENTS_J[a]
+        for i in range(3):
+            a_s[i] = start[a, i] - start[pa, i]
+            a_o[i] = out[a, i] - out[pa, i]
+            v[i] = start[j, i] - start[p, i]
+            d[i] = scratch[j, i] - scratch[p, i]
+        ok = _unit_into(d, d)
+        if _unit_into(a_s, a_s) and _unit_into(a_o, a_o) and _unit_into(v, v):
+            c = a_s[0] * a_o[0] + a_s[1] * a_o[1] + a_s[2] * a_o[2]
+            if 1.0 + c > OPPOSITE:
+                wx = a_s[1] * a_o[2] - a_s[2] * a_o[1]
+                wy = a_s[2] * a_o[0] - a_s[0] * a_o[2]
+                wz = a_s[0] * a_o[1] - a_s[1] * a_o[0]
+                k = (wx * v[0] + wy * v[1] + wz * v[2]) / (1.0 + c)
+                u[0] = c * v[0] + (wy * v[2] - wz * v[1]) + wx * k
+                u[1] = c * v[1] + (wz * v[0] - wx * v[2]) + wy * k
+                u[2] = c * v[2] + (wx * v[1] - wy * v[0]) + wz * k
+                if ok:
+                    for i in range(3):
+                        u[i] = weight * u[i] + (1.0 - weight) * d[i]
+                ok = _unit_into(u, d)
+        b = BONE_OF_JOINT[j]
+        for i in range(3):
+            if ok:
+                out[j, i] = out[p, i] + d[i] * lengths[b]
+            else:  # nothing to turn by or to: the joint keeps its place on its parent
+                out[j, i] = out[p, i] + scratch[j, i] - scratch[p, i]
+
+
+@jit
 def unscale(
-    decoded: F32, scales: F64, canon: F64, lengths: F64, bone: Bool
+    decoded: F32,
+    scales: F64,
+    canon: F64,
+    lengths: F64,
+    bone: Bool,
+    tidx: I64,
+    counts: I64,
+    carry: float,
 ) -> F64:  # pragma: no cover - compiled
     """Network answers ``[M, 63]`` (float32, at the networks' size) back to the body's
-    size (float64), with the bone pass (reference: the start pose) where ``bone``."""
+    size (float64), with the bone pass (reference: the start pose) where ``bone``, and
+    there, with ``carry`` > 0, :func:`carry_item` below the item's targets ``tidx[b,
+    :counts[b]]``."""
     m = decoded.shape[0]
     out = np.empty((m, NUM_JOINTS, 3))
     pose = np.empty((NUM_JOINTS, 3))
@@ -343,6 +422,8 @@ def unscale(
                 pose[j, i] = np.float64(decoded[b, 3 * j + i]) * s
         if bone[b]:
             bone_pass_item(pose, lengths[b], canon[b], True, out[b], xr, lr, rr)
+            if carry > 0.0:
+                carry_item(out[b], canon[b], lengths[b], tidx[b], counts[b], carry, rr)
         else:
             out[b] = pose
     return out
@@ -406,11 +487,12 @@ def settle(
     tidx: I64,
     tpos: F64,
     counts: I64,
+    carry: float,
 ) -> tuple[F64, F64, F64]:  # pragma: no cover - compiled
     """:func:`unscale` with the bone pass for every item, then :func:`finish`, in one call
     (the lean path of ``service.lean``): the same arithmetic in the same order."""
     bone = np.ones(decoded.shape[0], dtype=np.bool_)
-    out = unscale(decoded, scales, canon, lengths, bone)
+    out = unscale(decoded, scales, canon, lengths, bone, tidx, counts, carry)
     return finish(out, facing, trans, floors, tidx, tpos, counts, lengths)
 
 
@@ -430,9 +512,9 @@ def warm() -> None:
         pose, np.zeros(1), tidx, tpos, counts, np.ones(1, dtype=np.bool_), shapes,
         np.ones(1), True, 1.0,
     )  # fmt: skip
-    unscale(out[6], out[4], out[0], out[3], np.ones(1, dtype=np.bool_))
+    unscale(out[6], out[4], out[0], out[3], np.ones(1, dtype=np.bool_), tidx, counts, 0.5)
     finish(out[0], out[1], out[2], np.zeros(1), tidx, tpos, counts, out[3])
-    settle(out[6], out[4], out[0], out[3], out[1], out[2], np.zeros(1), tidx, tpos, counts)
+    settle(out[6], out[4], out[0], out[3], out[1], out[2], np.zeros(1), tidx, tpos, counts, 0.5)
 
 
 def as_i64(a: npt.ArrayLike) -> I64:

@@ -114,6 +114,15 @@ class Serving(_Strict):
         "start + D(S(z, t)) - D(S(z, x_t)), so an edit that asks for no change changes "
         "nothing and the network's bias never reaches the answer.",
     )
+    carry: float = Field(
+        default=0.0,
+        ge=0.0,
+        le=1.0,
+        description="After the bone pass, every joint below a targeted joint (not the root) "
+        "with no target of its own below turns with the targeted joint's bone, as a rigid "
+        "branch would, by this fraction: 0 keeps the network's answer, 1 carries the branch "
+        "as the start pose had it (as FABRIK does); each bone's direction is the mix.",
+    )
     passes: int = Field(
         default=1,
         ge=1,

@@ -84,6 +84,7 @@ class Engine:
         composition_projections: int = 1,
         fabrik_max_iterations: int = 64,
         solve_passes: int | None = None,
+        carry: float | None = None,
     ) -> None:
         self.models_dir = Path(models_dir)
         self.manifest: Manifest = load_manifest(self.models_dir, verify=True)
@@ -126,6 +127,11 @@ class Engine:
         )
         self.body = m.serving.body
         self.delta = m.serving.delta
+        #: how far joints below a target turn with its bone (``serving.carry`` unless
+        #: overridden, e.g. by a bench)
+        self.carry = float(m.serving.carry if carry is None else carry)
+        if not 0.0 <= self.carry <= 1.0:
+            raise ValueError(f"carry must be in [0, 1], got {self.carry}")
         known = np.asarray(m.skeleton.skeletons, dtype=np.float64)  # [C, 20]
         self._shape_totals = known.sum(axis=-1)
         self._shapes = known / self._shape_totals[:, None]
@@ -366,7 +372,7 @@ class Engine:
             bone = keep | ex
             if len(sequences) == 1 and neural.all():  # the common case: no gathers
                 decoded = self._run_sequence(x, canvas, sequences[0])
-                out = compiled.unscale(decoded, scales, canon, lengths, bone)
+                out = compiled.unscale(decoded, scales, canon, lengths, bone, tidx, cnt, self.carry)
             else:
                 items = np.flatnonzero(neural)
                 decoded = np.empty((n, 3 * NUM_JOINTS), dtype=np.float32)
@@ -375,8 +381,9 @@ class Engine:
                     decoded[sel] = self._run_sequence(x[sel], canvas[sel], seq)
                 out = canon.copy()
                 out[items] = compiled.unscale(
-                    decoded[items], scales[items], canon[items], lengths[items], bone[items]
-                )
+                    decoded[items], scales[items], canon[items], lengths[items], bone[items],
+                    tidx[items], cnt[items], self.carry,
+                )  # fmt: skip
         start = canon
         if origin is not None and moved is not None and moved.any():
             start = canon.copy()  # the caller's start poses in this pass's canonical frame

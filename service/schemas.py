@@ -213,6 +213,11 @@ class ModelsResponse(BaseModel):
         description="Neural solves per edit when a request's `options.passes` is absent "
         "(the manifest's `serving.passes`)."
     )
+    carry: float = Field(
+        description="How far joints below a targeted joint turn with its bone, as a rigid "
+        "branch would, after the bone pass: 0 (the network's answer) to 1 (the start pose's "
+        "branch carried, as FABRIK does); the manifest's `serving.carry`."
+    )
     models: list[ModelInfo]
 
 

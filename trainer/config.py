@@ -92,6 +92,13 @@ class SolverConfig(_Section):
         description="Serving: neural solves per edit, each from the previous answer "
         "(manifest serving.passes; not a training setting).",
     )
+    carry: float = Field(
+        default=0.0,
+        ge=0,
+        le=1,
+        description="Serving: how far joints below a targeted joint turn with its bone, as "
+        "a rigid branch would (manifest serving.carry; not a training setting).",
+    )
     identity_fraction: float = Field(
         default=0.1,
         ge=0,

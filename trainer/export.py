@@ -359,6 +359,7 @@ def export_all(
         delta=cfg.solver.delta,
         anchor=cfg.solver.delta and cfg.solver.anchor,
         passes=cfg.solver.passes,
+        carry=cfg.solver.carry,
         completion_yaws=cfg.completion.serving_yaws,
         completion_mirror=cfg.completion.serving_mirror,
     )  # fmt: skip

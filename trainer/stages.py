@@ -186,9 +186,9 @@ def config_tag(cfg: TrainConfig, stage: str, *, legacy: bool = False) -> str:
         relevant["autoencoder"] = _section(cfg, "autoencoder")
     if stage.startswith("solver"):
         # each bank reads only its own sets and epochs (its own seed and pair stream), so
-        # neither is retrained when only the other's change; passes: serving only
+        # neither is retrained when only the other's change; passes, carry: serving only
         other = ("sets", "epochs") if stage == "solvers_long" else ("long_sets", "long_epochs")
-        relevant["solver"] = _section(cfg, "solver", ("passes", *other))
+        relevant["solver"] = _section(cfg, "solver", ("passes", "carry", *other))
         relevant["augment"] = _section(cfg, "augment")
     if stage.startswith("completion"):  # serving_*: serving only
         relevant["completion"] = _section(cfg, "completion", ("serving_yaws", "serving_mirror"))

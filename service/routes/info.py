@@ -36,6 +36,7 @@ async def models(engine: ReadyEngine) -> ModelsResponse:
         solver_sets=sorted(m.solvers()),
         completion_levels=[list(e.joints) for e in m.completion_levels()],
         passes=engine.solve_passes,
+        carry=engine.carry,
         models=[
             ModelInfo(
                 name=e.name,
