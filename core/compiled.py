@@ -405,12 +405,12 @@ def unscale(
     bone: Bool,
     tidx: I64,
     counts: I64,
-    carry: float,
+    carry: F64,
 ) -> F64:  # pragma: no cover - compiled
     """Network answers ``[M, 63]`` (float32, at the networks' size) back to the body's
     size (float64), with the bone pass (reference: the start pose) where ``bone``, and
-    there, with ``carry`` > 0, :func:`carry_item` below the item's targets ``tidx[b,
-    :counts[b]]``."""
+    there, where ``carry[b]`` > 0, :func:`carry_item` below the item's targets ``tidx[b,
+    :counts[b]]`` by that weight."""
     m = decoded.shape[0]
     out = np.empty((m, NUM_JOINTS, 3))
     pose = np.empty((NUM_JOINTS, 3))
@@ -422,8 +422,8 @@ def unscale(
                 pose[j, i] = np.float64(decoded[b, 3 * j + i]) * s
         if bone[b]:
             bone_pass_item(pose, lengths[b], canon[b], True, out[b], xr, lr, rr)
-            if carry > 0.0:
-                carry_item(out[b], canon[b], lengths[b], tidx[b], counts[b], carry, rr)
+            if carry[b] > 0.0:
+                carry_item(out[b], canon[b], lengths[b], tidx[b], counts[b], carry[b], rr)
         else:
             out[b] = pose
     return out
@@ -487,7 +487,7 @@ def settle(
     tidx: I64,
     tpos: F64,
     counts: I64,
-    carry: float,
+    carry: F64,
 ) -> tuple[F64, F64, F64]:  # pragma: no cover - compiled
     """:func:`unscale` with the bone pass for every item, then :func:`finish`, in one call
     (the lean path of ``service.lean``): the same arithmetic in the same order."""
@@ -512,9 +512,23 @@ def warm() -> None:
         pose, np.zeros(1), tidx, tpos, counts, np.ones(1, dtype=np.bool_), shapes,
         np.ones(1), True, 1.0,
     )  # fmt: skip
-    unscale(out[6], out[4], out[0], out[3], np.ones(1, dtype=np.bool_), tidx, counts, 0.5)
+    unscale(
+        out[6], out[4], out[0], out[3], np.ones(1, dtype=np.bool_), tidx, counts, np.full(1, 0.5)
+    )
     finish(out[0], out[1], out[2], np.zeros(1), tidx, tpos, counts, out[3])
-    settle(out[6], out[4], out[0], out[3], out[1], out[2], np.zeros(1), tidx, tpos, counts, 0.5)
+    settle(
+        out[6],
+        out[4],
+        out[0],
+        out[3],
+        out[1],
+        out[2],
+        np.zeros(1),
+        tidx,
+        tpos,
+        counts,
+        np.full(1, 0.5),
+    )
 
 
 def as_i64(a: npt.ArrayLike) -> I64:

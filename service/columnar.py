@@ -258,7 +258,7 @@ def solve(engine: Engine, cols: Columns, part: slice) -> BatchAnswer:
         cols.poses[part], cols.tidx[part], cols.tpos[part], n_targets=cols.n_targets,
         weights=cols.weights[part], fabrik=o.method == "fabrik",
         preserve_bone_lengths=o.preserve_bone_lengths, exact=o.reach == "exact",
-        tolerance=o.tolerance, floor=o.floor, passes=o.passes,
+        tolerance=o.tolerance, floor=o.floor, passes=o.passes, carry=o.carry,
     )  # fmt: skip
 
 

@@ -192,7 +192,7 @@ class Engine:
                 p.pose[None], p.target_idx[None], p.target_pos[None], n_targets=p.n_targets,
                 weights=p.weights[None], fabrik=p.method == "fabrik",
                 preserve_bone_lengths=p.preserve_bone_lengths, exact=p.reach == "exact",
-                tolerance=p.tolerance, floor=p.floor, passes=p.passes,
+                tolerance=p.tolerance, floor=p.floor, passes=p.passes, carry=p.carry,
             )  # fmt: skip
             return [self._result(p, ans, 0)]
         counts = np.fromiter((len(p.target_idx) for p in problems), np.int64, n)
@@ -218,6 +218,7 @@ class Engine:
             tolerance=np.fromiter((p.tolerance for p in problems), np.float64, n),
             floor=np.fromiter((p.floor for p in problems), np.float64, n),
             passes=np.fromiter((self.passes_of(p) for p in problems), np.int64, n),
+            carry=np.fromiter((self.carry_of(p) for p in problems), np.float64, n),
         )  # fmt: skip
         return [self._result(p, ans, b) for b, p in enumerate(problems)]
 
@@ -240,7 +241,7 @@ class Engine:
             compiled.as_f64(p.target_pos).reshape(1, k, 3), np.full(1, k, dtype=np.int64),
             np.full(1, p.n_targets, dtype=np.int64), weights[None], one & (seq is None), one,
             one & (p.reach == "exact"), np.full(1, p.tolerance, dtype=np.float64),
-            np.full(1, p.floor, dtype=np.float64),
+            np.full(1, p.floor, dtype=np.float64), np.full(1, self.carry_of(p)),
         )  # fmt: skip
         ans = lean_answer(self, items, passes, seq)
         return None if ans is None else self._result(p, ans, 0)
@@ -248,6 +249,10 @@ class Engine:
     def passes_of(self, p: SolveProblem) -> int:
         """The neural passes ``p`` asks for (``solve_passes`` unless it says)."""
         return self.solve_passes if p.passes is None else p.passes
+
+    def carry_of(self, p: SolveProblem) -> float:
+        """The carry below targets ``p`` asks for (``carry`` unless it says)."""
+        return self.carry if p.carry is None else p.carry
 
     @staticmethod
     def _result(p: SolveProblem, ans: BatchAnswer, b: int) -> SolveResult:
@@ -277,6 +282,7 @@ class Engine:
         tolerance: npt.ArrayLike = 1e-3,
         floor: npt.ArrayLike = 0.0,
         passes: npt.ArrayLike | None = None,
+        carry: npt.ArrayLike | None = None,
     ) -> BatchAnswer:
         """Solve a batch given as arrays (validated like :class:`SolveProblem`), no
         per-item objects: ``poses [B, 21, 3]`` world; ``target_idx [B, K]`` joints (per
@@ -284,7 +290,8 @@ class Engine:
         on; the rest is padding), ``target_pos [B, K, 3]`` world, ``weights [B, K]``.
         Per-item options are ``[B]`` arrays or scalars: ``fabrik`` (method), ``exact``
         (reach), ``preserve_bone_lengths``, ``tolerance`` (m), ``floor`` (world y),
-        ``passes`` (neural solves; default the engine's ``solve_passes``).
+        ``passes`` (neural solves; default the engine's ``solve_passes``), ``carry`` (the
+        branch below each target, 0-1, :mod:`core.carry`; default the engine's ``carry``).
 
         Geometry runs in compiled kernels (:mod:`core.compiled`), one call per stage for
         the whole batch; items that share a solver sequence share one onnxruntime run per
@@ -308,7 +315,10 @@ class Engine:
             _per_item(1.0 if weights is None else weights, n, np.float64, k_max), fab,
             _per_item(preserve_bone_lengths, n, np.bool_), _per_item(exact, n, np.bool_),
             _per_item(tolerance, n, np.float64), _per_item(floor, n, np.float64),
+            _per_item(self.carry if carry is None else carry, n, np.float64),
         )  # fmt: skip
+        if n and not bool(np.all((items.carry >= 0.0) & (items.carry <= 1.0))):
+            raise ValueError("carry must be in [0, 1]")
         reps = _per_item(self.solve_passes if passes is None else passes, n, np.int64)
         if n and int(reps.min()) < 1:
             raise ValueError(f"passes must be at least 1, got {int(reps.min())}")
@@ -372,7 +382,9 @@ class Engine:
             bone = keep | ex
             if len(sequences) == 1 and neural.all():  # the common case: no gathers
                 decoded = self._run_sequence(x, canvas, sequences[0])
-                out = compiled.unscale(decoded, scales, canon, lengths, bone, tidx, cnt, self.carry)
+                out = compiled.unscale(
+                    decoded, scales, canon, lengths, bone, tidx, cnt, batch.carry
+                )
             else:
                 items = np.flatnonzero(neural)
                 decoded = np.empty((n, 3 * NUM_JOINTS), dtype=np.float32)
@@ -382,7 +394,7 @@ class Engine:
                 out = canon.copy()
                 out[items] = compiled.unscale(
                     decoded[items], scales[items], canon[items], lengths[items], bone[items],
-                    tidx[items], cnt[items], self.carry,
+                    tidx[items], cnt[items], batch.carry[items],
                 )  # fmt: skip
         start = canon
         if origin is not None and moved is not None and moved.any():

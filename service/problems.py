@@ -34,6 +34,7 @@ class SolveProblem:
     tolerance: float = 1e-3
     floor: float = 0.0  # world y of the ground under the character
     passes: int | None = None  # neural solves (None: the engine's ``solve_passes``)
+    carry: float | None = None  # the branch below targets, 0-1 (None: the engine's)
 
 
 @dataclass(frozen=True)
@@ -75,6 +76,7 @@ class _Items:
     ex: npt.NDArray[np.bool_]  # [B] reach=exact
     tols: compiled.F64  # [B]
     floors: compiled.F64  # [B]
+    carry: compiled.F64  # [B] the branch below the targets (core.carry), 0-1
 
     def soft(self, sel: npt.NDArray[np.intp], poses: compiled.F64) -> _Items:
         """Items ``sel`` from ``poses`` as a refinement pass solves them: neural, soft
@@ -82,7 +84,7 @@ class _Items:
         no = np.zeros(len(sel), dtype=np.bool_)
         return _Items(
             poses[sel], self.tidx[sel], self.tpos[sel], self.cnt[sel], self.n_t[sel],
-            self.w[sel], no, ~no, no, self.tols[sel], self.floors[sel],
+            self.w[sel], no, ~no, no, self.tols[sel], self.floors[sel], self.carry[sel],
         )  # fmt: skip
 
 

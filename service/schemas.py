@@ -100,6 +100,16 @@ class SolveOptions(_Body):
         "More passes reach closer on bodies unlike the training ones; each costs about one "
         "more solve. 1 is the fastest. `method: fabrik` ignores it.",
     )
+    carry: Finite | None = Field(
+        default=None,
+        ge=0.0,
+        le=1.0,
+        description="How far the joints below a targeted joint (the wrist under a dragged "
+        "elbow, the ankle and foot under a knee) turn with its bone, as a rigid branch "
+        "would: 0 leaves them where the network put them, 1 carries the start pose's "
+        "branch (as FABRIK does); between, each bone's direction is the mix. Absent: the "
+        "models' default, `carry` of `GET /v1/models`. `method: fabrik` ignores it.",
+    )
 
 
 class SolveRequest(_Body):

@@ -105,6 +105,7 @@ def problem_of(
         tolerance=o.tolerance,
         floor=o.floor,
         passes=o.passes,
+        carry=o.carry,
     )
 
 
