@@ -51,6 +51,11 @@ function wireControls() {
   for (const input of document.querySelectorAll('input[name=method], #exact, #preserve, #tolerance')) {
     input.addEventListener('change', () => requestSolve(true));
   }
+  $('carry').addEventListener('change', (ev) => {
+    ev.target.dataset.touched = '1';
+    $('carry-label').textContent = ev.target.valueAsNumber.toFixed(2);
+    requestSolve(true);
+  });
   $('sample').addEventListener('change', (ev) => loadSample(Number(ev.target.value)));
   $('bvh-file').addEventListener('change', (ev) => {
     openFile(ev.target.files[0]);
@@ -153,6 +158,7 @@ async function fetchSkeleton() {
       }
       ui.connected = true;
       $('status').textContent = 'connected';
+      await showModelDefaults();
       if (ui.currentError && ui.currentError.status === 503) clearError();
       return;
     } catch (err) {
@@ -161,6 +167,16 @@ async function fetchSkeleton() {
       if (err.status !== 503 && err.status !== 0) return;
       await new Promise((r) => setTimeout(r, 2000)); // models still loading / server restarting
     }
+  }
+}
+
+// The slider starts at the models' own carry (it is sent only once moved).
+async function showModelDefaults() {
+  const res = await api('GET', 'v1/models');
+  const slider = $('carry');
+  if (!slider.dataset.touched && typeof res.data.carry === 'number') {
+    slider.value = String(res.data.carry);
+    $('carry-label').textContent = `${res.data.carry.toFixed(2)} (models' default)`;
   }
 }
 

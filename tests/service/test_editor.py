@@ -372,6 +372,20 @@ def test_editor_drag_solve_fabrik_errors(server: str, browser: Any, tmp_path: Pa
         assert "unreachable" in banner.inner_text()
         page.unroute("**/v1/solve")
 
+        # -- the branch carry: the models' default until the slider moves ----------------
+        page.locator(".segmented label", has_text="Neural").click()
+        page.wait_for_function(f"() => {m}.error() === null")
+        settled()
+        assert "carry" not in solves[-1]["options"]
+        assert "models' default" in page.locator("#carry-label").inner_text()
+        assert page.locator("#carry").input_value() == "0.5"  # GET /v1/models says so
+        page.locator("#carry").fill("1")
+        settled()
+        assert solves[-1]["options"]["carry"] == 1
+        last = page.evaluate(f"{m}.lastSolve()")
+        direct = post_json(server + "/v1/solve", last["request"])
+        assert direct["pose"] == last["response"]["pose"]
+
         # Only the browser's own log lines of the two forced failures.
         assert page_errors == []
         unexpected = [e for e in console_errors if not e.startswith("Failed to load resource")]

@@ -117,12 +117,15 @@ export function reset() {
 // Solving: the request body, throttled requests, answers
 // ------------------------------------------------------------------------------------
 export function options() {
-  return {
+  const out = {
     method: document.querySelector('input[name=method]:checked').value,
     preserve_bone_lengths: $('preserve').checked,
     reach: $('exact').checked ? 'exact' : 'soft',
     tolerance: $('tolerance').valueAsNumber,
   };
+  // the models' own default (GET /v1/models) until the slider is moved
+  if ($('carry').dataset.touched) out.carry = $('carry').valueAsNumber;
+  return out;
 }
 
 function solveBody() {
