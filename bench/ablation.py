@@ -92,6 +92,8 @@ VARIANTS: dict[str, str] = {
     "carry05": "`other003` served with serving.carry 0.5: shipped since (mx1-405fce5f4421)",
     "carry075": "`other003` served with serving.carry 0.75",
     "carry1": "`other003` served with serving.carry 1 (the branch carried rigidly, as FABRIK)",
+    "ae40_o3": "the shipped recipe (other_weight 0.03, carry 0.5) with the autoencoder trained "
+    "40 epochs (ae40_o3.toml; both solver banks retrained on it, completion reused)",
 }
 COMPLETION = "6-point completion"
 
