@@ -333,14 +333,24 @@ def prepare(
 
 @jit
 def carry_item(
-    out: F64, start: F64, lengths: F64, tidx: I64, count: int, weight: float, scratch: F64
+    out: F64,
+    start: F64,
+    lengths: F64,
+    tidx: I64,
+    count: int,
+    weight: float,
+    scratch: F64,
+    flags: I64,
+    anchor: I64,
+    vecs: F64,
 ) -> None:  # pragma: no cover - compiled
     """``core.carry.carry_below`` for one pose ``out [21, 3]`` (joint order, bone lengths
     exact), in place: every joint below a targeted joint (not the root) with no target
-    below it turns, from ``start``, with its anchor's bone, by ``weight`` (``scratch``:
-    ``[21, 3]``)."""
-    flags = np.zeros(NUM_JOINTS, dtype=np.int64)  # 1 targeted, 2 has a target below
-    anchor = np.full(NUM_JOINTS, -1, dtype=np.int64)
+    below it turns, from ``start``, with its anchor's bone, by ``weight``. Scratch:
+    ``scratch [21, 3]``, ``flags``, ``anchor`` ``[21]`` (int64), ``vecs [5, 3]``."""
+    for j in range(NUM_JOINTS):
+        flags[j] = 0  # 1 targeted, 2 has a target below
+        anchor[j] = -1
     for q in range(count):
         flags[tidx[q]] = 1
     for j in range(NUM_JOINTS - 1, 0, -1):
@@ -362,7 +372,7 @@ def carry_item(
     for j in range(NUM_JOINTS):
         for i in range(3):
             scratch[j, i] = out[j, i]
-    a_s, a_o, v, u, d = np.empty(3), np.empty(3), np.empty(3), np.empty(3), np.empty(3)
+    a_s, a_o, v, u, d = vecs[0], vecs[1], vecs[2], vecs[3], vecs[4]
     for j in range(1, NUM_JOINTS):
         a = anchor[j]
         if a < 0:
@@ -415,6 +425,11 @@ def unscale(
     out = np.empty((m, NUM_JOINTS, 3))
     pose = np.empty((NUM_JOINTS, 3))
     xr, rr, lr = np.empty((NUM_JOINTS, 3)), np.empty((NUM_JOINTS, 3)), np.empty(NUM_JOINTS - 1)
+    flags, anchor, vecs = (
+        np.empty(NUM_JOINTS, np.int64),
+        np.empty(NUM_JOINTS, np.int64),
+        np.empty((5, 3)),
+    )
     for b in range(m):
         s = scales[b]
         for j in range(NUM_JOINTS):
@@ -423,7 +438,8 @@ def unscale(
         if bone[b]:
             bone_pass_item(pose, lengths[b], canon[b], True, out[b], xr, lr, rr)
             if carry[b] > 0.0:
-                carry_item(out[b], canon[b], lengths[b], tidx[b], counts[b], carry[b], rr)
+                carry_item(out[b], canon[b], lengths[b], tidx[b], counts[b], carry[b], rr,
+                           flags, anchor, vecs)  # fmt: skip
         else:
             out[b] = pose
     return out

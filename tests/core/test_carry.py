@@ -76,6 +76,7 @@ def test_carry_turns_the_branch_with_the_bone(
 def test_compiled_carry_matches_numpy(answers: tuple[np.ndarray, np.ndarray, np.ndarray]) -> None:
     start, lens, answer = answers
     scratch = np.empty((21, 3))
+    ints = np.empty(21, np.int64), np.empty(21, np.int64), np.empty((5, 3))
     for names in [("left_elbow",), ("left_knee", "right_elbow"), ("spine2",), ("pelvis",)]:
         targets = _idx(*names)
         tidx = np.asarray(targets + [0] * (4 - len(targets)), dtype=np.int64)
@@ -83,7 +84,9 @@ def test_compiled_carry_matches_numpy(answers: tuple[np.ndarray, np.ndarray, np.
             ref = carry_below(answer, start, lens, targets, weight)
             got = answer.copy()
             for b in range(len(got)):
-                compiled.carry_item(got[b], start[b], lens[b], tidx, len(targets), weight, scratch)
+                compiled.carry_item(
+                    got[b], start[b], lens[b], tidx, len(targets), weight, scratch, *ints
+                )
             assert np.abs(got - ref).max() < 1e-12
     # degenerate: an elbow on its shoulder; a forearm opposite the rigid one (the mix cancels
     # only if the upper arm has not turned, so this checks the fallbacks agree, not a case)
@@ -94,7 +97,7 @@ def test_compiled_carry_matches_numpy(answers: tuple[np.ndarray, np.ndarray, np.
     ref = carry_below(bad, start[:2], lens[:2], [e], 0.5)
     got = bad.copy()
     for b in range(2):
-        compiled.carry_item(got[b], start[b], lens[b], np.asarray([e]), 1, 0.5, scratch)
+        compiled.carry_item(got[b], start[b], lens[b], np.asarray([e]), 1, 0.5, scratch, *ints)
     assert np.all(np.isfinite(got)) and np.abs(got - ref).max() < 1e-12
     # nothing to turn by: the forearm keeps the answer's direction, at its length
     forearm = lens[0, w - 1]
