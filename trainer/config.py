@@ -97,7 +97,13 @@ class SolverConfig(_Section):
         ge=0,
         le=1,
         description="Serving: how far joints below a targeted joint turn with its bone, as "
-        "a rigid branch would (manifest serving.carry; not a training setting).",
+        "a rigid branch would (manifest serving.carry; a training setting only with "
+        "carry_loss).",
+    )
+    carry_loss: bool = Field(
+        default=False,
+        description="With rigid_loss: the losses also see the carry below the targets "
+        "(`carry`), as the answer is served.",
     )
     identity_fraction: float = Field(
         default=0.1,

@@ -14,7 +14,8 @@ from __future__ import annotations
 
 import torch
 
-from core.skeleton import BONE_CHILDREN, BONE_PARENTS, BONES, NUM_JOINTS
+from core.carry import OPPOSITE, carry_anchors
+from core.skeleton import BONE_CHILDREN, BONE_PARENTS, BONES, NUM_JOINTS, PARENTS
 from trainer.augment import bone_lengths
 
 #: Eps of the direction's norm: keeps the gradient finite where a child sits on its parent.
@@ -50,3 +51,47 @@ def bone_pass_t(flat_poses: torch.Tensor, lengths: torch.Tensor) -> torch.Tensor
         out[child] = base + lengths[..., b : b + 1] * unit
     stacked = torch.stack([j for j in out if j is not None], dim=-2)
     return stacked.reshape(flat_poses.shape)
+
+
+def _unit(v: torch.Tensor) -> torch.Tensor:
+    out: torch.Tensor = v / (v.norm(dim=-1, keepdim=True) + EPS)
+    return out
+
+
+def carry_t(
+    answers: torch.Tensor, start: torch.Tensor, lengths: torch.Tensor,
+    sets: list[list[int]], weight: float,
+) -> torch.Tensor:  # fmt: skip
+    """``core.carry.carry_below`` of every solver's answer ``[S, B, 63]`` (bone lengths
+    ``lengths [B, 20]`` exact, after :func:`bone_pass_t`) from the start poses ``[B, 63]``,
+    solver ``s`` carrying below its own joints ``sets[s]``; differentiable (the degenerate
+    cases the service falls back on are kept finite, not matched)."""
+    if weight <= 0.0:
+        return answers
+    n_sets, b = answers.shape[0], answers.shape[1]
+    joints = answers.reshape(n_sets, b, NUM_JOINTS, 3)
+    st = start.reshape(b, NUM_JOINTS, 3)
+    bone_of = {int(c): i for i, c in enumerate(BONE_CHILDREN)}
+    out = []
+    for s, targets in enumerate(sets):
+        anchors = carry_anchors(targets)
+        if not (anchors >= 0).any():
+            out.append(joints[s])
+            continue
+        pose = list(joints[s].unbind(dim=-2))
+        for j in range(1, NUM_JOINTS):
+            a = int(anchors[j])
+            if a < 0:
+                continue
+            p, pa = PARENTS[j], PARENTS[a]
+            a_s, a_o = _unit(st[:, a] - st[:, pa]), _unit(pose[a] - pose[pa])
+            v = _unit(st[:, j] - st[:, p])
+            c = (a_s * a_o).sum(-1, keepdim=True)
+            w = torch.linalg.cross(a_s, a_o, dim=-1)
+            k = (w * v).sum(-1, keepdim=True) / (1.0 + c).clamp_min(OPPOSITE)
+            carried = c * v + torch.linalg.cross(w, v, dim=-1) + w * k
+            d = _unit(joints[s, :, j] - joints[s, :, p])
+            u = _unit(weight * carried + (1.0 - weight) * d)
+            pose[j] = pose[p] + lengths[:, bone_of[j] : bone_of[j] + 1] * u
+        out.append(torch.stack(pose, dim=-2))
+    return torch.stack(out).reshape(answers.shape)

@@ -152,7 +152,7 @@ def load_checkpoint(
 #: from their default, so that runs from before them stay valid.
 _ADDED_LATER: dict[str, tuple[str, ...]] = {
     "autoencoder": ("loss",),
-    "solver": ("rigid_loss", "joint_loss", "stay_frame"),
+    "solver": ("rigid_loss", "joint_loss", "stay_frame", "carry_loss"),
     "augment": ("lift_start",),
     "completion": ("loss",),
 }
@@ -188,7 +188,8 @@ def config_tag(cfg: TrainConfig, stage: str, *, legacy: bool = False) -> str:
         # each bank reads only its own sets and epochs (its own seed and pair stream), so
         # neither is retrained when only the other's change; passes, carry: serving only
         other = ("sets", "epochs") if stage == "solvers_long" else ("long_sets", "long_epochs")
-        relevant["solver"] = _section(cfg, "solver", ("passes", "carry", *other))
+        serving = ("passes",) if cfg.solver.carry_loss else ("passes", "carry")
+        relevant["solver"] = _section(cfg, "solver", (*serving, *other))
         relevant["augment"] = _section(cfg, "augment")
     if stage.startswith("completion"):  # serving_*: serving only
         relevant["completion"] = _section(cfg, "completion", ("serving_yaws", "serving_mirror"))

@@ -5,10 +5,11 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from core.carry import carry_below
 from core.kinematics import bone_pass
-from core.skeleton import NUM_JOINTS, bone_lengths
+from core.skeleton import JOINT_INDEX, NUM_JOINTS, bone_lengths
 from tests.conftest import PosePairs
-from trainer.rigid import bone_lengths_t, bone_pass_t
+from trainer.rigid import bone_lengths_t, bone_pass_t, carry_t
 
 
 def test_bone_pass_equals_the_service_one_on_real_poses(real_poses: PosePairs) -> None:
@@ -40,3 +41,25 @@ def test_gradient_is_finite_where_a_child_sits_on_its_parent(real_poses: PosePai
     (grad,) = torch.autograd.grad(out.sum(), pose)
     assert torch.isfinite(grad).all()
     assert torch.isfinite(out).all()
+
+
+def test_carry_equals_the_service_one_on_real_poses(real_poses: PosePairs) -> None:
+    """Answers of three solvers (elbow, knee, both wrists) on real pairs, carried below
+    their targets: the torch carry lands where the service's numpy one does, with a
+    finite gradient."""
+    start = real_poses.poses[real_poses.starts]
+    lengths = bone_lengths(start)
+    answer = bone_pass(real_poses.poses[real_poses.goals], lengths, reference=start)
+    sets = [[JOINT_INDEX["left_elbow"]], [JOINT_INDEX["right_knee"]],
+            [JOINT_INDEX["left_wrist"], JOINT_INDEX["right_wrist"]]]  # fmt: skip
+    flat = torch.tensor(np.stack([answer.reshape(len(start), -1)] * 3), requires_grad=True)
+    got = carry_t(
+        flat, torch.from_numpy(start.reshape(len(start), -1)), torch.from_numpy(lengths),
+        sets, 0.5,
+    )  # fmt: skip
+    for s, targets in enumerate(sets):
+        want = carry_below(answer, start, lengths, targets, 0.5)
+        assert np.abs(got[s].detach().numpy().reshape(want.shape) - want).max() < 1e-6
+    assert torch.equal(got[2], flat[2])  # nothing hangs below the wrists
+    (grad,) = torch.autograd.grad(got.sum(), flat)
+    assert torch.isfinite(grad).all()
