@@ -92,6 +92,8 @@ VARIANTS: dict[str, str] = {
     "carry05": "`other003` served with serving.carry 0.5: shipped since (mx1-405fce5f4421)",
     "carry075": "`other003` served with serving.carry 0.75",
     "carry1": "`other003` served with serving.carry 1 (the branch carried rigidly, as FABRIK)",
+    "carry_loss": "the shipped recipe with the solvers trained on the answer with the carry "
+    "(solver.carry_loss, carry_loss.toml; both solver banks retrained)",
     "ae40_o3": "the shipped recipe (other_weight 0.03, carry 0.5) with the autoencoder trained "
     "40 epochs (ae40_o3.toml; both solver banks retrained on it, completion reused)",
 }
