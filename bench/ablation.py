@@ -94,6 +94,10 @@ VARIANTS: dict[str, str] = {
     "carry1": "`other003` served with serving.carry 1 (the branch carried rigidly, as FABRIK)",
     "carry_loss": "the shipped recipe with the solvers trained on the answer with the carry "
     "(solver.carry_loss, carry_loss.toml; both solver banks retrained)",
+    "turn12_min3": "`carry05` served with the turn search (serving.turn_yaws 12, margin 1 cm) "
+    "for edits with 3 or more targets",
+    "turn12_min4": "the same for edits with 4 or more targets",
+    "turn12_min5": "the same for edits with 5 or more targets: shipped since (mx1-00ce505b05cf)",
     "ae40_o3": "the shipped recipe (other_weight 0.03, carry 0.5) with the autoencoder trained "
     "40 epochs (ae40_o3.toml; both solver banks retrained on it, completion reused)",
 }

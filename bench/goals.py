@@ -258,6 +258,8 @@ def issue14_goals(i14: Json | None) -> list[Goal]:
             if r and "neural_passes1" in r
             else ""
         )
+        if r and "neural_no_turn" in r:
+            at1 += f"; {r['neural_no_turn']['p50_ms']:.3f} ms without the turn search"
         shown = (
             "–"
             if r is None

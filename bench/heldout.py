@@ -636,6 +636,10 @@ def main(
         Optional[float],  # noqa: UP045
         typer.Option(help="Carry below targets, 0-1 (default: the manifest's serving.carry)."),
     ] = None,
+    turn_yaws: Annotated[
+        Optional[int],  # noqa: UP045
+        typer.Option(help="Turn search yaws, 1 = off (default: the manifest's serving)."),
+    ] = None,
 ) -> None:
     """Held-out bodies and the stress set only, against any models folder."""
     from rich.console import Console
@@ -648,11 +652,11 @@ def main(
         raise typer.BadParameter(f"no dataset file at {dataset}", param_hint="--dataset")
     console = Console(stderr=True)
     cfg = dataclasses.replace(QUICK if quick else HeldoutConfig(), seed=seed)
-    engine = Engine(models, threads=1, solve_passes=passes, carry=carry)
+    engine = Engine(models, threads=1, solve_passes=passes, carry=carry, turn_yaws=turn_yaws)
     res = run_heldout(engine, load_dataset(dataset), cfg, split=split, log=console.log)
     res.models = {
         "dir": str(models), "version": engine.version, "passes": engine.solve_passes,
-        "carry": engine.carry,
+        "carry": engine.carry, "turn_yaws": engine.turn_search.yaws,
     }  # fmt: skip
     if out is not None:
         out.parent.mkdir(parents=True, exist_ok=True)

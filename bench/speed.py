@@ -3,6 +3,7 @@ throughput. Timings use ``time.perf_counter_ns`` around ``Engine.solve``."""
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import time
 from collections.abc import Callable, Sequence
@@ -14,6 +15,7 @@ from bench.edits import Edits, problems
 from service.engine import Engine
 from service.limits import chunks_of, fan_out, neural_price
 from service.problems import SolveProblem
+from service.turns import NO_SEARCH
 
 Json = dict[str, Any]
 
@@ -221,6 +223,10 @@ def _issue14_set(
         "fabrik_kernel": kernel,
         "fabrik_numpy": numpy_fabrik,
     }
+    if engine.turn_search.searches("neural", len(idx), False):  # the default searches
+        plain = copy.copy(engine)
+        plain.turn_search = NO_SEARCH
+        runs["neural_no_turn"] = lambda i: plain.solve([neural[i]])
     for i in range(warmup):
         for fn in runs.values():
             fn(i % n)

@@ -123,6 +123,25 @@ class Serving(_Strict):
         "branch would, by this fraction: 0 keeps the network's answer, 1 carries the branch "
         "as the start pose had it (as FABRIK does); each bone's direction is the mix.",
     )
+    turn_yaws: int = Field(
+        default=1,
+        ge=1,
+        le=36,
+        description="Turn search (service.turns): a neural edit with at least "
+        "`turn_min_targets` targets and no pins is first tried from its start turned about "
+        "the vertical through the pelvis by this many evenly spaced yaws (0 first), and "
+        "solved from the one whose soft answer lands nearest its targets. 1 = off.",
+    )
+    turn_margin: float = Field(
+        default=0.0,
+        ge=0.0,
+        le=1.0,
+        description="Metres by which a turned start's answer must land nearer the targets "
+        "(mean distance) than the unturned one's to be chosen.",
+    )
+    turn_min_targets: int = Field(
+        default=3, ge=1, le=21, description="The fewest targets an edit needs to search."
+    )
     passes: int = Field(
         default=1,
         ge=1,

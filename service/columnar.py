@@ -26,6 +26,7 @@ from service.errors import BodyInvalid, TooManyItems
 from service.limits import chunks_of, price_of
 from service.problems import BatchAnswer
 from service.schemas import MAX_COORDINATE, MAX_WEIGHT, SolveOptions
+from service.turns import NO_SEARCH, TurnSearch
 from service.validation import check_bones
 
 F64 = npt.NDArray[np.float64]
@@ -73,10 +74,12 @@ class Columns:
     def size(self) -> int:
         return int(self.poses.shape[0])
 
-    def parts(self, passes: int) -> list[slice]:
+    def parts(self, passes: int, search: TurnSearch = NO_SEARCH) -> list[slice]:
         """Priced parts (``service.limits``): every item costs the same here (``passes``:
-        the engine's default, when the options do not say)."""
-        return chunks_of([price_of(self.options, self.n_pins > 0, passes)] * self.size)
+        the engine's default, when the options do not say; ``search``: its turn search)."""
+        o, pinned = self.options, self.n_pins > 0
+        each = price_of(o, pinned, passes, search.factor(o.method, self.n_targets, pinned))
+        return chunks_of([each] * self.size)
 
 
 def _numbers(rows: Any, loc: tuple[Any, ...], width: int, n: int, errs: _Errors,

@@ -42,6 +42,7 @@ from core.skeleton import (
     bone_lengths,
     set_key,
 )
+from service import turns
 from service.errors import InvalidRequest
 from service.lean import (
     covering,
@@ -85,6 +86,7 @@ class Engine:
         fabrik_max_iterations: int = 64,
         solve_passes: int | None = None,
         carry: float | None = None,
+        turn_yaws: int | None = None,
     ) -> None:
         self.models_dir = Path(models_dir)
         self.manifest: Manifest = load_manifest(self.models_dir, verify=True)
@@ -132,6 +134,11 @@ class Engine:
         self.carry = float(m.serving.carry if carry is None else carry)
         if not 0.0 <= self.carry <= 1.0:
             raise ValueError(f"carry must be in [0, 1], got {self.carry}")
+        #: the turn search of many-target edits (``serving.turn_*``, :mod:`service.turns`)
+        self.turn_search = turns.TurnSearch(
+            int(m.serving.turn_yaws if turn_yaws is None else turn_yaws),
+            float(m.serving.turn_margin), int(m.serving.turn_min_targets),
+        )  # fmt: skip
         known = np.asarray(m.skeleton.skeletons, dtype=np.float64)  # [C, 20]
         self._shape_totals = known.sum(axis=-1)
         self._shapes = known / self._shape_totals[:, None]
@@ -231,6 +238,8 @@ class Engine:
         if p.method != "fabrik":
             if not (p.preserve_bone_lengths and p.n_targets == len(tidx)):
                 return None  # the bone pass left out, or pins: the general path
+            if self.turn_search.searches(p.method, p.n_targets, False):
+                return None  # a turn search (service.turns): the general path
             passes, seq = self.passes_of(p), covering(self, tidx, weights)
             if seq is None or passes < 1:
                 return None
@@ -323,6 +332,13 @@ class Engine:
         if n and int(reps.min()) < 1:
             raise ValueError(f"passes must be at least 1, got {int(reps.min())}")
         reps = np.where(fab, 1, reps)  # FABRIK items: one solve (and not the caller's array)
+        items, degrees = turns.search(self, items, reps, self._solve_items)
+        return turns.mark(self._solve_items(items, reps), degrees)
+
+    def _solve_items(self, items: _Items, reps: npt.NDArray[np.int64]) -> BatchAnswer:
+        """:meth:`solve_arrays` of normalised items with their passes ``reps``."""
+        pose_a = items.poses
+        n = pose_a.shape[0]
         # a batch all alike (service.lean): FABRIK on one target set, or neural with no
         # pins and every target on a solver
         lean = None if fabrik_batch(items) else lean_sequence(self, items, reps)

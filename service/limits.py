@@ -26,6 +26,7 @@ from service.errors import ClientDisconnected, DeadlineExceeded
 from service.middleware.types import T0
 from service.problems import SolveProblem
 from service.schemas import MAX_PASSES
+from service.turns import NO_SEARCH, TurnSearch
 
 CHUNK_PRICE = 256
 FABRIK_PRICE = 16
@@ -43,30 +44,36 @@ class Priced(Protocol):
     def passes(self) -> int | None: ...
 
 
-def price_of(o: Priced, pinned: bool, passes: int) -> int:
+def price_of(o: Priced, pinned: bool, passes: int, search: int = 1) -> int:
     """Relative cost of one pose item (measured: an exact-reach item ~10 ms, a neural pass
     well under 0.1 ms in a batch) with options ``o`` (``pinned``: it has pins);
-    ``passes``: the engine's default, where ``o.passes`` does not say."""
+    ``passes``: the engine's default, where ``o.passes`` does not say; ``search``: the
+    solves per pass of its turn search (``TurnSearch.factor``, 1 without)."""
     if o.method == "fabrik":
         return FABRIK_PRICE
-    return neural_price(o.reach == "exact" or pinned, passes if o.passes is None else o.passes)
+    p = passes if o.passes is None else o.passes
+    return neural_price(o.reach == "exact" or pinned, p, search)
 
 
-def price(p: SolveProblem, passes: int) -> int:
-    """:func:`price_of` a validated problem."""
-    return price_of(p, len(p.target_idx) > p.n_targets, passes)
+def price(p: SolveProblem, passes: int, search: TurnSearch = NO_SEARCH) -> int:
+    """:func:`price_of` a validated problem (``search``: the engine's turn search)."""
+    pinned = len(p.target_idx) > p.n_targets
+    return price_of(p, pinned, passes, search.factor(p.method, p.n_targets, pinned))
 
 
-def neural_price(slow: bool, passes: int) -> int:
-    """A neural item of ``passes`` passes: one unit per pass, plus the FABRIK polish's
-    ``FABRIK_PRICE - 1`` when it runs one (exact reach, pins)."""
-    return passes + (FABRIK_PRICE - 1 if slow else 0)
+def neural_price(slow: bool, passes: int, search: int = 1) -> int:
+    """A neural item of ``passes`` passes: one unit per pass (times ``search``, its turn
+    search's solves), plus the FABRIK polish's ``FABRIK_PRICE - 1`` when it runs one
+    (exact reach, pins)."""
+    return passes * search + (FABRIK_PRICE - 1 if slow else 0)
 
 
-def chunks(problems: Sequence[SolveProblem], passes: int) -> list[slice]:
+def chunks(
+    problems: Sequence[SolveProblem], passes: int, search: TurnSearch = NO_SEARCH
+) -> list[slice]:
     """Consecutive slices of at most ``CHUNK_PRICE`` units (at least one item each);
     ``passes``: the engine's default for items that do not say."""
-    return chunks_of([price(p, passes) for p in problems])
+    return chunks_of([price(p, passes, search) for p in problems])
 
 
 def chunks_of(prices: Sequence[int]) -> list[slice]:
@@ -107,10 +114,14 @@ class Budget:
             )
 
     async def run(self, fn: Callable[[Sequence[SolveProblem]], list[R]],
-                  problems: Sequence[SolveProblem], passes: int) -> list[R]:  # fmt: skip
+                  problems: Sequence[SolveProblem], passes: int,
+                  search: TurnSearch = NO_SEARCH) -> list[R]:  # fmt: skip
         """``fn`` over ``problems`` chunk by chunk, off the event loop, within budget
-        (``passes``: the engine's default, for the price of items that do not say)."""
-        parts = await self.run_parts(lambda part: fn(problems[part]), chunks(problems, passes))
+        (``passes``: the engine's default, for the price of items that do not say;
+        ``search``: the engine's turn search, priced too)."""
+        parts = await self.run_parts(
+            lambda part: fn(problems[part]), chunks(problems, passes, search)
+        )
         return [r for part in parts for r in part]
 
     async def run_parts(self, fn: Callable[[slice], R], parts: Sequence[slice]) -> list[R]:
@@ -203,7 +214,8 @@ def character_price(joints: int, slow: bool) -> int:
 def max_item_price(passes: int) -> int:
     """The costliest pose item: neural with the FABRIK polish at the most passes a request
     may ask for or the models' default (``passes``), whichever is more; dearer than a
-    FABRIK item."""
+    FABRIK item. (A pose item's turn search is priced in its chunks, not here: a batch of
+    pose items is bounded by its item count alone.)"""
     return max(FABRIK_PRICE, neural_price(True, max(MAX_PASSES, passes)))
 
 

@@ -100,6 +100,24 @@ class SolverConfig(_Section):
         "a rigid branch would (manifest serving.carry; a training setting only with "
         "carry_loss).",
     )
+    turn_yaws: int = Field(
+        default=1,
+        ge=1,
+        le=36,
+        description="Serving: the turn search's yaws (manifest serving.turn_yaws; 1 = off).",
+    )
+    turn_margin: float = Field(
+        default=0.0,
+        ge=0,
+        le=1,
+        description="Serving: metres a turned start must win by (manifest serving.turn_margin).",
+    )
+    turn_min_targets: int = Field(
+        default=3,
+        ge=1,
+        le=21,
+        description="Serving: the fewest targets that search (manifest serving.turn_min_targets).",
+    )
     carry_loss: bool = Field(
         default=False,
         description="With rigid_loss: the losses also see the carry below the targets "

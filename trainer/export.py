@@ -360,6 +360,9 @@ def export_all(
         anchor=cfg.solver.delta and cfg.solver.anchor,
         passes=cfg.solver.passes,
         carry=cfg.solver.carry,
+        turn_yaws=cfg.solver.turn_yaws,
+        turn_margin=cfg.solver.turn_margin,
+        turn_min_targets=cfg.solver.turn_min_targets,
         completion_yaws=cfg.completion.serving_yaws,
         completion_mirror=cfg.completion.serving_mirror,
     )  # fmt: skip

@@ -99,7 +99,7 @@ async def solve_one(p: SolveProblem, pinned: bool, engine: Engine, budget: Budge
         (result,) = engine.solve([p])
         budget.compute += time.perf_counter() - t
         return result
-    (result,) = await budget.run(engine.solve, [p], engine.solve_passes)
+    (result,) = await budget.run(engine.solve, [p], engine.solve_passes, engine.turn_search)
     return result
 
 
@@ -134,7 +134,7 @@ async def solve_batch(body: BatchBody, engine: ReadyEngine, budget: RequestBudge
 
     problems = await off_loop(request, prepare, len(items))
     prepared = {i: await read_character(budget, f, f"items[{i}]") for i, f in chars.items()}
-    results = await budget.run(engine.solve, problems, engine.solve_passes)
+    results = await budget.run(engine.solve, problems, engine.solve_passes, engine.turn_search)
     state.metrics.batch.observe(len(forms))
     for p, r in zip(problems, results, strict=True):
         state.metrics.solved(p.method, r.solvers)
@@ -192,7 +192,8 @@ async def solve_columns(cols: columnar.Columns, engine: Engine, budget: Budget,
     """A validated columnar batch: solved in priced parts within the budget, answered
     from the arrays (``service.columnar``)."""
     parts = await budget.run_parts(
-        lambda part: columnar.solve(engine, cols, part), cols.parts(engine.solve_passes)
+        lambda part: columnar.solve(engine, cols, part),
+        cols.parts(engine.solve_passes, engine.turn_search),
     )
     ans = columnar.merge(parts)
     state.metrics.batch.observe(cols.size)

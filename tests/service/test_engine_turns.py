@@ -1,0 +1,131 @@
+"""The turn search of many-target edits (``serving.turn_*``, service.turns) on real poses:
+an edit whose targets come from the goal pose turned a quarter round is solved from the
+start turned the same way, and lands nearer that goal than without the search; edits with
+few targets or with pins never search; answers stay bit-identical, alone or in a batch."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from core.skeleton import JOINT_INDEX
+from service import limits
+from service.engine import Engine
+from service.problems import SolveProblem
+from service.turns import turned
+from tests.conftest import PosePairs
+
+FIVE = ("head", "left_wrist", "right_wrist", "left_ankle", "right_ankle")
+
+
+@pytest.fixture(scope="module")
+def engines(models_dir: Path) -> tuple[Engine, Engine]:
+    return Engine(models_dir, turn_yaws=1), Engine(models_dir)
+
+
+def _problems(
+    starts: np.ndarray, goals: np.ndarray, names: tuple[str, ...], pins: tuple[str, ...] = (),
+    reach: str = "soft",
+) -> list[SolveProblem]:  # fmt: skip
+    idx = np.asarray([JOINT_INDEX[n] for n in names + pins], dtype=np.intp)
+    return [
+        SolveProblem(
+            pose=s, target_idx=idx, target_pos=np.concatenate([g[idx[: len(names)]],
+                                                               s[idx[len(names):]]]),
+            weights=np.ones(len(idx)), n_targets=len(names), reach=reach,  # type: ignore[arg-type]
+        )
+        for s, g in zip(starts, goals, strict=True)
+    ]  # fmt: skip
+
+
+def _turn(solvers: list[str]) -> str | None:
+    return solvers[-1] if solvers[-1].startswith("turn") else None
+
+
+def test_shipped_models_search(engines: tuple[Engine, Engine]) -> None:
+    serving = engines[1].manifest.serving
+    assert engines[1].turn_search.yaws == serving.turn_yaws == 12
+    assert serving.turn_min_targets == 5 and serving.turn_margin == 0.01
+    assert engines[0].turn_search.yaws == 1
+
+
+def test_a_turned_goal_turns_the_start(
+    engines: tuple[Engine, Engine], real_poses: PosePairs
+) -> None:
+    off, on = engines
+    start = real_poses.poses[real_poses.starts[:30]]
+    goal = turned(real_poses.poses[real_poses.goals[:30]], np.pi / 2)
+    probs = _problems(start, goal, FIVE)
+    plain, searched = off.solve(probs), on.solve(probs)
+    turns = [r.solvers[-1] for r in searched]
+    near = sum(t in ("turn 60", "turn 90", "turn 120") for t in turns)
+    assert near >= 20 and turns.count("turn 90") >= 15, turns
+    assert all(not s.startswith("turn") for r in plain for s in r.solvers)
+    err = [np.linalg.norm(np.stack([r.pose for r in rs]) - goal, axis=-1).mean() for rs in
+           (plain, searched)]  # fmt: skip
+    assert err[1] < 0.5 * err[0], err
+    for r in searched:
+        assert r.max_bone_error <= 1e-5
+    # exact reach searches as the soft edit does, then reaches from the start it chose
+    exact = on.solve(_problems(start[:8], goal[:8], FIVE, reach="exact"))
+    for r, soft in zip(exact, searched[:8], strict=True):
+        assert r.reached.all() and "fabrik-polish" in r.solvers
+        assert _turn(r.solvers) == _turn(soft.solvers)
+
+
+def test_who_searches(engines: tuple[Engine, Engine], real_poses: PosePairs) -> None:
+    off, on = engines
+    start = real_poses.poses[real_poses.starts[:12]]
+    goal = turned(real_poses.poses[real_poses.goals[:12]], np.pi / 2)
+    few = _problems(start, goal, ("head", "left_wrist", "right_wrist", "left_ankle"))
+    pinned = _problems(start, goal, FIVE[:4], pins=("right_ankle",))
+    for probs in (few, pinned):
+        for a, b in zip(off.solve(probs), on.solve(probs), strict=True):
+            assert np.array_equal(a.pose, b.pose) and a.solvers == b.solvers
+    # edits as captured (0.2-1 s apart, small turns) mostly keep their facing
+    kept = [r.solvers[-1] for r in on.solve(_problems(
+        real_poses.poses[real_poses.starts[:40]], real_poses.poses[real_poses.goals[:40]], FIVE
+    ))]  # fmt: skip
+    assert sum(not s.startswith("turn") for s in kept) >= 30, kept
+
+
+def test_bit_identical_alone_and_in_a_batch(
+    engines: tuple[Engine, Engine], real_poses: PosePairs
+) -> None:
+    on = engines[1]
+    start = real_poses.poses[real_poses.starts[:16]]
+    goal = real_poses.poses[real_poses.goals[:16]]
+    mixed = (
+        _problems(start[:6], turned(goal[:6], -np.pi / 3), FIVE)
+        + _problems(start[6:10], goal[6:10], ("left_wrist", "right_wrist"))
+        + _problems(start[10:], turned(goal[10:], np.pi), FIVE, reach="exact")
+    )
+    batch, again = on.solve(mixed), on.solve(mixed)
+    for p, a, b in zip(mixed, batch, again, strict=True):
+        (single,) = on.solve([p])
+        assert np.array_equal(a.pose, b.pose) and np.array_equal(a.pose, single.pose)
+        assert a.solvers == single.solvers
+
+
+def test_searching_items_are_priced_by_their_solves(
+    engines: tuple[Engine, Engine], real_poses: PosePairs
+) -> None:
+    """A searching item costs its candidates' solves too, so batches of them run in
+    smaller priced chunks; few targets, pins and FABRIK cost what they did."""
+    search = engines[1].turn_search
+    start = real_poses.poses[real_poses.starts[:1]]
+    goal = real_poses.poses[real_poses.goals[:1]]
+    (five,) = _problems(start, goal, FIVE)
+    (four,) = _problems(start, goal, FIVE[:4])
+    (pinned,) = _problems(start, goal, FIVE, pins=("pelvis",))
+    fabrik = dataclasses.replace(five, method="fabrik")
+    assert limits.price(five, 2, search) == 2 * 13 and limits.price(five, 2) == 2
+    assert limits.price(four, 2, search) == limits.price(four, 2) == 2
+    assert limits.price(pinned, 2, search) == limits.price(pinned, 2)
+    assert limits.price(fabrik, 2, search) == limits.FABRIK_PRICE
+    assert len(limits.chunks([five] * 100, 2, search)) == 12  # 9 items of 26 per 256
+    # the batch price limit (character items) is the item count's, search or not
+    assert limits.max_item_price(2) == 4 + limits.FABRIK_PRICE - 1
