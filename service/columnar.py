@@ -78,7 +78,8 @@ class Columns:
         """Priced parts (``service.limits``): every item costs the same here (``passes``:
         the engine's default, when the options do not say; ``search``: its turn search)."""
         o, pinned = self.options, self.n_pins > 0
-        each = price_of(o, pinned, passes, search.factor(o.method, self.n_targets, pinned))
+        factor = search.factor(o.method, self.n_targets, pinned, o.turn_search)
+        each = price_of(o, pinned, passes, factor)
         return chunks_of([each] * self.size)
 
 
@@ -262,6 +263,7 @@ def solve(engine: Engine, cols: Columns, part: slice) -> BatchAnswer:
         weights=cols.weights[part], fabrik=o.method == "fabrik",
         preserve_bone_lengths=o.preserve_bone_lengths, exact=o.reach == "exact",
         tolerance=o.tolerance, floor=o.floor, passes=o.passes, carry=o.carry,
+        turn_search=o.turn_search is not False,
     )  # fmt: skip
 
 

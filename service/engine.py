@@ -200,6 +200,7 @@ class Engine:
                 weights=p.weights[None], fabrik=p.method == "fabrik",
                 preserve_bone_lengths=p.preserve_bone_lengths, exact=p.reach == "exact",
                 tolerance=p.tolerance, floor=p.floor, passes=p.passes, carry=p.carry,
+                turn_search=p.turn_search is not False,
             )  # fmt: skip
             return [self._result(p, ans, 0)]
         counts = np.fromiter((len(p.target_idx) for p in problems), np.int64, n)
@@ -226,6 +227,7 @@ class Engine:
             floor=np.fromiter((p.floor for p in problems), np.float64, n),
             passes=np.fromiter((self.passes_of(p) for p in problems), np.int64, n),
             carry=np.fromiter((self.carry_of(p) for p in problems), np.float64, n),
+            turn_search=np.fromiter((p.turn_search is not False for p in problems), np.bool_, n),
         )  # fmt: skip
         return [self._result(p, ans, b) for b, p in enumerate(problems)]
 
@@ -238,7 +240,7 @@ class Engine:
         if p.method != "fabrik":
             if not (p.preserve_bone_lengths and p.n_targets == len(tidx)):
                 return None  # the bone pass left out, or pins: the general path
-            if self.turn_search.searches(p.method, p.n_targets, False):
+            if self.turn_search.searches(p.method, p.n_targets, False, p.turn_search):
                 return None  # a turn search (service.turns): the general path
             passes, seq = self.passes_of(p), covering(self, tidx, weights)
             if seq is None or passes < 1:
@@ -250,7 +252,7 @@ class Engine:
             compiled.as_f64(p.target_pos).reshape(1, k, 3), np.full(1, k, dtype=np.int64),
             np.full(1, p.n_targets, dtype=np.int64), weights[None], one & (seq is None), one,
             one & (p.reach == "exact"), np.full(1, p.tolerance, dtype=np.float64),
-            np.full(1, p.floor, dtype=np.float64), np.full(1, self.carry_of(p)),
+            np.full(1, p.floor, dtype=np.float64), np.full(1, self.carry_of(p)), one,
         )  # fmt: skip
         ans = lean_answer(self, items, passes, seq)
         return None if ans is None else self._result(p, ans, 0)
@@ -292,6 +294,7 @@ class Engine:
         floor: npt.ArrayLike = 0.0,
         passes: npt.ArrayLike | None = None,
         carry: npt.ArrayLike | None = None,
+        turn_search: npt.ArrayLike = True,
     ) -> BatchAnswer:
         """Solve a batch given as arrays (validated like :class:`SolveProblem`), no
         per-item objects: ``poses [B, 21, 3]`` world; ``target_idx [B, K]`` joints (per
@@ -300,7 +303,8 @@ class Engine:
         Per-item options are ``[B]`` arrays or scalars: ``fabrik`` (method), ``exact``
         (reach), ``preserve_bone_lengths``, ``tolerance`` (m), ``floor`` (world y),
         ``passes`` (neural solves; default the engine's ``solve_passes``), ``carry`` (the
-        branch below each target, 0-1, :mod:`core.carry`; default the engine's ``carry``).
+        branch below each target, 0-1, :mod:`core.carry`; default the engine's ``carry``),
+        ``turn_search`` (False: never search the turn, :mod:`service.turns`).
 
         Geometry runs in compiled kernels (:mod:`core.compiled`), one call per stage for
         the whole batch; items that share a solver sequence share one onnxruntime run per
@@ -325,6 +329,7 @@ class Engine:
             _per_item(preserve_bone_lengths, n, np.bool_), _per_item(exact, n, np.bool_),
             _per_item(tolerance, n, np.float64), _per_item(floor, n, np.float64),
             _per_item(self.carry if carry is None else carry, n, np.float64),
+            _per_item(turn_search, n, np.bool_),
         )  # fmt: skip
         if n and not bool(np.all((items.carry >= 0.0) & (items.carry <= 1.0))):
             raise ValueError("carry must be in [0, 1]")

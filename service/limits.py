@@ -58,7 +58,7 @@ def price_of(o: Priced, pinned: bool, passes: int, search: int = 1) -> int:
 def price(p: SolveProblem, passes: int, search: TurnSearch = NO_SEARCH) -> int:
     """:func:`price_of` a validated problem (``search``: the engine's turn search)."""
     pinned = len(p.target_idx) > p.n_targets
-    return price_of(p, pinned, passes, search.factor(p.method, p.n_targets, pinned))
+    return price_of(p, pinned, passes, search.factor(p.method, p.n_targets, pinned, p.turn_search))
 
 
 def neural_price(slow: bool, passes: int, search: int = 1) -> int:

@@ -35,6 +35,7 @@ class SolveProblem:
     floor: float = 0.0  # world y of the ground under the character
     passes: int | None = None  # neural solves (None: the engine's ``solve_passes``)
     carry: float | None = None  # the branch below targets, 0-1 (None: the engine's)
+    turn_search: bool | None = None  # search the turn (service.turns; None: if the models do)
 
 
 @dataclass(frozen=True)
@@ -77,6 +78,7 @@ class _Items:
     tols: compiled.F64  # [B]
     floors: compiled.F64  # [B]
     carry: compiled.F64  # [B] the branch below the targets (core.carry), 0-1
+    turn: npt.NDArray[np.bool_]  # [B] may search its turn (service.turns)
 
     def soft(self, sel: npt.NDArray[np.intp], poses: compiled.F64) -> _Items:
         """Items ``sel`` from ``poses`` as a refinement pass solves them: neural, soft
@@ -85,6 +87,7 @@ class _Items:
         return _Items(
             poses[sel], self.tidx[sel], self.tpos[sel], self.cnt[sel], self.n_t[sel],
             self.w[sel], no, ~no, no, self.tols[sel], self.floors[sel], self.carry[sel],
+            self.turn[sel],
         )  # fmt: skip
 
 

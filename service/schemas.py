@@ -110,6 +110,13 @@ class SolveOptions(_Body):
         "branch (as FABRIK does); between, each bone's direction is the mix. Absent: the "
         "models' default, `carry` of `GET /v1/models`. `method: fabrik` ignores it.",
     )
+    turn_search: bool | None = Field(
+        default=None,
+        description="Whether an edit with many targets (`turn_min_targets` of `GET "
+        "/v1/models`, 5 for the shipped models) and no pins first searches the body's turn "
+        "about the pelvis (the solver path then ends `turn <deg>`); absent: the models' "
+        "default. About 13 solves instead of one; `false` is the fast path.",
+    )
 
 
 class SolveRequest(_Body):
@@ -227,6 +234,14 @@ class ModelsResponse(BaseModel):
         description="How far joints below a targeted joint turn with its bone, as a rigid "
         "branch would, after the bone pass: 0 (the network's answer) to 1 (the start pose's "
         "branch carried, as FABRIK does); the manifest's `serving.carry`."
+    )
+    turn_yaws: int = Field(
+        description="Turns of the start a searching edit tries (1: no search; the manifest's "
+        "`serving.turn_yaws`)."
+    )
+    turn_min_targets: int = Field(
+        description="The fewest targets of an edit that searches its turn "
+        "(`serving.turn_min_targets`)."
     )
     models: list[ModelInfo]
 

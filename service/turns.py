@@ -48,12 +48,18 @@ class TurnSearch:
     margin: float = 0.0
     min_targets: int = 5
 
-    def searches(self, method: str, n_targets: int, pinned: bool) -> bool:
-        return self.yaws > 1 and method != "fabrik" and not pinned and n_targets >= self.min_targets
+    def searches(
+        self, method: str, n_targets: int, pinned: bool, wanted: bool | None = None
+    ) -> bool:
+        """Whether an item searches (``wanted``: its ``options.turn_search``; None: yes)."""
+        return (
+            wanted is not False and self.yaws > 1 and method != "fabrik" and not pinned
+            and n_targets >= self.min_targets
+        )  # fmt: skip
 
-    def factor(self, method: str, n_targets: int, pinned: bool) -> int:
+    def factor(self, method: str, n_targets: int, pinned: bool, wanted: bool | None = None) -> int:
         """The solves an item costs per pass: its candidates and itself, or 1."""
-        return self.yaws + 1 if self.searches(method, n_targets, pinned) else 1
+        return self.yaws + 1 if self.searches(method, n_targets, pinned, wanted) else 1
 
 
 #: No search (models without ``serving.turn_*``, FABRIK-only callers).
@@ -65,7 +71,7 @@ def searching(engine: Engine, items: _Items) -> npt.NDArray[np.intp]:
     t = engine.turn_search
     if t.yaws <= 1:
         return np.zeros(0, dtype=np.intp)
-    ok = ~items.fab & (items.n_t >= t.min_targets) & (items.cnt == items.n_t)
+    ok = items.turn & ~items.fab & (items.n_t >= t.min_targets) & (items.cnt == items.n_t)
     return np.flatnonzero(ok)
 
 

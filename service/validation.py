@@ -106,6 +106,7 @@ def problem_of(
         floor=o.floor,
         passes=o.passes,
         carry=o.carry,
+        turn_search=o.turn_search,
     )
 
 

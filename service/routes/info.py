@@ -37,6 +37,8 @@ async def models(engine: ReadyEngine) -> ModelsResponse:
         completion_levels=[list(e.joints) for e in m.completion_levels()],
         passes=engine.solve_passes,
         carry=engine.carry,
+        turn_yaws=engine.turn_search.yaws,
+        turn_min_targets=engine.turn_search.min_targets,
         models=[
             ModelInfo(
                 name=e.name,

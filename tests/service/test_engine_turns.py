@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -17,6 +18,7 @@ from service.engine import Engine
 from service.problems import SolveProblem
 from service.turns import turned
 from tests.conftest import PosePairs
+from tests.service.test_api import assert_problem
 
 FIVE = ("head", "left_wrist", "right_wrist", "left_ankle", "right_ankle")
 
@@ -129,3 +131,39 @@ def test_searching_items_are_priced_by_their_solves(
     assert len(limits.chunks([five] * 100, 2, search)) == 12  # 9 items of 26 per 256
     # the batch price limit (character items) is the item count's, search or not
     assert limits.max_item_price(2) == 4 + limits.FABRIK_PRICE - 1
+
+
+def test_options_turn_search_over_http(client: Any, real_poses: PosePairs) -> None:
+    """``options.turn_search``: absent searches as the models say (``GET /v1/models``),
+    ``false`` never does (bit for bit the engine without a search), in every batch form;
+    a non-boolean is a 422 naming it."""
+    info = client.get("/v1/models").json()
+    assert info["turn_yaws"] == 12 and info["turn_min_targets"] == 5
+    start = real_poses.poses[real_poses.starts[:3]]
+    goal = turned(real_poses.poses[real_poses.goals[:3]], np.pi / 2)
+    bodies = []
+    for s, g in zip(start, goal, strict=True):
+        bodies.append({
+            "pose": {n: s[j].tolist() for n, j in JOINT_INDEX.items()},
+            "targets": [{"joint": n, "position": g[JOINT_INDEX[n]].tolist()} for n in FIVE],
+        })  # fmt: skip
+    searched = [client.post("/v1/solve", json=b).json() for b in bodies]
+    off = [{**b, "options": {"turn_search": False}} for b in bodies]
+    plain = [client.post("/v1/solve", json=b).json() for b in off]
+    assert any(r["solvers"][-1].startswith("turn") for r in searched), searched
+    assert not any(s.startswith("turn") for r in plain for s in r["solvers"])
+    batch = client.post("/v1/solve/batch", json={"items": [*bodies, *off]}).json()["items"]
+    assert batch == searched + plain
+    col = {
+        "poses": [s.reshape(-1).tolist() for s in start],
+        "targets": {"joints": list(FIVE),
+                    "positions": [g[[JOINT_INDEX[n] for n in FIVE]].reshape(-1).tolist()
+                                  for g in goal]},
+        "options": {"turn_search": False},
+    }  # fmt: skip
+    r = client.post("/v1/solve/batch", json=col)
+    assert r.status_code == 200, r.text
+    assert not any(s.startswith("turn") for p in r.json()["solvers"] for s in p)
+    for bad in ("yes", 1, [True]):
+        resp = client.post("/v1/solve", json={**bodies[0], "options": {"turn_search": bad}})
+        assert_problem(resp, 422, "options.turn_search")
