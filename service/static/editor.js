@@ -48,7 +48,7 @@ function wireControls() {
   renderer.domElement.addEventListener('pointerleave', () => {
     if (!ui.drag) $('hud').hidden = true;
   });
-  for (const input of document.querySelectorAll('input[name=method], #exact, #preserve, #tolerance')) {
+  for (const input of document.querySelectorAll('input[name=method], #exact, #preserve, #tolerance, #turn-search')) {
     input.addEventListener('change', () => requestSolve(true));
   }
   $('carry').addEventListener('change', (ev) => {

@@ -386,6 +386,12 @@ def test_editor_drag_solve_fabrik_errors(server: str, browser: Any, tmp_path: Pa
         direct = post_json(server + "/v1/solve", last["request"])
         assert direct["pose"] == last["response"]["pose"]
 
+        # -- the turn search: the models' default until unchecked ------------------------
+        assert "turn_search" not in solves[-1]["options"]
+        page.get_by_label("Search the body's turn").uncheck()
+        settled()
+        assert solves[-1]["options"]["turn_search"] is False
+
         # Only the browser's own log lines of the two forced failures.
         assert page_errors == []
         unexpected = [e for e in console_errors if not e.startswith("Failed to load resource")]

@@ -125,6 +125,7 @@ export function options() {
   };
   // the models' own default (GET /v1/models) until the slider is moved
   if ($('carry').dataset.touched) out.carry = $('carry').valueAsNumber;
+  if (!$('turn-search').checked) out.turn_search = false; // checked: the models' default
   return out;
 }
 
