@@ -8,6 +8,7 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
+from core.manifest import Serving
 from core.skeleton import BASE_KEYPOINTS, JOINT_NAMES
 
 
@@ -37,6 +38,12 @@ class AutoencoderConfig(_Section):
         description="Reconstruction loss: MSE of the normalised coordinates, or the mean "
         "per-joint distance in metres (MPJPE, what the benchmarks score).",
     )
+
+
+def _serving(name: str) -> Any:
+    """The manifest's own field ``serving.<name>`` (default, bounds, description), for a
+    setting the trainer only passes on to the manifest."""
+    return Serving.model_fields[name]
 
 
 class SolverConfig(_Section):
@@ -85,43 +92,17 @@ class SolverConfig(_Section):
         "mean squared coordinate error, or mean per-joint distance (what MPJPE and reach "
         "score; it tolerates a few joints moving far less than many moving a little).",
     )
-    passes: int = Field(
-        default=1,
-        ge=1,
-        le=8,
-        description="Serving: neural solves per edit, each from the previous answer "
-        "(manifest serving.passes; not a training setting).",
-    )
-    carry: float = Field(
-        default=0.0,
-        ge=0,
-        le=1,
-        description="Serving: how far joints below a targeted joint turn with its bone, as "
-        "a rigid branch would (manifest serving.carry; a training setting only with "
-        "carry_loss).",
-    )
-    turn_yaws: int = Field(
-        default=1,
-        ge=1,
-        le=36,
-        description="Serving: the turn search's yaws (manifest serving.turn_yaws; 1 = off).",
-    )
-    turn_margin: float = Field(
-        default=0.0,
-        ge=0,
-        le=1,
-        description="Serving: metres a turned start must win by (manifest serving.turn_margin).",
-    )
-    turn_min_targets: int = Field(
-        default=3,
-        ge=1,
-        le=21,
-        description="Serving: the fewest targets that search (manifest serving.turn_min_targets).",
-    )
+    # Serving settings, written to the manifest's `serving` block: defined there, once
+    # (core.manifest.Serving); the solvers are not trained differently for them.
+    passes: int = _serving("passes")
+    carry: float = _serving("carry")
+    turn_yaws: int = _serving("turn_yaws")
+    turn_margin: float = _serving("turn_margin")
+    turn_min_targets: int = _serving("turn_min_targets")
     carry_loss: bool = Field(
         default=False,
         description="With rigid_loss: the losses also see the carry below the targets "
-        "(`carry`), as the answer is served.",
+        "(`carry`), as the answer is served (then `carry` is a training setting too).",
     )
     identity_fraction: float = Field(
         default=0.1,
