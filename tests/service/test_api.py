@@ -22,6 +22,20 @@ def as_array(pose: dict[str, list[float]]) -> np.ndarray:
     return np.array([pose[n] for n in JOINT_NAMES], dtype=np.float64)
 
 
+def engine_pose(engine: Any, body: dict[str, Any]) -> np.ndarray:
+    """What ``engine`` answers a pose-form solve body (its targets, default options)."""
+    from service.problems import SolveProblem
+
+    pose = as_array(body["pose"])
+    idx = np.asarray([JOINT_INDEX[t["joint"]] for t in body["targets"]], dtype=np.intp)
+    p = SolveProblem(
+        pose=pose, target_idx=idx, target_pos=np.asarray([t["position"] for t in body["targets"]]),
+        weights=np.ones(len(idx)), n_targets=len(idx),
+    )  # fmt: skip
+    (r,) = engine.solve([p])
+    return np.asarray(r.pose)
+
+
 def yaw_shift(yaw: float, shift: tuple[float, float, float], scale: float = 1.0) -> Any:
     c, s = math.cos(yaw), math.sin(yaw)
     rot = np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])

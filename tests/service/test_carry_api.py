@@ -14,10 +14,10 @@ import pytest
 
 from core.skeleton import JOINT_INDEX
 from service.engine import Engine
-from service.problems import SolveProblem
 from tests.conftest import PosePairs
-from tests.service.test_api import as_array, assert_problem, solve_body
+from tests.service.test_api import as_array, engine_pose, solve_body
 from tests.service.test_columnar import assert_same, columns, items
+from tests.service.test_passes_api import assert_bad_option
 
 ELBOW = ["left_elbow"]
 
@@ -25,17 +25,6 @@ ELBOW = ["left_elbow"]
 @pytest.fixture(scope="module")
 def by_carry(models_dir: Path) -> dict[float, Engine]:
     return {c: Engine(models_dir, carry=c) for c in (0.0, 1.0)}
-
-
-def _engine_pose(engine: Engine, body: dict[str, Any]) -> np.ndarray:
-    pose = as_array(body["pose"])
-    idx = np.asarray([JOINT_INDEX[t["joint"]] for t in body["targets"]], dtype=np.intp)
-    p = SolveProblem(
-        pose=pose, target_idx=idx, target_pos=np.asarray([t["position"] for t in body["targets"]]),
-        weights=np.ones(len(idx)), n_targets=len(idx),
-    )  # fmt: skip
-    (r,) = engine.solve([p])
-    return np.asarray(r.pose)
 
 
 def test_models_say_their_default(client: Any, engine: Engine) -> None:
@@ -53,13 +42,13 @@ def test_pose_form_carry_equals_an_engine_built_with_it(
         default = client.post("/v1/solve", json=body).json()
         explicit = client.post("/v1/solve", json={**body, "options": {"carry": 0.5}}).json()
         assert explicit == default  # absent = the models' default
-        assert np.array_equal(as_array(default["pose"]), _engine_pose(engine, body))
+        assert np.array_equal(as_array(default["pose"]), engine_pose(engine, body))
         poses = {}
         for c, other in by_carry.items():
             out = client.post("/v1/solve", json={**body, "options": {"carry": c}})
             assert out.status_code == 200, out.text
             poses[c] = as_array(out.json()["pose"])
-            assert np.array_equal(poses[c], _engine_pose(other, body)), c
+            assert np.array_equal(poses[c], engine_pose(other, body)), c
         # integers are numbers too
         one = client.post("/v1/solve", json={**body, "options": {"carry": 1}}).json()
         assert np.array_equal(as_array(one["pose"]), poses[1.0])
@@ -97,11 +86,4 @@ def test_batch_and_columnar_carry(client: Any, real_poses: PosePairs) -> None:
 def test_bad_carry_is_422_naming_the_field(
     client: Any, real_poses: PosePairs, value: object
 ) -> None:
-    body = solve_body(real_poses, 0, ELBOW)
-    bad = {**body, "options": {"carry": value}}
-    assert_problem(client.post("/v1/solve", json=bad), 422, "options.carry")
-    batch = {"items": [body, bad]}
-    assert_problem(client.post("/v1/solve/batch", json=batch), 422, "items[1].options.carry")
-    col = columns(real_poses, 3)
-    col["options"] = {"carry": value}
-    assert_problem(client.post("/v1/solve/batch", json=col), 422, "options.carry")
+    assert_bad_option(client, real_poses, "carry", value)

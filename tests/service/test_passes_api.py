@@ -19,7 +19,7 @@ from service.engine import Engine
 from service.problems import SolveProblem
 from tests.character_files import FILES, extract_bvh
 from tests.conftest import PosePairs
-from tests.service.test_api import as_array, assert_problem, solve_body
+from tests.service.test_api import as_array, assert_problem, engine_pose, solve_body
 from tests.service.test_characters import _goal
 from tests.service.test_columnar import assert_same, columns, items
 from tests.service.test_solve_forms import character_body
@@ -35,17 +35,6 @@ def by_passes(models_dir: Path) -> dict[int, Engine]:
 @pytest.fixture(scope="module")
 def files(mocap_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     return extract_bvh(mocap_dir, tmp_path_factory.mktemp("passes"))
-
-
-def _engine_pose(engine: Engine, body: dict[str, Any]) -> np.ndarray:
-    pose = as_array(body["pose"])
-    idx = np.asarray([JOINT_INDEX[t["joint"]] for t in body["targets"]], dtype=np.intp)
-    p = SolveProblem(
-        pose=pose, target_idx=idx, target_pos=np.asarray([t["position"] for t in body["targets"]]),
-        weights=np.ones(len(idx)), n_targets=len(idx),
-    )  # fmt: skip
-    (r,) = engine.solve([p])
-    return np.asarray(r.pose)
 
 
 def test_models_say_their_default(client: Any, engine: Engine) -> None:
@@ -64,11 +53,11 @@ def test_pose_form_passes_equal_an_engine_built_with_them(
             "/v1/solve", json={**body, "options": {"passes": engine.solve_passes}}
         )
         assert explicit.json() == default  # absent = the models' default
-        assert np.array_equal(as_array(default["pose"]), _engine_pose(engine, body))
+        assert np.array_equal(as_array(default["pose"]), engine_pose(engine, body))
         for p, other in by_passes.items():
             out = client.post("/v1/solve", json={**body, "options": {"passes": p}})
             assert out.status_code == 200, out.text
-            assert np.array_equal(as_array(out.json()["pose"]), _engine_pose(other, body)), p
+            assert np.array_equal(as_array(out.json()["pose"]), engine_pose(other, body)), p
         one = client.post("/v1/solve", json={**body, "options": {"passes": 1}}).json()
         assert one["pose"] != default["pose"]
 
@@ -134,18 +123,24 @@ def test_character_and_bvh_routes_take_passes(client: Any, files: dict[str, Path
     assert_problem(client.post("/v1/bvh/solve", json=bad_bvh), 422, "options.passes")
 
 
+def assert_bad_option(client: Any, real_poses: PosePairs, name: str, value: object) -> None:
+    """``options.<name> = value`` is a 422 naming the field in the pose form, the item
+    list (with the item's index) and the columnar form."""
+    body = solve_body(real_poses, 0, WRISTS)
+    bad = {**body, "options": {name: value}}
+    assert_problem(client.post("/v1/solve", json=bad), 422, f"options.{name}")
+    batch = {"items": [body, bad]}
+    assert_problem(client.post("/v1/solve/batch", json=batch), 422, f"items[1].options.{name}")
+    col = columns(real_poses, 3)
+    col["options"] = {name: value}
+    assert_problem(client.post("/v1/solve/batch", json=col), 422, f"options.{name}")
+
+
 @pytest.mark.parametrize("value", [0, 5, -1, 1.5, 2.0, "2", True, [2]])
 def test_bad_passes_are_422_naming_the_field(
     client: Any, real_poses: PosePairs, value: object
 ) -> None:
-    body = solve_body(real_poses, 0, WRISTS)
-    bad = {**body, "options": {"passes": value}}
-    assert_problem(client.post("/v1/solve", json=bad), 422, "options.passes")
-    batch = {"items": [body, bad]}
-    assert_problem(client.post("/v1/solve/batch", json=batch), 422, "items[1].options.passes")
-    col = columns(real_poses, 3)
-    col["options"] = {"passes": value}
-    assert_problem(client.post("/v1/solve/batch", json=col), 422, "options.passes")
+    assert_bad_option(client, real_poses, "passes", value)
 
 
 def test_prices_count_passes(real_poses: PosePairs) -> None:
