@@ -97,7 +97,9 @@ VARIANTS: dict[str, str] = {
     "turn12_min3": "`carry05` served with the turn search (serving.turn_yaws 12, margin 1 cm) "
     "for edits with 3 or more targets",
     "turn12_min4": "the same for edits with 4 or more targets",
-    "turn12_min5": "the same for edits with 5 or more targets: shipped since (mx1-00ce505b05cf)",
+    "turn12_min5": "the same for edits with 5 or more targets (mx1-00ce505b05cf)",
+    "turn12_plaus1": "`turn12_min5` scoring candidates by reach + 1 x the answer's distance to "
+    "its autoencoder round trip (serving.turn_plausibility): shipped since (mx1-c9e21949f9e0)",
     "ae40_o3": "the shipped recipe (other_weight 0.03, carry 0.5) with the autoencoder trained "
     "40 epochs (ae40_o3.toml; both solver banks retrained on it, completion reused)",
 }

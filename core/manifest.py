@@ -139,6 +139,13 @@ class Serving(_Strict):
         description="Metres by which a turned start's answer must land nearer the targets "
         "(mean distance) than the unturned one's to be chosen.",
     )
+    turn_plausibility: float = Field(
+        default=0.0,
+        ge=0.0,
+        le=100.0,
+        description="The turn search scores a candidate by its targets' mean distance plus "
+        "this times the mean distance of its answer to the autoencoder's round trip of it.",
+    )
     turn_min_targets: int = Field(
         default=3, ge=1, le=21, description="The fewest targets an edit needs to search."
     )

@@ -138,6 +138,7 @@ class Engine:
         self.turn_search = turns.TurnSearch(
             int(m.serving.turn_yaws if turn_yaws is None else turn_yaws),
             float(m.serving.turn_margin), int(m.serving.turn_min_targets),
+            float(m.serving.turn_plausibility),
         )  # fmt: skip
         known = np.asarray(m.skeleton.skeletons, dtype=np.float64)  # [C, 20]
         self._shape_totals = known.sum(axis=-1)

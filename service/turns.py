@@ -7,11 +7,14 @@ them instead of turning it: on held-out 5-end-effector edits whose two frames ar
 than 45° apart its answer is worse than FABRIK's (11.7 against 10.4 cm). Here, before the
 edit is solved, its start pose is tried turned about the vertical through its pelvis by
 ``turn_yaws`` evenly spaced yaws (0 first); each candidate is solved as a soft edit (the
-item's passes, bone pass, carry) and the one whose answer lands nearest its targets (mean
-distance) is kept, the unturned start winning unless another is at least ``turn_margin``
-metres nearer. The edit is then solved as asked from the kept start. Only neural items with
-at least ``turn_min_targets`` targets and no pins take part: fewer targets say little about
-a facing, and pins ask for joints to stay where they are.
+item's passes, bone pass, carry) and the one whose answer scores lowest is kept: the mean
+distance of its targets, plus ``turn_plausibility`` times the mean distance of the answer
+to the autoencoder's round trip of it (how far it is from the pose space: a body bent
+towards targets it should have turned to is far), the unturned start winning unless
+another scores at least ``turn_margin`` metres lower. The edit is then solved as asked
+from the kept start. Only neural items with at least ``turn_min_targets`` targets and no
+pins take part (``options.turn_search: false`` opts out): fewer targets say little about a
+facing, and pins ask for joints to stay where they are.
 
 Every candidate is an item of one batch solve, so the cost is about ``turn_yaws`` + 1
 solves per searching item; answers stay bit-identical (each item alone, argmin ties to the
@@ -47,6 +50,7 @@ class TurnSearch:
     yaws: int = 1
     margin: float = 0.0
     min_targets: int = 5
+    plausibility: float = 0.0
 
     def searches(
         self, method: str, n_targets: int, pinned: bool, wanted: bool | None = None
@@ -104,15 +108,26 @@ def search(
     soft = dataclasses.replace(items.soft(rep, items.poses), poses=candidates)
     ans = solve(soft, reps[rep])
     cols = np.arange(items.tidx.shape[1])[None, :] < soft.n_t[:, None]
-    reach = (ans.errors * cols).sum(axis=1) / soft.n_t
-    reach = reach.reshape(y, m)
-    reach[0] -= engine.turn_search.margin
-    best = np.argmin(reach, axis=0)  # ties: the first, the unturned start
+    score = (ans.errors * cols).sum(axis=1) / soft.n_t
+    if engine.turn_search.plausibility > 0:  # how far the answer is from the pose space
+        score += engine.turn_search.plausibility * implausibility(engine, ans.pose, soft.floors)
+    score = score.reshape(y, m)
+    score[0] -= engine.turn_search.margin
+    best = np.argmin(score, axis=0)  # ties: the first, the unturned start
     poses = items.poses.copy()
     poses[sel] = candidates.reshape(y, m, *starts.shape[1:])[best, np.arange(m)]
     deg = np.rint(np.degrees(yaws[best])).astype(np.int64)
     degrees[sel] = np.where(deg > 180, deg - 360, deg)
     return dataclasses.replace(items, poses=poses), degrees
+
+
+def implausibility(engine: Engine, poses: npt.NDArray[np.floating], floors: F64) -> F64:
+    """Mean per-joint distance (m) of world ``poses [N, 21, 3]`` (over ``floors [N]``) to
+    the autoencoder's round trip of them: small for poses like the training ones."""
+    world = poses.copy()
+    world[:, :, 1] -= floors[:, None]
+    out: F64 = np.linalg.norm(engine.reconstruct(world) - world, axis=-1).mean(axis=-1)
+    return out
 
 
 def mark(ans: BatchAnswer, degrees: npt.NDArray[np.int64]) -> BatchAnswer:

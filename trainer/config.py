@@ -99,6 +99,7 @@ class SolverConfig(_Section):
     turn_yaws: int = _serving("turn_yaws")
     turn_margin: float = _serving("turn_margin")
     turn_min_targets: int = _serving("turn_min_targets")
+    turn_plausibility: float = _serving("turn_plausibility")
     carry_loss: bool = Field(
         default=False,
         description="With rigid_loss: the losses also see the carry below the targets "
