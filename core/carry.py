@@ -21,14 +21,15 @@ from collections.abc import Iterable
 import numpy as np
 import numpy.typing as npt
 
+from core.kinematics import _swing
 from core.skeleton import BONE_CHILDREN, JOINT_INDEX, NUM_JOINTS, PARENTS
 
 F64 = npt.NDArray[np.float64]
 
 _ROOT = JOINT_INDEX["pelvis"]
-_BONE_OF = {int(c): b for b, c in enumerate(BONE_CHILDREN)}
-#: ``1 + cos`` at or below which a bone is taken to have turned right round: no swing.
-OPPOSITE = 1e-9
+#: The bone (``lengths`` axis, ``BONES`` order) ending at each joint (the root: 0).
+BONE_OF: npt.NDArray[np.int64] = np.zeros(NUM_JOINTS, dtype=np.int64)
+BONE_OF[BONE_CHILDREN] = np.arange(len(BONE_CHILDREN))
 _TINY = 1e-300
 
 
@@ -58,12 +59,12 @@ def _unit(v: F64) -> tuple[F64, npt.NDArray[np.bool_]]:
     return np.where(ok[..., None], v / np.where(ok[..., None], n, 1.0), 0.0), ok
 
 
-def swing(a: F64, b: F64, v: F64) -> F64:
-    """Rotate ``v`` by the minimal rotation taking unit ``a`` to unit ``b`` (``[..., 3]``)."""
-    c = np.sum(a * b, axis=-1, keepdims=True)
-    w = np.cross(a, b)
-    k = np.sum(w * v, axis=-1, keepdims=True) / (1.0 + c)
-    out: F64 = c * v + np.cross(w, v) + w * k
+def _swing3(a: F64, b: F64, v: F64) -> F64:
+    """``core.kinematics._swing`` over ``[..., 3]`` vectors: ``v`` turned by the minimal
+    rotation taking ``a`` to ``b`` (unchanged where they are equal or degenerate)."""
+    shape = np.broadcast_shapes(a.shape, b.shape, v.shape)
+    flat = [np.broadcast_to(x, shape).reshape(-1, 3, 1) for x in (a, b, v)]
+    out: F64 = _swing(*flat)[..., 0].reshape(shape)
     return out
 
 
@@ -84,17 +85,17 @@ def carry_below(
     for j in np.flatnonzero(anchors >= 0).tolist():
         a, p = int(anchors[j]), PARENTS[j]
         pa = PARENTS[a]
-        a_s, ok_s = _unit(start[..., a, :] - start[..., pa, :])
-        a_o, ok_o = _unit(pose[..., a, :] - pose[..., pa, :])
-        v, ok_v = _unit(start[..., j, :] - start[..., p, :])
+        turned = _swing3(
+            start[..., a, :] - start[..., pa, :],
+            pose[..., a, :] - pose[..., pa, :],
+            start[..., j, :] - start[..., p, :],
+        )  # the start's bone, turned with the anchor's
+        carried, ok_c = _unit(turned)
         d, ok_d = _unit(pose[..., j, :] - pose[..., p, :])
-        c = np.sum(a_s * a_o, axis=-1)
-        turns = ok_s & ok_o & ok_v & (1.0 + c > OPPOSITE)
-        carried = swing(a_s, a_o, v)
-        mixed = np.where(ok_d[..., None], weight * carried + (1.0 - weight) * d, carried)
-        u, ok_u = _unit(np.where(turns[..., None], mixed, d))
-        ok = np.where(turns, ok_u, ok_d)
-        length = lengths[..., _BONE_OF[j], None]
+        both = (ok_c & ok_d)[..., None]
+        mixed = np.where(both, weight * carried + (1.0 - weight) * d, carried)
+        u, ok = _unit(np.where(ok_c[..., None], mixed, d))
+        length = lengths[..., BONE_OF[j], None]
         out[..., j, :] = np.where(
             ok[..., None],
             out[..., p, :] + u * length,

@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
-from core.carry import OPPOSITE
+from core.carry import BONE_OF
 from core.jit import jit
 from core.rest import REST_DIRS
 from core.skeleton import (
@@ -54,9 +54,8 @@ _PARENTS: I64 = BONE_PARENTS.astype(np.int64)
 _LEFT: I64 = np.asarray([JOINT_INDEX[a] for a, _ in FACING_PAIRS], dtype=np.int64)
 _RIGHT: I64 = np.asarray([JOINT_INDEX[b] for _, b in FACING_PAIRS], dtype=np.int64)
 _PELVIS = JOINT_INDEX["pelvis"]
-#: Parent of each joint (joint order; the root's is itself) and the bone ending at it.
+#: Parent of each joint (joint order; the root's is itself).
 PARENTS_J: I64 = np.asarray([max(p, 0) for p in PARENTS], dtype=np.int64)
-BONE_OF_JOINT: I64 = np.asarray([_BONE_OF.get(j, 0) for j in range(NUM_JOINTS)], dtype=np.int64)
 
 _LEG = JOINT_INDEX["left_ankle"]
 #: Distance at or below which a direction is undefined (as in core.kinematics).
@@ -332,6 +331,41 @@ def prepare(
 
 
 @jit
+def unit_or(v: F64, f1: F64, f2: F64, out: F64, n_fallbacks: int) -> None:  # pragma: no cover
+    """``kinematics._unit_or(v, f1, f2)`` for one 3-vector (``n_fallbacks`` of them used):
+    the first vector with a direction, the last one divided by its norm or by 1."""
+    for level in range(n_fallbacks + 1):
+        a = v if level == 0 else (f1 if level == 1 else f2)
+        n = np.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
+        if n > TINY or level == n_fallbacks:
+            d = n if n > TINY else 1.0
+            out[0], out[1], out[2] = a[0] / d, a[1] / d, a[2] / d
+            return
+
+
+@jit
+def swing_into(a: F64, b: F64, v: F64, out: F64) -> None:  # pragma: no cover - compiled
+    """``kinematics._swing`` for one vector: ``v`` turned by the rotation taking a to b."""
+    au, bu, zero = np.empty(3), np.empty(3), np.zeros(3)
+    unit_or(a, zero, zero, au, 1)
+    unit_or(b, zero, zero, bu, 1)
+    c = au[0] * bu[0] + au[1] * bu[1] + au[2] * bu[2]
+    w0 = au[1] * bu[2] - au[2] * bu[1]
+    w1 = au[2] * bu[0] - au[0] * bu[2]
+    w2 = au[0] * bu[1] - au[1] * bu[0]
+    scale = (w0 * v[0] + w1 * v[1] + w2 * v[2]) / max(1.0 + c, 1e-12)
+    same = (a[0] == b[0] and a[1] == b[1] and a[2] == b[2]) or not (
+        au[0] != 0.0 or au[1] != 0.0 or au[2] != 0.0
+    ) or not (bu[0] != 0.0 or bu[1] != 0.0 or bu[2] != 0.0)  # fmt: skip
+    if same:
+        out[0], out[1], out[2] = v[0], v[1], v[2]
+        return
+    out[0] = (c * v[0] + (w1 * v[2] - w2 * v[1])) + w0 * scale
+    out[1] = (c * v[1] + (w2 * v[0] - w0 * v[2])) + w1 * scale
+    out[2] = (c * v[2] + (w0 * v[1] - w1 * v[0])) + w2 * scale
+
+
+@jit
 def carry_item(
     out: F64,
     start: F64,
@@ -383,22 +417,15 @@ def carry_item(
             a_o[i] = out[a, i] - out[pa, i]
             v[i] = start[j, i] - start[p, i]
             d[i] = scratch[j, i] - scratch[p, i]
-        ok = _unit_into(d, d)
-        if _unit_into(a_s, a_s) and _unit_into(a_o, a_o) and _unit_into(v, v):
-            c = a_s[0] * a_o[0] + a_s[1] * a_o[1] + a_s[2] * a_o[2]
-            if 1.0 + c > OPPOSITE:
-                wx = a_s[1] * a_o[2] - a_s[2] * a_o[1]
-                wy = a_s[2] * a_o[0] - a_s[0] * a_o[2]
-                wz = a_s[0] * a_o[1] - a_s[1] * a_o[0]
-                k = (wx * v[0] + wy * v[1] + wz * v[2]) / (1.0 + c)
-                u[0] = c * v[0] + (wy * v[2] - wz * v[1]) + wx * k
-                u[1] = c * v[1] + (wz * v[0] - wx * v[2]) + wy * k
-                u[2] = c * v[2] + (wx * v[1] - wy * v[0]) + wz * k
-                if ok:
-                    for i in range(3):
-                        u[i] = weight * u[i] + (1.0 - weight) * d[i]
-                ok = _unit_into(u, d)
-        b = BONE_OF_JOINT[j]
+        swing_into(a_s, a_o, v, u)  # the start's bone, turned with the anchor's
+        carried, ok = _unit_into(u, u), _unit_into(d, d)
+        if carried and ok:
+            for i in range(3):
+                u[i] = weight * u[i] + (1.0 - weight) * d[i]
+            ok = _unit_into(u, d)
+        elif carried:
+            ok = _unit_into(u, d)
+        b = BONE_OF[j]
         for i in range(3):
             if ok:
                 out[j, i] = out[p, i] + d[i] * lengths[b]

@@ -23,7 +23,16 @@ import numpy as np
 import numpy.typing as npt
 
 from core import kinematics
-from core.compiled import LEN_ORDER, ORDER, PARENT_RANK, REST_DIRS_RANK, TINY, bone_pass_item
+from core.compiled import (
+    LEN_ORDER,
+    ORDER,
+    PARENT_RANK,
+    REST_DIRS_RANK,
+    TINY,
+    bone_pass_item,
+    swing_into,
+    unit_or,
+)
 from core.jit import jit
 from core.skeleton import JOINT_INDEX, NUM_JOINTS
 
@@ -116,19 +125,6 @@ def packed_plans(target_idx: npt.ArrayLike, weights: npt.ArrayLike) -> Plans:
 # Kernels
 # --------------------------------------------------------------------------------------
 @jit
-def _unit_or(v: F64, f1: F64, f2: F64, out: F64, n_fallbacks: int) -> None:  # pragma: no cover
-    """``kinematics._unit_or(v, f1, f2)`` for one 3-vector (``n_fallbacks`` of them used):
-    the first vector with a direction, the last one divided by its norm or by 1."""
-    for level in range(n_fallbacks + 1):
-        a = v if level == 0 else (f1 if level == 1 else f2)
-        n = np.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
-        if n > TINY or level == n_fallbacks:
-            d = n if n > TINY else 1.0
-            out[0], out[1], out[2] = a[0] / d, a[1] / d, a[2] / d
-            return
-
-
-@jit
 def _clamp_root(
     p: F64, start: F64, tpos: F64, radii: F64, anchors: Bool
 ) -> None:  # pragma: no cover - compiled
@@ -195,7 +191,7 @@ def _iterate(
                 for c in range(3):
                     f1[c] = x[par, c] - x[kid, c]
                     f2[c] = -REST_DIRS_RANK[kid - 1, c]
-                _unit_or(v, f1, f2, u, 2)
+                unit_or(v, f1, f2, u, 2)
                 q0 = proposal[kid, 0] + u[0] * ln
                 q1 = proposal[kid, 1] + u[1] * ln
                 q2 = proposal[kid, 2] + u[2] * ln
@@ -228,7 +224,7 @@ def _iterate(
                 for c in range(3):
                     f1[c] = x[kid, c] - x[par, c]
                     f2[c] = REST_DIRS_RANK[kid - 1, c]
-                _unit_or(v, f1, f2, u, 2)
+                unit_or(v, f1, f2, u, 2)
                 for c in range(3):
                     y[kid, c] = y[par, c] + u[c] * ln
             else:
@@ -238,28 +234,6 @@ def _iterate(
             for c in range(3):
                 ok = ok and np.isfinite(y[kid, c])
     return ok and np.isfinite(y[0, 0]) and np.isfinite(y[0, 1]) and np.isfinite(y[0, 2])
-
-
-@jit
-def _swing_into(a: F64, b: F64, v: F64, out: F64) -> None:  # pragma: no cover - compiled
-    """``kinematics._swing`` for one vector: ``v`` turned by the rotation taking a to b."""
-    au, bu, zero = np.empty(3), np.empty(3), np.zeros(3)
-    _unit_or(a, zero, zero, au, 1)
-    _unit_or(b, zero, zero, bu, 1)
-    c = au[0] * bu[0] + au[1] * bu[1] + au[2] * bu[2]
-    w0 = au[1] * bu[2] - au[2] * bu[1]
-    w1 = au[2] * bu[0] - au[0] * bu[2]
-    w2 = au[0] * bu[1] - au[1] * bu[0]
-    scale = (w0 * v[0] + w1 * v[1] + w2 * v[2]) / max(1.0 + c, 1e-12)
-    same = (a[0] == b[0] and a[1] == b[1] and a[2] == b[2]) or not (
-        au[0] != 0.0 or au[1] != 0.0 or au[2] != 0.0
-    ) or not (bu[0] != 0.0 or bu[1] != 0.0 or bu[2] != 0.0)  # fmt: skip
-    if same:
-        out[0], out[1], out[2] = v[0], v[1], v[2]
-        return
-    out[0] = (c * v[0] + (w1 * v[2] - w2 * v[1])) + w0 * scale
-    out[1] = (c * v[1] + (w2 * v[0] - w0 * v[2])) + w1 * scale
-    out[2] = (c * v[2] + (w0 * v[1] - w1 * v[0])) + w2 * scale
 
 
 @jit
@@ -281,7 +255,7 @@ def _carry(x0: F64, x: F64, pi: I64) -> None:  # pragma: no cover - compiled
         if keep:
             placed[i, :] = x0[kid, :]
         else:
-            _swing_into(a0, a1, off, out)
+            swing_into(a0, a1, off, out)
             for c in range(3):
                 placed[i, c] = x[anc, c] + out[c]
     for i in range(pi[_C]):

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import torch
 
-from core.carry import OPPOSITE, carry_anchors
+from core.carry import BONE_OF, carry_anchors
 from core.skeleton import BONE_CHILDREN, BONE_PARENTS, BONES, NUM_JOINTS, PARENTS
 from trainer.augment import bone_lengths
 
@@ -71,7 +71,6 @@ def carry_t(
     n_sets, b = answers.shape[0], answers.shape[1]
     joints = answers.reshape(n_sets, b, NUM_JOINTS, 3)
     st = start.reshape(b, NUM_JOINTS, 3)
-    bone_of = {int(c): i for i, c in enumerate(BONE_CHILDREN)}
     out = []
     for s, targets in enumerate(sets):
         anchors = carry_anchors(targets)
@@ -88,10 +87,11 @@ def carry_t(
             v = _unit(st[:, j] - st[:, p])
             c = (a_s * a_o).sum(-1, keepdim=True)
             w = torch.linalg.cross(a_s, a_o, dim=-1)
-            k = (w * v).sum(-1, keepdim=True) / (1.0 + c).clamp_min(OPPOSITE)
+            k = (w * v).sum(-1, keepdim=True) / (1.0 + c).clamp_min(1e-12)  # as kinematics._swing
             carried = c * v + torch.linalg.cross(w, v, dim=-1) + w * k
             d = _unit(joints[s, :, j] - joints[s, :, p])
             u = _unit(weight * carried + (1.0 - weight) * d)
-            pose[j] = pose[p] + lengths[:, bone_of[j] : bone_of[j] + 1] * u
+            b_j = int(BONE_OF[j])
+            pose[j] = pose[p] + lengths[:, b_j : b_j + 1] * u
         out.append(torch.stack(pose, dim=-2))
     return torch.stack(out).reshape(answers.shape)
