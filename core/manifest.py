@@ -130,7 +130,8 @@ class Serving(_Strict):
         description="Turn search (service.turns): a neural edit with at least "
         "`turn_min_targets` targets and no pins is first tried from its start turned about "
         "the vertical through the pelvis by this many evenly spaced yaws (0 first), and "
-        "solved from the one whose soft answer lands nearest its targets. 1 = off.",
+        "solved from the one whose soft answer scores lowest (reach, and with "
+        "`turn_plausibility` the answer's distance to the pose space). 1 = off.",
     )
     turn_margin: float = Field(
         default=0.0,
@@ -147,7 +148,7 @@ class Serving(_Strict):
         "this times the mean distance of its answer to the autoencoder's round trip of it.",
     )
     turn_min_targets: int = Field(
-        default=3, ge=1, le=21, description="The fewest targets an edit needs to search."
+        default=5, ge=1, le=21, description="The fewest targets an edit needs to search."
     )
     passes: int = Field(
         default=1,

@@ -135,11 +135,7 @@ class Engine:
         if not 0.0 <= self.carry <= 1.0:
             raise ValueError(f"carry must be in [0, 1], got {self.carry}")
         #: the turn search of many-target edits (``serving.turn_*``, :mod:`service.turns`)
-        self.turn_search = turns.TurnSearch(
-            int(m.serving.turn_yaws if turn_yaws is None else turn_yaws),
-            float(m.serving.turn_margin), int(m.serving.turn_min_targets),
-            float(m.serving.turn_plausibility),
-        )  # fmt: skip
+        self.turn_search = turns.TurnSearch.of(m.serving, turn_yaws)
         known = np.asarray(m.skeleton.skeletons, dtype=np.float64)  # [C, 20]
         self._shape_totals = known.sum(axis=-1)
         self._shapes = known / self._shape_totals[:, None]

@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import numpy.typing as npt
 
+from core.manifest import Serving
 from core.skeleton import JOINT_INDEX
 from service.problems import BatchAnswer, _Items
 
@@ -45,12 +46,22 @@ _PELVIS = JOINT_INDEX["pelvis"]
 class TurnSearch:
     """An engine's turn search: ``yaws`` candidate turns (1: off) for neural items with at
     least ``min_targets`` targets and no pins, the unturned start kept unless another
-    lands ``margin`` metres nearer its targets."""
+    scores ``margin`` metres lower (``plausibility``: the weight of the answer's distance
+    to the pose space in the score). Read from a manifest's ``serving`` block
+    (:meth:`of`), which defines the settings and their defaults."""
 
-    yaws: int = 1
-    margin: float = 0.0
-    min_targets: int = 5
-    plausibility: float = 0.0
+    yaws: int
+    margin: float
+    min_targets: int
+    plausibility: float
+
+    @staticmethod
+    def of(serving: Serving, yaws: int | None = None) -> TurnSearch:
+        """The search ``serving`` asks for (``yaws``: an override, e.g. 1 for none)."""
+        return TurnSearch(
+            serving.turn_yaws if yaws is None else int(yaws), serving.turn_margin,
+            serving.turn_min_targets, serving.turn_plausibility,
+        )  # fmt: skip
 
     def searches(
         self, method: str, n_targets: int, pinned: bool, wanted: bool | None = None
@@ -67,7 +78,7 @@ class TurnSearch:
 
 
 #: No search (models without ``serving.turn_*``, FABRIK-only callers).
-NO_SEARCH = TurnSearch()
+NO_SEARCH = TurnSearch.of(Serving())
 
 
 def searching(engine: Engine, items: _Items) -> npt.NDArray[np.intp]:
