@@ -33,6 +33,9 @@ class AutoencoderConfig(_Section):
     batch_size: int = Field(default=256, gt=0)
     epochs: int = Field(default=20, ge=1)
     std_floor: float = Field(default=0.01, gt=0, description="Floor of per-feature std (m).")
+    lr_schedule: Literal["constant", "cosine"] = Field(
+        default="constant", description="Cosine decay of the learning rate to 0 over all steps."
+    )
     loss: Literal["mse", "mpjpe"] = Field(
         default="mse",
         description="Reconstruction loss: MSE of the normalised coordinates, or the mean "

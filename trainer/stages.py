@@ -13,6 +13,7 @@ from __future__ import annotations
 import hashlib
 import io
 import json
+import math
 import os
 import time
 from collections.abc import Callable, Iterator
@@ -64,6 +65,19 @@ def init_distributed() -> Dist:
 
 def seed_all(seed: int) -> None:
     torch.manual_seed(seed)
+
+
+def schedule_lr(
+    optim: torch.optim.Optimizer, lr: float, schedule: str, epoch: int, step: int,
+    steps: int, epochs: int,
+) -> None:  # fmt: skip
+    """Set ``optim``'s learning rate for ``step`` of ``epoch`` (of ``epochs`` x ``steps``):
+    ``lr`` throughout ("constant") or decayed to 0 along a half cosine ("cosine"). A function
+    of the step alone, so a resumed stage continues exactly."""
+    if schedule == "cosine":
+        progress = (epoch * steps + step) / max(1, epochs * steps)
+        for group in optim.param_groups:
+            group["lr"] = lr * 0.5 * (1.0 + math.cos(math.pi * progress))
 
 
 def stage_rng(seed: int, stage: str, epoch: int) -> np.random.Generator:
@@ -151,7 +165,7 @@ def load_checkpoint(
 #: Fields added after checkpoints of their stages existed: in a tag only where they differ
 #: from their default, so that runs from before them stay valid.
 _ADDED_LATER: dict[str, tuple[str, ...]] = {
-    "autoencoder": ("loss",),
+    "autoencoder": ("loss", "lr_schedule"),
     "solver": ("rigid_loss", "joint_loss", "stay_frame", "carry_loss"),
     "augment": ("lift_start",),
     "completion": ("loss",),

@@ -51,6 +51,7 @@ from trainer.stages import (
     init_distributed,
     mean_loss,
     run_stage,
+    schedule_lr,
     seed_all,
     stage_rng,
     steps_per_epoch,
@@ -141,7 +142,8 @@ def train_autoencoder(
     def train_epoch(epoch: int, bar: Bar) -> float:
         rng = stage_rng(cfg.seed, "autoencoder", epoch)
         total_loss, count = torch.zeros((), dtype=torch.float64), 0
-        for idx in batches(len(train), ac.batch_size, d, cfg.seed, epoch):
+        for step, idx in enumerate(batches(len(train), ac.batch_size, d, cfg.seed, epoch)):
+            schedule_lr(optim, ac.lr, ac.lr_schedule, epoch, step, steps, ac.epochs)
             x = ae_samples(train[idx], rng, aug, total)
             recon = net(x)
             if ac.loss == "mpjpe":
@@ -527,10 +529,7 @@ def train_completion(
             for step, idx in enumerate(
                 batches(len(train), cc.batch_size, d, cfg.seed + 10 + level, epoch)
             ):
-                if cc.lr_schedule == "cosine":  # a function of the step: resume-exact
-                    progress = (epoch * steps + step) / max(1, cc.epochs * steps)
-                    for group in optim.param_groups:
-                        group["lr"] = cc.lr * 0.5 * (1.0 + math.cos(math.pi * progress))
+                schedule_lr(optim, cc.lr, cc.lr_schedule, epoch, step, steps, cc.epochs)
                 poses = augment(train[idx], rng, cc.mirror, cc.yaw, cfg.augment)
                 keep = keep_mask(len(poses), rng) if level > 1 else None
                 x = completion_inputs(nets, level, poses, keep)

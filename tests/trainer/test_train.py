@@ -39,6 +39,7 @@ from trainer.stages import (
     config_tag,
     load_checkpoint,
     save_checkpoint,
+    schedule_lr,
     stage_tags,
 )
 from trainer.train import (
@@ -365,6 +366,28 @@ def test_completion_loss_mpjpe_is_the_mean_joint_distance(trained: tuple[Trained
     assert config_tag(mse, "completion1") == config_tag(load_config(None, {}), "completion1")
     assert config_tag(mpjpe, "completion1") != config_tag(mse, "completion1")
     assert config_tag(mpjpe, "solvers") == config_tag(mse, "solvers")
+
+
+def test_learning_rate_schedules() -> None:
+    """``lr_schedule``: "constant" keeps the base rate, "cosine" halves it at mid-training
+    and ends near 0, as a function of the step alone; the autoencoder's choice enters the
+    checkpoint tags only when it is not the default (older runs stay valid)."""
+    optim = torch.optim.Adam([torch.zeros(1, requires_grad=True)], lr=1.0)
+    seen = {}
+    for kind in ("constant", "cosine"):
+        for epoch, step in ((0, 0), (1, 0), (1, 9)):
+            optim.param_groups[0]["lr"] = 3e-3
+            schedule_lr(optim, 3e-3, kind, epoch, step, steps=10, epochs=2)
+            seen[kind, epoch, step] = optim.param_groups[0]["lr"]
+    assert seen["constant", 1, 9] == seen["constant", 0, 0] == 3e-3
+    assert seen["cosine", 0, 0] == pytest.approx(3e-3)
+    assert seen["cosine", 1, 0] == pytest.approx(1.5e-3)
+    assert 0 < seen["cosine", 1, 9] < 3e-5
+    plain = load_config(None, {"autoencoder": {"lr_schedule": "constant"}})
+    cosine = load_config(None, {"autoencoder": {"lr_schedule": "cosine"}})
+    assert config_tag(plain, "autoencoder") == config_tag(load_config(None, {}), "autoencoder")
+    assert config_tag(cosine, "autoencoder") != config_tag(plain, "autoencoder")
+    assert config_tag(cosine, "completion1") == config_tag(plain, "completion1")
 
 
 @pytest.mark.parametrize("distance", [False, True])
