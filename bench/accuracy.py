@@ -241,6 +241,10 @@ def _contiguous_segments(test: PoseDataset, length: int) -> list[int]:
     return np.flatnonzero(run >= length - 1).tolist()
 
 
+#: B4's extra row: neural + bone pass with the turn search off (edits it would search).
+NO_TURN = "neural_bone_no_turn"
+
+
 def eval_paths(engine: Engine, test: PoseDataset, cfg: EvalConfig, acc: Accuracy) -> Json:
     """B4: targets follow a real clip; each solve starts from the previous result."""
     rng = np.random.default_rng(cfg.seed + 4)
@@ -261,13 +265,17 @@ def eval_paths(engine: Engine, test: PoseDataset, cfg: EvalConfig, acc: Accuracy
         idx = joint_idx(names)
         free = np.setdiff1d(np.arange(NUM_JOINTS), idx)
         out[set_name] = {}
-        for method in ("fabrik", "neural_bone", "neural_exact"):
+        methods = ["fabrik", "neural_bone", "neural_exact"]
+        if engine.turn_search.searches("neural", len(idx), pinned=False):
+            methods.append(NO_TURN)  # what the turn search does to a drag
+        for method in methods:
             t0 = time.perf_counter()
             traj = np.empty_like(seg)
             traj[:, 0] = seg[:, 0]
+            as_method, turn = ("neural_bone", False) if method == NO_TURN else (method, None)
             for t in range(1, length):
                 step = Edits(traj[:, t - 1], [idx] * len(rows), list(seg[:, t][:, idx]))
-                traj[:, t] = solve(engine, step, method, cfg.chunk)
+                traj[:, t] = solve(engine, step, as_method, cfg.chunk, turn)
             seconds = time.perf_counter() - t0
             accel = np.linalg.norm(traj[:, 2:] - 2 * traj[:, 1:-1] + traj[:, :-2], axis=-1)
             accel *= FPS**2

@@ -33,6 +33,7 @@ METHOD_LABEL: dict[str, str] = {
     "neural_raw": "neural raw",
     "neural_bone": "neural + bone pass",
     "neural_exact": "neural + exact reach",
+    "neural_bone_no_turn": "neural + bone pass, no turn search",  # B4
     "rest_fabrik": "rest pose + FABRIK",  # B2 baseline
     "neural": "completion",  # B2
     "completion": "completion",  # held-out 6-point completion
@@ -173,8 +174,9 @@ def solver_joints(engine: Engine) -> list[str]:
     return [e.joints[0] for e in engine.manifest.solvers().values() if len(e.joints) == 1]
 
 
-def problems(edits: Edits, method: str) -> list[SolveProblem]:
-    """The engine problems of ``edits`` for one solving method (``METHOD_OPTIONS``)."""
+def problems(edits: Edits, method: str, turn_search: bool | None = None) -> list[SolveProblem]:
+    """The engine problems of ``edits`` for one solving method (``METHOD_OPTIONS``;
+    ``turn_search``: the option of every problem, None: the models' default)."""
     engine_method, preserve, reach = METHOD_OPTIONS[method]
     return [
         SolveProblem(
@@ -187,16 +189,19 @@ def problems(edits: Edits, method: str) -> list[SolveProblem]:
             preserve_bone_lengths=preserve,
             reach=reach,
             tolerance=TOLERANCE,
+            turn_search=turn_search,
         )
         for i in range(len(edits))
     ]
 
 
-def solve(engine: Engine, edits: Edits, method: str, chunk: int = 2048) -> F64:
+def solve(
+    engine: Engine, edits: Edits, method: str, chunk: int = 2048, turn_search: bool | None = None
+) -> F64:
     """Solved poses ``[N, 21, 3]`` (world, as given) of one method."""
     if method == "identity":
         return edits.start.copy()
-    probs = problems(edits, method)
+    probs = problems(edits, method, turn_search)
     out: list[F64] = []
     for s in range(0, len(probs), chunk):
         out.extend(r.pose for r in engine.solve(probs[s : s + chunk]))

@@ -22,6 +22,7 @@ METHOD_COLOUR: dict[str, str] = {
     "neural_raw": "#aec7e8",
     "neural_bone": "#1f77b4",
     "neural_exact": "#2ca02c",
+    "neural_bone_no_turn": "#9467bd",  # B4: the same, turn search off
     "rest_fabrik": "#ff7f0e",  # B2 baseline
     "neural": "#1f77b4",  # B2 completion
     "completion": "#1f77b4",  # held-out 6-point completion

@@ -223,7 +223,9 @@ def render_report(results: Json, plots: dict[str, str], title: str) -> str:
             "targets follow the clip frame by frame and every solve starts from the previous "
             "result. Jitter = mean joint acceleration |p[t+1] − 2p[t] + p[t−1]| × fps² "
             f"(m/s²); the real clips have {fmt(b4['real_jitter'])} m/s². Drift = error of the "
-            "untargeted joints to the real frame, first vs last 10 steps.",
+            "untargeted joints to the real frame, first vs last 10 steps. Five targets: "
+            "also with the turn search off (`options.turn_search: false`), as a client "
+            "dragging may choose (docs/generalisation.md item 22).",
             "",
             table(
                 [

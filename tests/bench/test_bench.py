@@ -130,6 +130,12 @@ def test_quick_bench_writes_a_sane_report(
     for method in ("fabrik", "neural_bone", "neural_exact"):
         assert results["determinism"][method]["repeat_bitwise_equal"], method
     assert set(results["ablation"]) == {label for label, _ in QUICK.strategies}
+    # B4: the five-target drag also without the turn search (the shipped models search),
+    # the left wrist alone never searches
+    five, wrist = results["B4"]["5 end effectors"], results["B4"]["left_wrist"]
+    assert "neural_bone_no_turn" not in wrist
+    assert five["neural_bone_no_turn"]["bone_max"] <= 1e-5
+    assert "neural + bone pass, no turn search" in report
     assert results["B2"]
     assert all(lvl["neural"]["mpjpe"] > 0 for lvl in results["B2"].values())
 
