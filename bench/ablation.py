@@ -102,6 +102,18 @@ VARIANTS: dict[str, str] = {
     "its autoencoder round trip (serving.turn_plausibility): shipped since (mx1-c9e21949f9e0)",
     "ae40_o3": "the shipped recipe (other_weight 0.03, carry 0.5) with the autoencoder trained "
     "40 epochs (ae40_o3.toml; both solver banks retrained on it, completion reused)",
+    "ae_cos1e3": "the shipped recipe with the autoencoder at lr 1e-3 decayed along a cosine "
+    "(autoencoder.lr_schedule, ae_cos1e3.toml; same 20 epochs; both solver banks retrained, "
+    "completion as shipped)",
+    "ae_cos3e3": "the same at lr 3e-3 (ae_cos3e3.toml); both scored with the autoencoder "
+    "critic of `turn12_plaus1`",
+    "ae_cos1e3_critic": "`ae_cos1e3` served with the completion critic (as `critic_completion05`)",
+    "ae_cos3e3_critic": "`ae_cos3e3` served with the completion critic (as `critic_completion05`)",
+    "critic_completion1": "`turn12_plaus1` with the candidates scored by reach + 1 x the "
+    "answer's distance to the body completion level 1 builds from its base key points "
+    "(serving.turn_critic completion)",
+    "critic_completion05": "the same at 0.5 (serving.turn_plausibility): shipped since "
+    "(mx1-78eb3e10e6ac)",
 }
 COMPLETION = "6-point completion"
 
@@ -197,12 +209,10 @@ def main(
     text = (
         "# Training ablation on held-out bodies\n\n"
         f"Written by `scripts/ablation.sh` then `python -m bench.ablation {fams}`.\n"
-        "Variants train at a small budget (trainer/configs/ablation/full.toml, the recipe of "
-        "`previous`); `shipped`, `c12*`, `previous*`, `rigid`, `ae512*`, `shipped-before`, "
-        "`shipped-world-pairs`, `long_solvers`, `stay*`, `solver256`, `completion512`, "
-        "`eff5*`, `lift*`, `pairs_long`, `c13`, `solver_distance`, `views`, "
-        "`completion_mpjpe*`, `ae40`, `stay_local*`, `other*` are full-budget models scored with "
-        "`python -m bench.heldout --models DIR [--passes N] --out reports/ablation/NAME.json`."
+        "`full`, `no_augment`, `no_bodies`, `world_pairs`, `no_delta` and `no_anchor` train at "
+        "a small budget (trainer/configs/ablation/full.toml, the recipe of `previous`); every "
+        "other row is a full-budget model scored with `python -m bench.heldout --models DIR "
+        "[--passes N] [--carry W] [--turn-yaws N] --out reports/ablation/NAME.json`."
         " Rows scored with the numpy engine, before the compiled one, agree with it to "
         "5e-14 m (docs/benchmarks.md)."
         "\n\n" + render(rows)

@@ -145,7 +145,14 @@ class Serving(_Strict):
         ge=0.0,
         le=100.0,
         description="The turn search scores a candidate by its targets' mean distance plus "
-        "this times the mean distance of its answer to the autoencoder's round trip of it.",
+        "this times the mean distance of its answer to `turn_critic`'s idea of it.",
+    )
+    turn_critic: Literal["autoencoder", "completion"] = Field(
+        default="autoencoder",
+        description="What the turn search's plausibility term compares a candidate answer "
+        "with: the autoencoder's round trip of it (`autoencoder`), or the body completion "
+        "level 1 builds from the answer's own base key points (`completion`: how far the "
+        "answer is from a body those points imply).",
     )
     turn_min_targets: int = Field(
         default=5, ge=1, le=21, description="The fewest targets an edit needs to search."
@@ -249,6 +256,8 @@ class Manifest(_Strict):
         levels = sorted(m.level for m in self.models if m.kind == "completion" and m.level)
         if levels and levels != list(range(1, len(levels) + 1)):
             raise ValueError("completion levels must be 1..n")
+        if self.serving.turn_critic == "completion" and not levels:
+            raise ValueError("serving.turn_critic = completion needs completion level 1")
         for m in self.models if self.serving.completion_mirror else ():
             mirrored = {JOINT_NAMES[MIRROR[JOINT_INDEX[j]]] for j in m.joints or ()}
             if m.kind == "completion" and mirrored != set(m.joints or ()):

@@ -9,8 +9,10 @@ edit is solved, its start pose is tried turned about the vertical through its pe
 ``turn_yaws`` evenly spaced yaws (0 first); each candidate is solved as a soft edit (the
 item's passes, bone pass, carry) and the one whose answer scores lowest is kept: the mean
 distance of its targets, plus ``turn_plausibility`` times the mean distance of the answer
-to the autoencoder's round trip of it (how far it is from the pose space: a body bent
-towards targets it should have turned to is far), the unturned start winning unless
+to what ``turn_critic`` makes of it: the autoencoder's round trip of it, or the body
+completion level 1 builds from the answer's own base key points (pelvis, neck, wrists,
+ankles): a body bent towards targets it should have turned to is far from the body those
+points imply (docs/generalisation.md items 22, 24), the unturned start winning unless
 another scores at least ``turn_margin`` metres lower. The edit is then solved as asked
 from the kept start. Only neural items with at least ``turn_min_targets`` targets and no
 pins take part (``options.turn_search: false`` opts out): fewer targets say little about a
@@ -32,7 +34,7 @@ import numpy as np
 import numpy.typing as npt
 
 from core.manifest import Serving
-from core.skeleton import JOINT_INDEX
+from core.skeleton import JOINT_INDEX, bone_lengths
 from service.problems import BatchAnswer, _Items
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -46,21 +48,23 @@ _PELVIS = JOINT_INDEX["pelvis"]
 class TurnSearch:
     """An engine's turn search: ``yaws`` candidate turns (1: off) for neural items with at
     least ``min_targets`` targets and no pins, the unturned start kept unless another
-    scores ``margin`` metres lower (``plausibility``: the weight of the answer's distance
-    to the pose space in the score). Read from a manifest's ``serving`` block
+    scores ``margin`` metres lower (``plausibility``: the weight in the score of the
+    answer's distance to what ``critic`` makes of it, "autoencoder" or "completion"). Read
+    from a manifest's ``serving`` block
     (:meth:`of`), which defines the settings and their defaults."""
 
     yaws: int
     margin: float
     min_targets: int
     plausibility: float
+    critic: str
 
     @staticmethod
     def of(serving: Serving, yaws: int | None = None) -> TurnSearch:
         """The search ``serving`` asks for (``yaws``: an override, e.g. 1 for none)."""
         return TurnSearch(
             serving.turn_yaws if yaws is None else int(yaws), serving.turn_margin,
-            serving.turn_min_targets, serving.turn_plausibility,
+            serving.turn_min_targets, serving.turn_plausibility, serving.turn_critic,
         )  # fmt: skip
 
     def searches(
@@ -120,7 +124,7 @@ def search(
     ans = solve(soft, reps[rep])
     cols = np.arange(items.tidx.shape[1])[None, :] < soft.n_t[:, None]
     score = (ans.errors * cols).sum(axis=1) / soft.n_t
-    if engine.turn_search.plausibility > 0:  # how far the answer is from the pose space
+    if engine.turn_search.plausibility > 0:  # how unlike a real body the answer is
         score += engine.turn_search.plausibility * implausibility(engine, ans.pose, soft.floors)
     score = score.reshape(y, m)
     score[0] -= engine.turn_search.margin
@@ -134,10 +138,32 @@ def search(
 
 def implausibility(engine: Engine, poses: npt.NDArray[np.floating], floors: F64) -> F64:
     """Mean per-joint distance (m) of world ``poses [N, 21, 3]`` (over ``floors [N]``) to
-    the autoencoder's round trip of them: small for poses like the training ones."""
-    world = poses.copy()
-    world[:, :, 1] -= floors[:, None]
-    out: F64 = np.linalg.norm(engine.reconstruct(world) - world, axis=-1).mean(axis=-1)
+    what the search's critic makes of them: small for poses like the training ones."""
+    world = np.asarray(poses, dtype=np.float64).copy()
+    other: npt.NDArray[np.floating]
+    if engine.turn_search.critic == "completion":
+        world[:, :, [0, 2]] -= world[:, _PELVIS : _PELVIS + 1, [0, 2]]
+        world[:, :, 1] -= floors[:, None]
+        other = implied_bodies(engine, world)
+    else:
+        world[:, :, 1] -= floors[:, None]
+        other = engine.reconstruct(world)
+    out: F64 = np.linalg.norm(other - world, axis=-1).mean(axis=-1)
+    return out
+
+
+def implied_bodies(engine: Engine, poses: F64) -> F64:
+    """The bodies completion level 1 builds from the base key points of ``poses
+    [N, 21, 3]`` (pelvis floor point at the origin, as it was trained; one view, the
+    networks' size): one network run for all."""
+    level = engine.manifest.completion_levels()[0]
+    keys = poses[:, [JOINT_INDEX[j] for j in level.joints]]
+    # networks trained on bodies of every size read the size from the key points (as
+    # Engine.complete feeds them); older ones see the size of their training skeletons
+    total = engine.body == "total_length"
+    scale = (np.ones(len(poses)) if total else engine.scales_of(bone_lengths(poses)))[:, None, None]
+    x = (keys / scale).reshape(len(poses), -1).astype(np.float32)
+    out: F64 = engine.completion[0](x).astype(np.float64).reshape(poses.shape) * scale
     return out
 
 

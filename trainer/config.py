@@ -103,6 +103,7 @@ class SolverConfig(_Section):
     turn_margin: float = _serving("turn_margin")
     turn_min_targets: int = _serving("turn_min_targets")
     turn_plausibility: float = _serving("turn_plausibility")
+    turn_critic: Literal["autoencoder", "completion"] = _serving("turn_critic")
     carry_loss: bool = Field(
         default=False,
         description="With rigid_loss: the losses also see the carry below the targets "

@@ -202,7 +202,7 @@ def config_tag(cfg: TrainConfig, stage: str, *, legacy: bool = False) -> str:
         # each bank reads only its own sets and epochs (its own seed and pair stream), so
         # neither is retrained when only the other's change; passes, carry: serving only
         other = ("sets", "epochs") if stage == "solvers_long" else ("long_sets", "long_epochs")
-        turn = ("turn_yaws", "turn_margin", "turn_min_targets", "turn_plausibility")
+        turn = ("turn_yaws", "turn_margin", "turn_min_targets", "turn_plausibility", "turn_critic")
         serving = ("passes", *turn) if cfg.solver.carry_loss else ("passes", "carry", *turn)
         relevant["solver"] = _section(cfg, "solver", (*serving, *other))
         relevant["augment"] = _section(cfg, "augment")

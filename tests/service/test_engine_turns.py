@@ -5,6 +5,7 @@ few targets or with pins never search; answers stay bit-identical, alone or in a
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 from pathlib import Path
 from typing import Any
@@ -16,11 +17,13 @@ from core.skeleton import JOINT_INDEX
 from service import limits
 from service.engine import Engine
 from service.problems import SolveProblem
-from service.turns import turned
+from service.turns import implausibility, turned
 from tests.conftest import PosePairs
 from tests.service.test_api import assert_problem
 
 FIVE = ("head", "left_wrist", "right_wrist", "left_ankle", "right_ankle")
+UPPER = ("spine2", "neck", "head", "left_collar", "left_shoulder", "left_elbow", "left_wrist",
+         "right_collar", "right_shoulder", "right_elbow", "right_wrist")  # fmt: skip
 
 
 @pytest.fixture(scope="module")
@@ -51,7 +54,29 @@ def test_shipped_models_search(engines: tuple[Engine, Engine]) -> None:
     serving = engines[1].manifest.serving
     assert engines[1].turn_search.yaws == serving.turn_yaws == 12
     assert serving.turn_min_targets == 5 and serving.turn_margin == 0.01
+    assert serving.turn_critic == "completion" and serving.turn_plausibility == 0.5
     assert engines[0].turn_search.yaws == 1
+
+
+@pytest.mark.parametrize("critic", ["autoencoder", "completion"])
+def test_critics_tell_a_real_body_from_a_twisted_one(
+    engines: tuple[Engine, Engine], real_poses: PosePairs, critic: str
+) -> None:
+    """The plausibility term of the search: real poses score lower than the same poses
+    with the upper body (spine2 and above) twisted 60° against the legs about the pelvis,
+    what a body bent towards targets it should have turned to looks like; by either
+    critic, the autoencoder's round trip or the body completion builds from the key
+    points."""
+    engine = copy.copy(engines[1])
+    engine.turn_search = dataclasses.replace(engine.turn_search, critic=critic)
+    poses = real_poses.poses[real_poses.starts[:100]]
+    upper = [JOINT_INDEX[j] for j in UPPER]
+    twisted = poses.copy()
+    twisted[:, upper] = turned(poses, np.radians(60.0))[:, upper]
+    floors = np.zeros(len(poses))
+    real, bent = implausibility(engine, poses, floors), implausibility(engine, twisted, floors)
+    assert np.all(np.isfinite(real)) and real.mean() < 0.05
+    assert (bent > real).mean() >= 0.9, (critic, real.mean(), bent.mean())
 
 
 def test_a_turned_goal_turns_the_start(

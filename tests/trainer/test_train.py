@@ -272,6 +272,13 @@ def test_tampered_manifest_is_rejected(trained: tuple[Trained, Path], tmp_path: 
     (copy / "manifest.json").write_text("{not json")
     with pytest.raises(ManifestError, match="not readable JSON"):
         load_manifest(copy)
+    # the turn search's completion critic needs completion level 1
+    raw = json.loads((models / "manifest.json").read_text())
+    raw["serving"].update(turn_yaws=12, turn_critic="completion")
+    raw["models"] = [m for m in raw["models"] if m["kind"] != "completion"]
+    (copy / "manifest.json").write_text(json.dumps(raw))
+    with pytest.raises(ManifestError, match="turn_critic = completion needs completion"):
+        load_manifest(copy, verify=False)
 
 
 def _state(result: Trained) -> dict[str, torch.Tensor]:
