@@ -28,7 +28,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 import numpy.typing as npt
@@ -57,7 +57,7 @@ class TurnSearch:
     margin: float
     min_targets: int
     plausibility: float
-    critic: str
+    critic: Literal["autoencoder", "completion"]
 
     @staticmethod
     def of(serving: Serving, yaws: int | None = None) -> TurnSearch:
