@@ -114,6 +114,12 @@ VARIANTS: dict[str, str] = {
     "(serving.turn_critic completion)",
     "critic_completion05": "the same at 0.5 (serving.turn_plausibility): shipped since "
     "(mx1-78eb3e10e6ac)",
+    "critic_3passes": "`critic_completion05` served with three passes for every edit "
+    "(`--passes 3`)",
+    "retry05cm": "`critic_completion05` with one more pass for soft answers still more than "
+    "0.5 cm from a target (serving.retry_reach 0.005)",
+    "retry1cm": "the same at 1 cm",
+    "retry2cm": "the same at 2 cm: shipped since (mx1-dc18b1ee350b)",
 }
 COMPLETION = "6-point completion"
 

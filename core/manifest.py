@@ -157,6 +157,14 @@ class Serving(_Strict):
     turn_min_targets: int = Field(
         default=5, ge=1, le=21, description="The fewest targets an edit needs to search."
     )
+    retry_reach: float = Field(
+        default=0.0,
+        ge=0.0,
+        le=1.0,
+        description="A soft neural answer (bone lengths kept) whose farthest target is more "
+        "than this many metres away after its passes gets one more pass from that answer "
+        "(service.engine: the edits the passes left short, and only they); 0 = never.",
+    )
     passes: int = Field(
         default=1,
         ge=1,

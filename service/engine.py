@@ -87,6 +87,7 @@ class Engine:
         solve_passes: int | None = None,
         carry: float | None = None,
         turn_yaws: int | None = None,
+        retry_reach: float | None = None,
     ) -> None:
         self.models_dir = Path(models_dir)
         self.manifest: Manifest = load_manifest(self.models_dir, verify=True)
@@ -152,6 +153,8 @@ class Engine:
         self.passes = composition_passes
         #: neural solves per edit (``serving.passes`` unless overridden, e.g. by a bench)
         self.solve_passes = m.serving.passes if solve_passes is None else int(solve_passes)
+        #: soft answers further than this (m) from a target get one more pass (0: never)
+        self.retry_reach = m.serving.retry_reach if retry_reach is None else float(retry_reach)
         if self.solve_passes < 1:
             raise ValueError(f"solve_passes must be at least 1, got {self.solve_passes}")
         self.composition = composition
@@ -252,7 +255,7 @@ class Engine:
             np.full(1, p.floor, dtype=np.float64), np.full(1, self.carry_of(p)), one,
         )  # fmt: skip
         ans = lean_answer(self, items, passes, seq)
-        return None if ans is None else self._result(p, ans, 0)
+        return None if ans is None else self._result(p, self._retry(items, ans), 0)
 
     def passes_of(self, p: SolveProblem) -> int:
         """The neural passes ``p`` asks for (``solve_passes`` unless it says)."""
@@ -335,7 +338,25 @@ class Engine:
             raise ValueError(f"passes must be at least 1, got {int(reps.min())}")
         reps = np.where(fab, 1, reps)  # FABRIK items: one solve (and not the caller's array)
         items, degrees = turns.search(self, items, reps, self._solve_items)
-        return turns.mark(self._solve_items(items, reps), degrees)
+        return turns.mark(self._retry(items, self._solve_items(items, reps)), degrees)
+
+    def _retry(self, items: _Items, ans: BatchAnswer) -> BatchAnswer:
+        """``ans`` with one more pass, from its answer, for every soft neural item (bone
+        lengths kept) whose farthest target is still more than ``serving.retry_reach``
+        away: the passes left it short, as the bone pass takes back what the networks
+        reached for (docs/generalisation.md item 25). Such an item gets what one more of
+        its passes would give it; the others are untouched."""
+        if self.retry_reach <= 0.0 or ans.pose.shape[0] == 0:
+            return ans
+        cols = np.arange(items.tidx.shape[1])[None, :] < items.n_t[:, None]
+        far = np.where(cols, ans.errors, 0.0).max(axis=1) > self.retry_reach
+        sel = np.flatnonzero(far & ~items.fab & ~items.ex & items.keep)
+        if sel.size == 0:
+            return ans
+        again = self._solve_items(
+            items.soft(sel, compiled.as_f64(ans.pose)), np.ones(sel.size, np.int64)
+        )
+        return ans.with_items(sel, again)
 
     def _solve_items(self, items: _Items, reps: npt.NDArray[np.int64]) -> BatchAnswer:
         """:meth:`solve_arrays` of normalised items with their passes ``reps``."""

@@ -60,6 +60,18 @@ class BatchAnswer:
     paths: tuple[tuple[str, ...], ...]  # the distinct solver paths of the batch
     path_of: npt.NDArray[np.int64]  # [B] index into ``paths``
 
+    def with_items(self, sel: npt.NDArray[np.intp], other: BatchAnswer) -> BatchAnswer:
+        """These answers with items ``sel`` replaced by ``other``'s (one per ``sel``)."""
+        pose, errors = self.pose.copy(), self.errors.copy()
+        bone, its, path_of = self.max_bone_error.copy(), self.iterations.copy(), self.path_of.copy()
+        pose[sel], bone[sel], its[sel] = other.pose, other.max_bone_error, other.iterations
+        errors[sel] = 0.0
+        errors[sel, : other.errors.shape[1]] = other.errors
+        paths = list(self.paths)  # distinct, as every answer's are
+        paths += [p for p in dict.fromkeys(other.paths) if p not in paths]
+        path_of[sel] = np.asarray([paths.index(p) for p in other.paths], np.int64)[other.path_of]
+        return BatchAnswer(pose, errors, bone, its, tuple(paths), path_of)
+
 
 @dataclass(frozen=True)
 class _Items:

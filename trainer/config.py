@@ -104,6 +104,7 @@ class SolverConfig(_Section):
     turn_min_targets: int = _serving("turn_min_targets")
     turn_plausibility: float = _serving("turn_plausibility")
     turn_critic: Literal["autoencoder", "completion"] = _serving("turn_critic")
+    retry_reach: float = _serving("retry_reach")
     carry_loss: bool = Field(
         default=False,
         description="With rigid_loss: the losses also see the carry below the targets "

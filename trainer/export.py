@@ -365,6 +365,7 @@ def export_all(
         turn_min_targets=cfg.solver.turn_min_targets,
         turn_plausibility=cfg.solver.turn_plausibility,
         turn_critic=cfg.solver.turn_critic,
+        retry_reach=cfg.solver.retry_reach,
         completion_yaws=cfg.completion.serving_yaws,
         completion_mirror=cfg.completion.serving_mirror,
     )  # fmt: skip

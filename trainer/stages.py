@@ -203,7 +203,8 @@ def config_tag(cfg: TrainConfig, stage: str, *, legacy: bool = False) -> str:
         # neither is retrained when only the other's change; passes, carry: serving only
         other = ("sets", "epochs") if stage == "solvers_long" else ("long_sets", "long_epochs")
         turn = ("turn_yaws", "turn_margin", "turn_min_targets", "turn_plausibility", "turn_critic")
-        serving = ("passes", *turn) if cfg.solver.carry_loss else ("passes", "carry", *turn)
+        carry = () if cfg.solver.carry_loss else ("carry",)
+        serving: tuple[str, ...] = ("passes", "retry_reach", *turn, *carry)
         relevant["solver"] = _section(cfg, "solver", (*serving, *other))
         relevant["augment"] = _section(cfg, "augment")
     if stage.startswith("completion"):  # serving_*: serving only
