@@ -5,11 +5,11 @@ A batch is cut into chunks of at most ``CHUNK_PRICE`` units (a plain neural item
 1 per neural pass, ``options.passes`` or the models' default; an item that runs FABRIK -
 exact reach, pins, the fabrik method - costs ``FABRIK_PRICE``, a neural one that also
 polishes ``FABRIK_PRICE - 1`` plus its passes; the engine's retry of a soft answer left
-short, ``serving.retry_reach``, is at most one more pass and is not priced). Chunks run in worker threads under the
-app's compute limiter, in waves as wide as the compute tokens free at the time (so one big
-batch uses every compute thread: 1.6-1.9x the engine's poses/s on 2); between waves the
-request checks its deadline and its client, and stops (504 or 499) instead of computing
-answers nobody will read.
+short, ``serving.retry_reach``, is at most one more pass and is not priced). Chunks run
+in worker threads under the app's compute limiter, in waves as wide as the compute tokens
+free at the time (so one big batch uses every compute thread: 1.6-1.9x the engine's
+poses/s on 2); between waves the request checks its deadline and its client, and stops
+(504 or 499) instead of computing answers nobody will read.
 """
 
 from __future__ import annotations
