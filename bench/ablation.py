@@ -120,6 +120,8 @@ VARIANTS: dict[str, str] = {
     "0.5 cm from a target (serving.retry_reach 0.005)",
     "retry1cm": "the same at 1 cm",
     "retry2cm": "the same at 2 cm: shipped since (mx1-dc18b1ee350b)",
+    "ae_cos3e3_retry": "`ae_cos3e3_critic` with the retry at 2 cm (as shipped, on item 23's "
+    "autoencoder)",
 }
 COMPLETION = "6-point completion"
 
