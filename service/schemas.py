@@ -243,6 +243,10 @@ class ModelsResponse(BaseModel):
         description="The fewest targets of an edit that searches its turn "
         "(`serving.turn_min_targets`)."
     )
+    retry_reach: float = Field(
+        description="Metres beyond which a soft answer's farthest target gets one more pass "
+        "from that answer (0: never; the manifest's `serving.retry_reach`)."
+    )
     models: list[ModelInfo]
 
 

@@ -39,6 +39,7 @@ async def models(engine: ReadyEngine) -> ModelsResponse:
         carry=engine.carry,
         turn_yaws=engine.turn_search.yaws,
         turn_min_targets=engine.turn_search.min_targets,
+        retry_reach=engine.retry_reach,
         models=[
             ModelInfo(
                 name=e.name,
