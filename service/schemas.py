@@ -243,6 +243,15 @@ class ModelsResponse(BaseModel):
         description="The fewest targets of an edit that searches its turn "
         "(`serving.turn_min_targets`)."
     )
+    turn_critic: str = Field(
+        description="What judges how natural a searched turn's answer is: `completion` (the "
+        "body completion builds from its base key points) or `autoencoder` (its round trip); "
+        "the manifest's `serving.turn_critic`."
+    )
+    turn_plausibility: float = Field(
+        description="The weight of that judgement beside the reach in a candidate's score "
+        "(`serving.turn_plausibility`)."
+    )
     retry_reach: float = Field(
         description="Metres beyond which a soft answer's farthest target gets one more pass "
         "from that answer (0: never; the manifest's `serving.retry_reach`)."

@@ -164,6 +164,7 @@ def test_options_turn_search_over_http(client: Any, real_poses: PosePairs) -> No
     a non-boolean is a 422 naming it."""
     info = client.get("/v1/models").json()
     assert info["turn_yaws"] == 12 and info["turn_min_targets"] == 5
+    assert info["turn_critic"] == "completion" and info["turn_plausibility"] == 0.5
     start = real_poses.poses[real_poses.starts[:3]]
     goal = turned(real_poses.poses[real_poses.goals[:3]], np.pi / 2)
     bodies = []
