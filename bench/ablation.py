@@ -72,20 +72,20 @@ VARIANTS: dict[str, str] = {
     "(completion.loss, completion_mpjpe.toml; 12 epochs, one view)",
     "completion_mpjpe_views": "`completion_mpjpe` served over 4 turns x mirror",
     "completion_mpjpe_e20": "`completion_mpjpe` with 20 completion epochs, one view",
-    "shipped": "the recipe shipped before this round (run exp_c14, ablation/base_c14.toml): "
+    "c14": "run exp_c14 (ablation/base_c14.toml), shipped before `other003`: "
     "`c13`'s autoencoder and solvers, completion_mpjpe_e20's completion, served over 4 turns "
     "x mirror",
-    "ae40": "`shipped` with the autoencoder trained 40 epochs instead of 20 (ae40.toml); "
+    "ae40": "`c14` with the autoencoder trained 40 epochs instead of 20 (ae40.toml); "
     "both solver banks retrained on it, the shipped completion reused",
-    "stay_local": "`shipped` with the stay term on each joint's offset from its parent "
+    "stay_local": "`c14` with the stay term on each joint's offset from its parent "
     "(solver.stay_frame local, stay_local.toml; both solver banks retrained)",
     "stay_local03": "`stay_local` with the stay term weighted 0.3 (stay_local03.toml)",
-    "other003": "`shipped` (exp_c14) with the goal's other joints weighted 0.03 instead of 0.01 "
+    "other003": "`c14` with the goal's other joints weighted 0.03 instead of 0.01 "
     "(solver.other_weight, other003.toml; both solver banks retrained): shipped since, run "
     "exp_c15",
-    "other01": "`shipped` (exp_c14) with solver.other_weight 0.1 (other01.toml)",
+    "other01": "`c14` with solver.other_weight 0.1 (other01.toml)",
     "other01_local": "`other01` with the stay term in the local frame (other01_local.toml)",
-    "other03": "`shipped` (exp_c14) with solver.other_weight 0.3 (other03.toml)",
+    "other03": "`c14` with solver.other_weight 0.3 (other03.toml)",
     "carry025": "`other003`'s networks (exp_c15) served with the branch below each target "
     "turned 0.25 of the way with the target's bone (serving.carry; `python -m bench.heldout "
     "--carry 0.25`)",
