@@ -26,6 +26,10 @@ def _check_joints(sets: list[list[str]]) -> list[list[str]]:
     return sets
 
 
+#: Learning-rate schedules of a training stage (``trainer.stages.schedule_lr``).
+LrSchedule = Literal["constant", "cosine"]
+
+
 class AutoencoderConfig(_Section):
     hidden: list[int] = Field(default=[200, 200], min_length=1)
     latent: int = Field(default=64, gt=0)
@@ -33,7 +37,7 @@ class AutoencoderConfig(_Section):
     batch_size: int = Field(default=256, gt=0)
     epochs: int = Field(default=20, ge=1)
     std_floor: float = Field(default=0.01, gt=0, description="Floor of per-feature std (m).")
-    lr_schedule: Literal["constant", "cosine"] = Field(
+    lr_schedule: LrSchedule = Field(
         default="constant", description="Cosine decay of the learning rate to 0 over all steps."
     )
     loss: Literal["mse", "mpjpe"] = Field(
@@ -105,6 +109,7 @@ class SolverConfig(_Section):
     turn_plausibility: float = _serving("turn_plausibility")
     turn_critic: Literal["autoencoder", "completion"] = _serving("turn_critic")
     retry_reach: float = _serving("retry_reach")
+    # (their names: SERVING_SETTINGS, below, which the export and the checkpoint tags read)
     carry_loss: bool = Field(
         default=False,
         description="With rigid_loss: the losses also see the carry below the targets "
@@ -153,6 +158,16 @@ class SolverConfig(_Section):
         return self
 
 
+#: The solver section's serving settings (``_serving``): passed on to the manifest's
+#: ``serving`` block under the same names, and not in the solvers' checkpoint tags.
+SERVING_SETTINGS: tuple[str, ...] = (
+    "passes", "carry", "turn_yaws", "turn_margin", "turn_min_targets", "turn_plausibility",
+    "turn_critic", "retry_reach",
+)  # fmt: skip
+if not set(SERVING_SETTINGS) <= set(SolverConfig.model_fields) & set(Serving.model_fields):
+    raise RuntimeError("SERVING_SETTINGS must name fields of SolverConfig and of Serving")
+
+
 class CompletionConfig(_Section):
     schemes: list[list[str]] = Field(
         default=[
@@ -165,7 +180,7 @@ class CompletionConfig(_Section):
     hidden: list[int] = Field(default=[300, 400, 300, 200], min_length=1)
     activation: Literal["selu", "relu"] = "selu"
     lr: float = Field(default=1e-3, gt=0)
-    lr_schedule: Literal["constant", "cosine"] = Field(
+    lr_schedule: LrSchedule = Field(
         default="cosine", description="Cosine decay of the learning rate to 0 over all steps."
     )
     weight_decay: float = Field(default=1e-5, ge=0, description="L2 regularisation.")

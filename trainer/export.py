@@ -29,7 +29,7 @@ from core.manifest import (
     write_manifest,
 )
 from core.skeleton import BONES, FRAME, JOINT_NAMES, NUM_JOINTS, PARENT_NAMES, bone_lengths
-from trainer.config import TrainConfig
+from trainer.config import SERVING_SETTINGS, TrainConfig
 from trainer.data.dataset import FPS
 from trainer.fused import FusedGraph, LeanFusedGraph
 from trainer.model_card import write_model_card
@@ -358,14 +358,7 @@ def export_all(
         else "nearest_skeleton",
         delta=cfg.solver.delta,
         anchor=cfg.solver.delta and cfg.solver.anchor,
-        passes=cfg.solver.passes,
-        carry=cfg.solver.carry,
-        turn_yaws=cfg.solver.turn_yaws,
-        turn_margin=cfg.solver.turn_margin,
-        turn_min_targets=cfg.solver.turn_min_targets,
-        turn_plausibility=cfg.solver.turn_plausibility,
-        turn_critic=cfg.solver.turn_critic,
-        retry_reach=cfg.solver.retry_reach,
+        **{k: getattr(cfg.solver, k) for k in SERVING_SETTINGS},
         completion_yaws=cfg.completion.serving_yaws,
         completion_mirror=cfg.completion.serving_mirror,
     )  # fmt: skip

@@ -31,7 +31,7 @@ from torch import nn
 from torch.utils.data import DistributedSampler
 
 from core.io import write_atomic
-from trainer.config import TrainConfig
+from trainer.config import SERVING_SETTINGS, LrSchedule, TrainConfig
 
 console = Console(stderr=True)
 
@@ -68,7 +68,7 @@ def seed_all(seed: int) -> None:
 
 
 def schedule_lr(
-    optim: torch.optim.Optimizer, lr: float, schedule: str, epoch: int, step: int,
+    optim: torch.optim.Optimizer, lr: float, schedule: LrSchedule, epoch: int, step: int,
     steps: int, epochs: int,
 ) -> None:  # fmt: skip
     """Set ``optim``'s learning rate for ``step`` of ``epoch`` (of ``epochs`` x ``steps``):
@@ -202,9 +202,9 @@ def config_tag(cfg: TrainConfig, stage: str, *, legacy: bool = False) -> str:
         # each bank reads only its own sets and epochs (its own seed and pair stream), so
         # neither is retrained when only the other's change; passes, carry: serving only
         other = ("sets", "epochs") if stage == "solvers_long" else ("long_sets", "long_epochs")
-        turn = ("turn_yaws", "turn_margin", "turn_min_targets", "turn_plausibility", "turn_critic")
-        carry = () if cfg.solver.carry_loss else ("carry",)
-        serving: tuple[str, ...] = ("passes", "retry_reach", *turn, *carry)
+        # (carry is a training setting too where the losses see it, solver.carry_loss)
+        keep = ("carry",) if cfg.solver.carry_loss else ()
+        serving = tuple(k for k in SERVING_SETTINGS if k not in keep)
         relevant["solver"] = _section(cfg, "solver", (*serving, *other))
         relevant["augment"] = _section(cfg, "augment")
     if stage.startswith("completion"):  # serving_*: serving only
