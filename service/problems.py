@@ -92,6 +92,11 @@ class _Items:
     carry: compiled.F64  # [B] the branch below the targets (core.carry), 0-1
     turn: npt.NDArray[np.bool_]  # [B] may search its turn (service.turns)
 
+    def targets(self) -> npt.NDArray[np.bool_]:
+        """``[B, K]``: which columns of each item are its user targets (not pins, padding)."""
+        out: npt.NDArray[np.bool_] = np.arange(self.tidx.shape[1])[None, :] < self.n_t[:, None]
+        return out
+
     def soft(self, sel: npt.NDArray[np.intp], poses: compiled.F64) -> _Items:
         """Items ``sel`` from ``poses`` as a refinement pass solves them: neural, soft
         reach, bone lengths restored."""

@@ -34,7 +34,7 @@ import numpy as np
 import numpy.typing as npt
 
 from core.manifest import Serving
-from core.skeleton import JOINT_INDEX, bone_lengths
+from core.skeleton import JOINT_INDEX
 from service.problems import BatchAnswer, _Items
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -122,8 +122,7 @@ def search(
     rep = np.tile(sel, y)
     soft = dataclasses.replace(items.soft(rep, items.poses), poses=candidates)
     ans = solve(soft, reps[rep])
-    cols = np.arange(items.tidx.shape[1])[None, :] < soft.n_t[:, None]
-    score = (ans.errors * cols).sum(axis=1) / soft.n_t
+    score = (ans.errors * soft.targets()).sum(axis=1) / soft.n_t
     if engine.turn_search.plausibility > 0:  # how unlike a real body the answer is
         score += engine.turn_search.plausibility * implausibility(engine, ans.pose, soft.floors)
     score = score.reshape(y, m)
@@ -144,26 +143,11 @@ def implausibility(engine: Engine, poses: npt.NDArray[np.floating], floors: F64)
     if engine.turn_search.critic == "completion":
         world[:, :, [0, 2]] -= world[:, _PELVIS : _PELVIS + 1, [0, 2]]
         world[:, :, 1] -= floors[:, None]
-        other = implied_bodies(engine, world)
+        other = engine.implied_bodies(world)
     else:
         world[:, :, 1] -= floors[:, None]
         other = engine.reconstruct(world)
     out: F64 = np.linalg.norm(other - world, axis=-1).mean(axis=-1)
-    return out
-
-
-def implied_bodies(engine: Engine, poses: F64) -> F64:
-    """The bodies completion level 1 builds from the base key points of ``poses
-    [N, 21, 3]`` (pelvis floor point at the origin, as it was trained; one view, the
-    networks' size): one network run for all."""
-    level = engine.manifest.completion_levels()[0]
-    keys = poses[:, [JOINT_INDEX[j] for j in level.joints]]
-    # networks trained on bodies of every size read the size from the key points (as
-    # Engine.complete feeds them); older ones see the size of their training skeletons
-    total = engine.body == "total_length"
-    scale = (np.ones(len(poses)) if total else engine.scales_of(bone_lengths(poses)))[:, None, None]
-    x = (keys / scale).reshape(len(poses), -1).astype(np.float32)
-    out: F64 = engine.completion[0](x).astype(np.float64).reshape(poses.shape) * scale
     return out
 
 
