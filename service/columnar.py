@@ -24,7 +24,7 @@ from core.skeleton import JOINT_INDEX, JOINT_NAMES, NUM_JOINTS
 from service.engine import Engine
 from service.errors import BodyInvalid, TooManyItems
 from service.limits import chunks_of, price_of
-from service.problems import BatchAnswer
+from service.problems import BatchAnswer, renumber
 from service.schemas import MAX_COORDINATE, MAX_WEIGHT, SolveOptions
 from service.turns import NO_SEARCH, TurnSearch
 from service.validation import check_bones
@@ -272,10 +272,7 @@ def merge(parts: Sequence[BatchAnswer]) -> BatchAnswer:
     if len(parts) == 1:
         return parts[0]
     index: dict[tuple[str, ...], int] = {}
-    path_of = []
-    for a in parts:
-        remap = np.array([index.setdefault(path, len(index)) for path in a.paths])
-        path_of.append(remap[a.path_of])
+    path_of = [renumber(index, a) for a in parts]
     return BatchAnswer(
         np.concatenate([a.pose for a in parts]),
         np.concatenate([a.errors for a in parts]),

@@ -67,10 +67,17 @@ class BatchAnswer:
         pose[sel], bone[sel], its[sel] = other.pose, other.max_bone_error, other.iterations
         errors[sel] = 0.0
         errors[sel, : other.errors.shape[1]] = other.errors
-        paths = list(self.paths)  # distinct, as every answer's are
-        paths += [p for p in dict.fromkeys(other.paths) if p not in paths]
-        path_of[sel] = np.asarray([paths.index(p) for p in other.paths], np.int64)[other.path_of]
-        return BatchAnswer(pose, errors, bone, its, tuple(paths), path_of)
+        index = {p: i for i, p in enumerate(self.paths)}
+        path_of[sel] = renumber(index, other)
+        return BatchAnswer(pose, errors, bone, its, tuple(index), path_of)
+
+
+def renumber(index: dict[tuple[str, ...], int], ans: BatchAnswer) -> npt.NDArray[np.int64]:
+    """``ans.path_of`` as indices into ``index`` (distinct solver paths in order), which
+    takes in the paths of ``ans`` it did not have."""
+    remap = np.array([index.setdefault(path, len(index)) for path in ans.paths], np.int64)
+    out: npt.NDArray[np.int64] = remap[ans.path_of]
+    return out
 
 
 @dataclass(frozen=True)
