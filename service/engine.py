@@ -29,8 +29,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from core import compiled, compiled_fabrik, kinematics
-from core.geometry import canonical_transform, facing_transform, symmetry_views, unview
+from core import compiled, compiled_fabrik
+from core.geometry import canonical_transform, facing_transform
 from core.manifest import Manifest, ModelEntry, load_manifest
 from core.rest import rest_lengths, rest_pose
 from core.skeleton import (
@@ -42,8 +42,7 @@ from core.skeleton import (
     bone_lengths,
     set_key,
 )
-from service import turns
-from service.errors import InvalidRequest
+from service import completion, turns
 from service.lean import (
     covering,
     fabrik_batch,
@@ -107,7 +106,7 @@ class Engine:
         self.completion = [net(entry) for entry in m.completion_levels()]
         # each completion level's key points in its input order, and where each one's
         # mirror image sits in that order (the symmetry views of serving.completion_*)
-        self._level_mirror = [
+        self.level_mirror = [
             [entry.joints.index(JOINT_NAMES[MIRROR[JOINT_INDEX[j]]]) for j in entry.joints]
             if m.serving.completion_mirror
             else list(range(len(entry.joints)))
@@ -683,7 +682,7 @@ class Engine:
         x[:, cols] = flat[:, cols]
         return self.encoder(x)
 
-    # -- key-point completion -----------------------------------------------------------
+    # -- key-point completion (service.completion) --------------------------------------
     def complete(
         self,
         keypoints: dict[str, F64],
@@ -691,84 +690,8 @@ class Engine:
         tolerance: float = 1e-3,
         floor: float = 0.0,
     ) -> CompleteResult:
-        levels = self.manifest.completion_levels()
-        missing = [j for j in levels[0].joints if j not in keypoints]
-        if missing:
-            raise InvalidRequest(
-                f"keypoints: the six base points are required; missing {missing}",
-                missing=missing,
-            )
-        # pelvis floor projection to the origin; the networks were trained for any yaw
-        origin = keypoints["pelvis"].copy()
-        origin[1] = floor
-        ref = self.reference_lengths
-        bones = {JOINT_NAMES[c]: b for b, (c, _) in enumerate(BONES)}
-        lengths = ref.copy()
-        scale = 1.0
-        if given_lengths:
-            bad = sorted(set(given_lengths) - set(bones))
-            if bad:
-                raise InvalidRequest(
-                    f"bone_lengths: no bone ends at {bad} (name the child joint of each bone)"
-                )
-            ratio = float(np.median([given_lengths[j] / ref[bones[j]] for j in given_lengths]))
-            lengths = ref * ratio
-            # networks trained on random bodies at random sizes read the size from the key
-            # points; older ones are fed the size of their nearest training skeleton
-            scale = float(self.completion_scales(lengths))
-            for j, value in given_lengths.items():
-                lengths[bones[j]] = value
-        given = {j: (v - origin) / scale for j, v in keypoints.items()}
-        last = len(levels)
-        for n, entry in enumerate(levels, start=1):
-            if set(given) <= set(entry.joints):
-                last = n
-                break
-        pred: F64 | None = None
-        run: list[int] = []
-        for n in range(1, last + 1):
-            joints = levels[n - 1].joints
-            rows = []
-            for j in joints:
-                if j in given:
-                    rows.append(given[j])
-                else:
-                    assert pred is not None
-                    rows.append(pred[JOINT_INDEX[j]])
-            pred = self._complete_level(n - 1, np.stack(rows))
-            run.append(n)
-        assert pred is not None
-        if not given_lengths:  # the network's own estimate of this body's proportions
-            lengths = np.asarray(bone_lengths(pred), dtype=np.float64)
-        pose = kinematics.bone_pass(pred * scale, lengths)
-        idx = np.asarray([JOINT_INDEX[j] for j in keypoints], dtype=np.intp)
-        goal = np.stack([given[j] * scale for j in keypoints])
-        res = kinematics.polish(
-            pose,
-            lengths,
-            idx,
-            goal,
-            tolerance=tolerance,
-            max_iterations=self.fabrik_max_iterations,
-        )
-        world = res.positions + origin
-        errors = np.linalg.norm(world[idx] - np.stack(list(keypoints.values())), axis=-1)
-        return CompleteResult(pose=world, errors=errors, reached=errors <= tolerance, levels=run)
-
-    def _complete_level(self, level: int, keys: F64) -> F64:
-        """Completion level ``level`` (0-based) of key points ``[K, 3]`` (floor-centred,
-        the networks' scale): the mean of its answers over the symmetry views the manifest
-        asks for (``serving.completion_yaws`` turns about +Y, each also mirrored with
-        ``serving.completion_mirror``), each answer taken back to the first view; one
-        network run for all views. One view: the network's answer as it is."""
-        yaws, mirror = (
-            self.manifest.serving.completion_yaws,
-            self.manifest.serving.completion_mirror,
-        )
-        views = symmetry_views(keys, self._level_mirror[level], yaws, mirror)
-        x = views.reshape(len(views), -1).astype(np.float32)
-        out = self.completion[level](x).astype(np.float64).reshape(len(views), NUM_JOINTS, 3)
-        return np.asarray(unview(out, MIRROR, yaws, mirror).mean(axis=0))
+        """A whole pose from key points: :func:`service.completion.complete`."""
+        return completion.complete(self, keypoints, given_lengths, tolerance, floor)
 
     def warmup(self) -> None:
         """A real solve on the reference rest pose; raises if anything is off."""

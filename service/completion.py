@@ -1,0 +1,112 @@
+"""Key-point completion (Cascadeur-style): a whole pose from 6, 11 or 16 joints, through
+the engine's completion levels (onnxruntime + numpy, no torch)."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import numpy.typing as npt
+
+from core import kinematics
+from core.geometry import symmetry_views, unview
+from core.skeleton import BONES, JOINT_INDEX, JOINT_NAMES, MIRROR, NUM_JOINTS, bone_lengths
+from service.errors import InvalidRequest
+from service.problems import CompleteResult
+
+if TYPE_CHECKING:
+    from service.engine import Engine
+
+F64 = npt.NDArray[np.floating[Any]]
+
+
+def complete(
+    engine: Engine,
+    keypoints: dict[str, F64],
+    given_lengths: dict[str, float] | None,
+    tolerance: float = 1e-3,
+    floor: float = 0.0,
+) -> CompleteResult:
+    """The whole pose ``engine``'s completion levels build from ``keypoints`` (world
+    space, metres): level after level until every given point is an input, then the
+    bone pass (the given ``given_lengths``, else the network's own proportions) and a
+    polish onto the key points to ``tolerance``."""
+    levels = engine.manifest.completion_levels()
+    missing = [j for j in levels[0].joints if j not in keypoints]
+    if missing:
+        raise InvalidRequest(
+            f"keypoints: the six base points are required; missing {missing}",
+            missing=missing,
+        )
+    # pelvis floor projection to the origin; the networks were trained for any yaw
+    origin = keypoints["pelvis"].copy()
+    origin[1] = floor
+    ref = engine.reference_lengths
+    bones = {JOINT_NAMES[c]: b for b, (c, _) in enumerate(BONES)}
+    lengths = ref.copy()
+    scale = 1.0
+    if given_lengths:
+        bad = sorted(set(given_lengths) - set(bones))
+        if bad:
+            raise InvalidRequest(
+                f"bone_lengths: no bone ends at {bad} (name the child joint of each bone)"
+            )
+        ratio = float(np.median([given_lengths[j] / ref[bones[j]] for j in given_lengths]))
+        lengths = ref * ratio
+        # networks trained on random bodies at random sizes read the size from the key
+        # points; older ones are fed the size of their nearest training skeleton
+        scale = float(engine.completion_scales(lengths))
+        for j, value in given_lengths.items():
+            lengths[bones[j]] = value
+    given = {j: (v - origin) / scale for j, v in keypoints.items()}
+    last = len(levels)
+    for n, entry in enumerate(levels, start=1):
+        if set(given) <= set(entry.joints):
+            last = n
+            break
+    pred: F64 | None = None
+    run: list[int] = []
+    for n in range(1, last + 1):
+        joints = levels[n - 1].joints
+        rows = []
+        for j in joints:
+            if j in given:
+                rows.append(given[j])
+            else:
+                assert pred is not None
+                rows.append(pred[JOINT_INDEX[j]])
+        pred = complete_level(engine, n - 1, np.stack(rows))
+        run.append(n)
+    assert pred is not None
+    if not given_lengths:  # the network's own estimate of this body's proportions
+        lengths = np.asarray(bone_lengths(pred), dtype=np.float64)
+    pose = kinematics.bone_pass(pred * scale, lengths)
+    idx = np.asarray([JOINT_INDEX[j] for j in keypoints], dtype=np.intp)
+    goal = np.stack([given[j] * scale for j in keypoints])
+    res = kinematics.polish(
+        pose,
+        lengths,
+        idx,
+        goal,
+        tolerance=tolerance,
+        max_iterations=engine.fabrik_max_iterations,
+    )
+    world = res.positions + origin
+    errors = np.linalg.norm(world[idx] - np.stack(list(keypoints.values())), axis=-1)
+    return CompleteResult(pose=world, errors=errors, reached=errors <= tolerance, levels=run)
+
+
+def complete_level(engine: Engine, level: int, keys: F64) -> F64:
+    """Completion level ``level`` (0-based) of key points ``[K, 3]`` (floor-centred,
+    the networks' scale): the mean of its answers over the symmetry views the manifest
+    asks for (``serving.completion_yaws`` turns about +Y, each also mirrored with
+    ``serving.completion_mirror``), each answer taken back to the first view; one
+    network run for all views. One view: the network's answer as it is."""
+    yaws, mirror = (
+        engine.manifest.serving.completion_yaws,
+        engine.manifest.serving.completion_mirror,
+    )
+    views = symmetry_views(keys, engine.level_mirror[level], yaws, mirror)
+    x = views.reshape(len(views), -1).astype(np.float32)
+    out = engine.completion[level](x).astype(np.float64).reshape(len(views), NUM_JOINTS, 3)
+    return np.asarray(unview(out, MIRROR, yaws, mirror).mean(axis=0))
