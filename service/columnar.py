@@ -23,10 +23,9 @@ from pydantic import ValidationError
 from core.skeleton import JOINT_INDEX, JOINT_NAMES, NUM_JOINTS
 from service.engine import Engine
 from service.errors import BodyInvalid, TooManyItems
-from service.limits import chunks_of, price_of
+from service.limits import Pricing, chunks_of, price_of
 from service.problems import BatchAnswer, renumber
 from service.schemas import MAX_COORDINATE, MAX_WEIGHT, SolveOptions
-from service.turns import NO_SEARCH, TurnSearch
 from service.validation import check_bones
 
 F64 = npt.NDArray[np.float64]
@@ -74,12 +73,12 @@ class Columns:
     def size(self) -> int:
         return int(self.poses.shape[0])
 
-    def parts(self, passes: int, search: TurnSearch = NO_SEARCH) -> list[slice]:
-        """Priced parts (``service.limits``): every item costs the same here (``passes``:
-        the engine's default, when the options do not say; ``search``: its turn search)."""
+    def parts(self, pricing: Pricing) -> list[slice]:
+        """Priced parts (``service.limits``): every item costs the same here (``pricing``:
+        the engine's, ``Pricing.of``)."""
         o, pinned = self.options, self.n_pins > 0
-        factor = search.factor(o.method, self.n_targets, pinned, o.turn_search)
-        each = price_of(o, pinned, passes, factor)
+        factor = pricing.search.factor(o.method, self.n_targets, pinned, o.turn_search)
+        each = price_of(o, pinned, pricing, factor)
         return chunks_of([each] * self.size)
 
 

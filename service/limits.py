@@ -4,8 +4,9 @@ priced chunks so that one request never holds the worker for long.
 A batch is cut into chunks of at most ``CHUNK_PRICE`` units (a plain neural item costs
 1 per neural pass, ``options.passes`` or the models' default; an item that runs FABRIK -
 exact reach, pins, the fabrik method - costs ``FABRIK_PRICE``, a neural one that also
-polishes ``FABRIK_PRICE - 1`` plus its passes; the engine's retry of a soft answer left
-short, ``serving.retry_reach``, is at most one more pass and is not priced). Chunks run
+polishes ``FABRIK_PRICE - 1`` plus its passes; a turn search multiplies the passes by
+its solves; the engine's retry of a soft answer left short, ``serving.retry_reach``, adds
+the one more pass it may run). The engine's side of a price is one :class:`Pricing`. Chunks run
 in worker threads under the app's compute limiter, in waves as wide as the compute tokens
 free at the time (so one big batch uses every compute thread: 1.6-1.9x the engine's
 poses/s on 2); between waves the request checks its deadline and its client, and stops
@@ -17,7 +18,8 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor, wait
-from typing import Protocol, TypeVar
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Protocol, TypeVar
 
 import anyio
 import anyio.to_thread
@@ -28,6 +30,9 @@ from service.middleware.types import T0
 from service.problems import SolveProblem
 from service.schemas import MAX_PASSES
 from service.turns import NO_SEARCH, TurnSearch
+
+if TYPE_CHECKING:
+    from service.engine import Engine
 
 CHUNK_PRICE = 256
 FABRIK_PRICE = 16
@@ -45,36 +50,50 @@ class Priced(Protocol):
     def passes(self) -> int | None: ...
 
 
-def price_of(o: Priced, pinned: bool, passes: int, search: int = 1) -> int:
+@dataclass(frozen=True)
+class Pricing:
+    """What an engine adds to an item's price: ``passes``, its default neural passes (for
+    items that do not say); ``search``, its turn search; ``retry``, whether it gives a soft
+    answer left short one more pass (``serving.retry_reach``, ``Engine._retry``)."""
+
+    passes: int = 1
+    search: TurnSearch = NO_SEARCH
+    retry: bool = False
+
+    @staticmethod
+    def of(engine: Engine) -> Pricing:
+        return Pricing(engine.solve_passes, engine.turn_search, engine.retry_reach > 0.0)
+
+
+def neural_price(slow: bool, passes: int, search: int = 1, retry: bool = False) -> int:
+    """A neural item of ``passes`` passes: one unit per pass (times ``search``, its turn
+    search's solves), one more for the engine's ``retry`` (soft items), plus the FABRIK
+    polish's ``FABRIK_PRICE - 1`` when it runs one (exact reach, pins)."""
+    return passes * search + int(retry) + (FABRIK_PRICE - 1 if slow else 0)
+
+
+def price_of(o: Priced, pinned: bool, pricing: Pricing, search: int = 1) -> int:
     """Relative cost of one pose item (measured: an exact-reach item ~10 ms, a neural pass
-    well under 0.1 ms in a batch) with options ``o`` (``pinned``: it has pins);
-    ``passes``: the engine's default, where ``o.passes`` does not say; ``search``: the
-    solves per pass of its turn search (``TurnSearch.factor``, 1 without)."""
+    well under 0.1 ms in a batch) with options ``o`` (``pinned``: it has pins) on an engine
+    priced ``pricing``; ``search``: the solves per pass of its turn search
+    (``TurnSearch.factor``, 1 without)."""
     if o.method == "fabrik":
         return FABRIK_PRICE
-    p = passes if o.passes is None else o.passes
-    return neural_price(o.reach == "exact" or pinned, p, search)
+    p = pricing.passes if o.passes is None else o.passes
+    soft = o.reach != "exact"
+    return neural_price(not soft or pinned, p, search, pricing.retry and soft)
 
 
-def price(p: SolveProblem, passes: int, search: TurnSearch = NO_SEARCH) -> int:
-    """:func:`price_of` a validated problem (``search``: the engine's turn search)."""
+def price(p: SolveProblem, pricing: Pricing) -> int:
+    """:func:`price_of` a validated problem."""
     pinned = len(p.target_idx) > p.n_targets
-    return price_of(p, pinned, passes, search.factor(p.method, p.n_targets, pinned, p.turn_search))
+    factor = pricing.search.factor(p.method, p.n_targets, pinned, p.turn_search)
+    return price_of(p, pinned, pricing, factor)
 
 
-def neural_price(slow: bool, passes: int, search: int = 1) -> int:
-    """A neural item of ``passes`` passes: one unit per pass (times ``search``, its turn
-    search's solves), plus the FABRIK polish's ``FABRIK_PRICE - 1`` when it runs one
-    (exact reach, pins)."""
-    return passes * search + (FABRIK_PRICE - 1 if slow else 0)
-
-
-def chunks(
-    problems: Sequence[SolveProblem], passes: int, search: TurnSearch = NO_SEARCH
-) -> list[slice]:
-    """Consecutive slices of at most ``CHUNK_PRICE`` units (at least one item each);
-    ``passes``: the engine's default for items that do not say."""
-    return chunks_of([price(p, passes, search) for p in problems])
+def chunks(problems: Sequence[SolveProblem], pricing: Pricing) -> list[slice]:
+    """Consecutive slices of at most ``CHUNK_PRICE`` units (at least one item each)."""
+    return chunks_of([price(p, pricing) for p in problems])
 
 
 def chunks_of(prices: Sequence[int]) -> list[slice]:
@@ -115,14 +134,10 @@ class Budget:
             )
 
     async def run(self, fn: Callable[[Sequence[SolveProblem]], list[R]],
-                  problems: Sequence[SolveProblem], passes: int,
-                  search: TurnSearch = NO_SEARCH) -> list[R]:  # fmt: skip
+                  problems: Sequence[SolveProblem], pricing: Pricing) -> list[R]:  # fmt: skip
         """``fn`` over ``problems`` chunk by chunk, off the event loop, within budget
-        (``passes``: the engine's default, for the price of items that do not say;
-        ``search``: the engine's turn search, priced too)."""
-        parts = await self.run_parts(
-            lambda part: fn(problems[part]), chunks(problems, passes, search)
-        )
+        (``pricing``: the engine's, :meth:`Pricing.of`)."""
+        parts = await self.run_parts(lambda part: fn(problems[part]), chunks(problems, pricing))
         return [r for part in parts for r in part]
 
     async def run_parts(self, fn: Callable[[slice], R], parts: Sequence[slice]) -> list[R]:
@@ -212,16 +227,16 @@ def character_price(joints: int, slow: bool) -> int:
     return (FABRIK_PRICE + -(-joints // CHARACTER_JOINTS)) * (2 if slow else 1)
 
 
-def max_item_price(passes: int) -> int:
-    """The costliest pose item: neural with the FABRIK polish at the most passes a request
-    may ask for or the models' default (``passes``), whichever is more; dearer than a
-    FABRIK item. (A pose item's turn search is priced in its chunks, not here: a batch of
-    pose items is bounded by its item count alone.)"""
-    return max(FABRIK_PRICE, neural_price(True, max(MAX_PASSES, passes)))
+def max_item_price(pricing: Pricing) -> int:
+    """The costliest pose item: neural with the FABRIK polish (pins) at the most passes a
+    request may ask for or the models' default, whichever is more, and the retry; dearer
+    than a FABRIK item. (A pose item's turn search is priced in its chunks, not here: a
+    batch of pose items is bounded by its item count alone.)"""
+    passes = max(MAX_PASSES, pricing.passes)
+    return max(FABRIK_PRICE, neural_price(True, passes, retry=pricing.retry))
 
 
-def batch_price_limit(max_items: int, passes: int) -> int:
+def batch_price_limit(max_items: int, pricing: Pricing) -> int:
     """The most one batch may cost: ``max_items`` of the costliest pose items (a batch of
-    pose items is bounded by its item count alone; character items also by their joints);
-    ``passes``: the models' default."""
-    return max_items * max_item_price(passes)
+    pose items is bounded by its item count alone; character items also by their joints)."""
+    return max_items * max_item_price(pricing)

@@ -35,6 +35,7 @@ from service.limits import (
     CHARACTER_JOINTS,
     FABRIK_PRICE,
     Budget,
+    Pricing,
     batch_price_limit,
     character_price,
     max_item_price,
@@ -99,7 +100,7 @@ async def solve_one(p: SolveProblem, pinned: bool, engine: Engine, budget: Budge
         (result,) = engine.solve([p])
         budget.compute += time.perf_counter() - t
         return result
-    (result,) = await budget.run(engine.solve, [p], engine.solve_passes, engine.turn_search)
+    (result,) = await budget.run(engine.solve, [p], Pricing.of(engine))
     return result
 
 
@@ -123,7 +124,7 @@ async def solve_batch(body: BatchBody, engine: ReadyEngine, budget: RequestBudge
     forms = [item.root for item in req.items]
     chars = {i: f for i, f in enumerate(forms) if isinstance(f, CharacterSolveRequest)}
     if chars:
-        check_price(forms, limit, engine.solve_passes)
+        check_price(forms, limit, Pricing.of(engine))
     where = [i for i, f in enumerate(forms) if i not in chars]
     items = [f for f in forms if isinstance(f, SolveRequest)]  # the pose form, in order
 
@@ -134,7 +135,7 @@ async def solve_batch(body: BatchBody, engine: ReadyEngine, budget: RequestBudge
 
     problems = await off_loop(request, prepare, len(items))
     prepared = {i: await read_character(budget, f, f"items[{i}]") for i, f in chars.items()}
-    results = await budget.run(engine.solve, problems, engine.solve_passes, engine.turn_search)
+    results = await budget.run(engine.solve, problems, Pricing.of(engine))
     state.metrics.batch.observe(len(forms))
     for p, r in zip(problems, results, strict=True):
         state.metrics.solved(p.method, r.solvers)
@@ -150,24 +151,24 @@ async def solve_batch(body: BatchBody, engine: ReadyEngine, budget: RequestBudge
 
 
 def check_price(forms: list[SolveRequest | CharacterSolveRequest], max_items: int,
-                passes: int) -> None:  # fmt: skip
+                pricing: Pricing) -> None:  # fmt: skip
     """Refuse (413) a batch that costs more than ``max_items`` of the costliest pose items:
     a character item costs by its joints (``service.limits.character_price``), a pose
-    item as ``service.limits.price`` (``passes``: the engine's default)."""
+    item as ``service.limits.price`` (``pricing``: the engine's)."""
     prices = [
         character_price(len(f.character.joints), _slow(f))
         if isinstance(f, CharacterSolveRequest)
-        else price_of(f.options, bool(f.pins), passes)
+        else price_of(f.options, bool(f.pins), pricing)
         for f in forms
     ]
-    total, cap = sum(prices), batch_price_limit(max_items, passes)
+    total, cap = sum(prices), batch_price_limit(max_items, pricing)
     if total > cap:
         i = max(range(len(prices)), key=prices.__getitem__)
         big = forms[i]
         joints = len(big.character.joints) if isinstance(big, CharacterSolveRequest) else 21
         raise TooManyItems(
             f"items: the batch costs {total} work units, beyond the limit of {cap} "
-            f"({max_items} items of at most {max_item_price(passes)} units); a character item "
+            f"({max_items} items of at most {max_item_price(pricing)} units); a character item "
             f"costs {FABRIK_PRICE} + 1 per {CHARACTER_JOINTS} joints, doubled for exact reach, "
             "pins or FABRIK "
             f"(items[{i}], {joints} joints: {prices[i]}); send smaller batches"
@@ -193,7 +194,7 @@ async def solve_columns(cols: columnar.Columns, engine: Engine, budget: Budget,
     from the arrays (``service.columnar``)."""
     parts = await budget.run_parts(
         lambda part: columnar.solve(engine, cols, part),
-        cols.parts(engine.solve_passes, engine.turn_search),
+        cols.parts(Pricing.of(engine)),
     )
     ans = columnar.merge(parts)
     state.metrics.batch.observe(cols.size)

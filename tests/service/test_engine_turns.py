@@ -149,13 +149,14 @@ def test_searching_items_are_priced_by_their_solves(
     (four,) = _problems(start, goal, FIVE[:4])
     (pinned,) = _problems(start, goal, FIVE, pins=("pelvis",))
     fabrik = dataclasses.replace(five, method="fabrik")
-    assert limits.price(five, 2, search) == 2 * 13 and limits.price(five, 2) == 2
-    assert limits.price(four, 2, search) == limits.price(four, 2) == 2
-    assert limits.price(pinned, 2, search) == limits.price(pinned, 2)
-    assert limits.price(fabrik, 2, search) == limits.FABRIK_PRICE
-    assert len(limits.chunks([five] * 100, 2, search)) == 12  # 9 items of 26 per 256
+    on, off = limits.Pricing(2, search), limits.Pricing(2)
+    assert limits.price(five, on) == 2 * 13 and limits.price(five, off) == 2
+    assert limits.price(four, on) == limits.price(four, off) == 2
+    assert limits.price(pinned, on) == limits.price(pinned, off)
+    assert limits.price(fabrik, on) == limits.FABRIK_PRICE
+    assert len(limits.chunks([five] * 100, on)) == 12  # 9 items of 26 per 256
     # the batch price limit (character items) is the item count's, search or not
-    assert limits.max_item_price(2) == 4 + limits.FABRIK_PRICE - 1
+    assert limits.max_item_price(on) == limits.max_item_price(off) == 4 + limits.FABRIK_PRICE - 1
 
 
 def test_options_turn_search_over_http(client: Any, real_poses: PosePairs) -> None:

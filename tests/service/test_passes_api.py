@@ -151,10 +151,27 @@ def test_prices_count_passes(real_poses: PosePairs) -> None:
                         weights=np.ones(2), n_targets=2)  # fmt: skip
     exact = dataclasses.replace(soft, reach="exact")
     fabrik = dataclasses.replace(soft, method="fabrik")
-    assert limits.price(soft, 1) == 1 and limits.price(exact, 1) == limits.FABRIK_PRICE
-    assert limits.price(soft, 2) == 2 and limits.price(exact, 2) == limits.FABRIK_PRICE + 1
-    assert limits.price(dataclasses.replace(soft, passes=4), 2) == 4
-    assert limits.price(dataclasses.replace(fabrik, passes=4), 2) == limits.FABRIK_PRICE
+    one, two = limits.Pricing(1), limits.Pricing(2)
+    assert limits.price(soft, one) == 1 and limits.price(exact, one) == limits.FABRIK_PRICE
+    assert limits.price(soft, two) == 2 and limits.price(exact, two) == limits.FABRIK_PRICE + 1
+    assert limits.price(dataclasses.replace(soft, passes=4), two) == 4
+    assert limits.price(dataclasses.replace(fabrik, passes=4), two) == limits.FABRIK_PRICE
     many = [dataclasses.replace(soft, passes=4)] * 256
-    assert len(limits.chunks(many, 1)) == 4  # 64 four-pass items per 256-unit chunk
-    assert len(limits.chunks([soft] * 256, 1)) == 1
+    assert len(limits.chunks(many, one)) == 4  # 64 four-pass items per 256-unit chunk
+    assert len(limits.chunks([soft] * 256, one)) == 1
+    # an engine that retries a soft answer left short (serving.retry_reach) prices the
+    # pass it may add on soft items, pinned or not; exact reach and FABRIK never retry
+    retry = limits.Pricing(2, retry=True)
+    pinned = dataclasses.replace(soft, n_targets=1)
+    assert limits.price(soft, retry) == 3 and limits.price(exact, retry) == limits.price(exact, two)
+    assert limits.price(pinned, retry) == limits.price(pinned, two) + 1
+    assert limits.price(fabrik, retry) == limits.FABRIK_PRICE
+    assert limits.max_item_price(retry) == limits.max_item_price(two) + 1
+
+
+def test_engine_pricing_follows_the_models(engine: Engine, models_dir: Path) -> None:
+    """``Pricing.of``: the engine's default passes, turn search and retry, as it runs them."""
+    pricing = limits.Pricing.of(engine)
+    assert pricing == limits.Pricing(engine.solve_passes, engine.turn_search, True)
+    assert engine.retry_reach > 0  # the shipped models retry (serving.retry_reach)
+    assert not limits.Pricing.of(Engine(models_dir, retry_reach=0.0)).retry
