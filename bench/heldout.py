@@ -418,6 +418,26 @@ def _rng(seed: int, *stream: int) -> np.random.Generator:
     return np.random.default_rng([seed, *stream])
 
 
+def family_sets(
+    engine: Engine,
+    data: PoseDataset,
+    world: F64,
+    n: int,
+    cfg: HeldoutConfig,
+    rng: np.random.Generator,
+    body: Callable[[WorldPairs], WorldPairs] | None = None,
+) -> tuple[dict[str, Edits], dict[str, F64], WorldPairs]:
+    """One family's edit sets, each set's turns, and its pairs (``body`` rebuilds the
+    pairs as other bodies): what :func:`evaluate_family` scores."""
+    pairs = world_pairs(data, world, *sample_pairs(data, n, rng))
+    random_pairs = world_pairs(data, world, *sample_pairs(data, n, rng))
+    if body is not None:
+        pairs, random_pairs = body(pairs), body(random_pairs)
+    sets = edit_sets(engine, pairs, random_pairs, cfg, rng)
+    turn = {k: (random_pairs if k == RANDOM_SET else pairs).turn for k in sets}
+    return sets, turn, pairs
+
+
 def evaluate_family(
     engine: Engine,
     data: PoseDataset,
@@ -429,12 +449,7 @@ def evaluate_family(
     body: Callable[[WorldPairs], WorldPairs] | None = None,
 ) -> tuple[dict[str, dict[str, Items]], WorldPairs]:
     """Every set and method of one family (``body`` rebuilds the pairs as other bodies)."""
-    pairs = world_pairs(data, world, *sample_pairs(data, n, rng))
-    random_pairs = world_pairs(data, world, *sample_pairs(data, n, rng))
-    if body is not None:
-        pairs, random_pairs = body(pairs), body(random_pairs)
-    sets = edit_sets(engine, pairs, random_pairs, cfg, rng)
-    turn = {k: (random_pairs if k == RANDOM_SET else pairs).turn for k in sets}
+    sets, turn, pairs = family_sets(engine, data, world, n, cfg, rng, body)
     items = run_sets(engine, sets, turn, cfg.chunk)
     m = min(n_completion, len(pairs))
     sub = WorldPairs(

@@ -199,3 +199,28 @@ def test_quick_heldout_run_has_every_family_set_and_method(
     pooled = res["families"][2]["sets"][FIVE]["fabrik"]["n"]
     parts = [f["sets"][FIVE]["fabrik"]["n"] for f in res["families"][:2]]
     assert pooled == sum(parts)
+
+
+def test_joint_breakdown_adds_up_to_the_heldout_sets(
+    models_dir: Path, holdout_dataset: Path
+) -> None:
+    """``bench.joints`` scores bench.heldout's own edits: each method's per-joint means
+    average to the MPJPE the held-out run gives that set, and the body parts add up to it;
+    FABRIK leaves the pelvis where the start has it (on the target's), the network moves it."""
+    from bench.heldout import QUICK, run_heldout
+    from bench.joints import METHODS, joint_errors, parts_of
+    from service.engine import Engine
+    from trainer.data.dataset import load_dataset
+
+    engine = Engine(models_dir)
+    data = load_dataset(holdout_dataset)
+    res = joint_errors(engine, data, ["left_elbow"], "holdout", QUICK)
+    pooled = run_heldout(engine, data, QUICK, log=lambda _: None).family("holdout: all")
+    for method in METHODS:
+        per_joint = res["left_elbow"][method]
+        want = pooled.sets["left_elbow"][method].mpjpe
+        assert per_joint.mean() == pytest.approx(want, abs=1e-9), method
+        assert sum(parts_of(per_joint).values()) == pytest.approx(want, abs=1e-9)
+    assert res["left_elbow"]["fabrik"][PELVIS] == 0.0
+    assert res["left_elbow"]["neural_bone"][PELVIS] > 0.0
+    assert res["left_elbow"]["neural_exact"][JOINT_INDEX["left_elbow"]] < 0.1  # 1 mm polish
