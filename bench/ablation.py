@@ -122,6 +122,15 @@ VARIANTS: dict[str, str] = {
     "retry2cm": "the same at 2 cm: shipped since (mx1-dc18b1ee350b)",
     "ae_cos3e3_retry": "`ae_cos3e3_critic` with the retry at 2 cm (as shipped, on item 23's "
     "autoencoder)",
+    "ae_cos3e3_long3": "`ae_cos3e3_retry` with its 5-end-effector solver trained 3 epochs "
+    "instead of 8 (ae_cos3e3_long3.toml; served as shipped)",
+    "ae_cos3e3_long16": "the same, 16 epochs (ae_cos3e3_long16.toml)",
+    "elbows_long_e3": "the shipped recipe with the two elbow solvers trained apart (the long "
+    "bank) for 3 epochs instead of one epoch in the shared bank; no 5-end-effector solver "
+    "(elbows_long_e3.toml; served as shipped)",
+    "elbows_long_e8": "the same, 8 epochs (elbows_long_e8.toml)",
+    "c15_carry1": "the shipped models served with the whole branch below a dragged joint "
+    "turned with its bone (`--carry 1`, FABRIK's rigid branch)",
 }
 COMPLETION = "6-point completion"
 
