@@ -336,8 +336,21 @@ class Engine:
         if n and int(reps.min()) < 1:
             raise ValueError(f"passes must be at least 1, got {int(reps.min())}")
         reps = np.where(fab, 1, reps)  # FABRIK items: one solve (and not the caller's array)
-        items, degrees = turns.search(self, items, reps, self._solve_items)
-        return turns.mark(self._retry(items, self._solve_items(items, reps)), degrees)
+        items, degrees, known = turns.search(self, items, reps, self._solve_items)
+        return turns.mark(self._retry(items, self._solve_rest(items, reps, known)), degrees)
+
+    def _solve_rest(
+        self, items: _Items, reps: npt.NDArray[np.int64], known: turns.Known | None
+    ) -> BatchAnswer:
+        """:meth:`_solve_items` of the items whose answer the turn search does not have."""
+        if known is None:
+            return self._solve_items(items, reps)
+        n = items.poses.shape[0]
+        rest = np.setdiff1d(np.arange(n), known[0])
+        if rest.size == 0:
+            return BatchAnswer.scatter(n, [known])
+        part = self._solve_items(items.take(rest), reps[rest])
+        return BatchAnswer.scatter(n, [(rest, part), known])
 
     def _retry(self, items: _Items, ans: BatchAnswer) -> BatchAnswer:
         """``ans`` with one more pass, from its answer, for every soft neural item (bone

@@ -7,13 +7,15 @@ The engine (:mod:`service.engine`) works on these; the HTTP layer builds
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, fields
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
 from core import compiled
+from core.skeleton import NUM_JOINTS
 
 F64 = npt.NDArray[np.floating[Any]]
 
@@ -60,6 +62,30 @@ class BatchAnswer:
     paths: tuple[tuple[str, ...], ...]  # the distinct solver paths of the batch
     path_of: npt.NDArray[np.int64]  # [B] index into ``paths``
 
+    def take(self, rows: npt.NDArray[np.intp]) -> BatchAnswer:
+        """The answers of items ``rows``, in that order (only their solver paths)."""
+        used, path_of = np.unique(self.path_of[rows], return_inverse=True)
+        return BatchAnswer(
+            self.pose[rows], self.errors[rows], self.max_bone_error[rows],
+            self.iterations[rows], tuple(self.paths[i] for i in used.tolist()),
+            path_of.astype(np.int64).reshape(-1),
+        )  # fmt: skip
+
+    @staticmethod
+    def scatter(n: int, parts: Sequence[tuple[npt.NDArray[np.intp], BatchAnswer]]) -> BatchAnswer:
+        """One answer for ``n`` items from ``parts``, each the answers of items ``sel``
+        (together every item once); solver paths renumbered in part order."""
+        k = max(a.errors.shape[1] for _, a in parts)
+        pose, errors = np.empty((n, NUM_JOINTS, 3)), np.zeros((n, k))
+        bone, its = np.empty(n), np.empty(n, dtype=np.int64)
+        path_of = np.empty(n, dtype=np.int64)
+        index: dict[tuple[str, ...], int] = {}
+        for sel, a in parts:
+            pose[sel], bone[sel], its[sel] = a.pose, a.max_bone_error, a.iterations
+            errors[sel, : a.errors.shape[1]] = a.errors
+            path_of[sel] = renumber(index, a)
+        return BatchAnswer(pose, errors, bone, its, tuple(index), path_of)
+
     def with_items(self, sel: npt.NDArray[np.intp], other: BatchAnswer) -> BatchAnswer:
         """These answers with items ``sel`` replaced by ``other``'s (one per ``sel``)."""
         pose, errors = self.pose.copy(), self.errors.copy()
@@ -103,6 +129,10 @@ class _Items:
         """``[B, K]``: which columns of each item are its user targets (not pins, padding)."""
         out: npt.NDArray[np.bool_] = np.arange(self.tidx.shape[1])[None, :] < self.n_t[:, None]
         return out
+
+    def take(self, rows: npt.NDArray[np.intp]) -> _Items:
+        """Items ``rows``, as they are."""
+        return _Items(*(getattr(self, f.name)[rows] for f in fields(self)))
 
     def soft(self, sel: npt.NDArray[np.intp], poses: compiled.F64) -> _Items:
         """Items ``sel`` from ``poses`` as a refinement pass solves them: neural, soft

@@ -18,9 +18,12 @@ from the kept start. Only neural items with at least ``turn_min_targets`` target
 pins take part (``options.turn_search: false`` opts out): fewer targets say little about a
 facing, and pins ask for joints to stay where they are.
 
-Every candidate is an item of one batch solve, so the cost is about ``turn_yaws`` + 1
-solves per searching item; answers stay bit-identical (each item alone, argmin ties to the
-unturned start). The answer's solver path ends with ``turn <deg>`` where the start turned.
+The unturned start is solved first, and where its score is within the margin the search
+ends there (no other candidate could be kept); otherwise the other candidates are solved
+as one batch. A soft item's kept candidate is its answer; an exact one is solved again
+from the kept start. At most ``turn_yaws`` + 1 solves per searching item; answers stay
+bit-identical (each item alone, argmin ties to the unturned start). The answer's solver
+path ends with ``turn <deg>`` where the start turned.
 """
 
 from __future__ import annotations
@@ -104,35 +107,83 @@ def turned(poses: F64, yaw: float) -> F64:
     return out
 
 
+#: Items whose final answer the search already has: their indices and that answer.
+Known = tuple[npt.NDArray[np.intp], BatchAnswer]
+
+
 def search(
     engine: Engine, items: _Items, reps: npt.NDArray[np.int64],
     solve: Callable[[_Items, npt.NDArray[np.int64]], BatchAnswer],
-) -> tuple[_Items, npt.NDArray[np.int64]]:  # fmt: skip
-    """``items`` with the start of every searching item turned as the search chose, and
-    each item's turn in whole degrees (0: not turned). ``solve(items, reps)`` solves a
-    batch (the engine's own path)."""
+) -> tuple[_Items, npt.NDArray[np.int64], Known | None]:  # fmt: skip
+    """``items`` with the start of every searching item turned as the search chose, each
+    item's turn in whole degrees (0: not turned), and the answers it already has: a soft
+    item's kept candidate was solved as the item asks, so it is not solved again.
+    ``solve(items, reps)`` solves a batch (the engine's own path).
+
+    Scores are never negative and another candidate is kept only if it scores ``margin``
+    below the unturned start, so an unturned score within the margin ends the search with
+    the answer the full search gives. Many items are solved unturned first and the other
+    turns only for the items still open (fewer rows); a lone item solves every turn in one
+    batch (fewer runs, whose fixed cost dominates there). Either way the same start is kept."""
     sel = searching(engine, items)
     degrees = np.zeros(len(items.poses), dtype=np.int64)
     if sel.size == 0:
-        return items, degrees
-    y, m = engine.turn_search.yaws, sel.size
-    yaws = 2.0 * np.pi * np.arange(y) / y
+        return items, degrees, None
+    t = engine.turn_search
+    first = np.arange(t.yaws if sel.size == 1 else 1)  # the turns solved for every item
+    scores, found, poses = _candidates(engine, items, reps, sel, first, solve)
+    scores[0] -= t.margin
+    best = np.argmin(scores, axis=0)  # ties: the first, the unturned start
+    open_ = np.flatnonzero(scores[0] > 0.0) if first.size == 1 else np.zeros(0, np.intp)
+    if open_.size:
+        more, ans, turned_poses = _candidates(
+            engine, items, reps, sel[open_], np.arange(1, t.yaws), solve
+        )
+        pick = np.argmin(np.vstack([scores[0, open_], more]), axis=0)
+        turn = np.flatnonzero(pick > 0)
+        best[open_[turn]] = pick[turn]
+        row = (pick[turn] - 1) * open_.size + turn  # the kept candidate's row of `ans`
+        found = found.with_items(open_[turn], ans.take(row))
+        poses = np.concatenate([poses, turned_poses])
+        best_rows = np.arange(sel.size)
+        best_rows[open_[turn]] = sel.size + row
+    else:
+        best_rows = best * sel.size + np.arange(sel.size)
+        found = found.take(best_rows)
+    out = items.poses.copy()
+    out[sel] = poses[best_rows]
+    deg = np.rint(360.0 * best / t.yaws).astype(np.int64)
+    degrees[sel] = np.where(deg > 180, deg - 360, deg)
+    mine = ~items.ex[sel] & items.keep[sel]  # solved as asked: soft, bone lengths kept
+    known = (sel[mine], found.take(np.flatnonzero(mine))) if mine.any() else None
+    return dataclasses.replace(items, poses=out), degrees, known
+
+
+def _candidates(
+    engine: Engine, items: _Items, reps: npt.NDArray[np.int64], sel: npt.NDArray[np.intp],
+    steps: npt.NDArray[np.int64], solve: Callable[[_Items, npt.NDArray[np.int64]], BatchAnswer],
+) -> tuple[F64, BatchAnswer, F64]:  # fmt: skip
+    """Items ``sel`` solved soft from their starts turned by ``steps`` (of the search's
+    ``yaws`` steps; 0 unturned) in one batch, turn-major: the scores ``[turns, sel]``,
+    the answers and the candidate starts (rows ``turn * len(sel) + item``)."""
+    y = engine.turn_search.yaws
     starts = items.poses[sel]
-    candidates = np.concatenate([turned(starts, float(a)) if a else starts for a in yaws])
-    rep = np.tile(sel, y)
-    soft = dataclasses.replace(items.soft(rep, items.poses), poses=candidates)
+    poses = np.concatenate(
+        [turned(starts, float(2.0 * np.pi * k / y)) if k else starts for k in steps.tolist()]
+    )
+    rep = np.tile(sel, len(steps))
+    soft = dataclasses.replace(items.soft(rep, items.poses), poses=poses)
     ans = solve(soft, reps[rep])
-    score = (ans.errors * soft.targets()).sum(axis=1) / soft.n_t
+    return _score(engine, soft, ans).reshape(len(steps), -1), ans, poses
+
+
+def _score(engine: Engine, soft: _Items, ans: BatchAnswer) -> F64:
+    """Each candidate's score: the mean distance of its targets, plus ``plausibility``
+    times its answer's distance to what the critic makes of it (never negative)."""
+    score: F64 = (ans.errors * soft.targets()).sum(axis=1) / soft.n_t
     if engine.turn_search.plausibility > 0:  # how unlike a real body the answer is
         score += engine.turn_search.plausibility * implausibility(engine, ans.pose, soft.floors)
-    score = score.reshape(y, m)
-    score[0] -= engine.turn_search.margin
-    best = np.argmin(score, axis=0)  # ties: the first, the unturned start
-    poses = items.poses.copy()
-    poses[sel] = candidates.reshape(y, m, *starts.shape[1:])[best, np.arange(m)]
-    deg = np.rint(np.degrees(yaws[best])).astype(np.int64)
-    degrees[sel] = np.where(deg > 180, deg - 360, deg)
-    return dataclasses.replace(items, poses=poses), degrees
+    return score
 
 
 def implausibility(engine: Engine, poses: npt.NDArray[np.floating], floors: F64) -> F64:

@@ -194,3 +194,67 @@ def test_options_turn_search_over_http(client: Any, real_poses: PosePairs) -> No
     for bad in ("yes", 1, [True]):
         resp = client.post("/v1/solve", json={**bodies[0], "options": {"turn_search": bad}})
         assert_problem(resp, 422, "options.turn_search")
+
+
+def test_search_ends_early_with_the_answers_of_the_full_search(
+    engines: tuple[Engine, Engine], real_poses: PosePairs
+) -> None:
+    """The staged search (the unturned start first; the other 11 turns only for items whose
+    unturned score is beyond the margin) keeps the start the full search keeps, and its
+    answers (soft: the kept candidate's own; exact: solved again) are the full search's bit
+    for bit. The reference: every candidate in one batch, argmin with the margin, then the
+    edit solved as asked from the kept start."""
+    from service.problems import _Items
+    from service.turns import _score
+
+    engine = engines[1]
+    t = engine.turn_search
+    starts = real_poses.poses[real_poses.starts[:40]]
+    goals = real_poses.poses[real_poses.goals[:40]]
+    goals[::2] = turned(goals[::2], np.radians(90.0))  # half of them turned a quarter round
+    probs = _problems(starts, goals, FIVE) + _problems(starts[:8], goals[:8], FIVE, reach="exact")
+    n, k = len(probs), len(FIVE)
+    args = dict(
+        poses=np.stack([p.pose for p in probs]), target_idx=np.stack([p.target_idx for p in probs]),
+        target_pos=np.stack([p.target_pos for p in probs]),
+        exact=np.array([p.reach == "exact" for p in probs]),
+    )  # fmt: skip
+    sizes: list[int] = []
+
+    def counting(items: _Items, reps: np.ndarray) -> Any:
+        sizes.append(len(items.poses))
+        return engine._solve_items(items, reps)
+
+    items = _Items(
+        args["poses"], args["target_idx"], args["target_pos"], np.full(n, k), np.full(n, k),
+        np.ones((n, k)), np.zeros(n, bool), np.ones(n, bool), args["exact"],
+        np.full(n, 1e-3), np.zeros(n), np.full(n, engine.carry), np.ones(n, bool),
+    )  # fmt: skip
+    reps = np.full(n, engine.solve_passes)
+    from service.turns import search
+
+    kept, degrees, known = search(engine, items, reps, counting)
+    # the reference: all 12 candidates of every item at once
+    every = np.concatenate([turned(items.poses, 2 * np.pi * y / t.yaws) if y else items.poses
+                            for y in range(t.yaws)])  # fmt: skip
+    rep = np.tile(np.arange(n), t.yaws)
+    soft = dataclasses.replace(items.soft(rep, items.poses), poses=every)
+    score = _score(engine, soft, engine._solve_items(soft, reps[rep])).reshape(t.yaws, n)
+    score[0] -= t.margin
+    best = np.argmin(score, axis=0)
+    want_deg = np.rint(360.0 * best / t.yaws).astype(int)
+    assert np.array_equal(degrees, np.where(want_deg > 180, want_deg - 360, want_deg))
+    assert np.array_equal(kept.poses, every.reshape(t.yaws, n, 21, 3)[best, np.arange(n)])
+    open_ = int((score[0] > 0).sum())
+    assert 0 < open_ < n and sizes == [n, 11 * open_]  # some ended early, some searched on
+    ref = engine._solve_items(kept, reps)
+    assert known is not None and np.array_equal(known[0], np.arange(40))  # the soft ones
+    assert np.array_equal(known[1].pose, ref.pose[:40])
+    assert np.array_equal(known[1].errors, ref.errors[:40])
+    got, want = engine.solve_arrays(**args), engine._retry(kept, ref)  # then the retry
+    assert np.array_equal(got.pose, want.pose) and np.array_equal(got.errors, want.errors)
+    # a lone item solves its 12 turns in one batch: the same start, the same answer
+    for i in (*np.flatnonzero(score[0] > 0)[:3], *np.flatnonzero(score[0] <= 0)[:2], n - 1):
+        one = engine.solve_arrays(**{key: v[i : i + 1] for key, v in args.items()})
+        assert np.array_equal(one.pose[0], got.pose[i]), i
+        assert one.paths[one.path_of[0]] == got.paths[got.path_of[i]], i
