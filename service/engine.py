@@ -82,7 +82,7 @@ class Engine:
         composition_passes: int = 1,
         composition: str = "reencode",
         composition_projections: int = 1,
-        fabrik_max_iterations: int = 64,
+        fabrik_max_iterations: int = compiled_fabrik.MAX_ITERATIONS,
         solve_passes: int | None = None,
         carry: float | None = None,
         turn_yaws: int | None = None,

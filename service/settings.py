@@ -9,6 +9,8 @@ from typing import Literal
 from pydantic import Field, SecretStr
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
+from core.compiled_fabrik import MAX_ITERATIONS
+
 #: The models shipped with the repository (``<repo>/models``).
 BUNDLED_MODELS = Path(__file__).resolve().parent.parent / "models"
 
@@ -57,7 +59,7 @@ class Settings(BaseSettings):
     composition_projections: int = Field(
         default=1, ge=0, le=8, description="Paste-all-targets-and-re-encode rounds at the end."
     )
-    fabrik_max_iterations: int = Field(default=64, ge=1, le=10_000)
+    fabrik_max_iterations: int = Field(default=MAX_ITERATIONS, ge=1, le=10_000)
     log_level: Literal["debug", "info", "warning", "error"] = "info"
     access_log: bool = True
 
