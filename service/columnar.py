@@ -24,7 +24,7 @@ from core.skeleton import JOINT_INDEX, JOINT_NAMES, NUM_JOINTS
 from service.engine import Engine
 from service.errors import BodyInvalid, TooManyItems
 from service.limits import Pricing, chunks_of, price_of
-from service.problems import BatchAnswer, renumber
+from service.problems import BatchAnswer
 from service.schemas import MAX_COORDINATE, MAX_WEIGHT, SolveOptions
 from service.validation import check_bones
 
@@ -270,16 +270,9 @@ def merge(parts: Sequence[BatchAnswer]) -> BatchAnswer:
     """The answers of consecutive parts as one (solver paths renumbered)."""
     if len(parts) == 1:
         return parts[0]
-    index: dict[tuple[str, ...], int] = {}
-    path_of = [renumber(index, a) for a in parts]
-    return BatchAnswer(
-        np.concatenate([a.pose for a in parts]),
-        np.concatenate([a.errors for a in parts]),
-        np.concatenate([a.max_bone_error for a in parts]),
-        np.concatenate([a.iterations for a in parts]),
-        tuple(index),
-        np.concatenate(path_of).astype(np.int64),
-    )
+    ends = np.cumsum([len(a.pose) for a in parts])
+    rows = [np.arange(e - len(a.pose), e) for a, e in zip(parts, ends, strict=True)]
+    return BatchAnswer.scatter(int(ends[-1]), list(zip(rows, parts, strict=True)))
 
 
 def answer(cols: Columns, ans: BatchAnswer, version: str) -> bytes:

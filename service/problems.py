@@ -88,14 +88,8 @@ class BatchAnswer:
 
     def with_items(self, sel: npt.NDArray[np.intp], other: BatchAnswer) -> BatchAnswer:
         """These answers with items ``sel`` replaced by ``other``'s (one per ``sel``)."""
-        pose, errors = self.pose.copy(), self.errors.copy()
-        bone, its, path_of = self.max_bone_error.copy(), self.iterations.copy(), self.path_of.copy()
-        pose[sel], bone[sel], its[sel] = other.pose, other.max_bone_error, other.iterations
-        errors[sel] = 0.0
-        errors[sel, : other.errors.shape[1]] = other.errors
-        index = {p: i for i, p in enumerate(self.paths)}
-        path_of[sel] = renumber(index, other)
-        return BatchAnswer(pose, errors, bone, its, tuple(index), path_of)
+        rest = np.setdiff1d(np.arange(self.pose.shape[0]), sel)
+        return BatchAnswer.scatter(len(self.pose), [(rest, self.take(rest)), (sel, other)])
 
 
 def renumber(index: dict[tuple[str, ...], int], ans: BatchAnswer) -> npt.NDArray[np.int64]:
