@@ -83,15 +83,13 @@ def complete(
     pose = kinematics.bone_pass(pred * scale, lengths)
     idx = np.asarray([JOINT_INDEX[j] for j in keypoints], dtype=np.intp)
     goal = np.stack([given[j] * scale for j in keypoints])
-    res = kinematics.polish(
-        pose,
-        lengths,
-        idx,
-        goal,
-        tolerance=tolerance,
-        max_iterations=engine.fabrik_max_iterations,
-    )
-    world = res.positions + origin
+    # the compiled exact-reach polish (core.compiled_fabrik), as a solve's exact reach runs
+    polished, _, _ = engine._fabrik(
+        True, pose[None], np.asarray(lengths, dtype=np.float64)[None], goal[None],
+        np.full(1, tolerance), idx.astype(np.int64), np.ones(len(idx)),
+        np.zeros(len(idx), dtype=np.bool_),
+    )  # fmt: skip
+    world = polished[0] + origin
     errors = np.linalg.norm(world[idx] - np.stack(list(keypoints.values())), axis=-1)
     return CompleteResult(pose=world, errors=errors, reached=errors <= tolerance, levels=run)
 
