@@ -55,7 +55,7 @@ def complete(
         lengths = ref * ratio
         # networks trained on random bodies at random sizes read the size from the key
         # points; older ones are fed the size of their nearest training skeleton
-        scale = float(engine.completion_scales(lengths))
+        scale = float(completion_scales(engine, lengths))
         for j, value in given_lengths.items():
             lengths[bones[j]] = value
     given = {j: (v - origin) / scale for j, v in keypoints.items()}
@@ -92,6 +92,27 @@ def complete(
     world = polished[0] + origin
     errors = np.linalg.norm(world[idx] - np.stack(list(keypoints.values())), axis=-1)
     return CompleteResult(pose=world, errors=errors, reached=errors <= tolerance, levels=run)
+
+
+def completion_scales(engine: Engine, lengths: F64) -> F64:
+    """How much bigger characters ``[..., 20]`` are than what ``engine``'s completion
+    networks are fed: networks trained on bodies of every size (``serving.body =
+    total_length``) read the size from the key points (1); older ones see the size of
+    their nearest training skeleton (``Engine.scales_of``)."""
+    if engine.body == "total_length":
+        return np.ones(np.shape(lengths)[:-1])
+    return engine.scales_of(lengths)
+
+
+def implied_bodies(engine: Engine, poses: F64) -> F64:
+    """The bodies completion level 1 builds from the base key points of ``poses
+    [N, 21, 3]`` (pelvis floor point at the origin, as the networks were trained): one
+    network run for all, one view (the turn search's critic, :mod:`service.turns`)."""
+    idx = [JOINT_INDEX[j] for j in engine.manifest.completion_levels()[0].joints]
+    scale = completion_scales(engine, bone_lengths(poses))[:, None, None]
+    x = (poses[:, idx] / scale).reshape(len(poses), -1).astype(np.float32)
+    out: F64 = engine.completion[0](x).astype(np.float64).reshape(poses.shape) * scale
+    return out
 
 
 def complete_level(engine: Engine, level: int, keys: F64) -> F64:

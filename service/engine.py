@@ -639,25 +639,6 @@ class Engine:
         out = self.decoder(self.encoder(x)).astype(np.float64).reshape(len(world), NUM_JOINTS, 3)
         return np.asarray(frame.to_world(out * scales))
 
-    def completion_scales(self, lengths: F64) -> F64:
-        """How much bigger characters ``[..., 20]`` are than what the completion networks
-        are fed: networks trained on bodies of every size (``serving.body =
-        total_length``) read the size from the key points (1); older ones see the size of
-        their nearest training skeleton (:meth:`scales_of`)."""
-        if self.body == "total_length":
-            return np.ones(np.shape(lengths)[:-1])
-        return self.scales_of(lengths)
-
-    def implied_bodies(self, poses: F64) -> F64:
-        """The bodies completion level 1 builds from the base key points of ``poses
-        [N, 21, 3]`` (pelvis floor point at the origin, as the networks were trained): one
-        network run for all, one view (the turn search's critic, :mod:`service.turns`)."""
-        idx = [JOINT_INDEX[j] for j in self.manifest.completion_levels()[0].joints]
-        scale = self.completion_scales(bone_lengths(poses))[:, None, None]
-        x = (poses[:, idx] / scale).reshape(len(poses), -1).astype(np.float32)
-        out: F64 = self.completion[0](x).astype(np.float64).reshape(poses.shape) * scale
-        return out
-
     def _compose(
         self, z: npt.NDArray[np.float32], canvas: npt.NDArray[np.float32], sequence: tuple[str, ...]
     ) -> npt.NDArray[np.float32]:

@@ -38,6 +38,7 @@ import numpy.typing as npt
 
 from core.manifest import Serving
 from core.skeleton import JOINT_INDEX
+from service import completion
 from service.problems import BatchAnswer, _Items
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -194,7 +195,7 @@ def implausibility(engine: Engine, poses: npt.NDArray[np.floating], floors: F64)
     if engine.turn_search.critic == "completion":
         world[:, :, [0, 2]] -= world[:, _PELVIS : _PELVIS + 1, [0, 2]]
         world[:, :, 1] -= floors[:, None]
-        other = engine.implied_bodies(world)
+        other = completion.implied_bodies(engine, world)
     else:
         world[:, :, 1] -= floors[:, None]
         other = engine.reconstruct(world)
