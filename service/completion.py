@@ -8,7 +8,6 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import numpy.typing as npt
 
-from core import kinematics
 from core.geometry import symmetry_views, unview
 from core.skeleton import BONES, JOINT_INDEX, JOINT_NAMES, MIRROR, NUM_JOINTS, bone_lengths
 from service.errors import InvalidRequest
@@ -80,12 +79,12 @@ def complete(
     assert pred is not None
     if not given_lengths:  # the network's own estimate of this body's proportions
         lengths = np.asarray(bone_lengths(pred), dtype=np.float64)
-    pose = kinematics.bone_pass(pred * scale, lengths)
     idx = np.asarray([JOINT_INDEX[j] for j in keypoints], dtype=np.intp)
     goal = np.stack([given[j] * scale for j in keypoints])
-    # the compiled exact-reach polish (core.compiled_fabrik), as a solve's exact reach runs
+    # the compiled exact-reach polish (core.compiled_fabrik), as a solve's exact reach runs:
+    # it first gives the pose these bone lengths (the bone pass), then reaches
     polished, _, _ = engine._fabrik(
-        True, pose[None], np.asarray(lengths, dtype=np.float64)[None], goal[None],
+        True, (pred * scale)[None], np.asarray(lengths, dtype=np.float64)[None], goal[None],
         np.full(1, tolerance), idx.astype(np.int64), np.ones(len(idx)),
         np.zeros(len(idx), dtype=np.bool_),
     )  # fmt: skip
