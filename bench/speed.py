@@ -13,7 +13,7 @@ import numpy as np
 
 from bench.edits import Edits, problems
 from service.engine import Engine
-from service.limits import Pricing, chunks_of, fan_out, neural_price
+from service.limits import Pricing, chunks, fan_out
 from service.problems import SolveProblem
 from service.turns import NO_SEARCH
 
@@ -155,8 +155,7 @@ def issue14(
     probs = [p for _ in range(reps) for p in problems(two, "neural_bone")][:batch]
     probs1 = [dataclasses.replace(p, passes=1) for p in probs]
     # a batch as the service runs it on 2 compute threads: its priced parts, fanned out
-    pricing = Pricing.of(engine)
-    parts = chunks_of([neural_price(False, pricing.passes, retry=pricing.retry)] * batch)
+    parts = chunks(probs, Pricing.of(engine))
 
     def two_threads() -> object:
         return fan_out(lambda p: engine.solve_arrays(starts[p], tidx[p], tpos[p]), parts, 2)
