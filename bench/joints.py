@@ -16,14 +16,12 @@ import numpy as np
 import numpy.typing as npt
 import typer
 
-from bench.edits import METHODS as _ALL_METHODS
 from bench.edits import solve
-from bench.heldout import DEFAULT_DATASET, HeldoutConfig, _rng, family_sets
+from bench.heldout import DEFAULT_DATASET, METHODS, HeldoutConfig, _rng, family_sets
 from core.skeleton import JOINT_INDEX, JOINT_NAMES, NUM_JOINTS
 from service.engine import Engine
 
 F64 = npt.NDArray[np.floating[Any]]
-METHODS = tuple(m for m in _ALL_METHODS if m != "neural_raw")
 #: Body parts (every joint in one).
 PARTS: dict[str, tuple[str, ...]] = {
     "trunk": ("pelvis", "spine1", "spine2", "neck", "head"),
