@@ -4,7 +4,9 @@ Every network must work on a body it never saw, posed in the world as a user pos
 The mocap holds a few bodies only, so each training sample is rebuilt on a random body:
 
 * :func:`rebuild` scales every bone vector root-outwards (a bone keeps its direction, gets
-  a new length) and moves the pelvis joint along the spine, as other studios place it;
+  a new length) and moves some joints along a bone, as other studios place them: the
+  pelvis along the spine, and (``joint_shift``) the neck, head and collars along their
+  parent bones, within ``core.bodies.PLACEMENT``'s limits (the stress set's);
 * :func:`mirror` swaps left and right (x -> -x);
 * :func:`turn` rotates about +Y through the pelvis floor point;
 * :func:`normalise_size` scales a body to the reference total bone length, as the service
@@ -25,7 +27,8 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from core.skeleton import BONE_CHILDREN, BONE_PARENTS, DEPTH, JOINT_INDEX, MIRROR
+from core.bodies import PLACEMENT
+from core.skeleton import BONE_CHILDREN, BONE_PARENTS, DEPTH, JOINT_INDEX, MIRROR, PARENTS
 from trainer.config import AugmentConfig
 
 _PELVIS = JOINT_INDEX["pelvis"]
@@ -42,6 +45,11 @@ _BONE_MIRROR = torch.tensor(
     [BONE_CHILDREN.tolist().index(MIRROR[c]) for c in BONE_CHILDREN.tolist()]
 )
 _MIRROR_JOINTS = torch.tensor(MIRROR)
+#: The joints ``joint_shift`` moves (all of ``PLACEMENT`` but the pelvis): index, parent,
+#: largest fraction of the parent bone.
+_PLACED = [
+    (JOINT_INDEX[n], PARENTS[JOINT_INDEX[n]], f) for n, f in PLACEMENT.items() if n != "pelvis"
+]
 
 
 def bone_lengths(poses: torch.Tensor) -> torch.Tensor:
@@ -50,25 +58,35 @@ def bone_lengths(poses: torch.Tensor) -> torch.Tensor:
     return lengths
 
 
-def rebuild(poses: torch.Tensor, scale: torch.Tensor, pelvis_shift: torch.Tensor) -> torch.Tensor:
+def rebuild(poses: torch.Tensor, scale: torch.Tensor, shift: torch.Tensor) -> torch.Tensor:
     """Poses ``[B, 21, 3]`` on new bodies: bone ``b`` scaled by ``scale[:, b]`` (root outwards,
-    directions kept), then the pelvis joint moved by ``pelvis_shift[:, None]`` times the
-    pelvis->spine1 vector (the rest of the body stays where it is)."""
+    directions kept), then joints moved, their children staying where they are: the pelvis
+    by ``shift[:, 0]`` times the pelvis->spine1 vector, and where ``shift`` is ``[B, 21]``
+    every other joint ``j`` by ``shift[:, j]`` times its parent bone (``core.bodies.Body``'s
+    convention). ``shift`` ``[B]``: the pelvis alone."""
     vec = poses[:, _CHILD] - poses[:, _PARENT]  # [B, 20, 3]
     out = poses.clone()
     for bones in _LEVELS:
         out[:, _CHILD[bones]] = out[:, _PARENT[bones]] + vec[:, bones] * scale[:, bones, None]
-    spine = out[:, _SPINE1] - out[:, _PELVIS]
-    out[:, _PELVIS] = out[:, _PELVIS] + pelvis_shift[:, None] * spine
+    scaled = out.clone()  # every move is measured on the scaled pose: order does not matter
+    pelvis = shift if shift.dim() == 1 else shift[:, _PELVIS]
+    out[:, _PELVIS] = out[:, _PELVIS] + pelvis[:, None] * (scaled[:, _SPINE1] - scaled[:, _PELVIS])
+    if shift.dim() == 2:
+        for j, parent, _ in _PLACED:
+            out[:, j] = out[:, j] + shift[:, j, None] * (scaled[:, j] - scaled[:, parent])
     return out
 
 
 def random_bodies(
-    n: int, rng: np.random.Generator, cfg: AugmentConfig
+    n: int, rng: np.random.Generator, cfg: AugmentConfig, *, placement: bool = True
 ) -> tuple[torch.Tensor, torch.Tensor]:
-    """Bone scales ``[n, 20]`` and pelvis shifts ``[n]``: log-normal per bone, left and right
-    equal in ``symmetric_fraction`` of bodies, plus a per-body limb/trunk factor; a share
-    ``1 - body_fraction`` keeps the recorded body (scale 1, shift 0)."""
+    """Bone scales ``[n, 20]`` and joint shifts (:func:`rebuild`): log-normal per bone, left
+    and right equal in ``symmetric_fraction`` of bodies, plus a per-body limb/trunk factor;
+    the pelvis shifted up to ``pelvis_shift``; a share ``1 - body_fraction`` keeps the
+    recorded body (scale 1, shift 0). With ``placement`` and ``joint_shift`` > 0 the shifts
+    are ``[n, 21]``: the neck, head and collars too, each uniform within ``joint_shift``
+    times its ``PLACEMENT`` limit (mirror joints alike in symmetric bodies); else ``[n]``,
+    the pelvis alone (the random stream as before ``joint_shift`` existed)."""
     log = rng.normal(0.0, cfg.bone_sigma, (n, len(BONE_CHILDREN)))
     sym = rng.random(n) < cfg.symmetric_fraction
     log[sym] = 0.5 * (log[sym] + log[sym][:, _BONE_MIRROR.numpy()])
@@ -77,7 +95,17 @@ def random_bodies(
     shift = rng.uniform(-cfg.pelvis_shift, cfg.pelvis_shift, n)
     keep = rng.random(n) >= cfg.body_fraction
     scale[keep], shift[keep] = 1.0, 0.0
-    return torch.from_numpy(scale).float(), torch.from_numpy(shift).float()
+    if not (placement and cfg.joint_shift > 0):
+        return torch.from_numpy(scale).float(), torch.from_numpy(shift).float()
+    shifts = np.zeros((n, len(MIRROR)))
+    shifts[:, _PELVIS] = shift
+    for j, _, limit in _PLACED:
+        shifts[:, j] = rng.uniform(-1.0, 1.0, n) * cfg.joint_shift * limit
+    mirrored = shifts[:, list(MIRROR)]
+    first = np.arange(len(MIRROR)) <= np.asarray(MIRROR)  # one of each pair gives its value
+    shifts[sym] = np.where(first, shifts[sym], mirrored[sym])
+    shifts[keep] = 0.0
+    return torch.from_numpy(scale).float(), torch.from_numpy(shifts).float()
 
 
 def mirror(poses: torch.Tensor) -> torch.Tensor:

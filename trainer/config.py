@@ -250,6 +250,13 @@ class AugmentConfig(_Section):
     pelvis_shift: float = Field(
         default=0.35, ge=0, description="Pelvis moved up to this share of pelvis->spine1."
     )
+    joint_shift: float = Field(
+        default=0.0,
+        ge=0,
+        description="Autoencoder and solver pairs: the neck, head and collars moved along "
+        "their parent bones by up to this times core.bodies.PLACEMENT's limits (1: the "
+        "stress set's range); 0: the pelvis alone is placed anew. Completion does not read it.",
+    )
     mirror: bool = True
     normalise_size: bool = Field(
         default=True,

@@ -167,7 +167,7 @@ def load_checkpoint(
 _ADDED_LATER: dict[str, tuple[str, ...]] = {
     "autoencoder": ("loss", "lr_schedule"),
     "solver": ("rigid_loss", "joint_loss", "stay_frame", "carry_loss"),
-    "augment": ("lift_start",),
+    "augment": ("lift_start", "joint_shift"),
     "completion": ("loss",),
 }
 
@@ -207,7 +207,8 @@ def config_tag(cfg: TrainConfig, stage: str, *, legacy: bool = False) -> str:
         serving = tuple(k for k in SERVING_SETTINGS if k not in keep)
         relevant["solver"] = _section(cfg, "solver", (*serving, *other))
         relevant["augment"] = _section(cfg, "augment")
-    if stage.startswith("completion"):  # serving_*: serving only
+    if stage.startswith("completion"):  # serving_*: serving only; joint_shift: not read
+        relevant["augment"] = _section(cfg, "augment", (*pairs_only, "joint_shift"))
         relevant["completion"] = _section(cfg, "completion", ("serving_yaws", "serving_mirror"))
     text = json.dumps(relevant, sort_keys=True)
     return f"{stage}:{hashlib.sha256(text.encode()).hexdigest()[:16]}"

@@ -443,7 +443,7 @@ def augment(
     out = as_joints(poses)
     n = len(out)
     if aug is not None and aug.enabled:
-        scale, shift = random_bodies(n, rng, aug)
+        scale, shift = random_bodies(n, rng, aug, placement=False)  # augment.joint_shift: not here
         out = rebuild(out, scale, shift)
         size = np.where(rng.random(n) < 0.5, 1.0, rng.uniform(0.6, 1.2, n))
         out = out * torch.from_numpy(size).float()[:, None, None]

@@ -9,13 +9,15 @@ import pytest
 import torch
 
 from core.geometry import canonical_transform
-from core.skeleton import JOINT_INDEX, MIRROR, bone_lengths
+from core.bodies import PLACEMENT
+from core.skeleton import JOINT_INDEX, MIRROR, PARENTS, bone_lengths
 from trainer.augment import (
     FrameSource,
     augment_pairs,
     goal_in_start_frame,
     lift_onto,
     mirror,
+    random_bodies,
     rebuild,
     turn,
 )
@@ -91,6 +93,40 @@ def test_rebuild_gives_the_requested_bone_lengths(small_dataset: Path) -> None:
     moved = rebuild(poses, scale, torch.full((32,), 0.3, dtype=torch.float64))
     up = (out[:, JOINT_INDEX["spine1"]] - out[:, PELVIS]) * 0.3
     torch.testing.assert_close(moved[:, PELVIS] - out[:, PELVIS], up)
+
+
+def test_joint_shift_places_neck_head_and_collars_anew(small_dataset: Path) -> None:
+    src, _ = _source(small_dataset)
+    poses = src.poses[:256]
+    cfg = AugmentConfig(body_fraction=0.75, joint_shift=1.0)
+    scale, shift = random_bodies(256, np.random.default_rng(8), cfg)
+    assert shift.shape == (256, 21)
+    # the pelvis and the body draw as without joint_shift (its stream comes after them)
+    scale0, pelvis = random_bodies(256, np.random.default_rng(8), AugmentConfig(body_fraction=0.75))
+    torch.testing.assert_close(scale, scale0, atol=0, rtol=0)
+    torch.testing.assert_close(shift[:, PELVIS], pelvis, atol=0, rtol=0)
+    recorded = (scale == 1.0).all(dim=1)
+    assert recorded.any() and not shift[recorded].any()  # a recorded body keeps its joints
+    moved = [JOINT_INDEX[n] for n in PLACEMENT if n != "pelvis"]
+    limits = torch.tensor([PLACEMENT[n] for n in PLACEMENT if n != "pelvis"])
+    assert (shift[:, moved].abs() <= limits + 1e-7).all()
+    assert (shift[~recorded][:, moved].abs() > 0.05 * limits).float().mean() > 0.8
+    others = [j for j in range(21) if j not in moved and j != PELVIS]
+    assert not shift[:, others].any()
+    # symmetric bodies move both collars alike; others may not
+    lc, rc = JOINT_INDEX["left_collar"], JOINT_INDEX["right_collar"]
+    same = shift[:, lc] == shift[:, rc]
+    assert same[~recorded].any() and not same[~recorded].all()
+    # each moved joint goes along its parent bone; its children stay where they were
+    out = rebuild(poses, torch.ones_like(scale), shift)
+    for j in moved:
+        along = shift[:, j, None] * (poses[:, j] - poses[:, PARENTS[j]])
+        torch.testing.assert_close(out[:, j] - poses[:, j], along, atol=1e-6, rtol=0)
+    rest = [j for j in range(21) if j not in moved and j != PELVIS]
+    torch.testing.assert_close(out[:, rest], poses[:, rest], atol=1e-6, rtol=0)
+    # completion's bodies (placement=False) are the pelvis-only ones, whatever joint_shift
+    _, alone = random_bodies(256, np.random.default_rng(8), cfg, placement=False)
+    torch.testing.assert_close(alone, pelvis, atol=0, rtol=0)
 
 
 def test_pairs_share_one_body_and_are_normalised(small_dataset: Path) -> None:
