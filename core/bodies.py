@@ -2,9 +2,11 @@
 
 A *body* is a change applied to poses ``[..., 21, 3]``: every bone scaled by its own factor,
 and some joints moved along a bone, as another studio would place them (pelvis higher up
-the spine, neck lower, collars nearer the midline, ...). The benchmark's stress set and
-the trainer's augmentation use the same functions, so both mean the same thing by "another
-body". Nothing here is random unless a ``numpy.random.Generator`` is passed in.
+the spine, neck lower, collars nearer the midline, ...). The benchmark's stress set uses
+these functions; the trainer's augmentation (``trainer/augment.py``, in torch) moves joints
+the same way and within the same :data:`PLACEMENT` limits (``augment.joint_shift``), so
+both mean the same thing by "another body". Nothing here is random unless a
+``numpy.random.Generator`` is passed in.
 
 - :func:`random_bodies` draws bodies (symmetric or not);
 - :func:`shift_joints` moves the joints (pose-relative, so it follows any pose);
