@@ -131,6 +131,10 @@ VARIANTS: dict[str, str] = {
     "elbows_long_e8": "the same, 8 epochs (elbows_long_e8.toml)",
     "c15_carry1": "the shipped models served with the whole branch below a dragged joint "
     "turned with its bone (`--carry 1`, FABRIK's rigid branch)",
+    "placement": "the shipped recipe with the neck, head and collars placed anew on the "
+    "autoencoder's and solvers' random bodies (`augment.joint_shift` 1, placement.toml)",
+    "ae_cos5e4": "the shipped recipe with the autoencoder at lr 5e-4 decayed along a cosine "
+    "(ae_cos5e4.toml)",
 }
 COMPLETION = "6-point completion"
 
