@@ -655,6 +655,10 @@ def main(
         Optional[int],  # noqa: UP045
         typer.Option(help="Turn search yaws, 1 = off (default: the manifest's serving)."),
     ] = None,
+    keep_ends: Annotated[
+        Optional[bool],  # noqa: UP045
+        typer.Option(help="Targeted limb ends kept (default: the manifest's serving.keep_ends)."),
+    ] = None,
 ) -> None:
     """Held-out bodies and the stress set only, against any models folder."""
     from rich.console import Console
@@ -667,11 +671,15 @@ def main(
         raise typer.BadParameter(f"no dataset file at {dataset}", param_hint="--dataset")
     console = Console(stderr=True)
     cfg = dataclasses.replace(QUICK if quick else HeldoutConfig(), seed=seed)
-    engine = Engine(models, threads=1, solve_passes=passes, carry=carry, turn_yaws=turn_yaws)
+    engine = Engine(
+        models, threads=1, solve_passes=passes, carry=carry, turn_yaws=turn_yaws,
+        keep_ends=keep_ends,
+    )  # fmt: skip
     res = run_heldout(engine, load_dataset(dataset), cfg, split=split, log=console.log)
     res.models = {
         "dir": str(models), "version": engine.version, "passes": engine.solve_passes,
         "carry": engine.carry, "turn_yaws": engine.turn_search.yaws,
+        "keep_ends": engine.keep_ends,
     }  # fmt: skip
     if out is not None:
         out.parent.mkdir(parents=True, exist_ok=True)

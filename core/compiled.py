@@ -19,6 +19,8 @@ import numpy as np
 import numpy.typing as npt
 
 from core.carry import BONE_OF
+from core.ends import BELOW as _ENDS_BELOW
+from core.ends import CHAINS as _CHAINS
 from core.jit import jit
 from core.rest import REST_DIRS
 from core.skeleton import (
@@ -54,6 +56,7 @@ _PARENTS: I64 = BONE_PARENTS.astype(np.int64)
 _LEFT: I64 = np.asarray([JOINT_INDEX[a] for a, _ in FACING_PAIRS], dtype=np.int64)
 _RIGHT: I64 = np.asarray([JOINT_INDEX[b] for _, b in FACING_PAIRS], dtype=np.int64)
 _PELVIS = JOINT_INDEX["pelvis"]
+_ENDS_TINY = 1e-12  # core.ends._TINY
 #: Parent of each joint (joint order; the root's is itself).
 PARENTS_J: I64 = np.asarray([max(p, 0) for p in PARENTS], dtype=np.int64)
 
@@ -434,6 +437,58 @@ def carry_item(
 
 
 @jit
+def ends_item(
+    out: F64, network: F64, tidx: I64, count: int, flags: I64
+) -> None:  # pragma: no cover - compiled
+    """``core.ends.keep_ends`` for one pose ``out [21, 3]`` (after the bone pass) and its
+    network pose ``network [21, 3]``, in place; ``flags [21]`` (int64) is scratch."""
+    for j in range(NUM_JOINTS):
+        flags[j] = 0
+    for q in range(count):
+        flags[tidx[q]] = 1
+    s, e0, w0, u, v = np.empty(3), np.empty(3), np.empty(3), np.empty(3), np.empty(3)
+    for c in range(_CHAINS.shape[0]):
+        top, mid, end = _CHAINS[c, 0], _CHAINS[c, 1], _CHAINS[c, 2]
+        if flags[end] == 0 or flags[mid] != 0 or flags[top] != 0:
+            continue
+        below = False
+        for j in range(NUM_JOINTS):
+            if _ENDS_BELOW[c, j] and flags[j] != 0:
+                below = True
+        if below:
+            continue
+        for i in range(3):
+            s[i], e0[i], w0[i] = out[top, i], out[mid, i], out[end, i]
+        a = np.sqrt((e0[0] - s[0]) ** 2 + (e0[1] - s[1]) ** 2 + (e0[2] - s[2]) ** 2)
+        b = np.sqrt((w0[0] - e0[0]) ** 2 + (w0[1] - e0[1]) ** 2 + (w0[2] - e0[2]) ** 2)
+        for i in range(3):
+            u[i] = network[end, i] - s[i]
+        d0 = np.sqrt(u[0] ** 2 + u[1] ** 2 + u[2] ** 2)
+        if not (d0 > _ENDS_TINY and a > _ENDS_TINY):
+            continue
+        for i in range(3):
+            u[i] = u[i] / d0
+        d = min(max(d0, abs(a - b)), a + b)
+        along = (e0[0] - s[0]) * u[0] + (e0[1] - s[1]) * u[1] + (e0[2] - s[2]) * u[2]
+        for i in range(3):
+            v[i] = (e0[i] - s[i]) - along * u[i]
+        nb = np.sqrt(v[0] ** 2 + v[1] ** 2 + v[2] ** 2)
+        if not nb > _ENDS_TINY:
+            continue
+        for i in range(3):
+            v[i] = v[i] / nb
+        cos = min(max((a * a + d * d - b * b) / (2.0 * a * d), -1.0), 1.0)
+        sin = np.sqrt(max(0.0, 1.0 - cos * cos))
+        for i in range(3):
+            shift = (s[i] + d * u[i]) - w0[i]
+            out[mid, i] = s[i] + a * (cos * u[i] + sin * v[i])
+            out[end, i] = w0[i] + shift
+            for j in range(NUM_JOINTS):
+                if _ENDS_BELOW[c, j]:
+                    out[j, i] += shift
+
+
+@jit
 def unscale(
     decoded: F32,
     scales: F64,
@@ -443,11 +498,13 @@ def unscale(
     tidx: I64,
     counts: I64,
     carry: F64,
+    ends: bool,
 ) -> F64:  # pragma: no cover - compiled
     """Network answers ``[M, 63]`` (float32, at the networks' size) back to the body's
     size (float64), with the bone pass (reference: the start pose) where ``bone``, and
     there, where ``carry[b]`` > 0, :func:`carry_item` below the item's targets ``tidx[b,
-    :counts[b]]`` by that weight."""
+    :counts[b]]`` by that weight, then with ``ends`` :func:`ends_item` (the targeted limb
+    ends back where the network put them)."""
     m = decoded.shape[0]
     out = np.empty((m, NUM_JOINTS, 3))
     pose = np.empty((NUM_JOINTS, 3))
@@ -467,6 +524,8 @@ def unscale(
             if carry[b] > 0.0:
                 carry_item(out[b], canon[b], lengths[b], tidx[b], counts[b], carry[b], rr,
                            flags, anchor, vecs)  # fmt: skip
+            if ends:
+                ends_item(out[b], pose, tidx[b], counts[b], flags)
         else:
             out[b] = pose
     return out
@@ -531,11 +590,12 @@ def settle(
     tpos: F64,
     counts: I64,
     carry: F64,
+    ends: bool,
 ) -> tuple[F64, F64, F64]:  # pragma: no cover - compiled
     """:func:`unscale` with the bone pass for every item, then :func:`finish`, in one call
     (the lean path of ``service.lean``): the same arithmetic in the same order."""
     bone = np.ones(decoded.shape[0], dtype=np.bool_)
-    out = unscale(decoded, scales, canon, lengths, bone, tidx, counts, carry)
+    out = unscale(decoded, scales, canon, lengths, bone, tidx, counts, carry, ends)
     return finish(out, facing, trans, floors, tidx, tpos, counts, lengths)
 
 
@@ -556,8 +616,9 @@ def warm() -> None:
         np.ones(1), True, 1.0,
     )  # fmt: skip
     unscale(
-        out[6], out[4], out[0], out[3], np.ones(1, dtype=np.bool_), tidx, counts, np.full(1, 0.5)
-    )
+        out[6], out[4], out[0], out[3], np.ones(1, dtype=np.bool_), tidx, counts, np.full(1, 0.5),
+        True,
+    )  # fmt: skip
     finish(out[0], out[1], out[2], np.zeros(1), tidx, tpos, counts, out[3])
     settle(
         out[6],
@@ -571,6 +632,7 @@ def warm() -> None:
         tpos,
         counts,
         np.full(1, 0.5),
+        True,
     )
 
 

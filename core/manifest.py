@@ -123,6 +123,13 @@ class Serving(_Strict):
         "branch would, by this fraction: 0 keeps the network's answer, 1 carries the branch "
         "as the start pose had it (as FABRIK does); each bone's direction is the mix.",
     )
+    keep_ends: bool = Field(
+        default=False,
+        description="After the bone pass (and the carry), each targeted wrist and ankle with "
+        "no target on its elbow or knee, shoulder or hip, or below it goes back where the "
+        "networks put it (as near as the limb reaches), its elbow or knee placed anew with "
+        "the character's own lengths in the plane the limb was bent in (core.ends).",
+    )
     turn_yaws: int = Field(
         default=1,
         ge=1,

@@ -87,6 +87,7 @@ class Engine:
         carry: float | None = None,
         turn_yaws: int | None = None,
         retry_reach: float | None = None,
+        keep_ends: bool | None = None,
     ) -> None:
         self.models_dir = Path(models_dir)
         self.manifest: Manifest = load_manifest(self.models_dir, verify=True)
@@ -134,6 +135,9 @@ class Engine:
         self.carry = float(m.serving.carry if carry is None else carry)
         if not 0.0 <= self.carry <= 1.0:
             raise ValueError(f"carry must be in [0, 1], got {self.carry}")
+        #: the bone pass keeps targeted wrists and ankles where the networks put them
+        #: (``serving.keep_ends`` unless overridden; :mod:`core.ends`)
+        self.keep_ends = bool(m.serving.keep_ends if keep_ends is None else keep_ends)
         #: the turn search of many-target edits (``serving.turn_*``, :mod:`service.turns`)
         self.turn_search = turns.TurnSearch.of(m.serving, turn_yaws)
         known = np.asarray(m.skeleton.skeletons, dtype=np.float64)  # [C, 20]
@@ -435,7 +439,7 @@ class Engine:
             if len(sequences) == 1 and neural.all():  # the common case: no gathers
                 decoded = self._run_sequence(x, canvas, sequences[0])
                 out = compiled.unscale(
-                    decoded, scales, canon, lengths, bone, tidx, cnt, batch.carry
+                    decoded, scales, canon, lengths, bone, tidx, cnt, batch.carry, self.keep_ends
                 )
             else:
                 items = np.flatnonzero(neural)
@@ -446,7 +450,7 @@ class Engine:
                 out = canon.copy()
                 out[items] = compiled.unscale(
                     decoded[items], scales[items], canon[items], lengths[items], bone[items],
-                    tidx[items], cnt[items], batch.carry[items],
+                    tidx[items], cnt[items], batch.carry[items], self.keep_ends,
                 )  # fmt: skip
         start = canon
         if origin is not None and moved is not None and moved.any():

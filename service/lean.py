@@ -122,10 +122,12 @@ def solve_lean(
         if not exact or k < passes - 1:
             pose, errors, bone_err = compiled.settle(
                 decoded, scales, canon, lengths, facing, trans, floors, tidx, tpos, counts,
-                items.carry,
+                items.carry, engine.keep_ends,
             )  # fmt: skip
             continue
-        out = compiled.unscale(decoded, scales, canon, lengths, every, tidx, counts, items.carry)
+        out = compiled.unscale(
+            decoded, scales, canon, lengths, every, tidx, counts, items.carry, engine.keep_ends
+        )
         out, iterations, errs = engine._fabrik(
             True, out, lengths, tcan[:, :c], items.tols, tidx[0, :c], items.w[0, :c],
             np.zeros(c, dtype=np.bool_),

@@ -109,6 +109,7 @@ class SolverConfig(_Section):
     turn_plausibility: float = _serving("turn_plausibility")
     turn_critic: Literal["autoencoder", "completion"] = _serving("turn_critic")
     retry_reach: float = _serving("retry_reach")
+    keep_ends: bool = _serving("keep_ends")
     # (their names: SERVING_SETTINGS, below, which the export and the checkpoint tags read)
     carry_loss: bool = Field(
         default=False,
@@ -162,7 +163,7 @@ class SolverConfig(_Section):
 #: ``serving`` block under the same names, and not in the solvers' checkpoint tags.
 SERVING_SETTINGS: tuple[str, ...] = (
     "passes", "carry", "turn_yaws", "turn_margin", "turn_min_targets", "turn_plausibility",
-    "turn_critic", "retry_reach",
+    "turn_critic", "retry_reach", "keep_ends",
 )  # fmt: skip
 if not set(SERVING_SETTINGS) <= set(SolverConfig.model_fields) & set(Serving.model_fields):
     raise RuntimeError("SERVING_SETTINGS must name fields of SolverConfig and of Serving")

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 import torch
 
-from core.geometry import canonical_transform
 from core.bodies import PLACEMENT
+from core.geometry import canonical_transform
 from core.skeleton import JOINT_INDEX, MIRROR, PARENTS, bone_lengths
 from trainer.augment import (
     FrameSource,

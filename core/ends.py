@@ -1,0 +1,99 @@
+"""Targeted limb ends stay where the networks put them through the bone pass.
+
+The bone pass (:func:`core.kinematics.bone_pass`) gives a character its own bone lengths
+root outwards, each bone keeping the direction the networks gave it. A wrist the networks
+put on its target then lands where the character's own arm, laid along those directions,
+ends: on a body whose arm is longer or shorter than the one the networks drew, centimetres
+away (docs/generalisation.md items 8 and 28). :func:`keep_ends` puts it back. For each
+targeted wrist and ankle with no target on its elbow or knee, its shoulder or hip, or
+below it:
+
+- the end goes where the networks put it, or, out of the limb's reach, as near as the limb
+  reaches on the line from the shoulder (hip) towards it;
+- the elbow (knee) is placed anew by the two-bone solution (law of cosines) with the
+  character's own lengths, in the plane the bone pass bent the limb in;
+- the branch below the end (the foot) moves with it.
+
+The shoulder (hip) and everything above stay as the bone pass left them; bone lengths stay
+exact. A limb bent in no plane (straight along the line to the end) is left as it was.
+
+Batched numpy over ``[..., 21, 3]`` with one target set: the reference the compiled kernel
+(``core.compiled.ends_item``, in ``unscale``) is held to in tests.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from typing import Final
+
+import numpy as np
+import numpy.typing as npt
+
+from core.skeleton import JOINT_INDEX, NUM_JOINTS, PARENTS
+
+F64 = npt.NDArray[np.float64]
+
+#: The limb ends kept, each with its chain: (shoulder or hip, elbow or knee, end).
+CHAINS: Final[npt.NDArray[np.int64]] = np.asarray(
+    [
+        (PARENTS[PARENTS[j]], PARENTS[j], j)
+        for j in (
+            JOINT_INDEX[n] for n in ("left_wrist", "right_wrist", "left_ankle", "right_ankle")
+        )
+    ],
+    dtype=np.int64,
+)
+#: Per chain, the joints below its end ``[4, 21]``.
+BELOW: Final[npt.NDArray[np.bool_]] = np.zeros((len(CHAINS), NUM_JOINTS), dtype=np.bool_)
+for _c, _end in enumerate(CHAINS[:, 2].tolist()):
+    for _j in range(NUM_JOINTS):
+        _p = PARENTS[_j]
+        while _p >= 0 and _p != _end:
+            _p = PARENTS[_p]
+        BELOW[_c, _j] = _p == _end
+_TINY = 1e-12
+
+
+def kept_chains(targets: Iterable[int]) -> list[int]:
+    """The chains (rows of :data:`CHAINS`) whose end :func:`keep_ends` keeps for a target
+    set: the end targeted; its middle joint, its top joint and the joints below it not."""
+    targeted = np.zeros(NUM_JOINTS, dtype=bool)
+    targeted[list(targets)] = True
+    return [
+        c
+        for c, (top, mid, end) in enumerate(CHAINS.tolist())
+        if targeted[end]
+        and not targeted[mid]
+        and not targeted[top]
+        and not targeted[BELOW[c]].any()
+    ]
+
+
+def keep_ends(pose: F64, network: F64, targets: Iterable[int]) -> F64:
+    """``pose [..., 21, 3]`` (after the bone pass: the character's lengths) with each kept
+    chain's end where ``network`` (the same poses before the bone pass) has it, as near as
+    the limb reaches; see the module. A new array."""
+    out = np.array(pose, dtype=np.float64, copy=True)
+    net = np.asarray(network, dtype=np.float64)
+    for c in kept_chains(targets):
+        top, mid, end = CHAINS[c].tolist()
+        s, e0, w0 = out[..., top, :], out[..., mid, :], out[..., end, :]
+        a = np.sqrt(np.sum((e0 - s) ** 2, axis=-1))
+        b = np.sqrt(np.sum((w0 - e0) ** 2, axis=-1))
+        line = net[..., end, :] - s
+        d0 = np.sqrt(np.sum(line**2, axis=-1))
+        u = line / np.where(d0 > _TINY, d0, 1.0)[..., None]
+        d = np.minimum(np.maximum(d0, np.abs(a - b)), a + b)
+        bend = (e0 - s) - np.sum((e0 - s) * u, axis=-1)[..., None] * u
+        nb = np.sqrt(np.sum(bend**2, axis=-1))
+        v = bend / np.where(nb > _TINY, nb, 1.0)[..., None]
+        ok = (d0 > _TINY) & (nb > _TINY) & (a > _TINY)
+        cos = np.clip((a * a + d * d - b * b) / np.where(ok, 2.0 * a * d, 1.0), -1.0, 1.0)
+        sin = np.sqrt(np.maximum(0.0, 1.0 - cos * cos))
+        elbow = s + a[..., None] * (cos[..., None] * u + sin[..., None] * v)
+        wrist = s + d[..., None] * u
+        shift = np.where(ok[..., None], wrist - w0, 0.0)
+        out[..., mid, :] = np.where(ok[..., None], elbow, e0)
+        out[..., end, :] = w0 + shift
+        out[..., BELOW[c], :] += shift[..., None, :]
+    return out

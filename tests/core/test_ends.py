@@ -1,0 +1,107 @@
+"""Targeted limb ends kept through the bone pass (core.ends) on real poses, and its compiled
+kernel (core.compiled.ends_item) against it."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from core import compiled
+from core.ends import BELOW, CHAINS, keep_ends, kept_chains
+from core.skeleton import JOINT_INDEX, bone_lengths
+from tests.conftest import PosePairs
+
+J = JOINT_INDEX
+L_ARM = (J["left_shoulder"], J["left_elbow"], J["left_wrist"])
+R_LEG = (J["right_hip"], J["right_knee"], J["right_ankle"])
+
+
+def _idx(*names: str) -> list[int]:
+    return [J[n] for n in names]
+
+
+def test_chains_kept_only_for_free_limb_ends() -> None:
+    def kept(*names: str) -> set[int]:
+        return {int(CHAINS[c, 2]) for c in kept_chains(_idx(*names))}
+
+    assert tuple(CHAINS[0]) == L_ARM and tuple(CHAINS[3]) == R_LEG
+    assert kept("left_wrist", "right_ankle", "head") == {J["left_wrist"], J["right_ankle"]}
+    # a target on the elbow, the shoulder or below the ankle (the foot) leaves the chain be
+    assert kept("left_wrist", "left_elbow") == set()
+    assert kept("left_wrist", "left_shoulder") == set()
+    assert kept("left_ankle", "left_foot") == set()
+    assert kept("left_knee", "pelvis", "spine2") == set()
+    assert BELOW[3, J["right_foot"]] and BELOW[3].sum() == 1 and not BELOW[0].any()
+
+
+@pytest.fixture(scope="module")
+def limbs(real_poses: PosePairs) -> tuple[np.ndarray, np.ndarray]:
+    """Stand-in network answers (goals on bodies with other limb lengths) and the same
+    answers after the bone pass onto their starts' lengths."""
+    start = real_poses.poses[real_poses.starts]
+    goal = real_poses.poses[real_poses.goals]
+    rng = np.random.default_rng(3)
+    scale = rng.uniform(0.8, 1.25, (len(goal), 20))
+    lens = np.ascontiguousarray(bone_lengths(start))
+    network = compiled.bone_pass_batch(
+        np.ascontiguousarray(goal), np.ascontiguousarray(lens * scale), goal, True
+    )
+    return network, compiled.bone_pass_batch(network, lens, start, True)
+
+
+def test_ends_go_back_where_the_network_put_them(limbs: tuple[np.ndarray, np.ndarray]) -> None:
+    network, passed = limbs
+    out = keep_ends(passed, network, _idx("left_wrist", "right_ankle"))
+    # bone lengths stay the character's
+    assert np.abs(bone_lengths(out) / bone_lengths(passed) - 1).max() < 1e-12
+    moved = [*L_ARM[1:], *R_LEG[1:], J["right_foot"]]
+    rest = np.setdiff1d(np.arange(21), moved)
+    assert np.array_equal(out[:, rest], passed[:, rest])  # the top and the rest stay
+    for top, mid, end in (L_ARM, R_LEG):
+        reach = np.linalg.norm(passed[:, mid] - passed[:, top], axis=-1) + np.linalg.norm(
+            passed[:, end] - passed[:, mid], axis=-1
+        )
+        far = np.linalg.norm(network[:, end] - passed[:, top], axis=-1)
+        inside = far < reach
+        assert inside.mean() > 0.5 and (~inside).any()
+        # within the limb's reach the end is the network's; beyond, on the line towards it
+        assert np.abs(out[inside, end] - network[inside, end]).max() < 1e-9
+        line = network[~inside, end] - passed[~inside, top]
+        got = out[~inside, end] - passed[~inside, top]
+        unit = line / np.linalg.norm(line, axis=-1, keepdims=True)
+        assert np.abs(got - unit * reach[~inside, None]).max() < 1e-9
+        # the bone pass moved the end; keeping it brings it nearer the network's
+        before = np.linalg.norm(passed[:, end] - network[:, end], axis=-1)
+        after = np.linalg.norm(out[:, end] - network[:, end], axis=-1)
+        assert np.all(after <= before + 1e-12) and before.mean() > 0.01
+        # the elbow (knee) stays in the plane the bone pass bent the limb in
+        normal = np.cross(passed[:, mid] - passed[:, top], network[:, end] - passed[:, top])
+        assert np.abs(np.sum((out[:, mid] - passed[:, top]) * normal, axis=-1)).max() < 1e-9
+    # the foot moves with the ankle, as it hung below it
+    foot, ankle = J["right_foot"], J["right_ankle"]
+    np.testing.assert_allclose(out[:, foot] - out[:, ankle], passed[:, foot] - passed[:, ankle])
+
+
+def test_compiled_ends_match_numpy(limbs: tuple[np.ndarray, np.ndarray]) -> None:
+    network, passed = limbs
+    flags = np.empty(21, np.int64)
+    for names in [("left_wrist",), ("left_wrist", "right_wrist", "left_ankle", "right_ankle"),
+                  ("right_ankle", "right_foot"), ("head", "left_elbow")]:  # fmt: skip
+        targets = _idx(*names)
+        tidx = np.asarray(targets + [0] * (5 - len(targets)), dtype=np.int64)
+        ref = keep_ends(passed, network, targets)
+        got = passed.copy()
+        for b in range(len(got)):
+            compiled.ends_item(got[b], network[b], tidx, len(targets), flags)
+        assert np.abs(got - ref).max() < 1e-12
+    # degenerate: the network's wrist on the shoulder; an arm straight along the line to it
+    bad, net = passed[:2].copy(), network[:2].copy()
+    top, mid, end = L_ARM
+    net[0, end] = bad[0, top]
+    bad[1, mid] = bad[1, top] + 0.3 * (net[1, end] - bad[1, top])
+    ref = keep_ends(bad, net, [end])
+    got = bad.copy()
+    for b in range(2):
+        compiled.ends_item(got[b], net[b], np.asarray([end]), 1, flags)
+    assert np.all(np.isfinite(got)) and np.abs(got - ref).max() < 1e-12
+    assert np.array_equal(got, bad)  # nothing to place by: left as the bone pass had it
