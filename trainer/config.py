@@ -116,6 +116,12 @@ class SolverConfig(_Section):
         description="With rigid_loss: the losses also see the carry below the targets "
         "(`carry`), as the answer is served (then `carry` is a training setting too).",
     )
+    ends_loss: bool = Field(
+        default=False,
+        description="With rigid_loss: the losses also see the targeted limb ends kept where "
+        "the network put them (`keep_ends`), as the answer is served (then `keep_ends` is a "
+        "training setting too).",
+    )
     identity_fraction: float = Field(
         default=0.1,
         ge=0,

@@ -15,6 +15,7 @@ from __future__ import annotations
 import torch
 
 from core.carry import BONE_OF, carry_anchors
+from core.ends import BELOW, CHAINS, kept_chains
 from core.skeleton import BONE_CHILDREN, BONE_PARENTS, BONES, NUM_JOINTS, PARENTS
 from trainer.augment import bone_lengths
 
@@ -93,5 +94,39 @@ def carry_t(
             u = _unit(weight * carried + (1.0 - weight) * d)
             b_j = int(BONE_OF[j])
             pose[j] = pose[p] + lengths[:, b_j : b_j + 1] * u
+        out.append(torch.stack(pose, dim=-2))
+    return torch.stack(out).reshape(answers.shape)
+
+
+def ends_t(answers: torch.Tensor, network: torch.Tensor, sets: list[list[int]]) -> torch.Tensor:
+    """``core.ends.keep_ends`` of every solver's answer ``[S, B, 63]`` (after
+    :func:`bone_pass_t`, and the carry if any) with the networks' poses ``network [S, B,
+    63]`` (before it), solver ``s`` keeping the ends of its own targets ``sets[s]``;
+    differentiable (the degenerate cases the service leaves alone are kept finite, not
+    matched)."""
+    n_sets, b = answers.shape[0], answers.shape[1]
+    joints = answers.reshape(n_sets, b, NUM_JOINTS, 3)
+    net = network.reshape(n_sets, b, NUM_JOINTS, 3)
+    out = []
+    for s, targets in enumerate(sets):
+        pose = list(joints[s].unbind(dim=-2))
+        for c in kept_chains(targets):
+            top, mid, end = (int(j) for j in CHAINS[c])
+            a = (pose[mid] - pose[top]).norm(dim=-1, keepdim=True)
+            bl = (pose[end] - pose[mid]).norm(dim=-1, keepdim=True)
+            line = net[s, :, end] - pose[top]
+            d0 = line.norm(dim=-1, keepdim=True)
+            u = line / d0.clamp_min(EPS)
+            d = torch.minimum(torch.maximum(d0, (a - bl).abs()), a + bl)
+            e0 = pose[mid] - pose[top]
+            bend = e0 - (e0 * u).sum(-1, keepdim=True) * u
+            v = bend / bend.norm(dim=-1, keepdim=True).clamp_min(EPS)
+            cos = ((a * a + d * d - bl * bl) / (2.0 * a * d).clamp_min(EPS)).clamp(-1.0, 1.0)
+            sin = (1.0 - cos * cos).clamp_min(1e-12).sqrt()  # a finite gradient at full reach
+            shift = pose[top] + d * u - pose[end]
+            pose[mid] = pose[top] + a * (cos * u + sin * v)
+            pose[end] = pose[end] + shift
+            for j in BELOW[c].nonzero()[0].tolist():
+                pose[j] = pose[j] + shift
         out.append(torch.stack(pose, dim=-2))
     return torch.stack(out).reshape(answers.shape)

@@ -166,7 +166,7 @@ def load_checkpoint(
 #: from their default, so that runs from before them stay valid.
 _ADDED_LATER: dict[str, tuple[str, ...]] = {
     "autoencoder": ("loss", "lr_schedule"),
-    "solver": ("rigid_loss", "joint_loss", "stay_frame", "carry_loss"),
+    "solver": ("rigid_loss", "joint_loss", "stay_frame", "carry_loss", "ends_loss"),
     "augment": ("lift_start", "joint_shift"),
     "completion": ("loss",),
 }
@@ -202,8 +202,11 @@ def config_tag(cfg: TrainConfig, stage: str, *, legacy: bool = False) -> str:
         # each bank reads only its own sets and epochs (its own seed and pair stream), so
         # neither is retrained when only the other's change; passes, carry: serving only
         other = ("sets", "epochs") if stage == "solvers_long" else ("long_sets", "long_epochs")
-        # (carry is a training setting too where the losses see it, solver.carry_loss)
-        keep = ("carry",) if cfg.solver.carry_loss else ()
+        # (carry and keep_ends are training settings too where the losses see them,
+        # solver.carry_loss and solver.ends_loss)
+        keep = (("carry",) if cfg.solver.carry_loss else ()) + (
+            ("keep_ends",) if cfg.solver.ends_loss else ()
+        )
         serving = tuple(k for k in SERVING_SETTINGS if k not in keep)
         relevant["solver"] = _section(cfg, "solver", (*serving, *other))
         relevant["augment"] = _section(cfg, "augment")

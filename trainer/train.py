@@ -40,7 +40,7 @@ from trainer.models import (
     target_columns,
 )
 from trainer.pairs import partner_ranges, sample_partners
-from trainer.rigid import bone_lengths_t, bone_pass_t, carry_t, parent_offsets_t
+from trainer.rigid import bone_lengths_t, bone_pass_t, carry_t, ends_t, parent_offsets_t
 from trainer.stages import (
     Bar,
     Dist,
@@ -250,6 +250,7 @@ def solver_losses(
     distance: bool = False,
     stay_local: bool = False,
     carry: float = 0.0,
+    ends: bool = False,
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """Per-solver loss ``[S]`` and answers ``[S, B, 63]`` for a batch of pairs (``mode`` as
     the service answers, :func:`solved_poses`):
@@ -262,7 +263,9 @@ def solver_losses(
     ``stay_local``: the stay term on each joint's offset from its parent (the root: its
     position), not on its world position (:func:`trainer.rigid.parent_offsets_t`).
     ``carry`` (with ``rigid``): the answer also with the service's carry below each
-    solver's targets (:func:`trainer.rigid.carry_t`), as served with ``serving.carry``."""
+    solver's targets (:func:`trainer.rigid.carry_t`), as served with ``serving.carry``.
+    ``ends`` (with ``rigid``): then each solver's targeted limb ends kept where the network
+    put them (:func:`trainer.rigid.ends_t`), as served with ``serving.keep_ends``."""
     n_sets = len(bank.sets)
     decoded = solved_poses(ae, net, start, goal, n_sets, mode)
     start_lengths = bone_lengths_t(start)
@@ -270,6 +273,8 @@ def solver_losses(
     if rigid and carry > 0:
         sets = [[JOINT_INDEX[j] for j in joints] for joints in bank.sets]
         answer = carry_t(answer, start, start_lengths, sets, carry)
+    if rigid and ends:
+        answer = ends_t(answer, decoded, [[JOINT_INDEX[j] for j in js] for js in bank.sets])
     goal_s = goal.unsqueeze(0).expand(n_sets, -1, -1)
     target_mask = torch.zeros(n_sets, 1, goal.shape[1])
     for s, joints in enumerate(bank.sets):
@@ -381,6 +386,7 @@ def train_solvers(
             ae, bank, model, start, goal, sc.other_weight, sc.bone_weight, mode,
             sc.stay_weight, sc.rigid_loss, sc.joint_loss == "distance",
             sc.stay_frame == "local", sc.carry if sc.carry_loss else 0.0,
+            sc.keep_ends and sc.ends_loss,
         )  # fmt: skip
         return out
 

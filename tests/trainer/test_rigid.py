@@ -6,10 +6,11 @@ import numpy as np
 import torch
 
 from core.carry import carry_below
+from core.ends import keep_ends
 from core.kinematics import bone_pass
 from core.skeleton import JOINT_INDEX, NUM_JOINTS, bone_lengths
 from tests.conftest import PosePairs
-from trainer.rigid import bone_lengths_t, bone_pass_t, carry_t
+from trainer.rigid import bone_lengths_t, bone_pass_t, carry_t, ends_t
 
 
 def test_bone_pass_equals_the_service_one_on_real_poses(real_poses: PosePairs) -> None:
@@ -63,3 +64,28 @@ def test_carry_equals_the_service_one_on_real_poses(real_poses: PosePairs) -> No
     assert torch.equal(got[2], flat[2])  # nothing hangs below the wrists
     (grad,) = torch.autograd.grad(got.sum(), flat)
     assert torch.isfinite(grad).all()
+
+
+def test_ends_equal_the_service_ones_on_real_poses(real_poses: PosePairs) -> None:
+    """Stand-in network answers (real goals with other limb lengths) after the bone pass to
+    the starts' lengths, their targeted limb ends kept (left wrist; both ankles; the left
+    elbow, which keeps nothing): the torch step lands where the service's numpy one does,
+    with a finite gradient."""
+    start = real_poses.poses[real_poses.starts]
+    lengths = bone_lengths(start)
+    scale = np.random.default_rng(5).uniform(0.8, 1.25, lengths.shape)
+    goal = real_poses.poses[real_poses.goals]
+    network = bone_pass(goal, lengths * scale, reference=goal)
+    answer = bone_pass(network, lengths, reference=start)
+    sets = [[JOINT_INDEX["left_wrist"]], [JOINT_INDEX["left_ankle"], JOINT_INDEX["right_ankle"]],
+            [JOINT_INDEX["left_elbow"]]]  # fmt: skip
+    flat = torch.tensor(np.stack([answer.reshape(len(start), -1)] * 3), requires_grad=True)
+    net = torch.tensor(np.stack([network.reshape(len(start), -1)] * 3), requires_grad=True)
+    got = ends_t(flat, net, sets)
+    for s, targets in enumerate(sets):
+        want = keep_ends(answer, network, targets)
+        assert np.abs(got[s].detach().numpy().reshape(want.shape) - want).max() < 1e-6
+    assert not torch.equal(got[0], flat[0]) and torch.equal(got[2], flat[2])
+    (g_answer, g_net) = torch.autograd.grad(got.sum(), (flat, net))
+    assert torch.isfinite(g_answer).all() and torch.isfinite(g_net).all()
+    assert g_net[0].abs().sum() > 0  # the kept end follows the network's
