@@ -21,6 +21,7 @@ import numpy.typing as npt
 from core.carry import BONE_OF
 from core.ends import BELOW as _ENDS_BELOW
 from core.ends import CHAINS as _CHAINS
+from core.ends import TINY as _ENDS_TINY
 from core.jit import jit
 from core.rest import REST_DIRS
 from core.skeleton import (
@@ -56,7 +57,6 @@ _PARENTS: I64 = BONE_PARENTS.astype(np.int64)
 _LEFT: I64 = np.asarray([JOINT_INDEX[a] for a, _ in FACING_PAIRS], dtype=np.int64)
 _RIGHT: I64 = np.asarray([JOINT_INDEX[b] for _, b in FACING_PAIRS], dtype=np.int64)
 _PELVIS = JOINT_INDEX["pelvis"]
-_ENDS_TINY = 1e-12  # core.ends._TINY
 #: Parent of each joint (joint order; the root's is itself).
 PARENTS_J: I64 = np.asarray([max(p, 0) for p in PARENTS], dtype=np.int64)
 

@@ -51,7 +51,8 @@ for _c, _end in enumerate(CHAINS[:, 2].tolist()):
         while _p >= 0 and _p != _end:
             _p = PARENTS[_p]
         BELOW[_c, _j] = _p == _end
-_TINY = 1e-12
+#: Below this (m) a length counts as none: the end on its shoulder (hip), a limb bent in no plane.
+TINY = 1e-12
 
 
 def kept_chains(targets: Iterable[int]) -> list[int]:
@@ -82,12 +83,12 @@ def keep_ends(pose: F64, network: F64, targets: Iterable[int]) -> F64:
         b = np.sqrt(np.sum((w0 - e0) ** 2, axis=-1))
         line = net[..., end, :] - s
         d0 = np.sqrt(np.sum(line**2, axis=-1))
-        u = line / np.where(d0 > _TINY, d0, 1.0)[..., None]
+        u = line / np.where(d0 > TINY, d0, 1.0)[..., None]
         d = np.minimum(np.maximum(d0, np.abs(a - b)), a + b)
         bend = (e0 - s) - np.sum((e0 - s) * u, axis=-1)[..., None] * u
         nb = np.sqrt(np.sum(bend**2, axis=-1))
-        v = bend / np.where(nb > _TINY, nb, 1.0)[..., None]
-        ok = (d0 > _TINY) & (nb > _TINY) & (a > _TINY)
+        v = bend / np.where(nb > TINY, nb, 1.0)[..., None]
+        ok = (d0 > TINY) & (nb > TINY) & (a > TINY)
         cos = np.clip((a * a + d * d - b * b) / np.where(ok, 2.0 * a * d, 1.0), -1.0, 1.0)
         sin = np.sqrt(np.maximum(0.0, 1.0 - cos * cos))
         elbow = s + a[..., None] * (cos[..., None] * u + sin[..., None] * v)
