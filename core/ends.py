@@ -43,14 +43,21 @@ CHAINS: Final[npt.NDArray[np.int64]] = np.asarray(
     ],
     dtype=np.int64,
 )
+
+
+def _below(end: int) -> npt.NDArray[np.bool_]:
+    """Which joints hang below ``end`` ``[21]``."""
+    out = np.zeros(NUM_JOINTS, dtype=np.bool_)
+    for j in range(NUM_JOINTS):
+        p = PARENTS[j]
+        while p >= 0 and p != end:
+            p = PARENTS[p]
+        out[j] = p == end
+    return out
+
+
 #: Per chain, the joints below its end ``[4, 21]``.
-BELOW: Final[npt.NDArray[np.bool_]] = np.zeros((len(CHAINS), NUM_JOINTS), dtype=np.bool_)
-for _c, _end in enumerate(CHAINS[:, 2].tolist()):
-    for _j in range(NUM_JOINTS):
-        _p = PARENTS[_j]
-        while _p >= 0 and _p != _end:
-            _p = PARENTS[_p]
-        BELOW[_c, _j] = _p == _end
+BELOW: Final[npt.NDArray[np.bool_]] = np.stack([_below(int(e)) for e in CHAINS[:, 2]])
 #: Below this (m) a length counts as none: the end on its shoulder (hip), a limb bent in no plane.
 TINY = 1e-12
 
