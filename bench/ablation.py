@@ -135,6 +135,10 @@ VARIANTS: dict[str, str] = {
     "autoencoder's and solvers' random bodies (`augment.joint_shift` 1, placement.toml)",
     "ae_cos5e4": "the shipped recipe with the autoencoder at lr 5e-4 decayed along a cosine "
     "(ae_cos5e4.toml)",
+    "keep_ends": "the networks of `retry2cm` with the bone pass keeping each targeted wrist and "
+    "ankle where the networks put it (`serving.keep_ends`, `--keep-ends`)",
+    "ends_loss": "keep_ends, with both solver banks retrained with it in their losses "
+    "(`solver.ends_loss`, ends_loss.toml): shipped since",
 }
 COMPLETION = "6-point completion"
 

@@ -256,6 +256,11 @@ class ModelsResponse(BaseModel):
         description="Metres beyond which a soft answer's farthest target gets one more pass "
         "from that answer (0: never; the manifest's `serving.retry_reach`)."
     )
+    keep_ends: bool = Field(
+        description="Whether the bone pass keeps each targeted wrist and ankle where the "
+        "networks put it, its elbow or knee placed anew with the character's lengths (the "
+        "manifest's `serving.keep_ends`)."
+    )
     models: list[ModelInfo]
 
 

@@ -42,6 +42,7 @@ async def models(engine: ReadyEngine) -> ModelsResponse:
         turn_critic=engine.turn_search.critic,
         turn_plausibility=engine.turn_search.plausibility,
         retry_reach=engine.retry_reach,
+        keep_ends=engine.keep_ends,
         models=[
             ModelInfo(
                 name=e.name,

@@ -1,0 +1,79 @@
+"""Targeted limb ends kept through the bone pass in the engine (``serving.keep_ends``):
+only the targeted limb's elbow (knee) and end move, bone lengths hold, and on bodies the
+models never saw the soft answer reaches nearer its targets and the real pose."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from core.bodies import body_lengths, random_bodies, rebuild
+from core.skeleton import JOINT_INDEX, bone_lengths
+from service.engine import Engine
+from service.problems import SolveProblem
+from tests.conftest import PosePairs
+
+J = JOINT_INDEX
+
+
+@pytest.fixture(scope="module")
+def engines(models_dir: Path) -> tuple[Engine, Engine]:
+    kw = {"solve_passes": 1, "retry_reach": 0.0}  # one pass, no retry: the kept ends alone
+    return Engine(models_dir, keep_ends=False, **kw), Engine(models_dir, **kw)
+
+
+@pytest.fixture(scope="module")
+def pairs(real_poses: PosePairs) -> tuple[np.ndarray, np.ndarray]:
+    """Real (start, goal) pairs rebuilt on random asymmetric bodies, one per pair."""
+    start, goal = real_poses.poses[real_poses.starts], real_poses.poses[real_poses.goals]
+    bodies = random_bodies(np.random.default_rng(11), len(start), scale=0.25, symmetric=False)
+    lengths = body_lengths(goal, bodies)
+    return rebuild(start, bodies, lengths), rebuild(goal, bodies, lengths)
+
+
+def _problems(starts: np.ndarray, goals: np.ndarray, names: tuple[str, ...]) -> list[SolveProblem]:
+    idx = np.asarray([J[n] for n in names], dtype=np.intp)
+    return [
+        SolveProblem(
+            pose=s, target_idx=idx, target_pos=g[idx], weights=np.ones(len(idx)), n_targets=len(idx)
+        )
+        for s, g in zip(starts, goals, strict=True)
+    ]
+
+
+def test_shipped_models_keep_ends(engines: tuple[Engine, Engine], client: Any) -> None:
+    assert engines[1].keep_ends and engines[1].manifest.serving.keep_ends
+    assert not engines[0].keep_ends
+    assert client.get("/v1/models").json()["keep_ends"] is True
+
+
+def test_only_the_targeted_limb_moves_and_reaches_nearer(
+    engines: tuple[Engine, Engine], pairs: tuple[np.ndarray, np.ndarray]
+) -> None:
+    start, goal = pairs
+    limbs = {
+        ("left_wrist",): ("left_elbow", "left_wrist"),
+        ("right_ankle",): ("right_knee", "right_ankle", "right_foot"),
+    }
+    for names, moved in limbs.items():
+        probs = _problems(start, goal, names)
+        a, b = ([r for r in e.solve(probs)] for e in engines)
+        pa, pb = np.stack([r.pose for r in a]), np.stack([r.pose for r in b])
+        others = np.setdiff1d(np.arange(21), [J[n] for n in moved])
+        assert np.array_equal(pa[:, others], pb[:, others])
+        assert np.abs(bone_lengths(pb) / bone_lengths(start) - 1).max() < 1e-9
+        assert max(r.max_bone_error for r in b) <= 1e-5
+        reach_a = np.asarray([r.errors[0] for r in a])
+        reach_b = np.asarray([r.errors[0] for r in b])
+        assert reach_b.mean() < 0.8 * reach_a.mean()
+        # and the whole pose ends nearer the real one
+        mpjpe = [np.linalg.norm(p - goal, axis=-1).mean() for p in (pa, pb)]
+        assert mpjpe[1] < mpjpe[0]
+    # batch and single agree bit for bit
+    probs = _problems(start[:8], goal[:8], ("left_wrist", "right_ankle"))
+    batch = engines[1].solve(probs)
+    for p, r in zip(probs, batch, strict=True):
+        assert np.array_equal(engines[1].solve([p])[0].pose, r.pose)
