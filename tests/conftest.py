@@ -249,6 +249,20 @@ class PosePairs:
 #: The older name (the real set came first).
 RealPoses = PosePairs
 
+
+def on_random_bodies(pairs: PosePairs, seed: int) -> tuple[Any, Any]:
+    """The (start, goal) poses of ``pairs`` rebuilt on random asymmetric bodies (``core.bodies``,
+    ±25 % per bone), one body per pair, the same for its start and goal."""
+    import numpy as np
+
+    from core.bodies import body_lengths, random_bodies, rebuild
+
+    start, goal = pairs.poses[pairs.starts], pairs.poses[pairs.goals]
+    bodies = random_bodies(np.random.default_rng(seed), len(start), scale=0.25, symmetric=False)
+    lengths = body_lengths(goal, bodies)
+    return rebuild(start, bodies, lengths), rebuild(goal, bodies, lengths)
+
+
 #: Largest random turn (degrees) of a bone about its parent joint, by the child joint's
 #: name without its side: the spine and head bend a little, the limbs more, so every pose
 #: stays upright.

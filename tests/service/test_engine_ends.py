@@ -10,11 +10,10 @@ from typing import Any
 import numpy as np
 import pytest
 
-from core.bodies import body_lengths, random_bodies, rebuild
 from core.skeleton import JOINT_INDEX, bone_lengths
 from service.engine import Engine
 from service.problems import SolveProblem
-from tests.conftest import PosePairs
+from tests.conftest import PosePairs, on_random_bodies
 
 J = JOINT_INDEX
 
@@ -28,10 +27,7 @@ def engines(models_dir: Path) -> tuple[Engine, Engine]:
 @pytest.fixture(scope="module")
 def pairs(real_poses: PosePairs) -> tuple[np.ndarray, np.ndarray]:
     """Real (start, goal) pairs rebuilt on random asymmetric bodies, one per pair."""
-    start, goal = real_poses.poses[real_poses.starts], real_poses.poses[real_poses.goals]
-    bodies = random_bodies(np.random.default_rng(11), len(start), scale=0.25, symmetric=False)
-    lengths = body_lengths(goal, bodies)
-    return rebuild(start, bodies, lengths), rebuild(goal, bodies, lengths)
+    return on_random_bodies(real_poses, 11)
 
 
 def _problems(starts: np.ndarray, goals: np.ndarray, names: tuple[str, ...]) -> list[SolveProblem]:
