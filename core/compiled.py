@@ -438,15 +438,16 @@ def carry_item(
 
 @jit
 def ends_item(
-    out: F64, network: F64, tidx: I64, count: int, flags: I64
+    out: F64, network: F64, tidx: I64, count: int, flags: I64, vecs: F64
 ) -> None:  # pragma: no cover - compiled
     """``core.ends.keep_ends`` for one pose ``out [21, 3]`` (after the bone pass) and its
-    network pose ``network [21, 3]``, in place; ``flags [21]`` (int64) is scratch."""
+    network pose ``network [21, 3]``, in place; ``flags [21]`` (int64) and ``vecs [5, 3]``
+    are scratch."""
     for j in range(NUM_JOINTS):
         flags[j] = 0
     for q in range(count):
         flags[tidx[q]] = 1
-    s, e0, w0, u, v = np.empty(3), np.empty(3), np.empty(3), np.empty(3), np.empty(3)
+    s, e0, w0, u, v = vecs[0], vecs[1], vecs[2], vecs[3], vecs[4]
     for c in range(_CHAINS.shape[0]):
         top, mid, end = _CHAINS[c, 0], _CHAINS[c, 1], _CHAINS[c, 2]
         if flags[end] == 0 or flags[mid] != 0 or flags[top] != 0:
@@ -525,7 +526,7 @@ def unscale(
                 carry_item(out[b], canon[b], lengths[b], tidx[b], counts[b], carry[b], rr,
                            flags, anchor, vecs)  # fmt: skip
             if ends:
-                ends_item(out[b], pose, tidx[b], counts[b], flags)
+                ends_item(out[b], pose, tidx[b], counts[b], flags, vecs)
         else:
             out[b] = pose
     return out

@@ -84,7 +84,7 @@ def test_ends_go_back_where_the_network_put_them(limbs: tuple[np.ndarray, np.nda
 
 def test_compiled_ends_match_numpy(limbs: tuple[np.ndarray, np.ndarray]) -> None:
     network, passed = limbs
-    flags = np.empty(21, np.int64)
+    flags, vecs = np.empty(21, np.int64), np.empty((5, 3))
     for names in [("left_wrist",), ("left_wrist", "right_wrist", "left_ankle", "right_ankle"),
                   ("right_ankle", "right_foot"), ("head", "left_elbow")]:  # fmt: skip
         targets = _idx(*names)
@@ -92,7 +92,7 @@ def test_compiled_ends_match_numpy(limbs: tuple[np.ndarray, np.ndarray]) -> None
         ref = keep_ends(passed, network, targets)
         got = passed.copy()
         for b in range(len(got)):
-            compiled.ends_item(got[b], network[b], tidx, len(targets), flags)
+            compiled.ends_item(got[b], network[b], tidx, len(targets), flags, vecs)
         assert np.abs(got - ref).max() < 1e-12
     # degenerate: the network's wrist on the shoulder; an arm straight along the line to it
     bad, net = passed[:2].copy(), network[:2].copy()
@@ -102,6 +102,6 @@ def test_compiled_ends_match_numpy(limbs: tuple[np.ndarray, np.ndarray]) -> None
     ref = keep_ends(bad, net, [end])
     got = bad.copy()
     for b in range(2):
-        compiled.ends_item(got[b], net[b], np.asarray([end]), 1, flags)
+        compiled.ends_item(got[b], net[b], np.asarray([end]), 1, flags, vecs)
     assert np.all(np.isfinite(got)) and np.abs(got - ref).max() < 1e-12
     assert np.array_equal(got, bad)  # nothing to place by: left as the bone pass had it
