@@ -270,11 +270,11 @@ def solver_losses(
     decoded = solved_poses(ae, net, start, goal, n_sets, mode)
     start_lengths = bone_lengths_t(start)
     answer = bone_pass_t(decoded, start_lengths) if rigid else decoded
+    sets = [[JOINT_INDEX[j] for j in joints] for joints in bank.sets]
     if rigid and carry > 0:
-        sets = [[JOINT_INDEX[j] for j in joints] for joints in bank.sets]
         answer = carry_t(answer, start, start_lengths, sets, carry)
     if rigid and ends:
-        answer = ends_t(answer, decoded, [[JOINT_INDEX[j] for j in js] for js in bank.sets])
+        answer = ends_t(answer, decoded, sets)
     goal_s = goal.unsqueeze(0).expand(n_sets, -1, -1)
     target_mask = torch.zeros(n_sets, 1, goal.shape[1])
     for s, joints in enumerate(bank.sets):
