@@ -23,7 +23,7 @@ from pydantic import ValidationError
 from core.skeleton import JOINT_INDEX, JOINT_NAMES, NUM_JOINTS
 from service.engine import Engine
 from service.errors import BodyInvalid, TooManyItems
-from service.limits import Pricing, chunks_of, price_of
+from service.limits import Pricing, chunks_of, searched_price
 from service.problems import BatchAnswer
 from service.schemas import MAX_COORDINATE, MAX_WEIGHT, SolveOptions
 from service.validation import check_bones
@@ -76,9 +76,7 @@ class Columns:
     def parts(self, pricing: Pricing) -> list[slice]:
         """Priced parts (``service.limits``): every item costs the same here (``pricing``:
         the engine's, ``Pricing.of``)."""
-        o, pinned = self.options, self.n_pins > 0
-        factor = pricing.search.factor(o.method, self.n_targets, pinned, o.turn_search)
-        each = price_of(o, pinned, pricing, factor)
+        each = searched_price(self.options, self.n_targets, self.n_pins > 0, pricing)
         return chunks_of([each] * self.size)
 
 

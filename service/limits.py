@@ -48,6 +48,8 @@ class Priced(Protocol):
     def reach(self) -> str: ...
     @property
     def passes(self) -> int | None: ...
+    @property
+    def turn_search(self) -> bool | None: ...
 
 
 @dataclass(frozen=True)
@@ -84,11 +86,16 @@ def price_of(o: Priced, pinned: bool, pricing: Pricing, search: int = 1) -> int:
     return neural_price(not soft or pinned, p, search, pricing.retry and soft)
 
 
+def searched_price(o: Priced, n_targets: int, pinned: bool, pricing: Pricing) -> int:
+    """:func:`price_of` an item of ``n_targets`` targets with its turn search priced in
+    (the solves ``pricing.search`` gives it, ``TurnSearch.factor``)."""
+    factor = pricing.search.factor(o.method, n_targets, pinned, o.turn_search)
+    return price_of(o, pinned, pricing, factor)
+
+
 def price(p: SolveProblem, pricing: Pricing) -> int:
-    """:func:`price_of` a validated problem."""
-    pinned = len(p.target_idx) > p.n_targets
-    factor = pricing.search.factor(p.method, p.n_targets, pinned, p.turn_search)
-    return price_of(p, pinned, pricing, factor)
+    """:func:`searched_price` of a validated problem."""
+    return searched_price(p, p.n_targets, len(p.target_idx) > p.n_targets, pricing)
 
 
 def chunks(problems: Sequence[SolveProblem], pricing: Pricing) -> list[slice]:
