@@ -438,11 +438,11 @@ def carry_item(
 
 @jit
 def ends_item(
-    out: F64, network: F64, tidx: I64, count: int, flags: I64, vecs: F64
+    out: F64, network: F64, tidx: I64, count: int, chains: Bool, flags: I64, vecs: F64
 ) -> None:  # pragma: no cover - compiled
     """``core.ends.keep_ends`` for one pose ``out [21, 3]`` (after the bone pass) and its
-    network pose ``network [21, 3]``, in place; ``flags [21]`` (int64) and ``vecs [5, 3]``
-    are scratch."""
+    network pose ``network [21, 3]``, in place, for the chains ``chains [C]`` marks
+    (``core.ends.active``); ``flags [21]`` (int64) and ``vecs [5, 3]`` are scratch."""
     for j in range(NUM_JOINTS):
         flags[j] = 0
     for q in range(count):
@@ -450,7 +450,7 @@ def ends_item(
     s, e0, w0, u, v = vecs[0], vecs[1], vecs[2], vecs[3], vecs[4]
     for c in range(_CHAINS.shape[0]):
         top, mid, end = _CHAINS[c, 0], _CHAINS[c, 1], _CHAINS[c, 2]
-        if flags[end] == 0 or flags[mid] != 0 or flags[top] != 0:
+        if not chains[c] or flags[end] == 0 or flags[mid] != 0 or flags[top] != 0:
             continue
         below = False
         for j in range(NUM_JOINTS):
@@ -499,13 +499,13 @@ def unscale(
     tidx: I64,
     counts: I64,
     carry: F64,
-    ends: bool,
+    chains: Bool,
 ) -> F64:  # pragma: no cover - compiled
     """Network answers ``[M, 63]`` (float32, at the networks' size) back to the body's
     size (float64), with the bone pass (reference: the start pose) where ``bone``, and
     there, where ``carry[b]`` > 0, :func:`carry_item` below the item's targets ``tidx[b,
-    :counts[b]]`` by that weight, then with ``ends`` :func:`ends_item` (the targeted limb
-    ends back where the network put them)."""
+    :counts[b]]`` by that weight, then :func:`ends_item` of the chains ``chains`` marks
+    (the targeted limb ends back where the network put them; none marked: not run)."""
     m = decoded.shape[0]
     out = np.empty((m, NUM_JOINTS, 3))
     pose = np.empty((NUM_JOINTS, 3))
@@ -515,6 +515,7 @@ def unscale(
         np.empty(NUM_JOINTS, np.int64),
         np.empty((5, 3)),
     )
+    ends = chains.any()
     for b in range(m):
         s = scales[b]
         for j in range(NUM_JOINTS):
@@ -526,7 +527,7 @@ def unscale(
                 carry_item(out[b], canon[b], lengths[b], tidx[b], counts[b], carry[b], rr,
                            flags, anchor, vecs)  # fmt: skip
             if ends:
-                ends_item(out[b], pose, tidx[b], counts[b], flags, vecs)
+                ends_item(out[b], pose, tidx[b], counts[b], chains, flags, vecs)
         else:
             out[b] = pose
     return out
@@ -591,12 +592,12 @@ def settle(
     tpos: F64,
     counts: I64,
     carry: F64,
-    ends: bool,
+    chains: Bool,
 ) -> tuple[F64, F64, F64]:  # pragma: no cover - compiled
     """:func:`unscale` with the bone pass for every item, then :func:`finish`, in one call
     (the lean path of ``service.lean``): the same arithmetic in the same order."""
     bone = np.ones(decoded.shape[0], dtype=np.bool_)
-    out = unscale(decoded, scales, canon, lengths, bone, tidx, counts, carry, ends)
+    out = unscale(decoded, scales, canon, lengths, bone, tidx, counts, carry, chains)
     return finish(out, facing, trans, floors, tidx, tpos, counts, lengths)
 
 
@@ -612,13 +613,14 @@ def warm() -> None:
     tpos = np.zeros((1, 1, 3))
     counts = np.ones(1, dtype=np.int64)
     shapes = np.ones((1, NUM_JOINTS - 1)) / (NUM_JOINTS - 1)
+    chains = np.ones(_CHAINS.shape[0], dtype=np.bool_)
     out = prepare(
         pose, np.zeros(1), tidx, tpos, counts, np.ones(1, dtype=np.bool_), shapes,
         np.ones(1), True, 1.0,
     )  # fmt: skip
     unscale(
         out[6], out[4], out[0], out[3], np.ones(1, dtype=np.bool_), tidx, counts, np.full(1, 0.5),
-        True,
+        chains,
     )  # fmt: skip
     finish(out[0], out[1], out[2], np.zeros(1), tidx, tpos, counts, out[3])
     settle(
@@ -633,7 +635,7 @@ def warm() -> None:
         tpos,
         counts,
         np.full(1, 0.5),
-        True,
+        chains,
     )
 
 

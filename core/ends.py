@@ -17,6 +17,14 @@ below it:
 The shoulder (hip) and everything above stay as the bone pass left them; bone lengths stay
 exact. A limb bent in no plane (straight along the line to the end) is left as it was.
 
+A targeted elbow (with ``serving.keep_elbows``) is kept the same way one level up: its
+chain is collar, shoulder, elbow. Where no target is on its shoulder or collar or below it
+(the wrist), the elbow goes back where the networks put it, as near as the collar bone and
+the upper arm reach; the shoulder is placed anew by the two-bone solution; the forearm and
+hand move with the elbow. An elbow alone has no second bone below its shoulder to take up
+the difference in length, so without the collar the bone pass leaves it where the
+character's trunk and upper arm end (docs/generalisation.md item 29).
+
 Batched numpy over ``[..., 21, 3]`` with one target set: the reference the compiled kernel
 (``core.compiled.ends_item``, in ``unscale``) is held to in tests.
 """
@@ -33,14 +41,13 @@ from core.skeleton import JOINT_INDEX, NUM_JOINTS, PARENTS
 
 F64 = npt.NDArray[np.float64]
 
-#: The limb ends kept, each with its chain: (shoulder or hip, elbow or knee, end).
+#: The limb ends (``serving.keep_ends``) and the elbows (``serving.keep_elbows``).
+ENDS: Final = ("left_wrist", "right_wrist", "left_ankle", "right_ankle")
+ELBOWS: Final = ("left_elbow", "right_elbow")
+#: The joints kept, each with its chain (top, middle, end): shoulder or hip, elbow or knee,
+#: wrist or ankle; collar, shoulder, elbow.
 CHAINS: Final[npt.NDArray[np.int64]] = np.asarray(
-    [
-        (PARENTS[PARENTS[j]], PARENTS[j], j)
-        for j in (
-            JOINT_INDEX[n] for n in ("left_wrist", "right_wrist", "left_ankle", "right_ankle")
-        )
-    ],
+    [(PARENTS[PARENTS[j]], PARENTS[j], j) for j in (JOINT_INDEX[n] for n in ENDS + ELBOWS)],
     dtype=np.int64,
 )
 
@@ -62,28 +69,40 @@ BELOW: Final[npt.NDArray[np.bool_]] = np.stack([_below(int(e)) for e in CHAINS[:
 TINY = 1e-12
 
 
-def kept_chains(targets: Iterable[int]) -> list[int]:
-    """The chains (rows of :data:`CHAINS`) whose end :func:`keep_ends` keeps for a target
-    set: the end targeted; its middle joint, its top joint and the joints below it not."""
+def active(ends: bool = True, elbows: bool = False) -> npt.NDArray[np.bool_]:
+    """Which chains (rows of :data:`CHAINS`) are kept ``[C]``: the limb ends with ``ends``
+    (``serving.keep_ends``), the elbows with ``elbows`` (``serving.keep_elbows``)."""
+    return np.asarray([ends] * len(ENDS) + [elbows] * len(ELBOWS), dtype=np.bool_)
+
+
+def kept_chains(targets: Iterable[int], chains: npt.NDArray[np.bool_] | None = None) -> list[int]:
+    """The chains (rows of :data:`CHAINS`; of those ``chains`` marks, default the limb ends)
+    whose end :func:`keep_ends` keeps for a target set: the end targeted; its middle
+    joint, its top joint and the joints below it not."""
+    on = active() if chains is None else chains
     targeted = np.zeros(NUM_JOINTS, dtype=bool)
     targeted[list(targets)] = True
     return [
         c
         for c, (top, mid, end) in enumerate(CHAINS.tolist())
-        if targeted[end]
+        if on[c]
+        and targeted[end]
         and not targeted[mid]
         and not targeted[top]
         and not targeted[BELOW[c]].any()
     ]
 
 
-def keep_ends(pose: F64, network: F64, targets: Iterable[int]) -> F64:
+def keep_ends(
+    pose: F64, network: F64, targets: Iterable[int], chains: npt.NDArray[np.bool_] | None = None
+) -> F64:
     """``pose [..., 21, 3]`` (after the bone pass: the character's lengths) with each kept
-    chain's end where ``network`` (the same poses before the bone pass) has it, as near as
-    the limb reaches; see the module. A new array."""
+    chain's end (of those ``chains`` marks, default the limb ends) where ``network`` (the
+    same poses before the bone pass) has it, as near as the limb reaches; see the module.
+    A new array."""
     out = np.array(pose, dtype=np.float64, copy=True)
     net = np.asarray(network, dtype=np.float64)
-    for c in kept_chains(targets):
+    for c in kept_chains(targets, chains):
         top, mid, end = CHAINS[c].tolist()
         s, e0, w0 = out[..., top, :], out[..., mid, :], out[..., end, :]
         a = np.sqrt(np.sum((e0 - s) ** 2, axis=-1))

@@ -130,6 +130,13 @@ class Serving(_Strict):
         "networks put it (as near as the limb reaches), its elbow or knee placed anew with "
         "the character's own lengths in the plane the limb was bent in (core.ends).",
     )
+    keep_elbows: bool = Field(
+        default=False,
+        description="The same for each targeted elbow with no target on its shoulder or "
+        "collar or below it (the wrist): back where the networks put it (as near as the "
+        "collar bone and the upper arm reach), its shoulder placed anew with the "
+        "character's own lengths, the forearm and hand moved with it (core.ends).",
+    )
     turn_yaws: int = Field(
         default=1,
         ge=1,

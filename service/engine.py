@@ -30,6 +30,7 @@ import numpy as np
 import numpy.typing as npt
 
 from core import compiled, compiled_fabrik
+from core.ends import active as active_chains
 from core.geometry import canonical_transform, facing_transform
 from core.manifest import Manifest, ModelEntry, load_manifest
 from core.rest import rest_lengths, rest_pose
@@ -88,6 +89,7 @@ class Engine:
         turn_yaws: int | None = None,
         retry_reach: float | None = None,
         keep_ends: bool | None = None,
+        keep_elbows: bool | None = None,
     ) -> None:
         self.models_dir = Path(models_dir)
         self.manifest: Manifest = load_manifest(self.models_dir, verify=True)
@@ -135,9 +137,12 @@ class Engine:
         self.carry = float(m.serving.carry if carry is None else carry)
         if not 0.0 <= self.carry <= 1.0:
             raise ValueError(f"carry must be in [0, 1], got {self.carry}")
-        #: the bone pass keeps targeted wrists and ankles where the networks put them
-        #: (``serving.keep_ends`` unless overridden; :mod:`core.ends`)
+        #: the bone pass keeps targeted wrists and ankles, and elbows, where the networks
+        #: put them (``serving.keep_ends``, ``serving.keep_elbows`` unless overridden;
+        #: :mod:`core.ends`): the chains it keeps, ``[C]``
         self.keep_ends = bool(m.serving.keep_ends if keep_ends is None else keep_ends)
+        self.keep_elbows = bool(m.serving.keep_elbows if keep_elbows is None else keep_elbows)
+        self.kept_chains = active_chains(self.keep_ends, self.keep_elbows)
         #: the turn search of many-target edits (``serving.turn_*``, :mod:`service.turns`)
         self.turn_search = turns.TurnSearch.of(m.serving, turn_yaws)
         known = np.asarray(m.skeleton.skeletons, dtype=np.float64)  # [C, 20]
@@ -439,7 +444,7 @@ class Engine:
             if len(sequences) == 1 and neural.all():  # the common case: no gathers
                 decoded = self._run_sequence(x, canvas, sequences[0])
                 out = compiled.unscale(
-                    decoded, scales, canon, lengths, bone, tidx, cnt, batch.carry, self.keep_ends
+                    decoded, scales, canon, lengths, bone, tidx, cnt, batch.carry, self.kept_chains
                 )
             else:
                 items = np.flatnonzero(neural)
@@ -450,7 +455,7 @@ class Engine:
                 out = canon.copy()
                 out[items] = compiled.unscale(
                     decoded[items], scales[items], canon[items], lengths[items], bone[items],
-                    tidx[items], cnt[items], batch.carry[items], self.keep_ends,
+                    tidx[items], cnt[items], batch.carry[items], self.kept_chains,
                 )  # fmt: skip
         start = canon
         if origin is not None and moved is not None and moved.any():

@@ -261,6 +261,11 @@ class ModelsResponse(BaseModel):
         "networks put it, its elbow or knee placed anew with the character's lengths (the "
         "manifest's `serving.keep_ends`)."
     )
+    keep_elbows: bool = Field(
+        description="Whether the bone pass keeps each targeted elbow where the networks put "
+        "it, its shoulder placed anew with the character's lengths (the manifest's "
+        "`serving.keep_elbows`)."
+    )
     models: list[ModelInfo]
 
 

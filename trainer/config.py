@@ -110,6 +110,7 @@ class SolverConfig(_Section):
     turn_critic: Literal["autoencoder", "completion"] = _serving("turn_critic")
     retry_reach: float = _serving("retry_reach")
     keep_ends: bool = _serving("keep_ends")
+    keep_elbows: bool = _serving("keep_elbows")
     # (their names: SERVING_SETTINGS, below, which the export and the checkpoint tags read)
     carry_loss: bool = Field(
         default=False,
@@ -118,9 +119,9 @@ class SolverConfig(_Section):
     )
     ends_loss: bool = Field(
         default=False,
-        description="With rigid_loss: the losses also see the targeted limb ends kept where "
-        "the network put them (`keep_ends`), as the answer is served (then `keep_ends` is a "
-        "training setting too).",
+        description="With rigid_loss: the losses also see the targeted limb ends (and elbows) "
+        "kept where the network put them (`keep_ends`, `keep_elbows`), as the answer is "
+        "served (then both are training settings too).",
     )
     identity_fraction: float = Field(
         default=0.1,
@@ -169,7 +170,7 @@ class SolverConfig(_Section):
 #: ``serving`` block under the same names, and not in the solvers' checkpoint tags.
 SERVING_SETTINGS: tuple[str, ...] = (
     "passes", "carry", "turn_yaws", "turn_margin", "turn_min_targets", "turn_plausibility",
-    "turn_critic", "retry_reach", "keep_ends",
+    "turn_critic", "retry_reach", "keep_ends", "keep_elbows",
 )  # fmt: skip
 if not set(SERVING_SETTINGS) <= set(SolverConfig.model_fields) & set(Serving.model_fields):
     raise RuntimeError("SERVING_SETTINGS must name fields of SolverConfig and of Serving")

@@ -12,6 +12,8 @@ output teaches the solvers to reach with the body's own bones.
 
 from __future__ import annotations
 
+import numpy as np
+import numpy.typing as npt
 import torch
 
 from core.carry import BONE_OF, carry_anchors
@@ -98,10 +100,16 @@ def carry_t(
     return torch.stack(out).reshape(answers.shape)
 
 
-def ends_t(answers: torch.Tensor, network: torch.Tensor, sets: list[list[int]]) -> torch.Tensor:
+def ends_t(
+    answers: torch.Tensor,
+    network: torch.Tensor,
+    sets: list[list[int]],
+    chains: npt.NDArray[np.bool_] | None = None,
+) -> torch.Tensor:
     """``core.ends.keep_ends`` of every solver's answer ``[S, B, 63]`` (after
     :func:`bone_pass_t`, and the carry if any) with the networks' poses ``network [S, B,
-    63]`` (before it), solver ``s`` keeping the ends of its own targets ``sets[s]``;
+    63]`` (before it), solver ``s`` keeping the ends of its own targets ``sets[s]`` (of the
+    chains ``chains`` marks, default the limb ends);
     differentiable (the degenerate cases the service leaves alone are kept finite, not
     matched)."""
     n_sets, b = answers.shape[0], answers.shape[1]
@@ -110,7 +118,7 @@ def ends_t(answers: torch.Tensor, network: torch.Tensor, sets: list[list[int]]) 
     out = []
     for s, targets in enumerate(sets):
         pose = list(joints[s].unbind(dim=-2))
-        for c in kept_chains(targets):
+        for c in kept_chains(targets, chains):
             top, mid, end = (int(j) for j in CHAINS[c])
             a = (pose[mid] - pose[top]).norm(dim=-1, keepdim=True)
             bl = (pose[end] - pose[mid]).norm(dim=-1, keepdim=True)

@@ -166,7 +166,7 @@ def load_checkpoint(
 #: from their default, so that runs from before them stay valid.
 _ADDED_LATER: dict[str, tuple[str, ...]] = {
     "autoencoder": ("loss", "lr_schedule"),
-    "solver": ("rigid_loss", "joint_loss", "stay_frame", "carry_loss", "ends_loss"),
+    "solver": ("rigid_loss", "joint_loss", "stay_frame", "carry_loss", "ends_loss", "keep_elbows"),
     "augment": ("lift_start", "joint_shift"),
     "completion": ("loss",),
 }
@@ -205,7 +205,7 @@ def config_tag(cfg: TrainConfig, stage: str, *, legacy: bool = False) -> str:
         # (carry and keep_ends are training settings too where the losses see them,
         # solver.carry_loss and solver.ends_loss)
         keep = (("carry",) if cfg.solver.carry_loss else ()) + (
-            ("keep_ends",) if cfg.solver.ends_loss else ()
+            ("keep_ends", "keep_elbows") if cfg.solver.ends_loss else ()
         )
         serving = tuple(k for k in SERVING_SETTINGS if k not in keep)
         relevant["solver"] = _section(cfg, "solver", (*serving, *other))

@@ -11,10 +11,12 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import numpy.typing as npt
 import torch
 from torch import nn
 from torch.nn.parallel import DistributedDataParallel
 
+from core.ends import active
 from core.skeleton import JOINT_INDEX, NUM_JOINTS
 from core.skeleton import bone_lengths as bone_lengths_np
 from trainer.augment import (
@@ -250,7 +252,7 @@ def solver_losses(
     distance: bool = False,
     stay_local: bool = False,
     carry: float = 0.0,
-    ends: bool = False,
+    ends: npt.NDArray[np.bool_] | None = None,
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """Per-solver loss ``[S]`` and answers ``[S, B, 63]`` for a batch of pairs (``mode`` as
     the service answers, :func:`solved_poses`):
@@ -264,8 +266,10 @@ def solver_losses(
     position), not on its world position (:func:`trainer.rigid.parent_offsets_t`).
     ``carry`` (with ``rigid``): the answer also with the service's carry below each
     solver's targets (:func:`trainer.rigid.carry_t`), as served with ``serving.carry``.
-    ``ends`` (with ``rigid``): then each solver's targeted limb ends kept where the network
-    put them (:func:`trainer.rigid.ends_t`), as served with ``serving.keep_ends``."""
+    ``ends`` (with ``rigid``): then each solver's targeted joints of the chains it marks
+    (:func:`core.ends.active`) kept where the network put them
+    (:func:`trainer.rigid.ends_t`), as served with ``serving.keep_ends`` and
+    ``serving.keep_elbows``; None: none."""
     n_sets = len(bank.sets)
     decoded = solved_poses(ae, net, start, goal, n_sets, mode)
     start_lengths = bone_lengths_t(start)
@@ -273,8 +277,8 @@ def solver_losses(
     sets = [[JOINT_INDEX[j] for j in joints] for joints in bank.sets]
     if rigid and carry > 0:
         answer = carry_t(answer, start, start_lengths, sets, carry)
-    if rigid and ends:
-        answer = ends_t(answer, decoded, sets)
+    if rigid and ends is not None and ends.any():
+        answer = ends_t(answer, decoded, sets, ends)
     goal_s = goal.unsqueeze(0).expand(n_sets, -1, -1)
     target_mask = torch.zeros(n_sets, 1, goal.shape[1])
     for s, joints in enumerate(bank.sets):
@@ -386,7 +390,7 @@ def train_solvers(
             ae, bank, model, start, goal, sc.other_weight, sc.bone_weight, mode,
             sc.stay_weight, sc.rigid_loss, sc.joint_loss == "distance",
             sc.stay_frame == "local", sc.carry if sc.carry_loss else 0.0,
-            sc.keep_ends and sc.ends_loss,
+            active(sc.keep_ends, sc.keep_elbows) if sc.ends_loss else None,
         )  # fmt: skip
         return out
 

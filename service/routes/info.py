@@ -43,6 +43,7 @@ async def models(engine: ReadyEngine) -> ModelsResponse:
         turn_plausibility=engine.turn_search.plausibility,
         retry_reach=engine.retry_reach,
         keep_ends=engine.keep_ends,
+        keep_elbows=engine.keep_elbows,
         models=[
             ModelInfo(
                 name=e.name,

@@ -7,13 +7,15 @@ import numpy as np
 import pytest
 
 from core import compiled
-from core.ends import BELOW, CHAINS, keep_ends, kept_chains
+from core.ends import BELOW, CHAINS, active, keep_ends, kept_chains
 from core.skeleton import JOINT_INDEX, bone_lengths
 from tests.conftest import PosePairs
 
 J = JOINT_INDEX
 L_ARM = (J["left_shoulder"], J["left_elbow"], J["left_wrist"])
 R_LEG = (J["right_hip"], J["right_knee"], J["right_ankle"])
+L_UPPER = (J["left_collar"], J["left_shoulder"], J["left_elbow"])
+ELBOWS = active(ends=True, elbows=True)
 
 
 def _idx(*names: str) -> list[int]:
@@ -21,10 +23,18 @@ def _idx(*names: str) -> list[int]:
 
 
 def test_chains_kept_only_for_free_limb_ends() -> None:
-    def kept(*names: str) -> set[int]:
-        return {int(CHAINS[c, 2]) for c in kept_chains(_idx(*names))}
+    def kept(*names: str, chains: np.ndarray | None = None) -> set[int]:
+        return {int(CHAINS[c, 2]) for c in kept_chains(_idx(*names), chains)}
 
     assert tuple(CHAINS[0]) == L_ARM and tuple(CHAINS[3]) == R_LEG
+    assert tuple(CHAINS[4]) == L_UPPER and BELOW[4].sum() == 1 and BELOW[4, J["left_wrist"]]
+    # elbows only where asked for, and only with no target on the wrist, shoulder or collar
+    assert kept("left_elbow", "right_elbow") == set()
+    assert kept("left_elbow", "right_elbow", chains=ELBOWS) == {J["left_elbow"], J["right_elbow"]}
+    assert kept("left_elbow", chains=active(ends=False, elbows=True)) == {J["left_elbow"]}
+    assert kept("left_wrist", chains=active(ends=False, elbows=True)) == set()
+    for other in ("left_wrist", "left_shoulder", "left_collar"):
+        assert kept("left_elbow", other, chains=ELBOWS) <= {J["left_wrist"]}
     assert kept("left_wrist", "right_ankle", "head") == {J["left_wrist"], J["right_ankle"]}
     # a target on the elbow, the shoulder or below the ankle (the foot) leaves the chain be
     assert kept("left_wrist", "left_elbow") == set()
@@ -92,7 +102,16 @@ def test_compiled_ends_match_numpy(limbs: tuple[np.ndarray, np.ndarray]) -> None
         ref = keep_ends(passed, network, targets)
         got = passed.copy()
         for b in range(len(got)):
-            compiled.ends_item(got[b], network[b], tidx, len(targets), flags, vecs)
+            compiled.ends_item(got[b], network[b], tidx, len(targets), active(), flags, vecs)
+        assert np.abs(got - ref).max() < 1e-12
+    for names in [("left_elbow",), ("left_elbow", "right_elbow", "left_ankle"),
+                  ("right_elbow", "right_wrist", "head")]:  # fmt: skip
+        targets = _idx(*names)
+        tidx = np.asarray(targets + [0] * (5 - len(targets)), dtype=np.int64)
+        ref = keep_ends(passed, network, targets, ELBOWS)
+        got = passed.copy()
+        for b in range(len(got)):
+            compiled.ends_item(got[b], network[b], tidx, len(targets), ELBOWS, flags, vecs)
         assert np.abs(got - ref).max() < 1e-12
     # degenerate: the network's wrist on the shoulder; an arm straight along the line to it
     bad, net = passed[:2].copy(), network[:2].copy()
@@ -102,6 +121,33 @@ def test_compiled_ends_match_numpy(limbs: tuple[np.ndarray, np.ndarray]) -> None
     ref = keep_ends(bad, net, [end])
     got = bad.copy()
     for b in range(2):
-        compiled.ends_item(got[b], net[b], np.asarray([end]), 1, flags, vecs)
+        compiled.ends_item(got[b], net[b], np.asarray([end]), 1, active(), flags, vecs)
     assert np.all(np.isfinite(got)) and np.abs(got - ref).max() < 1e-12
     assert np.array_equal(got, bad)  # nothing to place by: left as the bone pass had it
+
+
+def test_elbows_go_back_where_the_network_put_them(limbs: tuple[np.ndarray, np.ndarray]) -> None:
+    """With the elbows kept (``serving.keep_elbows``): a lone targeted elbow goes back where
+    the network put it, as near as the collar bone and the upper arm reach; the shoulder
+    moves in the plane they were bent in; the forearm and hand move with the elbow."""
+    network, passed = limbs
+    out = keep_ends(passed, network, _idx("left_elbow"), ELBOWS)
+    assert np.array_equal(keep_ends(passed, network, _idx("left_elbow")), passed)  # not asked
+    assert np.abs(bone_lengths(out) / bone_lengths(passed) - 1).max() < 1e-12
+    top, mid, end = L_UPPER
+    wrist = J["left_wrist"]
+    rest = np.setdiff1d(np.arange(21), [mid, end, wrist])
+    assert np.array_equal(out[:, rest], passed[:, rest])  # the collar and the rest stay
+    reach = np.linalg.norm(passed[:, mid] - passed[:, top], axis=-1) + np.linalg.norm(
+        passed[:, end] - passed[:, mid], axis=-1
+    )
+    inside = np.linalg.norm(network[:, end] - passed[:, top], axis=-1) < reach
+    assert inside.mean() > 0.5
+    assert np.abs(out[inside, end] - network[inside, end]).max() < 1e-9
+    before = np.linalg.norm(passed[:, end] - network[:, end], axis=-1)
+    after = np.linalg.norm(out[:, end] - network[:, end], axis=-1)
+    assert np.all(after <= before + 1e-12) and before.mean() > 0.01
+    normal = np.cross(passed[:, mid] - passed[:, top], network[:, end] - passed[:, top])
+    assert np.abs(np.sum((out[:, mid] - passed[:, top]) * normal, axis=-1)).max() < 1e-9
+    # the forearm keeps its direction: the wrist moves with the elbow
+    np.testing.assert_allclose(out[:, wrist] - out[:, end], passed[:, wrist] - passed[:, end])

@@ -73,3 +73,27 @@ def test_only_the_targeted_limb_moves_and_reaches_nearer(
     batch = engines[1].solve(probs)
     for p, r in zip(probs, batch, strict=True):
         assert np.array_equal(engines[1].solve([p])[0].pose, r.pose)
+
+
+def test_kept_elbows_move_only_the_arm_and_reach_nearer(
+    models_dir: Path, pairs: tuple[np.ndarray, np.ndarray], client: Any
+) -> None:
+    """``serving.keep_elbows``: a lone targeted elbow goes back where the networks put it;
+    only its shoulder, the elbow and the hand below move; lengths hold; batch = single."""
+    kw = {"solve_passes": 1, "retry_reach": 0.0}
+    off, on = (Engine(models_dir, keep_elbows=k, **kw) for k in (False, True))
+    assert on.kept_chains.sum() == 6 and off.kept_chains.sum() == (4 if off.keep_ends else 0)
+    assert client.get("/v1/models").json()["keep_elbows"] is on.manifest.serving.keep_elbows
+    start, goal = pairs
+    probs = _problems(start, goal, ("left_elbow",))
+    a, b = off.solve(probs), on.solve(probs)
+    pa, pb = np.stack([r.pose for r in a]), np.stack([r.pose for r in b])
+    moved = [J[n] for n in ("left_shoulder", "left_elbow", "left_wrist")]
+    others = np.setdiff1d(np.arange(21), moved)
+    assert np.array_equal(pa[:, others], pb[:, others]) and not np.array_equal(pa, pb)
+    assert max(r.max_bone_error for r in b) <= 1e-5
+    reach_a, reach_b = (np.asarray([r.errors[0] for r in rs]) for rs in (a, b))
+    assert reach_b.mean() < 0.5 * reach_a.mean()
+    probs = _problems(start[:8], goal[:8], ("left_elbow", "right_elbow", "left_ankle"))
+    for p, r in zip(probs, on.solve(probs), strict=True):
+        assert np.array_equal(on.solve([p])[0].pose, r.pose)

@@ -6,7 +6,7 @@ import numpy as np
 import torch
 
 from core.carry import carry_below
-from core.ends import keep_ends
+from core.ends import active, keep_ends
 from core.kinematics import bone_pass
 from core.skeleton import JOINT_INDEX, NUM_JOINTS, bone_lengths
 from tests.conftest import PosePairs
@@ -69,8 +69,9 @@ def test_carry_equals_the_service_one_on_real_poses(real_poses: PosePairs) -> No
 def test_ends_equal_the_service_ones_on_real_poses(real_poses: PosePairs) -> None:
     """Stand-in network answers (real goals with other limb lengths) after the bone pass to
     the starts' lengths, their targeted limb ends kept (left wrist; both ankles; the left
-    elbow, which keeps nothing): the torch step lands where the service's numpy one does,
-    with a finite gradient."""
+    elbow, which keeps nothing with the limb ends alone, and its shoulder and elbow with the
+    elbows too): the torch step lands where the service's numpy one does, with a finite
+    gradient."""
     start = real_poses.poses[real_poses.starts]
     lengths = bone_lengths(start)
     scale = np.random.default_rng(5).uniform(0.8, 1.25, lengths.shape)
@@ -86,6 +87,12 @@ def test_ends_equal_the_service_ones_on_real_poses(real_poses: PosePairs) -> Non
         want = keep_ends(answer, network, targets)
         assert np.abs(got[s].detach().numpy().reshape(want.shape) - want).max() < 1e-6
     assert not torch.equal(got[0], flat[0]) and torch.equal(got[2], flat[2])
+    elbows = active(ends=True, elbows=True)
+    with_elbows = ends_t(flat, net, sets, elbows)
+    assert torch.equal(with_elbows[:2], got[:2]) and not torch.equal(with_elbows[2], flat[2])
+    want = keep_ends(answer, network, sets[2], elbows)
+    assert np.abs(with_elbows[2].detach().numpy().reshape(want.shape) - want).max() < 1e-6
+    got = torch.cat([got[:2], with_elbows[2:]])
     (g_answer, g_net) = torch.autograd.grad(got.sum(), (flat, net))
     assert torch.isfinite(g_answer).all() and torch.isfinite(g_net).all()
-    assert g_net[0].abs().sum() > 0  # the kept end follows the network's
+    assert g_net[0].abs().sum() > 0 and g_net[2].abs().sum() > 0  # kept: follows the network
