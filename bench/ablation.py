@@ -139,6 +139,12 @@ VARIANTS: dict[str, str] = {
     "ankle where the networks put it (`serving.keep_ends`, `--keep-ends`)",
     "ends_loss": "keep_ends, with both solver banks retrained with it in their losses "
     "(`solver.ends_loss`, ends_loss.toml): shipped since",
+    "keep_elbows_serving": "the shipped networks (`ends_loss`) served with each lone targeted "
+    "elbow kept too (`serving.keep_elbows`, `--keep-elbows`)",
+    "keep_elbows": "the same with both solver banks retrained with it in their losses "
+    "(keep_elbows.toml)",
+    "ae_cos3e3_ends": "the shipped recipe (`ends_loss`) with the autoencoder at lr 3e-3 decayed "
+    "along a cosine (ae_cos3e3_ends.toml; both solver banks retrained on it)",
 }
 COMPLETION = "6-point completion"
 
