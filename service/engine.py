@@ -139,7 +139,8 @@ class Engine:
             raise ValueError(f"carry must be in [0, 1], got {self.carry}")
         #: the bone pass keeps targeted wrists and ankles, and elbows, where the networks
         #: put them (``serving.keep_ends``, ``serving.keep_elbows`` unless overridden;
-        #: :mod:`core.ends`): the chains it keeps, ``[C]``
+        #: :mod:`core.ends`): ``kept_chains``, the mask ``[C]`` of chains it may keep
+        #: (``core.ends.active``; which of them an edit keeps: ``core.ends.kept_chains``)
         self.keep_ends = bool(m.serving.keep_ends if keep_ends is None else keep_ends)
         self.keep_elbows = bool(m.serving.keep_elbows if keep_elbows is None else keep_elbows)
         self.kept_chains = active_chains(self.keep_ends, self.keep_elbows)

@@ -202,8 +202,8 @@ def config_tag(cfg: TrainConfig, stage: str, *, legacy: bool = False) -> str:
         # each bank reads only its own sets and epochs (its own seed and pair stream), so
         # neither is retrained when only the other's change; passes, carry: serving only
         other = ("sets", "epochs") if stage == "solvers_long" else ("long_sets", "long_epochs")
-        # (carry and keep_ends are training settings too where the losses see them,
-        # solver.carry_loss and solver.ends_loss)
+        # (carry, keep_ends and keep_elbows are training settings too where the losses see
+        # them, solver.carry_loss and solver.ends_loss)
         keep = (("carry",) if cfg.solver.carry_loss else ()) + (
             ("keep_ends", "keep_elbows") if cfg.solver.ends_loss else ()
         )
