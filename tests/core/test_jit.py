@@ -1,0 +1,70 @@
+"""The compiled kernels' disk cache follows every source they read constants from."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import core.jit
+from core.jit import fingerprint
+
+CORE = Path(core.jit.__file__).resolve().parent
+
+KERNEL = """from pkg.consts import K
+from pkg.jit import jit
+
+
+@jit
+def f() -> int:
+    return K
+
+
+print(f())
+"""
+
+
+def _run(root: Path, cache: Path) -> str:
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("NUMBA_", "MARIONETTE_"))}
+    env |= {"PYTHONPATH": str(root), "NUMBA_CACHE_DIR": str(cache)}
+    out = subprocess.run(
+        [sys.executable, "-c", "import pkg.kern"], env=env, capture_output=True, text=True
+    )
+    assert out.returncode == 0, out.stderr[-2000:]
+    return out.stdout.strip()
+
+
+def test_a_constant_edited_in_another_module_is_not_served_from_a_stale_cache(
+    tmp_path: Path,
+) -> None:
+    """A kernel bakes in a constant imported from another file; numba alone checks only the
+    kernel's own file, so without the sources' fingerprint in the cache folder the second
+    run would load the first run's machine code and print 1."""
+    pkg = tmp_path / "src" / "pkg"
+    pkg.mkdir(parents=True)
+    shutil.copy(CORE / "jit.py", pkg / "jit.py")
+    (pkg / "__init__.py").write_text("")
+    (pkg / "kern.py").write_text(KERNEL)
+    (pkg / "consts.py").write_text("K = 1\n")
+    cache = tmp_path / "cache"
+    assert _run(tmp_path / "src", cache) == "1"
+    assert _run(tmp_path / "src", cache) == "1"  # loaded, the same folder
+    first = fingerprint(pkg)
+    (pkg / "consts.py").write_text("K = 2\n")
+    assert fingerprint(pkg) != first
+    assert _run(tmp_path / "src", cache) == "2"
+    assert sorted(p.name for p in cache.iterdir()) == sorted([first, fingerprint(pkg)])
+
+
+def test_this_process_and_its_children_use_the_core_sources_folder() -> None:
+    """numba reads the folder named by core's fingerprint, and a child process inheriting
+    the environment picks the same one (not a folder inside it)."""
+    folder = core.jit.numba.config.CACHE_DIR  # numba as core.jit imported it
+    assert Path(folder).name == fingerprint(CORE)
+    out = subprocess.run(
+        [sys.executable, "-c", "import core.jit, numba; print(numba.config.CACHE_DIR)"],
+        capture_output=True, text=True, check=True,
+    )  # fmt: skip
+    assert out.stdout.strip() == folder
