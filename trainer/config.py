@@ -119,9 +119,15 @@ class SolverConfig(_Section):
     )
     ends_loss: bool = Field(
         default=False,
-        description="With rigid_loss: the losses also see the targeted limb ends (and elbows) "
-        "kept where the network put them (`keep_ends`, `keep_elbows`), as the answer is "
-        "served (then both are training settings too).",
+        description="With rigid_loss: the losses also see the targeted limb ends kept where "
+        "the network put them (`keep_ends`), as the answer is served (then `keep_ends` is a "
+        "training setting too).",
+    )
+    elbows_loss: bool = Field(
+        default=False,
+        description="With ends_loss: the losses also see the targeted elbows kept "
+        "(`keep_elbows`; then it is a training setting too). Off, the elbows are kept in "
+        "serving only (the shipped recipe; docs/generalisation.md item 29).",
     )
     identity_fraction: float = Field(
         default=0.1,

@@ -166,7 +166,15 @@ def load_checkpoint(
 #: from their default, so that runs from before them stay valid.
 _ADDED_LATER: dict[str, tuple[str, ...]] = {
     "autoencoder": ("loss", "lr_schedule"),
-    "solver": ("rigid_loss", "joint_loss", "stay_frame", "carry_loss", "ends_loss", "keep_elbows"),
+    "solver": (
+        "rigid_loss",
+        "joint_loss",
+        "stay_frame",
+        "carry_loss",
+        "ends_loss",
+        "keep_elbows",
+        "elbows_loss",
+    ),
     "augment": ("lift_start", "joint_shift"),
     "completion": ("loss",),
 }
@@ -203,9 +211,12 @@ def config_tag(cfg: TrainConfig, stage: str, *, legacy: bool = False) -> str:
         # neither is retrained when only the other's change; passes, carry: serving only
         other = ("sets", "epochs") if stage == "solvers_long" else ("long_sets", "long_epochs")
         # (carry, keep_ends and keep_elbows are training settings too where the losses see
-        # them, solver.carry_loss and solver.ends_loss)
-        keep = (("carry",) if cfg.solver.carry_loss else ()) + (
-            ("keep_ends", "keep_elbows") if cfg.solver.ends_loss else ()
+        # them: solver.carry_loss, solver.ends_loss, solver.elbows_loss)
+        sc = cfg.solver
+        keep = (
+            (("carry",) if sc.carry_loss else ())
+            + (("keep_ends",) if sc.ends_loss else ())
+            + (("keep_elbows",) if sc.ends_loss and sc.elbows_loss else ())
         )
         serving = tuple(k for k in SERVING_SETTINGS if k not in keep)
         relevant["solver"] = _section(cfg, "solver", (*serving, *other))

@@ -390,7 +390,7 @@ def train_solvers(
             ae, bank, model, start, goal, sc.other_weight, sc.bone_weight, mode,
             sc.stay_weight, sc.rigid_loss, sc.joint_loss == "distance",
             sc.stay_frame == "local", sc.carry if sc.carry_loss else 0.0,
-            active(sc.keep_ends, sc.keep_elbows) if sc.ends_loss else None,
+            active(sc.keep_ends, sc.keep_elbows and sc.elbows_loss) if sc.ends_loss else None,
         )  # fmt: skip
         return out
 

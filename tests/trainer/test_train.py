@@ -501,3 +501,19 @@ def test_stay_term_in_the_local_frame_measures_offsets_from_parents(
     local = load_config(None, {"solver": {"stay_frame": "local"}})
     assert config_tag(local, "solvers") != config_tag(load_config(None, {}), "solvers")
     assert config_tag(local, "completion1") == config_tag(load_config(None, {}), "completion1")
+
+
+def test_serving_settings_enter_the_solver_tags_only_where_the_losses_see_them() -> None:
+    """keep_ends and keep_elbows change the solvers' weights only with ends_loss (and, for
+    the elbows, elbows_loss): switching one on for serving alone keeps every checkpoint."""
+    base = {"rigid_loss": True, "ends_loss": True}
+
+    def tag(stage: str, **solver: object) -> str:
+        return config_tag(load_config(None, {"solver": {**base, **solver}}), stage)
+
+    for stage in ("solvers", "solvers_long"):
+        assert tag(stage, keep_elbows=True) == tag(stage, keep_elbows=False)
+        assert tag(stage, keep_elbows=True, elbows_loss=True) != tag(stage, keep_elbows=True)
+        assert tag(stage, keep_ends=False) != tag(stage, keep_ends=True)
+        assert tag(stage, ends_loss=False, keep_ends=False) == tag(stage, ends_loss=False)
+    assert tag("completion1", keep_elbows=True, elbows_loss=True) == tag("completion1")
