@@ -324,4 +324,17 @@ def issue14_goals(i14: Json | None) -> list[Goal]:
             status(rate["solve_arrays"] >= 200_000),
         )
     )
+    if "network_rows_per_s" in i14:
+        net, passes = i14["network_rows_per_s"], i14.get("passes", 1)
+        rows.append(
+            (
+                f"(info) the networks alone: the fused graph of {i14['network_set']} run "
+                f"once on the same {i14['batch']} rows (one thread)",
+                "–",
+                f"{net:,.0f} rows/s, so at most {net / passes:,.0f} poses/s at {passes} "
+                f"passes; the in-process batch reaches {rate['solve_arrays'] / (net / passes):.0%} "
+                "of that",
+                "info",
+            )
+        )
     return rows

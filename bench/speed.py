@@ -174,6 +174,7 @@ def issue14(
     }
     ort_threads = engine.encoder.session.get_session_options().intra_op_num_threads
     return {
+        **_network_ceiling(engine, two, starts, tpos, batch_rounds),
         "latency": rows,
         "composed": extra,
         "tolerance_m": tolerance,
@@ -183,6 +184,26 @@ def issue14(
         "threads": ort_threads,
         "passes": engine.solve_passes,
     }
+
+
+def _network_ceiling(
+    engine: Engine, edits: Edits, starts: np.ndarray, targets: np.ndarray, rounds: int
+) -> Json:
+    """The networks alone on the batch: the fused graph of ``edits``' target set run once
+    on every row (``network_rows_per_s``), so that a solve of ``engine.solve_passes``
+    passes cannot exceed ``network_rows_per_s / passes`` poses/s on this thread whatever
+    the geometry around it costs. Empty when no single fused graph covers the set."""
+    from core.skeleton import JOINT_NAMES
+
+    key = "+".join(sorted(JOINT_NAMES[j] for j in edits.joints[0]))
+    net = engine.fused.get(key)
+    if net is None:
+        return {}
+    x = np.ascontiguousarray(starts.reshape(len(starts), -1), dtype=np.float32)
+    t = np.ascontiguousarray(targets.reshape(len(targets), -1), dtype=np.float32)
+    net(x, t)
+    rate = len(x) / min(_timed(lambda: net(x, t)) for _ in range(rounds))
+    return {"network_set": key, "network_rows_per_s": rate}
 
 
 def _issue14_set(

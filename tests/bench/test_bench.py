@@ -160,6 +160,9 @@ def test_quick_bench_writes_a_sane_report(
     assert all(r["neural_passes1"]["p50_ms"] > 0 for r in i14["latency"])
     assert i14["batch_poses_per_s"]["solve_arrays_passes1"] > 0
     assert i14["batch_poses_per_s"]["solve_arrays_2threads"] > 0
+    # the networks alone on the 2-target batch: the ceiling the solve's passes divide
+    assert i14["network_set"] == "left_wrist+right_wrist" and i14["network_rows_per_s"] > 0
+    assert "the networks alone: the fused graph of left_wrist+right_wrist" in report
     assert "on 2 threads" in report
     assert "at passes=1" in report
 
