@@ -245,6 +245,12 @@ class Provenance(_Strict):
     git_commit: str
     versions: dict[str, str]
     training_seconds: dict[str, float] = Field(default_factory=dict)
+    serving_changes: list[dict[str, Any]] = Field(
+        default_factory=list,
+        description="Serving blocks set after the export without retraining (`pose-trainer "
+        "serving`), oldest first: the version before, the settings changed (old and new "
+        "value) and the git commit.",
+    )
 
 
 class Manifest(_Strict):

@@ -152,6 +152,28 @@ def plot_data(
     typer.echo(f"wrote {path}")
 
 
+@app.command("serving")
+def serving_cmd(
+    config: Annotated[Path, typer.Option(help="Config whose serving settings to apply (TOML).")],
+    models: Annotated[Path, typer.Option(help="Models directory.")] = Path("models"),
+) -> None:
+    """Set the models' serving block (manifest.json, new version) from a config's serving
+    settings, without retraining; refuses a setting the losses were trained with."""
+    from trainer.config import load_config
+    from trainer.serving import set_serving
+
+    try:
+        manifest, changed = set_serving(load_config(config), models)
+    except ValueError as exc:
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(1) from None
+    if not changed:
+        typer.echo(f"{models}: serving already as in {config} ({manifest.version})")
+        return
+    listed = ", ".join(f"{k} {v['from']!r} -> {v['to']!r}" for k, v in changed.items())
+    typer.echo(f"{models}: {listed}; version {manifest.version}")
+
+
 @app.command("model-card")
 def model_card(
     models: Annotated[Path, typer.Option(help="Models directory.")] = Path("models"),

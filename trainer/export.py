@@ -175,7 +175,7 @@ def body_shapes(lengths: np.ndarray, min_share: float = 0.01, most: int = 16) ->
     return shapes
 
 
-def _git_commit(out: Path) -> str:
+def git_commit_of(out: Path) -> str:
     """HEAD, with ``-dirty`` if a tracked file other than the export's own (``out``) is
     modified."""
     try:
@@ -205,6 +205,19 @@ def model_version(entries: list[ModelEntry], serving: Serving) -> str:
     the files alone)."""
     text = "".join(e.sha256 for e in entries) + serving.model_dump_json()
     return "mx1-" + hashlib.sha256(text.encode()).hexdigest()[:12]
+
+
+def serving_of(cfg: TrainConfig) -> Serving:
+    """The manifest's serving block of models trained and served with ``cfg``."""
+    return Serving(
+        body="total_length" if cfg.augment.enabled and cfg.augment.normalise_size
+        else "nearest_skeleton",
+        delta=cfg.solver.delta,
+        anchor=cfg.solver.delta and cfg.solver.anchor,
+        **{k: getattr(cfg.solver, k) for k in SERVING_SETTINGS},
+        completion_yaws=cfg.completion.serving_yaws,
+        completion_mirror=cfg.completion.serving_mirror,
+    )  # fmt: skip
 
 
 def _params(module: nn.Module) -> int:
@@ -353,15 +366,7 @@ def export_all(
         {"name": str(a.get("file") or a.get("path")), "sha256": str(a.get("sha256"))}
         for a in data_meta.get("archives", [])
     ]
-    serving = Serving(
-        body="total_length" if cfg.augment.enabled and cfg.augment.normalise_size
-        else "nearest_skeleton",
-        delta=cfg.solver.delta,
-        anchor=cfg.solver.delta and cfg.solver.anchor,
-        **{k: getattr(cfg.solver, k) for k in SERVING_SETTINGS},
-        completion_yaws=cfg.completion.serving_yaws,
-        completion_mirror=cfg.completion.serving_mirror,
-    )  # fmt: skip
+    serving = serving_of(cfg)
     manifest = Manifest(
         schema_version=SCHEMA_VERSION,
         version=model_version(entries, serving),
@@ -387,7 +392,7 @@ def export_all(
             dataset={k: v for k, v in data_meta.items() if k != "archives"},
             split_seed=int(data_meta.get("seed", 0)),
             config=cfg.model_dump(mode="json"),
-            git_commit=_git_commit(out),
+            git_commit=git_commit_of(out),
             versions={
                 "python": platform.python_version(),
                 "torch": torch.__version__,

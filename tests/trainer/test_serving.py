@@ -1,0 +1,76 @@
+"""`pose-trainer serving`: a trained model folder's serving block set from a config."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from core.manifest import load_manifest
+from service.engine import Engine
+from trainer.cli import app
+from trainer.config import load_config
+from trainer.serving import set_serving
+
+DEFAULT = Path(__file__).resolve().parents[2] / "trainer" / "configs" / "default.toml"
+
+
+@pytest.fixture
+def models(models_dir: Path, tmp_path: Path) -> Path:
+    out = tmp_path / "models"
+    shutil.copytree(models_dir, out)
+    return out
+
+
+def test_a_serving_only_setting_changes_the_version_and_the_answers_setting(
+    models: Path,
+) -> None:
+    """Flipping keep_elbows (the losses never saw it) gives a verified manifest of a new
+    version that the engine serves with the new setting and records the change; the same
+    block gives the same version again (the version hashes the files and the block)."""
+    before = load_manifest(models)
+    flip = not before.serving.keep_elbows
+    cfg = load_config(DEFAULT, {"solver": {"keep_elbows": flip}})
+    original = load_config(DEFAULT, {"solver": {"keep_elbows": not flip}})
+    set_serving(original, models)  # the shipped block as the default config states it
+    start = load_manifest(models)
+    after, changed = set_serving(cfg, models)
+    assert changed == {"keep_elbows": {"from": not flip, "to": flip}}
+    assert after.version != start.version and after == load_manifest(models, verify=True)
+    assert after.provenance.serving_changes[-1]["from"] == start.version
+    assert after.provenance.config["solver"]["keep_elbows"] is flip
+    assert [m.sha256 for m in after.models] == [m.sha256 for m in before.models]
+    assert Engine(models).keep_elbows is flip
+    assert f"manifest {after.version}" in (models / "README.md").read_text()
+    assert set_serving(cfg, models)[1] == {}  # already so: nothing written
+    back, _ = set_serving(original, models)
+    assert back.serving == start.serving and back.version != after.version
+    again, _ = set_serving(cfg, models)
+    assert again.version == after.version and len(again.provenance.serving_changes) == 3
+
+
+def test_a_setting_the_losses_saw_is_refused_and_nothing_written(models: Path) -> None:
+    manifest = load_manifest(models)
+    assert manifest.provenance.config["solver"]["ends_loss"]  # the shipped recipe
+    text = (models / "manifest.json").read_text()
+    flipped = {"keep_ends": not manifest.serving.keep_ends}
+    with pytest.raises(ValueError, match="retrain to change them: keep_ends"):
+        set_serving(load_config(DEFAULT, {"solver": flipped}), models)
+    assert (models / "manifest.json").read_text() == text
+
+
+def test_the_command_reports_the_change_or_the_refusal(models: Path, tmp_path: Path) -> None:
+    cfg = tmp_path / "serving.toml"
+    manifest = json.loads((models / "manifest.json").read_text())
+    turns = manifest["serving"]["turn_yaws"] * 2
+    cfg.write_text(f'extends = "{DEFAULT}"\n[solver]\nturn_yaws = {turns}\n')
+    ok = CliRunner().invoke(app, ["serving", "--config", str(cfg), "--models", str(models)])
+    assert ok.exit_code == 0, ok.output
+    assert f"turn_yaws {turns // 2} -> {turns}" in ok.output
+    assert load_manifest(models).serving.turn_yaws == turns
+    cfg.write_text(f'extends = "{DEFAULT}"\n[solver]\ndelta = false\n')
+    bad = CliRunner().invoke(app, ["serving", "--config", str(cfg), "--models", str(models)])
+    assert bad.exit_code == 1 and "delta True -> False" in bad.output
