@@ -44,6 +44,10 @@ def test_shipped_models_keep_ends(engines: tuple[Engine, Engine], client: Any) -
     assert engines[1].keep_ends and engines[1].manifest.serving.keep_ends
     assert not engines[0].keep_ends
     assert client.get("/v1/models").json()["keep_ends"] is True
+    # and the lone elbows (serving.keep_elbows, set without retraining: the losses saw the
+    # ends only)
+    assert engines[1].keep_elbows and client.get("/v1/models").json()["keep_elbows"] is True
+    assert not engines[1].manifest.provenance.config["solver"].get("elbows_loss", False)
 
 
 def test_only_the_targeted_limb_moves_and_reaches_nearer(
