@@ -142,7 +142,14 @@ VARIANTS: dict[str, str] = {
     "keep_elbows_serving": "the shipped networks (`ends_loss`) served with each lone targeted "
     "elbow kept too (`serving.keep_elbows`, `--keep-elbows`)",
     "keep_elbows": "the same with both solver banks retrained with it in their losses "
-    "(keep_elbows.toml)",
+    "(keep_elbows.toml, `solver.elbows_loss`), on this host's autoencoder: compare "
+    "`keep_elbows_here`, which differs in the two elbow solvers only",
+    "ends_here": "the `ends_loss` recipe retrained from its seed on this host (runs/ship): "
+    "the same seed on another CPU, so the autoencoder's weights differ from the shipped ones "
+    "slightly, and every network with them; served "
+    "without kept elbows",
+    "keep_elbows_here": "`ends_here` served with the lone elbows kept (`serving.keep_elbows`, "
+    "as shipped since mx1-39a0a1d79547)",
     "ae_cos3e3_ends": "the shipped recipe (`ends_loss`) with the autoencoder at lr 3e-3 decayed "
     "along a cosine (ae_cos3e3_ends.toml; both solver banks retrained on it)",
 }
