@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import tomllib
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Literal
 
@@ -180,6 +181,18 @@ SERVING_SETTINGS: tuple[str, ...] = (
 )  # fmt: skip
 if not set(SERVING_SETTINGS) <= set(SolverConfig.model_fields) & set(Serving.model_fields):
     raise RuntimeError("SERVING_SETTINGS must name fields of SolverConfig and of Serving")
+
+
+def seen_by_losses(solver: Mapping[str, Any]) -> tuple[str, ...]:
+    """The serving settings the solvers' losses saw, from a ``solver`` section (a dumped
+    :class:`SolverConfig`, or an older one without some flags: those off): training
+    settings too, so in the checkpoint tags, and fixed once trained."""
+    ends = bool(solver.get("ends_loss", False))
+    return (
+        (("carry",) if solver.get("carry_loss", False) else ())
+        + (("keep_ends",) if ends else ())
+        + (("keep_elbows",) if ends and solver.get("elbows_loss", False) else ())
+    )
 
 
 class CompletionConfig(_Section):

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from core.manifest import Manifest, Serving, load_manifest, write_manifest
-from trainer.config import SERVING_SETTINGS, TrainConfig
+from trainer.config import SERVING_SETTINGS, TrainConfig, seen_by_losses
 from trainer.export import git_commit_of, model_version, serving_of
 from trainer.model_card import write_model_card
 
@@ -26,15 +26,8 @@ TRAINED = ("body", "delta", "anchor")
 
 def locked(trained: dict[str, Any]) -> set[str]:
     """The serving settings the models were trained for, by their training config's
-    ``solver`` section ``trained`` (flags missing from an older config: off)."""
-    out = set(TRAINED)
-    if trained.get("carry_loss", False):
-        out.add("carry")
-    if trained.get("ends_loss", False):
-        out.add("keep_ends")
-        if trained.get("elbows_loss", False):
-            out.add("keep_elbows")
-    return out
+    ``solver`` section ``trained``."""
+    return {*TRAINED, *seen_by_losses(trained)}
 
 
 def set_serving(cfg: TrainConfig, models_dir: Path) -> tuple[Manifest, dict[str, Any]]:

@@ -31,7 +31,7 @@ from torch import nn
 from torch.utils.data import DistributedSampler
 
 from core.io import write_atomic
-from trainer.config import SERVING_SETTINGS, LrSchedule, TrainConfig
+from trainer.config import SERVING_SETTINGS, LrSchedule, TrainConfig, seen_by_losses
 
 console = Console(stderr=True)
 
@@ -212,12 +212,7 @@ def config_tag(cfg: TrainConfig, stage: str, *, legacy: bool = False) -> str:
         other = ("sets", "epochs") if stage == "solvers_long" else ("long_sets", "long_epochs")
         # (carry, keep_ends and keep_elbows are training settings too where the losses see
         # them: solver.carry_loss, solver.ends_loss, solver.elbows_loss)
-        sc = cfg.solver
-        keep = (
-            (("carry",) if sc.carry_loss else ())
-            + (("keep_ends",) if sc.ends_loss else ())
-            + (("keep_elbows",) if sc.ends_loss and sc.elbows_loss else ())
-        )
+        keep = seen_by_losses(cfg.solver.model_dump())
         serving = tuple(k for k in SERVING_SETTINGS if k not in keep)
         relevant["solver"] = _section(cfg, "solver", (*serving, *other))
         relevant["augment"] = _section(cfg, "augment")
