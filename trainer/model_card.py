@@ -65,7 +65,11 @@ bone pass); MPJPE = mean per-joint error of the whole decoded pose to the true t
 
 Training time per stage (s, one CPU thread): {seconds}.
 Training configuration, git commit and library versions: `manifest.json` → `provenance`.
-"""
+
+## Serving
+How the service answers with these networks (`manifest.json` → `serving`; docs/service.md):
+{serving}
+{changes}"""
 
 
 def _fmt(metrics: dict[str, float], split: str) -> str:
@@ -95,6 +99,13 @@ def render(manifest: Manifest) -> str:
         gap=cfg["solver"]["max_gap_seconds"],
         rows=rows,
         seconds=seconds or "–",
+        serving=", ".join(f"`{k}` {v}" for k, v in manifest.serving.model_dump().items()) + ".",
+        changes="".join(
+            f"\nSet after training with `pose-trainer serving` (from {c['from']}): "
+            + ", ".join(f"`{k}` {v['from']} → {v['to']}" for k, v in c["changed"].items())
+            + "."
+            for c in manifest.provenance.serving_changes
+        ),
     )
 
 
