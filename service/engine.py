@@ -139,11 +139,11 @@ class Engine:
             raise ValueError(f"carry must be in [0, 1], got {self.carry}")
         #: the bone pass keeps targeted wrists and ankles, and elbows, where the networks
         #: put them (``serving.keep_ends``, ``serving.keep_elbows`` unless overridden;
-        #: :mod:`core.ends`): ``kept_chains``, the mask ``[C]`` of chains it may keep
+        #: :mod:`core.ends`): ``chain_mask``, the mask ``[C]`` of chains it may keep
         #: (``core.ends.active``; which of them an edit keeps: ``core.ends.kept_chains``)
         self.keep_ends = bool(m.serving.keep_ends if keep_ends is None else keep_ends)
         self.keep_elbows = bool(m.serving.keep_elbows if keep_elbows is None else keep_elbows)
-        self.kept_chains = active_chains(self.keep_ends, self.keep_elbows)
+        self.chain_mask = active_chains(self.keep_ends, self.keep_elbows)
         #: the turn search of many-target edits (``serving.turn_*``, :mod:`service.turns`)
         self.turn_search = turns.TurnSearch.of(m.serving, turn_yaws)
         known = np.asarray(m.skeleton.skeletons, dtype=np.float64)  # [C, 20]
@@ -445,7 +445,7 @@ class Engine:
             if len(sequences) == 1 and neural.all():  # the common case: no gathers
                 decoded = self._run_sequence(x, canvas, sequences[0])
                 out = compiled.unscale(
-                    decoded, scales, canon, lengths, bone, tidx, cnt, batch.carry, self.kept_chains
+                    decoded, scales, canon, lengths, bone, tidx, cnt, batch.carry, self.chain_mask
                 )
             else:
                 items = np.flatnonzero(neural)
@@ -456,7 +456,7 @@ class Engine:
                 out = canon.copy()
                 out[items] = compiled.unscale(
                     decoded[items], scales[items], canon[items], lengths[items], bone[items],
-                    tidx[items], cnt[items], batch.carry[items], self.kept_chains,
+                    tidx[items], cnt[items], batch.carry[items], self.chain_mask,
                 )  # fmt: skip
         start = canon
         if origin is not None and moved is not None and moved.any():

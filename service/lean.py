@@ -122,11 +122,11 @@ def solve_lean(
         if not exact or k < passes - 1:
             pose, errors, bone_err = compiled.settle(
                 decoded, scales, canon, lengths, facing, trans, floors, tidx, tpos, counts,
-                items.carry, engine.kept_chains,
+                items.carry, engine.chain_mask,
             )  # fmt: skip
             continue
         out = compiled.unscale(
-            decoded, scales, canon, lengths, every, tidx, counts, items.carry, engine.kept_chains
+            decoded, scales, canon, lengths, every, tidx, counts, items.carry, engine.chain_mask
         )
         out, iterations, errs = engine._fabrik(
             True, out, lengths, tcan[:, :c], items.tols, tidx[0, :c], items.w[0, :c],

@@ -86,7 +86,7 @@ def test_kept_elbows_move_only_the_arm_and_reach_nearer(
     only its shoulder, the elbow and the hand below move; lengths hold; batch = single."""
     kw = {"solve_passes": 1, "retry_reach": 0.0}
     off, on = (Engine(models_dir, keep_elbows=k, **kw) for k in (False, True))
-    assert on.kept_chains.sum() == 6 and off.kept_chains.sum() == (4 if off.keep_ends else 0)
+    assert on.chain_mask.sum() == 6 and off.chain_mask.sum() == (4 if off.keep_ends else 0)
     assert client.get("/v1/models").json()["keep_elbows"] is on.manifest.serving.keep_elbows
     start, goal = pairs
     probs = _problems(start, goal, ("left_elbow",))
