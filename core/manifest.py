@@ -245,6 +245,11 @@ class Provenance(_Strict):
     git_commit: str
     versions: dict[str, str]
     training_seconds: dict[str, float] = Field(default_factory=dict)
+    training_hosts: dict[str, list[str]] = Field(
+        default_factory=dict,
+        description="Per stage, the hosts that trained it (CPU model, SIMD level, torch, "
+        "threads): the same seed on another CPU gives slightly other weights.",
+    )
     serving_changes: list[dict[str, Any]] = Field(
         default_factory=list,
         description="Serving blocks set after the export without retraining (`pose-trainer "

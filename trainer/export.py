@@ -401,6 +401,7 @@ def export_all(
                 "numpy": np.__version__,
             },
             training_seconds={k: round(s.seconds, 1) for k, s in trained.states.items()},
+            training_hosts={k: s.hosts for k, s in trained.states.items()},
         ),
     )
     write_manifest(out, manifest)

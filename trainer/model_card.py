@@ -64,6 +64,7 @@ bone pass); MPJPE = mean per-joint error of the whole decoded pose to the true t
 {rows}
 
 Training time per stage (s, one CPU thread): {seconds}.
+Trained on: {hosts}.
 Training configuration, git commit and library versions: `manifest.json` → `provenance`.
 
 ## Serving
@@ -99,6 +100,10 @@ def render(manifest: Manifest) -> str:
         gap=cfg["solver"]["max_gap_seconds"],
         rows=rows,
         seconds=seconds or "–",
+        hosts="; ".join(
+            sorted({h for hs in manifest.provenance.training_hosts.values() for h in hs})
+        )
+        or "not recorded (trained before hosts were)",
         serving=", ".join(f"`{k}` {v}" for k, v in manifest.serving.model_dump().items()) + ".",
         changes="".join(
             f"\nSet after training with `pose-trainer serving` (from {c['from']}): "

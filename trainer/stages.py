@@ -10,11 +10,13 @@ run ends with the same weights as an uninterrupted one.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import io
 import json
 import math
 import os
+import platform
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
@@ -127,6 +129,21 @@ class StageState:
     epoch: int = 0  # epochs completed
     history: list[dict[str, float]] = field(default_factory=list)
     seconds: float = 0.0
+    hosts: list[str] = field(default_factory=list)  # :func:`host` of each run that trained it
+
+
+def host() -> str:
+    """What decides a stage's arithmetic besides the code and the seed: the CPU model and
+    the SIMD level torch dispatches to, the torch version and the thread count (the same
+    seed on another CPU gives slightly other weights; docs/generalisation.md item 29)."""
+    model = platform.processor() or platform.machine()
+    with contextlib.suppress(OSError):
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                model = line.split(":", 1)[1].strip()
+                break
+    capability = torch.backends.cpu.get_cpu_capability()
+    return f"{model}, {capability}, torch {torch.__version__}, {torch.get_num_threads()} threads"
 
 
 def save_checkpoint(
@@ -139,6 +156,7 @@ def save_checkpoint(
             "epoch": state.epoch,
             "history": state.history,
             "seconds": state.seconds,
+            "hosts": state.hosts,
             "model": model.state_dict(),
             "optim": optim.state_dict(),
         },
@@ -159,7 +177,12 @@ def load_checkpoint(
         return StageState()
     model.load_state_dict(ckpt["model"])
     optim.load_state_dict(ckpt["optim"])
-    return StageState(epoch=ckpt["epoch"], history=ckpt["history"], seconds=ckpt["seconds"])
+    return StageState(
+        epoch=ckpt["epoch"],
+        history=ckpt["history"],
+        seconds=ckpt["seconds"],
+        hosts=list(ckpt.get("hosts", [])),  # written before hosts were: none recorded
+    )
 
 
 #: Fields added after checkpoints of their stages existed: in a tag only where they differ
@@ -268,6 +291,8 @@ def run_stage(
         return state
     if state.epoch and d.main:
         console.print(f"[cyan]{name}: resuming after epoch {state.epoch}")
+    if host() not in state.hosts:
+        state.hosts.append(host())
     for epoch in range(state.epoch, epochs):
         t0 = time.perf_counter()
         model.train()

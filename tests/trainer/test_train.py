@@ -37,6 +37,7 @@ from trainer.rigid import parent_offsets_t
 from trainer.stages import (
     StageState,
     config_tag,
+    host,
     load_checkpoint,
     save_checkpoint,
     schedule_lr,
@@ -517,3 +518,14 @@ def test_serving_settings_enter_the_solver_tags_only_where_the_losses_see_them()
         assert tag(stage, keep_ends=False) != tag(stage, keep_ends=True)
         assert tag(stage, ends_loss=False, keep_ends=False) == tag(stage, ends_loss=False)
     assert tag("completion1", keep_elbows=True, elbows_loss=True) == tag("completion1")
+
+
+def test_every_stage_records_the_host_that_trained_it(trained: tuple[Trained, Path]) -> None:
+    """The same seed on another CPU gives slightly other weights, so the manifest names the
+    host (CPU model, SIMD level, torch, threads) of every stage, and the model card too."""
+    result, models = trained
+    manifest = load_manifest(models)
+    assert set(manifest.provenance.training_hosts) == set(result.states)
+    assert all(hosts == [host()] for hosts in manifest.provenance.training_hosts.values())
+    assert torch.backends.cpu.get_cpu_capability() in host()
+    assert f"Trained on: {host()}." in (models / "README.md").read_text()
