@@ -389,7 +389,10 @@ def export_all(
         models=entries,
         provenance=Provenance(
             data=archives,
-            dataset={k: v for k, v in data_meta.items() if k != "archives"},
+            dataset={
+                **{k: v for k, v in data_meta.items() if k != "archives"},
+                "file_sha256": sha256_file(Path(cfg.dataset)),  # the npz trained on
+            },
             split_seed=int(data_meta.get("seed", 0)),
             config=cfg.model_dump(mode="json"),
             git_commit=git_commit_of(out),

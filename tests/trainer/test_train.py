@@ -18,6 +18,7 @@ import onnxruntime as ort
 import pytest
 import torch
 
+from core.io import sha256_file
 from core.manifest import ManifestError, load_manifest
 from core.skeleton import JOINT_INDEX
 from trainer.config import QUICK, TrainConfig, load_config
@@ -520,7 +521,9 @@ def test_serving_settings_enter_the_solver_tags_only_where_the_losses_see_them()
     assert tag("completion1", keep_elbows=True, elbows_loss=True) == tag("completion1")
 
 
-def test_every_stage_records_the_host_that_trained_it(trained: tuple[Trained, Path]) -> None:
+def test_every_stage_records_the_host_that_trained_it(
+    trained: tuple[Trained, Path], small_dataset: Path
+) -> None:
     """The same seed on another CPU gives slightly other weights, so the manifest names the
     host (CPU model, SIMD level, torch, threads) of every stage, and the model card too."""
     result, models = trained
@@ -529,3 +532,4 @@ def test_every_stage_records_the_host_that_trained_it(trained: tuple[Trained, Pa
     assert all(hosts == [host()] for hosts in manifest.provenance.training_hosts.values())
     assert torch.backends.cpu.get_cpu_capability() in host()
     assert f"Trained on: {host()}." in (models / "README.md").read_text()
+    assert manifest.provenance.dataset["file_sha256"] == sha256_file(small_dataset)
