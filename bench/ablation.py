@@ -150,6 +150,9 @@ VARIANTS: dict[str, str] = {
     "without kept elbows",
     "keep_elbows_here": "`ends_here` served with the lone elbows kept (`serving.keep_elbows`, "
     "as shipped since mx1-39a0a1d79547)",
+    "ease5mm": "the shipped models (mx1-39a0a1d79547) served with kept ends eased over 5 mm "
+    "(`serving.keep_ease` 0.005, `--keep-ease 0.005`)",
+    "ease1cm": "the same eased over 1 cm",
     "ae_cos3e3_ends": "the shipped recipe (`ends_loss`) with the autoencoder at lr 3e-3 decayed "
     "along a cosine (ae_cos3e3_ends.toml; both solver banks retrained on it)",
 }

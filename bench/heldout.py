@@ -663,6 +663,10 @@ def main(
         Optional[bool],  # noqa: UP045
         typer.Option(help="Targeted elbows kept (default: the manifest's serving.keep_elbows)."),
     ] = None,
+    keep_ease: Annotated[
+        Optional[float],  # noqa: UP045
+        typer.Option(help="Kept ends eased over this (m; default: serving.keep_ease)."),
+    ] = None,
 ) -> None:
     """Held-out bodies and the stress set only, against any models folder."""
     from rich.console import Console
@@ -677,13 +681,14 @@ def main(
     cfg = dataclasses.replace(QUICK if quick else HeldoutConfig(), seed=seed)
     engine = Engine(
         models, threads=1, solve_passes=passes, carry=carry, turn_yaws=turn_yaws,
-        keep_ends=keep_ends, keep_elbows=keep_elbows,
+        keep_ends=keep_ends, keep_elbows=keep_elbows, keep_ease=keep_ease,
     )  # fmt: skip
     res = run_heldout(engine, load_dataset(dataset), cfg, split=split, log=console.log)
     res.models = {
         "dir": str(models), "version": engine.version, "passes": engine.solve_passes,
         "carry": engine.carry, "turn_yaws": engine.turn_search.yaws,
         "keep_ends": engine.keep_ends, "keep_elbows": engine.keep_elbows,
+        "keep_ease": engine.keep_ease,
     }  # fmt: skip
     if out is not None:
         out.parent.mkdir(parents=True, exist_ok=True)

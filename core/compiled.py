@@ -438,11 +438,19 @@ def carry_item(
 
 @jit
 def ends_item(
-    out: F64, network: F64, tidx: I64, count: int, chains: Bool, flags: I64, vecs: F64
+    out: F64,
+    network: F64,
+    tidx: I64,
+    count: int,
+    chains: Bool,
+    flags: I64,
+    vecs: F64,
+    ease: float,
 ) -> None:  # pragma: no cover - compiled
     """``core.ends.keep_ends`` for one pose ``out [21, 3]`` (after the bone pass) and its
     network pose ``network [21, 3]``, in place, for the chains ``chains [C]`` marks
-    (``core.ends.active``); ``flags [21]`` (int64) and ``vecs [5, 3]`` are scratch."""
+    (``core.ends.active``), eased over ``ease`` m; ``flags [21]`` (int64) and ``vecs [5,
+    3]`` are scratch."""
     for j in range(NUM_JOINTS):
         flags[j] = 0
     for q in range(count):
@@ -464,6 +472,15 @@ def ends_item(
         b = np.sqrt((w0[0] - e0[0]) ** 2 + (w0[1] - e0[1]) ** 2 + (w0[2] - e0[2]) ** 2)
         for i in range(3):
             u[i] = network[end, i] - s[i]
+        if ease > 0.0:
+            gap = np.sqrt(
+                (network[end, 0] - w0[0]) ** 2
+                + (network[end, 1] - w0[1]) ** 2
+                + (network[end, 2] - w0[2]) ** 2
+            )
+            if gap < ease:
+                for i in range(3):
+                    u[i] = (w0[i] + (gap / ease) * (network[end, i] - w0[i])) - s[i]
         d0 = np.sqrt(u[0] ** 2 + u[1] ** 2 + u[2] ** 2)
         if not (d0 > _ENDS_TINY and a > _ENDS_TINY):
             continue
@@ -500,6 +517,7 @@ def unscale(
     counts: I64,
     carry: F64,
     chains: Bool,
+    ease: float,
 ) -> F64:  # pragma: no cover - compiled
     """Network answers ``[M, 63]`` (float32, at the networks' size) back to the body's
     size (float64), with the bone pass (reference: the start pose) where ``bone``, and
@@ -527,7 +545,7 @@ def unscale(
                 carry_item(out[b], canon[b], lengths[b], tidx[b], counts[b], carry[b], rr,
                            flags, anchor, vecs)  # fmt: skip
             if ends:
-                ends_item(out[b], pose, tidx[b], counts[b], chains, flags, vecs)
+                ends_item(out[b], pose, tidx[b], counts[b], chains, flags, vecs, ease)
         else:
             out[b] = pose
     return out
@@ -593,11 +611,12 @@ def settle(
     counts: I64,
     carry: F64,
     chains: Bool,
+    ease: float,
 ) -> tuple[F64, F64, F64]:  # pragma: no cover - compiled
     """:func:`unscale` with the bone pass for every item, then :func:`finish`, in one call
     (the lean path of ``service.lean``): the same arithmetic in the same order."""
     bone = np.ones(decoded.shape[0], dtype=np.bool_)
-    out = unscale(decoded, scales, canon, lengths, bone, tidx, counts, carry, chains)
+    out = unscale(decoded, scales, canon, lengths, bone, tidx, counts, carry, chains, ease)
     return finish(out, facing, trans, floors, tidx, tpos, counts, lengths)
 
 
@@ -620,7 +639,7 @@ def warm() -> None:
     )  # fmt: skip
     unscale(
         out[6], out[4], out[0], out[3], np.ones(1, dtype=np.bool_), tidx, counts, np.full(1, 0.5),
-        chains,
+        chains, 0.0,
     )  # fmt: skip
     finish(out[0], out[1], out[2], np.zeros(1), tidx, tpos, counts, out[3])
     settle(
@@ -636,6 +655,7 @@ def warm() -> None:
         counts,
         np.full(1, 0.5),
         chains,
+        0.0,
     )
 
 

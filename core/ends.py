@@ -94,12 +94,18 @@ def kept_chains(targets: Iterable[int], chains: npt.NDArray[np.bool_] | None = N
 
 
 def keep_ends(
-    pose: F64, network: F64, targets: Iterable[int], chains: npt.NDArray[np.bool_] | None = None
+    pose: F64,
+    network: F64,
+    targets: Iterable[int],
+    chains: npt.NDArray[np.bool_] | None = None,
+    ease: float = 0.0,
 ) -> F64:
     """``pose [..., 21, 3]`` (after the bone pass: the character's lengths) with each kept
     chain's end (of those ``chains`` marks, default the limb ends) where ``network`` (the
     same poses before the bone pass) has it, as near as the limb reaches; see the module.
-    A new array."""
+    ``ease`` (m, > 0): an end the bone pass left ``g`` < ``ease`` from the network's goes
+    only ``g / ease`` of the way back (a millimetre of the networks' ankle no longer bends
+    a straight knee; continuous in ``g``). A new array."""
     out = np.array(pose, dtype=np.float64, copy=True)
     net = np.asarray(network, dtype=np.float64)
     for c in kept_chains(targets, chains):
@@ -108,6 +114,10 @@ def keep_ends(
         a = np.sqrt(np.sum((e0 - s) ** 2, axis=-1))
         b = np.sqrt(np.sum((w0 - e0) ** 2, axis=-1))
         line = net[..., end, :] - s
+        if ease > 0.0:
+            gap = np.sqrt(np.sum((net[..., end, :] - w0) ** 2, axis=-1))
+            part = (w0 + (gap / ease)[..., None] * (net[..., end, :] - w0)) - s
+            line = np.where((gap < ease)[..., None], part, line)
         d0 = np.sqrt(np.sum(line**2, axis=-1))
         u = line / np.where(d0 > TINY, d0, 1.0)[..., None]
         d = np.minimum(np.maximum(d0, np.abs(a - b)), a + b)

@@ -137,6 +137,15 @@ class Serving(_Strict):
         "collar bone and the upper arm reach), its shoulder placed anew with the "
         "character's own lengths, the forearm and hand moved with it (core.ends).",
     )
+    keep_ease: float = Field(
+        default=0.0,
+        ge=0.0,
+        le=0.1,
+        description="With keep_ends / keep_elbows: an end the bone pass left g metres from "
+        "where the networks put it, g below this, goes back only g / keep_ease of the way "
+        "(0: all the way), so that a millimetre of the networks' answer does not bend a "
+        "straight limb (core.ends).",
+    )
     turn_yaws: int = Field(
         default=1,
         ge=1,

@@ -90,6 +90,7 @@ class Engine:
         retry_reach: float | None = None,
         keep_ends: bool | None = None,
         keep_elbows: bool | None = None,
+        keep_ease: float | None = None,
     ) -> None:
         self.models_dir = Path(models_dir)
         self.manifest: Manifest = load_manifest(self.models_dir, verify=True)
@@ -144,6 +145,9 @@ class Engine:
         self.keep_ends = bool(m.serving.keep_ends if keep_ends is None else keep_ends)
         self.keep_elbows = bool(m.serving.keep_elbows if keep_elbows is None else keep_elbows)
         self.chain_mask = active_chains(self.keep_ends, self.keep_elbows)
+        #: an end the bone pass left nearer than this (m) to the networks' goes back only
+        #: that share of the way (``serving.keep_ease``; ``core.ends.keep_ends``)
+        self.keep_ease = float(m.serving.keep_ease if keep_ease is None else keep_ease)
         #: the turn search of many-target edits (``serving.turn_*``, :mod:`service.turns`)
         self.turn_search = turns.TurnSearch.of(m.serving, turn_yaws)
         known = np.asarray(m.skeleton.skeletons, dtype=np.float64)  # [C, 20]
@@ -445,8 +449,9 @@ class Engine:
             if len(sequences) == 1 and neural.all():  # the common case: no gathers
                 decoded = self._run_sequence(x, canvas, sequences[0])
                 out = compiled.unscale(
-                    decoded, scales, canon, lengths, bone, tidx, cnt, batch.carry, self.chain_mask
-                )
+                    decoded, scales, canon, lengths, bone, tidx, cnt, batch.carry, self.chain_mask,
+                    self.keep_ease,
+                )  # fmt: skip
             else:
                 items = np.flatnonzero(neural)
                 decoded = np.empty((n, 3 * NUM_JOINTS), dtype=np.float32)
@@ -456,7 +461,7 @@ class Engine:
                 out = canon.copy()
                 out[items] = compiled.unscale(
                     decoded[items], scales[items], canon[items], lengths[items], bone[items],
-                    tidx[items], cnt[items], batch.carry[items], self.chain_mask,
+                    tidx[items], cnt[items], batch.carry[items], self.chain_mask, self.keep_ease,
                 )  # fmt: skip
         start = canon
         if origin is not None and moved is not None and moved.any():

@@ -122,12 +122,13 @@ def solve_lean(
         if not exact or k < passes - 1:
             pose, errors, bone_err = compiled.settle(
                 decoded, scales, canon, lengths, facing, trans, floors, tidx, tpos, counts,
-                items.carry, engine.chain_mask,
+                items.carry, engine.chain_mask, engine.keep_ease,
             )  # fmt: skip
             continue
         out = compiled.unscale(
-            decoded, scales, canon, lengths, every, tidx, counts, items.carry, engine.chain_mask
-        )
+            decoded, scales, canon, lengths, every, tidx, counts, items.carry, engine.chain_mask,
+            engine.keep_ease,
+        )  # fmt: skip
         out, iterations, errs = engine._fabrik(
             True, out, lengths, tcan[:, :c], items.tols, tidx[0, :c], items.w[0, :c],
             np.zeros(c, dtype=np.bool_),

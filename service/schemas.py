@@ -266,6 +266,11 @@ class ModelsResponse(BaseModel):
         "it, its shoulder placed anew with the character's lengths (the manifest's "
         "`serving.keep_elbows`)."
     )
+    keep_ease: float = Field(
+        description="Metres below which a kept end that the bone pass left that near the "
+        "networks' goes back only in proportion (0: all the way; the manifest's "
+        "`serving.keep_ease`)."
+    )
     models: list[ModelInfo]
 
 

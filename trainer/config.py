@@ -112,6 +112,7 @@ class SolverConfig(_Section):
     retry_reach: float = _serving("retry_reach")
     keep_ends: bool = _serving("keep_ends")
     keep_elbows: bool = _serving("keep_elbows")
+    keep_ease: float = _serving("keep_ease")
     # (their names: SERVING_SETTINGS, below, which the export and the checkpoint tags read)
     carry_loss: bool = Field(
         default=False,
@@ -177,7 +178,7 @@ class SolverConfig(_Section):
 #: ``serving`` block under the same names, and not in the solvers' checkpoint tags.
 SERVING_SETTINGS: tuple[str, ...] = (
     "passes", "carry", "turn_yaws", "turn_margin", "turn_min_targets", "turn_plausibility",
-    "turn_critic", "retry_reach", "keep_ends", "keep_elbows",
+    "turn_critic", "retry_reach", "keep_ends", "keep_elbows", "keep_ease",
 )  # fmt: skip
 if not set(SERVING_SETTINGS) <= set(SolverConfig.model_fields) & set(Serving.model_fields):
     raise RuntimeError("SERVING_SETTINGS must name fields of SolverConfig and of Serving")

@@ -44,6 +44,7 @@ async def models(engine: ReadyEngine) -> ModelsResponse:
         retry_reach=engine.retry_reach,
         keep_ends=engine.keep_ends,
         keep_elbows=engine.keep_elbows,
+        keep_ease=engine.keep_ease,
         models=[
             ModelInfo(
                 name=e.name,

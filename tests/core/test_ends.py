@@ -102,7 +102,7 @@ def test_compiled_ends_match_numpy(limbs: tuple[np.ndarray, np.ndarray]) -> None
         ref = keep_ends(passed, network, targets)
         got = passed.copy()
         for b in range(len(got)):
-            compiled.ends_item(got[b], network[b], tidx, len(targets), active(), flags, vecs)
+            compiled.ends_item(got[b], network[b], tidx, len(targets), active(), flags, vecs, 0.0)
         assert np.abs(got - ref).max() < 1e-12
     for names in [("left_elbow",), ("left_elbow", "right_elbow", "left_ankle"),
                   ("right_elbow", "right_wrist", "head")]:  # fmt: skip
@@ -111,7 +111,7 @@ def test_compiled_ends_match_numpy(limbs: tuple[np.ndarray, np.ndarray]) -> None
         ref = keep_ends(passed, network, targets, ELBOWS)
         got = passed.copy()
         for b in range(len(got)):
-            compiled.ends_item(got[b], network[b], tidx, len(targets), ELBOWS, flags, vecs)
+            compiled.ends_item(got[b], network[b], tidx, len(targets), ELBOWS, flags, vecs, 0.0)
         assert np.abs(got - ref).max() < 1e-12
     # degenerate: the network's wrist on the shoulder; an arm straight along the line to it
     bad, net = passed[:2].copy(), network[:2].copy()
@@ -121,7 +121,7 @@ def test_compiled_ends_match_numpy(limbs: tuple[np.ndarray, np.ndarray]) -> None
     ref = keep_ends(bad, net, [end])
     got = bad.copy()
     for b in range(2):
-        compiled.ends_item(got[b], net[b], np.asarray([end]), 1, active(), flags, vecs)
+        compiled.ends_item(got[b], net[b], np.asarray([end]), 1, active(), flags, vecs, 0.0)
     assert np.all(np.isfinite(got)) and np.abs(got - ref).max() < 1e-12
     assert np.array_equal(got, bad)  # nothing to place by: left as the bone pass had it
 
@@ -151,3 +151,35 @@ def test_elbows_go_back_where_the_network_put_them(limbs: tuple[np.ndarray, np.n
     assert np.abs(np.sum((out[:, mid] - passed[:, top]) * normal, axis=-1)).max() < 1e-9
     # the forearm keeps its direction: the wrist moves with the elbow
     np.testing.assert_allclose(out[:, wrist] - out[:, end], passed[:, wrist] - passed[:, end])
+
+
+def test_eased_ends_go_back_in_proportion_and_match_compiled(
+    limbs: tuple[np.ndarray, np.ndarray],
+) -> None:
+    """``ease``: an end the bone pass left ``g`` < ``ease`` from the network's goes back
+    ``g / ease`` of the way (within the limb's reach), beyond ``ease`` all the way, as
+    without it, bit for bit; the compiled kernel agrees."""
+    network, passed = limbs
+    targets = _idx("left_wrist", "right_ankle", "right_elbow")
+    ease = 0.02
+    plain, eased = (keep_ends(passed, network, targets, ELBOWS, e) for e in (0.0, ease))
+    flags, vecs = np.empty(21, np.int64), np.empty((5, 3))
+    tidx = np.asarray([*targets, 0, 0], dtype=np.int64)
+    got = passed.copy()
+    for b in range(len(got)):
+        compiled.ends_item(got[b], network[b], tidx, len(targets), ELBOWS, flags, vecs, ease)
+    assert np.abs(got - eased).max() < 1e-12
+    assert np.abs(bone_lengths(eased) / bone_lengths(passed) - 1).max() < 1e-12
+    for top, mid, end in (L_ARM, R_LEG):
+        gap = np.linalg.norm(network[:, end] - passed[:, end], axis=-1)
+        far = gap >= ease
+        assert far.any() and (~far).any()
+        assert np.array_equal(eased[far][:, end], plain[far][:, end])
+        reach = np.linalg.norm(passed[:, mid] - passed[:, top], axis=-1) + np.linalg.norm(
+            passed[:, end] - passed[:, mid], axis=-1
+        )
+        near = ~far & (np.linalg.norm(network[:, end] - passed[:, top], axis=-1) < reach)
+        want = passed[near, end] + (gap[near] / ease)[:, None] * (
+            network[near, end] - passed[near, end]
+        )
+        assert np.abs(eased[near, end] - want).max() < 1e-9

@@ -101,3 +101,26 @@ def test_kept_elbows_move_only_the_arm_and_reach_nearer(
     probs = _problems(start[:8], goal[:8], ("left_elbow", "right_elbow", "left_ankle"))
     for p, r in zip(probs, on.solve(probs), strict=True):
         assert np.array_equal(on.solve([p])[0].pose, r.pose)
+
+
+def test_eased_ends_differ_only_where_the_bone_pass_left_them_near(
+    models_dir: Path, pairs: tuple[np.ndarray, np.ndarray], client: Any
+) -> None:
+    """``serving.keep_ease``: kept ends the bone pass left within ``keep_ease`` of the
+    networks' go back only in proportion, so some answers change (the limb only), others
+    not at all; lengths hold; batch = single; ``GET /v1/models`` reports the shipped value."""
+    kw = {"solve_passes": 1, "retry_reach": 0.0}
+    plain, eased = (Engine(models_dir, keep_ease=e, **kw) for e in (0.0, 0.01))
+    assert client.get("/v1/models").json()["keep_ease"] == plain.manifest.serving.keep_ease
+    start, goal = pairs
+    probs = _problems(start, goal, ("right_ankle",))
+    a, b = plain.solve(probs), eased.solve(probs)
+    pa, pb = np.stack([r.pose for r in a]), np.stack([r.pose for r in b])
+    changed = np.any(pa != pb, axis=(1, 2))
+    assert changed.any() and not changed.all()
+    leg = [J[n] for n in ("right_knee", "right_ankle", "right_foot")]
+    others = np.setdiff1d(np.arange(21), leg)
+    assert np.array_equal(pa[:, others], pb[:, others])
+    assert max(r.max_bone_error for r in b) <= 1e-5
+    for p, r in zip(probs[:8], eased.solve(probs[:8]), strict=True):
+        assert np.array_equal(eased.solve([p])[0].pose, r.pose)
