@@ -159,12 +159,13 @@ def serving_cmd(
 ) -> None:
     """Set the models' serving block (manifest.json, new version) from a config's serving
     settings, without retraining; refuses a setting the losses were trained with."""
+    from core.manifest import ManifestError
     from trainer.config import load_config
     from trainer.serving import set_serving
 
-    try:
+    try:  # a config not found or not valid, models not found or tampered with, a refusal
         manifest, changed = set_serving(load_config(config), models)
-    except ValueError as exc:
+    except (OSError, ValueError, ManifestError) as exc:
         typer.echo(f"error: {exc}", err=True)
         raise typer.Exit(1) from None
     if not changed:

@@ -77,3 +77,9 @@ def test_the_command_reports_the_change_or_the_refusal(models: Path, tmp_path: P
     cfg.write_text(f'extends = "{DEFAULT}"\n[solver]\ndelta = false\n')
     bad = CliRunner().invoke(app, ["serving", "--config", str(cfg), "--models", str(models)])
     assert bad.exit_code == 1 and "delta True -> False" in bad.output
+    for args, says in (
+        (["--config", str(tmp_path / "none.toml"), "--models", str(models)], "none.toml"),
+        (["--config", str(cfg), "--models", str(tmp_path / "empty")], "manifest.json: missing"),
+    ):
+        got = CliRunner().invoke(app, ["serving", *args])
+        assert got.exit_code == 1 and says in got.output and "Traceback" not in got.output
