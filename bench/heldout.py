@@ -667,6 +667,10 @@ def main(
         Optional[float],  # noqa: UP045
         typer.Option(help="Kept ends eased over this (m; default: serving.keep_ease)."),
     ] = None,
+    keep_collar: Annotated[
+        Optional[bool],  # noqa: UP045
+        typer.Option(help="Kept wrists reached by turning the collar (default: serving)."),
+    ] = None,
 ) -> None:
     """Held-out bodies and the stress set only, against any models folder."""
     from rich.console import Console
@@ -682,13 +686,14 @@ def main(
     engine = Engine(
         models, threads=1, solve_passes=passes, carry=carry, turn_yaws=turn_yaws,
         keep_ends=keep_ends, keep_elbows=keep_elbows, keep_ease=keep_ease,
+        keep_collar=keep_collar,
     )  # fmt: skip
     res = run_heldout(engine, load_dataset(dataset), cfg, split=split, log=console.log)
     res.models = {
         "dir": str(models), "version": engine.version, "passes": engine.solve_passes,
         "carry": engine.carry, "turn_yaws": engine.turn_search.yaws,
         "keep_ends": engine.keep_ends, "keep_elbows": engine.keep_elbows,
-        "keep_ease": engine.keep_ease,
+        "keep_ease": engine.keep_ease, "keep_collar": engine.keep_collar,
     }  # fmt: skip
     if out is not None:
         out.parent.mkdir(parents=True, exist_ok=True)

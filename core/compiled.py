@@ -21,6 +21,7 @@ import numpy.typing as npt
 from core.carry import BONE_OF
 from core.ends import BELOW as _ENDS_BELOW
 from core.ends import CHAINS as _CHAINS
+from core.ends import COLLARS as _ENDS_COLLARS
 from core.ends import TINY as _ENDS_TINY
 from core.jit import jit
 from core.rest import REST_DIRS
@@ -446,11 +447,12 @@ def ends_item(
     flags: I64,
     vecs: F64,
     ease: float,
+    collar: bool,
 ) -> None:  # pragma: no cover - compiled
     """``core.ends.keep_ends`` for one pose ``out [21, 3]`` (after the bone pass) and its
     network pose ``network [21, 3]``, in place, for the chains ``chains [C]`` marks
-    (``core.ends.active``), eased over ``ease`` m; ``flags [21]`` (int64) and ``vecs [5,
-    3]`` are scratch."""
+    (``core.ends.active``), eased over ``ease`` m, wrists reached by turning the collar
+    with ``collar``; ``flags [21]`` (int64) and ``vecs [5, 3]`` are scratch."""
     for j in range(NUM_JOINTS):
         flags[j] = 0
     for q in range(count):
@@ -470,8 +472,8 @@ def ends_item(
             s[i], e0[i], w0[i] = out[top, i], out[mid, i], out[end, i]
         a = np.sqrt((e0[0] - s[0]) ** 2 + (e0[1] - s[1]) ** 2 + (e0[2] - s[2]) ** 2)
         b = np.sqrt((w0[0] - e0[0]) ** 2 + (w0[1] - e0[1]) ** 2 + (w0[2] - e0[2]) ** 2)
-        for i in range(3):
-            u[i] = network[end, i] - s[i]
+        for i in range(3):  # the goal of the end, then the line to it from the top
+            u[i] = network[end, i]
         if ease > 0.0:
             gap = np.sqrt(
                 (network[end, 0] - w0[0]) ** 2
@@ -480,7 +482,13 @@ def ends_item(
             )
             if gap < ease:
                 for i in range(3):
-                    u[i] = (w0[i] + (gap / ease) * (network[end, i] - w0[i])) - s[i]
+                    u[i] = w0[i] + (gap / ease) * (network[end, i] - w0[i])
+        k = _ENDS_COLLARS[c]
+        if collar and k >= 0 and flags[k] == 0 and _collar_turn(out, k, c, top, mid, end, u, a + b):
+            for i in range(3):
+                s[i], e0[i], w0[i] = out[top, i], out[mid, i], out[end, i]
+        for i in range(3):
+            u[i] = u[i] - s[i]
         d0 = np.sqrt(u[0] ** 2 + u[1] ** 2 + u[2] ** 2)
         if not (d0 > _ENDS_TINY and a > _ENDS_TINY):
             continue
@@ -507,6 +515,45 @@ def ends_item(
 
 
 @jit
+def _collar_turn(
+    out: F64, k: int, c: int, top: int, mid: int, end: int, goal: F64, reach: float
+) -> bool:  # pragma: no cover - compiled
+    """``core.ends._collar_turn`` for one pose, in place: the shoulder ``top`` turned about
+    the collar ``k`` towards ``goal [3]``, the arm (``mid``, ``end`` and chain ``c``'s
+    joints below it) moved with it. Whether it moved."""
+    cx, cy, cz = out[k, 0], out[k, 1], out[k, 2]
+    px, py, pz = out[top, 0] - cx, out[top, 1] - cy, out[top, 2] - cz
+    cl = np.sqrt(px * px + py * py + pz * pz)
+    dx, dy, dz = goal[0] - out[top, 0], goal[1] - out[top, 1], goal[2] - out[top, 2]
+    if not (dx * dx + dy * dy + dz * dz > reach * reach and cl > _ENDS_TINY):
+        return False
+    px, py, pz = px / cl, py / cl, pz / cl
+    wx, wy, wz = goal[0] - cx, goal[1] - cy, goal[2] - cz
+    wp = wx * px + wy * py + wz * pz
+    qx, qy, qz = wx - wp * px, wy - wp * py, wz - wp * pz
+    wq = np.sqrt(qx * qx + qy * qy + qz * qz)
+    if not wq > _ENDS_TINY:
+        return False
+    qx, qy, qz = qx / wq, qy / wq, qz / wq
+    rho = np.sqrt(wp * wp + wq * wq)
+    kk = (wx * wx + wy * wy + wz * wz + cl * cl - reach * reach) / (2.0 * cl)
+    phi = np.arctan2(wq, wp)
+    th = phi - np.arccos(min(kk / rho, 1.0)) if kk < rho else phi
+    th = max(th, 0.0)
+    ct, st = np.cos(th), np.sin(th)
+    shift = (
+        (cx + cl * (ct * px + st * qx)) - out[top, 0],
+        (cy + cl * (ct * py + st * qy)) - out[top, 1],
+        (cz + cl * (ct * pz + st * qz)) - out[top, 2],
+    )
+    for j in range(NUM_JOINTS):
+        if j in (top, mid, end) or _ENDS_BELOW[c, j]:
+            for i in range(3):
+                out[j, i] = out[j, i] + shift[i]
+    return True
+
+
+@jit
 def unscale(
     decoded: F32,
     scales: F64,
@@ -518,6 +565,7 @@ def unscale(
     carry: F64,
     chains: Bool,
     ease: float,
+    collar: Bool,
 ) -> F64:  # pragma: no cover - compiled
     """Network answers ``[M, 63]`` (float32, at the networks' size) back to the body's
     size (float64), with the bone pass (reference: the start pose) where ``bone``, and
@@ -545,7 +593,7 @@ def unscale(
                 carry_item(out[b], canon[b], lengths[b], tidx[b], counts[b], carry[b], rr,
                            flags, anchor, vecs)  # fmt: skip
             if ends:
-                ends_item(out[b], pose, tidx[b], counts[b], chains, flags, vecs, ease)
+                ends_item(out[b], pose, tidx[b], counts[b], chains, flags, vecs, ease, collar[b])
         else:
             out[b] = pose
     return out
@@ -612,11 +660,12 @@ def settle(
     carry: F64,
     chains: Bool,
     ease: float,
+    collar: Bool,
 ) -> tuple[F64, F64, F64]:  # pragma: no cover - compiled
     """:func:`unscale` with the bone pass for every item, then :func:`finish`, in one call
     (the lean path of ``service.lean``): the same arithmetic in the same order."""
     bone = np.ones(decoded.shape[0], dtype=np.bool_)
-    out = unscale(decoded, scales, canon, lengths, bone, tidx, counts, carry, chains, ease)
+    out = unscale(decoded, scales, canon, lengths, bone, tidx, counts, carry, chains, ease, collar)
     return finish(out, facing, trans, floors, tidx, tpos, counts, lengths)
 
 
@@ -639,7 +688,7 @@ def warm() -> None:
     )  # fmt: skip
     unscale(
         out[6], out[4], out[0], out[3], np.ones(1, dtype=np.bool_), tidx, counts, np.full(1, 0.5),
-        chains, 0.0,
+        chains, 0.0, np.ones(1, dtype=np.bool_),
     )  # fmt: skip
     finish(out[0], out[1], out[2], np.zeros(1), tidx, tpos, counts, out[3])
     settle(
@@ -656,6 +705,7 @@ def warm() -> None:
         np.full(1, 0.5),
         chains,
         0.0,
+        np.ones(1, dtype=np.bool_),
     )
 
 

@@ -52,6 +52,15 @@ CHAINS: Final[npt.NDArray[np.int64]] = np.asarray(
 )
 
 
+#: Per chain, the joint above its top that may turn it towards its end's goal
+#: (``serving.keep_collar``): a wrist's collar; -1 for the others.
+COLLARS: Final[npt.NDArray[np.int64]] = np.asarray(
+    [PARENTS[int(top)] if int(end) in (JOINT_INDEX[n] for n in ENDS[:2]) else -1
+     for top, _, end in CHAINS],
+    dtype=np.int64,
+)  # fmt: skip
+
+
 def _below(end: int) -> npt.NDArray[np.bool_]:
     """Which joints hang below ``end`` ``[21]``."""
     out = np.zeros(NUM_JOINTS, dtype=np.bool_)
@@ -99,25 +108,37 @@ def keep_ends(
     targets: Iterable[int],
     chains: npt.NDArray[np.bool_] | None = None,
     ease: float = 0.0,
+    collar: bool = False,
 ) -> F64:
     """``pose [..., 21, 3]`` (after the bone pass: the character's lengths) with each kept
     chain's end (of those ``chains`` marks, default the limb ends) where ``network`` (the
     same poses before the bone pass) has it, as near as the limb reaches; see the module.
     ``ease`` (m, > 0): an end the bone pass left ``g`` < ``ease`` from the network's goes
     only ``g / ease`` of the way back (a millimetre of the networks' ankle no longer bends
-    a straight knee; continuous in ``g``). A new array."""
+    a straight knee; continuous in ``g``). ``collar``: a kept wrist whose goal lies beyond
+    the arm's reach from its shoulder first turns the shoulder about its collar towards the
+    goal, as little as brings it within reach (all the way where nothing does), the arm
+    moving with it. A new array."""
     out = np.array(pose, dtype=np.float64, copy=True)
     net = np.asarray(network, dtype=np.float64)
+    targets = list(targets)
     for c in kept_chains(targets, chains):
         top, mid, end = CHAINS[c].tolist()
         s, e0, w0 = out[..., top, :], out[..., mid, :], out[..., end, :]
         a = np.sqrt(np.sum((e0 - s) ** 2, axis=-1))
         b = np.sqrt(np.sum((w0 - e0) ** 2, axis=-1))
-        line = net[..., end, :] - s
+        goal = net[..., end, :]
         if ease > 0.0:
             gap = np.sqrt(np.sum((net[..., end, :] - w0) ** 2, axis=-1))
-            part = (w0 + (gap / ease)[..., None] * (net[..., end, :] - w0)) - s
-            line = np.where((gap < ease)[..., None], part, line)
+            part = w0 + (gap / ease)[..., None] * (net[..., end, :] - w0)
+            goal = np.where((gap < ease)[..., None], part, goal)
+        k = int(COLLARS[c])
+        if collar and k >= 0 and k not in targets:
+            shift = _collar_turn(out[..., k, :], s, goal, a + b)
+            for j in (top, mid, end, *np.flatnonzero(BELOW[c]).tolist()):
+                out[..., j, :] = out[..., j, :] + shift
+            s, e0, w0 = out[..., top, :], out[..., mid, :], out[..., end, :]
+        line = goal - s
         d0 = np.sqrt(np.sum(line**2, axis=-1))
         u = line / np.where(d0 > TINY, d0, 1.0)[..., None]
         d = np.minimum(np.maximum(d0, np.abs(a - b)), a + b)
@@ -134,3 +155,27 @@ def keep_ends(
         out[..., end, :] = w0 + shift
         out[..., BELOW[c], :] += shift[..., None, :]
     return out
+
+
+def _collar_turn(collar: F64, shoulder: F64, goal: F64, reach: F64) -> F64:
+    """How far ``shoulder [..., 3]`` moves when it turns about ``collar`` (on its sphere)
+    just far enough towards ``goal`` that the goal is ``reach`` from it (0 where it already
+    is within reach; towards the goal all the way where no turn brings it within reach)."""
+    p = shoulder - collar
+    cl = np.sqrt(np.sum(p**2, axis=-1))
+    w = goal - collar
+    d = goal - shoulder
+    far = (np.sum(d**2, axis=-1) > reach * reach) & (cl > TINY)
+    pu = p / np.where(cl > TINY, cl, 1.0)[..., None]
+    wp = np.sum(w * pu, axis=-1)
+    q = w - wp[..., None] * pu
+    wq = np.sqrt(np.sum(q**2, axis=-1))
+    ok = far & (wq > TINY)
+    qu = q / np.where(wq > TINY, wq, 1.0)[..., None]
+    rho = np.sqrt(wp * wp + wq * wq)
+    kk = (np.sum(w**2, axis=-1) + cl * cl - reach * reach) / np.where(ok, 2.0 * cl, 1.0)
+    phi = np.arctan2(wq, wp)
+    th = np.where(kk < rho, phi - np.arccos(np.minimum(kk / np.where(ok, rho, 1.0), 1.0)), phi)
+    th = np.maximum(th, 0.0)
+    moved = collar + cl[..., None] * (np.cos(th)[..., None] * pu + np.sin(th)[..., None] * qu)
+    return np.where(ok[..., None], moved - shoulder, 0.0)

@@ -146,6 +146,14 @@ class Serving(_Strict):
         "(0: all the way), so that a millimetre of the networks' answer does not bend a "
         "straight limb (core.ends).",
     )
+    keep_collar: bool = Field(
+        default=False,
+        description="With keep_ends, in soft answers with fewer than turn_min_targets "
+        "targets (exact reach has its FABRIK polish; more targets search the body's turn): "
+        "a kept wrist whose place lies beyond the arm's reach from its shoulder first turns "
+        "the shoulder about its collar towards it, as little as brings it within reach, the "
+        "arm moving with it (core.ends).",
+    )
     turn_yaws: int = Field(
         default=1,
         ge=1,

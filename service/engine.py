@@ -91,6 +91,7 @@ class Engine:
         keep_ends: bool | None = None,
         keep_elbows: bool | None = None,
         keep_ease: float | None = None,
+        keep_collar: bool | None = None,
     ) -> None:
         self.models_dir = Path(models_dir)
         self.manifest: Manifest = load_manifest(self.models_dir, verify=True)
@@ -148,6 +149,9 @@ class Engine:
         #: an end the bone pass left nearer than this (m) to the networks' goes back only
         #: that share of the way (``serving.keep_ease``; ``core.ends.keep_ends``)
         self.keep_ease = float(m.serving.keep_ease if keep_ease is None else keep_ease)
+        #: a kept wrist beyond the arm's reach turns its shoulder about the collar first
+        #: (``serving.keep_collar``; ``core.ends.keep_ends``)
+        self.keep_collar = bool(m.serving.keep_collar if keep_collar is None else keep_collar)
         #: the turn search of many-target edits (``serving.turn_*``, :mod:`service.turns`)
         self.turn_search = turns.TurnSearch.of(m.serving, turn_yaws)
         known = np.asarray(m.skeleton.skeletons, dtype=np.float64)  # [C, 20]
@@ -446,11 +450,15 @@ class Engine:
                     seq_of[mine] = seq_ids.setdefault(seq, len(seq_ids))
             sequences = list(seq_ids)
             bone = keep | ex
+            # the collar turn helps the soft reach of edits of few targets; exact reach has
+            # its FABRIK polish, edits of many targets search the body's turn instead (whose
+            # soft candidates a collar turn would make look nearer than they are)
+            collar = ~ex & self.keep_collar & (n_t < self.turn_search.min_targets)
             if len(sequences) == 1 and neural.all():  # the common case: no gathers
                 decoded = self._run_sequence(x, canvas, sequences[0])
                 out = compiled.unscale(
                     decoded, scales, canon, lengths, bone, tidx, cnt, batch.carry, self.chain_mask,
-                    self.keep_ease,
+                    self.keep_ease, collar,
                 )  # fmt: skip
             else:
                 items = np.flatnonzero(neural)
@@ -462,6 +470,7 @@ class Engine:
                 out[items] = compiled.unscale(
                     decoded[items], scales[items], canon[items], lengths[items], bone[items],
                     tidx[items], cnt[items], batch.carry[items], self.chain_mask, self.keep_ease,
+                    collar[items],
                 )  # fmt: skip
         start = canon
         if origin is not None and moved is not None and moved.any():

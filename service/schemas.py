@@ -271,6 +271,10 @@ class ModelsResponse(BaseModel):
         "networks' goes back only in proportion (0: all the way; the manifest's "
         "`serving.keep_ease`)."
     )
+    keep_collar: bool = Field(
+        description="Whether a soft answer's kept wrist beyond the arm's reach turns its "
+        "shoulder about the collar first (the manifest's `serving.keep_collar`)."
+    )
     models: list[ModelInfo]
 
 

@@ -45,6 +45,7 @@ async def models(engine: ReadyEngine) -> ModelsResponse:
         keep_ends=engine.keep_ends,
         keep_elbows=engine.keep_elbows,
         keep_ease=engine.keep_ease,
+        keep_collar=engine.keep_collar,
         models=[
             ModelInfo(
                 name=e.name,

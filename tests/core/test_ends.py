@@ -102,7 +102,9 @@ def test_compiled_ends_match_numpy(limbs: tuple[np.ndarray, np.ndarray]) -> None
         ref = keep_ends(passed, network, targets)
         got = passed.copy()
         for b in range(len(got)):
-            compiled.ends_item(got[b], network[b], tidx, len(targets), active(), flags, vecs, 0.0)
+            compiled.ends_item(
+                got[b], network[b], tidx, len(targets), active(), flags, vecs, 0.0, False
+            )
         assert np.abs(got - ref).max() < 1e-12
     for names in [("left_elbow",), ("left_elbow", "right_elbow", "left_ankle"),
                   ("right_elbow", "right_wrist", "head")]:  # fmt: skip
@@ -111,7 +113,9 @@ def test_compiled_ends_match_numpy(limbs: tuple[np.ndarray, np.ndarray]) -> None
         ref = keep_ends(passed, network, targets, ELBOWS)
         got = passed.copy()
         for b in range(len(got)):
-            compiled.ends_item(got[b], network[b], tidx, len(targets), ELBOWS, flags, vecs, 0.0)
+            compiled.ends_item(
+                got[b], network[b], tidx, len(targets), ELBOWS, flags, vecs, 0.0, False
+            )
         assert np.abs(got - ref).max() < 1e-12
     # degenerate: the network's wrist on the shoulder; an arm straight along the line to it
     bad, net = passed[:2].copy(), network[:2].copy()
@@ -121,7 +125,7 @@ def test_compiled_ends_match_numpy(limbs: tuple[np.ndarray, np.ndarray]) -> None
     ref = keep_ends(bad, net, [end])
     got = bad.copy()
     for b in range(2):
-        compiled.ends_item(got[b], net[b], np.asarray([end]), 1, active(), flags, vecs, 0.0)
+        compiled.ends_item(got[b], net[b], np.asarray([end]), 1, active(), flags, vecs, 0.0, False)
     assert np.all(np.isfinite(got)) and np.abs(got - ref).max() < 1e-12
     assert np.array_equal(got, bad)  # nothing to place by: left as the bone pass had it
 
@@ -167,7 +171,7 @@ def test_eased_ends_go_back_in_proportion_and_match_compiled(
     tidx = np.asarray([*targets, 0, 0], dtype=np.int64)
     got = passed.copy()
     for b in range(len(got)):
-        compiled.ends_item(got[b], network[b], tidx, len(targets), ELBOWS, flags, vecs, ease)
+        compiled.ends_item(got[b], network[b], tidx, len(targets), ELBOWS, flags, vecs, ease, False)
     assert np.abs(got - eased).max() < 1e-12
     assert np.abs(bone_lengths(eased) / bone_lengths(passed) - 1).max() < 1e-12
     for top, mid, end in (L_ARM, R_LEG):
@@ -183,3 +187,53 @@ def test_eased_ends_go_back_in_proportion_and_match_compiled(
             network[near, end] - passed[near, end]
         )
         assert np.abs(eased[near, end] - want).max() < 1e-9
+
+
+def test_a_wrist_out_of_reach_turns_its_shoulder_about_the_collar(
+    limbs: tuple[np.ndarray, np.ndarray],
+) -> None:
+    """``collar``: a kept wrist whose goal lies beyond the arm's reach from its shoulder
+    turns the shoulder on its collar's sphere towards it, as little as brings it within
+    reach; within reach nothing changes; lengths hold; the compiled kernel agrees."""
+    network, passed = limbs
+    shoulder, elbow, wrist = L_ARM
+    collar = J["left_collar"]
+    net = network.copy()
+    rng = np.random.default_rng(5)
+    # push half of the goals out of the arm's reach: 5-30 cm further along the line
+    far = rng.random(len(net)) < 0.5
+    line = net[:, wrist] - passed[:, shoulder]
+    net[far, wrist] += (
+        line[far]
+        / np.linalg.norm(line[far], axis=-1, keepdims=True)
+        * (rng.uniform(0.05, 0.3, (far.sum(), 1)))
+    )
+    targets = _idx("left_wrist")
+    plain, turned = (keep_ends(passed, net, targets, collar=k) for k in (False, True))
+    reach = np.linalg.norm(passed[:, elbow] - passed[:, shoulder], axis=-1) + np.linalg.norm(
+        passed[:, wrist] - passed[:, elbow], axis=-1
+    )
+    out = np.linalg.norm(net[:, wrist] - passed[:, shoulder], axis=-1) > reach
+    assert out.sum() > 0.2 * len(out) and (~out).any()
+    assert np.array_equal(turned[~out], plain[~out])  # within reach: as without it
+    assert np.abs(bone_lengths(turned) / bone_lengths(passed) - 1).max() < 1e-12
+    rest = np.setdiff1d(np.arange(21), [shoulder, elbow, wrist])
+    assert np.array_equal(turned[:, rest], passed[:, rest])  # the collar and the rest stay
+    miss = (np.linalg.norm(o[:, wrist] - net[:, wrist], axis=-1) for o in (plain, turned))
+    before, after = miss
+    assert np.all(after[out] < before[out]) and after[out].mean() < 0.7 * before[out].mean()
+    # brought within reach by the turn: the wrist on its goal; else the shoulder turned all
+    # the way, onto the line from the collar to the goal
+    on = after[out] < 1e-9
+    assert 0.2 < on.mean() < 1.0
+    rest_out = np.flatnonzero(out)[~on]
+    to_goal = net[rest_out, wrist] - passed[rest_out, collar]
+    to_shoulder = turned[rest_out, shoulder] - passed[rest_out, collar]
+    assert np.abs(np.cross(to_goal, to_shoulder)).max() < 1e-9
+    assert np.all(np.sum(to_goal * to_shoulder, axis=-1) > 0)
+    flags, vecs = np.empty(21, np.int64), np.empty((5, 3))
+    got = passed.copy()
+    for b in range(len(got)):
+        compiled.ends_item(got[b], net[b], np.asarray(targets), 1, active(), flags, vecs, 0.0, True)
+    assert np.abs(got - turned).max() < 1e-12
+    assert collar not in targets

@@ -4,6 +4,7 @@ models never saw the soft answer reaches nearer its targets and the real pose.""
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 from typing import Any
 
@@ -124,3 +125,31 @@ def test_eased_ends_differ_only_where_the_bone_pass_left_them_near(
     assert max(r.max_bone_error for r in b) <= 1e-5
     for p, r in zip(probs[:8], eased.solve(probs[:8]), strict=True):
         assert np.array_equal(eased.solve([p])[0].pose, r.pose)
+
+
+def test_out_of_reach_wrists_turn_the_collar_in_soft_answers_only(
+    models_dir: Path, pairs: tuple[np.ndarray, np.ndarray], client: Any
+) -> None:
+    """``serving.keep_collar``: a soft answer's kept wrist beyond the arm's reach turns its
+    shoulder about the collar (only the shoulder, the elbow and the wrist move, reach
+    improves); exact answers are unchanged; lengths hold; batch = single."""
+    kw = {"solve_passes": 1, "retry_reach": 0.0}
+    off, on = (Engine(models_dir, keep_collar=k, **kw) for k in (False, True))
+    assert client.get("/v1/models").json()["keep_collar"] is on.manifest.serving.keep_collar
+    start, goal = pairs
+    probs = _problems(start, goal, ("left_wrist",))
+    a, b = off.solve(probs), on.solve(probs)
+    pa, pb = np.stack([r.pose for r in a]), np.stack([r.pose for r in b])
+    changed = np.any(pa != pb, axis=(1, 2))
+    assert changed.any() and not changed.all()
+    arm = [J[n] for n in ("left_shoulder", "left_elbow", "left_wrist")]
+    rest = np.setdiff1d(np.arange(21), arm)
+    assert np.array_equal(pa[:, rest], pb[:, rest])
+    reach_a, reach_b = (np.asarray([r.errors[0] for r in rs]) for rs in (a, b))
+    assert np.all(reach_b[changed] < reach_a[changed])
+    assert max(r.max_bone_error for r in b) <= 1e-5
+    exact = [dataclasses.replace(p, reach="exact") for p in probs[:16]]
+    for x, y in zip(off.solve(exact), on.solve(exact), strict=True):
+        assert np.array_equal(x.pose, y.pose)
+    for p, r in zip(probs[:8], on.solve(probs[:8]), strict=True):
+        assert np.array_equal(on.solve([p])[0].pose, r.pose)
