@@ -153,6 +153,12 @@ VARIANTS: dict[str, str] = {
     "ease5mm": "the shipped models (mx1-39a0a1d79547) served with kept ends eased over 5 mm "
     "(`serving.keep_ease` 0.005, `--keep-ease 0.005`)",
     "ease1cm": "the same eased over 1 cm",
+    "collar_all": "the shipped models (mx1-39a0a1d79547) served with a kept wrist out of the "
+    "arm's reach turning its shoulder about the collar (`serving.keep_collar`, "
+    "`--keep-collar`) in every answer, soft and exact (a first form, in no commit)",
+    "collar_soft": "the same in soft answers only (a second form, in no commit)",
+    "collar": "the same in soft answers of fewer than 5 targets (the turn search's own): "
+    "shipped since (mx1-26b6fd5eb17c)",
     "ae_cos3e3_ends": "the shipped recipe (`ends_loss`) with the autoencoder at lr 3e-3 decayed "
     "along a cosine (ae_cos3e3_ends.toml; both solver banks retrained on it)",
 }

@@ -49,6 +49,8 @@ def test_shipped_models_keep_ends(engines: tuple[Engine, Engine], client: Any) -
     # ends only)
     assert engines[1].keep_elbows and client.get("/v1/models").json()["keep_elbows"] is True
     assert not engines[1].manifest.provenance.config["solver"].get("elbows_loss", False)
+    # and wrists out of reach turn the collar (serving.keep_collar, set without retraining)
+    assert engines[1].keep_collar and client.get("/v1/models").json()["keep_collar"] is True
 
 
 def test_only_the_targeted_limb_moves_and_reaches_nearer(
