@@ -9,11 +9,12 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 import pytest
 
 from core.skeleton import JOINT_INDEX, bone_lengths
 from service.engine import Engine
-from service.problems import SolveProblem
+from service.problems import SolveProblem, SolveResult
 from tests.conftest import PosePairs, on_random_bodies
 
 J = JOINT_INDEX
@@ -21,7 +22,8 @@ J = JOINT_INDEX
 
 @pytest.fixture(scope="module")
 def engines(models_dir: Path) -> tuple[Engine, Engine]:
-    kw = {"solve_passes": 1, "retry_reach": 0.0}  # one pass, no retry: the kept ends alone
+    # one pass, no retry, no collar turn (its own test below): the kept ends alone
+    kw = {"solve_passes": 1, "retry_reach": 0.0, "keep_collar": False}
     return Engine(models_dir, keep_ends=False, **kw), Engine(models_dir, **kw)
 
 
@@ -50,7 +52,8 @@ def test_shipped_models_keep_ends(engines: tuple[Engine, Engine], client: Any) -
     assert engines[1].keep_elbows and client.get("/v1/models").json()["keep_elbows"] is True
     assert not engines[1].manifest.provenance.config["solver"].get("elbows_loss", False)
     # and wrists out of reach turn the collar (serving.keep_collar, set without retraining)
-    assert engines[1].keep_collar and client.get("/v1/models").json()["keep_collar"] is True
+    assert engines[1].manifest.serving.keep_collar
+    assert client.get("/v1/models").json()["keep_collar"] is True
 
 
 def test_only_the_targeted_limb_moves_and_reaches_nearer(
@@ -106,6 +109,26 @@ def test_kept_elbows_move_only_the_arm_and_reach_nearer(
         assert np.array_equal(on.solve([p])[0].pose, r.pose)
 
 
+def _off_on(
+    off: Engine, on: Engine, pairs: tuple[np.ndarray, np.ndarray], target: str, moved: list[str]
+) -> tuple[list[SolveResult], list[SolveResult], npt.NDArray[np.bool_], list[SolveProblem]]:
+    """One-target edits of ``pairs`` solved by ``off`` and ``on``: some answers differ, in
+    the joints ``moved`` only; ``on`` keeps lengths and answers a batch as it answers each
+    item alone. The answers, which of them changed, and the problems."""
+    start, goal = pairs
+    probs = _problems(start, goal, (target,))
+    a, b = off.solve(probs), on.solve(probs)
+    pa, pb = np.stack([r.pose for r in a]), np.stack([r.pose for r in b])
+    changed = np.any(pa != pb, axis=(1, 2))
+    assert changed.any() and not changed.all()
+    rest = np.setdiff1d(np.arange(21), [J[n] for n in moved])
+    assert np.array_equal(pa[:, rest], pb[:, rest])
+    assert max(r.max_bone_error for r in b) <= 1e-5
+    for p, r in zip(probs[:8], on.solve(probs[:8]), strict=True):
+        assert np.array_equal(on.solve([p])[0].pose, r.pose)
+    return a, b, changed, probs
+
+
 def test_eased_ends_differ_only_where_the_bone_pass_left_them_near(
     models_dir: Path, pairs: tuple[np.ndarray, np.ndarray], client: Any
 ) -> None:
@@ -115,18 +138,7 @@ def test_eased_ends_differ_only_where_the_bone_pass_left_them_near(
     kw = {"solve_passes": 1, "retry_reach": 0.0}
     plain, eased = (Engine(models_dir, keep_ease=e, **kw) for e in (0.0, 0.01))
     assert client.get("/v1/models").json()["keep_ease"] == plain.manifest.serving.keep_ease
-    start, goal = pairs
-    probs = _problems(start, goal, ("right_ankle",))
-    a, b = plain.solve(probs), eased.solve(probs)
-    pa, pb = np.stack([r.pose for r in a]), np.stack([r.pose for r in b])
-    changed = np.any(pa != pb, axis=(1, 2))
-    assert changed.any() and not changed.all()
-    leg = [J[n] for n in ("right_knee", "right_ankle", "right_foot")]
-    others = np.setdiff1d(np.arange(21), leg)
-    assert np.array_equal(pa[:, others], pb[:, others])
-    assert max(r.max_bone_error for r in b) <= 1e-5
-    for p, r in zip(probs[:8], eased.solve(probs[:8]), strict=True):
-        assert np.array_equal(eased.solve([p])[0].pose, r.pose)
+    _off_on(plain, eased, pairs, "right_ankle", ["right_knee", "right_ankle", "right_foot"])
 
 
 def test_out_of_reach_wrists_turn_the_collar_in_soft_answers_only(
@@ -138,20 +150,10 @@ def test_out_of_reach_wrists_turn_the_collar_in_soft_answers_only(
     kw = {"solve_passes": 1, "retry_reach": 0.0}
     off, on = (Engine(models_dir, keep_collar=k, **kw) for k in (False, True))
     assert client.get("/v1/models").json()["keep_collar"] is on.manifest.serving.keep_collar
-    start, goal = pairs
-    probs = _problems(start, goal, ("left_wrist",))
-    a, b = off.solve(probs), on.solve(probs)
-    pa, pb = np.stack([r.pose for r in a]), np.stack([r.pose for r in b])
-    changed = np.any(pa != pb, axis=(1, 2))
-    assert changed.any() and not changed.all()
-    arm = [J[n] for n in ("left_shoulder", "left_elbow", "left_wrist")]
-    rest = np.setdiff1d(np.arange(21), arm)
-    assert np.array_equal(pa[:, rest], pb[:, rest])
+    arm = ["left_shoulder", "left_elbow", "left_wrist"]
+    a, b, changed, probs = _off_on(off, on, pairs, "left_wrist", arm)
     reach_a, reach_b = (np.asarray([r.errors[0] for r in rs]) for rs in (a, b))
     assert np.all(reach_b[changed] < reach_a[changed])
-    assert max(r.max_bone_error for r in b) <= 1e-5
     exact = [dataclasses.replace(p, reach="exact") for p in probs[:16]]
     for x, y in zip(off.solve(exact), on.solve(exact), strict=True):
         assert np.array_equal(x.pose, y.pose)
-    for p, r in zip(probs[:8], on.solve(probs[:8]), strict=True):
-        assert np.array_equal(on.solve([p])[0].pose, r.pose)
