@@ -157,8 +157,8 @@ VARIANTS: dict[str, str] = {
     "arm's reach turning its shoulder about the collar (`serving.keep_collar`, "
     "`--keep-collar`) in every answer, soft and exact (a first form, in no commit)",
     "collar_soft": "the same in soft answers only (a second form, in no commit)",
-    "collar": "the same in soft answers of fewer than 5 targets (the turn search's own): "
-    "shipped since (mx1-26b6fd5eb17c)",
+    "collar": "the same in answers asked in soft reach with fewer than 5 targets (the turn "
+    "search's own): shipped since (mx1-26b6fd5eb17c); exact answers as before, bit for bit",
     "ae_cos3e3_ends": "the shipped recipe (`ends_loss`) with the autoencoder at lr 3e-3 decayed "
     "along a cosine (ae_cos3e3_ends.toml; both solver banks retrained on it)",
 }

@@ -148,8 +148,9 @@ class Serving(_Strict):
     )
     keep_collar: bool = Field(
         default=False,
-        description="With keep_ends, in soft answers with fewer than turn_min_targets "
-        "targets (exact reach has its FABRIK polish; more targets search the body's turn): "
+        description="With keep_ends, in answers asked in soft reach with fewer than "
+        "turn_min_targets targets (exact reach has its FABRIK polish, and its soft passes "
+        "before it go without; more targets search the body's turn): "
         "a kept wrist whose place lies beyond the arm's reach from its shoulder first turns "
         "the shoulder about its collar towards it, as little as brings it within reach, the "
         "arm moving with it (core.ends).",

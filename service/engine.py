@@ -450,10 +450,11 @@ class Engine:
                     seq_of[mine] = seq_ids.setdefault(seq, len(seq_ids))
             sequences = list(seq_ids)
             bone = keep | ex
-            # the collar turn helps the soft reach of edits of few targets; exact reach has
-            # its FABRIK polish, edits of many targets search the body's turn instead (whose
-            # soft candidates a collar turn would make look nearer than they are)
-            collar = ~ex & self.keep_collar & (n_t < self.turn_search.min_targets)
+            # the collar turn helps the soft reach of edits of few targets asked in soft
+            # reach; exact reach has its FABRIK polish (its soft passes before go without),
+            # edits of many targets search the body's turn instead (whose soft candidates a
+            # collar turn would make look nearer than they are)
+            collar = batch.soft_asked() & self.keep_collar & (n_t < self.turn_search.min_targets)
             if len(sequences) == 1 and neural.all():  # the common case: no gathers
                 decoded = self._run_sequence(x, canvas, sequences[0])
                 out = compiled.unscale(

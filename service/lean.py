@@ -111,8 +111,8 @@ def solve_lean(
     c = int(items.cnt[0])
     tidx, counts, floors = items.tidx, items.cnt, items.floors
     every = np.ones(n, dtype=np.bool_)
-    few = c < engine.turn_search.min_targets  # soft, few targets (see Engine._solve_once)
-    collar = np.full(n, engine.keep_collar and not exact and few)
+    # the collar turn for few-target edits asked in soft reach (as Engine._solve_once)
+    collar = items.soft_asked() & (engine.keep_collar and c < engine.turn_search.min_targets)
     pose = items.poses
     errors, bone_err = np.zeros(tidx.shape), np.zeros(n)
     iterations = np.zeros(n, dtype=np.int64)

@@ -157,3 +157,7 @@ def test_out_of_reach_wrists_turn_the_collar_in_soft_answers_only(
     exact = [dataclasses.replace(p, reach="exact") for p in probs[:16]]
     for x, y in zip(off.solve(exact), on.solve(exact), strict=True):
         assert np.array_equal(x.pose, y.pose)
+    # nor in the soft passes an exact answer runs first (alone, the lean path; in a batch)
+    two = [Engine(models_dir, solve_passes=2, keep_collar=k) for k in (False, True)]
+    for x, y in zip(two[0].solve(exact), two[1].solve(exact + probs[:4])[:16], strict=True):
+        assert np.array_equal(x.pose, y.pose)

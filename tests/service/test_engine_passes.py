@@ -57,13 +57,17 @@ def test_a_pass_starts_from_the_previous_answer(
     engines: tuple[Engine, Engine], real_poses: PosePairs
 ) -> None:
     one, three = engines
+    # the soft passes before an exact one turn no collar (serving.keep_collar serves answers
+    # asked in soft reach), so by hand they are an engine's without it
+    plain = Engine(one.models_dir, solve_passes=1, retry_reach=0.0, keep_collar=False)
     starts, goals = _other_bodies(real_poses)
     probs = _problems(starts[:10], goals[:10], WRISTS, reach="exact")
     by_hand = probs
     for _ in range(2):  # two soft passes with bone lengths kept, then the asked-for one
         soft = [dataclasses.replace(p, reach="soft", preserve_bone_lengths=True) for p in by_hand]
         by_hand = [
-            dataclasses.replace(p, pose=r.pose) for p, r in zip(probs, one.solve(soft), strict=True)
+            dataclasses.replace(p, pose=r.pose)
+            for p, r in zip(probs, plain.solve(soft), strict=True)
         ]
     for want, got in zip(one.solve(by_hand), three.solve(probs), strict=True):
         assert np.array_equal(want.pose, got.pose) and want.solvers == got.solvers
