@@ -270,6 +270,7 @@ class Engine:
             np.full(1, p.n_targets, dtype=np.int64), weights[None], one & (seq is None), one,
             one & (p.reach == "exact"), np.full(1, p.tolerance, dtype=np.float64),
             np.full(1, p.floor, dtype=np.float64), np.full(1, self.carry_of(p)), one,
+            one & (p.reach != "exact"),
         )  # fmt: skip
         ans = lean_answer(self, items, passes, seq)
         return None if ans is None else self._result(p, self._retry(items, ans), 0)
@@ -339,14 +340,15 @@ class Engine:
         k_max = tidx.shape[1]
         cnt = _per_item(k_max if counts is None else counts, n, np.int64)
         fab = _per_item(fabrik, n, np.bool_)
+        ex = _per_item(exact, n, np.bool_)
         items = _Items(
             pose_a, tidx, np.array(target_pos, dtype=np.float64).reshape(n, k_max, 3), cnt,
             cnt if n_targets is None else _per_item(n_targets, n, np.int64),
             _per_item(1.0 if weights is None else weights, n, np.float64, k_max), fab,
-            _per_item(preserve_bone_lengths, n, np.bool_), _per_item(exact, n, np.bool_),
+            _per_item(preserve_bone_lengths, n, np.bool_), ex,
             _per_item(tolerance, n, np.float64), _per_item(floor, n, np.float64),
             _per_item(self.carry if carry is None else carry, n, np.float64),
-            _per_item(turn_search, n, np.bool_),
+            _per_item(turn_search, n, np.bool_), ~ex,
         )  # fmt: skip
         if n and not bool(np.all((items.carry >= 0.0) & (items.carry <= 1.0))):
             raise ValueError("carry must be in [0, 1]")
@@ -369,6 +371,14 @@ class Engine:
             return BatchAnswer.scatter(n, [known])
         part = self._solve_items(items.take(rest), reps[rest])
         return BatchAnswer.scatter(n, [(rest, part), known])
+
+    def collar_items(self, items: _Items) -> npt.NDArray[np.bool_]:
+        """Which items turn a kept wrist's collar (``serving.keep_collar``) ``[B]``: edits of
+        few targets asked in soft reach. Exact reach has its FABRIK polish (its soft passes
+        before go without); edits of many targets search the body's turn instead, whose
+        soft candidates a collar turn would make look nearer than they are."""
+        few = items.n_t < self.turn_search.min_targets
+        return items.asked_soft & few & self.keep_collar
 
     def _retry(self, items: _Items, ans: BatchAnswer) -> BatchAnswer:
         """``ans`` with one more pass, from its answer, for every soft neural item (bone
@@ -450,11 +460,7 @@ class Engine:
                     seq_of[mine] = seq_ids.setdefault(seq, len(seq_ids))
             sequences = list(seq_ids)
             bone = keep | ex
-            # the collar turn helps the soft reach of edits of few targets asked in soft
-            # reach; exact reach has its FABRIK polish (its soft passes before go without),
-            # edits of many targets search the body's turn instead (whose soft candidates a
-            # collar turn would make look nearer than they are)
-            collar = batch.soft_asked() & self.keep_collar & (n_t < self.turn_search.min_targets)
+            collar = self.collar_items(batch)
             if len(sequences) == 1 and neural.all():  # the common case: no gathers
                 decoded = self._run_sequence(x, canvas, sequences[0])
                 out = compiled.unscale(

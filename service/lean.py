@@ -111,8 +111,7 @@ def solve_lean(
     c = int(items.cnt[0])
     tidx, counts, floors = items.tidx, items.cnt, items.floors
     every = np.ones(n, dtype=np.bool_)
-    # the collar turn for few-target edits asked in soft reach (as Engine._solve_once)
-    collar = items.soft_asked() & (engine.keep_collar and c < engine.turn_search.min_targets)
+    collar = engine.collar_items(items)
     pose = items.poses
     errors, bone_err = np.zeros(tidx.shape), np.zeros(n)
     iterations = np.zeros(n, dtype=np.int64)

@@ -118,13 +118,9 @@ class _Items:
     floors: compiled.F64  # [B]
     carry: compiled.F64  # [B] the branch below the targets (core.carry), 0-1
     turn: npt.NDArray[np.bool_]  # [B] may search its turn (service.turns)
-    #: [B] the caller asked for soft reach (None: ``~ex``); kept through the soft passes
-    #: before an exact one, which serving.keep_collar leaves alone
-    asked_soft: npt.NDArray[np.bool_] | None = None
-
-    def soft_asked(self) -> npt.NDArray[np.bool_]:
-        """Which items the caller asked to answer in soft reach ``[B]``."""
-        return ~self.ex if self.asked_soft is None else self.asked_soft
+    #: [B] the caller asked for soft reach: ``~ex`` as asked, kept through the soft passes
+    #: before an exact one (which serving.keep_collar leaves alone)
+    asked_soft: npt.NDArray[np.bool_]
 
     def targets(self) -> npt.NDArray[np.bool_]:
         """``[B, K]``: which columns of each item are its user targets (not pins, padding)."""
@@ -133,10 +129,7 @@ class _Items:
 
     def take(self, rows: npt.NDArray[np.intp]) -> _Items:
         """Items ``rows``, as they are."""
-        parts: list[Any] = [
-            None if (v := getattr(self, f.name)) is None else v[rows] for f in fields(self)
-        ]
-        return _Items(*parts)
+        return _Items(*(getattr(self, f.name)[rows] for f in fields(self)))
 
     def soft(self, sel: npt.NDArray[np.intp], poses: compiled.F64) -> _Items:
         """Items ``sel`` from ``poses`` as a refinement pass solves them: neural, soft
@@ -145,7 +138,7 @@ class _Items:
         return _Items(
             poses[sel], self.tidx[sel], self.tpos[sel], self.cnt[sel], self.n_t[sel],
             self.w[sel], no, ~no, no, self.tols[sel], self.floors[sel], self.carry[sel],
-            self.turn[sel], self.soft_asked()[sel],
+            self.turn[sel], self.asked_soft[sel],
         )  # fmt: skip
 
 

@@ -129,6 +129,7 @@ def _items(probs: list[SolveProblem], engine: Engine) -> tuple[_Items, np.ndarra
         np.asarray([p.reach == "exact" for p in probs]),
         np.full(n, 1e-3), np.zeros(n), np.asarray([engine.carry_of(p) for p in probs]),
         np.asarray([p.turn_search is not False for p in probs]),
+        np.asarray([p.reach != "exact" for p in probs]),
     )  # fmt: skip
     passes = np.asarray([engine.passes_of(p) for p in probs], np.int64)
     return items, passes
