@@ -291,8 +291,8 @@ def run_stage(
         return state
     if state.epoch and d.main:
         console.print(f"[cyan]{name}: resuming after epoch {state.epoch}")
-    if host() not in state.hosts:
-        state.hosts.append(host())
+    if (here := host()) not in state.hosts:
+        state.hosts.append(here)
     for epoch in range(state.epoch, epochs):
         t0 = time.perf_counter()
         model.train()
