@@ -91,6 +91,9 @@ class HeldoutConfig:
     body_scale: float = 0.25  # bone factors 0.8 .. 1.25 (log-uniform)
     seed: int = 0
     chunk: int = 2048
+    #: the start left where it was captured (the pelvis must travel too) instead of on
+    #: the target's pelvis, as the issue's edits put it
+    captured: bool = False
 
 
 #: A seconds-long configuration for tests and smoke runs.
@@ -118,9 +121,15 @@ class WorldPairs:
         return Edits(self.start, joints, [self.goal[i, j] for i, j in enumerate(joints)], self.goal)
 
 
-def world_pairs(data: PoseDataset, world: F64, a: IntArray, b: IntArray) -> WorldPairs:
-    """Start = world pose of rows ``a`` moved onto the pelvis of rows ``b``; goal = rows b."""
-    start = world[a] + (world[b, PELVIS] - world[a, PELVIS])[:, None, :]
+def world_pairs(
+    data: PoseDataset, world: F64, a: IntArray, b: IntArray, *, captured: bool = False
+) -> WorldPairs:
+    """Start = world pose of rows ``a`` moved onto the pelvis of rows ``b`` (``captured``:
+    left where it was); goal = rows b."""
+    if captured:
+        start = world[a].copy()
+    else:
+        start = world[a] + (world[b, PELVIS] - world[a, PELVIS])[:, None, :]
     yaw = np.asarray(data.yaw, dtype=np.float64)
     turn = np.degrees(np.abs(np.angle(np.exp(1j * (yaw[b] - yaw[a])))))
     return WorldPairs(start, world[b].copy(), turn, (a, b))
@@ -131,13 +140,14 @@ def rebodied(
 ) -> WorldPairs:
     """The same edits with each pair's body rebuilt (``core.bodies``): one random body
     per edit, the same for its start and target pose; the start is put back on the
-    target's pelvis and both are moved up or down together so that the target's lowest
-    foot joint stays at its captured height."""
+    target's pelvis (or as far from it as before) and both are moved up or down together
+    so that the target's lowest foot joint stays at its captured height."""
     bodies = random_bodies(rng, len(pairs), scale=scale, symmetric=symmetric)
     lengths = body_lengths(pairs.goal, bodies)
     goal = rebuild(pairs.goal, bodies, lengths)
     start = rebuild(pairs.start, bodies, lengths)
-    start += (goal[:, PELVIS] - start[:, PELVIS])[:, None, :]
+    away = pairs.start[:, PELVIS] - pairs.goal[:, PELVIS]  # 0 for the issue's edits
+    start += (goal[:, PELVIS] - start[:, PELVIS] + away)[:, None, :]
     lift = pairs.goal[:, FEET, 1].min(axis=1) - goal[:, FEET, 1].min(axis=1)
     up = np.zeros((len(pairs), 1, 3))
     up[:, 0, 1] = lift
@@ -429,8 +439,8 @@ def family_sets(
 ) -> tuple[dict[str, Edits], dict[str, F64], WorldPairs]:
     """One family's edit sets, each set's turns, and its pairs (``body`` rebuilds the
     pairs as other bodies): what :func:`evaluate_family` scores."""
-    pairs = world_pairs(data, world, *sample_pairs(data, n, rng))
-    random_pairs = world_pairs(data, world, *sample_pairs(data, n, rng))
+    pairs = world_pairs(data, world, *sample_pairs(data, n, rng), captured=cfg.captured)
+    random_pairs = world_pairs(data, world, *sample_pairs(data, n, rng), captured=cfg.captured)
     if body is not None:
         pairs, random_pairs = body(pairs), body(random_pairs)
     sets = edit_sets(engine, pairs, random_pairs, cfg, rng)
@@ -671,6 +681,14 @@ def main(
         Optional[bool],  # noqa: UP045
         typer.Option(help="Kept wrists reached by turning the collar (default: serving)."),
     ] = None,
+    keep_pelvis: Annotated[
+        Optional[float],  # noqa: UP045
+        typer.Option(help="Metres of the pelvis move a few-target edit drops (default: serving)."),
+    ] = None,
+    captured: Annotated[
+        bool,
+        typer.Option(help="Starts left where captured, not on the target's pelvis."),
+    ] = False,
 ) -> None:
     """Held-out bodies and the stress set only, against any models folder."""
     from rich.console import Console
@@ -682,11 +700,11 @@ def main(
     if not dataset.is_file():
         raise typer.BadParameter(f"no dataset file at {dataset}", param_hint="--dataset")
     console = Console(stderr=True)
-    cfg = dataclasses.replace(QUICK if quick else HeldoutConfig(), seed=seed)
+    cfg = dataclasses.replace(QUICK if quick else HeldoutConfig(), seed=seed, captured=captured)
     engine = Engine(
         models, threads=1, solve_passes=passes, carry=carry, turn_yaws=turn_yaws,
         keep_ends=keep_ends, keep_elbows=keep_elbows, keep_ease=keep_ease,
-        keep_collar=keep_collar,
+        keep_collar=keep_collar, keep_pelvis=keep_pelvis,
     )  # fmt: skip
     res = run_heldout(engine, load_dataset(dataset), cfg, split=split, log=console.log)
     res.models = {
@@ -694,6 +712,7 @@ def main(
         "carry": engine.carry, "turn_yaws": engine.turn_search.yaws,
         "keep_ends": engine.keep_ends, "keep_elbows": engine.keep_elbows,
         "keep_ease": engine.keep_ease, "keep_collar": engine.keep_collar,
+        "keep_pelvis": engine.keep_pelvis,
     }  # fmt: skip
     if out is not None:
         out.parent.mkdir(parents=True, exist_ok=True)

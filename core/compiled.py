@@ -554,6 +554,21 @@ def _collar_turn(
 
 
 @jit
+def hold_pelvis(pose: F64, start: F64, r: float) -> None:  # pragma: no cover - compiled
+    """``serving.keep_pelvis``, in place on one pose ``[21, 3]``: the pelvis's move away
+    from ``start``'s loses ``r`` of its length (a move shorter than ``r`` is dropped), so
+    the bone pass lays the body out from there: ``start + d · max(0, 1 − r / |d|)``."""
+    dx = pose[_PELVIS, 0] - start[_PELVIS, 0]
+    dy = pose[_PELVIS, 1] - start[_PELVIS, 1]
+    dz = pose[_PELVIS, 2] - start[_PELVIS, 2]
+    n = np.sqrt(dx * dx + dy * dy + dz * dz)
+    f = (n - r) / n if n > r else 0.0
+    pose[_PELVIS, 0] = start[_PELVIS, 0] + dx * f
+    pose[_PELVIS, 1] = start[_PELVIS, 1] + dy * f
+    pose[_PELVIS, 2] = start[_PELVIS, 2] + dz * f
+
+
+@jit
 def unscale(
     decoded: F32,
     scales: F64,
@@ -566,12 +581,15 @@ def unscale(
     chains: Bool,
     ease: float,
     collar: Bool,
+    hold: F64,
 ) -> F64:  # pragma: no cover - compiled
     """Network answers ``[M, 63]`` (float32, at the networks' size) back to the body's
     size (float64), with the bone pass (reference: the start pose) where ``bone``, and
     there, where ``carry[b]`` > 0, :func:`carry_item` below the item's targets ``tidx[b,
     :counts[b]]`` by that weight, then :func:`ends_item` of the chains ``chains`` marks
-    (the targeted limb ends back where the network put them; none marked: not run)."""
+    (the targeted limb ends back where the network put them; none marked: not run).
+    Where ``hold[b]`` > 0 the bone pass starts from a pelvis held near the start's
+    (:func:`hold_pelvis`)."""
     m = decoded.shape[0]
     out = np.empty((m, NUM_JOINTS, 3))
     pose = np.empty((NUM_JOINTS, 3))
@@ -588,6 +606,8 @@ def unscale(
             for i in range(3):
                 pose[j, i] = np.float64(decoded[b, 3 * j + i]) * s
         if bone[b]:
+            if hold[b] > 0.0:
+                hold_pelvis(pose, canon[b], hold[b])
             bone_pass_item(pose, lengths[b], canon[b], True, out[b], xr, lr, rr)
             if carry[b] > 0.0:
                 carry_item(out[b], canon[b], lengths[b], tidx[b], counts[b], carry[b], rr,
@@ -661,11 +681,14 @@ def settle(
     chains: Bool,
     ease: float,
     collar: Bool,
+    hold: F64,
 ) -> tuple[F64, F64, F64]:  # pragma: no cover - compiled
     """:func:`unscale` with the bone pass for every item, then :func:`finish`, in one call
     (the lean path of ``service.lean``): the same arithmetic in the same order."""
     bone = np.ones(decoded.shape[0], dtype=np.bool_)
-    out = unscale(decoded, scales, canon, lengths, bone, tidx, counts, carry, chains, ease, collar)
+    out = unscale(
+        decoded, scales, canon, lengths, bone, tidx, counts, carry, chains, ease, collar, hold
+    )
     return finish(out, facing, trans, floors, tidx, tpos, counts, lengths)
 
 
@@ -688,7 +711,7 @@ def warm() -> None:
     )  # fmt: skip
     unscale(
         out[6], out[4], out[0], out[3], np.ones(1, dtype=np.bool_), tidx, counts, np.full(1, 0.5),
-        chains, 0.0, np.ones(1, dtype=np.bool_),
+        chains, 0.0, np.ones(1, dtype=np.bool_), np.full(1, 0.02),
     )  # fmt: skip
     finish(out[0], out[1], out[2], np.zeros(1), tidx, tpos, counts, out[3])
     settle(
@@ -706,6 +729,7 @@ def warm() -> None:
         chains,
         0.0,
         np.ones(1, dtype=np.bool_),
+        np.full(1, 0.02),
     )
 
 

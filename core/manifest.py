@@ -155,6 +155,15 @@ class Serving(_Strict):
         "the shoulder about its collar towards it, as little as brings it within reach, the "
         "arm moving with it (core.ends).",
     )
+    keep_pelvis: float = Field(
+        default=0.0,
+        ge=0.0,
+        le=1.0,
+        description="In answers of fewer than turn_min_targets targets, none on the pelvis: "
+        "the networks' move of the pelvis away from the start's loses this many metres of "
+        "its length (a shorter move is dropped) before the bone pass lays the body out "
+        "from it, so a few-joint edit does not drift the hips (0: off; core.compiled).",
+    )
     turn_yaws: int = Field(
         default=1,
         ge=1,

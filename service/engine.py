@@ -40,6 +40,7 @@ from core.skeleton import (
     JOINT_NAMES,
     MIRROR,
     NUM_JOINTS,
+    ROOT,
     bone_lengths,
     set_key,
 )
@@ -92,6 +93,7 @@ class Engine:
         keep_elbows: bool | None = None,
         keep_ease: float | None = None,
         keep_collar: bool | None = None,
+        keep_pelvis: float | None = None,
     ) -> None:
         self.models_dir = Path(models_dir)
         self.manifest: Manifest = load_manifest(self.models_dir, verify=True)
@@ -152,6 +154,11 @@ class Engine:
         #: a kept wrist beyond the arm's reach turns its shoulder about the collar first
         #: (``serving.keep_collar``; ``core.ends.keep_ends``)
         self.keep_collar = bool(m.serving.keep_collar if keep_collar is None else keep_collar)
+        #: a few-target edit's pelvis loses this much (m) of the networks' move
+        #: (``serving.keep_pelvis``; ``core.compiled.hold_pelvis``)
+        self.keep_pelvis = float(m.serving.keep_pelvis if keep_pelvis is None else keep_pelvis)
+        if not 0.0 <= self.keep_pelvis <= 1.0:
+            raise ValueError(f"keep_pelvis must be in [0, 1] m, got {self.keep_pelvis}")
         #: the turn search of many-target edits (``serving.turn_*``, :mod:`service.turns`)
         self.turn_search = turns.TurnSearch.of(m.serving, turn_yaws)
         known = np.asarray(m.skeleton.skeletons, dtype=np.float64)  # [C, 20]
@@ -380,6 +387,15 @@ class Engine:
         few = items.n_t < self.turn_search.min_targets
         return items.asked_soft & few & self.keep_collar
 
+    def pelvis_holds(self, items: _Items) -> npt.NDArray[np.float64]:
+        """How much of the networks' pelvis move each item drops (``serving.keep_pelvis``,
+        m; 0: none) ``[B]``: edits of few targets (the turn search's many turn the body
+        about its pelvis) none of which, pins included, is on the pelvis itself."""
+        few = items.n_t < self.turn_search.min_targets
+        cols = np.arange(items.tidx.shape[1])[None, :] < items.cnt[:, None]
+        on_pelvis = ((items.tidx == JOINT_INDEX[ROOT]) & cols).any(axis=1)
+        return np.where(few & ~on_pelvis, self.keep_pelvis, 0.0)
+
     def _retry(self, items: _Items, ans: BatchAnswer) -> BatchAnswer:
         """``ans`` with one more pass, from its answer, for every soft neural item (bone
         lengths kept) whose farthest target is still more than ``serving.retry_reach``
@@ -460,12 +476,12 @@ class Engine:
                     seq_of[mine] = seq_ids.setdefault(seq, len(seq_ids))
             sequences = list(seq_ids)
             bone = keep | ex
-            collar = self.collar_items(batch)
+            collar, hold = self.collar_items(batch), self.pelvis_holds(batch)
             if len(sequences) == 1 and neural.all():  # the common case: no gathers
                 decoded = self._run_sequence(x, canvas, sequences[0])
                 out = compiled.unscale(
                     decoded, scales, canon, lengths, bone, tidx, cnt, batch.carry, self.chain_mask,
-                    self.keep_ease, collar,
+                    self.keep_ease, collar, hold,
                 )  # fmt: skip
             else:
                 items = np.flatnonzero(neural)
@@ -477,7 +493,7 @@ class Engine:
                 out[items] = compiled.unscale(
                     decoded[items], scales[items], canon[items], lengths[items], bone[items],
                     tidx[items], cnt[items], batch.carry[items], self.chain_mask, self.keep_ease,
-                    collar[items],
+                    collar[items], hold[items],
                 )  # fmt: skip
         start = canon
         if origin is not None and moved is not None and moved.any():

@@ -111,7 +111,7 @@ def solve_lean(
     c = int(items.cnt[0])
     tidx, counts, floors = items.tidx, items.cnt, items.floors
     every = np.ones(n, dtype=np.bool_)
-    collar = engine.collar_items(items)
+    collar, hold = engine.collar_items(items), engine.pelvis_holds(items)
     pose = items.poses
     errors, bone_err = np.zeros(tidx.shape), np.zeros(n)
     iterations = np.zeros(n, dtype=np.int64)
@@ -123,12 +123,12 @@ def solve_lean(
         if not exact or k < passes - 1:
             pose, errors, bone_err = compiled.settle(
                 decoded, scales, canon, lengths, facing, trans, floors, tidx, tpos, counts,
-                items.carry, engine.chain_mask, engine.keep_ease, collar,
+                items.carry, engine.chain_mask, engine.keep_ease, collar, hold,
             )  # fmt: skip
             continue
         out = compiled.unscale(
             decoded, scales, canon, lengths, every, tidx, counts, items.carry, engine.chain_mask,
-            engine.keep_ease, collar,
+            engine.keep_ease, collar, hold,
         )  # fmt: skip
         out, iterations, errs = engine._fabrik(
             True, out, lengths, tcan[:, :c], items.tols, tidx[0, :c], items.w[0, :c],

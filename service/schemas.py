@@ -275,6 +275,10 @@ class ModelsResponse(BaseModel):
         description="Whether a soft answer's kept wrist beyond the arm's reach turns its "
         "shoulder about the collar first (the manifest's `serving.keep_collar`)."
     )
+    keep_pelvis: float = Field(
+        description="Metres of the networks' pelvis move a few-target edit drops (0: none; "
+        "the manifest's `serving.keep_pelvis`)."
+    )
     models: list[ModelInfo]
 
 

@@ -46,6 +46,7 @@ async def models(engine: ReadyEngine) -> ModelsResponse:
         keep_elbows=engine.keep_elbows,
         keep_ease=engine.keep_ease,
         keep_collar=engine.keep_collar,
+        keep_pelvis=engine.keep_pelvis,
         models=[
             ModelInfo(
                 name=e.name,
