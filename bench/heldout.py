@@ -685,6 +685,10 @@ def main(
         Optional[float],  # noqa: UP045
         typer.Option(help="Metres of the pelvis move a few-target edit drops (default: serving)."),
     ] = None,
+    pelvis_travel: Annotated[
+        Optional[bool],  # noqa: UP045
+        typer.Option(help="A targeted pelvis moves the start across first (default: serving)."),
+    ] = None,
     captured: Annotated[
         bool,
         typer.Option(help="Starts left where captured, not on the target's pelvis."),
@@ -704,7 +708,7 @@ def main(
     engine = Engine(
         models, threads=1, solve_passes=passes, carry=carry, turn_yaws=turn_yaws,
         keep_ends=keep_ends, keep_elbows=keep_elbows, keep_ease=keep_ease,
-        keep_collar=keep_collar, keep_pelvis=keep_pelvis,
+        keep_collar=keep_collar, keep_pelvis=keep_pelvis, pelvis_travel=pelvis_travel,
     )  # fmt: skip
     res = run_heldout(engine, load_dataset(dataset), cfg, split=split, log=console.log)
     res.models = {
@@ -712,7 +716,7 @@ def main(
         "carry": engine.carry, "turn_yaws": engine.turn_search.yaws,
         "keep_ends": engine.keep_ends, "keep_elbows": engine.keep_elbows,
         "keep_ease": engine.keep_ease, "keep_collar": engine.keep_collar,
-        "keep_pelvis": engine.keep_pelvis,
+        "keep_pelvis": engine.keep_pelvis, "pelvis_travel": engine.pelvis_travel,
     }  # fmt: skip
     if out is not None:
         out.parent.mkdir(parents=True, exist_ok=True)

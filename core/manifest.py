@@ -164,6 +164,13 @@ class Serving(_Strict):
         "its length (a shorter move is dropped) before the bone pass lays the body out "
         "from it, so a few-joint edit does not drift the hips (0: off; core.compiled).",
     )
+    pelvis_travel: bool = Field(
+        default=False,
+        description="In a neural edit with a target on the pelvis and no pins, the start "
+        "is first moved horizontally so that its pelvis lies over that target (the "
+        "networks, trained on poses canonicalised over their pelvis, move it up or down "
+        "but not across); the height stays the networks' to change.",
+    )
     turn_yaws: int = Field(
         default=1,
         ge=1,

@@ -94,6 +94,7 @@ class Engine:
         keep_ease: float | None = None,
         keep_collar: bool | None = None,
         keep_pelvis: float | None = None,
+        pelvis_travel: bool | None = None,
     ) -> None:
         self.models_dir = Path(models_dir)
         self.manifest: Manifest = load_manifest(self.models_dir, verify=True)
@@ -159,6 +160,10 @@ class Engine:
         self.keep_pelvis = float(m.serving.keep_pelvis if keep_pelvis is None else keep_pelvis)
         if not 0.0 <= self.keep_pelvis <= 1.0:
             raise ValueError(f"keep_pelvis must be in [0, 1] m, got {self.keep_pelvis}")
+        #: a targeted pelvis takes the start with it, horizontally, before the networks
+        #: (``serving.pelvis_travel``; ``_Items.onto_pelvis_target``)
+        p_travel = m.serving.pelvis_travel if pelvis_travel is None else pelvis_travel
+        self.pelvis_travel = bool(p_travel)
         #: the turn search of many-target edits (``serving.turn_*``, :mod:`service.turns`)
         self.turn_search = turns.TurnSearch.of(m.serving, turn_yaws)
         known = np.asarray(m.skeleton.skeletons, dtype=np.float64)  # [C, 20]
@@ -279,6 +284,8 @@ class Engine:
             np.full(1, p.floor, dtype=np.float64), np.full(1, self.carry_of(p)), one,
             one & (p.reach != "exact"),
         )  # fmt: skip
+        if self.pelvis_travel:
+            items = items.onto_pelvis_target()
         ans = lean_answer(self, items, passes, seq)
         return None if ans is None else self._result(p, self._retry(items, ans), 0)
 
@@ -363,6 +370,8 @@ class Engine:
         if n and int(reps.min()) < 1:
             raise ValueError(f"passes must be at least 1, got {int(reps.min())}")
         reps = np.where(fab, 1, reps)  # FABRIK items: one solve (and not the caller's array)
+        if self.pelvis_travel:
+            items = items.onto_pelvis_target()
         items, degrees, known = turns.search(self, items, reps, self._solve_items)
         return turns.mark(self._retry(items, self._solve_rest(items, reps, known)), degrees)
 

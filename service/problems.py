@@ -7,6 +7,7 @@ The engine (:mod:`service.engine`) works on these; the HTTP layer builds
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass, fields
 from typing import Any
@@ -15,9 +16,10 @@ import numpy as np
 import numpy.typing as npt
 
 from core import compiled
-from core.skeleton import NUM_JOINTS
+from core.skeleton import JOINT_INDEX, NUM_JOINTS, ROOT
 
 F64 = npt.NDArray[np.floating[Any]]
+PELVIS = JOINT_INDEX[ROOT]
 
 
 # --------------------------------------------------------------------------------------
@@ -126,6 +128,21 @@ class _Items:
         """``[B, K]``: which columns of each item are its user targets (not pins, padding)."""
         out: npt.NDArray[np.bool_] = np.arange(self.tidx.shape[1])[None, :] < self.n_t[:, None]
         return out
+
+    def onto_pelvis_target(self) -> _Items:
+        """These items with each neural start whose user targets include the pelvis, and
+        which has no pins, moved horizontally (x, z) so that its pelvis lies over that
+        target (``serving.pelvis_travel``); the height is the networks' to change. The
+        others as they are."""
+        cols = self.targets() & (self.tidx == PELVIS)
+        rows = np.flatnonzero(cols.any(axis=1) & ~self.fab & (self.cnt == self.n_t))
+        if rows.size == 0:
+            return self
+        shift = self.tpos[rows, np.argmax(cols[rows], axis=1)] - self.poses[rows, PELVIS]
+        shift[:, 1] = 0.0
+        poses = self.poses.copy()
+        poses[rows] += shift[:, None, :]
+        return dataclasses.replace(self, poses=poses)
 
     def take(self, rows: npt.NDArray[np.intp]) -> _Items:
         """Items ``rows``, as they are."""

@@ -279,6 +279,10 @@ class ModelsResponse(BaseModel):
         description="Metres of the networks' pelvis move a few-target edit drops (0: none; "
         "the manifest's `serving.keep_pelvis`)."
     )
+    pelvis_travel: bool = Field(
+        description="Whether a targeted pelvis first takes the start with it horizontally "
+        "(the manifest's `serving.pelvis_travel`)."
+    )
     models: list[ModelInfo]
 
 

@@ -115,6 +115,7 @@ class SolverConfig(_Section):
     keep_ease: float = _serving("keep_ease")
     keep_collar: bool = _serving("keep_collar")
     keep_pelvis: float = _serving("keep_pelvis")
+    pelvis_travel: bool = _serving("pelvis_travel")
     # (their names: SERVING_SETTINGS, below, which the export and the checkpoint tags read)
     carry_loss: bool = Field(
         default=False,
@@ -181,7 +182,7 @@ class SolverConfig(_Section):
 SERVING_SETTINGS: tuple[str, ...] = (
     "passes", "carry", "turn_yaws", "turn_margin", "turn_min_targets", "turn_plausibility",
     "turn_critic", "retry_reach", "keep_ends", "keep_elbows", "keep_ease",
-    "keep_collar", "keep_pelvis",
+    "keep_collar", "keep_pelvis", "pelvis_travel",
 )  # fmt: skip
 if not set(SERVING_SETTINGS) <= set(SolverConfig.model_fields) & set(Serving.model_fields):
     raise RuntimeError("SERVING_SETTINGS must name fields of SolverConfig and of Serving")

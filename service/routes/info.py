@@ -47,6 +47,7 @@ async def models(engine: ReadyEngine) -> ModelsResponse:
         keep_ease=engine.keep_ease,
         keep_collar=engine.keep_collar,
         keep_pelvis=engine.keep_pelvis,
+        pelvis_travel=engine.pelvis_travel,
         models=[
             ModelInfo(
                 name=e.name,

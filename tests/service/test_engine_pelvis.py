@@ -88,3 +88,51 @@ def test_a_mixed_batch_answers_each_item_as_alone(
     ]
     for p, r in zip(probs, engine.solve(probs), strict=True):
         assert np.array_equal(engine.solve([p])[0].pose, r.pose)
+
+
+def _pelvis_moves(starts: np.ndarray, shift: tuple[float, float, float]) -> list[SolveProblem]:
+    """Edits of the pelvis alone, each to its start's pelvis moved by ``shift`` (m)."""
+    idx = np.asarray([PELVIS], dtype=np.intp)
+    return [
+        SolveProblem(
+            pose=s, target_idx=idx, target_pos=s[idx] + np.asarray(shift), weights=np.ones(1),
+            n_targets=1,
+        )
+        for s in starts
+    ]
+
+
+def test_a_targeted_pelvis_takes_the_start_across(
+    models_dir: Path, pairs: tuple[np.ndarray, np.ndarray], client: Any
+) -> None:
+    """``serving.pelvis_travel``: the networks, trained on poses over their own pelvis, do
+    not move it across; a pelvis target first moves the start there horizontally."""
+    off, on = (Engine(models_dir, pelvis_travel=t) for t in (False, True))
+    assert client.get("/v1/models").json()["pelvis_travel"] is on.manifest.serving.pelvis_travel
+    start = pairs[0][:24]
+    probs = _pelvis_moves(start, (0.4, 0.0, -0.3))
+    a, b = off.solve(probs), on.solve(probs)
+    reach_a, reach_b = (np.asarray([r.errors[0] for r in rs]) for rs in (a, b))
+    assert reach_a.mean() > 0.2 and reach_b.max() < 0.01
+    assert max(r.max_bone_error for r in b) <= 1e-5
+    # the height stays the networks' to change: a lowered pelvis is the same answer
+    # whether or not the start went across first, moved as far across
+    down = _pelvis_moves(start[:8], (0.0, -0.1, 0.0))
+    for x, y in zip(off.solve(down), on.solve(down), strict=True):
+        assert np.array_equal(x.pose, y.pose)
+    # pins keep the start where it is (its FABRIK polish holds them); FABRIK is its own
+    pinned = [
+        dataclasses.replace(
+            p, target_idx=np.asarray([PELVIS, JOINT_INDEX["left_foot"]], dtype=np.intp),
+            target_pos=np.stack([p.target_pos[0], p.pose[JOINT_INDEX["left_foot"]]]),
+            weights=np.ones(2),
+        )
+        for p in probs[:8]
+    ]
+    fabrik = [dataclasses.replace(p, method="fabrik") for p in probs[:8]]
+    for x, y in zip(off.solve(pinned + fabrik), on.solve(pinned + fabrik), strict=True):
+        assert np.array_equal(x.pose, y.pose)
+    # batch = single, with edits it leaves alone in the batch
+    mixed = probs[:6] + _problems(pairs[0][:6], pairs[1][:6], ("left_wrist",))
+    for p, r in zip(mixed, on.solve(mixed), strict=True):
+        assert np.array_equal(on.solve([p])[0].pose, r.pose)
