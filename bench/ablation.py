@@ -159,6 +159,24 @@ VARIANTS: dict[str, str] = {
     "collar_soft": "the same in soft answers only (a second form, in no commit)",
     "collar": "the same in answers asked in soft reach with fewer than 5 targets (the turn "
     "search's own): shipped since (mx1-26b6fd5eb17c); exact answers as before, bit for bit",
+    "pelvis_1cm": "the shipped models (mx1-26b6fd5eb17c) served with a few-target edit's "
+    "pelvis move shortened by 1 cm (`serving.keep_pelvis` 0.01, `--keep-pelvis 0.01`)",
+    "pelvis_2cm": "the same by 2 cm: shipped since",
+    "pelvis_5cm": "the same by 5 cm",
+    "pelvis_full": "the same held entirely (`--keep-pelvis 1`)",
+    "pelvis_all": "the pelvis held entirely in every edit not on it, many targets too (a "
+    "`/tmp` form, in no commit)",
+    "captured": "mx1-26b6fd5eb17c on edits whose start stays where it was captured "
+    "(`--captured`: the pelvis must travel too)",
+    "captured_pelvis_1cm": "`pelvis_1cm` on those edits",
+    "captured_pelvis_2cm": "`pelvis_2cm` on those edits",
+    "captured_pelvis_5cm": "`pelvis_5cm` on those edits",
+    "captured_pelvis_full": "`pelvis_full` on those edits",
+    "captured_pelvis_all": "`pelvis_all` on those edits (a `/tmp` form; its stress bodies "
+    "were put back on the target's pelvis)",
+    "captured_travel": "mx1-31d1095cf3e0 (`pelvis_2cm` with `serving.pelvis_travel`: a "
+    "targeted pelvis moves the start across first) on the captured edits: shipped",
+    "captured_travel_up": "the same with the start moved vertically too (a `/tmp` form)",
     "ae_cos3e3_ends": "the shipped recipe (`ends_loss`) with the autoencoder at lr 3e-3 decayed "
     "along a cosine (ae_cos3e3_ends.toml; both solver banks retrained on it)",
 }
