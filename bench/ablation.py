@@ -161,7 +161,7 @@ VARIANTS: dict[str, str] = {
     "search's own): shipped since (mx1-26b6fd5eb17c); exact answers as before, bit for bit",
     "pelvis_1cm": "the shipped models (mx1-26b6fd5eb17c) served with a few-target edit's "
     "pelvis move shortened by 1 cm (`serving.keep_pelvis` 0.01, `--keep-pelvis 0.01`)",
-    "pelvis_2cm": "the same by 2 cm: shipped since",
+    "pelvis_2cm": "the same by 2 cm (shipped as mx1-31d1095cf3e0, taken back: B1 loses)",
     "pelvis_5cm": "the same by 5 cm",
     "pelvis_full": "the same held entirely (`--keep-pelvis 1`)",
     "pelvis_all": "the pelvis held entirely in every edit not on it, many targets too (a "
@@ -174,8 +174,13 @@ VARIANTS: dict[str, str] = {
     "captured_pelvis_full": "`pelvis_full` on those edits",
     "captured_pelvis_all": "`pelvis_all` on those edits (a `/tmp` form; its stress bodies "
     "were put back on the target's pelvis)",
-    "captured_travel": "mx1-31d1095cf3e0 (`pelvis_2cm` with `serving.pelvis_travel`: a "
+    "pelvis_across": "`pelvis_2cm` held across only (x, z), the height the networks' (a "
+    "`/tmp` form)",
+    "captured_pelvis_across": "`pelvis_across` on the captured edits, with `pelvis_travel`",
+    "captured_travel": "mx1-f16971a84261 (mx1-26b6fd5eb17c with `serving.pelvis_travel`: a "
     "targeted pelvis moves the start across first) on the captured edits: shipped",
+    "captured_travel_pelvis_2cm": "`pelvis_travel` with `pelvis_2cm` (mx1-31d1095cf3e0) on the "
+    "captured edits",
     "captured_travel_up": "the same with the start moved vertically too (a `/tmp` form)",
     "ae_cos3e3_ends": "the shipped recipe (`ends_loss`) with the autoencoder at lr 3e-3 decayed "
     "along a cosine (ae_cos3e3_ends.toml; both solver banks retrained on it)",
