@@ -95,7 +95,10 @@ def _pelvis_moves(starts: np.ndarray, shift: tuple[float, float, float]) -> list
     idx = np.asarray([PELVIS], dtype=np.intp)
     return [
         SolveProblem(
-            pose=s, target_idx=idx, target_pos=s[idx] + np.asarray(shift), weights=np.ones(1),
+            pose=s,
+            target_idx=idx,
+            target_pos=s[idx] + np.asarray(shift),
+            weights=np.ones(1),
             n_targets=1,
         )
         for s in starts
@@ -123,7 +126,8 @@ def test_a_targeted_pelvis_takes_the_start_across(
     # pins keep the start where it is (its FABRIK polish holds them); FABRIK is its own
     pinned = [
         dataclasses.replace(
-            p, target_idx=np.asarray([PELVIS, JOINT_INDEX["left_foot"]], dtype=np.intp),
+            p,
+            target_idx=np.asarray([PELVIS, JOINT_INDEX["left_foot"]], dtype=np.intp),
             target_pos=np.stack([p.target_pos[0], p.pose[JOINT_INDEX["left_foot"]]]),
             weights=np.ones(2),
         )
