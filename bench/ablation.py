@@ -182,6 +182,14 @@ VARIANTS: dict[str, str] = {
     "captured_travel_pelvis_2cm": "`pelvis_travel` with `pelvis_2cm` (mx1-31d1095cf3e0) on the "
     "captured edits",
     "captured_travel_up": "the same with the start moved vertically too (a `/tmp` form)",
+    "turn_fit_1cm": "mx1-f16971a84261 with the turn search also trying the start fitted to "
+    "the targets (turned and shifted across, least squares; `serving.turn_fit`, "
+    "`--turn-fit 0.01`), kept if it scores 1 cm below every other candidate",
+    "turn_fit_3cm": "the same, kept if 3 cm below",
+    "turn_fit_10cm": "the same, kept if 10 cm below: shipped since (mx1-fe4f3722cfd5)",
+    "captured_turn_fit_1cm": "`turn_fit_1cm` on the captured edits",
+    "captured_turn_fit_3cm": "`turn_fit_3cm` on the captured edits",
+    "captured_turn_fit_10cm": "`turn_fit_10cm` on the captured edits",
     "ae_cos3e3_ends": "the shipped recipe (`ends_loss`) with the autoencoder at lr 3e-3 decayed "
     "along a cosine (ae_cos3e3_ends.toml; both solver banks retrained on it)",
 }

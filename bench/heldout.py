@@ -689,6 +689,10 @@ def main(
         Optional[bool],  # noqa: UP045
         typer.Option(help="A targeted pelvis moves the start across first (default: serving)."),
     ] = None,
+    turn_fit: Annotated[
+        Optional[float],  # noqa: UP045
+        typer.Option(help="Margin (m) of the fitted start in the turn search; 0: off."),
+    ] = None,
     captured: Annotated[
         bool,
         typer.Option(help="Starts left where captured, not on the target's pelvis."),
@@ -706,7 +710,7 @@ def main(
     console = Console(stderr=True)
     cfg = dataclasses.replace(QUICK if quick else HeldoutConfig(), seed=seed, captured=captured)
     engine = Engine(
-        models, threads=1, solve_passes=passes, carry=carry, turn_yaws=turn_yaws,
+        models, threads=1, solve_passes=passes, carry=carry, turn_yaws=turn_yaws, turn_fit=turn_fit,
         keep_ends=keep_ends, keep_elbows=keep_elbows, keep_ease=keep_ease,
         keep_collar=keep_collar, keep_pelvis=keep_pelvis, pelvis_travel=pelvis_travel,
     )  # fmt: skip
@@ -714,6 +718,7 @@ def main(
     res.models = {
         "dir": str(models), "version": engine.version, "passes": engine.solve_passes,
         "carry": engine.carry, "turn_yaws": engine.turn_search.yaws,
+        "turn_fit": engine.turn_search.fit,
         "keep_ends": engine.keep_ends, "keep_elbows": engine.keep_elbows,
         "keep_ease": engine.keep_ease, "keep_collar": engine.keep_collar,
         "keep_pelvis": engine.keep_pelvis, "pelvis_travel": engine.pelvis_travel,

@@ -205,6 +205,16 @@ class Serving(_Strict):
     turn_min_targets: int = Field(
         default=5, ge=1, le=21, description="The fewest targets an edit needs to search."
     )
+    turn_fit: float = Field(
+        default=0.0,
+        ge=0.0,
+        le=1.0,
+        description="The turn search also tries the start moved to fit its targets: turned "
+        "about the vertical and shifted across by the rigid motion that best carries its "
+        "targeted joints onto their targets (least squares, heights left alone), for a body "
+        "that has travelled as well as turned. Kept only if it scores this many metres "
+        "below every other candidate (0: not tried).",
+    )
     retry_reach: float = Field(
         default=0.0,
         ge=0.0,

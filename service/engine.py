@@ -88,6 +88,7 @@ class Engine:
         solve_passes: int | None = None,
         carry: float | None = None,
         turn_yaws: int | None = None,
+        turn_fit: float | None = None,
         retry_reach: float | None = None,
         keep_ends: bool | None = None,
         keep_elbows: bool | None = None,
@@ -165,7 +166,7 @@ class Engine:
         p_travel = m.serving.pelvis_travel if pelvis_travel is None else pelvis_travel
         self.pelvis_travel = bool(p_travel)
         #: the turn search of many-target edits (``serving.turn_*``, :mod:`service.turns`)
-        self.turn_search = turns.TurnSearch.of(m.serving, turn_yaws)
+        self.turn_search = turns.TurnSearch.of(m.serving, turn_yaws, turn_fit)
         known = np.asarray(m.skeleton.skeletons, dtype=np.float64)  # [C, 20]
         self._shape_totals = known.sum(axis=-1)
         self._shapes = known / self._shape_totals[:, None]
@@ -372,8 +373,8 @@ class Engine:
         reps = np.where(fab, 1, reps)  # FABRIK items: one solve (and not the caller's array)
         if self.pelvis_travel:
             items = items.onto_pelvis_target()
-        items, degrees, known = turns.search(self, items, reps, self._solve_items)
-        return turns.mark(self._retry(items, self._solve_rest(items, reps, known)), degrees)
+        items, turned, known = turns.search(self, items, reps, self._solve_items)
+        return turns.mark(self._retry(items, self._solve_rest(items, reps, known)), turned)
 
     def _solve_rest(
         self, items: _Items, reps: npt.NDArray[np.int64], known: turns.Known | None

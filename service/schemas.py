@@ -243,6 +243,10 @@ class ModelsResponse(BaseModel):
         description="The fewest targets of an edit that searches its turn "
         "(`serving.turn_min_targets`)."
     )
+    turn_fit: float = Field(
+        description="Metres by which the turn search's start moved to fit the targets must "
+        "score below every other candidate to be kept (0: not tried; `serving.turn_fit`)."
+    )
     turn_critic: str = Field(
         description="What judges how natural a searched turn's answer is: `completion` (the "
         "body completion builds from its base key points) or `autoencoder` (its round trip); "

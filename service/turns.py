@@ -62,13 +62,22 @@ class TurnSearch:
     min_targets: int
     plausibility: float
     critic: Literal["autoencoder", "completion"]
+    #: > 0: one more candidate, the start moved to fit its targets (:func:`fitted`), kept
+    #: only if it scores this many metres below every other
+    fit: float = 0.0
+
+    @property
+    def candidates(self) -> int:
+        """Candidate starts per searching item, the unturned one included."""
+        return self.yaws + int(self.fit > 0.0)
 
     @staticmethod
-    def of(serving: Serving, yaws: int | None = None) -> TurnSearch:
-        """The search ``serving`` asks for (``yaws``: an override, e.g. 1 for none)."""
+    def of(serving: Serving, yaws: int | None = None, fit: float | None = None) -> TurnSearch:
+        """The search ``serving`` asks for (``yaws``, ``fit``: overrides; yaws 1: none)."""
         return TurnSearch(
             serving.turn_yaws if yaws is None else int(yaws), serving.turn_margin,
             serving.turn_min_targets, serving.turn_plausibility, serving.turn_critic,
+            serving.turn_fit if fit is None else float(fit),
         )  # fmt: skip
 
     def searches(
@@ -82,7 +91,7 @@ class TurnSearch:
 
     def factor(self, method: str, n_targets: int, pinned: bool, wanted: bool | None = None) -> int:
         """The solves an item costs per pass: its candidates and itself, or 1."""
-        return self.yaws + 1 if self.searches(method, n_targets, pinned, wanted) else 1
+        return self.candidates + 1 if self.searches(method, n_targets, pinned, wanted) else 1
 
 
 #: No search (models without ``serving.turn_*``, FABRIK-only callers).
@@ -108,16 +117,50 @@ def turned(poses: F64, yaw: float) -> F64:
     return out
 
 
+def fitted(poses: F64, items: _Items, rows: npt.NDArray[np.intp]) -> tuple[F64, F64]:
+    """``poses [N, 21, 3]`` (world, +Y up; the starts of ``items[rows]``) each moved by
+    the turn about the vertical and the shift across that best carry its targeted joints
+    onto their targets (least squares over x and z; heights as they were), and each turn
+    in radians, as :func:`turned` would turn it."""
+    tidx, tpos = items.tidx[rows], items.tpos[rows]
+    use = items.targets()[rows].astype(np.float64)  # [N, K]
+    n = use.sum(axis=1, keepdims=True)
+    src = np.take_along_axis(poses, tidx[:, :, None], axis=1)[:, :, [0, 2]]  # [N, K, 2]
+    dst = tpos[:, :, [0, 2]]
+    sc = (src * use[:, :, None]).sum(axis=1) / n  # centroids [N, 2]
+    dc = (dst * use[:, :, None]).sum(axis=1) / n
+    a, b = (src - sc[:, None]) * use[:, :, None], dst - dc[:, None]
+    # turned(): x' = c x + s z, z' = -s x + c z; maximise sum(b . R a)
+    cos = (a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1]).sum(axis=1)
+    sin = (a[..., 1] * b[..., 0] - a[..., 0] * b[..., 1]).sum(axis=1)
+    yaw = np.arctan2(sin, cos)
+    c, s = np.cos(yaw)[:, None], np.sin(yaw)[:, None]
+    x, z = poses[:, :, 0] - sc[:, :1], poses[:, :, 2] - sc[:, 1:]
+    out = poses.copy()
+    out[:, :, 0] = c * x + s * z + dc[:, :1]
+    out[:, :, 2] = -s * x + c * z + dc[:, 1:]
+    return out, yaw
+
+
 #: Items whose final answer the search already has: their indices and that answer.
 Known = tuple[npt.NDArray[np.intp], BatchAnswer]
+
+
+@dataclass(frozen=True)
+class Turns:
+    """What the search did to each item's start: its turn in whole degrees (0: none), and
+    whether it was the fitted start (turned and moved across, :func:`fitted`)."""
+
+    degrees: npt.NDArray[np.int64]  # [B]
+    moved: npt.NDArray[np.bool_]  # [B]
 
 
 def search(
     engine: Engine, items: _Items, reps: npt.NDArray[np.int64],
     solve: Callable[[_Items, npt.NDArray[np.int64]], BatchAnswer],
-) -> tuple[_Items, npt.NDArray[np.int64], Known | None]:  # fmt: skip
-    """``items`` with the start of every searching item turned as the search chose, each
-    item's turn in whole degrees (0: not turned), and the answers it already has: a soft
+) -> tuple[_Items, Turns, Known | None]:  # fmt: skip
+    """``items`` with the start of every searching item turned as the search chose, what
+    it did to each (:class:`Turns`), and the answers it already has: a soft
     item's kept candidate was solved as the item asks, so it is not solved again.
     ``solve(items, reps)`` solves a batch (the engine's own path).
 
@@ -128,17 +171,18 @@ def search(
     batch (fewer runs, whose fixed cost dominates there). Either way the same start is kept."""
     sel = searching(engine, items)
     degrees = np.zeros(len(items.poses), dtype=np.int64)
+    moved = np.zeros(len(items.poses), dtype=np.bool_)
     if sel.size == 0:
-        return items, degrees, None
+        return items, Turns(degrees, moved), None
     t = engine.turn_search
-    first = np.arange(t.yaws if sel.size == 1 else 1)  # the turns solved for every item
+    first = np.arange(t.candidates if sel.size == 1 else 1)  # solved for every item
     scores, found, poses = _candidates(engine, items, reps, sel, first, solve)
     scores[0] -= t.margin
     best = np.argmin(scores, axis=0)  # ties: the first, the unturned start
     open_ = np.flatnonzero(scores[0] > 0.0) if first.size == 1 else np.zeros(0, np.intp)
     if open_.size:
         more, ans, turned_poses = _candidates(
-            engine, items, reps, sel[open_], np.arange(1, t.yaws), solve
+            engine, items, reps, sel[open_], np.arange(1, t.candidates), solve
         )
         pick = np.argmin(np.vstack([scores[0, open_], more]), axis=0)
         turn = np.flatnonzero(pick > 0)
@@ -154,10 +198,15 @@ def search(
     out = items.poses.copy()
     out[sel] = poses[best_rows]
     deg = np.rint(360.0 * best / t.yaws).astype(np.int64)
+    fit = np.flatnonzero(best == t.yaws) if t.fit > 0.0 else np.zeros(0, np.intp)
+    if fit.size:  # the fitted start: its own turn
+        yaw = fitted(items.poses[sel[fit]], items, sel[fit])[1]
+        deg[fit] = np.rint(np.degrees(yaw)).astype(np.int64) % 360
+        moved[sel[fit]] = True
     degrees[sel] = np.where(deg > 180, deg - 360, deg)
     mine = ~items.ex[sel] & items.keep[sel]  # solved as asked: soft, bone lengths kept
     known = (sel[mine], found.take(np.flatnonzero(mine))) if mine.any() else None
-    return dataclasses.replace(items, poses=out), degrees, known
+    return dataclasses.replace(items, poses=out), Turns(degrees, moved), known
 
 
 def _candidates(
@@ -169,13 +218,19 @@ def _candidates(
     the answers and the candidate starts (rows ``turn * len(sel) + item``)."""
     y = engine.turn_search.yaws
     starts = items.poses[sel]
-    poses = np.concatenate(
-        [turned(starts, float(2.0 * np.pi * k / y)) if k else starts for k in steps.tolist()]
-    )
+
+    def start(k: int) -> F64:
+        if k == y:  # the fitted start (TurnSearch.fit)
+            return fitted(starts, items, sel)[0]
+        return turned(starts, float(2.0 * np.pi * k / y)) if k else starts
+
+    poses = np.concatenate([start(k) for k in steps.tolist()])
     rep = np.tile(sel, len(steps))
     soft = dataclasses.replace(items.soft(rep, items.poses), poses=poses)
     ans = solve(soft, reps[rep])
-    return _score(engine, soft, ans).reshape(len(steps), -1), ans, poses
+    scores = _score(engine, soft, ans).reshape(len(steps), -1)
+    scores[steps == y] += engine.turn_search.fit  # the fitted start's bar (0 if not tried)
+    return scores, ans, poses
 
 
 def _score(engine: Engine, soft: _Items, ans: BatchAnswer) -> F64:
@@ -203,14 +258,21 @@ def implausibility(engine: Engine, poses: npt.NDArray[np.floating], floors: F64)
     return out
 
 
-def mark(ans: BatchAnswer, degrees: npt.NDArray[np.int64]) -> BatchAnswer:
-    """``ans`` with ``turn <deg>`` at the end of the solver path of every turned item."""
-    if not degrees.any():
+def mark(ans: BatchAnswer, turns: Turns) -> BatchAnswer:
+    """``ans`` with ``turn <deg>`` (a fitted start: ``fit <deg>``) at the end of the solver
+    path of every item the search turned or moved."""
+    if not (turns.degrees.any() or turns.moved.any()):
         return ans
-    keys = [(int(p), int(d)) for p, d in zip(ans.path_of.tolist(), degrees.tolist(), strict=True)]
+    keys = [
+        (int(p), int(d), bool(m))
+        for p, d, m in zip(
+            ans.path_of.tolist(), turns.degrees.tolist(), turns.moved.tolist(), strict=True
+        )
+    ]
     distinct = list(dict.fromkeys(keys))
     paths = tuple(
-        ans.paths[p] + ((f"turn {d}",) if d else ()) for p, d in distinct
+        ans.paths[p] + ((f"fit {d}",) if m else (f"turn {d}",) if d else ())
+        for p, d, m in distinct
     )  # fmt: skip
     index = {k: i for i, k in enumerate(distinct)}
     path_of = np.fromiter((index[k] for k in keys), np.int64, len(keys))

@@ -109,6 +109,7 @@ class SolverConfig(_Section):
     turn_min_targets: int = _serving("turn_min_targets")
     turn_plausibility: float = _serving("turn_plausibility")
     turn_critic: Literal["autoencoder", "completion"] = _serving("turn_critic")
+    turn_fit: float = _serving("turn_fit")
     retry_reach: float = _serving("retry_reach")
     keep_ends: bool = _serving("keep_ends")
     keep_elbows: bool = _serving("keep_elbows")
@@ -181,7 +182,7 @@ class SolverConfig(_Section):
 #: ``serving`` block under the same names, and not in the solvers' checkpoint tags.
 SERVING_SETTINGS: tuple[str, ...] = (
     "passes", "carry", "turn_yaws", "turn_margin", "turn_min_targets", "turn_plausibility",
-    "turn_critic", "retry_reach", "keep_ends", "keep_elbows", "keep_ease",
+    "turn_critic", "turn_fit", "retry_reach", "keep_ends", "keep_elbows", "keep_ease",
     "keep_collar", "keep_pelvis", "pelvis_travel",
 )  # fmt: skip
 if not set(SERVING_SETTINGS) <= set(SolverConfig.model_fields) & set(Serving.model_fields):

@@ -38,6 +38,7 @@ async def models(engine: ReadyEngine) -> ModelsResponse:
         passes=engine.solve_passes,
         carry=engine.carry,
         turn_yaws=engine.turn_search.yaws,
+        turn_fit=engine.turn_search.fit,
         turn_min_targets=engine.turn_search.min_targets,
         turn_critic=engine.turn_search.critic,
         turn_plausibility=engine.turn_search.plausibility,

@@ -55,6 +55,7 @@ def test_shipped_models_search(engines: tuple[Engine, Engine]) -> None:
     assert engines[1].turn_search.yaws == serving.turn_yaws == 12
     assert serving.turn_min_targets == 5 and serving.turn_margin == 0.01
     assert serving.turn_critic == "completion" and serving.turn_plausibility == 0.5
+    assert engines[1].turn_search.fit == serving.turn_fit == 0.1
     assert engines[0].turn_search.yaws == 1
 
 
@@ -150,11 +151,11 @@ def test_searching_items_are_priced_by_their_solves(
     (pinned,) = _problems(start, goal, FIVE, pins=("pelvis",))
     fabrik = dataclasses.replace(five, method="fabrik")
     on, off = limits.Pricing(2, search), limits.Pricing(2)
-    assert limits.price(five, on) == 2 * 13 and limits.price(five, off) == 2
+    assert limits.price(five, on) == 2 * 14 and limits.price(five, off) == 2  # 12 yaws, fit, itself
     assert limits.price(four, on) == limits.price(four, off) == 2
     assert limits.price(pinned, on) == limits.price(pinned, off)
     assert limits.price(fabrik, on) == limits.FABRIK_PRICE
-    assert len(limits.chunks([five] * 100, on)) == 12  # 9 items of 26 per 256
+    assert len(limits.chunks([five] * 100, on)) == 12  # 9 items of 28 per 256
     # the batch price limit (character items) is the item count's, search or not
     assert limits.max_item_price(on) == limits.max_item_price(off) == 4 + limits.FABRIK_PRICE - 1
 
@@ -164,7 +165,7 @@ def test_options_turn_search_over_http(client: Any, real_poses: PosePairs) -> No
     ``false`` never does (bit for bit the engine without a search), in every batch form;
     a non-boolean is a 422 naming it."""
     info = client.get("/v1/models").json()
-    assert info["turn_yaws"] == 12 and info["turn_min_targets"] == 5
+    assert info["turn_yaws"] == 12 and info["turn_min_targets"] == 5 and info["turn_fit"] == 0.1
     assert info["turn_critic"] == "completion" and info["turn_plausibility"] == 0.5
     start = real_poses.poses[real_poses.starts[:3]]
     goal = turned(real_poses.poses[real_poses.goals[:3]], np.pi / 2)
@@ -199,13 +200,13 @@ def test_options_turn_search_over_http(client: Any, real_poses: PosePairs) -> No
 def test_search_ends_early_with_the_answers_of_the_full_search(
     engines: tuple[Engine, Engine], real_poses: PosePairs
 ) -> None:
-    """The staged search (the unturned start first; the other 11 turns only for items whose
-    unturned score is beyond the margin) keeps the start the full search keeps, and its
-    answers (soft: the kept candidate's own; exact: solved again) are the full search's bit
-    for bit. The reference: every candidate in one batch, argmin with the margin, then the
-    edit solved as asked from the kept start."""
+    """The staged search (the unturned start first; the other 11 turns and the fitted start
+    only for items whose unturned score is beyond the margin) keeps the start the full
+    search keeps, and its answers (soft: the kept candidate's own; exact: solved again) are
+    the full search's bit for bit. The reference: every candidate in one batch, argmin with
+    the margin, then the edit solved as asked from the kept start."""
     from service.problems import _Items
-    from service.turns import _score
+    from service.turns import _score, fitted
 
     engine = engines[1]
     t = engine.turn_search
@@ -234,28 +235,63 @@ def test_search_ends_early_with_the_answers_of_the_full_search(
     reps = np.full(n, engine.solve_passes)
     from service.turns import search
 
-    kept, degrees, known = search(engine, items, reps, counting)
-    # the reference: all 12 candidates of every item at once
+    kept, turns_, known = search(engine, items, reps, counting)
+    # the reference: all 12 turns and the fitted start of every item at once
+    c = t.candidates
+    moved, yaw = fitted(items.poses, items, np.arange(n))
     every = np.concatenate([turned(items.poses, 2 * np.pi * y / t.yaws) if y else items.poses
-                            for y in range(t.yaws)])  # fmt: skip
-    rep = np.tile(np.arange(n), t.yaws)
+                            for y in range(t.yaws)] + [moved])  # fmt: skip
+    rep = np.tile(np.arange(n), c)
     soft = dataclasses.replace(items.soft(rep, items.poses), poses=every)
-    score = _score(engine, soft, engine._solve_items(soft, reps[rep])).reshape(t.yaws, n)
+    score = _score(engine, soft, engine._solve_items(soft, reps[rep])).reshape(c, n)
     score[0] -= t.margin
+    score[t.yaws] += t.fit
     best = np.argmin(score, axis=0)
-    want_deg = np.rint(360.0 * best / t.yaws).astype(int)
-    assert np.array_equal(degrees, np.where(want_deg > 180, want_deg - 360, want_deg))
-    assert np.array_equal(kept.poses, every.reshape(t.yaws, n, 21, 3)[best, np.arange(n)])
+    fit = best == t.yaws
+    want_deg = np.where(fit, np.rint(np.degrees(yaw)).astype(int) % 360,
+                        np.rint(360.0 * best / t.yaws).astype(int))  # fmt: skip
+    assert np.array_equal(turns_.moved, fit)
+    assert np.array_equal(turns_.degrees, np.where(want_deg > 180, want_deg - 360, want_deg))
+    assert np.array_equal(kept.poses, every.reshape(c, n, 21, 3)[best, np.arange(n)])
     open_ = int((score[0] > 0).sum())
-    assert 0 < open_ < n and sizes == [n, 11 * open_]  # some ended early, some searched on
+    assert 0 < open_ < n and sizes == [n, (c - 1) * open_]  # some ended early, some searched on
     ref = engine._solve_items(kept, reps)
     assert known is not None and np.array_equal(known[0], np.arange(40))  # the soft ones
     assert np.array_equal(known[1].pose, ref.pose[:40])
     assert np.array_equal(known[1].errors, ref.errors[:40])
     got, want = engine.solve_arrays(**args), engine._retry(kept, ref)  # then the retry
     assert np.array_equal(got.pose, want.pose) and np.array_equal(got.errors, want.errors)
-    # a lone item solves its 12 turns in one batch: the same start, the same answer
+    # a lone item solves its 13 candidates in one batch: the same start, the same answer
     for i in (*np.flatnonzero(score[0] > 0)[:3], *np.flatnonzero(score[0] <= 0)[:2], n - 1):
         one = engine.solve_arrays(**{key: v[i : i + 1] for key, v in args.items()})
         assert np.array_equal(one.pose[0], got.pose[i]), i
         assert one.paths[one.path_of[0]] == got.paths[got.path_of[i]], i
+
+
+def test_a_travelled_goal_fits_the_start(
+    engines: tuple[Engine, Engine], real_poses: PosePairs
+) -> None:
+    """``serving.turn_fit``: the start moved to fit the targets (turned about the vertical
+    and shifted across, least squares) is one more candidate; an edit whose goal walked a
+    metre and turned a quarter round is solved from it, nearer the goal; lengths hold; the
+    exact answer searches as the soft one; alone = in a batch."""
+    on, off = engines[1], copy.copy(engines[1])
+    off.turn_search = dataclasses.replace(on.turn_search, fit=0.0)
+    assert on.turn_search.candidates == off.turn_search.candidates + 1 == 13
+    start = real_poses.poses[real_poses.starts[:24]]
+    goal = turned(real_poses.poses[real_poses.goals[:24]], np.pi / 2) + np.array([0.8, 0.0, -0.6])
+    probs = _problems(start, goal, FIVE)
+    plain, fit = off.solve(probs), on.solve(probs)
+    marks = [r.solvers[-1] for r in fit]
+    assert sum(m.startswith("fit") for m in marks) >= 18, marks
+    err = [np.linalg.norm(np.stack([r.pose for r in rs]) - goal, axis=-1).mean() for rs in
+           (plain, fit)]  # fmt: skip
+    assert err[1] < 0.5 * err[0], err
+    assert max(r.max_bone_error for r in fit) <= 1e-5
+    exact = on.solve(_problems(start[:6], goal[:6], FIVE, reach="exact"))
+    for r, soft in zip(exact, fit[:6], strict=True):
+        assert r.reached.all() and r.solvers[-1] == soft.solvers[-1]
+    mixed = probs[:4] + _problems(start[4:8], goal[4:8], ("left_wrist", "right_wrist"))
+    for p, r in zip(mixed, on.solve(mixed), strict=True):
+        (single,) = on.solve([p])
+        assert np.array_equal(single.pose, r.pose) and single.solvers == r.solvers
