@@ -76,6 +76,11 @@ def run(
         plots.plot_heldout(held, out / "heldout.png")
         plot_files["heldout"] = "heldout.png"
         seconds["heldout"] = round(time.perf_counter() - t0, 1)
+        t0 = time.perf_counter()
+        console.log("held-out bodies, starts where they were captured")
+        c_cfg = dataclasses.replace(h_cfg, captured=True)
+        results["captured"] = heldout.run_heldout(engine, data, c_cfg, log=console.log).to_json()
+        seconds["captured"] = round(time.perf_counter() - t0, 1)
 
     edit_sets: dict[int, tuple[str, Any]] = {}
     if not (skip_speed and skip_http):

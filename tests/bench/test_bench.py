@@ -142,6 +142,12 @@ def test_quick_bench_writes_a_sane_report(
     families = [f["name"] for f in results["heldout"]["families"]]
     assert any(n.endswith(": all") for n in families)
     assert "test: asymmetric bodies" in families
+    # the same edits with the starts where they were captured: a pelvis target there is
+    # away from the start, and the engine takes the body across to it (pelvis_travel)
+    cap = {f["name"]: f for f in results["captured"]["families"]}
+    pelvis = cap["holdout: all"]["sets"]["pelvis"]
+    assert pelvis["identity"]["reach_mean"] > 1.0 > pelvis["neural_bone"]["reach_mean"]
+    assert "starts where they were captured" in report
 
     speed = results["speed"]
     assert {r["targets"] for r in speed["latency"]} == {1, 2, 5}
