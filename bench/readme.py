@@ -19,6 +19,7 @@ SECTIONS = (
     "## Goals",
     "### Goals on held-out bodies (issue 11)",
     "### Held-out bodies beside the in-studio test split",
+    "### The same edits, starts where they were captured",
     "### B2 — completion from key points only",
     "### Composition ablation",
     "### In-process latency (one thread)",
