@@ -40,7 +40,6 @@ from core.skeleton import (
     JOINT_NAMES,
     MIRROR,
     NUM_JOINTS,
-    ROOT,
     bone_lengths,
     set_key,
 )
@@ -54,6 +53,7 @@ from service.lean import (
     uncovered,
 )
 from service.problems import (
+    PELVIS,
     BatchAnswer,
     CompleteResult,
     SolveProblem,
@@ -403,7 +403,7 @@ class Engine:
         about its pelvis) none of which, pins included, is on the pelvis itself."""
         few = items.n_t < self.turn_search.min_targets
         cols = np.arange(items.tidx.shape[1])[None, :] < items.cnt[:, None]
-        on_pelvis = ((items.tidx == JOINT_INDEX[ROOT]) & cols).any(axis=1)
+        on_pelvis = ((items.tidx == PELVIS) & cols).any(axis=1)
         return np.where(few & ~on_pelvis, self.keep_pelvis, 0.0)
 
     def _retry(self, items: _Items, ans: BatchAnswer) -> BatchAnswer:

@@ -37,15 +37,13 @@ import numpy as np
 import numpy.typing as npt
 
 from core.manifest import Serving
-from core.skeleton import JOINT_INDEX
 from service import completion
-from service.problems import BatchAnswer, _Items
+from service.problems import PELVIS, BatchAnswer, _Items
 
 if TYPE_CHECKING:  # pragma: no cover
     from service.engine import Engine
 
 F64 = npt.NDArray[np.float64]
-_PELVIS = JOINT_INDEX["pelvis"]
 
 
 @dataclass(frozen=True)
@@ -112,7 +110,7 @@ def turned(poses: F64, yaw: float) -> F64:
     through each pose's pelvis."""
     c, s = np.cos(yaw), np.sin(yaw)
     rot = np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
-    pelvis = poses[:, _PELVIS : _PELVIS + 1]
+    pelvis = poses[:, PELVIS : PELVIS + 1]
     out: F64 = (poses - pelvis) @ rot.T + pelvis
     return out
 
@@ -248,7 +246,7 @@ def implausibility(engine: Engine, poses: npt.NDArray[np.floating], floors: F64)
     world = np.asarray(poses, dtype=np.float64).copy()
     other: npt.NDArray[np.floating]
     if engine.turn_search.critic == "completion":
-        world[:, :, [0, 2]] -= world[:, _PELVIS : _PELVIS + 1, [0, 2]]
+        world[:, :, [0, 2]] -= world[:, PELVIS : PELVIS + 1, [0, 2]]
         world[:, :, 1] -= floors[:, None]
         other = completion.implied_bodies(engine, world)
     else:

@@ -263,6 +263,23 @@ def on_random_bodies(pairs: PosePairs, seed: int) -> tuple[Any, Any]:
     return rebuild(start, bodies, lengths), rebuild(goal, bodies, lengths)
 
 
+def edit_problems(starts: Any, goals: Any, names: tuple[str, ...]) -> list[Any]:
+    """One soft neural ``SolveProblem`` per (start, goal) pair: the joints ``names``
+    dragged to where the goal has them, weight 1, no pins."""
+    import numpy as np
+
+    from core.skeleton import JOINT_INDEX
+    from service.problems import SolveProblem
+
+    idx = np.asarray([JOINT_INDEX[n] for n in names], dtype=np.intp)
+    return [
+        SolveProblem(
+            pose=s, target_idx=idx, target_pos=g[idx], weights=np.ones(len(idx)), n_targets=len(idx)
+        )
+        for s, g in zip(starts, goals, strict=True)
+    ]
+
+
 #: Largest random turn (degrees) of a bone about its parent joint, by the child joint's
 #: name without its side: the spine and head bend a little, the limbs more, so every pose
 #: stays upright.

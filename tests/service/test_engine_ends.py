@@ -15,7 +15,7 @@ import pytest
 from core.skeleton import JOINT_INDEX, bone_lengths
 from service.engine import Engine
 from service.problems import SolveProblem, SolveResult
-from tests.conftest import PosePairs, on_random_bodies
+from tests.conftest import PosePairs, edit_problems, on_random_bodies
 
 J = JOINT_INDEX
 
@@ -31,16 +31,6 @@ def engines(models_dir: Path) -> tuple[Engine, Engine]:
 def pairs(real_poses: PosePairs) -> tuple[np.ndarray, np.ndarray]:
     """Real (start, goal) pairs rebuilt on random asymmetric bodies, one per pair."""
     return on_random_bodies(real_poses, 11)
-
-
-def _problems(starts: np.ndarray, goals: np.ndarray, names: tuple[str, ...]) -> list[SolveProblem]:
-    idx = np.asarray([J[n] for n in names], dtype=np.intp)
-    return [
-        SolveProblem(
-            pose=s, target_idx=idx, target_pos=g[idx], weights=np.ones(len(idx)), n_targets=len(idx)
-        )
-        for s, g in zip(starts, goals, strict=True)
-    ]
 
 
 def test_shipped_models_keep_ends(engines: tuple[Engine, Engine], client: Any) -> None:
@@ -65,7 +55,7 @@ def test_only_the_targeted_limb_moves_and_reaches_nearer(
         ("right_ankle",): ("right_knee", "right_ankle", "right_foot"),
     }
     for names, moved in limbs.items():
-        probs = _problems(start, goal, names)
+        probs = edit_problems(start, goal, names)
         a, b = ([r for r in e.solve(probs)] for e in engines)
         pa, pb = np.stack([r.pose for r in a]), np.stack([r.pose for r in b])
         others = np.setdiff1d(np.arange(21), [J[n] for n in moved])
@@ -79,7 +69,7 @@ def test_only_the_targeted_limb_moves_and_reaches_nearer(
         mpjpe = [np.linalg.norm(p - goal, axis=-1).mean() for p in (pa, pb)]
         assert mpjpe[1] < mpjpe[0]
     # batch and single agree bit for bit
-    probs = _problems(start[:8], goal[:8], ("left_wrist", "right_ankle"))
+    probs = edit_problems(start[:8], goal[:8], ("left_wrist", "right_ankle"))
     batch = engines[1].solve(probs)
     for p, r in zip(probs, batch, strict=True):
         assert np.array_equal(engines[1].solve([p])[0].pose, r.pose)
@@ -95,7 +85,7 @@ def test_kept_elbows_move_only_the_arm_and_reach_nearer(
     assert on.chain_mask.sum() == 6 and off.chain_mask.sum() == (4 if off.keep_ends else 0)
     assert client.get("/v1/models").json()["keep_elbows"] is on.manifest.serving.keep_elbows
     start, goal = pairs
-    probs = _problems(start, goal, ("left_elbow",))
+    probs = edit_problems(start, goal, ("left_elbow",))
     a, b = off.solve(probs), on.solve(probs)
     pa, pb = np.stack([r.pose for r in a]), np.stack([r.pose for r in b])
     moved = [J[n] for n in ("left_shoulder", "left_elbow", "left_wrist")]
@@ -104,7 +94,7 @@ def test_kept_elbows_move_only_the_arm_and_reach_nearer(
     assert max(r.max_bone_error for r in b) <= 1e-5
     reach_a, reach_b = (np.asarray([r.errors[0] for r in rs]) for rs in (a, b))
     assert reach_b.mean() < 0.5 * reach_a.mean()
-    probs = _problems(start[:8], goal[:8], ("left_elbow", "right_elbow", "left_ankle"))
+    probs = edit_problems(start[:8], goal[:8], ("left_elbow", "right_elbow", "left_ankle"))
     for p, r in zip(probs, on.solve(probs), strict=True):
         assert np.array_equal(on.solve([p])[0].pose, r.pose)
 
@@ -116,7 +106,7 @@ def _off_on(
     the joints ``moved`` only; ``on`` keeps lengths and answers a batch as it answers each
     item alone. The answers, which of them changed, and the problems."""
     start, goal = pairs
-    probs = _problems(start, goal, (target,))
+    probs = edit_problems(start, goal, (target,))
     a, b = off.solve(probs), on.solve(probs)
     pa, pb = np.stack([r.pose for r in a]), np.stack([r.pose for r in b])
     changed = np.any(pa != pb, axis=(1, 2))

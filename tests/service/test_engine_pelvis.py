@@ -15,7 +15,7 @@ import pytest
 from core.skeleton import JOINT_INDEX
 from service.engine import Engine
 from service.problems import SolveProblem, SolveResult
-from tests.conftest import PosePairs, on_random_bodies
+from tests.conftest import PosePairs, edit_problems, on_random_bodies
 
 PELVIS = JOINT_INDEX["pelvis"]
 ONE_PASS = {"solve_passes": 1, "retry_reach": 0.0}
@@ -25,16 +25,6 @@ ONE_PASS = {"solve_passes": 1, "retry_reach": 0.0}
 def pairs(real_poses: PosePairs) -> tuple[np.ndarray, np.ndarray]:
     """Real (start, goal) pairs rebuilt on random asymmetric bodies, one per pair."""
     return on_random_bodies(real_poses, 13)
-
-
-def _problems(starts: np.ndarray, goals: np.ndarray, names: tuple[str, ...]) -> list[SolveProblem]:
-    idx = np.asarray([JOINT_INDEX[n] for n in names], dtype=np.intp)
-    return [
-        SolveProblem(
-            pose=s, target_idx=idx, target_pos=g[idx], weights=np.ones(len(idx)), n_targets=len(idx)
-        )
-        for s, g in zip(starts, goals, strict=True)
-    ]
 
 
 def _moves(results: list[SolveResult], starts: np.ndarray) -> np.ndarray:
@@ -51,7 +41,7 @@ def test_the_pelvis_move_loses_keep_pelvis_of_its_length(
     assert client.get("/v1/models").json()["keep_pelvis"] == off.manifest.serving.keep_pelvis
     start, goal = pairs
     for names in (("left_elbow",), ("head", "right_knee")):
-        probs = _problems(start, goal, names)
+        probs = edit_problems(start, goal, names)
         move = [_moves(e.solve(probs), start) for e in (off, near, held)]
         assert 0.1 < np.mean(move[0] > r) < 0.9  # the networks move it, some of it farther
         # one pass, no retry: the same network answer, its pelvis move shortened by r
@@ -60,7 +50,9 @@ def test_the_pelvis_move_loses_keep_pelvis_of_its_length(
         for e in (near, held):
             assert max(r.max_bone_error for r in e.solve(probs)) <= 1e-5
     # exact reach still reaches: its FABRIK polish starts from the held pose
-    exact = [dataclasses.replace(p, reach="exact") for p in _problems(start, goal, ("left_wrist",))]
+    exact = [
+        dataclasses.replace(p, reach="exact") for p in edit_problems(start, goal, ("left_wrist",))
+    ]
     assert all(r.errors.max() <= p.tolerance for p, r in zip(exact, held.solve(exact), strict=True))
 
 
@@ -71,7 +63,7 @@ def test_edits_on_the_pelvis_or_of_many_targets_are_as_without_it(
     start, goal = pairs
     ends = ("head", "left_wrist", "right_wrist", "left_ankle", "right_ankle")
     for names in (("pelvis",), ("pelvis", "left_wrist"), ends):
-        probs = _problems(start[:24], goal[:24], names)
+        probs = edit_problems(start[:24], goal[:24], names)
         for a, b in zip(off.solve(probs), held.solve(probs), strict=True):
             assert np.array_equal(a.pose, b.pose)
 
@@ -84,7 +76,7 @@ def test_a_mixed_batch_answers_each_item_as_alone(
     probs = [
         p
         for names in (("left_elbow",), ("pelvis",), ("left_wrist", "right_ankle"))
-        for p in _problems(start[:6], goal[:6], names)
+        for p in edit_problems(start[:6], goal[:6], names)
     ]
     for p, r in zip(probs, engine.solve(probs), strict=True):
         assert np.array_equal(engine.solve([p])[0].pose, r.pose)
@@ -137,6 +129,6 @@ def test_a_targeted_pelvis_takes_the_start_across(
     for x, y in zip(off.solve(pinned + fabrik), on.solve(pinned + fabrik), strict=True):
         assert np.array_equal(x.pose, y.pose)
     # batch = single, with edits it leaves alone in the batch
-    mixed = probs[:6] + _problems(pairs[0][:6], pairs[1][:6], ("left_wrist",))
+    mixed = probs[:6] + edit_problems(pairs[0][:6], pairs[1][:6], ("left_wrist",))
     for p, r in zip(mixed, on.solve(mixed), strict=True):
         assert np.array_equal(on.solve([p])[0].pose, r.pose)
