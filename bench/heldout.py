@@ -126,10 +126,8 @@ def world_pairs(
 ) -> WorldPairs:
     """Start = world pose of rows ``a`` moved onto the pelvis of rows ``b`` (``captured``:
     left where it was); goal = rows b."""
-    if captured:
-        start = world[a].copy()
-    else:
-        start = world[a] + (world[b, PELVIS] - world[a, PELVIS])[:, None, :]
+    onto = 0.0 if captured else (world[b, PELVIS] - world[a, PELVIS])[:, None, :]
+    start = world[a] + onto
     yaw = np.asarray(data.yaw, dtype=np.float64)
     turn = np.degrees(np.abs(np.angle(np.exp(1j * (yaw[b] - yaw[a])))))
     return WorldPairs(start, world[b].copy(), turn, (a, b))

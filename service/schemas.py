@@ -114,8 +114,9 @@ class SolveOptions(_Body):
         default=None,
         description="Whether an edit with many targets (`turn_min_targets` of `GET "
         "/v1/models`, 5 for the shipped models) and no pins first searches the body's turn "
-        "about the pelvis (the solver path then ends `turn <deg>`); absent: the models' "
-        "default. About 13 solves instead of one; `false` is the fast path.",
+        "about the pelvis, and the start moved to fit the targets (`turn_fit`; the solver "
+        "path then ends `turn <deg>` or `fit <deg>`); absent: the models' default. About 14 "
+        "solves instead of one; `false` is the fast path.",
     )
 
 

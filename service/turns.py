@@ -21,9 +21,15 @@ facing, and pins ask for joints to stay where they are.
 The unturned start is solved first, and where its score is within the margin the search
 ends there (no other candidate could be kept); otherwise the other candidates are solved
 as one batch. A soft item's kept candidate is its answer; an exact one is solved again
-from the kept start. At most ``turn_yaws`` + 1 solves per searching item; answers stay
-bit-identical (each item alone, argmin ties to the unturned start). The answer's solver
-path ends with ``turn <deg>`` where the start turned.
+from the kept start. At most ``turn_yaws`` + 1 solves per searching item (+ 1 with
+``turn_fit``); answers stay bit-identical (each item alone, argmin ties to the unturned
+start). The answer's solver path ends with ``turn <deg>`` where the start turned.
+
+With ``turn_fit`` > 0 the search has one more candidate, the start moved to fit its
+targets (:func:`fitted`: turned about the vertical and shifted across by the rigid motion
+that best carries the targeted joints onto their targets), for a body that travelled as
+well as turned (docs/generalisation.md item 34). It is kept only if it scores
+``turn_fit`` metres below every other candidate; its path ends with ``fit <deg>``.
 """
 
 from __future__ import annotations
