@@ -401,6 +401,8 @@ class Engine:
         """How much of the networks' pelvis move each item drops (``serving.keep_pelvis``,
         m; 0: none) ``[B]``: edits of few targets (the turn search's many turn the body
         about its pelvis) none of which, pins included, is on the pelvis itself."""
+        if self.keep_pelvis == 0.0:  # off (the shipped models): nothing to work out
+            return np.zeros(items.tidx.shape[0])
         few = items.n_t < self.turn_search.min_targets
         cols = np.arange(items.tidx.shape[1])[None, :] < items.cnt[:, None]
         on_pelvis = ((items.tidx == PELVIS) & cols).any(axis=1)

@@ -134,7 +134,10 @@ class _Items:
         which has no pins, moved horizontally (x, z) so that its pelvis lies over that
         target (``serving.pelvis_travel``); the height is the networks' to change. The
         others as they are."""
-        cols = self.targets() & (self.tidx == PELVIS)
+        on = self.tidx == PELVIS
+        if not on.any():  # the common case: no pelvis column at all
+            return self
+        cols = self.targets() & on
         rows = np.flatnonzero(cols.any(axis=1) & ~self.fab & (self.cnt == self.n_t))
         if rows.size == 0:
             return self
