@@ -687,6 +687,10 @@ def main(
         Optional[bool],  # noqa: UP045
         typer.Option(help="A targeted pelvis moves the start across first (default: serving)."),
     ] = None,
+    reach_travel: Annotated[
+        Optional[bool],  # noqa: UP045
+        typer.Option(help="A target out of reach moves the start across (default: serving)."),
+    ] = None,
     turn_fit: Annotated[
         Optional[float],  # noqa: UP045
         typer.Option(help="Margin (m) of the fitted start in the turn search; 0: off."),
@@ -711,6 +715,7 @@ def main(
         models, threads=1, solve_passes=passes, carry=carry, turn_yaws=turn_yaws, turn_fit=turn_fit,
         keep_ends=keep_ends, keep_elbows=keep_elbows, keep_ease=keep_ease,
         keep_collar=keep_collar, keep_pelvis=keep_pelvis, pelvis_travel=pelvis_travel,
+        reach_travel=reach_travel,
     )  # fmt: skip
     res = run_heldout(engine, load_dataset(dataset), cfg, split=split, log=console.log)
     res.models = {
@@ -720,6 +725,7 @@ def main(
         "keep_ends": engine.keep_ends, "keep_elbows": engine.keep_elbows,
         "keep_ease": engine.keep_ease, "keep_collar": engine.keep_collar,
         "keep_pelvis": engine.keep_pelvis, "pelvis_travel": engine.pelvis_travel,
+        "reach_travel": engine.reach_travel,
     }  # fmt: skip
     if out is not None:
         out.parent.mkdir(parents=True, exist_ok=True)

@@ -171,6 +171,13 @@ class Serving(_Strict):
         "networks, trained on poses canonicalised over their pelvis, move it up or down "
         "but not across); the height stays the networks' to change.",
     )
+    reach_travel: bool = Field(
+        default=False,
+        description="In a neural edit of fewer than turn_min_targets targets and no pins, "
+        "a target farther across (x, z) from the start's pelvis than its chain reaches "
+        "first moves the start across by the excess (the farthest such target's), as a "
+        "body steps towards what it cannot reach.",
+    )
     turn_yaws: int = Field(
         default=1,
         ge=1,

@@ -96,6 +96,7 @@ class Engine:
         keep_collar: bool | None = None,
         keep_pelvis: float | None = None,
         pelvis_travel: bool | None = None,
+        reach_travel: bool | None = None,
     ) -> None:
         self.models_dir = Path(models_dir)
         self.manifest: Manifest = load_manifest(self.models_dir, verify=True)
@@ -165,6 +166,10 @@ class Engine:
         #: (``serving.pelvis_travel``; ``_Items.onto_pelvis_target``)
         p_travel = m.serving.pelvis_travel if pelvis_travel is None else pelvis_travel
         self.pelvis_travel = bool(p_travel)
+        #: a target beyond its chain's reach moves the start across first, in few-target
+        #: edits (``serving.reach_travel``; ``_Items.within_reach``)
+        r_travel = m.serving.reach_travel if reach_travel is None else reach_travel
+        self.reach_travel = bool(r_travel)
         #: the turn search of many-target edits (``serving.turn_*``, :mod:`service.turns`)
         self.turn_search = turns.TurnSearch.of(m.serving, turn_yaws, turn_fit)
         known = np.asarray(m.skeleton.skeletons, dtype=np.float64)  # [C, 20]
@@ -285,8 +290,7 @@ class Engine:
             np.full(1, p.floor, dtype=np.float64), np.full(1, self.carry_of(p)), one,
             one & (p.reach != "exact"),
         )  # fmt: skip
-        if self.pelvis_travel:
-            items = items.onto_pelvis_target()
+        items = items.travelled(self.pelvis_travel, self.reach_travel, self.turn_search.min_targets)
         ans = lean_answer(self, items, passes, seq)
         return None if ans is None else self._result(p, self._retry(items, ans), 0)
 
@@ -371,8 +375,7 @@ class Engine:
         if n and int(reps.min()) < 1:
             raise ValueError(f"passes must be at least 1, got {int(reps.min())}")
         reps = np.where(fab, 1, reps)  # FABRIK items: one solve (and not the caller's array)
-        if self.pelvis_travel:
-            items = items.onto_pelvis_target()
+        items = items.travelled(self.pelvis_travel, self.reach_travel, self.turn_search.min_targets)
         items, turned, known = turns.search(self, items, reps, self._solve_items)
         return turns.mark(self._retry(items, self._solve_rest(items, reps, known)), turned)
 

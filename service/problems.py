@@ -16,7 +16,7 @@ import numpy as np
 import numpy.typing as npt
 
 from core import compiled
-from core.skeleton import JOINT_INDEX, NUM_JOINTS, ROOT
+from core.skeleton import JOINT_INDEX, NUM_JOINTS, ROOT, bone_lengths
 
 F64 = npt.NDArray[np.floating[Any]]
 PELVIS = JOINT_INDEX[ROOT]
@@ -129,6 +129,14 @@ class _Items:
         out: npt.NDArray[np.bool_] = np.arange(self.tidx.shape[1])[None, :] < self.n_t[:, None]
         return out
 
+    def travelled(self, pelvis: bool, reach: bool, few: int) -> _Items:
+        """These items with their starts moved across first, as the serving settings say:
+        onto a pelvis target (``pelvis``: ``serving.pelvis_travel``), then towards a target
+        out of reach in edits of fewer than ``few`` targets (``reach``:
+        ``serving.reach_travel``)."""
+        items = self.onto_pelvis_target() if pelvis else self
+        return items.within_reach(few) if reach else items
+
     def onto_pelvis_target(self) -> _Items:
         """These items with each neural start whose user targets include the pelvis, and
         which has no pins, moved horizontally (x, z) so that its pelvis lies over that
@@ -146,6 +154,34 @@ class _Items:
         poses = self.poses.copy()
         poses[rows] += shift[:, None, :]
         return dataclasses.replace(self, poses=poses)
+
+    def within_reach(self, few: int) -> _Items:
+        """These items with each neural start of fewer than ``few`` user targets and no
+        pins, one of whose targets lies across (x, z) farther from the start's pelvis than
+        its chain reaches, moved across by the farthest such target's excess, so that the
+        networks see it within reach (``serving.reach_travel``; a body
+        stepping towards what it cannot reach, as FABRIK's root moves). The others as they
+        are. Chains are the pelvis-to-joint bone sums of the start's own bones."""
+        rows = np.flatnonzero(~self.fab & (self.cnt == self.n_t) & (self.n_t < few))
+        if rows.size == 0:
+            return self
+        poses = self.poses[rows]
+        # each target's pelvis-to-joint bone sum, row by row (no BLAS: a batch gives each
+        # item what it gets alone)
+        reach = (bone_lengths(poses)[:, None, :] * compiled.CHAIN[self.tidx[rows]]).sum(axis=-1)
+        away = self.tpos[rows] - poses[:, PELVIS : PELVIS + 1]  # [R, K, 3]
+        away[:, :, 1] = 0.0  # across only: a target too high or low is the networks'
+        dist = np.linalg.norm(away, axis=-1)
+        excess = np.where(self.targets()[rows], dist - reach, 0.0)
+        far = excess.argmax(axis=1)
+        go = excess[np.arange(rows.size), far] > 0.0
+        if not go.any():
+            return self
+        r, k = rows[go], far[go]
+        shift = away[go, k] * (excess[go, k] / dist[go, k])[:, None]
+        out = self.poses.copy()
+        out[r] += shift[:, None, :]
+        return dataclasses.replace(self, poses=out)
 
     def take(self, rows: npt.NDArray[np.intp]) -> _Items:
         """Items ``rows``, as they are."""

@@ -288,6 +288,10 @@ class ModelsResponse(BaseModel):
         description="Whether a targeted pelvis first takes the start with it horizontally "
         "(the manifest's `serving.pelvis_travel`)."
     )
+    reach_travel: bool = Field(
+        description="Whether a few-target edit's target farther across than its chain "
+        "reaches first moves the start across (the manifest's `serving.reach_travel`)."
+    )
     models: list[ModelInfo]
 
 

@@ -117,6 +117,7 @@ class SolverConfig(_Section):
     keep_collar: bool = _serving("keep_collar")
     keep_pelvis: float = _serving("keep_pelvis")
     pelvis_travel: bool = _serving("pelvis_travel")
+    reach_travel: bool = _serving("reach_travel")
     # (their names: SERVING_SETTINGS, below, which the export and the checkpoint tags read)
     carry_loss: bool = Field(
         default=False,
@@ -183,7 +184,7 @@ class SolverConfig(_Section):
 SERVING_SETTINGS: tuple[str, ...] = (
     "passes", "carry", "turn_yaws", "turn_margin", "turn_min_targets", "turn_plausibility",
     "turn_critic", "turn_fit", "retry_reach", "keep_ends", "keep_elbows", "keep_ease",
-    "keep_collar", "keep_pelvis", "pelvis_travel",
+    "keep_collar", "keep_pelvis", "pelvis_travel", "reach_travel",
 )  # fmt: skip
 if not set(SERVING_SETTINGS) <= set(SolverConfig.model_fields) & set(Serving.model_fields):
     raise RuntimeError("SERVING_SETTINGS must name fields of SolverConfig and of Serving")

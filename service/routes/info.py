@@ -49,6 +49,7 @@ async def models(engine: ReadyEngine) -> ModelsResponse:
         keep_collar=engine.keep_collar,
         keep_pelvis=engine.keep_pelvis,
         pelvis_travel=engine.pelvis_travel,
+        reach_travel=engine.reach_travel,
         models=[
             ModelInfo(
                 name=e.name,

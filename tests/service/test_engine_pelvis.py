@@ -1,7 +1,8 @@
-"""A few-target edit's pelvis held near the start's (``serving.keep_pelvis``): the
-networks' move of the pelvis loses ``keep_pelvis`` metres of its length before the bone
-pass, in edits of fewer than ``turn_min_targets`` targets none of which is on the pelvis;
-other edits are answered as without it, bit for bit; lengths hold; batch = single."""
+"""Where the engine puts the pelvis. A few-target edit's pelvis held near the start's
+(``serving.keep_pelvis``: the networks' move loses ``keep_pelvis`` metres of its length
+before the bone pass); a pelvis target taking the start across (``serving.pelvis_travel``);
+a target out of its chain's reach moving the start across (``serving.reach_travel``).
+Other edits are answered as without each, bit for bit; lengths hold; batch = single."""
 
 from __future__ import annotations
 
@@ -102,7 +103,8 @@ def test_a_targeted_pelvis_takes_the_start_across(
 ) -> None:
     """``serving.pelvis_travel``: the networks, trained on poses over their own pelvis, do
     not move it across; a pelvis target first moves the start there horizontally."""
-    off, on = (Engine(models_dir, pelvis_travel=t) for t in (False, True))
+    # reach_travel would move a lone pelvis target's start as well (its chain is empty)
+    off, on = (Engine(models_dir, pelvis_travel=t, reach_travel=False) for t in (False, True))
     assert client.get("/v1/models").json()["pelvis_travel"] is on.manifest.serving.pelvis_travel
     start = pairs[0][:24]
     probs = _pelvis_moves(start, (0.4, 0.0, -0.3))
@@ -130,5 +132,39 @@ def test_a_targeted_pelvis_takes_the_start_across(
         assert np.array_equal(x.pose, y.pose)
     # batch = single, with edits it leaves alone in the batch
     mixed = probs[:6] + edit_problems(pairs[0][:6], pairs[1][:6], ("left_wrist",))
+    for p, r in zip(mixed, on.solve(mixed), strict=True):
+        assert np.array_equal(on.solve([p])[0].pose, r.pose)
+
+
+def test_a_target_out_of_reach_moves_the_start_across(
+    models_dir: Path, pairs: tuple[np.ndarray, np.ndarray], client: Any
+) -> None:
+    """``serving.reach_travel``: in a few-target edit, a target beyond its chain's reach
+    from the start's pelvis moves the start across by the excess first (the networks,
+    trained over the pelvis, never move it across), so the soft answer reaches it; targets
+    within reach, many targets and pins are answered as without it, bit for bit."""
+    off, on = (Engine(models_dir, reach_travel=t) for t in (False, True))
+    assert client.get("/v1/models").json()["reach_travel"] is on.manifest.serving.reach_travel
+    start, goal = pairs[0][:16], pairs[1][:16]
+    wrist = JOINT_INDEX["left_wrist"]
+    far = [
+        dataclasses.replace(p, target_pos=p.pose[[wrist]] + np.array([1.2, 0.0, 0.9]))
+        for p in edit_problems(start, goal, ("left_wrist",))
+    ]
+    a, b = off.solve(far), on.solve(far)
+    reach_a, reach_b = (np.asarray([r.errors[0] for r in rs]) for rs in (a, b))
+    # moved no farther than the target's chain needs at full stretch from the pelvis: the
+    # soft answer still falls short (a spine does not straighten), by half as much
+    assert reach_a.min() > 0.9 and reach_b.mean() < 0.5 * reach_a.mean(), (reach_a, reach_b)
+    assert max(r.max_bone_error for r in b) <= 1e-5
+    moved = np.stack([r.pose[PELVIS] for r in b]) - start[:, PELVIS]
+    assert np.all(np.linalg.norm(moved[:, [0, 2]], axis=1) > 0.3)  # the body went across
+    ends = ("head", "left_wrist", "right_wrist", "left_ankle", "right_ankle")
+    near = edit_problems(start, goal, ("left_wrist", "right_ankle"))  # real: within reach
+    pinned = [dataclasses.replace(p, n_targets=0) for p in far[:4]]  # the wrist as a pin
+    for probs in (near, edit_problems(start[:6], goal[:6], ends), pinned):
+        for x, y in zip(off.solve(probs), on.solve(probs), strict=True):
+            assert np.array_equal(x.pose, y.pose)
+    mixed = far[:4] + near[:4]
     for p, r in zip(mixed, on.solve(mixed), strict=True):
         assert np.array_equal(on.solve([p])[0].pose, r.pose)
