@@ -190,6 +190,11 @@ VARIANTS: dict[str, str] = {
     "captured_turn_fit_1cm": "`turn_fit_1cm` on the captured edits",
     "captured_turn_fit_3cm": "`turn_fit_3cm` on the captured edits",
     "captured_turn_fit_10cm": "`turn_fit_10cm` on the captured edits",
+    "captured_reach_travel": "mx1-3f5e57dad299 (mx1-fe4f3722cfd5 with `serving.reach_travel`: a "
+    "target farther across than its chain reaches moves the start across) on the captured "
+    "edits: shipped",
+    "captured_reach_travel_3d": "the same with the excess measured in 3D (a first form, "
+    "dropped: it moved B1)",
     "ae_cos3e3_ends": "the shipped recipe (`ends_loss`) with the autoencoder at lr 3e-3 decayed "
     "along a cosine (ae_cos3e3_ends.toml; both solver banks retrained on it)",
 }
