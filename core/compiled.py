@@ -569,6 +569,35 @@ def hold_pelvis(pose: F64, start: F64, r: float) -> None:  # pragma: no cover - 
 
 
 @jit
+def reach_shift(
+    poses: F64, tidx: I64, tpos: F64, n_t: I64, go: Bool
+) -> F64:  # pragma: no cover - compiled
+    """``serving.reach_travel``'s move of each start ``[B, 3]`` (0 where none): for items
+    ``go``, the farthest of the first ``n_t[b]`` targets that lies across (x, z) farther
+    from the start's pelvis than its chain reaches (the start's bones from the pelvis to
+    the joint, summed in bone order), and the horizontal excess towards it."""
+    out = np.zeros((poses.shape[0], 3))
+    lens = np.empty(NUM_JOINTS - 1)
+    for b in range(poses.shape[0]):
+        if not go[b]:
+            continue
+        bone_lengths_item(poses[b], lens)
+        best = 0.0
+        for q in range(n_t[b]):
+            j = tidx[b, q]
+            reach = 0.0
+            for i in range(NUM_JOINTS - 1):
+                reach += lens[i] * CHAIN[j, i]
+            ax = tpos[b, q, 0] - poses[b, _PELVIS, 0]
+            az = tpos[b, q, 2] - poses[b, _PELVIS, 2]
+            d = np.sqrt(ax * ax + az * az)
+            if d - reach > best:
+                best = d - reach
+                out[b, 0], out[b, 2] = ax * (best / d), az * (best / d)
+    return out
+
+
+@jit
 def unscale(
     decoded: F32,
     scales: F64,
@@ -714,6 +743,7 @@ def warm() -> None:
         chains, 0.0, np.ones(1, dtype=np.bool_), np.full(1, 0.02),
     )  # fmt: skip
     finish(out[0], out[1], out[2], np.zeros(1), tidx, tpos, counts, out[3])
+    reach_shift(pose, tidx, tpos, counts, np.ones(1, dtype=np.bool_))
     settle(
         out[6],
         out[4],

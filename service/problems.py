@@ -16,7 +16,7 @@ import numpy as np
 import numpy.typing as npt
 
 from core import compiled
-from core.skeleton import JOINT_INDEX, NUM_JOINTS, ROOT, bone_lengths
+from core.skeleton import JOINT_INDEX, NUM_JOINTS, ROOT
 
 F64 = npt.NDArray[np.floating[Any]]
 PELVIS = JOINT_INDEX[ROOT]
@@ -159,28 +159,18 @@ class _Items:
         """These items with each neural start of fewer than ``few`` user targets and no
         pins, one of whose targets lies across (x, z) farther from the start's pelvis than
         its chain reaches, moved across by the farthest such target's excess, so that the
-        networks see it within reach (``serving.reach_travel``; a body
-        stepping towards what it cannot reach, as FABRIK's root moves). The others as they
-        are. Chains are the pelvis-to-joint bone sums of the start's own bones."""
-        rows = np.flatnonzero(~self.fab & (self.cnt == self.n_t) & (self.n_t < few))
-        if rows.size == 0:
-            return self
-        poses = self.poses[rows]
-        # each target's pelvis-to-joint bone sum, row by row (no BLAS: a batch gives each
-        # item what it gets alone)
-        reach = (bone_lengths(poses)[:, None, :] * compiled.CHAIN[self.tidx[rows]]).sum(axis=-1)
-        away = self.tpos[rows] - poses[:, PELVIS : PELVIS + 1]  # [R, K, 3]
-        away[:, :, 1] = 0.0  # across only: a target too high or low is the networks'
-        dist = np.linalg.norm(away, axis=-1)
-        excess = np.where(self.targets()[rows], dist - reach, 0.0)
-        far = excess.argmax(axis=1)
-        go = excess[np.arange(rows.size), far] > 0.0
+        networks see it within reach (``serving.reach_travel``: a body steps towards what
+        it cannot reach, as FABRIK's root moves). The others as they are. A chain is the
+        sum of the start's own bones from the pelvis to the joint."""
+        go = ~self.fab & (self.cnt == self.n_t) & (self.n_t < few)
         if not go.any():
             return self
-        r, k = rows[go], far[go]
-        shift = away[go, k] * (excess[go, k] / dist[go, k])[:, None]
+        shift = compiled.reach_shift(self.poses, self.tidx, self.tpos, self.n_t, go)
+        rows = np.flatnonzero(shift.any(axis=1))
+        if rows.size == 0:
+            return self
         out = self.poses.copy()
-        out[r] += shift[:, None, :]
+        out[rows] += shift[rows, None, :]
         return dataclasses.replace(self, poses=out)
 
     def take(self, rows: npt.NDArray[np.intp]) -> _Items:
