@@ -177,7 +177,7 @@ def _wins(families: list[Family], better: str, worse: str) -> tuple[int, int, st
 def heldout_goals(h: HeldoutResults) -> list[Goal]:
     """Issue 11's "done when" list, on the held-out families (each source and all pooled)."""
     held = [f for f in h.families if f.kind == "holdout"]
-    pooled = next((f for f in held if f.name.endswith(": all")), None)
+    pooled = h.pooled()
     rows: list[Goal] = []
     if pooled is None:
         return [("Held-out bodies", "–", "no held-out families in this run", status(None))]

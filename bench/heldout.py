@@ -285,6 +285,12 @@ class HeldoutResults:
     def family(self, name: str) -> Family:
         return next(f for f in self.families if f.name == name)
 
+    def pooled(self) -> Family | None:
+        """The held-out family of every source together (``<split>: all``), if run."""
+        return next(
+            (f for f in self.families if f.kind == "holdout" and f.name.endswith(": all")), None
+        )
+
     def to_json(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
 
@@ -591,9 +597,7 @@ def print_tables(res: HeldoutResults) -> None:
         return "–" if x is None or not math.isfinite(x) else f"{x:.2f}"
 
     console = Console(width=None if Console().is_terminal else 150)
-    pooled = next(
-        (x for x in res.families if x.kind == "holdout" and x.name.endswith(": all")), None
-    )
+    pooled = res.pooled()
     if pooled is not None:
         table = Table(
             title=f"{pooled.name}: MPJPE to the real pose / reach (cm)",

@@ -533,7 +533,7 @@ def heldout_sections(results: Json, plots: dict[str, str]) -> list[str]:
         return []
     h = HeldoutResults.from_json(results["heldout"])
     cfg = h.config
-    pooled = next((f for f in h.families if f.kind == "holdout" and f.name.endswith(": all")), None)
+    pooled = h.pooled()
     studio = next((f for f in h.families if f.name == "test: as captured"), None)
     b1 = results.get("B1", {})
     md: list[str] = [
@@ -638,7 +638,7 @@ def captured_section(results: Json) -> list[str]:
         return []
     h = HeldoutResults.from_json(results["captured"])
     fams = {f.name: f for f in h.families}
-    pooled = next((f for f in h.families if f.kind == "holdout" and f.name.endswith(": all")), None)
+    pooled = h.pooled()
     studio = fams.get("test: as captured")
     if pooled is None:
         return []

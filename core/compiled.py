@@ -116,6 +116,16 @@ def _norm(x: float, y: float, z: float) -> float:  # pragma: no cover - compiled
 
 
 @jit
+def chain_length(lens: F64, j: int) -> float:  # pragma: no cover - compiled
+    """The bones ``lens [20]`` (``BONES`` order) from the pelvis to joint ``j``, summed in
+    bone order: how far ``j`` reaches from the pelvis at full stretch."""
+    acc = 0.0
+    for i in range(NUM_JOINTS - 1):
+        acc += lens[i] * CHAIN[j, i]
+    return acc
+
+
+@jit
 def bone_lengths_item(pose: F64, out: F64) -> None:  # pragma: no cover - compiled
     """``out[20]`` = lengths of ``pose [21, 3]`` in ``BONES`` order."""
     for b in range(_CHILDREN.shape[0]):
@@ -316,10 +326,7 @@ def prepare(
                 x[b, 3 * j + i] = np.float32(canon[b, j, i] / s)
         # within reach: the pelvis-to-target chain plus a leg of root travel
         for j in range(NUM_JOINTS):
-            acc = 0.0
-            for i in range(NUM_JOINTS - 1):
-                acc += lengths[b, i] * CHAIN[j, i]
-            chain[j] = acc
+            chain[j] = chain_length(lengths[b], j)
         for q in range(counts[b]):
             j = tidx[b, q]
             radius = chain[j] + chain[_LEG]
@@ -584,10 +591,7 @@ def reach_shift(
         bone_lengths_item(poses[b], lens)
         best = 0.0
         for q in range(n_t[b]):
-            j = tidx[b, q]
-            reach = 0.0
-            for i in range(NUM_JOINTS - 1):
-                reach += lens[i] * CHAIN[j, i]
+            reach = chain_length(lens, tidx[b, q])
             ax = tpos[b, q, 0] - poses[b, _PELVIS, 0]
             az = tpos[b, q, 2] - poses[b, _PELVIS, 2]
             d = np.sqrt(ax * ax + az * az)
