@@ -62,6 +62,7 @@ from service.problems import (
     _groups,
     _Items,
     _per_item,
+    stacked,
 )
 from service.runtime import Fused, Net, session_options
 
@@ -225,45 +226,15 @@ class Engine:
         n = len(problems)
         if n == 0:
             return []
-        if n == 1:  # one edit (the interactive case): its arrays as they are
-            p = problems[0]
-            lean = self._lean_single(p)
+        if n == 1:  # one edit (the interactive case): the lean path, if it qualifies
+            lean = self._lean_single(problems[0])
             if lean is not None:
                 return [lean]
-            ans = self.solve_arrays(
-                p.pose[None], p.target_idx[None], p.target_pos[None], n_targets=p.n_targets,
-                weights=p.weights[None], fabrik=p.method == "fabrik",
-                preserve_bone_lengths=p.preserve_bone_lengths, exact=p.reach == "exact",
-                tolerance=p.tolerance, floor=p.floor, passes=p.passes, carry=p.carry,
-                turn_search=p.turn_search is not False,
-            )  # fmt: skip
-            return [self._result(p, ans, 0)]
-        counts = np.fromiter((len(p.target_idx) for p in problems), np.int64, n)
-        k_max = int(counts.max())
-        tidx = np.zeros((n, k_max), dtype=np.int64)
-        tpos = np.zeros((n, k_max, 3))
-        weights = np.ones((n, k_max))
-        for b, p in enumerate(problems):
-            k = len(p.target_idx)
-            tidx[b, :k] = p.target_idx
-            tpos[b, :k] = p.target_pos
-            weights[b, :k] = p.weights
         ans = self.solve_arrays(
-            np.stack([p.pose for p in problems]), tidx, tpos,
-            counts=counts,
-            n_targets=np.fromiter((p.n_targets for p in problems), np.int64, n),
-            weights=weights,
-            fabrik=np.fromiter((p.method == "fabrik" for p in problems), np.bool_, n),
-            preserve_bone_lengths=np.fromiter(
-                (p.preserve_bone_lengths for p in problems), np.bool_, n
-            ),
-            exact=np.fromiter((p.reach == "exact" for p in problems), np.bool_, n),
-            tolerance=np.fromiter((p.tolerance for p in problems), np.float64, n),
-            floor=np.fromiter((p.floor for p in problems), np.float64, n),
+            **stacked(problems),
             passes=np.fromiter((self.passes_of(p) for p in problems), np.int64, n),
             carry=np.fromiter((self.carry_of(p) for p in problems), np.float64, n),
-            turn_search=np.fromiter((p.turn_search is not False for p in problems), np.bool_, n),
-        )  # fmt: skip
+        )
         return [self._result(p, ans, b) for b, p in enumerate(problems)]
 
     def _lean_single(self, p: SolveProblem) -> SolveResult | None:
@@ -280,16 +251,7 @@ class Engine:
             passes, seq = self.passes_of(p), covering(self, tidx, weights)
             if seq is None or passes < 1:
                 return None
-        k = len(tidx)
-        one = np.ones(1, dtype=np.bool_)
-        items = _Items(
-            compiled.as_f64(p.pose)[None], tidx[None],
-            compiled.as_f64(p.target_pos).reshape(1, k, 3), np.full(1, k, dtype=np.int64),
-            np.full(1, p.n_targets, dtype=np.int64), weights[None], one & (seq is None), one,
-            one & (p.reach == "exact"), np.full(1, p.tolerance, dtype=np.float64),
-            np.full(1, p.floor, dtype=np.float64), np.full(1, self.carry_of(p)), one,
-            one & (p.reach != "exact"),
-        )  # fmt: skip
+        items = _Items.of_problem(p, self.carry_of(p))
         items = items.travelled(self.pelvis_travel, self.reach_travel, self.turn_search.min_targets)
         ans = lean_answer(self, items, passes, seq)
         return None if ans is None else self._result(p, self._retry(items, ans), 0)
@@ -353,24 +315,22 @@ class Engine:
         last pass is the one asked for. At refinement pass k (from 0) the items with
         p > k + 1 take part, the others keep their pose: an item with p passes gets what
         an engine built with ``solve_passes=p`` gives it. FABRIK items ignore ``passes``."""
-        pose_a = compiled.as_f64(poses)
-        n = pose_a.shape[0]
-        tidx = compiled.as_i64(target_idx).reshape(n, -1)
-        k_max = tidx.shape[1]
-        cnt = _per_item(k_max if counts is None else counts, n, np.int64)
-        fab = _per_item(fabrik, n, np.bool_)
-        ex = _per_item(exact, n, np.bool_)
-        items = _Items(
-            pose_a, tidx, np.array(target_pos, dtype=np.float64).reshape(n, k_max, 3), cnt,
-            cnt if n_targets is None else _per_item(n_targets, n, np.int64),
-            _per_item(1.0 if weights is None else weights, n, np.float64, k_max), fab,
-            _per_item(preserve_bone_lengths, n, np.bool_), ex,
-            _per_item(tolerance, n, np.float64), _per_item(floor, n, np.float64),
-            _per_item(self.carry if carry is None else carry, n, np.float64),
-            _per_item(turn_search, n, np.bool_), ~ex,
-        )  # fmt: skip
-        if n and not bool(np.all((items.carry >= 0.0) & (items.carry <= 1.0))):
-            raise ValueError("carry must be in [0, 1]")
+        items = _Items.of_arrays(
+            poses,
+            target_idx,
+            target_pos,
+            counts=counts,
+            n_targets=n_targets,
+            weights=weights,
+            fabrik=fabrik,
+            preserve_bone_lengths=preserve_bone_lengths,
+            exact=exact,
+            tolerance=tolerance,
+            floor=floor,
+            carry=self.carry if carry is None else carry,
+            turn_search=turn_search,
+        )
+        n, fab = items.poses.shape[0], items.fab
         reps = _per_item(self.solve_passes if passes is None else passes, n, np.int64)
         if n and int(reps.min()) < 1:
             raise ValueError(f"passes must be at least 1, got {int(reps.min())}")

@@ -124,6 +124,50 @@ class _Items:
     #: before an exact one (which serving.keep_collar leaves alone)
     asked_soft: npt.NDArray[np.bool_]
 
+    @staticmethod
+    def of_problem(p: SolveProblem, carry: float) -> _Items:
+        """One problem as a batch of one (``carry``: the one it asks for), as
+        :meth:`of_arrays` makes it from :func:`stacked` ``([p])``."""
+        tidx, k = compiled.as_i64(p.target_idx), len(p.target_idx)
+        one = np.ones(1, dtype=np.bool_)
+        return _Items(
+            compiled.as_f64(p.pose)[None], tidx[None],
+            compiled.as_f64(p.target_pos).reshape(1, k, 3), np.full(1, k, dtype=np.int64),
+            np.full(1, p.n_targets, dtype=np.int64), compiled.as_f64(p.weights)[None],
+            one & (p.method == "fabrik"), one & p.preserve_bone_lengths,
+            one & (p.reach == "exact"), np.full(1, p.tolerance, dtype=np.float64),
+            np.full(1, p.floor, dtype=np.float64), np.full(1, carry), one,
+            one & (p.reach != "exact"),
+        )  # fmt: skip
+
+    @staticmethod
+    def of_arrays(
+        poses: npt.ArrayLike, target_idx: npt.ArrayLike, target_pos: npt.ArrayLike, *,
+        counts: npt.ArrayLike | None, n_targets: npt.ArrayLike | None,
+        weights: npt.ArrayLike | None, fabrik: npt.ArrayLike,
+        preserve_bone_lengths: npt.ArrayLike, exact: npt.ArrayLike, tolerance: npt.ArrayLike,
+        floor: npt.ArrayLike, carry: npt.ArrayLike, turn_search: npt.ArrayLike,
+    ) -> _Items:  # fmt: skip
+        """A batch given as arrays (:meth:`Engine.solve_arrays`' arguments, per-item
+        options as ``[B]`` arrays or scalars) as contiguous per-item arrays."""
+        pose_a = compiled.as_f64(poses)
+        n = pose_a.shape[0]
+        tidx = compiled.as_i64(target_idx).reshape(n, -1)
+        k_max = tidx.shape[1]
+        cnt = _per_item(k_max if counts is None else counts, n, np.int64)
+        ex = _per_item(exact, n, np.bool_)
+        items = _Items(
+            pose_a, tidx, np.array(target_pos, dtype=np.float64).reshape(n, k_max, 3), cnt,
+            cnt if n_targets is None else _per_item(n_targets, n, np.int64),
+            _per_item(1.0 if weights is None else weights, n, np.float64, k_max),
+            _per_item(fabrik, n, np.bool_), _per_item(preserve_bone_lengths, n, np.bool_), ex,
+            _per_item(tolerance, n, np.float64), _per_item(floor, n, np.float64),
+            _per_item(carry, n, np.float64), _per_item(turn_search, n, np.bool_), ~ex,
+        )  # fmt: skip
+        if n and not bool(np.all((items.carry >= 0.0) & (items.carry <= 1.0))):
+            raise ValueError("carry must be in [0, 1]")
+        return items
+
     def targets(self) -> npt.NDArray[np.bool_]:
         """``[B, K]``: which columns of each item are its user targets (not pins, padding)."""
         out: npt.NDArray[np.bool_] = np.arange(self.tidx.shape[1])[None, :] < self.n_t[:, None]
@@ -225,6 +269,36 @@ def _groups(
         c = int(cnt[f])
         out.append(_Group(tidx[f, :c].copy(), w[f, :c].copy(), int(n_t[f]), m))
     return out
+
+
+def stacked(problems: Sequence[SolveProblem]) -> dict[str, Any]:
+    """Validated problems as :meth:`Engine.solve_arrays`' arguments: targets and pins
+    padded to the longest item's columns, every per-item option a ``[B]`` array but
+    ``passes`` and ``carry``, whose defaults are the engine's (it adds them)."""
+    n = len(problems)
+    counts = np.fromiter((len(p.target_idx) for p in problems), np.int64, n)
+    k_max = int(counts.max())
+    tidx = np.zeros((n, k_max), dtype=np.int64)
+    tpos = np.zeros((n, k_max, 3))
+    weights = np.ones((n, k_max))
+    for b, p in enumerate(problems):
+        k = len(p.target_idx)
+        tidx[b, :k] = p.target_idx
+        tpos[b, :k] = p.target_pos
+        weights[b, :k] = p.weights
+    return dict(
+        poses=np.stack([p.pose for p in problems]), target_idx=tidx, target_pos=tpos,
+        counts=counts, n_targets=np.fromiter((p.n_targets for p in problems), np.int64, n),
+        weights=weights,
+        fabrik=np.fromiter((p.method == "fabrik" for p in problems), np.bool_, n),
+        preserve_bone_lengths=np.fromiter(
+            (p.preserve_bone_lengths for p in problems), np.bool_, n
+        ),
+        exact=np.fromiter((p.reach == "exact" for p in problems), np.bool_, n),
+        tolerance=np.fromiter((p.tolerance for p in problems), np.float64, n),
+        floor=np.fromiter((p.floor for p in problems), np.float64, n),
+        turn_search=np.fromiter((p.turn_search is not False for p in problems), np.bool_, n),
+    )  # fmt: skip
 
 
 def _per_item(value: npt.ArrayLike, n: int, dtype: type[np.generic], k: int | None = None) -> Any:
