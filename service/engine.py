@@ -62,6 +62,7 @@ from service.problems import (
     _groups,
     _Items,
     _per_item,
+    others,
     stacked,
 )
 from service.runtime import Fused, Net, session_options
@@ -346,7 +347,7 @@ class Engine:
         if known is None:
             return self._solve_items(items, reps)
         n = items.poses.shape[0]
-        rest = np.setdiff1d(np.arange(n), known[0])
+        rest = others(n, known[0])
         if rest.size == 0:
             return BatchAnswer.scatter(n, [known])
         part = self._solve_items(items.take(rest), reps[rest])

@@ -66,7 +66,10 @@ class BatchAnswer:
 
     def take(self, rows: npt.NDArray[np.intp]) -> BatchAnswer:
         """The answers of items ``rows``, in that order (only their solver paths)."""
-        used, path_of = np.unique(self.path_of[rows], return_inverse=True)
+        if len(self.paths) == 1:  # one path (the common case): nothing to renumber
+            used, path_of = np.zeros(1, np.int64), np.zeros(len(rows), np.int64)
+        else:
+            used, path_of = np.unique(self.path_of[rows], return_inverse=True)
         return BatchAnswer(
             self.pose[rows], self.errors[rows], self.max_bone_error[rows],
             self.iterations[rows], tuple(self.paths[i] for i in used.tolist()),
@@ -90,8 +93,15 @@ class BatchAnswer:
 
     def with_items(self, sel: npt.NDArray[np.intp], other: BatchAnswer) -> BatchAnswer:
         """These answers with items ``sel`` replaced by ``other``'s (one per ``sel``)."""
-        rest = np.setdiff1d(np.arange(self.pose.shape[0]), sel)
+        rest = others(len(self.pose), sel)
         return BatchAnswer.scatter(len(self.pose), [(rest, self.take(rest)), (sel, other)])
+
+
+def others(n: int, sel: npt.NDArray[np.intp]) -> npt.NDArray[np.intp]:
+    """The items of ``n`` not in ``sel``, in order."""
+    keep = np.ones(n, dtype=np.bool_)
+    keep[sel] = False
+    return np.flatnonzero(keep)
 
 
 def renumber(index: dict[tuple[str, ...], int], ans: BatchAnswer) -> npt.NDArray[np.int64]:

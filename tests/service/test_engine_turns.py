@@ -16,8 +16,8 @@ import pytest
 from core.skeleton import JOINT_INDEX
 from service import limits
 from service.engine import Engine
-from service.problems import SolveProblem
-from service.turns import implausibility, turned
+from service.problems import SolveProblem, others
+from service.turns import implausibility, turned, turned_by
 from tests.conftest import PosePairs
 from tests.service.test_api import assert_problem
 
@@ -78,6 +78,26 @@ def test_critics_tell_a_real_body_from_a_twisted_one(
     real, bent = implausibility(engine, poses, floors), implausibility(engine, twisted, floors)
     assert np.all(np.isfinite(real)) and real.mean() < 0.05
     assert (bent > real).mean() >= 0.9, (critic, real.mean(), bent.mean())
+
+
+def test_turns_of_real_poses(real_poses: PosePairs) -> None:
+    """Every candidate turn at once equals each turn alone; a turn keeps heights and the
+    pelvis, and each joint's distance from the vertical through it; a full turn is none."""
+    poses = real_poses.poses[real_poses.goals[:8]]
+    yaws = 2.0 * np.pi * np.arange(12) / 12
+    every = turned_by(poses, yaws)
+    for k, yaw in enumerate(yaws):
+        np.testing.assert_array_equal(every[k], turned(poses, float(yaw)))
+    quarter = turned(poses, np.pi / 2)
+    pelvis = JOINT_INDEX["pelvis"]
+    np.testing.assert_allclose(quarter[:, pelvis], poses[:, pelvis], atol=1e-12)
+    np.testing.assert_array_equal(quarter[..., 1], poses[..., 1])
+    across = np.linalg.norm((poses - poses[:, pelvis : pelvis + 1])[..., [0, 2]], axis=-1)
+    turned_across = (quarter - quarter[:, pelvis : pelvis + 1])[..., [0, 2]]
+    np.testing.assert_allclose(np.linalg.norm(turned_across, axis=-1), across, atol=1e-12)
+    assert np.abs(quarter - poses).max() > 0.1  # it did turn
+    np.testing.assert_allclose(turned(poses, 2.0 * np.pi), poses, atol=1e-12)
+    np.testing.assert_array_equal(others(6, np.array([4, 1])), [0, 2, 3, 5])
 
 
 def test_a_turned_goal_turns_the_start(
