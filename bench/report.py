@@ -225,7 +225,7 @@ def render_report(results: Json, plots: dict[str, str], title: str) -> str:
             f"(m/s²); the real clips have {fmt(b4['real_jitter'])} m/s². Drift = error of the "
             "untargeted joints to the real frame, first vs last 10 steps. Five targets: "
             "also with the turn search off (`options.turn_search: false`), as a client "
-            "dragging may choose (docs/generalisation.md item 22).",
+            "dragging may choose (docs/generalisation-serving.md item 22).",
             "",
             table(
                 [
@@ -658,7 +658,7 @@ def captured_section(results: Json) -> list[str]:
         "",
         "As above, but each start stays where it was captured instead of on its target's "
         "pelvis, so the body's travel between the two frames (walking included) is left in "
-        "(`python -m bench.heldout --captured`; docs/generalisation.md items 32–34). "
+        "(`python -m bench.heldout --captured`; docs/generalisation-serving.md items 32–34). "
         "MPJPE to the real target pose, cm.",
         "",
         table(CAPTURED_HEAD, rows),

@@ -3,7 +3,7 @@
 FABRIK carries every branch it does not solve as a rigid body: drag an elbow and the
 forearm and wrist turn with the upper arm, as the start pose held them. The networks
 place those joints themselves, and on bodies they never saw they place them worse than
-the rigid branch does (docs/generalisation.md item 20). :func:`carry_below` mixes the
+the rigid branch does (docs/generalisation-serving.md item 20). :func:`carry_below` mixes the
 two, bone by bone, after the bone pass: each joint below a targeted joint (never the
 root's branches: dragging the pelvis moves the whole body) with no target of its own
 below it gets the direction ``weight * carried + (1 - weight) * network``, normalised,

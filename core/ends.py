@@ -4,9 +4,9 @@ The bone pass (:func:`core.kinematics.bone_pass`) gives a character its own bone
 root outwards, each bone keeping the direction the networks gave it. A wrist the networks
 put on its target then lands where the character's own arm, laid along those directions,
 ends: on a body whose arm is longer or shorter than the one the networks drew, centimetres
-away (docs/generalisation.md items 8 and 28). :func:`keep_ends` puts it back. For each
-targeted wrist and ankle with no target on its elbow or knee, its shoulder or hip, or
-below it:
+away (docs/generalisation.md item 8, docs/generalisation-serving.md item 28).
+:func:`keep_ends` puts it back. For each targeted wrist and ankle with no target on its
+elbow or knee, its shoulder or hip, or below it:
 
 - the end goes where the networks put it, or, out of the limb's reach, as near as the limb
   reaches on the line from the shoulder (hip) towards it;
@@ -23,7 +23,7 @@ chain is collar, shoulder, elbow. Where no target is on its shoulder or collar o
 the upper arm reach; the shoulder is placed anew by the two-bone solution; the forearm and
 hand move with the elbow. An elbow alone has no second bone below its shoulder to take up
 the difference in length, so without the collar the bone pass leaves it where the
-character's trunk and upper arm end (docs/generalisation.md item 29).
+character's trunk and upper arm end (docs/generalisation-serving.md item 29).
 
 Batched numpy over ``[..., 21, 3]`` with one target set: the reference the compiled kernel
 (``core.compiled.ends_item``, in ``unscale``) is held to in tests.

@@ -376,7 +376,7 @@ class Engine:
         """``ans`` with one more pass, from its answer, for every soft neural item (bone
         lengths kept) whose farthest target is still more than ``serving.retry_reach``
         away: the passes left it short, as the bone pass takes back what the networks
-        reached for (docs/generalisation.md item 25). Such an item gets what one more of
+        reached for (docs/generalisation-serving.md item 25). Such an item gets what one more of
         its passes would give it; the others are untouched."""
         if self.retry_reach <= 0.0 or ans.pose.shape[0] == 0:
             return ans

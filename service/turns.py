@@ -12,7 +12,7 @@ distance of its targets, plus ``turn_plausibility`` times the mean distance of t
 to what ``turn_critic`` makes of it: the autoencoder's round trip of it, or the body
 completion level 1 builds from the answer's own base key points (pelvis, neck, wrists,
 ankles): a body bent towards targets it should have turned to is far from the body those
-points imply (docs/generalisation.md items 22, 24), the unturned start winning unless
+points imply (docs/generalisation-serving.md items 22, 24), the unturned start winning unless
 another scores at least ``turn_margin`` metres lower. The edit is then solved as asked
 from the kept start. Only neural items with at least ``turn_min_targets`` targets and no
 pins take part (``options.turn_search: false`` opts out): fewer targets say little about a
@@ -28,7 +28,7 @@ start). The answer's solver path ends with ``turn <deg>`` where the start turned
 With ``turn_fit`` > 0 the search has one more candidate, the start moved to fit its
 targets (:func:`fitted`: turned about the vertical and shifted across by the rigid motion
 that best carries the targeted joints onto their targets), for a body that travelled as
-well as turned (docs/generalisation.md item 34). It is kept only if it scores
+well as turned (docs/generalisation-serving.md item 34). It is kept only if it scores
 ``turn_fit`` metres below every other candidate; its path ends with ``fit <deg>``.
 """
 

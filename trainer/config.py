@@ -134,7 +134,7 @@ class SolverConfig(_Section):
         default=False,
         description="With ends_loss: the losses also see the targeted elbows kept "
         "(`keep_elbows`; then it is a training setting too). Off, the elbows are kept in "
-        "serving only (the shipped recipe; docs/generalisation.md item 29).",
+        "serving only (the shipped recipe; docs/generalisation-serving.md item 29).",
     )
     identity_fraction: float = Field(
         default=0.1,

@@ -135,7 +135,7 @@ class StageState:
 def host() -> str:
     """What decides a stage's arithmetic besides the code and the seed: the CPU model and
     the SIMD level torch dispatches to, the torch version and the thread count (the same
-    seed on another CPU gives slightly other weights; docs/generalisation.md item 29)."""
+    seed on another CPU gives slightly other weights; docs/generalisation-serving.md item 29)."""
     model = platform.processor() or platform.machine()
     with contextlib.suppress(OSError):
         for line in Path("/proc/cpuinfo").read_text().splitlines():
