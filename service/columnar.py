@@ -158,7 +158,7 @@ def _names(value: Any, loc: tuple[Any, ...], n: int, errs: _Errors, least: int
             errs.add(where, "literal_error", "unknown joint", ctx={"expected": "'spine1'"},
                      input=rows[b][i])  # fmt: skip
         return None
-    out: I64 = np.ascontiguousarray(np.broadcast_to(idx, (n, k)))
+    out: I64 = np.require(np.broadcast_to(idx, (n, k)), requirements=["C", "W"])
     return out
 
 

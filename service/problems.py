@@ -312,11 +312,14 @@ def stacked(problems: Sequence[SolveProblem]) -> dict[str, Any]:
 
 
 def _per_item(value: npt.ArrayLike, n: int, dtype: type[np.generic], k: int | None = None) -> Any:
-    """A per-item option as a contiguous ``[n]`` (or ``[n, k]``) array; scalars repeat."""
+    """A per-item option as a contiguous, writable ``[n]`` (or ``[n, k]``) array; scalars
+    repeat. Writable: a read-only array (what ``np.broadcast_to`` gives) would be another
+    type to the compiled kernels, compiled on first use instead of at start."""
     shape = (n,) if k is None else (n, k)
     if isinstance(value, (bool, int, float)) or np.ndim(value) == 0:
         return np.full(shape, value, dtype=dtype)
-    return np.ascontiguousarray(np.broadcast_to(np.asarray(value, dtype=dtype), shape))
+    wide = np.broadcast_to(np.asarray(value, dtype=dtype), shape)
+    return np.require(wide, requirements=["C_CONTIGUOUS", "WRITEABLE"])
 
 
 @dataclass(frozen=True)
