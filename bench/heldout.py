@@ -699,6 +699,10 @@ def main(
         Optional[float],  # noqa: UP045
         typer.Option(help="Margin (m) of the fitted start in the turn search; 0: off."),
     ] = None,
+    solve_mirror: Annotated[
+        Optional[bool],  # noqa: UP045
+        typer.Option(help="Each pass also solves the mirror image (default: serving)."),
+    ] = None,
     captured: Annotated[
         bool,
         typer.Option(help="Starts left where captured, not on the target's pelvis."),
@@ -719,7 +723,7 @@ def main(
         models, threads=1, solve_passes=passes, carry=carry, turn_yaws=turn_yaws, turn_fit=turn_fit,
         keep_ends=keep_ends, keep_elbows=keep_elbows, keep_ease=keep_ease,
         keep_collar=keep_collar, keep_pelvis=keep_pelvis, pelvis_travel=pelvis_travel,
-        reach_travel=reach_travel,
+        reach_travel=reach_travel, solve_mirror=solve_mirror,
     )  # fmt: skip
     res = run_heldout(engine, load_dataset(dataset), cfg, split=split, log=console.log)
     res.models = {
@@ -729,7 +733,7 @@ def main(
         "keep_ends": engine.keep_ends, "keep_elbows": engine.keep_elbows,
         "keep_ease": engine.keep_ease, "keep_collar": engine.keep_collar,
         "keep_pelvis": engine.keep_pelvis, "pelvis_travel": engine.pelvis_travel,
-        "reach_travel": engine.reach_travel,
+        "reach_travel": engine.reach_travel, "solve_mirror": engine.solve_mirror,
     }  # fmt: skip
     if out is not None:
         out.parent.mkdir(parents=True, exist_ok=True)

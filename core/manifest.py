@@ -238,6 +238,13 @@ class Serving(_Strict):
         "previous pass's answer (bone lengths restored, canonicalised anew) with the same "
         "targets, so what the bone pass took from the reach is asked for again.",
     )
+    solve_mirror: bool = Field(
+        default=False,
+        description="Each neural pass also solves the edit's mirror image (left and right "
+        "swapped, x -> -x in the canonical frame) with the mirrored target set's solvers, "
+        "and answers the mean of the two (the mirror image taken back); a set whose mirror "
+        "has no solver is solved once. The networks were trained mirrored too.",
+    )
     completion_yaws: int = Field(
         default=1,
         ge=1,

@@ -9,7 +9,7 @@ left side is +X.
 
 from __future__ import annotations
 
-from typing import Final
+from typing import Any, Final, TypeVar
 
 import numpy as np
 import numpy.typing as npt
@@ -160,3 +160,21 @@ def bone_lengths(positions: npt.NDArray[np.floating]) -> npt.NDArray[np.floating
 def set_key(joints: list[str] | tuple[str, ...] | frozenset[str]) -> str:
     """The manifest key of a target joint set: sorted names joined by '+'."""
     return "+".join(sorted(joints))
+
+
+_F = TypeVar("_F", bound=np.floating[Any])
+_MIRROR_IDX: Final[npt.NDArray[np.intp]] = np.asarray(MIRROR, dtype=np.intp)
+_MIRROR_SIGN: Final[npt.NDArray[np.float64]] = np.array([-1.0, 1.0, 1.0])
+
+
+def mirrored(poses: npt.NDArray[_F]) -> npt.NDArray[_F]:
+    """Left <-> right of ``poses [..., 21, 3]`` in a frame whose x axis is the body's side
+    (the canonical frame): each joint takes its mirror joint's place, x negated. Exact in
+    any float type, and its own inverse."""
+    out: npt.NDArray[_F] = poses[..., _MIRROR_IDX, :] * _MIRROR_SIGN.astype(poses.dtype)
+    return out
+
+
+def mirror_key(key: str) -> str:
+    """The key of a target set's mirror image (``set_key`` of its joints' mirrors)."""
+    return set_key([JOINT_NAMES[MIRROR[JOINT_INDEX[j]]] for j in key.split("+")])

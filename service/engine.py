@@ -41,6 +41,8 @@ from core.skeleton import (
     MIRROR,
     NUM_JOINTS,
     bone_lengths,
+    mirror_key,
+    mirrored,
     set_key,
 )
 from service import completion, turns
@@ -99,6 +101,7 @@ class Engine:
         keep_pelvis: float | None = None,
         pelvis_travel: bool | None = None,
         reach_travel: bool | None = None,
+        solve_mirror: bool | None = None,
     ) -> None:
         self.models_dir = Path(models_dir)
         self.manifest: Manifest = load_manifest(self.models_dir, verify=True)
@@ -172,6 +175,10 @@ class Engine:
         #: edits (``serving.reach_travel``; ``_Items.within_reach``)
         r_travel = m.serving.reach_travel if reach_travel is None else reach_travel
         self.reach_travel = bool(r_travel)
+        #: each neural pass also solves the edit's mirror image and averages the two
+        #: (``serving.solve_mirror``; :meth:`_run_sequence`)
+        mirror = m.serving.solve_mirror if solve_mirror is None else solve_mirror
+        self.solve_mirror = bool(mirror)
         #: the turn search of many-target edits (``serving.turn_*``, :mod:`service.turns`)
         self.turn_search = turns.TurnSearch.of(m.serving, turn_yaws, turn_fit)
         known = np.asarray(m.skeleton.skeletons, dtype=np.float64)  # [C, 20]
@@ -235,6 +242,7 @@ class Engine:
             **stacked(problems),
             passes=np.fromiter((self.passes_of(p) for p in problems), np.int64, n),
             carry=np.fromiter((self.carry_of(p) for p in problems), np.float64, n),
+            mirror=np.fromiter((self.mirror_of(p) for p in problems), np.bool_, n),
         )
         return [self._result(p, ans, b) for b, p in enumerate(problems)]
 
@@ -252,7 +260,7 @@ class Engine:
             passes, seq = self.passes_of(p), covering(self, tidx, weights)
             if seq is None or passes < 1:
                 return None
-        items = _Items.of_problem(p, self.carry_of(p))
+        items = _Items.of_problem(p, self.carry_of(p), self.mirror_of(p))
         items = items.travelled(self.pelvis_travel, self.reach_travel, self.turn_search.min_targets)
         ans = lean_answer(self, items, passes, seq)
         return None if ans is None else self._result(p, self._retry(items, ans), 0)
@@ -264,6 +272,10 @@ class Engine:
     def carry_of(self, p: SolveProblem) -> float:
         """The carry below targets ``p`` asks for (``carry`` unless it says)."""
         return self.carry if p.carry is None else p.carry
+
+    def mirror_of(self, p: SolveProblem) -> bool:
+        """Whether ``p`` has its mirror image solved too (``solve_mirror`` unless it says)."""
+        return self.solve_mirror if p.mirror is None else p.mirror
 
     @staticmethod
     def _result(p: SolveProblem, ans: BatchAnswer, b: int) -> SolveResult:
@@ -295,6 +307,7 @@ class Engine:
         passes: npt.ArrayLike | None = None,
         carry: npt.ArrayLike | None = None,
         turn_search: npt.ArrayLike = True,
+        mirror: npt.ArrayLike | None = None,
     ) -> BatchAnswer:
         """Solve a batch given as arrays (validated like :class:`SolveProblem`), no
         per-item objects: ``poses [B, 21, 3]`` world; ``target_idx [B, K]`` joints (per
@@ -304,7 +317,8 @@ class Engine:
         (reach), ``preserve_bone_lengths``, ``tolerance`` (m), ``floor`` (world y),
         ``passes`` (neural solves; default the engine's ``solve_passes``), ``carry`` (the
         branch below each target, 0-1, :mod:`core.carry`; default the engine's ``carry``),
-        ``turn_search`` (False: never search the turn, :mod:`service.turns`).
+        ``turn_search`` (False: never search the turn, :mod:`service.turns`), ``mirror``
+        (also solve the mirror image; default the engine's ``solve_mirror``).
 
         Geometry runs in compiled kernels (:mod:`core.compiled`), one call per stage for
         the whole batch; items that share a solver sequence share one onnxruntime run per
@@ -330,6 +344,7 @@ class Engine:
             floor=floor,
             carry=self.carry if carry is None else carry,
             turn_search=turn_search,
+            mirror=self.solve_mirror if mirror is None else mirror,
         )
         n, fab = items.poses.shape[0], items.fab
         reps = _per_item(self.solve_passes if passes is None else passes, n, np.int64)
@@ -454,7 +469,7 @@ class Engine:
             bone = keep | ex
             collar, hold = self.collar_items(batch), self.pelvis_holds(batch)
             if len(sequences) == 1 and neural.all():  # the common case: no gathers
-                decoded = self._run_sequence(x, canvas, sequences[0])
+                decoded = self._run_sequence(x, canvas, sequences[0], batch.mirror)
                 out = compiled.unscale(
                     decoded, scales, canon, lengths, bone, tidx, cnt, batch.carry, self.chain_mask,
                     self.keep_ease, collar, hold,
@@ -464,7 +479,7 @@ class Engine:
                 decoded = np.empty((n, 3 * NUM_JOINTS), dtype=np.float32)
                 for s, seq in enumerate(sequences):
                     sel = np.flatnonzero(seq_of == s)
-                    decoded[sel] = self._run_sequence(x[sel], canvas[sel], seq)
+                    decoded[sel] = self._run_sequence(x[sel], canvas[sel], seq, batch.mirror[sel])
                 out = canon.copy()
                 out[items] = compiled.unscale(
                     decoded[items], scales[items], canon[items], lengths[items], bone[items],
@@ -600,6 +615,38 @@ class Engine:
         return paths, path_of.astype(np.int64).reshape(-1)
 
     def _run_sequence(
+        self, x: npt.NDArray[np.float32], canvas: npt.NDArray[np.float32],
+        sequence: tuple[str, ...], views: npt.NDArray[np.bool_],
+    ) -> npt.NDArray[np.float32]:  # fmt: skip
+        """The networks' answer ``[B, 63]`` to canonical poses ``x [B, 63]`` and targets
+        ``canvas [B, 21, 3]``: :meth:`_run_once`; for the rows ``views [B]`` asks
+        (``serving.solve_mirror``, ``options.mirror``) the mean of it and the answer to the
+        mirror image, taken back (``core.skeleton.mirrored``); both views in one run per
+        stage where the target set is its own mirror image. Each row alone."""
+        back = self._mirror_of(sequence) if views.any() else None
+        if back is None:
+            return self._run_once(x, canvas, sequence)
+        n, rows = len(x), np.flatnonzero(views)
+        x_m = mirrored(x[rows].reshape(len(rows), NUM_JOINTS, 3)).reshape(len(rows), -1)
+        c_m = mirrored(canvas[rows])
+        if back == sequence:
+            both = self._run_once(np.concatenate([x, x_m]), np.concatenate([canvas, c_m]), back)
+            own, other = both[:n], both[n:]
+        else:
+            own, other = self._run_once(x, canvas, sequence), self._run_once(x_m, c_m, back)
+        other = mirrored(other.reshape(len(rows), NUM_JOINTS, 3)).reshape(len(rows), -1)
+        own[rows] = (own[rows] + other) * np.float32(0.5)
+        return own
+
+    def _mirror_of(self, sequence: tuple[str, ...]) -> tuple[str, ...] | None:
+        """The solver sequence of ``sequence``'s mirror image, or None if a solver has no
+        mirror among the models."""
+        if not sequence:  # no networks to ask
+            return None
+        back = tuple(mirror_key(key) for key in sequence)
+        return back if all(key in self.solvers for key in back) else None
+
+    def _run_once(
         self, x: npt.NDArray[np.float32], canvas: npt.NDArray[np.float32], sequence: tuple[str, ...]
     ) -> npt.NDArray[np.float32]:
         """Encode, run a solver sequence, decode: one ORT run per stage."""

@@ -119,7 +119,7 @@ def solve_lean(
         tpos, (canon, facing, trans, lengths, scales, tcan, x, canvas) = engine._prepare(
             pose, items, every
         )
-        decoded = engine._run_sequence(x, canvas, sequence)
+        decoded = engine._run_sequence(x, canvas, sequence, items.mirror)
         if not exact or k < passes - 1:
             pose, errors, bone_err = compiled.settle(
                 decoded, scales, canon, lengths, facing, trans, floors, tidx, tpos, counts,

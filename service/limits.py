@@ -50,28 +50,38 @@ class Priced(Protocol):
     def passes(self) -> int | None: ...
     @property
     def turn_search(self) -> bool | None: ...
+    @property
+    def mirror(self) -> bool | None: ...
 
 
 @dataclass(frozen=True)
 class Pricing:
     """What an engine adds to an item's price: ``passes``, its default neural passes (for
     items that do not say); ``search``, its turn search; ``retry``, whether it gives a soft
-    answer left short one more pass (``serving.retry_reach``, ``Engine._retry``)."""
+    answer left short one more pass (``serving.retry_reach``, ``Engine._retry``);
+    ``mirror``, whether its passes also solve the mirror image (for items that do not
+    say; ``serving.solve_mirror``)."""
 
     passes: int = 1
     search: TurnSearch = NO_SEARCH
     retry: bool = False
+    mirror: bool = False
 
     @staticmethod
     def of(engine: Engine) -> Pricing:
-        return Pricing(engine.solve_passes, engine.turn_search, engine.retry_reach > 0.0)
+        return Pricing(
+            engine.solve_passes, engine.turn_search, engine.retry_reach > 0.0, engine.solve_mirror
+        )
 
 
-def neural_price(slow: bool, passes: int, search: int = 1, retry: bool = False) -> int:
+def neural_price(
+    slow: bool, passes: int, search: int = 1, retry: bool = False, views: int = 1
+) -> int:
     """A neural item of ``passes`` passes: one unit per pass (times ``search``, its turn
-    search's solves), one more for the engine's ``retry`` (soft items), plus the FABRIK
-    polish's ``FABRIK_PRICE - 1`` when it runs one (exact reach, pins)."""
-    return passes * search + int(retry) + (FABRIK_PRICE - 1 if slow else 0)
+    search's solves), one more for the engine's ``retry`` (soft items), all times its
+    ``views`` (2 with the mirror image), plus the FABRIK polish's ``FABRIK_PRICE - 1``
+    when it runs one (exact reach, pins)."""
+    return (passes * search + int(retry)) * views + (FABRIK_PRICE - 1 if slow else 0)
 
 
 def price_of(o: Priced, pinned: bool, pricing: Pricing, search: int = 1) -> int:
@@ -83,7 +93,8 @@ def price_of(o: Priced, pinned: bool, pricing: Pricing, search: int = 1) -> int:
         return FABRIK_PRICE
     p = pricing.passes if o.passes is None else o.passes
     soft = o.reach != "exact"
-    return neural_price(not soft or pinned, p, search, pricing.retry and soft)
+    views = 2 if (pricing.mirror if o.mirror is None else o.mirror) else 1
+    return neural_price(not soft or pinned, p, search, pricing.retry and soft, views)
 
 
 def searched_price(o: Priced, n_targets: int, pinned: bool, pricing: Pricing) -> int:
@@ -236,11 +247,12 @@ def character_price(joints: int, slow: bool) -> int:
 
 def max_item_price(pricing: Pricing) -> int:
     """The costliest pose item: neural with the FABRIK polish (pins) at the most passes a
-    request may ask for or the models' default, whichever is more, and the retry; dearer
-    than a FABRIK item. (A pose item's turn search is priced in its chunks, not here: a
-    batch of pose items is bounded by its item count alone.)"""
+    request may ask for or the models' default, whichever is more, and the retry, with
+    its mirror image (``options.mirror``); dearer than a FABRIK item. (A pose item's turn
+    search is priced in its chunks, not here: a batch of pose items is bounded by its
+    item count alone.)"""
     passes = max(MAX_PASSES, pricing.passes)
-    return max(FABRIK_PRICE, neural_price(True, passes, retry=pricing.retry))
+    return max(FABRIK_PRICE, neural_price(True, passes, retry=pricing.retry, views=2))
 
 
 def batch_price_limit(max_items: int, pricing: Pricing) -> int:

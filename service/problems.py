@@ -40,6 +40,7 @@ class SolveProblem:
     passes: int | None = None  # neural solves (None: the engine's ``solve_passes``)
     carry: float | None = None  # the branch below targets, 0-1 (None: the engine's)
     turn_search: bool | None = None  # search the turn (service.turns; None: if the models do)
+    mirror: bool | None = None  # also solve the mirror image (None: if the models do)
 
 
 @dataclass(frozen=True)
@@ -133,10 +134,12 @@ class _Items:
     #: [B] the caller asked for soft reach: ``~ex`` as asked, kept through the soft passes
     #: before an exact one (which serving.keep_collar leaves alone)
     asked_soft: npt.NDArray[np.bool_]
+    #: [B] each neural pass also solves the mirror image (``serving.solve_mirror``)
+    mirror: npt.NDArray[np.bool_]
 
     @staticmethod
-    def of_problem(p: SolveProblem, carry: float) -> _Items:
-        """One problem as a batch of one (``carry``: the one it asks for), as
+    def of_problem(p: SolveProblem, carry: float, mirror: bool) -> _Items:
+        """One problem as a batch of one (``carry``, ``mirror``: what it asks for), as
         :meth:`of_arrays` makes it from :func:`stacked` ``([p])``."""
         tidx, k = compiled.as_i64(p.target_idx), len(p.target_idx)
         one = np.ones(1, dtype=np.bool_)
@@ -147,7 +150,7 @@ class _Items:
             one & (p.method == "fabrik"), one & p.preserve_bone_lengths,
             one & (p.reach == "exact"), np.full(1, p.tolerance, dtype=np.float64),
             np.full(1, p.floor, dtype=np.float64), np.full(1, carry), one,
-            one & (p.reach != "exact"),
+            one & (p.reach != "exact"), one & mirror,
         )  # fmt: skip
 
     @staticmethod
@@ -157,6 +160,7 @@ class _Items:
         weights: npt.ArrayLike | None, fabrik: npt.ArrayLike,
         preserve_bone_lengths: npt.ArrayLike, exact: npt.ArrayLike, tolerance: npt.ArrayLike,
         floor: npt.ArrayLike, carry: npt.ArrayLike, turn_search: npt.ArrayLike,
+        mirror: npt.ArrayLike,
     ) -> _Items:  # fmt: skip
         """A batch given as arrays (:meth:`Engine.solve_arrays`' arguments, per-item
         options as ``[B]`` arrays or scalars) as contiguous per-item arrays."""
@@ -173,6 +177,7 @@ class _Items:
             _per_item(fabrik, n, np.bool_), _per_item(preserve_bone_lengths, n, np.bool_), ex,
             _per_item(tolerance, n, np.float64), _per_item(floor, n, np.float64),
             _per_item(carry, n, np.float64), _per_item(turn_search, n, np.bool_), ~ex,
+            _per_item(mirror, n, np.bool_),
         )  # fmt: skip
         if n and not bool(np.all((items.carry >= 0.0) & (items.carry <= 1.0))):
             raise ValueError("carry must be in [0, 1]")
@@ -238,7 +243,7 @@ class _Items:
         return _Items(
             poses[sel], self.tidx[sel], self.tpos[sel], self.cnt[sel], self.n_t[sel],
             self.w[sel], no, ~no, no, self.tols[sel], self.floors[sel], self.carry[sel],
-            self.turn[sel], self.asked_soft[sel],
+            self.turn[sel], self.asked_soft[sel], self.mirror[sel],
         )  # fmt: skip
 
 
@@ -284,7 +289,7 @@ def _groups(
 def stacked(problems: Sequence[SolveProblem]) -> dict[str, Any]:
     """Validated problems as :meth:`Engine.solve_arrays`' arguments: targets and pins
     padded to the longest item's columns, every per-item option a ``[B]`` array but
-    ``passes`` and ``carry``, whose defaults are the engine's (it adds them)."""
+    ``passes``, ``carry`` and ``mirror``, whose defaults are the engine's (it adds them)."""
     n = len(problems)
     counts = np.fromiter((len(p.target_idx) for p in problems), np.int64, n)
     k_max = int(counts.max())

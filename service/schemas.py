@@ -118,6 +118,14 @@ class SolveOptions(_Body):
         "path then ends `turn <deg>` or `fit <deg>`); absent: the models' default. About 14 "
         "solves instead of one; `false` is the fast path.",
     )
+    mirror: bool | None = Field(
+        default=None,
+        description="Whether each neural pass also solves the edit's mirror image (left and "
+        "right swapped) and answers the mean of the two: a little closer to a real pose on "
+        "bodies unlike the training ones, at twice the networks' work. Absent: the models' "
+        "default, `solve_mirror` of `GET /v1/models`; `false` is the fast path. `method: "
+        "fabrik` ignores it.",
+    )
 
 
 class SolveRequest(_Body):
@@ -291,6 +299,11 @@ class ModelsResponse(BaseModel):
     reach_travel: bool = Field(
         description="Whether a few-target edit's target farther across than its chain "
         "reaches first moves the start across (the manifest's `serving.reach_travel`)."
+    )
+    solve_mirror: bool = Field(
+        description="Whether each neural pass also solves the edit's mirror image and answers "
+        "the mean of the two, unless a request says (`options.mirror`; the manifest's "
+        "`serving.solve_mirror`)."
     )
     models: list[ModelInfo]
 

@@ -107,6 +107,7 @@ def problem_of(
         passes=o.passes,
         carry=o.carry,
         turn_search=o.turn_search,
+        mirror=o.mirror,
     )
 
 

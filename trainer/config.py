@@ -118,6 +118,7 @@ class SolverConfig(_Section):
     keep_pelvis: float = _serving("keep_pelvis")
     pelvis_travel: bool = _serving("pelvis_travel")
     reach_travel: bool = _serving("reach_travel")
+    solve_mirror: bool = _serving("solve_mirror")
     # (their names: SERVING_SETTINGS, below, which the export and the checkpoint tags read)
     carry_loss: bool = Field(
         default=False,
@@ -184,7 +185,7 @@ class SolverConfig(_Section):
 SERVING_SETTINGS: tuple[str, ...] = (
     "passes", "carry", "turn_yaws", "turn_margin", "turn_min_targets", "turn_plausibility",
     "turn_critic", "turn_fit", "retry_reach", "keep_ends", "keep_elbows", "keep_ease",
-    "keep_collar", "keep_pelvis", "pelvis_travel", "reach_travel",
+    "keep_collar", "keep_pelvis", "pelvis_travel", "reach_travel", "solve_mirror",
 )  # fmt: skip
 if not set(SERVING_SETTINGS) <= set(SolverConfig.model_fields) & set(Serving.model_fields):
     raise RuntimeError("SERVING_SETTINGS must name fields of SolverConfig and of Serving")

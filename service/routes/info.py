@@ -50,6 +50,7 @@ async def models(engine: ReadyEngine) -> ModelsResponse:
         keep_pelvis=engine.keep_pelvis,
         pelvis_travel=engine.pelvis_travel,
         reach_travel=engine.reach_travel,
+        solve_mirror=engine.solve_mirror,
         models=[
             ModelInfo(
                 name=e.name,

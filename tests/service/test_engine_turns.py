@@ -177,7 +177,8 @@ def test_searching_items_are_priced_by_their_solves(
     assert limits.price(fabrik, on) == limits.FABRIK_PRICE
     assert len(limits.chunks([five] * 100, on)) == 12  # 9 items of 28 per 256
     # the batch price limit (character items) is the item count's, search or not
-    assert limits.max_item_price(on) == limits.max_item_price(off) == 4 + limits.FABRIK_PRICE - 1
+    top = 2 * 4 + limits.FABRIK_PRICE - 1  # 4 passes, twice with the mirror image, the polish
+    assert limits.max_item_price(on) == limits.max_item_price(off) == top
 
 
 def test_options_turn_search_over_http(client: Any, real_poses: PosePairs) -> None:
@@ -250,7 +251,7 @@ def test_search_ends_early_with_the_answers_of_the_full_search(
         args["poses"], args["target_idx"], args["target_pos"], np.full(n, k), np.full(n, k),
         np.ones((n, k)), np.zeros(n, bool), np.ones(n, bool), args["exact"],
         np.full(n, 1e-3), np.zeros(n), np.full(n, engine.carry), np.ones(n, bool),
-        ~args["exact"],
+        ~args["exact"], np.full(n, engine.solve_mirror),
     )  # fmt: skip
     reps = np.full(n, engine.solve_passes)
     from service.turns import search

@@ -11,7 +11,7 @@ import pytest
 from core.skeleton import JOINT_INDEX
 from service.engine import Engine
 from service.lean import lean_sequence, solve_lean
-from service.problems import SolveProblem, _Items
+from service.problems import SolveProblem, _Items, stacked
 from tests.conftest import PosePairs
 
 WRISTS = ("left_wrist", "right_wrist")
@@ -114,23 +114,11 @@ def test_fabrik_answers_are_the_general_paths(
 
 
 def _items(probs: list[SolveProblem], engine: Engine) -> tuple[_Items, np.ndarray]:
-    k = max(len(p.target_idx) for p in probs)
-    n = len(probs)
-    tidx, tpos, w = np.zeros((n, k), np.int64), np.zeros((n, k, 3)), np.ones((n, k))
-    for b, p in enumerate(probs):
-        c = len(p.target_idx)
-        tidx[b, :c], tpos[b, :c], w[b, :c] = p.target_idx, p.target_pos, p.weights
-    cnt = np.asarray([len(p.target_idx) for p in probs], np.int64)
-    items = _Items(
-        np.stack([p.pose for p in probs]), tidx, tpos, cnt,
-        np.asarray([p.n_targets for p in probs], np.int64), w,
-        np.asarray([p.method == "fabrik" for p in probs]),
-        np.asarray([p.preserve_bone_lengths for p in probs]),
-        np.asarray([p.reach == "exact" for p in probs]),
-        np.full(n, 1e-3), np.zeros(n), np.asarray([engine.carry_of(p) for p in probs]),
-        np.asarray([p.turn_search is not False for p in probs]),
-        np.asarray([p.reach != "exact" for p in probs]),
-    )  # fmt: skip
+    items = _Items.of_arrays(
+        **stacked(probs),
+        carry=np.asarray([engine.carry_of(p) for p in probs]),
+        mirror=np.asarray([engine.mirror_of(p) for p in probs]),
+    )
     passes = np.asarray([engine.passes_of(p) for p in probs], np.int64)
     return items, passes
 

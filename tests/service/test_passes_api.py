@@ -166,7 +166,17 @@ def test_prices_count_passes(real_poses: PosePairs) -> None:
     assert limits.price(soft, retry) == 3 and limits.price(exact, retry) == limits.price(exact, two)
     assert limits.price(pinned, retry) == limits.price(pinned, two) + 1
     assert limits.price(fabrik, retry) == limits.FABRIK_PRICE
-    assert limits.max_item_price(retry) == limits.max_item_price(two) + 1
+    # (the costliest item asks for its mirror image too: twice its passes and retry)
+    assert limits.max_item_price(retry) == limits.max_item_price(two) + 2
+    # an engine that also solves the mirror image prices every neural unit twice, unless
+    # the item says no (options.mirror); the FABRIK polish and FABRIK items are not doubled
+    both = limits.Pricing(2, retry=True, mirror=True)
+    assert limits.price(soft, both) == 2 * 3
+    assert limits.price(dataclasses.replace(soft, mirror=False), both) == 3
+    assert limits.price(dataclasses.replace(soft, mirror=True), retry) == 2 * 3
+    assert limits.price(exact, both) == limits.price(exact, two) + 2
+    assert limits.price(fabrik, both) == limits.FABRIK_PRICE
+    assert limits.max_item_price(both) == limits.max_item_price(retry)
 
 
 def test_engine_pricing_follows_the_models(engine: Engine, models_dir: Path) -> None:

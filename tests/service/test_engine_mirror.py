@@ -1,0 +1,126 @@
+"""Each neural pass also solving the edit's mirror image (``serving.solve_mirror``,
+``options.mirror``), on real poses: the answer is then the same, mirrored, for an edit and
+its mirror image (a left-wrist drag and the matching right-wrist drag), which the left and
+right solvers alone are not; it stays bit-identical alone and in a batch whatever the
+other items ask; a request can turn it either way; bad values are 422s naming the field."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from core.skeleton import mirror_key, mirrored
+from service.engine import Engine
+from service.problems import SolveProblem
+from tests.conftest import PosePairs, edit_problems
+from tests.service.test_api import as_array, solve_body
+from tests.service.test_passes_api import assert_bad_option
+
+WRISTS = ("left_wrist", "right_wrist")
+
+
+@pytest.fixture(scope="module")
+def engines(models_dir: Path) -> tuple[Engine, Engine]:
+    """The shipped models served with the mirror image off, and on."""
+    return Engine(models_dir, solve_mirror=False), Engine(models_dir, solve_mirror=True)
+
+
+def _mirror_problem(p: SolveProblem, names: tuple[str, ...]) -> SolveProblem:
+    """``p`` mirrored in the world (x -> -x, left and right swapped): the same edit of the
+    mirror-image body, its targets on the mirrored joints."""
+    from core.skeleton import JOINT_INDEX
+
+    goal_world = np.zeros((21, 3))
+    goal_world[p.target_idx] = p.target_pos
+    idx = np.asarray([JOINT_INDEX[n] for n in names], dtype=np.intp)
+    return dataclasses.replace(
+        p, pose=mirrored(p.pose), target_idx=idx, target_pos=mirrored(goal_world)[idx]
+    )
+
+
+def test_mirror_helpers() -> None:
+    rng = np.random.default_rng(0)
+    poses = rng.normal(size=(4, 21, 3))
+    np.testing.assert_array_equal(mirrored(mirrored(poses)), poses)
+    assert not np.allclose(mirrored(poses), poses)
+    assert mirror_key("left_elbow") == "right_elbow"
+    assert mirror_key("left_wrist+right_wrist") == "left_wrist+right_wrist"
+    assert mirror_key("head+left_ankle") == "head+right_ankle"
+
+
+@pytest.mark.parametrize("names", [("left_wrist",), ("left_elbow",), WRISTS])
+def test_an_edit_and_its_mirror_image_answer_alike(
+    engines: tuple[Engine, Engine], real_poses: PosePairs, names: tuple[str, ...]
+) -> None:
+    """Solved with the mirror image, a drag and the same drag on the mirror-image body
+    (the other side's joint) give mirror-image answers, to float rounding; the left and
+    right solvers alone answer them differently (millimetres and more)."""
+    from core.skeleton import JOINT_NAMES, MIRROR
+
+    other = tuple(sorted(JOINT_NAMES[MIRROR[JOINT_NAMES.index(n)]] for n in names))
+    starts = real_poses.poses[real_poses.starts[:12]]
+    goals = real_poses.poses[real_poses.goals[:12]]
+    probs = [dataclasses.replace(p, turn_search=False) for p in edit_problems(starts, goals, names)]
+    flipped = [_mirror_problem(p, other) for p in probs]
+    gap = {}
+    for on, engine in zip((False, True), engines, strict=True):
+        a = np.stack([r.pose for r in engine.solve(probs)])
+        b = np.stack([r.pose for r in engine.solve(flipped)])
+        gap[on] = float(np.abs(mirrored(b) - a).max())
+    assert gap[True] < 1e-4, gap
+    if names != WRISTS:  # one solver per side: they differ
+        assert gap[False] > 1e-3, gap
+    assert gap[False] > 10 * gap[True], gap
+
+
+def test_bit_identical_alone_and_in_a_mixed_batch(
+    engines: tuple[Engine, Engine], real_poses: PosePairs
+) -> None:
+    """Items that ask for the mirror image and items that do not, in one batch with
+    exact reach and several target sets: each answer equals the item solved alone, and
+    equals the engine whose default is what the item asked for."""
+    off, on = engines
+    starts = real_poses.poses[real_poses.starts[:8]]
+    goals = real_poses.poses[real_poses.goals[:8]]
+    probs = edit_problems(starts[:4], goals[:4], ("left_elbow",)) + edit_problems(
+        starts[4:], goals[4:], WRISTS
+    )
+    probs = [
+        dataclasses.replace(p, mirror=bool(i % 2), reach="exact" if i % 3 == 0 else "soft")
+        for i, p in enumerate(probs)
+    ]
+    together = off.solve(probs)
+    for p, r in zip(probs, together, strict=True):
+        (alone,) = off.solve([p])
+        (default,) = (on if p.mirror else off).solve([dataclasses.replace(p, mirror=None)])
+        for other in (alone, default):
+            assert np.array_equal(r.pose, other.pose) and np.array_equal(r.errors, other.errors)
+            assert r.solvers == other.solvers
+        assert r.max_bone_error <= 1e-5
+    plain = off.solve([dataclasses.replace(p, mirror=False) for p in probs])
+    changed = [not np.array_equal(a.pose, b.pose) for a, b in zip(together, plain, strict=True)]
+    assert changed == [bool(p.mirror) for p in probs]
+
+
+def test_options_mirror_over_http(client: Any, real_poses: PosePairs) -> None:
+    body = solve_body(real_poses, 0, ["left_wrist"])
+    poses = {}
+    for value in (None, False, True):
+        req = body if value is None else {**body, "options": {"mirror": value}}
+        resp = client.post("/v1/solve", json=req)
+        assert resp.status_code == 200, resp.text
+        poses[value] = as_array(resp.json()["pose"])
+    default = client.get("/v1/models").json()["solve_mirror"]
+    assert np.array_equal(poses[None], poses[default])
+    assert not np.array_equal(poses[False], poses[True])
+
+
+@pytest.mark.parametrize("value", ["yes", 1, [True]])
+def test_bad_mirror_is_422_naming_the_field(
+    client: Any, real_poses: PosePairs, value: object
+) -> None:
+    assert_bad_option(client, real_poses, "mirror", value)
