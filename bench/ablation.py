@@ -197,6 +197,9 @@ VARIANTS: dict[str, str] = {
     "dropped: it moved B1)",
     "ae_cos3e3_ends": "the shipped recipe (`ends_loss`) with the autoencoder at lr 3e-3 decayed "
     "along a cosine (ae_cos3e3_ends.toml; both solver banks retrained on it)",
+    "solve_mirror": "mx1-a396ee05a58c (mx1-3f5e57dad299 with `serving.solve_mirror`: each pass "
+    "also solves the mirror image with the mirrored set's solvers, the mean answered): shipped",
+    "captured_solve_mirror": "`solve_mirror` on the captured edits: shipped",
 }
 COMPLETION = "6-point completion"
 

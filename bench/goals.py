@@ -258,6 +258,8 @@ def issue14_goals(i14: Json | None) -> list[Goal]:
             if r and "neural_passes1" in r
             else ""
         )
+        if r and "neural_no_mirror" in r:
+            at1 += f"; {r['neural_no_mirror']['p50_ms']:.3f} ms without the mirror image"
         if r and "neural_no_turn" in r:
             at1 += f"; {r['neural_no_turn']['p50_ms']:.3f} ms without the turn search"
         shown = (
@@ -308,6 +310,11 @@ def issue14_goals(i14: Json | None) -> list[Goal]:
         if "solve_arrays_passes1" in rate
         else ""
     )
+    if "solve_arrays_no_mirror" in rate:
+        at1 += (
+            f"; without the mirror image: {rate['solve_arrays_no_mirror']:,.0f} via "
+            f"solve_arrays, {rate['solve_no_mirror']:,.0f} via solve(problems)"
+        )
     rows.append(
         (
             f"Issue 14: in-process batch of {i14['batch']} (2 targets, "
@@ -326,14 +333,16 @@ def issue14_goals(i14: Json | None) -> list[Goal]:
     )
     if "network_rows_per_s" in i14:
         net, passes = i14["network_rows_per_s"], i14.get("passes", 1)
+        views = i14.get("views", 1)  # 2: each pass also runs the mirror image's rows
+        top = net / (passes * views)
         rows.append(
             (
                 f"(info) the networks alone: the fused graph of {i14['network_set']} run "
                 f"once on the same {i14['batch']} rows (one thread)",
                 "–",
-                f"{net:,.0f} rows/s, so at most {net / passes:,.0f} poses/s at {passes} "
-                f"passes; the in-process batch reaches {rate['solve_arrays'] / (net / passes):.0%} "
-                "of that",
+                f"{net:,.0f} rows/s, so at most {top:,.0f} poses/s at {passes} passes"
+                f"{' of 2 views (the mirror image)' if views == 2 else ''}; the in-process "
+                f"batch reaches {rate['solve_arrays'] / top:.0%} of that",
                 "info",
             )
         )

@@ -119,25 +119,30 @@ def serve(
 
 
 def request_body(
-    start: np.ndarray, joints: np.ndarray, targets: np.ndarray, passes: int | None = None
-) -> Json:
-    """A pose-form body; ``passes``: ``options.passes`` (None: the models' default)."""
+    start: np.ndarray, joints: np.ndarray, targets: np.ndarray, passes: int | None = None,
+    mirror: bool | None = None,
+) -> Json:  # fmt: skip
+    """A pose-form body; ``passes``, ``mirror``: ``options.passes``, ``options.mirror``
+    (None: the models' default)."""
     return {
         "pose": {n: [float(v) for v in start[i]] for i, n in enumerate(JOINT_NAMES)},
         "targets": [
             {"joint": JOINT_NAMES[int(j)], "position": [float(v) for v in t]}
             for j, t in zip(joints, targets, strict=True)
         ],
-        "options": _options(passes),
+        "options": _options(passes, mirror),
     }
 
 
-def _options(passes: int | None) -> Json:
+def _options(passes: int | None, mirror: bool | None = None) -> Json:
     o: Json = {"method": "neural", "preserve_bone_lengths": True, "reach": "soft"}
-    return o if passes is None else {**o, "passes": passes}
+    o = o if passes is None else {**o, "passes": passes}
+    return o if mirror is None else {**o, "mirror": mirror}
 
 
-def columnar_body(edits: Edits, rows: Sequence[int], passes: int | None = None) -> Json:
+def columnar_body(
+    edits: Edits, rows: Sequence[int], passes: int | None = None, mirror: bool | None = None
+) -> Json:
     """The columnar form of the edits ``rows`` (docs/service.md): one row of 63 numbers per
     pose, target joints per item, one row of 3K numbers per item."""
     return {
@@ -146,13 +151,13 @@ def columnar_body(edits: Edits, rows: Sequence[int], passes: int | None = None) 
             "joints": [[JOINT_NAMES[int(j)] for j in edits.joints[i]] for i in rows],
             "positions": [np.asarray(edits.targets[i]).reshape(-1).tolist() for i in rows],
         },
-        "options": _options(passes),
+        "options": _options(passes, mirror),
     }
 
 
-def bodies(edits: Edits, passes: int | None = None) -> list[Json]:
+def bodies(edits: Edits, passes: int | None = None, mirror: bool | None = None) -> list[Json]:
     return [
-        request_body(edits.start[i], edits.joints[i], edits.targets[i], passes)
+        request_body(edits.start[i], edits.joints[i], edits.targets[i], passes, mirror)
         for i in range(len(edits))
     ]
 
@@ -347,7 +352,9 @@ def goal_rows(http: Json | None) -> list[tuple[str, str, str, bool | None]]:
     http = http or {}
     one = next((r for r in http.get("solve", []) if r["concurrency"] == 1), None)
     p1, col1 = http.get("solve_passes1"), http.get("batch_columnar_passes1")
+    p_m, col_m = http.get("solve_no_mirror"), http.get("batch_columnar_no_mirror")
     at1 = f"; {p1['p50_ms']:.3f} ms at passes=1" if p1 else ""
+    at1 += f"; {p_m['p50_ms']:.3f} ms with mirror: false" if p_m else ""
     rows: list[tuple[str, str, str, bool | None]] = [
         (
             "HTTP /v1/solve p50 at concurrency 1 (loopback, the models' passes)",
@@ -359,6 +366,7 @@ def goal_rows(http: Json | None) -> list[tuple[str, str, str, bool | None]]:
     col, items = http.get("batch_columnar"), http.get("batch")
     also = f"; item list {items['poses_per_s']:,.0f}" if items else ""
     also += f"; {col1['poses_per_s']:,.0f} at passes=1" if col1 else ""
+    also += f"; {col_m['poses_per_s']:,.0f} with mirror: false" if col_m else ""
     rows.append(
         (
             "HTTP /v1/solve/batch poses/s (columnar form, "
@@ -386,19 +394,22 @@ def run_http(
     log: Path | None = None,
 ) -> Json:
     """The whole HTTP measurement; returns a JSON-able dict. /v1/solve at concurrency 1
-    and the columnar batch are measured twice: with the models' passes (the default) and
-    with ``options.passes = 1`` (``solve_passes1``, ``batch_columnar_passes1``)."""
+    and the columnar batch are measured three times: with the models' defaults, with
+    ``options.passes = 1`` (``solve_passes1``, ``batch_columnar_passes1``) and with
+    ``options.mirror = false`` (``solve_no_mirror``, ``batch_columnar_no_mirror``)."""
     items = bodies(edits)
     single = [json.dumps(b).encode() for b in items]
     single1 = [json.dumps(b).encode() for b in bodies(edits, passes=1)]
+    single_m = [json.dumps(b).encode() for b in bodies(edits, mirror=False)]
     n_batch = max(1, min(4, -(-batch_size * 2 // len(items))))
     rows = [
         [(s * batch_size + j) % len(items) for j in range(batch_size)]
         for s in range(max(2, n_batch))
     ]
     batch_payloads = [json.dumps({"items": [items[i] for i in r]}).encode() for r in rows]
-    columns, columns1 = (
-        [json.dumps(columnar_body(edits, r, passes=p)).encode() for r in rows] for p in (None, 1)
+    columns, columns1, columns_m = (
+        [json.dumps(columnar_body(edits, r, passes=p, mirror=m)).encode() for r in rows]
+        for p, m in ((None, None), (1, None), (None, False))
     )
     out: Json = {
         "solve_set": solve_set,
@@ -412,19 +423,24 @@ def run_http(
         rss: Json = {"after_start": rss_kb(server.pid)}
         load(f"{server.url}/v1/solve", single, 4, warmup, 30.0)
         load(f"{server.url}/v1/solve", single1, 1, warmup, 30.0)
+        load(f"{server.url}/v1/solve", single_m, 1, warmup, 30.0)
         load(f"{server.url}/v1/solve/batch", batch_payloads[:1], 1, 1, 60.0)
         load(f"{server.url}/v1/solve/batch", columns[:1], 1, 2, 60.0)
         load(f"{server.url}/v1/solve/batch", columns1[:1], 1, 2, 60.0)
+        load(f"{server.url}/v1/solve/batch", columns_m[:1], 1, 2, 60.0)
         rss["after_warm_up"] = rss_kb(server.pid)
         for c in concurrency:
             out["solve"].append(load(f"{server.url}/v1/solve", single, c, requests, seconds))
         out["solve_passes1"] = load(f"{server.url}/v1/solve", single1, 1, requests, seconds)
+        out["solve_no_mirror"] = load(f"{server.url}/v1/solve", single_m, 1, requests, seconds)
         b = load(f"{server.url}/v1/solve/batch", batch_payloads, 1, batches, batch_seconds)
         out["batch"] = _batch_row(b, batch_size, len(batch_payloads[0]))
         col = load(f"{server.url}/v1/solve/batch", columns, 1, 4 * batches, batch_seconds)
         out["batch_columnar"] = _batch_row(col, batch_size, len(columns[0]))
         col1 = load(f"{server.url}/v1/solve/batch", columns1, 1, 4 * batches, batch_seconds)
         out["batch_columnar_passes1"] = _batch_row(col1, batch_size, len(columns1[0]))
+        col_m = load(f"{server.url}/v1/solve/batch", columns_m, 1, 4 * batches, batch_seconds)
+        out["batch_columnar_no_mirror"] = _batch_row(col_m, batch_size, len(columns_m[0]))
         rss["after_load"] = rss_kb(server.pid)
         out["rss_kb"] = rss
     return out

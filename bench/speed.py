@@ -131,12 +131,15 @@ def issue14(
     - ``fabrik_numpy``: ``core.kinematics.fabrik`` (the numpy FABRIK the engine ran before);
     - ``neural_passes1``: the ``neural`` call with ``passes=1`` (``options.passes``), beside
       the engine's default (``solve_passes``, the models' ``serving.passes``);
+    - ``neural_no_mirror``: with ``mirror=False`` (``options.mirror``), when the engine's
+      default solves the mirror image too (``serving.solve_mirror``);
     - ``composed``: the same timings on sets no trained solver covers whole (several
       solvers composed), beside the goals' sets.
 
     FABRIK with ``tolerance`` (m) and the engine's iteration cap. Then in-process batch
     throughput of ``engine.solve_arrays`` and ``engine.solve`` on ``batch`` edits (2
-    targets), at the default passes and at ``passes=1`` (``*_passes1``), and of
+    targets), at the default passes and at ``passes=1`` (``*_passes1``) or without the
+    mirror image (``*_no_mirror``, when the default has it), and of
     ``solve_arrays`` on 2 threads (``solve_arrays_2threads``: the batch's priced parts
     fanned out as the service runs them on its 2 compute threads, ``service.limits``)."""
     rows = [
@@ -154,6 +157,7 @@ def issue14(
     tpos = np.concatenate([np.stack(two.targets)] * reps)[:batch]
     probs = [p for _ in range(reps) for p in problems(two, "neural_bone")][:batch]
     probs1 = [dataclasses.replace(p, passes=1) for p in probs]
+    plain = [dataclasses.replace(p, mirror=False) for p in probs]
     # a batch as the service runs it on 2 compute threads: its priced parts, fanned out
     parts = chunks(probs, Pricing.of(engine))
 
@@ -167,6 +171,11 @@ def issue14(
         "solve_arrays_passes1": lambda: engine.solve_arrays(starts, tidx, tpos, passes=1),
         "solve_passes1": lambda: engine.solve(probs1),
     }
+    if engine.solve_mirror:  # the fast path a request can take: options.mirror false
+        runs["solve_arrays_no_mirror"] = lambda: engine.solve_arrays(
+            starts, tidx, tpos, mirror=False
+        )
+        runs["solve_no_mirror"] = lambda: engine.solve(plain)
     for fn in runs.values():
         fn()
     through = {
@@ -183,6 +192,7 @@ def issue14(
         "batch_poses_per_s": through,
         "threads": ort_threads,
         "passes": engine.solve_passes,
+        "views": 2 if engine.solve_mirror else 1,
     }
 
 
@@ -216,6 +226,7 @@ def _issue14_set(
     cap = engine.fabrik_max_iterations
     neural = problems(edits, "neural_bone")
     neural1 = [dataclasses.replace(p, passes=1) for p in neural]
+    no_mirror = [dataclasses.replace(p, mirror=False) for p in neural]
     fab = [dataclasses.replace(p, tolerance=tolerance) for p in problems(edits, "fabrik")]
     n = len(edits)
     start = np.ascontiguousarray(edits.start, dtype=np.float64)
@@ -244,6 +255,8 @@ def _issue14_set(
         "fabrik_kernel": kernel,
         "fabrik_numpy": numpy_fabrik,
     }
+    if engine.solve_mirror:  # the default solves the mirror image too
+        runs["neural_no_mirror"] = lambda i: engine.solve([no_mirror[i]])
     if engine.turn_search.searches("neural", len(idx), False):  # the default searches
         plain = copy.copy(engine)
         plain.turn_search = NO_SEARCH

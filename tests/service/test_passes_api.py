@@ -180,8 +180,11 @@ def test_prices_count_passes(real_poses: PosePairs) -> None:
 
 
 def test_engine_pricing_follows_the_models(engine: Engine, models_dir: Path) -> None:
-    """``Pricing.of``: the engine's default passes, turn search and retry, as it runs them."""
+    """``Pricing.of``: the engine's default passes, turn search, retry and mirror image, as
+    it runs them."""
     pricing = limits.Pricing.of(engine)
-    assert pricing == limits.Pricing(engine.solve_passes, engine.turn_search, True)
+    assert pricing == limits.Pricing(engine.solve_passes, engine.turn_search, True, True)
     assert engine.retry_reach > 0  # the shipped models retry (serving.retry_reach)
+    assert engine.solve_mirror  # ... and solve the mirror image (serving.solve_mirror)
     assert not limits.Pricing.of(Engine(models_dir, retry_reach=0.0)).retry
+    assert not limits.Pricing.of(Engine(models_dir, solve_mirror=False)).mirror

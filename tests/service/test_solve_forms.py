@@ -267,9 +267,9 @@ def test_oversized_character_batch_is_refused(
     with make_client(models_dir, max_batch_items=4) as small:
         # 4 of the costliest pose items fit; so do 2 small characters; 3 big ones do not
         assert small.post("/v1/solve/batch", json={"items": [exact_pose] * 4}).status_code == 200
-        # the limit is 4 of the costliest pose items: a pinned soft one at 4 passes, 4 + 15
-        # units and the retry's 1 (it was 4 x 16, refusing this mixed batch of 19 + 19 +
-        # 24 + 5 = 67 units)
+        # the limit is 4 of the costliest pose items: a pinned soft one at 4 passes and the
+        # retry's 1, twice with its mirror image, and the polish's 15 units (it was 4 x 16,
+        # refusing this mixed batch of 23 + 23 + 24 + 10 = 80 units)
         dearest = {**pose, "options": {"reach": "exact", "passes": 4}}
         four = {**pose, "options": {"passes": 4}}
         soft = {**char, "pins": [], "options": {}}  # 16 + 1 per 8 of its 57 joints
@@ -281,10 +281,10 @@ def test_oversized_character_batch_is_refused(
         body = assert_problem(r, 413, "work units", "items[1]", "joints")
         assert body["type"].endswith("/too-many-items")
         assert not read  # refused before any skeleton was read
-    # the default limit: 430 items (within the 1024 item limit) of a 57-joint skeleton
-    # with exact reach cost 430 x 48 units, beyond 1024 x 20 (a pinned soft item at 4
-    # passes and the retry's pass)
+    # the default limit: 540 items (within the 1024 item limit) of a 57-joint skeleton
+    # with exact reach cost 540 x 48 units, beyond 1024 x 25 (a pinned soft item at 4
+    # passes and the retry's pass, twice with its mirror image, and the polish's 15)
     with make_client(models_dir) as c:
-        r = c.post("/v1/solve/batch", json={"items": [char] * 430})
+        r = c.post("/v1/solve/batch", json={"items": [char] * 540})
         assert_problem(r, 413, "items[0], 57 joints")
     assert not read
