@@ -41,11 +41,9 @@ from core.skeleton import (
     MIRROR,
     NUM_JOINTS,
     bone_lengths,
-    mirror_key,
-    mirrored,
     set_key,
 )
-from service import completion, turns
+from service import completion, networks, turns
 from service.lean import (
     covering,
     fabrik_batch,
@@ -176,7 +174,7 @@ class Engine:
         r_travel = m.serving.reach_travel if reach_travel is None else reach_travel
         self.reach_travel = bool(r_travel)
         #: each neural pass also solves the edit's mirror image and averages the two
-        #: (``serving.solve_mirror``; :meth:`_run_sequence`)
+        #: (``serving.solve_mirror``; :func:`service.networks.answer`)
         mirror = m.serving.solve_mirror if solve_mirror is None else solve_mirror
         self.solve_mirror = bool(mirror)
         #: the turn search of many-target edits (``serving.turn_*``, :mod:`service.turns`)
@@ -469,7 +467,7 @@ class Engine:
             bone = keep | ex
             collar, hold = self.collar_items(batch), self.pelvis_holds(batch)
             if len(sequences) == 1 and neural.all():  # the common case: no gathers
-                decoded = self._run_sequence(x, canvas, sequences[0], batch.mirror)
+                decoded = networks.answer(self, x, canvas, sequences[0], batch.mirror)
                 out = compiled.unscale(
                     decoded, scales, canon, lengths, bone, tidx, cnt, batch.carry, self.chain_mask,
                     self.keep_ease, collar, hold,
@@ -479,7 +477,9 @@ class Engine:
                 decoded = np.empty((n, 3 * NUM_JOINTS), dtype=np.float32)
                 for s, seq in enumerate(sequences):
                     sel = np.flatnonzero(seq_of == s)
-                    decoded[sel] = self._run_sequence(x[sel], canvas[sel], seq, batch.mirror[sel])
+                    decoded[sel] = networks.answer(
+                        self, x[sel], canvas[sel], seq, batch.mirror[sel]
+                    )
                 out = canon.copy()
                 out[items] = compiled.unscale(
                     decoded[items], scales[items], canon[items], lengths[items], bone[items],
@@ -614,90 +614,6 @@ class Engine:
         )
         return paths, path_of.astype(np.int64).reshape(-1)
 
-    def _run_sequence(
-        self, x: npt.NDArray[np.float32], canvas: npt.NDArray[np.float32],
-        sequence: tuple[str, ...], views: npt.NDArray[np.bool_],
-    ) -> npt.NDArray[np.float32]:  # fmt: skip
-        """The networks' answer ``[B, 63]`` to canonical poses ``x [B, 63]`` and targets
-        ``canvas [B, 21, 3]``: :meth:`_run_once`; for the rows ``views [B]`` asks
-        (``serving.solve_mirror``, ``options.mirror``) the mean of it and the answer to the
-        mirror image, taken back (``core.skeleton.mirrored``); both views in one run per
-        stage where the target set is its own mirror image. Each row alone."""
-        back = self._mirror_of(sequence) if views.any() else None
-        if back is None:
-            return self._run_once(x, canvas, sequence)
-        n, rows = len(x), np.flatnonzero(views)
-        x_m = mirrored(x[rows].reshape(len(rows), NUM_JOINTS, 3)).reshape(len(rows), -1)
-        c_m = mirrored(canvas[rows])
-        if back == sequence:
-            both = self._run_once(np.concatenate([x, x_m]), np.concatenate([canvas, c_m]), back)
-            own, other = both[:n], both[n:]
-        else:
-            own, other = self._run_once(x, canvas, sequence), self._run_once(x_m, c_m, back)
-        other = mirrored(other.reshape(len(rows), NUM_JOINTS, 3)).reshape(len(rows), -1)
-        own[rows] = (own[rows] + other) * np.float32(0.5)
-        return own
-
-    def _mirror_of(self, sequence: tuple[str, ...]) -> tuple[str, ...] | None:
-        """The solver sequence of ``sequence``'s mirror image, or None if a solver has no
-        mirror among the models."""
-        if not sequence:  # no networks to ask
-            return None
-        back = tuple(mirror_key(key) for key in sequence)
-        return back if all(key in self.solvers for key in back) else None
-
-    def _run_once(
-        self, x: npt.NDArray[np.float32], canvas: npt.NDArray[np.float32], sequence: tuple[str, ...]
-    ) -> npt.NDArray[np.float32]:
-        """Encode, run a solver sequence, decode: one ORT run per stage."""
-        if self.delta:  # shipped fused graphs give the (anchored) delta answer
-            return self._delta(x, canvas, sequence)
-        if len(sequence) == 1:  # one fused run: encode, solve, decode
-            key = sequence[0]
-            return self.fused[key](x, canvas[:, self.solver_joints[key]].reshape(len(x), -1))
-        z = self.encoder(x)  # none (only uncovered joints) or a composed sequence
-        if sequence:
-            z = self._compose(z, canvas, sequence)
-        return self.decoder(z)
-
-    def _delta(
-        self, x: npt.NDArray[np.float32], canvas: npt.NDArray[np.float32], sequence: tuple[str, ...]
-    ) -> npt.NDArray[np.float32]:
-        """Delta answers (``serving.delta``): each solver's fused graph moves the CURRENT
-        pose by what it changes in the decoded pose (anchored or not, as exported), so the
-        autoencoder's own error on the start pose never reaches the answer. Between solvers
-        the targets solved so far are pasted onto the pose (``composition="reencode"``)."""
-        if len(sequence) == 1:  # one solver: its graph on the start pose, nothing to paste
-            key = sequence[0]
-            return self.fused[key](x, canvas[:, self.solver_joints[key]].reshape(len(x), -1))
-        pose = x.copy()
-        flat = canvas.reshape(len(x), -1)
-        for key, joints, cols in self._steps(sequence):
-            if cols is not None:
-                pose[:, cols] = flat[:, cols]
-            pose = self.fused[key](pose, canvas[:, joints].reshape(len(x), -1))
-        return pose
-
-    def _steps(
-        self, sequence: tuple[str, ...]
-    ) -> list[tuple[str, npt.NDArray[np.intp], npt.NDArray[np.intp] | None]]:
-        """Per solver of a delta sequence: its key, its joints, and the pose columns of
-        the targets solved before it, pasted first (None: nothing to paste). Memoised."""
-        steps = self._delta_steps.get(sequence)
-        if steps is None:
-            steps, done = [], list[int]()
-            for key in sequence:
-                joints = self.solver_joints[key]
-                cols = None
-                if self.composition == "reencode" and done:
-                    cols = np.asarray([3 * j + k for j in done for k in range(3)], dtype=np.intp)
-                steps.append((key, joints, cols))
-                done.extend(int(j) for j in joints if int(j) not in done)
-            if len(self._delta_steps) >= 4096:  # bounded: forget everything, start again
-                self._delta_steps.clear()
-            self._delta_steps[sequence] = steps
-        return steps
-
     def reconstruct(self, world: F64) -> F64:
         """The autoencoder's round trip of world poses ``[B, 21, 3]`` through the same body
         mapping as a solve (canonical frame, size): how well the pose space holds a body."""
@@ -708,43 +624,6 @@ class Engine:
         x = (canon / scales).reshape(len(world), -1).astype(np.float32)
         out = self.decoder(self.encoder(x)).astype(np.float64).reshape(len(world), NUM_JOINTS, 3)
         return np.asarray(frame.to_world(out * scales))
-
-    def _compose(
-        self, z: npt.NDArray[np.float32], canvas: npt.NDArray[np.float32], sequence: tuple[str, ...]
-    ) -> npt.NDArray[np.float32]:
-        """Run a solver sequence on latents ``[M, D]`` whose targets are on ``canvas``.
-
-        ``composition="reencode"`` (default): before each solver after the first, decode,
-        paste the targets solved so far onto their joints and re-encode, so a later solver
-        starts from a pose that already meets the earlier targets; after the last solver,
-        ``projections`` rounds of paste-all-targets and re-encode. ``"sequential"``: the
-        paper's ẑ = S_t3(S_t2(S_t1(z))). Either cycles ``passes`` times through the
-        sequence (1 is best: a solver re-applied to its own output overshoots)."""
-        if len(sequence) == 1:
-            key = sequence[0]
-            return self.solvers[key](z, canvas[:, self.solver_joints[key]].reshape(len(z), -1))
-        flat = canvas.reshape(len(z), -1)
-        done: list[int] = []
-        for _ in range(self.passes):
-            for key in sequence:
-                joints = self.solver_joints[key]
-                if self.composition == "reencode" and done:
-                    z = self._paste(z, flat, done)
-                z = self.solvers[key](z, canvas[:, joints].reshape(len(z), -1))
-                done.extend(int(j) for j in joints if int(j) not in done)
-        if self.composition == "reencode":
-            for _ in range(self.projections):
-                z = self._paste(z, flat, done)
-        return z
-
-    def _paste(
-        self, z: npt.NDArray[np.float32], flat: npt.NDArray[np.float32], joints: list[int]
-    ) -> npt.NDArray[np.float32]:
-        """Decode, put ``joints`` on their targets, encode: back onto the pose manifold."""
-        x = self.decoder(z)
-        cols = np.asarray([3 * j + k for j in joints for k in range(3)], dtype=np.intp)
-        x[:, cols] = flat[:, cols]
-        return self.encoder(x)
 
     # -- key-point completion (service.completion) --------------------------------------
     def complete(

@@ -20,6 +20,7 @@ import numpy.typing as npt
 
 from core import compiled
 from core.skeleton import JOINT_NAMES
+from service import networks
 from service.problems import BatchAnswer, _Items
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -119,7 +120,7 @@ def solve_lean(
         tpos, (canon, facing, trans, lengths, scales, tcan, x, canvas) = engine._prepare(
             pose, items, every
         )
-        decoded = engine._run_sequence(x, canvas, sequence, items.mirror)
+        decoded = networks.answer(engine, x, canvas, sequence, items.mirror)
         if not exact or k < passes - 1:
             pose, errors, bone_err = compiled.settle(
                 decoded, scales, canon, lengths, facing, trans, floors, tidx, tpos, counts,

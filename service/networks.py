@@ -1,0 +1,157 @@
+"""The networks' side of a solve: canonical poses and targets in, the networks' answer out.
+
+One fused graph for a single-solver edit (the anchored delta answer inside it), or a
+composed sequence of solvers (re-encoding with the targets solved so far pasted between
+them, ``composition``), and with ``serving.solve_mirror`` the mirror image's answer too,
+averaged in. The engine (:mod:`service.engine`) prepares the canonical inputs and settles
+the answer (bone pass, way back to the world); this module runs onnxruntime.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+import numpy.typing as npt
+
+from core.skeleton import NUM_JOINTS, mirror_key, mirrored
+
+if TYPE_CHECKING:  # pragma: no cover
+    from service.engine import Engine
+
+
+def answer(
+    engine: Engine, x: npt.NDArray[np.float32], canvas: npt.NDArray[np.float32],
+    sequence: tuple[str, ...], views: npt.NDArray[np.bool_],
+) -> npt.NDArray[np.float32]:  # fmt: skip
+    """The networks' answer ``[B, 63]`` to canonical poses ``x [B, 63]`` and targets
+    ``canvas [B, 21, 3]``: :func:`run_once`; for the rows ``views [B]`` asks
+    (``serving.solve_mirror``, ``options.mirror``) the mean of it and the answer to the
+    mirror image, taken back (``core.skeleton.mirrored``); both views in one run per
+    stage where the target set is its own mirror image. Each row alone."""
+    back = mirror_of(engine, sequence) if views.any() else None
+    if back is None:
+        return run_once(engine, x, canvas, sequence)
+    n, rows = len(x), np.flatnonzero(views)
+    x_m = mirrored(x[rows].reshape(len(rows), NUM_JOINTS, 3)).reshape(len(rows), -1)
+    c_m = mirrored(canvas[rows])
+    if back == sequence:
+        both = run_once(engine, np.concatenate([x, x_m]), np.concatenate([canvas, c_m]), back)
+        own, other = both[:n], both[n:]
+    else:
+        own, other = run_once(engine, x, canvas, sequence), run_once(engine, x_m, c_m, back)
+    other = mirrored(other.reshape(len(rows), NUM_JOINTS, 3)).reshape(len(rows), -1)
+    own[rows] = (own[rows] + other) * np.float32(0.5)
+    return own
+
+
+def mirror_of(engine: Engine, sequence: tuple[str, ...]) -> tuple[str, ...] | None:
+    """The solver sequence of ``sequence``'s mirror image, or None if a solver has no
+    mirror among the models."""
+    if not sequence:  # no networks to ask
+        return None
+    back = tuple(mirror_key(key) for key in sequence)
+    return back if all(key in engine.solvers for key in back) else None
+
+
+def run_once(
+    engine: Engine,
+    x: npt.NDArray[np.float32],
+    canvas: npt.NDArray[np.float32],
+    sequence: tuple[str, ...],
+) -> npt.NDArray[np.float32]:
+    """Encode, run a solver sequence, decode: one ORT run per stage."""
+    if engine.delta:  # shipped fused graphs give the (anchored) delta answer
+        return delta(engine, x, canvas, sequence)
+    if len(sequence) == 1:  # one fused run: encode, solve, decode
+        key = sequence[0]
+        return engine.fused[key](x, canvas[:, engine.solver_joints[key]].reshape(len(x), -1))
+    z = engine.encoder(x)  # none (only uncovered joints) or a composed sequence
+    if sequence:
+        z = compose(engine, z, canvas, sequence)
+    return engine.decoder(z)
+
+
+def delta(
+    engine: Engine,
+    x: npt.NDArray[np.float32],
+    canvas: npt.NDArray[np.float32],
+    sequence: tuple[str, ...],
+) -> npt.NDArray[np.float32]:
+    """Delta answers (``serving.delta``): each solver's fused graph moves the CURRENT
+    pose by what it changes in the decoded pose (anchored or not, as exported), so the
+    autoencoder's own error on the start pose never reaches the answer. Between solvers
+    the targets solved so far are pasted onto the pose (``composition="reencode"``)."""
+    if len(sequence) == 1:  # one solver: its graph on the start pose, nothing to paste
+        key = sequence[0]
+        return engine.fused[key](x, canvas[:, engine.solver_joints[key]].reshape(len(x), -1))
+    pose = x.copy()
+    flat = canvas.reshape(len(x), -1)
+    for key, joints, cols in steps(engine, sequence):
+        if cols is not None:
+            pose[:, cols] = flat[:, cols]
+        pose = engine.fused[key](pose, canvas[:, joints].reshape(len(x), -1))
+    return pose
+
+
+def steps(
+    engine: Engine, sequence: tuple[str, ...]
+) -> list[tuple[str, npt.NDArray[np.intp], npt.NDArray[np.intp] | None]]:
+    """Per solver of a delta sequence: its key, its joints, and the pose columns of
+    the targets solved before it, pasted first (None: nothing to paste). Memoised."""
+    out = engine._delta_steps.get(sequence)
+    if out is None:
+        out, done = [], list[int]()
+        for key in sequence:
+            joints = engine.solver_joints[key]
+            cols = None
+            if engine.composition == "reencode" and done:
+                cols = np.asarray([3 * j + k for j in done for k in range(3)], dtype=np.intp)
+            out.append((key, joints, cols))
+            done.extend(int(j) for j in joints if int(j) not in done)
+        if len(engine._delta_steps) >= 4096:  # bounded: forget everything, start again
+            engine._delta_steps.clear()
+        engine._delta_steps[sequence] = out
+    return out
+
+
+def compose(
+    engine: Engine,
+    z: npt.NDArray[np.float32],
+    canvas: npt.NDArray[np.float32],
+    sequence: tuple[str, ...],
+) -> npt.NDArray[np.float32]:
+    """Run a solver sequence on latents ``[M, D]`` whose targets are on ``canvas``.
+
+    ``composition="reencode"`` (default): before each solver after the first, decode,
+    paste the targets solved so far onto their joints and re-encode, so a later solver
+    starts from a pose that already meets the earlier targets; after the last solver,
+    ``projections`` rounds of paste-all-targets and re-encode. ``"sequential"``: the
+    paper's ẑ = S_t3(S_t2(S_t1(z))). Either cycles ``passes`` times through the
+    sequence (1 is best: a solver re-applied to its own output overshoots)."""
+    if len(sequence) == 1:
+        key = sequence[0]
+        return engine.solvers[key](z, canvas[:, engine.solver_joints[key]].reshape(len(z), -1))
+    flat = canvas.reshape(len(z), -1)
+    done: list[int] = []
+    for _ in range(engine.passes):
+        for key in sequence:
+            joints = engine.solver_joints[key]
+            if engine.composition == "reencode" and done:
+                z = paste(engine, z, flat, done)
+            z = engine.solvers[key](z, canvas[:, joints].reshape(len(z), -1))
+            done.extend(int(j) for j in joints if int(j) not in done)
+    if engine.composition == "reencode":
+        for _ in range(engine.projections):
+            z = paste(engine, z, flat, done)
+    return z
+
+
+def paste(
+    engine: Engine, z: npt.NDArray[np.float32], flat: npt.NDArray[np.float32], joints: list[int]
+) -> npt.NDArray[np.float32]:
+    """Decode, put ``joints`` on their targets, encode: back onto the pose manifold."""
+    x = engine.decoder(z)
+    cols = np.asarray([3 * j + k for j in joints for k in range(3)], dtype=np.intp)
+    x[:, cols] = flat[:, cols]
+    return engine.encoder(x)
