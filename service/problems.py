@@ -149,8 +149,8 @@ class _Items:
             np.full(1, p.n_targets, dtype=np.int64), compiled.as_f64(p.weights)[None],
             one & (p.method == "fabrik"), one & p.preserve_bone_lengths,
             one & (p.reach == "exact"), np.full(1, p.tolerance, dtype=np.float64),
-            np.full(1, p.floor, dtype=np.float64), np.full(1, carry), one,
-            one & (p.reach != "exact"), one & mirror,
+            np.full(1, p.floor, dtype=np.float64), np.full(1, carry),
+            one & (p.turn_search is not False), one & (p.reach != "exact"), one & mirror,
         )  # fmt: skip
 
     @staticmethod

@@ -141,3 +141,27 @@ def test_which_batches_take_the_lean_path(engine: Engine, real_poses: PosePairs)
     }
     for why, probs in others.items():
         assert lean_sequence(engine, *_items(probs, engine)) is None, why
+
+
+def test_one_problem_as_items_equals_its_stacked_arrays(
+    engine: Engine, real_poses: PosePairs
+) -> None:
+    """``_Items.of_problem`` (the lean single path) builds what ``_Items.of_arrays`` builds
+    from ``stacked([p])`` (the general path), field by field, dtype and all, every array
+    writable (a read-only one would be another type to the compiled kernels)."""
+    pose = real_poses.poses[real_poses.starts[0]]
+    idx = np.asarray([JOINT_INDEX["left_wrist"], JOINT_INDEX["right_ankle"]], dtype=np.intp)
+    base = SolveProblem(pose=pose, target_idx=idx, target_pos=pose[idx] + 0.1,
+                        weights=np.array([1.0, 2.0]), n_targets=1)  # fmt: skip
+    for p in (
+        base, dataclasses.replace(base, n_targets=2, reach="exact", tolerance=1e-4, floor=0.2),
+        dataclasses.replace(base, method="fabrik", preserve_bone_lengths=False),
+        dataclasses.replace(base, turn_search=False, mirror=False, carry=0.2, passes=3),
+    ):  # fmt: skip
+        carry, mirror = engine.carry_of(p), engine.mirror_of(p)
+        one = _Items.of_problem(p, carry, mirror)
+        other = _Items.of_arrays(**stacked([p]), carry=[carry], mirror=[mirror])
+        for f in dataclasses.fields(one):
+            a, b = getattr(one, f.name), getattr(other, f.name)
+            assert a.dtype == b.dtype and np.array_equal(a, b), f.name
+            assert a.flags.writeable and a.flags.c_contiguous, f.name
