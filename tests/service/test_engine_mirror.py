@@ -16,7 +16,7 @@ import pytest
 from core.skeleton import mirror_key, mirrored
 from service.engine import Engine
 from service.problems import SolveProblem
-from tests.conftest import PosePairs, edit_problems
+from tests.conftest import PosePairs, edit_problems, make_client
 from tests.service.test_api import as_array, solve_body
 from tests.service.test_passes_api import assert_bad_option
 
@@ -117,6 +117,22 @@ def test_options_mirror_over_http(client: Any, real_poses: PosePairs) -> None:
     default = client.get("/v1/models").json()["solve_mirror"]
     assert np.array_equal(poses[None], poses[default])
     assert not np.array_equal(poses[False], poses[True])
+
+
+def test_the_deployment_can_turn_the_default_off(
+    models_dir: Path, client: Any, real_poses: PosePairs
+) -> None:
+    """``POSE_SOLVE_MIRROR=false``: the default answer is the one ``mirror: false`` gets
+    from the shipped default, and a request can still ask for the mirror image."""
+    body = solve_body(real_poses, 0, ["left_wrist"])
+    shipped_off = client.post("/v1/solve", json={**body, "options": {"mirror": False}})
+    shipped_on = client.post("/v1/solve", json={**body, "options": {"mirror": True}})
+    with make_client(models_dir, solve_mirror=False) as fast:
+        assert fast.get("/v1/models").json()["solve_mirror"] is False
+        plain = fast.post("/v1/solve", json=body)
+        asked = fast.post("/v1/solve", json={**body, "options": {"mirror": True}})
+    assert as_array(plain.json()["pose"]).tolist() == as_array(shipped_off.json()["pose"]).tolist()
+    assert as_array(asked.json()["pose"]).tolist() == as_array(shipped_on.json()["pose"]).tolist()
 
 
 @pytest.mark.parametrize("value", ["yes", 1, [True]])
