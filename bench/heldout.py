@@ -98,6 +98,8 @@ class HeldoutConfig:
 
 #: A seconds-long configuration for tests and smoke runs.
 DEFAULT_DATASET = Path("data/poses.npz")
+#: The stress family of the in-studio TEST split as captured (the held-out tables' peer).
+STUDIO = "test: as captured"
 QUICK = HeldoutConfig(edits=12, stress=6, completions=4, recon=50)
 
 
@@ -290,6 +292,10 @@ class HeldoutResults:
         return next(
             (f for f in self.families if f.kind == "holdout" and f.name.endswith(": all")), None
         )
+
+    def studio(self) -> Family | None:
+        """The in-studio TEST split's world-space edits (:data:`STUDIO`), if run."""
+        return next((f for f in self.families if f.name == STUDIO), None)
 
     def to_json(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -531,7 +537,7 @@ def run_heldout(
     else:
         test_world = test.world()
         variants: list[tuple[str, Callable[[WorldPairs], WorldPairs] | None, str]] = [
-            ("test: as captured", None, "in-studio TEST split, the same world-space edits"),
+            (STUDIO, None, "in-studio TEST split, the same world-space edits"),
         ]
         for k, symmetric in enumerate((True, False)):
             what = "symmetric" if symmetric else "asymmetric"

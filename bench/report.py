@@ -10,7 +10,7 @@ from typing import Any
 from bench.accuracy import STRESS_METHODS
 from bench.edits import COMPOSED5, FIVE, METHOD_LABEL, METHODS, short
 from bench.goals import goals, heldout_goals
-from bench.heldout import COMPLETION, HeldoutResults
+from bench.heldout import COMPLETION, Family, HeldoutResults
 from bench.heldout import METHODS as HELD_METHODS
 from bench.markdown import fmt, table
 from core.io import write_atomic
@@ -520,6 +520,20 @@ def _mp(block: Any, method: str) -> str:
     return fmt(block[method].mpjpe) if block and method in block else "–"
 
 
+def _world_cells(name: str, studio: Family | None, block: Any) -> list[str]:
+    """One set's world-edit cells: start, FABRIK, soft (completion's own answer for the
+    completion set) and exact on the TEST split (``studio``), the same on the held-out
+    ``block``, and the held-out soft reach."""
+    soft = "completion" if name == COMPLETION else "neural_bone"
+    methods = ("identity", "fabrik", soft, "neural_exact")
+    st = studio.sets.get(name, {}) if studio else {}
+    return [
+        *(_mp(st, m) for m in methods),
+        *(_mp(block, m) for m in methods),
+        fmt(block[soft].reach_mean),
+    ]
+
+
 def heldout_sections(results: Json, plots: dict[str, str]) -> list[str]:
     """The held-out goals, the side-by-side table, the plot and per-family details."""
     if results.get("heldout_skipped"):
@@ -533,8 +547,7 @@ def heldout_sections(results: Json, plots: dict[str, str]) -> list[str]:
         return []
     h = HeldoutResults.from_json(results["heldout"])
     cfg = h.config
-    pooled = h.pooled()
-    studio = next((f for f in h.families if f.name == "test: as captured"), None)
+    pooled, studio = h.pooled(), h.studio()
     b1 = results.get("B1", {})
     md: list[str] = [
         "## Held-out bodies (world-space edits)",
@@ -559,17 +572,13 @@ def heldout_sections(results: Json, plots: dict[str, str]) -> list[str]:
     if pooled is not None:
         rows = []
         for name, block in pooled.sets.items():
-            st = studio.sets.get(name, {}) if studio else {}
             b = b1.get(name, {})
-            soft = "completion" if name == COMPLETION else "neural_bone"
             rows.append(
                 [
                     short(name),
                     fmt(b.get("fabrik", {}).get("mpjpe")),
                     fmt(b.get("neural_bone", {}).get("mpjpe")),
-                    *(_mp(st, m) for m in ("identity", "fabrik", soft, "neural_exact")),
-                    *(_mp(block, m) for m in ("identity", "fabrik", soft, "neural_exact")),
-                    fmt(block[soft].reach_mean),
+                    *_world_cells(name, studio, block),
                 ]
             )
         md += [
@@ -637,19 +646,11 @@ def captured_section(results: Json) -> list[str]:
     if not results.get("captured"):
         return []
     h = HeldoutResults.from_json(results["captured"])
-    fams = {f.name: f for f in h.families}
-    pooled = h.pooled()
-    studio = fams.get("test: as captured")
+    pooled, studio = h.pooled(), h.studio()
     if pooled is None:
         return []
-    methods = ("identity", "fabrik", "neural_bone", "neural_exact")
     rows = [
-        [
-            short(name),
-            *(_mp(studio.sets.get(name, {}) if studio else {}, m) for m in methods),
-            *(_mp(block, m) for m in methods),
-            fmt(block["neural_bone"].reach_mean),
-        ]
+        [short(name), *_world_cells(name, studio, block)]
         for name, block in pooled.sets.items()
         if name != COMPLETION
     ]
