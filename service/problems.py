@@ -188,6 +188,12 @@ class _Items:
         out: npt.NDArray[np.bool_] = np.arange(self.tidx.shape[1])[None, :] < self.n_t[:, None]
         return out
 
+    def neural_unpinned(self) -> npt.NDArray[np.bool_]:
+        """``[B]``: neural items with no pins (every column in use is a user target), the
+        ones whose start the engine may move or turn before solving."""
+        out: npt.NDArray[np.bool_] = ~self.fab & (self.cnt == self.n_t)
+        return out
+
     def travelled(self, pelvis: bool, reach: bool, few: int) -> _Items:
         """These items with their starts moved across first, as the serving settings say:
         onto a pelvis target (``pelvis``: ``serving.pelvis_travel``), then towards a target
@@ -205,7 +211,7 @@ class _Items:
         if not on.any():  # the common case: no pelvis column at all
             return self
         cols = self.targets() & on
-        rows = np.flatnonzero(cols.any(axis=1) & ~self.fab & (self.cnt == self.n_t))
+        rows = np.flatnonzero(cols.any(axis=1) & self.neural_unpinned())
         if rows.size == 0:
             return self
         shift = self.tpos[rows, np.argmax(cols[rows], axis=1)] - self.poses[rows, PELVIS]
@@ -221,7 +227,7 @@ class _Items:
         networks see it within reach (``serving.reach_travel``: a body steps towards what
         it cannot reach, as FABRIK's root moves). The others as they are. A chain is the
         sum of the start's own bones from the pelvis to the joint."""
-        go = ~self.fab & (self.cnt == self.n_t) & (self.n_t < few)
+        go = self.neural_unpinned() & (self.n_t < few)
         if not go.any():
             return self
         shift = compiled.reach_shift(self.poses, self.tidx, self.tpos, self.n_t, go)

@@ -107,7 +107,7 @@ def searching(engine: Engine, items: _Items) -> npt.NDArray[np.intp]:
     t = engine.turn_search
     if t.yaws <= 1:
         return np.zeros(0, dtype=np.intp)
-    ok = items.turn & ~items.fab & (items.n_t >= t.min_targets) & (items.cnt == items.n_t)
+    ok = items.turn & items.neural_unpinned() & (items.n_t >= t.min_targets)
     return np.flatnonzero(ok)
 
 
