@@ -61,11 +61,11 @@ def run_once(
     sequence: tuple[str, ...],
 ) -> npt.NDArray[np.float32]:
     """Encode, run a solver sequence, decode: one ORT run per stage."""
-    if engine.delta:  # shipped fused graphs give the (anchored) delta answer
-        return delta(engine, x, canvas, sequence)
-    if len(sequence) == 1:  # one fused run: encode, solve, decode
+    if len(sequence) == 1:  # one fused run: encode, solve, decode (the delta answer in it)
         key = sequence[0]
         return engine.fused[key](x, canvas[:, engine.solver_joints[key]].reshape(len(x), -1))
+    if engine.delta:  # shipped fused graphs give the (anchored) delta answer
+        return delta(engine, x, canvas, sequence)
     z = engine.encoder(x)  # none (only uncovered joints) or a composed sequence
     if sequence:
         z = compose(engine, z, canvas, sequence)
@@ -78,13 +78,11 @@ def delta(
     canvas: npt.NDArray[np.float32],
     sequence: tuple[str, ...],
 ) -> npt.NDArray[np.float32]:
-    """Delta answers (``serving.delta``): each solver's fused graph moves the CURRENT
+    """Delta answers (``serving.delta``) of a sequence of solvers (one alone is
+    :func:`run_once`'s single fused run): each solver's fused graph moves the CURRENT
     pose by what it changes in the decoded pose (anchored or not, as exported), so the
     autoencoder's own error on the start pose never reaches the answer. Between solvers
     the targets solved so far are pasted onto the pose (``composition="reencode"``)."""
-    if len(sequence) == 1:  # one solver: its graph on the start pose, nothing to paste
-        key = sequence[0]
-        return engine.fused[key](x, canvas[:, engine.solver_joints[key]].reshape(len(x), -1))
     pose = x.copy()
     flat = canvas.reshape(len(x), -1)
     for key, joints, cols in steps(engine, sequence):
