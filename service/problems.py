@@ -329,7 +329,10 @@ def _per_item(value: npt.ArrayLike, n: int, dtype: type[np.generic], k: int | No
     shape = (n,) if k is None else (n, k)
     if isinstance(value, (bool, int, float)) or np.ndim(value) == 0:
         return np.full(shape, value, dtype=dtype)
-    wide = np.broadcast_to(np.asarray(value, dtype=dtype), shape)
+    given = np.asarray(value, dtype=dtype)
+    if given.shape == shape:  # the common case, a fraction of broadcasting's cost
+        return given.copy()  # C order, writable, and never the caller's array
+    wide = np.broadcast_to(given, shape)
     return np.require(wide, requirements=["C_CONTIGUOUS", "WRITEABLE"])
 
 

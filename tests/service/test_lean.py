@@ -160,8 +160,13 @@ def test_one_problem_as_items_equals_its_stacked_arrays(
     ):  # fmt: skip
         carry, mirror = engine.carry_of(p), engine.mirror_of(p)
         one = _Items.of_problem(p, carry, mirror)
-        other = _Items.of_arrays(**stacked([p]), carry=[carry], mirror=[mirror])
+        given = stacked([p])
+        other = _Items.of_arrays(**given, carry=[carry], mirror=[mirror])
         for f in dataclasses.fields(one):
             a, b = getattr(one, f.name), getattr(other, f.name)
             assert a.dtype == b.dtype and np.array_equal(a, b), f.name
             assert a.flags.writeable and a.flags.c_contiguous, f.name
+            assert b.flags.writeable and b.flags.c_contiguous, f.name
+        # per-item options are the engine's own copies, never the caller's arrays
+        for name in ("w", "fab", "keep", "ex", "tols", "floors", "turn", "cnt", "n_t"):
+            assert not any(np.shares_memory(getattr(other, name), g) for g in given.values()), name
