@@ -116,6 +116,8 @@ class Engine:
             key: np.asarray([JOINT_INDEX[j] for j in entry.joints], dtype=np.intp)
             for key, entry in m.solvers().items()
         }
+        #: how each solver's edit is asked of its mirror image (``serving.solve_mirror``)
+        self.mirror_views = networks.mirror_views(self.solver_joints)
         self.completion = [net(entry) for entry in m.completion_levels()]
         # each completion level's key points in its input order, and where each one's
         # mirror image sits in that order (the symmetry views of serving.completion_*)

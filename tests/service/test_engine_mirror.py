@@ -13,7 +13,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from core.skeleton import mirror_key, mirrored
+from core.skeleton import MIRROR_COLUMNS, MIRROR_SIGNS, mirror_key, mirrored
+from service import networks
 from service.engine import Engine
 from service.problems import SolveProblem
 from tests.conftest import PosePairs, edit_problems, make_client
@@ -50,6 +51,34 @@ def test_mirror_helpers() -> None:
     assert mirror_key("left_elbow") == "right_elbow"
     assert mirror_key("left_wrist+right_wrist") == "left_wrist+right_wrist"
     assert mirror_key("head+left_ankle") == "head+right_ankle"
+    flat = poses.reshape(4, -1)  # the flat form is the same permutation and sign
+    np.testing.assert_array_equal(
+        flat[:, MIRROR_COLUMNS] * MIRROR_SIGNS, mirrored(poses).reshape(4, -1)
+    )
+
+
+def test_one_solver_fast_way_gives_the_general_ways_numbers(
+    engines: tuple[Engine, Engine], real_poses: PosePairs
+) -> None:
+    """``networks.both_views`` (one solver: mirrored inputs from flat columns, one run
+    where the set is its own mirror image) is bit for bit the mean of the solver's answer
+    and its mirror solver's answer to the mirrored pose and targets, taken back, on the
+    rows asked; the other rows are the solver's answer alone."""
+    engine = engines[1]
+    x = real_poses.poses[real_poses.starts[:6]].astype(np.float32)  # [6, 21, 3]
+    canvas = np.ascontiguousarray(real_poses.poses[real_poses.goals[:6]], dtype=np.float32)
+    views = np.asarray([True, False, True, True, False, True])
+    assert set(engine.mirror_views) == set(engine.solvers)  # every shipped solver has one
+    for key, view in engine.mirror_views.items():
+        got = networks.both_views(engine, x.reshape(6, -1), canvas, view, views)
+        want = networks.run_once(engine, x.reshape(6, -1), canvas, (key,))
+        other = networks.run_once(
+            engine, mirrored(x[views]).reshape(4, -1), mirrored(canvas[views]), (view.back,)
+        )
+        back = mirrored(other.reshape(4, 21, 3)).reshape(4, -1)
+        want[views] = (want[views] + back) * np.float32(0.5)
+        np.testing.assert_array_equal(got, want, err_msg=key)
+        assert view.back == mirror_key(key)
 
 
 @pytest.mark.parametrize("names", [("left_wrist",), ("left_elbow",), WRISTS])
