@@ -709,6 +709,10 @@ def main(
         Optional[bool],  # noqa: UP045
         typer.Option(help="Each pass also solves the mirror image (default: serving)."),
     ] = None,
+    retry_polish: Annotated[
+        Optional[bool],  # noqa: UP045
+        typer.Option(help="Soft answers left short polished onto targets (default: serving)."),
+    ] = None,
     captured: Annotated[
         bool,
         typer.Option(help="Starts left where captured, not on the target's pelvis."),
@@ -729,7 +733,7 @@ def main(
         models, threads=1, solve_passes=passes, carry=carry, turn_yaws=turn_yaws, turn_fit=turn_fit,
         keep_ends=keep_ends, keep_elbows=keep_elbows, keep_ease=keep_ease,
         keep_collar=keep_collar, keep_pelvis=keep_pelvis, pelvis_travel=pelvis_travel,
-        reach_travel=reach_travel, solve_mirror=solve_mirror,
+        reach_travel=reach_travel, solve_mirror=solve_mirror, retry_polish=retry_polish,
     )  # fmt: skip
     res = run_heldout(engine, load_dataset(dataset), cfg, split=split, log=console.log)
     res.models = {
@@ -740,6 +744,7 @@ def main(
         "keep_ease": engine.keep_ease, "keep_collar": engine.keep_collar,
         "keep_pelvis": engine.keep_pelvis, "pelvis_travel": engine.pelvis_travel,
         "reach_travel": engine.reach_travel, "solve_mirror": engine.solve_mirror,
+        "retry_polish": engine.retry_polish,
     }  # fmt: skip
     if out is not None:
         out.parent.mkdir(parents=True, exist_ok=True)

@@ -230,6 +230,13 @@ class Serving(_Strict):
         "than this many metres away after its passes gets one more pass from that answer "
         "(service.engine: the edits the passes left short, and only they); 0 = never.",
     )
+    retry_polish: bool = Field(
+        default=False,
+        description="A soft answer still more than `retry_reach` from a target after that "
+        "pass is polished onto its targets (FABRIK from the answer, the trunk held first, "
+        "to the item's tolerance), as exact reach is: a soft answer then never misses by "
+        "more than `retry_reach`. Off, or with `retry_reach` 0: the networks' answer as is.",
+    )
     passes: int = Field(
         default=1,
         ge=1,

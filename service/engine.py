@@ -92,6 +92,7 @@ class Engine:
         turn_yaws: int | None = None,
         turn_fit: float | None = None,
         retry_reach: float | None = None,
+        retry_polish: bool | None = None,
         keep_ends: bool | None = None,
         keep_elbows: bool | None = None,
         keep_ease: float | None = None,
@@ -199,6 +200,10 @@ class Engine:
         self.solve_passes = m.serving.passes if solve_passes is None else int(solve_passes)
         #: soft answers further than this (m) from a target get one more pass (0: never)
         self.retry_reach = m.serving.retry_reach if retry_reach is None else float(retry_reach)
+        #: soft answers still further than ``retry_reach`` after that pass are polished
+        #: onto their targets (``serving.retry_polish`` unless overridden)
+        polish = m.serving.retry_polish if retry_polish is None else retry_polish
+        self.retry_polish = bool(polish)
         if self.solve_passes < 1:
             raise ValueError(f"solve_passes must be at least 1, got {self.solve_passes}")
         self.composition = composition
@@ -391,20 +396,64 @@ class Engine:
         """``ans`` with one more pass, from its answer, for every soft neural item (bone
         lengths kept) whose farthest target is still more than ``serving.retry_reach``
         away: the passes left it short, as the bone pass takes back what the networks
-        reached for (docs/generalisation-serving.md item 25). Such an item gets what one more of
-        its passes would give it; the others are untouched."""
+        reached for (docs/generalisation-serving.md item 25). Such an item gets what one
+        more of its passes would give it; the others are untouched. With
+        ``serving.retry_polish``, an item that pass still leaves short is then polished
+        onto its targets (:meth:`_polish_short`)."""
         if self.retry_reach <= 0.0 or ans.pose.shape[0] == 0:
             return ans
         if float(ans.errors.max()) <= self.retry_reach:  # the common case, one reduction
             return ans
-        far = np.where(items.targets(), ans.errors, 0.0).max(axis=1) > self.retry_reach
-        sel = np.flatnonzero(far & ~items.fab & ~items.ex & items.keep)
+        sel = self._short(items, ans)
         if sel.size == 0:
             return ans
         again = self._solve_items(
             items.soft(sel, compiled.as_f64(ans.pose)), np.ones(sel.size, np.int64)
         )
-        return ans.with_items(sel, again)
+        ans = ans.with_items(sel, again)
+        return self._polish_short(items, ans) if self.retry_polish else ans
+
+    def _short(self, items: _Items, ans: BatchAnswer) -> npt.NDArray[np.intp]:
+        """The soft neural items (bone lengths kept) of ``ans`` whose farthest user target
+        is more than ``serving.retry_reach`` away."""
+        far = np.where(items.targets(), ans.errors, 0.0).max(axis=1) > self.retry_reach
+        out: npt.NDArray[np.intp] = np.flatnonzero(far & ~items.fab & ~items.ex & items.keep)
+        return out
+
+    def _polish_short(self, items: _Items, ans: BatchAnswer) -> BatchAnswer:
+        """``ans`` with every item still short (:meth:`_short`) polished from its answer
+        onto its targets, to its own tolerance, as exact reach polishes: the compiled
+        FABRIK polish, trunk held first, pins held (``serving.retry_polish``,
+        docs/generalisation-serving.md item 37). Its ``solvers`` get ``fabrik-polish``. An
+        item the polish would leave no nearer (the iteration cap) keeps its answer."""
+        sel = self._short(items, ans)
+        if sel.size == 0:
+            return ans
+        short = dataclasses.replace(items.take(sel), poses=compiled.as_f64(ans.pose[sel]))
+        tpos, (canon, facing, trans, _l, _s, tcan, _x, _c) = self._prepare(
+            short.poses, short, np.zeros(sel.size, dtype=np.bool_)
+        )
+        lengths = np.ascontiguousarray(bone_lengths(items.poses[sel]))  # the caller's own
+        out, iterations = canon.copy(), np.zeros(sel.size, dtype=np.int64)
+        for g in _groups(short.cnt, short.n_t, short.tidx, short.w):
+            m, k = g.members, len(g.idx)
+            out[m], iterations[m], _ = self._fabrik(
+                True, canon[m], lengths[m], tcan[m, :k], short.tols[m], g.idx, g.weights,
+                np.arange(k) >= g.n_targets,
+            )  # fmt: skip
+        world, errors, bone_err = compiled.finish(
+            out, facing, trans, short.floors, short.tidx, tpos, short.cnt, lengths
+        )
+        before = ans.take(sel)
+        user = short.targets()
+        nearer = np.flatnonzero(
+            np.where(user, errors, 0.0).max(axis=1) < np.where(user, before.errors, 0.0).max(axis=1)
+        )
+        polished = BatchAnswer(
+            world, errors, bone_err, iterations + before.iterations,
+            tuple((*path, "fabrik-polish") for path in before.paths), before.path_of,
+        ).take(nearer)  # fmt: skip
+        return ans.with_items(sel[nearer], polished)
 
     def _solve_items(self, items: _Items, reps: npt.NDArray[np.int64]) -> BatchAnswer:
         """:meth:`solve_arrays` of normalised items with their passes ``reps``."""

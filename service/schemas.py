@@ -269,6 +269,11 @@ class ModelsResponse(BaseModel):
         description="Metres beyond which a soft answer's farthest target gets one more pass "
         "from that answer (0: never; the manifest's `serving.retry_reach`)."
     )
+    retry_polish: bool = Field(
+        description="Whether a soft answer still farther than `retry_reach` from a target "
+        "after that pass is polished onto its targets, as exact reach is (`solvers` then "
+        "ends with `fabrik-polish`; the manifest's `serving.retry_polish`)."
+    )
     keep_ends: bool = Field(
         description="Whether the bone pass keeps each targeted wrist and ankle where the "
         "networks put it, its elbow or knee placed anew with the character's lengths (the "

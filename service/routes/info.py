@@ -43,6 +43,7 @@ async def models(engine: ReadyEngine) -> ModelsResponse:
         turn_critic=engine.turn_search.critic,
         turn_plausibility=engine.turn_search.plausibility,
         retry_reach=engine.retry_reach,
+        retry_polish=engine.retry_polish,
         keep_ends=engine.keep_ends,
         keep_elbows=engine.keep_elbows,
         keep_ease=engine.keep_ease,

@@ -194,7 +194,7 @@ def test_a_soft_answer_left_short_gets_one_more_pass(
     assert Engine(models_dir).retry_reach == 0.02
     plain = Engine(models_dir, solve_passes=2, retry_reach=0.0)
     more = Engine(models_dir, solve_passes=3, retry_reach=0.0)
-    retry = Engine(models_dir, solve_passes=2, retry_reach=0.01)
+    retry = Engine(models_dir, solve_passes=2, retry_reach=0.01, retry_polish=False)
     starts, goals = _other_bodies(real_poses)
     soft = _problems(starts[:40], goals[:40], WRISTS)
     exact = _problems(starts[40:50], goals[40:50], WRISTS, reach="exact")
@@ -210,3 +210,33 @@ def test_a_soft_answer_left_short_gets_one_more_pass(
         assert np.array_equal(alone.pose, g.pose)
     errors = [float(g.errors.max()) for g in got[:40]]
     assert np.mean(errors) < np.mean([float(b.errors.max()) for b in base[:40]])
+
+
+# -- the polish of what the retry leaves short (``serving.retry_polish``) --------------------
+def test_a_soft_answer_the_retry_leaves_short_is_polished(
+    models_dir: Path, real_poses: PosePairs
+) -> None:
+    """With ``retry_polish``, a soft answer still further than ``retry_reach`` from a
+    target after the retry is polished onto its targets, to its tolerance: its solvers
+    end with ``fabrik-polish``, its bone lengths stay the caller's; every other answer is
+    the one without the polish, bit for bit; alone and in a batch alike. The shipped
+    models polish."""
+    assert Engine(models_dir).retry_polish
+    plain = Engine(models_dir, retry_reach=0.01, retry_polish=False)
+    polish = Engine(models_dir, retry_reach=0.01, retry_polish=True)
+    starts, goals = _other_bodies(real_poses)
+    soft = _problems(starts, goals, WRISTS) + _problems(starts, goals, ("left_elbow",))
+    base, got = plain.solve(soft), polish.solve(soft)
+    short = [float(b.errors.max()) > 0.01 for b in base]
+    assert 0 < sum(short) < len(soft)  # real edits on both sides of the threshold
+    for i, (p, g, b) in enumerate(zip(soft, got, base, strict=True)):
+        if short[i]:
+            assert g.solvers == [*b.solvers, "fabrik-polish"], i
+            assert float(g.errors.max()) <= p.tolerance < float(b.errors.max()), i
+            assert g.iterations > 0
+            lengths = bone_lengths(p.pose)
+            assert np.abs(bone_lengths(g.pose) / lengths - 1.0).max() < 1e-9, i
+        else:
+            assert np.array_equal(g.pose, b.pose) and g.solvers == b.solvers, i
+        (alone,) = polish.solve([p])
+        assert np.array_equal(alone.pose, g.pose) and alone.solvers == g.solvers, i
