@@ -200,6 +200,13 @@ VARIANTS: dict[str, str] = {
     "solve_mirror": "mx1-a396ee05a58c (mx1-3f5e57dad299 with `serving.solve_mirror`: each pass "
     "also solves the mirror image with the mirrored set's solvers, the mean answered): shipped",
     "captured_solve_mirror": "`solve_mirror` on the captured edits: shipped",
+    "retry_polish": "mx1-c34901011fe4 (mx1-a396ee05a58c with `serving.retry_polish`: a soft "
+    "answer the retry still leaves more than 2 cm short is polished onto its targets, to "
+    "the item's tolerance): shipped",
+    "captured_retry_polish": "`retry_polish` on the captured edits: shipped",
+    "retry_polish_to_cap": "the same polish stopped within 2 cm of the targets (a `/tmp` "
+    "form)",
+    "captured_retry_polish_to_cap": "`retry_polish_to_cap` on the captured edits",
 }
 COMPLETION = "6-point completion"
 
