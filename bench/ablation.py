@@ -204,8 +204,7 @@ VARIANTS: dict[str, str] = {
     "answer the retry still leaves more than 2 cm short is polished onto its targets, to "
     "the item's tolerance): shipped",
     "captured_retry_polish": "`retry_polish` on the captured edits: shipped",
-    "retry_polish_to_cap": "the same polish stopped within 2 cm of the targets (a `/tmp` "
-    "form)",
+    "retry_polish_to_cap": "the same polish stopped within 2 cm of the targets (a `/tmp` form)",
     "captured_retry_polish_to_cap": "`retry_polish_to_cap` on the captured edits",
 }
 COMPLETION = "6-point completion"

@@ -6,13 +6,19 @@ A batch is cut into chunks of at most ``CHUNK_PRICE`` units (a plain neural item
 exact reach, pins, the fabrik method - costs ``FABRIK_PRICE``, a neural one that also
 polishes ``FABRIK_PRICE - 1`` plus its passes; a turn search multiplies the passes by
 its solves; the engine's retry of a soft answer left short, ``serving.retry_reach``, adds
-the one more pass it may run, and the polish of what that pass still leaves short,
-``serving.retry_polish``, prices a soft item's polish as exact reach's). The engine's side
-of a price is one :class:`Pricing`. Chunks run in worker threads under the app's compute
-limiter, in waves as wide as the compute tokens free at the time (so one big batch uses
-every compute thread: 1.6-1.9x the engine's poses/s on 2); between waves the request
-checks its deadline and its client, and stops (504 or 499) instead of computing answers
-nobody will read.
+the one more pass it may run). The engine's side of a price is one :class:`Pricing`. Chunks run
+in worker threads under the app's compute limiter, in waves as wide as the compute tokens
+free at the time (so one big batch uses every compute thread: 1.6-1.9x the engine's
+poses/s on 2); between waves the request checks its deadline and its client, and stops
+(504 or 499) instead of computing answers nobody will read.
+
+The polish of a soft answer its retry still leaves short (``serving.retry_polish``) is not
+priced: it runs for the few answers the networks leave over 2 cm short (2-3 % of real
+edits, docs/generalisation-serving.md item 37), each bounded by the iteration cap (at most
+~0.6 ms an item, 5 targets at tolerance 0, both stages at the cap: 512 iterations), so a
+chunk of soft items that all polish runs at most some tens of ms longer. Priced as exact
+reach's, it would cut a chunk of shipped 2-target soft items from 42 to 12 and halve a
+batch's poses/s on 2 threads (18-22k -> 8-9k, measured in one process).
 """
 
 from __future__ import annotations
@@ -62,22 +68,18 @@ class Pricing:
     items that do not say); ``search``, its turn search; ``retry``, whether it gives a soft
     answer left short one more pass (``serving.retry_reach``, ``Engine._retry``);
     ``mirror``, whether its passes also solve the mirror image (for items that do not
-    say; ``serving.solve_mirror``); ``polish``, whether a soft answer that retry still
-    leaves short is polished onto its targets (``serving.retry_polish``)."""
+    say; ``serving.solve_mirror``)."""
 
     passes: int = 1
     search: TurnSearch = NO_SEARCH
     retry: bool = False
     mirror: bool = False
-    polish: bool = False
 
     @staticmethod
     def of(engine: Engine) -> Pricing:
-        retry = engine.retry_reach > 0.0
         return Pricing(
-            engine.solve_passes, engine.turn_search, retry, engine.solve_mirror,
-            retry and engine.retry_polish,
-        )  # fmt: skip
+            engine.solve_passes, engine.turn_search, engine.retry_reach > 0.0, engine.solve_mirror
+        )
 
 
 def neural_price(
@@ -86,8 +88,7 @@ def neural_price(
     """A neural item of ``passes`` passes: one unit per pass (times ``search``, its turn
     search's solves), one more for the engine's ``retry`` (soft items), all times its
     ``views`` (2 with the mirror image), plus the FABRIK polish's ``FABRIK_PRICE - 1``
-    when it may run one (exact reach, pins, a soft answer left short with
-    ``serving.retry_polish``)."""
+    when it runs one (exact reach, pins)."""
     return (passes * search + int(retry)) * views + (FABRIK_PRICE - 1 if slow else 0)
 
 
@@ -101,8 +102,7 @@ def price_of(o: Priced, pinned: bool, pricing: Pricing, search: int = 1) -> int:
     p = pricing.passes if o.passes is None else o.passes
     soft = o.reach != "exact"
     views = 2 if (pricing.mirror if o.mirror is None else o.mirror) else 1
-    slow = not soft or pinned or pricing.polish  # the polish: exact, pins, a short answer
-    return neural_price(slow, p, search, pricing.retry and soft, views)
+    return neural_price(not soft or pinned, p, search, pricing.retry and soft, views)
 
 
 def searched_price(o: Priced, n_targets: int, pinned: bool, pricing: Pricing) -> int:

@@ -177,25 +177,17 @@ def test_prices_count_passes(real_poses: PosePairs) -> None:
     assert limits.price(exact, both) == limits.price(exact, two) + 2
     assert limits.price(fabrik, both) == limits.FABRIK_PRICE
     assert limits.max_item_price(both) == limits.max_item_price(retry)
-    # an engine that polishes what its retry leaves short (serving.retry_polish) prices a
-    # soft item's possible polish as exact reach's; exact reach and FABRIK are unchanged
-    polish = limits.Pricing(2, retry=True, mirror=True, polish=True)
-    assert limits.price(soft, polish) == limits.price(soft, both) + limits.FABRIK_PRICE - 1
-    assert limits.price(exact, polish) == limits.price(exact, both)
-    assert limits.price(pinned, polish) == limits.price(pinned, both)
-    assert limits.price(fabrik, polish) == limits.FABRIK_PRICE
-    assert limits.max_item_price(polish) == limits.max_item_price(both)
 
 
 def test_engine_pricing_follows_the_models(engine: Engine, models_dir: Path) -> None:
-    """``Pricing.of``: the engine's default passes, turn search, retry, mirror image and
-    polish, as it runs them."""
+    """``Pricing.of``: the engine's default passes, turn search, retry and mirror image, as
+    it runs them."""
     pricing = limits.Pricing.of(engine)
-    assert pricing == limits.Pricing(engine.solve_passes, engine.turn_search, True, True, True)
+    assert pricing == limits.Pricing(engine.solve_passes, engine.turn_search, True, True)
     assert engine.retry_reach > 0  # the shipped models retry (serving.retry_reach)
     assert engine.solve_mirror  # ... and solve the mirror image (serving.solve_mirror)
-    assert engine.retry_polish  # ... and polish what the retry leaves short
     assert not limits.Pricing.of(Engine(models_dir, retry_reach=0.0)).retry
-    assert not limits.Pricing.of(Engine(models_dir, retry_reach=0.0)).polish
-    assert not limits.Pricing.of(Engine(models_dir, retry_polish=False)).polish
+    # the polish of a short soft answer is not priced (service.limits says why)
+    assert engine.retry_polish
+    assert limits.Pricing.of(Engine(models_dir, retry_polish=False)) == pricing
     assert not limits.Pricing.of(Engine(models_dir, solve_mirror=False)).mirror
