@@ -49,6 +49,7 @@ from service.lean import (
     fabrik_batch,
     lean_answer,
     lean_sequence,
+    solve_fabrik,
     solve_lean,
     uncovered,
 )
@@ -430,27 +431,22 @@ class Engine:
         if sel.size == 0:
             return ans
         short = dataclasses.replace(items.take(sel), poses=compiled.as_f64(ans.pose[sel]))
-        tpos, (canon, facing, trans, _l, _s, tcan, _x, _c) = self._prepare(
-            short.poses, short, np.zeros(sel.size, dtype=np.bool_)
-        )
         lengths = np.ascontiguousarray(bone_lengths(items.poses[sel]))  # the caller's own
-        out, iterations = canon.copy(), np.zeros(sel.size, dtype=np.int64)
-        for g in _groups(short.cnt, short.n_t, short.tidx, short.w):
-            m, k = g.members, len(g.idx)
-            out[m], iterations[m], _ = self._fabrik(
-                True, canon[m], lengths[m], tcan[m, :k], short.tols[m], g.idx, g.weights,
-                np.arange(k) >= g.n_targets,
-            )  # fmt: skip
-        world, errors, bone_err = compiled.finish(
-            out, facing, trans, short.floors, short.tidx, tpos, short.cnt, lengths
-        )
         before = ans.take(sel)
+        world, errors = before.pose.copy(), before.errors.copy()
+        bone_err, iterations = before.max_bone_error.copy(), before.iterations.copy()
+        for g in _groups(short.cnt, short.n_t, short.tidx, short.w):
+            m = g.members
+            world[m], errors[m], bone_err[m], its = solve_fabrik(
+                self, short.take(m), polish=True, lengths=lengths[m]
+            )
+            iterations[m] += its
         user = short.targets()
         nearer = np.flatnonzero(
             np.where(user, errors, 0.0).max(axis=1) < np.where(user, before.errors, 0.0).max(axis=1)
         )
         polished = BatchAnswer(
-            world, errors, bone_err, iterations + before.iterations,
+            world, errors, bone_err, iterations,
             tuple((*path, "fabrik-polish") for path in before.paths), before.path_of,
         ).take(nearer)  # fmt: skip
         return ans.with_items(sel[nearer], polished)

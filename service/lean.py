@@ -149,16 +149,21 @@ def fabrik_batch(items: _Items) -> bool:
     return items.poses.shape[0] > 0 and bool(items.fab.all()) and one_set(items)
 
 
-def solve_fabrik(engine: Engine, items: _Items) -> Solved:
+def solve_fabrik(
+    engine: Engine, items: _Items, *, polish: bool = False, lengths: F64 | None = None
+) -> Solved:
     """FABRIK for every item of ``items`` (one target set, its targets then its pins): the
-    canonical frame, the compiled FABRIK, the way back; as :func:`solve_lean` answers."""
+    canonical frame, the compiled FABRIK, the way back; as :func:`solve_lean` answers.
+    ``polish``: the exact-reach polish instead (trunk held first); ``lengths`` ``[B, 20]``:
+    the bones to keep (default: the poses' own)."""
     n = items.poses.shape[0]
     c = int(items.cnt[0])
-    tpos, (canon, facing, trans, lengths, _scales, tcan, _x, _canvas) = engine._prepare(
+    tpos, (canon, facing, trans, own, _scales, tcan, _x, _canvas) = engine._prepare(
         items.poses, items, np.zeros(n, dtype=np.bool_)
     )
+    lengths = own if lengths is None else lengths
     out, iterations, _ = engine._fabrik(
-        False, canon, lengths, tcan[:, :c], items.tols, items.tidx[0, :c], items.w[0, :c],
+        polish, canon, lengths, tcan[:, :c], items.tols, items.tidx[0, :c], items.w[0, :c],
         np.arange(c) >= int(items.n_t[0]),
     )  # fmt: skip
     pose, errors, bone_err = compiled.finish(
