@@ -81,3 +81,48 @@ def test_the_answer_is_the_same_on_one_compute_thread_or_two(
             assert r.status_code == 200, r.text
             answers.append(r.content)
     assert answers[0] == answers[1]
+
+
+def test_light_solves_run_on_the_loop_and_the_rest_in_a_worker(
+    client: Any, real_poses: PosePairs, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``Engine.light``: a single edit that costs a few network runs is answered on the
+    event loop's thread (a thread hop would cost about as much again); a turn search,
+    composed solvers, pins, exact reach and FABRIK run in a worker thread, so the loop
+    stays free for other requests."""
+    from service.engine import Engine
+    from tests.service.test_api import solve_body
+
+    where: list[int] = []
+    solve = Engine.solve
+
+    def spy(self: Engine, problems: Any) -> Any:
+        where.append(threading.get_ident())
+        return solve(self, problems)
+
+    monkeypatch.setattr(Engine, "solve", spy)
+    five = ["head", "left_wrist", "right_wrist", "left_ankle", "right_ankle"]
+    wrists = solve_body(real_poses, 0, ["left_wrist", "right_wrist"])
+    pinned = {**wrists, "pins": ["left_ankle"]}
+    bodies = {
+        "light": [wrists, solve_body(real_poses, 1, ["left_elbow"])],
+        "worker": [
+            solve_body(real_poses, 0, five),  # the turn search
+            solve_body(real_poses, 0, ["left_elbow", "right_knee"]),  # two solvers composed
+            pinned,
+            solve_body(real_poses, 0, ["left_wrist"], reach="exact"),
+            solve_body(real_poses, 0, ["left_wrist"], method="fabrik"),
+        ],
+    }
+    threads: dict[str, list[int]] = {}
+    for kind, group in bodies.items():
+        threads[kind] = []
+        for body in group:
+            where.clear()
+            r = client.post("/v1/solve", json=body)
+            assert r.status_code == 200, r.text
+            assert len(where) == 1
+            threads[kind].append(where[0])
+    loop = threads["light"][0]
+    assert set(threads["light"]) == {loop}
+    assert loop not in threads["worker"]
