@@ -271,21 +271,6 @@ class Engine:
         ans = lean_answer(self, items, passes, seq)
         return None if ans is None else self._result(p, self._retry(items, ans), 0)
 
-    def light(self, p: SolveProblem) -> bool:
-        """Whether solving ``p`` costs only a few network runs (under a millisecond or so
-        here): neural soft reach, bone lengths kept, no pins, no turn search, one solver
-        covering every target (its fused graph, with its mirror image's, per pass). The
-        service answers these on the event loop (a thread hop costs ~0.3 ms here) and
-        everything else in a worker thread."""
-        if p.method == "fabrik" or p.reach != "soft" or not p.preserve_bone_lengths:
-            return False
-        if p.n_targets != len(p.target_idx):  # pins: a FABRIK polish holds them
-            return False
-        if self.turn_search.searches(p.method, p.n_targets, False, p.turn_search):
-            return False
-        seq = covering(self, compiled.as_i64(p.target_idx), compiled.as_f64(p.weights))
-        return seq is not None and len(seq) == 1
-
     def passes_of(self, p: SolveProblem) -> int:
         """The neural passes ``p`` asks for (``solve_passes`` unless it says)."""
         return self.solve_passes if p.passes is None else p.passes

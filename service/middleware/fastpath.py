@@ -144,7 +144,7 @@ class FastPath:
         engine = state.repository.ready_engine()
         budget = Budget(Request(scope, receive), state.settings.deadline_seconds)
         try:
-            result = await solve_one(p, engine, budget)  # the route's own
+            result = await solve_one(p, bool(req.pins), engine, budget)  # the route's own
         except PoseError as exc:
             await _problem(scope, receive, send, exc)
             return True

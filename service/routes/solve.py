@@ -86,17 +86,16 @@ async def solve(body: SolveBody, engine: ReadyEngine, budget: RequestBudget,
     if isinstance(req, CharacterSolveRequest):
         return json_response(await answer_character(req, engine, budget, state), budget.compute)
     p = solve_problem(req, poses([req], ["pose"])[0])
-    result = await solve_one(p, engine, budget)
+    result = await solve_one(p, bool(req.pins), engine, budget)
     state.metrics.solved(p.method, result.solvers)
     return json_response(solve_payload(p, result, engine.version), budget.compute)
 
 
-async def solve_one(p: SolveProblem, engine: Engine, budget: Budget) -> SolveResult:
-    """One pose problem, its engine time added to the budget's:
-    a light solve (``Engine.light``: one fused graph per pass, ~0.3-0.7 ms) inline, where a
-    thread hop would cost about as much again; anything else (a turn search, composed
-    solvers, FABRIK: milliseconds) in a worker thread, so the loop stays free."""
-    if engine.light(p):
+async def solve_one(p: SolveProblem, pinned: bool, engine: Engine, budget: Budget) -> SolveResult:
+    """One pose problem (``pinned``: it has pins), its engine time added to the budget's:
+    a neural soft solve without pins inline (~0.15 ms: inline beats a thread hop), anything
+    else in a worker thread (FABRIK iterations can take milliseconds: the loop stays free)."""
+    if p.method == "neural" and p.reach == "soft" and not pinned:
         t = time.perf_counter()
         (result,) = engine.solve([p])
         budget.compute += time.perf_counter() - t
