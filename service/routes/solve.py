@@ -93,8 +93,11 @@ async def solve(body: SolveBody, engine: ReadyEngine, budget: RequestBudget,
 
 async def solve_one(p: SolveProblem, pinned: bool, engine: Engine, budget: Budget) -> SolveResult:
     """One pose problem (``pinned``: it has pins), its engine time added to the budget's:
-    a neural soft solve without pins inline (~0.15 ms: inline beats a thread hop), anything
-    else in a worker thread (FABRIK iterations can take milliseconds: the loop stays free)."""
+    a neural soft solve without pins inline (0.3-0.7 ms; a turn search 2-4 ms), anything
+    else in a worker thread (FABRIK iterations can take milliseconds: the loop stays free).
+    Inline even for the turn search: in a worker it shares the GIL with the loop, and over
+    HTTP a lone 5-target edit took 6.2 against 5.0 ms, and beside a client of 2-target
+    edits 13-16 against 4-8 ms (docs/service.md, "Work per request")."""
     if p.method == "neural" and p.reach == "soft" and not pinned:
         t = time.perf_counter()
         (result,) = engine.solve([p])

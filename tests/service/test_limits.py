@@ -81,3 +81,51 @@ def test_the_answer_is_the_same_on_one_compute_thread_or_two(
             assert r.status_code == 200, r.text
             answers.append(r.content)
     assert answers[0] == answers[1]
+
+
+def test_soft_unpinned_edits_run_on_the_loop_and_the_rest_in_a_worker(
+    client: Any, real_poses: PosePairs, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A single edit in neural soft reach without pins is answered on the event loop's
+    thread, the turn search and composed solvers too (in a worker they share the GIL with
+    the loop and took longer: docs/service.md); pins, exact reach and FABRIK run in a
+    worker thread, so the loop stays free of their FABRIK iterations."""
+    from service.engine import Engine
+    from tests.service.test_api import solve_body
+
+    where: list[int] = []
+    solve = Engine.solve
+
+    def spy(self: Engine, problems: Any) -> Any:
+        where.append(threading.get_ident())
+        return solve(self, problems)
+
+    monkeypatch.setattr(Engine, "solve", spy)
+    five = ["head", "left_wrist", "right_wrist", "left_ankle", "right_ankle"]
+    wrists = solve_body(real_poses, 0, ["left_wrist", "right_wrist"])
+    pinned = {**wrists, "pins": ["left_ankle"]}
+    bodies = {
+        "light": [
+            wrists,
+            solve_body(real_poses, 1, ["left_elbow"]),
+            solve_body(real_poses, 0, five),  # the turn search
+            solve_body(real_poses, 0, ["left_elbow", "right_knee"]),  # two solvers composed
+        ],
+        "worker": [
+            pinned,
+            solve_body(real_poses, 0, ["left_wrist"], reach="exact"),
+            solve_body(real_poses, 0, ["left_wrist"], method="fabrik"),
+        ],
+    }
+    threads: dict[str, list[int]] = {}
+    for kind, group in bodies.items():
+        threads[kind] = []
+        for body in group:
+            where.clear()
+            r = client.post("/v1/solve", json=body)
+            assert r.status_code == 200, r.text
+            assert len(where) == 1
+            threads[kind].append(where[0])
+    loop = threads["light"][0]
+    assert set(threads["light"]) == {loop}
+    assert loop not in threads["worker"]
