@@ -206,6 +206,9 @@ VARIANTS: dict[str, str] = {
     "captured_retry_polish": "`retry_polish` on the captured edits: shipped",
     "retry_polish_to_cap": "the same polish stopped within 2 cm of the targets (a `/tmp` form)",
     "captured_retry_polish_to_cap": "`retry_polish_to_cap` on the captured edits",
+    "polish_no_retry": "`retry_polish` with the polish in place of the retry's pass (a `/tmp` "
+    "form): B1 soft 6.503 -> 6.506",
+    "captured_polish_no_retry": "`polish_no_retry` on the captured edits",
 }
 COMPLETION = "6-point completion"
 
