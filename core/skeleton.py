@@ -168,12 +168,15 @@ _MIRROR_SIGN: Final[npt.NDArray[np.float64]] = np.array([-1.0, 1.0, 1.0])
 _SIGNS: Final[dict[np.dtype[Any], npt.NDArray[Any]]] = {
     np.dtype(t): _MIRROR_SIGN.astype(t) for t in (np.float32, np.float64)
 }
-#: :func:`mirrored` of flat poses ``[..., 63]``: column ``c`` of the mirror image is column
-#: ``MIRROR_COLUMNS[c]`` of the pose times ``MIRROR_SIGNS[c]`` (x of each joint negated).
+#: :func:`mirrored_flat`: column ``c`` of a flat mirror image is column ``MIRROR_COLUMNS[c]``
+#: of the pose times ``MIRROR_SIGNS[c]`` (x of each joint negated).
 MIRROR_COLUMNS: Final[npt.NDArray[np.intp]] = (
     3 * _MIRROR_IDX[:, None] + np.arange(3, dtype=np.intp)
 ).reshape(-1)
 MIRROR_SIGNS: Final[npt.NDArray[np.float64]] = np.tile(_MIRROR_SIGN, len(MIRROR))
+_FLAT_SIGNS: Final[dict[np.dtype[Any], npt.NDArray[Any]]] = {
+    np.dtype(t): MIRROR_SIGNS.astype(t) for t in (np.float32, np.float64)
+}
 
 
 def mirrored(poses: npt.NDArray[_F]) -> npt.NDArray[_F]:
@@ -183,6 +186,16 @@ def mirrored(poses: npt.NDArray[_F]) -> npt.NDArray[_F]:
     sign = _SIGNS.get(poses.dtype)
     out: npt.NDArray[_F] = poses[..., _MIRROR_IDX, :] * (
         _MIRROR_SIGN.astype(poses.dtype) if sign is None else sign
+    )
+    return out
+
+
+def mirrored_flat(poses: npt.NDArray[_F]) -> npt.NDArray[_F]:
+    """:func:`mirrored` of flat poses ``[B, 63]`` (one fancy index and one product, where
+    the ``[..., 21, 3]`` form reshapes both ways): the same numbers."""
+    sign = _FLAT_SIGNS.get(poses.dtype)
+    out: npt.NDArray[_F] = poses[:, MIRROR_COLUMNS] * (
+        MIRROR_SIGNS.astype(poses.dtype) if sign is None else sign
     )
     return out
 

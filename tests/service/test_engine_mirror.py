@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from core.skeleton import MIRROR_COLUMNS, MIRROR_SIGNS, mirror_key, mirrored
+from core.skeleton import mirror_key, mirrored, mirrored_flat
 from service import networks
 from service.engine import Engine
 from service.problems import SolveProblem
@@ -52,9 +52,7 @@ def test_mirror_helpers() -> None:
     assert mirror_key("left_wrist+right_wrist") == "left_wrist+right_wrist"
     assert mirror_key("head+left_ankle") == "head+right_ankle"
     flat = poses.reshape(4, -1)  # the flat form is the same permutation and sign
-    np.testing.assert_array_equal(
-        flat[:, MIRROR_COLUMNS] * MIRROR_SIGNS, mirrored(poses).reshape(4, -1)
-    )
+    np.testing.assert_array_equal(mirrored_flat(flat), mirrored(poses).reshape(4, -1))
 
 
 def test_one_solver_fast_way_gives_the_general_ways_numbers(
