@@ -32,7 +32,7 @@ VARIANTS: dict[str, str] = {
     "shipped-world-pairs": "full budget, world-frame pairs, 1 solver epoch, stay term",
     "previous": "the models shipped before this round: `full`'s recipe at its full budget "
     "(200x200 -> 64 autoencoder, one pass)",
-    "previous_2passes": "`previous` served with two passes (`--passes 2`)",
+    "previous_2passes": "`previous` served with two passes (`--serving passes=2`)",
     "rigid": "`previous` + solvers trained on the bone-passed answer "
     "(trainer/configs/ablation/rigid.toml), one pass",
     "ae512": "`rigid` with a 512x512 -> 128 autoencoder (trainer/configs/ablation/ae512.toml), "
@@ -88,7 +88,7 @@ VARIANTS: dict[str, str] = {
     "other03": "`c14` with solver.other_weight 0.3 (other03.toml)",
     "carry025": "`other003`'s networks (exp_c15) served with the branch below each target "
     "turned 0.25 of the way with the target's bone (serving.carry; `python -m bench.heldout "
-    "--carry 0.25`)",
+    "--serving carry=0.25`)",
     "carry05": "`other003` served with serving.carry 0.5: shipped since (mx1-405fce5f4421)",
     "carry075": "`other003` served with serving.carry 0.75",
     "carry1": "`other003` served with serving.carry 1 (the branch carried rigidly, as FABRIK)",
@@ -115,7 +115,7 @@ VARIANTS: dict[str, str] = {
     "critic_completion05": "the same at 0.5 (serving.turn_plausibility): shipped since "
     "(mx1-78eb3e10e6ac)",
     "critic_3passes": "`critic_completion05` served with three passes for every edit "
-    "(`--passes 3`)",
+    "(`--serving passes=3`)",
     "retry05cm": "`critic_completion05` with one more pass for soft answers still more than "
     "0.5 cm from a target (serving.retry_reach 0.005)",
     "retry1cm": "the same at 1 cm",
@@ -130,17 +130,17 @@ VARIANTS: dict[str, str] = {
     "(elbows_long_e3.toml; served as shipped)",
     "elbows_long_e8": "the same, 8 epochs (elbows_long_e8.toml)",
     "c15_carry1": "the shipped models served with the whole branch below a dragged joint "
-    "turned with its bone (`--carry 1`, FABRIK's rigid branch)",
+    "turned with its bone (`--serving carry=1`, FABRIK's rigid branch)",
     "placement": "the shipped recipe with the neck, head and collars placed anew on the "
     "autoencoder's and solvers' random bodies (`augment.joint_shift` 1, placement.toml)",
     "ae_cos5e4": "the shipped recipe with the autoencoder at lr 5e-4 decayed along a cosine "
     "(ae_cos5e4.toml)",
     "keep_ends": "the networks of `retry2cm` with the bone pass keeping each targeted wrist and "
-    "ankle where the networks put it (`serving.keep_ends`, `--keep-ends`)",
+    "ankle where the networks put it (`serving.keep_ends`, `--serving keep_ends=true`)",
     "ends_loss": "keep_ends, with both solver banks retrained with it in their losses "
     "(`solver.ends_loss`, ends_loss.toml): shipped since",
     "keep_elbows_serving": "the shipped networks (`ends_loss`) served with each lone targeted "
-    "elbow kept too (`serving.keep_elbows`, `--keep-elbows`)",
+    "elbow kept too (`serving.keep_elbows`, `--serving keep_elbows=true`)",
     "keep_elbows": "the same with both solver banks retrained with it in their losses "
     "(keep_elbows.toml, `solver.elbows_loss`), on this host's autoencoder: compare "
     "`keep_elbows_here`, which differs in the two elbow solvers only",
@@ -151,19 +151,19 @@ VARIANTS: dict[str, str] = {
     "keep_elbows_here": "`ends_here` served with the lone elbows kept (`serving.keep_elbows`, "
     "as shipped since mx1-39a0a1d79547)",
     "ease5mm": "the shipped models (mx1-39a0a1d79547) served with kept ends eased over 5 mm "
-    "(`serving.keep_ease` 0.005, `--keep-ease 0.005`)",
+    "(`serving.keep_ease` 0.005, `--serving keep_ease=0.005`)",
     "ease1cm": "the same eased over 1 cm",
     "collar_all": "the shipped models (mx1-39a0a1d79547) served with a kept wrist out of the "
     "arm's reach turning its shoulder about the collar (`serving.keep_collar`, "
-    "`--keep-collar`) in every answer, soft and exact (a first form, in no commit)",
+    "`--serving keep_collar=true`) in every answer, soft and exact (a first form, in no commit)",
     "collar_soft": "the same in soft answers only (a second form, in no commit)",
     "collar": "the same in answers asked in soft reach with fewer than 5 targets (the turn "
     "search's own): shipped since (mx1-26b6fd5eb17c); exact answers as before, bit for bit",
     "pelvis_1cm": "the shipped models (mx1-26b6fd5eb17c) served with a few-target edit's "
-    "pelvis move shortened by 1 cm (`serving.keep_pelvis` 0.01, `--keep-pelvis 0.01`)",
+    "pelvis move shortened by 1 cm (`serving.keep_pelvis` 0.01, `--serving keep_pelvis=0.01`)",
     "pelvis_2cm": "the same by 2 cm (shipped as mx1-31d1095cf3e0, taken back: B1 loses)",
     "pelvis_5cm": "the same by 5 cm",
-    "pelvis_full": "the same held entirely (`--keep-pelvis 1`)",
+    "pelvis_full": "the same held entirely (`--serving keep_pelvis=1`)",
     "pelvis_all": "the pelvis held entirely in every edit not on it, many targets too (a "
     "`/tmp` form, in no commit)",
     "captured": "mx1-26b6fd5eb17c on edits whose start stays where it was captured "
@@ -184,7 +184,7 @@ VARIANTS: dict[str, str] = {
     "captured_travel_up": "the same with the start moved vertically too (a `/tmp` form)",
     "turn_fit_1cm": "mx1-f16971a84261 with the turn search also trying the start fitted to "
     "the targets (turned and shifted across, least squares; `serving.turn_fit`, "
-    "`--turn-fit 0.01`), kept if it scores 1 cm below every other candidate",
+    "`--serving turn_fit=0.01`), kept if it scores 1 cm below every other candidate",
     "turn_fit_3cm": "the same, kept if 3 cm below",
     "turn_fit_10cm": "the same, kept if 10 cm below: shipped since (mx1-fe4f3722cfd5)",
     "captured_turn_fit_1cm": "`turn_fit_1cm` on the captured edits",
@@ -307,7 +307,7 @@ def main(
         "`full`, `no_augment`, `no_bodies`, `world_pairs`, `no_delta` and `no_anchor` train at "
         "a small budget (trainer/configs/ablation/full.toml, the recipe of `previous`); every "
         "other row is a full-budget model scored with `python -m bench.heldout --models DIR "
-        "[--passes N] [--carry W] [--turn-yaws N] --out reports/ablation/NAME.json`."
+        "[--serving KEY=VALUE ...] --out reports/ablation/NAME.json` (e.g. `passes=3`)."
         " Rows scored with the numpy engine, before the compiled one, agree with it to "
         "5e-14 m (docs/benchmarks.md)."
         "\n\n" + render(rows)

@@ -654,6 +654,21 @@ def print_tables(res: HeldoutResults) -> None:
         console.print("AE recon: this engine has no Engine.reconstruct (not measured)")
 
 
+def overrides(pairs: Sequence[str]) -> dict[str, Any]:
+    """``--serving`` pairs as settings: each value read as JSON (``3``, ``0.01``,
+    ``true``), else kept as text (``completion``)."""
+    out: dict[str, Any] = {}
+    for pair in pairs:
+        key, sep, text = pair.partition("=")
+        if not sep or not key:
+            raise typer.BadParameter(f"{pair!r} is not KEY=VALUE", param_hint="--serving")
+        try:
+            out[key.strip()] = json.loads(text)
+        except ValueError:
+            out[key.strip()] = text
+    return out
+
+
 def main(
     models: Annotated[Path, typer.Option(help="Models folder (manifest.json).")] = Path("models"),
     dataset: Annotated[Path, typer.Option(help="Dataset file (format 2).")] = DEFAULT_DATASET,
@@ -661,57 +676,13 @@ def main(
     quick: Annotated[bool, typer.Option(help="A handful of edits per set (smoke run).")] = False,
     seed: Annotated[int, typer.Option(help="Seed of every sample.")] = 0,
     split: Annotated[str, typer.Option(help="Split of the held-out bodies.")] = "holdout",
-    passes: Annotated[
-        Optional[int],  # noqa: UP045
-        typer.Option(help="Neural solves per edit (default: the manifest's serving.passes)."),
-    ] = None,
-    carry: Annotated[
-        Optional[float],  # noqa: UP045
-        typer.Option(help="Carry below targets, 0-1 (default: the manifest's serving.carry)."),
-    ] = None,
-    turn_yaws: Annotated[
-        Optional[int],  # noqa: UP045
-        typer.Option(help="Turn search yaws, 1 = off (default: the manifest's serving)."),
-    ] = None,
-    keep_ends: Annotated[
-        Optional[bool],  # noqa: UP045
-        typer.Option(help="Targeted limb ends kept (default: the manifest's serving.keep_ends)."),
-    ] = None,
-    keep_elbows: Annotated[
-        Optional[bool],  # noqa: UP045
-        typer.Option(help="Targeted elbows kept (default: the manifest's serving.keep_elbows)."),
-    ] = None,
-    keep_ease: Annotated[
-        Optional[float],  # noqa: UP045
-        typer.Option(help="Kept ends eased over this (m; default: serving.keep_ease)."),
-    ] = None,
-    keep_collar: Annotated[
-        Optional[bool],  # noqa: UP045
-        typer.Option(help="Kept wrists reached by turning the collar (default: serving)."),
-    ] = None,
-    keep_pelvis: Annotated[
-        Optional[float],  # noqa: UP045
-        typer.Option(help="Metres of the pelvis move a few-target edit drops (default: serving)."),
-    ] = None,
-    pelvis_travel: Annotated[
-        Optional[bool],  # noqa: UP045
-        typer.Option(help="A targeted pelvis moves the start across first (default: serving)."),
-    ] = None,
-    reach_travel: Annotated[
-        Optional[bool],  # noqa: UP045
-        typer.Option(help="A target out of reach moves the start across (default: serving)."),
-    ] = None,
-    turn_fit: Annotated[
-        Optional[float],  # noqa: UP045
-        typer.Option(help="Margin (m) of the fitted start in the turn search; 0: off."),
-    ] = None,
-    solve_mirror: Annotated[
-        Optional[bool],  # noqa: UP045
-        typer.Option(help="Each pass also solves the mirror image (default: serving)."),
-    ] = None,
-    retry_polish: Annotated[
-        Optional[bool],  # noqa: UP045
-        typer.Option(help="Soft answers left short polished onto targets (default: serving)."),
+    serving: Annotated[
+        Optional[list[str]],  # noqa: UP045
+        typer.Option(
+            metavar="KEY=VALUE",
+            help="Serve with this setting of the manifest's serving block instead (repeat "
+            "for more; e.g. passes=3, keep_pelvis=0.01, turn_critic=autoencoder).",
+        ),
     ] = None,
     captured: Annotated[
         bool,
@@ -729,22 +700,14 @@ def main(
         raise typer.BadParameter(f"no dataset file at {dataset}", param_hint="--dataset")
     console = Console(stderr=True)
     cfg = dataclasses.replace(QUICK if quick else HeldoutConfig(), seed=seed, captured=captured)
-    engine = Engine(
-        models, threads=1, solve_passes=passes, carry=carry, turn_yaws=turn_yaws, turn_fit=turn_fit,
-        keep_ends=keep_ends, keep_elbows=keep_elbows, keep_ease=keep_ease,
-        keep_collar=keep_collar, keep_pelvis=keep_pelvis, pelvis_travel=pelvis_travel,
-        reach_travel=reach_travel, solve_mirror=solve_mirror, retry_polish=retry_polish,
-    )  # fmt: skip
+    try:
+        engine = Engine(models, threads=1, serving=overrides(serving or []))
+    except ValueError as exc:  # not a setting, fixed by training, or out of range
+        raise typer.BadParameter(str(exc), param_hint="--serving") from None
     res = run_heldout(engine, load_dataset(dataset), cfg, split=split, log=console.log)
     res.models = {
-        "dir": str(models), "version": engine.version, "passes": engine.solve_passes,
-        "carry": engine.carry, "turn_yaws": engine.turn_search.yaws,
-        "turn_fit": engine.turn_search.fit,
-        "keep_ends": engine.keep_ends, "keep_elbows": engine.keep_elbows,
-        "keep_ease": engine.keep_ease, "keep_collar": engine.keep_collar,
-        "keep_pelvis": engine.keep_pelvis, "pelvis_travel": engine.pelvis_travel,
-        "reach_travel": engine.reach_travel, "solve_mirror": engine.solve_mirror,
-        "retry_polish": engine.retry_polish,
+        "dir": str(models), "version": engine.version,
+        "overrides": overrides(serving or []), **engine.serving.model_dump(mode="json"),
     }  # fmt: skip
     if out is not None:
         out.parent.mkdir(parents=True, exist_ok=True)

@@ -85,7 +85,7 @@ def main(
     """Print per joint and per body part where each method's error sits."""
     from trainer.data.dataset import load_dataset
 
-    engine = Engine(models, threads=1, carry=carry)
+    engine = Engine(models, threads=1, serving={"carry": carry})
     cfg = HeldoutConfig(seed=seed)
     res = joint_errors(engine, load_dataset(dataset), set_, split, cfg)
     for name, by in res.items():

@@ -21,6 +21,7 @@ Schema version 1. Kinds:
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Literal
 
@@ -266,6 +267,27 @@ class Serving(_Strict):
         description="Completion also averages over the mirror image of every view (left and "
         "right swapped, x -> -x; the networks were trained mirrored too).",
     )
+
+
+#: Serving settings fixed by how the networks were trained and exported (the fused graphs
+#: answer with them): nothing but a retrain changes them.
+TRAINED_SERVING: frozenset[str] = frozenset({"body", "delta", "anchor"})
+
+
+def serving_with(serving: Serving, overrides: Mapping[str, Any] | None) -> Serving:
+    """``serving`` with ``overrides`` applied (an engine told to serve otherwise than its
+    manifest says: by a bench, a test or the service's settings), validated as the
+    manifest's block is. ``ValueError`` names a key that is not a setting, one fixed by
+    training (:data:`TRAINED_SERVING`), or a value out of its range."""
+    if not overrides:
+        return serving
+    unknown = sorted(set(overrides) - set(Serving.model_fields))
+    if unknown:
+        raise ValueError(f"not serving settings: {', '.join(unknown)}")
+    fixed = sorted(set(overrides) & TRAINED_SERVING)
+    if fixed:
+        raise ValueError(f"fixed by how the networks were trained: {', '.join(fixed)}")
+    return Serving.model_validate({**serving.model_dump(), **overrides})
 
 
 class ModelEntry(_Strict):

@@ -32,7 +32,7 @@ def main() -> None:
     data = load_dataset(args.dataset)
     held = data.subset(data.split_mask("holdout"))
     world = held.world()
-    engine = Engine(Path(args.models), threads=1, solve_passes=args.passes)
+    engine = Engine(Path(args.models), threads=1, serving={"passes": args.passes})
     print("source     joint        reach cm: no bone pass / with bone pass")
     for source in sorted(set(held.clip_source[np.unique(held.clip)].tolist())):
         mask = held.source_mask(source)

@@ -121,8 +121,8 @@ def complete_level(engine: Engine, level: int, keys: F64) -> F64:
     ``serving.completion_mirror``), each answer taken back to the first view; one
     network run for all views. One view: the network's answer as it is."""
     yaws, mirror = (
-        engine.manifest.serving.completion_yaws,
-        engine.manifest.serving.completion_mirror,
+        engine.serving.completion_yaws,
+        engine.serving.completion_mirror,
     )
     views = symmetry_views(keys, engine.level_mirror[level], yaws, mirror)
     x = views.reshape(len(views), -1).astype(np.float32)

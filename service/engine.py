@@ -21,7 +21,7 @@ load time), a composed one as encoder, solvers (with re-encoding) and decoder.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from functools import lru_cache
 from pathlib import Path
 from typing import Any
@@ -32,7 +32,7 @@ import numpy.typing as npt
 from core import compiled, compiled_fabrik
 from core.ends import active as active_chains
 from core.geometry import canonical_transform, facing_transform
-from core.manifest import Manifest, ModelEntry, load_manifest
+from core.manifest import Manifest, ModelEntry, Serving, load_manifest, serving_with
 from core.rest import rest_lengths, rest_pose
 from core.skeleton import (
     BONES,
@@ -88,23 +88,13 @@ class Engine:
         composition: str = "reencode",
         composition_projections: int = 1,
         fabrik_max_iterations: int = compiled_fabrik.MAX_ITERATIONS,
-        solve_passes: int | None = None,
-        carry: float | None = None,
-        turn_yaws: int | None = None,
-        turn_fit: float | None = None,
-        retry_reach: float | None = None,
-        retry_polish: bool | None = None,
-        keep_ends: bool | None = None,
-        keep_elbows: bool | None = None,
-        keep_ease: float | None = None,
-        keep_collar: bool | None = None,
-        keep_pelvis: float | None = None,
-        pelvis_travel: bool | None = None,
-        reach_travel: bool | None = None,
-        solve_mirror: bool | None = None,
+        serving: Mapping[str, Any] | None = None,
     ) -> None:
         self.models_dir = Path(models_dir)
         self.manifest: Manifest = load_manifest(self.models_dir, verify=True)
+        #: the serving settings this engine runs with: the manifest's, with ``serving``'s
+        #: overrides (a bench's, a test's, the service settings'; ``serving_with``)
+        self.serving: Serving = serving_with(self.manifest.serving, serving)
         options = session_options(threads)
 
         def net(entry: ModelEntry) -> Net:
@@ -125,7 +115,7 @@ class Engine:
         # mirror image sits in that order (the symmetry views of serving.completion_*)
         self.level_mirror = [
             [entry.joints.index(JOINT_NAMES[MIRROR[JOINT_INDEX[j]]]) for j in entry.joints]
-            if m.serving.completion_mirror
+            if self.serving.completion_mirror
             else list(range(len(entry.joints)))
             for entry in m.completion_levels()
         ]
@@ -144,45 +134,38 @@ class Engine:
         self.reference_lengths = np.asarray(
             [ref[JOINT_NAMES[c]] for c, _ in BONES], dtype=np.float64
         )
-        self.body = m.serving.body
-        self.delta = m.serving.delta
-        #: how far joints below a target turn with its bone (``serving.carry`` unless
-        #: overridden, e.g. by a bench)
-        self.carry = float(m.serving.carry if carry is None else carry)
-        if not 0.0 <= self.carry <= 1.0:
-            raise ValueError(f"carry must be in [0, 1], got {self.carry}")
+        sv = self.serving
+        self.body = sv.body
+        self.delta = sv.delta
+        #: how far joints below a target turn with its bone (``serving.carry``)
+        self.carry = sv.carry
         #: the bone pass keeps targeted wrists and ankles, and elbows, where the networks
-        #: put them (``serving.keep_ends``, ``serving.keep_elbows`` unless overridden;
-        #: :mod:`core.ends`): ``chain_mask``, the mask ``[C]`` of chains it may keep
-        #: (``core.ends.active``; which of them an edit keeps: ``core.ends.kept_chains``)
-        self.keep_ends = bool(m.serving.keep_ends if keep_ends is None else keep_ends)
-        self.keep_elbows = bool(m.serving.keep_elbows if keep_elbows is None else keep_elbows)
+        #: put them (``serving.keep_ends``, ``serving.keep_elbows``; :mod:`core.ends`):
+        #: ``chain_mask``, the mask ``[C]`` of chains it may keep (``core.ends.active``;
+        #: which of them an edit keeps: ``core.ends.kept_chains``)
+        self.keep_ends = sv.keep_ends
+        self.keep_elbows = sv.keep_elbows
         self.chain_mask = active_chains(self.keep_ends, self.keep_elbows)
         #: an end the bone pass left nearer than this (m) to the networks' goes back only
         #: that share of the way (``serving.keep_ease``; ``core.ends.keep_ends``)
-        self.keep_ease = float(m.serving.keep_ease if keep_ease is None else keep_ease)
+        self.keep_ease = sv.keep_ease
         #: a kept wrist beyond the arm's reach turns its shoulder about the collar first
         #: (``serving.keep_collar``; ``core.ends.keep_ends``)
-        self.keep_collar = bool(m.serving.keep_collar if keep_collar is None else keep_collar)
+        self.keep_collar = sv.keep_collar
         #: a few-target edit's pelvis loses this much (m) of the networks' move
         #: (``serving.keep_pelvis``; ``core.compiled.hold_pelvis``)
-        self.keep_pelvis = float(m.serving.keep_pelvis if keep_pelvis is None else keep_pelvis)
-        if not 0.0 <= self.keep_pelvis <= 1.0:
-            raise ValueError(f"keep_pelvis must be in [0, 1] m, got {self.keep_pelvis}")
+        self.keep_pelvis = sv.keep_pelvis
         #: a targeted pelvis takes the start with it, horizontally, before the networks
         #: (``serving.pelvis_travel``; ``_Items.onto_pelvis_target``)
-        p_travel = m.serving.pelvis_travel if pelvis_travel is None else pelvis_travel
-        self.pelvis_travel = bool(p_travel)
+        self.pelvis_travel = sv.pelvis_travel
         #: a target beyond its chain's reach moves the start across first, in few-target
         #: edits (``serving.reach_travel``; ``_Items.within_reach``)
-        r_travel = m.serving.reach_travel if reach_travel is None else reach_travel
-        self.reach_travel = bool(r_travel)
+        self.reach_travel = sv.reach_travel
         #: each neural pass also solves the edit's mirror image and averages the two
         #: (``serving.solve_mirror``; :func:`service.networks.answer`)
-        mirror = m.serving.solve_mirror if solve_mirror is None else solve_mirror
-        self.solve_mirror = bool(mirror)
+        self.solve_mirror = sv.solve_mirror
         #: the turn search of many-target edits (``serving.turn_*``, :mod:`service.turns`)
-        self.turn_search = turns.TurnSearch.of(m.serving, turn_yaws, turn_fit)
+        self.turn_search = turns.TurnSearch.of(sv)
         known = np.asarray(m.skeleton.skeletons, dtype=np.float64)  # [C, 20]
         self._shape_totals = known.sum(axis=-1)
         self._shapes = known / self._shape_totals[:, None]
@@ -197,16 +180,13 @@ class Engine:
             tuple[str, ...], list[tuple[str, npt.NDArray[np.intp], npt.NDArray[np.intp] | None]]
         ] = {}
         self.passes = composition_passes
-        #: neural solves per edit (``serving.passes`` unless overridden, e.g. by a bench)
-        self.solve_passes = m.serving.passes if solve_passes is None else int(solve_passes)
+        #: neural solves per edit (``serving.passes``)
+        self.solve_passes = sv.passes
         #: soft answers further than this (m) from a target get one more pass (0: never)
-        self.retry_reach = m.serving.retry_reach if retry_reach is None else float(retry_reach)
+        self.retry_reach = sv.retry_reach
         #: soft answers still further than ``retry_reach`` after that pass are polished
-        #: onto their targets (``serving.retry_polish`` unless overridden)
-        polish = m.serving.retry_polish if retry_polish is None else retry_polish
-        self.retry_polish = bool(polish)
-        if self.solve_passes < 1:
-            raise ValueError(f"solve_passes must be at least 1, got {self.solve_passes}")
+        #: onto their targets (``serving.retry_polish``)
+        self.retry_polish = sv.retry_polish
         self.composition = composition
         self.projections = composition_projections
         self.fabrik_max_iterations = fabrik_max_iterations

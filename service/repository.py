@@ -62,7 +62,7 @@ class ModelRepository:
                 composition=s.composition,
                 composition_projections=s.composition_projections,
                 fabrik_max_iterations=s.fabrik_max_iterations,
-                solve_mirror=s.solve_mirror,
+                serving={} if s.solve_mirror is None else {"solve_mirror": s.solve_mirror},
             )
             engine.warmup()
         except Exception as exc:  # any failure means "not ready", with the reason logged

@@ -76,12 +76,11 @@ class TurnSearch:
         return self.yaws + int(self.fit > 0.0)
 
     @staticmethod
-    def of(serving: Serving, yaws: int | None = None, fit: float | None = None) -> TurnSearch:
-        """The search ``serving`` asks for (``yaws``, ``fit``: overrides; yaws 1: none)."""
+    def of(serving: Serving) -> TurnSearch:
+        """The search ``serving`` asks for (``turn_yaws`` 1: none)."""
         return TurnSearch(
-            serving.turn_yaws if yaws is None else int(yaws), serving.turn_margin,
-            serving.turn_min_targets, serving.turn_plausibility, serving.turn_critic,
-            serving.turn_fit if fit is None else float(fit),
+            serving.turn_yaws, serving.turn_margin, serving.turn_min_targets,
+            serving.turn_plausibility, serving.turn_critic, serving.turn_fit,
         )  # fmt: skip
 
     def searches(

@@ -201,6 +201,29 @@ def test_quick_heldout_run_has_every_family_set_and_method(
     assert pooled == sum(parts)
 
 
+def test_serving_overrides_are_read_and_refused_by_name(
+    models_dir: Path, holdout_dataset: Path
+) -> None:
+    """``--serving KEY=VALUE``: values read as JSON or text; a key that is not a setting,
+    or one fixed by training, stops the run before any edit with the key named."""
+    import typer
+    from typer.testing import CliRunner
+
+    from bench.heldout import main, overrides
+
+    assert overrides(["passes=3", "keep_pelvis=0.01", "turn_critic=completion"]) == {
+        "passes": 3, "keep_pelvis": 0.01, "turn_critic": "completion",
+    }  # fmt: skip
+    assert overrides(["solve_mirror=false"]) == {"solve_mirror": False}
+    app = typer.Typer()
+    app.command()(main)
+    args = ["--quick", "--models", str(models_dir), "--dataset", str(holdout_dataset)]
+    for bad, named in (("pases=3", "pases"), ("delta=false", "delta"), ("passes", "KEY=VALUE")):
+        result = CliRunner().invoke(app, [*args, "--serving", bad])
+        assert result.exit_code == 2, result.output
+        assert named in result.output and "holdout: all" not in result.output
+
+
 def test_joint_breakdown_adds_up_to_the_heldout_sets(
     models_dir: Path, holdout_dataset: Path
 ) -> None:

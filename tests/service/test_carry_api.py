@@ -24,7 +24,7 @@ ELBOW = ["left_elbow"]
 
 @pytest.fixture(scope="module")
 def by_carry(models_dir: Path) -> dict[float, Engine]:
-    return {c: Engine(models_dir, carry=c) for c in (0.0, 1.0)}
+    return {c: Engine(models_dir, serving={"carry": c}) for c in (0.0, 1.0)}
 
 
 def test_models_say_their_default(client: Any, engine: Engine) -> None:

@@ -19,8 +19,8 @@ ELBOW, WRIST = JOINT_INDEX["left_elbow"], JOINT_INDEX["left_wrist"]
 
 @pytest.fixture(scope="module")
 def engines(models_dir: Path) -> tuple[Engine, Engine]:
-    kw = {"solve_passes": 1, "retry_reach": 0.0}  # one pass, no retry: the carry alone
-    return Engine(models_dir, carry=0.0, **kw), Engine(models_dir, **kw)
+    kw = {"passes": 1, "retry_reach": 0.0}  # one pass, no retry: the carry alone
+    return Engine(models_dir, serving={"carry": 0.0, **kw}), Engine(models_dir, serving=kw)
 
 
 @pytest.fixture(scope="module")
@@ -43,7 +43,7 @@ def _problems(
 def test_shipped_models_carry(engines: tuple[Engine, Engine]) -> None:
     assert engines[1].carry == engines[1].manifest.serving.carry > 0.0
     with pytest.raises(ValueError, match="carry"):
-        Engine(engines[0].models_dir, carry=1.5)
+        Engine(engines[0].models_dir, serving={"carry": 1.5})
 
 
 def test_only_the_branch_below_the_target_moves(

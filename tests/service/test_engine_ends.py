@@ -23,8 +23,8 @@ J = JOINT_INDEX
 @pytest.fixture(scope="module")
 def engines(models_dir: Path) -> tuple[Engine, Engine]:
     # one pass, no retry, no collar turn (its own test below): the kept ends alone
-    kw = {"solve_passes": 1, "retry_reach": 0.0, "keep_collar": False}
-    return Engine(models_dir, keep_ends=False, **kw), Engine(models_dir, **kw)
+    kw = {"passes": 1, "retry_reach": 0.0, "keep_collar": False}
+    return Engine(models_dir, serving={"keep_ends": False, **kw}), Engine(models_dir, serving=kw)
 
 
 @pytest.fixture(scope="module")
@@ -80,8 +80,8 @@ def test_kept_elbows_move_only_the_arm_and_reach_nearer(
 ) -> None:
     """``serving.keep_elbows``: a lone targeted elbow goes back where the networks put it;
     only its shoulder, the elbow and the hand below move; lengths hold; batch = single."""
-    kw = {"solve_passes": 1, "retry_reach": 0.0}
-    off, on = (Engine(models_dir, keep_elbows=k, **kw) for k in (False, True))
+    kw = {"passes": 1, "retry_reach": 0.0}
+    off, on = (Engine(models_dir, serving={"keep_elbows": k, **kw}) for k in (False, True))
     assert on.chain_mask.sum() == 6 and off.chain_mask.sum() == (4 if off.keep_ends else 0)
     assert client.get("/v1/models").json()["keep_elbows"] is on.manifest.serving.keep_elbows
     start, goal = pairs
@@ -125,8 +125,8 @@ def test_eased_ends_differ_only_where_the_bone_pass_left_them_near(
     """``serving.keep_ease``: kept ends the bone pass left within ``keep_ease`` of the
     networks' go back only in proportion, so some answers change (the limb only), others
     not at all; lengths hold; batch = single; ``GET /v1/models`` reports the shipped value."""
-    kw = {"solve_passes": 1, "retry_reach": 0.0}
-    plain, eased = (Engine(models_dir, keep_ease=e, **kw) for e in (0.0, 0.01))
+    kw = {"passes": 1, "retry_reach": 0.0}
+    plain, eased = (Engine(models_dir, serving={"keep_ease": e, **kw}) for e in (0.0, 0.01))
     assert client.get("/v1/models").json()["keep_ease"] == plain.manifest.serving.keep_ease
     _off_on(plain, eased, pairs, "right_ankle", ["right_knee", "right_ankle", "right_foot"])
 
@@ -137,8 +137,8 @@ def test_out_of_reach_wrists_turn_the_collar_in_soft_answers_only(
     """``serving.keep_collar``: a soft answer's kept wrist beyond the arm's reach turns its
     shoulder about the collar (only the shoulder, the elbow and the wrist move, reach
     improves); exact answers are unchanged; lengths hold; batch = single."""
-    kw = {"solve_passes": 1, "retry_reach": 0.0}
-    off, on = (Engine(models_dir, keep_collar=k, **kw) for k in (False, True))
+    kw = {"passes": 1, "retry_reach": 0.0}
+    off, on = (Engine(models_dir, serving={"keep_collar": k, **kw}) for k in (False, True))
     assert client.get("/v1/models").json()["keep_collar"] is on.manifest.serving.keep_collar
     arm = ["left_shoulder", "left_elbow", "left_wrist"]
     a, b, changed, probs = _off_on(off, on, pairs, "left_wrist", arm)
@@ -148,6 +148,6 @@ def test_out_of_reach_wrists_turn_the_collar_in_soft_answers_only(
     for x, y in zip(off.solve(exact), on.solve(exact), strict=True):
         assert np.array_equal(x.pose, y.pose)
     # nor in the soft passes an exact answer runs first (alone, the lean path; in a batch)
-    two = [Engine(models_dir, solve_passes=2, keep_collar=k) for k in (False, True)]
+    two = [Engine(models_dir, serving={"passes": 2, "keep_collar": k}) for k in (False, True)]
     for x, y in zip(two[0].solve(exact), two[1].solve(exact + probs[:4])[:16], strict=True):
         assert np.array_equal(x.pose, y.pose)

@@ -27,7 +27,9 @@ WRISTS = ("left_wrist", "right_wrist")
 @pytest.fixture(scope="module")
 def engines(models_dir: Path) -> tuple[Engine, Engine]:
     """The shipped models served with the mirror image off, and on."""
-    return Engine(models_dir, solve_mirror=False), Engine(models_dir, solve_mirror=True)
+    return Engine(models_dir, serving={"solve_mirror": False}), Engine(
+        models_dir, serving={"solve_mirror": True}
+    )
 
 
 def _mirror_problem(p: SolveProblem, names: tuple[str, ...]) -> SolveProblem:

@@ -23,8 +23,8 @@ WRISTS = ("left_wrist", "right_wrist")
 def engines(models_dir: Path) -> tuple[Engine, Engine]:
     # without the retry (serving.retry_reach), which adds a pass to soft answers left short
     return (
-        Engine(models_dir, solve_passes=1, retry_reach=0.0),
-        Engine(models_dir, solve_passes=3, retry_reach=0.0),
+        Engine(models_dir, serving={"passes": 1, "retry_reach": 0.0}),
+        Engine(models_dir, serving={"passes": 3, "retry_reach": 0.0}),
     )
 
 
@@ -59,7 +59,7 @@ def test_a_pass_starts_from_the_previous_answer(
     one, three = engines
     # the soft passes before an exact one turn no collar (serving.keep_collar serves answers
     # asked in soft reach), so by hand they are an engine's without it
-    plain = Engine(one.models_dir, solve_passes=1, retry_reach=0.0, keep_collar=False)
+    plain = Engine(one.models_dir, serving={"passes": 1, "retry_reach": 0.0, "keep_collar": False})
     starts, goals = _other_bodies(real_poses)
     probs = _problems(starts[:10], goals[:10], WRISTS, reach="exact")
     by_hand = probs
@@ -118,8 +118,8 @@ def test_per_item_passes_equal_an_engine_built_with_them(
     item bit for bit as an engine built with ``solve_passes`` = its passes, as its single
     solve, and as the same batch again."""
     one, three = engines
-    by_passes = {1: one, 2: Engine(models_dir, solve_passes=2, retry_reach=0.0), 3: three,
-                 4: Engine(models_dir, solve_passes=4, retry_reach=0.0)}  # fmt: skip
+    by_passes = {1: one, 2: Engine(models_dir, serving={"passes": 2, "retry_reach": 0.0}), 3: three,
+                 4: Engine(models_dir, serving={"passes": 4, "retry_reach": 0.0})}  # fmt: skip
     starts, goals = _other_bodies(real_poses)
     mixed = (
         _problems(starts[:20], goals[:20], WRISTS)
@@ -192,9 +192,9 @@ def test_a_soft_answer_left_short_gets_one_more_pass(
     batch; answers within it, exact reach and FABRIK are untouched. The shipped models
     retry at 2 cm."""
     assert Engine(models_dir).retry_reach == 0.02
-    plain = Engine(models_dir, solve_passes=2, retry_reach=0.0)
-    more = Engine(models_dir, solve_passes=3, retry_reach=0.0)
-    retry = Engine(models_dir, solve_passes=2, retry_reach=0.01, retry_polish=False)
+    plain = Engine(models_dir, serving={"passes": 2, "retry_reach": 0.0})
+    more = Engine(models_dir, serving={"passes": 3, "retry_reach": 0.0})
+    retry = Engine(models_dir, serving={"passes": 2, "retry_reach": 0.01, "retry_polish": False})
     starts, goals = _other_bodies(real_poses)
     soft = _problems(starts[:40], goals[:40], WRISTS)
     exact = _problems(starts[40:50], goals[40:50], WRISTS, reach="exact")
@@ -222,8 +222,8 @@ def test_a_soft_answer_the_retry_leaves_short_is_polished(
     the one without the polish, bit for bit; alone and in a batch alike. The shipped
     models polish."""
     assert Engine(models_dir).retry_polish
-    plain = Engine(models_dir, retry_reach=0.01, retry_polish=False)
-    polish = Engine(models_dir, retry_reach=0.01, retry_polish=True)
+    plain = Engine(models_dir, serving={"retry_reach": 0.01, "retry_polish": False})
+    polish = Engine(models_dir, serving={"retry_reach": 0.01, "retry_polish": True})
     starts, goals = _other_bodies(real_poses)
     soft = _problems(starts, goals, WRISTS) + _problems(starts, goals, ("left_elbow",))
     base, got = plain.solve(soft), polish.solve(soft)
@@ -248,8 +248,8 @@ def test_the_polish_of_a_short_answer_holds_its_pins(
     """A soft edit with pins that the retry leaves short is polished again (its pins had
     their own polish) with the pins held: it ends nearer its target and its pins stay
     within tolerance of where the start had them; the others answer as without it."""
-    plain = Engine(models_dir, retry_reach=0.01, retry_polish=False)
-    polish = Engine(models_dir, retry_reach=0.01, retry_polish=True)
+    plain = Engine(models_dir, serving={"retry_reach": 0.01, "retry_polish": False})
+    polish = Engine(models_dir, serving={"retry_reach": 0.01, "retry_polish": True})
     starts, goals = _other_bodies(real_poses)
     ankles = [JOINT_INDEX["left_ankle"], JOINT_INDEX["right_ankle"]]
     wrist = JOINT_INDEX["left_wrist"]

@@ -19,7 +19,7 @@ from service.problems import SolveProblem, SolveResult
 from tests.conftest import PosePairs, edit_problems, on_random_bodies
 
 PELVIS = JOINT_INDEX["pelvis"]
-ONE_PASS = {"solve_passes": 1, "retry_reach": 0.0}
+ONE_PASS = {"passes": 1, "retry_reach": 0.0}
 
 
 @pytest.fixture(scope="module")
@@ -38,7 +38,9 @@ def test_the_pelvis_move_loses_keep_pelvis_of_its_length(
     models_dir: Path, pairs: tuple[np.ndarray, np.ndarray], client: Any
 ) -> None:
     r = 0.005
-    off, near, held = (Engine(models_dir, keep_pelvis=x, **ONE_PASS) for x in (0.0, r, 1.0))
+    off, near, held = (
+        Engine(models_dir, serving={"keep_pelvis": x, **ONE_PASS}) for x in (0.0, r, 1.0)
+    )
     assert client.get("/v1/models").json()["keep_pelvis"] == off.manifest.serving.keep_pelvis
     start, goal = pairs
     for names in (("left_elbow",), ("head", "right_knee")):
@@ -60,7 +62,7 @@ def test_the_pelvis_move_loses_keep_pelvis_of_its_length(
 def test_edits_on_the_pelvis_or_of_many_targets_are_as_without_it(
     models_dir: Path, pairs: tuple[np.ndarray, np.ndarray]
 ) -> None:
-    off, held = (Engine(models_dir, keep_pelvis=r) for r in (0.0, 1.0))
+    off, held = (Engine(models_dir, serving={"keep_pelvis": r}) for r in (0.0, 1.0))
     start, goal = pairs
     ends = ("head", "left_wrist", "right_wrist", "left_ankle", "right_ankle")
     for names in (("pelvis",), ("pelvis", "left_wrist"), ends):
@@ -72,7 +74,7 @@ def test_edits_on_the_pelvis_or_of_many_targets_are_as_without_it(
 def test_a_mixed_batch_answers_each_item_as_alone(
     models_dir: Path, pairs: tuple[np.ndarray, np.ndarray]
 ) -> None:
-    engine = Engine(models_dir, keep_pelvis=0.02)
+    engine = Engine(models_dir, serving={"keep_pelvis": 0.02})
     start, goal = pairs
     probs = [
         p
@@ -106,7 +108,9 @@ def test_a_targeted_pelvis_takes_the_start_across(
     # reach_travel would move a lone pelvis target's start as well (its chain is empty);
     # the polish of a short answer (serving.retry_polish) would reach it without either
     off, on = (
-        Engine(models_dir, pelvis_travel=t, reach_travel=False, retry_polish=False)
+        Engine(
+            models_dir, serving={"pelvis_travel": t, "reach_travel": False, "retry_polish": False}
+        )
         for t in (False, True)
     )
     assert client.get("/v1/models").json()["pelvis_travel"] is on.manifest.serving.pelvis_travel
@@ -148,7 +152,10 @@ def test_a_target_out_of_reach_moves_the_start_across(
     trained over the pelvis, never move it across), so the soft answer reaches it; targets
     within reach, many targets and pins are answered as without it, bit for bit."""
     # the networks' answers: the polish of a short answer (serving.retry_polish) reaches
-    off, on = (Engine(models_dir, reach_travel=t, retry_polish=False) for t in (False, True))
+    off, on = (
+        Engine(models_dir, serving={"reach_travel": t, "retry_polish": False})
+        for t in (False, True)
+    )
     assert client.get("/v1/models").json()["reach_travel"] is on.manifest.serving.reach_travel
     start, goal = pairs[0][:16], pairs[1][:16]
     wrist = JOINT_INDEX["left_wrist"]

@@ -28,7 +28,7 @@ UPPER = ("spine2", "neck", "head", "left_collar", "left_shoulder", "left_elbow",
 
 @pytest.fixture(scope="module")
 def engines(models_dir: Path) -> tuple[Engine, Engine]:
-    return Engine(models_dir, turn_yaws=1), Engine(models_dir)
+    return Engine(models_dir, serving={"turn_yaws": 1}), Engine(models_dir)
 
 
 def _problems(

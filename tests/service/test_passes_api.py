@@ -29,7 +29,7 @@ WRISTS = ["left_wrist", "right_wrist"]
 
 @pytest.fixture(scope="module")
 def by_passes(models_dir: Path) -> dict[int, Engine]:
-    return {p: Engine(models_dir, solve_passes=p) for p in (1, 3)}
+    return {p: Engine(models_dir, serving={"passes": p}) for p in (1, 3)}
 
 
 @pytest.fixture(scope="module")
@@ -186,8 +186,8 @@ def test_engine_pricing_follows_the_models(engine: Engine, models_dir: Path) -> 
     assert pricing == limits.Pricing(engine.solve_passes, engine.turn_search, True, True)
     assert engine.retry_reach > 0  # the shipped models retry (serving.retry_reach)
     assert engine.solve_mirror  # ... and solve the mirror image (serving.solve_mirror)
-    assert not limits.Pricing.of(Engine(models_dir, retry_reach=0.0)).retry
+    assert not limits.Pricing.of(Engine(models_dir, serving={"retry_reach": 0.0})).retry
     # the polish of a short soft answer is not priced (service.limits says why)
     assert engine.retry_polish
-    assert limits.Pricing.of(Engine(models_dir, retry_polish=False)) == pricing
-    assert not limits.Pricing.of(Engine(models_dir, solve_mirror=False)).mirror
+    assert limits.Pricing.of(Engine(models_dir, serving={"retry_polish": False})) == pricing
+    assert not limits.Pricing.of(Engine(models_dir, serving={"solve_mirror": False})).mirror
