@@ -659,7 +659,7 @@ def captured_section(results: Json) -> list[str]:
         "",
         "As above, but each start stays where it was captured instead of on its target's "
         "pelvis, so the body's travel between the two frames (walking included) is left in "
-        "(`python -m bench.heldout --captured`; docs/generalisation-serving.md items 32–34). "
+        "(`python -m bench.heldout --captured`; docs/generalisation-serving-2.md items 32–34). "
         "MPJPE to the real target pose, cm.",
         "",
         table(CAPTURED_HEAD, rows),

@@ -1,4 +1,4 @@
-"""Pelvis edits that lower or raise the body (docs/generalisation-serving.md, item 33).
+"""Pelvis edits that lower or raise the body (docs/generalisation-serving-2.md, item 33).
 
 Edits of the pelvis alone, from real pairs 0.2-1 s apart whose start stays where it was
 captured (bench.heldout's pairs, ``captured``), kept where the goal's pelvis lies at least

@@ -405,7 +405,7 @@ class Engine:
         """``ans`` with every item still short (:meth:`_short`) polished from its answer
         onto its targets, to its own tolerance, as exact reach polishes: the compiled
         FABRIK polish, trunk held first, pins held (``serving.retry_polish``,
-        docs/generalisation-serving.md item 37). Its ``solvers`` get ``fabrik-polish``. An
+        docs/generalisation-serving-2.md item 37). Its ``solvers`` get ``fabrik-polish``. An
         item the polish would leave no nearer (the iteration cap) keeps its answer."""
         sel = self._short(items, ans)
         if sel.size == 0:

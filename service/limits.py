@@ -14,7 +14,7 @@ poses/s on 2); between waves the request checks its deadline and its client, and
 
 The polish of a soft answer its retry still leaves short (``serving.retry_polish``) is not
 priced: it runs for the few answers the networks leave over 2 cm short (2-3 % of real
-edits, docs/generalisation-serving.md item 37), each bounded by the iteration cap (at most
+edits, docs/generalisation-serving-2.md item 37), each bounded by the iteration cap (at most
 ~0.6 ms an item, 5 targets at tolerance 0, both stages at the cap: 512 iterations), so a
 chunk of soft items that all polish runs at most some tens of ms longer. Priced as exact
 reach's, it would cut a chunk of shipped 2-target soft items from 42 to 12 and halve a

@@ -28,7 +28,7 @@ start). The answer's solver path ends with ``turn <deg>`` where the start turned
 With ``turn_fit`` > 0 the search has one more candidate, the start moved to fit its
 targets (:func:`fitted`: turned about the vertical and shifted across by the rigid motion
 that best carries the targeted joints onto their targets), for a body that travelled as
-well as turned (docs/generalisation-serving.md item 34). It is kept only if it scores
+well as turned (docs/generalisation-serving-2.md item 34). It is kept only if it scores
 ``turn_fit`` metres below every other candidate; its path ends with ``fit <deg>``.
 """
 
