@@ -1,0 +1,41 @@
+"""onnxruntime wrappers (service.runtime): a big batch runs in blocks of ROW_BLOCK rows,
+and every row's answer is the one a single run of the whole batch gives, bit for bit."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from core.skeleton import JOINT_INDEX
+from service import runtime
+from service.engine import Engine
+from tests.conftest import PosePairs
+
+
+def test_blocked_runs_equal_one_run_bit_for_bit(engine: Engine, real_poses: PosePairs) -> None:
+    net = engine.fused["left_wrist+right_wrist"]
+    assert isinstance(net, runtime.Net)
+    n = 2 * runtime.ROW_BLOCK + 37  # two whole blocks and a part
+    rows = np.resize(np.arange(len(real_poses.poses)), n)
+    pose = real_poses.poses[rows].reshape(n, -1).astype(np.float32)
+    wrists = [JOINT_INDEX["left_wrist"], JOINT_INDEX["right_wrist"]]
+    targets = real_poses.poses[rows[::-1]][:, wrists].reshape(n, -1).astype(np.float32)
+    whole = net.session.run([net.output], dict(zip(net.inputs, (pose, targets), strict=True)))[0]
+    got = net(pose, targets)
+    assert got.shape == whole.shape == (n, 63)
+    assert np.array_equal(got, whole)
+    assert np.array_equal(net(pose[:1], targets[:1]), whole[:1])  # the bound single row
+    assert net(pose[:0], targets[:0]).shape == (0, 63)
+
+
+def test_a_big_batch_answers_as_its_items_alone(engine: Engine, real_poses: PosePairs) -> None:
+    """Items past the first block of a batch answer as they do alone (rows mirrored too:
+    2 views per item, so a 300-item batch runs its networks on 600 rows)."""
+    n = 300
+    starts = real_poses.poses[np.resize(real_poses.starts, n)]
+    goals = real_poses.poses[np.resize(real_poses.goals, n)]
+    joints = np.asarray([JOINT_INDEX["left_wrist"], JOINT_INDEX["right_ankle"]])
+    idx = np.tile(joints, (n, 1))
+    batch = engine.solve_arrays(starts, idx, goals[:, joints])
+    for i in (0, 255, 256, 299):
+        alone = engine.solve_arrays(starts[i : i + 1], idx[i : i + 1], goals[i : i + 1][:, joints])
+        assert np.array_equal(batch.pose[i], alone.pose[0]), i
