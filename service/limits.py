@@ -17,8 +17,9 @@ priced: it runs for the few answers the networks leave over 2 cm short (2-3 % of
 edits, docs/generalisation-serving-2.md item 37), each bounded by the iteration cap (at most
 ~0.6 ms an item, 5 targets at tolerance 0, both stages at the cap: 512 iterations), so a
 chunk of soft items that all polish runs at most some tens of ms longer. Priced as exact
-reach's, it would cut a chunk of shipped 2-target soft items from 42 to 12 and halve a
-batch's poses/s on 2 threads (18-22k -> 8-9k, measured in one process).
+reach's, it would cut a chunk of shipped 2-target soft items to under a third (42 -> 12
+items at 256 units a chunk) and halve a batch's poses/s on 2 threads (18-22k -> 8-9k,
+measured in one process).
 """
 
 from __future__ import annotations
@@ -42,7 +43,15 @@ from service.turns import NO_SEARCH, TurnSearch
 if TYPE_CHECKING:
     from service.engine import Engine
 
-CHUNK_PRICE = 256
+#: Units per chunk: ~10 ms of a batch's 2-target soft items (170 at the shipped 2 passes
+#: with the mirror image). Chunks of 256 units (42 such items) spent a third of their time
+#: on the engine's per-call work: a columnar 1,024-edit batch over HTTP went 5.2-8.3k ->
+#: 11.9-13.5k poses/s at 1,024 (11.1-11.3k at 512, 14.1-15.1k at 2,048), and lone edits
+#: sent beside a stream of such batches kept their latency (p50 4.7-5.2 -> 4.5-4.6 ms, p99
+#: 11.8-12.6 -> 12.3-12.8 ms: they run on the event loop, not in chunks); /tmp scripts,
+#: two rounds each, interleaved. A chunk in process (/tmp script): 2-target soft items 13 ms,
+#: 3-joint composed ones 30 ms, turn-searching 5-target ones 12 ms, exact 5 ms, FABRIK 2 ms.
+CHUNK_PRICE = 1024
 FABRIK_PRICE = 16
 R = TypeVar("R")
 

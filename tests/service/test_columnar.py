@@ -75,7 +75,7 @@ def assert_same(col: dict[str, Any], answers: list[dict[str, Any]]) -> None:
 @pytest.mark.parametrize(
     ("options", "pins", "n"),
     [
-        ({}, None, 300),  # more than one priced part (256 units each)
+        ({}, None, 300),  # more than one priced part (6 units an item, CHUNK_PRICE a part)
         ({"reach": "exact"}, ["left_foot"], 24),
         ({"method": "fabrik"}, None, 24),
         ({"preserve_bone_lengths": False, "floor": 0.0, "tolerance": 0.01}, None, 24),

@@ -175,7 +175,8 @@ def test_searching_items_are_priced_by_their_solves(
     assert limits.price(four, on) == limits.price(four, off) == 2
     assert limits.price(pinned, on) == limits.price(pinned, off)
     assert limits.price(fabrik, on) == limits.FABRIK_PRICE
-    assert len(limits.chunks([five] * 100, on)) == 12  # 9 items of 28 per 256
+    per = limits.CHUNK_PRICE // 28  # searching items of 28 units per chunk
+    assert len(limits.chunks([five] * (3 * per + 1), on)) == 4
     # the batch price limit (character items) is the item count's, search or not
     top = 2 * 4 + limits.FABRIK_PRICE - 1  # 4 passes, twice with the mirror image, the polish
     assert limits.max_item_price(on) == limits.max_item_price(off) == top

@@ -156,9 +156,9 @@ def test_prices_count_passes(real_poses: PosePairs) -> None:
     assert limits.price(soft, two) == 2 and limits.price(exact, two) == limits.FABRIK_PRICE + 1
     assert limits.price(dataclasses.replace(soft, passes=4), two) == 4
     assert limits.price(dataclasses.replace(fabrik, passes=4), two) == limits.FABRIK_PRICE
-    many = [dataclasses.replace(soft, passes=4)] * 256
-    assert len(limits.chunks(many, one)) == 4  # 64 four-pass items per 256-unit chunk
-    assert len(limits.chunks([soft] * 256, one)) == 1
+    many = [dataclasses.replace(soft, passes=4)] * limits.CHUNK_PRICE
+    assert len(limits.chunks(many, one)) == 4  # four-pass items: a quarter as many per chunk
+    assert len(limits.chunks([soft] * limits.CHUNK_PRICE, one)) == 1
     # an engine that retries a soft answer left short (serving.retry_reach) prices the
     # pass it may add on soft items, pinned or not; exact reach and FABRIK never retry
     retry = limits.Pricing(2, retry=True)
