@@ -209,6 +209,8 @@ VARIANTS: dict[str, str] = {
     "polish_no_retry": "`retry_polish` with the polish in place of the retry's pass (a `/tmp` "
     "form): B1 soft 6.503 -> 6.506",
     "captured_polish_no_retry": "`polish_no_retry` on the captured edits",
+    "ae_cos3e3_served": "`ae_cos3e3_ends`'s networks served as mx1-c34901011fe4 (its serving "
+    "block set with `pose-trainer serving`): not shipped, the in-studio 5 end effectors lose",
 }
 COMPLETION = "6-point completion"
 
