@@ -700,14 +700,15 @@ def main(
         raise typer.BadParameter(f"no dataset file at {dataset}", param_hint="--dataset")
     console = Console(stderr=True)
     cfg = dataclasses.replace(QUICK if quick else HeldoutConfig(), seed=seed, captured=captured)
+    asked = overrides(serving or [])
     try:
-        engine = Engine(models, threads=1, serving=overrides(serving or []))
+        engine = Engine(models, threads=1, serving=asked)
     except ValueError as exc:  # not a setting, fixed by training, or out of range
         raise typer.BadParameter(str(exc), param_hint="--serving") from None
     res = run_heldout(engine, load_dataset(dataset), cfg, split=split, log=console.log)
     res.models = {
-        "dir": str(models), "version": engine.version,
-        "overrides": overrides(serving or []), **engine.serving.model_dump(mode="json"),
+        "dir": str(models), "version": engine.version, "overrides": asked,
+        **engine.serving.model_dump(mode="json"),
     }  # fmt: skip
     if out is not None:
         out.parent.mkdir(parents=True, exist_ok=True)

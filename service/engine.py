@@ -315,7 +315,7 @@ class Engine:
         with its bone lengths restored, each pass starting from the previous answer; the
         last pass is the one asked for. At refinement pass k (from 0) the items with
         p > k + 1 take part, the others keep their pose: an item with p passes gets what
-        an engine built with ``solve_passes=p`` gives it. FABRIK items ignore ``passes``."""
+        an engine built with ``serving={"passes": p}`` gives it. FABRIK items ignore ``passes``."""
         items = _Items.of_arrays(
             poses,
             target_idx,
