@@ -159,11 +159,16 @@ def blocked(
     """``session``'s ``output`` for ``arrays`` (fed to ``inputs``), in runs of at most
     :data:`ROW_BLOCK` rows."""
     n = arrays[0].shape[0]
+    if n <= ROW_BLOCK:  # one run, as the hot path's few rows always are
+        one: npt.NDArray[np.float32] = session.run(
+            [output], dict(zip(inputs, arrays, strict=True))
+        )[0]
+        return one
     runs = [
         session.run(
             [output], dict(zip(inputs, (a[s : s + ROW_BLOCK] for a in arrays), strict=True))
         )[0]
-        for s in range(0, max(n, 1), ROW_BLOCK)
+        for s in range(0, n, ROW_BLOCK)
     ]
-    out: npt.NDArray[np.float32] = runs[0] if len(runs) == 1 else np.concatenate(runs)
+    out: npt.NDArray[np.float32] = np.concatenate(runs)
     return out
