@@ -1,10 +1,12 @@
 """Held-out bodies: world-space edits on bodies no model was trained on, and a stress set
 of in-studio test poses rebuilt as other bodies (issue 11).
 
-``python -m bench.heldout --models DIR --dataset FILE --out FILE.json [--quick]`` runs only
-this part and prints one compact table; ``python -m bench`` runs it inside the full
-benchmark. Everything goes through :class:`service.engine.Engine` in-process (the code the
-service runs), with the options of the B1 benchmark.
+``python -m bench.heldout --models DIR --dataset FILE --out FILE.json [--quick]
+[--captured] [--serving KEY=VALUE ...]`` runs only this part and prints one compact table
+(``--serving``: the models served with other settings of their manifest's serving block,
+``core.manifest.serving_with``); ``python -m bench`` runs it inside the full benchmark.
+Everything goes through :class:`service.engine.Engine` in-process (the code the service
+runs), with the options of the B1 benchmark.
 
 Edits (per family: one held-out source, all held-out sources pooled, or a stress body):
 two frames i, j of one clip, 0.2-1 s apart (6-30 frames at 30 fps, seeded); the target
