@@ -165,14 +165,19 @@ def set_key(joints: list[str] | tuple[str, ...] | frozenset[str]) -> str:
 _F = TypeVar("_F", bound=np.floating[Any])
 _MIRROR_IDX: Final[npt.NDArray[np.intp]] = np.asarray(MIRROR, dtype=np.intp)
 _MIRROR_SIGN: Final[npt.NDArray[np.float64]] = np.array([-1.0, 1.0, 1.0])
-_SIGNS: Final[dict[np.dtype[Any], npt.NDArray[Any]]] = {
-    np.dtype(t): _MIRROR_SIGN.astype(t) for t in (np.float32, np.float64)
-}
+
+
+def flat_columns(joints: npt.ArrayLike) -> npt.NDArray[np.intp]:
+    """The columns ``[3k]`` of a flat pose ``[.., 63]`` holding ``joints`` (indices, in
+    their order), x, y and z each."""
+    idx = np.asarray(joints, dtype=np.intp).reshape(-1)
+    out: npt.NDArray[np.intp] = (3 * idx[:, None] + np.arange(3, dtype=np.intp)).reshape(-1)
+    return out
+
+
 #: :func:`mirrored_flat`: column ``c`` of a flat mirror image is column ``MIRROR_COLUMNS[c]``
 #: of the pose times ``MIRROR_SIGNS[c]`` (x of each joint negated).
-MIRROR_COLUMNS: Final[npt.NDArray[np.intp]] = (
-    3 * _MIRROR_IDX[:, None] + np.arange(3, dtype=np.intp)
-).reshape(-1)
+MIRROR_COLUMNS: Final[npt.NDArray[np.intp]] = flat_columns(_MIRROR_IDX)
 MIRROR_SIGNS: Final[npt.NDArray[np.float64]] = np.tile(_MIRROR_SIGN, len(MIRROR))
 _FLAT_SIGNS: Final[dict[np.dtype[Any], npt.NDArray[Any]]] = {
     np.dtype(t): MIRROR_SIGNS.astype(t) for t in (np.float32, np.float64)
@@ -183,10 +188,7 @@ def mirrored(poses: npt.NDArray[_F]) -> npt.NDArray[_F]:
     """Left <-> right of ``poses [..., 21, 3]`` in a frame whose x axis is the body's side
     (the canonical frame): each joint takes its mirror joint's place, x negated. Exact in
     any float type, and its own inverse."""
-    sign = _SIGNS.get(poses.dtype)
-    out: npt.NDArray[_F] = poses[..., _MIRROR_IDX, :] * (
-        _MIRROR_SIGN.astype(poses.dtype) if sign is None else sign
-    )
+    out: npt.NDArray[_F] = poses[..., _MIRROR_IDX, :] * _MIRROR_SIGN.astype(poses.dtype)
     return out
 
 

@@ -15,7 +15,14 @@ from typing import TYPE_CHECKING
 import numpy as np
 import numpy.typing as npt
 
-from core.skeleton import MIRROR, MIRROR_SIGNS, NUM_JOINTS, mirror_key, mirrored_flat
+from core.skeleton import (
+    MIRROR,
+    MIRROR_SIGNS,
+    NUM_JOINTS,
+    flat_columns,
+    mirror_key,
+    mirrored_flat,
+)
 
 if TYPE_CHECKING:  # pragma: no cover
     from service.engine import Engine
@@ -68,17 +75,13 @@ class MirrorView:
 
 def mirror_views(solver_joints: dict[str, npt.NDArray[np.intp]]) -> dict[str, MirrorView]:
     """:class:`MirrorView` of every solver whose mirror image is among the solvers."""
-
-    def columns(joints: npt.NDArray[np.intp]) -> npt.NDArray[np.intp]:
-        return (3 * np.asarray(joints, dtype=np.intp)[:, None] + np.arange(3)).reshape(-1)
-
     out = {}
     for key, joints in solver_joints.items():
         back = mirror_key(key)
         if back in solver_joints:
             theirs = solver_joints[back]
             out[key] = MirrorView(
-                key, back, columns(joints), columns(np.asarray(MIRROR)[theirs]),
+                key, back, flat_columns(joints), flat_columns(np.asarray(MIRROR)[theirs]),
                 MIRROR_SIGNS[: 3 * len(theirs)].astype(np.float32),
             )  # fmt: skip
     return out
@@ -165,7 +168,7 @@ def steps(
             joints = engine.solver_joints[key]
             cols = None
             if engine.composition == "reencode" and done:
-                cols = np.asarray([3 * j + k for j in done for k in range(3)], dtype=np.intp)
+                cols = flat_columns(done)
             out.append((key, joints, cols))
             done.extend(int(j) for j in joints if int(j) not in done)
         if len(engine._delta_steps) >= 4096:  # bounded: forget everything, start again
@@ -211,6 +214,6 @@ def paste(
 ) -> npt.NDArray[np.float32]:
     """Decode, put ``joints`` on their targets, encode: back onto the pose manifold."""
     x = engine.decoder(z)
-    cols = np.asarray([3 * j + k for j in joints for k in range(3)], dtype=np.intp)
+    cols = flat_columns(joints)
     x[:, cols] = flat[:, cols]
     return engine.encoder(x)

@@ -11,7 +11,7 @@ from collections.abc import Iterable
 import torch
 from torch import nn
 
-from core.skeleton import JOINT_INDEX
+from core.skeleton import JOINT_INDEX, flat_columns
 
 POSE_DIM = 63
 
@@ -92,7 +92,7 @@ class TiedAutoencoder(nn.Module):
 
 def target_columns(joints: list[str]) -> list[int]:
     """Columns of the flattened pose holding the given joints (x, y, z each)."""
-    return [3 * JOINT_INDEX[j] + k for j in joints for k in range(3)]
+    return [int(c) for c in flat_columns([JOINT_INDEX[j] for j in joints])]
 
 
 class SolverBank(nn.Module):
