@@ -397,7 +397,7 @@ class Engine:
     def _short(self, items: _Items, ans: BatchAnswer) -> npt.NDArray[np.intp]:
         """The soft neural items (bone lengths kept) of ``ans`` whose farthest user target
         is more than ``serving.retry_reach`` away."""
-        far = np.where(items.targets(), ans.errors, 0.0).max(axis=1) > self.retry_reach
+        far = items.farthest(ans.errors) > self.retry_reach
         out: npt.NDArray[np.intp] = np.flatnonzero(far & ~items.fab & ~items.ex & items.keep)
         return out
 
@@ -421,10 +421,7 @@ class Engine:
                 self, short.take(m), polish=True, lengths=lengths[m]
             )
             iterations[m] += its
-        user = short.targets()
-        nearer = np.flatnonzero(
-            np.where(user, errors, 0.0).max(axis=1) < np.where(user, before.errors, 0.0).max(axis=1)
-        )
+        nearer = np.flatnonzero(short.farthest(errors) < short.farthest(before.errors))
         polished = BatchAnswer(
             world, errors, bone_err, iterations,
             tuple((*path, "fabrik-polish") for path in before.paths), before.path_of,

@@ -188,6 +188,11 @@ class _Items:
         out: npt.NDArray[np.bool_] = np.arange(self.tidx.shape[1])[None, :] < self.n_t[:, None]
         return out
 
+    def farthest(self, errors: F64) -> F64:
+        """``[B]``: each item's largest distance ``errors [B, K]`` to its user targets."""
+        out: F64 = np.where(self.targets(), errors, 0.0).max(axis=1)
+        return out
+
     def neural_unpinned(self) -> npt.NDArray[np.bool_]:
         """``[B]``: neural items with no pins (every column in use is a user target), the
         ones whose start the engine may move or turn before solving."""

@@ -158,17 +158,16 @@ def blocked(
 ) -> npt.NDArray[np.float32]:
     """``session``'s ``output`` for ``arrays`` (fed to ``inputs``), in runs of at most
     :data:`ROW_BLOCK` rows."""
+
+    def run(parts: tuple[npt.NDArray[np.float32], ...]) -> npt.NDArray[np.float32]:
+        out: npt.NDArray[np.float32] = session.run([output], dict(zip(inputs, parts, strict=True)))[
+            0
+        ]
+        return out
+
     n = arrays[0].shape[0]
     if n <= ROW_BLOCK:  # one run, as the hot path's few rows always are
-        one: npt.NDArray[np.float32] = session.run(
-            [output], dict(zip(inputs, arrays, strict=True))
-        )[0]
-        return one
-    runs = [
-        session.run(
-            [output], dict(zip(inputs, (a[s : s + ROW_BLOCK] for a in arrays), strict=True))
-        )[0]
-        for s in range(0, n, ROW_BLOCK)
-    ]
-    out: npt.NDArray[np.float32] = np.concatenate(runs)
-    return out
+        return run(arrays)
+    return np.concatenate(
+        [run(tuple(a[s : s + ROW_BLOCK] for a in arrays)) for s in range(0, n, ROW_BLOCK)]
+    )
