@@ -213,8 +213,17 @@ def test_a_soft_answer_left_short_gets_one_more_pass(
 
 
 # -- the polish of what the retry leaves short (``serving.retry_polish``) --------------------
+@pytest.fixture(scope="module")
+def polishing(models_dir: Path) -> tuple[Engine, Engine]:
+    """Engines retrying at 1 cm, without and with the polish."""
+    plain, polish = (
+        Engine(models_dir, serving={"retry_reach": 0.01, "retry_polish": p}) for p in (False, True)
+    )
+    return plain, polish
+
+
 def test_a_soft_answer_the_retry_leaves_short_is_polished(
-    models_dir: Path, real_poses: PosePairs
+    models_dir: Path, real_poses: PosePairs, polishing: tuple[Engine, Engine]
 ) -> None:
     """With ``retry_polish``, a soft answer still further than ``retry_reach`` from a
     target after the retry is polished onto its targets, to its tolerance: its solvers
@@ -222,8 +231,7 @@ def test_a_soft_answer_the_retry_leaves_short_is_polished(
     the one without the polish, bit for bit; alone and in a batch alike. The shipped
     models polish."""
     assert Engine(models_dir).retry_polish
-    plain = Engine(models_dir, serving={"retry_reach": 0.01, "retry_polish": False})
-    polish = Engine(models_dir, serving={"retry_reach": 0.01, "retry_polish": True})
+    plain, polish = polishing
     starts, goals = _other_bodies(real_poses)
     soft = _problems(starts, goals, WRISTS) + _problems(starts, goals, ("left_elbow",))
     base, got = plain.solve(soft), polish.solve(soft)
@@ -243,13 +251,12 @@ def test_a_soft_answer_the_retry_leaves_short_is_polished(
 
 
 def test_the_polish_of_a_short_answer_holds_its_pins(
-    models_dir: Path, real_poses: PosePairs
+    real_poses: PosePairs, polishing: tuple[Engine, Engine]
 ) -> None:
     """A soft edit with pins that the retry leaves short is polished again (its pins had
     their own polish) with the pins held: it ends nearer its target and its pins stay
     within tolerance of where the start had them; the others answer as without it."""
-    plain = Engine(models_dir, serving={"retry_reach": 0.01, "retry_polish": False})
-    polish = Engine(models_dir, serving={"retry_reach": 0.01, "retry_polish": True})
+    plain, polish = polishing
     starts, goals = _other_bodies(real_poses)
     ankles = [JOINT_INDEX["left_ankle"], JOINT_INDEX["right_ankle"]]
     wrist = JOINT_INDEX["left_wrist"]
