@@ -117,7 +117,7 @@ def run(
         console.log("issue 14: compiled solve vs compiled and numpy FABRIK, batch rate")
         i14 = speed.issue14(
             engine,
-            {k: edit_sets[k] for k in (2, 5)},
+            {k: edit_sets[k] for k in (1, 2, 5)},
             composed={5: composed},
             calls=40 if quick else 2000,
             warmup=5 if quick else 50,

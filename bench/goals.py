@@ -262,6 +262,8 @@ def issue14_goals(i14: Json | None) -> list[Goal]:
             at1 += f"; {r['neural_no_mirror']['p50_ms']:.3f} ms without the mirror image"
         if r and "neural_no_turn" in r:
             at1 += f"; {r['neural_no_turn']['p50_ms']:.3f} ms without the turn search"
+        if r and "neural_numpy_mirror" in r:
+            at1 += f"; {r['neural_numpy_mirror']['p50_ms']:.3f} ms without the mirror graphs"
         shown = (
             "–"
             if r is None
@@ -276,6 +278,20 @@ def issue14_goals(i14: Json | None) -> list[Goal]:
                 status(None if r is None else r["neural"]["p50_ms"] <= limit),
             )
         )
+    one = lat.get(1)
+    if one is not None:  # the commonest drag: one joint, two solvers with the mirror image
+        numpy_way = one.get("neural_numpy_mirror")
+        rows.append(
+            (
+                f"(info) neural 1-target soft solve p50 ({one['set']})",
+                "–",
+                f"{one['neural']['p50_ms']:.3f} ms (p99 {one['neural']['p99_ms']:.3f}"
+                + ("" if numpy_way is None else
+                   f"; {numpy_way['p50_ms']:.3f} ms without the mirror graphs")
+                + f"); compiled FABRIK {one['fabrik_compiled']['p50_ms']:.3f} ms",
+                "info",
+            )
+        )  # fmt: skip
     for r in i14.get("composed", []):
         rows.append(
             (

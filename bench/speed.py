@@ -133,6 +133,9 @@ def issue14(
       the engine's default (``solve_passes``, the models' ``serving.passes``);
     - ``neural_no_mirror``: with ``mirror=False`` (``options.mirror``), when the engine's
       default solves the mirror image too (``serving.solve_mirror``);
+    - ``neural_numpy_mirror``: the ``neural`` call with the mirror image asked around the
+      fused graphs in numpy (the engine without its mirror graphs, ``trainer.mirror``),
+      when the default solves it and the models ship them;
     - ``composed``: the same timings on sets no trained solver covers whole (several
       solvers composed), beside the goals' sets.
 
@@ -257,6 +260,10 @@ def _issue14_set(
     }
     if engine.solve_mirror:  # the default solves the mirror image too
         runs["neural_no_mirror"] = lambda i: engine.solve([no_mirror[i]])
+    if engine.solve_mirror and engine.mirror_graphs:  # the mirror graphs' share
+        numpy_way = copy.copy(engine)
+        numpy_way.mirror_graphs = {}
+        runs["neural_numpy_mirror"] = lambda i: numpy_way.solve([neural[i]])
     if engine.turn_search.searches("neural", len(idx), False):  # the default searches
         plain = copy.copy(engine)
         plain.turn_search = NO_SEARCH

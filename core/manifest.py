@@ -16,6 +16,10 @@ Schema version 1. Kinds:
 * ``fused`` (optional): ``pose [N,63], targets [N,3k] -> solved_pose [N,63]``, one solver's whole
   edit in one graph (encoder, solver, decoder; with ``serving.delta`` the answer
   ``pose + D(z') - D(z)``), fused at export time so the service needs no ``onnx``.
+* ``mirror`` (optional): ``pose [N,63], targets [N,3k] -> solved_pose [N,63]``, the mean of
+  a fused graph's answer and its mirror set's fused answer to the mirrored pose and
+  targets, taken back (``serving.solve_mirror`` in one run; ``trainer.mirror``). Each
+  needs its set's fused graph and its mirror set's.
 """
 
 from __future__ import annotations
@@ -28,7 +32,16 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from core.io import sha256_file, write_atomic
-from core.skeleton import FRAME, JOINT_INDEX, JOINT_NAMES, MIRROR, NUM_JOINTS, PARENT_NAMES, set_key
+from core.skeleton import (
+    FRAME,
+    JOINT_INDEX,
+    JOINT_NAMES,
+    MIRROR,
+    NUM_JOINTS,
+    PARENT_NAMES,
+    mirror_key,
+    set_key,
+)
 
 SCHEMA_VERSION = 1
 MANIFEST_NAME = "manifest.json"
@@ -292,7 +305,7 @@ def serving_with(serving: Serving, overrides: Mapping[str, Any] | None) -> Servi
 
 class ModelEntry(_Strict):
     name: str
-    kind: Literal["autoencoder", "solver", "completion", "fused"]
+    kind: Literal["autoencoder", "solver", "completion", "fused", "mirror"]
     part: Literal["encoder", "decoder"] | None = None
     file: str
     sha256: str = Field(pattern=r"^[0-9a-f]{64}$")
@@ -313,7 +326,7 @@ class ModelEntry(_Strict):
             raise ValueError(f"model {self.name}: unknown joints {unknown}")
         if self.kind == "autoencoder" and self.part is None:
             raise ValueError(f"model {self.name}: an autoencoder entry needs a part")
-        if self.kind in ("solver", "fused") and (
+        if self.kind in ("solver", "fused", "mirror") and (
             not self.joints or self.key != set_key(self.joints)
         ):
             raise ValueError(f"model {self.name}: solver key must be the sorted joint set")
@@ -373,6 +386,14 @@ class Manifest(_Strict):
             raise ValueError("fused graphs must be unique and each match a solver's set")
         if self.serving.delta and set(fused) != set(keys):
             raise ValueError("delta answers are served by fused graphs: one per solver set")
+        mirrors = [m.key for m in self.models if m.kind == "mirror"]
+        if len(mirrors) != len(set(mirrors)) or not all(
+            k in fused and mirror_key(str(k)) in fused for k in mirrors
+        ):
+            raise ValueError(
+                "mirror graphs must be unique and each match a fused graph whose mirror "
+                "set has one too"
+            )
         levels = sorted(m.level for m in self.models if m.kind == "completion" and m.level)
         if levels and levels != list(range(1, len(levels) + 1)):
             raise ValueError("completion levels must be 1..n")
@@ -398,6 +419,11 @@ class Manifest(_Strict):
         """Pre-fused single-solver graphs (``pose, targets -> pose``: encoder, solver,
         decoder and, with ``serving.delta``, the delta answer in one graph)."""
         return {str(m.key): m for m in self.models if m.kind == "fused"}
+
+    def mirrors(self) -> dict[str, ModelEntry]:
+        """Mirror graphs: a single-solver edit and its mirror image, averaged, in one graph
+        (``serving.solve_mirror``; ``service.networks.both_views``)."""
+        return {str(m.key): m for m in self.models if m.kind == "mirror"}
 
     def completion_levels(self) -> list[ModelEntry]:
         return sorted(

@@ -41,6 +41,7 @@ from core.skeleton import (
     MIRROR,
     NUM_JOINTS,
     bone_lengths,
+    mirror_key,
     set_key,
 )
 from service import completion, networks, turns
@@ -66,7 +67,7 @@ from service.problems import (
     others,
     stacked,
 )
-from service.runtime import Fused, Net, session_options
+from service.runtime import ROW_BLOCK, Fused, Net, session_options
 
 F64 = npt.NDArray[np.floating[Any]]
 #: Metres by which the exact-reach fallback must beat the polish to be used.
@@ -108,8 +109,16 @@ class Engine:
             key: np.asarray([JOINT_INDEX[j] for j in entry.joints], dtype=np.intp)
             for key, entry in m.solvers().items()
         }
-        #: how each solver's edit is asked of its mirror image (``serving.solve_mirror``)
+        #: how each solver's edit is asked of its mirror image (``serving.solve_mirror``),
+        #: and the shipped graphs that ask both in one run (``trainer.mirror``)
         self.mirror_views = networks.mirror_views(self.solver_joints)
+        #: (a set that is its own mirror image runs both views as rows of one graph: half
+        #: the rows per block, as many inside)
+        self.mirror_graphs = {
+            key: Net(self.models_dir / entry.file, entry, options,
+                     ROW_BLOCK // 2 if mirror_key(key) == key else ROW_BLOCK)
+            for key, entry in m.mirrors().items()
+        }  # fmt: skip
         self.completion = [net(entry) for entry in m.completion_levels()]
         # each completion level's key points in its input order, and where each one's
         # mirror image sits in that order (the symmetry views of serving.completion_*)

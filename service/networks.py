@@ -94,10 +94,15 @@ def both_views(
     """:func:`answer` of one solver's edit (``view``) with its mirror image on the rows
     ``views`` asks: the mirrored inputs taken straight from flat columns, one run of both
     views where the target set is its own mirror image. The same numbers as the general
-    way (a permutation and a sign are exact)."""
-    n, rows = len(x), np.flatnonzero(views)
+    way (a permutation and a sign are exact). Where every row asks and the models ship
+    the set's mirror graph (``trainer.mirror``), that graph does all of it in one run."""
+    n = len(x)
     flat = canvas.reshape(n, -1)
     targets = flat[:, view.own]
+    graph = engine.mirror_graphs.get(view.key)
+    if graph is not None and views.all():
+        return graph(x, targets)
+    rows = np.flatnonzero(views)
     x_m = mirrored_flat(x[rows])
     t_m = flat[rows[:, None], view.other] * view.signs
     if view.back == view.key:

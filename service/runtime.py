@@ -87,8 +87,10 @@ class _SingleRow:
 class Net:
     """One onnxruntime session with a single input/output signature."""
 
-    def __init__(self, path: Path, entry: ModelEntry, options: ort.SessionOptions) -> None:
-        self.entry = entry
+    def __init__(
+        self, path: Path, entry: ModelEntry, options: ort.SessionOptions, block: int = ROW_BLOCK
+    ) -> None:
+        self.entry, self.block = entry, block
         self.session = ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
         self.inputs = [i.name for i in entry.inputs]
         self.output = entry.outputs[0].name
@@ -100,7 +102,7 @@ class Net:
     def __call__(self, *arrays: npt.NDArray[np.float32]) -> npt.NDArray[np.float32]:
         if arrays[0].shape[0] == 1:
             return self.single(arrays)
-        return blocked(self.session, self.inputs, self.output, arrays)
+        return blocked(self.session, self.inputs, self.output, arrays, self.block)
 
 
 class Fused:
@@ -155,9 +157,10 @@ def blocked(
     inputs: list[str],
     output: str,
     arrays: tuple[npt.NDArray[np.float32], ...],
+    block: int = ROW_BLOCK,
 ) -> npt.NDArray[np.float32]:
     """``session``'s ``output`` for ``arrays`` (fed to ``inputs``), in runs of at most
-    :data:`ROW_BLOCK` rows."""
+    ``block`` rows."""
 
     def run(parts: tuple[npt.NDArray[np.float32], ...]) -> npt.NDArray[np.float32]:
         out: npt.NDArray[np.float32] = session.run([output], dict(zip(inputs, parts, strict=True)))[
@@ -166,8 +169,8 @@ def blocked(
         return out
 
     n = arrays[0].shape[0]
-    if n <= ROW_BLOCK:  # one run, as the hot path's few rows always are
+    if n <= block:  # one run, as the hot path's few rows always are
         return run(arrays)
     return np.concatenate(
-        [run(tuple(a[s : s + ROW_BLOCK] for a in arrays)) for s in range(0, n, ROW_BLOCK)]
+        [run(tuple(a[s : s + block] for a in arrays)) for s in range(0, n, block)]
     )

@@ -175,6 +175,24 @@ def serving_cmd(
     typer.echo(f"{models}: {listed}; version {manifest.version}")
 
 
+@app.command("mirror")
+def mirror_cmd(
+    models: Annotated[Path, typer.Option(help="Models directory.")] = Path("models"),
+) -> None:
+    """Write the models' mirror graphs (``mirror_<key>.onnx``: an edit and its mirror image
+    in one run, ``trainer.mirror``) from their fused graphs; manifest.json gets their
+    entries and a new version. The networks and the answers stay as they were."""
+    from core.manifest import ManifestError
+    from trainer.mirror import add_mirror_graphs
+
+    try:  # models not found or tampered with, or a graph that does not check out
+        manifest = add_mirror_graphs(models)
+    except (OSError, ValueError, RuntimeError, ManifestError) as exc:
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(1) from None
+    typer.echo(f"{models}: {len(manifest.mirrors())} mirror graphs; version {manifest.version}")
+
+
 @app.command("model-card")
 def model_card(
     models: Annotated[Path, typer.Option(help="Models directory.")] = Path("models"),

@@ -32,6 +32,7 @@ from core.skeleton import BONES, FRAME, JOINT_NAMES, NUM_JOINTS, PARENT_NAMES, b
 from trainer.config import SERVING_SETTINGS, TrainConfig
 from trainer.data.dataset import FPS
 from trainer.fused import FusedGraph, LeanFusedGraph
+from trainer.mirror import mirror_entries
 from trainer.model_card import write_model_card
 from trainer.models import SingleSolver, TiedAutoencoder, target_columns
 from trainer.train import (
@@ -355,6 +356,9 @@ def export_all(
             level=level,
             stage=f"completion{level}",
         )
+
+    # each set's edit and its mirror image in one graph (serving.solve_mirror), from the above
+    entries += mirror_entries(out, {str(e.key): e for e in entries if e.kind == "fused"})
 
     train_poses = trained.splits.train.positions
     all_lengths = bone_lengths(train_poses.astype(np.float64))

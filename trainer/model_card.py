@@ -21,6 +21,9 @@ facing +Z, left = +X):
   the encoder's weights transposed): `encoder.onnx`, `decoder.onnx`;
 - one **solver** per target joint set (latent + target positions → new latent), composed in
   sequence by the service for other sets;
+- per solver set, a **fused** graph (encoder, solver and decoder in one run, the answer as
+  served) and a **mirror** graph (the edit and its mirror image, averaged, in one run), both
+  composed from the networks above;
 - nested **key-point completion** networks (the whole pose from key points alone, any yaw):
   level 1 takes the six base points, larger levels add points.
 

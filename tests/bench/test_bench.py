@@ -164,6 +164,11 @@ def test_quick_bench_writes_a_sane_report(
         assert row["errors"] == 0 and row["p50_ms"] > 0
     i14 = speed["issue14"]
     assert all(r["neural_passes1"]["p50_ms"] > 0 for r in i14["latency"])
+    # the shipped mirror graphs beside the numpy way around the fused graphs, 1-5 targets
+    assert [r["targets"] for r in i14["latency"]] == [1, 2, 5]
+    assert all(r["neural_numpy_mirror"]["p50_ms"] > 0 for r in i14["latency"])
+    assert "neural 1-target soft solve p50 (left_wrist)" in report
+    assert "without the mirror graphs" in report
     assert i14["batch_poses_per_s"]["solve_arrays_passes1"] > 0
     assert i14["batch_poses_per_s"]["solve_arrays_2threads"] > 0
     # the networks alone on the 2-target batch: the ceiling the solve's passes divide

@@ -6,6 +6,7 @@ other items ask; a request can turn it either way; bad values are 422s naming th
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 from pathlib import Path
 from typing import Any
@@ -14,7 +15,7 @@ import numpy as np
 import pytest
 
 from core.skeleton import mirror_key, mirrored, mirrored_flat
-from service import networks
+from service import networks, runtime
 from service.engine import Engine
 from service.problems import SolveProblem
 from tests.conftest import PosePairs, edit_problems, make_client
@@ -79,6 +80,35 @@ def test_one_solver_fast_way_gives_the_general_ways_numbers(
         want[views] = (want[views] + back) * np.float32(0.5)
         np.testing.assert_array_equal(got, want, err_msg=key)
         assert view.back == mirror_key(key)
+
+
+def test_mirror_graphs_answer_as_the_fused_graphs_and_numpy(
+    engines: tuple[Engine, Engine], real_poses: PosePairs
+) -> None:
+    """Where every row asks for the mirror image, ``networks.both_views`` runs the set's
+    shipped mirror graph (``trainer.mirror``) and nothing else: with the fused graphs
+    taken away it still answers, and bit for bit as the numpy way around the fused graphs
+    (the engine without mirror graphs), for every set, on 1 row and on 7, and on more rows
+    than a run's block (the sets that are their own mirror run half-blocks)."""
+    engine = engines[1]
+    numpy_way = copy.copy(engine)
+    numpy_way.mirror_graphs = {}
+    no_fused = copy.copy(engine)
+    no_fused.fused = {}
+    assert set(engine.mirror_graphs) == set(engine.solvers)  # the shipped models have all
+    rows = runtime.ROW_BLOCK + 3
+    x = real_poses.poses[real_poses.starts[np.arange(rows) % 40]].astype(np.float32)
+    canvas = np.ascontiguousarray(
+        real_poses.poses[real_poses.goals[np.arange(rows) % 40]], dtype=np.float32
+    )
+    for key, view in engine.mirror_views.items():
+        for n in (1, 7, rows):
+            flat, views = x[:n].reshape(n, -1), np.ones(n, dtype=np.bool_)
+            got = networks.both_views(no_fused, flat, canvas[:n], view, views)
+            want = networks.both_views(numpy_way, flat, canvas[:n], view, views)
+            np.testing.assert_array_equal(got, want, err_msg=f"{key}, {n} rows")
+        block = engine.mirror_graphs[key].block
+        assert block == (runtime.ROW_BLOCK // 2 if view.back == key else runtime.ROW_BLOCK)
 
 
 @pytest.mark.parametrize("names", [("left_wrist",), ("left_elbow",), WRISTS])

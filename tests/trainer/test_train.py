@@ -107,6 +107,8 @@ def test_manifest_is_valid_and_hashes_verify(trained: tuple[Trained, Path]) -> N
     assert set(manifest.solvers()) == {
         "left_wrist", "left_ankle+right_ankle", "head+left_wrist+right_wrist"
     }  # fmt: skip
+    # a mirror graph where the set's mirror image has a fused graph too (not left_wrist)
+    assert set(manifest.mirrors()) == {"left_ankle+right_ankle", "head+left_wrist+right_wrist"}
     assert manifest.provenance.split_seed == 0
     assert manifest.provenance.config["solver"]["other_weight"] == 0.01
     for entry in manifest.models:

@@ -1,0 +1,76 @@
+"""`pose-trainer mirror`: a model folder's mirror graphs, written from its fused graphs
+(``trainer.mirror``), on the shipped models."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from core.manifest import ManifestError, load_manifest
+from trainer.cli import app
+from trainer.export import model_version
+
+
+@pytest.fixture
+def without(models_dir: Path, tmp_path: Path) -> Path:
+    """A copy of the shipped models as exported before mirror graphs existed: no mirror
+    files, no mirror entries, the version of the files it has."""
+    out = tmp_path / "models"
+    shutil.copytree(models_dir, out, ignore=shutil.ignore_patterns("mirror_*"))
+    manifest = load_manifest(models_dir, verify=False)
+    kept = [m for m in manifest.models if m.kind != "mirror"]
+    raw = json.loads(manifest.model_copy(
+        update={"models": kept, "version": model_version(kept, manifest.serving)}
+    ).model_dump_json())  # fmt: skip
+    (out / "manifest.json").write_text(json.dumps(raw))
+    return out
+
+
+def test_mirror_writes_the_shipped_graphs_bit_for_bit(models_dir: Path, without: Path) -> None:
+    """From the fused graphs alone the command writes the shipped mirror graphs byte for
+    byte, one per solver set (every shipped set's mirror image has a solver), and the
+    manifest of the shipped version; run again, nothing changes."""
+    shipped = load_manifest(models_dir)
+    before = load_manifest(without)
+    assert not before.mirrors() and before.version != shipped.version
+    result = CliRunner().invoke(app, ["mirror", "--models", str(without)])
+    assert result.exit_code == 0, result.output
+    assert f"15 mirror graphs; version {shipped.version}" in result.output
+    after = load_manifest(without, verify=True)
+    assert after.version == shipped.version
+    assert set(after.mirrors()) == set(after.solvers()) == set(shipped.mirrors())
+    for key, entry in shipped.mirrors().items():
+        assert (without / entry.file).read_bytes() == (models_dir / entry.file).read_bytes(), key
+    assert (
+        f"| mirror:left_wrist | {after.mirrors()['left_wrist'].parameters:,} |"
+        in (without / "README.md").read_text()
+    )
+    again = CliRunner().invoke(app, ["mirror", "--models", str(without)])
+    assert again.exit_code == 0 and load_manifest(without).version == shipped.version
+
+
+def test_a_tampered_fused_graph_is_refused_by_name(without: Path) -> None:
+    target = without / "fused_left_wrist.onnx"
+    data = bytearray(target.read_bytes())
+    data[len(data) // 2] ^= 0xFF
+    target.write_bytes(bytes(data))
+    result = CliRunner().invoke(app, ["mirror", "--models", str(without)])
+    assert result.exit_code == 1
+    assert "fused_left_wrist.onnx" in result.output and "sha256" in result.output
+    assert not list(without.glob("mirror_*"))
+
+
+def test_a_mirror_entry_needs_both_fused_graphs(models_dir: Path, tmp_path: Path) -> None:
+    """The manifest refuses a mirror graph whose mirror set has no fused graph."""
+    raw = json.loads((models_dir / "manifest.json").read_text())
+    raw["models"] = [m for m in raw["models"] if m["name"] != "fused:right_wrist"]
+    raw["models"] = [m for m in raw["models"] if m["name"] not in ("solver:right_wrist",)]
+    out = tmp_path / "models"
+    out.mkdir()
+    (out / "manifest.json").write_text(json.dumps(raw))
+    with pytest.raises(ManifestError, match="mirror graphs must be unique and each match"):
+        load_manifest(out, verify=False)
