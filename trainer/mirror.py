@@ -154,7 +154,11 @@ def mirror_entries(models_dir: Path, fused: dict[str, ModelEntry]) -> list[Model
         model = mirror_graph(onnx.load(str(own_path)), back, entry, back_entry)
         path = models_dir / f"mirror_{key}.onnx"
         write_atomic(path, model.SerializeToString())
-        _check(path, own_path, back_path, entry, back_entry)
+        try:
+            _check(path, own_path, back_path, entry, back_entry)
+        except RuntimeError:
+            path.unlink()  # never left beside the models as if it were one of them
+            raise
         params = entry.parameters + (0 if back is None else back_entry.parameters)
         out.append(
             entry.model_copy(

@@ -7,6 +7,7 @@ import json
 import shutil
 from pathlib import Path
 
+import numpy as np
 import pytest
 from typer.testing import CliRunner
 
@@ -74,3 +75,31 @@ def test_a_mirror_entry_needs_both_fused_graphs(models_dir: Path, tmp_path: Path
     (out / "manifest.json").write_text(json.dumps(raw))
     with pytest.raises(ManifestError, match="mirror graphs must be unique and each match"):
         load_manifest(out, verify=False)
+
+
+def test_a_graph_that_does_not_answer_as_the_fused_graphs_is_refused(
+    without: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Every graph written is checked against the fused graphs before it is listed: one
+    whose mean is off (a quarter, not a half) is refused by name and removed, and the
+    manifest stays as it was."""
+    import onnx.numpy_helper
+
+    from trainer import mirror
+
+    right = mirror.mirror_graph
+
+    def off(*args: object, **kwargs: object) -> onnx.ModelProto:
+        model = right(*args, **kwargs)  # type: ignore[arg-type]
+        half = next(i for i in model.graph.initializer if i.name == "m_half")
+        half.CopyFrom(onnx.numpy_helper.from_array(np.asarray(0.25, np.float32), "m_half"))
+        return model
+
+    monkeypatch.setattr(mirror, "mirror_graph", off)
+    before = (without / "manifest.json").read_bytes()
+    result = CliRunner().invoke(app, ["mirror", "--models", str(without)])
+    assert result.exit_code == 1
+    assert "not the fused graphs' mean, bit for bit" in result.output
+    assert "mirror_head" in result.output  # the first set by name
+    assert not list(without.glob("mirror_*"))
+    assert (without / "manifest.json").read_bytes() == before
