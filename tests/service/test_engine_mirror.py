@@ -111,6 +111,35 @@ def test_mirror_graphs_answer_as_the_fused_graphs_and_numpy(
         assert block == (runtime.ROW_BLOCK // 2 if view.back == key else runtime.ROW_BLOCK)
 
 
+@pytest.mark.parametrize(
+    "sequence",
+    [("left_ankle+right_ankle", "left_wrist"), ("left_wrist", "right_knee", "head"),
+     ("left_elbow", "right_knee")],
+)  # fmt: skip
+def test_composed_views_step_together_as_they_run_apart(
+    engines: tuple[Engine, Engine], real_poses: PosePairs, sequence: tuple[str, ...]
+) -> None:
+    """``networks.delta_views`` (a composed edit's two views step by step, a step whose set
+    is its own mirror image as one run of both) answers each view as :func:`networks.delta`
+    alone, bit for bit, with fewer mirrored rows than own rows too, and ``answer`` is their
+    mean on the rows that ask."""
+    engine = engines[1]
+    back = networks.mirror_of(engine, sequence)
+    assert back is not None and back != sequence
+    x = real_poses.poses[real_poses.starts[:7]].astype(np.float32).reshape(7, -1)
+    canvas = np.ascontiguousarray(real_poses.poses[real_poses.goals[:7]], dtype=np.float32)
+    rows = np.asarray([0, 2, 3, 6])
+    x_m = mirrored_flat(x[rows])
+    c_m = mirrored(canvas[rows])
+    own, other = networks.delta_views(engine, x, canvas, x_m, c_m, sequence, back)
+    np.testing.assert_array_equal(own, networks.delta(engine, x, canvas, sequence))
+    np.testing.assert_array_equal(other, networks.delta(engine, x_m, c_m, back))
+    views = np.isin(np.arange(7), rows)
+    want = own.copy()
+    want[rows] = (own[rows] + mirrored_flat(other)) * np.float32(0.5)
+    np.testing.assert_array_equal(networks.answer(engine, x, canvas, sequence, views), want)
+
+
 @pytest.mark.parametrize("names", [("left_wrist",), ("left_elbow",), WRISTS])
 def test_an_edit_and_its_mirror_image_answer_alike(
     engines: tuple[Engine, Engine], real_poses: PosePairs, names: tuple[str, ...]
