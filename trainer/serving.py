@@ -15,19 +15,17 @@ import copy
 from pathlib import Path
 from typing import Any
 
-from core.manifest import Manifest, Serving, load_manifest, write_manifest
+from core.manifest import TRAINED_SERVING, Manifest, Serving, load_manifest, write_manifest
 from trainer.config import SERVING_SETTINGS, TrainConfig, seen_by_losses
 from trainer.export import git_commit_of, model_version, serving_of
 from trainer.model_card import write_model_card
 
-#: Set by the training whatever the losses saw.
-TRAINED = ("body", "delta", "anchor")
-
 
 def locked(trained: dict[str, Any]) -> set[str]:
     """The serving settings the models were trained for, by their training config's
-    ``solver`` section ``trained``."""
-    return {*TRAINED, *seen_by_losses(trained)}
+    ``solver`` section ``trained``: those set by the training whatever the losses saw
+    (``core.manifest.TRAINED_SERVING``) and those the losses saw."""
+    return {*TRAINED_SERVING, *seen_by_losses(trained)}
 
 
 def set_serving(cfg: TrainConfig, models_dir: Path) -> tuple[Manifest, dict[str, Any]]:
