@@ -205,3 +205,14 @@ def mirrored_flat(poses: npt.NDArray[_F]) -> npt.NDArray[_F]:
 def mirror_key(key: str) -> str:
     """The key of a target set's mirror image (``set_key`` of its joints' mirrors)."""
     return set_key([JOINT_NAMES[MIRROR[JOINT_INDEX[j]]] for j in key.split("+")])
+
+
+def mirror_target_columns(
+    joints: npt.ArrayLike, theirs: npt.ArrayLike
+) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.intp], npt.NDArray[np.float64]]:
+    """How the targets of a set ``joints`` are asked of its mirror set ``theirs`` (each
+    in its solver's input order): the flat columns ``[3k]`` of ``joints``, the flat
+    columns whose mirror images are ``theirs``' targets in their order, and the signs
+    ``[3k]`` that take them there (x negated)."""
+    other = np.asarray(MIRROR, dtype=np.intp)[np.asarray(theirs, dtype=np.intp)]
+    return flat_columns(joints), flat_columns(other), MIRROR_SIGNS[: 3 * len(other)].copy()

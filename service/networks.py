@@ -16,11 +16,10 @@ import numpy as np
 import numpy.typing as npt
 
 from core.skeleton import (
-    MIRROR,
-    MIRROR_SIGNS,
     NUM_JOINTS,
     flat_columns,
     mirror_key,
+    mirror_target_columns,
     mirrored_flat,
 )
 
@@ -81,11 +80,8 @@ def mirror_views(solver_joints: dict[str, npt.NDArray[np.intp]]) -> dict[str, Mi
     for key, joints in solver_joints.items():
         back = mirror_key(key)
         if back in solver_joints:
-            theirs = solver_joints[back]
-            out[key] = MirrorView(
-                key, back, flat_columns(joints), flat_columns(np.asarray(MIRROR)[theirs]),
-                MIRROR_SIGNS[: 3 * len(theirs)].astype(np.float32),
-            )  # fmt: skip
+            own, other, signs = mirror_target_columns(joints, solver_joints[back])
+            out[key] = MirrorView(key, back, own, other, signs.astype(np.float32))
     return out
 
 

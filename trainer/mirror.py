@@ -29,12 +29,11 @@ from core.io import sha256_file, write_atomic
 from core.manifest import Manifest, ModelEntry, load_manifest, write_manifest
 from core.skeleton import (
     JOINT_INDEX,
-    MIRROR,
     MIRROR_COLUMNS,
     MIRROR_SIGNS,
     NUM_JOINTS,
-    flat_columns,
     mirror_key,
+    mirror_target_columns,
     mirrored_flat,
 )
 
@@ -44,22 +43,29 @@ def _names(entry: ModelEntry) -> tuple[str, str, str]:
     return pose, targets, entry.outputs[0].name
 
 
+def _columns(
+    entry: ModelEntry, back_entry: ModelEntry
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``core.skeleton.mirror_target_columns`` of a fused graph's set and its mirror set's."""
+    return mirror_target_columns(
+        [JOINT_INDEX[j] for j in entry.joints], [JOINT_INDEX[j] for j in back_entry.joints]
+    )
+
+
 def mirror_graph(own: onnx.ModelProto, back: onnx.ModelProto | None, entry: ModelEntry,
                  back_entry: ModelEntry) -> onnx.ModelProto:  # fmt: skip
     """The mirror graph of fused graph ``own`` (``entry``) and the fused graph of its mirror
     set (``back``, ``back_entry``; None where the set is its own mirror image: both views
     then go through ``own`` as one run of twice the rows)."""
     pose, targets, solved = _names(entry)
-    own_joints = [JOINT_INDEX[j] for j in entry.joints]
-    back_joints = [JOINT_INDEX[j] for j in back_entry.joints]
-    own_cols = flat_columns(own_joints).tolist()
+    own_cols, other, signs = _columns(entry, back_entry)
     # the mirror set's targets, in its input order, from this set's targets' columns
-    pick = [own_cols.index(c) for c in flat_columns(np.asarray(MIRROR)[back_joints]).tolist()]
+    pick = [own_cols.tolist().index(c) for c in other.tolist()]
     consts: dict[str, np.ndarray] = {
         "m_cols": np.asarray(MIRROR_COLUMNS, dtype=np.int64),
         "m_signs": MIRROR_SIGNS.astype(np.float32),
         "m_pick": np.asarray(pick, dtype=np.int64),
-        "m_tsigns": MIRROR_SIGNS[: 3 * len(back_joints)].astype(np.float32),
+        "m_tsigns": signs.astype(np.float32),
         "m_half": np.asarray(0.5, dtype=np.float32),
     }
     inits = [numpy_helper.from_array(v, k) for k, v in consts.items()]
@@ -126,9 +132,8 @@ def _check(path: Path, own: Path, back: Path, entry: ModelEntry, back_entry: Mod
     }
     pose, targets, _ = _names(entry)
     bp, bt, _ = _names(back_entry)
-    own_cols = flat_columns([JOINT_INDEX[j] for j in entry.joints])
-    other = flat_columns(np.asarray(MIRROR)[[JOINT_INDEX[j] for j in back_entry.joints]])
-    signs = MIRROR_SIGNS[: len(other)].astype(np.float32)
+    own_cols, other, signs64 = _columns(entry, back_entry)
+    signs = signs64.astype(np.float32)
     rng = np.random.default_rng(0)
     for n in (1, 37):
         x = (rng.standard_normal((n, 3 * NUM_JOINTS)) * 0.4).astype(np.float32)
