@@ -149,14 +149,9 @@ def delta(
     :func:`run_once`'s single fused run): each solver's fused graph moves the CURRENT
     pose by what it changes in the decoded pose (anchored or not, as exported), so the
     autoencoder's own error on the start pose never reaches the answer. Between solvers
-    the targets solved so far are pasted onto the pose (``composition="reencode"``)."""
-    pose = x.copy()
-    flat = canvas.reshape(len(x), -1)
-    for key, joints, cols in steps(engine, sequence):
-        if cols is not None:
-            pose[:, cols] = flat[:, cols]
-        pose = engine.fused[key](pose, canvas[:, joints].reshape(len(x), -1))
-    return pose
+    the targets solved so far are pasted onto the pose (``composition="reencode"``): the
+    one view of :func:`delta_views`."""
+    return delta_views(engine, x, canvas, x[:0], canvas[:0], sequence, sequence)[0]
 
 
 def delta_views(
@@ -168,11 +163,11 @@ def delta_views(
     ``back`` on the mirror image ``x_m``, ``c_m``, the two step by step together, so that
     a step whose set is its own mirror image (both ankles, both wrists, the head) runs both
     views as the rows of one run; a step whose mirror is another set runs the two graphs.
-    Each view's numbers are :func:`delta`'s (a composed edit with such a step 5-7 % faster,
-    interleaved A/B in one process)."""
+    Each view's numbers are those it gets alone (a composed edit with such a step 5-7 %
+    faster, interleaved A/B in one process). No mirrored rows: :func:`delta`."""
     pose, pose_m = x.copy(), x_m.copy()
     n, m = len(x), len(x_m)
-    flat, flat_m = canvas.reshape(n, -1), c_m.reshape(m, -1)
+    flat, flat_m = canvas.reshape(n, -1), c_m.reshape(m, 3 * NUM_JOINTS)  # m may be 0
     for (key, joints, cols), (key_m, joints_m, cols_m) in zip(
         steps(engine, sequence), steps(engine, back), strict=True
     ):
@@ -180,12 +175,14 @@ def delta_views(
             pose[:, cols] = flat[:, cols]
         if cols_m is not None:
             pose_m[:, cols_m] = flat_m[:, cols_m]
-        t, t_m = canvas[:, joints].reshape(n, -1), c_m[:, joints_m].reshape(m, -1)
-        if key == key_m:
+        t, t_m = canvas[:, joints].reshape(n, -1), c_m[:, joints_m].reshape(m, 3 * len(joints_m))
+        if key == key_m and m:  # both views as the rows of one run
             both = engine.fused[key](np.concatenate([pose, pose_m]), np.concatenate([t, t_m]))
             pose, pose_m = both[:n], both[n:]
-        else:
-            pose, pose_m = engine.fused[key](pose, t), engine.fused[key_m](pose_m, t_m)
+            continue
+        pose = engine.fused[key](pose, t)
+        if m:
+            pose_m = engine.fused[key_m](pose_m, t_m)
     return pose, pose_m
 
 
