@@ -9,23 +9,24 @@ the model through unchanged), so that:
   UTF-8, nest deeper than the parser's recursion limit or carry integers longer than
   Python converts; duplicate keys in an object are a 400 naming the key;
 - bodies of ``INLINE_BYTES`` or more are decoded and validated in a worker thread
-  (bounded by the app's compute limiter), so a flood of big bodies never stalls the
+  (on one of the app's compute tokens, waited for no longer than the request's
+  deadline), so a flood of big bodies never stalls the
   event loop (liveness keeps answering).
 """
 
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Callable, Coroutine
 from typing import Any
 
-import anyio
-import anyio.to_thread
 from fastapi import Request, Response
 from fastapi.routing import APIRoute
 from pydantic import BaseModel, ValidationError
 
-from service.errors import BodyError, BodyInvalid, MalformedBody, clip
+from service.errors import BodyError, BodyInvalid, DeadlineExceeded, MalformedBody, clip
+from service.limits import Budget
 
 INLINE_BYTES = 64 * 1024  # smaller bodies are parsed on the loop (a thread hop costs more)
 
@@ -84,10 +85,14 @@ class _Request(Request):
             if len(body) < INLINE_BYTES:
                 self._json = parse(body, self.model)
             else:
-                limiter = getattr(self.app.state, "compute_limiter", None)
-                self._json = await anyio.to_thread.run_sync(
-                    parse, body, self.model, limiter=limiter
-                )
+                state = getattr(self.app.state, "pose", None)
+                deadline = state.settings.deadline_seconds if state is not None else math.inf
+                try:
+                    self._json = await Budget(self, deadline).in_thread(
+                        lambda: parse(body, self.model), "reading the body"
+                    )
+                except DeadlineExceeded as exc:  # FastAPI lets only HTTPException through
+                    raise BodyError(exc) from None
         return self._json
 
 

@@ -17,7 +17,6 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-import anyio.to_thread
 import numpy as np
 import orjson
 from pydantic import ValidationError
@@ -154,7 +153,6 @@ class FastPath:
 
     async def _columns(self, scope: Scope, receive: Receive, send: Send, state: ServiceState,
                        body: bytes) -> bool:  # fmt: skip
-        app_state = scope["app"].state
         limit = state.settings.max_batch_items
 
         def read() -> columnar.Columns | None:
@@ -179,17 +177,14 @@ class FastPath:
             legit = isinstance(options, dict) and type(options.get("preserve_bone_lengths")) is bool
             return columnar.parse(data, limit, suspect=not strict or bools != int(legit))
 
+        request = Request(scope, receive)
+        budget = Budget(request, state.settings.deadline_seconds)
         try:
-            if len(body) < INLINE_BYTES:
-                cols = read()
-            else:
-                limiter = app_state.compute_limiter
-                cols = await anyio.to_thread.run_sync(read, limiter=limiter)
+            small = len(body) < INLINE_BYTES
+            cols = read() if small else await budget.in_thread(read, "reading the body")
             if cols is None:
                 return False
             engine = state.repository.ready_engine()
-            request = Request(scope, receive)
-            budget = Budget(request, state.settings.deadline_seconds)
             response = await solve_columns(cols, engine, budget, state, request)
         except BodyError as exc:
             await _problem(scope, receive, send, exc.error)

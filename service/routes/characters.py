@@ -11,7 +11,6 @@ import time
 from collections.abc import Callable
 from typing import TypeVar
 
-import anyio.to_thread
 from fastapi import APIRouter, Response
 
 from core.bvh import BVH
@@ -56,9 +55,8 @@ async def step(budget: Budget, stage: str, work: Callable[[], R]) -> R:
             f"the request needed more than the {budget.deadline_seconds:g} s deadline "
             f"(before {stage}); retry, or send a smaller request"
         ) from None
-    limiter = budget.request.app.state.compute_limiter
     t = time.perf_counter()
-    out = await anyio.to_thread.run_sync(work, limiter=limiter)
+    out = await budget.in_thread(work, stage)
     budget.compute += time.perf_counter() - t
     return out
 

@@ -4,8 +4,7 @@ from __future__ import annotations
 
 import time
 
-import anyio.to_thread
-from fastapi import APIRouter, Request, Response
+from fastapi import APIRouter, Response
 
 from service.body import BodyRoute
 from service.deps import ReadyEngine, RequestBudget
@@ -17,15 +16,13 @@ router = APIRouter(route_class=BodyRoute, tags=["complete"])
 
 
 @router.post("/v1/complete", response_model=CompleteResponse)
-async def complete(req: CompleteRequest, engine: ReadyEngine, budget: RequestBudget,
-                   request: Request) -> Response:  # fmt: skip
+async def complete(req: CompleteRequest, engine: ReadyEngine, budget: RequestBudget) -> Response:
     """A whole pose from key points alone (at least the six base points)."""
     points = keypoints(req)
     await budget.check()
     t = time.perf_counter()
-    result = await anyio.to_thread.run_sync(
-        lambda: engine.complete(points, req.bone_lengths, floor=req.floor),
-        limiter=request.app.state.compute_limiter,
+    result = await budget.in_thread(
+        lambda: engine.complete(points, req.bone_lengths, floor=req.floor), "the completion"
     )
     budget.compute += time.perf_counter() - t
     return json_response(complete_payload(list(points), result, engine.version), budget.compute)

@@ -9,7 +9,6 @@ import time
 from collections.abc import Callable
 from typing import Annotated, Any, TypeVar
 
-import anyio.to_thread
 from fastapi import APIRouter, Request, Response
 from pydantic import (
     Discriminator,
@@ -136,7 +135,7 @@ async def solve_batch(body: BatchBody, engine: ReadyEngine, budget: RequestBudge
         return [solve_problem(item, arr[k], f"items[{i}]") for k, (i, item) in
                 enumerate(zip(where, items, strict=True))]  # fmt: skip
 
-    problems = await off_loop(request, prepare, len(items))
+    problems = await off_loop(budget, prepare, len(items), "preparing the items")
     prepared = {i: await read_character(budget, f, f"items[{i}]") for i, f in chars.items()}
     results = await budget.run(engine.solve, problems, Pricing.of(engine))
     state.metrics.batch.observe(len(forms))
@@ -150,7 +149,7 @@ async def solve_batch(body: BatchBody, engine: ReadyEngine, budget: RequestBudge
                for i in range(len(forms))]  # fmt: skip
         return json_response({"items": out}, budget.compute)
 
-    return await off_loop(request, answer, len(forms))
+    return await off_loop(budget, answer, len(forms), "writing the answer")
 
 
 def check_price(forms: list[SolveRequest | CharacterSolveRequest], max_items: int,
@@ -183,12 +182,12 @@ def _slow(form: SolveRequest | CharacterSolveRequest) -> bool:
     return o.method == "fabrik" or o.reach == "exact" or bool(form.pins)
 
 
-async def off_loop(request: Request, work: Callable[[], R], items: int) -> R:
-    """Per-item Python work of a big batch in a worker thread (the loop stays free)."""
+async def off_loop(budget: Budget, work: Callable[[], R], items: int, stage: str) -> R:
+    """Per-item Python work of a big batch in a worker thread (the loop stays free), on a
+    compute token taken within the deadline (``stage`` names it in a 504)."""
     if items <= INLINE_ITEMS:
         return work()
-    limiter = request.app.state.compute_limiter
-    return await anyio.to_thread.run_sync(work, limiter=limiter)
+    return await budget.in_thread(work, stage)
 
 
 async def solve_columns(cols: columnar.Columns, engine: Engine, budget: Budget,
@@ -202,5 +201,7 @@ async def solve_columns(cols: columnar.Columns, engine: Engine, budget: Budget,
     ans = columnar.merge(parts)
     state.metrics.batch.observe(cols.size)
     state.metrics.solved_paths(cols.options.method, ans.paths, ans.path_of)
-    body = await off_loop(request, lambda: columnar.answer(cols, ans, engine.version), cols.size)
+    body = await off_loop(
+        budget, lambda: columnar.answer(cols, ans, engine.version), cols.size, "writing the answer"
+    )
     return raw_response(body, budget.compute)

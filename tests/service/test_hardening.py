@@ -6,6 +6,8 @@ from __future__ import annotations
 import json
 import re
 import shutil
+import threading
+import time
 from pathlib import Path
 from typing import Any
 
@@ -107,12 +109,50 @@ def test_past_the_deadline_is_a_504_with_retry_after(models_dir: Path) -> None:
         item["targets"][0]["position"] = [0.3 + 0.01 * k, 1.9, 0.4]
     with make_client(models_dir, deadline_seconds=0.001) as c:
         resp = c.post("/v1/solve/batch", json={"items": items})
-        assert_problem(resp, 504, "deadline", "smaller batches")
+        assert_problem(resp, 504, "deadline", "smaller")
         assert resp.headers["retry-after"] == "1"
         metrics = c.get("/metrics").text
         assert (
             'pose_rejections_total{reason="deadline-exceeded",route="/v1/solve/batch"}' in metrics
         )
+
+
+def test_a_request_waits_for_a_compute_thread_no_longer_than_its_deadline(
+    models_dir: Path,
+) -> None:
+    """Every compute token held elsewhere: each request that needs one is a 504 at its
+    deadline, naming the stage it waited for, not an answer once a token is free (64
+    1,024-item batches at once took 25 s to their 504s before; the token comes back here
+    only after 6 s, so a request that waits for it fails the clock check)."""
+    items = [body(options={"reach": "exact"}) for _ in range(300)]  # > 64 KiB: parsed off-loop
+    pose = [v for n in JOINT_NAMES for v in rest_pose()[JOINT_NAMES.index(n)].tolist()]
+    cols = {"poses": [pose] * 300, "targets": {"joints": ["left_wrist"],
+                                               "positions": [[0.5, 1.2, 0.3]] * 300}}  # fmt: skip
+    base = ("pelvis", "head", "left_wrist", "right_wrist", "left_ankle", "right_ankle")
+    points = [{"joint": n, "position": rest_pose()[JOINT_NAMES.index(n)].tolist()} for n in base]
+    cases = [
+        ("/v1/solve/batch", {"items": items}, "reading the body"),
+        ("/v1/solve/batch", cols, "reading the body"),
+        ("/v1/solve", body(options={"reach": "exact"}), "before items 0-0"),
+        ("/v1/complete", {"keypoints": points}, "before the completion"),
+    ]
+    with make_client(models_dir, deadline_seconds=0.5, compute_threads=1) as c:
+        limiter = c.app.state.compute_limiter
+        holder = object()
+        c.portal.call(limiter.acquire_on_behalf_of, holder)
+        timer = threading.Timer(6.0, c.portal.call, (limiter.release_on_behalf_of, holder))
+        timer.start()
+        try:
+            for path, data, stage in cases:
+                t = time.perf_counter()
+                resp = c.post(path, json=data)
+                took = time.perf_counter() - t
+                assert_problem(resp, 504, "0.5 s deadline", stage, "compute thread", "busy")
+                assert resp.headers["retry-after"] == "1"
+                assert took < 3.0, (path, took)
+        finally:
+            timer.join()
+        assert c.post("/v1/solve", json=body(options={"reach": "exact"})).status_code == 200
 
 
 def test_lower_case_bearer_scheme_is_accepted(models_dir: Path) -> None:
