@@ -14,7 +14,8 @@ Conventions implemented here:
   (:attr:`BVHJoint.channel_start`); :attr:`BVH.motion` holds the raw channel values, one
   row per frame; :attr:`BVH.text` is the file's text and :meth:`BVH.frame_lines` its
   frame lines, unchanged.
-- The MOTION block is parsed in one go (``str.split`` + one ``np.array`` conversion), with a
+- The MOTION block is parsed in one go by numpy (``np.fromstring``, no Python object per
+  value), falling back to ``str.split`` + ``float`` for what numpy does not read, with a
   per-line check only on the error path.
 
 Malformed input raises :class:`BVHError`, which names the file and the reason (with the line
@@ -36,6 +37,7 @@ FloatArray = npt.NDArray[np.float64]
 _POSITION_CHANNELS = {"xposition": 0, "yposition": 1, "zposition": 2}
 _ROTATION_CHANNELS = {"xrotation": "X", "yrotation": "Y", "zrotation": "Z"}
 _MOTION_RE = re.compile(r"^[ \t]*MOTION[ \t]*\r?$", re.MULTILINE)
+_LINE_RE = re.compile(r"^[^\S\n]*\S", re.MULTILINE)  # a line that is not blank
 _FRAMES_RE = re.compile(r"^[ \t]*Frames:[ \t]*(\S+)[ \t]*\r?$")
 _FRAME_TIME_RE = re.compile(r"^[ \t]*Frame Time:[ \t]*(\S+)[ \t]*\r?$")
 
@@ -114,6 +116,11 @@ class BVH:
             return []
         lines = [ln.rstrip("\r") for ln in self.text[self.motion_offset :].split("\n")]
         return [ln for ln in lines if ln.strip()]
+
+    def frame_line_count(self) -> int:
+        """``len(self.frame_lines())``, without making the lines (an 8 MB file holds
+        ~100,000 of them)."""
+        return sum(1 for _ in _LINE_RE.finditer(self.text, self.motion_offset)) if self.text else 0
 
     def index(self, name: str) -> int:
         """Index of a joint by name; ``KeyError`` listing the known names if absent."""
@@ -307,15 +314,21 @@ def parse_bvh(text: str, name: str = "<string>") -> BVH:
 
     body = rest[3] if len(rest) > 3 else ""
     first_line = motion_line + 3
-    tokens = body.split()
     expected = n_frames * n_channels
-    if len(tokens) != expected:
-        _explain_count(name, body, first_line, n_frames, n_channels)
-    try:
-        motion = np.array(tokens, dtype=np.float64).reshape(n_frames, n_channels)
-    except ValueError:
-        _explain_values(name, body, first_line)
-        raise  # pragma: no cover - _explain_values always raises
+    try:  # numpy's own reader: no Python object per value (an 8 MB file: 84 -> 30 MB peak)
+        values = np.fromstring(body, dtype=np.float64, sep=" ")
+    except ValueError:  # a token numpy does not read: Python's float() has the last word
+        values = np.zeros(0)
+    if values.size != expected:
+        tokens = body.split()
+        if len(tokens) != expected:
+            _explain_count(name, body, first_line, n_frames, n_channels)
+        try:
+            values = np.array(tokens, dtype=np.float64)
+        except ValueError:
+            _explain_values(name, body, first_line)
+            raise  # pragma: no cover - _explain_values always raises
+    motion = values.reshape(n_frames, n_channels)
     body_offset = len(text) - len(body)
     return BVH(
         name=name,

@@ -64,7 +64,7 @@ def format_bvh(bvh: BVH, motion: F64 | None = None) -> str:
 def _frame_span(bvh: BVH, frame: int) -> tuple[int, int] | None:
     """(start, end) character offsets of a frame's line in ``bvh.text``; None if the
     file does not hold one frame per line."""
-    if not bvh.text or len(bvh.frame_lines()) != bvh.num_frames:
+    if not bvh.text or bvh.frame_line_count() != bvh.num_frames:
         return None
     pos = bvh.motion_offset
     seen = -1
@@ -77,7 +77,7 @@ def _frame_span(bvh: BVH, frame: int) -> tuple[int, int] | None:
             if seen == frame:
                 return pos, end
         pos = end + 1
-    return None  # pragma: no cover - frame_lines() said the count matches
+    return None  # pragma: no cover - frame_line_count() said the count matches
 
 
 def splice_frame(bvh: BVH, frame: int, row: F64, columns: list[int]) -> str:

@@ -192,6 +192,32 @@ def test_raw_text_and_frame_lines_are_kept_for_a_writer() -> None:
     np.testing.assert_array_equal(bvh.motion[1], [1, 2, 3, 90, 0, 0, 0, 90, 0])
 
 
+@pytest.mark.parametrize(
+    "body",
+    [
+        "1 2 3 0 0 0 0 0 0\n\n1 2 3 90 0 0 0 90 0\n \t\n0 0 0 90 90 0 0 0 0\n0 0 0 0 0 0 0 0 90",
+        "1 2 3 0 0 0 0 0 0\r\n1 2 3 90 0 0 0 90 0\r\n\r\n"
+        "0 0 0 90 90 0 0 0 0 0 0 0 0 0 0 0 0 90\r\n",
+        "1 2 3 0 0 0 0 0 0 1 2 3 90 0 0 0 90 0 0 0 0 90 90 0 0 0 0 0 0 0 0 0 0 0 0 90\n",
+    ],
+)
+def test_frame_line_count_is_the_number_of_frame_lines(body: str) -> None:
+    bvh = parse_bvh(TINY.split("1 2 3 0")[0] + body, "lines.bvh")
+    assert bvh.num_frames == 4
+    assert bvh.frame_line_count() == len(bvh.frame_lines())
+    assert bvh.frame_line_count() == body.count("\n") + (not body.endswith("\n")) - (
+        body.count("\n\n") + body.count("\n \t\n") + body.count("\r\n\r\n")
+    )
+
+
+def test_motion_values_numpy_does_not_read_are_read_as_python_reads_them() -> None:
+    # numpy's reader stops at "1_000"; Python's float() takes it, as the reader always did
+    bvh = parse_bvh(TINY.replace("1 2 3 90 0 0 0 90 0", "1 2 3 1_000 0 0 0 90 0"), "u.bvh")
+    np.testing.assert_array_equal(bvh.motion[1], [1, 2, 3, 1000, 0, 0, 0, 90, 0])
+    with pytest.raises(BVHError, match="line 20: not a number"):
+        parse_bvh(TINY.replace("1 2 3 90 0 0 0 90 0", "1 2 3 0x1p3 0 0 0 90 0"), "x.bvh")
+
+
 def test_end_site_name_clash_is_an_error() -> None:
     # The root's End Site would be "root_end", the name of a joint already read.
     clash = TINY.replace("JOINT child", "JOINT root_end").replace(
