@@ -15,7 +15,6 @@ import gc
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 
-import anyio
 from fastapi import FastAPI
 
 from service import middleware
@@ -23,6 +22,7 @@ from service.deps import ServiceState
 from service.docs import document_problems, mount_docs
 from service.editor import mount_editor
 from service.errors import install_handlers
+from service.limits import ComputeLimiter
 from service.metrics import Metrics
 from service.repository import ModelRepository
 from service.routes import characters, complete, health, info, solve
@@ -61,7 +61,7 @@ def create_app(settings: Settings | None = None, *, load_in_background: bool = T
         telemetry={"tracing": False, "metrics": False, "logs": False},
     )
     app.state.pose = state
-    app.state.compute_limiter = anyio.CapacityLimiter(settings.compute_threads)
+    app.state.compute_limiter = ComputeLimiter(settings.compute_threads)
     install_handlers(app)
     routers = (solve.router, complete.router, info.router, health.router, characters.router)
     for router in routers:

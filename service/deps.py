@@ -5,7 +5,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Annotated
 
-import anyio
 from fastapi import Depends, Request
 
 from service.engine import Engine
@@ -39,11 +38,6 @@ async def ready_engine(state: State) -> Engine:
 
 async def get_budget(request: Request, state: State) -> Budget:
     return Budget(request, state.settings.deadline_seconds)
-
-
-async def get_limiter(request: Request) -> anyio.CapacityLimiter:
-    limiter: anyio.CapacityLimiter = request.app.state.compute_limiter
-    return limiter
 
 
 ReadyEngine = Annotated[Engine, Depends(ready_engine)]
