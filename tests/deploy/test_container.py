@@ -19,12 +19,14 @@ import os
 import shutil
 import statistics
 import subprocess
+import threading
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 
 from core.rest import rest_pose
@@ -269,6 +271,89 @@ def test_character_and_bvh_routes(service: Container, figures: dict[str, str]) -
     assert resp.status_code == 200, resp.text
     inspect = {"bvh": body["bvh"], "frame": 0}
     assert service.client.post("/v1/bvh/inspect", json=inspect).status_code == 200
+
+
+def k8s_memory_mib() -> tuple[float, float]:
+    """The Deployment's memory request and limit, MiB (deploy/k8s/deployment.yaml)."""
+    import yaml
+
+    docs = yaml.safe_load_all((ROOT / "deploy" / "k8s" / "deployment.yaml").read_text())
+    (deploy,) = [d for d in docs if d and d.get("kind") == "Deployment"]
+    res = deploy["spec"]["template"]["spec"]["containers"][0]["resources"]
+    unit = {"Mi": 1.0, "Gi": 1024.0}
+    return tuple(  # type: ignore[return-value]
+        float(res[k]["memory"][:-2]) * unit[res[k]["memory"][-2:]] for k in ("requests", "limits")
+    )
+
+
+def vm(engine: Engine, name: str, field: str) -> float:
+    """A /proc/1/status figure (kB) of the container's service process, in MiB."""
+    line = engine.run("exec", name, "grep", f"{field}:", "/proc/1/status")
+    return int(line.split()[1]) / 1024
+
+
+def heavy_loads() -> list[tuple[str, bytes, int]]:
+    """The largest requests the default limits admit at once (POSE_MAX_CONCURRENCY 64,
+    POSE_MAX_INFLIGHT_BYTES 64 MiB, POSE_MAX_BATCH_ITEMS 1,024, bodies up to 8 MiB): 64
+    item lists of 1,024 exact-reach items (1.1 MB each), 42 columnar batches of 1,024 edits
+    (1.5 MB), 8 BVH files of 7.6 MB (the example's frames repeated), solved and inspected."""
+    from tests.service.server import heavy_batch
+
+    pose = rest_pose()
+    rng = np.random.default_rng(0)
+    n = 1024
+    wrists = pose[[JOINT_INDEX["left_wrist"], JOINT_INDEX["right_wrist"]]]
+    cols = {
+        "poses": (pose[None] + rng.normal(0, 0.01, (n, 21, 3))).reshape(n, -1).tolist(),
+        "targets": {
+            "joints": ["left_wrist", "right_wrist"],
+            "positions": (wrists[None] + rng.normal(0, 0.2, (n, 2, 3))).reshape(n, -1).tolist(),
+        },
+    }
+    example = json.loads((EXAMPLES / "bvh_solve.json").read_text())
+    head, motion = example["bvh"].split("MOTION", 1)
+    lines = motion.strip().splitlines()
+    frames = lines[2:] * (7_600_000 // sum(len(f) + 1 for f in lines[2:]))
+    bvh = f"{head}MOTION\nFrames: {len(frames)}\n{lines[1]}\n" + "\n".join(frames) + "\n"
+    solve = json.dumps({**example, "bvh": bvh}).encode()
+    inspect = json.dumps({"bvh": bvh, "frame": 1}).encode()
+    return [
+        ("/v1/solve/batch", heavy_batch(n), 64),
+        ("/v1/solve/batch", json.dumps(cols).encode(), 42),
+        ("/v1/bvh/solve", solve, 8),
+        ("/v1/bvh/inspect", inspect, 8),
+    ]
+
+
+def test_memory_stays_within_the_kubernetes_request_and_limit(
+    engine: Engine, service: Container, figures: dict[str, str]
+) -> None:
+    """Once ready the service's RSS is within the Deployment's memory request, and its
+    peak under the heaviest loads the default limits admit (:func:`heavy_loads`, one kind
+    after the other, each kind's requests all at once) stays under 85 % of its limit: a
+    pod is not killed for what the service lets in. Every answer is a 200, a 429 or a 504."""
+    request_mib, limit_mib = k8s_memory_mib()
+    ready = vm(engine, service.name, "VmRSS")
+    figures["rss_mib_ready"] = f"{ready:.0f}"
+    assert ready <= request_mib, (ready, request_mib)
+
+    def one(path: str, body: bytes, codes: list[int]) -> None:
+        head = {"content-type": "application/json"}
+        resp = service.client.post(path, content=body, headers=head, timeout=120)
+        codes.append(resp.status_code)
+
+    for path, body, n in heavy_loads():
+        codes: list[int] = []
+        threads = [threading.Thread(target=one, args=(path, body, codes)) for _ in range(n)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+        assert set(codes) <= {200, 429, 504} and len(codes) == n, (path, sorted(set(codes)))
+    peak = vm(engine, service.name, "VmHWM")
+    figures["rss_mib_peak"] = f"{peak:.0f}"
+    assert peak <= 0.85 * limit_mib, (peak, limit_mib)
+    assert status(service.client, "/v2/health/ready") == 200
 
 
 def test_bad_requests_are_problems(service: Container) -> None:
