@@ -15,6 +15,7 @@ from service.schemas import Problem
 _PROBLEM_STATUS = {
     400: "Body is not valid JSON (the detail says where), not UTF-8, or has duplicate keys.",
     401: "Missing or wrong API key (only when POSE_API_KEY is set).",
+    408: "The body did not arrive within the deadline (a stalled upload): the connection closes.",
     413: "Body or batch larger than the configured limit.",
     415: "Body is not application/json.",
     422: "Invalid request: the detail says which field and why.",
@@ -46,7 +47,8 @@ def document_problems(app: FastAPI) -> None:
             for method, op in ops.items():
                 if not path.startswith("/v1/"):
                     continue
-                codes = [400, 401, 413, 415, 422, 429, 503, 504] if method == "post" else [401, 503]
+                post = [400, 401, 408, 413, 415, 422, 429, 503, 504]
+                codes = post if method == "post" else [401, 503]
                 for code in codes:
                     op["responses"][str(code)] = {
                         "description": _PROBLEM_STATUS[code],

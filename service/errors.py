@@ -56,6 +56,14 @@ class MalformedBody(PoseError):
     type_ = "malformed-body"
 
 
+class RequestTimeout(PoseError):
+    """The body did not arrive within the deadline (a stalled or too slow upload)."""
+
+    status = 408
+    title = "Request body timeout"
+    type_ = "request-timeout"
+
+
 class TooManyItems(PoseError):
     status = 413
     title = "Too many items"

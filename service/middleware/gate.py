@@ -6,24 +6,43 @@
   checked up front, a chunked body counted while it is read);
 - admission, per worker: at most ``max_concurrency`` ``/v1`` POSTs in flight and at most
   ``max_inflight_bytes`` of their bodies held at once (a chunked body reserves the whole
-  body limit); past either, 429 with ``Retry-After`` before the body is read.
+  body limit); past either, 429 with ``Retry-After`` before the body is read;
+- the body is read here, whole, within the request's deadline (``deadline_seconds`` from
+  its arrival): a body that has not arrived by then is a 408 and the connection is closed.
+  Before, a stalled upload held its admission slot for as long as the client kept the
+  connection open: 64 of them, sent by one client with no bandwidth to speak of, turned
+  every other request away with 429s.
 """
 
 from __future__ import annotations
 
+import asyncio
 import hmac
+import time
 
 from service.errors import (
     MalformedBody,
     PayloadTooLarge,
     PoseError,
+    RequestTimeout,
     TooManyRequests,
     Unauthorized,
     UnsupportedMediaType,
     error_response,
 )
-from service.middleware.types import REASON, ASGIApp, Message, Receive, Scope, Send, header_map
+from service.middleware.types import (
+    REASON,
+    T0,
+    ASGIApp,
+    Message,
+    Receive,
+    Scope,
+    Send,
+    header_map,
+)
 from service.settings import Settings
+
+WATCH_SECONDS = 0.1  # how often the gate looks for body reads past their deadline
 
 
 def _api_key(headers: dict[str, str]) -> str:
@@ -40,6 +59,26 @@ class Gate:
         self.settings = settings
         self.active = 0  # admitted /v1 POSTs in flight
         self.held = 0  # body bytes reserved by them
+        #: tasks reading a body -> when their deadline passes (perf_counter seconds)
+        self._reading: dict[asyncio.Task[object], float] = {}
+        self._late: set[asyncio.Task[object]] = set()  # cancelled for being late
+        self._watch: asyncio.Task[None] | None = None
+
+    async def _watch_reads(self) -> None:
+        """Cancel every body read past its deadline, every ``WATCH_SECONDS``, while any
+        runs. One watch for all reads: a timeout per request (asyncio's, or anyio's cancel
+        scope) added 9-14 µs to every request's time in the gate, the watch and the whole
+        body's buffering ~4 µs (a /tmp loop over the gate alone, three rounds)."""
+        try:
+            while self._reading:
+                await asyncio.sleep(WATCH_SECONDS)
+                now = time.perf_counter()
+                for task, until in list(self._reading.items()):
+                    if now > until and task not in self._late:
+                        self._late.add(task)
+                        task.cancel()
+        finally:
+            self._watch = None
 
     def _check(self, scope: Scope, headers: dict[str, str]) -> int:
         """Raise the first rule the request breaks; return the body bytes to reserve."""
@@ -95,8 +134,11 @@ class Gate:
             self.active += 1
             self.held += reserved
         try:
-            if "content-length" not in headers and "transfer-encoding" in headers:
-                buffered = await self._buffer(scope, receive, send)
+            length = headers.get("content-length")
+            if (length is not None and length != "0") or (
+                length is None and "transfer-encoding" in headers
+            ):
+                buffered = await self._buffer(scope, receive, send, length)
                 if buffered is None:
                     return
                 receive = buffered
@@ -106,26 +148,60 @@ class Gate:
                 self.active -= 1
                 self.held -= reserved
 
-    async def _buffer(self, scope: Scope, receive: Receive, send: Send) -> Receive | None:
-        """Read a chunked body within the limit and hand it on whole (None: refused)."""
+    async def _buffer(
+        self, scope: Scope, receive: Receive, send: Send, length: str | None
+    ) -> Receive | None:
+        """Read the body within the size limit and the deadline and hand it on whole
+        (None: refused, answered here)."""
         limit = self.settings.max_body_bytes
+        deadline = self.settings.deadline_seconds
         chunks: list[bytes] = []
         size = 0
-        while True:
-            message = await receive()
-            if message["type"] != "http.request":
-                break
-            chunks.append(message.get("body", b""))
-            size += len(chunks[-1])
-            if size > limit:
-                big = PayloadTooLarge(f"body exceeds the {limit}-byte limit")
-                scope[REASON] = big.type_
-                await error_response(big)(scope, receive, send)
-                return None
-            if not message.get("more_body", False):
-                break
+        late = False
+        task = asyncio.current_task()
+        assert task is not None
+        self._reading[task] = scope.get(T0, time.perf_counter()) + deadline
+        if self._watch is None:
+            self._watch = asyncio.get_running_loop().create_task(self._watch_reads())
+        try:
+            while size <= limit:
+                message = await receive()
+                if message["type"] != "http.request":
+                    break
+                chunks.append(message.get("body", b""))
+                size += len(chunks[-1])
+                if not message.get("more_body", False):
+                    break
+        except asyncio.CancelledError:
+            if task not in self._late:
+                raise
+            task.uncancel()  # cancelled by the watch below: answered here
+            late = True
+        finally:
+            del self._reading[task]
+            self._late.discard(task)
+        if size > limit:
+            big = PayloadTooLarge(f"body exceeds the {limit}-byte limit")
+            scope[REASON] = big.type_
+            await error_response(big)(scope, receive, send)
+            return None
+        if late:
+            of = f" of {length}" if length is not None else ""
+            timeout = RequestTimeout(
+                f"the request body did not arrive within the {deadline:g} s deadline "
+                f"({size}{of} bytes received): send the body without pauses, or a smaller one"
+            )
+            scope[REASON] = timeout.type_
+            answer = error_response(timeout)
+            answer.headers["connection"] = "close"
+            await answer(scope, receive, send)
+            return None
         replay: list[Message] = [
-            {"type": "http.request", "body": b"".join(chunks), "more_body": False}
+            {
+                "type": "http.request",
+                "body": chunks[0] if len(chunks) == 1 else b"".join(chunks),
+                "more_body": False,
+            }
         ]
 
         async def receive_buffered() -> Message:

@@ -51,6 +51,51 @@ def test_heavy_batches_are_bounded_by_the_deadline(models_dir: Path, tmp_path: P
         assert s.request("GET", "/v2/health/live")[0] == 200
 
 
+def _stall(port: int, declared: int) -> socket.socket:
+    """A connection that sends a request's head and the first byte of its body, then
+    nothing more (a stalled or very slow upload)."""
+    sock = socket.create_connection(("127.0.0.1", port))
+    sock.sendall(
+        b"POST /v1/solve HTTP/1.1\r\nhost: x\r\ncontent-type: application/json\r\n"
+        + f"content-length: {declared}\r\n\r\n{{".encode()
+    )
+    return sock
+
+
+def test_stalled_uploads_end_at_the_deadline_and_free_their_slots(
+    models_dir: Path, tmp_path: Path
+) -> None:
+    """A body that does not arrive is a 408 at the deadline and its connection closed; as
+    many stalled uploads as the worker admits turn others away only until then (before:
+    for as long as their clients kept the connections open)."""
+    solve = (Path(__file__).parents[2] / "docs" / "examples" / "solve.json").read_bytes()
+    with serve(models_dir, tmp_path, POSE_DEADLINE_SECONDS="1", POSE_MAX_CONCURRENCY="8") as s:
+        sock = _stall(s.port, 100_000)
+        sock.settimeout(10)
+        t = time.perf_counter()
+        answer = b""
+        while chunk := sock.recv(65536):  # read to the close
+            answer += chunk
+        took = time.perf_counter() - t
+        head, _, data = answer.partition(b"\r\n\r\n")
+        assert head.startswith(b"HTTP/1.1 408"), head
+        assert b"connection: close" in head.lower() and PROBLEM.encode() in head
+        problem = json.loads(data)
+        assert problem["type"].endswith("/request-timeout"), problem
+        assert "1 s deadline" in problem["detail"] and "1 of 100000 bytes" in problem["detail"]
+        assert 0.9 < took < 3.0, took
+        sock.close()
+        print(f"\nstalled upload: 408 after {took:.2f} s")
+        stalled = [_stall(s.port, 1000) for _ in range(8)]  # every admission slot
+        time.sleep(0.3)
+        assert s.request("POST", "/v1/solve", solve)[0] == 429
+        time.sleep(1.5)  # past their deadline
+        status, _, data = s.request("POST", "/v1/solve", solve)
+        assert status == 200, data[:300]
+        for c in stalled:
+            c.close()
+
+
 def _abandon(port: int, body: bytes, after: float) -> None:
     with socket.create_connection(("127.0.0.1", port)) as sock:
         head = (
