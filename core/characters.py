@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from core import compiled_characters
 from core.units import UNITS, UP_AXES
 
 F64 = npt.NDArray[np.float64]
@@ -41,9 +42,11 @@ class Skeleton:
     rotatable: tuple[bool, ...]  # may the solve change this joint's local rotation?
     translatable: tuple[bool, ...]  # does the pose carry this joint's own translation?
     index: dict[str, int] = field(default_factory=dict, repr=False, compare=False)
+    parent_array: npt.NDArray[np.int64] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         self.index.update({n: i for i, n in enumerate(self.names)})
+        object.__setattr__(self, "parent_array", np.asarray(self.parents, dtype=np.int64))
 
     @property
     def size(self) -> int:
@@ -155,17 +158,11 @@ def build_skeleton(
 
 
 def forward_kinematics(skel: Skeleton, pose: Pose) -> tuple[F64, F64]:
-    """World rotations ``[J, 3, 3]`` and positions ``[J, 3]`` of every joint."""
-    g_rot = np.empty((skel.size, 3, 3))
-    g_pos = np.empty((skel.size, 3))
-    for j, p in enumerate(skel.parents):
-        if p < 0:
-            g_rot[j] = pose.rotations[j]
-            g_pos[j] = pose.translations[j]
-        else:
-            g_rot[j] = g_rot[p] @ pose.rotations[j]
-            g_pos[j] = g_pos[p] + g_rot[p] @ pose.translations[j]
-    return g_rot, g_pos
+    """World rotations ``[J, 3, 3]`` and positions ``[J, 3]`` of every joint (compiled:
+    :mod:`core.compiled_characters`)."""
+    return compiled_characters.forward_kinematics(
+        skel.parent_array, pose.rotations, pose.translations
+    )
 
 
 # --------------------------------------------------------------------------------------

@@ -21,10 +21,11 @@ over it, joint by joint. Then two structural rules apply to every map:
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Final
 
 import numpy as np
+import numpy.typing as npt
 
 from core.characters import F64, CharacterError, Skeleton
 from core.skeleton import JOINT_INDEX, JOINT_NAMES, PARENT_NAMES
@@ -211,6 +212,20 @@ class Anchor:
 class JointMap:
     anchors: tuple[Anchor, ...]  # one per canonical joint, canonical order
     scheme: str  # the automatic scheme used, "explicit", or "<scheme>+explicit"
+    #: the anchors' joints ``[21]`` and offsets ``[21, 3, 1]``, for :meth:`points`
+    joints: npt.NDArray[np.intp] = field(init=False, repr=False, compare=False)
+    offsets: F64 = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "joints", np.array([a.joint for a in self.anchors], np.intp))
+        offsets = np.array([a.offset for a in self.anchors], dtype=np.float64).reshape(-1, 3, 1)
+        object.__setattr__(self, "offsets", offsets)
+
+    def points(self, g_rot: F64, g_pos: F64) -> F64:
+        """The anchors' world points ``[21, 3]`` of world joint rotations ``[J, 3, 3]`` and
+        positions ``[J, 3]`` (of :func:`core.characters.forward_kinematics`)."""
+        out: F64 = g_pos[self.joints] + (g_rot[self.joints] @ self.offsets)[..., 0]
+        return out
 
     def describe(self) -> dict[str, str]:
         return {n: a.label for n, a in zip(JOINT_NAMES, self.anchors, strict=True)}

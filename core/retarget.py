@@ -45,7 +45,7 @@ def canonical_points(skel: Skeleton, pose: Pose, jmap: JointMap) -> F64:
 
 
 def anchor_points(jmap: JointMap, g_rot: F64, g_pos: F64) -> F64:
-    return np.stack([g_pos[a.joint] + g_rot[a.joint] @ a.offset for a in jmap.anchors])
+    return jmap.points(g_rot, g_pos)
 
 
 @dataclass(frozen=True)

@@ -268,3 +268,33 @@ def test_character_modules_import_no_scipy() -> None:
         "core.retarget, service.characters"
     )
     subprocess.run([sys.executable, "-c", code], check=True)
+
+
+def test_compiled_forward_kinematics_is_the_matrix_products_of_the_joints(
+    files: dict[str, Path],
+) -> None:
+    """core.compiled_characters against the plain numpy products, joint by joint, on
+    every file's skeleton and several of its frames; the same answer on every call, and
+    the anchors' points as the per-anchor formula gives them."""
+    for name, path in files.items():
+        bvh = read_bvh(path)
+        skel = skeleton_of(bvh)
+        jmap = resolve_map(skel, None)
+        for frame in range(0, bvh.num_frames, max(1, bvh.num_frames // 5)):
+            pose = pose_of(bvh, frame)
+            g_rot, g_pos = forward_kinematics(skel, pose)
+            ref_rot, ref_pos = np.empty_like(g_rot), np.empty_like(g_pos)
+            for j, p in enumerate(skel.parents):
+                if p < 0:
+                    ref_rot[j], ref_pos[j] = pose.rotations[j], pose.translations[j]
+                else:
+                    ref_rot[j] = ref_rot[p] @ pose.rotations[j]
+                    ref_pos[j] = ref_pos[p] + ref_rot[p] @ pose.translations[j]
+            scale = max(1.0, float(np.abs(ref_pos).max()))
+            np.testing.assert_allclose(g_rot, ref_rot, rtol=0, atol=1e-12, err_msg=name)
+            np.testing.assert_allclose(g_pos, ref_pos, rtol=0, atol=1e-12 * scale, err_msg=name)
+            again = forward_kinematics(skel, Pose(pose.rotations.copy(), pose.translations.copy()))
+            assert again[0].tobytes() == g_rot.tobytes() and again[1].tobytes() == g_pos.tobytes()
+            points = np.stack([g_pos[a.joint] + g_rot[a.joint] @ a.offset for a in jmap.anchors])
+            got = jmap.points(g_rot, g_pos)
+            np.testing.assert_allclose(got, points, rtol=0, atol=1e-12 * scale)
