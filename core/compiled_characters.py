@@ -4,10 +4,10 @@ A character solve aims the skeleton's joints group by group and reads the world 
 after each (``core.retarget``): about 200 forward kinematics for one exact-reach edit of
 a 22-joint skeleton, which took half of its 110 ms as numpy loops over the joints. Here
 one call is a few µs (that edit: 108.6 -> 41.3 ms median, with the anchors' points taken
-in one array operation, ``JointMap.points``). The products are written out in source order (no BLAS, no fused
-multiply-add), so an answer is the same on every run; they differ from numpy's ``@`` (BLAS)
-by rounding only (6e-17 on the docs' BVH example; tests/core/test_characters.py holds
-them to 1e-12 on real files).
+in one array operation, ``JointMap.points``). The products are written out in source
+order (no BLAS, no fused multiply-add), so an answer is the same on every run; they differ
+from numpy's ``@`` (BLAS) by rounding only (6e-17 on the docs' BVH example;
+tests/core/test_characters.py holds them to 1e-12 on real files).
 """
 
 from __future__ import annotations

@@ -104,7 +104,7 @@ def _aim_pass(
         new_global = turn @ g_rot[b]
         parent = skel.parents[b]
         local = new_global if parent < 0 else g_rot[parent].T @ new_global
-        if not np.allclose(local, original.rotations[b], rtol=0.0, atol=1e-15):
+        if not (np.abs(local - original.rotations[b]) <= 1e-15).all():  # np.allclose, rtol 0
             pose.rotations[b] = local
             changed.add(b)
     return changed
