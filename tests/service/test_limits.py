@@ -218,4 +218,4 @@ def test_under_overload_the_first_requests_finish_first(
             t.join()
     took = sorted(d - t0 for d in done)
     assert len(took) == 16
-    assert took[1] < 0.5 * took[-1], took  # with tokens shared in turn: all within ~5 %
+    assert took[1] < 0.5 * took[-1], took  # tokens shared in turn: all within ~10 % (2.52-2.76 s)
