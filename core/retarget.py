@@ -41,10 +41,6 @@ _FIRST_CHILD = {p: c for c, p in reversed(list(enumerate(PARENTS))) if p >= 0}
 def canonical_points(skel: Skeleton, pose: Pose, jmap: JointMap) -> F64:
     """The 21 canonical points ``[21, 3]`` of a pose, in the character's units and axes."""
     g_rot, g_pos = forward_kinematics(skel, pose)
-    return anchor_points(jmap, g_rot, g_pos)
-
-
-def anchor_points(jmap: JointMap, g_rot: F64, g_pos: F64) -> F64:
     return jmap.points(g_rot, g_pos)
 
 
@@ -88,7 +84,7 @@ def _aim_pass(
         g_rot, g_pos = forward_kinematics(skel, pose)
         pivot = g_pos[b]
         kids = plan.groups[b]
-        v = anchor_points(jmap, g_rot, g_pos)[kids] - pivot
+        v = jmap.points(g_rot, g_pos)[kids] - pivot
         u = goal[kids] - pivot
         nv, nu = np.linalg.norm(v, axis=1), np.linalg.norm(u, axis=1)
         ok = (nv > 1e-9 * max(1.0, float(nv.max()))) & (nu > 1e-12)
@@ -127,7 +123,7 @@ def _place_pelvis(
     members = [_PELVIS, *kids]
     weights = np.array([pelvis_weight] + [1.0 if c in _HIPS else 0.25 for c in kids])
     g_rot, g_pos = forward_kinematics(skel, pose)
-    now = anchor_points(jmap, g_rot, g_pos)[members]
+    now = jmap.points(g_rot, g_pos)[members]
     want = goal[members]
     w = weights / weights.sum()
     c_now, c_want = w @ now, w @ want
@@ -254,7 +250,7 @@ def _attempt(
         if not chain:
             continue
         g_rot, g_pos = forward_kinematics(skel, new)
-        pts = anchor_points(jmap, g_rot, g_pos)
+        pts = jmap.points(g_rot, g_pos)
         top = jmap.anchors[chain[0]].joint
         line = np.concatenate([g_pos[top][None], pts[chain[1:]]])
         reach = float(np.linalg.norm(np.diff(line, axis=0), axis=1).sum())
@@ -301,4 +297,4 @@ def retarget(
             break
         goal[body] += shift  # out of reach from the pelvis: move the whole body towards it
     g_rot, g_pos = forward_kinematics(skel, new)
-    return Retargeted(new, anchor_points(jmap, g_rot, g_pos), frozenset(changed))
+    return Retargeted(new, jmap.points(g_rot, g_pos), frozenset(changed))

@@ -44,7 +44,7 @@ from core.characters import (
     up_rotation,
 )
 from core.characters_maps import JointMap, infer_units, infer_up, resolve_map
-from core.retarget import anchor_points, canonical_points, retarget
+from core.retarget import canonical_points, retarget
 from core.skeleton import BONES, JOINT_INDEX, JOINT_NAMES
 from service.engine import Engine
 from service.errors import InvalidRequest
@@ -450,7 +450,7 @@ def character_answer(ch: Character, edit: Edit, given: dict[str, list[float]]) -
         "rotations": rotations,
         "root_position": edit.pose.translations[root].tolist(),
         "positions": dict(zip(ch.skel.names, g_pos.tolist(), strict=True)),
-        **_report(ch, edit, anchor_points(ch.jmap, g_rot, g_pos)),
+        **_report(ch, edit, ch.jmap.points(g_rot, g_pos)),
     }
 
 
@@ -483,7 +483,7 @@ def character_from_bvh(bvh: BVH, req: BVHSolveRequest | BVHInspectRequest) -> Ch
         pose = pose_of(bvh, req.frame)
         jmap = resolve_map(skel, req.joint_map)
         g_rot, g_pos = forward_kinematics(skel, pose)
-        points = anchor_points(jmap, g_rot, g_pos)
+        points = jmap.points(g_rot, g_pos)
         return _character(skel, pose, jmap, req.units, req.up, points)
     except (CharacterError, BVHError) as exc:
         raise _invalid(exc) from None
@@ -506,7 +506,7 @@ def bvh_inspect(bvh: BVH, ch: Character, frame: int) -> dict[str, Any]:
     """What an editor needs to draw and pose the file: its joints and channels, where the 21
     canonical joints sit on them, units and axes, and one frame's world positions."""
     g_rot, g_pos = forward_kinematics(ch.skel, ch.pose)
-    points = anchor_points(ch.jmap, g_rot, g_pos)
+    points = ch.jmap.points(g_rot, g_pos)
     names = ch.skel.names
     return {
         "joints": [
