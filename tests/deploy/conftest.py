@@ -2,7 +2,12 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+from typing import Any
+
 import pytest
+
+K8S = Path(__file__).resolve().parents[2] / "deploy" / "k8s"
 
 FIGURES: dict[str, str] = {}
 
@@ -17,3 +22,25 @@ def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:
         terminalreporter.section("container figures")
         for name, value in FIGURES.items():
             terminalreporter.write_line(f"SMOKE {name}={value}")
+
+
+@pytest.fixture(scope="session")
+def k8s() -> dict[str, dict[str, Any]]:
+    """The Kubernetes manifests (deploy/k8s) by kind (one object of each)."""
+    yaml = pytest.importorskip("yaml")
+    docs: dict[str, dict[str, Any]] = {}
+    for path in sorted(K8S.glob("*.yaml")):
+        if path.name == "kustomization.yaml":
+            continue
+        for doc in yaml.safe_load_all(path.read_text()):
+            if doc:
+                assert doc["kind"] not in docs, f"two {doc['kind']} objects"
+                docs[doc["kind"]] = doc
+    assert {"Deployment", "Service", "HorizontalPodAutoscaler"} <= docs.keys(), docs.keys()
+    return docs
+
+
+def deployment_container(k8s: dict[str, dict[str, Any]]) -> dict[str, Any]:
+    """The Deployment's one container."""
+    (container,) = k8s["Deployment"]["spec"]["template"]["spec"]["containers"]
+    return container

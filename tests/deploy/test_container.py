@@ -31,6 +31,7 @@ import pytest
 
 from core.rest import rest_pose
 from core.skeleton import JOINT_INDEX, JOINT_NAMES, bone_lengths
+from tests.deploy.conftest import deployment_container
 from tests.service.server import free_port
 from tests.service.test_api import as_array, assert_problem
 
@@ -273,13 +274,9 @@ def test_character_and_bvh_routes(service: Container, figures: dict[str, str]) -
     assert service.client.post("/v1/bvh/inspect", json=inspect).status_code == 200
 
 
-def k8s_memory_mib() -> tuple[float, float]:
-    """The Deployment's memory request and limit, MiB (deploy/k8s/deployment.yaml)."""
-    import yaml
-
-    docs = yaml.safe_load_all((ROOT / "deploy" / "k8s" / "deployment.yaml").read_text())
-    (deploy,) = [d for d in docs if d and d.get("kind") == "Deployment"]
-    res = deploy["spec"]["template"]["spec"]["containers"][0]["resources"]
+def k8s_memory_mib(k8s: dict[str, dict[str, Any]]) -> tuple[float, float]:
+    """The Deployment's memory request and limit, MiB (deploy/k8s)."""
+    res = deployment_container(k8s)["resources"]
     unit = {"Mi": 1.0, "Gi": 1024.0}
     return tuple(  # type: ignore[return-value]
         float(res[k]["memory"][:-2]) * unit[res[k]["memory"][-2:]] for k in ("requests", "limits")
@@ -326,13 +323,13 @@ def heavy_loads() -> list[tuple[str, bytes, int]]:
 
 
 def test_memory_stays_within_the_kubernetes_request_and_limit(
-    engine: Engine, service: Container, figures: dict[str, str]
+    engine: Engine, service: Container, figures: dict[str, str], k8s: dict[str, dict[str, Any]]
 ) -> None:
     """Once ready the service's RSS is within the Deployment's memory request, and its
     peak under the heaviest loads the default limits admit (:func:`heavy_loads`, one kind
     after the other, each kind's requests all at once) stays under 85 % of its limit: a
     pod is not killed for what the service lets in. Every answer is a 200, a 429 or a 504."""
-    request_mib, limit_mib = k8s_memory_mib()
+    request_mib, limit_mib = k8s_memory_mib(k8s)
     ready = vm(engine, service.name, "VmRSS")
     figures["rss_mib_ready"] = f"{ready:.0f}"
     assert ready <= request_mib, (ready, request_mib)

@@ -26,6 +26,8 @@ from typing import Any
 
 import pytest
 
+from tests.deploy.conftest import K8S, deployment_container
+
 yaml = pytest.importorskip("yaml")
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -33,7 +35,6 @@ DOCKERFILE = ROOT / "docker" / "Dockerfile"
 COMPOSE = ROOT / "docker" / "compose.yaml"
 HEALTHCHECK = ROOT / "docker" / "healthcheck.py"
 SMOKE = ROOT / "docker" / "smoke.sh"
-K8S = ROOT / "deploy" / "k8s"
 DEFAULT_BASE_IMAGE = "python:3.11-slim-bookworm"
 
 
@@ -350,26 +351,6 @@ def test_compose_runs_the_image_with_the_ready_check(app_port: int) -> None:
 # --------------------------------------------------------------------------- Kubernetes
 
 
-@pytest.fixture(scope="module")
-def k8s() -> dict[str, dict[str, Any]]:
-    """The manifests by kind (one object of each)."""
-    docs: dict[str, dict[str, Any]] = {}
-    for path in sorted(K8S.glob("*.yaml")):
-        if path.name == "kustomization.yaml":
-            continue
-        for doc in yaml.safe_load_all(path.read_text()):
-            if doc:
-                assert doc["kind"] not in docs, f"two {doc['kind']} objects"
-                docs[doc["kind"]] = doc
-    assert {"Deployment", "Service", "HorizontalPodAutoscaler"} <= docs.keys(), docs.keys()
-    return docs
-
-
-def _container(k8s: dict[str, dict[str, Any]]) -> dict[str, Any]:
-    (container,) = k8s["Deployment"]["spec"]["template"]["spec"]["containers"]
-    return container
-
-
 def _resolve_port(container: dict[str, Any], port: int | str) -> int:
     if isinstance(port, int):
         return port
@@ -384,7 +365,7 @@ def test_kustomization_lists_every_manifest() -> None:
 
 
 def test_deployment_ports_match_settings(k8s: dict[str, dict[str, Any]], app_port: int) -> None:
-    container = _container(k8s)
+    container = deployment_container(k8s)
     assert [p["containerPort"] for p in container["ports"]] == [app_port]
     env = {e["name"]: e.get("value") for e in container.get("env", [])}
     assert int(env["POSE_PORT"]) == app_port
@@ -394,7 +375,7 @@ def test_deployment_ports_match_settings(k8s: dict[str, dict[str, Any]], app_por
 def test_probes_use_the_apps_health_routes(
     k8s: dict[str, dict[str, Any]], live_path: str, ready_path: str, app_port: int
 ) -> None:
-    container = _container(k8s)
+    container = deployment_container(k8s)
     expected = {"livenessProbe": live_path, "readinessProbe": ready_path}
     for probe, path in expected.items():
         get = container[probe]["httpGet"]
@@ -410,7 +391,7 @@ def test_deployment_resources_and_security(
     k8s: dict[str, dict[str, Any]], final_stage: list[tuple[str, str]]
 ) -> None:
     pod = k8s["Deployment"]["spec"]["template"]["spec"]
-    container = _container(k8s)
+    container = deployment_container(k8s)
     for kind in ("requests", "limits"):
         assert {"cpu", "memory"} <= container["resources"][kind].keys(), kind
     sc = container["securityContext"]
@@ -433,7 +414,7 @@ def test_service_routes_to_the_pods(k8s: dict[str, dict[str, Any]], app_port: in
     assert svc["selector"].items() <= labels.items()
     assert k8s["Deployment"]["spec"]["selector"]["matchLabels"].items() <= labels.items()
     (port,) = svc["ports"]
-    assert _resolve_port(_container(k8s), port["targetPort"]) == app_port
+    assert _resolve_port(deployment_container(k8s), port["targetPort"]) == app_port
 
 
 def test_hpa_scales_the_deployment_on_cpu(k8s: dict[str, dict[str, Any]]) -> None:
@@ -453,7 +434,7 @@ def test_hpa_scales_the_deployment_on_cpu(k8s: dict[str, dict[str, Any]]) -> Non
 
 
 def test_manifest_images_are_the_kustomize_name(k8s: dict[str, dict[str, Any]]) -> None:
-    image = _container(k8s)["image"]
+    image = deployment_container(k8s)["image"]
     kustomization = yaml.safe_load((K8S / "kustomization.yaml").read_text())
     names = {i["name"] for i in kustomization.get("images", [])}
     assert re.split(r"[:@]", image)[0] in names, image
