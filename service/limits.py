@@ -219,10 +219,14 @@ class Budget:
     def left(self) -> float:
         return self.t0 + self.deadline_seconds - time.perf_counter()
 
-    async def check(self, done: int = 0, total: int = 0) -> None:
-        """Raise when the work should stop: client gone, deadline passed."""
+    async def client_gone(self, done: int = 0, total: int = 0) -> None:
+        """Raise (499, never sent) when the client has gone away."""
         if await self.request.is_disconnected():
             raise ClientDisconnected(f"client went away after {done} of {total} items")
+
+    async def check(self, done: int = 0, total: int = 0) -> None:
+        """Raise when the work should stop: client gone, deadline passed."""
+        await self.client_gone(done, total)
         if self.left <= 0:
             raise DeadlineExceeded(
                 f"the request needed more than the {self.deadline_seconds:g} s deadline "

@@ -36,7 +36,6 @@ from service.characters import (
 )
 from service.deps import ReadyEngine, RequestBudget, ServiceState, State
 from service.engine import Engine
-from service.errors import DeadlineExceeded
 from service.limits import Budget
 from service.problems import SolveProblem
 from service.responses import json_response
@@ -46,15 +45,10 @@ R = TypeVar("R")
 
 
 async def step(budget: Budget, stage: str, work: Callable[[], R]) -> R:
-    """One stage of the work, as the solve routes run theirs: first the deadline and the
-    client (504 / 499), then ``work`` in a worker thread under the app's compute limiter."""
-    try:
-        await budget.check()
-    except DeadlineExceeded:
-        raise DeadlineExceeded(
-            f"the request needed more than the {budget.deadline_seconds:g} s deadline "
-            f"(before {stage}); retry, or send a smaller request"
-        ) from None
+    """One stage of the work, as the solve routes run theirs: first the client (499), then
+    ``work`` in a worker thread on a compute token taken within the deadline (504 naming
+    ``stage``, :meth:`Budget.token`)."""
+    await budget.client_gone()
     t = time.perf_counter()
     out = await budget.in_thread(work, stage)
     budget.compute += time.perf_counter() - t
