@@ -576,29 +576,54 @@ def hold_pelvis(pose: F64, start: F64, r: float) -> None:  # pragma: no cover - 
 
 
 @jit
-def reach_shift(
-    poses: F64, tidx: I64, tpos: F64, n_t: I64, go: Bool
-) -> F64:  # pragma: no cover - compiled
-    """``serving.reach_travel``'s move of each start ``[B, 3]`` (0 where none): for items
-    ``go``, the farthest of the first ``n_t[b]`` targets that lies across (x, z) farther
-    from the start's pelvis than its chain reaches (the start's bones from the pelvis to
-    the joint, summed in bone order), and the horizontal excess towards it."""
-    out = np.zeros((poses.shape[0], 3))
+def travel(
+    poses: F64, tidx: I64, tpos: F64, cnt: I64, n_t: I64, fab: Bool, pelvis: bool, reach: bool,
+    few: int,
+) -> tuple[F64, bool]:  # pragma: no cover - compiled  # fmt: skip
+    """The starts ``poses [B, 21, 3]`` moved across as ``_Items.travelled`` says, and
+    whether any moved; only neural items with no pins (``fab``, ``cnt`` = ``n_t``) move.
+    ``pelvis`` (``serving.pelvis_travel``): an item with a target on the pelvis moves
+    horizontally (x, z) by its first such target's offset from the start's pelvis. Then
+    ``reach`` (``serving.reach_travel``), for items of fewer than ``few`` targets: by the
+    excess of the target farthest across (x, z) beyond its chain's reach (the start's
+    bones from the pelvis to the joint, summed in bone order), towards it, if any."""
+    out = poses.copy()
     lens = np.empty(NUM_JOINTS - 1)
+    moved = False
     for b in range(poses.shape[0]):
-        if not go[b]:
+        if fab[b] or cnt[b] != n_t[b]:
             continue
-        bone_lengths_item(poses[b], lens)
-        best = 0.0
+        pose = out[b]
+        for q in range(n_t[b] if pelvis else 0):
+            if tidx[b, q] == _PELVIS:
+                sx, sz = tpos[b, q, 0] - pose[_PELVIS, 0], tpos[b, q, 2] - pose[_PELVIS, 2]
+                _shift(pose, sx, sz)
+                moved = True
+                break
+        if not reach or n_t[b] >= few:
+            continue
+        bone_lengths_item(pose, lens)
+        best, sx, sz = 0.0, 0.0, 0.0
         for q in range(n_t[b]):
-            reach = chain_length(lens, tidx[b, q])
-            ax = tpos[b, q, 0] - poses[b, _PELVIS, 0]
-            az = tpos[b, q, 2] - poses[b, _PELVIS, 2]
+            ax = tpos[b, q, 0] - pose[_PELVIS, 0]
+            az = tpos[b, q, 2] - pose[_PELVIS, 2]
             d = np.sqrt(ax * ax + az * az)
-            if d - reach > best:
-                best = d - reach
-                out[b, 0], out[b, 2] = ax * (best / d), az * (best / d)
-    return out
+            over = d - chain_length(lens, tidx[b, q])
+            if over > best:
+                best, sx, sz = over, ax * (over / d), az * (over / d)
+        if sx != 0.0 or sz != 0.0:
+            _shift(pose, sx, sz)
+            moved = True
+    return out, moved
+
+
+@jit
+def _shift(pose: F64, sx: float, sz: float) -> None:  # pragma: no cover - compiled
+    """``pose [21, 3] += (sx, 0, sz)`` in place, every joint (y gains 0.0: as numpy adds)."""
+    for j in range(NUM_JOINTS):
+        pose[j, 0] += sx
+        pose[j, 1] += 0.0
+        pose[j, 2] += sz
 
 
 @jit
@@ -750,24 +775,12 @@ def warm() -> None:
         chains, 0.0, np.ones(1, dtype=np.bool_), np.full(1, 0.02),
     )  # fmt: skip
     finish(out[0], out[1], out[2], np.zeros(1), tidx, tpos, counts, out[3])
-    reach_shift(pose, tidx, tpos, counts, np.ones(1, dtype=np.bool_))
+    one = np.ones(1, dtype=np.bool_)
+    travel(pose, tidx, tpos, counts, counts, ~one, True, True, 5)
     settle(
-        out[6],
-        out[4],
-        out[0],
-        out[3],
-        out[1],
-        out[2],
-        np.zeros(1),
-        tidx,
-        tpos,
-        counts,
-        np.full(1, 0.5),
-        chains,
-        0.0,
-        np.ones(1, dtype=np.bool_),
-        np.full(1, 0.02),
-    )
+        out[6], out[4], out[0], out[3], out[1], out[2], np.zeros(1), tidx, tpos, counts,
+        np.full(1, 0.5), chains, 0.0, one, np.full(1, 0.02),
+    )  # fmt: skip
 
 
 def as_i64(a: npt.ArrayLike) -> I64:

@@ -165,10 +165,10 @@ class Engine:
         #: (``serving.keep_pelvis``; ``core.compiled.hold_pelvis``)
         self.keep_pelvis = sv.keep_pelvis
         #: a targeted pelvis takes the start with it, horizontally, before the networks
-        #: (``serving.pelvis_travel``; ``_Items.onto_pelvis_target``)
+        #: (``serving.pelvis_travel``; ``_Items.travelled``)
         self.pelvis_travel = sv.pelvis_travel
         #: a target beyond its chain's reach moves the start across first, in few-target
-        #: edits (``serving.reach_travel``; ``_Items.within_reach``)
+        #: edits (``serving.reach_travel``; ``_Items.travelled``)
         self.reach_travel = sv.reach_travel
         #: each neural pass also solves the edit's mirror image and averages the two
         #: (``serving.solve_mirror``; :func:`service.networks.answer`)
@@ -536,13 +536,16 @@ class Engine:
         return BatchAnswer(world, errors, bone_err, iterations, paths, path_of)
 
     def _prepare(
-        self, poses: compiled.F64, items: _Items, neural: npt.NDArray[np.bool_]
-    ) -> tuple[compiled.F64, compiled.Prepared]:
+        self, poses: compiled.F64, items: _Items, neural: npt.NDArray[np.bool_],
+        tpos: compiled.F64 | None = None,
+    ) -> tuple[compiled.F64, compiled.Prepared]:  # fmt: skip
         """``compiled.prepare`` of ``poses`` with the targets, counts and floors of
         ``items`` and this engine's body mapping; first the targets with the floor taken
-        off (the networks know a floor at y = 0), which ``compiled.finish`` takes too."""
-        tpos = items.tpos.copy()
-        tpos[:, :, 1] -= items.floors[:, None]
+        off (the networks know a floor at y = 0), which ``compiled.finish`` takes too
+        (``tpos``: those, already taken off by an earlier call)."""
+        if tpos is None:
+            tpos = items.tpos.copy()
+            tpos[:, :, 1] -= items.floors[:, None]
         return tpos, compiled.prepare(
             poses, items.floors, items.tidx, tpos, items.cnt, neural, self._shapes_c,
             self._shape_totals, self.body == "total_length", self._reference_total,

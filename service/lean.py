@@ -116,9 +116,10 @@ def solve_lean(
     pose = items.poses
     errors, bone_err = np.zeros(tidx.shape), np.zeros(n)
     iterations = np.zeros(n, dtype=np.int64)
+    tpos = None  # the targets with the floor taken off: the first pass's, for every pass
     for k in range(passes):
         tpos, (canon, facing, trans, lengths, scales, tcan, x, canvas) = engine._prepare(
-            pose, items, every
+            pose, items, every, tpos
         )
         decoded = networks.answer(engine, x, canvas, sequence, items.mirror)
         if not exact or k < passes - 1:

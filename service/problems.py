@@ -142,15 +142,19 @@ class _Items:
         """One problem as a batch of one (``carry``, ``mirror``: what it asks for), as
         :meth:`of_arrays` makes it from :func:`stacked` ``([p])``."""
         tidx, k = compiled.as_i64(p.target_idx), len(p.target_idx)
-        one = np.ones(1, dtype=np.bool_)
+        # each per-item option a one-element view of one array per dtype (an array each
+        # cost 1-2 us: a third of a lean solve's Python before this)
+        ints = np.array([k, p.n_targets], dtype=np.int64)
+        reals = np.array([p.tolerance, p.floor, carry], dtype=np.float64)
+        flags = np.array(
+            [p.method == "fabrik", p.preserve_bone_lengths, p.reach == "exact",
+             p.turn_search is not False, p.reach != "exact", mirror], dtype=np.bool_,
+        )  # fmt: skip
         return _Items(
             compiled.as_f64(p.pose)[None], tidx[None],
-            compiled.as_f64(p.target_pos).reshape(1, k, 3), np.full(1, k, dtype=np.int64),
-            np.full(1, p.n_targets, dtype=np.int64), compiled.as_f64(p.weights)[None],
-            one & (p.method == "fabrik"), one & p.preserve_bone_lengths,
-            one & (p.reach == "exact"), np.full(1, p.tolerance, dtype=np.float64),
-            np.full(1, p.floor, dtype=np.float64), np.full(1, carry),
-            one & (p.turn_search is not False), one & (p.reach != "exact"), one & mirror,
+            compiled.as_f64(p.target_pos).reshape(1, k, 3), ints[0:1], ints[1:2],
+            compiled.as_f64(p.weights)[None], flags[0:1], flags[1:2], flags[2:3], reals[0:1],
+            reals[1:2], reals[2:3], flags[3:4], flags[4:5], flags[5:6],
         )  # fmt: skip
 
     @staticmethod
@@ -200,48 +204,20 @@ class _Items:
         return out
 
     def travelled(self, pelvis: bool, reach: bool, few: int) -> _Items:
-        """These items with their starts moved across first, as the serving settings say:
-        onto a pelvis target (``pelvis``: ``serving.pelvis_travel``), then towards a target
-        out of reach in edits of fewer than ``few`` targets (``reach``:
-        ``serving.reach_travel``)."""
-        items = self.onto_pelvis_target() if pelvis else self
-        return items.within_reach(few) if reach else items
-
-    def onto_pelvis_target(self) -> _Items:
-        """These items with each neural start whose user targets include the pelvis, and
-        which has no pins, moved horizontally (x, z) so that its pelvis lies over that
-        target (``serving.pelvis_travel``); the height is the networks' to change. The
-        others as they are."""
-        on = self.tidx == PELVIS
-        if not on.any():  # the common case: no pelvis column at all
+        """These items with their starts moved across first, as the serving settings say
+        (:func:`core.compiled.travel`; only neural starts with no pins move): onto a pelvis
+        target (``pelvis``: ``serving.pelvis_travel``; horizontally, so that the start's
+        pelvis lies over that target; the height is the networks' to change), then, in
+        edits of fewer than ``few`` targets, towards a target out of reach (``reach``:
+        ``serving.reach_travel``; a body steps towards what it cannot reach, as FABRIK's
+        root moves), by the farthest such target's excess across (x, z) over its chain,
+        so that the networks see it within reach."""
+        if not (pelvis or reach):
             return self
-        cols = self.targets() & on
-        rows = np.flatnonzero(cols.any(axis=1) & self.neural_unpinned())
-        if rows.size == 0:
-            return self
-        shift = self.tpos[rows, np.argmax(cols[rows], axis=1)] - self.poses[rows, PELVIS]
-        shift[:, 1] = 0.0
-        poses = self.poses.copy()
-        poses[rows] += shift[:, None, :]
-        return dataclasses.replace(self, poses=poses)
-
-    def within_reach(self, few: int) -> _Items:
-        """These items with each neural start of fewer than ``few`` user targets and no
-        pins, one of whose targets lies across (x, z) farther from the start's pelvis than
-        its chain reaches, moved across by the farthest such target's excess, so that the
-        networks see it within reach (``serving.reach_travel``: a body steps towards what
-        it cannot reach, as FABRIK's root moves). The others as they are. A chain is the
-        sum of the start's own bones from the pelvis to the joint."""
-        go = self.neural_unpinned() & (self.n_t < few)
-        if not go.any():
-            return self
-        shift = compiled.reach_shift(self.poses, self.tidx, self.tpos, self.n_t, go)
-        rows = np.flatnonzero(shift.any(axis=1))
-        if rows.size == 0:
-            return self
-        out = self.poses.copy()
-        out[rows] += shift[rows, None, :]
-        return dataclasses.replace(self, poses=out)
+        poses, moved = compiled.travel(
+            self.poses, self.tidx, self.tpos, self.cnt, self.n_t, self.fab, pelvis, reach, few
+        )
+        return dataclasses.replace(self, poses=poses) if moved else self
 
     def take(self, rows: npt.NDArray[np.intp]) -> _Items:
         """Items ``rows``, as they are."""
