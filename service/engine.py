@@ -248,9 +248,10 @@ class Engine:
         weights = compiled.as_f64(p.weights)
         passes, seq = 1, None
         if p.method != "fabrik":
-            if not (p.preserve_bone_lengths and p.n_targets == len(tidx)):
-                return None  # the bone pass left out, or pins: the general path
-            if self.turn_search.searches(p.method, p.n_targets, False, p.turn_search):
+            if not p.preserve_bone_lengths:
+                return None  # the bone pass left out: the general path
+            pinned = p.n_targets < len(tidx)
+            if self.turn_search.searches(p.method, p.n_targets, pinned, p.turn_search):
                 return None  # a turn search (service.turns): the general path
             passes, seq = self.passes_of(p), covering(self, tidx, weights)
             if seq is None or passes < 1:

@@ -1,13 +1,14 @@
 """The lean solve: a batch whose items all ask for the same thing of the networks.
 
 The interactive drag (one item) and a clip's cleanup (many items, one target set) are
-almost always: method neural, soft reach, bone lengths kept, no pins, every target on a
-trained solver, the same passes. Such a batch needs none of the general path's grouping,
-FABRIK polish or per-pass bookkeeping (:meth:`service.engine.Engine._solve_once`): each
-pass is one compiled call in (:func:`core.compiled.prepare`), one onnxruntime run per
-solver of the sequence, and one compiled call out (:func:`core.compiled.settle`: the bone
-pass and the way back to the world). These are the general path's kernels in its order,
-so the answers are bit-identical to it (``tests/service/test_lean.py``).
+almost always: method neural, bone lengths kept, every target on a trained solver, the
+same passes, pins or not. Such a batch needs none of the general path's grouping or
+per-pass bookkeeping (:meth:`service.engine.Engine._solve_once`): each pass is one
+compiled call in (:func:`core.compiled.prepare`), one onnxruntime run per solver of the
+sequence, and one compiled call out (:func:`core.compiled.settle`: the bone pass and the
+way back to the world); with pins, or exact reach's last pass, the bone pass, the compiled
+FABRIK polish and the way back. These are the general path's kernels in its order, so
+the answers are bit-identical to it (``tests/service/test_lean.py``).
 """
 
 from __future__ import annotations
@@ -47,8 +48,6 @@ def lean_sequence(
     if n == 0 or items.fab.any() or not items.keep.all():
         return None
     if n > 1 and not (items.ex == items.ex[0]).all():  # all exact reach, or none
-        return None
-    if not np.array_equal(items.cnt, items.n_t):  # pins: a FABRIK polish holds them
         return None
     if not (one_set(items) and int(passes.min()) == int(passes.max())):
         return None
@@ -92,7 +91,8 @@ def lean_answer(
     else:
         exact = bool(items.ex[0])
         got = solve_lean(engine, items, passes, sequence, exact)
-        path = (*sequence, "fabrik-polish") if exact else sequence
+        polished = exact or int(items.cnt[0]) > int(items.n_t[0])  # exact reach, or pins
+        path = (*sequence, "fabrik-polish") if polished else sequence
     if got is None:
         return None
     world, errors, bone_err, iterations = got
@@ -102,14 +102,18 @@ def lean_answer(
 def solve_lean(
     engine: Engine, items: _Items, passes: int, sequence: tuple[str, ...], exact: bool = False
 ) -> Solved | None:
-    """``passes`` neural solves of every item of ``items`` (one target set, no pins), each
-    from the previous answer: world poses ``[B, 21, 3]``, each target's distance
-    ``[B, K]``, the relative bone error ``[B]`` and FABRIK iterations ``[B]``. ``exact``:
-    the last pass ends with the FABRIK polish onto each item's tolerance; if it leaves any
-    item beyond it, None (the general path then also tries plain FABRIK from the caller's
+    """``passes`` neural solves of every item of ``items`` (one target set), each from the
+    previous answer: world poses ``[B, 21, 3]``, each target's distance ``[B, K]``, the
+    relative bone error ``[B]`` and FABRIK iterations ``[B]``. Pins (the columns from
+    ``n_t`` on) go exactly where they are asked in every pass, by the FABRIK polish that
+    holds the solved targets where the networks put them. ``exact``: the last pass ends
+    with the FABRIK polish onto each item's tolerance, pins held; if it leaves any item
+    beyond it, None (the general path then also tries plain FABRIK from the caller's
     start, and keeps the closer)."""
     n = items.poses.shape[0]
     c = int(items.cnt[0])
+    pins = np.arange(c) >= int(items.n_t[0])
+    pinned = bool(pins.any())
     tidx, counts, floors = items.tidx, items.cnt, items.floors
     every = np.ones(n, dtype=np.bool_)
     collar, hold = engine.collar_items(items), engine.pelvis_holds(items)
@@ -122,7 +126,8 @@ def solve_lean(
             pose, items, every, tpos
         )
         decoded = networks.answer(engine, x, canvas, sequence, items.mirror)
-        if not exact or k < passes - 1:
+        last = exact and k == passes - 1
+        if not (last or pinned):
             pose, errors, bone_err = compiled.settle(
                 decoded, scales, canon, lengths, facing, trans, floors, tidx, tpos, counts,
                 items.carry, engine.chain_mask, engine.keep_ease, collar, hold,
@@ -132,11 +137,14 @@ def solve_lean(
             decoded, scales, canon, lengths, every, tidx, counts, items.carry, engine.chain_mask,
             engine.keep_ease, collar, hold,
         )  # fmt: skip
+        # exact: every column onto its goal; soft: the pins, the solved targets held
+        goal = (
+            tcan[:, :c] if last else np.where(pins[None, :, None], tcan[:, :c], out[:, tidx[0, :c]])
+        )
         out, iterations, errs = engine._fabrik(
-            True, out, lengths, tcan[:, :c], items.tols, tidx[0, :c], items.w[0, :c],
-            np.zeros(c, dtype=np.bool_),
-        )  # fmt: skip
-        if np.any(errs > items.tols[:, None]):
+            True, out, lengths, goal, items.tols, tidx[0, :c], items.w[0, :c], pins
+        )
+        if last and np.any(errs > items.tols[:, None]):
             return None
         pose, errors, bone_err = compiled.finish(
             out, facing, trans, floors, tidx, tpos, counts, lengths

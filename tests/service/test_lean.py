@@ -41,16 +41,29 @@ def _fabrik_item(real: PosePairs) -> SolveProblem:
 
 @pytest.mark.parametrize("reach", ["soft", "exact"])
 @pytest.mark.parametrize("passes", [1, 2, 3])
-@pytest.mark.parametrize("names", [WRISTS, ("left_knee",), ("head", "left_wrist", "right_ankle")])
+@pytest.mark.parametrize(
+    ("names", "pins"),
+    [(WRISTS, 0), (("left_knee",), 0), (("head", "left_wrist", "right_ankle"), 0),
+     (("left_wrist", "right_wrist", "left_ankle", "right_ankle"), 2), (("head", "pelvis"), 1)],
+)  # fmt: skip
 def test_lean_answers_are_the_general_paths(
-    engine: Engine, real_poses: PosePairs, passes: int, names: tuple[str, ...], reach: str
-) -> None:
+    engine: Engine, real_poses: PosePairs, passes: int, names: tuple[str, ...], pins: int,
+    reach: str,
+) -> None:  # fmt: skip
     """Alone (lean, from the problem), as a one-set batch (lean, from arrays) and inside a
     batch with a FABRIK item (the general path): the same bits, solvers, iterations and
-    errors. Exact reach ends with the FABRIK polish and reaches."""
+    errors, pins (the last ``pins`` joints) included. Exact reach ends with the FABRIK
+    polish and reaches; so do pins, soft or exact, where they were."""
     probs = [
-        dataclasses.replace(p, passes=passes, reach=reach) for p in _problems(real_poses, names)
+        dataclasses.replace(p, passes=passes, reach=reach, n_targets=len(names) - pins)
+        for p in _problems(real_poses, names)
     ]
+    if pins:  # a pin holds its joint where the start has it
+        probs = [
+            dataclasses.replace(p, target_pos=np.concatenate(
+                [p.target_pos[: p.n_targets], p.pose[p.target_idx[p.n_targets :]]]))
+            for p in probs
+        ]  # fmt: skip
     together = engine.solve(probs)
     general = engine.solve([*probs, _fabrik_item(real_poses)])[:-1]
     for p, a, g in zip(probs, together, general, strict=True):
@@ -60,9 +73,14 @@ def test_lean_answers_are_the_general_paths(
             assert np.array_equal(r.errors, g.errors) and np.array_equal(r.reached, g.reached)
             assert r.max_bone_error == g.max_bone_error
             assert r.solvers == g.solvers and r.iterations == g.iterations
+            assert np.array_equal(r.pin_errors, g.pin_errors)
         assert one.max_bone_error < 1e-5
-        if reach == "exact":
-            assert one.solvers[-1] == "fabrik-polish" and one.reached.all()
+        assert len(one.pin_errors) == pins and bool((one.pin_errors <= 1e-3).all())
+        if reach == "exact":  # the polish, or where it misses (a pinned pelvis), plain FABRIK
+            assert one.solvers[-1] in ("fabrik-polish", "fabrik-fallback")
+            assert one.reached.all() or pins  # a pin may hold a target out of reach
+        elif pins:
+            assert one.solvers[-1] == "fabrik-polish"
         else:
             assert one.iterations == 0 and "fabrik-polish" not in one.solvers
 
@@ -129,11 +147,12 @@ def test_which_batches_take_the_lean_path(engine: Engine, real_poses: PosePairs)
     exact = [dataclasses.replace(p, reach="exact") for p in wrists]
     assert lean_sequence(engine, *_items(exact, engine)) == ("left_wrist+right_wrist",)
     pinned = [dataclasses.replace(p, n_targets=1) for p in wrists]  # right wrist: a pin
+    assert lean_sequence(engine, *_items(pinned, engine)) == ("left_wrist+right_wrist",)
     others = {
         "a FABRIK item": [*wrists, _fabrik_item(real_poses)],
         "exact and soft reach": [dataclasses.replace(wrists[0], reach="exact"), *wrists[1:]],
         "free bone lengths": [dataclasses.replace(wrists[0], preserve_bone_lengths=False)],
-        "a pin": pinned,
+        "pins and none": [*pinned[:2], *wrists[2:]],
         "two target sets": [*wrists, *_problems(real_poses, ("left_knee",))[:1]],
         "other weights": [dataclasses.replace(wrists[0], weights=np.array([1.0, 2.0])), wrists[1]],
         "other passes": [dataclasses.replace(wrists[0], passes=1), wrists[1]],
