@@ -193,10 +193,10 @@ def mirrored(poses: npt.NDArray[_F]) -> npt.NDArray[_F]:
 
 
 def mirrored_flat(poses: npt.NDArray[_F]) -> npt.NDArray[_F]:
-    """:func:`mirrored` of flat poses ``[B, 63]`` (one fancy index and one product, where
-    the ``[..., 21, 3]`` form reshapes both ways): the same numbers."""
+    """:func:`mirrored` of flat poses ``[B, 63]`` (one gather of columns and one product,
+    where the ``[..., 21, 3]`` form reshapes both ways): the same numbers."""
     sign = _FLAT_SIGNS.get(poses.dtype)
-    out: npt.NDArray[_F] = poses[:, MIRROR_COLUMNS] * (
+    out: npt.NDArray[_F] = poses.take(MIRROR_COLUMNS, axis=1) * (
         MIRROR_SIGNS.astype(poses.dtype) if sign is None else sign
     )
     return out

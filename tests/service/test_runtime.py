@@ -3,6 +3,8 @@ and every row's answer is the one a single run of the whole batch gives, bit for
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 
 from core.skeleton import JOINT_INDEX
@@ -23,8 +25,38 @@ def test_blocked_runs_equal_one_run_bit_for_bit(engine: Engine, real_poses: Pose
     got = net(pose, targets)
     assert got.shape == whole.shape == (n, 63)
     assert np.array_equal(got, whole)
-    assert np.array_equal(net(pose[:1], targets[:1]), whole[:1])  # the bound single row
+    for _ in range(2):  # bound runs of a few rows: each shape's buffers, reused in turn
+        for r in range(1, runtime.FEW_ROWS + 1):
+            assert np.array_equal(net(pose[r : 2 * r], targets[r : 2 * r]), whole[r : 2 * r])
     assert net(pose[:0], targets[:0]).shape == (0, 63)
+
+
+def test_bound_runs_in_threads_keep_their_own_buffers(
+    engine: Engine, real_poses: PosePairs
+) -> None:
+    """Two threads running one network at once, each on its own rows (one and two at a
+    time): every answer is its rows' own, as one run of the whole batch gives it."""
+    net = engine.fused["left_wrist+right_wrist"]
+    n = 64
+    pose = real_poses.poses[np.resize(real_poses.starts, n)].reshape(n, -1).astype(np.float32)
+    targets = pose[::-1, :6].copy()
+    whole = net.session.run([net.output], dict(zip(net.inputs, (pose, targets), strict=True)))[0]
+    wrong: list[int] = []
+
+    def work(rows: int) -> None:
+        for _ in range(20):
+            for s in range(0, n, rows):
+                if not np.array_equal(
+                    net(pose[s : s + rows], targets[s : s + rows]), whole[s : s + rows]
+                ):
+                    wrong.append(s)
+
+    threads = [threading.Thread(target=work, args=(r,)) for r in (1, 2)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert wrong == []
 
 
 def test_a_big_batch_answers_as_its_items_alone(engine: Engine, real_poses: PosePairs) -> None:
