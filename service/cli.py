@@ -52,5 +52,6 @@ def main(argv: list[str] | None = None) -> None:
         workers=args.workers,
         log_level=settings.log_level,
         access_log=False,
+        http="service.transport:PacedHTTPProtocol",  # a floor on how fast answers are taken
         timeout_graceful_shutdown=settings.shutdown_grace_seconds,
     )

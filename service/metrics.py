@@ -10,6 +10,20 @@ from collections.abc import Sequence
 import numpy as np
 import numpy.typing as npt
 from prometheus_client import CollectorRegistry, Counter, Histogram
+from prometheus_client.core import CounterMetricFamily
+from prometheus_client.registry import Collector
+
+from service.transport import PacedHTTPProtocol
+
+
+class _SlowReaders(Collector):
+    """Connections closed on a client that did not take its answer (``service.transport``,
+    counted per process, as the protocol has no app to count in)."""
+
+    def collect(self) -> list[CounterMetricFamily]:
+        help_ = "Connections closed on a client that did not take its answer"
+        dropped = PacedHTTPProtocol.dropped
+        return [CounterMetricFamily("pose_slow_readers", help_, value=dropped)]
 
 
 class Metrics:
@@ -43,6 +57,7 @@ class Metrics:
             buckets=(1, 2, 4, 8, 16, 32, 64, 128, 256, 512, 1024, 4096),
             registry=self.registry,
         )
+        self.registry.register(_SlowReaders())
 
     def solved(self, method: str, solvers: list[str], n: int = 1) -> None:
         """Count ``n`` solves under a bounded label (never an open-ended combination)."""

@@ -40,6 +40,12 @@ class Settings(BaseSettings):
     deadline_seconds: float = Field(
         default=2.0, gt=0, le=600, description="Wall time one request may take; 504 past it."
     )
+    max_unsent_bytes: int = Field(
+        default=64 * 1024 * 1024,
+        ge=1024,
+        description="Answers held per worker for clients that do not take them; past it, "
+        "the longest-waiting connections are closed (service.transport).",
+    )
     compute_threads: int = Field(
         default=2, ge=1, le=64, description="Threads solving or parsing big bodies at once."
     )

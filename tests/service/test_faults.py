@@ -219,3 +219,78 @@ def test_broken_models_are_not_ready_with_file_names(
         for d in (data, answer[2]):
             assert str(tmp_path) not in d.decode()
         assert s.request("GET", "/v2/health/live")[0] == 200
+
+
+def _big_bvh_solve(frames: int = 15_500) -> bytes:
+    """The docs' BVH edit with its motion repeated to ``frames`` frames (7.6 MB): an answer
+    of the same size, more than a loopback socket takes at once (~4 MB)."""
+    example = json.loads((Path(__file__).parents[2] / "docs/examples/bvh_solve.json").read_text())
+    head, motion = example["bvh"].split("MOTION\n")
+    lines = motion.strip().split("\n")
+    rows = (lines[2:] * (frames // len(lines[2:]) + 1))[:frames]
+    example["bvh"] = f"{head}MOTION\nFrames: {frames}\n{lines[1]}\n" + "\n".join(rows) + "\n"
+    return json.dumps(example).encode()
+
+
+def _unread(port: int, body: bytes, window: int | None = 4096) -> socket.socket:
+    """A client that sends a BVH edit and does not read its answer (yet); ``window``: its
+    socket's receive buffer (None: the system's)."""
+    sock = socket.socket()
+    if window is not None:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, window)
+    sock.connect(("127.0.0.1", port))
+    sock.sendall(
+        b"POST /v1/bvh/solve HTTP/1.1\r\nhost: x\r\ncontent-type: application/json\r\n"
+        + f"content-length: {len(body)}\r\n\r\n".encode()
+        + body
+    )
+    return sock
+
+
+def _drain(sock: socket.socket) -> bytes:
+    """What the server sends until it closes the connection or the answer is whole."""
+    sock.settimeout(10)
+    out = b""
+    try:
+        while chunk := sock.recv(1 << 20):
+            out += chunk
+            head, _, data = out.partition(b"\r\n\r\n")
+            length = [h for h in head.lower().split(b"\r\n") if h.startswith(b"content-length")]
+            if length and len(data) >= int(length[0].split(b":")[1]):
+                break
+    except ConnectionResetError:
+        pass
+    return out
+
+
+def test_answers_nobody_reads_are_bounded_per_worker(models_dir: Path, tmp_path: Path) -> None:
+    """The answers a worker holds for clients that do not take them stay within
+    ``POSE_MAX_UNSENT_BYTES``: past it the longest-waiting connections are closed and their
+    answers dropped, oldest first (before: held for as long as the clients kept their
+    connections; twelve 7.6 MB BVH answers, +125 MB). The one left within the bound gets
+    its whole answer when it reads at last."""
+    body = _big_bvh_solve()
+    with serve(models_dir, tmp_path, POSE_MAX_UNSENT_BYTES=str(8 << 20)) as s:
+        status, _, whole = s.request("POST", "/v1/bvh/solve", body)
+        assert status == 200 and len(whole) > 7_000_000
+        before = s.rss_mib()
+        socks = []
+        for _ in range(8):  # one after another, each answered within the deadline
+            socks.append(_unread(s.port, body))
+            time.sleep(0.8)
+        after = s.rss_mib()
+        slow = [e for e in s.log_lines() if e.get("event") == "slow-reader"]
+        got = [_drain(c) for c in socks[:-1]]  # the last one still holds its answer
+        print(f"\n8 unread 7.6 MB answers: RSS {before:.0f} -> {after:.0f} MiB, {len(slow)} "
+              f"dropped, each after {min(map(len, got)) / 1e6:.1f} MB")  # fmt: skip
+        assert all(g.startswith(b"HTTP/1.1 200") and len(g) < len(whole) for g in got), [
+            g[:12] + b" %d" % len(g) for g in got
+        ]
+        assert len(slow) == 7 and all(e["others_unsent"] <= 8 << 20 for e in slow), slow
+        assert after - before < 40, (before, after)  # not 8 x the ~5 MB unsent
+        assert "pose_slow_readers_total 7.0" in s.request("GET", "/metrics")[2].decode()
+        last = _drain(socks[-1])  # read at last: the whole answer
+        head, _, data = last.partition(b"\r\n\r\n")
+        assert head.startswith(b"HTTP/1.1 200") and json.loads(data) == json.loads(whole)
+        for c in socks:
+            c.close()

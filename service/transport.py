@@ -1,0 +1,78 @@
+"""The HTTP protocol the service runs under uvicorn: uvicorn's own (httptools where it is
+installed, else h11), with a bound on the answers a worker holds for clients that do not
+take them.
+
+uvicorn hands a whole answer to the connection at once; what the client's socket does not
+take waits in the process, for as long as the client keeps the connection open. An answer
+of a few megabytes (a BVH file) that is never read therefore held most of itself in memory
+for good: twelve clients that sent a 7.6 MB ``/v1/bvh/solve`` and read nothing took the
+server from 283 to 408 MB (a ``/tmp`` script on loopback), and some sixty would take a pod
+past its memory limit. Here the answers waiting in a worker (its connections whose
+write buffer went over the high-water mark, uvicorn's flow control) hold at most
+``max_unsent_bytes`` (``POSE_MAX_UNSENT_BYTES``) between them: when an answer backs up
+past it, the connections that have waited longest are closed and their answers dropped,
+oldest first, with a ``slow-reader`` warning in the log each and
+``pose_slow_readers_total``. A client that reads, however slowly, loses its answer only
+while the worker holds more than that for clients that do not. (A floor on each client's
+pace was tried first: the client's own socket buffer, megabytes on loopback, hides its
+reading from the server for seconds at a time, so steady readers were cut off.)
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+from typing import Any, ClassVar
+
+import orjson
+from uvicorn.protocols.http.auto import AutoHTTPProtocol
+
+from service.settings import get_settings
+
+log = logging.getLogger("service.transport")
+
+
+class PacedHTTPProtocol(AutoHTTPProtocol):  # type: ignore[misc, valid-type]
+    """uvicorn's HTTP protocol with a bound on the answers waiting for their clients."""
+
+    #: this worker's connections whose answer waits, in the order they began to wait
+    waiting: ClassVar[dict[PacedHTTPProtocol, int]] = {}
+    dropped: ClassVar[int] = 0  # connections closed on a slow reader (service.metrics)
+    _order: ClassVar[itertools.count[int]] = itertools.count()
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self._budget = get_settings().max_unsent_bytes
+
+    def pause_writing(self) -> None:
+        super().pause_writing()
+        cls = PacedHTTPProtocol
+        cls.waiting.setdefault(self, next(cls._order))
+        held = {p: p.transport.get_write_buffer_size() for p in cls.waiting}
+        total = sum(held.values())
+        for oldest in sorted(cls.waiting, key=cls.waiting.__getitem__):
+            if total <= self._budget:
+                break
+            total -= held[oldest]
+            oldest.drop(held[oldest], total)
+
+    def drop(self, unsent: int, left: int) -> None:
+        """Close this connection and drop the ``unsent`` bytes of its answer (``left``:
+        what the others still hold)."""
+        PacedHTTPProtocol.waiting.pop(self, None)
+        PacedHTTPProtocol.dropped += 1
+        client = getattr(self, "client", None)
+        line = {
+            "event": "slow-reader", "client": f"{client[0]}:{client[1]}" if client else None,
+            "unsent": unsent, "others_unsent": left, "max_unsent_bytes": self._budget,
+        }  # fmt: skip
+        log.warning(orjson.dumps(line).decode())
+        self.transport.abort()  # connection_lost follows; the app's sends become no-ops
+
+    def resume_writing(self) -> None:
+        super().resume_writing()  # under the low-water mark: it takes its answer
+        PacedHTTPProtocol.waiting.pop(self, None)
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        PacedHTTPProtocol.waiting.pop(self, None)
+        super().connection_lost(exc)
