@@ -264,6 +264,8 @@ def issue14_goals(i14: Json | None) -> list[Goal]:
             at1 += f"; {r['neural_no_turn']['p50_ms']:.3f} ms without the turn search"
         if r and "neural_numpy_mirror" in r:
             at1 += f"; {r['neural_numpy_mirror']['p50_ms']:.3f} ms without the mirror graphs"
+        if r and "neural_pinned" in r:
+            at1 += f"; {r['neural_pinned']['p50_ms']:.3f} ms with both ankles pinned"
         shown = (
             "–"
             if r is None
@@ -288,6 +290,8 @@ def issue14_goals(i14: Json | None) -> list[Goal]:
                 f"{one['neural']['p50_ms']:.3f} ms (p99 {one['neural']['p99_ms']:.3f}"
                 + ("" if numpy_way is None else
                    f"; {numpy_way['p50_ms']:.3f} ms without the mirror graphs")
+                + ("" if "neural_pinned" not in one else
+                   f"; {one['neural_pinned']['p50_ms']:.3f} ms with both ankles pinned")
                 + f"); compiled FABRIK {one['fabrik_compiled']['p50_ms']:.3f} ms",
                 "info",
             )

@@ -136,6 +136,8 @@ def issue14(
     - ``neural_numpy_mirror``: the ``neural`` call with the mirror image asked around the
       fused graphs in numpy (the engine without its mirror graphs, ``trainer.mirror``),
       when the default solves it and the models ship them;
+    - ``neural_pinned``: the ``neural`` call with both ankles pinned where the start has
+      them (sets without an ankle);
     - ``composed``: the same timings on sets no trained solver covers whole (several
       solvers composed), beside the goals' sets.
 
@@ -224,7 +226,7 @@ def _issue14_set(
 ) -> Json:
     """One target count of :func:`issue14`: the four timings interleaved per call."""
     from core import compiled_fabrik, kinematics
-    from core.skeleton import bone_lengths
+    from core.skeleton import JOINT_INDEX, bone_lengths
 
     cap = engine.fabrik_max_iterations
     neural = problems(edits, "neural_bone")
@@ -264,6 +266,16 @@ def _issue14_set(
         numpy_way = copy.copy(engine)
         numpy_way.mirror_graphs = {}
         runs["neural_numpy_mirror"] = lambda i: numpy_way.solve([neural[i]])
+    ankles = np.asarray([JOINT_INDEX["left_ankle"], JOINT_INDEX["right_ankle"]])
+    if not np.isin(ankles, idx).any():  # feet pinned where they stand: the editor's pins
+        feet = [
+            dataclasses.replace(
+                p, target_idx=np.concatenate([p.target_idx, ankles]), weights=np.ones(len(idx) + 2),
+                target_pos=np.concatenate([p.target_pos, p.pose[ankles]]),
+            )
+            for p in neural
+        ]  # fmt: skip
+        runs["neural_pinned"] = lambda i: engine.solve([feet[i]])
     if engine.turn_search.searches("neural", len(idx), False):  # the default searches
         plain = copy.copy(engine)
         plain.turn_search = NO_SEARCH

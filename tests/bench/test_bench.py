@@ -169,6 +169,9 @@ def test_quick_bench_writes_a_sane_report(
     assert all(r["neural_numpy_mirror"]["p50_ms"] > 0 for r in i14["latency"])
     assert "neural 1-target soft solve p50 (left_wrist)" in report
     assert "without the mirror graphs" in report
+    # both ankles pinned beside the plain edit, on the sets without an ankle
+    assert [r["targets"] for r in i14["latency"] if "neural_pinned" in r] == [1, 2]
+    assert "ms with both ankles pinned" in report
     assert i14["batch_poses_per_s"]["solve_arrays_passes1"] > 0
     assert i14["batch_poses_per_s"]["solve_arrays_2threads"] > 0
     # the networks alone on the 2-target batch: the ceiling the solve's passes divide
