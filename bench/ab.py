@@ -1,0 +1,151 @@
+"""Single-edit engine time of two revisions side by side, on this machine, in one run:
+``python -m bench.ab --base REV [--rounds 3] [--edits 128]``.
+
+This machine is shared and noisy: one revision's timings from one run against another's
+from another run compare hosts as much as code. Here each round runs a probe (this file,
+``--probe``) in a git worktree of ``REV`` and then in this tree, each in a fresh process,
+the same edits in the same order; the rounds alternate. The probe times
+``Engine.solve([p])`` per call in CPU time of its thread (``time.thread_time_ns``: another
+tenant's load on the host shows less in it than in wall time), for 1, 2 and 5 targets (the
+TEST split's B1-style edits, the speed part's seed): the models' defaults (``default``),
+one pass without the mirror image (``plain``: the paper's configuration), FABRIK
+(``fabrik``), and with both ankles pinned where the start has them (``pinned``, 1 and 2
+targets). The table gives each case's p50 per round, and the best round of each
+revision (the least disturbed) with their ratio.
+
+The probe uses only what both trees have (``Engine``, ``bench.edits``); the models are
+each tree's own.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Annotated, Any
+
+import numpy as np
+import typer
+
+REPO = Path(__file__).resolve().parents[1]
+SETS = {
+    1: ("left_wrist",),
+    2: ("left_wrist", "right_wrist"),
+    5: ("head", "left_wrist", "right_wrist", "left_ankle", "right_ankle"),
+}
+
+
+def probe(dataset: Path, edits: int, seed: int) -> dict[str, float]:
+    """Per case, the p50 in µs of ``Engine.solve([p])`` over three calls of each edit."""
+    from bench.edits import edits_from_pairs, joint_idx, problems, sample_pairs, test_split
+    from core.skeleton import JOINT_INDEX
+    from service.engine import Engine
+    from trainer.data.dataset import load_dataset
+
+    engine = Engine(Path("models"), threads=1)
+    test = test_split(load_dataset(dataset))
+    a, b = sample_pairs(test, edits, np.random.default_rng(seed + 100))
+    ankles = np.asarray([JOINT_INDEX["left_ankle"], JOINT_INDEX["right_ankle"]])
+    out: dict[str, float] = {}
+    for k, names in SETS.items():
+        ed = edits_from_pairs(test, a, b, [joint_idx(names)] * len(a))
+        neural = problems(ed, "neural_bone")
+        cases = {
+            "default": neural,
+            "plain": [dataclasses.replace(p, passes=1, mirror=False) for p in neural],
+            "fabrik": problems(ed, "fabrik"),
+            "pinned": [
+                dataclasses.replace(
+                    p, target_idx=np.concatenate([p.target_idx, ankles]),
+                    target_pos=np.concatenate([p.target_pos, p.pose[ankles]]),
+                    weights=np.ones(len(p.target_idx) + 2),
+                )
+                for p in neural
+            ] if k < 5 else [],
+        }  # fmt: skip
+        for name, probs in cases.items():
+            if not probs:
+                continue
+            for p in probs[:10]:  # warm
+                engine.solve([p])
+            ns = []
+            for _ in range(3):
+                for p in probs:
+                    t0 = time.thread_time_ns()
+                    engine.solve([p])
+                    ns.append(time.thread_time_ns() - t0)
+            out[f"{k} {name}"] = float(np.median(ns)) / 1e3
+    return out
+
+
+def _run(tree: Path, dataset: Path, edits: int, seed: int) -> dict[str, float]:
+    cmd = [sys.executable, str(Path(__file__).resolve()), "--probe", str(dataset.resolve()),
+           str(edits), str(seed)]  # fmt: skip
+    env = {**os.environ, "PYTHONPATH": str(tree)}
+    done = subprocess.run(cmd, cwd=tree, env=env, capture_output=True, text=True, check=True)
+    got: dict[str, float] = json.loads(done.stdout.strip().splitlines()[-1])
+    return got
+
+
+def compare(base: str, dataset: Path, rounds: int, edits: int, seed: int) -> dict[str, Any]:
+    """The probe's figures of ``base`` and of this tree, ``rounds`` rounds alternated."""
+    with tempfile.TemporaryDirectory() as tmp:
+        tree = Path(tmp) / "base"
+        subprocess.run(["git", "-C", str(REPO), "worktree", "add", "--detach", "-q", str(tree),
+                        base], check=True)  # fmt: skip
+        try:
+            runs: dict[str, list[dict[str, float]]] = {"base": [], "this": []}
+            for _ in range(rounds):
+                runs["base"].append(_run(tree, dataset, edits, seed))
+                runs["this"].append(_run(REPO, dataset, edits, seed))
+        finally:
+            subprocess.run(["git", "-C", str(REPO), "worktree", "remove", "--force", str(tree)],
+                           check=False)  # fmt: skip
+    return {"revision": base, "rounds": rounds, "edits": edits, **runs}
+
+
+def table(result: dict[str, Any]) -> str:
+    """Markdown: per case the rounds' p50s and the best round of each, with their ratio."""
+    lines = [
+        f"| case | {result['revision']} (µs, each round) | this tree | best: "
+        f"{result['revision']} → this tree | × |",
+        "|---|---|---|---|---|",
+    ]
+    for case in result["this"][0]:
+        old = [r[case] for r in result["base"] if case in r]
+        new = [r[case] for r in result["this"]]
+        if not old:
+            continue
+        lines.append(
+            f"| {case} | {' / '.join(f'{x:.0f}' for x in old)} | "
+            f"{' / '.join(f'{x:.0f}' for x in new)} | {min(old):.0f} → {min(new):.0f} | "
+            f"{min(old) / min(new):.2f} |"
+        )
+    return "\n".join(lines)
+
+
+def main(
+    base: Annotated[str, typer.Option(help="The revision to compare with (git).")],
+    dataset: Annotated[Path, typer.Option(help="Dataset file.")] = Path("data/poses.npz"),
+    rounds: Annotated[int, typer.Option(min=1, help="Rounds, each revision once.")] = 3,
+    edits: Annotated[int, typer.Option(min=1, help="Edits per case.")] = 128,
+    seed: Annotated[int, typer.Option(help="The edits' seed.")] = 0,
+    out: Annotated[Path | None, typer.Option(help="Write the figures (JSON) here.")] = None,
+) -> None:
+    """Time single edits of REV and of this tree side by side (see the module)."""
+    result = compare(base, dataset, rounds, edits, seed)
+    if out is not None:
+        out.write_text(json.dumps(result, indent=1))
+    print(table(result))
+
+
+if __name__ == "__main__":
+    if len(sys.argv) == 5 and sys.argv[1] == "--probe":
+        print(json.dumps(probe(Path(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4]))))
+    else:
+        typer.run(main)

@@ -1,0 +1,35 @@
+"""``python -m bench.ab``: two revisions' single-edit times side by side in one run."""
+
+from __future__ import annotations
+
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from bench import ab
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+@pytest.mark.slow
+def test_two_revisions_side_by_side(bench_dataset: Path) -> None:
+    """A worktree of HEAD against this tree: every case timed in both, each round, and
+    the worktree gone afterwards."""
+    if subprocess.run(["git", "-C", str(REPO), "rev-parse", "HEAD"], check=False).returncode:
+        pytest.skip("not a git checkout")
+
+    def worktrees() -> str:
+        return subprocess.run(["git", "-C", str(REPO), "worktree", "list"], capture_output=True,
+                              text=True, check=True).stdout  # fmt: skip
+
+    before = worktrees()
+    result = ab.compare("HEAD", bench_dataset, rounds=1, edits=4, seed=0)
+    cases = {f"{k} {c}" for k in (1, 2, 5) for c in ("default", "plain", "fabrik")}
+    cases |= {"1 pinned", "2 pinned"}
+    for side in ("base", "this"):
+        assert len(result[side]) == 1 and set(result[side][0]) == cases
+        assert all(0 < t < 1e6 for t in result[side][0].values())
+    text = ab.table(result)
+    assert text.count("\n") == 2 + len(cases) - 1 and "| 2 pinned |" in text
+    assert worktrees() == before  # the base's worktree removed
