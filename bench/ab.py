@@ -87,7 +87,9 @@ def _run(tree: Path, dataset: Path, edits: int, seed: int) -> dict[str, float]:
     cmd = [sys.executable, str(Path(__file__).resolve()), "--probe", str(dataset.resolve()),
            str(edits), str(seed)]  # fmt: skip
     env = {**os.environ, "PYTHONPATH": str(tree)}
-    done = subprocess.run(cmd, cwd=tree, env=env, capture_output=True, text=True, check=True)
+    done = subprocess.run(cmd, cwd=tree, env=env, capture_output=True, text=True, check=False)
+    if done.returncode:  # say why (a revision without the probe's modules, say)
+        raise RuntimeError(f"the probe failed in {tree}:\n{done.stderr[-2000:]}")
     got: dict[str, float] = json.loads(done.stdout.strip().splitlines()[-1])
     return got
 

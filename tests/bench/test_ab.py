@@ -33,3 +33,11 @@ def test_two_revisions_side_by_side(bench_dataset: Path) -> None:
     text = ab.table(result)
     assert text.count("\n") == 2 + len(cases) - 1 and "| 2 pinned |" in text
     assert worktrees() == before  # the base's worktree removed
+
+
+@pytest.mark.slow
+def test_a_probe_that_fails_says_why(bench_dataset: Path, tmp_path: Path) -> None:
+    """A tree the probe cannot run in (here: no models) is an error with its reason."""
+    with pytest.raises(RuntimeError, match="the probe failed") as err:
+        ab._run(tmp_path, bench_dataset, 1, 0)
+    assert "Error" in str(err.value)  # the probe's own traceback, not a bare exit status
