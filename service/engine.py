@@ -258,8 +258,7 @@ class Engine:
                 return None
         items = _Items.of_problem(p, self.carry_of(p), self.mirror_of(p))
         items = items.travelled(self.pelvis_travel, self.reach_travel, self.turn_search.min_targets)
-        ans = lean_answer(self, items, passes, seq)
-        return None if ans is None else self._result(p, self._retry(items, ans), 0)
+        return self._result(p, self._retry(items, lean_answer(self, items, passes, seq)), 0)
 
     def passes_of(self, p: SolveProblem) -> int:
         """The neural passes ``p`` asks for (``solve_passes`` unless it says)."""
@@ -442,13 +441,11 @@ class Engine:
         """:meth:`solve_arrays` of normalised items with their passes ``reps``."""
         pose_a = items.poses
         n = pose_a.shape[0]
-        # a batch all alike (service.lean): FABRIK on one target set, or neural with no
-        # pins and every target on a solver
+        # a batch all alike (service.lean): FABRIK on one target set, or neural with every
+        # target on a solver
         lean = None if fabrik_batch(items) else lean_sequence(self, items, reps)
         if lean is not None or fabrik_batch(items):
-            ans = lean_answer(self, items, int(reps[0]), lean)
-            if ans is not None:
-                return ans
+            return lean_answer(self, items, int(reps[0]), lean)
         rounds = int(reps.max()) - 1 if n else 0
         if rounds == 0:
             return self._solve_once(items)
@@ -460,9 +457,7 @@ class Engine:
             if lean is None:
                 current[now] = self._solve_once(soft).pose
             else:  # e.g. exact reach's soft passes before its last (service.lean)
-                done = solve_lean(self, soft, 1, lean)
-                assert done is not None  # soft: never falls back
-                current[now] = done[0]
+                current[now] = solve_lean(self, soft, 1, lean)[0]
         return self._solve_once(
             dataclasses.replace(items, poses=current), origin=pose_a, moved=reps > 1
         )
@@ -523,10 +518,7 @@ class Engine:
         start = canon
         if origin is not None and moved is not None and moved.any():
             start = canon.copy()  # the caller's start poses in this pass's canonical frame
-            frame = facing_transform(facing[moved, 0], facing[moved, 1], trans[moved])
-            lifted = origin[moved].copy()
-            lifted[..., 1] -= floors[moved, None]
-            start[moved] = frame.to_canonical(lifted)
+            start[moved] = self.origin_in(origin[moved], facing[moved], trans[moved], floors[moved])
         for g in groups:
             self._finish_group(g, fab, ex, seq_of, sequences, start, out, lengths, tcan,
                                tols, iterations, suffix)  # fmt: skip
@@ -568,6 +560,40 @@ class Engine:
         )  # fmt: skip
         return pose, its, errs
 
+    def exact_fallback(
+        self, polished: tuple[compiled.F64, npt.NDArray[np.int64], compiled.F64], start: F64,
+        lengths: F64, goal: F64, tols: F64, idx: npt.NDArray[np.int64], weights: F64,
+        pins: npt.NDArray[np.bool_],
+    ) -> tuple[compiled.F64, npt.NDArray[np.int64], npt.NDArray[np.bool_]]:  # fmt: skip
+        """Exact reach's last word on a batch of one target set: ``polished`` (poses,
+        iterations, errors of the FABRIK polish from the networks' answer), and for every
+        item it left beyond its tolerance, plain FABRIK from its ``start`` (the caller's
+        start, canonical), kept where it ends nearer. Ties (equal to rounding: e.g. both
+        at the stretch a pin allows) keep the polish, whose pose is nearer the network's.
+        Returns poses, iterations (FABRIK's added where kept) and which kept it."""
+        pose, its, errs = polished
+        fell = np.zeros(len(pose), dtype=np.bool_)
+        missed = np.flatnonzero(np.any(errs > tols[:, None], axis=1))
+        if missed.size:
+            alt, alt_its, alt_errs = self._fabrik(
+                False, start[missed], lengths[missed], goal[missed], tols[missed], idx, weights,
+                pins,
+            )  # fmt: skip
+            better = np.max(alt_errs, axis=1) < np.max(errs[missed], axis=1) - _TIE
+            take = missed[better]
+            pose[take], its[take] = alt[better], its[take] + alt_its[better]
+            fell[take] = True
+        return pose, its, fell
+
+    @staticmethod
+    def origin_in(origin: F64, facing: F64, trans: F64, floors: F64) -> F64:
+        """World poses ``origin [B, 21, 3]`` (over ``floors``) in the canonical frames of a
+        pass (its ``facing``, ``trans``): where exact reach's fallback starts."""
+        lifted = origin.copy()
+        lifted[..., 1] -= floors[:, None]
+        out: F64 = facing_transform(facing[:, 0], facing[:, 1], trans).to_canonical(lifted)
+        return out
+
     def _plan_for(self, idx: npt.NDArray[np.int64], weights: F64) -> tuple[str, ...]:
         """``plan`` of a target set, memoised on its (joints, weights) bytes."""
         key = (idx.tobytes(), weights.tobytes())
@@ -595,7 +621,7 @@ class Engine:
 
         def run(
             polish: bool, sel: npt.NDArray[np.intp], start: F64, goal: F64
-        ) -> tuple[F64, npt.NDArray[np.int64], F64]:
+        ) -> tuple[compiled.F64, npt.NDArray[np.int64], compiled.F64]:
             return self._fabrik(polish, start, lengths[sel], goal, tols[sel], g.idx, g.weights,
                                 pinned)  # fmt: skip
 
@@ -609,17 +635,11 @@ class Engine:
         sel = neural[ex[neural]]
         if sel.size:  # exact reach: the polish, or plain FABRIK where that reaches closer
             goal = tcan[sel, :k]
-            pose, its, errs = run(True, sel, out[sel], goal)
-            missed = np.flatnonzero(np.any(errs > tols[sel, None], axis=1))
-            suffix[sel] = 1
-            if missed.size:
-                alt, alt_its, alt_errs = run(False, sel[missed], canon[sel[missed]], goal[missed])
-                # ties (equal to rounding: e.g. both at the stretch a pin allows) keep
-                # the polish, whose pose is nearer the network's
-                better = np.max(alt_errs, axis=1) < np.max(errs[missed], axis=1) - _TIE
-                take = missed[better]
-                pose[take], its[take] = alt[better], its[take] + alt_its[better]
-                suffix[sel[take]] = 2
+            pose, its, fell = self.exact_fallback(
+                run(True, sel, out[sel], goal), canon[sel], lengths[sel], goal, tols[sel],
+                g.idx, g.weights, pinned,
+            )  # fmt: skip
+            suffix[sel] = np.where(fell, 2, 1)
             out[sel], iterations[sel] = pose, its
         sel = neural[~ex[neural]]
         if not sel.size:

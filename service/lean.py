@@ -30,6 +30,8 @@ if TYPE_CHECKING:  # pragma: no cover
 F64 = compiled.F64
 #: A lean solve's world poses, target distances, bone errors and FABRIK iterations.
 Solved = tuple[F64, F64, F64, npt.NDArray[np.int64]]
+#: :func:`solve_lean`'s: and which items exact reach's fallback answered (plain FABRIK).
+LeanSolved = tuple[F64, F64, F64, npt.NDArray[np.int64], npt.NDArray[np.bool_]]
 
 
 @lru_cache(maxsize=4096)
@@ -80,36 +82,38 @@ def covering(engine: Engine, idx: npt.NDArray[np.int64], weights: F64) -> tuple[
 
 def lean_answer(
     engine: Engine, items: _Items, passes: int, sequence: tuple[str, ...] | None
-) -> BatchAnswer | None:
+) -> BatchAnswer:
     """The answer of a batch that :func:`lean_sequence` (``sequence``) or
-    :func:`fabrik_batch` (``sequence`` None: FABRIK) let through, or None where exact reach's
-    polish missed (the general path then solves the batch)."""
+    :func:`fabrik_batch` (``sequence`` None: FABRIK) let through."""
     n = items.poses.shape[0]
     if sequence is None:
-        got: Solved | None = solve_fabrik(engine, items)
-        path: tuple[str, ...] = ("fabrik",)
-    else:
-        exact = bool(items.ex[0])
-        got = solve_lean(engine, items, passes, sequence, exact)
-        polished = exact or int(items.cnt[0]) > int(items.n_t[0])  # exact reach, or pins
-        path = (*sequence, "fabrik-polish") if polished else sequence
-    if got is None:
-        return None
-    world, errors, bone_err, iterations = got
-    return BatchAnswer(world, errors, bone_err, iterations, (path,), np.zeros(n, np.int64))
+        world, errors, bone_err, iterations = solve_fabrik(engine, items)
+        return BatchAnswer(
+            world, errors, bone_err, iterations, (("fabrik",),), np.zeros(n, np.int64)
+        )
+    exact = bool(items.ex[0])
+    world, errors, bone_err, iterations, fell = solve_lean(engine, items, passes, sequence, exact)
+    polished = exact or int(items.cnt[0]) > int(items.n_t[0])  # exact reach, or pins
+    paths = [(*sequence, "fabrik-polish") if polished else sequence, (*sequence, "fabrik-fallback")]
+    if fell.all():  # the solver paths the batch uses, in the general path's order
+        paths = paths[1:]
+    elif not fell.any():
+        paths = paths[:1]
+    path_of = fell.astype(np.int64) if len(paths) == 2 else np.zeros(n, np.int64)
+    return BatchAnswer(world, errors, bone_err, iterations, tuple(paths), path_of)
 
 
 def solve_lean(
     engine: Engine, items: _Items, passes: int, sequence: tuple[str, ...], exact: bool = False
-) -> Solved | None:
+) -> LeanSolved:
     """``passes`` neural solves of every item of ``items`` (one target set), each from the
     previous answer: world poses ``[B, 21, 3]``, each target's distance ``[B, K]``, the
     relative bone error ``[B]`` and FABRIK iterations ``[B]``. Pins (the columns from
     ``n_t`` on) go exactly where they are asked in every pass, by the FABRIK polish that
     holds the solved targets where the networks put them. ``exact``: the last pass ends
-    with the FABRIK polish onto each item's tolerance, pins held; if it leaves any item
-    beyond it, None (the general path then also tries plain FABRIK from the caller's
-    start, and keeps the closer)."""
+    with the FABRIK polish onto each item's tolerance, pins held; where it leaves an item
+    beyond it, plain FABRIK from the caller's start too, the nearer kept
+    (:meth:`Engine.exact_fallback`, as the general path): those items are marked."""
     n = items.poses.shape[0]
     c = int(items.cnt[0])
     pins = np.arange(c) >= int(items.n_t[0])
@@ -120,6 +124,7 @@ def solve_lean(
     pose = items.poses
     errors, bone_err = np.zeros(tidx.shape), np.zeros(n)
     iterations = np.zeros(n, dtype=np.int64)
+    fell = np.zeros(n, dtype=np.bool_)
     tpos = None  # the targets with the floor taken off: the first pass's, for every pass
     for k in range(passes):
         tpos, (canon, facing, trans, lengths, scales, tcan, x, canvas) = engine._prepare(
@@ -141,15 +146,19 @@ def solve_lean(
         goal = (
             tcan[:, :c] if last else np.where(pins[None, :, None], tcan[:, :c], out[:, tidx[0, :c]])
         )
-        out, iterations, errs = engine._fabrik(
+        polished = engine._fabrik(
             True, out, lengths, goal, items.tols, tidx[0, :c], items.w[0, :c], pins
         )
-        if last and np.any(errs > items.tols[:, None]):
-            return None
+        out, iterations = polished[0], polished[1]
+        if last:  # from the caller's start: this pass's own where it is the first
+            start = canon if k == 0 else engine.origin_in(items.poses, facing, trans, floors)
+            out, iterations, fell = engine.exact_fallback(
+                polished, start, lengths, goal, items.tols, tidx[0, :c], items.w[0, :c], pins
+            )
         pose, errors, bone_err = compiled.finish(
             out, facing, trans, floors, tidx, tpos, counts, lengths
         )
-    return pose, errors, bone_err, iterations
+    return pose, errors, bone_err, iterations, fell
 
 
 def fabrik_batch(items: _Items) -> bool:

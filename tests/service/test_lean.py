@@ -85,27 +85,34 @@ def test_lean_answers_are_the_general_paths(
             assert one.iterations == 0 and "fabrik-polish" not in one.solvers
 
 
+@pytest.mark.parametrize("passes", [1, 2])
+@pytest.mark.parametrize("pins", [0, 2])
 def test_exact_reach_out_of_reach_falls_back_as_the_general_path(
-    engine: Engine, real_poses: PosePairs
+    engine: Engine, real_poses: PosePairs, passes: int, pins: int
 ) -> None:
-    """A target the polish cannot reach leaves the lean path (``solve_lean`` says None):
-    the general path also tries plain FABRIK from the caller's start and keeps the closer,
-    as it always did; a reachable one stays on it."""
-    probs = _problems(real_poses, ("left_wrist",), reach="exact")[:6]
-    far = [
-        dataclasses.replace(p, target_pos=p.target_pos + np.array([0.0, 3.0, 0.0])) for p in probs
-    ]
-    for batch, lean in ((probs, True), (far, False)):
-        arrays, _ = _items(batch, engine)
-        arrays = dataclasses.replace(arrays, floors=np.full(6, 0.3), tols=np.full(6, 1e-3))
-        got = solve_lean(engine, arrays, 2, ("left_wrist",), exact=True)
-        assert (got is not None) == lean
-    general = engine.solve([*far, _fabrik_item(real_poses)])[:-1]
-    for p, g in zip(far, general, strict=True):
+    """Where the polish cannot reach a target, the lean path also tries plain FABRIK from
+    the caller's start and keeps the closer, as the general path does (bit for bit, the
+    solver paths too: ``fabrik-fallback`` where FABRIK's was kept, here with pins held);
+    a reachable target keeps the polish. Mixed in one batch, each item its own."""
+    names = ("left_wrist", "left_ankle", "right_ankle")[: 1 + pins]
+    probs = [
+        dataclasses.replace(p, reach="exact", passes=passes, n_targets=1, target_pos=np.concatenate(
+            [p.target_pos[:1] + np.array([0.0, 3.0 * (i % 2), 0.0]), p.pose[p.target_idx[1:]]]))
+        for i, p in enumerate(_problems(real_poses, names)[:8])
+    ]  # fmt: skip
+    arrays, _ = _items(probs, engine)
+    fell = solve_lean(engine, arrays, passes, lean_sequence(engine, *_items(probs, engine)) or (),
+                      exact=True)[4]  # fmt: skip
+    assert not fell[::2].any()  # the reachable ones kept the polish
+    together = engine.solve(probs)
+    general = engine.solve([*probs, _fabrik_item(real_poses)])[:-1]
+    for i, (p, a, g) in enumerate(zip(probs, together, general, strict=True)):
         (one,) = engine.solve([p])
-        assert not one.reached.any()
-        assert np.array_equal(one.pose, g.pose) and one.solvers == g.solvers
-        assert one.iterations == g.iterations
+        for r in (a, one):
+            assert np.array_equal(r.pose, g.pose) and r.solvers == g.solvers, i
+            assert r.iterations == g.iterations and np.array_equal(r.errors, g.errors), i
+        assert one.reached.all() == (i % 2 == 0), i  # the far ones (odd) are out of reach
+        assert one.solvers[-1] == ("fabrik-fallback" if fell[i] else "fabrik-polish"), i
 
 
 @pytest.mark.parametrize("pins", [0, 2])
