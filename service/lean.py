@@ -7,7 +7,8 @@ per-pass bookkeeping (:meth:`service.engine.Engine._solve_once`): each pass is o
 compiled call in (:func:`core.compiled.prepare`), one onnxruntime run per solver of the
 sequence, and one compiled call out (:func:`core.compiled.settle`: the bone pass and the
 way back to the world); with pins, or exact reach's last pass, the bone pass, the compiled
-FABRIK polish and the way back. These are the general path's kernels in its order, so
+FABRIK polish (and where exact reach's misses, plain FABRIK from the caller's start) and
+the way back. These are the general path's kernels in its order, so
 the answers are bit-identical to it (``tests/service/test_lean.py``).
 """
 
