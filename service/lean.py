@@ -87,21 +87,18 @@ def lean_answer(
     """The answer of a batch that :func:`lean_sequence` (``sequence``) or
     :func:`fabrik_batch` (``sequence`` None: FABRIK) let through."""
     n = items.poses.shape[0]
-    if sequence is None:
+    if sequence is None:  # FABRIK: no sequence (-1), no suffix
         world, errors, bone_err, iterations = solve_fabrik(engine, items)
-        return BatchAnswer(
-            world, errors, bone_err, iterations, (("fabrik",),), np.zeros(n, np.int64)
+        seq_of, suffix = np.full(n, -1, np.int64), np.zeros(n, np.int64)
+    else:  # the general path's suffixes: 1 polish (exact reach, or pins), 2 fallback
+        exact = bool(items.ex[0])
+        world, errors, bone_err, iterations, fell = solve_lean(
+            engine, items, passes, sequence, exact
         )
-    exact = bool(items.ex[0])
-    world, errors, bone_err, iterations, fell = solve_lean(engine, items, passes, sequence, exact)
-    polished = exact or int(items.cnt[0]) > int(items.n_t[0])  # exact reach, or pins
-    paths = [(*sequence, "fabrik-polish") if polished else sequence, (*sequence, "fabrik-fallback")]
-    if fell.all():  # the solver paths the batch uses, in the general path's order
-        paths = paths[1:]
-    elif not fell.any():
-        paths = paths[:1]
-    path_of = fell.astype(np.int64) if len(paths) == 2 else np.zeros(n, np.int64)
-    return BatchAnswer(world, errors, bone_err, iterations, tuple(paths), path_of)
+        polished = exact or int(items.cnt[0]) > int(items.n_t[0])
+        seq_of, suffix = np.zeros(n, np.int64), np.where(fell, 2, int(polished))
+    paths, path_of = engine._paths(seq_of, suffix, [sequence or ()])
+    return BatchAnswer(world, errors, bone_err, iterations, paths, path_of)
 
 
 def solve_lean(
