@@ -20,7 +20,6 @@ reading from the server for seconds at a time, so steady readers were cut off.)
 
 from __future__ import annotations
 
-import itertools
 import logging
 from typing import Any, ClassVar
 
@@ -35,10 +34,10 @@ log = logging.getLogger("service.transport")
 class PacedHTTPProtocol(AutoHTTPProtocol):  # type: ignore[misc, valid-type]
     """uvicorn's HTTP protocol with a bound on the answers waiting for their clients."""
 
-    #: this worker's connections whose answer waits, in the order they began to wait
-    waiting: ClassVar[dict[PacedHTTPProtocol, int]] = {}
+    #: this worker's connections whose answer waits, in the order they began to wait (a
+    #: dict: insertion order, and removal by key)
+    waiting: ClassVar[dict[PacedHTTPProtocol, None]] = {}
     dropped: ClassVar[int] = 0  # connections closed on a slow reader (service.metrics)
-    _order: ClassVar[itertools.count[int]] = itertools.count()
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
@@ -47,10 +46,10 @@ class PacedHTTPProtocol(AutoHTTPProtocol):  # type: ignore[misc, valid-type]
     def pause_writing(self) -> None:
         super().pause_writing()
         cls = PacedHTTPProtocol
-        cls.waiting.setdefault(self, next(cls._order))
+        cls.waiting.setdefault(self, None)
         held = {p: p.transport.get_write_buffer_size() for p in cls.waiting}
         total = sum(held.values())
-        for oldest in sorted(cls.waiting, key=cls.waiting.__getitem__):
+        for oldest in list(cls.waiting):
             if total <= self._budget:
                 break
             total -= held[oldest]
