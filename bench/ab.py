@@ -40,17 +40,35 @@ SETS = {
 }
 
 
+def ankles_pinned(problems: list[Any]) -> list[Any]:
+    """``problems`` (``SolveProblem``) with both ankles pinned where each start has them,
+    as an editor pins the feet (sets with an ankle target: empty). Also ``make bench``'s
+    ``neural_pinned`` (:mod:`bench.speed`); here, not in :mod:`bench.edits`, because the
+    probe also runs in older trees."""
+    from core.skeleton import JOINT_INDEX
+
+    ankles = np.asarray([JOINT_INDEX["left_ankle"], JOINT_INDEX["right_ankle"]])
+    if not problems or np.isin(ankles, problems[0].target_idx).any():
+        return []
+    return [
+        dataclasses.replace(
+            p, target_idx=np.concatenate([p.target_idx, ankles]),
+            target_pos=np.concatenate([p.target_pos, p.pose[ankles]]),
+            weights=np.ones(len(p.target_idx) + 2),
+        )
+        for p in problems
+    ]  # fmt: skip
+
+
 def probe(dataset: Path, edits: int, seed: int) -> dict[str, float]:
     """Per case, the p50 in µs of ``Engine.solve([p])`` over three calls of each edit."""
     from bench.edits import edits_from_pairs, joint_idx, problems, sample_pairs, test_split
-    from core.skeleton import JOINT_INDEX
     from service.engine import Engine
     from trainer.data.dataset import load_dataset
 
     engine = Engine(Path("models"), threads=1)
     test = test_split(load_dataset(dataset))
     a, b = sample_pairs(test, edits, np.random.default_rng(seed + 100))
-    ankles = np.asarray([JOINT_INDEX["left_ankle"], JOINT_INDEX["right_ankle"]])
     out: dict[str, float] = {}
     for k, names in SETS.items():
         ed = edits_from_pairs(test, a, b, [joint_idx(names)] * len(a))
@@ -59,15 +77,8 @@ def probe(dataset: Path, edits: int, seed: int) -> dict[str, float]:
             "default": neural,
             "plain": [dataclasses.replace(p, passes=1, mirror=False) for p in neural],
             "fabrik": problems(ed, "fabrik"),
-            "pinned": [
-                dataclasses.replace(
-                    p, target_idx=np.concatenate([p.target_idx, ankles]),
-                    target_pos=np.concatenate([p.target_pos, p.pose[ankles]]),
-                    weights=np.ones(len(p.target_idx) + 2),
-                )
-                for p in neural
-            ] if k < 5 else [],
-        }  # fmt: skip
+            "pinned": ankles_pinned(neural),  # none for the five end effectors
+        }
         for name, probs in cases.items():
             if not probs:
                 continue

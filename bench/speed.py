@@ -225,8 +225,9 @@ def _issue14_set(
     engine: Engine, k: int, name: str, edits: Edits, calls: int, warmup: int, tolerance: float
 ) -> Json:
     """One target count of :func:`issue14`: the four timings interleaved per call."""
+    from bench.ab import ankles_pinned
     from core import compiled_fabrik, kinematics
-    from core.skeleton import JOINT_INDEX, bone_lengths
+    from core.skeleton import bone_lengths
 
     cap = engine.fabrik_max_iterations
     neural = problems(edits, "neural_bone")
@@ -266,15 +267,8 @@ def _issue14_set(
         numpy_way = copy.copy(engine)
         numpy_way.mirror_graphs = {}
         runs["neural_numpy_mirror"] = lambda i: numpy_way.solve([neural[i]])
-    ankles = np.asarray([JOINT_INDEX["left_ankle"], JOINT_INDEX["right_ankle"]])
-    if not np.isin(ankles, idx).any():  # feet pinned where they stand: the editor's pins
-        feet = [
-            dataclasses.replace(
-                p, target_idx=np.concatenate([p.target_idx, ankles]), weights=np.ones(len(idx) + 2),
-                target_pos=np.concatenate([p.target_pos, p.pose[ankles]]),
-            )
-            for p in neural
-        ]  # fmt: skip
+    feet = ankles_pinned(neural)  # feet pinned where they stand: the editor's pins
+    if feet:
         runs["neural_pinned"] = lambda i: engine.solve([feet[i]])
     if engine.turn_search.searches("neural", len(idx), False):  # the default searches
         plain = copy.copy(engine)
