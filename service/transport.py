@@ -16,10 +16,15 @@ oldest first, with a ``slow-reader`` warning in the log each and
 while the worker holds more than that for clients that do not. (A floor on each client's
 pace was tried first: the client's own socket buffer, megabytes on loopback, hides its
 reading from the server for seconds at a time, so steady readers were cut off.)
+
+Each answer also leaves in one write where it is small: uvicorn writes the status line and
+headers, then the body, each at once, so a small answer cost two ``send`` system calls
+and two TCP segments, and its client woke up twice to read it (:class:`Coalescing`).
 """
 
 from __future__ import annotations
 
+import asyncio
 import logging
 from typing import Any, ClassVar
 
@@ -31,8 +36,69 @@ from service.settings import get_settings
 log = logging.getLogger("service.transport")
 
 
+#: A write smaller than this may wait for the next (a response's headers for its body); a
+#: larger one goes at once with what waits (no copy of a big body, and uvicorn's flow
+#: control sees it).
+COALESCE_BYTES = 64 * 1024
+
+
+class Coalescing:
+    """A transport that holds a small write until the next one, or until the end of the
+    event loop's step if none comes, and then sends both as one: a response's headers
+    leave with its body, in one ``send`` and one TCP segment. The write that completes a
+    pair goes at once (holding it to the end of the step would put the app's work after
+    its answer, metrics and logs, before the client's read). In order with every other
+    write; ``close`` sends what is held first, ``abort`` drops it (as the transport drops
+    its buffer). Everything else is the transport's own."""
+
+    def __init__(self, transport: asyncio.Transport) -> None:
+        self._transport = transport
+        self._held: bytes | None = None
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._transport, name)
+
+    def write(self, data: bytes | bytearray | memoryview) -> None:
+        held, self._held = self._held, None
+        if held is not None:  # the pair is complete
+            if len(data) < COALESCE_BYTES:
+                data = held + data
+            else:
+                self._transport.write(held)
+            self._transport.write(data)
+        elif len(data) < COALESCE_BYTES:
+            self._held = bytes(data)
+            asyncio.get_running_loop().call_soon(self._flush)
+        else:
+            self._transport.write(data)
+
+    def writelines(self, parts: Any) -> None:
+        self.write(b"".join(parts))
+
+    def write_eof(self) -> None:
+        self._flush()
+        self._transport.write_eof()
+
+    def _flush(self) -> None:
+        held, self._held = self._held, None
+        if held is not None and not self._transport.is_closing():
+            self._transport.write(held)
+
+    def get_write_buffer_size(self) -> int:
+        return int(self._transport.get_write_buffer_size()) + len(self._held or b"")
+
+    def close(self) -> None:
+        self._flush()
+        self._transport.close()
+
+    def abort(self) -> None:
+        self._held = None
+        self._transport.abort()
+
+
 class PacedHTTPProtocol(AutoHTTPProtocol):  # type: ignore[misc, valid-type]
-    """uvicorn's HTTP protocol with a bound on the answers waiting for their clients."""
+    """uvicorn's HTTP protocol with a bound on the answers waiting for their clients, its
+    small writes coalesced (:class:`Coalescing`)."""
 
     #: this worker's connections whose answer waits, in the order they began to wait (a
     #: dict: insertion order, and removal by key)
@@ -42,6 +108,9 @@ class PacedHTTPProtocol(AutoHTTPProtocol):  # type: ignore[misc, valid-type]
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
         self._budget = get_settings().max_unsent_bytes
+
+    def connection_made(self, transport: asyncio.Transport) -> None:
+        super().connection_made(Coalescing(transport))
 
     def pause_writing(self) -> None:
         super().pause_writing()
