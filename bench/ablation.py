@@ -211,6 +211,10 @@ VARIANTS: dict[str, str] = {
     "captured_polish_no_retry": "`polish_no_retry` on the captured edits",
     "ae_cos3e3_served": "`ae_cos3e3_ends`'s networks served as mx1-c34901011fe4 (its serving "
     "block set with `pose-trainer serving`): not shipped, the in-studio 5 end effectors lose",
+    "turn_quick": "mx1-25bb75ec3824 with `serving.turn_quick`: the turn search scores its "
+    "candidates on one pass without the mirror image, then solves the edit as asked "
+    "(`--serving turn_quick=true`): not shipped, the in-studio searching sets lose",
+    "captured_turn_quick": "`turn_quick` on the captured edits",
 }
 COMPLETION = "6-point completion"
 

@@ -236,6 +236,13 @@ class Serving(_Strict):
         "that has travelled as well as turned. Kept only if it scores this many metres "
         "below every other candidate (0: not tried).",
     )
+    turn_quick: bool = Field(
+        default=False,
+        description="The turn search solves its candidates in their quick form, one pass "
+        "without the mirror image, then the edit as asked from the start it keeps: about "
+        "a quarter of the networks' work of a search, and candidates scored on rougher "
+        "answers (docs/generalisation-serving-2.md item 40).",
+    )
     retry_reach: float = Field(
         default=0.0,
         ge=0.0,

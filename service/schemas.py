@@ -256,6 +256,10 @@ class ModelsResponse(BaseModel):
         description="Metres by which the turn search's start moved to fit the targets must "
         "score below every other candidate to be kept (0: not tried; `serving.turn_fit`)."
     )
+    turn_quick: bool = Field(
+        description="Whether the turn search scores its candidates on their quick form (one "
+        "pass, no mirror image) before solving the edit as asked (`serving.turn_quick`)."
+    )
     turn_critic: str = Field(
         description="What judges how natural a searched turn's answer is: `completion` (the "
         "body completion builds from its base key points) or `autoencoder` (its round trip); "

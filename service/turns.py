@@ -30,6 +30,10 @@ targets (:func:`fitted`: turned about the vertical and shifted across by the rig
 that best carries the targeted joints onto their targets), for a body that travelled as
 well as turned (docs/generalisation-serving-2.md item 34). It is kept only if it scores
 ``turn_fit`` metres below every other candidate; its path ends with ``fit <deg>``.
+
+With ``turn_quick`` each candidate is solved in its quick form (one pass, no mirror
+image), and the edit then as asked from the start kept, soft ones too (measured, not
+shipped: docs/generalisation-serving-2.md item 40).
 """
 
 from __future__ import annotations
@@ -69,6 +73,9 @@ class TurnSearch:
     #: > 0: one more candidate, the start moved to fit its targets (:func:`fitted`), kept
     #: only if it scores this many metres below every other
     fit: float = 0.0
+    #: candidates solved in their quick form (one pass, no mirror image); the edit is then
+    #: solved as asked from the start kept
+    quick: bool = False
 
     @property
     def candidates(self) -> int:
@@ -81,6 +88,7 @@ class TurnSearch:
         return TurnSearch(
             serving.turn_yaws, serving.turn_margin, serving.turn_min_targets,
             serving.turn_plausibility, serving.turn_critic, serving.turn_fit,
+            serving.turn_quick,
         )  # fmt: skip
 
     def searches(
@@ -93,7 +101,8 @@ class TurnSearch:
         )  # fmt: skip
 
     def factor(self, method: str, n_targets: int, pinned: bool, wanted: bool | None = None) -> int:
-        """The solves an item costs per pass: its candidates and itself, or 1."""
+        """The solves an item costs per pass: its candidates and itself, or 1 (with
+        ``quick``, an upper bound: its candidates each cost one pass, one view)."""
         return self.candidates + 1 if self.searches(method, n_targets, pinned, wanted) else 1
 
 
@@ -218,6 +227,8 @@ def search(
         moved[sel[fit]] = True
     degrees[sel] = np.where(deg > 180, deg - 360, deg)
     mine = ~items.ex[sel] & items.keep[sel]  # solved as asked: soft, bone lengths kept
+    if t.quick:  # candidates in their quick form: every edit is solved again, as asked
+        mine[:] = False
     known = (sel[mine], found.take(np.flatnonzero(mine))) if mine.any() else None
     return dataclasses.replace(items, poses=out), Turns(degrees, moved), known
 
@@ -227,7 +238,8 @@ def _candidates(
     steps: npt.NDArray[np.int64], solve: Callable[[_Items, npt.NDArray[np.int64]], BatchAnswer],
 ) -> tuple[F64, BatchAnswer, F64]:  # fmt: skip
     """Items ``sel`` solved soft from their starts turned by ``steps`` (of the search's
-    ``yaws`` steps; 0 unturned) in one batch, turn-major: the scores ``[turns, sel]``,
+    ``yaws`` steps; 0 unturned) in one batch (with ``quick``: one pass, no mirror image),
+    turn-major: the scores ``[turns, sel]``,
     the answers and the candidate starts (rows ``turn * len(sel) + item``)."""
     y = engine.turn_search.yaws
     starts = items.poses[sel]
@@ -240,7 +252,11 @@ def _candidates(
     poses = np.concatenate(parts) if len(parts) > 1 else parts[0]
     rep = np.tile(sel, len(steps))
     soft = dataclasses.replace(items.soft(rep, items.poses), poses=poses)
-    ans = solve(soft, reps[rep])
+    if engine.turn_search.quick:  # one pass, no mirror image
+        soft = dataclasses.replace(soft, mirror=np.zeros(len(rep), dtype=np.bool_))
+        ans = solve(soft, np.ones(len(rep), dtype=np.int64))
+    else:
+        ans = solve(soft, reps[rep])
     scores = _score(engine, soft, ans).reshape(len(steps), -1)
     scores[steps == y] += engine.turn_search.fit  # the fitted start's bar (0 if not tried)
     return scores, ans, poses

@@ -317,3 +317,35 @@ def test_a_travelled_goal_fits_the_start(
     for p, r in zip(mixed, on.solve(mixed), strict=True):
         (single,) = on.solve([p])
         assert np.array_equal(single.pose, r.pose) and single.solvers == r.solvers
+
+
+def test_quick_candidates_keep_a_start_then_solve_as_asked(
+    engines: tuple[Engine, Engine], models_dir: Path, real_poses: PosePairs
+) -> None:
+    """``serving.turn_quick``: the candidates solved in their quick form (one pass, no
+    mirror image) still find a quarter turn, and the answer is then the edit solved as
+    asked from the start kept: bit for bit what the models give without a search from
+    that start, soft and exact; alone = in a batch."""
+    off = engines[0]
+    quick = Engine(models_dir, serving={"turn_quick": True})
+    assert quick.turn_search.quick and not engines[1].turn_search.quick
+    start = real_poses.poses[real_poses.starts[:24]]
+    goal = turned(real_poses.poses[real_poses.goals[:24]], np.pi / 2)
+    probs = _problems(start, goal, FIVE) + _problems(start[:6], goal[:6], FIVE, reach="exact")
+    got = quick.solve(probs)
+    turns = [_turn(r.solvers) for r in got]
+    assert turns.count("turn 90") >= 15, turns
+    y, compared = quick.turn_search.yaws, 0
+    for p, r, t in zip(probs, got, turns, strict=True):
+        if r.solvers[-1].startswith("fit"):
+            continue  # the fitted start: its own test above
+        compared += 1
+        step = 0 if t is None else int(t.split()[1]) * y // 360 % y
+        kept = p.pose if step == 0 else turned_by(p.pose[None], np.array([2.0 * np.pi * step / y]))
+        (want,) = off.solve([dataclasses.replace(p, pose=kept.reshape(21, 3))])
+        assert np.array_equal(r.pose, want.pose), t
+        assert r.solvers == want.solvers + ([t] if t else [])
+    assert compared >= 24, turns
+    for p, r in zip(probs[:3] + probs[-2:], quick.solve(probs[:3] + probs[-2:]), strict=True):
+        (single,) = quick.solve([p])
+        assert np.array_equal(single.pose, r.pose) and single.solvers == r.solvers
