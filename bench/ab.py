@@ -15,6 +15,11 @@ revision (the least disturbed) with their ratio.
 
 The probe uses only what both trees have (``Engine``, ``bench.edits``); the models are
 each tree's own.
+
+``--serving KEY=VALUE`` (repeatable) times this tree with those serving settings against
+itself with the models' own (no ``--base``), or against ``--base`` as it is: the A/B of a
+setting, such as ``turn_quick=true`` (docs/generalisation-serving-2.md item 40). The
+``batch`` rows time each case's edits as one ``Engine.solve`` call, per edit.
 """
 
 from __future__ import annotations
@@ -60,13 +65,18 @@ def ankles_pinned(problems: list[Any]) -> list[Any]:
     ]  # fmt: skip
 
 
-def probe(dataset: Path, edits: int, seed: int) -> dict[str, float]:
-    """Per case, the p50 in µs of ``Engine.solve([p])`` over three calls of each edit."""
+def probe(
+    dataset: Path, edits: int, seed: int, serving: dict[str, Any] | None = None
+) -> dict[str, float]:
+    """Per case, the p50 in µs of ``Engine.solve([p])`` over three calls of each edit, and
+    (``batch``) the median over three calls of ``Engine.solve`` on all of them, per edit;
+    ``serving``: settings over the models' own."""
     from bench.edits import edits_from_pairs, joint_idx, problems, sample_pairs, test_split
     from service.engine import Engine
     from trainer.data.dataset import load_dataset
 
-    engine = Engine(Path("models"), threads=1)
+    models = Path("models")  # (an older tree's Engine may not take ``serving``)
+    engine = Engine(models, threads=1, serving=serving) if serving else Engine(models, threads=1)
     test = test_split(load_dataset(dataset))
     a, b = sample_pairs(test, edits, np.random.default_rng(seed + 100))
     out: dict[str, float] = {}
@@ -91,12 +101,20 @@ def probe(dataset: Path, edits: int, seed: int) -> dict[str, float]:
                     engine.solve([p])
                     ns.append(time.thread_time_ns() - t0)
             out[f"{k} {name}"] = float(np.median(ns)) / 1e3
+        whole = []
+        for _ in range(3):
+            t0 = time.thread_time_ns()
+            engine.solve(neural)
+            whole.append((time.thread_time_ns() - t0) / len(neural))
+        out[f"{k} batch"] = float(np.median(whole)) / 1e3
     return out
 
 
-def _run(tree: Path, dataset: Path, edits: int, seed: int) -> dict[str, float]:
+def _run(
+    tree: Path, dataset: Path, edits: int, seed: int, serving: dict[str, Any] | None = None
+) -> dict[str, float]:
     cmd = [sys.executable, str(Path(__file__).resolve()), "--probe", str(dataset.resolve()),
-           str(edits), str(seed)]  # fmt: skip
+           str(edits), str(seed), json.dumps(serving or {})]  # fmt: skip
     env = {**os.environ, "PYTHONPATH": str(tree)}
     done = subprocess.run(cmd, cwd=tree, env=env, capture_output=True, text=True, check=False)
     if done.returncode:  # say why (a revision without the probe's modules, say)
@@ -105,28 +123,42 @@ def _run(tree: Path, dataset: Path, edits: int, seed: int) -> dict[str, float]:
     return got
 
 
-def compare(base: str, dataset: Path, rounds: int, edits: int, seed: int) -> dict[str, Any]:
-    """The probe's figures of ``base`` and of this tree, ``rounds`` rounds alternated."""
+def compare(
+    base: str | None, dataset: Path, rounds: int, edits: int, seed: int,
+    serving: dict[str, Any] | None = None,
+) -> dict[str, Any]:  # fmt: skip
+    """The probe's figures of ``base`` (None: this tree with the models' own settings) and
+    of this tree with ``serving``, ``rounds`` rounds alternated."""
+    runs: dict[str, list[dict[str, float]]] = {"base": [], "this": []}
+
+    def alternate(tree: Path) -> None:
+        for _ in range(rounds):
+            runs["base"].append(_run(tree, dataset, edits, seed))
+            runs["this"].append(_run(REPO, dataset, edits, seed, serving))
+
+    label = "this tree (models' settings)" if base is None else base
+    if base is None:
+        alternate(REPO)
+        return {"revision": label, "serving": serving or {}, "rounds": rounds, "edits": edits,
+                **runs}  # fmt: skip
     with tempfile.TemporaryDirectory() as tmp:
         tree = Path(tmp) / "base"
         subprocess.run(["git", "-C", str(REPO), "worktree", "add", "--detach", "-q", str(tree),
                         base], check=True)  # fmt: skip
         try:
-            runs: dict[str, list[dict[str, float]]] = {"base": [], "this": []}
-            for _ in range(rounds):
-                runs["base"].append(_run(tree, dataset, edits, seed))
-                runs["this"].append(_run(REPO, dataset, edits, seed))
+            alternate(tree)
         finally:
             subprocess.run(["git", "-C", str(REPO), "worktree", "remove", "--force", str(tree)],
                            check=False)  # fmt: skip
-    return {"revision": base, "rounds": rounds, "edits": edits, **runs}
+    return {"revision": label, "serving": serving or {}, "rounds": rounds, "edits": edits, **runs}
 
 
 def table(result: dict[str, Any]) -> str:
     """Markdown: per case the rounds' p50s and the best round of each, with their ratio."""
+    mine = "this tree" + "".join(f" {k}={v}" for k, v in result.get("serving", {}).items())
     lines = [
-        f"| case | {result['revision']} (µs, each round) | this tree | best: "
-        f"{result['revision']} → this tree | × |",
+        f"| case | {result['revision']} (µs, each round) | {mine} | best: "
+        f"{result['revision']} → {mine} | × |",
         "|---|---|---|---|---|",
     ]
     for case in result["this"][0]:
@@ -143,7 +175,14 @@ def table(result: dict[str, Any]) -> str:
 
 
 def main(
-    base: Annotated[str, typer.Option(help="The revision to compare with (git).")],
+    base: Annotated[
+        str | None,
+        typer.Option(help="The revision to compare with (git); none: this tree itself."),
+    ] = None,
+    serving: Annotated[
+        list[str] | None,
+        typer.Option(help="KEY=VALUE: this tree's side served with this setting (repeat)."),
+    ] = None,
     dataset: Annotated[Path, typer.Option(help="Dataset file.")] = Path("data/poses.npz"),
     rounds: Annotated[int, typer.Option(min=1, help="Rounds, each revision once.")] = 3,
     edits: Annotated[int, typer.Option(min=1, help="Edits per case.")] = 128,
@@ -151,14 +190,20 @@ def main(
     out: Annotated[Path | None, typer.Option(help="Write the figures (JSON) here.")] = None,
 ) -> None:
     """Time single edits of REV and of this tree side by side (see the module)."""
-    result = compare(base, dataset, rounds, edits, seed)
+    from bench.heldout import overrides
+
+    asked = overrides(serving or [])
+    if base is None and not asked:
+        raise typer.BadParameter("give --base REV, --serving KEY=VALUE, or both")
+    result = compare(base, dataset, rounds, edits, seed, asked)
     if out is not None:
         out.write_text(json.dumps(result, indent=1))
     print(table(result))
 
 
 if __name__ == "__main__":
-    if len(sys.argv) == 5 and sys.argv[1] == "--probe":
-        print(json.dumps(probe(Path(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4]))))
+    if len(sys.argv) == 6 and sys.argv[1] == "--probe":
+        args = Path(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4]), json.loads(sys.argv[5])
+        print(json.dumps(probe(*args)))
     else:
         typer.run(main)

@@ -32,8 +32,8 @@ well as turned (docs/generalisation-serving-2.md item 34). It is kept only if it
 ``turn_fit`` metres below every other candidate; its path ends with ``fit <deg>``.
 
 With ``turn_quick`` each candidate is solved in its quick form (one pass, no mirror
-image), and the edit then as asked from the start kept, soft ones too (measured, not
-shipped: docs/generalisation-serving-2.md item 40).
+image), and the edit then as asked from the start kept, soft ones too unless they asked
+for that form (measured, not shipped: docs/generalisation-serving-2.md item 40).
 """
 
 from __future__ import annotations
@@ -227,8 +227,8 @@ def search(
         moved[sel[fit]] = True
     degrees[sel] = np.where(deg > 180, deg - 360, deg)
     mine = ~items.ex[sel] & items.keep[sel]  # solved as asked: soft, bone lengths kept
-    if t.quick:  # candidates in their quick form: every edit is solved again, as asked
-        mine[:] = False
+    if t.quick:  # candidates in their quick form: solved as asked only if asked so
+        mine &= (reps[sel] == 1) & ~items.mirror[sel]
     known = (sel[mine], found.take(np.flatnonzero(mine))) if mine.any() else None
     return dataclasses.replace(items, poses=out), Turns(degrees, moved), known
 

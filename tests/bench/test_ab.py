@@ -25,7 +25,7 @@ def test_two_revisions_side_by_side(bench_dataset: Path) -> None:
 
     before = worktrees()
     result = ab.compare("HEAD", bench_dataset, rounds=1, edits=4, seed=0)
-    cases = {f"{k} {c}" for k in (1, 2, 5) for c in ("default", "plain", "fabrik")}
+    cases = {f"{k} {c}" for k in (1, 2, 5) for c in ("default", "plain", "fabrik", "batch")}
     cases |= {"1 pinned", "2 pinned"}
     for side in ("base", "this"):
         assert len(result[side]) == 1 and set(result[side][0]) == cases
@@ -41,3 +41,20 @@ def test_a_probe_that_fails_says_why(bench_dataset: Path, tmp_path: Path) -> Non
     with pytest.raises(RuntimeError, match="the probe failed") as err:
         ab._run(tmp_path, bench_dataset, 1, 0)
     assert "Error" in str(err.value)  # the probe's own traceback, not a bare exit status
+
+
+@pytest.mark.slow
+def test_a_serving_setting_against_the_models_own(bench_dataset: Path) -> None:
+    """``--serving`` without ``--base``: this tree against itself, its side served with the
+    setting. One that changes nothing the probe times (``keep_pelvis`` 0, the shipped
+    value) times the same cases; the table names the setting; a setting the models refuse
+    fails the probe, so the setting does reach the engine."""
+    result = ab.compare(None, bench_dataset, rounds=1, edits=4, seed=0,
+                        serving={"keep_pelvis": 0.0})  # fmt: skip
+    assert result["serving"] == {"keep_pelvis": 0.0}
+    assert set(result["base"][0]) == set(result["this"][0]) and "5 batch" in result["this"][0]
+    text = ab.table(result)
+    assert "this tree (models' settings)" in text.splitlines()[0]
+    assert "this tree keep_pelvis=0.0" in text.splitlines()[0]
+    with pytest.raises(RuntimeError, match="passes"):
+        ab._run(REPO, bench_dataset, 1, 0, {"passes": 0})

@@ -349,3 +349,7 @@ def test_quick_candidates_keep_a_start_then_solve_as_asked(
     for p, r in zip(probs[:3] + probs[-2:], quick.solve(probs[:3] + probs[-2:]), strict=True):
         (single,) = quick.solve([p])
         assert np.array_equal(single.pose, r.pose) and single.solvers == r.solvers
+    # an edit that asks for the quick form itself keeps its candidate's answer: the same
+    plain = [dataclasses.replace(p, passes=1, mirror=False) for p in probs[:8]]
+    for p, r, full in zip(plain, quick.solve(plain), engines[1].solve(plain), strict=True):
+        assert np.array_equal(r.pose, full.pose) and r.solvers == full.solvers
