@@ -351,5 +351,5 @@ def test_quick_candidates_keep_a_start_then_solve_as_asked(
         assert np.array_equal(single.pose, r.pose) and single.solvers == r.solvers
     # an edit that asks for the quick form itself keeps its candidate's answer: the same
     plain = [dataclasses.replace(p, passes=1, mirror=False) for p in probs[:8]]
-    for p, r, full in zip(plain, quick.solve(plain), engines[1].solve(plain), strict=True):
+    for r, full in zip(quick.solve(plain), engines[1].solve(plain), strict=True):
         assert np.array_equal(r.pose, full.pose) and r.solvers == full.solvers
