@@ -215,8 +215,8 @@ VARIANTS: dict[str, str] = {
     "candidates on one pass without the mirror image, then solves the edit as asked "
     "(`--serving turn_quick=true`): not shipped, the in-studio searching sets lose",
     "captured_turn_quick": "`turn_quick` on the captured edits",
-    "seed1": "the shipped recipe trained again with seed 1 (trainer/configs/ablation/seed1.toml; "
-    "completion 1 epoch, unused here): the seed's share of every figure",
+    "seed1": "the shipped recipe trained again with seed 1 (trainer/configs/ablation/seed1.toml), "
+    "served with the shipped completion networks: the seed's share of every figure",
     "captured_seed1": "`seed1` on the captured edits",
     "seed_pair": "the shipped models and `seed1` together: each pass answers the mean of the "
     "two models' networks (a `/tmp` wrapper of service.networks.answer; twice the networks' "
