@@ -136,20 +136,19 @@ def compare(
             runs["base"].append(_run(tree, dataset, edits, seed))
             runs["this"].append(_run(REPO, dataset, edits, seed, serving))
 
-    label = "this tree (models' settings)" if base is None else base
     if base is None:
         alternate(REPO)
-        return {"revision": label, "serving": serving or {}, "rounds": rounds, "edits": edits,
-                **runs}  # fmt: skip
-    with tempfile.TemporaryDirectory() as tmp:
-        tree = Path(tmp) / "base"
-        subprocess.run(["git", "-C", str(REPO), "worktree", "add", "--detach", "-q", str(tree),
-                        base], check=True)  # fmt: skip
-        try:
-            alternate(tree)
-        finally:
-            subprocess.run(["git", "-C", str(REPO), "worktree", "remove", "--force", str(tree)],
-                           check=False)  # fmt: skip
+    else:
+        with tempfile.TemporaryDirectory() as tmp:
+            tree = Path(tmp) / "base"
+            subprocess.run(["git", "-C", str(REPO), "worktree", "add", "--detach", "-q",
+                            str(tree), base], check=True)  # fmt: skip
+            try:
+                alternate(tree)
+            finally:
+                subprocess.run(["git", "-C", str(REPO), "worktree", "remove", "--force",
+                                str(tree)], check=False)  # fmt: skip
+    label = "this tree (models' settings)" if base is None else base
     return {"revision": label, "serving": serving or {}, "rounds": rounds, "edits": edits, **runs}
 
 

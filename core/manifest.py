@@ -239,8 +239,8 @@ class Serving(_Strict):
     turn_quick: bool = Field(
         default=False,
         description="The turn search solves its candidates in their quick form, one pass "
-        "without the mirror image, then the edit as asked from the start it keeps: about "
-        "a quarter of the networks' work of a search, and candidates scored on rougher "
+        "without the mirror image, then the edit as asked from the start it keeps: a "
+        "quarter of the candidates' networks' work, and candidates scored on rougher "
         "answers (docs/generalisation-serving-2.md item 40).",
     )
     retry_reach: float = Field(
