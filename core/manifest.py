@@ -478,8 +478,21 @@ def verify_entry(models_dir: Path, entry: ModelEntry) -> None:
         raise ManifestError(file, f"sha256 {digest[:12]}… does not match the manifest")
 
 
+def serving_json(serving: Serving) -> dict[str, Any]:
+    """The serving block as a manifest file holds it: the settings it was written with. A
+    setting added to :class:`Serving` after a file was written is absent from it, and its
+    default is how those models were served before it existed, so re-writing an older
+    manifest (a mirror pass, the version hash) keeps what it says and its version."""
+    return serving.model_dump(mode="json", exclude_unset=True)
+
+
+def manifest_json(manifest: Manifest) -> dict[str, Any]:
+    """The manifest as its file holds it (:func:`serving_json` for the serving block)."""
+    return {**manifest.model_dump(mode="json"), "serving": serving_json(manifest.serving)}
+
+
 def write_manifest(models_dir: Path, manifest: Manifest) -> Path:
     path = Path(models_dir) / MANIFEST_NAME
-    text = json.dumps(manifest.model_dump(mode="json"), indent=2, sort_keys=False) + "\n"
+    text = json.dumps(manifest_json(manifest), indent=2, sort_keys=False) + "\n"
     write_atomic(path, text.encode("utf-8"))
     return path

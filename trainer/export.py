@@ -201,10 +201,11 @@ def git_commit_of(out: Path) -> str:
 
 
 def model_version(entries: list[ModelEntry], serving: Serving) -> str:
-    """The models' version: a hash of every file's sha256 and of the serving section, which
-    changes answers as much as a file does (models exported before completion views hashed
-    the files alone)."""
-    text = "".join(e.sha256 for e in entries) + serving.model_dump_json()
+    """The models' version: a hash of every file's sha256 and of the serving section as the
+    manifest holds it (``core.manifest.serving_json``: a setting added after it was written
+    is left out), which changes answers as much as a file does (models exported before
+    completion views hashed the files alone)."""
+    text = "".join(e.sha256 for e in entries) + serving.model_dump_json(exclude_unset=True)
     return "mx1-" + hashlib.sha256(text.encode()).hexdigest()[:12]
 
 

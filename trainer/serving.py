@@ -15,7 +15,14 @@ import copy
 from pathlib import Path
 from typing import Any
 
-from core.manifest import TRAINED_SERVING, Manifest, Serving, load_manifest, write_manifest
+from core.manifest import (
+    TRAINED_SERVING,
+    Manifest,
+    Serving,
+    load_manifest,
+    manifest_json,
+    write_manifest,
+)
 from trainer.config import SERVING_SETTINGS, TrainConfig, seen_by_losses
 from trainer.export import git_commit_of, model_version, serving_of
 from trainer.model_card import write_model_card
@@ -64,7 +71,7 @@ def set_serving(cfg: TrainConfig, models_dir: Path) -> tuple[Manifest, dict[str,
             "provenance": provenance,
         }
     )
-    out = Manifest.model_validate(out.model_dump(mode="json"))
+    out = Manifest.model_validate(manifest_json(out))
     write_manifest(models_dir, out)
     write_model_card(models_dir, out)
     return out, changed

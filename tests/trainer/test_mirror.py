@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from core.manifest import ManifestError, load_manifest
+from core.manifest import ManifestError, Serving, load_manifest, write_manifest
 from trainer.cli import app
 from trainer.export import model_version
 
@@ -24,10 +24,9 @@ def without(models_dir: Path, tmp_path: Path) -> Path:
     shutil.copytree(models_dir, out, ignore=shutil.ignore_patterns("mirror_*"))
     manifest = load_manifest(models_dir, verify=False)
     kept = [m for m in manifest.models if m.kind != "mirror"]
-    raw = json.loads(manifest.model_copy(
+    write_manifest(out, manifest.model_copy(
         update={"models": kept, "version": model_version(kept, manifest.serving)}
-    ).model_dump_json())  # fmt: skip
-    (out / "manifest.json").write_text(json.dumps(raw))
+    ))  # fmt: skip
     return out
 
 
@@ -52,6 +51,30 @@ def test_mirror_writes_the_shipped_graphs_bit_for_bit(models_dir: Path, without:
     )
     again = CliRunner().invoke(app, ["mirror", "--models", str(without)])
     assert again.exit_code == 0 and load_manifest(without).version == shipped.version
+
+
+def test_a_setting_added_after_a_manifest_was_written_keeps_its_version(
+    models_dir: Path, without: Path
+) -> None:
+    """A serving setting the manifest does not name (added to the service after the models
+    were exported) is served at its default and is not part of the version: the mirror
+    pass keeps the file's serving block as written. Once the file names it, it counts."""
+    raw = json.loads((without / "manifest.json").read_text())
+    newest = list(Serving.model_fields)[-1]
+    del raw["serving"][newest]
+    (without / "manifest.json").write_text(json.dumps(raw))
+    older = load_manifest(without, verify=False)
+    assert getattr(older.serving, newest) == Serving.model_fields[newest].default
+    assert model_version(older.models, older.serving) != model_version(
+        older.models, Serving.model_validate(older.serving.model_dump())
+    )
+    result = CliRunner().invoke(app, ["mirror", "--models", str(without)])
+    assert result.exit_code == 0, result.output
+    written = json.loads((without / "manifest.json").read_text())
+    assert newest not in written["serving"]
+    assert written["serving"] == raw["serving"]
+    after = load_manifest(without)
+    assert after.version == model_version(after.models, after.serving)
 
 
 def test_a_tampered_fused_graph_is_refused_by_name(without: Path) -> None:
