@@ -222,6 +222,11 @@ VARIANTS: dict[str, str] = {
     "two models' networks (a `/tmp` wrapper of service.networks.answer; twice the networks' "
     "work): not shipped",
     "captured_seed_pair": "`seed_pair` on the captured edits",
+    "bones24": "the shipped recipe with random bodies' bones drawn twice as wide "
+    "(augment.bone_sigma 0.24, trainer/configs/ablation/bones24.toml), served with the shipped "
+    "completion networks: autoencoder closer on held-out bodies, solves no better, in-studio "
+    "worse: not shipped",
+    "captured_bones24": "`bones24` on the captured edits",
 }
 COMPLETION = "6-point completion"
 
