@@ -10,8 +10,9 @@ tenant's load on the host shows less in it than in wall time), for 1, 2 and 5 ta
 TEST split's B1-style edits, the speed part's seed): the models' defaults (``default``),
 one pass without the mirror image (``plain``: the paper's configuration), FABRIK
 (``fabrik``), and with both ankles pinned where the start has them (``pinned``, 1 and 2
-targets). The table gives each case's p50 per round, and the best round of each
-revision (the least disturbed) with their ratio.
+targets); and a client's own character, a BVH file's frame edited end to end but for HTTP
+(``bvh exact``, ``bvh soft``: :func:`bvh_edits`). The table gives each case's p50 per
+round, and the best round of each revision (the least disturbed) with their ratio.
 
 The probe uses only what both trees have (``Engine``, ``bench.edits``); the models are
 each tree's own.
@@ -107,6 +108,37 @@ def probe(
             engine.solve(neural)
             whole.append((time.thread_time_ns() - t0) / len(neural))
         out[f"{k} batch"] = float(np.median(whole)) / 1e3
+    out.update(bvh_edits(engine))
+    return out
+
+
+def bvh_edits(engine: Any, calls: int = 20) -> dict[str, float]:
+    """The p50 in µs of a whole ``POST /v1/bvh/solve`` minus HTTP (``service.characters``:
+    read the file, map its joints, solve, retarget, write the file back), over ``calls``
+    calls of ``docs/examples/bvh_solve.json`` (22 joints, two pins) as given (``exact``) and
+    in soft reach without its pins (``soft``)."""
+    from service.characters import (
+        BVHSolveRequest,
+        bvh_answer,
+        character_from_bvh,
+        read_request_bvh,
+        solve_character,
+    )
+
+    body = json.loads(Path("docs/examples/bvh_solve.json").read_text())
+    asks = {"exact": body, "soft": {**body, "pins": [], "options": {"reach": "soft"}}}
+    out: dict[str, float] = {}
+    for name, ask in asks.items():
+        req = BVHSolveRequest.model_validate(ask)
+        ns = []
+        for i in range(calls + 3):  # three to warm
+            t0 = time.thread_time_ns()
+            bvh = read_request_bvh(req.bvh)
+            ch = character_from_bvh(bvh, req)
+            bvh_answer(bvh, ch, req, solve_character(engine, ch, req))
+            if i >= 3:
+                ns.append(time.thread_time_ns() - t0)
+        out[f"bvh {name}"] = float(np.median(ns)) / 1e3
     return out
 
 

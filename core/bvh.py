@@ -388,19 +388,26 @@ def read_bvh(path: str | Path, name: str | None = None) -> BVH:
     return parse_bvh(text, label)
 
 
+_AXIS = {"X": 0, "Y": 1, "Z": 2}
+
+
 def axis_rotations(axis: str, radians: FloatArray) -> FloatArray:
-    """Rotation matrices ``[..., 3, 3]`` about ``axis`` ("X", "Y" or "Z") by ``radians``."""
-    c, s = np.cos(radians), np.sin(radians)
-    one, zero = np.ones_like(c), np.zeros_like(c)
-    if axis == "X":
-        rows = ((one, zero, zero), (zero, c, -s), (zero, s, c))
-    elif axis == "Y":
-        rows = ((c, zero, s), (zero, one, zero), (-s, zero, c))
-    elif axis == "Z":
-        rows = ((c, -s, zero), (s, c, zero), (zero, zero, one))
-    else:
+    """Rotation matrices ``[..., 3, 3]`` about ``axis`` ("X", "Y" or "Z") by ``radians``:
+    1 at ``[i, i]`` for the axis ``i``, ``c -s / s c`` in the other two rows and columns,
+    in cyclic order (filled in place: a character solve builds hundreds of these one by
+    one, and stacking nine arrays cost more than the trigonometry)."""
+    if axis not in _AXIS:
         raise ValueError(f"unknown rotation axis {axis!r}")
-    return np.stack([np.stack(r, axis=-1) for r in rows], axis=-2)
+    i = _AXIS[axis]
+    j, k = (i + 1) % 3, (i + 2) % 3
+    c, s = np.cos(radians), np.sin(radians)
+    out = np.zeros((*np.shape(c), 3, 3))
+    out[..., i, i] = 1.0
+    out[..., j, j] = c
+    out[..., j, k] = -s
+    out[..., k, j] = s
+    out[..., k, k] = c
+    return out
 
 
 def euler_matrices(seq: str, radians: FloatArray) -> FloatArray:
@@ -415,9 +422,6 @@ def euler_matrices(seq: str, radians: FloatArray) -> FloatArray:
     for k in range(1, len(seq)):
         out = np.matmul(out, axis_rotations(seq[k], radians[..., k]))
     return out
-
-
-_AXIS = {"X": 0, "Y": 1, "Z": 2}
 
 
 def euler_angles(seq: str, matrices: FloatArray) -> FloatArray:

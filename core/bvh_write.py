@@ -126,14 +126,19 @@ def pose_of(bvh: BVH, frame: int, row: F64 | None = None) -> Pose:
     n = len(bvh.joints)
     rot = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()
     trans = np.array([j.offset for j in bvh.joints], dtype=np.float64)
+    orders: dict[str, tuple[list[int], list[list[int]]]] = {}  # one product per order
     for i, j in enumerate(bvh.joints):
         seq = j.rotation_order
         if seq:
             cols = [j.channel_start + k for k, c in enumerate(j.channels) if c.lower() in _ROT]
-            rot[i] = euler_matrices(seq, np.deg2rad(row[cols])[None])[0]
+            joints, columns = orders.setdefault(seq, ([], []))
+            joints.append(i)
+            columns.append(cols)
         for k, c in enumerate(j.channels):
             if c.lower() in _POS:
                 trans[i, _POS[c.lower()]] = row[j.channel_start + k]
+    for seq, (joints, columns) in orders.items():
+        rot[joints] = euler_matrices(seq, np.deg2rad(row[np.array(columns)]))
     return Pose(rot, trans)
 
 
@@ -146,7 +151,8 @@ def _nearest_euler(seq: str, matrix: F64, old: F64) -> F64:
     best, best_cost = first, np.inf
     for cand in (first, other):
         cand = old + (cand - old + 180.0) % 360.0 - 180.0  # whole turns towards old
-        if not np.allclose(euler_matrices(seq, np.deg2rad(cand)[None])[0], matrix, atol=1e-9):
+        back = euler_matrices(seq, np.deg2rad(cand)[None])[0]
+        if not (np.abs(back - matrix) <= 1e-9 + 1e-5 * np.abs(matrix)).all():  # np.allclose
             continue
         cost = float(np.abs(cand - old).max())
         if cost < best_cost:

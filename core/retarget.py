@@ -27,7 +27,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
+from core import compiled_characters
 from core.characters import F64, Pose, Skeleton, best_rotation, forward_kinematics, swing
 from core.characters_maps import JointMap
 from core.skeleton import JOINT_INDEX, PARENTS
@@ -48,6 +50,11 @@ def canonical_points(skel: Skeleton, pose: Pose, jmap: JointMap) -> F64:
 class _Plan:
     groups: dict[int, list[int]]  # aim joint -> canonical children it aims
     aim_of: dict[int, int]  # canonical joint -> aim joint of its bone to its parent
+    #: the groups as arrays for the compiled pass: aim joints in skeleton order, and their
+    #: children ``kids[kid_start[i]:kid_start[i + 1]]``
+    aims: npt.NDArray[np.int64]
+    kid_start: npt.NDArray[np.int64]
+    kids: npt.NDArray[np.int64]
 
 
 def _plan(skel: Skeleton, jmap: JointMap) -> _Plan:
@@ -61,7 +68,45 @@ def _plan(skel: Skeleton, jmap: JointMap) -> _Plan:
             continue
         groups.setdefault(b, []).append(c)
         aim_of[c] = b
-    return _Plan(groups, aim_of)
+    aims = sorted(groups)
+    sizes = [len(groups[b]) for b in aims]
+    return _Plan(
+        groups,
+        aim_of,
+        np.array(aims, dtype=np.int64),
+        np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64),
+        np.array([c for b in aims for c in groups[b]], dtype=np.int64),
+    )
+
+
+def _aim_group(
+    skel: Skeleton, pose: Pose, jmap: JointMap, b: int, kids: list[int], goal: F64, original: Pose
+) -> bool:
+    """Aim one group, joint ``b``; True if its rotation changed (numpy: the groups the
+    compiled pass leaves, those with two children or more to aim)."""
+    pose.rotations[b] = original.rotations[b]
+    g_rot, g_pos = forward_kinematics(skel, pose)
+    pivot = g_pos[b]
+    v = jmap.points(g_rot, g_pos)[kids] - pivot
+    u = goal[kids] - pivot
+    nv, nu = np.linalg.norm(v, axis=1), np.linalg.norm(u, axis=1)
+    ok = (nv > 1e-9 * max(1.0, float(nv.max()))) & (nu > 1e-12)
+    if not ok.any():
+        return False
+    if ok.sum() == 1:
+        k = int(np.argmax(ok))
+        turn = swing(v[k], u[k])
+    else:
+        turn = best_rotation(
+            v[ok] / nv[ok, None], u[ok] / nu[ok, None], weights=nv[ok] / nv[ok].sum()
+        )
+    new_global = turn @ g_rot[b]
+    parent = skel.parents[b]
+    local = new_global if parent < 0 else g_rot[parent].T @ new_global
+    if (np.abs(local - original.rotations[b]) <= 1e-15).all():  # np.allclose, rtol 0
+        return False
+    pose.rotations[b] = local
+    return True
 
 
 def _aim_pass(
@@ -75,35 +120,31 @@ def _aim_pass(
 ) -> set[int]:
     """Aim every group (parents first). Each turn starts from the joint's *original* local
     rotation, so a joint aimed again (exact reach) still differs from the input by one
-    swing, never by a twist."""
-    changed: set[int] = set()
-    for b in sorted(plan.groups):
-        if b == skip:
-            continue
-        pose.rotations[b] = original.rotations[b]
-        g_rot, g_pos = forward_kinematics(skel, pose)
-        pivot = g_pos[b]
-        kids = plan.groups[b]
-        v = jmap.points(g_rot, g_pos)[kids] - pivot
-        u = goal[kids] - pivot
-        nv, nu = np.linalg.norm(v, axis=1), np.linalg.norm(u, axis=1)
-        ok = (nv > 1e-9 * max(1.0, float(nv.max()))) & (nu > 1e-12)
-        if not ok.any():
-            continue
-        if ok.sum() == 1:
-            k = int(np.argmax(ok))
-            turn = swing(v[k], u[k])
-        else:
-            turn = best_rotation(
-                v[ok] / nv[ok, None], u[ok] / nu[ok, None], weights=nv[ok] / nv[ok].sum()
-            )
-        new_global = turn @ g_rot[b]
-        parent = skel.parents[b]
-        local = new_global if parent < 0 else g_rot[parent].T @ new_global
-        if not (np.abs(local - original.rotations[b]) <= 1e-15).all():  # np.allclose, rtol 0
-            pose.rotations[b] = local
-            changed.add(b)
-    return changed
+    swing, never by a twist. Compiled (:func:`core.compiled_characters.aim_singles_into`),
+    but for the groups that aim two children or more (a chest, a pelvis: their
+    least-squares turn is numpy's SVD), aimed here."""
+    rotations = np.require(pose.rotations, np.float64, ["C", "W"])
+    pose.rotations = rotations
+    parents = np.require(skel.parent_array, np.int64, ["C", "W"])
+    translations = np.require(pose.translations, np.float64, ["C", "W"])
+    first = np.require(original.rotations, np.float64, ["C", "W"])
+    joints = np.require(jmap.joints, np.int64, ["C", "W"])
+    offsets = np.require(jmap.offsets.reshape(-1, 3), np.float64, ["C", "W"])
+    goal = np.require(goal, np.float64, ["C", "W"])
+    n = len(plan.aims)
+    g_rot, g_pos = np.empty((len(parents), 3, 3)), np.empty((len(parents), 3))
+    changed = np.zeros(n, dtype=np.uint8)
+    i = 0
+    while i < n:
+        i = compiled_characters.aim_singles_into(
+            parents, rotations, translations, first, plan.aims, plan.kid_start, plan.kids,
+            joints, offsets, goal, i, -1 if skip is None else skip, g_rot, g_pos, changed,
+        )  # fmt: skip
+        if i < n:
+            b = int(plan.aims[i])
+            changed[i] = _aim_group(skel, pose, jmap, b, plan.groups[b], goal, original)
+            i += 1
+    return {int(b) for b in plan.aims[changed.astype(bool)]}
 
 
 def _place_pelvis(

@@ -26,7 +26,7 @@ def test_two_revisions_side_by_side(bench_dataset: Path) -> None:
     before = worktrees()
     result = ab.compare("HEAD", bench_dataset, rounds=1, edits=4, seed=0)
     cases = {f"{k} {c}" for k in (1, 2, 5) for c in ("default", "plain", "fabrik", "batch")}
-    cases |= {"1 pinned", "2 pinned"}
+    cases |= {"1 pinned", "2 pinned", "bvh exact", "bvh soft"}
     for side in ("base", "this"):
         assert len(result[side]) == 1 and set(result[side][0]) == cases
         assert all(0 < t < 1e6 for t in result[side][0].values())

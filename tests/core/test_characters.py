@@ -8,12 +8,20 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from core import compiled_characters
 from core.bvh import parse_bvh, read_bvh
 from core.bvh_write import format_bvh, pose_of, row_of, skeleton_of, splice_frame
-from core.characters import CharacterError, Pose, build_skeleton, forward_kinematics, twist_angle
+from core.characters import (
+    CharacterError,
+    Pose,
+    build_skeleton,
+    forward_kinematics,
+    swing,
+    twist_angle,
+)
 from core.characters_maps import resolve_map
 from core.rest import rest_pose
-from core.retarget import canonical_points, retarget
+from core.retarget import _aim_group, _aim_pass, _plan, canonical_points, retarget
 from core.skeleton import JOINT_INDEX, JOINT_NAMES, PARENTS
 from tests.character_files import extract_bvh
 
@@ -298,3 +306,48 @@ def test_compiled_forward_kinematics_is_the_matrix_products_of_the_joints(
             points = np.stack([g_pos[a.joint] + g_rot[a.joint] @ a.offset for a in jmap.anchors])
             got = jmap.points(g_rot, g_pos)
             np.testing.assert_allclose(got, points, rtol=0, atol=1e-12 * scale)
+
+
+def test_compiled_swing_is_the_numpy_swing() -> None:
+    """core.compiled_characters.swing_into against core.characters.swing: random
+    directions, parallel ones (no turn) and opposite ones (a half turn about the axis
+    perpendicular to the smallest component), each a rotation taking a onto b."""
+    rng = np.random.default_rng(3)
+    pairs = [(rng.normal(size=3), rng.normal(size=3)) for _ in range(200)]
+    for a in [*rng.normal(size=(20, 3)), np.array([0.0, 0.0, 2.0]), np.array([1.0, 1e-9, 0.0])]:
+        pairs += [(a, 3.0 * a), (a, -0.5 * a)]
+    out = np.empty((3, 3))
+    for a, b in pairs:
+        compiled_characters.swing_into(a, b, out)
+        np.testing.assert_allclose(out, swing(a, b), rtol=0, atol=1e-14)
+        ua, ub = a / np.linalg.norm(a), b / np.linalg.norm(b)
+        np.testing.assert_allclose(out @ ua, ub, rtol=0, atol=1e-12)
+
+
+def test_compiled_aim_pass_is_the_numpy_aim_of_each_group(files: dict[str, Path]) -> None:
+    """The aim pass (``core.retarget._aim_pass``: the single-child groups compiled, the
+    others numpy) against the numpy aim of every group in turn (``_aim_group``), on every
+    file's skeleton, two frames each, goals the start's points moved by up to a tenth of
+    the body's size (one run skipping the first group, as a turned pelvis is): rotations
+    to 1e-12, the same joints changed, the same bytes on a second run."""
+    rng = np.random.default_rng(7)
+    for name, path in files.items():
+        bvh = read_bvh(path)
+        skel = skeleton_of(bvh)
+        jmap = resolve_map(skel, None)
+        plan = _plan(skel, jmap)
+        for frame, skip in ((0, None), (bvh.num_frames // 2, int(plan.aims[0]))):
+            pose = pose_of(bvh, frame)
+            start = canonical_points(skel, pose, jmap)
+            goal = start + rng.normal(0.0, 0.1 * float(np.ptp(start, axis=0).max()), start.shape)
+            got = pose.copy()
+            changed = _aim_pass(skel, got, jmap, plan, goal, skip, pose)
+            want, want_changed = pose.copy(), set()
+            for b in sorted(plan.groups):
+                if b != skip and _aim_group(skel, want, jmap, b, plan.groups[b], goal, pose):
+                    want_changed.add(b)
+            np.testing.assert_allclose(got.rotations, want.rotations, rtol=0, atol=1e-12)
+            assert changed == want_changed and len(changed) > len(plan.groups) // 2, name
+            again = pose.copy()
+            assert _aim_pass(skel, again, jmap, plan, goal, skip, pose) == changed
+            assert again.rotations.tobytes() == got.rotations.tobytes(), name
