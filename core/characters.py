@@ -43,10 +43,15 @@ class Skeleton:
     translatable: tuple[bool, ...]  # does the pose carry this joint's own translation?
     index: dict[str, int] = field(default_factory=dict, repr=False, compare=False)
     parent_array: npt.NDArray[np.int64] = field(init=False, repr=False, compare=False)
+    _rest: F64 = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         self.index.update({n: i for i, n in enumerate(self.names)})
         object.__setattr__(self, "parent_array", np.asarray(self.parents, dtype=np.int64))
+        rest = np.zeros((len(self.names), 3))
+        for j, p in enumerate(self.parents):
+            rest[j] = self.offsets[j] if p < 0 else rest[p] + self.offsets[j]
+        object.__setattr__(self, "_rest", rest)
 
     @property
     def size(self) -> int:
@@ -64,11 +69,10 @@ class Skeleton:
         return False
 
     def rest_positions(self) -> F64:
-        """World positions of the rest pose (identity rotations, offsets as given)."""
-        out = np.zeros((self.size, 3))
-        for j, p in enumerate(self.parents):
-            out[j] = self.offsets[j] if p < 0 else out[p] + self.offsets[j]
-        return out
+        """World positions of the rest pose (identity rotations, offsets as given): a copy
+        of the ones summed once when the skeleton was built (a joint map asks a dozen
+        times per request)."""
+        return self._rest.copy()
 
 
 @dataclass
