@@ -149,9 +149,9 @@ def _nearest_euler(seq: str, matrix: F64, old: F64) -> F64:
     proper = seq[0] == seq[2]
     other = np.array([a + 180.0, -b if proper else 180.0 - b, c + 180.0])
     best, best_cost = first, np.inf
-    for cand in (first, other):
-        cand = old + (cand - old + 180.0) % 360.0 - 180.0  # whole turns towards old
-        back = euler_matrices(seq, np.deg2rad(cand)[None])[0]
+    cands = old + (np.stack([first, other]) - old + 180.0) % 360.0 - 180.0  # turns to old
+    backs = euler_matrices(seq, np.deg2rad(cands))  # both checked in one product
+    for cand, back in zip(cands, backs, strict=True):
         if not (np.abs(back - matrix) <= 1e-9 + 1e-5 * np.abs(matrix)).all():  # np.allclose
             continue
         cost = float(np.abs(cand - old).max())
