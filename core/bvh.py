@@ -401,7 +401,7 @@ def axis_rotations(axis: str, radians: FloatArray) -> FloatArray:
     i = _AXIS[axis]
     j, k = (i + 1) % 3, (i + 2) % 3
     c, s = np.cos(radians), np.sin(radians)
-    out = np.zeros((*np.shape(c), 3, 3))
+    out = np.zeros((*np.shape(c), 3, 3), dtype=np.result_type(c))
     out[..., i, i] = 1.0
     out[..., j, j] = c
     out[..., j, k] = -s
@@ -424,6 +424,13 @@ def euler_matrices(seq: str, radians: FloatArray) -> FloatArray:
     return out
 
 
+def invertible_order(seq: str) -> bool:
+    """Whether :func:`euler_angles` inverts ``seq``: three axes, none twice in a row (a
+    BVH joint whose rotation channels repeat an axis in a row, ``Xrotation Xrotation
+    Yrotation``, has no unique angles to write back)."""
+    return len(seq) == 3 and seq[0] != seq[1] and seq[1] != seq[2] and set(seq) <= set(_AXIS)
+
+
 def euler_angles(seq: str, matrices: FloatArray) -> FloatArray:
     """The inverse of :func:`euler_matrices` for three axes: ``[..., 3, 3]`` -> radians
     ``[..., 3]`` with ``R = R_seq[0](a) @ R_seq[1](b) @ R_seq[2](c)``.
@@ -432,7 +439,7 @@ def euler_angles(seq: str, matrices: FloatArray) -> FloatArray:
     proper Euler (``"ZXZ"``, ``b`` in [0, 180]); ``a`` and ``c`` lie in [-180, 180]. In
     gimbal lock (``b`` at a bound) only ``a + c`` or ``a - c`` is defined: ``c`` is 0 then.
     """
-    if len(seq) != 3 or seq[0] == seq[1] or seq[1] == seq[2] or any(a not in _AXIS for a in seq):
+    if not invertible_order(seq):
         raise ValueError(f"an Euler sequence of three axes, none twice in a row, expected: {seq!r}")
     m = np.asarray(matrices, dtype=np.float64)
     i, j = _AXIS[seq[0]], _AXIS[seq[1]]

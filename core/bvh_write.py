@@ -19,7 +19,7 @@ import re
 
 import numpy as np
 
-from core.bvh import BVH, BVHError, euler_angles, euler_matrices
+from core.bvh import BVH, BVHError, euler_angles, euler_matrices, invertible_order
 from core.characters import F64, Pose, Skeleton, build_skeleton
 
 DECIMALS = 6
@@ -106,12 +106,14 @@ def splice_frame(bvh: BVH, frame: int, row: F64, columns: list[int]) -> str:
 
 
 def skeleton_of(bvh: BVH) -> Skeleton:
-    """The BVH hierarchy as a :class:`Skeleton` (same joint order: the file's)."""
+    """The BVH hierarchy as a :class:`Skeleton` (same joint order: the file's). A joint
+    the solve may turn has three rotation channels whose angles can be written back
+    (:func:`core.bvh.invertible_order`); the others keep theirs."""
     skel, order = build_skeleton(
         [j.name for j in bvh.joints],
         [None if j.parent < 0 else bvh.joints[j.parent].name for j in bvh.joints],
         [j.offset for j in bvh.joints],
-        rotatable=[len(j.rotation_order) == 3 for j in bvh.joints],
+        rotatable=[invertible_order(j.rotation_order) for j in bvh.joints],
         translatable=[sum(c.lower() in _POS for c in j.channels) == 3 for j in bvh.joints],
         where=bvh.name,
     )
@@ -170,7 +172,7 @@ def row_of(
     for i in sorted(joints):
         j = bvh.joints[i]
         rot_cols = [j.channel_start + k for k, c in enumerate(j.channels) if c.lower() in _ROT]
-        if len(rot_cols) == 3:
+        if len(rot_cols) == 3 and invertible_order(j.rotation_order):  # else never turned
             angles = _nearest_euler(j.rotation_order, pose.rotations[i], row[rot_cols])
             row[rot_cols] = angles
             columns += rot_cols

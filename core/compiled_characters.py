@@ -142,6 +142,7 @@ def aim_singles_into(
     nu = np.empty(kids.shape[0])
     turn = np.empty((3, 3))
     new = np.empty((3, 3))
+    local = np.empty((3, 3))
     for i in range(start, aims.shape[0]):
         b = aims[i]
         if b == skip:
@@ -195,15 +196,14 @@ def aim_singles_into(
                         + g_rot[p, 1, r] * new[1, c]
                         + (g_rot[p, 2, r] * new[2, c])
                     )
-                rotations[b, r, c] = x
+                local[r, c] = x
                 if not abs(x - original[b, r, c]) <= 1e-15:
                     differs = True
-        if differs:
+        if differs:  # compared before writing: ``original`` may be ``rotations`` itself
             changed[i] = 1
-        else:
             for r in range(3):
                 for c in range(3):
-                    rotations[b, r, c] = original[b, r, c]
+                    rotations[b, r, c] = local[r, c]
     return int(aims.shape[0])
 
 

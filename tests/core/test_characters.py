@@ -351,3 +351,7 @@ def test_compiled_aim_pass_is_the_numpy_aim_of_each_group(files: dict[str, Path]
             again = pose.copy()
             assert _aim_pass(skel, again, jmap, plan, goal, skip, pose) == changed
             assert again.rotations.tobytes() == got.rotations.tobytes(), name
+            # the pose turned in place, its own original: the same turns, the same report
+            alias = pose.copy()
+            assert _aim_pass(skel, alias, jmap, plan, goal, skip, alias) == changed, name
+            np.testing.assert_allclose(alias.rotations, got.rotations, rtol=0, atol=1e-12)

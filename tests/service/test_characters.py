@@ -251,6 +251,34 @@ def test_bad_bvh_files(client: Any, files: dict[str, Path]) -> None:
     _bad(client, "/v1/bvh/solve", {"bvh": text, "frame": 0, "targets": unmapped}, "Wrist_L_nope")
 
 
+def test_a_joint_whose_angles_cannot_be_written_back_keeps_them(
+    client: Any, files: dict[str, Path]
+) -> None:
+    """A joint whose rotation channels repeat an axis in a row (``Xrotation Xrotation
+    Yrotation``: no unique angles to write back) is not turned: the edit still answers,
+    that joint's columns as they were, the others solved (was a 500)."""
+    text = files["bandai"].read_text()
+    old = "JOINT LowerArm_L\n            {\n              OFFSET 24.3286 1.87007e-05 0\n"
+    assert text.count(old + "              CHANNELS 6 Xposition Yposition Zposition "
+                      "Zrotation Xrotation Yrotation") == 1  # fmt: skip
+    odd = text.replace(
+        old + "              CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation",
+        old + "              CHANNELS 6 Xposition Yposition Zposition Xrotation Xrotation",
+    )
+    wrist, goal, _ = _goal(odd, 0)
+    for reach in ("soft", "exact"):
+        body = {"bvh": odd, "frame": 0, "targets": [{"joint": wrist, "position": goal.tolist()}],
+                "options": {"reach": reach}}  # fmt: skip
+        r = client.post("/v1/bvh/solve", json=body)
+        assert r.status_code == 200, r.text
+        ref_old, ref_new = RefBVH(odd), RefBVH(r.json()["bvh"])
+        j = next(j for j in ref_old.joints if j.name == "LowerArm_L")
+        cols = slice(j.start, j.start + len(j.channels))
+        before, after = ref_old.rows[0].split(), ref_new.rows[0].split()
+        assert after[cols] == before[cols] and after != before, reach
+        assert ref_new.rows[1:] == ref_old.rows[1:]
+
+
 def test_bad_character_skeletons(client: Any) -> None:
     def body(joints: list[dict[str, Any]]) -> dict[str, Any]:
         return {

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from core import compiled, compiled_fabrik
+from core import compiled, compiled_characters, compiled_fabrik
 from core.skeleton import JOINT_NAMES
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "docs" / "examples"
@@ -24,7 +24,7 @@ FIVE = ["head", "left_wrist", "right_wrist", "left_ankle", "right_ankle"]
 def signatures() -> dict[str, set[str]]:
     """Every compiled kernel's signatures so far, by name."""
     out = {}
-    for mod in (compiled, compiled_fabrik):
+    for mod in (compiled, compiled_fabrik, compiled_characters):
         for name in dir(mod):
             sigs = getattr(getattr(mod, name), "signatures", None)
             if sigs is not None:
