@@ -14,7 +14,7 @@ The aim pass itself is compiled too (:func:`aim_singles_into`): every group that
 child (an arm's, a leg's, the neck's joints) is turned here by its swing, one call for a
 run of such groups; a group that aims two children or more (a chest, a pelvis) goes back
 to numpy for its least-squares turn (an SVD: numba's needs SciPy, which the service does
-not install). The docs' BVH edit, read to written back: 24.7 -> 8.7 ms CPU p50
+not install). The docs' BVH edit, read to written back: 25.2 -> 8.5 ms CPU p50
 (``python -m bench.ab``'s ``bvh exact`` row, docs/characters.md).
 """
 
