@@ -32,6 +32,8 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
+from core.text import quoted
+
 FloatArray = npt.NDArray[np.float64]
 
 _POSITION_CHANNELS = {"xposition": 0, "yposition": 1, "zposition": 2}
@@ -133,7 +135,7 @@ class BVH:
             return self._index[name]
         except KeyError:
             raise KeyError(
-                f"{self.name}: no joint {name!r}; joints are {', '.join(self.joint_names)}"
+                f"{self.name}: no joint {quoted(name)}; joints are {', '.join(self.joint_names)}"
             ) from None
 
     def forward_kinematics(
@@ -183,7 +185,7 @@ class _Tokens:
         line = self.line()
         tok = self.next(repr(word))
         if tok != word:
-            raise _error(self.file, f"line {line}: expected {word!r}, got {tok!r}")
+            raise _error(self.file, f"line {line}: expected {word!r}, got {quoted(tok)}")
 
     def rest_of_line(self, what: str) -> str:
         """All remaining tokens on the current token's line (a joint name may have spaces)."""
@@ -206,8 +208,14 @@ class _Tokens:
             try:
                 out.append(float(tok))
             except ValueError:
-                raise _error(self.file, f"line {line}: {what}: not a number: {tok!r}") from None
+                reason = f"line {line}: {quoted(what)}: not a number: {quoted(tok)}"
+                raise _error(self.file, reason) from None
         return out
+
+
+#: the deepest nesting of joints read (a real rig's fingers or hair are tens deep; the
+#: reader recurses once per level, and Python's stack holds about a thousand)
+MAX_DEPTH = 256
 
 
 def _parse_hierarchy(file: str, text: str) -> list[BVHJoint]:
@@ -217,14 +225,16 @@ def _parse_hierarchy(file: str, text: str) -> list[BVHJoint]:
     names: set[str] = set()
     n_channels = 0
 
-    def parse_joint(parent: int) -> None:
+    def parse_joint(parent: int, depth: int) -> None:
         nonlocal n_channels
         line = toks.line()
+        if depth > MAX_DEPTH:
+            raise _error(file, f"line {line}: joints nested more than {MAX_DEPTH} deep")
         name = toks.rest_of_line("a joint name")
         if not name:
             raise _error(file, f"line {line}: missing joint name")
         if name in names:
-            raise _error(file, f"line {line}: duplicate joint name {name!r}")
+            raise _error(file, f"line {line}: duplicate joint name {quoted(name)}")
         names.add(name)
         toks.expect("{")
         toks.expect("OFFSET")
@@ -235,13 +245,19 @@ def _parse_hierarchy(file: str, text: str) -> list[BVHJoint]:
         try:
             count = int(count_tok)
         except ValueError:
-            raise _error(file, f"line {line}: bad channel count {count_tok!r}") from None
+            count = -1
+        if count < 0:
+            raise _error(
+                file, f"line {line}: bad channel count {quoted(count_tok)}: not a whole number >= 0"
+            )
         channels: list[str] = []
         for _ in range(count):
             line = toks.line()
             ch = toks.next("a channel name")
             if ch.lower() not in _POSITION_CHANNELS and ch.lower() not in _ROTATION_CHANNELS:
-                raise _error(file, f"line {line}: unknown channel {ch!r} of joint {name!r}")
+                raise _error(
+                    file, f"line {line}: unknown channel {quoted(ch)} of joint {quoted(name)}"
+                )
             channels.append(ch)
         index = len(joints)
         joints.append(BVHJoint(name, parent, (ox, oy, oz), tuple(channels), n_channels))
@@ -253,7 +269,7 @@ def _parse_hierarchy(file: str, text: str) -> list[BVHJoint]:
             if tok == "}":
                 return
             if tok == "JOINT":
-                parse_joint(index)
+                parse_joint(index, depth + 1)
             elif tok == "End":
                 toks.expect("Site")
                 toks.expect("{")
@@ -263,21 +279,25 @@ def _parse_hierarchy(file: str, text: str) -> list[BVHJoint]:
                 end_count += 1
                 end_name = f"{name}_end" if end_count == 1 else f"{name}_end{end_count}"
                 if end_name in names:
-                    raise _error(file, f"line {line}: End Site name {end_name!r} is taken")
+                    raise _error(file, f"line {line}: End Site name {quoted(end_name)} is taken")
                 names.add(end_name)
                 joints.append(
                     BVHJoint(end_name, index, (ex, ey, ez), (), n_channels, end_site=True)
                 )
             else:
-                raise _error(file, f"line {line}: expected JOINT, End Site or '}}', got {tok!r}")
+                raise _error(
+                    file, f"line {line}: expected JOINT, End Site or '}}', got {quoted(tok)}"
+                )
 
     while toks.peek() == "ROOT":
         toks.next("ROOT")
-        parse_joint(-1)
+        parse_joint(-1, 1)
     if not joints:
         raise _error(file, f"line {toks.line()}: no ROOT joint in HIERARCHY")
     if toks.peek() is not None:
-        raise _error(file, f"line {toks.line()}: unexpected {toks.peek()!r} after the hierarchy")
+        raise _error(
+            file, f"line {toks.line()}: unexpected {quoted(toks.peek())} after the hierarchy"
+        )
     return joints
 
 
@@ -301,11 +321,11 @@ def parse_bvh(text: str, name: str = "<string>") -> BVH:
         raise _error(name, f"line {motion_line}: truncated MOTION header")
     frames_match = _FRAMES_RE.match(rest[1])
     if frames_match is None:
-        raise _error(name, f"line {motion_line + 1}: expected 'Frames: <n>', got {rest[1]!r}")
+        raise _error(name, f"line {motion_line + 1}: expected 'Frames: <n>', got {quoted(rest[1])}")
     time_match = _FRAME_TIME_RE.match(rest[2])
     if time_match is None:
         raise _error(
-            name, f"line {motion_line + 2}: expected 'Frame Time: <seconds>', got {rest[2]!r}"
+            name, f"line {motion_line + 2}: expected 'Frame Time: <seconds>', got {quoted(rest[2])}"
         )
     try:
         n_frames = int(frames_match.group(1))
@@ -373,7 +393,8 @@ def _explain_values(name: str, body: str, first_line: int) -> None:
             try:
                 float(tok)
             except ValueError:
-                raise _error(name, f"line {first_line + offset}: not a number: {tok!r}") from None
+                reason = f"line {first_line + offset}: not a number: {quoted(tok)}"
+                raise _error(name, reason) from None
     raise _error(name, "could not convert the MOTION values")
 
 

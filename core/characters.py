@@ -23,6 +23,7 @@ import numpy as np
 import numpy.typing as npt
 
 from core import compiled_characters
+from core.text import quoted
 from core.units import UNITS, UP_AXES
 
 F64 = npt.NDArray[np.float64]
@@ -109,7 +110,8 @@ def build_skeleton(
             raise CharacterError(f"{where}[{i}].name: empty joint name")
         if name in seen:
             raise CharacterError(
-                f"{where}[{i}].name: duplicate joint name {name!r} (also joints[{seen[name]}])"
+                f"{where}[{i}].name: duplicate joint name {quoted(name)} "
+                f"(also joints[{seen[name]}])"
             )
         seen[name] = i
     off = np.zeros((n, 3))
@@ -124,9 +126,9 @@ def build_skeleton(
         if p is None:
             parent_of.append(-1)
         elif p not in seen:
-            raise CharacterError(f"{where}[{i}].parent: unknown joint {p!r}")
+            raise CharacterError(f"{where}[{i}].parent: unknown joint {quoted(p)}")
         elif p == names[i]:
-            raise CharacterError(f"{where}[{i}].parent: joint {p!r} is its own parent")
+            raise CharacterError(f"{where}[{i}].parent: joint {quoted(p)} is its own parent")
         else:
             parent_of.append(seen[p])
     roots = [i for i, pi in enumerate(parent_of) if pi < 0]
@@ -173,9 +175,18 @@ def forward_kinematics(skel: Skeleton, pose: Pose) -> tuple[F64, F64]:
 # Rotations
 # --------------------------------------------------------------------------------------
 def quat_to_matrix(q: npt.ArrayLike) -> F64:
-    """``[..., 4]`` quaternions ``[x, y, z, w]`` (normalised here) -> ``[..., 3, 3]``."""
+    """``[..., 4]`` quaternions ``[x, y, z, w]`` (normalised here, whatever their length:
+    one whose squared components overflow or underflow is first divided by its largest
+    component) -> ``[..., 3, 3]``."""
     a = np.asarray(q, dtype=np.float64)
-    a = a / np.linalg.norm(a, axis=-1, keepdims=True)
+    with np.errstate(over="ignore", under="ignore"):
+        n = np.linalg.norm(a, axis=-1, keepdims=True)
+    odd = ~(np.isfinite(n) & (n > 1e-150))
+    if odd.any():
+        m = np.max(np.abs(a), axis=-1, keepdims=True)
+        a = np.where(odd, a / np.where(m > 0, m, 1.0), a)
+        n = np.linalg.norm(a, axis=-1, keepdims=True)
+    a = a / n
     x, y, z, w = a[..., 0], a[..., 1], a[..., 2], a[..., 3]
     rows = (
         (1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)),
@@ -271,7 +282,9 @@ def units_scale(units: str | float) -> float:
     """Metres per unit for a unit name or a positive number; ``CharacterError`` otherwise."""
     if isinstance(units, str):
         if units not in UNITS:
-            raise CharacterError(f"unknown units {units!r}; use one of {sorted(UNITS)} or a number")
+            raise CharacterError(
+                f"unknown units {quoted(units)}; use one of {sorted(UNITS)} or a number"
+            )
         return UNITS[units]
     value = float(units)
     if not np.isfinite(value) or value <= 0:
@@ -281,7 +294,7 @@ def units_scale(units: str | float) -> float:
 
 def up_rotation(up: str) -> F64:
     if up not in UP_AXES:
-        raise CharacterError(f"unknown up axis {up!r}; use one of {sorted(UP_AXES)}")
+        raise CharacterError(f"unknown up axis {quoted(up)}; use one of {sorted(UP_AXES)}")
     return UP_AXES[up]
 
 

@@ -29,6 +29,7 @@ import numpy.typing as npt
 
 from core.characters import F64, CharacterError, Skeleton
 from core.skeleton import JOINT_INDEX, JOINT_NAMES, PARENT_NAMES
+from core.text import quoted
 
 _LIMBS = ("collar", "shoulder", "elbow", "wrist", "hip", "knee", "ankle", "foot")
 
@@ -315,10 +316,11 @@ def resolve_map(
     for canon, name in (explicit or {}).items():
         if canon not in JOINT_INDEX:
             raise CharacterError(
-                f"{where}: unknown canonical joint {canon!r}; joints are {', '.join(JOINT_NAMES)}"
+                f"{where}: unknown canonical joint {quoted(canon)}; "
+                f"joints are {', '.join(JOINT_NAMES)}"
             )
         if name not in skel.index:
-            raise CharacterError(f"{where}.{canon}: the skeleton has no joint {name!r}")
+            raise CharacterError(f"{where}.{canon}: the skeleton has no joint {quoted(name)}")
         given[canon] = skel.index[name]
 
     best_name, best_found, best_hits = "", dict(given), -1
@@ -355,8 +357,8 @@ def _anchors(skel: Skeleton, found: dict[str, int], scheme: str, where: str) -> 
         pj = anchors[parent].joint
         if not skel.is_ancestor(pj, j):
             raise CharacterError(
-                f"{where}: {canon} -> {skel.names[j]!r} is not below {parent} -> "
-                f"{skel.names[pj]!r} in the skeleton"
+                f"{where}: {canon} -> {quoted(skel.names[j])} is not below {parent} -> "
+                f"{quoted(skel.names[pj])} in the skeleton"
             )
     # zero-length canonical bones: slide the child part-way along its own bone
     for canon in JOINT_NAMES:

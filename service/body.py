@@ -25,7 +25,8 @@ from fastapi import Request, Response
 from fastapi.routing import APIRoute
 from pydantic import BaseModel, ValidationError
 
-from service.errors import BodyError, BodyInvalid, DeadlineExceeded, MalformedBody, clip
+from core.text import clip
+from service.errors import BodyError, BodyInvalid, DeadlineExceeded, MalformedBody
 from service.limits import Budget
 
 INLINE_BYTES = 64 * 1024  # smaller bodies are parsed on the loop (a thread hop costs more)

@@ -46,9 +46,11 @@ from core.characters import (
 from core.characters_maps import JointMap, infer_units, infer_up, resolve_map
 from core.retarget import canonical_points, retarget
 from core.skeleton import BONES, JOINT_INDEX, JOINT_NAMES
+from core.text import clip, quoted
 from service.engine import Engine
 from service.errors import InvalidRequest
 from service.problems import SolveProblem, SolveResult
+from service.schemas import MAX_COORDINATE as MAX_METRES
 from service.schemas import MAX_WEIGHT, SolveOptions, SolveRequest, SolveResponse, TargetResult
 from service.validation import MIN_BONE, problem_of, validate_as
 
@@ -316,16 +318,34 @@ def _resolve_joint(ch: Character, name: str, where: str) -> int:
         return JOINT_INDEX[name]
     mapped = ", ".join(f"{n} ({lbl})" for n, lbl in ch.jmap.describe().items())
     raise InvalidRequest(
-        f"{where}: {name!r} is neither a mapped joint of this skeleton nor a canonical "
+        f"{where}: {quoted(name)} is neither a mapped joint of this skeleton nor a canonical "
         f"joint; mapped: {mapped}"
     )
+
+
+def _within_reach_of_metres(points: F64, what: str, ch: Character) -> None:
+    """The service works within ±``MAX_METRES`` m, as the pose form does: a character
+    whose values times its units land beyond (or overflow) is refused by name, before any
+    geometry runs on numbers it cannot hold (an SVD that does not converge, a NaN error)."""
+    far = float(np.max(np.abs(points), initial=0.0))
+    if not far <= MAX_METRES:
+        raise InvalidRequest(
+            f"{what}: {far:.4g} m from the origin in metres (values x units "
+            f"{quoted(ch.units)} = {ch.scale:.4g} m per unit); the service works within "
+            f"±{MAX_METRES:g} m: check the units or move the character nearer the origin"
+        )
 
 
 def character_problem(ch: Character, req: _Frame, where: str = "") -> SolveProblem:
     """The canonical solve problem of one frame, in metres and +Y up; errors name their
     field under ``where`` (e.g. ``items[3]``)."""
     prefix = f"{where}." if where else ""
-    pts = ch.to_service(canonical_points(ch.skel, ch.pose, ch.jmap))
+    with np.errstate(over="ignore", invalid="ignore"):  # refused by name just below
+        pts = ch.to_service(canonical_points(ch.skel, ch.pose, ch.jmap))
+        goals = [ch.to_service(np.asarray(t.position, dtype=np.float64)) for t in req.targets]
+    _within_reach_of_metres(pts, f"{prefix}the pose's mapped joints", ch)
+    for i, g in enumerate(goals):
+        _within_reach_of_metres(g, f"{prefix}targets[{i}].position", ch)
     lengths = np.linalg.norm(pts[[c for c, _ in BONES]] - pts[[p for _, p in BONES]], axis=1)
     if lengths.min() < MIN_BONE:
         short = [JOINT_NAMES[c] for (c, _), n in zip(BONES, lengths, strict=True) if n < MIN_BONE]
@@ -333,7 +353,6 @@ def character_problem(ch: Character, req: _Frame, where: str = "") -> SolveProbl
             f"{prefix}joint_map: the mapped points make zero-length bones ending at {short} "
             f"(each canonical joint must be at least {MIN_BONE * 1000:g} mm from its parent)"
         )
-    goals = [ch.to_service(np.asarray(t.position, dtype=np.float64)) for t in req.targets]
     return problem_of(
         pts,
         [
@@ -414,10 +433,13 @@ def character_from_request(req: CharacterSolveRequest, where: str = "") -> Chara
         )
         unknown = sorted(set(req.rotations) - set(skel.names))
         if unknown:
-            raise CharacterError(f"{prefix}rotations: unknown joints {unknown[:8]}")
+            names = ", ".join(quoted(n) for n in unknown[:8])
+            raise CharacterError(f"{prefix}rotations: unknown joints {names}")
         rot = np.broadcast_to(np.eye(3), (skel.size, 3, 3)).copy()
         for name, q in req.rotations.items():
-            if float(np.linalg.norm(q)) < 1e-6:
+            with np.errstate(over="ignore"):  # a huge one is fine: normalised overflow-safe
+                length = float(np.linalg.norm(q))
+            if length < 1e-6:
                 raise CharacterError(f"{prefix}rotations.{name}: zero-length quaternion {q}")
             rot[skel.index[name]] = quat_to_matrix(q)
         trans = skel.offsets.copy()
@@ -463,15 +485,23 @@ def read_request_bvh(text: str) -> BVH:
         bvh = parse_bvh(text, "bvh")
     except BVHError as exc:
         raise _invalid(exc) from None
-    bad = ~np.isfinite(bvh.motion)
+    bad = ~(np.abs(bvh.motion) <= MAX_COORDINATE)  # NaN too
     if bad.any():
         f, c = (int(v) for v in np.argwhere(bad)[0])
         line = bvh.text[: bvh.motion_offset].count("\n") + 1 + f
         joint = next(j for j in reversed(bvh.joints) if j.channel_start <= c and j.channels)
+        channel = joint.channels[c - joint.channel_start]
         raise InvalidRequest(
-            f"bvh: line {line}: frame {f}, channel {joint.name}.{joint.channels[c - joint.channel_start]}"  # noqa: E501
-            f" is {bvh.motion[f, c]!r}: channel values must be finite numbers"
+            f"bvh: line {line}: frame {f}, channel {clip(joint.name)}.{channel} is "
+            f"{bvh.motion[f, c]!r}: channel values must be finite numbers within "
+            f"±{MAX_COORDINATE:g}"
         )
+    for j in bvh.joints:
+        if not (np.abs(np.asarray(j.offset)) <= MAX_COORDINATE).all():
+            raise InvalidRequest(
+                f"bvh: OFFSET of {quoted(j.name)} is {list(j.offset)}: offsets must be finite "
+                f"numbers within ±{MAX_COORDINATE:g}"
+            )
     return bvh
 
 

@@ -3,7 +3,8 @@
 Everything a client can get wrong or run into is a ``PoseError`` (or, for the body
 reader, ``BodyError``); ``install_handlers`` turns those, FastAPI's request validation
 errors and anything unexpected into ``application/problem+json``. Details quote at most
-``QUOTE`` characters of the client's input.
+``QUOTE`` characters of any one value of the client's input (``core.text.quoted``), and
+are at most ``MAX_DETAIL`` characters.
 """
 
 from __future__ import annotations
@@ -18,18 +19,13 @@ from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from core.skeleton import JOINT_NAMES
+from core.text import QUOTE, clip
 
 PROBLEM_JSON = "application/problem+json"
 PROBLEM_BASE = "https://marionette.dev/problems/"
 REASON = "pose.reason"  # scope key: why a request was refused (a problem type), for metrics
-QUOTE = 100  # characters of client input an error detail may quote
+MAX_DETAIL = 4000  # characters of any detail, whatever built it
 log = logging.getLogger("service")
-
-
-def clip(text: object, limit: int = QUOTE) -> str:
-    """``text`` as a string of at most ``limit`` characters (``…`` marks a cut)."""
-    s = str(text)
-    return s if len(s) <= limit else s[: limit - 1] + "…"
 
 
 class PoseError(Exception):
@@ -171,7 +167,8 @@ def problem(
 def error_response(exc: PoseError) -> JSONResponse:
     """The one problem+json answer of a domain error (with ``Retry-After`` when useful)."""
     headers = {"Retry-After": str(exc.retry_after)} if exc.retry_after is not None else None
-    return problem(exc.status, exc.title, exc.detail, type_=exc.type_, headers=headers, **exc.extra)
+    detail = clip(exc.detail, MAX_DETAIL)
+    return problem(exc.status, exc.title, detail, type_=exc.type_, headers=headers, **exc.extra)
 
 
 def _location(loc: Sequence[Any]) -> str:

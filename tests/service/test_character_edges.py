@@ -1,0 +1,157 @@
+"""Character requests at the edges of what numbers and files can hold: each gets a 422 that
+names what was wrong, or a right answer; never a 500 or an answer with a non-finite number
+(the docs' examples, changed one value at a time)."""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+from typing import Any
+
+import pytest
+
+from core.bvh import MAX_DEPTH
+from core.text import QUOTE
+from service.errors import MAX_DETAIL
+from tests.conftest import REPO_ROOT
+from tests.service.test_api import assert_problem
+
+EXAMPLES = REPO_ROOT / "docs" / "examples"
+
+
+def _example(name: str) -> dict[str, Any]:
+    body: dict[str, Any] = json.loads((EXAMPLES / f"{name}.json").read_text())
+    return body
+
+
+def _refused(client: Any, path: str, body: dict[str, Any], *needles: str) -> str:
+    r = client.post(path, json=body)
+    assert_problem(r, 422)
+    detail: str = r.json()["detail"]
+    for needle in needles:
+        assert needle in detail, detail
+    return detail
+
+
+def _frame_values(text: str, frame: int) -> tuple[list[str], int]:
+    lines = text.split("\n")
+    first = next(i for i, ln in enumerate(lines) if ln.startswith("Frame Time")) + 1
+    return lines, first + frame
+
+
+@pytest.mark.parametrize("value", ["1e200", "-1e200", "1.7e308", "1e20"])
+def test_a_bvh_value_beyond_any_body_is_named(client: Any, value: str) -> None:
+    """A channel value the size of no body (was: a 500 'SVD did not converge' at 1e200, a
+    body teleported to 0 at 1e20) is refused, naming its line and channel."""
+    body = _example("bvh_solve")
+    lines, row = _frame_values(body["bvh"], body["frame"])
+    values = lines[row].split()
+    lines[row] = " ".join([value, *values[1:]])
+    body["bvh"] = "\n".join(lines)
+    _refused(client, "/v1/bvh/solve", body, f"line {row + 1}", "Xposition", "within ±1e+07")
+
+
+@pytest.mark.parametrize(
+    ("path", "name", "units"),
+    [
+        ("/v1/bvh/solve", "bvh_solve", 1e200),
+        ("/v1/solve", "solve_character", 1e160),
+        ("/v1/character/solve", "character_solve", 1e160),
+    ],
+)
+def test_units_that_put_the_body_beyond_the_service_are_named(
+    client: Any, path: str, name: str, units: float
+) -> None:
+    """Values times units beyond ±1e4 m (the pose form's bound) are refused by name (was:
+    a 500 from an SVD that did not converge)."""
+    body = _example(name)
+    if "character" in body:
+        body["character"]["units"] = units
+    elif "skeleton" in body:
+        body["skeleton"]["units"] = units
+    else:
+        body["units"] = units
+    _refused(client, path, body, "mapped joints", "m from the origin", "±10000 m")
+
+
+def test_a_target_beyond_the_service_is_named(client: Any) -> None:
+    """A target that lands beyond ±1e4 m once in metres (was: a 200 whose error was NaN,
+    written as null) is refused by its index."""
+    body = _example("solve_character")
+    body["character"]["units"] = 1e-2
+    body["targets"] = [{"joint": "LeftHand", "position": [1e7, 1e7, 1e7]}]
+    body["pins"], body["options"] = [], {"method": "fabrik"}
+    _refused(client, "/v1/solve", body, "targets[0].position", "±10000 m")
+
+
+def test_a_huge_quaternion_is_normalised_not_dropped(client: Any) -> None:
+    """[0, 0, 1e200, 0] is the half turn about Z that [0, 0, 1, 0] is (its squared length
+    overflows: it was read as no turn at all)."""
+    answers = []
+    for q in ([0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 1e200, 0.0]):
+        body = _example("solve_character")
+        body["rotations"]["LeftHand"] = q
+        r = client.post("/v1/solve", json=body)
+        assert r.status_code == 200, r.text
+        answers.append(r.json()["positions"]["LeftHandIndex1"])
+    assert answers[0] == answers[1]
+    body = _example("solve_character")
+    r = client.post("/v1/solve", json=body)
+    assert math.dist(r.json()["positions"]["LeftHandIndex1"], answers[0]) > 0.05
+
+
+def test_a_negative_channel_count_is_refused(client: Any) -> None:
+    """``CHANNELS -6`` was read as no channels while the columns counted back, so the edit
+    went into other joints' columns."""
+    body = _example("bvh_solve")
+    head, sep, motion = body["bvh"].partition("MOTION")
+    first = head.index("CHANNELS 6")
+    end = head.index("\n", first)
+    head = head[:first] + "CHANNELS -6" + head[end:]
+    body["bvh"] = head + sep + motion
+    _refused(client, "/v1/bvh/solve", body, "bad channel count '-6'", "line")
+    _refused(client, "/v1/bvh/inspect", {"bvh": body["bvh"]}, "bad channel count")
+
+
+def test_a_chain_nested_past_the_limit_is_refused(client: Any) -> None:
+    """A hierarchy nested deeper than the reader holds (a rope of 1,000 joints: was a 500,
+    Python's recursion limit) is refused with the limit."""
+    depth = MAX_DEPTH + 50
+    head = [
+        "HIERARCHY",
+        "ROOT Hips",
+        "{",
+        "OFFSET 0 0 0",
+        "CHANNELS 3 Zrotation Xrotation Yrotation",
+    ]
+    for i in range(depth):
+        head += [f"JOINT J{i}", "{", "OFFSET 0 1 0", "CHANNELS 3 Zrotation Xrotation Yrotation"]
+    head += ["}"] * (depth + 1)
+    motion = ["MOTION", "Frames: 1", "Frame Time: 0.033", " ".join(["0"] * 3 * (depth + 1))]
+    text = "\n".join(head + motion) + "\n"
+    _refused(client, "/v1/bvh/inspect", {"bvh": text}, f"nested more than {MAX_DEPTH} deep")
+
+
+def test_a_detail_quotes_a_long_value_clipped(client: Any) -> None:
+    """A 100,000-character joint name (target, pin, map value, BVH token, skeleton parent)
+    comes back as at most QUOTE characters of it, in a detail of bounded length."""
+    long = "J" * 100_000
+    bodies = []
+    body = _example("bvh_solve")
+    bodies.append(("/v1/bvh/solve", {**body, "targets": [{"joint": long, "position": [0, 1, 0]}]}))
+    bodies.append(("/v1/bvh/solve", {**body, "pins": [long]}))
+    bodies.append(("/v1/bvh/solve", {**body, "bvh": body["bvh"].replace("Zrotation", long, 1)}))
+    char = _example("solve_character")
+    bad_parent = copy.deepcopy(char)
+    bad_parent["character"]["joints"][1]["parent"] = long
+    bodies.append(("/v1/solve", bad_parent))
+    bad_key = copy.deepcopy(char)
+    bad_key["rotations"][long] = [0.0, 0.0, 0.0, 1.0]
+    bodies.append(("/v1/solve", bad_key))
+    for path, b in bodies:
+        r = client.post(path, json=b)
+        assert_problem(r, 422)
+        detail = r.json()["detail"]
+        assert len(detail) <= MAX_DETAIL and "J" * QUOTE not in detail, (path, len(detail))
+        assert "J" * (QUOTE // 2) in detail, detail[:300]  # it still says what it was
