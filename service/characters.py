@@ -507,7 +507,9 @@ def read_request_bvh(text: str) -> BVH:
 
 def character_from_bvh(bvh: BVH, req: BVHSolveRequest | BVHInspectRequest) -> Character:
     if req.frame >= bvh.num_frames:
-        raise InvalidRequest(f"frame: {req.frame} is out of range: the file has {bvh.num_frames}")
+        raise InvalidRequest(
+            f"frame: {clip(req.frame)} is out of range: the file has {bvh.num_frames}"
+        )
     try:
         skel = skeleton_of(bvh)
         pose = pose_of(bvh, req.frame)

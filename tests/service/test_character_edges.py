@@ -134,8 +134,9 @@ def test_a_chain_nested_past_the_limit_is_refused(client: Any) -> None:
 
 
 def test_a_detail_quotes_a_long_value_clipped(client: Any) -> None:
-    """A 100,000-character joint name (target, pin, map value, BVH token, skeleton parent)
-    comes back as at most QUOTE characters of it, in a detail of bounded length."""
+    """A 100,000-character joint name (target, pin, BVH token, skeleton parent, rotation
+    key) or a 400-digit frame index comes back as at most QUOTE characters of it, in a
+    detail of bounded length."""
     long = "J" * 100_000
     bodies = []
     body = _example("bvh_solve")
@@ -149,9 +150,11 @@ def test_a_detail_quotes_a_long_value_clipped(client: Any) -> None:
     bad_key = copy.deepcopy(char)
     bad_key["rotations"][long] = [0.0, 0.0, 0.0, 1.0]
     bodies.append(("/v1/solve", bad_key))
+    bodies.append(("/v1/bvh/inspect", {"bvh": body["bvh"], "frame": int("7" * 400)}))
     for path, b in bodies:
         r = client.post(path, json=b)
         assert_problem(r, 422)
         detail = r.json()["detail"]
-        assert len(detail) <= MAX_DETAIL and "J" * QUOTE not in detail, (path, len(detail))
-        assert "J" * (QUOTE // 2) in detail, detail[:300]  # it still says what it was
+        assert len(detail) <= MAX_DETAIL, (path, len(detail))
+        assert "J" * QUOTE not in detail and "7" * QUOTE not in detail, detail[:300]
+        assert "J" * (QUOTE // 2) in detail or "7" * (QUOTE // 2) in detail, detail[:300]
