@@ -349,6 +349,11 @@ def character_problem(ch: Character, req: _Frame, where: str = "") -> SolveProbl
     lengths = np.linalg.norm(pts[[c for c, _ in BONES]] - pts[[p for _, p in BONES]], axis=1)
     if lengths.min() < MIN_BONE:
         short = [JOINT_NAMES[c] for (c, _), n in zip(BONES, lengths, strict=True) if n < MIN_BONE]
+        if len(short) == len(BONES):  # every bone: the units, not the map
+            raise InvalidRequest(
+                f"{prefix}units: the whole body spans {float(lengths.sum()):.3g} m of bones at "
+                f"{quoted(ch.units)} = {ch.scale:.4g} m per unit; check the units"
+            )
         raise InvalidRequest(
             f"{prefix}joint_map: the mapped points make zero-length bones ending at {short} "
             f"(each canonical joint must be at least {MIN_BONE * 1000:g} mm from its parent)"

@@ -75,6 +75,13 @@ def test_units_that_put_the_body_beyond_the_service_are_named(
     _refused(client, path, body, "mapped joints", "m from the origin", "±10000 m")
 
 
+def test_units_that_shrink_the_body_to_nothing_are_named(client: Any) -> None:
+    """Units so small that every bone is shorter than the service's least (was blamed on
+    the joint map)."""
+    body = {**_example("bvh_solve"), "units": 1e-300}
+    _refused(client, "/v1/bvh/solve", body, "units:", "check the units")
+
+
 def test_a_target_beyond_the_service_is_named(client: Any) -> None:
     """A target that lands beyond ±1e4 m once in metres (was: a 200 whose error was NaN,
     written as null) is refused by its index."""
