@@ -73,9 +73,11 @@ def forward_kinematics(parents: I64, rotations: F64, translations: F64) -> tuple
 
 
 @jit
-def swing_into(a: F64, b: F64, out: F64) -> None:  # pragma: no cover - compiled
+def swing_matrix_into(a: F64, b: F64, out: F64) -> None:  # pragma: no cover - compiled
     """``out [3, 3]``: the minimal rotation taking the direction of ``a`` to that of ``b``
-    (``core.characters.swing``, the same steps written for 3-vectors)."""
+    (``core.characters.swing``, the same steps written for 3-vectors; opposite directions
+    give a half turn). Not ``core.compiled.swing_into``: that one turns a vector and leaves
+    it as it is where the directions are opposite, as the pose path's ``_swing`` does."""
     na = np.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
     nb = np.sqrt(b[0] * b[0] + b[1] * b[1] + b[2] * b[2])
     ua0, ua1, ua2 = a[0] / na, a[1] / na, a[2] / na
@@ -177,7 +179,7 @@ def aim_singles_into(
             continue
         if count > 1:
             return i
-        swing_into(v[one], u[one], turn)
+        swing_matrix_into(v[one], u[one], turn)
         p = parents[b]
         for r in range(3):
             for c in range(3):

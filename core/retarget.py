@@ -55,6 +55,11 @@ class _Plan:
     aims: npt.NDArray[np.int64]
     kid_start: npt.NDArray[np.int64]
     kids: npt.NDArray[np.int64]
+    #: the skeleton's parents and the anchors' joints ``[21]`` and offsets ``[21, 3]``, as
+    #: the kernel takes them (contiguous), once per retarget rather than once per pass
+    parents: npt.NDArray[np.int64]
+    anchor_joints: npt.NDArray[np.int64]
+    anchor_offsets: F64
 
 
 def _plan(skel: Skeleton, jmap: JointMap) -> _Plan:
@@ -76,6 +81,9 @@ def _plan(skel: Skeleton, jmap: JointMap) -> _Plan:
         np.array(aims, dtype=np.int64),
         np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64),
         np.array([c for b in aims for c in groups[b]], dtype=np.int64),
+        np.require(skel.parent_array, np.int64, ["C", "W"]),
+        np.require(jmap.joints, np.int64, ["C", "W"]),
+        np.require(jmap.offsets.reshape(-1, 3), np.float64, ["C", "W"]),
     )
 
 
@@ -125,20 +133,18 @@ def _aim_pass(
     least-squares turn is numpy's SVD), aimed here."""
     rotations = np.require(pose.rotations, np.float64, ["C", "W"])
     pose.rotations = rotations
-    parents = np.require(skel.parent_array, np.int64, ["C", "W"])
     translations = np.require(pose.translations, np.float64, ["C", "W"])
     first = np.require(original.rotations, np.float64, ["C", "W"])
-    joints = np.require(jmap.joints, np.int64, ["C", "W"])
-    offsets = np.require(jmap.offsets.reshape(-1, 3), np.float64, ["C", "W"])
     goal = np.require(goal, np.float64, ["C", "W"])
     n = len(plan.aims)
-    g_rot, g_pos = np.empty((len(parents), 3, 3)), np.empty((len(parents), 3))
+    g_rot, g_pos = np.empty((skel.size, 3, 3)), np.empty((skel.size, 3))
     changed = np.zeros(n, dtype=np.uint8)
     i = 0
     while i < n:
         i = compiled_characters.aim_singles_into(
-            parents, rotations, translations, first, plan.aims, plan.kid_start, plan.kids,
-            joints, offsets, goal, i, -1 if skip is None else skip, g_rot, g_pos, changed,
+            plan.parents, rotations, translations, first, plan.aims, plan.kid_start, plan.kids,
+            plan.anchor_joints, plan.anchor_offsets, goal, i, -1 if skip is None else skip,
+            g_rot, g_pos, changed,
         )  # fmt: skip
         if i < n:
             b = int(plan.aims[i])

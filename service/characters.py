@@ -501,12 +501,14 @@ def read_request_bvh(text: str) -> BVH:
             f"{bvh.motion[f, c]!r}: channel values must be finite numbers within "
             f"±{MAX_COORDINATE:g}"
         )
-    for j in bvh.joints:
-        if not (np.abs(np.asarray(j.offset)) <= MAX_COORDINATE).all():
-            raise InvalidRequest(
-                f"bvh: OFFSET of {quoted(j.name)} is {list(j.offset)}: offsets must be finite "
-                f"numbers within ±{MAX_COORDINATE:g}"
-            )
+    offsets = np.array([j.offset for j in bvh.joints], dtype=np.float64)
+    far = ~(np.abs(offsets) <= MAX_COORDINATE).all(axis=1)  # NaN too
+    if far.any():
+        j = bvh.joints[int(np.argmax(far))]
+        raise InvalidRequest(
+            f"bvh: OFFSET of {quoted(j.name)} is {list(j.offset)}: offsets must be finite "
+            f"numbers within ±{MAX_COORDINATE:g}"
+        )
     return bvh
 
 

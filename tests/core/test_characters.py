@@ -309,7 +309,7 @@ def test_compiled_forward_kinematics_is_the_matrix_products_of_the_joints(
 
 
 def test_compiled_swing_is_the_numpy_swing() -> None:
-    """core.compiled_characters.swing_into against core.characters.swing: random
+    """core.compiled_characters.swing_matrix_into against core.characters.swing: random
     directions, parallel ones (no turn) and opposite ones (a half turn about the axis
     perpendicular to the smallest component), each a rotation taking a onto b."""
     rng = np.random.default_rng(3)
@@ -318,7 +318,7 @@ def test_compiled_swing_is_the_numpy_swing() -> None:
         pairs += [(a, 3.0 * a), (a, -0.5 * a)]
     out = np.empty((3, 3))
     for a, b in pairs:
-        compiled_characters.swing_into(a, b, out)
+        compiled_characters.swing_matrix_into(a, b, out)
         np.testing.assert_allclose(out, swing(a, b), rtol=0, atol=1e-14)
         ua, ub = a / np.linalg.norm(a), b / np.linalg.norm(b)
         np.testing.assert_allclose(out @ ua, ub, rtol=0, atol=1e-12)
