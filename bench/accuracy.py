@@ -510,7 +510,7 @@ def evaluate_accuracy(
     res["models"] = {
         "dir": str(models_dir),
         "version": engine.version,
-        "composition_passes": engine.passes,
+        "composition_passes": engine.composition_passes,
         "composition": engine.composition,
         "composition_projections": engine.projections,
         "bytes": model_bytes(engine),

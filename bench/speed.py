@@ -176,7 +176,7 @@ def issue14(
         "solve_arrays_passes1": lambda: engine.solve_arrays(starts, tidx, tpos, passes=1),
         "solve_passes1": lambda: engine.solve(probs1),
     }
-    if engine.solve_mirror:  # the fast path a request can take: options.mirror false
+    if engine.serving.solve_mirror:  # the fast path a request can take: options.mirror false
         runs["solve_arrays_no_mirror"] = lambda: engine.solve_arrays(
             starts, tidx, tpos, mirror=False
         )
@@ -196,8 +196,8 @@ def issue14(
         "batch": batch,
         "batch_poses_per_s": through,
         "threads": ort_threads,
-        "passes": engine.solve_passes,
-        "views": 2 if engine.solve_mirror else 1,
+        "passes": engine.serving.passes,
+        "views": 2 if engine.serving.solve_mirror else 1,
     }
 
 
@@ -205,7 +205,7 @@ def _network_ceiling(
     engine: Engine, edits: Edits, starts: np.ndarray, targets: np.ndarray, rounds: int
 ) -> Json:
     """The networks alone on the batch: the fused graph of ``edits``' target set run once
-    on every row (``network_rows_per_s``), so that a solve of ``engine.solve_passes``
+    on every row (``network_rows_per_s``), so that a solve of ``engine.serving.passes``
     passes cannot exceed ``network_rows_per_s / passes`` poses/s on this thread whatever
     the geometry around it costs. Empty when no single fused graph covers the set."""
     from core.skeleton import JOINT_NAMES
@@ -261,9 +261,9 @@ def _issue14_set(
         "fabrik_kernel": kernel,
         "fabrik_numpy": numpy_fabrik,
     }
-    if engine.solve_mirror:  # the default solves the mirror image too
+    if engine.serving.solve_mirror:  # the default solves the mirror image too
         runs["neural_no_mirror"] = lambda i: engine.solve([no_mirror[i]])
-    if engine.solve_mirror and engine.mirror_graphs:  # the mirror graphs' share
+    if engine.serving.solve_mirror and engine.mirror_graphs:  # the mirror graphs' share
         numpy_way = copy.copy(engine)
         numpy_way.mirror_graphs = {}
         runs["neural_numpy_mirror"] = lambda i: numpy_way.solve([neural[i]])

@@ -98,7 +98,7 @@ def completion_scales(engine: Engine, lengths: F64) -> F64:
     networks are fed: networks trained on bodies of every size (``serving.body =
     total_length``) read the size from the key points (1); older ones see the size of
     their nearest training skeleton (``Engine.scales_of``)."""
-    if engine.body == "total_length":
+    if engine.serving.body == "total_length":
         return np.ones(np.shape(lengths)[:-1])
     return engine.scales_of(lengths)
 

@@ -143,38 +143,14 @@ class Engine:
         self.reference_lengths = np.asarray(
             [ref[JOINT_NAMES[c]] for c, _ in BONES], dtype=np.float64
         )
-        sv = self.serving
-        self.body = sv.body
-        self.delta = sv.delta
-        #: how far joints below a target turn with its bone (``serving.carry``)
-        self.carry = sv.carry
-        #: the bone pass keeps targeted wrists and ankles, and elbows, where the networks
-        #: put them (``serving.keep_ends``, ``serving.keep_elbows``; :mod:`core.ends`):
-        #: ``chain_mask``, the mask ``[C]`` of chains it may keep (``core.ends.active``;
-        #: which of them an edit keeps: ``core.ends.kept_chains``)
-        self.keep_ends = sv.keep_ends
-        self.keep_elbows = sv.keep_elbows
-        self.chain_mask = active_chains(self.keep_ends, self.keep_elbows)
-        #: an end the bone pass left nearer than this (m) to the networks' goes back only
-        #: that share of the way (``serving.keep_ease``; ``core.ends.keep_ends``)
-        self.keep_ease = sv.keep_ease
-        #: a kept wrist beyond the arm's reach turns its shoulder about the collar first
-        #: (``serving.keep_collar``; ``core.ends.keep_ends``)
-        self.keep_collar = sv.keep_collar
-        #: a few-target edit's pelvis loses this much (m) of the networks' move
-        #: (``serving.keep_pelvis``; ``core.compiled.hold_pelvis``)
-        self.keep_pelvis = sv.keep_pelvis
-        #: a targeted pelvis takes the start with it, horizontally, before the networks
-        #: (``serving.pelvis_travel``; ``_Items.travelled``)
-        self.pelvis_travel = sv.pelvis_travel
-        #: a target beyond its chain's reach moves the start across first, in few-target
-        #: edits (``serving.reach_travel``; ``_Items.travelled``)
-        self.reach_travel = sv.reach_travel
-        #: each neural pass also solves the edit's mirror image and averages the two
-        #: (``serving.solve_mirror``; :func:`service.networks.answer`)
-        self.solve_mirror = sv.solve_mirror
+        # every serving setting is read from ``self.serving`` where it is used (one source
+        # of truth: the manifest's block with its overrides); what is derived from them once:
+        #: the mask ``[C]`` of chains the bone pass may keep where the networks put them
+        #: (``serving.keep_ends``, ``serving.keep_elbows``; ``core.ends.active``; which of
+        #: them an edit keeps: ``core.ends.kept_chains``)
+        self.chain_mask = active_chains(self.serving.keep_ends, self.serving.keep_elbows)
         #: the turn search of many-target edits (``serving.turn_*``, :mod:`service.turns`)
-        self.turn_search = turns.TurnSearch.of(sv)
+        self.turn_search = turns.TurnSearch.of(self.serving)
         known = np.asarray(m.skeleton.skeletons, dtype=np.float64)  # [C, 20]
         self._shape_totals = known.sum(axis=-1)
         self._shapes = known / self._shape_totals[:, None]
@@ -188,14 +164,7 @@ class Engine:
         self._delta_steps: dict[
             tuple[str, ...], list[tuple[str, npt.NDArray[np.intp], npt.NDArray[np.intp] | None]]
         ] = {}
-        self.passes = composition_passes
-        #: neural solves per edit (``serving.passes``)
-        self.solve_passes = sv.passes
-        #: soft answers further than this (m) from a target get one more pass (0: never)
-        self.retry_reach = sv.retry_reach
-        #: soft answers still further than ``retry_reach`` after that pass are polished
-        #: onto their targets (``serving.retry_polish``)
-        self.retry_polish = sv.retry_polish
+        self.composition_passes = composition_passes
         self.composition = composition
         self.projections = composition_projections
         self.fabrik_max_iterations = fabrik_max_iterations
@@ -208,7 +177,7 @@ class Engine:
         the size of the training skeleton whose proportions it matches best. Either way a
         1.9 m or a 1.2 m copy of a character is solved exactly as that character."""
         total = np.sum(lengths, axis=-1, keepdims=True)
-        if self.body == "total_length":
+        if self.serving.body == "total_length":
             return np.asarray(total[..., 0] / np.sum(self.reference_lengths), dtype=np.float64)
         shape = lengths / total
         distance = np.linalg.norm(shape[..., None, :] - self._shapes, axis=-1)  # [..., C]
@@ -257,20 +226,22 @@ class Engine:
             if seq is None or passes < 1:
                 return None
         items = _Items.of_problem(p, self.carry_of(p), self.mirror_of(p))
-        items = items.travelled(self.pelvis_travel, self.reach_travel, self.turn_search.min_targets)
+        items = items.travelled(
+            self.serving.pelvis_travel, self.serving.reach_travel, self.turn_search.min_targets
+        )
         return self._result(p, self._retry(items, lean_answer(self, items, passes, seq)), 0)
 
     def passes_of(self, p: SolveProblem) -> int:
         """The neural passes ``p`` asks for (``solve_passes`` unless it says)."""
-        return self.solve_passes if p.passes is None else p.passes
+        return self.serving.passes if p.passes is None else p.passes
 
     def carry_of(self, p: SolveProblem) -> float:
         """The carry below targets ``p`` asks for (``carry`` unless it says)."""
-        return self.carry if p.carry is None else p.carry
+        return self.serving.carry if p.carry is None else p.carry
 
     def mirror_of(self, p: SolveProblem) -> bool:
         """Whether ``p`` has its mirror image solved too (``solve_mirror`` unless it says)."""
-        return self.solve_mirror if p.mirror is None else p.mirror
+        return self.serving.solve_mirror if p.mirror is None else p.mirror
 
     @staticmethod
     def _result(p: SolveProblem, ans: BatchAnswer, b: int) -> SolveResult:
@@ -337,16 +308,18 @@ class Engine:
             exact=exact,
             tolerance=tolerance,
             floor=floor,
-            carry=self.carry if carry is None else carry,
+            carry=self.serving.carry if carry is None else carry,
             turn_search=turn_search,
-            mirror=self.solve_mirror if mirror is None else mirror,
+            mirror=self.serving.solve_mirror if mirror is None else mirror,
         )
         n, fab = items.poses.shape[0], items.fab
-        reps = _per_item(self.solve_passes if passes is None else passes, n, np.int64)
+        reps = _per_item(self.serving.passes if passes is None else passes, n, np.int64)
         if n and int(reps.min()) < 1:
             raise ValueError(f"passes must be at least 1, got {int(reps.min())}")
         reps = np.where(fab, 1, reps)  # FABRIK items: one solve (and not the caller's array)
-        items = items.travelled(self.pelvis_travel, self.reach_travel, self.turn_search.min_targets)
+        items = items.travelled(
+            self.serving.pelvis_travel, self.serving.reach_travel, self.turn_search.min_targets
+        )
         items, turned, known = turns.search(self, items, reps, self._solve_items)
         return turns.mark(self._retry(items, self._solve_rest(items, reps, known)), turned)
 
@@ -369,18 +342,18 @@ class Engine:
         before go without); edits of many targets search the body's turn instead, whose
         soft candidates a collar turn would make look nearer than they are."""
         few = items.n_t < self.turn_search.min_targets
-        return items.asked_soft & few & self.keep_collar
+        return items.asked_soft & few & self.serving.keep_collar
 
     def pelvis_holds(self, items: _Items) -> npt.NDArray[np.float64]:
         """How much of the networks' pelvis move each item drops (``serving.keep_pelvis``,
         m; 0: none) ``[B]``: edits of few targets (the turn search's many turn the body
         about its pelvis) none of which, pins included, is on the pelvis itself."""
-        if self.keep_pelvis == 0.0:  # off (the shipped models): nothing to work out
+        if self.serving.keep_pelvis == 0.0:  # off (the shipped models): nothing to work out
             return np.zeros(items.tidx.shape[0])
         few = items.n_t < self.turn_search.min_targets
         cols = np.arange(items.tidx.shape[1])[None, :] < items.cnt[:, None]
         on_pelvis = ((items.tidx == PELVIS) & cols).any(axis=1)
-        return np.where(few & ~on_pelvis, self.keep_pelvis, 0.0)
+        return np.where(few & ~on_pelvis, self.serving.keep_pelvis, 0.0)
 
     def _retry(self, items: _Items, ans: BatchAnswer) -> BatchAnswer:
         """``ans`` with one more pass, from its answer, for every soft neural item (bone
@@ -390,9 +363,9 @@ class Engine:
         more of its passes would give it; the others are untouched. With
         ``serving.retry_polish``, an item that pass still leaves short is then polished
         onto its targets (:meth:`_polish_short`)."""
-        if self.retry_reach <= 0.0 or ans.pose.shape[0] == 0:
+        if self.serving.retry_reach <= 0.0 or ans.pose.shape[0] == 0:
             return ans
-        if float(ans.errors.max()) <= self.retry_reach:  # the common case, one reduction
+        if float(ans.errors.max()) <= self.serving.retry_reach:  # the common case, one reduction
             return ans
         sel = self._short(items, ans)
         if sel.size == 0:
@@ -401,12 +374,12 @@ class Engine:
             items.soft(sel, compiled.as_f64(ans.pose)), np.ones(sel.size, np.int64)
         )
         ans = ans.with_items(sel, again)
-        return self._polish_short(items, ans) if self.retry_polish else ans
+        return self._polish_short(items, ans) if self.serving.retry_polish else ans
 
     def _short(self, items: _Items, ans: BatchAnswer) -> npt.NDArray[np.intp]:
         """The soft neural items (bone lengths kept) of ``ans`` whose farthest user target
         is more than ``serving.retry_reach`` away."""
-        far = items.farthest(ans.errors) > self.retry_reach
+        far = items.farthest(ans.errors) > self.serving.retry_reach
         out: npt.NDArray[np.intp] = np.flatnonzero(far & ~items.fab & ~items.ex & items.keep)
         return out
 
@@ -499,7 +472,7 @@ class Engine:
                 decoded = networks.answer(self, x, canvas, sequences[0], batch.mirror)
                 out = compiled.unscale(
                     decoded, scales, canon, lengths, bone, tidx, cnt, batch.carry, self.chain_mask,
-                    self.keep_ease, collar, hold,
+                    self.serving.keep_ease, collar, hold,
                 )  # fmt: skip
             else:
                 items = np.flatnonzero(neural)
@@ -512,8 +485,8 @@ class Engine:
                 out = canon.copy()
                 out[items] = compiled.unscale(
                     decoded[items], scales[items], canon[items], lengths[items], bone[items],
-                    tidx[items], cnt[items], batch.carry[items], self.chain_mask, self.keep_ease,
-                    collar[items], hold[items],
+                    tidx[items], cnt[items], batch.carry[items], self.chain_mask,
+                    self.serving.keep_ease, collar[items], hold[items],
                 )  # fmt: skip
         start = canon
         if origin is not None and moved is not None and moved.any():
@@ -541,7 +514,7 @@ class Engine:
             tpos[:, :, 1] -= items.floors[:, None]
         return tpos, compiled.prepare(
             poses, items.floors, items.tidx, tpos, items.cnt, neural, self._shapes_c,
-            self._shape_totals, self.body == "total_length", self._reference_total,
+            self._shape_totals, self.serving.body == "total_length", self._reference_total,
         )  # fmt: skip
 
     def _fabrik(

@@ -90,7 +90,10 @@ class Pricing:
     @staticmethod
     def of(engine: Engine) -> Pricing:
         return Pricing(
-            engine.solve_passes, engine.turn_search, engine.retry_reach > 0.0, engine.solve_mirror
+            engine.serving.passes,
+            engine.turn_search,
+            engine.serving.retry_reach > 0.0,
+            engine.serving.solve_mirror,
         )
 
 

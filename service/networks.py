@@ -51,7 +51,7 @@ def answer(
     if back == sequence:
         both = run_once(engine, np.concatenate([x, x_m]), np.concatenate([canvas, c_m]), back)
         own, other = both[:n], both[n:]
-    elif engine.delta:  # the two sequences step by step together
+    elif engine.serving.delta:  # the two sequences step by step together
         own, other = delta_views(engine, x, canvas, x_m, c_m, sequence, back)
     else:
         own, other = run_once(engine, x, canvas, sequence), run_once(engine, x_m, c_m, back)
@@ -132,7 +132,7 @@ def run_once(
         key = sequence[0]
         targets = canvas.take(engine.solver_joints[key], axis=1).reshape(len(x), -1)
         return engine.fused[key](x, targets)
-    if engine.delta:  # shipped fused graphs give the (anchored) delta answer
+    if engine.serving.delta:  # shipped fused graphs give the (anchored) delta answer
         return delta(engine, x, canvas, sequence)
     z = engine.encoder(x)  # none (only uncovered joints) or a composed sequence
     if sequence:
@@ -227,7 +227,7 @@ def compose(
         return engine.solvers[key](z, canvas[:, engine.solver_joints[key]].reshape(len(z), -1))
     flat = canvas.reshape(len(z), -1)
     done: list[int] = []
-    for _ in range(engine.passes):
+    for _ in range(engine.composition_passes):
         for key in sequence:
             joints = engine.solver_joints[key]
             if engine.composition == "reencode" and done:

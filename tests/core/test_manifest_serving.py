@@ -48,7 +48,11 @@ def test_trained_settings_are_serving_fields() -> None:
 
 def test_an_engine_serves_its_overrides(models_dir: Path) -> None:
     engine = Engine(models_dir, serving={"passes": 1, "turn_yaws": 1, "keep_pelvis": 0.02})
-    assert (engine.solve_passes, engine.turn_search.yaws, engine.keep_pelvis) == (1, 1, 0.02)
+    assert (engine.serving.passes, engine.turn_search.yaws, engine.serving.keep_pelvis) == (
+        1,
+        1,
+        0.02,
+    )
     assert engine.serving.carry == engine.manifest.serving.carry
     with pytest.raises(ValueError, match="anchor"):
         Engine(models_dir, serving={"anchor": False})

@@ -30,7 +30,7 @@ def by_carry(models_dir: Path) -> dict[float, Engine]:
 def test_models_say_their_default(client: Any, engine: Engine) -> None:
     r = client.get("/v1/models")
     assert r.status_code == 200
-    assert r.json()["carry"] == engine.manifest.serving.carry == engine.carry == 0.5
+    assert r.json()["carry"] == engine.manifest.serving.carry == engine.serving.carry == 0.5
 
 
 def test_pose_form_carry_equals_an_engine_built_with_it(

@@ -40,7 +40,7 @@ def files(mocap_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[str
 def test_models_say_their_default(client: Any, engine: Engine) -> None:
     r = client.get("/v1/models")
     assert r.status_code == 200
-    assert r.json()["passes"] == engine.manifest.serving.passes == engine.solve_passes
+    assert r.json()["passes"] == engine.manifest.serving.passes == engine.serving.passes
     assert r.json()["retry_reach"] == engine.manifest.serving.retry_reach == 0.02
 
 
@@ -51,7 +51,7 @@ def test_pose_form_passes_equal_an_engine_built_with_them(
         body = solve_body(real_poses, k, WRISTS)
         default = client.post("/v1/solve", json=body).json()
         explicit = client.post(
-            "/v1/solve", json={**body, "options": {"passes": engine.solve_passes}}
+            "/v1/solve", json={**body, "options": {"passes": engine.serving.passes}}
         )
         assert explicit.json() == default  # absent = the models' default
         assert np.array_equal(as_array(default["pose"]), engine_pose(engine, body))
@@ -183,11 +183,11 @@ def test_engine_pricing_follows_the_models(engine: Engine, models_dir: Path) -> 
     """``Pricing.of``: the engine's default passes, turn search, retry and mirror image, as
     it runs them."""
     pricing = limits.Pricing.of(engine)
-    assert pricing == limits.Pricing(engine.solve_passes, engine.turn_search, True, True)
-    assert engine.retry_reach > 0  # the shipped models retry (serving.retry_reach)
-    assert engine.solve_mirror  # ... and solve the mirror image (serving.solve_mirror)
+    assert pricing == limits.Pricing(engine.serving.passes, engine.turn_search, True, True)
+    assert engine.serving.retry_reach > 0  # the shipped models retry (serving.retry_reach)
+    assert engine.serving.solve_mirror  # ... and solve the mirror image (serving.solve_mirror)
     assert not limits.Pricing.of(Engine(models_dir, serving={"retry_reach": 0.0})).retry
     # the polish of a short soft answer is not priced (service.limits says why)
-    assert engine.retry_polish
+    assert engine.serving.retry_polish
     assert limits.Pricing.of(Engine(models_dir, serving={"retry_polish": False})) == pricing
     assert not limits.Pricing.of(Engine(models_dir, serving={"solve_mirror": False})).mirror
