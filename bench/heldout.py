@@ -440,6 +440,16 @@ def _rng(seed: int, *stream: int) -> np.random.Generator:
     return np.random.default_rng([seed, *stream])
 
 
+def recon_sample(world: F64, cfg: HeldoutConfig, k: int, n_sources: int) -> F64:
+    """The poses of source ``k`` (of ``n_sources``) whose autoencoder round trip is scored:
+    its share of ``cfg.recon``, drawn once per seed (``trainer.probe_directions`` scores
+    the same poses)."""
+    rows = _rng(cfg.seed, 12, k).choice(
+        len(world), min(len(world), math.ceil(cfg.recon / n_sources)), replace=False
+    )
+    return world[np.sort(rows)]
+
+
 def family_sets(
     engine: Engine,
     data: PoseDataset,
@@ -509,10 +519,7 @@ def run_heldout(
         items, pairs = evaluate_family(
             engine, data, world[mask], share, share_c, cfg, _rng(cfg.seed, 11, k)
         )
-        rows = _rng(cfg.seed, 12, k).choice(
-            len(data), min(len(data), math.ceil(cfg.recon / len(sources))), replace=False
-        )
-        poses = world[mask][np.sort(rows)]
+        poses = recon_sample(world[mask], cfg, k, len(sources))
         recon_poses.append(poses)
         fam = family(
             f"{split}: {source}", "holdout", data, items, recon_of(engine, poses), pairs.turn
