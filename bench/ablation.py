@@ -227,6 +227,10 @@ VARIANTS: dict[str, str] = {
     "completion networks: autoencoder closer on held-out bodies, solves no better, in-studio "
     "worse: not shipped",
     "captured_bones24": "`bones24` on the captured edits",
+    "latent128": "the shipped recipe with a latent of 128 instead of 64 "
+    "(trainer/configs/ablation/latent128.toml), served with the shipped completion networks: "
+    "autoencoder closer everywhere, solves no better: not shipped",
+    "captured_latent128": "`latent128` on the captured edits",
 }
 COMPLETION = "6-point completion"
 

@@ -16,7 +16,9 @@ through the same mapping as ``Engine.reconstruct`` (canonical frame, one size). 
 them: the shipped autoencoder's answer after the bone pass (the body's own lengths), the
 fair peer of an answer that has them by construction.
 
-    python -m trainer.probe_directions --models models --out reports/probe_directions.json
+    python -m trainer.probe_directions --out reports/probe_directions.json
+    python -m trainer.probe_directions --loss positions \
+        --out reports/probe_directions_positions.json
 
 Measured: docs/generalisation-serving-2.md item 44.
 """
@@ -75,9 +77,14 @@ def from_directions(features: torch.Tensor, lengths: torch.Tensor) -> torch.Tens
     return torch.stack([j for j in joints if j is not None], dim=1)
 
 
-def train_directions(config: Path, epochs: int | None) -> tuple[TiedAutoencoder, float, float]:
+def train_directions(
+    config: Path, epochs: int | None, loss_kind: str
+) -> tuple[TiedAutoencoder, float, float]:
     """The direction autoencoder, trained as ``trainer.train.train_autoencoder`` trains
-    the shipped one; returns it, the reference total bone length and the seconds taken."""
+    the shipped one; returns it, the reference total bone length and the seconds taken.
+    ``loss_kind``: ``features`` (the shipped loss: MSE of the normalised features) or
+    ``positions`` (MSE of the joints once laid on the sample's own lengths, metres: a bone
+    near the pelvis counts for every joint it carries)."""
     cfg = load_config(config)
     torch.set_num_threads(cfg.threads)
     torch.use_deterministic_algorithms(True)
@@ -100,12 +107,16 @@ def train_directions(config: Path, epochs: int | None) -> tuple[TiedAutoencoder,
         rng = stage_rng(cfg.seed, "autoencoder", epoch)
         loss_sum = 0.0
         for idx in batches(len(train), ac.batch_size, ONE, cfg.seed, epoch):
-            x, _ = to_directions(as_joints(ae_samples(train[idx], rng, aug, total)))
-            loss = nn.functional.mse_loss(ae.norm.normalise(ae(x)), ae.norm.normalise(x))
+            poses = as_joints(ae_samples(train[idx], rng, aug, total))
+            x, lengths = to_directions(poses)
+            if loss_kind == "positions":
+                loss = nn.functional.mse_loss(from_directions(ae(x), lengths), poses)
+            else:
+                loss = nn.functional.mse_loss(ae.norm.normalise(ae(x)), ae.norm.normalise(x))
             optim.zero_grad(set_to_none=True)
             loss.backward()
             optim.step()
-            loss_sum += float(loss)
+            loss_sum += float(loss.detach())
         console.print(f"directions epoch {epoch + 1}/{n_epochs}: loss {loss_sum / steps:.6f}")
     ae.eval()
     return ae, total, time.perf_counter() - t0
@@ -143,11 +154,16 @@ def main(
         "trainer/configs/default.toml"
     ),
     epochs: Annotated[int | None, typer.Option(help="Epochs (the recipe's by default).")] = None,
+    loss: Annotated[str, typer.Option(help="features (the shipped loss) or positions.")] = (
+        "features"
+    ),
     out: Annotated[Path, typer.Option(help="Where the JSON goes.")] = Path(
         "reports/probe_directions.json"
     ),
 ) -> None:
-    ae, total, seconds = train_directions(config, epochs)
+    if loss not in ("features", "positions"):
+        raise typer.BadParameter(f"loss must be features or positions, got {loss!r}")
+    ae, total, seconds = train_directions(config, epochs, loss)
     engine = Engine(models, threads=1)
     cfg = HeldoutConfig()
     dataset = load_dataset(load_config(config).dataset)
@@ -184,8 +200,14 @@ def main(
             f"(worst joint {row['positions']['worst_joint']:.2f} / "
             f"{row['bone_pass']['worst_joint']:.2f} / {row['dirs']['worst_joint']:.2f})"
         )
-    report = {"config": str(config), "epochs": epochs, "train_seconds": round(seconds, 1),
-              "models": engine.version, "rows": rows}  # fmt: skip
+    report = {
+        "config": str(config),
+        "epochs": epochs,
+        "loss": loss,
+        "train_seconds": round(seconds, 1),
+        "models": engine.version,
+        "rows": rows,
+    }
     write_atomic(out, json.dumps(report, indent=1).encode())
     console.print(f"wrote {out}")
 
