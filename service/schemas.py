@@ -344,7 +344,7 @@ PoseRow = Annotated[
     Field(
         min_length=3 * len(JOINT_NAMES),
         max_length=3 * len(JOINT_NAMES),
-        description="The 21 joints' x, y, z in the order of `/v1/info/skeleton` `joints` "
+        description="The 21 joints' x, y, z in the order of `/v1/skeleton` `joints` "
         "(pelvis x, y, z, spine1 x, y, z, …), metres, world frame.",
     ),
 ]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 from core.io import write_atomic
 from core.manifest import Manifest
@@ -31,9 +32,10 @@ Normalisation (train-split mean/std, std floored at {floor} m) is inside the gra
 input and output is in metres, in the canonical frame.
 
 ## Data and licence
-Trained on real motion capture: the Bandai-Namco-Research-Motiondataset 1 and 2 (CC BY-NC
-4.0) and CMU Graphics Lab dance clips (CMU terms), resampled to 30 fps, canonicalised,
-split by clip (seed {seed}) into train / val / test.
+Trained on real motion capture, resampled to {fps} fps, canonicalised, split by clip (seed
+{seed}) into train / val / test; the held-out bodies (split `holdout`) are never trained
+on. Sources (frames; licence; held out):
+{sources}
 
 **Licence of these weights: {licence}** They inherit the non-commercial term of the
 Bandai-Namco data. For commercial use, retrain on motion capture you may use commercially:
@@ -83,6 +85,20 @@ def _fmt(metrics: dict[str, float], split: str) -> str:
     return ", ".join(parts) or "–"
 
 
+def _sources(dataset: dict[str, Any]) -> str:
+    """One line per source of the dataset's provenance: frames, licence, what is held out."""
+    frames: dict[str, int] = dataset.get("source_frames", {})
+    licences: dict[str, str] = dataset.get("licences", {})
+    holdout: dict[str, list[str]] = dataset.get("holdout", {})
+    lines = []
+    for source in sorted(set(frames) | set(licences)):
+        held = holdout.get(source, [])
+        out = "all of it" if held == ["**"] else ", ".join(f"`{g}`" for g in held) or "none"
+        count = f"{frames[source]:,}" if source in frames else "?"
+        lines.append(f"- `{source}`: {count} frames; {licences.get(source, '?')}; held out: {out}")
+    return "\n".join(lines) or "- (not recorded: the dataset predates its provenance)"
+
+
 def render(manifest: Manifest) -> str:
     cfg = manifest.provenance.config
     rows = "\n".join(
@@ -98,6 +114,8 @@ def render(manifest: Manifest) -> str:
         latent=manifest.latent_dim,
         floor=manifest.normalisation.std_floor,
         seed=manifest.provenance.split_seed,
+        fps=manifest.provenance.dataset.get("fps", 30),
+        sources=_sources(manifest.provenance.dataset),
         licence=manifest.licence,
         archives=archives or "- (none recorded)",
         gap=cfg["solver"]["max_gap_seconds"],
