@@ -4,16 +4,55 @@ Shared by the core's readers and the service's errors (``service.errors``)."""
 
 from __future__ import annotations
 
+import itertools
+
 QUOTE = 100  # characters of client input an error detail may quote
+_DEPTH = 3  # levels of a nested JSON value a message shows ([[…]] below them)
+_ITEMS = 4  # elements of a list or object a message shows (…, then how many in all)
+_DIGITS = 30  # digits of an integer a message shows (longer ones: their digit count)
 
 
 def clip(text: object, limit: int = QUOTE) -> str:
-    """``text`` as a string of at most ``limit`` characters (``…`` marks a cut)."""
-    s = str(text)
+    """``text`` as a string of at most ``limit`` characters (``…`` marks a cut). A value
+    that is not a string is shown as :func:`shown` shows it."""
+    s = text if isinstance(text, str) else shown(text)
     return s if len(s) <= limit else s[: limit - 1] + "…"
 
 
+def shown(value: object, depth: int = _DEPTH) -> str:
+    """A value from a client's JSON as JSON writes it (``null``, ``true``, ``[1, 2]``),
+    bounded: strings clipped, lists and objects cut after a few elements and a few levels,
+    huge integers by their digit count. Never recursive beyond ``depth``: a list nested a
+    thousand deep costs three levels (Python's own ``repr`` of it exhausts the stack)."""
+    if value is None:
+        return "null"
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int):
+        if abs(value) < 10**_DIGITS:
+            return str(value)
+        digits = int((value.bit_length() - 1) * 0.30103) + 1  # log10(2): no str() of it
+        digits += abs(value) >= 10**digits  # the estimate is at most one short
+        return f"{'-' if value < 0 else ''}<an integer of {digits} digits>"
+    if isinstance(value, str):
+        return repr(value if len(value) <= QUOTE else value[: QUOTE - 1] + "…")
+    if isinstance(value, list | tuple | dict):
+        opening, closing = ("{", "}") if isinstance(value, dict) else ("[", "]")
+        if not value:
+            return opening + closing
+        if depth <= 0:
+            return f"{opening}…{closing}"
+        if isinstance(value, dict):
+            head = itertools.islice(value.items(), _ITEMS)
+            parts = [f"{shown(k, 0)}: {shown(v, depth - 1)}" for k, v in head]
+        else:
+            parts = [shown(v, depth - 1) for v in itertools.islice(value, _ITEMS)]
+        more = f", … {len(value)} in all" if len(value) > _ITEMS else ""
+        return opening + ", ".join(parts) + more + closing
+    return repr(value)[:QUOTE]
+
+
 def quoted(value: object) -> str:
-    """``repr`` of ``value`` clipped to :data:`QUOTE` characters: how a message names
-    what a client sent."""
-    return repr(clip(value)) if isinstance(value, str) else clip(repr(value))
+    """How a message names what a client sent: a string in quotes, clipped to
+    :data:`QUOTE` characters; anything else as :func:`shown` shows it."""
+    return repr(clip(value)) if isinstance(value, str) else clip(shown(value))

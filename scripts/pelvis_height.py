@@ -40,7 +40,7 @@ def main() -> None:
     args = ap.parse_args()
     data = load_dataset(Path(args.dataset))
     engine = Engine(args.models, threads=1)
-    print(f"models {engine.version}, pelvis_travel {engine.pelvis_travel}")
+    print(f"models {engine.version}, pelvis_travel {engine.serving.pelvis_travel}")
     print("| split | pelvis | edits | mean height change | " + " | ".join(METHODS) + " |")
     print("|---|---|---|---|" + "---|" * len(METHODS))
     for split in ("test", "holdout"):

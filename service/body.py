@@ -25,8 +25,8 @@ from fastapi import Request, Response
 from fastapi.routing import APIRoute
 from pydantic import BaseModel, ValidationError
 
-from core.text import clip
-from service.errors import BodyError, BodyInvalid, DeadlineExceeded, MalformedBody
+from core.text import clip, quoted
+from service.errors import BodyError, BodyInvalid, DeadlineExceeded, MalformedBody, PoseError
 from service.limits import Budget
 
 INLINE_BYTES = 64 * 1024  # smaller bodies are parsed on the loop (a thread hop costs more)
@@ -37,7 +37,7 @@ def _object(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
     if len(out) != len(pairs):
         seen: set[str] = set()
         dup = next(k for k, _ in pairs if k in seen or seen.add(k))  # type: ignore[func-returns-value]
-        raise MalformedBody(f"duplicate key {clip(repr(dup))} in a JSON object")
+        raise MalformedBody(f"duplicate key {quoted(dup)} in a JSON object")
     return out
 
 
@@ -62,9 +62,11 @@ def decode(body: bytes) -> Any:
         raise MalformedBody(f"JSON number not accepted: {clip(exc, 80)}") from None
 
 
-def parse(body: bytes, model: type[BaseModel] | None) -> Any:
-    """Decode ``body`` and validate it into ``model``; raises ``BodyError`` (400) or
-    ``BodyInvalid`` (422), the exceptions FastAPI's body reader lets through."""
+def parse(body: bytes, model: type[BaseModel] | None, context: Any = None) -> Any:
+    """Decode ``body`` and validate it into ``model`` (``context``: pydantic's validation
+    context, the service's settings); raises ``BodyError`` (a ``PoseError``: 400, or a
+    validator's own, e.g. a batch over its item limit, 413) or ``BodyInvalid`` (422), the
+    exceptions FastAPI's body reader lets through."""
     try:
         data = decode(body)
     except MalformedBody as exc:
@@ -72,9 +74,11 @@ def parse(body: bytes, model: type[BaseModel] | None) -> Any:
     if model is None:
         return data
     try:
-        return model.model_validate(data)
+        return model.model_validate(data, context=context)
     except ValidationError as exc:
         raise BodyInvalid(exc.errors(include_url=False, include_context=True)) from None
+    except PoseError as exc:  # a validator's refusal of the whole body
+        raise BodyError(exc) from None
 
 
 class _Request(Request):
@@ -83,14 +87,15 @@ class _Request(Request):
     async def json(self) -> Any:
         if not hasattr(self, "_json"):
             body = await self.body()
+            state = getattr(self.app.state, "pose", None)
+            context = None if state is None else {"settings": state.settings}
             if len(body) < INLINE_BYTES:
-                self._json = parse(body, self.model)
+                self._json = parse(body, self.model, context)
             else:
-                state = getattr(self.app.state, "pose", None)
                 deadline = state.settings.deadline_seconds if state is not None else math.inf
                 try:
                     self._json = await Budget(self, deadline).in_thread(
-                        lambda: parse(body, self.model), "reading the body"
+                        lambda: parse(body, self.model, context), "reading the body"
                     )
                 except DeadlineExceeded as exc:  # FastAPI lets only HTTPException through
                     raise BodyError(exc) from None

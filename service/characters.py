@@ -369,6 +369,7 @@ def character_problem(ch: Character, req: _Frame, where: str = "") -> SolveProbl
         [_resolve_joint(ch, name, f"{prefix}pins[{i}]") for i, name in enumerate(req.pins)],
         req.options,
         where,
+        ([t.joint for t in req.targets], list(req.pins)),
     )
 
 

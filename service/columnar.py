@@ -22,7 +22,7 @@ from pydantic import ValidationError
 
 from core.skeleton import JOINT_INDEX, JOINT_NAMES, NUM_JOINTS
 from service.engine import Engine
-from service.errors import BodyInvalid, TooManyItems
+from service.errors import MAX_ERRORS, BodyInvalid, TooManyItems
 from service.limits import Pricing, chunks_of, searched_price
 from service.problems import BatchAnswer
 from service.schemas import MAX_COORDINATE, MAX_WEIGHT, SolveOptions
@@ -31,7 +31,7 @@ from service.validation import check_bones
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]
 WIDTH = 3 * NUM_JOINTS  # numbers per pose row
-MAX_ERRORS = 20
+_FLOAT_MAX = int(np.finfo(np.float64).max)  # a JSON integer beyond it is no float
 _TOP = ("poses", "targets", "pins", "options")
 _TARGETS = ("joints", "positions", "weights")
 
@@ -80,6 +80,18 @@ class Columns:
         return chunks_of([each] * self.size)
 
 
+def _shared(row: list[Any], loc: tuple[Any, ...], width: int, n: int, errs: _Errors,
+            suspect: bool) -> F64 | None:  # fmt: skip
+    """One row of ``width`` numbers shared by all ``n`` items, as ``[n, width]``; its
+    errors are named where they are (``targets.weights[0]``), once, not once per item."""
+    one = _Errors()
+    got = _numbers([row], loc, width, 1, one, suspect, None)
+    for e in one.raw:  # drop the row index _numbers gave them
+        extra = {key: v for key, v in e.items() if key not in ("loc", "type", "msg")}
+        errs.add((*loc, *e["loc"][len(loc) + 1 :]), e["type"], e["msg"], **extra)
+    return None if got is None else np.repeat(got, n, axis=0)
+
+
 def _numbers(rows: Any, loc: tuple[Any, ...], width: int, n: int, errs: _Errors,
              suspect: bool, bound: float | None = MAX_COORDINATE) -> F64 | None:  # fmt: skip
     """``rows`` (a list of ``n`` lists of ``width`` numbers) as a ``[n, width]`` array, or
@@ -107,6 +119,9 @@ def _numbers(rows: Any, loc: tuple[Any, ...], width: int, n: int, errs: _Errors,
                 for i, v in enumerate(row):
                     if type(v) is not float and type(v) is not int:
                         errs.add((*loc, b, i), "float_type", "Input should be a valid number")
+                    elif type(v) is int and not -_FLOAT_MAX < v < _FLOAT_MAX:  # 309+ digits
+                        errs.add((*loc, b, i), "float_type", "Input should be a valid number",
+                                 input=v)  # fmt: skip
             if len(errs.raw) >= MAX_ERRORS:
                 break
         if errs.raw:
@@ -233,7 +248,11 @@ def parse(data: dict[str, Any], max_items: int, suspect: bool = True) -> Columns
     if targets.get("weights") is not None:
         w = targets["weights"]
         shared = isinstance(w, list) and bool(w) and not isinstance(w[0], list)
-        got = _numbers([w] * n if shared else w, ("targets", "weights"), k, n, errs, suspect, None)
+        got = (
+            _shared(w, ("targets", "weights"), k, n, errs, suspect)
+            if shared
+            else _numbers(w, ("targets", "weights"), k, n, errs, suspect, None)
+        )
         if got is not None and not ((got > 0) & (got <= MAX_WEIGHT)).all():
             b, i = np.argwhere(~((got > 0) & (got <= MAX_WEIGHT)))[0].tolist()
             loc = ("targets", "weights", i) if shared else ("targets", "weights", b, i)

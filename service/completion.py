@@ -19,6 +19,18 @@ if TYPE_CHECKING:
 F64 = npt.NDArray[np.floating[Any]]
 
 
+#: The base points must span at least this much (m): the networks read a body's size from
+#: them, and six points at one spot have none (a 422, as a degenerate pose is for a solve).
+MIN_SPAN = 0.01
+#: The floor the networks see lies at most this many pelvis-to-neck distances below the
+#: pelvis. No body of the training data stood higher above its floor (at most 3.5: a jump;
+#: 2.2 standing), so a floor farther below says nothing but a size the networks never saw:
+#: 50 m below the key points, the answer's bones came out up to 7 m long, 10 km below,
+#: 1.4 km (reviewed 2026-12-04). A floor above the pelvis is refused (422): 9 m above the
+#: key points, it made bones up to 1.25 m long.
+FLOOR_REACH = 4.0
+
+
 def complete(
     engine: Engine,
     keypoints: dict[str, F64],
@@ -37,9 +49,22 @@ def complete(
             f"keypoints: the six base points are required; missing {missing}",
             missing=missing,
         )
+    base = np.stack([keypoints[j] for j in levels[0].joints])
+    span = float(np.max(np.linalg.norm(base[:, None] - base[None], axis=-1)))
+    if span < MIN_SPAN:
+        raise InvalidRequest(
+            f"keypoints: the six base points lie within {span * 1000:.3g} mm of each other; "
+            f"a body's size is read from them: they must span at least {MIN_SPAN * 100:g} cm"
+        )
     # pelvis floor projection to the origin; the networks were trained for any yaw
     origin = keypoints["pelvis"].copy()
-    origin[1] = floor
+    torso = float(np.linalg.norm(keypoints["neck"] - keypoints["pelvis"]))
+    if floor > origin[1]:
+        raise InvalidRequest(
+            f"floor: the ground ({floor:.4g} m) is above the pelvis key point "
+            f"({origin[1]:.4g} m): the body would stand under it"
+        )
+    origin[1] = max(floor, origin[1] - FLOOR_REACH * torso)
     ref = engine.reference_lengths
     bones = {JOINT_NAMES[c]: b for b, (c, _) in enumerate(BONES)}
     lengths = ref.copy()

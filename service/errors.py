@@ -10,6 +10,7 @@ are at most ``MAX_DETAIL`` characters.
 from __future__ import annotations
 
 import logging
+import re
 from collections.abc import Sequence
 from typing import Any
 
@@ -19,12 +20,13 @@ from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from core.skeleton import JOINT_NAMES
-from core.text import QUOTE, clip
+from core.text import QUOTE, clip, quoted
 
 PROBLEM_JSON = "application/problem+json"
 PROBLEM_BASE = "https://marionette.dev/problems/"
 REASON = "pose.reason"  # scope key: why a request was refused (a problem type), for metrics
 MAX_DETAIL = 4000  # characters of any detail, whatever built it
+MAX_ERRORS = 20  # field errors a problem lists
 log = logging.getLogger("service")
 
 
@@ -32,7 +34,7 @@ class PoseError(Exception):
     """Base of every error a client can cause; carries the HTTP status and a title."""
 
     status = 422
-    title = "Unprocessable pose request"
+    title = "Invalid request body"  # the title of every invalid-request problem
     type_ = "invalid-request"
     retry_after: int | None = None
 
@@ -164,11 +166,22 @@ def problem(
     return JSONResponse(body, status_code=status, media_type=PROBLEM_JSON, headers=headers)
 
 
+_LOCATION = re.compile(r"[\w.\[\]]+")
+
+
 def error_response(exc: PoseError) -> JSONResponse:
-    """The one problem+json answer of a domain error (with ``Retry-After`` when useful)."""
+    """The one problem+json answer of a domain error (with ``Retry-After`` when useful).
+    An ``invalid-request`` one has the shape of a field error's: its ``errors`` list names
+    the field (``targets[1]: duplicate target …`` -> location ``targets[1]``)."""
     headers = {"Retry-After": str(exc.retry_after)} if exc.retry_after is not None else None
     detail = clip(exc.detail, MAX_DETAIL)
-    return problem(exc.status, exc.title, detail, type_=exc.type_, headers=headers, **exc.extra)
+    extra = dict(exc.extra)
+    if exc.type_ == "invalid-request" and "errors" not in extra:
+        where, sep, message = detail.partition(": ")
+        if not (sep and _LOCATION.fullmatch(where)):
+            where, message = "body", detail
+        extra["errors"] = [{"location": where, "message": message}]
+    return problem(exc.status, exc.title, detail, type_=exc.type_, headers=headers, **extra)
 
 
 def _location(loc: Sequence[Any]) -> str:
@@ -188,9 +201,11 @@ def _message(error: Any) -> str:
     value = error.get("input")
     if kind == "literal_error" and "'spine1'" in str(ctx.get("expected", "")):
         where = "no bone ends at" if "[key]" in error.get("loc", ()) else "unknown joint"
-        return f"{where} {clip(repr(value))}; joints are {', '.join(JOINT_NAMES)}"
+        return f"{where} {quoted(value)}; joints are {', '.join(JOINT_NAMES)}"
     if kind == "finite_number":
         return "must be a finite number (NaN and infinities are not)"
+    if kind == "float_type" and type(value) is int:  # JSON allows any integer; a float not
+        return f"{quoted(value)} is beyond any number this API takes (±1.8e308)"
     if (
         kind in ("less_than_equal", "greater_than_equal")
         and abs(float(ctx.get("le", ctx.get("ge", 0)))) == 1.0e4
@@ -204,7 +219,7 @@ def validation_problem(raw: Sequence[Any]) -> JSONResponse:
     detail = "; ".join(f"{e['location']}: {e['message']}" for e in errors[:3])
     if len(errors) > 3:
         detail += f"; and {len(errors) - 3} more"
-    return problem(422, "Invalid request body", detail, type_="invalid-request", errors=errors[:20])
+    return problem(422, PoseError.title, detail, type_=PoseError.type_, errors=errors[:MAX_ERRORS])
 
 
 def install_handlers(app: FastAPI) -> None:

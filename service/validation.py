@@ -14,6 +14,7 @@ import numpy.typing as npt
 from pydantic import BaseModel, ValidationError, ValidatorFunctionWrapHandler
 
 from core.skeleton import BONES, JOINT_INDEX, JOINT_NAMES, bone_lengths
+from core.text import quoted
 from service.errors import InvalidRequest
 from service.problems import SolveProblem
 from service.schemas import CompleteRequest, SolveOptions, SolveRequest
@@ -69,25 +70,33 @@ def problem_of(
     pins: Sequence[int],
     options: SolveOptions,
     where: str = "",
+    given: tuple[Sequence[str], Sequence[str]] | None = None,
 ) -> SolveProblem:
     """The engine problem of canonical joint indices ``targets`` (at ``goals`` ``[K, 3]``)
     and ``pins`` (held where ``pose`` has them); refuses a joint targeted twice, pinned
-    twice, or both. Shared by ``/v1/solve`` and the character routes."""
+    twice, or both. Shared by ``/v1/solve`` and the character routes; ``given``: the names
+    the client sent for the targets and the pins (a character's own), for the messages."""
     prefix = f"{where}." if where else ""
+
+    def named(j: int, k: int, pin: bool) -> str:
+        sent = None if given is None else given[pin][k]
+        canon = JOINT_NAMES[j]
+        return repr(canon) if sent in (None, canon) else f"{quoted(sent)} (mapped to {canon!r})"
+
     idx: list[int] = []
     for i, j in enumerate(targets):
         if j in idx:
             raise InvalidRequest(
-                f"{prefix}targets[{i}]: duplicate target for joint {JOINT_NAMES[j]!r}"
+                f"{prefix}targets[{i}]: duplicate target for joint {named(j, i, False)}"
             )
         idx.append(j)
     n_targets = len(idx)
     for i, j in enumerate(pins):
-        name = JOINT_NAMES[j]
+        name = named(j, i, True)
         if j in idx[:n_targets]:
-            raise InvalidRequest(f"{prefix}pins[{i}]: joint {name!r} is both pinned and targeted")
+            raise InvalidRequest(f"{prefix}pins[{i}]: joint {name} is both pinned and targeted")
         if j in idx:
-            raise InvalidRequest(f"{prefix}pins[{i}]: joint {name!r} is pinned twice")
+            raise InvalidRequest(f"{prefix}pins[{i}]: joint {name} is pinned twice")
         idx.append(j)
     target_idx = np.asarray(idx, dtype=np.intp)
     w = np.ones(len(idx))

@@ -1,11 +1,12 @@
 """Pure-ASGI middleware, one concern per module, installed by :func:`install`.
 
-Outermost first: CORS (``cors``), request id + access log + last-resort answers
-(``context``), ``x-total-time`` (``timing``), Prometheus metrics (``metrics``), hardening
-headers (``headers``), and the gate (``gate``: API key, content type, body limits and the
-per-worker admission bound), and innermost the hot paths (``fastpath``: the pose form of
-``/v1/solve`` and the columnar batch answered without the router). Every rejection is
-problem+json.
+Outermost first: the request id (``context.RequestId``), hardening headers (``headers``)
+and ``x-total-time`` (``timing``) on every answer, CORS preflights and last-resort answers
+included; CORS (``cors``); the access log and last-resort answers
+(``context.RequestContext``); Prometheus metrics (``metrics``); the gate (``gate``: API
+key, content type, body limits and the per-worker admission bound), and innermost the hot
+paths (``fastpath``: the pose form of ``/v1/solve`` and the columnar batch answered without
+the router). Every rejection is problem+json.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ from fastapi import FastAPI
 from starlette.routing import BaseRoute
 
 from service.metrics import Metrics
-from service.middleware.context import RequestContext
+from service.middleware.context import RequestContext, RequestId
 from service.middleware.cors import ProblemCORS
 from service.middleware.gate import Gate
 from service.middleware.headers import SecurityHeaders
@@ -36,12 +37,14 @@ def install(
     from service.middleware.fastpath import FastPath  # imports the routes' modules
 
     app.add_middleware(FastPath, app_routes=routes)
-    app.add_middleware(Gate, settings=settings)
-    app.add_middleware(SecurityHeaders)
+    posts = frozenset(
+        path for r in routes if "POST" in (getattr(r, "methods", None) or ())
+        if isinstance(path := getattr(r, "path", None), str)
+    )  # fmt: skip
+    app.add_middleware(Gate, settings=settings, posts=posts)
     app.add_middleware(RequestMetrics, metrics=metrics, app_routes=routes)
-    app.add_middleware(Timing)
     app.add_middleware(RequestContext, access_log=settings.access_log)
-    if settings.cors_origins:  # outermost: even the gate's rejections carry CORS headers
+    if settings.cors_origins:  # outside the gate and the 500s: their answers carry CORS too
         app.add_middleware(
             ProblemCORS,
             allow_origins=settings.cors_origins,
@@ -49,3 +52,6 @@ def install(
             allow_headers=["Content-Type", "X-API-Key", "X-Request-ID", "Authorization"],
             expose_headers=EXPOSED,
         )
+    app.add_middleware(Timing)
+    app.add_middleware(SecurityHeaders)
+    app.add_middleware(RequestId)

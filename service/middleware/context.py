@@ -1,7 +1,8 @@
-"""Request id (``X-Request-ID``, the client's or a new one: 32 random hex digits), one
-JSON access-log line per request, and the last-resort answers: a 500 problem for anything
-unhandled and, when the server cancels a request at the end of its shutdown grace period,
-a 503 problem."""
+"""Request id (``X-Request-ID``, the client's or a new one: 32 random hex digits) on every
+answer (:class:`RequestId`, outermost: CORS preflights and last-resort answers carry it
+too), one JSON access-log line per request, and the last-resort answers: a 500 problem for
+anything unhandled and, when the server cancels a request at the end of its shutdown grace
+period, a 503 problem (:class:`RequestContext`)."""
 
 from __future__ import annotations
 
@@ -28,6 +29,38 @@ access_log = logging.getLogger("service.access")
 _OUTCOME = {499: "client_disconnected", 503: "unavailable", 504: "deadline_exceeded"}
 
 
+def request_id(scope: Scope) -> str:
+    """The request's id: the client's ``X-Request-ID`` (printable, at most 128 characters)
+    or 32 random hex digits; made once per request and kept in its scope."""
+    known: str | None = scope.get(REQUEST_ID)
+    if known is None:
+        given = next((v for k, v in scope["headers"] if k.lower() == b"x-request-id"), b"")
+        text = given.decode("latin-1")
+        known = "".join(c for c in text[:128] if c.isprintable()) or os.urandom(16).hex()
+        scope[REQUEST_ID] = known
+    return known
+
+
+class RequestId:
+    """Every answer carries its request's id, whichever layer gives it."""
+
+    def __init__(self, app: ASGIApp) -> None:
+        self.app = app
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        tag = (b"x-request-id", request_id(scope).encode("latin-1", "replace"))
+
+        async def tagged(message: Message) -> None:
+            if message["type"] == "http.response.start":
+                message["headers"] = [*message.get("headers", []), tag]
+            await send(message)
+
+        await self.app(scope, receive, tagged)
+
+
 class RequestContext:
     def __init__(self, app: ASGIApp, access_log: bool = True) -> None:
         self.app = app
@@ -38,10 +71,7 @@ class RequestContext:
             await self.app(scope, receive, send)
             return
         t0: float = scope.setdefault(T0, time.perf_counter())
-        given = next((v for k, v in scope["headers"] if k.lower() == b"x-request-id"), b"")
-        given = given.decode("latin-1")
-        request_id = "".join(c for c in given[:128] if c.isprintable()) or os.urandom(16).hex()
-        scope[REQUEST_ID] = request_id
+        rid = request_id(scope)
         status = [500]
         started = [False]
 
@@ -49,10 +79,6 @@ class RequestContext:
             if message["type"] == "http.response.start":
                 started[0] = True
                 status[0] = int(message["status"])
-                message["headers"] = [
-                    *message.get("headers", []),
-                    (b"x-request-id", request_id.encode("latin-1", "replace")),
-                ]
             await send(message)
 
         try:
@@ -62,12 +88,12 @@ class RequestContext:
             if not started[0]:
                 busy = ShuttingDown("the server is shutting down; retry on another instance")
                 await error_response(busy)(scope, receive, tagged)
-            self._log(scope, request_id, status[0], t0)
+            self._log(scope, rid, status[0], t0)
             return  # answered: the cancellation ends here
         except Exception:  # the app's own 500 handler would run outside the middleware
             if not started[0]:
                 await internal_error(scope["method"], scope["path"])(scope, receive, tagged)
-        self._log(scope, request_id, status[0], t0)
+        self._log(scope, rid, status[0], t0)
 
     def _log(self, scope: Scope, request_id: str, status: int, t0: float) -> None:
         if not self.access_log or not access_log.isEnabledFor(logging.INFO):

@@ -14,14 +14,19 @@ from service.schemas import Health
 router = APIRouter(tags=["health"])
 
 
-@router.get("/v2/health/live", response_model=Health)
+#: Health answers HEAD as GET (RFC 9110 9.3.2): load balancers probe with it.
+PROBE = ["GET", "HEAD"]
+
+
+@router.api_route("/v2/health/live", methods=PROBE, response_model=Health)
 async def live() -> Health:
     """The process is up (Open Inference Protocol liveness)."""
     return Health(status="live")
 
 
-@router.get(
+@router.api_route(
     "/v2/health/ready",
+    methods=PROBE,
     response_model=Health,
     responses={503: {"model": Health, "description": "Models not loaded or broken."}},
 )

@@ -14,6 +14,7 @@ from pydantic import (
     Discriminator,
     RootModel,
     Tag,
+    ValidationInfo,
     ValidatorFunctionWrapHandler,
     model_validator,
 )
@@ -69,10 +70,20 @@ class BatchBody(
 
     @model_validator(mode="wrap")
     @classmethod
-    def _form(cls, data: Any, handler: ValidatorFunctionWrapHandler) -> Any:
+    def _form(cls, data: Any, handler: ValidatorFunctionWrapHandler, info: ValidationInfo) -> Any:
+        settings = (info.context or {}).get("settings")
+        items = data.get("items") if isinstance(data, dict) else None
+        if settings is not None and isinstance(items, list):  # counted before validated
+            too_many(len(items), settings.max_batch_items)
         return validate_as(
             data, handler, lambda d: ColumnarBatch if _batch_form(d) == "columns" else BatchRequest
         )
+
+
+def too_many(n: int, limit: int) -> None:
+    """413 for a batch of ``n`` items beyond ``limit``."""
+    if n > limit:
+        raise TooManyItems(f"{n} items exceed the limit of {limit} per batch")
 
 
 @router.post("/v1/solve", response_model=SolveResponse | CharacterSolveResponse)
@@ -121,8 +132,7 @@ async def solve_batch(body: BatchBody, engine: ReadyEngine, budget: RequestBudge
         return await solve_columns(cols, engine, budget, state, request)
     req = body.root
     limit = state.settings.max_batch_items
-    if len(req.items) > limit:
-        raise TooManyItems(f"{len(req.items)} items exceed the limit of {limit} per batch")
+    too_many(len(req.items), limit)
     forms = [item.root for item in req.items]
     chars = {i: f for i, f in enumerate(forms) if isinstance(f, CharacterSolveRequest)}
     if chars:

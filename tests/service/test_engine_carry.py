@@ -41,7 +41,7 @@ def _problems(
 
 
 def test_shipped_models_carry(engines: tuple[Engine, Engine]) -> None:
-    assert engines[1].carry == engines[1].manifest.serving.carry > 0.0
+    assert engines[1].serving.carry == engines[1].manifest.serving.carry > 0.0
     with pytest.raises(ValueError, match="carry"):
         Engine(engines[0].models_dir, serving={"carry": 1.5})
 

@@ -34,12 +34,12 @@ def pairs(real_poses: PosePairs) -> tuple[np.ndarray, np.ndarray]:
 
 
 def test_shipped_models_keep_ends(engines: tuple[Engine, Engine], client: Any) -> None:
-    assert engines[1].keep_ends and engines[1].manifest.serving.keep_ends
-    assert not engines[0].keep_ends
+    assert engines[1].serving.keep_ends and engines[1].manifest.serving.keep_ends
+    assert not engines[0].serving.keep_ends
     assert client.get("/v1/models").json()["keep_ends"] is True
     # and the lone elbows (serving.keep_elbows, set without retraining: the losses saw the
     # ends only)
-    assert engines[1].keep_elbows and client.get("/v1/models").json()["keep_elbows"] is True
+    assert engines[1].serving.keep_elbows and client.get("/v1/models").json()["keep_elbows"] is True
     assert not engines[1].manifest.provenance.config["solver"].get("elbows_loss", False)
     # and wrists out of reach turn the collar (serving.keep_collar, set without retraining)
     assert engines[1].manifest.serving.keep_collar
@@ -82,7 +82,7 @@ def test_kept_elbows_move_only_the_arm_and_reach_nearer(
     only its shoulder, the elbow and the hand below move; lengths hold; batch = single."""
     kw = {"passes": 1, "retry_reach": 0.0}
     off, on = (Engine(models_dir, serving={"keep_elbows": k, **kw}) for k in (False, True))
-    assert on.chain_mask.sum() == 6 and off.chain_mask.sum() == (4 if off.keep_ends else 0)
+    assert on.chain_mask.sum() == 6 and off.chain_mask.sum() == (4 if off.serving.keep_ends else 0)
     assert client.get("/v1/models").json()["keep_elbows"] is on.manifest.serving.keep_elbows
     start, goal = pairs
     probs = edit_problems(start, goal, ("left_elbow",))

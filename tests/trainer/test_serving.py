@@ -43,7 +43,7 @@ def test_a_serving_only_setting_changes_the_version_and_the_answers_setting(
     assert after.provenance.serving_changes[-1]["from"] == start.version
     assert after.provenance.config["solver"]["keep_elbows"] is flip
     assert [m.sha256 for m in after.models] == [m.sha256 for m in before.models]
-    assert Engine(models).keep_elbows is flip
+    assert Engine(models).serving.keep_elbows is flip
     card = (models / "README.md").read_text()
     assert f"manifest {after.version}" in card and f"`keep_elbows` {flip}," in card
     assert f"(from {start.version}): `keep_elbows` {not flip} → {flip}." in card

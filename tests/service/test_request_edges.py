@@ -1,0 +1,221 @@
+"""Pose requests at the edges a review found (2026-12-04): each gets the problem that names
+what was wrong, with the status and headers every other answer gets; never a 500 (the docs'
+examples, changed one value at a time)."""
+
+from __future__ import annotations
+
+import copy
+import gzip
+import json
+import re
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from core.skeleton import JOINT_NAMES, bone_lengths
+from tests.conftest import REPO_ROOT, make_client
+from tests.service.test_api import assert_problem
+
+EXAMPLES = REPO_ROOT / "docs" / "examples"
+EVERY_ANSWER = ("x-request-id", "x-total-time", "x-content-type-options", "content-security-policy")
+
+
+def _example(name: str) -> dict[str, Any]:
+    body: dict[str, Any] = json.loads((EXAMPLES / f"{name}.json").read_text())
+    return body
+
+
+def _columns(n: int = 3) -> dict[str, Any]:
+    """The docs' solve example as a columnar batch of ``n`` copies."""
+    solve = _example("solve")
+    row = [v for j in JOINT_NAMES for v in solve["pose"][j]]
+    goals = [v for t in solve["targets"] for v in t["position"]]
+    return {
+        "poses": [row] * n,
+        "targets": {"joints": [t["joint"] for t in solve["targets"]], "positions": [goals] * n},
+    }
+
+
+def _raw(client: Any, path: str, text: str, **headers: str) -> Any:
+    return client.post(
+        path, content=text.encode(), headers={"content-type": "application/json", **headers}
+    )
+
+
+def test_an_integer_beyond_any_float_is_a_422_in_every_form(client: Any) -> None:
+    """A 400-digit JSON integer (valid JSON) where a number goes: a 500 in the columnar form
+    before (numpy's OverflowError), 'Input should be a valid number' in the others."""
+    huge = "9" * 400
+    text = json.dumps(_columns())
+    cols = re.sub(r'("poses": \[\[)[^,]+', lambda m: m.group(1) + huge, text, count=1)
+    body = assert_problem(_raw(client, "/v1/solve/batch", cols), 422, "poses[0][0]")
+    assert body["errors"][0]["location"] == "poses[0][0]"
+    solve = json.dumps(_example("solve"))
+    x = json.dumps(_example("solve")["targets"][0]["position"][0])
+    body = assert_problem(
+        _raw(client, "/v1/solve", solve.replace(x, huge, 1)), 422, "beyond any number"
+    )
+    assert "an integer of 400 digits" in body["detail"], body["detail"]
+
+
+@pytest.mark.parametrize("field", ["joints", "pins"])
+def test_a_joint_name_nested_a_thousand_deep_is_named_not_a_500(client: Any, field: str) -> None:
+    """orjson reads lists up to 1,024 deep; quoting one in the message recursed past
+    Python's stack (a 500 before). Now the value is shown three levels deep."""
+    deep = "[" * 1000 + "1.0" + "]" * 1000
+    cols = _columns(1)
+    cols["targets"]["joints"] = ["left_wrist"]
+    cols["targets"]["positions"] = [cols["targets"]["positions"][0][:3]]
+    if field == "pins":
+        cols["pins"] = ["__DEEP__"]
+    else:
+        cols["targets"]["joints"] = ["__DEEP__"]
+    text = json.dumps(cols).replace('"__DEEP__"', deep)
+    r = _raw(client, "/v1/solve/batch", text)
+    assert_problem(r, 422, "[[[[…]]]]")
+    for name in EVERY_ANSWER[:2]:
+        assert name in r.headers
+
+
+def test_a_500_carries_the_headers_of_every_answer(
+    models_dir: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The last-resort 500 was answered outside the timing and hardening layers."""
+    with make_client(models_dir) as c:
+        engine = c.app.state.pose.repository.engine
+
+        def boom(*_: Any, **__: Any) -> None:
+            raise RuntimeError("injected fault")
+
+        monkeypatch.setattr(engine, "solve", boom)
+        r = c.post("/v1/solve", json=_example("solve"), headers={"X-Request-ID": "r-500"})
+        assert_problem(r, 500)
+        assert r.headers["x-request-id"] == "r-500"
+        for name in EVERY_ANSWER:
+            assert name in r.headers, name
+
+
+def test_cors_preflights_carry_the_headers_of_every_answer(models_dir: Path) -> None:
+    """Preflights were answered outside the request id, timing and hardening layers: a
+    refused one could not be matched to anything."""
+    with make_client(models_dir, cors_origins=["http://editor.example"]) as c:
+        for origin, status in (("http://editor.example", 200), ("http://evil.example", 400)):
+            r = c.options(
+                "/v1/solve", headers={"Origin": origin, "Access-Control-Request-Method": "POST"}
+            )
+            assert r.status_code == status, r.text
+            for name in EVERY_ANSWER[:3]:
+                assert name in r.headers, (origin, name)
+
+
+@pytest.mark.parametrize(
+    "path", ["/v1/solve", "/v1/solve/batch", "/v1/complete", "/v1/character/solve",
+             "/v1/bvh/solve", "/v1/bvh/inspect"],
+)  # fmt: skip
+def test_an_empty_body_is_a_400_on_every_route_that_reads_one(client: Any, path: str) -> None:
+    """422 'body: Field required' on four routes, 400 on the batch, before."""
+    body = assert_problem(_raw(client, path, ""), 400, "no body")
+    assert body["type"].endswith("malformed-body")
+
+
+def test_an_empty_post_to_no_route_is_still_a_404(client: Any) -> None:
+    assert _raw(client, "/v1/nothing-here", "").status_code == 404
+
+
+def test_field_and_cross_field_errors_are_one_problem_shape(client: Any) -> None:
+    """Type invalid-request had two titles, and cross-field errors no ``errors`` list."""
+    bad = _example("bad")
+    field = assert_problem(client.post("/v1/solve", json=bad), 422)
+    twice = _example("solve")
+    twice["targets"] = [twice["targets"][0], twice["targets"][0]]
+    cross = assert_problem(client.post("/v1/solve", json=twice), 422, "duplicate target")
+    assert field["type"] == cross["type"] and field["title"] == cross["title"]
+    assert cross["errors"] == [
+        {"location": "targets[1]", "message": cross["detail"].partition(": ")[2]}
+    ]
+
+
+@pytest.mark.parametrize(
+    ("weights", "needle"), [([float("nan")], "finite"), ([1.0, 2.0], "1 numbers")]
+)
+def test_shared_columnar_weights_are_named_once_where_they_are(
+    client: Any, weights: list[float], needle: str
+) -> None:
+    """A flat weight list shared by every item was named once per item, at places that do
+    not exist in the body (``targets.weights[2][0]``)."""
+    cols = _columns(3)
+    cols["targets"]["joints"] = cols["targets"]["joints"][:1]
+    cols["targets"]["positions"] = [row[:3] for row in cols["targets"]["positions"]]
+    cols["targets"]["weights"] = weights
+    body = assert_problem(_raw(client, "/v1/solve/batch", json.dumps(cols)), 422, needle)
+    where = [e["location"] for e in body["errors"]]
+    assert where == (["targets.weights[0]"] if needle == "finite" else ["targets.weights"])
+
+
+def test_a_batch_over_its_item_limit_is_a_413_before_its_items_are_read(models_dir: Path) -> None:
+    """The item list was validated whole before its length was checked: one bad item in
+    1,025 gave a 422 there (a 413 in the columnar form), and 8 MiB of items cost a compute
+    thread ~1-2 s before their 413."""
+    with make_client(models_dir, max_batch_items=4) as c:
+        items = [_example("solve")] * 5
+        items[1] = {"pose": "not a pose"}
+        assert_problem(c.post("/v1/solve/batch", json={"items": items}), 413, "5 items")
+        assert c.post("/v1/solve/batch", json={"items": items[:1]}).status_code == 200
+
+
+def test_a_characters_duplicate_is_named_as_the_client_named_it(client: Any) -> None:
+    """'duplicate target for joint left_wrist' named a joint the client never sent."""
+    body = _example("solve_character")
+    hand = body["targets"][0]["joint"]
+    body["targets"] = [body["targets"][0], copy.deepcopy(body["targets"][0])]
+    detail = assert_problem(client.post("/v1/solve", json=body), 422)["detail"]
+    assert f"'{hand}'" in detail and "mapped to 'left_wrist'" in detail, detail
+
+
+@pytest.mark.parametrize("coding", ["gzip", "br"])
+def test_a_compressed_body_is_a_415(client: Any, coding: str) -> None:
+    """A gzip body was read as text (400 'not UTF-8'); a plain one labelled gzip was solved."""
+    plain = json.dumps(_example("solve")).encode()
+    for content in (gzip.compress(plain), plain):
+        r = client.post(
+            "/v1/solve", content=content,
+            headers={"content-type": "application/json", "content-encoding": coding},
+        )  # fmt: skip
+        assert_problem(r, 415, coding)
+
+
+def test_completion_refuses_key_points_at_one_spot(client: Any) -> None:
+    body = _example("complete")
+    for k in body["keypoints"]:
+        k["position"] = [1.0, 1.0, 1.0]
+    assert_problem(client.post("/v1/complete", json=body), 422, "six base points", "1 cm")
+
+
+@pytest.mark.parametrize("floor", [-50.0, -9999.0])
+def test_a_floor_far_from_the_key_points_gives_a_body_of_their_size(
+    client: Any, floor: float
+) -> None:
+    """A floor 50 m below the key points made bones up to 7 m long (1.4 km at 10 km). Such
+    floors now give the answer of the lowest floor a body of the training data stood on
+    (``service.completion.FLOOR_REACH``); one above the pelvis is refused."""
+    body = _example("complete")
+    near = client.post("/v1/complete", json=body).json()
+    far = client.post("/v1/complete", json={**body, "floor": floor})
+    assert far.status_code == 200, far.text
+    pose = np.array([far.json()["pose"][j] for j in JOINT_NAMES])
+    lengths = bone_lengths(pose)
+    ref = bone_lengths(np.array([near["pose"][j] for j in JOINT_NAMES]))
+    assert lengths.max() < 0.6 and np.abs(lengths - ref).max() < 0.1, lengths
+    pelvis = near["pose"]["pelvis"][1]
+    assert_problem(client.post("/v1/complete", json={**body, "floor": pelvis + 0.01}), 422,
+                   "floor", "above the pelvis")  # fmt: skip
+
+
+@pytest.mark.parametrize("path", ["/v2/health/live", "/v2/health/ready"])
+def test_health_answers_head_as_get(client: Any, path: str) -> None:
+    """HEAD was a 405 on the health routes, which load balancers probe with."""
+    get, head = client.get(path), client.head(path)
+    assert head.status_code == get.status_code == 200
+    assert head.content == b"" and head.headers["content-type"] == get.headers["content-type"]
