@@ -1,7 +1,7 @@
 """Transport: the FastAPI application, assembled from its parts.
 
-A request flows: middleware (``service.middleware``: CORS, request id and access log,
-timing, metrics, hardening headers, the gate) -> a router (``service.routes``: body read
+A request flows: middleware (``service.middleware``: the headers of every answer, CORS,
+access log, metrics, the gate) -> a router (``service.routes``: body read
 and validated by ``service.body`` and ``service.schemas``, cross-field checks in
 ``service.validation``) -> the data plane (``service.engine.Engine``) held by the model
 repository (``service.repository``), which also holds readiness. ``service.errors``

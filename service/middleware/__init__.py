@@ -1,9 +1,8 @@
 """Pure-ASGI middleware, one concern per module, installed by :func:`install`.
 
-Outermost first: the request id (``context.RequestId``), hardening headers (``headers``)
-and ``x-total-time`` (``timing``) on every answer, CORS preflights and last-resort answers
-included; CORS (``cors``); the access log and last-resort answers
-(``context.RequestContext``); Prometheus metrics (``metrics``); the gate (``gate``: API
+Outermost first: the headers of every answer (``headers``: request id, ``x-total-time``,
+hardening), CORS preflights and last-resort answers included; CORS (``cors``); the access
+log and last-resort answers (``context``); Prometheus metrics (``metrics``); the gate (``gate``: API
 key, content type, body limits and the per-worker admission bound), and innermost the hot
 paths (``fastpath``: the pose form of ``/v1/solve`` and the columnar batch answered without
 the router). Every rejection is problem+json.
@@ -17,12 +16,11 @@ from fastapi import FastAPI
 from starlette.routing import BaseRoute
 
 from service.metrics import Metrics
-from service.middleware.context import RequestContext, RequestId
+from service.middleware.context import RequestContext
 from service.middleware.cors import ProblemCORS
 from service.middleware.gate import Gate
-from service.middleware.headers import SecurityHeaders
+from service.middleware.headers import AnswerHeaders
 from service.middleware.metrics import RequestMetrics
-from service.middleware.timing import Timing
 from service.settings import Settings
 
 #: Headers a browser client may read.
@@ -52,6 +50,4 @@ def install(
             allow_headers=["Content-Type", "X-API-Key", "X-Request-ID", "Authorization"],
             expose_headers=EXPOSED,
         )
-    app.add_middleware(Timing)
-    app.add_middleware(SecurityHeaders)
-    app.add_middleware(RequestId)
+    app.add_middleware(AnswerHeaders)

@@ -1,22 +1,19 @@
-"""Request id (``X-Request-ID``, the client's or a new one: 32 random hex digits) on every
-answer (:class:`RequestId`, outermost: CORS preflights and last-resort answers carry it
-too), one JSON access-log line per request, and the last-resort answers: a 500 problem for
-anything unhandled and, when the server cancels a request at the end of its shutdown grace
-period, a 503 problem (:class:`RequestContext`)."""
+"""One JSON access-log line per request (its id: ``headers.request_id``), and the
+last-resort answers: a 500 problem for anything unhandled and, when the server cancels a
+request at the end of its shutdown grace period, a 503 problem."""
 
 from __future__ import annotations
 
 import asyncio
 import logging
-import os
 import time
 
 import orjson
 
 from service.errors import ShuttingDown, error_response, internal_error
+from service.middleware.headers import request_id
 from service.middleware.types import (
     REASON,
-    REQUEST_ID,
     T0,
     ASGIApp,
     Message,
@@ -27,38 +24,6 @@ from service.middleware.types import (
 
 access_log = logging.getLogger("service.access")
 _OUTCOME = {499: "client_disconnected", 503: "unavailable", 504: "deadline_exceeded"}
-
-
-def request_id(scope: Scope) -> str:
-    """The request's id: the client's ``X-Request-ID`` (printable, at most 128 characters)
-    or 32 random hex digits; made once per request and kept in its scope."""
-    known: str | None = scope.get(REQUEST_ID)
-    if known is None:
-        given = next((v for k, v in scope["headers"] if k.lower() == b"x-request-id"), b"")
-        text = given.decode("latin-1")
-        known = "".join(c for c in text[:128] if c.isprintable()) or os.urandom(16).hex()
-        scope[REQUEST_ID] = known
-    return known
-
-
-class RequestId:
-    """Every answer carries its request's id, whichever layer gives it."""
-
-    def __init__(self, app: ASGIApp) -> None:
-        self.app = app
-
-    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
-        if scope["type"] != "http":
-            await self.app(scope, receive, send)
-            return
-        tag = (b"x-request-id", request_id(scope).encode("latin-1", "replace"))
-
-        async def tagged(message: Message) -> None:
-            if message["type"] == "http.response.start":
-                message["headers"] = [*message.get("headers", []), tag]
-            await send(message)
-
-        await self.app(scope, receive, tagged)
 
 
 class RequestContext:

@@ -1,9 +1,19 @@
-"""Hardening headers on every answer: no MIME sniffing, no framing, no referrer, and a
-Content Security Policy (HTML pages may load their own scripts and styles only)."""
+"""The headers every answer carries, whichever layer gives it (this layer is the outermost,
+so CORS preflights and the last-resort 500 and 503 answers carry them too):
+
+- ``X-Request-ID``: the client's (printable, at most 128 characters) or 32 random hex
+  digits, made once per request (:func:`request_id`; the access log names it);
+- ``X-Total-Time``: the whole request in ms, from arrival to the response's headers (the
+  engine's own time is the route's ``X-Compute-Time``);
+- hardening: no MIME sniffing, no framing, no referrer, and a Content Security Policy
+  (HTML pages may load their own scripts and styles only)."""
 
 from __future__ import annotations
 
-from service.middleware.types import ASGIApp, Message, Receive, Scope, Send
+import os
+import time
+
+from service.middleware.types import REQUEST_ID, T0, ASGIApp, Message, Receive, Scope, Send
 
 #: JSON answers load nothing.
 API_CSP = b"default-src 'none'; frame-ancestors 'none'; base-uri 'none'"
@@ -15,7 +25,19 @@ _BASE = [
 ]
 
 
-class SecurityHeaders:
+def request_id(scope: Scope) -> str:
+    """The request's id: the client's ``X-Request-ID`` (printable, at most 128 characters)
+    or 32 random hex digits; made once per request and kept in its scope."""
+    known: str | None = scope.get(REQUEST_ID)
+    if known is None:
+        given = next((v for k, v in scope["headers"] if k.lower() == b"x-request-id"), b"")
+        text = given.decode("latin-1")
+        known = "".join(c for c in text[:128] if c.isprintable()) or os.urandom(16).hex()
+        scope[REQUEST_ID] = known
+    return known
+
+
+class AnswerHeaders:
     def __init__(self, app: ASGIApp) -> None:
         self.app = app
 
@@ -23,15 +45,19 @@ class SecurityHeaders:
         if scope["type"] != "http":
             await self.app(scope, receive, send)
             return
+        t0: float = scope.setdefault(T0, time.perf_counter())
+        tag = (b"x-request-id", request_id(scope).encode("latin-1", "replace"))
 
-        async def harden(message: Message) -> None:
+        async def stamped(message: Message) -> None:
             if message["type"] == "http.response.start":
                 headers = list(message.get("headers", []))
                 names = {k.lower() for k, _ in headers}
-                extra = [(k, v) for k, v in _BASE if k not in names]
+                ms = f"{(time.perf_counter() - t0) * 1000:.3f}ms".encode()
+                extra = [tag, (b"x-total-time", ms)]
+                extra += [(k, v) for k, v in _BASE if k not in names]
                 if b"content-security-policy" not in names:  # pages set their own
                     extra.append((b"content-security-policy", API_CSP))
                 message["headers"] = headers + extra
             await send(message)
 
-        await self.app(scope, receive, harden)
+        await self.app(scope, receive, stamped)
