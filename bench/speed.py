@@ -130,7 +130,7 @@ def issue14(
       edit (no engine glue);
     - ``fabrik_numpy``: ``core.kinematics.fabrik`` (the numpy FABRIK the engine ran before);
     - ``neural_passes1``: the ``neural`` call with ``passes=1`` (``options.passes``), beside
-      the engine's default (``solve_passes``, the models' ``serving.passes``);
+      the engine's default (the models' ``serving.passes``);
     - ``neural_no_mirror``: with ``mirror=False`` (``options.mirror``), when the engine's
       default solves the mirror image too (``serving.solve_mirror``);
     - ``neural_numpy_mirror``: the ``neural`` call with the mirror image asked around the

@@ -31,8 +31,10 @@ def shown(value: object, depth: int = _DEPTH) -> str:
     if isinstance(value, int):
         if abs(value) < 10**_DIGITS:
             return str(value)
-        digits = int((value.bit_length() - 1) * 0.30103) + 1  # log10(2): no str() of it
-        digits += abs(value) >= 10**digits  # the estimate is at most one short
+        # no str() of it (Python refuses past 4,300 digits): log10(2) per bit, then exact
+        digits = max(1, int((value.bit_length() - 1) * 0.30102999566398114))
+        while abs(value) >= 10**digits:
+            digits += 1
         return f"{'-' if value < 0 else ''}<an integer of {digits} digits>"
     if isinstance(value, str):
         return repr(value if len(value) <= QUOTE else value[: QUOTE - 1] + "…")

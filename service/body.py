@@ -29,6 +29,7 @@ from core.text import clip, quoted
 from service.errors import BodyError, BodyInvalid, DeadlineExceeded, MalformedBody, PoseError
 from service.limits import Budget
 
+NO_BODY = "the request has no body: send a JSON object"
 INLINE_BYTES = 64 * 1024  # smaller bodies are parsed on the loop (a thread hop costs more)
 
 
@@ -44,6 +45,8 @@ def _object(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
 def decode(body: bytes) -> Any:
     """Strict JSON: UTF-8, no duplicate keys; every failure a ``MalformedBody`` that says
     where. (``NaN`` and ``Infinity`` tokens decode; the schemas then reject them by field.)"""
+    if not body.strip():
+        raise MalformedBody(NO_BODY)
     try:
         text = body.decode("utf-8")
     except UnicodeDecodeError as exc:
@@ -59,7 +62,7 @@ def decode(body: bytes) -> Any:
     except RecursionError:
         raise MalformedBody("JSON nested too deeply (arrays/objects within each other)") from None
     except ValueError as exc:  # integer longer than Python converts (4300 digits)
-        raise MalformedBody(f"JSON number not accepted: {clip(exc, 80)}") from None
+        raise MalformedBody(f"JSON number not accepted: {clip(str(exc), 80)}") from None
 
 
 def parse(body: bytes, model: type[BaseModel] | None, context: Any = None) -> Any:
@@ -116,6 +119,9 @@ class BodyRoute(APIRoute):
         request_class = type("BodyRequest", (_Request,), {"model": model})
 
         async def route_handler(request: Request) -> Response:
-            return await handler(request_class(request.scope, request.receive))
+            req = request_class(request.scope, request.receive)
+            if model is not None and not (await req.body()).strip():  # FastAPI would not
+                raise BodyError(MalformedBody(NO_BODY))  # read it: 422 'Field required'
+            return await handler(req)
 
         return route_handler

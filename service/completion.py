@@ -26,8 +26,9 @@ MIN_SPAN = 0.01
 #: pelvis. No body of the training data stood higher above its floor (at most 3.5: a jump;
 #: 2.2 standing), so a floor farther below says nothing but a size the networks never saw:
 #: 50 m below the key points, the answer's bones came out up to 7 m long, 10 km below,
-#: 1.4 km (reviewed 2026-12-04). A floor above the pelvis is refused (422): 9 m above the
-#: key points, it made bones up to 1.25 m long.
+#: 1.4 km (reviewed 2026-12-04). Nor is it above the pelvis: a pelvis on the floor (a body
+#: lying or sitting there) is as low as the training data went; 9 m above the key points,
+#: the floor made bones up to 1.25 m long.
 FLOOR_REACH = 4.0
 
 
@@ -59,12 +60,12 @@ def complete(
     # pelvis floor projection to the origin; the networks were trained for any yaw
     origin = keypoints["pelvis"].copy()
     torso = float(np.linalg.norm(keypoints["neck"] - keypoints["pelvis"]))
-    if floor > origin[1]:
+    if torso < MIN_SPAN:
         raise InvalidRequest(
-            f"floor: the ground ({floor:.4g} m) is above the pelvis key point "
-            f"({origin[1]:.4g} m): the body would stand under it"
+            f"keypoints: the pelvis and the neck lie {torso * 1000:.3g} mm apart; the body's "
+            f"size is read from them: they must be at least {MIN_SPAN * 100:g} cm apart"
         )
-    origin[1] = max(floor, origin[1] - FLOOR_REACH * torso)
+    origin[1] = min(max(floor, origin[1] - FLOOR_REACH * torso), origin[1])
     ref = engine.reference_lengths
     bones = {JOINT_NAMES[c]: b for b, (c, _) in enumerate(BONES)}
     lengths = ref.copy()

@@ -72,6 +72,10 @@ from service.runtime import ROW_BLOCK, Fused, Net, session_options
 F64 = npt.NDArray[np.floating[Any]]
 #: Metres by which the exact-reach fallback must beat the polish to be used.
 _TIE = 1e-12
+#: How far exact reach may lift a body whose pelvis FABRIK holds, as a share of its summed
+#: bone lengths (``Engine._shifted_fallback``): 2.5 %, ~10 cm for an adult, a rise onto
+#: the toes.
+LIFT = 0.025
 
 
 # --------------------------------------------------------------------------------------
@@ -232,7 +236,7 @@ class Engine:
         return self._result(p, self._retry(items, lean_answer(self, items, passes, seq)), 0)
 
     def passes_of(self, p: SolveProblem) -> int:
-        """The neural passes ``p`` asks for (``solve_passes`` unless it says)."""
+        """The neural passes ``p`` asks for (``serving.passes`` unless it says)."""
         return self.serving.passes if p.passes is None else p.passes
 
     def carry_of(self, p: SolveProblem) -> float:
@@ -240,7 +244,8 @@ class Engine:
         return self.serving.carry if p.carry is None else p.carry
 
     def mirror_of(self, p: SolveProblem) -> bool:
-        """Whether ``p`` has its mirror image solved too (``solve_mirror`` unless it says)."""
+        """Whether ``p`` has its mirror image solved too (``serving.solve_mirror`` unless
+        it says)."""
         return self.serving.solve_mirror if p.mirror is None else p.mirror
 
     @staticmethod
@@ -281,10 +286,10 @@ class Engine:
         on; the rest is padding), ``target_pos [B, K, 3]`` world, ``weights [B, K]``.
         Per-item options are ``[B]`` arrays or scalars: ``fabrik`` (method), ``exact``
         (reach), ``preserve_bone_lengths``, ``tolerance`` (m), ``floor`` (world y),
-        ``passes`` (neural solves; default the engine's ``solve_passes``), ``carry`` (the
+        ``passes`` (neural solves; default ``serving.passes``), ``carry`` (the
         branch below each target, 0-1, :mod:`core.carry`; default the engine's ``carry``),
         ``turn_search`` (False: never search the turn, :mod:`service.turns`), ``mirror``
-        (also solve the mirror image; default the engine's ``solve_mirror``).
+        (also solve the mirror image; default ``serving.solve_mirror``).
 
         Geometry runs in compiled kernels (:mod:`core.compiled`), one call per stage for
         the whole batch; items that share a solver sequence share one onnxruntime run per
@@ -555,8 +560,43 @@ class Engine:
             better = np.max(alt_errs, axis=1) < np.max(errs[missed], axis=1) - _TIE
             take = missed[better]
             pose[take], its[take] = alt[better], its[take] + alt_its[better]
+            errs[take] = alt_errs[better]
             fell[take] = True
+            if not pins.any():
+                self._shifted_fallback(pose, its, errs, fell, lengths, goal, tols, idx, weights)
         return pose, its, fell
+
+    def _shifted_fallback(
+        self, pose: F64, its: npt.NDArray[np.int64], errs: F64, fell: npt.NDArray[np.bool_],
+        lengths: F64, goal: F64, tols: F64, idx: npt.NDArray[np.int64], weights: F64,
+    ) -> None:  # fmt: skip
+        """Exact reach of a set without pins whose targets all hang from one branch of the
+        pelvis (a collar, the neck, the spine, one limb): FABRIK holds the pelvis there, so
+        a target beyond that branch's reach stays short by the whole excess (3 cm above a
+        standing body's neck: missed by 3 cm, where with both ankles pinned the pelvis is
+        free and it was reached). Each item still short is moved whole by its targets'
+        weighted mean miss, polished again, and kept where that ends nearer: across as far
+        as it takes (as ``serving.reach_travel`` moves a soft answer's start), up by at
+        most ``LIFT`` of the body's summed bone lengths (a rise onto the toes: ~10 cm for
+        an adult; a hand 3 m up is approached, not reached by a body in the air), down no
+        lower than the floor (canonical y 0) or than its lowest joint already is. In place."""
+        short = np.flatnonzero(np.any(errs > tols[:, None], axis=1))
+        if not short.size:
+            return
+        w = weights / np.sum(weights)
+        shift = np.einsum("k,nkc->nc", w, goal[short] - pose[short][:, idx])
+        above = np.maximum(pose[short][..., 1].min(axis=1), 0.0)
+        shift[:, 1] = np.clip(shift[:, 1], -above, LIFT * lengths[short].sum(axis=1))
+        hold = np.zeros(len(idx), dtype=np.bool_)
+        alt, alt_its, alt_errs = self._fabrik(
+            True, pose[short] + shift[:, None, :], lengths[short], goal[short], tols[short],
+            idx, weights, hold,
+        )  # fmt: skip
+        better = np.max(alt_errs, axis=1) < np.max(errs[short], axis=1) - _TIE
+        take = short[better]
+        pose[take], its[take] = alt[better], its[take] + alt_its[better]
+        errs[take] = alt_errs[better]
+        fell[take] = True
 
     @staticmethod
     def origin_in(origin: F64, facing: F64, trans: F64, floors: F64) -> F64:

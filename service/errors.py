@@ -166,7 +166,10 @@ def problem(
     return JSONResponse(body, status_code=status, media_type=PROBLEM_JSON, headers=headers)
 
 
-_LOCATION = re.compile(r"[\w.\[\]]+")
+#: A field's place as the messages write it (``items[2].targets[0].joint``, ``bvh``):
+#: lower-case names and indices only, so a client's own name in a detail (``Bip01 L
+#: Forearm``, ``L: Forearm``) is never taken for one.
+_LOCATION = re.compile(r"[a-z_]+(\[\d+\])*(\.[a-z_]+(\[\d+\])*)*")
 
 
 def error_response(exc: PoseError) -> JSONResponse:

@@ -37,7 +37,7 @@ class SolveProblem:
     reach: str = "soft"
     tolerance: float = 1e-3
     floor: float = 0.0  # world y of the ground under the character
-    passes: int | None = None  # neural solves (None: the engine's ``solve_passes``)
+    passes: int | None = None  # neural solves (None: the engine's ``serving.passes``)
     carry: float | None = None  # the branch below targets, 0-1 (None: the engine's)
     turn_search: bool | None = None  # search the turn (service.turns; None: if the models do)
     mirror: bool | None = None  # also solve the mirror image (None: if the models do)

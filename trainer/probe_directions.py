@@ -10,9 +10,11 @@ answer has them exactly, whatever the body.
 
 This trains such an autoencoder with the shipped one's recipe (the same samples: random
 bodies, placements, mirror, facings and offsets of ``ae_samples``; the same architecture,
-optimiser, batch, epochs and loss: MSE of normalised features) and scores both on the
-poses ``python -m bench.heldout`` scores the shipped one on (``bench.heldout.recon_sample``),
-through the same mapping as ``Engine.reconstruct`` (canonical frame, one size). Beside
+optimiser, batch, epochs and loss: MSE of normalised features; a recipe with a learning-rate
+schedule or another loss is refused, not silently trained otherwise) and scores both on the
+held-out poses ``python -m bench.heldout`` scores the shipped one on
+(``bench.heldout.recon_sample``), and as many of each in-studio TEST source drawn the same
+way, through the same mapping as ``Engine.reconstruct`` (canonical frame, one size). Beside
 them: the shipped autoencoder's answer after the bone pass (the body's own lengths), the
 fair peer of an answer that has them by construction.
 
@@ -90,6 +92,11 @@ def train_directions(
     torch.use_deterministic_algorithms(True)
     seed_all(cfg.seed)
     ac, aug = cfg.autoencoder, cfg.augment
+    if ac.lr_schedule != "constant" or ac.loss != "mse":
+        raise typer.BadParameter(
+            f"the probe trains at a constant rate on the MSE of normalised features; {config} "
+            f"asks lr_schedule={ac.lr_schedule!r}, loss={ac.loss!r}"
+        )
     splits = load_splits(cfg)
     train = flat(splits.train.positions)
     total = float(reference_lengths(splits.train).sum())

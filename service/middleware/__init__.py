@@ -35,11 +35,7 @@ def install(
     from service.middleware.fastpath import FastPath  # imports the routes' modules
 
     app.add_middleware(FastPath, app_routes=routes)
-    posts = frozenset(
-        path for r in routes if "POST" in (getattr(r, "methods", None) or ())
-        if isinstance(path := getattr(r, "path", None), str)
-    )  # fmt: skip
-    app.add_middleware(Gate, settings=settings, posts=posts)
+    app.add_middleware(Gate, settings=settings)
     app.add_middleware(RequestMetrics, metrics=metrics, app_routes=routes)
     app.add_middleware(RequestContext, access_log=settings.access_log)
     if settings.cors_origins:  # outside the gate and the 500s: their answers carry CORS too

@@ -5,7 +5,7 @@
 - a body must be ``application/json``, uncompressed (a ``Content-Encoding`` other than
   ``identity`` is a 415, not a body read as if it were plain), and within
   ``max_body_bytes`` (declared length checked up front, a chunked body counted while it is
-  read); a POST to a route that reads a body must send one (400);
+  read);
 - admission, per worker: at most ``max_concurrency`` ``/v1`` POSTs in flight and at most
   ``max_inflight_bytes`` of their bodies held at once (a chunked body reserves the whole
   body limit); past either, 429 with ``Retry-After`` before the body is read;
@@ -57,12 +57,9 @@ def _api_key(headers: dict[str, str]) -> str:
 
 
 class Gate:
-    def __init__(
-        self, app: ASGIApp, settings: Settings, posts: frozenset[str] = frozenset()
-    ) -> None:
+    def __init__(self, app: ASGIApp, settings: Settings) -> None:
         self.app = app
         self.settings = settings
-        self.posts = posts  # the paths of the app's POST routes
         self.active = 0  # admitted /v1 POSTs in flight
         self.held = 0  # body bytes reserved by them
         #: tasks reading a body -> when their deadline passes (perf_counter seconds)
@@ -99,11 +96,7 @@ class Gate:
             )
         length = headers.get("content-length")
         chunked = length is None and "transfer-encoding" in headers
-        if method not in ("POST", "PUT", "PATCH"):
-            return 0
-        if length in (None, "0") and not chunked:
-            if method == "POST" and path in self.posts:  # every one of them reads a body
-                raise MalformedBody("the request has no body: send a JSON object")
+        if method not in ("POST", "PUT", "PATCH") or (length in (None, "0") and not chunked):
             return 0
         ctype = headers.get("content-type", "").split(";")[0].strip().lower()
         if ctype != "application/json":

@@ -14,22 +14,19 @@ from service.schemas import Health
 router = APIRouter(tags=["health"])
 
 
-#: Health answers HEAD as GET (RFC 9110 9.3.2): load balancers probe with it.
-PROBE = ["GET", "HEAD"]
-
-
-@router.api_route("/v2/health/live", methods=PROBE, response_model=Health)
+@router.get("/v2/health/live", response_model=Health)
+@router.head("/v2/health/live", include_in_schema=False)  # load balancers probe with HEAD
 async def live() -> Health:
     """The process is up (Open Inference Protocol liveness)."""
     return Health(status="live")
 
 
-@router.api_route(
+@router.get(
     "/v2/health/ready",
-    methods=PROBE,
     response_model=Health,
     responses={503: {"model": Health, "description": "Models not loaded or broken."}},
 )
+@router.head("/v2/health/ready", include_in_schema=False)
 async def ready(response: Response, state: State) -> Health:
     """200 once every model is loaded, verified and a warm-up solve passed; else 503
     with the reason (file names, never server paths)."""

@@ -108,11 +108,17 @@ def test_exact_reach_and_pins(client: Any, synthetic_poses: PosePairs) -> None:
 def test_unreachable_target_is_approached_not_an_error(
     client: Any, synthetic_poses: PosePairs
 ) -> None:
+    """2 m to the right of the shoulder, both feet pinned: beyond any arm, approached. Not
+    pinned, exact reach moves the body across until it is reached, as soft reach moves
+    its start (``serving.reach_travel``; ``Engine._shifted_fallback``)."""
     body = solve_body(synthetic_poses, 0, ["right_wrist"], reach="exact")
     pose = as_array(body["pose"])
     shoulder = pose[JOINT_INDEX["right_shoulder"]]
     far = shoulder + np.array([-2.0, 0.0, 0.0])  # 2 m to the right: beyond any arm
     body["targets"][0]["position"] = far.tolist()
+    free = client.post("/v1/solve", json=body).json()
+    assert free["targets"][0]["reached"] is True, free["targets"]
+    body["pins"] = ["left_ankle", "right_ankle"]
     resp = client.post("/v1/solve", json=body)
     assert resp.status_code == 200
     out = resp.json()

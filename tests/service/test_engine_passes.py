@@ -115,7 +115,7 @@ def test_per_item_passes_equal_an_engine_built_with_them(
     models_dir: Path, engines: tuple[Engine, Engine], real_poses: PosePairs
 ) -> None:
     """One batch mixing 1, 2, 3 and 4 passes (and FABRIK, and exact reach) answers each
-    item bit for bit as an engine built with ``solve_passes`` = its passes, as its single
+    item bit for bit as an engine built with ``serving.passes`` = its passes, as its single
     solve, and as the same batch again."""
     one, three = engines
     by_passes = {1: one, 2: Engine(models_dir, serving={"passes": 2, "retry_reach": 0.0}), 3: three,
