@@ -162,6 +162,8 @@ class _Tokens:
         self.file = file
         self.items: list[tuple[str, int, int]] = []  # token, line number, position in line
         for lineno, line in enumerate(lines, start=1):
+            if lineno == 1:  # a UTF-8 byte order mark (Windows exporters write one)
+                line = line.removeprefix("\ufeff")
             for pos, tok in enumerate(line.split()):
                 self.items.append((tok, lineno, pos))
         self.pos = 0

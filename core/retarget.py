@@ -272,6 +272,44 @@ def _fabrik(
 _ROUNDS = 8
 
 
+def _widened(
+    skel: Skeleton, pose: Pose, jmap: JointMap, plan: _Plan, goal: F64, chain: list[int],
+    target: F64, exact: Sequence[tuple[int, F64]], tolerance: float, bend: F64 | None,
+) -> bool:  # fmt: skip
+    """A target its chain left short, where the chain's top hangs from a joint that aims
+    several (a chest: the neck and both collars): that joint's turn joins the chain. The
+    head's chain is the neck alone, one bone from a neck point the chest's least-squares
+    turn placed millimetres off, so exact reach missed a head by 3-7 mm on every file
+    tried. The chain with the joint's origin in front is FABRIK-ed onto the target, and
+    the goals of all its aimed children are turned rigidly about that origin by the
+    swing that carries the chain's top where FABRIK put it (the chest turns as one, arms
+    with it), so its least-squares turn lands the top there exactly. Not where another
+    exact target hangs from one of its other children (the chest's turn would move it).
+    Returns whether ``goal`` changed."""
+    joint, aim = chain[-1], plan.aim_of.get(chain[0])
+    goal_t = np.asarray(target, dtype=np.float64)
+    if aim is None or len(plan.groups[aim]) < 2:
+        return False
+    others = [c for c in plan.groups[aim] if c != chain[0]]
+    for j, _ in exact:
+        while j >= 0 and j not in others and j != joint:
+            j = PARENTS[j]
+        if j in others:
+            return False
+    g_rot, g_pos = forward_kinematics(skel, pose)
+    pts = jmap.points(g_rot, g_pos)
+    if float(np.linalg.norm(pts[joint] - goal_t)) <= tolerance:
+        return False
+    origin, top = g_pos[aim], g_pos[jmap.anchors[chain[0]].joint]
+    line = np.concatenate([origin[None], top[None], pts[chain[1:]]])
+    done = _fabrik(line, goal_t, tolerance * 0.01, bend=bend)
+    turn = swing(top - origin, done[1] - origin)
+    for c in plan.groups[aim]:
+        goal[c] = origin + turn @ (pts[c] - origin)
+    goal[chain[1:]] = done[2:]
+    return True
+
+
 def _attempt(
     skel: Skeleton,
     pose: Pose,
@@ -310,6 +348,8 @@ def _attempt(
         done = _fabrik(line, np.asarray(target, dtype=np.float64), tolerance * 0.01, bend=bend)
         goal[chain[1:]] = done[1:]
         changed |= _aim_pass(skel, new, jmap, plan, goal, turned, pose)
+        if _widened(skel, new, jmap, plan, goal, chain, target, exact, tolerance, bend):
+            changed |= _aim_pass(skel, new, jmap, plan, goal, turned, pose)
     if root is not None and not np.array_equal(new.translations[root], pose.translations[root]):
         changed.add(root)
     shift = np.mean(moves, axis=0) if moves else None

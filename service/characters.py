@@ -25,6 +25,7 @@ from pydantic import (
     Tag,
     ValidationError,
     ValidatorFunctionWrapHandler,
+    WrapValidator,
     model_validator,
 )
 from pydantic_core import InitErrorDetails, PydanticCustomError
@@ -64,8 +65,25 @@ Quat = Annotated[
     list[Annotated[float, Field(allow_inf_nan=False)]],
     Field(min_length=4, max_length=4, description="[x, y, z, w] (scalar last), any length > 0."),
 ]
+
+
+def _one_units_error(value: Any, handler: ValidatorFunctionWrapHandler) -> Any:
+    """One message for the two forms units take (pydantic names each branch of the union,
+    its internals included: ``units.literal['m',…]: …; units.constrained-float: …``)."""
+    try:
+        return handler(value)
+    except ValidationError:
+        raise PydanticCustomError(
+            "units",
+            "must be one of m, cm, mm, in, ft (lower case) or metres per unit, a number > 0; "
+            "got {got}",
+            {"got": quoted(value)},
+        ) from None
+
+
 Units = Annotated[
     Literal["m", "cm", "mm", "in", "ft"] | Annotated[float, Field(gt=0, allow_inf_nan=False)],
+    WrapValidator(_one_units_error),
     Field(description="Unit name, or metres per unit (e.g. 0.0564444 for CMU ASF units)."),
 ]
 
@@ -499,7 +517,7 @@ def read_request_bvh(text: str) -> BVH:
         channel = joint.channels[c - joint.channel_start]
         raise InvalidRequest(
             f"bvh: line {line}: frame {f}, channel {clip(joint.name)}.{channel} is "
-            f"{bvh.motion[f, c]!r}: channel values must be finite numbers within "
+            f"{float(bvh.motion[f, c])!r}: channel values must be finite numbers within "
             f"±{MAX_COORDINATE:g}"
         )
     offsets = np.array([j.offset for j in bvh.joints], dtype=np.float64)

@@ -61,9 +61,16 @@ function wireControls() {
     openFile(ev.target.files[0]);
     ev.target.value = ''; // the same file can be opened again
   });
+  // Units or up changed: read again the file last asked for. If that is the open file, its
+  // edits are kept and Reset still returns to it as opened (the undo history starts anew:
+  // its poses were in the old units); if its opening failed, that file, not the open one.
   for (const id of ['bvh-units', 'bvh-up']) {
     $(id).addEventListener('change', () => {
-      if (doc.tried) openText(doc.active ? doc.text : doc.tried.text, doc.tried.name);
+      const t = doc.tried;
+      if (!t) return;
+      const open = doc.active && t.name === doc.name && t.text === doc.original;
+      if (open) openText(doc.text, doc.name, doc.original);
+      else openText(t.text, t.name);
     });
   }
   $('bvh-frame').addEventListener('input', (ev) => setFrame(Number(ev.target.value)));

@@ -591,6 +591,35 @@ def test_editor_opens_poses_scrubs_and_exports_a_real_bvh_file(
         changed = [i for i, (x, y) in enumerate(zip(old_lines, new_lines, strict=True)) if x != y]
         assert changed == [motion + 3 + edited_frame], changed
 
+        # -- the units or up changed with the file open: read again, edits kept; Reset
+        # returns to the file as opened (was: the edited text became the original) ------
+        page.select_option("#bvh-up", "+Y")  # the file's own: the same figure
+        page.wait_for_function(f"() => {m}.history().length === 1")
+        assert page.evaluate(f"{m}.bvhText()") == edited
+        assert page.evaluate(f"{m}.bvh()")["name"] == "dropped.bvh"
+        page.click("#reset")
+        assert page.evaluate(f"{m}.bvhText()") == original
+
+        # -- an open refused (units auto), then units stated: THAT file opens (was: the
+        # file still shown, under the refused one's name) -----------------------------------
+        page.select_option("#bvh-units", "auto")  # re-reads dropped.bvh: refused, still shown
+        page.wait_for_function(f"() => {m}.error() !== null")
+        with page.expect_response("**/v1/bvh/inspect") as refused:
+            page.evaluate(
+                """([text, name]) => {
+                  const dt = new DataTransfer();
+                  dt.items.add(new File([text], name, { type: 'text/plain' }));
+                  document.getElementById('viewport').dispatchEvent(
+                    new DragEvent('drop', { dataTransfer: dt, bubbles: true, cancelable: true }));
+                }""",
+                [edited, "other.bvh"],
+            )
+        assert refused.value.status == 422
+        assert page.evaluate(f"{m}.bvh()")["name"] == "dropped.bvh"
+        page.select_option("#bvh-units", str(units))
+        page.wait_for_function(f"() => {m}.bvh().name === 'other.bvh'")
+        assert page.evaluate(f"{m}.bvhText()") == edited
+
         assert page_errors == []
         # only the browser's own log line of the refused (422) first open
         unexpected = [e for e in console_errors if not e.startswith("Failed to load resource")]

@@ -120,6 +120,17 @@ def test_an_empty_body_is_a_400_on_every_route_that_reads_one(client: Any, path:
     assert body["type"].endswith("malformed-body")
 
 
+def test_an_empty_body_by_any_framing_is_a_400(client: Any) -> None:
+    """The gate saw only Content-Length 0: a chunked empty body or ``Content-Length: 00``
+    still reached FastAPI, which does not read an empty body (422 'Field required')."""
+    chunked = client.post(
+        "/v1/solve", content=iter([b""]), headers={"content-type": "application/json"}
+    )
+    assert_problem(chunked, 400, "no body")
+    for path in ("/v1/solve", "/v1/solve/batch", "/v1/complete"):
+        assert_problem(_raw(client, path, "  \n "), 400, "no body")
+
+
 def test_an_empty_post_to_no_route_is_still_a_404(client: Any) -> None:
     assert _raw(client, "/v1/nothing-here", "").status_code == 404
 
@@ -191,15 +202,22 @@ def test_completion_refuses_key_points_at_one_spot(client: Any) -> None:
     for k in body["keypoints"]:
         k["position"] = [1.0, 1.0, 1.0]
     assert_problem(client.post("/v1/complete", json=body), 422, "six base points", "1 cm")
+    body = _example("complete")
+    pelvis = next(k["position"] for k in body["keypoints"] if k["joint"] == "pelvis")
+    for k in body["keypoints"]:
+        if k["joint"] == "neck":
+            k["position"] = pelvis
+    assert_problem(client.post("/v1/complete", json=body), 422, "pelvis and the neck")
 
 
-@pytest.mark.parametrize("floor", [-50.0, -9999.0])
+@pytest.mark.parametrize("floor", [-50.0, -9999.0])  # and one above the pelvis
 def test_a_floor_far_from_the_key_points_gives_a_body_of_their_size(
     client: Any, floor: float
 ) -> None:
-    """A floor 50 m below the key points made bones up to 7 m long (1.4 km at 10 km). Such
-    floors now give the answer of the lowest floor a body of the training data stood on
-    (``service.completion.FLOOR_REACH``); one above the pelvis is refused."""
+    """A floor 50 m below the key points made bones up to 7 m long (1.4 km at 10 km); 9 m
+    above them, 1.25 m. Such floors now give the answer of the lowest floor a body of the
+    training data stood on (``service.completion.FLOOR_REACH``), or of a pelvis on the
+    floor (a body lying there: a floor just above the pelvis is no error)."""
     body = _example("complete")
     near = client.post("/v1/complete", json=body).json()
     far = client.post("/v1/complete", json={**body, "floor": floor})
@@ -208,9 +226,10 @@ def test_a_floor_far_from_the_key_points_gives_a_body_of_their_size(
     lengths = bone_lengths(pose)
     ref = bone_lengths(np.array([near["pose"][j] for j in JOINT_NAMES]))
     assert lengths.max() < 0.6 and np.abs(lengths - ref).max() < 0.1, lengths
-    pelvis = near["pose"]["pelvis"][1]
-    assert_problem(client.post("/v1/complete", json={**body, "floor": pelvis + 0.01}), 422,
-                   "floor", "above the pelvis")  # fmt: skip
+    pelvis = next(k["position"][1] for k in body["keypoints"] if k["joint"] == "pelvis")
+    above = client.post("/v1/complete", json={**body, "floor": pelvis + 9.0})
+    at = client.post("/v1/complete", json={**body, "floor": pelvis})
+    assert above.status_code == at.status_code == 200 and above.json() == at.json()
 
 
 @pytest.mark.parametrize("path", ["/v2/health/live", "/v2/health/ready"])
@@ -219,3 +238,110 @@ def test_health_answers_head_as_get(client: Any, path: str) -> None:
     get, head = client.get(path), client.head(path)
     assert head.status_code == get.status_code == 200
     assert head.content == b"" and head.headers["content-type"] == get.headers["content-type"]
+
+
+@pytest.mark.parametrize("joint", ["neck", "spine2", "left_collar"])
+def test_exact_reach_lifts_the_body_for_a_trunk_target_out_of_its_reach(
+    client: Any, joint: str
+) -> None:
+    """A neck, chest or collar 3 cm above a standing body is out of reach of a pelvis held
+    where it is, and FABRIK holds it when nothing else is targeted: exact reach missed by
+    the whole 3 cm (with both ankles pinned the pelvis moved and it was reached). Now the
+    body is lifted by what is left and polished again (``Engine._shifted_fallback``);
+    plain FABRIK (``method: fabrik``) stays the textbook algorithm."""
+    samples = json.loads((REPO_ROOT / "service" / "static" / "samples.json").read_text())
+    pose = samples["samples"][0]["pose"]
+    goal = [pose[joint][0], pose[joint][1] + 0.03, pose[joint][2]]
+    body = {"pose": pose, "targets": [{"joint": joint, "position": goal}]}
+    exact = client.post("/v1/solve", json={**body, "options": {"reach": "exact"}}).json()
+    assert exact["targets"][0]["reached"] and exact["targets"][0]["error"] < 1e-3, exact
+    assert exact["max_bone_length_error"] < 1e-5
+    assert min(p[1] for p in exact["pose"].values()) >= min(p[1] for p in pose.values()) - 1e-9
+    fabrik = client.post("/v1/solve", json={**body, "options": {"method": "fabrik"}}).json()
+    assert fabrik["targets"][0]["error"] > 0.02  # its pelvis held: short by ~the 3 cm
+
+
+def test_a_problem_location_is_never_read_out_of_a_clients_name() -> None:
+    """``error_response`` names the field a cross-field detail starts with, but only a
+    field as the messages write them: a client's joint named ``L: Forearm`` or ``Bip01 L
+    Forearm`` is not one (the location was ``rotations.L`` for the first)."""
+    from service.errors import InvalidRequest, error_response
+
+    def location(detail: str) -> str:
+        body = json.loads(bytes(error_response(InvalidRequest(detail)).body))
+        where: str = body["errors"][0]["location"]
+        return where
+
+    assert location("items[2].targets[1]: duplicate target") == "items[2].targets[1]"
+    assert location("rotations.L: Forearm: zero-length quaternion") == "body"
+    assert location("rotations.Bip01 L Forearm: zero-length quaternion") == "body"
+    assert location("degenerate pose: zero-length bones") == "body"
+
+
+def test_a_bvh_file_with_a_byte_order_mark_is_read(client: Any) -> None:
+    """Windows exporters write a UTF-8 BOM: 'expected HIERARCHY, got \\ufeffHIERARCHY'."""
+    body = _example("bvh_solve")
+    plain = client.post("/v1/bvh/inspect", json={"bvh": body["bvh"]})
+    marked = client.post("/v1/bvh/inspect", json={"bvh": "\ufeff" + body["bvh"]})
+    assert plain.status_code == marked.status_code == 200, marked.text
+    assert marked.json()["joints"] == plain.json()["joints"]
+
+
+def test_bad_units_get_one_message_without_pydantics_internals(client: Any) -> None:
+    body = _example("solve_character")
+    body["character"]["units"] = "CM"
+    detail = assert_problem(client.post("/v1/solve", json=body), 422, "must be one of m, cm")[
+        "detail"
+    ]
+    assert "literal[" not in detail and "constrained-float" not in detail, detail
+
+
+def test_a_nan_channel_is_named_as_a_number_not_numpys_repr(client: Any) -> None:
+    body = _example("bvh_solve")
+    lines = body["bvh"].split("\n")
+    row = next(i for i, ln in enumerate(lines) if ln.startswith("Frame Time")) + 1
+    lines[row] = " ".join(["nan", *lines[row].split()[1:]])
+    body["bvh"] = "\n".join(lines)
+    detail = assert_problem(client.post("/v1/bvh/solve", json=body), 422)["detail"]
+    assert "np.float64" not in detail, detail
+
+
+def test_exact_reach_lifts_a_body_no_higher_than_onto_its_toes(client: Any) -> None:
+    """A hand 3 m above a standing body: approached (the fallback lifts the body by at most
+    ``service.engine.LIFT`` of its summed bone lengths, ~9 cm here, beyond what the
+    networks lifted it), not reached by a body in the air."""
+    from service.engine import LIFT
+
+    samples = json.loads((REPO_ROOT / "service" / "static" / "samples.json").read_text())
+    pose = samples["samples"][0]["pose"]
+    goal = [pose["left_wrist"][0], pose["left_wrist"][1] + 3.0, pose["left_wrist"][2]]
+    body = {"pose": pose, "targets": [{"joint": "left_wrist", "position": goal}],
+            "options": {"reach": "exact"}}  # fmt: skip
+    out = client.post("/v1/solve", json=body).json()
+    assert not out["targets"][0]["reached"]
+    start = np.array([pose[j] for j in JOINT_NAMES])
+    end = np.array([out["pose"][j] for j in JOINT_NAMES])
+    rise = end[:, 1].min() - start[:, 1].min()  # the networks' own lift, then the shift's
+    assert 0.0 < rise < 2 * LIFT * bone_lengths(start).sum(), rise  # uncapped: ~2.3 m
+
+
+def test_exact_reach_meets_a_characters_head(client: Any) -> None:
+    """A character's head hangs from the neck alone, one bone from a neck point the chest's
+    least-squares turn placed millimetres off: exact reach missed a head 2 cm down by
+    3-7 mm on every file tried (4.6 mm here). The chest's turn now joins its chain
+    (``core.retarget._widened``)."""
+    ex = _example("solve_character")
+    ex["pins"] = []
+    first = client.post("/v1/solve", json={**ex, "targets": ex["targets"][:1]}).json()
+    head = next(j["name"] for j in ex["character"]["joints"] if j["name"].lower() == "head")
+    goal = [first["positions"][head][0], first["positions"][head][1] - 0.02,
+            first["positions"][head][2]]  # fmt: skip
+    body = {
+        **ex,
+        "rotations": first["rotations"],
+        "root_position": first["root_position"],
+        "targets": [{"joint": head, "position": goal}],
+        "options": {"reach": "exact"},
+    }
+    out = client.post("/v1/solve", json=body).json()
+    assert out["targets"][0]["reached"] and out["targets"][0]["error"] < 1e-3, out["targets"]

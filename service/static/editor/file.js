@@ -74,8 +74,11 @@ function worldMapping(info, frame0) {
 
 let opening = 0;
 
-export async function openText(text, name) {
-  doc.tried = { text, name };
+// Open ``text`` as the file ``name``; ``original`` is the file as opened (Reset returns to
+// it): the text itself, unless an open file is read again with other units or up axis,
+// its edits kept.
+export async function openText(text, name, original = text) {
+  doc.tried = { text: original, name };
   const ticket = ++opening;
   $('status').textContent = `opening ${name}…`;
   let res;
@@ -92,7 +95,7 @@ export async function openText(text, name) {
   cancelSolves();
   motionCache.clear();
   const info = res.data;
-  Object.assign(doc, { active: true, name, original: text, text, shown: text, info, frame: 0 });
+  Object.assign(doc, { active: true, name, original, text, shown: text, info, frame: 0 });
   const frame0 = fileFrame(text, 0);
   doc.toWorld = worldMapping(info, frame0);
   doc.fromWorld = doc.toWorld.clone().invert();
