@@ -69,8 +69,8 @@ function wireControls() {
       const t = doc.tried;
       if (!t) return;
       const open = doc.active && t.name === doc.name && t.text === doc.original;
-      if (open) openText(doc.text, doc.name, doc.original);
-      else openText(t.text, t.name);
+      if (open) openText(doc.text, doc.name, doc.original, doc.encoding);
+      else openText(t.text, t.name, t.text, t.encoding);
     });
   }
   $('bvh-frame').addEventListener('input', (ev) => setFrame(Number(ev.target.value)));

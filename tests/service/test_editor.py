@@ -627,3 +627,35 @@ def test_editor_opens_poses_scrubs_and_exports_a_real_bvh_file(
         assert all(u.startswith((server + "/", "blob:", "data:")) for u in urls), urls
     finally:
         context.close()
+
+
+@pytest.mark.browser
+def test_editor_writes_a_file_back_in_its_own_bytes(server: str, browser: Any) -> None:
+    """A BVH with a UTF-8 byte order mark, and one in Latin-1 (an exporter's accented joint
+    name), opened and exported unedited: the same bytes. file.text() read Latin-1 as
+    U+FFFD, so the export wrote three bytes in place of one and the name was lost; the BOM
+    was dropped."""
+    text = json.loads((REPO_ROOT / "docs" / "examples" / "bvh_solve.json").read_text())["bvh"]
+    accented = text.replace("LeftHandIndex1", "LeftHandInd\u00e8x1")
+    files = {
+        "marked.bvh": b"\xef\xbb\xbf" + text.encode(),
+        "latin.bvh": accented.encode("latin-1"),
+    }
+    context = browser.new_context(accept_downloads=True)
+    page = context.new_page()
+    page.set_default_timeout(20_000)
+    m = "window.marionette"
+    try:
+        page.goto(server + "/editor")
+        page.wait_for_function(f"() => {m} && {m}.ready()")
+        for name, data in files.items():
+            page.set_input_files(
+                "#bvh-file", files=[{"name": name, "mimeType": "text/plain", "buffer": data}]
+            )
+            page.wait_for_function(f"() => {m}.bvh() && {m}.bvh().name === '{name}'")
+            with page.expect_download() as dl:
+                page.click("#export")
+            assert Path(dl.value.path()).read_bytes() == data, name
+        assert "LeftHandInd\u00e8x1" in page.evaluate(f"{m}.bvh()")["joints"]
+    finally:
+        context.close()

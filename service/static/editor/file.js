@@ -77,8 +77,8 @@ let opening = 0;
 // Open ``text`` as the file ``name``; ``original`` is the file as opened (Reset returns to
 // it): the text itself, unless an open file is read again with other units or up axis,
 // its edits kept.
-export async function openText(text, name, original = text) {
-  doc.tried = { text: original, name };
+export async function openText(text, name, original = text, encoding = 'utf-8') {
+  doc.tried = { text: original, name, encoding };
   const ticket = ++opening;
   $('status').textContent = `opening ${name}…`;
   let res;
@@ -95,7 +95,7 @@ export async function openText(text, name, original = text) {
   cancelSolves();
   motionCache.clear();
   const info = res.data;
-  Object.assign(doc, { active: true, name, original, text, shown: text, info, frame: 0 });
+  Object.assign(doc, { active: true, name, original, text, shown: text, info, frame: 0, encoding });
   const frame0 = fileFrame(text, 0);
   doc.toWorld = worldMapping(info, frame0);
   doc.fromWorld = doc.toWorld.clone().invert();
@@ -126,16 +126,39 @@ export async function openText(text, name, original = text) {
   refresh();
 }
 
+// A file's bytes as text, and how to write them back byte for byte: UTF-8 (a byte order
+// mark kept as the text's first character), else ISO-8859-1, one character per byte (an
+// exporter's Latin-1 joint name 'abdom\xe9n'; file.text() turned it into U+FFFD, and the
+// export wrote that instead of the byte).
+export function decodeFile(bytes) {
+  try {
+    return { text: new TextDecoder('utf-8', { fatal: true, ignoreBOM: true }).decode(bytes), encoding: 'utf-8' };
+  } catch {
+    let text = '';
+    for (let i = 0; i < bytes.length; i += 8192) {
+      text += String.fromCharCode(...bytes.subarray(i, i + 8192));
+    }
+    return { text, encoding: 'latin-1' };
+  }
+}
+
+// The bytes of ``text`` in ``encoding`` (``decodeFile``'s inverse).
+export function encodeFile(text, encoding) {
+  if (encoding !== 'latin-1') return new TextEncoder().encode(text);
+  return Uint8Array.from(text, (c) => c.charCodeAt(0)); // edits write ASCII digits only
+}
+
 export async function openFile(file) {
   if (!file) return;
-  let text;
+  let bytes;
   try {
-    text = await file.text();
+    bytes = new Uint8Array(await file.arrayBuffer());
   } catch (err) {
     showError(new ApiError(-1, 'Cannot read the file', `${file.name}: ${err.message}`));
     return;
   }
-  await openText(text, file.name);
+  const { text, encoding } = decodeFile(bytes);
+  await openText(text, file.name, text, encoding);
 }
 
 export function closeFile() {

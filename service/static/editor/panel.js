@@ -4,7 +4,7 @@ import { $, doc, history, solver, state } from './state.js';
 import { clonePose, options } from './solve.js';
 import { drawPose } from './scene.js';
 import { removeTarget } from './interaction.js';
-import { refreshFrame } from './file.js';
+import { encodeFile, refreshFrame } from './file.js';
 
 // ------------------------------------------------------------------------------------
 // Panel
@@ -96,7 +96,7 @@ function exportName() {
 
 export function exportPose() {
   const blob = doc.active
-    ? new Blob([doc.text], { type: 'text/plain' })
+    ? new Blob([encodeFile(doc.text, doc.encoding)], { type: 'text/plain' })
     : new Blob([JSON.stringify(exportDocument(), null, 2)], { type: 'application/json' });
   const url = URL.createObjectURL(blob);
   const a = document.createElement('a');
