@@ -557,11 +557,7 @@ class Engine:
                 False, start[missed], lengths[missed], goal[missed], tols[missed], idx, weights,
                 pins,
             )  # fmt: skip
-            better = np.max(alt_errs, axis=1) < np.max(errs[missed], axis=1) - _TIE
-            take = missed[better]
-            pose[take], its[take] = alt[better], its[take] + alt_its[better]
-            errs[take] = alt_errs[better]
-            fell[take] = True
+            _keep_nearer(missed, (alt, alt_its, alt_errs), pose, its, errs, fell)
             if not pins.any():
                 self._shifted_fallback(pose, its, errs, fell, lengths, goal, tols, idx, weights)
         return pose, its, fell
@@ -588,15 +584,11 @@ class Engine:
         above = np.maximum(pose[short][..., 1].min(axis=1), 0.0)
         shift[:, 1] = np.clip(shift[:, 1], -above, LIFT * lengths[short].sum(axis=1))
         hold = np.zeros(len(idx), dtype=np.bool_)
-        alt, alt_its, alt_errs = self._fabrik(
+        alt = self._fabrik(
             True, pose[short] + shift[:, None, :], lengths[short], goal[short], tols[short],
             idx, weights, hold,
         )  # fmt: skip
-        better = np.max(alt_errs, axis=1) < np.max(errs[short], axis=1) - _TIE
-        take = short[better]
-        pose[take], its[take] = alt[better], its[take] + alt_its[better]
-        errs[take] = alt_errs[better]
-        fell[take] = True
+        _keep_nearer(short, alt, pose, its, errs, fell)
 
     @staticmethod
     def origin_in(origin: F64, facing: F64, trans: F64, floors: F64) -> F64:
@@ -722,6 +714,21 @@ class Engine:
             (result,) = self.solve([SolveProblem(**{**problem.__dict__, "method": method})])
             if not np.all(np.isfinite(result.pose)) or result.max_bone_error > 1e-5:
                 raise RuntimeError(f"warm-up {method} solve gave an invalid pose")
+
+
+def _keep_nearer(
+    rows: npt.NDArray[np.intp], alt: tuple[compiled.F64, npt.NDArray[np.int64], compiled.F64],
+    pose: F64, its: npt.NDArray[np.int64], errs: F64, fell: npt.NDArray[np.bool_],
+) -> None:  # fmt: skip
+    """Exact reach's fallbacks: where ``alt`` (poses, iterations, errors of ``rows``) ends
+    nearer its farthest target than the answer so far, by more than rounding, it is the
+    answer (its iterations added, marked fallen back). Ties keep the answer so far."""
+    alt_pose, alt_its, alt_errs = alt
+    better = np.max(alt_errs, axis=1) < np.max(errs[rows], axis=1) - _TIE
+    take = rows[better]
+    pose[take], its[take] = alt_pose[better], its[take] + alt_its[better]
+    errs[take] = alt_errs[better]
+    fell[take] = True
 
 
 @lru_cache(maxsize=4096)

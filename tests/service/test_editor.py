@@ -460,6 +460,21 @@ def test_editor_opens_poses_scrubs_and_exports_a_real_bvh_file(
         worst = max(dist(a, b) for a, b in zip(got, want, strict=True))
         assert worst < 1e-6, worst  # the page's FK is the service's
 
+    def drop(text: str, name: str) -> int:
+        """Drop ``text`` on the page as the file ``name``; the status of its inspection."""
+        with page.expect_response("**/v1/bvh/inspect") as inspected:
+            page.evaluate(
+                """([text, name]) => {
+                  const dt = new DataTransfer();
+                  dt.items.add(new File([text], name, { type: 'text/plain' }));
+                  document.getElementById('viewport').dispatchEvent(
+                    new DragEvent('drop', { dataTransfer: dt, bubbles: true, cancelable: true }));
+                }""",
+                [text, name],
+            )
+        status: int = inspected.value.status
+        return status
+
     def scrub(frame: int) -> None:
         page.locator("#bvh-frame").fill(str(frame))
         page.wait_for_function(f"() => {m}.bvh().frame === {frame}")
@@ -501,17 +516,7 @@ def test_editor_opens_poses_scrubs_and_exports_a_real_bvh_file(
 
         # -- drag and drop opens a file too --------------------------------------------------
         scrub(10)
-        with page.expect_response("**/v1/bvh/inspect") as dropped:
-            page.evaluate(
-                """([text, name]) => {
-                  const dt = new DataTransfer();
-                  dt.items.add(new File([text], name, { type: 'text/plain' }));
-                  document.getElementById('viewport').dispatchEvent(
-                    new DragEvent('drop', { dataTransfer: dt, bubbles: true, cancelable: true }));
-                }""",
-                [original, "dropped.bvh"],
-            )
-        assert dropped.value.status == 200
+        assert drop(original, "dropped.bvh") == 200
         page.wait_for_function(f"() => {m}.bvh().name === 'dropped.bvh'")
         assert page.evaluate(f"{m}.bvh().frame") == 0
 
@@ -604,17 +609,7 @@ def test_editor_opens_poses_scrubs_and_exports_a_real_bvh_file(
         # file still shown, under the refused one's name) -----------------------------------
         page.select_option("#bvh-units", "auto")  # re-reads dropped.bvh: refused, still shown
         page.wait_for_function(f"() => {m}.error() !== null")
-        with page.expect_response("**/v1/bvh/inspect") as refused:
-            page.evaluate(
-                """([text, name]) => {
-                  const dt = new DataTransfer();
-                  dt.items.add(new File([text], name, { type: 'text/plain' }));
-                  document.getElementById('viewport').dispatchEvent(
-                    new DragEvent('drop', { dataTransfer: dt, bubbles: true, cancelable: true }));
-                }""",
-                [edited, "other.bvh"],
-            )
-        assert refused.value.status == 422
+        assert drop(edited, "other.bvh") == 422
         assert page.evaluate(f"{m}.bvh()")["name"] == "dropped.bvh"
         page.select_option("#bvh-units", str(units))
         page.wait_for_function(f"() => {m}.bvh().name === 'other.bvh'")
