@@ -38,6 +38,7 @@ FloatArray = npt.NDArray[np.float64]
 
 _POSITION_CHANNELS = {"xposition": 0, "yposition": 1, "zposition": 2}
 _ROTATION_CHANNELS = {"xrotation": "X", "yrotation": "Y", "zrotation": "Z"}
+_LINE_END = re.compile(r"\r\n|\r|\n")
 _MOTION_RE = re.compile(r"^[ \t]*MOTION[ \t]*\r?$", re.MULTILINE)
 _BLANK_RE = re.compile(r"\n[^\S\n]*(?=\n|\Z)")  # a blank line after the first
 _BLANK_FIRST_RE = re.compile(r"[^\S\n]*(?:\n|\Z)")  # a blank first line
@@ -221,7 +222,9 @@ MAX_DEPTH = 256
 
 
 def _parse_hierarchy(file: str, text: str) -> list[BVHJoint]:
-    toks = _Tokens(file, text.splitlines())
+    # lines end at \n, \r\n or \r only: str.splitlines() also breaks at U+0085, U+2028 and
+    # some control characters, which a Latin-1 joint name may hold (0x85, Windows' '…')
+    toks = _Tokens(file, _LINE_END.split(text))
     toks.expect("HIERARCHY")
     joints: list[BVHJoint] = []
     names: set[str] = set()

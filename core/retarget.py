@@ -272,9 +272,25 @@ def _fabrik(
 _ROUNDS = 8
 
 
+def _nearer(
+    skel: Skeleton, pose: Pose, jmap: JointMap, exact: Sequence[tuple[int, F64]], old: F64
+) -> bool:
+    """Whether ``pose`` meets its exact targets (pins included) nearer than it did with the
+    local rotations ``old``: its farthest miss smaller, by more than rounding."""
+    joints = [j for j, _ in exact]
+    goals = np.asarray([g for _, g in exact], dtype=np.float64)
+
+    def worst(rotations: F64) -> float:
+        g_rot, g_pos = forward_kinematics(skel, Pose(rotations, pose.translations))
+        return float(np.linalg.norm(jmap.points(g_rot, g_pos)[joints] - goals, axis=1).max())
+
+    return worst(pose.rotations) < worst(old) - 1e-12
+
+
 def _widened(
     skel: Skeleton, pose: Pose, jmap: JointMap, plan: _Plan, goal: F64, chain: list[int],
     target: F64, exact: Sequence[tuple[int, F64]], tolerance: float, bend: F64 | None,
+    turned: int | None,
 ) -> bool:  # fmt: skip
     """A target its chain left short, where the chain's top hangs from a joint that aims
     several (a chest: the neck and both collars): that joint's turn joins the chain. The
@@ -284,14 +300,18 @@ def _widened(
     the goals of all its aimed children are turned rigidly about that origin by the
     swing that carries the chain's top where FABRIK put it (the chest turns as one, arms
     with it), so its least-squares turn lands the top there exactly. Not where another
-    exact target hangs from one of its other children (the chest's turn would move it).
+    exact target or pin lies on the chain or hangs from one of the joint's other children
+    (the chest's turn would move it), nor for the pelvis (placed, not aimed); the caller
+    keeps the result only where it meets the exact targets nearer (:func:`_nearer`).
     Returns whether ``goal`` changed."""
     joint, aim = chain[-1], plan.aim_of.get(chain[0])
     goal_t = np.asarray(target, dtype=np.float64)
-    if aim is None or len(plan.groups[aim]) < 2:
-        return False
+    if aim is None or aim == turned or len(plan.groups[aim]) < 2:
+        return False  # (the pelvis, ``turned``, is placed by _place_pelvis, not aimed)
     others = [c for c in plan.groups[aim] if c != chain[0]]
     for j, _ in exact:
+        if j != joint and j in chain:  # a pin or target on the chain itself (a neck)
+            return False
         while j >= 0 and j not in others and j != joint:
             j = PARENTS[j]
         if j in others:
@@ -348,8 +368,11 @@ def _attempt(
         done = _fabrik(line, np.asarray(target, dtype=np.float64), tolerance * 0.01, bend=bend)
         goal[chain[1:]] = done[1:]
         changed |= _aim_pass(skel, new, jmap, plan, goal, turned, pose)
-        if _widened(skel, new, jmap, plan, goal, chain, target, exact, tolerance, bend):
+        before = (new.rotations.copy(), goal.copy(), set(changed))
+        if _widened(skel, new, jmap, plan, goal, chain, target, exact, tolerance, bend, turned):
             changed |= _aim_pass(skel, new, jmap, plan, goal, turned, pose)
+            if not _nearer(skel, new, jmap, exact, before[0]):  # only ever a better answer
+                new.rotations, goal[:], changed = before[0], before[1], before[2]
     if root is not None and not np.array_equal(new.translations[root], pose.translations[root]):
         changed.add(root)
     shift = np.mean(moves, axis=0) if moves else None

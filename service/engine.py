@@ -73,8 +73,9 @@ F64 = npt.NDArray[np.floating[Any]]
 #: Metres by which the exact-reach fallback must beat the polish to be used.
 _TIE = 1e-12
 #: How far exact reach may lift a body whose pelvis FABRIK holds, as a share of its summed
-#: bone lengths (``Engine._shifted_fallback``): 2.5 %, ~10 cm for an adult, a rise onto
-#: the toes.
+#: bone lengths (``Engine._shifted_fallback``): 2.5 %, ~10 cm for an adult. The body rises
+#: whole, feet too: the price of meeting a trunk target out of reach without pins (pin the
+#: feet to keep them down: the pelvis is then free and the legs take the move).
 LIFT = 0.025
 
 
@@ -571,24 +572,31 @@ class Engine:
         a target beyond that branch's reach stays short by the whole excess (3 cm above a
         standing body's neck: missed by 3 cm, where with both ankles pinned the pelvis is
         free and it was reached). Each item still short is moved whole by its targets'
-        weighted mean miss, polished again, and kept where that ends nearer: across as far
-        as it takes (as ``serving.reach_travel`` moves a soft answer's start), up by at
-        most ``LIFT`` of the body's summed bone lengths (a rise onto the toes: ~10 cm for
-        an adult; a hand 3 m up is approached, not reached by a body in the air), down no
-        lower than the floor (canonical y 0) or than its lowest joint already is. In place."""
+        weighted mean miss, polished again, and kept where that ends nearer without losing
+        a target it had reached or sinking a joint below the floor (canonical y 0) or its
+        lowest joint: across as far as it takes (as ``serving.reach_travel`` moves a soft
+        answer's start), up by at most ``LIFT`` of the body's summed bone lengths (feet
+        included: the body is lifted whole, ~10 cm at most for an adult, so a hand 3 m up
+        is approached, not reached by a body in the air). In place."""
         short = np.flatnonzero(np.any(errs > tols[:, None], axis=1))
         if not short.size:
             return
         w = weights / np.sum(weights)
         shift = np.einsum("k,nkc->nc", w, goal[short] - pose[short][:, idx])
-        above = np.maximum(pose[short][..., 1].min(axis=1), 0.0)
-        shift[:, 1] = np.clip(shift[:, 1], -above, LIFT * lengths[short].sum(axis=1))
+        low = pose[short][..., 1].min(axis=1)
+        shift[:, 1] = np.clip(shift[:, 1], -np.maximum(low, 0.0), LIFT * lengths[short].sum(axis=1))
         hold = np.zeros(len(idx), dtype=np.bool_)
-        alt = self._fabrik(
+        alt_pose, alt_its, alt_errs = self._fabrik(
             True, pose[short] + shift[:, None, :], lengths[short], goal[short], tols[short],
             idx, weights, hold,
         )  # fmt: skip
-        _keep_nearer(short, alt, pose, its, errs, fell)
+        # never a target it had reached lost, nor a joint sunk below where the floor (or
+        # the answer's own lowest joint) was: the polish after the move knows no floor
+        tol = tols[short, None]
+        lost = ((errs[short] <= tol) & (alt_errs > tol)).any(axis=1)
+        sunk = alt_pose[..., 1].min(axis=1) < np.minimum(low, 0.0) - _TIE
+        ok = ~lost & ~sunk
+        _keep_nearer(short[ok], (alt_pose[ok], alt_its[ok], alt_errs[ok]), pose, its, errs, fell)
 
     @staticmethod
     def origin_in(origin: F64, facing: F64, trans: F64, floors: F64) -> F64:

@@ -14,19 +14,21 @@ from service.schemas import Health
 router = APIRouter(tags=["health"])
 
 
-@router.get("/v2/health/live", response_model=Health)
+# HEAD outermost: registered after GET, so a 405's Allow header names GET, the method the
+# schema documents (Starlette answers with the first route that matched the path)
 @router.head("/v2/health/live", include_in_schema=False)  # load balancers probe with HEAD
+@router.get("/v2/health/live", response_model=Health)
 async def live() -> Health:
     """The process is up (Open Inference Protocol liveness)."""
     return Health(status="live")
 
 
+@router.head("/v2/health/ready", include_in_schema=False)
 @router.get(
     "/v2/health/ready",
     response_model=Health,
     responses={503: {"model": Health, "description": "Models not loaded or broken."}},
 )
-@router.head("/v2/health/ready", include_in_schema=False)
 async def ready(response: Response, state: State) -> Health:
     """200 once every model is loaded, verified and a warm-up solve passed; else 503
     with the reason (file names, never server paths)."""

@@ -345,3 +345,68 @@ def test_exact_reach_meets_a_characters_head(client: Any) -> None:
     }
     out = client.post("/v1/solve", json=body).json()
     assert out["targets"][0]["reached"] and out["targets"][0]["error"] < 1e-3, out["targets"]
+
+
+def test_a_characters_head_reach_leaves_a_pinned_neck_where_it_is(client: Any) -> None:
+    """The chest's turn that meets a head (``core.retarget._widened``) is not made where it
+    would move a pin or target on the head's own chain (a review found a pinned neck left
+    37.5 mm off for a head 2 cm down): the pin holds."""
+    ex = _example("solve_character")
+    ex["pins"] = []
+    first = client.post("/v1/solve", json={**ex, "targets": ex["targets"][:1]}).json()
+    names = [j["name"] for j in ex["character"]["joints"]]
+    head = next(n for n in names if n.lower() == "head")
+    neck = next(n for n in names if n.lower() == "neck")
+    at = first["positions"][head]
+    body = {
+        **ex,
+        "rotations": first["rotations"],
+        "root_position": first["root_position"],
+        "targets": [{"joint": head, "position": [at[0], at[1] - 0.02, at[2]]}],
+        "pins": [neck],
+        "options": {"reach": "exact"},
+    }
+    out = client.post("/v1/solve", json=body).json()
+    assert out["pins"][0]["reached"] and out["pins"][0]["error"] < 1e-3, out["pins"]
+
+
+def test_exact_reach_moved_whole_never_loses_a_reached_target_or_sinks(client: Any) -> None:
+    """The body moved whole (``Engine._shifted_fallback``) is kept only where no target it
+    had reached is lost and no joint sinks below the floor: a review's random search found a
+    reached spine2 lost for a nearer wrist, and a polish that took a foot 1.5 mm under the
+    floor (rest pose, exact reach, no pins)."""
+    from core.rest import rest_pose
+
+    rest = rest_pose()
+    pose = {j: [float(v) for v in rest[i]] for i, j in enumerate(JOINT_NAMES)}
+    cases = [
+        {"spine2": [-0.17111, 1.25736, 0.05017], "left_wrist": [0.71, 1.45, -0.01]},
+        {"left_ankle": [0.10957, 0.07841, -0.02048], "left_knee": [0.15494, 0.41029, -0.00352]},
+    ]
+    for goals in cases:
+        targets = [{"joint": j, "position": p} for j, p in goals.items()]
+        out = client.post(
+            "/v1/solve", json={"pose": pose, "targets": targets, "options": {"reach": "exact"}}
+        ).json()
+        assert min(p[1] for p in out["pose"].values()) >= -1e-9, out["pose"]
+        if "spine2" in goals:
+            assert out["targets"][0]["reached"], out["targets"]
+
+
+@pytest.mark.parametrize("char", ["\x85", "\u2028", "\x0c"])
+def test_a_joint_name_with_a_line_break_python_knows_is_read(client: Any, char: str) -> None:
+    """The reader split the hierarchy with str.splitlines(), which also breaks at U+0085
+    (Windows' '…' read as Latin-1, as the editor reads a file that is not UTF-8), U+2028 and
+    form feeds: 'expected {, got x'. Lines end at \\n, \\r\\n or \\r only now."""
+    body = _example("bvh_solve")
+    text = body["bvh"].replace("JOINT Spine\n", f"JOINT Spine{char}x\n", 1)
+    r = client.post("/v1/bvh/inspect", json={"bvh": text})
+    assert r.status_code == 200, r.text
+
+
+def test_a_health_routes_405_allows_get(client: Any) -> None:
+    """With HEAD added as a route of its own, a 405 there listed only HEAD (Starlette
+    names the first route that matched the path): the contract test's schemathesis run
+    flagged it (its schema documents GET)."""
+    r = client.post("/v2/health/live", content=b"{}", headers={"content-type": "application/json"})
+    assert r.status_code == 405 and "GET" in r.headers["allow"], r.headers
