@@ -291,7 +291,7 @@ def _widened(
     skel: Skeleton, pose: Pose, jmap: JointMap, plan: _Plan, goal: F64, chain: list[int],
     target: F64, exact: Sequence[tuple[int, F64]], tolerance: float, bend: F64 | None,
     turned: int | None,
-) -> bool:  # fmt: skip
+) -> F64 | None:  # fmt: skip
     """A target its chain left short, where the chain's top hangs from a joint that aims
     several (a chest: the neck and both collars): that joint's turn joins the chain. The
     head's chain is the neck alone, one bone from a neck point the chest's least-squares
@@ -303,31 +303,32 @@ def _widened(
     exact target or pin lies on the chain or hangs from one of the joint's other children
     (the chest's turn would move it), nor for the pelvis (placed, not aimed); the caller
     keeps the result only where it meets the exact targets nearer (:func:`_nearer`).
-    Returns whether ``goal`` changed."""
+    Returns the widened goals (a copy of ``goal``), or None where it does not apply."""
     joint, aim = chain[-1], plan.aim_of.get(chain[0])
     goal_t = np.asarray(target, dtype=np.float64)
     if aim is None or aim == turned or len(plan.groups[aim]) < 2:
-        return False  # (the pelvis, ``turned``, is placed by _place_pelvis, not aimed)
+        return None  # (the pelvis, ``turned``, is placed by _place_pelvis, not aimed)
     others = [c for c in plan.groups[aim] if c != chain[0]]
     for j, _ in exact:
         if j != joint and j in chain:  # a pin or target on the chain itself (a neck)
-            return False
+            return None
         while j >= 0 and j not in others and j != joint:
             j = PARENTS[j]
         if j in others:
-            return False
+            return None
     g_rot, g_pos = forward_kinematics(skel, pose)
     pts = jmap.points(g_rot, g_pos)
     if float(np.linalg.norm(pts[joint] - goal_t)) <= tolerance:
-        return False
+        return None
     origin, top = g_pos[aim], g_pos[jmap.anchors[chain[0]].joint]
     line = np.concatenate([origin[None], top[None], pts[chain[1:]]])
     done = _fabrik(line, goal_t, tolerance * 0.01, bend=bend)
     turn = swing(top - origin, done[1] - origin)
+    wider = goal.copy()
     for c in plan.groups[aim]:
-        goal[c] = origin + turn @ (pts[c] - origin)
-    goal[chain[1:]] = done[2:]
-    return True
+        wider[c] = origin + turn @ (pts[c] - origin)
+    wider[chain[1:]] = done[2:]
+    return wider
 
 
 def _attempt(
@@ -368,11 +369,14 @@ def _attempt(
         done = _fabrik(line, np.asarray(target, dtype=np.float64), tolerance * 0.01, bend=bend)
         goal[chain[1:]] = done[1:]
         changed |= _aim_pass(skel, new, jmap, plan, goal, turned, pose)
-        before = (new.rotations.copy(), goal.copy(), set(changed))
-        if _widened(skel, new, jmap, plan, goal, chain, target, exact, tolerance, bend, turned):
-            changed |= _aim_pass(skel, new, jmap, plan, goal, turned, pose)
-            if not _nearer(skel, new, jmap, exact, before[0]):  # only ever a better answer
-                new.rotations, goal[:], changed = before[0], before[1], before[2]
+        wider = _widened(skel, new, jmap, plan, goal, chain, target, exact, tolerance, bend, turned)
+        if wider is not None:
+            rotations, aimed = new.rotations.copy(), set(changed)
+            aimed |= _aim_pass(skel, new, jmap, plan, wider, turned, pose)
+            if _nearer(skel, new, jmap, exact, rotations):  # only ever a better answer
+                goal, changed = wider, aimed
+            else:
+                new.rotations = rotations
     if root is not None and not np.array_equal(new.translations[root], pose.translations[root]):
         changed.add(root)
     shift = np.mean(moves, axis=0) if moves else None

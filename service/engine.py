@@ -560,24 +560,27 @@ class Engine:
             )  # fmt: skip
             _keep_nearer(missed, (alt, alt_its, alt_errs), pose, its, errs, fell)
             if not pins.any():
-                self._shifted_fallback(pose, its, errs, fell, lengths, goal, tols, idx, weights)
+                self._shifted_fallback(pose, its, errs, fell, lengths, goal, tols, idx, weights,
+                                       pins)  # fmt: skip
         return pose, its, fell
 
     def _shifted_fallback(
         self, pose: F64, its: npt.NDArray[np.int64], errs: F64, fell: npt.NDArray[np.bool_],
         lengths: F64, goal: F64, tols: F64, idx: npt.NDArray[np.int64], weights: F64,
+        pins: npt.NDArray[np.bool_],
     ) -> None:  # fmt: skip
-        """Exact reach of a set without pins whose targets all hang from one branch of the
-        pelvis (a collar, the neck, the spine, one limb): FABRIK holds the pelvis there, so
-        a target beyond that branch's reach stays short by the whole excess (3 cm above a
-        standing body's neck: missed by 3 cm, where with both ankles pinned the pelvis is
-        free and it was reached). Each item still short is moved whole by its targets'
-        weighted mean miss, polished again, and kept where that ends nearer without losing
-        a target it had reached or sinking a joint below the floor (canonical y 0) or its
-        lowest joint: across as far as it takes (as ``serving.reach_travel`` moves a soft
-        answer's start), up by at most ``LIFT`` of the body's summed bone lengths (feet
-        included: the body is lifted whole, ~10 cm at most for an adult, so a hand 3 m up
-        is approached, not reached by a body in the air). In place."""
+        """Exact reach of a set without pins (``pins`` all false) whose targets all hang
+        from one branch of the pelvis (a collar, the neck, the spine, one limb): FABRIK
+        holds the pelvis there, so a target beyond that branch's reach stays short by the
+        whole excess (3 cm above a standing body's neck: missed by 3 cm, where with both
+        ankles pinned the pelvis is free and it was reached). Each item still short is
+        moved whole by its targets' weighted mean miss, polished again, and kept where that
+        ends nearer without losing a target it had reached or sinking a joint below the
+        floor (canonical y 0) or its lowest joint: across as far as it takes (as
+        ``serving.reach_travel`` moves a soft answer's start), up by at most ``LIFT`` of
+        the body's summed bone lengths (feet included: the body is lifted whole, ~10 cm at
+        most for an adult, so a hand 3 m up is approached, not reached by a body in the
+        air). In place."""
         short = np.flatnonzero(np.any(errs > tols[:, None], axis=1))
         if not short.size:
             return
@@ -585,10 +588,9 @@ class Engine:
         shift = np.einsum("k,nkc->nc", w, goal[short] - pose[short][:, idx])
         low = pose[short][..., 1].min(axis=1)
         shift[:, 1] = np.clip(shift[:, 1], -np.maximum(low, 0.0), LIFT * lengths[short].sum(axis=1))
-        hold = np.zeros(len(idx), dtype=np.bool_)
         alt_pose, alt_its, alt_errs = self._fabrik(
             True, pose[short] + shift[:, None, :], lengths[short], goal[short], tols[short],
-            idx, weights, hold,
+            idx, weights, pins,
         )  # fmt: skip
         # never a target it had reached lost, nor a joint sunk below where the floor (or
         # the answer's own lowest joint) was: the polish after the move knows no floor
