@@ -15,6 +15,8 @@
 3. **Exact reach** (optional): for each target, the chain of single-child aims above it is
    FABRIK-ed, in the character's own bone lengths, from its fixed top onto the target, and
    the aim pass re-run, so the target is met whenever that chain can reach it.
+4. **Polish** (:func:`core.reach.polish`): what the targets and pins still miss is closed
+   by damped least-squares turns of the joints above them, pins first.
 
 Joints in no aim group (fingers, twist bones, props, spine joints between mapped ones)
 keep their local rotation; every joint keeps its offset, so bone lengths are the
@@ -32,6 +34,7 @@ import numpy.typing as npt
 from core import compiled_characters
 from core.characters import F64, Pose, Skeleton, best_rotation, forward_kinematics, swing
 from core.characters_maps import JointMap
+from core.reach import polish
 from core.skeleton import JOINT_INDEX, PARENTS
 
 _PELVIS = JOINT_INDEX["pelvis"]
@@ -339,9 +342,10 @@ def _attempt(
     goal: F64,
     exact: Sequence[tuple[int, F64]],
     tolerance: float,
-) -> tuple[Pose, set[int], F64 | None]:
+) -> tuple[Pose, set[int], F64 | None, int | None]:
     """One retarget onto ``goal``; the shift of the pelvis that would bring the exact
-    targets out of reach of their chains within reach (None if none is needed)."""
+    targets out of reach of their chains within reach (None if none is needed), and the
+    joint whose translation places the pelvis (None if none)."""
     new = pose.copy()
     goal = goal.copy()
     changed: set[int] = set()
@@ -380,7 +384,7 @@ def _attempt(
     if root is not None and not np.array_equal(new.translations[root], pose.translations[root]):
         changed.add(root)
     shift = np.mean(moves, axis=0) if moves else None
-    return new, changed, shift
+    return new, changed, shift, root
 
 
 @dataclass(frozen=True)
@@ -397,18 +401,22 @@ def retarget(
     solved: F64,
     *,
     exact: Sequence[tuple[int, F64]] = (),
+    pins: Sequence[tuple[int, F64]] = (),
     tolerance: float = 0.0,
 ) -> Retargeted:
     """A copy of ``pose`` whose canonical points follow ``solved`` ``[21, 3]`` (character
     units and axes); ``exact`` lists (canonical joint, goal) pairs to meet within
-    ``tolerance`` where the character's own chain can (see the module docstring)."""
+    ``tolerance`` where the character's own chain can, ``pins`` pairs to hold first (see
+    the module docstring)."""
     plan = _plan(skel, jmap)
     goal = np.array(solved, dtype=np.float64)
     body = [_PELVIS, *plan.groups.get(jmap.anchors[_PELVIS].joint, [])]
+    met = [*exact, *pins]
     for _ in range(_ROUNDS):
-        new, changed, shift = _attempt(skel, pose, jmap, plan, goal, exact, tolerance)
+        new, changed, shift, root = _attempt(skel, pose, jmap, plan, goal, met, tolerance)
         if shift is None:
             break
         goal[body] += shift  # out of reach from the pelvis: move the whole body towards it
+    changed |= polish(skel, new, jmap, exact, pins, tolerance, root)
     g_rot, g_pos = forward_kinematics(skel, new)
     return Retargeted(new, jmap.points(g_rot, g_pos), frozenset(changed))

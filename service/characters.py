@@ -410,9 +410,15 @@ def solve_prepared(engine: Engine, ch: Character, p: SolveProblem) -> Edit:
     character: every character solve, single or a batch item, runs exactly this."""
     (result,) = engine.solve([p])
     solved = ch.from_service(np.asarray(result.pose, dtype=np.float64))
-    pairs = zip(p.target_idx.tolist(), p.target_pos, strict=True)
-    exact = [(j, ch.from_service(g)) for j, g in pairs] if p.reach == "exact" else []
-    out = retarget(ch.skel, ch.pose, ch.jmap, solved, exact=exact, tolerance=p.tolerance / ch.scale)
+    given = zip(p.target_idx.tolist(), p.target_pos, strict=True)
+    pairs = [(j, ch.from_service(g)) for j, g in given]
+    # soft reach: the character's targeted joints go where the canonical answer put them
+    targets = pairs[: p.n_targets]
+    exact = targets if p.reach == "exact" else [(j, solved[j]) for j, _ in targets]
+    out = retarget(
+        ch.skel, ch.pose, ch.jmap, solved,
+        exact=exact, pins=pairs[p.n_targets :], tolerance=p.tolerance / ch.scale,
+    )  # fmt: skip
     return Edit(out.pose, out.changed, p, result, engine.version)
 
 
