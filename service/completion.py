@@ -116,7 +116,9 @@ def complete(
     )  # fmt: skip
     world = polished[0] + origin
     errors = np.linalg.norm(world[idx] - np.stack(list(keypoints.values())), axis=-1)
-    return CompleteResult(pose=world, errors=errors, reached=errors <= tolerance, levels=run)
+    return CompleteResult(
+        pose=world, errors=errors, reached=errors <= tolerance, levels=run, floor=float(origin[1])
+    )
 
 
 def completion_scales(engine: Engine, lengths: F64) -> F64:

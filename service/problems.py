@@ -323,3 +323,4 @@ class CompleteResult:
     errors: F64
     reached: npt.NDArray[np.bool_]
     levels: list[int]
+    floor: float  # the floor the networks saw (the request's, or where it was clamped)

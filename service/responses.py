@@ -48,6 +48,7 @@ def complete_payload(joints: list[str], r: CompleteResult, version: str) -> dict
             for j, e, ok in zip(joints, r.errors, r.reached, strict=True)
         ],
         "levels": list(r.levels),
+        "floor": r.floor,
         "model": version,
     }
 

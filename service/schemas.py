@@ -209,6 +209,12 @@ class CompleteResponse(BaseModel):
     pose: PoseOut
     keypoints: list[TargetResult]
     levels: list[int] = Field(description="Completion levels run (1 = six base points).")
+    floor: float = Field(
+        description="Height (m, world y) of the ground the completion used: the request's "
+        "`floor`, or the pelvis key point's height where it lies above that (a body lying "
+        "there), or 4 pelvis-to-neck lengths below it where it lies farther below (no body "
+        "of the training data stood higher)."
+    )
     model: str
 
 

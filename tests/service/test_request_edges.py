@@ -226,10 +226,16 @@ def test_a_floor_far_from_the_key_points_gives_a_body_of_their_size(
     lengths = bone_lengths(pose)
     ref = bone_lengths(np.array([near["pose"][j] for j in JOINT_NAMES]))
     assert lengths.max() < 0.6 and np.abs(lengths - ref).max() < 0.1, lengths
-    pelvis = next(k["position"][1] for k in body["keypoints"] if k["joint"] == "pelvis")
+    points = {k["joint"]: np.array(k["position"]) for k in body["keypoints"]}
+    pelvis = float(points["pelvis"][1])
+    torso = float(np.linalg.norm(points["neck"] - points["pelvis"]))
+    # the answer says which floor was used: the request's where it was taken as given
+    assert near["floor"] == body.get("floor", 0.0)
+    assert far.json()["floor"] == pytest.approx(pelvis - 4.0 * torso, abs=1e-12)
     above = client.post("/v1/complete", json={**body, "floor": pelvis + 9.0})
     at = client.post("/v1/complete", json={**body, "floor": pelvis})
     assert above.status_code == at.status_code == 200 and above.json() == at.json()
+    assert at.json()["floor"] == pelvis
 
 
 @pytest.mark.parametrize("path", ["/v2/health/live", "/v2/health/ready"])
