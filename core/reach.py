@@ -11,14 +11,15 @@ ended 3-6 cm from where the canonical answer had put it.
 
 :func:`polish` closes what is left on the character itself: every rotatable joint above a
 met point (targets and pins) turns, and the root moves, by damped least-squares steps
-(Levenberg-Marquardt, at most :data:`_MAX_TURN` a step) that meet those points at once in
-the character's own bone lengths. Pins weigh :data:`_PIN_WEIGHT` targets, so a target the
-skeleton cannot reach with its pins held is brought nearer but the pins stay; the other
-canonical points weigh :data:`_FOLLOW` each, so the rest of the body stays where the
-retarget laid it unless the targets need it to move; the root's move is priced as a turn
-at a tenth of the body's reach (:data:`_MOVE_PRICE`), so turns are preferred where they do
-it. The result is kept only where its farthest miss is smaller and no point that was met
-is lost.
+(Levenberg-Marquardt, at most :data:`_MAX_TURN` a step) in the character's own bone
+lengths. Pins weigh :data:`_PIN_WEIGHT` targets and no step takes one farther than half
+the tolerance (:data:`_HOLD`), so a target the skeleton cannot reach with its pins held
+comes nearer and the pins stay. Two phases: first the other canonical points weigh
+:data:`_FOLLOW` each, so the rest of the body stays where the retarget laid it unless the
+targets need it to move; then the targets alone, from there, so that no pull of the others
+leaves them short. The root's move is priced as a turn at a tenth of the body's reach
+(:data:`_MOVE_PRICE`), so turns come first where they do it. The result is kept only where
+its farthest miss is smaller and no point that was met is lost.
 """
 
 from __future__ import annotations
@@ -33,8 +34,9 @@ from core.characters_maps import JointMap
 from core.skeleton import JOINT_INDEX
 
 _PELVIS = JOINT_INDEX["pelvis"]
-_STEPS = 40  # damped steps tried at most (each one forward kinematics)
+_STEPS = 30  # damped steps tried at most per phase (each one forward kinematics)
 _MAX_TURN = 0.1  # radians per step and axis (a root's move: as much, priced)
+_HOLD = 0.5  # a pin may move a half of the tolerance in the steps (or as far as it started)
 _PIN_WEIGHT = 30.0  # a pin's miss counts 30 times a target's (900 times in the squares)
 _FOLLOW = 0.02  # the other points' moves count 0.02 of a target's miss: they follow
 _MOVE_PRICE = 0.1  # a move of the root by d costs as a turn of d / (0.1 x the body's reach)
@@ -55,12 +57,6 @@ def _rotations(w: F64) -> F64:
 def _misses(points: F64, goals: F64) -> F64:
     out: F64 = np.linalg.norm(points - goals, axis=1)
     return out
-
-
-def _cost(misses: F64, weight: F64) -> float:
-    """The weighted squares the steps lower (``weight``: per coordinate, 3 per miss)."""
-    w = misses * weight[::3]
-    return float(w @ w)
 
 
 def _ancestry(skel: Skeleton) -> npt.NDArray[np.bool_]:
@@ -96,63 +92,40 @@ def polish(
     root: int | None,
 ) -> set[int]:
     """Move ``pose`` (in place) so its canonical points ``exact`` and ``pins`` (canonical
-    joint, goal; character units) are met within ``tolerance`` where the skeleton can, the
-    pins first (each weighs :data:`_PIN_WEIGHT` targets); ``root`` is the joint whose
-    translation may move (None: none). Returns the joints whose rotation or translation it
-    changed (none where it found no better pose: one that lowers the weighted squares and
-    loses no point that was met)."""
-    met = [*exact, *pins]
-    if not met:
+    joint, goal; character units) are met within ``tolerance`` where the skeleton can, no
+    pin ever moved farther than a tenth of it (or than it started); ``root`` is the joint
+    whose translation may move (None: none). Returns the joints whose rotation or
+    translation it changed (none where it found no better pose: one that meets them nearer
+    and loses none that was met)."""
+    if not exact and not pins:
         return set()
     g_rot, g_pos = forward_kinematics(skel, pose)
     every = jmap.points(g_rot, g_pos)
-    free = [j for j in range(len(every)) if j not in {j for j, _ in met}]
-    joints = [j for j, _ in met] + free
-    goals = np.concatenate([np.asarray([g for _, g in met], dtype=np.float64), every[free]])
-    weight = np.repeat(
-        np.r_[np.ones(len(exact)), np.full(len(pins), _PIN_WEIGHT), np.full(len(free), _FOLLOW)],
-        3,
-    )
-    n = len(met)
-    start = _misses(every[joints], goals)
+    met = [j for j, _ in exact] + [j for j, _ in pins]
+    free = [j for j in range(len(every)) if j not in set(met)]
+    n, k = len(met), len(exact)
+    goals = np.concatenate([np.reshape([g for _, g in exact], (-1, 3)),
+                            np.reshape([g for _, g in pins], (-1, 3)), every[free]])  # fmt: skip
+    start = _misses(every[met + free], goals)
     if float(start[:n].max()) <= tolerance * 0.1:
         return set()
-    anchors = np.array([int(jmap.joints[j]) for j in joints], dtype=np.intp)
+    anchors = np.array([int(jmap.joints[j]) for j in met + free], dtype=np.intp)
     below = _ancestry(skel)[:, anchors]  # [J, K]: the point hangs from the joint
     movable = [b for b in range(skel.size) if skel.rotatable[b] and below[b, :n].any()]
-    parents = np.array([skel.parents[b] for b in movable], dtype=np.intp)
-    above = below[movable].astype(np.float64)
     moves = root is not None and bool(below[root, :n].any())
+    if not movable and not moves:
+        return set()
+    parents = np.array([skel.parents[b] for b in movable], dtype=np.intp)
     scale = _MOVE_PRICE * max(float(np.linalg.norm(every - every[_PELVIS], axis=1).max()), 1e-9)
-    rotations, translations, misses = pose.rotations, pose.translations, start
-    damping = scale**2
-    for _ in range(_STEPS):
-        pts = jmap.points(g_rot, g_pos)[joints]
-        jac = _jacobian(pts[None] - g_pos[movable][:, None], above)
-        if moves:
-            jac = np.concatenate([jac, np.tile(np.eye(3) * scale, (len(joints), 1))], axis=1)
-        jac *= weight[:, None]
-        err = (goals - pts).reshape(-1) * weight
-        step = jac.T @ np.linalg.solve(jac @ jac.T + damping * np.eye(len(err)), err)
-        step *= min(1.0, _MAX_TURN / max(float(np.abs(step).max()), 1e-300))
-        turns = _rotations(step[: 3 * len(movable)].reshape(-1, 3))
-        new_rot = rotations.copy()
-        parent = np.where((parents >= 0)[:, None, None], g_rot[parents], np.eye(3))
-        new_rot[movable] = parent.transpose(0, 2, 1) @ turns @ parent @ rotations[movable]
-        new_tr = translations.copy()
-        if moves and root is not None:
-            p = skel.parents[root]
-            shift = step[3 * len(movable) :] * scale
-            new_tr[root] = new_tr[root] + (shift if p < 0 else g_rot[p].T @ shift)
-        n_rot, n_pos = forward_kinematics(skel, Pose(new_rot, new_tr))
-        now = _misses(jmap.points(n_rot, n_pos)[joints], goals)
-        if (cost := _cost(now, weight)) < (last := _cost(misses, weight)):
-            rotations, translations, g_rot, g_pos, misses = new_rot, new_tr, n_rot, n_pos, now
-            damping = max(damping / 4.0, (1e-6 * scale) ** 2)
-            if float(misses[:n].max()) <= tolerance * 0.1 or cost > last * (1.0 - 1e-4):
-                break
-        else:
-            damping *= 10.0
+    fixed = np.r_[np.ones(k), np.full(n - k, _PIN_WEIGHT)]
+    hold = max(float(start[k:n].max(initial=0.0)), tolerance * _HOLD)  # no pin farther than this
+    state = (pose.rotations, pose.translations, g_rot, g_pos, start)
+    for follow in (_FOLLOW, 0.0):  # then the targets alone, from where the first left them
+        weight = np.r_[fixed, np.full(len(free), follow)]
+        state = _descend(skel, jmap, met + free, goals, weight, state, movable, parents,
+                         below[movable].astype(np.float64), root if moves else None, scale,
+                         hold, n, k, tolerance)  # fmt: skip
+    rotations, translations, _, _, misses = state
     lost = (start[:n] <= tolerance) & (misses[:n] > tolerance)
     if not float(misses[:n].max()) < float(start[:n].max()) or lost.any():
         return set()
@@ -161,3 +134,50 @@ def polish(
         changed.add(root)
     pose.rotations, pose.translations = rotations, translations
     return changed
+
+
+_State = tuple[F64, F64, F64, F64, F64]  # local rotations, translations, world ones, misses
+
+
+def _descend(
+    skel: Skeleton, jmap: JointMap, joints: list[int], goals: F64, weight: F64, state: _State,
+    movable: list[int], parents: npt.NDArray[np.intp], above: F64, root: int | None,
+    scale: float, hold: float, n: int, k: int, tolerance: float,
+) -> _State:  # fmt: skip
+    """Levenberg-Marquardt on the ``weight``-ed squares of the ``joints``' misses from
+    ``goals`` (the first ``n`` met: ``k`` targets, then pins), by turns of ``movable`` and
+    a move of ``root``; a step that takes a pin farther than ``hold`` is refused."""
+    rotations, translations, g_rot, g_pos, misses = state
+    rows = np.repeat(weight, 3)
+    cost = float((misses * weight) @ (misses * weight))
+    damping = scale**2
+    for _ in range(_STEPS):
+        if float(misses[:n].max()) <= tolerance * 0.1:
+            break
+        pts = jmap.points(g_rot, g_pos)[joints]
+        jac = _jacobian(pts[None] - g_pos[movable][:, None], above)
+        if root is not None:
+            jac = np.concatenate([jac, np.tile(np.eye(3) * scale, (len(joints), 1))], axis=1)
+        jac *= rows[:, None]
+        err = (goals - pts).reshape(-1) * rows
+        step = jac.T @ np.linalg.solve(jac @ jac.T + damping * np.eye(len(err)), err)
+        step *= min(1.0, _MAX_TURN / max(float(np.abs(step).max()), 1e-300))
+        turns = _rotations(step[: 3 * len(movable)].reshape(-1, 3))
+        new_rot = rotations.copy()
+        parent = np.where((parents >= 0)[:, None, None], g_rot[parents], np.eye(3))
+        new_rot[movable] = parent.transpose(0, 2, 1) @ turns @ parent @ rotations[movable]
+        new_tr = translations.copy()
+        if root is not None:
+            p = skel.parents[root]
+            shift = step[3 * len(movable) :] * scale
+            new_tr[root] = new_tr[root] + (shift if p < 0 else g_rot[p].T @ shift)
+        n_rot, n_pos = forward_kinematics(skel, Pose(new_rot, new_tr))
+        now = _misses(jmap.points(n_rot, n_pos)[joints], goals)
+        new = float((now * weight) @ (now * weight))
+        if new < cost and float(now[k:n].max(initial=0.0)) <= hold:
+            cost = new
+            rotations, translations, g_rot, g_pos, misses = new_rot, new_tr, n_rot, n_pos, now
+            damping = max(damping / 4.0, (1e-6 * scale) ** 2)
+        else:
+            damping *= 10.0
+    return rotations, translations, g_rot, g_pos, misses

@@ -1,0 +1,84 @@
+"""``core.reach.polish`` on a real character: it meets what it can, leaves a pose it cannot
+improve untouched, and never loses a pin for a target."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from core.bvh import read_bvh
+from core.bvh_write import pose_of, skeleton_of
+from core.characters import F64, Pose, Skeleton, forward_kinematics
+from core.characters_maps import JointMap, resolve_map
+from core.reach import polish
+from core.skeleton import JOINT_INDEX
+from tests.character_files import FILES, extract_bvh
+
+WRIST, ANKLES = JOINT_INDEX["left_wrist"], (JOINT_INDEX["left_ankle"], JOINT_INDEX["right_ankle"])
+
+
+@pytest.fixture(scope="module")
+def bandai(
+    mocap_dir: Path, tmp_path_factory: pytest.TempPathFactory
+) -> tuple[Skeleton, Pose, JointMap]:
+    path = extract_bvh(mocap_dir, tmp_path_factory.mktemp("reach"))["bandai"]
+    bvh = read_bvh(path)
+    skel = skeleton_of(bvh)
+    pose = pose_of(bvh, FILES["bandai"][3])
+    return skel, pose, resolve_map(skel)
+
+
+def _points(skel: Skeleton, pose: Pose, jmap: JointMap) -> F64:
+    g_rot, g_pos = forward_kinematics(skel, pose)
+    return jmap.points(g_rot, g_pos)
+
+
+def test_a_reachable_wrist_is_met_and_the_pins_held(
+    bandai: tuple[Skeleton, Pose, JointMap],
+) -> None:
+    skel, pose, jmap = bandai
+    pose = pose.copy()
+    pts = _points(skel, pose, jmap)
+    tol = 1e-3 * float(np.linalg.norm(pts[JOINT_INDEX["head"]] - pts[0]))  # ~1/500 of a trunk
+    goal = pts[WRIST] + 0.2 * (pts[JOINT_INDEX["head"]] - pts[WRIST])
+    pins = [(a, pts[a]) for a in ANKLES]
+    changed = polish(skel, pose, jmap, [(WRIST, goal)], pins, tol, 0)
+    after = _points(skel, pose, jmap)
+    assert np.linalg.norm(after[WRIST] - goal) <= 0.1 * tol
+    assert all(np.linalg.norm(after[a] - p) <= 0.1 * tol for a, p in pins)
+    assert changed  # the arm turned
+    # a pose that already meets them is left bit for bit
+    again = pose.copy()
+    assert polish(skel, again, jmap, [(WRIST, after[WRIST])], pins, tol, 0) == set()
+    np.testing.assert_array_equal(again.rotations, pose.rotations)
+
+
+def test_an_unreachable_wrist_comes_nearer_but_no_pin_is_lost(
+    bandai: tuple[Skeleton, Pose, JointMap],
+) -> None:
+    skel, pose, jmap = bandai
+    pose = pose.copy()
+    pts = _points(skel, pose, jmap)
+    tol = 1e-3 * float(np.linalg.norm(pts[JOINT_INDEX["head"]] - pts[0]))
+    goal = pts[WRIST] + np.array([0.0, 0.0, 1.0]) * 10 * float(np.ptp(pts, axis=0).max())
+    pins = [(a, pts[a]) for a in ANKLES]
+    before = float(np.linalg.norm(pts[WRIST] - goal))
+    polish(skel, pose, jmap, [(WRIST, goal)], pins, tol, 0)
+    after = _points(skel, pose, jmap)
+    assert float(np.linalg.norm(after[WRIST] - goal)) < before
+    assert all(np.linalg.norm(after[a] - p) <= tol for a, p in pins)
+
+
+def test_a_skeleton_with_nothing_to_turn_is_left_as_it_is(
+    bandai: tuple[Skeleton, Pose, JointMap],
+) -> None:
+    """No rotatable joint and no root to move (a file of position channels only): nothing
+    to do, no error (an empty step's maximum raised before)."""
+    skel, pose, jmap = bandai
+    frozen = dataclasses.replace(skel, rotatable=(False,) * skel.size)
+    pose = pose.copy()
+    pts = _points(frozen, pose, jmap)
+    assert polish(frozen, pose, jmap, [(WRIST, pts[WRIST] + 0.1)], [], 1e-3, None) == set()
