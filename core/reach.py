@@ -39,6 +39,7 @@ _MAX_TURN = 0.1  # radians per step and axis (a root's move: as much, priced)
 _HOLD = 0.5  # a pin may move a half of the tolerance in the steps (or as far as it started)
 _PIN_WEIGHT = 30.0  # a pin's miss counts 30 times a target's (900 times in the squares)
 _FOLLOW = 0.02  # the other points' moves count 0.02 of a target's miss: they follow
+_STALL, _GAIN = 5, 0.01  # stop once 5 steps taken have gained less than 1 % of the squares
 _MOVE_PRICE = 0.1  # a move of the root by d costs as a turn of d / (0.1 x the body's reach)
 
 
@@ -90,13 +91,15 @@ def polish(
     pins: Sequence[tuple[int, F64]],
     tolerance: float,
     root: int | None,
+    finish: bool = True,
 ) -> set[int]:
     """Move ``pose`` (in place) so its canonical points ``exact`` and ``pins`` (canonical
     joint, goal; character units) are met within ``tolerance`` where the skeleton can, no
-    pin ever moved farther than a tenth of it (or than it started); ``root`` is the joint
-    whose translation may move (None: none). Returns the joints whose rotation or
-    translation it changed (none where it found no better pose: one that meets them nearer
-    and loses none that was met)."""
+    pin ever moved farther than half of it (or than it started); ``root`` is the joint
+    whose translation may move (None: none); ``finish``: after the phase where the other
+    points follow, one for the targets alone (exact reach; soft reach stops short of it).
+    Returns the joints whose rotation or translation it changed (none where it found no
+    better pose: one that meets them nearer and loses none that was met)."""
     if not exact and not pins:
         return set()
     g_rot, g_pos = forward_kinematics(skel, pose)
@@ -120,7 +123,7 @@ def polish(
     fixed = np.r_[np.ones(k), np.full(n - k, _PIN_WEIGHT)]
     hold = max(float(start[k:n].max(initial=0.0)), tolerance * _HOLD)  # no pin farther than this
     state = (pose.rotations, pose.translations, g_rot, g_pos, start)
-    for follow in (_FOLLOW, 0.0):  # then the targets alone, from where the first left them
+    for follow in (_FOLLOW, 0.0) if finish else (_FOLLOW,):  # then the targets alone
         weight = np.r_[fixed, np.full(len(free), follow)]
         state = _descend(skel, jmap, met + free, goals, weight, state, movable, parents,
                          below[movable].astype(np.float64), root if moves else None, scale,
@@ -150,10 +153,13 @@ def _descend(
     rotations, translations, g_rot, g_pos, misses = state
     rows = np.repeat(weight, 3)
     cost = float((misses * weight) @ (misses * weight))
-    damping = scale**2
+    damping = 0.01 * scale**2
+    seen = [cost]  # the cost after each step taken
     for _ in range(_STEPS):
         if float(misses[:n].max()) <= tolerance * 0.1:
             break
+        if len(seen) > _STALL and cost > (1.0 - _GAIN) * seen[-_STALL - 1]:
+            break  # the last steps taken gained too little to go on
         pts = jmap.points(g_rot, g_pos)[joints]
         jac = _jacobian(pts[None] - g_pos[movable][:, None], above)
         if root is not None:
@@ -177,7 +183,10 @@ def _descend(
         if new < cost and float(now[k:n].max(initial=0.0)) <= hold:
             cost = new
             rotations, translations, g_rot, g_pos, misses = new_rot, new_tr, n_rot, n_pos, now
-            damping = max(damping / 4.0, (1e-6 * scale) ** 2)
+            damping = max(damping / 10.0, (1e-6 * scale) ** 2)
+            seen.append(cost)
         else:
             damping *= 10.0
+            if damping > 1e8 * scale**2:  # no step, however short, helps
+                break
     return rotations, translations, g_rot, g_pos, misses

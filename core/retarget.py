@@ -342,6 +342,7 @@ def _attempt(
     goal: F64,
     exact: Sequence[tuple[int, F64]],
     tolerance: float,
+    shifts: Sequence[bool],
 ) -> tuple[Pose, set[int], F64 | None, int | None]:
     """One retarget onto ``goal``; the shift of the pelvis that would bring the exact
     targets out of reach of their chains within reach (None if none is needed), and the
@@ -355,7 +356,7 @@ def _attempt(
         changed.add(turned)
     changed |= _aim_pass(skel, new, jmap, plan, goal, turned, pose)
     moves = []
-    for joint, target in exact:
+    for (joint, target), may_shift in zip(exact, shifts, strict=True):
         chain = _chain(plan, jmap, joint)
         if not chain:
             continue
@@ -366,7 +367,7 @@ def _attempt(
         reach = float(np.linalg.norm(np.diff(line, axis=0), axis=1).sum())
         gap = np.asarray(target, dtype=np.float64) - g_pos[top]
         far = float(np.linalg.norm(gap)) - reach * (1.0 - 1e-6)
-        if far > tolerance * 0.1:
+        if far > tolerance * 0.1 and may_shift:
             moves.append(gap / np.linalg.norm(gap) * (far + tolerance * 0.5))
         kid = _FIRST_CHILD.get(joint)  # e.g. the foot of an ankle: where a knee bends to
         bend = None if kid is None else pts[kid] - pts[joint]
@@ -402,21 +403,31 @@ def retarget(
     *,
     exact: Sequence[tuple[int, F64]] = (),
     pins: Sequence[tuple[int, F64]] = (),
+    soft: Sequence[tuple[int, F64]] = (),
     tolerance: float = 0.0,
 ) -> Retargeted:
     """A copy of ``pose`` whose canonical points follow ``solved`` ``[21, 3]`` (character
     units and axes); ``exact`` lists (canonical joint, goal) pairs to meet within
-    ``tolerance`` where the character's own chain can, ``pins`` pairs to hold first (see
-    the module docstring)."""
+    ``tolerance`` where the character's own chain can, ``pins`` pairs to hold first,
+    ``soft`` pairs to come near as the rest of the body allows (see the module docstring).
+    The whole body is moved towards a pin out of its chain's reach, and towards an exact
+    goal only where nothing holds it: no pin, no pelvis target (the shift would break
+    them)."""
     plan = _plan(skel, jmap)
     goal = np.array(solved, dtype=np.float64)
     body = [_PELVIS, *plan.groups.get(jmap.anchors[_PELVIS].joint, [])]
     met = [*exact, *pins]
+    # pins shift the body; targets only where nothing holds it (no pin, no pelvis target)
+    free = not pins and all(j != _PELVIS for j, _ in exact)
+    shifts = [free] * len(exact) + [True] * len(pins)
     for _ in range(_ROUNDS):
-        new, changed, shift, root = _attempt(skel, pose, jmap, plan, goal, met, tolerance)
+        new, changed, shift, root = _attempt(skel, pose, jmap, plan, goal, met, tolerance, shifts)
         if shift is None:
             break
         goal[body] += shift  # out of reach from the pelvis: move the whole body towards it
-    changed |= polish(skel, new, jmap, exact, pins, tolerance, root)
+    if soft:
+        changed |= polish(skel, new, jmap, soft, pins, tolerance, root, finish=False)
+    else:
+        changed |= polish(skel, new, jmap, exact, pins, tolerance, root)
     g_rot, g_pos = forward_kinematics(skel, new)
     return Retargeted(new, jmap.points(g_rot, g_pos), frozenset(changed))

@@ -412,13 +412,19 @@ def solve_prepared(engine: Engine, ch: Character, p: SolveProblem) -> Edit:
     solved = ch.from_service(np.asarray(result.pose, dtype=np.float64))
     given = zip(p.target_idx.tolist(), p.target_pos, strict=True)
     pairs = [(j, ch.from_service(g)) for j, g in given]
-    # soft reach: the character's targeted joints go where the canonical answer put them
     targets = pairs[: p.n_targets]
-    exact = targets if p.reach == "exact" else [(j, solved[j]) for j, _ in targets]
-    out = retarget(
-        ch.skel, ch.pose, ch.jmap, solved,
-        exact=exact, pins=pairs[p.n_targets :], tolerance=p.tolerance / ch.scale,
-    )  # fmt: skip
+    # a pin the canonical answer broke (a target it met instead) lies where it put it
+    pins = [
+        (j, g if err <= p.tolerance else solved[j])
+        for (j, g), err in zip(pairs[p.n_targets :], result.pin_errors, strict=True)
+    ]
+    if p.reach == "exact":
+        out = retarget(ch.skel, ch.pose, ch.jmap, solved, exact=targets, pins=pins,
+                       tolerance=p.tolerance / ch.scale)  # fmt: skip
+    else:  # the targeted joints come near where the canonical answer put them
+        soft = [(j, solved[j]) for j, _ in targets]
+        out = retarget(ch.skel, ch.pose, ch.jmap, solved, pins=pins, soft=soft,
+                       tolerance=p.tolerance / ch.scale)  # fmt: skip
     return Edit(out.pose, out.changed, p, result, engine.version)
 
 
