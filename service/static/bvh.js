@@ -12,8 +12,8 @@ const POSITION = { xposition: 0, yposition: 1, zposition: 2 };
 const ROTATION = { xrotation: 'X', yrotation: 'Y', zrotation: 'Z' };
 const DEG = Math.PI / 180;
 
-// Every MOTION value of the file, frame after frame (Float64Array).
-export function parseMotion(text) {
+// Where the frame lines start: after the MOTION line, "Frames:" and "Frame Time:".
+function motionStart(text) {
   const m = MOTION_RE.exec(text);
   if (!m) throw new Error('not a BVH file: no MOTION line');
   let i = m.index + m[0].length;
@@ -23,11 +23,39 @@ export function parseMotion(text) {
     if (i < 0) throw new Error('truncated MOTION header');
     i += 1;
   }
-  const tokens = text.slice(i).split(/\s+/);
+  return i;
+}
+
+// Every MOTION value of the file, frame after frame (Float64Array).
+export function parseMotion(text) {
+  const tokens = text.slice(motionStart(text)).split(/\s+/);
   const out = new Float64Array(tokens.length);
   let n = 0;
   for (const t of tokens) if (t) out[n++] = Number(t);
   return out.subarray(0, n);
+}
+
+// The values of one frame (Float64Array of ``channels``) read from its line alone (a 1 MB
+// file: ~0.5 ms, not parseMotion's 12-30 ms); null unless the file holds one frame per
+// line, ``frames`` lines less the blank ones (the service's rule for splicing a frame).
+export function frameValues(text, frame, frames, channels) {
+  const blank = /[^\S\n]*(?:\n|$)/y;
+  let pos = motionStart(text);
+  let seen = 0;
+  let line = null;
+  while (pos <= text.length) {
+    let end = text.indexOf('\n', pos);
+    if (end < 0) end = text.length;
+    blank.lastIndex = pos;
+    if (!blank.test(text)) {
+      if (seen === frame) line = [pos, end];
+      seen += 1;
+    }
+    pos = end + 1;
+  }
+  if (seen !== frames || !line) return null;
+  const tokens = text.slice(line[0], line[1]).split(/\s+/).filter((t) => t);
+  return tokens.length === channels ? Float64Array.from(tokens, Number) : null;
 }
 
 // 3x3 matrices as row-major arrays of 9.

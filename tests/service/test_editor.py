@@ -654,3 +654,216 @@ def test_editor_writes_a_file_back_in_its_own_bytes(server: str, browser: Any) -
         assert "LeftHandInd\u00e8x1" in page.evaluate(f"{m}.bvh()")["joints"]
     finally:
         context.close()
+
+
+# -- the review's defects: each found by a test run against the page before its fix ------------
+M = "window.marionette"
+
+
+def open_editor(browser: Any, server: str) -> Any:
+    """A fresh page on the editor, loaded and connected (its context closed with the page's
+    ``context``)."""
+    context = browser.new_context(viewport={"width": 1280, "height": 800}, device_scale_factor=1)
+    page = context.new_page()
+    page.set_default_timeout(20_000)
+    page.goto(server + "/editor")
+    page.wait_for_function(f"() => {M} && {M}.ready()")
+    page.wait_for_function("() => document.getElementById('status').textContent === 'connected'")
+    return page
+
+
+def settle(page: Any) -> None:
+    page.wait_for_function(f"() => (s => !s.dirty && !s.inflight)({M}.solveCount())", polling=50)
+
+
+def drag_joint(page: Any, joint: str, dx: float, dy: float, steps: int = 8) -> None:
+    """Drag ``joint``'s handle by (dx, dy) pixels and wait for the gesture's last solve."""
+    xy = page.evaluate(f"{M}.projectJoint('{joint}')")
+    page.mouse.move(xy["x"], xy["y"])
+    page.mouse.down()
+    for i in range(1, steps + 1):
+        page.mouse.move(xy["x"] + dx * i / steps, xy["y"] + dy * i / steps)
+        page.wait_for_timeout(16)
+    page.mouse.up()
+    settle(page)
+
+
+def hovered(page: Any, x: float, y: float) -> str | None:
+    """What the pointer at (x, y) would grab: the hover label's text, or None."""
+    page.mouse.move(x - 3, y)
+    page.mouse.move(x, y)
+    hud = page.locator("#hud")
+    return str(hud.inner_text()) if hud.is_visible() else None
+
+
+@pytest.mark.browser
+def test_editor_picks_the_nearest_joint_fairly(server: str, browser: Any) -> None:
+    """The head's picking bias (10 px) won over the neck: in the 'bow' sample the neck is
+    8 px from the head on screen and could not be grabbed at all, even with the pointer
+    on it; elsewhere a pointer 40% of the way from the neck to the head took the head. Now
+    the nearest joint wins, and the head is still grabbed anywhere on its (larger) sphere."""
+    page = open_editor(browser, server)
+    try:
+        names = page.locator("#sample option").all_inner_texts()
+        for name in names:
+            page.select_option("#sample", label=name)
+            neck = page.evaluate(f"{M}.projectJoint('neck')")
+            head = page.evaluate(f"{M}.projectJoint('head')")
+            assert hovered(page, neck["x"], neck["y"]) == "neck", name
+            near = (
+                neck["x"] + 0.4 * (head["x"] - neck["x"]),
+                neck["y"] + 0.4 * (head["y"] - neck["y"]),
+            )
+            assert hovered(page, *near) == "neck", name
+            assert hovered(page, head["x"], head["y"]) == "head", name
+            # 6 cm above the head's centre: on its 7.5 cm sphere, beyond PICK_PIXELS
+            pose = page.evaluate(f"{M}.pose()")
+            top = [pose["head"][0], pose["head"][1] + 0.06, pose["head"][2]]
+            on = page.evaluate(f"{M}.projectPoint({json.dumps(top)})")
+            assert math.dist((on["x"], on["y"]), (head["x"], head["y"])) > 18
+            assert hovered(page, on["x"], on["y"]) == "head", name
+        # ... and the bow's neck is dragged, not its head
+        page.select_option("#sample", label=next(n for n in names if n.endswith("bow")))
+        drag_joint(page, "neck", 0, -40)
+        assert list(page.evaluate(f"{M}.targets()")) == ["neck"]
+    finally:
+        page.context.close()
+
+
+@pytest.mark.browser
+def test_editor_undo_after_scrubbing_returns_to_the_state_before(server: str, browser: Any) -> None:
+    """Scrubbing rewrote the current undo step with the frame scrubbed to (and no targets):
+    after an edit at frame 1 was undone, a scrub to frame 0 and a redo, undo showed frame 0
+    (the scrubbed frame) instead of frame 1 before the edit, and a redo after a scrub lost
+    the edit's frame and target. Now scrubbing changes no step: undo and redo show the frame
+    of the edit they undo or redo (with its targets)."""
+    text = json.loads((REPO_ROOT / "docs" / "examples" / "bvh_solve.json").read_text())["bvh"]
+    page = open_editor(browser, server)
+
+    def scrub(frame: int) -> None:
+        page.locator("#bvh-frame").fill(str(frame))
+        page.wait_for_function(f"() => {M}.bvh().frame === {frame}")
+
+    def shown() -> tuple[bool, int, list[str]]:
+        """(the original text?, frame, targets), and the frame drawn is the text's."""
+        now = page.evaluate(f"{M}.bvhText()")
+        frame = page.evaluate(f"{M}.bvh().frame")
+        want = post_json(server + "/v1/bvh/inspect", {"bvh": now, "frame": frame})["positions"]
+        got = page.evaluate(f"{M}.bvhPositions()")
+        assert max(dist(a, b) for a, b in zip(got, want, strict=True)) < 1e-6
+        return now == text, frame, sorted(page.evaluate(f"{M}.targets()"))
+
+    try:
+        page.set_input_files(
+            "#bvh-file",
+            files=[{"name": "three.bvh", "mimeType": "text/plain", "buffer": text.encode()}],
+        )
+        page.wait_for_function(f"() => {M}.bvh() && {M}.bvh().name === 'three.bvh'")
+        scrub(1)
+        drag_joint(page, "left_wrist", 40, -60)
+        edited = page.evaluate(f"{M}.bvhText()")
+        assert edited != text
+        assert page.evaluate(f"{M}.history()") == {"length": 2, "index": 1}
+        assert shown() == (False, 1, ["left_wrist"])
+
+        scrub(2)  # not an undo step
+        assert page.evaluate(f"{M}.history()") == {"length": 2, "index": 1}
+        assert shown() == (False, 2, [])
+        page.click("#undo")  # the state before the edit: the file as opened, frame 1
+        assert shown() == (True, 1, [])
+        scrub(0)
+        page.click("#redo")  # the edit, at its frame, with its target
+        assert shown() == (False, 1, ["left_wrist"])
+        assert page.evaluate(f"{M}.bvhText()") == edited
+        page.click("#undo")  # was: frame 0, the frame scrubbed to
+        assert shown() == (True, 1, [])
+        page.click("#redo")
+
+        # an edit after a scrub: undoing it shows its frame, the step before it the first
+        # edit's frame
+        scrub(2)
+        drag_joint(page, "right_wrist", -40, -60)
+        assert page.evaluate(f"{M}.history()") == {"length": 3, "index": 2}
+        assert shown() == (False, 2, ["right_wrist"])
+        page.click("#undo")
+        assert page.evaluate(f"{M}.bvhText()") == edited
+        assert shown() == (False, 2, [])
+        page.click("#undo")
+        assert shown() == (True, 1, [])
+        page.click("#redo")
+        page.click("#redo")
+        assert shown() == (False, 2, ["right_wrist"])
+        # a scrub, then an option changed with no targets: still no step of its own
+        scrub(0)
+        page.get_by_label("Preserve bone lengths").click()
+        settle(page)
+        assert page.evaluate(f"{M}.history()") == {"length": 3, "index": 2}
+    finally:
+        page.context.close()
+
+
+@pytest.mark.browser
+def test_editor_reads_an_answer_by_its_frame_line(
+    server: str, browser: Any, more_mocap: Path
+) -> None:
+    """Each answer of a solve on a file is a new text, and the page read it whole to draw one
+    frame: on a 1 MB file (ReActIdle, 918 frames) 12-30 ms of parsing per answer. Now only
+    the frame's line is read (the whole file only when it does not hold one frame per line),
+    and the frame drawn is the same."""
+    path = next(more_mocap.rglob("genuine/003_genuine.bvh"))
+    text = path.read_text()
+    assert len(text) > 900_000
+    lines = text.split("\n")
+    body = lines.index("MOTION") + 3
+    frames = [ln for ln in lines[body:] if ln.strip()]
+    assert len(frames) == 918
+    spaced = "\n".join(lines[:body] + [f"{ln}\n  " for ln in frames]) + "\n"
+    halves = [ln.split(" ", 30) for ln in frames]  # each frame on two lines
+    wrapped = "\n".join(lines[:body] + [" ".join(h[:30]) + "\n" + h[30] for h in halves]) + "\n"
+    page = open_editor(browser, server)
+    try:
+        page.set_input_files("#bvh-file", str(path))
+        page.wait_for_function(f"() => {M}.bvh() !== null")
+        assert page.evaluate(f"{M}.bvh().frames") == 918
+        timing = page.evaluate(
+            """async ([spaced, wrapped]) => {
+              const file = await import('/static/editor/file.js');
+              const bvh = await import('/static/bvh.js');
+              const text = window.marionette.bvhText();
+              const median = (xs) => xs.sort((a, b) => a - b)[Math.floor(xs.length / 2)];
+              const time = (f) => {
+                const out = [];
+                for (let i = 1; i <= 7; i += 1) {
+                  const fresh = text + ' '.repeat(i);  // a new text, as each answer is
+                  const t0 = performance.now();
+                  f(fresh);
+                  out.push(performance.now() - t0);
+                }
+                return median(out);
+              };
+              const same = (t, f) =>
+                JSON.stringify(file.filePose(t, f)) === JSON.stringify(file.filePose(text, f));
+              return {
+                pose: time((t) => file.filePose(t, 700)),
+                parse: time((t) => bvh.parseMotion(t)),
+                spaced: [0, 500, 917].every((f) => same(spaced, f)),
+                wrapped: [0, 500, 917].every((f) => same(wrapped, f)),  // read whole
+              };
+            }""",
+            [spaced, wrapped],
+        )
+        print("a frame of a new 1 MB text:", timing)  # shown with pytest -s
+        assert timing["spaced"] and timing["wrapped"], timing
+        assert timing["pose"] < 0.3 * timing["parse"], timing
+
+        # a drag: the answer's frame drawn as the service has it
+        page.locator("#bvh-frame").fill("700")
+        page.wait_for_function(f"() => {M}.bvh().frame === 700")
+        drag_joint(page, "left_wrist", 30, -60)
+        now = page.evaluate(f"{M}.bvhText()")
+        assert now != text
+        want = post_json(server + "/v1/bvh/inspect", {"bvh": now, "frame": 700})["positions"]
+        got = page.evaluate(f"{M}.bvhPositions()")
+        assert max(dist(a, b) for a, b in zip(got, want, strict=True)) < 1e-6
+    finally:
+        page.context.close()

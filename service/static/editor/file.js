@@ -2,10 +2,10 @@
 // kinematics), and open (picker or drop), scrub, close.
 
 import * as THREE from 'three';
-import { anchorPoints, forwardKinematics, parseMotion } from '../bvh.js';
+import { anchorPoints, forwardKinematics, frameValues, parseMotion } from '../bvh.js';
 import { $, doc, history, state, ui } from './state.js';
 import { api, ApiError, clearError, showError } from './api.js';
-import { cancelSolves, clonePose, pushHistory, restore, snapshot } from './solve.js';
+import { cancelSolves, clonePose, pushHistory, restore } from './solve.js';
 import { buildCharacterBones, buildSkeleton, camera, controls, UP } from './scene.js';
 import { endDrag } from './interaction.js';
 import { refresh } from './panel.js';
@@ -25,11 +25,25 @@ function motionOf(text) {
   return values;
 }
 
+// One frame's values of a text: a text read whole (motionCache) has them; else its frame's
+// line alone is read (each answer of a solve is a new text: reading a 1 MB file whole took
+// 12-30 ms per answer), the file whole only when it does not hold one frame per line.
+let lastRow = { text: null, frame: -1, row: null };
+
+function frameRow(text, frame, n) {
+  const values = motionCache.get(text);
+  if (values) return values.subarray(frame * n, (frame + 1) * n);
+  if (lastRow.text === text && lastRow.frame === frame) return lastRow.row;
+  const row = frameValues(text, frame, doc.info.frames, n) || motionOf(text).subarray(frame * n, (frame + 1) * n);
+  lastRow = { text, frame, row };
+  return row;
+}
+
 // Forward kinematics of one frame of a text: every joint, and the canonical points (file units).
 export function fileFrame(text, frame) {
   const joints = doc.info.joints;
   const n = joints.reduce((acc, j) => acc + j.channels.length, 0);
-  const row = motionOf(text).subarray(frame * n, (frame + 1) * n);
+  const row = frameRow(text, frame, n);
   const fk = forwardKinematics(joints, row);
   return { fk, points: anchorPoints(joints, doc.info.anchors, fk) };
 }
@@ -94,6 +108,7 @@ export async function openText(text, name, original = text, encoding = 'utf-8') 
   endDrag(false);
   cancelSolves();
   motionCache.clear();
+  lastRow = { text: null, frame: -1, row: null };
   const info = res.data;
   Object.assign(doc, { active: true, name, original, text, shown: text, info, frame: 0, encoding });
   const frame0 = fileFrame(text, 0);
@@ -165,6 +180,7 @@ export function closeFile() {
   doc.active = false;
   doc.info = null;
   motionCache.clear();
+  lastRow = { text: null, frame: -1, row: null };
   buildSkeleton();
   buildCharacterBones();
   $('bvh-loaded').hidden = true;
@@ -187,8 +203,7 @@ export function setFrame(frame) {
   state.targets.clear();
   state.committed = filePose(doc.text, frame);
   state.pose = clonePose(state.committed);
-  // not an undo step: the current history entry follows the frame
-  if (history.index >= 0) history.stack[history.index] = snapshot();
+  // not an undo step, and no step changes: undo / redo show the frame of their edit
   refresh();
 }
 

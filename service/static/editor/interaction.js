@@ -4,10 +4,13 @@
 import * as THREE from 'three';
 import { $, doc, state, ui } from './state.js';
 import { cancelSolves, commitShown, requestSolve, restore, snapshot } from './solve.js';
-import { camera, controls, drawPose, renderer, viewport } from './scene.js';
+import {
+  camera, controls, drawPose, handleRadius, renderer, TARGET_RADIUS, viewport,
+} from './scene.js';
 import { refresh, refreshPanel } from './panel.js';
 
 const PICK_PIXELS = 18;
+const TARGET_PREFERENCE = 2;
 
 // ------------------------------------------------------------------------------------
 // Screen-space picking and ray-plane dragging
@@ -22,19 +25,26 @@ export function toScreen(p) {
   };
 }
 
-// The nearest joint or target marker within PICK_PIXELS of the pointer (targets first).
+// What the pointer grabs: the handle (joint or target marker) whose centre is nearest to
+// it, with no bias for any joint (the head's took the pointer from the neck even with the
+// neck under it, as in a bow); a target beats its own joint where they coincide
+// (TARGET_PREFERENCE px). A handle is in reach within PICK_PIXELS of its centre, or anywhere
+// on its sphere as drawn (a sample's head is larger), unless another centre is nearer.
 function pick(clientX, clientY) {
   let best = null;
-  const consider = (kind, joint, p, bias) => {
+  const camUp = new THREE.Vector3(0, 1, 0).applyQuaternion(camera.quaternion);
+  const consider = (kind, joint, p, radius) => {
     const s = toScreen(p);
     if (s.depth < -1 || s.depth > 1) return;
-    const d = Math.hypot(s.x - clientX, s.y - clientY) - bias;
-    if (d <= PICK_PIXELS && (!best || d < best.d)) best = { kind, joint, d };
+    const rim = toScreen([p[0] + camUp.x * radius, p[1] + camUp.y * radius, p[2] + camUp.z * radius]);
+    const d = Math.hypot(s.x - clientX, s.y - clientY);
+    if (d > Math.max(PICK_PIXELS, Math.hypot(rim.x - s.x, rim.y - s.y))) return;
+    const score = d - (kind === 'target' ? TARGET_PREFERENCE : 0);
+    if (!best || score < best.score) best = { kind, joint, score };
   };
-  for (const [joint, p] of state.targets) consider('target', joint, p, 2);
+  for (const [joint, p] of state.targets) consider('target', joint, p, TARGET_RADIUS);
   for (const joint of state.joints) {
-    const bias = joint === 'head' && !doc.active ? 10 : 0;
-    if (state.pose && state.pose[joint]) consider('joint', joint, state.pose[joint], bias);
+    if (state.pose && state.pose[joint]) consider('joint', joint, state.pose[joint], handleRadius(joint));
   }
   return best;
 }

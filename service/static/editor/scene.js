@@ -18,6 +18,10 @@ const COLORS = {
 const JOINT_RADIUS = 0.026;
 const BONE_RADIUS = 0.016;
 const HEAD_RADIUS = 0.075;
+export const TARGET_RADIUS = 0.036;
+
+// The radius (m) of a joint's handle as drawn: a sample's head is a larger sphere.
+export const handleRadius = (name) => (name === 'head' && !doc.active ? HEAD_RADIUS : JOINT_RADIUS);
 
 // ------------------------------------------------------------------------------------
 // Scene
@@ -83,8 +87,7 @@ export function buildSkeleton() {
   pinRings.clear();
   for (const name of state.joints) {
     const mesh = new THREE.Mesh(sphereGeometry, materials[side(name)]);
-    const r = name === 'head' && !doc.active ? HEAD_RADIUS : JOINT_RADIUS;
-    mesh.scale.setScalar(r);
+    mesh.scale.setScalar(handleRadius(name));
     mesh.name = name;
     skeleton.add(mesh);
     jointMeshes.set(name, mesh);
@@ -175,7 +178,7 @@ export function drawPose() {
     let marker = targetMarkers.get(joint);
     if (!marker) {
       marker = new THREE.Mesh(sphereGeometry, materials.target);
-      marker.scale.setScalar(0.036);
+      marker.scale.setScalar(TARGET_RADIUS);
       scene.add(marker);
       targetMarkers.set(joint, marker);
       const line = new THREE.Line(

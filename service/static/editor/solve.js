@@ -25,20 +25,26 @@ export function snapshot() {
   return snap;
 }
 
-export function restore(snap) {
-  state.committed = clonePose(snap.pose);
-  state.pose = clonePose(snap.pose);
-  state.targets = new Map(snap.targets.map(([j, p]) => [j, [...p]]));
+// Back to a snapshot; a file's at ``frame`` (its own by default): at another frame, the
+// frame as the snapshot's text has it, without its targets (they were for its frame).
+export function restore(snap, frame = snap.frame) {
+  const moved = doc.active && snap.text !== undefined && frame !== snap.frame;
+  state.committed = moved ? filePose(snap.text, frame) : clonePose(snap.pose);
+  state.pose = clonePose(state.committed);
+  state.targets = new Map(moved ? [] : snap.targets.map(([j, p]) => [j, [...p]]));
   state.pins = new Set(snap.pins);
   if (doc.active && snap.text !== undefined) {
     doc.text = snap.text;
     doc.shown = snap.text;
-    doc.frame = snap.frame;
+    doc.frame = frame;
   }
 }
 
+// The same state (no new undo step): also a step's state scrubbed to another frame (its
+// targets gone with the scrub), so a scrub never becomes a step of its own.
 function sameSnapshot(a, b) {
-  if (!a || a.text !== b.text || a.frame !== b.frame) return false;
+  if (!a || a.text !== b.text) return false;
+  if (a.frame !== b.frame) return b.targets.length === 0 && JSON.stringify(a.pins) === JSON.stringify(b.pins);
   return JSON.stringify({ ...a, text: null }) === JSON.stringify({ ...b, text: null });
 }
 
@@ -68,12 +74,15 @@ export function cancelSolves() {
   solver.commitPending = false;
 }
 
+// Undo and redo show the frame of the edit they undo or redo (a scrub changes no step):
+// undo, the step before at the undone edit's frame; redo, the redone step as it was made.
 export function undo() {
   if (history.index <= 0) return;
   endDrag(false);
   cancelSolves();
+  const frame = history.stack[history.index].frame;
   history.index -= 1;
-  restore(history.stack[history.index]);
+  restore(history.stack[history.index], frame);
   refresh();
 }
 
