@@ -16,10 +16,13 @@ lengths. Pins weigh :data:`_PIN_WEIGHT` targets and no step takes one farther th
 the tolerance (:data:`_HOLD`), so a target the skeleton cannot reach with its pins held
 comes nearer and the pins stay. Two phases: first the other canonical points weigh
 :data:`_FOLLOW` each, so the rest of the body stays where the retarget laid it unless the
-targets need it to move; then the targets alone, from there, so that no pull of the others
-leaves them short. The root's move is priced as a turn at a tenth of the body's reach
+targets need it to move; then (exact reach) the targets alone, from there, so that no pull
+of the others leaves them short; last, where a target out of reach pulled a pin off, the
+pins alone. The root's move is priced as a turn at a tenth of the body's reach
 (:data:`_MOVE_PRICE`), so turns come first where they do it. The result is kept only where
-its farthest miss is smaller and no point that was met is lost.
+no point that was met is lost and the pins' farthest miss is smaller, or, no worse, the
+targets'. The caller passes the targets the canonical answer met as pins
+(``service.characters.solve_prepared``).
 """
 
 from __future__ import annotations
@@ -123,20 +126,36 @@ def polish(
     fixed = np.r_[np.ones(k), np.full(n - k, _PIN_WEIGHT)]
     hold = max(float(start[k:n].max(initial=0.0)), tolerance * _HOLD)  # no pin farther than this
     state = (pose.rotations, pose.translations, g_rot, g_pos, start)
-    for follow in (_FOLLOW, 0.0) if finish else (_FOLLOW,):  # then the targets alone
-        weight = np.r_[fixed, np.full(len(free), follow)]
+    phases = [(fixed, _FOLLOW), (fixed, 0.0)] if finish else [(fixed, _FOLLOW)]
+    phases.append((np.r_[np.zeros(k), fixed[k:]], _FOLLOW))  # the pins alone, last
+    for i, (front, follow) in enumerate(phases):
+        if i == len(phases) - 1 and float(state[4][k:n].max(initial=0.0)) <= tolerance * 0.1:
+            break  # (needed only where a target out of reach pulled a pin off)
+        weight = np.r_[front, np.full(len(free), follow)]
         state = _descend(skel, jmap, met + free, goals, weight, state, movable, parents,
                          below[movable].astype(np.float64), root if moves else None, scale,
                          hold, n, k, tolerance)  # fmt: skip
     rotations, translations, _, _, misses = state
-    lost = (start[:n] <= tolerance) & (misses[:n] > tolerance)
-    if not float(misses[:n].max()) < float(start[:n].max()) or lost.any():
+    if not _better(start, misses, n, k, tolerance):
         return set()
     changed = {b for b in movable if not np.array_equal(rotations[b], pose.rotations[b])}
     if root is not None and not np.array_equal(translations[root], pose.translations[root]):
         changed.add(root)
     pose.rotations, pose.translations = rotations, translations
     return changed
+
+
+def _better(start: F64, end: F64, n: int, k: int, tolerance: float) -> bool:
+    """Whether misses ``end`` beat ``start`` (the first ``n``: ``k`` targets, then pins):
+    no point that was met lost, and the pins' farthest miss smaller (both within a tenth of
+    the tolerance count as equal), or, no worse, the targets'."""
+    if ((start[:n] <= tolerance) & (end[:n] > tolerance)).any():
+        return False
+    p0, p1 = float(start[k:n].max(initial=0.0)), float(end[k:n].max(initial=0.0))
+    if p1 < p0 - 1e-12 and p0 > tolerance * 0.1:
+        return True
+    t0, t1 = float(start[:k].max(initial=0.0)), float(end[:k].max(initial=0.0))
+    return p1 <= max(p0, tolerance * 0.1) and t1 < t0 - 1e-12
 
 
 _State = tuple[F64, F64, F64, F64, F64]  # local rotations, translations, world ones, misses
@@ -155,8 +174,9 @@ def _descend(
     cost = float((misses * weight) @ (misses * weight))
     damping = 0.01 * scale**2
     seen = [cost]  # the cost after each step taken
+    check = weight[:n] > 0  # the points this phase meets
     for _ in range(_STEPS):
-        if float(misses[:n].max()) <= tolerance * 0.1:
+        if float(misses[:n][check].max()) <= tolerance * 0.1:
             break
         if len(seen) > _STALL and cost > (1.0 - _GAIN) * seen[-_STALL - 1]:
             break  # the last steps taken gained too little to go on

@@ -418,8 +418,11 @@ def solve_prepared(engine: Engine, ch: Character, p: SolveProblem) -> Edit:
         (j, g if err <= p.tolerance else solved[j])
         for (j, g), err in zip(pairs[p.n_targets :], result.pin_errors, strict=True)
     ]
-    if p.reach == "exact":
-        out = retarget(ch.skel, ch.pose, ch.jmap, solved, exact=targets, pins=pins,
+    if p.reach == "exact":  # the targets the answer met are held as pins are
+        met = result.errors <= p.tolerance
+        held = [t for t, ok in zip(targets, met, strict=True) if ok]
+        rest = [t for t, ok in zip(targets, met, strict=True) if not ok]
+        out = retarget(ch.skel, ch.pose, ch.jmap, solved, exact=rest, pins=pins + held,
                        tolerance=p.tolerance / ch.scale)  # fmt: skip
     else:  # the targeted joints come near where the canonical answer put them
         soft = [(j, solved[j]) for j, _ in targets]

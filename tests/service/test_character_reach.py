@@ -21,8 +21,10 @@ from core.bvh_write import pose_of, skeleton_of
 from core.characters_maps import resolve_map
 from core.retarget import canonical_points
 from core.skeleton import JOINT_INDEX
+from core.units import UNITS
 from service.characters import (
     BVHSolveRequest,
+    bvh_answer,
     character_from_bvh,
     character_problem,
     read_request_bvh,
@@ -120,3 +122,72 @@ def test_soft_reach_lays_targets_where_the_canonical_answer_put_them(
     _summary(rows, "soft (target: off the canonical answer's miss)")
     assert max(r[3] for r in rows) <= TOL
     assert max(r[4] for r in rows) <= TOL
+
+
+def _answer(engine: Engine, text: str, name: str, body: dict[str, Any]) -> tuple[Any, Any]:
+    """(the canonical answer, the character's report) of one /v1/bvh/solve body."""
+    _, _, units, frame = FILES[name]
+    body = {"bvh": text, "frame": frame, **body}
+    if units is not None:
+        body["units"] = units
+    req = BVHSolveRequest.model_validate(body)
+    bvh = read_request_bvh(text)
+    ch = character_from_bvh(bvh, req)
+    edit = solve_prepared(engine, ch, character_problem(ch, req))
+    return edit.result, bvh_answer(bvh, ch, req, edit)
+
+
+@pytest.mark.parametrize("name", ["bandai", "cmu-daz-salsa", "reactidle-6ch"])
+def test_a_wrist_out_of_reach_neither_breaks_a_pin_nor_loses_the_pelvis(
+    engine: Engine, files: dict[str, Path], name: str
+) -> None:
+    """A review's finds: for a wrist out of reach the whole body was shifted towards it, so
+    a pinned pelvis moved up to 0.97 m and a pelvis target the answer met was missed by up
+    to 2.2 m; a pin the answer broke for a target (an elbow far from its pinned wrist) was
+    held by the character instead, which left the elbow 1.4 m from where the answer put it."""
+    text = files[name].read_text()
+    pts = _points(text, name)
+    up = pts[JOINT_INDEX["head"]] - pts[JOINT_INDEX["pelvis"]]
+    far = (pts[JOINT_INDEX["right_wrist"]] + 4.0 * np.roll(up, 1)).tolist()  # across, far
+    label = resolve_map(skeleton_of(parse_bvh(text))).describe()
+    wrist = {"joint": label["right_wrist"], "position": far}
+    for reach in ("exact", "soft"):
+        # a pinned pelvis stays where it was
+        result, out = _answer(engine, text, name, {"targets": [wrist], "pins": [label["pelvis"]],
+                                                    "options": {"reach": reach}})  # fmt: skip
+        assert result.pin_errors[0] <= TOL and out["pins"][0]["error"] <= TOL, (reach, out["pins"])
+        # a pelvis target the answer met is met
+        low = (pts[JOINT_INDEX["pelvis"]] - 0.1 * up).tolist()
+        pelvis = {"joint": label["pelvis"], "position": low}
+        result, out = _answer(
+            engine, text, name, {"targets": [pelvis, wrist], "options": {"reach": reach}}
+        )
+        assert result.errors[0] <= TOL, (reach, result.errors)
+        assert out["targets"][0]["error"] <= result.errors[0] + TOL, (reach, out["targets"])
+    # an elbow 2 m from its pinned wrist: where the answer breaks the pin for it, the
+    # character follows the answer (it held the pin: the elbow 1.4 m off); soft reach ends
+    # its polish before the targets alone, so it may stay a few cm short of the answer
+    units = _scale(out)
+    across = np.roll(up, 1) / np.linalg.norm(up)
+    elbow = {
+        "joint": label["left_elbow"],
+        "position": (pts[JOINT_INDEX["left_wrist"]] + 2.0 / units * across).tolist(),
+    }
+    result, out = _answer(engine, text, name, {"targets": [elbow], "pins": [label["left_wrist"]],
+                                                "options": {"reach": "soft"}})  # fmt: skip
+    assert out["targets"][0]["error"] <= result.errors[0] + 0.05, (out, result.errors)
+    if result.pin_errors[0] > TOL:  # the answer broke the pin: so does the character
+        assert out["pins"][0]["error"] > TOL
+
+
+def _points(text: str, name: str) -> np.ndarray:
+    bvh = parse_bvh(text)
+    skel = skeleton_of(bvh)
+    out: np.ndarray = canonical_points(skel, pose_of(bvh, FILES[name][3]), resolve_map(skel))
+    return out
+
+
+def _scale(out: dict[str, Any]) -> float:
+    """Metres per unit of an answer's file."""
+    units = out["units"]
+    return float(UNITS[units]) if isinstance(units, str) else float(units)
