@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -36,15 +37,22 @@ def _points(skel: Skeleton, pose: Pose, jmap: JointMap) -> F64:
     return jmap.points(g_rot, g_pos)
 
 
-def test_a_reachable_wrist_is_met_and_the_pins_held(
-    bandai: tuple[Skeleton, Pose, JointMap],
-) -> None:
+def _edit(bandai: tuple[Skeleton, Pose, JointMap]) -> tuple[Pose, F64, float, list[Any]]:
+    """A copy of the pose, its points, a tolerance (~1/500 of the trunk) and both ankles
+    pinned where they are."""
     skel, pose, jmap = bandai
     pose = pose.copy()
     pts = _points(skel, pose, jmap)
-    tol = 1e-3 * float(np.linalg.norm(pts[JOINT_INDEX["head"]] - pts[0]))  # ~1/500 of a trunk
+    tol = 1e-3 * float(np.linalg.norm(pts[JOINT_INDEX["head"]] - pts[0]))
+    return pose, pts, tol, [(a, pts[a]) for a in ANKLES]
+
+
+def test_a_reachable_wrist_is_met_and_the_pins_held(
+    bandai: tuple[Skeleton, Pose, JointMap],
+) -> None:
+    skel, _, jmap = bandai
+    pose, pts, tol, pins = _edit(bandai)
     goal = pts[WRIST] + 0.2 * (pts[JOINT_INDEX["head"]] - pts[WRIST])
-    pins = [(a, pts[a]) for a in ANKLES]
     changed = polish(skel, pose, jmap, [(WRIST, goal)], pins, tol, 0)
     after = _points(skel, pose, jmap)
     assert np.linalg.norm(after[WRIST] - goal) <= 0.1 * tol
@@ -59,12 +67,9 @@ def test_a_reachable_wrist_is_met_and_the_pins_held(
 def test_an_unreachable_wrist_comes_nearer_but_no_pin_is_lost(
     bandai: tuple[Skeleton, Pose, JointMap],
 ) -> None:
-    skel, pose, jmap = bandai
-    pose = pose.copy()
-    pts = _points(skel, pose, jmap)
-    tol = 1e-3 * float(np.linalg.norm(pts[JOINT_INDEX["head"]] - pts[0]))
+    skel, _, jmap = bandai
+    pose, pts, tol, pins = _edit(bandai)
     goal = pts[WRIST] + np.array([0.0, 0.0, 1.0]) * 10 * float(np.ptp(pts, axis=0).max())
-    pins = [(a, pts[a]) for a in ANKLES]
     before = float(np.linalg.norm(pts[WRIST] - goal))
     polish(skel, pose, jmap, [(WRIST, goal)], pins, tol, 0)
     after = _points(skel, pose, jmap)
