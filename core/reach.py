@@ -13,16 +13,17 @@ ended 3-6 cm from where the canonical answer had put it.
 met point (targets and pins) turns, and the root moves, by damped least-squares steps
 (Levenberg-Marquardt, at most :data:`_MAX_TURN` a step) in the character's own bone
 lengths. Pins weigh :data:`_PIN_WEIGHT` targets and no step takes one farther than half
-the tolerance (:data:`_HOLD`), so a target the skeleton cannot reach with its pins held
-comes nearer and the pins stay. Two phases: first the other canonical points weigh
-:data:`_FOLLOW` each, so the rest of the body stays where the retarget laid it unless the
-targets need it to move; then (exact reach) the targets alone, from there, so that no pull
-of the others leaves them short; last, where a target out of reach pulled a pin off, the
-pins alone. The root's move is priced as a turn at a tenth of the body's reach
-(:data:`_MOVE_PRICE`), so turns come first where they do it. The result is kept only where
-no point that was met is lost and the pins' farthest miss is smaller, or, no worse, the
-targets'. The caller passes the targets the canonical answer met as pins
-(``service.characters.solve_prepared``).
+the tolerance (:data:`_HOLD`; at least 0.5 mm on a 1 m reach, :data:`_SLACK`, brought
+back by the last phase), so a target the skeleton cannot reach with its pins held comes nearer and
+the pins stay. First the other canonical points weigh :data:`_FOLLOW` each, so the rest of
+the body stays where the retarget laid it unless the targets need it to move; then (exact
+reach) the targets alone, from there, so that no pull of the others leaves them short;
+last, where a target out of reach pulled a pin off, the pins first (the targets at a tenth
+of their weight, so that they do not wander). The root's move is priced as a turn at a
+tenth of the body's reach (:data:`_MOVE_PRICE`), so turns come first where they do it.
+The result is kept only where no point that was met is lost and the pins' farthest miss is
+smaller, or, no worse (or within half the tolerance), the targets'. The caller passes the
+targets the canonical answer met as pins (``service.characters.solve_prepared``).
 """
 
 from __future__ import annotations
@@ -40,6 +41,7 @@ _PELVIS = JOINT_INDEX["pelvis"]
 _STEPS = 30  # damped steps tried at most per phase (each one forward kinematics)
 _MAX_TURN = 0.1  # radians per step and axis (a root's move: as much, priced)
 _HOLD = 0.5  # a pin may move a half of the tolerance in the steps (or as far as it started)
+_SLACK = 0.005  # ... or 0.5 mm on a 1 m reach, whichever is more (a tight tolerance froze it)
 _PIN_WEIGHT = 30.0  # a pin's miss counts 30 times a target's (900 times in the squares)
 _FOLLOW = 0.02  # the other points' moves count 0.02 of a target's miss: they follow
 _STALL, _GAIN = 5, 0.01  # stop once 5 steps taken have gained less than 1 % of the squares
@@ -124,10 +126,11 @@ def polish(
     parents = np.array([skel.parents[b] for b in movable], dtype=np.intp)
     scale = _MOVE_PRICE * max(float(np.linalg.norm(every - every[_PELVIS], axis=1).max()), 1e-9)
     fixed = np.r_[np.ones(k), np.full(n - k, _PIN_WEIGHT)]
-    hold = max(float(start[k:n].max(initial=0.0)), tolerance * _HOLD)  # no pin farther than this
+    # no pin farther than this in the steps (the last phase brings them back)
+    hold = max(float(start[k:n].max(initial=0.0)), tolerance * _HOLD, scale * _SLACK)
     state = (pose.rotations, pose.translations, g_rot, g_pos, start)
     phases = [(fixed, _FOLLOW), (fixed, 0.0)] if finish else [(fixed, _FOLLOW)]
-    phases.append((np.r_[np.zeros(k), fixed[k:]], _FOLLOW))  # the pins alone, last
+    phases.append((np.r_[np.full(k, 0.1), fixed[k:]], _FOLLOW))  # the pins first, last
     for i, (front, follow) in enumerate(phases):
         if i == len(phases) - 1 and float(state[4][k:n].max(initial=0.0)) <= tolerance * 0.1:
             break  # (needed only where a target out of reach pulled a pin off)
@@ -148,14 +151,15 @@ def polish(
 def _better(start: F64, end: F64, n: int, k: int, tolerance: float) -> bool:
     """Whether misses ``end`` beat ``start`` (the first ``n``: ``k`` targets, then pins):
     no point that was met lost, and the pins' farthest miss smaller (both within a tenth of
-    the tolerance count as equal), or, no worse, the targets'."""
+    the tolerance count as equal), or, no worse (or within half the tolerance), the
+    targets'."""
     if ((start[:n] <= tolerance) & (end[:n] > tolerance)).any():
         return False
     p0, p1 = float(start[k:n].max(initial=0.0)), float(end[k:n].max(initial=0.0))
     if p1 < p0 - 1e-12 and p0 > tolerance * 0.1:
         return True
     t0, t1 = float(start[:k].max(initial=0.0)), float(end[:k].max(initial=0.0))
-    return p1 <= max(p0, tolerance * 0.1) and t1 < t0 - 1e-12
+    return p1 <= max(p0, tolerance * _HOLD) and t1 < t0 - 1e-12
 
 
 _State = tuple[F64, F64, F64, F64, F64]  # local rotations, translations, world ones, misses
