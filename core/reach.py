@@ -100,7 +100,8 @@ def polish(
 ) -> set[int]:
     """Move ``pose`` (in place) so its canonical points ``exact`` and ``pins`` (canonical
     joint, goal; character units) are met within ``tolerance`` where the skeleton can, no
-    pin ever moved farther than half of it (or than it started); ``root`` is the joint
+    pin moved in a step farther than half of it (or than it started, or 0.5 mm on a 1 m
+    reach), the last phase bringing them back; ``root`` is the joint
     whose translation may move (None: none); ``finish``: after the phase where the other
     points follow, one for the targets alone (exact reach; soft reach stops short of it).
     Returns the joints whose rotation or translation it changed (none where it found no
