@@ -125,6 +125,7 @@ def polish(
     if not movable and not moves:
         return set()
     parents = np.array([skel.parents[b] for b in movable], dtype=np.intp)
+    above = below[movable].astype(np.float64)
     scale = _MOVE_PRICE * max(float(np.linalg.norm(every - every[_PELVIS], axis=1).max()), 1e-9)
     fixed = np.r_[np.ones(k), np.full(n - k, _PIN_WEIGHT)]
     # no pin farther than this in the steps (the last phase brings them back)
@@ -137,7 +138,7 @@ def polish(
             break  # (needed only where a target out of reach pulled a pin off)
         weight = np.r_[front, np.full(len(free), follow)]
         state = _descend(skel, jmap, met + free, goals, weight, state, movable, parents,
-                         below[movable].astype(np.float64), root if moves else None, scale,
+                         above, root if moves else None, scale,
                          hold, n, k, tolerance)  # fmt: skip
     rotations, translations, _, _, misses = state
     if not _better(start, misses, n, k, tolerance):
@@ -175,6 +176,7 @@ def _descend(
     ``goals`` (the first ``n`` met: ``k`` targets, then pins), by turns of ``movable`` and
     a move of ``root``; a step that takes a pin farther than ``hold`` is refused."""
     rotations, translations, g_rot, g_pos, misses = state
+    pts = jmap.points(g_rot, g_pos)[joints]  # then those of each step taken
     rows = np.repeat(weight, 3)
     cost = float((misses * weight) @ (misses * weight))
     damping = 0.01 * scale**2
@@ -185,7 +187,6 @@ def _descend(
             break
         if len(seen) > _STALL and cost > (1.0 - _GAIN) * seen[-_STALL - 1]:
             break  # the last steps taken gained too little to go on
-        pts = jmap.points(g_rot, g_pos)[joints]
         jac = _jacobian(pts[None] - g_pos[movable][:, None], above)
         if root is not None:
             jac = np.concatenate([jac, np.tile(np.eye(3) * scale, (len(joints), 1))], axis=1)
@@ -203,11 +204,13 @@ def _descend(
             shift = step[3 * len(movable) :] * scale
             new_tr[root] = new_tr[root] + (shift if p < 0 else g_rot[p].T @ shift)
         n_rot, n_pos = forward_kinematics(skel, Pose(new_rot, new_tr))
-        now = _misses(jmap.points(n_rot, n_pos)[joints], goals)
+        n_pts = jmap.points(n_rot, n_pos)[joints]
+        now = _misses(n_pts, goals)
         new = float((now * weight) @ (now * weight))
         if new < cost and float(now[k:n].max(initial=0.0)) <= hold:
             cost = new
             rotations, translations, g_rot, g_pos, misses = new_rot, new_tr, n_rot, n_pos, now
+            pts = n_pts
             damping = max(damping / 10.0, (1e-6 * scale) ** 2)
             seen.append(cost)
         else:
