@@ -243,9 +243,12 @@ def _cross(a: F64, b: F64) -> F64:
 
 
 def swing(a: F64, b: F64) -> F64:
-    """The minimal rotation taking the direction of ``a`` to the direction of ``b``."""
-    ua = a / np.linalg.norm(a)
-    ub = b / np.linalg.norm(b)
+    """The minimal rotation taking the direction of ``a`` to the direction of ``b``; none
+    (the identity) where either has no direction (zero length)."""
+    na, nb = float(np.linalg.norm(a)), float(np.linalg.norm(b))
+    if not (na > 0.0 and nb > 0.0):
+        return np.eye(3)
+    ua, ub = a / na, b / nb
     axis = _cross(ua, ub)
     s = float(np.linalg.norm(axis))
     c = float(np.dot(ua, ub))

@@ -77,9 +77,15 @@ def swing_matrix_into(a: F64, b: F64, out: F64) -> None:  # pragma: no cover - c
     """``out [3, 3]``: the minimal rotation taking the direction of ``a`` to that of ``b``
     (``core.characters.swing``, the same steps written for 3-vectors; opposite directions
     give a half turn). Not ``core.compiled.swing_into``: that one turns a vector and leaves
-    it as it is where the directions are opposite, as the pose path's ``_swing`` does."""
+    it as it is where the directions are opposite, as the pose path's ``_swing`` does);
+    the identity where either has no direction (zero length)."""
     na = np.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
     nb = np.sqrt(b[0] * b[0] + b[1] * b[1] + b[2] * b[2])
+    if not (na > 0.0 and nb > 0.0):
+        for r in range(3):
+            for k in range(3):
+                out[r, k] = 1.0 if r == k else 0.0
+        return
     ua0, ua1, ua2 = a[0] / na, a[1] / na, a[2] / na
     ub0, ub1, ub2 = b[0] / nb, b[1] / nb, b[2] / nb
     x, y, z = ua1 * ub2 - ua2 * ub1, ua2 * ub0 - ua0 * ub2, ua0 * ub1 - ua1 * ub0

@@ -311,12 +311,17 @@ def test_compiled_forward_kinematics_is_the_matrix_products_of_the_joints(
 def test_compiled_swing_is_the_numpy_swing() -> None:
     """core.compiled_characters.swing_matrix_into against core.characters.swing: random
     directions, parallel ones (no turn) and opposite ones (a half turn about the axis
-    perpendicular to the smallest component), each a rotation taking a onto b."""
+    perpendicular to the smallest component), each a rotation taking a onto b; none where
+    either has no direction."""
     rng = np.random.default_rng(3)
     pairs = [(rng.normal(size=3), rng.normal(size=3)) for _ in range(200)]
     for a in [*rng.normal(size=(20, 3)), np.array([0.0, 0.0, 2.0]), np.array([1.0, 1e-9, 0.0])]:
         pairs += [(a, 3.0 * a), (a, -0.5 * a)]
     out = np.empty((3, 3))
+    for a, b in [(np.zeros(3), pairs[0][1]), (pairs[0][0], np.zeros(3))]:  # no direction
+        with np.errstate(all="raise"):
+            compiled_characters.swing_matrix_into(a, b, out)
+            assert (out == np.eye(3)).all() and (swing(a, b) == np.eye(3)).all()
     for a, b in pairs:
         compiled_characters.swing_matrix_into(a, b, out)
         np.testing.assert_allclose(out, swing(a, b), rtol=0, atol=1e-14)

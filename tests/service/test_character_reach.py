@@ -10,6 +10,7 @@ what is left on the character itself.
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -220,3 +221,33 @@ def test_a_dragged_pelvis_meets_its_target_beside_older_ones(
             met = result.errors <= TOL
             got = np.array([t["error"] for t in out["targets"]])
             assert (got[met] <= TOL).all(), (method, result.errors, got)
+
+
+def test_a_chain_whose_top_sits_on_its_parent_solves_without_a_numeric_warning(
+    engine: Engine, files: dict[str, Path]
+) -> None:
+    """A review's find: on cmu1/jumping_jacks a chain's top joint sits on the origin of the
+    joint that aims it (a zero offset), and the exact-reach widening asked for the turn
+    between two zero-length directions: numpy's "invalid value in divide", NaN goals the
+    caller then threw away. Two of the review's edits, solved with warnings as errors: the
+    character's target as near as the canonical answer's."""
+    text = files["cmu-asf-bvh"].read_text()
+    bvh = parse_bvh(text)
+    skel = skeleton_of(bvh)
+    label = resolve_map(skel).describe()
+    pts = canonical_points(skel, pose_of(bvh, 62), resolve_map(skel))
+    size = float(np.linalg.norm(pts[JOINT_INDEX["head"]] - pts[JOINT_INDEX["pelvis"]]))
+    # (joint, move in pelvis-head lengths, tolerance, pins): two of the review's edits
+    for joint, move, tolerance, pins in (
+        ("left_elbow", [0.466, 0.826, 0.147], 1e-4, []),
+        ("left_wrist", [0.777, -0.096, 0.554], 1e-2, ["left_ankle", "right_ankle"]),
+    ):
+        goal = (pts[JOINT_INDEX[joint]] + size * np.array(move)).tolist()
+        body = {"frame": 62, "targets": [{"joint": label[joint], "position": goal}],
+                "pins": [label[p] for p in pins],
+                "options": {"reach": "exact", "tolerance": tolerance}}  # fmt: skip
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            result, out = _answer(engine, text, "cmu-asf-bvh", body)
+        # (the elbow is out of the arm's reach: the character holds what the answer met)
+        assert out["targets"][0]["error"] <= result.errors[0] + tolerance, (joint, out, result)
