@@ -5,7 +5,8 @@ joint's bone starts), or a point fixed in one joint's frame (an End Site, or a p
 along a bone where the skeleton has no joint there). :class:`Anchor` holds that.
 
 :func:`auto_map` tries every naming scheme of :data:`SCHEMES` (names compared without case
-and without a ``namespace:`` prefix such as ``mixamorig:``) and keeps the one that resolves
+and without a ``namespace:`` prefix such as ``mixamorig:``, and also without a start that
+every joint's name shares, such as HumanIK's ``Character1_``) and keeps the one that resolves
 all 21 joints with the most names; an explicit map (canonical -> joint name) always wins
 over it, joint by joint. Then two structural rules apply to every map:
 
@@ -39,10 +40,16 @@ class Scheme:
     description: str
     sides: tuple[tuple[str, str], ...]  # (left token, right token) pairs to try for "{s}"
     joints: Mapping[str, tuple[str, ...]]  # canonical (or "collar"...) -> candidate names
+    prefixes: tuple[str, ...] = ("",)  # put before every candidate, one at a time
 
 
-def _scheme(description: str, sides: tuple[tuple[str, str], ...], **joints: str) -> Scheme:
-    return Scheme(description, sides, {k: tuple(v.split("|")) for k, v in joints.items()})
+def _scheme(
+    description: str,
+    sides: tuple[tuple[str, str], ...],
+    prefixes: tuple[str, ...] = ("",),
+    **joints: str,
+) -> Scheme:
+    return Scheme(description, sides, {k: tuple(v.split("|")) for k, v in joints.items()}, prefixes)
 
 
 #: Naming schemes found automatically. "{s}" is the side token; "a|b" tries a, then b;
@@ -66,28 +73,28 @@ SCHEMES: Final[dict[str, Scheme]] = {
         foot="Toes_{s}",
     ),
     "cmu-daz": _scheme(
-        "CMU BVH, 'daz-friendly' conversion (acRNN cmu-dance), Poser/DAZ",
+        "CMU BVH, 'daz-friendly' conversion (acRNN cmu-dance), Poser, DAZ Genesis 1-3 and 8",
         (("l", "r"),),
         pelvis="hip|hips",
-        spine1="abdomen",
-        spine2="chest",
-        neck="neck",
+        spine1="abdomen|abdomenLower",
+        spine2="chest|chestUpper",
+        neck="neck|neckLower",
         head="head",
         collar="{s}Collar",
-        shoulder="{s}Shldr",
-        elbow="{s}ForeArm",
+        shoulder="{s}Shldr|{s}ShldrBend",
+        elbow="{s}ForeArm|{s}ForearmBend",
         wrist="{s}Hand",
-        hip="{s}Thigh",
+        hip="{s}Thigh|{s}ThighBend",
         knee="{s}Shin",
         ankle="{s}Foot",
         foot="{s}Toe|{s}Foot_end",
     ),
     "cmu-asf-bvh": _scheme(
-        "CMU ASF/AMC converted to BVH (e.g. AnimatedDrawings cmu1)",
+        "CMU ASF/AMC converted to BVH (e.g. AnimatedDrawings cmu1), Xsens MVN BVH, Biovision",
         (("Left", "Right"),),
         pelvis="Hips",
         spine1="Chest",
-        spine2="Chest2",
+        spine2="Chest4|Chest3|Chest2",
         neck="Neck",
         head="Head",
         collar="{s}Collar",
@@ -116,8 +123,10 @@ SCHEMES: Final[dict[str, Scheme]] = {
         foot="{s}toes",
     ),
     "mixamo": _scheme(
-        "Mixamo (mixamorig:), MotionBuilder / CMU 'mb-friendly', AnimatedDrawings fair1",
+        "Mixamo (mixamorig:), MotionBuilder HumanIK, CMU 'mb-friendly', AnimatedDrawings "
+        "fair1, Perception Neuron, OptiTrack Motive (MotionBuilder names)",
         (("Left", "Right"), ("L", "R")),
+        ("", "mixamorig"),
         pelvis="Hips",
         neck="Neck",
         head="Head",
@@ -190,6 +199,111 @@ SCHEMES: Final[dict[str, Scheme]] = {
         ankle="DEF-foot.{s}|foot.{s}",
         foot="DEF-toe.{s}|toe.{s}|foot.{s}_end",
     ),
+    "xsens": _scheme(
+        "Xsens MVN segment names (Pelvis, L5, L3, T12, T8; LeftShoulder is the collar)",
+        (("Left", "Right"),),
+        pelvis="Pelvis",
+        spine1="L3",
+        spine2="T8",
+        neck="Neck",
+        head="Head",
+        collar="{s}Shoulder",
+        shoulder="{s}UpperArm",
+        elbow="{s}ForeArm",
+        wrist="{s}Hand",
+        hip="{s}UpperLeg",
+        knee="{s}LowerLeg",
+        ankle="{s}Foot",
+        foot="{s}Toe",
+    ),
+    "rokoko": _scheme(
+        "Rokoko Studio (Newton skeleton: Spine1-4, LeftThigh, LeftShin)",
+        (("Left", "Right"),),
+        pelvis="Hips",
+        spine1="Spine1",
+        spine2="Spine4|Spine3|Spine2",
+        neck="Neck",
+        head="Head",
+        collar="{s}Shoulder",
+        shoulder="{s}Arm",
+        elbow="{s}ForeArm",
+        wrist="{s}Hand",
+        hip="{s}Thigh",
+        knee="{s}Shin",
+        ankle="{s}Foot",
+        foot="{s}Toe|{s}ToeBase|{s}Foot_end",
+    ),
+    "biped": _scheme(
+        "3ds Max Biped (Bip01 / Bip001 / ValveBiped.Bip01_; the clavicles hang from the neck)",
+        (("L ", "R "), ("L_", "R_")),
+        ("Bip01 ", "Bip001 ", "Bip01_", "Bip001_", "ValveBiped.Bip01_"),
+        pelvis="Pelvis",
+        spine1="Spine",
+        spine2="Spine4|Spine3|Spine2|Spine1",
+        neck="Neck|Neck1",
+        head="Head|Head1",
+        collar="{s}Clavicle",
+        shoulder="{s}UpperArm",
+        elbow="{s}Forearm",
+        wrist="{s}Hand",
+        hip="{s}Thigh",
+        knee="{s}Calf",
+        ankle="{s}Foot",
+        foot="{s}Toe0|{s}Toe0Nub|{s}Foot_end",
+    ),
+    "smpl": _scheme(
+        "SMPL / SMPL-H / SMPL-X (smpl2bvh, m_avg_ / f_avg_; Left_foot is the toe)",
+        (("Left_", "Right_"), ("L_", "R_")),
+        ("", "m_avg_", "f_avg_"),
+        pelvis="Pelvis",
+        spine1="Spine1",
+        spine2="Spine3",
+        neck="Neck",
+        head="Head",
+        collar="{s}collar",
+        shoulder="{s}shoulder",
+        elbow="{s}elbow",
+        wrist="{s}wrist",
+        hip="{s}hip",
+        knee="{s}knee",
+        ankle="{s}ankle",
+        foot="{s}foot",
+    ),
+    "daz-genesis9": _scheme(
+        "DAZ Genesis 9 (l_shoulder is the collar)",
+        (("l_", "r_"),),
+        pelvis="hip",
+        spine1="spine1",
+        spine2="spine4",
+        neck="neck1",
+        head="head",
+        collar="{s}shoulder",
+        shoulder="{s}upperarm",
+        elbow="{s}forearm",
+        wrist="{s}hand",
+        hip="{s}thigh",
+        knee="{s}shin",
+        ankle="{s}foot",
+        foot="{s}toes",
+    ),
+    "character-creator": _scheme(
+        "Reallusion Character Creator / iClone / AccuRIG (CC_Base_*)",
+        (("L_", "R_"),),
+        ("CC_Base_",),
+        pelvis="Hip",
+        spine1="Waist",
+        spine2="Spine02",
+        neck="NeckTwist01",
+        head="Head",
+        collar="{s}Clavicle",
+        shoulder="{s}Upperarm",
+        elbow="{s}Forearm",
+        wrist="{s}Hand",
+        hip="{s}Thigh",
+        knee="{s}Calf",
+        ankle="{s}Foot",
+        foot="{s}ToeBase",
+    ),
 }
 
 #: Fraction of its own bone by which a canonical joint sitting on its parent is moved.
@@ -236,6 +350,17 @@ def _key(name: str) -> str:
     return name.rsplit(":", 1)[-1].lower()
 
 
+def _shared_prefix(keys: list[str]) -> str:
+    """The longest start that every name shares and that ends at a separator (``_``,
+    space, ``.`` or ``-``): a character's name that a rig puts before each joint's
+    (HumanIK's ``Character1_``); "" where there is none."""
+    first, last = min(keys, default=""), max(keys, default="")
+    same = (i for i, (a, b) in enumerate(zip(first, last, strict=False)) if a != b)
+    common = first[: next(same, len(first))]
+    cut = max(common.rfind(c) for c in "_ .-") + 1
+    return common[:cut] if cut < len(first) else ""
+
+
 def _canonical_key(name: str) -> tuple[str, int] | None:
     """("collar", side) for limb joints, (name, -1) for centre joints."""
     for side, prefix in enumerate(("left_", "right_")):
@@ -247,14 +372,15 @@ def _canonical_key(name: str) -> tuple[str, int] | None:
 def _resolve_scheme(
     skel: Skeleton, lookup: dict[str, int], scheme: Scheme
 ) -> tuple[dict[str, int], int]:
-    """Best resolution of a scheme over its side-token pairs: (canonical -> joint, names hit)."""
+    """Best resolution of a scheme over its prefixes and side-token pairs: (canonical ->
+    joint, names hit)."""
     best: tuple[dict[str, int], int] = ({}, -1)
-    for sides in scheme.sides:
+    for prefix, sides in ((p, s) for p in scheme.prefixes for s in scheme.sides):
         found: dict[str, int] = {}
         for canon in JOINT_NAMES:
             base, side = _canonical_key(canon) or (canon, -1)
             for cand in scheme.joints.get(base, ()):
-                name = cand.replace("{s}", sides[side]) if side >= 0 else cand
+                name = prefix + (cand.replace("{s}", sides[side]) if side >= 0 else cand)
                 if _key(name) in lookup:
                     found[canon] = lookup[_key(name)]
                     break
@@ -312,6 +438,9 @@ def resolve_map(
     lookup: dict[str, int] = {}
     for i, name in enumerate(skel.names):
         lookup.setdefault(_key(name), i)
+    shared = _shared_prefix(list(lookup))
+    for i, name in enumerate(skel.names):  # "Character1_LeftArm" is also "LeftArm"
+        lookup.setdefault(_key(name)[len(shared) :], i)
     given: dict[str, int] = {}
     for canon, name in (explicit or {}).items():
         if canon not in JOINT_INDEX:
