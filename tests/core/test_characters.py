@@ -19,7 +19,7 @@ from core.characters import (
     swing,
     twist_angle,
 )
-from core.characters_maps import resolve_map
+from core.characters_maps import resolve_map, rest_points
 from core.rest import rest_pose
 from core.retarget import _aim_group, _aim_pass, _plan, canonical_points, retarget
 from core.skeleton import JOINT_INDEX, JOINT_NAMES, PARENTS
@@ -121,6 +121,35 @@ def test_synthetic_schemes(scheme: str) -> None:
     forced = resolve_map(skel, {"spine1": "extra_spine"})
     assert forced.describe()["spine1"] == "extra_spine"
     assert forced.scheme == f"{scheme}+explicit"
+
+
+def test_biped_clavicles_on_the_neck() -> None:
+    """3ds Max Biped hangs its clavicles from ``Bip01 Neck`` (not from the chest, as the
+    canonical skeleton does) under a root ``Bip01`` above the pelvis: the map still finds
+    them, with the chest where it is named, each canonical point where the skeleton has it."""
+    rest = rest_pose()
+    names: list[str] = ["Bip01"]
+    parents: list[str | None] = [None]
+    offsets: list[list[float]] = [rest[0].tolist()]
+    label = dict(pelvis="Pelvis", spine1="Spine", spine2="Spine2", neck="Neck", head="Head",
+                 collar="Clavicle", shoulder="UpperArm", elbow="Forearm", wrist="Hand",
+                 hip="Thigh", knee="Calf", ankle="Foot", foot="Toe0")  # fmt: skip
+
+    def name(canon: str) -> str:
+        side, _, base = canon.partition("_")
+        return f"Bip01 {side[0].upper()} {label[base]}" if base else f"Bip01 {label[canon]}"
+
+    for j, canon in enumerate(JOINT_NAMES):
+        p = JOINT_INDEX["neck"] if canon.endswith("collar") else PARENTS[j]
+        names.append(name(canon))
+        parents.append("Bip01" if p < 0 else name(JOINT_NAMES[p]))
+        offsets.append((rest[j] - rest[max(p, 0)]).tolist())
+    skel, _ = build_skeleton(names, parents, offsets)
+    jmap = resolve_map(skel)
+    assert jmap.scheme == "biped"
+    assert jmap.describe()["left_collar"] == "Bip01 L Clavicle"
+    assert jmap.describe()["spine2"] == "Bip01 Spine2"
+    np.testing.assert_allclose(rest_points(skel, jmap), rest, rtol=0, atol=1e-12)
 
 
 def test_bad_skeletons() -> None:
