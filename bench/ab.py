@@ -138,7 +138,7 @@ def bvh_edits(engine: Any, calls: int = 20) -> dict[str, float]:
         ns = []
         for i in range(calls + 3):  # three to warm
             t0 = time.thread_time_ns()
-            bvh = read_request_bvh(req.bvh)
+            bvh = read_request_bvh(req.bvh, req.frame)
             ch = character_from_bvh(bvh, req)
             bvh_answer(bvh, ch, req, solve_character(engine, ch, req))
             if i >= 3:

@@ -124,7 +124,7 @@ def skeleton_of(bvh: BVH) -> Skeleton:
 
 def pose_of(bvh: BVH, frame: int, row: F64 | None = None) -> Pose:
     """Local rotations and translations of one frame (of ``row`` instead, when given)."""
-    row = bvh.motion[frame] if row is None else row
+    row = bvh.row(frame) if row is None else row
     n = len(bvh.joints)
     rot = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()
     trans = np.array([j.offset for j in bvh.joints], dtype=np.float64)
@@ -167,7 +167,7 @@ def row_of(
 ) -> tuple[F64, list[int]]:
     """The motion row of ``pose`` for the changed ``joints`` (others keep their values), and
     the columns that changed, as they will be written (rounded to :data:`DECIMALS`)."""
-    row = bvh.motion[frame].copy()
+    row = bvh.row(frame).copy()
     columns: list[int] = []
     for i in sorted(joints):
         j = bvh.joints[i]

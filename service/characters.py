@@ -518,15 +518,19 @@ def character_answer(ch: Character, edit: Edit, given: dict[str, list[float]]) -
 # --------------------------------------------------------------------------------------
 # BVH
 # --------------------------------------------------------------------------------------
-def read_request_bvh(text: str) -> BVH:
-    """Parse and check a BVH body: every failure is a 422 naming the line and the reason."""
+def read_request_bvh(text: str, frame: int | None = None) -> BVH:
+    """Parse and check a BVH body: every failure is a 422 naming the line and the reason.
+    ``frame``: only that frame's values are read and checked (where the file holds one
+    frame per line: the rest of the MOTION block is kept as written, unread)."""
     try:
-        bvh = parse_bvh(text, "bvh")
+        bvh = parse_bvh(text, "bvh", None if frame is None else (frame,))
     except BVHError as exc:
         raise _invalid(exc) from None
-    bad = ~(np.abs(bvh.motion) <= MAX_COORDINATE)  # NaN too
+    rows = np.arange(bvh.num_frames) if bvh.read is None else np.array(sorted(bvh.read), int)
+    bad = ~(np.abs(bvh.motion[rows]) <= MAX_COORDINATE)  # NaN too
     if bad.any():
-        f, c = (int(v) for v in np.argwhere(bad)[0])
+        k, c = (int(v) for v in np.argwhere(bad)[0])
+        f = int(rows[k])
         line = bvh.text[: bvh.motion_offset].count("\n") + 1 + f
         joint = next(j for j in reversed(bvh.joints) if j.channel_start <= c and j.channels)
         channel = joint.channels[c - joint.channel_start]

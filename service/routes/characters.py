@@ -114,7 +114,7 @@ async def bvh_solve(
     the frame time untouched)."""
 
     def read() -> tuple[BVH, Character]:
-        bvh = read_request_bvh(req.bvh)
+        bvh = read_request_bvh(req.bvh, req.frame)
         return bvh, character_from_bvh(bvh, req)
 
     bvh, ch = await step(budget, "reading the file", read)
@@ -134,7 +134,7 @@ async def bvh_inspect_route(req: BVHInspectRequest, budget: RequestBudget) -> Re
     one frame (``frame``, default 0), in the file's units and axes."""
 
     def work() -> dict[str, object]:
-        bvh = read_request_bvh(req.bvh)
+        bvh = read_request_bvh(req.bvh, req.frame)
         return bvh_inspect(bvh, character_from_bvh(bvh, req), req.frame)
 
     return json_response(await step(budget, "reading the file", work), budget.compute)

@@ -192,17 +192,15 @@ def test_raw_text_and_frame_lines_are_kept_for_a_writer() -> None:
     np.testing.assert_array_equal(bvh.motion[1], [1, 2, 3, 90, 0, 0, 0, 90, 0])
 
 
-@pytest.mark.parametrize(
-    "body",
-    [
-        "1 2 3 0 0 0 0 0 0\n\n1 2 3 90 0 0 0 90 0\n \t\n0 0 0 90 90 0 0 0 0\n0 0 0 0 0 0 0 0 90",
-        "1 2 3 0 0 0 0 0 0\r\n1 2 3 90 0 0 0 90 0\r\n\r\n"
-        "0 0 0 90 90 0 0 0 0 0 0 0 0 0 0 0 0 90\r\n",
-        "1 2 3 0 0 0 0 0 0 1 2 3 90 0 0 0 90 0 0 0 0 90 90 0 0 0 0 0 0 0 0 0 0 0 0 90\n",
-        " \n1 2 3 0 0 0 0 0 0\n\n\n1 2 3 90 0 0 0 90 0\n0 0 0 90 90 0 0 0 0\n"
-        "0 0 0 0 0 0 0 0 90\n\t ",
-    ],
-)
+_BODIES = [
+    "1 2 3 0 0 0 0 0 0\n\n1 2 3 90 0 0 0 90 0\n \t\n0 0 0 90 90 0 0 0 0\n0 0 0 0 0 0 0 0 90",
+    "1 2 3 0 0 0 0 0 0\r\n1 2 3 90 0 0 0 90 0\r\n\r\n0 0 0 90 90 0 0 0 0 0 0 0 0 0 0 0 0 90\r\n",
+    "1 2 3 0 0 0 0 0 0 1 2 3 90 0 0 0 90 0 0 0 0 90 90 0 0 0 0 0 0 0 0 0 0 0 0 90\n",
+    " \n1 2 3 0 0 0 0 0 0\n\n\n1 2 3 90 0 0 0 90 0\n0 0 0 90 90 0 0 0 0\n0 0 0 0 0 0 0 0 90\n\t ",
+]  # one frame a line, but blank lines; frames across lines
+
+
+@pytest.mark.parametrize("body", _BODIES)
 def test_frame_line_count_is_the_number_of_frame_lines(body: str) -> None:
     bvh = parse_bvh(TINY.split("1 2 3 0")[0] + body, "lines.bvh")
     assert bvh.num_frames == 4
@@ -262,3 +260,46 @@ def test_fair_child_file_in_inches_z_up(more_mocap: Path) -> None:
     height_in = np.median(pos[:, 1, 2] - pos[:, 2, 2])
     assert 30 < height_in < 45
     assert np.median(np.abs(pos[:, 1, 1] - pos[:, 2, 1])) < 10
+
+
+@pytest.mark.parametrize("body", _BODIES)
+def test_reading_some_frames_reads_them_as_the_whole_read_does(body: str) -> None:
+    """``frames=``: those rows bit for bit as a whole read gives them, the others NaN and
+    refused by ``row``; out-of-range frames are not read; a block whose frames are not one
+    per line (the third and second bodies) is read whole."""
+    text = TINY.split("1 2 3 0")[0] + body
+    whole = parse_bvh(text, "lines.bvh")
+    some = parse_bvh(text, "lines.bvh", frames=[1, 3, 7])
+    assert whole.read is None
+    if some.read is None:  # frames across lines: read whole
+        assert whole.frame_line_count() != whole.num_frames
+        assert some.motion.tobytes() == whole.motion.tobytes()
+        return
+    assert some.read == {1, 3}
+    for f in (1, 3):
+        assert some.row(f).tobytes() == whole.row(f).tobytes()
+    assert np.isnan(some.motion[[0, 2]]).all()
+    with pytest.raises(ValueError, match="frame 0 was not read"):
+        some.row(0)
+    # a bad value in the frame read is found as the whole read finds it, in another not
+    bad = text.replace("0 0 0 90 90 0 0 0 0", "0 0 0 90 nope 0 0 0 0")
+    with pytest.raises(BVHError, match="not a number: 'nope'") as whole_error:
+        parse_bvh(bad, "bad.bvh")
+    with pytest.raises(BVHError) as some_error:
+        parse_bvh(bad, "bad.bvh", frames=[2])
+    assert str(some_error.value) == str(whole_error.value)
+    assert parse_bvh(bad, "bad.bvh", frames=[1]).row(1).tobytes() == whole.row(1).tobytes()
+    crlf = text.replace("\r\n", "\n").replace("\n", "\r\n")
+    assert parse_bvh(crlf, "crlf.bvh", frames=[1]).row(1).tobytes() == whole.row(1).tobytes()
+
+
+def test_reading_one_frame_of_real_files_is_bit_identical(more_mocap: Path) -> None:
+    """Every frame of a real file (a fifth of them, and the last), read alone, is the row
+    the whole read gives."""
+    for path in sorted(more_mocap.rglob("*.bvh"))[:3]:
+        text = path.read_text()
+        whole = parse_bvh(text, path.name)
+        picks = [*range(0, whole.num_frames, 5), whole.num_frames - 1]
+        some = parse_bvh(text, path.name, frames=picks)
+        assert some.read == set(picks), path
+        assert some.motion[picks].tobytes() == whole.motion[picks].tobytes(), path

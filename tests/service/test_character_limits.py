@@ -44,9 +44,9 @@ def test_past_the_deadline_is_a_504_problem(models_dir: Path, route: str) -> Non
 def test_the_deadline_is_checked_between_reading_and_solving(
     models_dir: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    def read(text: str) -> Any:
+    def read(text: str, frame: int | None = None) -> Any:
         time.sleep(0.6)
-        return read_request_bvh(text)
+        return read_request_bvh(text, frame)
 
     solved: list[int] = []
     monkeypatch.setattr(routes, "read_request_bvh", read)

@@ -238,11 +238,14 @@ def test_bad_bvh_files(client: Any, files: dict[str, Path]) -> None:
     motion = lines.index("MOTION")
     row = lines[motion + 5].split(" ")
     row[4] = "nan"
-    post(
-        "\n".join([*lines[: motion + 5], " ".join(row), *lines[motion + 6 :]]),
-        f"line {motion + 6}",
-        "finite",
-    )
+    nan = "\n".join([*lines[: motion + 5], " ".join(row), *lines[motion + 6 :]])
+    body = {"bvh": nan, "frame": 2, "targets": target}
+    _bad(client, "/v1/bvh/solve", body, f"line {motion + 6}", "finite")
+    # only the frame edited is read: a NaN in another is kept as written, not refused
+    r = client.post("/v1/bvh/solve", json={**body, "frame": 0})
+    assert r.status_code == 200, r.text
+    assert r.json()["bvh"].split("\n")[motion + 5] == " ".join(row)
+    assert r.json()["bvh"].split("\n")[motion + 3] != lines[motion + 3]
     post(text.replace("Zrotation", "Wrotation", 1), "unknown channel", "line")
     post(text.replace("JOINT Spine", "JOINT Hips", 1), "duplicate joint name", "line")
     post("not a bvh", "HIERARCHY")

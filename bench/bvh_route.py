@@ -1,0 +1,87 @@
+"""Where the time of a ``/v1/bvh/solve`` goes, per step, on BVH files of your own:
+``python -m bench.bvh_route FILE.bvh [FILE.bvh ...] [--calls 7] [--frame 10]``.
+
+Each file's edit (its left wrist moved 10 % of the body's height up, soft reach, the
+models in ``--models``) runs the route's steps in process, as the route does them (no HTTP):
+reading the file (whole, as before 2026-12-04, and only the frame edited, as the route
+does now), the character (skeleton, joint map, units, up), the solve, and the answer (the
+file with that frame rewritten). Each step's median over ``--calls`` (after one to warm),
+in ms of wall time on this host. Units and up axis are inferred (``--units`` to state them).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Annotated, Any
+
+import numpy as np
+import typer
+
+from core.skeleton import JOINT_INDEX
+
+app = typer.Typer(add_completion=False)
+
+
+def _median_ms(calls: int, step: Callable[[], Any]) -> tuple[float, Any]:
+    times, out = [], None
+    for _ in range(calls + 1):
+        t0 = time.perf_counter()
+        out = step()
+        times.append(time.perf_counter() - t0)
+    return float(np.median(times[1:])) * 1e3, out
+
+
+def _row(engine: Any, path: Path, calls: int, frame: int, units: str | None) -> str:
+    """One file's table row."""
+    from service.characters import (
+        BVHSolveRequest,
+        bvh_answer,
+        character_from_bvh,
+        character_problem,
+        read_request_bvh,
+        solve_character,
+    )
+
+    text = path.read_text(encoding="utf-8", errors="replace")
+    target: dict[str, Any] = {"joint": "left_wrist", "position": [0.0, 0.0, 0.0]}
+    body: dict[str, Any] = {"bvh": text, "frame": frame, "targets": [target],
+                            "options": {"reach": "soft"}}  # fmt: skip
+    if units is not None:
+        body["units"] = units
+    req = BVHSolveRequest.model_validate(body)
+    whole, bvh = _median_ms(calls, lambda: read_request_bvh(text))
+    one, bvh = _median_ms(calls, lambda: read_request_bvh(text, frame))
+    ch = character_from_bvh(bvh, req)
+    pts = character_problem(ch, req).pose
+    wrist = pts[JOINT_INDEX["left_wrist"]].copy()
+    wrist[1] += 0.1 * float(pts[:, 1].max() - pts[:, 1].min())
+    target["position"] = ch.from_service(wrist[None])[0].tolist()
+    req = BVHSolveRequest.model_validate(body)
+    made, ch = _median_ms(calls, lambda: character_from_bvh(bvh, req))
+    solved, edit = _median_ms(calls, lambda: solve_character(engine, ch, req))
+    answered, _ = _median_ms(calls, lambda: bvh_answer(bvh, ch, req, edit))
+    return (f"| {path.name} | {len(text) / 1e6:.2f} | {bvh.num_frames} | {whole:.1f} | "
+            f"{one:.1f} | {made:.1f} | {solved:.1f} | {answered:.1f} |")  # fmt: skip
+
+
+@app.command()
+def main(
+    files: list[Path],
+    models: Annotated[Path, typer.Option(help="models folder")] = Path("models"),
+    calls: Annotated[int, typer.Option(min=1, max=1000)] = 7,
+    frame: Annotated[int, typer.Option(min=0)] = 10,
+    units: Annotated[str | None, typer.Option(help="units, where not plain from a file")] = None,
+) -> None:
+    from service.engine import Engine
+
+    engine = Engine(models)
+    print("| file | MB | frames | read whole | read the frame | character | solve | answer |")
+    print("|---|---|---|---|---|---|---|---|")
+    for path in files:
+        print(_row(engine, path, calls, frame, units))
+
+
+if __name__ == "__main__":
+    app()

@@ -1,0 +1,25 @@
+"""``python -m bench.bvh_route``: a row per file, the route's steps timed on a real file."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from typer.testing import CliRunner
+
+from bench.bvh_route import app
+from tests.character_files import extract_bvh
+
+
+def test_a_row_per_file_with_each_step_timed(
+    mocap_dir: Path, models_dir: Path, tmp_path: Path
+) -> None:
+    files = extract_bvh(mocap_dir, tmp_path)
+    args = [str(files["bandai"]), "--models", str(models_dir), "--calls", "1"]
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == 0, result.output
+    header, _, row = result.output.strip().splitlines()
+    assert header.startswith("| file | MB | frames | read whole | read the frame")
+    cells = [c.strip() for c in row.strip("|").split("|")]
+    assert cells[0] == files["bandai"].name and cells[2] == "195"
+    times = [float(c) for c in cells[3:]]
+    assert all(t > 0 for t in times) and len(times) == 5
