@@ -92,6 +92,8 @@ class BVH:
     motion_offset: int = field(default=0, repr=False, compare=False)
     #: the frames whose values were read (None: all; the others' rows are NaN)
     read: frozenset[int] | None = field(default=None, repr=False, compare=False)
+    #: (start, end) offsets in ``text`` of the lines of the frames read alone (a writer's)
+    spans: dict[int, tuple[int, int]] = field(default_factory=dict, repr=False, compare=False)
     _index: dict[str, int] = field(default_factory=dict, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -364,7 +366,7 @@ def parse_bvh(text: str, name: str = "<string>", frames: Iterable[int] | None = 
     if frames is not None:
         some = _read_frames(name, body, first_line, n_frames, n_channels, frames)
         if some is not None:
-            motion, read = some
+            motion, read, spans = some
             return BVH(
                 name=name,
                 joints=tuple(joints),
@@ -373,6 +375,7 @@ def parse_bvh(text: str, name: str = "<string>", frames: Iterable[int] | None = 
                 text=text,
                 motion_offset=body_offset,
                 read=read,
+                spans={f: (body_offset + a, body_offset + b) for f, (a, b) in spans.items()},
             )
     expected = n_frames * n_channels
     try:  # numpy's own reader: no Python object per value (an 8 MB file: 84 -> 30 MB peak)
@@ -401,18 +404,22 @@ def parse_bvh(text: str, name: str = "<string>", frames: Iterable[int] | None = 
 
 def _read_frames(
     name: str, body: str, first_line: int, n_frames: int, n_channels: int, frames: Iterable[int]
-) -> tuple[FloatArray, frozenset[int]] | None:
-    """The motion ``[F, C]`` with only ``frames``' rows read (the others NaN) and the set
-    read, where ``body`` holds ``n_frames`` non-blank lines; None where it does not (frames
-    across lines, or a count that does not match: the whole read explains it)."""
+) -> tuple[FloatArray, frozenset[int], dict[int, tuple[int, int]]] | None:
+    """The motion ``[F, C]`` with only ``frames``' rows read (the others NaN), the set read
+    and their lines' (start, end) in ``body``, where ``body`` holds ``n_frames`` non-blank
+    lines; None where it does not (frames across lines, or a count that does not match: the
+    whole read explains it)."""
     lines = body.split("\n")
     at = [k for k, line in enumerate(lines) if line.strip()]
     if len(at) != n_frames:
         return None
     motion = np.full((n_frames, n_channels), np.nan)
     read = frozenset(f for f in frames if 0 <= f < n_frames)
+    spans: dict[int, tuple[int, int]] = {}
     for f in sorted(read):
         line = lines[at[f]]
+        start = sum(map(len, lines[: at[f]])) + at[f]  # (each line's "\n" too)
+        spans[f] = (start, start + len(line))
         tokens = line.split()
         if len(tokens) != n_channels:
             got = f"expected {n_channels} values per frame, got {len(tokens)}"
@@ -427,7 +434,7 @@ def _read_frames(
             except ValueError:
                 _explain_values(name, line, first_line + at[f])
         motion[f] = values
-    return motion, read
+    return motion, read, spans
 
 
 def _explain_count(name: str, body: str, first_line: int, n_frames: int, n_channels: int) -> None:

@@ -64,6 +64,8 @@ def format_bvh(bvh: BVH, motion: F64 | None = None) -> str:
 def _frame_span(bvh: BVH, frame: int) -> tuple[int, int] | None:
     """(start, end) character offsets of a frame's line in ``bvh.text``; None if the
     file does not hold one frame per line."""
+    if frame in bvh.spans:  # found by the reader that read that frame alone
+        return bvh.spans[frame]
     if not bvh.text or bvh.frame_line_count() != bvh.num_frames:
         return None
     pos = bvh.motion_offset

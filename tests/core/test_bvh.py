@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from core.bvh import BVHError, euler_matrices, parse_bvh, read_bvh
+from core.bvh_write import _frame_span
 
 # Root: 6 channels (position + Z X Y rotation), child 10 up, end site 5 up the child.
 TINY = """HIERARCHY
@@ -278,6 +279,7 @@ def test_reading_some_frames_reads_them_as_the_whole_read_does(body: str) -> Non
     assert some.read == {1, 3}
     for f in (1, 3):
         assert some.row(f).tobytes() == whole.row(f).tobytes()
+        assert some.spans[f] == _frame_span(whole, f)  # the writer's, found by the reader
     assert np.isnan(some.motion[[0, 2]]).all()
     with pytest.raises(ValueError, match="frame 0 was not read"):
         some.row(0)
@@ -303,3 +305,4 @@ def test_reading_one_frame_of_real_files_is_bit_identical(more_mocap: Path) -> N
         some = parse_bvh(text, path.name, frames=picks)
         assert some.read == set(picks), path
         assert some.motion[picks].tobytes() == whole.motion[picks].tobytes(), path
+        assert all(some.spans[f] == _frame_span(whole, f) for f in picks[::20]), path
