@@ -752,11 +752,12 @@ def settle(
 
 def warm() -> None:
     """Compile (or load from the cache) every kernel of this module on tiny inputs, and of
-    :mod:`core.compiled_characters`."""
-    from core import compiled_characters
+    :mod:`core.compiled_characters` and :mod:`core.compiled_reach`."""
+    from core import compiled_characters, compiled_reach
     from core.rest import rest_pose
 
     compiled_characters.warm()
+    compiled_reach.warm()
     pose = rest_pose()[None].astype(np.float64)
     lens = np.ones((1, NUM_JOINTS - 1))
     bone_pass_batch(pose, lens, pose, True)

@@ -1,4 +1,5 @@
-"""Exact reach on a character's own skeleton: a damped least-squares polish (numpy).
+"""Exact reach on a character's own skeleton: a damped least-squares polish (its steps
+compiled: :mod:`core.compiled_reach`).
 
 :func:`core.retarget.retarget` lays a character's joints onto a solved canonical pose group
 by group, and meets each exact target through the short chain of single-child aims above
@@ -35,6 +36,7 @@ import numpy.typing as npt
 
 from core.characters import F64, Pose, Skeleton, forward_kinematics
 from core.characters_maps import JointMap
+from core.compiled_reach import descend_into
 from core.skeleton import JOINT_INDEX
 
 _PELVIS = JOINT_INDEX["pelvis"]
@@ -48,18 +50,6 @@ _STALL, _GAIN = 5, 0.01  # stop once 5 steps taken have gained less than 1 % of 
 _MOVE_PRICE = 0.1  # a move of the root by d costs as a turn of d / (0.1 x the body's reach)
 
 
-def _rotations(w: F64) -> F64:
-    """Rotation matrices ``[..., 3, 3]`` of rotation vectors ``[..., 3]`` (Rodrigues)."""
-    angle = np.linalg.norm(w, axis=-1, keepdims=True)
-    axis = w / np.maximum(angle, 1e-300)
-    x, y, z = axis[..., 0], axis[..., 1], axis[..., 2]
-    zero = np.zeros_like(x)
-    k = np.stack([zero, -z, y, z, zero, -x, -y, x, zero], axis=-1).reshape(*w.shape[:-1], 3, 3)
-    s, c = np.sin(angle)[..., None], np.cos(angle)[..., None]
-    out: F64 = np.eye(3) + s * k + (1.0 - c) * (k @ k)
-    return out
-
-
 def _misses(points: F64, goals: F64) -> F64:
     out: F64 = np.linalg.norm(points - goals, axis=1)
     return out
@@ -71,20 +61,6 @@ def _ancestry(skel: Skeleton) -> npt.NDArray[np.bool_]:
     for j, p in enumerate(skel.parents):  # parents first
         if p >= 0:
             out[:, j] |= out[:, p]
-    return out
-
-
-def _jacobian(levers: F64, above: F64) -> F64:
-    """``[3K, 3M]``: how each of K points moves ``[K, 3]`` with a small world turn of each
-    of M joints (``levers [M, K, 3]``: point minus the joint's origin; ``above [M, K]``: 1
-    where the point hangs from the joint): -[lever]x."""
-    m, k = above.shape
-    cols = np.zeros((m, k, 3, 3))
-    cols[..., 0, 1], cols[..., 0, 2] = levers[..., 2], -levers[..., 1]
-    cols[..., 1, 0], cols[..., 1, 2] = -levers[..., 2], levers[..., 0]
-    cols[..., 2, 0], cols[..., 2, 1] = levers[..., 1], -levers[..., 0]
-    cols *= above[..., None, None]
-    out: F64 = cols.transpose(1, 2, 0, 3).reshape(3 * k, 3 * m)
     return out
 
 
@@ -124,23 +100,21 @@ def polish(
     moves = root is not None and bool(below[root, :n].any())
     if not movable and not moves:
         return set()
-    parents = np.array([skel.parents[b] for b in movable], dtype=np.intp)
-    above = below[movable].astype(np.float64)
+    above = np.ascontiguousarray(below[movable], dtype=np.float64)
     scale = _MOVE_PRICE * max(float(np.linalg.norm(every - every[_PELVIS], axis=1).max()), 1e-9)
     fixed = np.r_[np.ones(k), np.full(n - k, _PIN_WEIGHT)]
     # no pin farther than this in the steps (the last phase brings them back)
     hold = max(float(start[k:n].max(initial=0.0)), tolerance * _HOLD, scale * _SLACK)
-    state = (pose.rotations, pose.translations, g_rot, g_pos, start)
+    state = (pose.rotations.copy(), pose.translations.copy(), start.copy())
     phases = [(fixed, _FOLLOW), (fixed, 0.0)] if finish else [(fixed, _FOLLOW)]
     phases.append((np.r_[np.full(k, 0.1), fixed[k:]], _FOLLOW))  # the pins first, last
     for i, (front, follow) in enumerate(phases):
-        if i == len(phases) - 1 and float(state[4][k:n].max(initial=0.0)) <= tolerance * 0.1:
+        if i == len(phases) - 1 and float(state[2][k:n].max(initial=0.0)) <= tolerance * 0.1:
             break  # (needed only where a target out of reach pulled a pin off)
         weight = np.r_[front, np.full(len(free), follow)]
-        state = _descend(skel, jmap, met + free, goals, weight, state, movable, parents,
-                         above, root if moves else None, scale,
-                         hold, n, k, tolerance)  # fmt: skip
-    rotations, translations, _, _, misses = state
+        state = _descend(skel, jmap, met + free, goals, weight, state, movable, above,
+                         root if moves else None, scale, hold, n, k, tolerance)  # fmt: skip
+    rotations, translations, misses = state
     if not _better(start, misses, n, k, tolerance):
         return set()
     changed = {b for b in movable if not np.array_equal(rotations[b], pose.rotations[b])}
@@ -164,57 +138,25 @@ def _better(start: F64, end: F64, n: int, k: int, tolerance: float) -> bool:
     return p1 <= max(p0, tolerance * _HOLD) and t1 < t0 - 1e-12
 
 
-_State = tuple[F64, F64, F64, F64, F64]  # local rotations, translations, world ones, misses
+_State = tuple[F64, F64, F64]  # local rotations, translations; the points' misses
 
 
 def _descend(
     skel: Skeleton, jmap: JointMap, joints: list[int], goals: F64, weight: F64, state: _State,
-    movable: list[int], parents: npt.NDArray[np.intp], above: F64, root: int | None,
-    scale: float, hold: float, n: int, k: int, tolerance: float,
+    movable: list[int], above: F64, root: int | None, scale: float, hold: float, n: int,
+    k: int, tolerance: float,
 ) -> _State:  # fmt: skip
     """Levenberg-Marquardt on the ``weight``-ed squares of the ``joints``' misses from
     ``goals`` (the first ``n`` met: ``k`` targets, then pins), by turns of ``movable`` and
-    a move of ``root``; a step that takes a pin farther than ``hold`` is refused."""
-    rotations, translations, g_rot, g_pos, misses = state
-    pts = jmap.points(g_rot, g_pos)[joints]  # then those of each step taken
-    rows = np.repeat(weight, 3)
-    cost = float((misses * weight) @ (misses * weight))
-    damping = 0.01 * scale**2
-    seen = [cost]  # the cost after each step taken
-    check = weight[:n] > 0  # the points this phase meets
-    for _ in range(_STEPS):
-        if float(misses[:n][check].max()) <= tolerance * 0.1:
-            break
-        if len(seen) > _STALL and cost > (1.0 - _GAIN) * seen[-_STALL - 1]:
-            break  # the last steps taken gained too little to go on
-        jac = _jacobian(pts[None] - g_pos[movable][:, None], above)
-        if root is not None:
-            jac = np.concatenate([jac, np.tile(np.eye(3) * scale, (len(joints), 1))], axis=1)
-        jac *= rows[:, None]
-        err = (goals - pts).reshape(-1) * rows
-        step = jac.T @ np.linalg.solve(jac @ jac.T + damping * np.eye(len(err)), err)
-        step *= min(1.0, _MAX_TURN / max(float(np.abs(step).max()), 1e-300))
-        turns = _rotations(step[: 3 * len(movable)].reshape(-1, 3))
-        new_rot = rotations.copy()
-        parent = np.where((parents >= 0)[:, None, None], g_rot[parents], np.eye(3))
-        new_rot[movable] = parent.transpose(0, 2, 1) @ turns @ parent @ rotations[movable]
-        new_tr = translations.copy()
-        if root is not None:
-            p = skel.parents[root]
-            shift = step[3 * len(movable) :] * scale
-            new_tr[root] = new_tr[root] + (shift if p < 0 else g_rot[p].T @ shift)
-        n_rot, n_pos = forward_kinematics(skel, Pose(new_rot, new_tr))
-        n_pts = jmap.points(n_rot, n_pos)[joints]
-        now = _misses(n_pts, goals)
-        new = float((now * weight) @ (now * weight))
-        if new < cost and float(now[k:n].max(initial=0.0)) <= hold:
-            cost = new
-            rotations, translations, g_rot, g_pos, misses = new_rot, new_tr, n_rot, n_pos, now
-            pts = n_pts
-            damping = max(damping / 10.0, (1e-6 * scale) ** 2)
-            seen.append(cost)
-        else:
-            damping *= 10.0
-            if damping > 1e8 * scale**2:  # no step, however short, helps
-                break
-    return rotations, translations, g_rot, g_pos, misses
+    a move of ``root``; a step that takes a pin farther than ``hold`` is refused
+    (:func:`core.compiled_reach.descend_into`, on copies of ``state``)."""
+    rotations, translations, misses = (np.array(a, dtype=np.float64) for a in state)
+    descend_into(
+        np.require(skel.parent_array, np.int64, ["C", "W"]), rotations, translations,
+        np.ascontiguousarray(jmap.joints[joints], dtype=np.int64),
+        np.ascontiguousarray(jmap.offsets[joints, :, 0]), np.ascontiguousarray(goals),
+        np.ascontiguousarray(weight, dtype=np.float64), np.array(movable, dtype=np.int64),
+        above, -1 if root is None else root, scale, hold, n, k, tolerance, _STEPS, _MAX_TURN,
+        _STALL, _GAIN, misses,
+    )  # fmt: skip
+    return rotations, translations, misses

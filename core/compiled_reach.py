@@ -1,0 +1,300 @@
+"""The damped least-squares steps of :mod:`core.reach`, compiled (numba, :mod:`core.jit`).
+
+:func:`core.reach.polish` moves a character's joints by Levenberg-Marquardt steps, each one
+forward kinematics of the character's own skeleton; in numpy a step cost ~0.3 ms (the
+kernel calls, the small arrays, the linear solve), and a polish up to 90 steps. Here one
+step is the same arithmetic written out in loops: the Jacobian of the canonical points,
+the damped normal equations on the smaller side (``(J Jᵀ + λI) y = e, x = Jᵀ y`` or
+``(JᵀJ + λI) x = Jᵀ e``: the same step), solved by Cholesky (no BLAS or LAPACK: numba's
+need SciPy, which the service does not install; a pivot that is not positive refuses the
+step, as a step that does not lower the cost is refused), the turns by Rodrigues' formula,
+forward kinematics (:func:`core.compiled_characters.forward_kinematics_into`). Products in
+source order, no fused multiply-add: the same request gives the same bits.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+
+from core.compiled_characters import forward_kinematics_into
+from core.jit import jit
+
+F64 = npt.NDArray[np.float64]
+I64 = npt.NDArray[np.int64]
+
+
+@jit
+def _points_into(
+    g_rot: F64, g_pos: F64, anchor: I64, offset: F64, out: F64
+) -> None:  # pragma: no cover - compiled
+    """The canonical points ``out [K, 3]``: joint ``anchor[i]``'s origin plus its rotation
+    times ``offset[i]``."""
+    for i in range(anchor.shape[0]):
+        a = anchor[i]
+        for r in range(3):
+            out[i, r] = g_pos[a, r] + (
+                g_rot[a, r, 0] * offset[i, 0]
+                + g_rot[a, r, 1] * offset[i, 1]
+                + g_rot[a, r, 2] * offset[i, 2]
+            )
+
+
+@jit
+def _misses_into(points: F64, goals: F64, out: F64) -> None:  # pragma: no cover - compiled
+    for i in range(points.shape[0]):
+        d0 = points[i, 0] - goals[i, 0]
+        d1 = points[i, 1] - goals[i, 1]
+        d2 = points[i, 2] - goals[i, 2]
+        out[i] = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+
+
+@jit
+def _cost(misses: F64, weight: F64) -> float:  # pragma: no cover - compiled
+    total = 0.0
+    for i in range(misses.shape[0]):
+        w = misses[i] * weight[i]
+        total += w * w
+    return total
+
+
+@jit
+def _cholesky_solve(a: F64, b: F64) -> bool:  # pragma: no cover - compiled
+    """Solve ``a x = b`` in place (``b`` becomes ``x``; ``a`` its Cholesky factor) for a
+    symmetric ``a``; False where a pivot is not positive (not positive definite in
+    floating point)."""
+    n = a.shape[0]
+    for j in range(n):
+        s = a[j, j]
+        for q in range(j):
+            s -= a[j, q] * a[j, q]
+        if not s > 0.0:
+            return False
+        d = np.sqrt(s)
+        a[j, j] = d
+        for i in range(j + 1, n):
+            t = a[i, j]
+            for q in range(j):
+                t -= a[i, q] * a[j, q]
+            a[i, j] = t / d
+    for i in range(n):  # L z = b
+        t = b[i]
+        for q in range(i):
+            t -= a[i, q] * b[q]
+        b[i] = t / a[i, i]
+    for i in range(n - 1, -1, -1):  # Lᵀ x = z
+        t = b[i]
+        for q in range(i + 1, n):
+            t -= a[q, i] * b[q]
+        b[i] = t / a[i, i]
+    return True
+
+
+@jit
+def descend_into(
+    parents: I64,
+    rotations: F64,
+    translations: F64,
+    anchor: I64,
+    offset: F64,
+    goals: F64,
+    weight: F64,
+    movable: I64,
+    above: F64,
+    root: int,
+    scale: float,
+    hold: float,
+    n: int,
+    k: int,
+    tolerance: float,
+    steps: int,
+    max_turn: float,
+    stall: int,
+    gain: float,
+    misses: F64,
+) -> int:  # pragma: no cover - compiled
+    """Levenberg-Marquardt on the ``weight``-ed squares of the points' misses from
+    ``goals`` (points: ``anchor``, ``offset``; the first ``n`` met: ``k`` targets, then
+    pins), by world turns of the ``movable`` joints (``above [M, K]``: 1 where point ``i``
+    hangs from joint ``m``) and a move of ``root`` (-1: none) priced at ``scale``; a step
+    that takes a pin farther than ``hold`` is refused. ``rotations``, ``translations`` and
+    ``misses`` (in: the start's) are updated in place; returns the steps taken."""
+    nj, npts, nm = parents.shape[0], anchor.shape[0], movable.shape[0]
+    ncol = 3 * nm + (3 if root >= 0 else 0)
+    nrow = 3 * npts
+    g_rot, g_pos = np.empty((nj, 3, 3)), np.empty((nj, 3))
+    n_rot, n_pos = np.empty((nj, 3, 3)), np.empty((nj, 3))
+    new_rot, new_tr = np.empty((nj, 3, 3)), np.empty((nj, 3))
+    pts, n_pts, now = np.empty((npts, 3)), np.empty((npts, 3)), np.empty(npts)
+    jac, err = np.zeros((nrow, ncol)), np.empty(nrow)
+    small = min(nrow, ncol)
+    normal, rhs, step = np.empty((small, small)), np.empty(small), np.empty(ncol)
+    forward_kinematics_into(parents, rotations, translations, g_rot, g_pos)
+    _points_into(g_rot, g_pos, anchor, offset, pts)
+    cost = _cost(misses, weight)
+    damping = 0.01 * scale * scale
+    seen = np.empty(steps + 1)
+    seen[0] = cost
+    taken = 0
+    for _ in range(steps):
+        worst = 0.0
+        for i in range(n):
+            if weight[i] > 0.0 and misses[i] > worst:
+                worst = misses[i]
+        if worst <= tolerance * 0.1:
+            break
+        if taken + 1 > stall and cost > (1.0 - gain) * seen[taken - stall]:
+            break  # the last steps taken gained too little to go on
+        for i in range(npts):  # the Jacobian, weighted: -[lever]x per joint, scale per move
+            w = weight[i]
+            for m in range(nm):
+                h = above[m, i] * w
+                b = movable[m]
+                l0 = (pts[i, 0] - g_pos[b, 0]) * h
+                l1 = (pts[i, 1] - g_pos[b, 1]) * h
+                l2 = (pts[i, 2] - g_pos[b, 2]) * h
+                c = 3 * m
+                jac[3 * i, c], jac[3 * i, c + 1], jac[3 * i, c + 2] = 0.0, l2, -l1
+                jac[3 * i + 1, c], jac[3 * i + 1, c + 1], jac[3 * i + 1, c + 2] = -l2, 0.0, l0
+                jac[3 * i + 2, c], jac[3 * i + 2, c + 1], jac[3 * i + 2, c + 2] = l1, -l0, 0.0
+            if root >= 0:
+                for r in range(3):
+                    for c in range(3):
+                        jac[3 * i + r, 3 * nm + c] = scale * w if r == c else 0.0
+            for r in range(3):
+                err[3 * i + r] = (goals[i, r] - pts[i, r]) * w
+        if nrow <= ncol:  # (J Jᵀ + λI) y = e, step = Jᵀ y
+            for a in range(nrow):
+                for b in range(a + 1):
+                    s = 0.0
+                    for c in range(ncol):
+                        s += jac[a, c] * jac[b, c]
+                    normal[a, b] = s
+                    normal[b, a] = s
+                normal[a, a] += damping
+                rhs[a] = err[a]
+            ok = _cholesky_solve(normal, rhs)
+            for c in range(ncol):
+                s = 0.0
+                for a in range(nrow):
+                    s += jac[a, c] * rhs[a]
+                step[c] = s
+        else:  # (JᵀJ + λI) step = Jᵀ e
+            for a in range(ncol):
+                for b in range(a + 1):
+                    s = 0.0
+                    for r in range(nrow):
+                        s += jac[r, a] * jac[r, b]
+                    normal[a, b] = s
+                    normal[b, a] = s
+                normal[a, a] += damping
+                s = 0.0
+                for r in range(nrow):
+                    s += jac[r, a] * err[r]
+                rhs[a] = s
+            ok = _cholesky_solve(normal, rhs)
+            for c in range(ncol):
+                step[c] = rhs[c]
+        new = np.inf
+        if ok:
+            big = 0.0
+            for c in range(ncol):
+                big = max(big, abs(step[c]))
+            cut = min(1.0, max_turn / max(big, 1e-300))
+            for c in range(ncol):
+                step[c] *= cut
+            for j in range(nj):
+                for r in range(3):
+                    new_tr[j, r] = translations[j, r]
+                    for c in range(3):
+                        new_rot[j, r, c] = rotations[j, r, c]
+            for m in range(nm):
+                _turn_into(step, m, parents[movable[m]], movable[m], g_rot, rotations, new_rot)
+            if root >= 0:
+                p = parents[root]
+                for r in range(3):
+                    shift = step[3 * nm + r] * scale
+                    if p >= 0:  # into the parent's frame: g_rot[p]ᵀ shift
+                        shift = (
+                            g_rot[p, 0, r] * step[3 * nm] * scale
+                            + g_rot[p, 1, r] * step[3 * nm + 1] * scale
+                            + g_rot[p, 2, r] * step[3 * nm + 2] * scale
+                        )
+                    new_tr[root, r] = translations[root, r] + shift
+            forward_kinematics_into(parents, new_rot, new_tr, n_rot, n_pos)
+            _points_into(n_rot, n_pos, anchor, offset, n_pts)
+            _misses_into(n_pts, goals, now)
+            new = _cost(now, weight)
+            for i in range(k, n):
+                if not now[i] <= hold:
+                    new = np.inf
+        if new < cost:
+            cost = new
+            rotations[:] = new_rot
+            translations[:] = new_tr
+            g_rot[:] = n_rot
+            g_pos[:] = n_pos
+            pts[:] = n_pts
+            misses[:] = now
+            damping = max(damping / 10.0, (1e-6 * scale) ** 2)
+            taken += 1
+            seen[taken] = cost
+        else:
+            damping *= 10.0
+            if damping > 1e8 * scale * scale:  # no step, however short, helps
+                break
+    return taken
+
+
+@jit
+def _turn_into(
+    step: F64, m: int, p: int, b: int, g_rot: F64, rotations: F64, new_rot: F64
+) -> None:  # pragma: no cover - compiled
+    """Joint ``b``'s new local rotation: the world turn ``step[3m:3m+3]`` (a rotation
+    vector) taken into its parent ``p``'s frame, ``Pᵀ T P R``."""
+    x, y, z = step[3 * m], step[3 * m + 1], step[3 * m + 2]
+    angle = np.sqrt(x * x + y * y + z * z)
+    turn = np.eye(3)
+    if angle > 0.0:
+        x, y, z = x / angle, y / angle, z / angle
+        s, c = np.sin(angle), 1.0 - np.cos(angle)
+        kx = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+        for r in range(3):
+            for q in range(3):
+                kk = kx[r, 0] * kx[0, q] + kx[r, 1] * kx[1, q] + kx[r, 2] * kx[2, q]
+                turn[r, q] += s * kx[r, q] + c * kk
+    if p >= 0:  # Pᵀ T P
+        tp = np.empty((3, 3))
+        for r in range(3):
+            for q in range(3):
+                tp[r, q] = (
+                    turn[r, 0] * g_rot[p, 0, q]
+                    + turn[r, 1] * g_rot[p, 1, q]
+                    + (turn[r, 2] * g_rot[p, 2, q])
+                )
+        for r in range(3):
+            for q in range(3):
+                turn[r, q] = (
+                    g_rot[p, 0, r] * tp[0, q]
+                    + g_rot[p, 1, r] * tp[1, q]
+                    + (g_rot[p, 2, r] * tp[2, q])
+                )
+    for r in range(3):
+        for q in range(3):
+            new_rot[b, r, q] = (
+                turn[r, 0] * rotations[b, 0, q]
+                + turn[r, 1] * rotations[b, 1, q]
+                + (turn[r, 2] * rotations[b, 2, q])
+            )
+
+
+def warm() -> None:
+    """Compile (or load from the cache) the kernel with the signature the caller uses."""
+    parents = np.array([-1, 0], dtype=np.int64)
+    rotations = np.repeat(np.eye(3)[None], 2, axis=0)
+    translations = np.array([[0.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    descend_into(
+        parents, rotations, translations, np.array([1], np.int64), np.zeros((1, 3)),
+        np.array([[1.0, 0.0, 0.0]]), np.ones(1), np.array([0], np.int64), np.ones((1, 1)),
+        0, 1.0, 1.0, 1, 1, 1e-3, 2, 0.1, 5, 0.01, np.ones(1),
+    )  # fmt: skip
