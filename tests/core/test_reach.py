@@ -58,6 +58,11 @@ def test_a_reachable_wrist_is_met_and_the_pins_held(
     assert np.linalg.norm(after[WRIST] - goal) <= 0.1 * tol
     assert all(np.linalg.norm(after[a] - p) <= 0.1 * tol for a, p in pins)
     assert changed  # the arm turned
+    # the same call gives the same bits (the compiled steps: no BLAS, no threads)
+    twice, _, _, _ = _edit(bandai)
+    assert polish(skel, twice, jmap, [(WRIST, goal)], pins, tol, 0) == changed
+    assert twice.rotations.tobytes() == pose.rotations.tobytes()
+    assert twice.translations.tobytes() == pose.translations.tobytes()
     # a pose that already meets them is left bit for bit
     again = pose.copy()
     assert polish(skel, again, jmap, [(WRIST, after[WRIST])], pins, tol, 0) == set()
