@@ -306,10 +306,12 @@ def test_a_nan_channel_is_named_as_a_number_not_numpys_repr(client: Any) -> None
     body = _example("bvh_solve")
     lines = body["bvh"].split("\n")
     row = next(i for i, ln in enumerate(lines) if ln.startswith("Frame Time")) + 1
+    row += body["frame"]  # the frame edited (only that one is read)
     lines[row] = " ".join(["nan", *lines[row].split()[1:]])
     body["bvh"] = "\n".join(lines)
     detail = assert_problem(client.post("/v1/bvh/solve", json=body), 422)["detail"]
     assert "np.float64" not in detail, detail
+    assert f"line {row + 1}" in detail and "nan" in detail, detail
 
 
 def test_exact_reach_lifts_a_body_no_higher_than_onto_its_toes(client: Any) -> None:
