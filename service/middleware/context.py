@@ -53,24 +53,26 @@ class RequestContext:
             if not started[0]:
                 busy = ShuttingDown("the server is shutting down; retry on another instance")
                 await error_response(busy)(scope, receive, tagged)
-            self._log(scope, rid, status[0], t0)
+            log_request(scope, rid, status[0], t0, self.access_log)
             return  # answered: the cancellation ends here
         except Exception:  # the app's own 500 handler would run outside the middleware
             if not started[0]:
                 await internal_error(scope["method"], scope["path"])(scope, receive, tagged)
-        self._log(scope, rid, status[0], t0)
+        log_request(scope, rid, status[0], t0, self.access_log)
 
-    def _log(self, scope: Scope, request_id: str, status: int, t0: float) -> None:
-        if not self.access_log or not access_log.isEnabledFor(logging.INFO):
-            return  # not even built when nobody reads it
-        line = {
-            "event": "request",
-            "request_id": request_id,
-            "method": scope["method"],
-            "path": scope["path"][:200],
-            "status": status,
-            "ms": round((time.perf_counter() - t0) * 1000, 3),
-        }
-        if status in _OUTCOME:
-            line["outcome"] = _OUTCOME[status]
-        access_log.info(orjson.dumps(line).decode())
+
+def log_request(scope: Scope, request_id: str, status: int, t0: float, enabled: bool) -> None:
+    """The access-log line of a request answered (``enabled``: the setting)."""
+    if not enabled or not access_log.isEnabledFor(logging.INFO):
+        return  # not even built when nobody reads it
+    line = {
+        "event": "request",
+        "request_id": request_id,
+        "method": scope["method"],
+        "path": scope["path"][:200],
+        "status": status,
+        "ms": round((time.perf_counter() - t0) * 1000, 3),
+    }
+    if status in _OUTCOME:
+        line["outcome"] = _OUTCOME[status]
+    access_log.info(orjson.dumps(line).decode())

@@ -5,9 +5,12 @@ from __future__ import annotations
 
 import json
 import logging
+from pathlib import Path
 from typing import Any
 
 import pytest
+
+from tests.conftest import make_client
 
 
 def test_one_json_line_per_request_with_its_id(client: Any, caplog: pytest.LogCaptureFixture
@@ -27,3 +30,23 @@ def test_no_line_above_info(client: Any, caplog: pytest.LogCaptureFixture) -> No
     with caplog.at_level(logging.WARNING, logger="service.access"):
         client.get("/v2/health/live")
     assert not [rec for rec in caplog.records if rec.name == "service.access"]
+
+
+def test_a_cors_preflight_has_its_line_too(
+    models_dir: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    """The CORS middleware answers a preflight itself, outside the access log's: it wrote
+    no line (noticed at stop 36). Allowed and refused alike now do."""
+    with (
+        make_client(models_dir, cors_origins=["http://editor.example"]) as c,
+        caplog.at_level(logging.INFO, logger="service.access"),
+    ):
+        for origin in ("http://editor.example", "http://evil.example"):
+            ask = {"Origin": origin, "X-Request-ID": origin[7:],
+                   "Access-Control-Request-Method": "POST"}  # fmt: skip
+            c.options("/v1/solve", headers=ask)
+    lines = [json.loads(rec.getMessage()) for rec in caplog.records if rec.name == "service.access"]
+    assert [(ln["method"], ln["path"], ln["status"], ln["request_id"]) for ln in lines] == [
+        ("OPTIONS", "/v1/solve", 200, "editor.example"),
+        ("OPTIONS", "/v1/solve", 400, "evil.example"),
+    ]
