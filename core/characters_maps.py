@@ -361,7 +361,7 @@ def _shared_prefix(keys: list[str]) -> str:
     return common[:cut] if cut < len(first) else ""
 
 
-def _canonical_key(name: str) -> tuple[str, int] | None:
+def _canonical_key(name: str) -> tuple[str, int]:
     """("collar", side) for limb joints, (name, -1) for centre joints."""
     for side, prefix in enumerate(("left_", "right_")):
         if name.startswith(prefix):
@@ -369,20 +369,37 @@ def _canonical_key(name: str) -> tuple[str, int] | None:
     return name, -1
 
 
-def _resolve_scheme(
-    skel: Skeleton, lookup: dict[str, int], scheme: Scheme
-) -> tuple[dict[str, int], int]:
+def _keys(scheme: Scheme) -> tuple[tuple[tuple[str, tuple[str, ...]], ...], ...]:
+    """Per prefix and side-token pair of ``scheme``: each canonical joint's candidate names,
+    as looked up (:func:`_key`), in the order tried."""
+    out = []
+    for prefix, sides in ((p, s) for p in scheme.prefixes for s in scheme.sides):
+        rows = []
+        for canon in JOINT_NAMES:
+            base, side = _canonical_key(canon)
+            names = (
+                c.replace("{s}", sides[side]) if side >= 0 else c
+                for c in scheme.joints.get(base, ())
+            )
+            rows.append((canon, tuple(_key(prefix + n) for n in names)))
+        out.append(tuple(rows))
+    return tuple(out)
+
+
+#: :func:`_keys` of every scheme, made once.
+_KEYS: Final = {name: _keys(scheme) for name, scheme in SCHEMES.items()}
+
+
+def _resolve_scheme(lookup: dict[str, int], scheme: str) -> tuple[dict[str, int], int]:
     """Best resolution of a scheme over its prefixes and side-token pairs: (canonical ->
     joint, names hit)."""
     best: tuple[dict[str, int], int] = ({}, -1)
-    for prefix, sides in ((p, s) for p in scheme.prefixes for s in scheme.sides):
+    for rows in _KEYS[scheme]:
         found: dict[str, int] = {}
-        for canon in JOINT_NAMES:
-            base, side = _canonical_key(canon) or (canon, -1)
-            for cand in scheme.joints.get(base, ()):
-                name = prefix + (cand.replace("{s}", sides[side]) if side >= 0 else cand)
-                if _key(name) in lookup:
-                    found[canon] = lookup[_key(name)]
+        for canon, keys in rows:
+            for key in keys:
+                if key in lookup:
+                    found[canon] = lookup[key]
                     break
         if len(found) > best[1]:
             best = (found, len(found))
@@ -453,16 +470,19 @@ def resolve_map(
         given[canon] = skel.index[name]
 
     best_name, best_found, best_hits = "", dict(given), -1
-    for scheme_name, scheme in SCHEMES.items():
-        found, hits = _resolve_scheme(skel, lookup, scheme)
+    structural = {"spine1", "spine2"}  # the joints the structural rules may fill
+    for scheme_name in SCHEMES:
+        found, hits = _resolve_scheme(lookup, scheme_name)
         found.update(given)
-        _structural(skel, found)
+        if set(JOINT_NAMES) - found.keys() <= structural:  # else it cannot be complete
+            _structural(skel, found)
         complete = len(found) == len(JOINT_NAMES)
         score = hits + (1000 if complete else 0)
         if score > best_hits:
             best_name, best_found, best_hits = scheme_name, found, score
     if given:
         best_name = "explicit" if len(given) == len(JOINT_NAMES) else f"{best_name}+explicit"
+    _structural(skel, best_found)  # (done already where it could complete the map)
     missing = [c for c in JOINT_NAMES if c not in best_found]
     if missing:
         raise CharacterError(
