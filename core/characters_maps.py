@@ -416,6 +416,19 @@ def _lca(skel: Skeleton, a: int, b: int) -> int:
     return b
 
 
+def _chest_below_collars(skel: Skeleton, found: dict[str, int]) -> int:
+    """Drop a named chest (spine2) that is not above both collars (a chest named by one of
+    several spine names, ``Chest4|Chest3|Chest2``, where the collars hang lower), so that
+    the structural rule puts it where they meet; 1 if dropped."""
+    chest, collars = found.get("spine2"), [found.get(c) for c in ("left_collar", "right_collar")]
+    if chest is None or None in collars:
+        return 0  # (a collar not found: the map is incomplete anyway)
+    if all(skel.is_ancestor(chest, c) for c in collars if c is not None):
+        return 0
+    del found["spine2"]
+    return 1
+
+
 def _structural(skel: Skeleton, found: dict[str, int]) -> None:
     """Fill spine2 (lowest common ancestor of the collars) and spine1 (first joint below the
     pelvis towards it, off the pelvis) where no name gave them."""
@@ -473,6 +486,7 @@ def resolve_map(
     structural = {"spine1", "spine2"}  # the joints the structural rules may fill
     for scheme_name in SCHEMES:
         found, hits = _resolve_scheme(lookup, scheme_name)
+        hits -= _chest_below_collars(skel, found)
         found.update(given)
         if set(JOINT_NAMES) - found.keys() <= structural:  # else it cannot be complete
             _structural(skel, found)

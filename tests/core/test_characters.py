@@ -152,6 +152,33 @@ def test_biped_clavicles_on_the_neck() -> None:
     np.testing.assert_allclose(rest_points(skel, jmap), rest, rtol=0, atol=1e-12)
 
 
+def test_a_chest_named_above_the_collars_only() -> None:
+    """A review's find: ``cmu-asf-bvh`` names the chest ``Chest4|Chest3|Chest2`` (Xsens has
+    four), and took ``Chest3`` where the collars hang from ``Chest2`` (a 422: the collar not
+    below the chest). A named chest that is not above both collars is left to the
+    structural rule: where the collars meet."""
+    names = ["Hips", "Chest", "Chest2", "Chest3", "Neck", "Head"]
+    parents: list[str | None] = [None, "Hips", "Chest", "Chest2", "Chest3", "Neck"]
+    offsets = [[0.0, 1.0, 0.0], [0.0, 0.1, 0.0], [0.0, 0.1, 0.0], [0.0, 0.1, 0.0],
+               [0.0, 0.1, 0.0], [0.0, 0.1, 0.0]]  # fmt: skip
+    for side, x in (("Left", 1.0), ("Right", -1.0)):
+        chain = [("Collar", "Chest2", [0.03 * x, 0.08, 0.0]),
+                 ("Shoulder", "Collar", [0.15 * x, 0, 0]),
+                 ("Elbow", "Shoulder", [0.28 * x, 0, 0]), ("Wrist", "Elbow", [0.25 * x, 0, 0]),
+                 ("Hip", "Hips", [0.1 * x, -0.05, 0]), ("Knee", "Hip", [0, -0.45, 0]),
+                 ("Ankle", "Knee", [0, -0.42, 0]), ("Toe", "Ankle", [0, -0.08, 0.12])]  # fmt: skip
+        for name, parent, off in chain:
+            names.append(side + name)
+            parents.append(
+                parent if parent.startswith("Chest") or parent == "Hips" else side + parent
+            )
+            offsets.append([float(v) for v in off])
+    skel, _ = build_skeleton(names, parents, offsets)
+    jmap = resolve_map(skel)
+    assert jmap.scheme == "cmu-asf-bvh"
+    assert jmap.describe()["spine2"] == "Chest2"
+
+
 def test_bad_skeletons() -> None:
     with pytest.raises(CharacterError, match="cycle"):
         build_skeleton(["a", "b", "c"], [None, "c", "b"], [[0, 0, 0]] * 3)
