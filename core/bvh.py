@@ -31,6 +31,7 @@ from __future__ import annotations
 import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
+from itertools import islice
 from pathlib import Path
 
 import numpy as np
@@ -46,6 +47,8 @@ _LINE_END = re.compile(r"\r\n|\r|\n")
 _MOTION_RE = re.compile(r"^[ \t]*MOTION[ \t]*\r?$", re.MULTILINE)
 _BLANK_RE = re.compile(r"\n[^\S\n]*(?=\n|\Z)")  # a blank line after the first
 _BLANK_FIRST_RE = re.compile(r"[^\S\n]*(?:\n|\Z)")  # a blank first line
+_BLANK_MID_RE = re.compile(r"\n[^\S\n]*\n")  # a blank line between two others
+_FRAME_LINE_RE = re.compile(r"^[^\n]*\S[^\n]*", re.MULTILINE)  # a non-blank line
 _FRAMES_RE = re.compile(r"^[ \t]*Frames:[ \t]*(\S+)[ \t]*\r?$")
 _FRAME_TIME_RE = re.compile(r"^[ \t]*Frame Time:[ \t]*(\S+)[ \t]*\r?$")
 
@@ -111,6 +114,15 @@ class BVH:
     def num_channels(self) -> int:
         return int(self.motion.shape[1])
 
+    def frame_span(self, frame: int) -> tuple[int, int] | None:
+        """(start, end) offsets in :attr:`text` of frame ``frame``'s line (its line ending
+        left out but a ``\r``); None if the file does not hold one frame per line."""
+        if frame in self.spans:  # found by the reader that read that frame alone
+            return self.spans[frame]
+        if not self.text or self.frame_line_count() != self.num_frames:
+            return None
+        return frame_line(self.text, self.motion_offset, frame)
+
     def row(self, frame: int) -> FloatArray:
         """Frame ``frame``'s channel values ``[C]``; ``ValueError`` for a frame the reader
         was not asked to read."""
@@ -140,11 +152,12 @@ class BVH:
     def frame_line_count(self) -> int:
         """``len(self.frame_lines())``, without making the lines: every line of the MOTION
         block less the blank ones (found by their newline, so the search skips along)."""
-        if not self.text:
-            return 0
-        text, at = self.text, self.motion_offset
-        blank = sum(1 for _ in _BLANK_RE.finditer(text, at))
-        return text.count("\n", at) + 1 - blank - (_BLANK_FIRST_RE.match(text, at) is not None)
+        return count_frame_lines(self.text, self.motion_offset) if self.text else 0
+
+    def whole(self) -> None:
+        """``ValueError`` unless every frame was read (a writer of the whole motion asks)."""
+        if self.read is not None:
+            raise ValueError(f"{self.name}: only frames {sorted(self.read)} were read")
 
     def index(self, name: str) -> int:
         """Index of a joint by name; ``KeyError`` listing the known names if absent."""
@@ -166,6 +179,39 @@ class BVH:
         sub-sampling costs nothing. Only the requested joints' ancestors are evaluated.
         """
         return forward_kinematics(self, names, frames)
+
+
+def count_frame_lines(text: str, at: int) -> int:
+    """The non-blank lines of ``text`` from offset ``at``, without making the lines (found
+    by their newline, so the search skips along; each blank line is one match)."""
+    blank = sum(1 for _ in _BLANK_RE.finditer(text, at))
+    return text.count("\n", at) + 1 - blank - (_BLANK_FIRST_RE.match(text, at) is not None)
+
+
+def frame_line(text: str, at: int, frame: int) -> tuple[int, int]:
+    """(start, end) offsets of the ``frame``-th non-blank line of ``text`` from ``at`` (a
+    line's start; the caller has counted them: it exists), its newline left out. The regex
+    engine steps over the lines before it (no Python step per line)."""
+    found = next(islice(_FRAME_LINE_RE.finditer(text, at), frame, None))
+    return found.start(), found.end()
+
+
+def _after_newlines(text: str, at: int, limit: int, k: int) -> int:
+    """The offset just after the ``k``-th newline of ``text[at:limit]`` (which holds at
+    least ``k``; ``at`` itself for 0): an interpolation search on ``str.count`` (frame lines
+    are of about one length), then a few steps of ``str.find``."""
+    lo, lo_n, hi, hi_n = at, 0, limit, text.count("\n", at, limit)
+    while hi_n - lo_n > 64:  # the k-th newline lies in text[lo:hi]
+        guess = lo + (hi - lo) * (k - lo_n) // (hi_n - lo_n)
+        guess = min(max(guess, lo + 1), hi - 1)
+        n = lo_n + text.count("\n", lo, guess)
+        if n < k:
+            lo, lo_n = guess, n
+        else:
+            hi, hi_n = guess, n
+    for _ in range(k - lo_n):
+        lo = text.find("\n", lo) + 1
+    return lo
 
 
 def _error(file: str, reason: str) -> BVHError:
@@ -364,7 +410,7 @@ def parse_bvh(text: str, name: str = "<string>", frames: Iterable[int] | None = 
     first_line = motion_line + 3
     body_offset = len(text) - len(body)
     if frames is not None:
-        some = _read_frames(name, body, first_line, n_frames, n_channels, frames)
+        some = _read_frames(name, text, body_offset, first_line, n_frames, n_channels, frames)
         if some is not None:
             motion, read, spans = some
             return BVH(
@@ -375,7 +421,7 @@ def parse_bvh(text: str, name: str = "<string>", frames: Iterable[int] | None = 
                 text=text,
                 motion_offset=body_offset,
                 read=read,
-                spans={f: (body_offset + a, body_offset + b) for f, (a, b) in spans.items()},
+                spans=spans,
             )
     expected = n_frames * n_channels
     try:  # numpy's own reader: no Python object per value (an 8 MB file: 84 -> 30 MB peak)
@@ -403,27 +449,41 @@ def parse_bvh(text: str, name: str = "<string>", frames: Iterable[int] | None = 
 
 
 def _read_frames(
-    name: str, body: str, first_line: int, n_frames: int, n_channels: int, frames: Iterable[int]
+    name: str,
+    text: str,
+    at: int,
+    first_line: int,
+    n_frames: int,
+    n_channels: int,
+    frames: Iterable[int],
 ) -> tuple[FloatArray, frozenset[int], dict[int, tuple[int, int]]] | None:
     """The motion ``[F, C]`` with only ``frames``' rows read (the others NaN), the set read
-    and their lines' (start, end) in ``body``, where ``body`` holds ``n_frames`` non-blank
-    lines; None where it does not (frames across lines, or a count that does not match: the
-    whole read explains it)."""
-    lines = body.split("\n")
-    at = [k for k, line in enumerate(lines) if line.strip()]
-    if len(at) != n_frames:
+    and their lines' (start, end) in ``text``, where the block from ``at`` holds
+    ``n_frames`` non-blank lines; None where it does not, or cannot hold the values
+    (frames across lines, a count that does not match, fewer characters than the values
+    need: the whole read explains it, and no table larger than the text allows is made)."""
+    if n_frames * n_channels * 2 > len(text) - at + 1:  # a value and a separator each
+        return None
+    if _BLANK_FIRST_RE.match(text, at) or _BLANK_MID_RE.search(text, at):
+        return None  # blank lines among the frames: rare, read whole
+    last = text[text.rfind("\n") + 1 :]  # (the block's last line: "" after a final newline)
+    if text.count("\n", at) + (not last.isspace() and last != "") != n_frames:
         return None
     motion = np.full((n_frames, n_channels), np.nan)
     read = frozenset(f for f in frames if 0 <= f < n_frames)
     spans: dict[int, tuple[int, int]] = {}
+    line_at, line_frame = at, 0  # the start of a frame line found, and its frame
     for f in sorted(read):
-        line = lines[at[f]]
-        start = sum(map(len, lines[: at[f]])) + at[f]  # (each line's "\n" too)
-        spans[f] = (start, start + len(line))
+        start = _after_newlines(text, line_at, len(text), f - line_frame)
+        end = text.find("\n", start)
+        end = len(text) if end < 0 else end
+        spans[f] = (start, end)
+        line_at, line_frame = start, f
+        line, number = text[start:end], first_line + text.count("\n", at, start)
         tokens = line.split()
         if len(tokens) != n_channels:
             got = f"expected {n_channels} values per frame, got {len(tokens)}"
-            raise _error(name, f"line {first_line + at[f]}: {got}")
+            raise _error(name, f"line {number}: {got}")
         try:  # as the whole block is read: numpy's reader, then Python's float()
             values = np.fromstring(line, dtype=np.float64, sep=" ")
         except ValueError:
@@ -432,7 +492,7 @@ def _read_frames(
             try:
                 values = np.array(tokens, dtype=np.float64)
             except ValueError:
-                _explain_values(name, line, first_line + at[f])
+                _explain_values(name, line, number)
         motion[f] = values
     return motion, read, spans
 
@@ -564,8 +624,9 @@ def forward_kinematics(
     """World positions ``[F, K, 3]`` of the named joints (default: all), in file units.
 
     Batched over frames; Euler rotations are converted per distinct channel order in one
-    vectorised call each.
+    vectorised call each. ``ValueError`` for a file read for some frames only.
     """
+    bvh.whole()
     motion = bvh.motion if frames is None else bvh.motion[frames]
     n_frames = motion.shape[0]
     wanted = list(range(len(bvh.joints))) if names is None else [bvh.index(n) for n in names]

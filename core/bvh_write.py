@@ -33,6 +33,8 @@ def _num(v: float) -> str:
 
 def format_bvh(bvh: BVH, motion: F64 | None = None) -> str:
     """The whole file as text (``motion`` replaces the BVH's own rows when given)."""
+    if motion is None:
+        bvh.whole()  # (a file read for one frame has NaN rows)
     rows = bvh.motion if motion is None else motion
     kids: dict[int, list[int]] = {}
     for i, j in enumerate(bvh.joints):
@@ -61,35 +63,15 @@ def format_bvh(bvh: BVH, motion: F64 | None = None) -> str:
     return "\n".join(out) + "\n"
 
 
-def _frame_span(bvh: BVH, frame: int) -> tuple[int, int] | None:
-    """(start, end) character offsets of a frame's line in ``bvh.text``; None if the
-    file does not hold one frame per line."""
-    if frame in bvh.spans:  # found by the reader that read that frame alone
-        return bvh.spans[frame]
-    if not bvh.text or bvh.frame_line_count() != bvh.num_frames:
-        return None
-    pos = bvh.motion_offset
-    seen = -1
-    text = bvh.text
-    while pos <= len(text):
-        end = text.find("\n", pos)
-        end = len(text) if end < 0 else end
-        if text[pos:end].strip():
-            seen += 1
-            if seen == frame:
-                return pos, end
-        pos = end + 1
-    return None  # pragma: no cover - frame_line_count() said the count matches
-
-
 def splice_frame(bvh: BVH, frame: int, row: F64, columns: list[int]) -> str:
     """The file's text with ``columns`` of frame ``frame`` set from ``row`` (whole motion
     row); every other byte is kept. A file whose frames are not one per line is written
     whole by :func:`format_bvh` instead."""
     if not 0 <= frame < bvh.num_frames:
         raise IndexError(f"frame {frame} out of range: the file has {bvh.num_frames} frames")
-    span = _frame_span(bvh, frame)
+    span = bvh.frame_span(frame)
     if span is None:
+        bvh.whole()  # (a file read for one frame holds one frame a line: it has its span)
         motion = bvh.motion.copy()
         motion[frame] = row
         return format_bvh(bvh, motion)

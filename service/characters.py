@@ -531,7 +531,8 @@ def read_request_bvh(text: str, frame: int | None = None) -> BVH:
     if bad.any():
         k, c = (int(v) for v in np.argwhere(bad)[0])
         f = int(rows[k])
-        line = bvh.text[: bvh.motion_offset].count("\n") + 1 + f
+        span = bvh.frame_span(f)  # (None: frames across lines; the block's first line, then)
+        line = bvh.text[: bvh.motion_offset if span is None else span[0]].count("\n") + 1
         joint = next(j for j in reversed(bvh.joints) if j.channel_start <= c and j.channels)
         channel = joint.channels[c - joint.channel_start]
         raise InvalidRequest(

@@ -3,6 +3,7 @@ joints, End Sites, what a writer needs kept, clear errors, and real files of fou
 
 from __future__ import annotations
 
+import tracemalloc
 from pathlib import Path
 from typing import Any
 
@@ -10,7 +11,6 @@ import numpy as np
 import pytest
 
 from core.bvh import BVHError, euler_matrices, parse_bvh, read_bvh
-from core.bvh_write import _frame_span
 
 # Root: 6 channels (position + Z X Y rotation), child 10 up, end site 5 up the child.
 TINY = """HIERARCHY
@@ -263,36 +263,59 @@ def test_fair_child_file_in_inches_z_up(more_mocap: Path) -> None:
     assert np.median(np.abs(pos[:, 1, 1] - pos[:, 2, 1])) < 10
 
 
-@pytest.mark.parametrize("body", _BODIES)
+_PLAIN = "1 2 3 0 0 0 0 0 0\n1 2 3 90 0 0 0 90 0\n0 0 0 90 90 0 0 0 0\n0 0 0 0 0 0 0 0 90"
+
+
+@pytest.mark.parametrize(
+    "body",
+    [_PLAIN + "\n", _PLAIN, _PLAIN.replace("\n", " \t\r\n") + "\r\n", _PLAIN + "\n  ", *_BODIES],
+)
 def test_reading_some_frames_reads_them_as_the_whole_read_does(body: str) -> None:
     """``frames=``: those rows bit for bit as a whole read gives them, the others NaN and
-    refused by ``row``; out-of-range frames are not read; a block whose frames are not one
-    per line (the third and second bodies) is read whole."""
+    refused by ``row``, the lines' spans the writer's; out-of-range frames are not read. A
+    block with blank lines among its frames, or frames across lines (``_BODIES``), is
+    read whole."""
     text = TINY.split("1 2 3 0")[0] + body
     whole = parse_bvh(text, "lines.bvh")
     some = parse_bvh(text, "lines.bvh", frames=[1, 3, 7])
     assert whole.read is None
-    if some.read is None:  # frames across lines: read whole
-        assert whole.frame_line_count() != whole.num_frames
-        assert some.motion.tobytes() == whole.motion.tobytes()
+    if body in _BODIES:
+        assert some.read is None and some.motion.tobytes() == whole.motion.tobytes()
         return
     assert some.read == {1, 3}
     for f in (1, 3):
         assert some.row(f).tobytes() == whole.row(f).tobytes()
-        assert some.spans[f] == _frame_span(whole, f)  # the writer's, found by the reader
+        assert some.spans[f] == whole.frame_span(f)  # the writer's, found by the reader
     assert np.isnan(some.motion[[0, 2]]).all()
     with pytest.raises(ValueError, match="frame 0 was not read"):
         some.row(0)
+    with pytest.raises(ValueError, match="only frames"):  # no NaN written or posed
+        some.forward_kinematics()
     # a bad value in the frame read is found as the whole read finds it, in another not
     bad = text.replace("0 0 0 90 90 0 0 0 0", "0 0 0 90 nope 0 0 0 0")
-    with pytest.raises(BVHError, match="not a number: 'nope'") as whole_error:
+    with pytest.raises(BVHError, match="line 21: not a number: 'nope'") as whole_error:
         parse_bvh(bad, "bad.bvh")
     with pytest.raises(BVHError) as some_error:
         parse_bvh(bad, "bad.bvh", frames=[2])
     assert str(some_error.value) == str(whole_error.value)
     assert parse_bvh(bad, "bad.bvh", frames=[1]).row(1).tobytes() == whole.row(1).tobytes()
-    crlf = text.replace("\r\n", "\n").replace("\n", "\r\n")
-    assert parse_bvh(crlf, "crlf.bvh", frames=[1]).row(1).tobytes() == whole.row(1).tobytes()
+
+
+def test_a_block_too_short_for_its_values_is_refused_without_a_table_for_them() -> None:
+    """A review's find: the reader made the NaN table of every frame and channel before
+    looking at a line, so a 0.2 MB body declaring 1,000 channels and 100,000 one-value lines
+    filled 0.8 GB (a 4 MB one asked for 1.46 TiB: a 500). Now it is read whole, which
+    compares the count of values first."""
+    head = "HIERARCHY\nROOT Hips\n{\n OFFSET 0 0 0\n CHANNELS 1000 " + "Xrotation " * 1000
+    text = head + "\n End Site\n {\n OFFSET 0 1 0\n }\n}\nMOTION\nFrames: 100000\n"
+    text += "Frame Time: 0.01\n" + "0\n" * 100_000
+    tracemalloc.start()
+    try:
+        with pytest.raises(BVHError, match="line 14: expected 1000 values per frame, got 1"):
+            parse_bvh(text, "x", [0])
+        assert tracemalloc.get_traced_memory()[1] < 50e6
+    finally:
+        tracemalloc.stop()
 
 
 def test_reading_one_frame_of_real_files_is_bit_identical(more_mocap: Path) -> None:
@@ -305,4 +328,4 @@ def test_reading_one_frame_of_real_files_is_bit_identical(more_mocap: Path) -> N
         some = parse_bvh(text, path.name, frames=picks)
         assert some.read == set(picks), path
         assert some.motion[picks].tobytes() == whole.motion[picks].tobytes(), path
-        assert all(some.spans[f] == _frame_span(whole, f) for f in picks[::20]), path
+        assert all(some.spans[f] == whole.frame_span(f) for f in picks[::20]), path

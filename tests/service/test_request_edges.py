@@ -314,6 +314,21 @@ def test_a_nan_channel_is_named_as_a_number_not_numpys_repr(client: Any) -> None
     assert f"line {row + 1}" in detail and "nan" in detail, detail
 
 
+@pytest.mark.parametrize("frame", [1, None])
+def test_a_bad_value_after_blank_lines_is_named_at_its_own_line(frame: int | None) -> None:
+    """A review's find: the line of a NaN was counted from the first frame line as if no
+    blank line came before it (line 15 for line 17), in a whole read and one frame's."""
+    from service.characters import read_request_bvh
+    from service.errors import InvalidRequest
+
+    head = "HIERARCHY\nROOT Hips\n{\n OFFSET 0 0 0\n CHANNELS 3 Xrotation Yrotation Zrotation\n"
+    text = head + " End Site\n {\n OFFSET 0 1 0\n }\n}\nMOTION\nFrames: 3\nFrame Time: 0.1\n"
+    text += "1 2 3\n\n\n4 nan 6\n7 8 9\n"
+    assert text.split("\n")[16] == "4 nan 6"
+    with pytest.raises(InvalidRequest, match=r"line 17: frame 1, channel Hips\.Yrotation"):
+        read_request_bvh(text, frame)
+
+
 def test_exact_reach_lifts_a_body_no_higher_than_onto_its_toes(client: Any) -> None:
     """A hand 3 m above a standing body: approached (the fallback lifts the body by at most
     ``service.engine.LIFT`` of its summed bone lengths, ~9 cm here, beyond what the
