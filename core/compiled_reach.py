@@ -59,6 +59,29 @@ def _cost(misses: F64, weight: F64) -> float:  # pragma: no cover - compiled
 
 
 @jit
+def _gram_into(a: F64, damping: float, out: F64) -> None:  # pragma: no cover - compiled
+    """``out = a aᵀ + damping I`` (``a [n, m]``; ``a`` may be a transposed view)."""
+    for i in range(a.shape[0]):
+        for j in range(i + 1):
+            s = 0.0
+            for c in range(a.shape[1]):
+                s += a[i, c] * a[j, c]
+            out[i, j] = s
+            out[j, i] = s
+        out[i, i] += damping
+
+
+@jit
+def _product_into(a: F64, x: F64, out: F64) -> None:  # pragma: no cover - compiled
+    """``out = a x`` (``a [n, m]``, ``x [m]``; ``a`` may be a transposed view)."""
+    for i in range(a.shape[0]):
+        s = 0.0
+        for c in range(a.shape[1]):
+            s += a[i, c] * x[c]
+        out[i] = s
+
+
+@jit
 def _cholesky_solve(a: F64, b: F64) -> bool:  # pragma: no cover - compiled
     """Solve ``a x = b`` in place (``b`` becomes ``x``; ``a`` its Cholesky factor) for a
     symmetric ``a``; False where a pivot is not positive (not positive definite in
@@ -164,37 +187,15 @@ def descend_into(
             for r in range(3):
                 err[3 * i + r] = (goals[i, r] - pts[i, r]) * w
         if nrow <= ncol:  # (J Jᵀ + λI) y = e, step = Jᵀ y
-            for a in range(nrow):
-                for b in range(a + 1):
-                    s = 0.0
-                    for c in range(ncol):
-                        s += jac[a, c] * jac[b, c]
-                    normal[a, b] = s
-                    normal[b, a] = s
-                normal[a, a] += damping
-                rhs[a] = err[a]
+            _gram_into(jac, damping, normal)
+            rhs[:] = err
             ok = _cholesky_solve(normal, rhs)
-            for c in range(ncol):
-                s = 0.0
-                for a in range(nrow):
-                    s += jac[a, c] * rhs[a]
-                step[c] = s
+            _product_into(jac.T, rhs, step)
         else:  # (JᵀJ + λI) step = Jᵀ e
-            for a in range(ncol):
-                for b in range(a + 1):
-                    s = 0.0
-                    for r in range(nrow):
-                        s += jac[r, a] * jac[r, b]
-                    normal[a, b] = s
-                    normal[b, a] = s
-                normal[a, a] += damping
-                s = 0.0
-                for r in range(nrow):
-                    s += jac[r, a] * err[r]
-                rhs[a] = s
+            _gram_into(jac.T, damping, normal)
+            _product_into(jac.T, err, rhs)
             ok = _cholesky_solve(normal, rhs)
-            for c in range(ncol):
-                step[c] = rhs[c]
+            step[:] = rhs
         new = np.inf
         if ok:
             big = 0.0
