@@ -526,11 +526,11 @@ def read_request_bvh(text: str, frame: int | None = None) -> BVH:
         bvh = parse_bvh(text, "bvh", None if frame is None else (frame,))
     except BVHError as exc:
         raise _invalid(exc) from None
-    rows = np.arange(bvh.num_frames) if bvh.read is None else np.array(sorted(bvh.read), int)
-    bad = ~(np.abs(bvh.motion[rows]) <= MAX_COORDINATE)  # NaN too
+    rows = None if bvh.read is None else np.array(sorted(bvh.read), dtype=np.intp)
+    bad = ~(np.abs(bvh.motion if rows is None else bvh.motion[rows]) <= MAX_COORDINATE)  # NaN
     if bad.any():
         k, c = (int(v) for v in np.argwhere(bad)[0])
-        f = int(rows[k])
+        f = k if rows is None else int(rows[k])
         span = bvh.frame_span(f)  # (None: frames across lines; the block's first line, then)
         line = bvh.text[: bvh.motion_offset if span is None else span[0]].count("\n") + 1
         joint = next(j for j in reversed(bvh.joints) if j.channel_start <= c and j.channels)
