@@ -6,8 +6,11 @@ kernel calls, the small arrays, the linear solve), and a polish up to 90 steps. 
 step is the same arithmetic written out in loops: the Jacobian of the canonical points,
 the damped normal equations on the smaller side (``(J Jᵀ + λI) y = e, x = Jᵀ y`` or
 ``(JᵀJ + λI) x = Jᵀ e``: the same step), solved by Cholesky (no BLAS or LAPACK: numba's
-need SciPy, which the service does not install; a pivot that is not positive refuses the
-step, as a step that does not lower the cost is refused), the turns by Rodrigues' formula,
+need SciPy, which the service does not install). A pivot that is not positive is common:
+JᵀJ of a rank-deficient J (a twist about a bone) once the damping has fallen below its
+rounding; the step is then solved again with ten times the damping, as numpy's LU on the
+other side never needed (a review: refusing the step instead wasted up to 11 of a phase's
+30 steps and broke a pin numpy held). The turns by Rodrigues' formula,
 forward kinematics (:func:`core.compiled_characters.forward_kinematics_into`). Products in
 source order, no fused multiply-add: the same request gives the same bits.
 """
@@ -186,16 +189,22 @@ def descend_into(
                         jac[3 * i + r, 3 * nm + c] = scale * w if r == c else 0.0
             for r in range(3):
                 err[3 * i + r] = (goals[i, r] - pts[i, r]) * w
-        if nrow <= ncol:  # (J Jᵀ + λI) y = e, step = Jᵀ y
-            _gram_into(jac, damping, normal)
-            rhs[:] = err
-            ok = _cholesky_solve(normal, rhs)
-            _product_into(jac.T, rhs, step)
-        else:  # (JᵀJ + λI) step = Jᵀ e
-            _gram_into(jac.T, damping, normal)
-            _product_into(jac.T, err, rhs)
-            ok = _cholesky_solve(normal, rhs)
-            step[:] = rhs
+        ok = False  # a pivot not positive (J rank-deficient, the damping below rounding):
+        while not ok and damping <= 1e8 * scale * scale:  # more damping, the same step
+            if nrow <= ncol:  # (J Jᵀ + λI) y = e, step = Jᵀ y
+                _gram_into(jac, damping, normal)
+                rhs[:] = err
+                ok = _cholesky_solve(normal, rhs)
+                _product_into(jac.T, rhs, step)
+            else:  # (JᵀJ + λI) step = Jᵀ e
+                _gram_into(jac.T, damping, normal)
+                _product_into(jac.T, err, rhs)
+                ok = _cholesky_solve(normal, rhs)
+                step[:] = rhs
+            if not ok:
+                damping *= 10.0
+        if not ok:
+            break  # no damping the cap allows makes it positive definite
         new = np.inf
         if ok:
             big = 0.0

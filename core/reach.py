@@ -156,7 +156,7 @@ def _descend(
         np.ascontiguousarray(jmap.joints[joints], dtype=np.int64),
         np.ascontiguousarray(jmap.offsets[joints, :, 0]), np.ascontiguousarray(goals),
         np.ascontiguousarray(weight, dtype=np.float64), np.array(movable, dtype=np.int64),
-        above, -1 if root is None else root, scale, hold, n, k, tolerance, _STEPS, _MAX_TURN,
-        _STALL, _GAIN, misses,
+        above, -1 if root is None else int(root), float(scale), float(hold), int(n), int(k),
+        float(tolerance), _STEPS, _MAX_TURN, _STALL, _GAIN, misses,
     )  # fmt: skip
     return rotations, translations, misses
