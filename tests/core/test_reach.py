@@ -14,6 +14,7 @@ from core.bvh import read_bvh
 from core.bvh_write import pose_of, skeleton_of
 from core.characters import F64, Pose, Skeleton, forward_kinematics
 from core.characters_maps import JointMap, resolve_map
+from core.compiled_reach import descend_into
 from core.reach import polish
 from core.skeleton import JOINT_INDEX
 from tests.character_files import FILES, extract_bvh
@@ -92,3 +93,23 @@ def test_a_skeleton_with_nothing_to_turn_is_left_as_it_is(
     pose = pose.copy()
     pts = _points(frozen, pose, jmap)
     assert polish(frozen, pose, jmap, [(WRIST, pts[WRIST] + 0.1)], [], 1e-3, None) == set()
+
+
+def test_a_turn_that_moves_nothing_does_not_stall_the_steps() -> None:
+    """A review's find: the Jacobian of a joint turned about its own bone is rank-deficient,
+    and once the damping has fallen below the rounding of JᵀJ a Cholesky pivot is not
+    positive; the kernel refused such steps and stopped short (this chain, its tip turned
+    2.5 rad about the root: 18 steps, 1.37 off). It now solves them again with more
+    damping and reaches the tip's goal."""
+    parents = np.array([-1, 0, 1], np.int64)
+    rotations = np.repeat(np.eye(3)[None], 3, axis=0)
+    translations = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
+    angle = 2.5  # the tip (two bones along x) to turn about z; a turn about x moves nothing
+    goals = np.array([[2 * np.cos(angle), 2 * np.sin(angle), 0.0], [1.0, 0.0, 0.0]])
+    misses = np.linalg.norm(translations.cumsum(axis=0)[[2, 1]] - goals, axis=1)
+    descend_into(
+        parents, rotations, translations, np.array([2, 1], np.int64), np.zeros((2, 3)), goals,
+        np.array([1.0, 0.02]), np.array([0], np.int64), np.ones((1, 2)), -1, 2e-5, 1.0, 1, 1,
+        1e-6, 30, 0.1, 5, 0.01, misses,
+    )  # fmt: skip
+    assert misses[0] < 1e-3, misses
