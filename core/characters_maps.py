@@ -239,7 +239,7 @@ SCHEMES: Final[dict[str, Scheme]] = {
         ("Bip01 ", "Bip001 ", "Bip01_", "Bip001_", "ValveBiped.Bip01_"),
         pelvis="Pelvis",
         spine1="Spine",
-        spine2="Spine4|Spine3|Spine2|Spine1",
+        spine2="Spine4|Spine3|Spine2|Spine1|Spine",  # one spine joint: the chest slides up it
         neck="Neck|Neck1",
         head="Head|Head1",
         collar="{s}Clavicle",

@@ -123,15 +123,18 @@ def test_synthetic_schemes(scheme: str) -> None:
     assert forced.scheme == f"{scheme}+explicit"
 
 
-def test_biped_clavicles_on_the_neck() -> None:
+@pytest.mark.parametrize("spines", [2, 1])
+def test_biped_clavicles_on_the_neck(spines: int) -> None:
     """3ds Max Biped hangs its clavicles from ``Bip01 Neck`` (not from the chest, as the
     canonical skeleton does) under a root ``Bip01`` above the pelvis: the map still finds
-    them, with the chest where it is named, each canonical point where the skeleton has it."""
+    them, with the chest where it is named, each canonical point where the skeleton has it.
+    A Biped of one spine joint has its chest half-way up that joint's bone (it was a 422:
+    the chest fell on the neck)."""
     rest = rest_pose()
     names: list[str] = ["Bip01"]
     parents: list[str | None] = [None]
     offsets: list[list[float]] = [rest[0].tolist()]
-    label = dict(pelvis="Pelvis", spine1="Spine", spine2="Spine2", neck="Neck", head="Head",
+    label = dict(pelvis="Pelvis", spine1="Spine", spine2="Spine1", neck="Neck", head="Head",
                  collar="Clavicle", shoulder="UpperArm", elbow="Forearm", wrist="Hand",
                  hip="Thigh", knee="Calf", ankle="Foot", foot="Toe0")  # fmt: skip
 
@@ -141,6 +144,10 @@ def test_biped_clavicles_on_the_neck() -> None:
 
     for j, canon in enumerate(JOINT_NAMES):
         p = JOINT_INDEX["neck"] if canon.endswith("collar") else PARENTS[j]
+        if spines == 1 and canon == "spine2":
+            continue
+        if spines == 1 and p == JOINT_INDEX["spine2"]:
+            p = JOINT_INDEX["spine1"]
         names.append(name(canon))
         parents.append("Bip01" if p < 0 else name(JOINT_NAMES[p]))
         offsets.append((rest[j] - rest[max(p, 0)]).tolist())
@@ -148,8 +155,11 @@ def test_biped_clavicles_on_the_neck() -> None:
     jmap = resolve_map(skel)
     assert jmap.scheme == "biped"
     assert jmap.describe()["left_collar"] == "Bip01 L Clavicle"
-    assert jmap.describe()["spine2"] == "Bip01 Spine2"
-    np.testing.assert_allclose(rest_points(skel, jmap), rest, rtol=0, atol=1e-12)
+    if spines == 2:
+        assert jmap.describe()["spine2"] == "Bip01 Spine1"
+        np.testing.assert_allclose(rest_points(skel, jmap), rest, rtol=0, atol=1e-12)
+    else:
+        assert jmap.describe()["spine2"] == "0.5 of Bip01 Spine->Bip01 Neck"
 
 
 def test_a_chest_named_above_the_collars_only() -> None:
