@@ -1,8 +1,9 @@
 """Pure-ASGI middleware, one concern per module, installed by :func:`install`.
 
 Outermost first: the headers of every answer (``headers``: request id, ``x-total-time``,
-hardening), CORS preflights and last-resort answers included; CORS (``cors``); the access
-log and last-resort answers (``context``); Prometheus metrics (``metrics``); the gate (``gate``: API
+hardening), CORS preflights and last-resort answers included; the access log
+(``context.AccessLog``: preflights included); CORS (``cors``); the last-resort answers
+(``context.RequestContext``); Prometheus metrics (``metrics``); the gate (``gate``: API
 key, content type, body limits and the per-worker admission bound), and innermost the hot
 paths (``fastpath``: the pose form of ``/v1/solve`` and the columnar batch answered without
 the router). Every rejection is problem+json.
@@ -16,7 +17,7 @@ from fastapi import FastAPI
 from starlette.routing import BaseRoute
 
 from service.metrics import Metrics
-from service.middleware.context import RequestContext
+from service.middleware.context import AccessLog, RequestContext
 from service.middleware.cors import ProblemCORS
 from service.middleware.gate import Gate
 from service.middleware.headers import AnswerHeaders
@@ -37,14 +38,14 @@ def install(
     app.add_middleware(FastPath, app_routes=routes)
     app.add_middleware(Gate, settings=settings)
     app.add_middleware(RequestMetrics, metrics=metrics, app_routes=routes)
-    app.add_middleware(RequestContext, access_log=settings.access_log)
+    app.add_middleware(RequestContext)
     if settings.cors_origins:  # outside the gate and the 500s: their answers carry CORS too
         app.add_middleware(
             ProblemCORS,
-            access_log=settings.access_log,
             allow_origins=settings.cors_origins,
             allow_methods=["GET", "POST", "OPTIONS"],
             allow_headers=["Content-Type", "X-API-Key", "X-Request-ID", "Authorization"],
             expose_headers=EXPOSED,
         )
+    app.add_middleware(AccessLog, access_log=settings.access_log)  # CORS preflights too
     app.add_middleware(AnswerHeaders)

@@ -1,6 +1,8 @@
-"""One JSON access-log line per request (its id: ``headers.request_id``), and the
-last-resort answers: a 500 problem for anything unhandled and, when the server cancels a
-request at the end of its shutdown grace period, a 503 problem."""
+"""One JSON access-log line per request (its id: ``headers.request_id``), written by
+:class:`AccessLog` outside CORS (a preflight is answered there, by the CORS layer), and the
+last-resort answers (:class:`RequestContext`, inside CORS so that they carry its headers):
+a 500 problem for anything unhandled and, when the server cancels a request at the end of
+its shutdown grace period, a 503 problem."""
 
 from __future__ import annotations
 
@@ -26,7 +28,9 @@ access_log = logging.getLogger("service.access")
 _OUTCOME = {499: "client_disconnected", 503: "unavailable", 504: "deadline_exceeded"}
 
 
-class RequestContext:
+class AccessLog:
+    """The access-log line of every request, whichever layer below answered it."""
+
     def __init__(self, app: ASGIApp, access_log: bool = True) -> None:
         self.app = app
         self.access_log = access_log
@@ -36,14 +40,34 @@ class RequestContext:
             await self.app(scope, receive, send)
             return
         t0: float = scope.setdefault(T0, time.perf_counter())
-        rid = request_id(scope)
         status = [500]
+
+        async def tagged(message: Message) -> None:
+            if message["type"] == "http.response.start":
+                status[0] = int(message["status"])
+            await send(message)
+
+        try:
+            await self.app(scope, receive, tagged)
+        finally:
+            log_request(scope, request_id(scope), status[0], t0, self.access_log)
+
+
+class RequestContext:
+    """The last-resort answers: a 500 problem, or a 503 once the shutdown grace ran out."""
+
+    def __init__(self, app: ASGIApp) -> None:
+        self.app = app
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
         started = [False]
 
         async def tagged(message: Message) -> None:
             if message["type"] == "http.response.start":
                 started[0] = True
-                status[0] = int(message["status"])
             await send(message)
 
         try:
@@ -53,12 +77,10 @@ class RequestContext:
             if not started[0]:
                 busy = ShuttingDown("the server is shutting down; retry on another instance")
                 await error_response(busy)(scope, receive, tagged)
-            log_request(scope, rid, status[0], t0, self.access_log)
             return  # answered: the cancellation ends here
         except Exception:  # the app's own 500 handler would run outside the middleware
             if not started[0]:
                 await internal_error(scope["method"], scope["path"])(scope, receive, tagged)
-        log_request(scope, rid, status[0], t0, self.access_log)
 
 
 def log_request(scope: Scope, request_id: str, status: int, t0: float, enabled: bool) -> None:
