@@ -496,8 +496,10 @@ def resolve_map(
             best_name, best_found, best_hits = scheme_name, found, score
     if given:
         best_name = "explicit" if len(given) == len(JOINT_NAMES) else f"{best_name}+explicit"
-    _structural(skel, best_found)  # (done already where it could complete the map)
     missing = [c for c in JOINT_NAMES if c not in best_found]
+    if missing:  # (the structural rules ran already where they could complete a map)
+        _structural(skel, best_found)
+        missing = [c for c in JOINT_NAMES if c not in best_found]
     if missing:
         raise CharacterError(
             f"{where}: no joint found for {missing} (closest naming scheme: {best_name}); "

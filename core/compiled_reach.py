@@ -18,13 +18,9 @@ source order, no fused multiply-add: the same request gives the same bits.
 from __future__ import annotations
 
 import numpy as np
-import numpy.typing as npt
 
-from core.compiled_characters import forward_kinematics_into
+from core.compiled_characters import F64, I64, forward_kinematics_into
 from core.jit import jit
-
-F64 = npt.NDArray[np.float64]
-I64 = npt.NDArray[np.int64]
 
 
 @jit
@@ -205,39 +201,37 @@ def descend_into(
                 damping *= 10.0
         if not ok:
             break  # no damping the cap allows makes it positive definite
-        new = np.inf
-        if ok:
-            big = 0.0
-            for c in range(ncol):
-                big = max(big, abs(step[c]))
-            cut = min(1.0, max_turn / max(big, 1e-300))
-            for c in range(ncol):
-                step[c] *= cut
-            for j in range(nj):
-                for r in range(3):
-                    new_tr[j, r] = translations[j, r]
-                    for c in range(3):
-                        new_rot[j, r, c] = rotations[j, r, c]
-            for m in range(nm):
-                _turn_into(step, m, parents[movable[m]], movable[m], g_rot, rotations, new_rot)
-            if root >= 0:
-                p = parents[root]
-                for r in range(3):
-                    shift = step[3 * nm + r] * scale
-                    if p >= 0:  # into the parent's frame: g_rot[p]ᵀ shift
-                        shift = (
-                            g_rot[p, 0, r] * step[3 * nm] * scale
-                            + g_rot[p, 1, r] * step[3 * nm + 1] * scale
-                            + g_rot[p, 2, r] * step[3 * nm + 2] * scale
-                        )
-                    new_tr[root, r] = translations[root, r] + shift
-            forward_kinematics_into(parents, new_rot, new_tr, n_rot, n_pos)
-            _points_into(n_rot, n_pos, anchor, offset, n_pts)
-            _misses_into(n_pts, goals, now)
-            new = _cost(now, weight)
-            for i in range(k, n):
-                if not now[i] <= hold:
-                    new = np.inf
+        big = 0.0
+        for c in range(ncol):
+            big = max(big, abs(step[c]))
+        cut = min(1.0, max_turn / max(big, 1e-300))
+        for c in range(ncol):
+            step[c] *= cut
+        for j in range(nj):
+            for r in range(3):
+                new_tr[j, r] = translations[j, r]
+                for c in range(3):
+                    new_rot[j, r, c] = rotations[j, r, c]
+        for m in range(nm):
+            _turn_into(step, m, parents[movable[m]], movable[m], g_rot, rotations, new_rot)
+        if root >= 0:
+            p = parents[root]
+            for r in range(3):
+                shift = step[3 * nm + r] * scale
+                if p >= 0:  # into the parent's frame: g_rot[p]ᵀ shift
+                    shift = (
+                        g_rot[p, 0, r] * step[3 * nm] * scale
+                        + g_rot[p, 1, r] * step[3 * nm + 1] * scale
+                        + g_rot[p, 2, r] * step[3 * nm + 2] * scale
+                    )
+                new_tr[root, r] = translations[root, r] + shift
+        forward_kinematics_into(parents, new_rot, new_tr, n_rot, n_pos)
+        _points_into(n_rot, n_pos, anchor, offset, n_pts)
+        _misses_into(n_pts, goals, now)
+        new = _cost(now, weight)
+        for i in range(k, n):
+            if not now[i] <= hold:
+                new = np.inf  # a pin taken too far: refused
         if new < cost:
             cost = new
             rotations[:] = new_rot

@@ -425,9 +425,7 @@ def retarget(
         if shift is None:
             break
         goal[body] += shift  # out of reach from the pelvis: move the whole body towards it
-    if soft:
-        changed |= polish(skel, new, jmap, soft, pins, tolerance, root, finish=False)
-    else:
-        changed |= polish(skel, new, jmap, exact, pins, tolerance, root)
+    # (soft reach: the targets come near, no phase for them alone)
+    changed |= polish(skel, new, jmap, soft or exact, pins, tolerance, root, finish=not soft)
     g_rot, g_pos = forward_kinematics(skel, new)
     return Retargeted(new, jmap.points(g_rot, g_pos), frozenset(changed))
