@@ -14,7 +14,10 @@
    of them (Kabsch), the one rotation a rigid bone can take.
 3. **Exact reach** (optional): for each target, the chain of single-child aims above it is
    FABRIK-ed, in the character's own bone lengths, from its fixed top onto the target, and
-   the aim pass re-run, so the target is met whenever that chain can reach it.
+   the aim pass re-run, so the target is met whenever that chain can reach it. A goal still
+   out of its chain's reach after that moves the whole body towards it and the pass is
+   repeated: a pin's always, a target's where nothing holds the body, a held target's
+   (one the solve met) only where the answer misses it otherwise.
 4. **Polish** (:func:`core.reach.polish`): what the targets and pins still miss is closed
    by damped least-squares turns of the joints above them, pins first.
 
@@ -356,7 +359,7 @@ def _attempt(
         changed.add(turned)
     changed |= _aim_pass(skel, new, jmap, plan, goal, turned, pose)
     moves = []
-    for (joint, target), may_shift in zip(exact, shifts, strict=True):
+    for joint, target in exact:
         chain = _chain(plan, jmap, joint)
         if not chain:
             continue
@@ -364,11 +367,6 @@ def _attempt(
         pts = jmap.points(g_rot, g_pos)
         top = jmap.anchors[chain[0]].joint
         line = np.concatenate([g_pos[top][None], pts[chain[1:]]])
-        reach = float(np.linalg.norm(np.diff(line, axis=0), axis=1).sum())
-        gap = np.asarray(target, dtype=np.float64) - g_pos[top]
-        far = float(np.linalg.norm(gap)) - reach * (1.0 - 1e-6)
-        if far > tolerance * 0.1 and may_shift:
-            moves.append(gap / np.linalg.norm(gap) * (far + tolerance * 0.5))
         kid = _FIRST_CHILD.get(joint)  # e.g. the foot of an ankle: where a knee bends to
         bend = None if kid is None else pts[kid] - pts[joint]
         done = _fabrik(line, np.asarray(target, dtype=np.float64), tolerance * 0.01, bend=bend)
@@ -382,6 +380,19 @@ def _attempt(
                 goal, changed = wider, aimed
             else:
                 new.rotations = rotations
+    g_rot, g_pos = forward_kinematics(skel, new)
+    pts = jmap.points(g_rot, g_pos)
+    for (joint, target), may_shift in zip(exact, shifts, strict=True):
+        chain = _chain(plan, jmap, joint) if may_shift else []
+        if not chain:
+            continue
+        top = jmap.anchors[chain[0]].joint
+        line = np.concatenate([g_pos[top][None], pts[chain[1:]]])
+        reach = float(np.linalg.norm(np.diff(line, axis=0), axis=1).sum())
+        gap = np.asarray(target, dtype=np.float64) - g_pos[top]
+        far = float(np.linalg.norm(gap)) - reach * (1.0 - 1e-6)
+        if far > tolerance * 0.1:
+            moves.append(gap / np.linalg.norm(gap) * (far + tolerance * 0.5))
     if root is not None and not np.array_equal(new.translations[root], pose.translations[root]):
         changed.add(root)
     shift = np.mean(moves, axis=0) if moves else None
@@ -403,23 +414,60 @@ def retarget(
     *,
     exact: Sequence[tuple[int, F64]] = (),
     pins: Sequence[tuple[int, F64]] = (),
+    held: Sequence[tuple[int, F64]] = (),
     soft: Sequence[tuple[int, F64]] = (),
     tolerance: float = 0.0,
 ) -> Retargeted:
     """A copy of ``pose`` whose canonical points follow ``solved`` ``[21, 3]`` (character
     units and axes); ``exact`` lists (canonical joint, goal) pairs to meet within
     ``tolerance`` where the character's own chain can, ``pins`` pairs to hold first,
-    ``soft`` pairs to come near as the rest of the body allows (see the module docstring).
-    The whole body is moved towards a pin out of its chain's reach, and towards an exact
-    goal only where nothing holds it: no pin, no pelvis target (the shift would break
-    them)."""
+    ``held`` pairs held as pins are (targets a solve met), ``soft`` pairs to come near as
+    the rest of the body allows (see the module docstring). The whole body is moved
+    towards a pin out of its chain's reach, towards an exact goal only where nothing holds
+    it (no pin, no pelvis target: the shift would break them), and towards a held goal only
+    where the answer misses it otherwise: a chain's top the character cannot put where the
+    solve did (a rigid chest under a collar the solve swung) is no reason to carry the
+    body across, the polish turns the joints above it first."""
     plan = _plan(skel, jmap)
+    # pins shift the body; targets only where nothing holds it (no pin, no pelvis target)
+    free = not pins and not held and all(j != _PELVIS for j, _ in exact)
+    lead = [free] * len(exact) + [True] * len(pins)
+    steady = _fit(skel, pose, jmap, plan, solved, exact, [*pins, *held], soft, tolerance,
+                  [*lead, *[False] * len(held)])  # fmt: skip
+    if held and _worst(steady.points, [*pins, *held]) > tolerance:  # shift for them too
+        moved = _fit(skel, pose, jmap, plan, solved, exact, [*pins, *held], soft, tolerance,
+                     [*lead, *[True] * len(held)])  # fmt: skip
+        pinned = _worst(moved.points, pins) <= max(_worst(steady.points, pins), tolerance)
+        if pinned and _worst(moved.points, held) < _worst(steady.points, held):
+            return moved
+    return steady
+
+
+def _worst(points: F64, pairs: Sequence[tuple[int, F64]]) -> float:
+    """The farthest of ``points`` from its goal in ``pairs`` (0 for none)."""
+    if not pairs:
+        return 0.0
+    goals = np.asarray([g for _, g in pairs], dtype=np.float64)
+    return float(np.linalg.norm(points[[j for j, _ in pairs]] - goals, axis=1).max())
+
+
+def _fit(
+    skel: Skeleton,
+    pose: Pose,
+    jmap: JointMap,
+    plan: _Plan,
+    solved: F64,
+    exact: Sequence[tuple[int, F64]],
+    pins: Sequence[tuple[int, F64]],
+    soft: Sequence[tuple[int, F64]],
+    tolerance: float,
+    shifts: Sequence[bool],
+) -> Retargeted:
+    """:func:`retarget` with ``shifts`` saying which of ``[*exact, *pins]`` may move the
+    whole body towards them when out of their chain's reach."""
     goal = np.array(solved, dtype=np.float64)
     body = [_PELVIS, *plan.groups.get(jmap.anchors[_PELVIS].joint, [])]
     met = [*exact, *pins]
-    # pins shift the body; targets only where nothing holds it (no pin, no pelvis target)
-    free = not pins and all(j != _PELVIS for j, _ in exact)
-    shifts = [free] * len(exact) + [True] * len(pins)
     for _ in range(_ROUNDS):
         new, changed, shift, root = _attempt(skel, pose, jmap, plan, goal, met, tolerance, shifts)
         if shift is None:

@@ -422,7 +422,7 @@ def solve_prepared(engine: Engine, ch: Character, p: SolveProblem) -> Edit:
         met = result.errors <= p.tolerance
         held = [t for t, ok in zip(targets, met, strict=True) if ok]
         rest = [t for t, ok in zip(targets, met, strict=True) if not ok]
-        out = retarget(ch.skel, ch.pose, ch.jmap, solved, exact=rest, pins=pins + held,
+        out = retarget(ch.skel, ch.pose, ch.jmap, solved, exact=rest, pins=pins, held=held,
                        tolerance=p.tolerance / ch.scale)  # fmt: skip
     else:  # the targeted joints come near where the canonical answer put them
         soft = [(j, solved[j]) for j, _ in targets]
