@@ -359,7 +359,7 @@ def _attempt(
         changed.add(turned)
     changed |= _aim_pass(skel, new, jmap, plan, goal, turned, pose)
     moves = []
-    for joint, target in exact:
+    for (joint, target), may_shift in zip(exact, shifts, strict=True):
         chain = _chain(plan, jmap, joint)
         if not chain:
             continue
@@ -367,6 +367,11 @@ def _attempt(
         pts = jmap.points(g_rot, g_pos)
         top = jmap.anchors[chain[0]].joint
         line = np.concatenate([g_pos[top][None], pts[chain[1:]]])
+        reach = float(np.linalg.norm(np.diff(line, axis=0), axis=1).sum())
+        gap = np.asarray(target, dtype=np.float64) - g_pos[top]
+        far = float(np.linalg.norm(gap)) - reach * (1.0 - 1e-6)
+        if far > tolerance * 0.1 and may_shift:
+            moves.append(gap / np.linalg.norm(gap) * (far + tolerance * 0.5))
         kid = _FIRST_CHILD.get(joint)  # e.g. the foot of an ankle: where a knee bends to
         bend = None if kid is None else pts[kid] - pts[joint]
         done = _fabrik(line, np.asarray(target, dtype=np.float64), tolerance * 0.01, bend=bend)
@@ -380,19 +385,6 @@ def _attempt(
                 goal, changed = wider, aimed
             else:
                 new.rotations = rotations
-    g_rot, g_pos = forward_kinematics(skel, new)
-    pts = jmap.points(g_rot, g_pos)
-    for (joint, target), may_shift in zip(exact, shifts, strict=True):
-        chain = _chain(plan, jmap, joint) if may_shift else []
-        if not chain:
-            continue
-        top = jmap.anchors[chain[0]].joint
-        line = np.concatenate([g_pos[top][None], pts[chain[1:]]])
-        reach = float(np.linalg.norm(np.diff(line, axis=0), axis=1).sum())
-        gap = np.asarray(target, dtype=np.float64) - g_pos[top]
-        far = float(np.linalg.norm(gap)) - reach * (1.0 - 1e-6)
-        if far > tolerance * 0.1:
-            moves.append(gap / np.linalg.norm(gap) * (far + tolerance * 0.5))
     if root is not None and not np.array_equal(new.translations[root], pose.translations[root]):
         changed.add(root)
     shift = np.mean(moves, axis=0) if moves else None
@@ -437,8 +429,12 @@ def retarget(
     if held and _worst(steady.points, [*pins, *held]) > tolerance:  # shift for them too
         moved = _fit(skel, pose, jmap, plan, solved, exact, [*pins, *held], soft, tolerance,
                      [*lead, *[True] * len(held)])  # fmt: skip
-        pinned = _worst(moved.points, pins) <= max(_worst(steady.points, pins), tolerance)
-        if pinned and _worst(moved.points, held) < _worst(steady.points, held):
+        # kept where it holds the pins no worse and meets the held goals nearer by more than
+        # half the tolerance (a gain of micrometres is not worth carrying the body across)
+        pinned = _worst(moved.points, pins) <= max(_worst(steady.points, pins), tolerance) * (
+            1.0 + 1e-9
+        )
+        if pinned and _worst(moved.points, held) < _worst(steady.points, held) - tolerance / 2:
             return moved
     return steady
 
