@@ -231,6 +231,10 @@ VARIANTS: dict[str, str] = {
     "(trainer/configs/ablation/latent128.toml), served with the shipped completion networks: "
     "autoencoder closer everywhere, solves no better: not shipped",
     "captured_latent128": "`latent128` on the captured edits",
+    "keep_pairs": "mx1-25bb75ec3824 with `serving.keep_pairs`: the hips and the collars "
+    "turned, each pair as one rigid part, to the start's angle after the bone pass "
+    "(`--serving keep_pairs=true`): not shipped, a held-out set crosses FABRIK the wrong way",
+    "captured_keep_pairs": "`keep_pairs` on the captured edits",
 }
 COMPLETION = "6-point completion"
 

@@ -25,6 +25,7 @@ from core.ends import COLLARS as _ENDS_COLLARS
 from core.ends import TINY as _ENDS_TINY
 from core.jit import jit
 from core.rest import REST_DIRS
+from core.rigid import keep_pairs_item
 from core.skeleton import (
     BONE_CHILDREN,
     BONE_PARENTS,
@@ -640,12 +641,14 @@ def unscale(
     ease: float,
     collar: Bool,
     hold: F64,
+    pairs: bool,
 ) -> F64:  # pragma: no cover - compiled
     """Network answers ``[M, 63]`` (float32, at the networks' size) back to the body's
     size (float64), with the bone pass (reference: the start pose) where ``bone``, and
-    there, where ``carry[b]`` > 0, :func:`carry_item` below the item's targets ``tidx[b,
-    :counts[b]]`` by that weight, then :func:`ends_item` of the chains ``chains`` marks
-    (the targeted limb ends back where the network put them; none marked: not run).
+    there, with ``pairs``, :func:`core.rigid.keep_pairs_item` (the hips and the collars
+    at the start's angles), then, where ``carry[b]`` > 0, :func:`carry_item` below the
+    item's targets ``tidx[b, :counts[b]]`` by that weight, then :func:`ends_item` of the
+    chains ``chains`` marks (the limb ends back where the network put them).
     Where ``hold[b]`` > 0 the bone pass starts from a pelvis held near the start's
     (:func:`hold_pelvis`)."""
     m = decoded.shape[0]
@@ -667,6 +670,8 @@ def unscale(
             if hold[b] > 0.0:
                 hold_pelvis(pose, canon[b], hold[b])
             bone_pass_item(pose, lengths[b], canon[b], True, out[b], xr, lr, rr)
+            if pairs:
+                keep_pairs_item(out[b], canon[b])
             if carry[b] > 0.0:
                 carry_item(out[b], canon[b], lengths[b], tidx[b], counts[b], carry[b], rr,
                            flags, anchor, vecs)  # fmt: skip
@@ -740,13 +745,15 @@ def settle(
     ease: float,
     collar: Bool,
     hold: F64,
+    pairs: bool,
 ) -> tuple[F64, F64, F64]:  # pragma: no cover - compiled
     """:func:`unscale` with the bone pass for every item, then :func:`finish`, in one call
     (the lean path of ``service.lean``): the same arithmetic in the same order."""
     bone = np.ones(decoded.shape[0], dtype=np.bool_)
     out = unscale(
-        decoded, scales, canon, lengths, bone, tidx, counts, carry, chains, ease, collar, hold
-    )
+        decoded, scales, canon, lengths, bone, tidx, counts, carry, chains, ease, collar, hold,
+        pairs,
+    )  # fmt: skip
     return finish(out, facing, trans, floors, tidx, tpos, counts, lengths)
 
 
@@ -773,14 +780,14 @@ def warm() -> None:
     )  # fmt: skip
     unscale(
         out[6], out[4], out[0], out[3], np.ones(1, dtype=np.bool_), tidx, counts, np.full(1, 0.5),
-        chains, 0.0, np.ones(1, dtype=np.bool_), np.full(1, 0.02),
+        chains, 0.0, np.ones(1, dtype=np.bool_), np.full(1, 0.02), True,
     )  # fmt: skip
     finish(out[0], out[1], out[2], np.zeros(1), tidx, tpos, counts, out[3])
     one = np.ones(1, dtype=np.bool_)
     travel(pose, tidx, tpos, counts, counts, ~one, True, True, 5)
     settle(
         out[6], out[4], out[0], out[3], out[1], out[2], np.zeros(1), tidx, tpos, counts,
-        np.full(1, 0.5), chains, 0.0, one, np.full(1, 0.02),
+        np.full(1, 0.5), chains, 0.0, one, np.full(1, 0.02), True,
     )  # fmt: skip
 
 

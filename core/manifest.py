@@ -160,6 +160,13 @@ class Serving(_Strict):
         "(0: all the way), so that a millimetre of the networks' answer does not bend a "
         "straight limb (core.ends).",
     )
+    keep_pairs: bool = Field(
+        default=False,
+        description="After the bone pass, the two hips on the pelvis and the two collars on "
+        "the chest turn, each pair as one rigid part, to the angle they make in the start "
+        "pose (the body's width between them kept), facing as the networks put them, the "
+        "legs and arms moved with them (core.rigid).",
+    )
     keep_collar: bool = Field(
         default=False,
         description="With keep_ends, in answers asked in soft reach with fewer than "

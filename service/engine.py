@@ -478,7 +478,7 @@ class Engine:
                 decoded = networks.answer(self, x, canvas, sequences[0], batch.mirror)
                 out = compiled.unscale(
                     decoded, scales, canon, lengths, bone, tidx, cnt, batch.carry, self.chain_mask,
-                    self.serving.keep_ease, collar, hold,
+                    self.serving.keep_ease, collar, hold, self.serving.keep_pairs,
                 )  # fmt: skip
             else:
                 items = np.flatnonzero(neural)
@@ -493,6 +493,7 @@ class Engine:
                     decoded[items], scales[items], canon[items], lengths[items], bone[items],
                     tidx[items], cnt[items], batch.carry[items], self.chain_mask,
                     self.serving.keep_ease, collar[items], hold[items],
+                    self.serving.keep_pairs,
                 )  # fmt: skip
         start = canon
         if origin is not None and moved is not None and moved.any():

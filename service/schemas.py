@@ -303,6 +303,11 @@ class ModelsResponse(BaseModel):
         description="Whether a soft answer's kept wrist beyond the arm's reach turns its "
         "shoulder about the collar first (the manifest's `serving.keep_collar`)."
     )
+    keep_pairs: bool = Field(
+        description="Whether the hips and the collars keep the start's width between them, "
+        "each pair turned as one rigid part after the bone pass (the manifest's "
+        "`serving.keep_pairs`)."
+    )
     keep_pelvis: float = Field(
         description="Metres of the networks' pelvis move a few-target edit drops (0: none; "
         "the manifest's `serving.keep_pelvis`)."

@@ -49,6 +49,7 @@ async def models(engine: ReadyEngine) -> ModelsResponse:
         keep_elbows=engine.serving.keep_elbows,
         keep_ease=engine.serving.keep_ease,
         keep_collar=engine.serving.keep_collar,
+        keep_pairs=engine.serving.keep_pairs,
         keep_pelvis=engine.serving.keep_pelvis,
         pelvis_travel=engine.serving.pelvis_travel,
         reach_travel=engine.serving.reach_travel,

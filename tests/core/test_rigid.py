@@ -1,0 +1,97 @@
+"""The rigid pairs (core.rigid): the hips and the collars turned to the start's angle,
+compiled kernel against the numpy reference on real poses, and the engine's
+``serving.keep_pairs`` on bodies the models never saw."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from core import kinematics
+from core.rigid import BELOW, PAIRS, keep_pairs, keep_pairs_item
+from core.skeleton import JOINT_INDEX, bone_lengths
+from service.engine import Engine
+from service.problems import SolveProblem
+from tests.conftest import PosePairs, on_random_bodies
+
+
+def _width(p: np.ndarray, left: int, right: int) -> np.ndarray:
+    out: np.ndarray = np.linalg.norm(p[..., left, :] - p[..., right, :], axis=-1)
+    return out
+
+
+@pytest.fixture(scope="module")
+def moved(real_poses: PosePairs) -> tuple[np.ndarray, np.ndarray]:
+    """(start, answer-like) pairs: each start with noise, bone lengths put back."""
+    start = real_poses.poses[real_poses.starts]
+    noisy = start + np.random.default_rng(3).normal(0.0, 0.04, start.shape)
+    return start, kinematics.bone_pass(noisy, bone_lengths(start), reference=start)
+
+
+def test_pairs_take_the_start_width_and_keep_every_bone(
+    moved: tuple[np.ndarray, np.ndarray],
+) -> None:
+    start, answer = moved
+    out = keep_pairs(answer, start)
+    for top, left, right in PAIRS:
+        before = np.abs(_width(answer, left, right) / _width(start, left, right) - 1.0)
+        assert before.max() > 0.05  # the noise changed the widths
+        assert np.abs(_width(out, left, right) / _width(start, left, right) - 1.0).max() < 1e-9
+        # the pair faces as the answer had it: the same across direction
+        across = out[:, left] - out[:, right]
+        was = answer[:, left] - answer[:, right]
+        cos = np.sum(across * was, axis=-1) / np.linalg.norm(across, axis=-1)
+        assert np.allclose(cos / np.linalg.norm(was, axis=-1), 1.0, atol=1e-12)
+        # the top stays; a limb below a moved joint moves as one piece
+        assert np.array_equal(out[:, top], answer[:, top])
+        kids = np.flatnonzero(BELOW[left])[1:]
+        assert np.allclose(out[:, kids] - out[:, [left]], answer[:, kids] - answer[:, [left]])
+    assert np.abs(bone_lengths(out) / bone_lengths(answer) - 1.0).max() < 1e-12
+
+
+def test_compiled_kernel_matches_numpy(moved: tuple[np.ndarray, np.ndarray]) -> None:
+    start, answer = moved
+    ref = keep_pairs(answer, start)
+    got = np.ascontiguousarray(answer.copy())
+    for b in range(len(got)):
+        keep_pairs_item(got[b], np.ascontiguousarray(start[b]))
+    assert np.abs(got - ref).max() < 1e-12
+    again = np.ascontiguousarray(answer.copy())
+    for b in range(len(again)):
+        keep_pairs_item(again[b], np.ascontiguousarray(start[b]))
+    assert np.array_equal(again, got)  # bit-identical run to run
+
+
+def test_a_degenerate_pair_is_left_as_it_is(moved: tuple[np.ndarray, np.ndarray]) -> None:
+    start, answer = moved
+    flat = answer[:1].copy()
+    pelvis, left = JOINT_INDEX["pelvis"], JOINT_INDEX["left_hip"]
+    flat[0, left] = flat[0, pelvis]  # a zero-length hip bone
+    out = keep_pairs(flat, start[:1])
+    got = np.ascontiguousarray(flat[0].copy())
+    keep_pairs_item(got, np.ascontiguousarray(start[0]))
+    hips = [left, JOINT_INDEX["right_hip"], JOINT_INDEX["right_knee"]]
+    assert np.array_equal(out[0, hips], flat[0, hips])
+    assert np.array_equal(got[hips], flat[0, hips])
+    assert np.isfinite(out).all()
+
+
+def test_the_engine_keeps_a_new_body_width(models_dir: Path, real_poses: PosePairs) -> None:
+    """``serving.keep_pairs``: every soft answer (no pins) on bodies the models never saw
+    has the start's hip and collar widths; off (the shipped default), the networks'."""
+    starts, goals = on_random_bodies(real_poses, 11)
+    idx = np.asarray([JOINT_INDEX["head"], JOINT_INDEX["left_wrist"]], dtype=np.intp)
+    problems = [
+        SolveProblem(pose=s, target_idx=idx, target_pos=g[idx], weights=np.ones(2), n_targets=2)
+        for s, g in zip(starts, goals, strict=True)
+    ]
+    kept = Engine(models_dir, serving={"keep_pairs": True})
+    assert not Engine(models_dir).serving.keep_pairs
+    answers = np.stack([r.pose for r in kept.solve(problems)])
+    for _, left, right in PAIRS:
+        ratio = _width(answers, left, right) / _width(starts, left, right)
+        assert np.abs(ratio - 1.0).max() < 1e-9
+    again = np.stack([r.pose for r in kept.solve(problems[:5])])
+    assert np.array_equal(again, answers[:5])  # batch vs single: the same bits
