@@ -1,0 +1,202 @@
+"""Users' own characters, edited as a user does, scored against what the body really did:
+``python -m bench.characters [FILE.bvh ...] [--edits 40] [--seed 0] [--on-pelvis]``; with
+no file, the twelve of :data:`DEFAULT_FILES` taken out of ``--mocap`` (``../shared/mocap``).
+
+Each edit takes two frames of one file 0.2-1 s apart (seeded): the start is frame i as the
+file has it (where it was captured: the body may have walked and turned since), the targets
+are frame j's own joints (the character's canonical points, the joint map's), and the
+answer is scored against frame j, all 21 points, in the character's own skeleton: what
+``/v1/bvh/solve`` writes back (its steps in process, as in ``bench.bvh_route``). Beside it
+the canonical answer the route laid the character onto (``canonical``: what ``/v1/solve``
+would have answered for the same points), FABRIK through the same route (``method:
+fabrik``), and the start unchanged. Sets: a lone wrist, both wrists, both ankles, the five
+end effectors. MPJPE to frame j and the targets' mean miss, cm; units and up inferred
+(``--units`` to state them).
+"""
+
+from __future__ import annotations
+
+import subprocess
+import tempfile
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Annotated, Any
+
+import numpy as np
+import typer
+
+from core.skeleton import JOINT_INDEX, JOINT_NAMES
+
+app = typer.Typer(add_completion=False)
+
+#: (name, canonical joints) of each edit set
+SETS: tuple[tuple[str, tuple[str, ...]], ...] = (
+    ("L wrist", ("left_wrist",)),
+    ("L wrist + R wrist", ("left_wrist", "right_wrist")),
+    ("L ankle + R ankle", ("left_ankle", "right_ankle")),
+    ("5 end eff.", ("head", "left_wrist", "right_wrist", "left_ankle", "right_ankle")),
+)
+_AD = "animateddrawings_fair_bvh/facebookresearch+AnimatedDrawings@74ee7f0/examples/bvh"
+_RI = "reactidle_bvh/Enekoassets+ReActIdle@90b0ac7"
+_BN = "dataset/Bandai-Namco-Research-Motiondataset-1/data"
+#: (archive, member, units to state or None) of the files scored when none is given: bodies
+#: no model was trained on (AnimatedDrawings' child and CMU retarget, five ReActIdle
+#: people), then two of the training studios' for reference
+DEFAULT_FILES: tuple[tuple[str, str, str | float | None], ...] = (
+    *[("animateddrawings_fair_bvh.tar.xz", f"{_AD}/fair1/{n}.bvh", "in")
+      for n in ("dab", "jumping", "wave_hello", "zombie")],
+    ("animateddrawings_fair_bvh.tar.xz", f"{_AD}/cmu1/jumping_jacks.bvh", 0.0564444),
+    *[("reactidle_bvh.tar.xz", f"{_RI}/{n}.bvh", None)
+      for n in ("acted/001_acted", "acted/002_acted", "acted/008_acted",
+                "genuine/003_genuine", "genuine/011_genuine")],
+    ("bandai-namco-research-motiondataset.tar.xz", f"{_BN}/dataset-1_walk_normal_001.bvh", None),
+    ("cmu-dance.tar.xz", "train_data_bvh/salsa/01.bvh", None),
+)  # fmt: skip
+#: (column, options of the request)
+METHODS: tuple[tuple[str, dict[str, str]], ...] = (
+    ("FABRIK", {"method": "fabrik", "reach": "exact"}),
+    ("soft", {"reach": "soft"}),
+    ("exact", {"reach": "exact"}),
+)
+
+
+@dataclass(frozen=True)
+class Scores:
+    """Per method (``start``, ``FABRIK``, ``soft``, ``exact`` and the canonical answers
+    ``soft canonical``, ``exact canonical``): MPJPE to the real frame and mean target
+    miss, cm, one entry per edit."""
+
+    mpjpe: dict[str, list[float]]
+    reach: dict[str, list[float]]
+
+
+def frame_pairs(frames: int, fps: float, n: int, rng: np.random.Generator) -> list[tuple[int, int]]:
+    """``n`` (i, j) frame pairs of a clip, j 0.2-1 s after i (fewer where it is short)."""
+    lo, hi = max(1, round(0.2 * fps)), max(1, round(1.0 * fps))
+    if frames <= lo:
+        return []
+    out = []
+    for _ in range(n):
+        gap = int(rng.integers(lo, min(hi, frames - 1) + 1))
+        i = int(rng.integers(0, frames - gap))
+        out.append((i, i + gap))
+    return out
+
+
+def score_file(
+    engine: Any,
+    path: Path,
+    edits: int,
+    seed: int,
+    units: str | float | None = None,
+    on_pelvis: bool = False,
+) -> dict[str, Scores]:
+    """Every set's scores on one file (see the module docstring)."""
+    from core.bvh_write import pose_of
+    from core.retarget import canonical_points
+    from service.characters import (
+        BVHSolveRequest,
+        character_from_bvh,
+        character_problem,
+        read_request_bvh,
+        solve_prepared,
+    )
+
+    text = path.read_text(encoding="utf-8", errors="replace")
+    bvh = read_request_bvh(text)
+    pairs = frame_pairs(bvh.num_frames, 1.0 / bvh.frame_time, edits, np.random.default_rng(seed))
+    out: dict[str, Scores] = {}
+    for name, joints in SETS:
+        idx = [JOINT_INDEX[j] for j in joints]
+        scores = Scores({}, {})
+        for i, j in pairs:
+            head = {"joint": "head", "position": [0.0, 0.0, 0.0]}  # (the character alone)
+            base: dict[str, Any] = {"bvh": text, "frame": i, "targets": [head]}
+            if units is not None:
+                base["units"] = units
+            ch = character_from_bvh(bvh, BVHSolveRequest.model_validate(base))
+            real = canonical_points(ch.skel, pose_of(bvh, j), ch.jmap)
+            if on_pelvis:  # frame j moved so its pelvis is the start's (no travel between)
+                here = canonical_points(ch.skel, ch.pose, ch.jmap)
+                real = real - real[JOINT_INDEX["pelvis"]] + here[JOINT_INDEX["pelvis"]]
+            truth = ch.to_service(real)
+            label = ch.jmap.describe()
+            targets = [{"joint": label[JOINT_NAMES[k]], "position": real[k].tolist()} for k in idx]
+            start = ch.to_service(canonical_points(ch.skel, ch.pose, ch.jmap))
+            _add(scores, "start", start, truth, idx)
+            for column, options in METHODS:
+                req = BVHSolveRequest.model_validate({**base, "targets": targets,
+                                                      "options": options})  # fmt: skip
+                edit = solve_prepared(engine, ch, character_problem(ch, req))
+                got = ch.to_service(canonical_points(ch.skel, edit.pose, ch.jmap))
+                _add(scores, column, got, truth, idx)
+                if column != "FABRIK":
+                    _add(scores, f"{column} canonical", np.asarray(edit.result.pose), truth, idx)
+        out[name] = scores
+    return out
+
+
+def _add(scores: Scores, method: str, pose: np.ndarray, truth: np.ndarray, idx: list[int]) -> None:
+    err = np.linalg.norm(np.asarray(pose, dtype=np.float64) - truth, axis=1) * 100.0
+    scores.mpjpe.setdefault(method, []).append(float(err.mean()))
+    scores.reach.setdefault(method, []).append(float(err[idx].mean()))
+
+
+COLUMNS = ("start", "FABRIK", "soft", "exact", "soft canonical", "exact canonical")
+
+
+def table(rows: Sequence[tuple[str, str, Scores]]) -> list[str]:
+    """Markdown lines: one row per (file, set), MPJPE per method, then the reach."""
+    head = ["file", "set", "edits", *COLUMNS, "reach soft / exact"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for file, name, s in rows:
+        n = len(s.mpjpe["start"])
+        cells = [f"{np.mean(s.mpjpe[m]):.2f}" for m in COLUMNS]
+        reach = f"{np.mean(s.reach['soft']):.2f} / {np.mean(s.reach['exact']):.3f}"
+        lines.append("| " + " | ".join([file, name, str(n), *cells, reach]) + " |")
+    return lines
+
+
+def extract(mocap: Path, out: Path) -> list[tuple[Path, str | float | None]]:
+    """:data:`DEFAULT_FILES` out of their archives in ``mocap`` into ``out`` (GNU tar)."""
+    by_archive: dict[str, list[str]] = {}
+    for archive, member, _ in DEFAULT_FILES:
+        by_archive.setdefault(archive, []).append(member)
+    for archive, members in by_archive.items():
+        subprocess.run(["tar", "-xJf", str(mocap / archive), "-C", str(out), *members],
+                       check=True)  # fmt: skip
+    return [(out / member, units) for _, member, units in DEFAULT_FILES]
+
+
+@app.command()
+def main(
+    files: Annotated[list[Path] | None, typer.Argument()] = None,
+    mocap: Annotated[Path, typer.Option(help="archives of the default files")] = Path(
+        "../shared/mocap"
+    ),
+    models: Annotated[Path, typer.Option(help="models folder")] = Path("models"),
+    edits: Annotated[int, typer.Option(min=1, max=10_000, help="edits per file and set")] = 40,
+    seed: Annotated[int, typer.Option(help="seed of the frame pairs")] = 0,
+    units: Annotated[str | None, typer.Option(help="units, where not plain from a file")] = None,
+    on_pelvis: Annotated[
+        bool, typer.Option(help="frame j moved onto the start's pelvis (no travel)")
+    ] = False,
+) -> None:
+    from service.engine import Engine
+
+    engine = Engine(models)
+    given: str | float | None = units
+    if units is not None and units.replace(".", "", 1).isdigit():
+        given = float(units)  # metres per unit
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        todo = [(p, given) for p in files] if files else extract(mocap, Path(tmp))
+        for path, stated in todo:
+            for name, scores in score_file(engine, path, edits, seed, stated, on_pelvis).items():
+                rows.append((path.name, name, scores))
+    print("\n".join(table(rows)))
+
+
+if __name__ == "__main__":
+    app()

@@ -1,0 +1,39 @@
+"""``python -m bench.characters``: a user's own file edited towards a later frame of itself,
+scored against that frame."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from typer.testing import CliRunner
+
+from bench.characters import SETS, app, frame_pairs
+from tests.character_files import extract_bvh
+
+
+def test_frame_pairs_are_a_fifth_to_one_second_apart() -> None:
+    pairs = frame_pairs(200, 30.0, 50, np.random.default_rng(0))
+    gaps = np.array([j - i for i, j in pairs])
+    assert len(pairs) == 50 and gaps.min() >= 6 and gaps.max() <= 30
+    assert all(0 <= i < j < 200 for i, j in pairs)
+    assert frame_pairs(5, 30.0, 10, np.random.default_rng(0)) == []  # shorter than 0.2 s
+
+
+def test_a_row_per_set_scored_against_the_later_frame(
+    mocap_dir: Path, models_dir: Path, tmp_path: Path
+) -> None:
+    files = extract_bvh(mocap_dir, tmp_path)
+    args = [str(files["bandai"]), "--models", str(models_dir), "--edits", "3"]
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == 0, result.output
+    header, _, *rows = result.output.strip().splitlines()
+    assert header.startswith("| file | set | edits | start | FABRIK | soft | exact |")
+    assert len(rows) == len(SETS)
+    for row, (name, _) in zip(rows, SETS, strict=True):
+        cells = [c.strip() for c in row.strip("|").split("|")]
+        assert cells[:3] == [files["bandai"].name, name, "3"]
+        start, fabrik, soft, exact, soft_c, exact_c = map(float, cells[3:9])
+        assert float(cells[9].split("/")[1]) <= 0.1  # exact reach: within 1 mm (in cm)
+        if name == "5 end eff.":  # a walk: five joints where they went say most of it
+            assert max(fabrik, soft, exact, soft_c, exact_c) < start / 3
