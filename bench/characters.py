@@ -1,5 +1,5 @@
 """Users' own characters, edited as a user does, scored against what the body really did:
-``python -m bench.characters [FILE.bvh ...] [--edits 40] [--seed 0] [--on-pelvis]``; with
+``python -m bench.characters [FILE.bvh ...] [--edits 40] [--on-pelvis] [--serving K=V]``; with
 no file, the twelve of :data:`DEFAULT_FILES` taken out of ``--mocap`` (``../shared/mocap``).
 
 Each edit takes two frames of one file 0.2-1 s apart (seeded): the start is frame i as the
@@ -182,10 +182,18 @@ def main(
     on_pelvis: Annotated[
         bool, typer.Option(help="frame j moved onto the start's pelvis (no travel)")
     ] = False,
+    serving: Annotated[
+        list[str] | None,
+        typer.Option(metavar="KEY=VALUE", help="a serving setting instead (bench.heldout's)"),
+    ] = None,
 ) -> None:
+    from bench.heldout import overrides
     from service.engine import Engine
 
-    engine = Engine(models)
+    try:
+        engine = Engine(models, serving=overrides(serving or []))
+    except ValueError as exc:  # not a setting, fixed by training, or out of range
+        raise typer.BadParameter(str(exc), param_hint="--serving") from None
     given: str | float | None = units
     if units is not None and units.replace(".", "", 1).isdigit():
         given = float(units)  # metres per unit
