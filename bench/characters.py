@@ -116,15 +116,14 @@ def score_file(
             if units is not None:
                 base["units"] = units
             ch = character_from_bvh(bvh, BVHSolveRequest.model_validate(base))
+            here = canonical_points(ch.skel, ch.pose, ch.jmap)
             real = canonical_points(ch.skel, pose_of(bvh, j), ch.jmap)
             if on_pelvis:  # frame j moved so its pelvis is the start's (no travel between)
-                here = canonical_points(ch.skel, ch.pose, ch.jmap)
                 real = real - real[JOINT_INDEX["pelvis"]] + here[JOINT_INDEX["pelvis"]]
             truth = ch.to_service(real)
             label = ch.jmap.describe()
             targets = [{"joint": label[JOINT_NAMES[k]], "position": real[k].tolist()} for k in idx]
-            start = ch.to_service(canonical_points(ch.skel, ch.pose, ch.jmap))
-            _add(scores, "start", start, truth, idx)
+            _add(scores, "start", ch.to_service(here), truth, idx)
             for column, options in METHODS:
                 req = BVHSolveRequest.model_validate({**base, "targets": targets,
                                                       "options": options})  # fmt: skip
