@@ -107,6 +107,8 @@ def score_file(
     bvh = read_request_bvh(text)
     pairs = frame_pairs(bvh.num_frames, 1.0 / bvh.frame_time, edits, np.random.default_rng(seed))
     out: dict[str, Scores] = {}
+    if not pairs:  # shorter than 0.2 s: no rows
+        return out
     for name, joints in SETS:
         idx = [JOINT_INDEX[j] for j in joints]
         scores = Scores({}, {})

@@ -8,7 +8,8 @@ from pathlib import Path
 import numpy as np
 from typer.testing import CliRunner
 
-from bench.characters import SETS, app, frame_pairs
+from bench.characters import SETS, app, frame_pairs, score_file
+from service.engine import Engine
 from tests.character_files import extract_bvh
 
 
@@ -37,3 +38,14 @@ def test_a_row_per_set_scored_against_the_later_frame(
         assert float(cells[9].split("/")[1]) <= 0.1  # exact reach: within 1 mm (in cm)
         if name == "5 end eff.":  # a walk: five joints where they went say most of it
             assert max(fabrik, soft, exact, soft_c, exact_c) < start / 3
+
+
+def test_a_file_shorter_than_a_fifth_of_a_second_gives_no_row(
+    mocap_dir: Path, models_dir: Path, tmp_path: Path
+) -> None:
+    text = extract_bvh(mocap_dir, tmp_path)["bandai"].read_text()
+    head, _, motion = text.partition("MOTION")
+    lines = motion.strip().splitlines()  # "Frames: N", "Frame Time: t", then the frames
+    short = tmp_path / "short.bvh"
+    short.write_text(f"{head}MOTION\nFrames: 3\n{lines[1]}\n" + "\n".join(lines[2:5]) + "\n")
+    assert score_file(Engine(models_dir), short, 5, 0) == {}
