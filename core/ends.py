@@ -37,7 +37,7 @@ from typing import Final
 import numpy as np
 import numpy.typing as npt
 
-from core.skeleton import JOINT_INDEX, NUM_JOINTS, PARENTS
+from core.skeleton import JOINT_INDEX, NUM_JOINTS, PARENTS, SUBTREE
 
 F64 = npt.NDArray[np.float64]
 
@@ -61,19 +61,9 @@ COLLARS: Final[npt.NDArray[np.int64]] = np.asarray(
 )  # fmt: skip
 
 
-def _below(end: int) -> npt.NDArray[np.bool_]:
-    """Which joints hang below ``end`` ``[21]``."""
-    out = np.zeros(NUM_JOINTS, dtype=np.bool_)
-    for j in range(NUM_JOINTS):
-        p = PARENTS[j]
-        while p >= 0 and p != end:
-            p = PARENTS[p]
-        out[j] = p == end
-    return out
-
-
 #: Per chain, the joints below its end ``[4, 21]``.
-BELOW: Final[npt.NDArray[np.bool_]] = np.stack([_below(int(e)) for e in CHAINS[:, 2]])
+_ENDS = CHAINS[:, 2]
+BELOW: Final[npt.NDArray[np.bool_]] = SUBTREE[_ENDS] & ~np.eye(NUM_JOINTS, dtype=np.bool_)[_ENDS]
 #: Below this (m) a length counts as none: the end on its shoulder (hip), a limb bent in no plane.
 TINY = 1e-12
 

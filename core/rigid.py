@@ -30,7 +30,7 @@ import numpy as np
 import numpy.typing as npt
 
 from core.jit import jit
-from core.skeleton import JOINT_INDEX, NUM_JOINTS, PARENTS
+from core.skeleton import JOINT_INDEX, NUM_JOINTS, SUBTREE
 
 F64 = npt.NDArray[np.float64]
 Bool = npt.NDArray[np.bool_]
@@ -43,13 +43,6 @@ PAIRS: npt.NDArray[np.int64] = np.array(
     ],
     dtype=np.int64,
 )
-#: ``[21, 21]``: True where joint ``k`` is joint ``j`` or below it (``[j, k]``)
-BELOW: Bool = np.eye(NUM_JOINTS, dtype=np.bool_)
-for _k in range(NUM_JOINTS):
-    _j = PARENTS[_k]
-    while _j >= 0:
-        BELOW[_j, _k] = True
-        _j = PARENTS[_j]
 #: A direction or frame axis this short is undefined (the pair is left as it is).
 TINY = 1e-12
 
@@ -91,7 +84,7 @@ def keep_pairs(positions: npt.ArrayLike, reference: npt.ArrayLike) -> F64:
             u = (turn @ v[..., :, None])[..., 0]
             move = out[..., top, :] + n * u - out[..., joint, :]
             move = np.where(ok[..., None], move, 0.0)
-            out[..., BELOW[joint], :] += move[..., None, :]
+            out[..., SUBTREE[joint], :] += move[..., None, :]
     return out
 
 
@@ -152,6 +145,6 @@ def keep_pairs_item(out: F64, ref: F64) -> None:  # pragma: no cover - compiled
                     u += (t + f_out[2, i] * f_ref[2, k]) * v[k]
                 move[i] = out[top, i] + n * u - out[joint, i]
             for k in range(NUM_JOINTS):
-                if BELOW[joint, k]:
+                if SUBTREE[joint, k]:
                     for i in range(3):
                         out[k, i] = out[k, i] + move[i]

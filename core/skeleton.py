@@ -131,6 +131,20 @@ def _depths() -> tuple[int, ...]:
 DEPTH: Final[tuple[int, ...]] = _depths()
 
 
+def _subtrees() -> npt.NDArray[np.bool_]:
+    out = np.eye(NUM_JOINTS, dtype=np.bool_)
+    for k in range(NUM_JOINTS):  # parents come first: a joint's row already holds its own
+        p = PARENTS[k]
+        while p >= 0:
+            out[p, k] = True
+            p = PARENTS[p]
+    return out
+
+
+#: ``[21, 21]``: True where joint ``k`` is joint ``j`` or hangs below it (``[j, k]``).
+SUBTREE: Final[npt.NDArray[np.bool_]] = _subtrees()
+
+
 def indices(names: list[str] | tuple[str, ...]) -> list[int]:
     """Joint indices for names; raises ``KeyError`` naming the first unknown joint."""
     out = []

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from core import kinematics
-from core.rigid import BELOW, PAIRS, keep_pairs, keep_pairs_item
-from core.skeleton import JOINT_INDEX, bone_lengths
+from core.rigid import PAIRS, keep_pairs, keep_pairs_item
+from core.skeleton import JOINT_INDEX, SUBTREE, bone_lengths
 from service.engine import Engine
 from service.problems import SolveProblem
 from tests.conftest import PosePairs, on_random_bodies
@@ -46,7 +46,7 @@ def test_pairs_take_the_start_width_and_keep_every_bone(
         assert np.allclose(cos / np.linalg.norm(was, axis=-1), 1.0, atol=1e-12)
         # the top stays; a limb below a moved joint moves as one piece
         assert np.array_equal(out[:, top], answer[:, top])
-        kids = np.flatnonzero(BELOW[left])[1:]
+        kids = np.flatnonzero(SUBTREE[left])[1:]
         assert np.allclose(out[:, kids] - out[:, [left]], answer[:, kids] - answer[:, [left]])
     assert np.abs(bone_lengths(out) / bone_lengths(answer) - 1.0).max() < 1e-12
 
