@@ -73,6 +73,15 @@ def forward_kinematics(parents: I64, rotations: F64, translations: F64) -> tuple
 
 
 @jit
+def mul33_into(a: F64, b: F64, out: F64) -> None:  # pragma: no cover - compiled
+    """``out [3, 3] = a b`` (either may be a transposed view; ``out`` neither of them),
+    each sum in source order."""
+    for r in range(3):
+        for q in range(3):
+            out[r, q] = a[r, 0] * b[0, q] + a[r, 1] * b[1, q] + a[r, 2] * b[2, q]
+
+
+@jit
 def swing_matrix_into(a: F64, b: F64, out: F64) -> None:  # pragma: no cover - compiled
     """``out [3, 3]``: the minimal rotation taking the direction of ``a`` to that of ``b``
     (``core.characters.swing``, the same steps written for 3-vectors; opposite directions
@@ -187,25 +196,15 @@ def aim_singles_into(
             return i
         swing_matrix_into(v[one], u[one], turn)
         p = parents[b]
-        for r in range(3):
-            for c in range(3):
-                new[r, c] = (
-                    turn[r, 0] * g_rot[b, 0, c]
-                    + turn[r, 1] * g_rot[b, 1, c]
-                    + (turn[r, 2] * g_rot[b, 2, c])
-                )
+        mul33_into(turn, g_rot[b], new)
+        if p >= 0:
+            mul33_into(g_rot[p].T, new, local)
+        else:
+            local[:] = new
         differs = False
         for r in range(3):
             for c in range(3):
-                x = new[r, c]
-                if p >= 0:
-                    x = (
-                        g_rot[p, 0, r] * new[0, c]
-                        + g_rot[p, 1, r] * new[1, c]
-                        + (g_rot[p, 2, r] * new[2, c])
-                    )
-                local[r, c] = x
-                if not abs(x - original[b, r, c]) <= 1e-15:
+                if not abs(local[r, c] - original[b, r, c]) <= 1e-15:
                     differs = True
         if differs:  # compared before writing: ``original`` may be ``rotations`` itself
             changed[i] = 1

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from core.compiled_characters import F64, I64, forward_kinematics_into
+from core.compiled_characters import F64, I64, forward_kinematics_into, mul33_into
 from core.jit import jit
 
 
@@ -269,27 +269,9 @@ def _turn_into(
                 turn[r, q] += s * kx[r, q] + c * kk
     if p >= 0:  # Pᵀ T P
         tp = np.empty((3, 3))
-        for r in range(3):
-            for q in range(3):
-                tp[r, q] = (
-                    turn[r, 0] * g_rot[p, 0, q]
-                    + turn[r, 1] * g_rot[p, 1, q]
-                    + (turn[r, 2] * g_rot[p, 2, q])
-                )
-        for r in range(3):
-            for q in range(3):
-                turn[r, q] = (
-                    g_rot[p, 0, r] * tp[0, q]
-                    + g_rot[p, 1, r] * tp[1, q]
-                    + (g_rot[p, 2, r] * tp[2, q])
-                )
-    for r in range(3):
-        for q in range(3):
-            new_rot[b, r, q] = (
-                turn[r, 0] * rotations[b, 0, q]
-                + turn[r, 1] * rotations[b, 1, q]
-                + (turn[r, 2] * rotations[b, 2, q])
-            )
+        mul33_into(turn, g_rot[p], tp)
+        mul33_into(g_rot[p].T, tp, turn)
+    mul33_into(turn, rotations[b], new_rot[b])
 
 
 def warm() -> None:
