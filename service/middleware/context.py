@@ -22,6 +22,7 @@ from service.middleware.types import (
     Receive,
     Scope,
     Send,
+    observed,
 )
 
 access_log = logging.getLogger("service.access")
@@ -41,14 +42,8 @@ class AccessLog:
             return
         t0: float = scope.setdefault(T0, time.perf_counter())
         status = [500]
-
-        async def tagged(message: Message) -> None:
-            if message["type"] == "http.response.start":
-                status[0] = int(message["status"])
-            await send(message)
-
         try:
-            await self.app(scope, receive, tagged)
+            await observed(self.app, scope, receive, send, status)
         finally:
             log_request(scope, request_id(scope), status[0], t0, self.access_log)
 

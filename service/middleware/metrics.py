@@ -12,7 +12,7 @@ from typing import Any
 from starlette.routing import BaseRoute, Match
 
 from service.metrics import Metrics
-from service.middleware.types import REASON, T0, ASGIApp, Message, Receive, Scope, Send
+from service.middleware.types import REASON, T0, ASGIApp, Receive, Scope, Send, observed
 
 
 class RequestMetrics:
@@ -38,14 +38,8 @@ class RequestMetrics:
             return
         t0: float = scope.setdefault(T0, time.perf_counter())
         status = [500]
-
-        async def observe(message: Message) -> None:
-            if message["type"] == "http.response.start":
-                status[0] = int(message["status"])
-            await send(message)
-
         try:
-            await self.app(scope, receive, observe)
+            await observed(self.app, scope, receive, send, status)
         except asyncio.CancelledError:  # shutdown: RequestContext answers a 503
             status[0] = 503 if status[0] == 500 else status[0]
             scope[REASON] = "shutting-down"

@@ -1,4 +1,4 @@
-"""ASGI types and the scope keys the middleware share."""
+"""ASGI types, the scope keys the middleware share, and their one shared step (:func:`observed`)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,9 @@ from typing import Any
 
 from service.errors import REASON
 
-__all__ = ["REASON", "REQUEST_ID", "T0", "ASGIApp", "Message", "Receive", "Scope", "Send"]
+__all__ = [
+    "REASON", "REQUEST_ID", "T0", "ASGIApp", "Message", "Receive", "Scope", "Send", "observed",
+]  # fmt: skip
 
 Scope = MutableMapping[str, Any]
 Message = MutableMapping[str, Any]
@@ -21,3 +23,17 @@ REQUEST_ID = "pose.request_id"
 
 def header_map(scope: Scope) -> dict[str, str]:
     return {k.decode("latin-1").lower(): v.decode("latin-1") for k, v in scope["headers"]}
+
+
+async def observed(
+    app: ASGIApp, scope: Scope, receive: Receive, send: Send, status: list[int]
+) -> None:
+    """Run ``app`` with ``send`` wrapped so that ``status[0]`` holds the answer's status once
+    it starts (left as it was where none started)."""
+
+    async def observe(message: Message) -> None:
+        if message["type"] == "http.response.start":
+            status[0] = int(message["status"])
+        await send(message)
+
+    await app(scope, receive, observe)
