@@ -106,24 +106,21 @@ def score_file(
     text = path.read_text(encoding="utf-8", errors="replace")
     bvh = read_request_bvh(text)
     pairs = frame_pairs(bvh.num_frames, 1.0 / bvh.frame_time, edits, np.random.default_rng(seed))
-    out: dict[str, Scores] = {}
-    if not pairs:  # shorter than 0.2 s: no rows
-        return out
-    for name, joints in SETS:
-        idx = [JOINT_INDEX[j] for j in joints]
-        scores = Scores({}, {})
-        for i, j in pairs:
-            head = {"joint": "head", "position": [0.0, 0.0, 0.0]}  # (the character alone)
-            base: dict[str, Any] = {"bvh": text, "frame": i, "targets": [head]}
-            if units is not None:
-                base["units"] = units
-            ch = character_from_bvh(bvh, BVHSolveRequest.model_validate(base))
-            here = canonical_points(ch.skel, ch.pose, ch.jmap)
-            real = canonical_points(ch.skel, pose_of(bvh, j), ch.jmap)
-            if on_pelvis:  # frame j moved so its pelvis is the start's (no travel between)
-                real = real - real[JOINT_INDEX["pelvis"]] + here[JOINT_INDEX["pelvis"]]
-            truth = ch.to_service(real)
-            label = ch.jmap.describe()
+    out: dict[str, Scores] = {name: Scores({}, {}) for name, _ in SETS} if pairs else {}
+    for i, j in pairs:  # the character and the real frame once per pair, every set on them
+        head = {"joint": "head", "position": [0.0, 0.0, 0.0]}  # (the character alone)
+        base: dict[str, Any] = {"bvh": text, "frame": i, "targets": [head]}
+        if units is not None:
+            base["units"] = units
+        ch = character_from_bvh(bvh, BVHSolveRequest.model_validate(base))
+        here = canonical_points(ch.skel, ch.pose, ch.jmap)
+        real = canonical_points(ch.skel, pose_of(bvh, j), ch.jmap)
+        if on_pelvis:  # frame j moved so its pelvis is the start's (no travel between)
+            real = real - real[JOINT_INDEX["pelvis"]] + here[JOINT_INDEX["pelvis"]]
+        truth = ch.to_service(real)
+        label = ch.jmap.describe()
+        for name, joints in SETS:
+            scores, idx = out[name], [JOINT_INDEX[n] for n in joints]
             targets = [{"joint": label[JOINT_NAMES[k]], "position": real[k].tolist()} for k in idx]
             _add(scores, "start", ch.to_service(here), truth, idx)
             for column, options in METHODS:
@@ -134,7 +131,6 @@ def score_file(
                 _add(scores, column, got, truth, idx)
                 if column != "FABRIK":
                     _add(scores, f"{column} canonical", np.asarray(edit.result.pose), truth, idx)
-        out[name] = scores
     return out
 
 
