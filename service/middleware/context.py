@@ -18,7 +18,6 @@ from service.middleware.types import (
     REASON,
     T0,
     ASGIApp,
-    Message,
     Receive,
     Scope,
     Send,
@@ -58,24 +57,18 @@ class RequestContext:
         if scope["type"] != "http":
             await self.app(scope, receive, send)
             return
-        started = [False]
-
-        async def tagged(message: Message) -> None:
-            if message["type"] == "http.response.start":
-                started[0] = True
-            await send(message)
-
+        status = [0]  # (0: no answer started)
         try:
-            await self.app(scope, receive, tagged)
+            await observed(self.app, scope, receive, send, status)
         except asyncio.CancelledError:  # the shutdown grace period ran out
             scope[REASON] = "shutting-down"
-            if not started[0]:
+            if not status[0]:
                 busy = ShuttingDown("the server is shutting down; retry on another instance")
-                await error_response(busy)(scope, receive, tagged)
+                await error_response(busy)(scope, receive, send)
             return  # answered: the cancellation ends here
         except Exception:  # the app's own 500 handler would run outside the middleware
-            if not started[0]:
-                await internal_error(scope["method"], scope["path"])(scope, receive, tagged)
+            if not status[0]:
+                await internal_error(scope["method"], scope["path"])(scope, receive, send)
 
 
 def log_request(scope: Scope, request_id: str, status: int, t0: float, enabled: bool) -> None:
