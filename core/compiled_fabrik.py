@@ -107,10 +107,11 @@ class Plans:
 
 
 @lru_cache(maxsize=4096)
-def _plans(idx: tuple[int, ...], weights: tuple[float, ...]) -> Plans:
+def _plans(idx: tuple[int, ...], weights: tuple[float, ...], pins: tuple[bool, ...]) -> Plans:
     target = np.asarray(idx, dtype=np.intp)
     w = np.asarray(weights, dtype=np.float64)
-    ints, floats = pack_plan(kinematics._make_plan(target, w, frozenset(), True))
+    pinned = np.asarray(pins, dtype=np.bool_)
+    ints, floats = pack_plan(kinematics._make_plan(target, w, frozenset(), True, pinned))
     locks = kinematics._trunk_locks(target)
     if locks is None:
         return Plans(ints, floats, False, ints, floats)
@@ -118,15 +119,22 @@ def _plans(idx: tuple[int, ...], weights: tuple[float, ...]) -> Plans:
     return Plans(li, lf, True, ints, floats)
 
 
-def packed_plans(target_idx: npt.ArrayLike, weights: npt.ArrayLike) -> Plans:
-    """The packed plans of a target set (K joint indices, K positive weights), cached."""
+def packed_plans(
+    target_idx: npt.ArrayLike, weights: npt.ArrayLike, pinned: npt.ArrayLike | None = None
+) -> Plans:
+    """The packed plans of a target set (K joint indices, K positive weights, which of
+    them are pins: ``kinematics._make_plan``), cached."""
     idx = tuple(int(i) for i in np.asarray(target_idx).reshape(-1))
     w = tuple(float(v) for v in np.asarray(weights, dtype=np.float64).reshape(-1))
+    asked = np.zeros(len(idx), dtype=np.bool_) if pinned is None else np.asarray(pinned)
+    pins = tuple(bool(v) for v in asked.reshape(-1))
     if len(w) != len(idx) or not all(np.isfinite(w)) or any(v <= 0 for v in w):
         raise ValueError("weights must be one positive finite number per target")
+    if len(pins) != len(idx):
+        raise ValueError("pinned must be one boolean per target")
     if any(i < 0 or i >= NUM_JOINTS for i in idx):
         raise ValueError(f"target indices must be integers in [0, {NUM_JOINTS})")
-    return _plans(idx, w)
+    return _plans(idx, w, pins)
 
 
 # --------------------------------------------------------------------------------------
@@ -134,9 +142,9 @@ def packed_plans(target_idx: npt.ArrayLike, weights: npt.ArrayLike) -> Plans:
 # --------------------------------------------------------------------------------------
 @jit
 def _clamp_root(
-    p: F64, start: F64, tpos: F64, radii: F64, anchors: Bool
+    p: F64, start: F64, tpos: F64, radii: F64, inner: F64, anchors: Bool
 ) -> None:  # pragma: no cover - compiled
-    """``kinematics._clamp_root`` then ``_project_root`` for one item, ``p`` in place."""
+    """``shells.clamp_root`` for one item, ``p`` in place."""
     d0, d1, d2 = p[0] - start[0], p[1] - start[1], p[2] - start[2]
     dd = (d0 * d0 + d1 * d1) + d2 * d2
     moving = dd > TINY * TINY
@@ -154,29 +162,59 @@ def _clamp_root(
         if s < smin or np.isnan(s):
             smin = s
     p[0], p[1], p[2] = start[0] + d0 * smin, start[1] + d1 * smin, start[2] + d2 * smin
-    over = np.zeros(tpos.shape[0], dtype=np.bool_)
+    _project_root(p, tpos, radii, inner, anchors)
+
+
+@jit
+def _project_root(
+    p: F64, tpos: F64, radii: F64, inner: F64, anchors: Bool
+) -> None:  # pragma: no cover - compiled
+    """``shells.project_root`` for one item, ``p`` in place."""
+    off = np.zeros(tpos.shape[0], dtype=np.bool_)
     for _ in range(32):
-        anyover = False
+        anyoff = False
         for k in range(tpos.shape[0]):
             a0, a1, a2 = p[0] - tpos[k, 0], p[1] - tpos[k, 1], p[2] - tpos[k, 2]
-            over[k] = anchors[k] and np.sqrt(a0 * a0 + a1 * a1 + a2 * a2) > radii[k] * (1.0 + 1e-9)
-            anyover = anyover or over[k]
-        if not anyover:
+            n = np.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
+            off[k] = anchors[k] and (n > radii[k] * (1.0 + 1e-9) or n < inner[k] * (1.0 - 1e-9))
+            anyoff = anyoff or off[k]
+        if not anyoff:
             break
         for k in range(tpos.shape[0]):
-            if not over[k]:
+            if not off[k]:
                 continue
             a0, a1, a2 = p[0] - tpos[k, 0], p[1] - tpos[k, 1], p[2] - tpos[k, 2]
             nk = max(np.sqrt(a0 * a0 + a1 * a1 + a2 * a2), TINY)
-            if anchors[k] and nk > radii[k] * (1.0 + 1e-9):
-                f = radii[k] / nk
+            if anchors[k] and (nk > radii[k] * (1.0 + 1e-9) or nk < inner[k] * (1.0 - 1e-9)):
+                f = min(max(nk, inner[k]), radii[k]) / nk
                 p[0], p[1], p[2] = tpos[k, 0] + a0 * f, tpos[k, 1] + a1 * f, tpos[k, 2] + a2 * f
+
+
+@jit
+def _shells(
+    x0: F64, lens: F64, tpos: F64, path: F64, hold: Bool, hold_any: bool, errors: F64,
+    tol: float, radii: F64, inner: F64, anchors: Bool,
+) -> None:  # pragma: no cover - compiled  # fmt: skip
+    """``shells.shells`` for one item into ``radii``, ``inner`` and ``anchors``."""
+    for k in range(tpos.shape[0]):
+        reach, longest = 0.0, 0.0
+        for b in range(lens.shape[0]):
+            reach += path[k * _NB + b] * lens[b]
+            longest = max(longest, path[k * _NB + b] * lens[b])
+        d0, d1, d2 = x0[0, 0] - tpos[k, 0], x0[0, 1] - tpos[k, 1], x0[0, 2] - tpos[k, 2]
+        dist = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        anchors[k] = errors[k] <= tol
+        if hold_any:
+            anchors[k] = hold[k] and reach > 0
+            dist = min(dist, reach)
+        inner[k] = max(2.0 * longest - reach, 0.0)
+        radii[k] = max(max(0.99 * reach, dist), inner[k])
 
 
 @jit
 def _iterate(
     x: F64, proposal: F64, y: F64, lens: F64, pi: I64, pf: F64, clamp: bool, start: F64,
-    tpos: F64, radii: F64, anchors: Bool, safe: bool,
+    tpos: F64, radii: F64, inner: F64, anchors: Bool, safe: bool,
 ) -> bool:  # pragma: no cover - compiled  # fmt: skip
     """One FABRIK iteration (``kinematics._iterate``) into ``y``; False if not finite."""
     v, f1, f2, u = np.empty(3), np.empty(3), np.empty(3), np.empty(3)
@@ -216,7 +254,7 @@ def _iterate(
             else:
                 proposal[par, 0], proposal[par, 1], proposal[par, 2] = q0, q1, q2
     if clamp:
-        _clamp_root(proposal[0], start, tpos, radii, anchors)
+        _clamp_root(proposal[0], start, tpos, radii, inner, anchors)
     y[:, :] = x
     if pi[_ROOT_MOVES] == 1:
         y[0, :] = proposal[0, :]
@@ -287,6 +325,20 @@ def _solve(
     """``kinematics._solve`` for one item (rank order); ``x``/``errors`` receive the answer."""
     k_n, t_n = pi[_K], pi[_T]
     stall = tol * 1e-3
+    hold_any = False
+    if has_hold:
+        for k in range(k_n):
+            hold_any = hold_any or hold[k]
+    radii, inner, anchors = np.empty(k_n), np.empty(k_n), np.zeros(k_n, dtype=np.bool_)
+    start, path = x0[0].copy(), pf[pi[_O_PATH] :]
+    if hold_any and pi[_ROOT_MOVES] == 0:  # shells.onto_pins, x0 moved in place
+        _shells(x0, lens, tpos, path, hold, True, errors, tol, radii, inner, anchors)
+        _project_root(start, tpos, radii, inner, anchors)
+        shift = start - x0[0]
+        for r in range(NUM_JOINTS):
+            for c in range(3):
+                x0[r, c] = x0[r, c] + shift[c]
+        start[:] = x0[0]
     x[:, :] = x0
     _errors(x, tpos, pi, errors)
     done = True
@@ -301,42 +353,30 @@ def _solve(
             for k in range(k_n):
                 s += jt[t * k_n + k] * tpos[k, c]
             proposal[targeted[t], c] = s
-    hold_any = False
-    if has_hold:
-        for k in range(k_n):
-            hold_any = hold_any or hold[k]
     clamp = pi[_ROOT_FREE] == 1 or (hold_any and pi[_ROOT_MOVES] == 1)
-    radii, anchors, start = np.empty(k_n), np.zeros(k_n, dtype=np.bool_), x0[0].copy()
     if clamp:
-        path = pf[pi[_O_PATH] :]
-        for k in range(k_n):
-            reach = 0.0
-            for b in range(lens.shape[0]):
-                reach += path[k * _NB + b] * lens[b]
-            d0, d1, d2 = x0[0, 0] - tpos[k, 0], x0[0, 1] - tpos[k, 1], x0[0, 2] - tpos[k, 2]
-            dist = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-            anchors[k] = errors[k] <= tol
-            if hold_any:
-                anchors[k] = hold[k] and reach > 0
-                dist = min(dist, reach)
-            radii[k] = max(0.99 * reach, dist)
+        _shells(x0, lens, tpos, path, hold, hold_any, errors, tol, radii, inner, anchors)
     new_errors = np.empty(k_n)
     y = np.empty_like(x)
     strikes, its = 0, 0
     while its < max_it and not done:
         its += 1
-        if not _iterate(x, proposal, y, lens, pi, pf, clamp, start, tpos, radii, anchors, False):
-            _iterate(x, proposal, y, lens, pi, pf, clamp, start, tpos, radii, anchors, True)
+        if not _iterate(
+            x, proposal, y, lens, pi, pf, clamp, start, tpos, radii, inner, anchors, False
+        ):
+            _iterate(x, proposal, y, lens, pi, pf, clamp, start, tpos, radii, inner, anchors, True)
         x[:, :] = y
         _errors(x, tpos, pi, new_errors)
-        progress, newly, all_ok = 0.0, False, True
+        progress, pin_progress, newly, all_ok = 0.0, 0.0, False, True
         for k in range(k_n):
             if new_errors[k] > tol:
                 progress += errors[k] - new_errors[k]
+                if hold_any and hold[k]:
+                    pin_progress += errors[k] - new_errors[k]
                 all_ok = False
             elif errors[k] > tol:
                 newly = True
-        strikes = 0 if (newly or progress >= stall) else strikes + 1
+        strikes = 0 if (newly or max(progress, pin_progress) >= stall) else strikes + 1
         finished = all_ok or strikes >= 3
         converged = converged or finished
         errors[:] = new_errors

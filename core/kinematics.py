@@ -29,15 +29,15 @@ import numpy as np
 import numpy.typing as npt
 
 from core.rest import REST_DIRS
+from core.shells import TINY as _TINY
+from core.shells import Shells, clamp_root, onto_pins, shells
+from core.shells import dot3 as _dot3
+from core.shells import norm3 as _norm3
 from core.skeleton import BONE_CHILDREN, DEPTH, NUM_JOINTS, PARENTS
 
 F64 = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.intp]
 BoolArray = npt.NDArray[np.bool_]
-
-#: Distance (metres) at or below which a direction is undefined: in effect only exact
-#: coincidence, the same test as the fast paths' "1 / distance is not finite".
-_TINY = 1e-300
 
 _ROOT = PARENTS.index(-1)
 _MAX_DEPTH = max(DEPTH)
@@ -128,17 +128,6 @@ def _lengths_internal(lens: F64, batch: tuple[int, ...]) -> F64:
         return np.ascontiguousarray(lens[_LEN_ORDER][:, None])
     flat = np.broadcast_to(lens, (*batch, NUM_JOINTS - 1)).reshape(-1, NUM_JOINTS - 1)
     return np.ascontiguousarray(flat[:, _LEN_ORDER].T)
-
-
-def _norm3(v: F64) -> F64:
-    """Euclidean norm over axis 1 of ``[k, 3, N]`` -> ``[k, N]``."""
-    out: F64 = np.sqrt(np.add.reduce(v * v, axis=1))
-    return out
-
-
-def _dot3(a: F64, b: F64) -> F64:
-    out: F64 = np.add.reduce(a * b, axis=1)
-    return out
 
 
 def _cross3(a: F64, b: F64) -> F64:
@@ -319,9 +308,19 @@ class _Plan:
 
 
 def _make_plan(
-    target_idx: IntArray, weights: F64, locked: frozenset[int], free_root: bool
+    target_idx: IntArray,
+    weights: F64,
+    locked: frozenset[int],
+    free_root: bool,
+    pinned: BoolArray | None = None,
 ) -> _Plan:
-    """``locked`` joints are held in place; callers lock whole ancestor lines only."""
+    """``locked`` joints are held in place; callers lock whole ancestor lines only.
+
+    ``pinned`` (K booleans): a sub-base other than the root with a pin on or below one of
+    its moving chains takes the centroid of those chains alone, so a far target on a
+    sibling chain cannot pull a pinned neck, head or arm off its pin (the root keeps the
+    centroid of all its branches, kept within reach of the pins: :mod:`core.shells`).
+    """
     k = len(target_idx)
     ranks = _RANK[target_idx]
     targeted = np.unique(ranks)
@@ -338,6 +337,8 @@ def _make_plan(
     # weight in a sub-base centroid is the total weight of those targets.
     active = [False] * NUM_JOINTS
     weight = [0.0] * NUM_JOINTS
+    pin_weight = [0.0] * NUM_JOINTS
+    pins = [False] * k if pinned is None else pinned.tolist()
     path = np.zeros((k, NUM_JOINTS - 1))
     for t, (r0, w) in enumerate(zip(ranks.tolist(), weights.tolist(), strict=True)):
         r = r0
@@ -348,6 +349,7 @@ def _make_plan(
         while r != 0 and (r == r0 or r not in locked_ranks):
             active[r] = True
             weight[r] += w
+            pin_weight[r] += w if pins[t] else 0.0
             r = parent_of[r]
 
     root_targeted = is_target[0]
@@ -366,9 +368,10 @@ def _make_plan(
         rows = sorted(set(parents))
         mix = None
         if len(rows) < len(kids):  # a sub-base: weighted centroid of its chains
+            held = {p for r, p in zip(kids, parents, strict=True) if p != 0 and pin_weight[r]}
             mix = np.zeros((len(rows), len(kids)))
             for col, (r, p) in enumerate(zip(kids, parents, strict=True)):
-                mix[rows.index(p), col] = weight[r]
+                mix[rows.index(p), col] = pin_weight[r] if p in held else weight[r]
             mix /= mix.sum(axis=1, keepdims=True)
         forward.append(
             _Forward(
@@ -427,50 +430,12 @@ def _swing(a: F64, b: F64, v: F64) -> F64:
     return np.where(same[:, None], v, rotated)
 
 
-def _clamp_root(proposal: F64, start: F64, tpos: F64, radii: F64, anchors: BoolArray) -> F64:
-    """Pull the proposed root (``[3, N]``) back along the segment from ``start`` until
-    every anchor target stays within its chain's reach: ``|root - target| <= radius``."""
-    d = proposal - start
-    e = start - tpos  # [K, 3, N]
-    dd = (d * d).sum(axis=0)  # [N]
-    ed = _dot3(e, d[None])  # [K, N]
-    ee = _dot3(e, e)
-    disc = np.maximum(ed * ed - dd * (ee - radii * radii), 0.0)
-    moving = dd > _TINY * _TINY
-    s = (np.sqrt(disc) - ed) / np.where(moving, dd, 1.0)
-    s = np.where(anchors & moving, np.clip(s, 0.0, 1.0), 1.0)
-    out: F64 = start + d * s.min(axis=0, initial=1.0)
-    return _project_root(out, tpos, radii, anchors)
-
-
-def _project_root(root: F64, tpos: F64, radii: F64, anchors: BoolArray, rounds: int = 32) -> F64:
-    """``root`` ``[3, N]`` into every anchor's ball by alternating projections (a no-op inside)."""
-    for _ in range(rounds):
-        over = anchors & (_norm3(root[None] - tpos) > radii * (1.0 + 1e-9))
-        if not over.any():
-            break
-        for k in np.flatnonzero(over.any(axis=1)).tolist():
-            dk = root - tpos[k]
-            nk = np.maximum(_norm3(dk[None])[0], _TINY)
-            fix = anchors[k] & (nk > radii[k] * (1.0 + 1e-9))
-            root = np.where(fix[None], tpos[k] + dk * (radii[k] / nk)[None], root)
-    return root
-
-
-@dataclass(frozen=True)
-class _RootClamp:
-    start: F64  # [3, N] root at the start of the solve
-    tpos: F64  # [K, 3, N]
-    radii: F64  # [K, N]
-    anchors: BoolArray  # [K, N]
-
-
 def _iterate(
     x: F64,
     proposal: F64,
     plan: _Plan,
     lengths: _LevelLengths,
-    clamp: _RootClamp | None,
+    clamp: Shells | None,
     safe: bool,
 ) -> F64:
     """One FABRIK iteration (forward then backward reaching); returns the new pose.
@@ -494,7 +459,7 @@ def _iterate(
             n = q.shape[-1]
             proposal[fw.rows] = (fw.mix @ q.reshape(len(fw.kids), -1)).reshape(-1, 3, n)
     if clamp is not None:  # the free root: centroid, kept within reach of the pins
-        proposal[0] = _clamp_root(proposal[0], clamp.start, clamp.tpos, clamp.radii, clamp.anchors)
+        proposal[0] = clamp_root(proposal[0], clamp)
     # Backward reaching: from the root outwards, every active bone exact again.
     y = x.copy()
     if plan.root_moves:
@@ -545,6 +510,11 @@ def _solve(
 ) -> _Solved:
     """Multi-end-effector FABRIK on internal arrays from ``x0`` (exact lengths)."""
     stall = tolerance * 1e-3
+    hold = pinned if pinned is not None and bool(np.any(pinned)) else None
+    # the pins wherever the start put them (chains of any length)
+    pins = None if hold is None else hold[:, None] & (plan.path @ lens > 0)
+    if pins is not None and not plan.root_moves:
+        x0 = onto_pins(x0, shells(plan.path, lens, x0[0], tpos, pins, True))
     x = x0
     errors = _norm3(x.take(plan.target_ranks, axis=0) - tpos)
     done = np.all(errors <= tolerance, axis=0)
@@ -555,16 +525,9 @@ def _solve(
     joint_t = (plan.joint_targets @ tpos.reshape(k, -1)).reshape(len(plan.targeted), 3, -1)
     proposal[plan.targeted] = joint_t
     clamp = None
-    hold = pinned if pinned is not None and bool(np.any(pinned)) else None
-    if plan.root_free or (hold is not None and plan.root_moves):
-        # Reach of each target's chain from the root, 1% short of full stretch so pinned
-        # limbs never lock straight (FABRIK crawls at full stretch); the start is inside.
-        reach, dist = plan.path @ lens, _norm3(x0[0][None] - tpos)
-        anchors = errors <= tolerance
-        if hold is not None:  # pins, wherever the start put them
-            anchors = np.broadcast_to(hold[:, None], anchors.shape) & (reach > 0)
-            dist = np.minimum(dist, reach)
-        clamp = _RootClamp(x0[0], tpos, np.maximum(0.99 * reach, dist), anchors)
+    if plan.root_free or (pins is not None and plan.root_moves):
+        anchors = errors <= tolerance if pins is None else pins
+        clamp = shells(plan.path, lens, x0[0], tpos, anchors, pins is not None)
 
     level_lengths = _level_lengths(lens, plan)
     strikes = np.zeros(x0.shape[-1], dtype=np.intp)
@@ -580,9 +543,13 @@ def _solve(
         x = y
         new_errors = _norm3(x.take(plan.target_ranks, axis=0) - tpos)
         # Stall: no target newly reached and the ones still missing got closer by less
-        # than ``stall`` in total (reached targets converging further do not count).
+        # than ``stall`` in total (reached targets converging further do not count), and
+        # the pins still missing too (a pin coming back while a far target recedes).
         missing = new_errors > tolerance
-        progress = np.where(missing, errors - new_errors, 0.0).sum(axis=0)
+        gain = np.where(missing, errors - new_errors, 0.0)
+        progress = gain.sum(axis=0)
+        if hold is not None:
+            progress = np.maximum(progress, gain[hold].sum(axis=0))
         newly_reached = np.any(~missing & (errors > tolerance), axis=0)
         strikes = np.where(newly_reached | (progress >= stall), 0, strikes + 1)
         finished = np.all(new_errors <= tolerance, axis=0) | (strikes >= 3)
@@ -713,19 +680,21 @@ def fabrik(
 
     Stops when every target is within ``tolerance`` (m); when progress stalls -- three
     iterations running in which no target became reached and the targets still missing
-    got closer by less than ``tolerance / 1000`` in total (an unreachable target at its
-    closest stretch); or after ``max_iterations``. Never raises for unreachable
-    targets and returns finite poses for finite input; raises ``ValueError`` on
-    malformed shapes, indices or weights.
+    got closer by less than ``tolerance / 1000`` in total, and so did the pins still
+    missing (an unreachable target at its closest stretch); or after ``max_iterations``.
+    Never raises for unreachable targets and returns finite poses for finite input;
+    raises ``ValueError`` on malformed shapes, indices or weights.
 
-    ``pinned`` (K booleans): hard targets; a moving root stays within reach of them from
-    any start, so a target beyond reach is approached only as far as the pins allow.
+    ``pinned`` (K booleans): hard targets. A moving root stays within reach of them from
+    any start, a fixed one first moves the start whole into their reach if it has left
+    it, and a sub-base with a pin below it follows its pinned chains alone, so a target
+    beyond reach is approached only as far as the pins allow.
     """
     pb = _prepare(positions, lengths, target_idx, target_pos, weights)
     if len(pb.idx) == 0:
         return _result(pb, _no_targets(pb), tolerance, 0)
     pins = _pinned(pinned, len(pb.idx))
-    plan = _make_plan(pb.idx, pb.weights, frozenset(), free_root)
+    plan = _make_plan(pb.idx, pb.weights, frozenset(), free_root, pins)
     solved = _solve(pb.x0, pb.lens, pb.tpos, plan, tolerance, max_iterations, pins)
     return _result(pb, solved, tolerance, solved.iterations)
 
@@ -795,6 +764,6 @@ def polish(
         if bool(np.all(local.errors <= tolerance)):
             return _result(pb, local, tolerance, local.iterations)
         x0, iterations = local.x, local.iterations
-    plan = _make_plan(pb.idx, pb.weights, frozenset(), free_root)
+    plan = _make_plan(pb.idx, pb.weights, frozenset(), free_root, pins)
     solved = _solve(x0, pb.lens, pb.tpos, plan, tolerance, max_iterations, pins)
     return _result(pb, solved, tolerance, iterations + solved.iterations)

@@ -531,7 +531,7 @@ class Engine:
         """The compiled FABRIK (``polish``: the exact-reach polish) of canonical ``starts``
         onto ``goals`` for one target set (joints ``idx``, ``weights``, pins ``hold``):
         poses, iterations and each target's error."""
-        plans = compiled_fabrik.packed_plans(idx, weights)
+        plans = compiled_fabrik.packed_plans(idx, weights, hold)
         pose, its, errs, _ = compiled_fabrik.solve_batch(
             polish, np.ascontiguousarray(starts), np.ascontiguousarray(lengths),
             np.ascontiguousarray(goals), np.ascontiguousarray(tols), self.fabrik_max_iterations,

@@ -75,7 +75,7 @@ def test_fabrik_and_polish_match_numpy(
     goals = real_poses.poses[real_poses.goals][:60][:, idx].copy()
     goals[:, pinned] = starts[:, idx[pinned]]
     lens = np.ascontiguousarray(bone_lengths(starts))
-    plans = compiled_fabrik.packed_plans(idx, np.ones(k))
+    plans = compiled_fabrik.packed_plans(idx, np.ones(k), pinned)
     pose, its, errs, _ = compiled_fabrik.solve_batch(
         polish, np.ascontiguousarray(starts), lens, np.ascontiguousarray(goals),
         np.full(len(starts), 1e-4), 64, plans.local_ints, plans.local_floats,
@@ -95,3 +95,37 @@ def test_fabrik_and_polish_match_numpy(
         plans.ints, plans.floats, pinned, True,
     )  # fmt: skip
     assert np.array_equal(again[0][0], pose[3])
+
+
+@pytest.mark.parametrize(
+    ("pin", "joint"), [("neck", "left_wrist"), ("left_hip", "left_ankle"), ("left_knee", "pelvis")]
+)
+@pytest.mark.parametrize("polish", [False, True])
+def test_pins_off_the_legs_match_numpy(
+    real_poses: PosePairs, pin: str, joint: str, polish: bool
+) -> None:
+    """A pin the start has left (moved whole, as a network's answer may be) and a far
+    target: the pinned sub-base centroid, the start brought back within the pin's shell
+    and the pins' own progress, compiled as in numpy."""
+    idx = _idx((joint, pin))
+    pinned = np.asarray([False, True])
+    rng = np.random.default_rng(5)
+    poses = real_poses.poses[real_poses.starts][:40]
+    goals = poses[:, idx].copy()
+    d = rng.normal(size=(len(poses), 3))
+    goals[:, 0] += d / np.linalg.norm(d, axis=1, keepdims=True)
+    starts = np.ascontiguousarray(poses + 0.25 * rng.normal(size=(len(poses), 1, 3)))
+    lens = np.ascontiguousarray(bone_lengths(poses))
+    plans = compiled_fabrik.packed_plans(idx, np.ones(2), pinned)
+    pose, its, errs, _ = compiled_fabrik.solve_batch(
+        polish, starts, lens, np.ascontiguousarray(goals), np.full(len(poses), 1e-3), 256,
+        plans.local_ints, plans.local_floats, plans.has_local, plans.ints, plans.floats,
+        pinned, True,
+    )  # fmt: skip
+    assert errs[:, 1].max() <= 1e-3  # the pin held
+    fn = kinematics.polish if polish else kinematics.fabrik
+    for b in range(len(poses)):
+        ref = fn(starts[b], lens[b], idx, goals[b], tolerance=1e-3, max_iterations=256,
+                 pinned=pinned)  # fmt: skip
+        assert np.abs(ref.positions - pose[b]).max() < 1e-12
+        assert ref.iterations == its[b]
