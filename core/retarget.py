@@ -42,6 +42,9 @@ from core.skeleton import JOINT_INDEX, PARENTS
 
 _PELVIS = JOINT_INDEX["pelvis"]
 _HIPS = (JOINT_INDEX["left_hip"], JOINT_INDEX["right_hip"])
+#: weight of a pinned child (or one above a pin) against the others where a joint aims
+#: several: a chest under a pinned neck or head
+HEAVY = 100.0
 #: each canonical joint's first child (joints without children absent)
 _FIRST_CHILD = {p: c for c, p in reversed(list(enumerate(PARENTS))) if p >= 0}
 
@@ -94,10 +97,14 @@ def _plan(skel: Skeleton, jmap: JointMap) -> _Plan:
 
 
 def _aim_group(
-    skel: Skeleton, pose: Pose, jmap: JointMap, b: int, kids: list[int], goal: F64, original: Pose
-) -> bool:
+    skel: Skeleton, pose: Pose, jmap: JointMap, b: int, kids: list[int], goal: F64, original: Pose,
+    heavy: frozenset[int],
+) -> bool:  # fmt: skip
     """Aim one group, joint ``b``; True if its rotation changed (numpy: the groups the
-    compiled pass leaves, those with two children or more to aim)."""
+    compiled pass leaves, those with two children or more to aim). Children in ``heavy``
+    (pins and the joints above them) weigh :data:`HEAVY` times the others in the
+    least-squares turn, so a chest turns a pinned neck (or a pinned head's neck) where the
+    solve put it and lets the collars follow."""
     pose.rotations[b] = original.rotations[b]
     g_rot, g_pos = forward_kinematics(skel, pose)
     pivot = g_pos[b]
@@ -111,8 +118,9 @@ def _aim_group(
         k = int(np.argmax(ok))
         turn = swing(v[k], u[k])
     else:
+        w = nv * np.asarray([HEAVY if c in heavy else 1.0 for c in kids])
         turn = best_rotation(
-            v[ok] / nv[ok, None], u[ok] / nu[ok, None], weights=nv[ok] / nv[ok].sum()
+            v[ok] / nv[ok, None], u[ok] / nu[ok, None], weights=w[ok] / w[ok].sum()
         )
     new_global = turn @ g_rot[b]
     parent = skel.parents[b]
@@ -131,6 +139,7 @@ def _aim_pass(
     goal: F64,
     skip: int | None,
     original: Pose,
+    heavy: frozenset[int] = frozenset(),
 ) -> set[int]:
     """Aim every group (parents first). Each turn starts from the joint's *original* local
     rotation, so a joint aimed again (exact reach) still differs from the input by one
@@ -154,7 +163,7 @@ def _aim_pass(
         )  # fmt: skip
         if i < n:
             b = int(plan.aims[i])
-            changed[i] = _aim_group(skel, pose, jmap, b, plan.groups[b], goal, original)
+            changed[i] = _aim_group(skel, pose, jmap, b, plan.groups[b], goal, original, heavy)
             i += 1
     return {int(b) for b in plan.aims[changed.astype(bool)]}
 
@@ -346,6 +355,7 @@ def _attempt(
     exact: Sequence[tuple[int, F64]],
     tolerance: float,
     shifts: Sequence[bool],
+    heavy: frozenset[int],
 ) -> tuple[Pose, set[int], F64 | None, int | None]:
     """One retarget onto ``goal``; the shift of the pelvis that would bring the exact
     targets out of reach of their chains within reach (None if none is needed), and the
@@ -357,7 +367,7 @@ def _attempt(
     root, turned = _place_pelvis(skel, new, jmap, plan, goal, pelvis_weight)
     if turned is not None:
         changed.add(turned)
-    changed |= _aim_pass(skel, new, jmap, plan, goal, turned, pose)
+    changed |= _aim_pass(skel, new, jmap, plan, goal, turned, pose, heavy)
     moves = []
     for (joint, target), may_shift in zip(exact, shifts, strict=True):
         chain = _chain(plan, jmap, joint)
@@ -376,11 +386,11 @@ def _attempt(
         bend = None if kid is None else pts[kid] - pts[joint]
         done = _fabrik(line, np.asarray(target, dtype=np.float64), tolerance * 0.01, bend=bend)
         goal[chain[1:]] = done[1:]
-        changed |= _aim_pass(skel, new, jmap, plan, goal, turned, pose)
+        changed |= _aim_pass(skel, new, jmap, plan, goal, turned, pose, heavy)
         wider = _widened(skel, new, jmap, plan, goal, chain, target, exact, tolerance, bend, turned)
         if wider is not None:
             rotations, aimed = new.rotations.copy(), set(changed)
-            aimed |= _aim_pass(skel, new, jmap, plan, wider, turned, pose)
+            aimed |= _aim_pass(skel, new, jmap, plan, wider, turned, pose, heavy)
             if _nearer(skel, new, jmap, exact, rotations):  # only ever a better answer
                 goal, changed = wider, aimed
             else:
@@ -464,8 +474,12 @@ def _fit(
     goal = np.array(solved, dtype=np.float64)
     body = [_PELVIS, *plan.groups.get(jmap.anchors[_PELVIS].joint, [])]
     met = [*exact, *pins]
+    # the pins and their parents (a pinned head: its neck, a child of the chest)
+    heavy = {j for j, _ in pins} | {PARENTS[j] for j, _ in pins}
     for _ in range(_ROUNDS):
-        new, changed, shift, root = _attempt(skel, pose, jmap, plan, goal, met, tolerance, shifts)
+        new, changed, shift, root = _attempt(
+            skel, pose, jmap, plan, goal, met, tolerance, shifts, frozenset(heavy)
+        )
         if shift is None:
             break
         goal[body] += shift  # out of reach from the pelvis: move the whole body towards it

@@ -297,3 +297,30 @@ def test_targets_the_answer_met_do_not_carry_the_body_across(
     print(f"\npelvis off the answer's (mm): max {max(off) * 1e3:.1f}, "
           f"{sum(o > 0.05 for o in off)}/{len(off)} beyond 50 mm")  # fmt: skip
     assert max(off) <= 0.05
+
+
+@pytest.mark.parametrize("name", sorted(FILES))
+def test_a_pinned_head_holds_on_the_character_under_far_wrists(
+    engine: Engine, files: dict[str, Path], name: str
+) -> None:
+    """Both wrists dragged 1.5 m (seeded directions), the head pinned: the canonical answer
+    holds the head, and the character's chest, which aims its neck and both collars as one
+    rigid turn, used to split the difference and left the head up to 90 mm off (FABRIK,
+    exact). The pinned head's neck now weighs most in that turn (``core.retarget.HEAVY``)."""
+    text = files[name].read_text()
+    pts = _points(text, name)
+    label = resolve_map(skeleton_of(parse_bvh(text))).describe()
+    still = {"joint": label["head"], "position": pts[JOINT_INDEX["head"]].tolist()}
+    far = 1.5 / _scale(_answer(engine, text, name, {"targets": [still]})[1])  # 1.5 m in units
+    rng = np.random.default_rng(11)
+    for options in ({"method": "fabrik", "reach": "exact"}, {"reach": "soft"}):
+        for _ in range(2):
+            d = rng.normal(size=(2, 3))
+            d /= np.linalg.norm(d, axis=1, keepdims=True)
+            wrists = [
+                {"joint": label[w], "position": (pts[JOINT_INDEX[w]] + far * d[k]).tolist()}
+                for k, w in enumerate(("left_wrist", "right_wrist"))
+            ]
+            body = {"targets": wrists, "pins": [label["head"]], "options": options}
+            _, out = _answer(engine, text, name, body)
+            assert out["pins"][0]["error"] <= 2e-3, (options, out["pins"])
