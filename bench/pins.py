@@ -1,4 +1,4 @@
-"""Do pins hold? ``python -m bench.pins [--poses 6] [--dataset data/poses.npz]``.
+"""Do pins hold? ``python -m bench.pins [--poses 6] [--dataset data/poses.npz] [--characters]``.
 
 Real poses (seeded, half from the TEST split, half from the held-out bodies), each edited
 with one pin set (a joint or two held where they are) and one far target set (joints moved
@@ -7,18 +7,28 @@ shipped models: neural and FABRIK, soft and exact reach. A pin is a hard constra
 (docs/service.md, "Pins"): the table counts the edits that left a pin more than its
 tolerance (1 mm) and more than 2 mm from where it was asked, and the farthest, per pin
 set; beside them the targets' mean miss, which says the targets were still approached.
+
+``--characters``: the same question on users' own files through ``/v1/bvh/solve``'s steps
+in process (:mod:`bench.characters`' twelve files, two frames each): the neck, the head, an
+elbow, both ankles, or the neck and both ankles pinned, one or both wrists or the head
+moved 0.5 or 1.5 m, soft, exact and FABRIK; the pin's miss is measured on the character's
+own joints (the canonical answer it is laid onto holds its pins).
 """
 
 from __future__ import annotations
 
 import itertools
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import numpy as np
 import typer
 
 from core.skeleton import JOINT_INDEX
+
+if TYPE_CHECKING:
+    from core.bvh import BVH
+    from service.engine import Engine
 
 #: What is held: a joint off the legs, the legs, or both.
 PIN_SETS: tuple[tuple[str, ...], ...] = (
@@ -78,16 +88,87 @@ def run(
     return out
 
 
-def main(
-    models: Annotated[Path, typer.Option(help="Models folder (manifest.json).")] = Path("models"),
-    dataset: Annotated[Path, typer.Option(help="Dataset file (format 2).")] = Path(
-        "data/poses.npz"
-    ),
-    poses: Annotated[int, typer.Option(min=1, help="Poses per split (TEST, held-out).")] = 6,
-    seed: Annotated[int, typer.Option(help="Seed of the poses and directions.")] = 0,
-) -> None:
-    """Print, per pin set, how many edits left a pin off and by how much."""
-    res = run(models, sample_poses(dataset, poses, seed), seed)
+#: (pins, targets) on a character (canonical names; the file's own joints by its map)
+CHARACTER_PINS: tuple[tuple[str, ...], ...] = (
+    ("neck",), ("head",), ("left_elbow",), ("left_ankle", "right_ankle"),
+    ("neck", "left_ankle", "right_ankle"),
+)  # fmt: skip
+CHARACTER_TARGETS: tuple[tuple[str, ...], ...] = (
+    ("right_wrist",), ("left_wrist", "right_wrist"), ("head",),
+)  # fmt: skip
+CHARACTER_OPTIONS = ({"reach": "soft"}, {"reach": "exact"}, {"method": "fabrik", "reach": "exact"})
+
+
+def run_characters(
+    models: Path, mocap: Path, seed: int
+) -> dict[tuple[str, ...], list[tuple[float, float]]]:
+    """Per pin set: (farthest pin on the character, targets' mean miss) of every edit,
+    metres, over :mod:`bench.characters`' files, two frames each."""
+    import tempfile
+
+    from bench.characters import extract, frame_pairs
+    from service.characters import read_request_bvh
+    from service.engine import Engine
+
+    engine = Engine(models, threads=1)
+    rng = np.random.default_rng(seed)
+    out: dict[tuple[str, ...], list[tuple[float, float]]] = {p: [] for p in CHARACTER_PINS}
+    with tempfile.TemporaryDirectory() as tmp:
+        for path, units in extract(mocap, Path(tmp)):
+            text = path.read_text(encoding="utf-8", errors="replace")
+            bvh = read_request_bvh(text)
+            for i, _ in frame_pairs(
+                bvh.num_frames, 1.0 / bvh.frame_time, 2, np.random.default_rng(1)
+            ):
+                base: dict[str, object] = {"bvh": text, "frame": i}
+                if units is not None:
+                    base["units"] = units
+                _character_frame(engine, bvh, base, rng, out)
+    return out
+
+
+def _character_frame(
+    engine: Engine, bvh: BVH, base: dict[str, object], rng: np.random.Generator,
+    out: dict[tuple[str, ...], list[tuple[float, float]]],
+) -> None:  # fmt: skip
+    """Every pin set, target set, distance and option on one frame of a file, into ``out``."""
+    from core.retarget import canonical_points
+    from service.characters import (
+        BVHSolveRequest,
+        character_from_bvh,
+        character_problem,
+        solve_prepared,
+    )  # fmt: skip
+
+    still = [{"joint": "head", "position": [0.0, 0.0, 0.0]}]  # (the character alone)
+    ch = character_from_bvh(bvh, BVHSolveRequest.model_validate({**base, "targets": still}))
+    here = canonical_points(ch.skel, ch.pose, ch.jmap)
+    label = ch.jmap.describe()
+    world = ch.to_service(here)
+    head, pelvis = JOINT_INDEX["head"], JOINT_INDEX["pelvis"]
+    metres = np.linalg.norm(world[head] - world[pelvis]) / np.linalg.norm(here[head] - here[pelvis])
+    cases = itertools.product(CHARACTER_PINS, CHARACTER_TARGETS, (0.5, 1.5), CHARACTER_OPTIONS)
+    for pins, targets, dist, options in cases:
+        if set(pins) & set(targets):
+            continue
+        d = rng.normal(size=(len(targets), 3))
+        d *= dist / metres / np.linalg.norm(d, axis=1, keepdims=True)
+        idx = [JOINT_INDEX[t] for t in targets]
+        asked = here[idx] + d
+        moved = [
+            {"joint": label[t], "position": a.tolist()} for t, a in zip(targets, asked, strict=True)
+        ]
+        body = {**base, "options": options, "pins": [label[p] for p in pins], "targets": moved}
+        req = BVHSolveRequest.model_validate(body)
+        edit = solve_prepared(engine, ch, character_problem(ch, req))
+        got = canonical_points(ch.skel, edit.pose, ch.jmap)
+        held = [JOINT_INDEX[p] for p in pins]
+        off = np.linalg.norm(got[held] - here[held], axis=1).max()
+        miss = np.linalg.norm(got[idx] - asked, axis=1).mean()
+        out[pins].append((float(off * metres), float(miss * metres)))
+
+
+def print_table(res: dict[tuple[str, ...], list[tuple[float, float]]]) -> None:
     print(
         "| pins | edits | pin > 1 mm | pin > 2 mm | farthest pin (mm) | targets' mean miss (cm) |"
     )
@@ -106,6 +187,23 @@ def main(
             f"{1000 * off.max():.1f} | {100 * miss.mean():.1f} |"
         )
     print(f"| all | {total[0]} | {total[1]} | {total[2]} | | |")
+
+
+def main(
+    models: Annotated[Path, typer.Option(help="Models folder (manifest.json).")] = Path("models"),
+    dataset: Annotated[Path, typer.Option(help="Dataset file (format 2).")] = Path(
+        "data/poses.npz"
+    ),
+    poses: Annotated[int, typer.Option(min=1, help="Poses per split (TEST, held-out).")] = 6,
+    seed: Annotated[int, typer.Option(help="Seed of the poses and directions.")] = 0,
+    characters: Annotated[bool, typer.Option(help="Users' own files instead.")] = False,
+    mocap: Annotated[Path, typer.Option(help="Archives of the files.")] = Path("../shared/mocap"),
+) -> None:
+    """Print, per pin set, how many edits left a pin off and by how much."""
+    if characters:
+        print_table(run_characters(models, mocap, seed))
+    else:
+        print_table(run(models, sample_poses(dataset, poses, seed), seed))
 
 
 if __name__ == "__main__":
