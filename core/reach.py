@@ -22,9 +22,11 @@ reach) the targets alone, from there, so that no pull of the others leaves them 
 last, where a target out of reach pulled a pin off, the pins first (the targets at a tenth
 of their weight, so that they do not wander). The root's move is priced as a turn at a
 tenth of the body's reach (:data:`_MOVE_PRICE`), so turns come first where they do it.
-The result is kept only where no point that was met is lost and the pins' farthest miss is
-smaller, or, no worse (or within half the tolerance), the targets'. The caller passes the
-targets the canonical answer met as pins (``service.characters.solve_prepared``).
+The result is kept only where no pin that was met is lost and the pins' farthest miss is
+smaller (a target met before may be lost for it: pins come first), or, no point that was
+met lost and the pins no worse (or within half the tolerance), the targets'. The targets
+the canonical answer met come as pins where the caller pinned nothing, else as targets
+below the caller's pins (``core.retarget``, ``service.characters.solve_prepared``).
 """
 
 from __future__ import annotations
@@ -126,14 +128,18 @@ def polish(
 
 def _better(start: F64, end: F64, n: int, k: int, tolerance: float) -> bool:
     """Whether misses ``end`` beat ``start`` (the first ``n``: ``k`` targets, then pins):
-    no point that was met lost, and the pins' farthest miss smaller (both within a tenth of
-    the tolerance count as equal), or, no worse (or within half the tolerance), the
-    targets'."""
-    if ((start[:n] <= tolerance) & (end[:n] > tolerance)).any():
+    no pin that was met lost, and the pins' farthest miss smaller (both within a tenth of
+    the tolerance count as equal: a target met before may be lost for it, pins come
+    first), or, no target that was met lost and the pins no worse (or within half the
+    tolerance), the targets' farthest miss smaller."""
+    lost = (start[:n] <= tolerance) & (end[:n] > tolerance)
+    if lost[k:].any():
         return False
     p0, p1 = float(start[k:n].max(initial=0.0)), float(end[k:n].max(initial=0.0))
     if p1 < p0 - 1e-12 and p0 > tolerance * 0.1:
         return True
+    if lost[:k].any():
+        return False
     t0, t1 = float(start[:k].max(initial=0.0)), float(end[:k].max(initial=0.0))
     return p1 <= max(p0, tolerance * _HOLD) and t1 < t0 - 1e-12
 

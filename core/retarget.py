@@ -434,10 +434,10 @@ def retarget(
     # pins shift the body; targets only where nothing holds it (no pin, no pelvis target)
     free = not pins and not held and all(j != _PELVIS for j, _ in exact)
     lead = [free] * len(exact) + [True] * len(pins)
-    steady = _fit(skel, pose, jmap, plan, solved, exact, [*pins, *held], soft, tolerance,
+    steady = _fit(skel, pose, jmap, plan, solved, exact, pins, held, soft, tolerance,
                   [*lead, *[False] * len(held)])  # fmt: skip
     if held and _worst(steady.points, [*pins, *held]) > tolerance:  # shift for them too
-        moved = _fit(skel, pose, jmap, plan, solved, exact, [*pins, *held], soft, tolerance,
+        moved = _fit(skel, pose, jmap, plan, solved, exact, pins, held, soft, tolerance,
                      [*lead, *[True] * len(held)])  # fmt: skip
         # kept where it holds the pins no worse and meets the held goals nearer by more than
         # half the tolerance (a gain of micrometres is not worth carrying the body across)
@@ -465,14 +465,19 @@ def _fit(
     solved: F64,
     exact: Sequence[tuple[int, F64]],
     pins: Sequence[tuple[int, F64]],
+    held: Sequence[tuple[int, F64]],
     soft: Sequence[tuple[int, F64]],
     tolerance: float,
     shifts: Sequence[bool],
 ) -> Retargeted:
-    """:func:`retarget` with ``shifts`` saying which of ``[*exact, *pins]`` may move the
-    whole body towards them when out of their chain's reach."""
+    """:func:`retarget` with ``shifts`` saying which of ``[*exact, *pins, *held]`` may move
+    the whole body towards them when out of their chain's reach. The polish holds the held
+    goals as pins where the caller pinned nothing, and as targets below the pins where it
+    did (a pinned neck is not left off to keep a wrist the answer met)."""
     goal = np.array(solved, dtype=np.float64)
     body = [_PELVIS, *plan.groups.get(jmap.anchors[_PELVIS].joint, [])]
+    hard = pins
+    pins = [*pins, *held]
     met = [*exact, *pins]
     # the pins and their parents (a pinned head: its neck, a child of the chest)
     heavy = {j for j, _ in pins} | {PARENTS[j] for j, _ in pins}
@@ -484,6 +489,9 @@ def _fit(
             break
         goal[body] += shift  # out of reach from the pelvis: move the whole body towards it
     # (soft reach: the targets come near, no phase for them alone)
-    changed |= polish(skel, new, jmap, soft or exact, pins, tolerance, root, finish=not soft)
+    if hard and held:
+        changed |= polish(skel, new, jmap, [*exact, *held], hard, tolerance, root)
+    else:
+        changed |= polish(skel, new, jmap, soft or exact, pins, tolerance, root, finish=not soft)
     g_rot, g_pos = forward_kinematics(skel, new)
     return Retargeted(new, jmap.points(g_rot, g_pos), frozenset(changed))

@@ -299,21 +299,27 @@ def test_targets_the_answer_met_do_not_carry_the_body_across(
     assert max(off) <= 0.05
 
 
+@pytest.mark.parametrize("pin", ["head", "neck"])
 @pytest.mark.parametrize("name", sorted(FILES))
-def test_a_pinned_head_holds_on_the_character_under_far_wrists(
-    engine: Engine, files: dict[str, Path], name: str
+def test_a_pinned_head_or_neck_holds_on_the_character_under_far_wrists(
+    engine: Engine, files: dict[str, Path], name: str, pin: str
 ) -> None:
-    """Both wrists dragged 1.5 m (seeded directions), the head pinned: the canonical answer
-    holds the head, and the character's chest, which aims its neck and both collars as one
-    rigid turn, used to split the difference and left the head up to 90 mm off (FABRIK,
-    exact). The pinned head's neck now weighs most in that turn (``core.retarget.HEAVY``)."""
+    """Both wrists dragged 1.5 m (seeded directions), the head or the neck pinned: the
+    canonical answer holds the pin, and the character's chest, which aims its neck and
+    both collars as one rigid turn, used to split the difference and left the head up to
+    90 mm off (FABRIK, exact; a pinned neck up to 0.3 m). The pinned child, or the child
+    above the pin, now weighs most in that turn (``core.retarget.HEAVY``), and the polish
+    puts the pin before the wrists the answer met (``core.reach._better``). A pinned neck
+    still ends up to 1 cm off in exact reach on some of these files (its anchor is not
+    where the canonical neck is on every chest): held to that, the head to 2 mm."""
+    bound = 2e-3 if pin == "head" else 0.015
     text = files[name].read_text()
     pts = _points(text, name)
     label = resolve_map(skeleton_of(parse_bvh(text))).describe()
     still = {"joint": label["head"], "position": pts[JOINT_INDEX["head"]].tolist()}
     far = 1.5 / _scale(_answer(engine, text, name, {"targets": [still]})[1])  # 1.5 m in units
     rng = np.random.default_rng(11)
-    for options in ({"method": "fabrik", "reach": "exact"}, {"reach": "soft"}):
+    for options in ({"method": "fabrik", "reach": "exact"}, {"reach": "soft"}, {"reach": "exact"}):
         for _ in range(2):
             d = rng.normal(size=(2, 3))
             d /= np.linalg.norm(d, axis=1, keepdims=True)
@@ -321,6 +327,6 @@ def test_a_pinned_head_holds_on_the_character_under_far_wrists(
                 {"joint": label[w], "position": (pts[JOINT_INDEX[w]] + far * d[k]).tolist()}
                 for k, w in enumerate(("left_wrist", "right_wrist"))
             ]
-            body = {"targets": wrists, "pins": [label["head"]], "options": options}
+            body = {"targets": wrists, "pins": [label[pin]], "options": options}
             _, out = _answer(engine, text, name, body)
-            assert out["pins"][0]["error"] <= 2e-3, (options, out["pins"])
+            assert out["pins"][0]["error"] <= bound, (options, out["pins"])
