@@ -214,7 +214,7 @@ def _shells(
 @jit
 def _iterate(
     x: F64, proposal: F64, y: F64, lens: F64, pi: I64, pf: F64, clamp: bool, start: F64,
-    tpos: F64, radii: F64, inner: F64, anchors: Bool, safe: bool,
+    tpos: F64, radii: F64, inner: F64, anchors: Bool, safe: bool, frozen: bool,
 ) -> bool:  # pragma: no cover - compiled  # fmt: skip
     """One FABRIK iteration (``kinematics._iterate``) into ``y``; False if not finite."""
     v, f1, f2, u = np.empty(3), np.empty(3), np.empty(3), np.empty(3)
@@ -256,7 +256,7 @@ def _iterate(
     if clamp:
         _clamp_root(proposal[0], start, tpos, radii, inner, anchors)
     y[:, :] = x
-    if pi[_ROOT_MOVES] == 1:
+    if pi[_ROOT_MOVES] == 1 and not frozen:
         y[0, :] = proposal[0, :]
     bwp, bwk, bwpar = pi[pi[_O_BWP] :], pi[pi[_O_BWK] :], pi[pi[_O_BWPAR] :]
     ok = True
@@ -358,13 +358,12 @@ def _solve(
         _shells(x0, lens, tpos, path, hold, hold_any, errors, tol, radii, inner, anchors)
     new_errors = np.empty(k_n)
     y = np.empty_like(x)
-    strikes, its = 0, 0
+    strikes, its, frozen = 0, 0, False
     while its < max_it and not done:
         its += 1
-        if not _iterate(
-            x, proposal, y, lens, pi, pf, clamp, start, tpos, radii, inner, anchors, False
-        ):
-            _iterate(x, proposal, y, lens, pi, pf, clamp, start, tpos, radii, inner, anchors, True)
+        args = (x, proposal, y, lens, pi, pf, clamp, start, tpos, radii, inner, anchors)
+        if not _iterate(*args, False, frozen):
+            _iterate(*args, True, frozen)
         x[:, :] = y
         _errors(x, tpos, pi, new_errors)
         progress, pin_progress, newly, all_ok = 0.0, 0.0, False, True
@@ -378,6 +377,11 @@ def _solve(
                 newly = True
         strikes = 0 if (newly or max(progress, pin_progress) >= stall) else strikes + 1
         finished = all_ok or strikes >= 3
+        if finished and not all_ok and hold_any and pi[_ROOT_MOVES] == 1 and not frozen:
+            for k in range(k_n):  # kinematics._solve: the root held, the limbs go on
+                frozen = frozen or (hold[k] and new_errors[k] > tol)
+            if frozen:
+                strikes, finished = 0, False
         converged = converged or finished
         errors[:] = new_errors
         done = finished

@@ -437,11 +437,13 @@ def _iterate(
     lengths: _LevelLengths,
     clamp: Shells | None,
     safe: bool,
+    frozen: BoolArray | None = None,
 ) -> F64:
     """One FABRIK iteration (forward then backward reaching); returns the new pose.
 
     ``proposal`` is scratch holding the fixed targets; the fast path lets undefined
     directions produce non-finite values, the caller then reruns with ``safe``.
+    ``frozen`` ``[N]``: items whose moving root stays where it is.
     """
     # Forward reaching: from the targeted joints towards the (sub-)bases.
     for fw, length in zip(plan.forward, lengths.forward, strict=True):
@@ -463,7 +465,7 @@ def _iterate(
     # Backward reaching: from the root outwards, every active bone exact again.
     y = x.copy()
     if plan.root_moves:
-        y[0] = proposal[0]
+        y[0] = proposal[0] if frozen is None else np.where(frozen[None], x[0], proposal[0])
     for (kids, parents, where), length in zip(plan.backward, lengths.backward, strict=True):
         par = y.take(parents, axis=0)
         toward = proposal.take(kids, axis=0) - par
@@ -531,13 +533,16 @@ def _solve(
 
     level_lengths = _level_lengths(lens, plan)
     strikes = np.zeros(x0.shape[-1], dtype=np.intp)
+    frozen = (
+        np.zeros(x0.shape[-1], dtype=np.bool_) if pins is not None and plan.root_moves else None
+    )
     iterations = 0
     while iterations < max_iterations and not bool(np.all(done)):
         iterations += 1
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            y = _iterate(x, proposal, plan, level_lengths, clamp, safe=False)
+            y = _iterate(x, proposal, plan, level_lengths, clamp, False, frozen)
         if not np.isfinite(np.add.reduce(y, axis=None)):
-            y = _iterate(x, proposal, plan, level_lengths, clamp, safe=True)
+            y = _iterate(x, proposal, plan, level_lengths, clamp, True, frozen)
         if done.any():  # finished poses of a batch keep their answer
             y = np.where(done[None, None], x, y)
         x = y
@@ -553,6 +558,15 @@ def _solve(
         newly_reached = np.any(~missing & (errors > tolerance), axis=0)
         strikes = np.where(newly_reached | (progress >= stall), 0, strikes + 1)
         finished = np.all(new_errors <= tolerance, axis=0) | (strikes >= 3)
+        if frozen is not None and hold is not None:
+            # a moving root that stopped with a pin still off is held where it is and the
+            # limbs go on: a chain from a fixed base meets a pin within its reach
+            again = finished & ~frozen & (new_errors[hold] > tolerance).any(axis=0)
+            frozen, strikes, finished = (
+                frozen | again,
+                np.where(again, 0, strikes),
+                finished & ~again,
+            )
         converged = converged | (finished & ~done)
         errors = np.where(done[None], errors, new_errors)
         done = done | finished

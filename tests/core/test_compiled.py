@@ -98,7 +98,13 @@ def test_fabrik_and_polish_match_numpy(
 
 
 @pytest.mark.parametrize(
-    ("pin", "joint"), [("neck", "left_wrist"), ("left_hip", "left_ankle"), ("left_knee", "pelvis")]
+    ("pin", "joint"),
+    [
+        ("neck", "left_wrist"),
+        ("left_hip", "left_ankle"),
+        ("left_knee", "pelvis"),
+        ("left_ankle", "head"),
+    ],
 )
 @pytest.mark.parametrize("polish", [False, True])
 def test_pins_off_the_legs_match_numpy(
@@ -129,3 +135,43 @@ def test_pins_off_the_legs_match_numpy(
                  pinned=pinned)  # fmt: skip
         assert np.abs(ref.positions - pose[b]).max() < 1e-12
         assert ref.iterations == its[b]
+
+
+def test_a_root_held_for_its_pins_matches_numpy(
+    real_poses: PosePairs, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Both ankles pinned, the head 1 m away, starts a network might give (4 cm of noise):
+    where the free root stops with a pin still off, it is held and the legs go on
+    (``kinematics._solve``'s ``frozen``), in numpy as compiled; every pin is met."""
+    idx = _idx(("head", "left_ankle", "right_ankle"))
+    pinned = np.asarray([False, True, True])
+    rng = np.random.default_rng(5)
+    poses = real_poses.poses[real_poses.starts]
+    goals = poses[:, idx].copy()
+    starts = poses.copy()
+    for b in range(len(poses)):
+        d = rng.normal(size=3)
+        goals[b, 0] += d / np.linalg.norm(d)
+        starts[b] += 0.04 * rng.normal(size=poses.shape[1:])
+    lens = np.ascontiguousarray(bone_lengths(poses))
+    plans = compiled_fabrik.packed_plans(idx, np.ones(3), pinned)
+    pose, its, errs, _ = compiled_fabrik.solve_batch(
+        False, starts, lens, np.ascontiguousarray(goals), np.full(len(poses), 1e-3), 256,
+        plans.local_ints, plans.local_floats, plans.has_local, plans.ints, plans.floats,
+        pinned, True,
+    )  # fmt: skip
+    assert errs[:, 1:].max() <= 1e-3
+    held = []
+    iterate = kinematics._iterate
+
+    def counting(*args: object) -> object:
+        held.append(args[6] is not None and bool(np.any(args[6])))
+        return iterate(*args)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(kinematics, "_iterate", counting)
+    for b in range(len(poses)):
+        ref = kinematics.fabrik(starts[b], lens[b], idx, goals[b], tolerance=1e-3,
+                                max_iterations=256, pinned=pinned)  # fmt: skip
+        assert np.abs(ref.positions - pose[b]).max() < 1e-12
+        assert ref.iterations == its[b]
+    assert any(held)  # the case arose
