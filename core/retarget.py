@@ -102,7 +102,7 @@ def _aim_group(
 ) -> bool:  # fmt: skip
     """Aim one group, joint ``b``; True if its rotation changed (numpy: the groups the
     compiled pass leaves, those with two children or more to aim). Children in ``heavy``
-    (pins and the joints above them) weigh :data:`HEAVY` times the others in the
+    (pins and held goals, and their parents) weigh :data:`HEAVY` times the others in the
     least-squares turn, so a chest turns a pinned neck (or a pinned head's neck) where the
     solve put it and lets the collars follow."""
     pose.rotations[b] = original.rotations[b]
@@ -479,7 +479,7 @@ def _fit(
     hard = pins
     pins = [*pins, *held]
     met = [*exact, *pins]
-    # the pins and their parents (a pinned head: its neck, a child of the chest)
+    # the pins and held goals and their parents (a pinned head: its neck, a chest's child)
     heavy = {j for j, _ in pins} | {PARENTS[j] for j, _ in pins}
     for _ in range(_ROUNDS):
         new, changed, shift, root = _attempt(
