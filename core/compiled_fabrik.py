@@ -124,11 +124,12 @@ def packed_plans(
 ) -> Plans:
     """The packed plans of a target set (K joint indices, K positive weights, which of
     them are pins: ``kinematics._make_plan``), cached."""
-    idx = tuple(int(i) for i in np.asarray(target_idx).reshape(-1))
-    w = tuple(float(v) for v in np.asarray(weights, dtype=np.float64).reshape(-1))
-    asked = np.zeros(len(idx), dtype=np.bool_) if pinned is None else np.asarray(pinned)
-    pins = tuple(bool(v) for v in asked.reshape(-1))
-    if len(w) != len(idx) or not all(np.isfinite(w)) or any(v <= 0 for v in w):
+    idx = tuple(np.asarray(target_idx, dtype=np.int64).reshape(-1).tolist())
+    wa = np.asarray(weights, dtype=np.float64).reshape(-1)
+    w = tuple(wa.tolist())
+    asked = np.zeros(len(idx), dtype=np.bool_) if pinned is None else pinned
+    pins = tuple(np.asarray(asked, dtype=np.bool_).reshape(-1).tolist())
+    if len(w) != len(idx) or not bool(np.isfinite(wa).all()) or bool((wa <= 0).any()):
         raise ValueError("weights must be one positive finite number per target")
     if len(pins) != len(idx):
         raise ValueError("pinned must be one boolean per target")
