@@ -75,19 +75,8 @@ def test_fabrik_and_polish_match_numpy(
     goals = real_poses.poses[real_poses.goals][:60][:, idx].copy()
     goals[:, pinned] = starts[:, idx[pinned]]
     lens = np.ascontiguousarray(bone_lengths(starts))
+    pose, _ = _against_numpy(polish, starts, lens, goals, idx, pinned, 1e-4, 64)
     plans = compiled_fabrik.packed_plans(idx, np.ones(k), pinned)
-    pose, its, errs, _ = compiled_fabrik.solve_batch(
-        polish, np.ascontiguousarray(starts), lens, np.ascontiguousarray(goals),
-        np.full(len(starts), 1e-4), 64, plans.local_ints, plans.local_floats,
-        plans.has_local, plans.ints, plans.floats, pinned, True,
-    )  # fmt: skip
-    fn = kinematics.polish if polish else kinematics.fabrik
-    for b in range(len(starts)):
-        ref = fn(starts[b], lens[b], idx, goals[b], tolerance=1e-4, max_iterations=64,
-                 pinned=pinned if pin else None)  # fmt: skip
-        assert np.abs(ref.positions - pose[b]).max() < 1e-12
-        assert ref.iterations == its[b]
-        assert np.abs(ref.errors - errs[b]).max() < 1e-12
     # each item alone: the same bits in a batch of one, and from one run to the next
     again = compiled_fabrik.solve_batch(
         polish, np.ascontiguousarray(starts[3:4]), lens[3:4], np.ascontiguousarray(goals[3:4]),
@@ -120,21 +109,32 @@ def test_pins_off_the_legs_match_numpy(
     goals = poses[:, idx].copy()
     d = rng.normal(size=(len(poses), 3))
     goals[:, 0] += d / np.linalg.norm(d, axis=1, keepdims=True)
-    starts = np.ascontiguousarray(poses + 0.25 * rng.normal(size=(len(poses), 1, 3)))
-    lens = np.ascontiguousarray(bone_lengths(poses))
-    plans = compiled_fabrik.packed_plans(idx, np.ones(2), pinned)
-    pose, its, errs, _ = compiled_fabrik.solve_batch(
-        polish, starts, lens, np.ascontiguousarray(goals), np.full(len(poses), 1e-3), 256,
-        plans.local_ints, plans.local_floats, plans.has_local, plans.ints, plans.floats,
-        pinned, True,
-    )  # fmt: skip
+    starts = poses + 0.25 * rng.normal(size=(len(poses), 1, 3))
+    _, errs = _against_numpy(polish, starts, bone_lengths(poses), goals, idx, pinned)
     assert errs[:, 1].max() <= 1e-3  # the pin held
+
+
+def _against_numpy(
+    polish: bool, starts: np.ndarray, lens: np.ndarray, goals: np.ndarray, idx: np.ndarray,
+    pinned: np.ndarray, tol: float = 1e-3, max_it: int = 256,
+) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """The compiled FABRIK (``polish``: the polish) of every item, pins ``pinned``, against
+    numpy's item by item (1e-12, the same iterations); its poses and errors ``[B, K]``."""
+    lens = np.ascontiguousarray(lens)
+    plans = compiled_fabrik.packed_plans(idx, np.ones(len(idx)), pinned)
+    pose, its, errs, _ = compiled_fabrik.solve_batch(
+        polish, np.ascontiguousarray(starts), lens, np.ascontiguousarray(goals),
+        np.full(len(starts), tol), max_it, plans.local_ints, plans.local_floats,
+        plans.has_local, plans.ints, plans.floats, pinned, True,
+    )  # fmt: skip
     fn = kinematics.polish if polish else kinematics.fabrik
-    for b in range(len(poses)):
-        ref = fn(starts[b], lens[b], idx, goals[b], tolerance=1e-3, max_iterations=256,
+    for b in range(len(starts)):
+        ref = fn(starts[b], lens[b], idx, goals[b], tolerance=tol, max_iterations=max_it,
                  pinned=pinned)  # fmt: skip
         assert np.abs(ref.positions - pose[b]).max() < 1e-12
         assert ref.iterations == its[b]
+        assert np.abs(ref.errors - errs[b]).max() < 1e-12
+    return pose, errs
 
 
 def test_a_root_held_for_its_pins_matches_numpy(
@@ -153,25 +153,14 @@ def test_a_root_held_for_its_pins_matches_numpy(
         d = rng.normal(size=3)
         goals[b, 0] += d / np.linalg.norm(d)
         starts[b] += 0.04 * rng.normal(size=poses.shape[1:])
-    lens = np.ascontiguousarray(bone_lengths(poses))
-    plans = compiled_fabrik.packed_plans(idx, np.ones(3), pinned)
-    pose, its, errs, _ = compiled_fabrik.solve_batch(
-        False, starts, lens, np.ascontiguousarray(goals), np.full(len(poses), 1e-3), 256,
-        plans.local_ints, plans.local_floats, plans.has_local, plans.ints, plans.floats,
-        pinned, True,
-    )  # fmt: skip
-    assert errs[:, 1:].max() <= 1e-3
     held = []
     iterate = kinematics._iterate
 
     def counting(*args: object) -> object:
-        held.append(args[6] is not None and bool(np.any(args[6])))
+        held.append(args[6] is not None and bool(np.any(np.asarray(args[6]))))
         return iterate(*args)  # type: ignore[arg-type]
 
     monkeypatch.setattr(kinematics, "_iterate", counting)
-    for b in range(len(poses)):
-        ref = kinematics.fabrik(starts[b], lens[b], idx, goals[b], tolerance=1e-3,
-                                max_iterations=256, pinned=pinned)  # fmt: skip
-        assert np.abs(ref.positions - pose[b]).max() < 1e-12
-        assert ref.iterations == its[b]
+    _, errs = _against_numpy(False, starts, bone_lengths(poses), goals, idx, pinned)
+    assert errs[:, 1:].max() <= 1e-3
     assert any(held)  # the case arose
