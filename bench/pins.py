@@ -30,15 +30,17 @@ if TYPE_CHECKING:
     from core.bvh import BVH
     from service.engine import Engine
 
-#: What is held: a joint off the legs, the legs, or both.
+#: What is held: a joint off the legs, the legs, both, or the hands.
 PIN_SETS: tuple[tuple[str, ...], ...] = (
     ("neck",), ("spine2",), ("head",), ("left_shoulder",), ("left_elbow",), ("left_hip",),
     ("left_knee",), ("left_ankle", "right_ankle"), ("neck", "left_ankle", "right_ankle"),
+    ("left_wrist", "right_wrist"),
 )  # fmt: skip
-#: What is dragged (a set sharing a joint with the pins is skipped).
+#: What is dragged (a set sharing a joint with the pins is skipped): ends, and joints
+#: above a pin (an elbow, a collar, the chest over pinned hands or shoulder).
 TARGET_SETS: tuple[tuple[str, ...], ...] = (
     ("left_wrist",), ("right_wrist",), ("left_wrist", "right_wrist"), ("head",),
-    ("left_ankle",), ("left_elbow",), ("pelvis",),
+    ("left_ankle",), ("left_elbow",), ("pelvis",), ("spine2",), ("left_collar",),
 )  # fmt: skip
 DISTANCES = (0.3, 1.0, 3.0)
 

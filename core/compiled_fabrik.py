@@ -213,6 +213,54 @@ def _shells(
 
 
 @jit
+def _hold_targets(
+    proposal: F64, aim: F64, pi: I64, pf: F64, lens: F64, tpos: F64, hold: Bool, root: F64
+) -> None:  # pragma: no cover - compiled
+    """``shells.hold_targets`` for one item, ``proposal`` in place."""
+    k_n, tr, targeted, path = pi[_K], pi[pi[_O_TR] :], pi[pi[_O_TGT] :], pf[pi[_O_PATH] :]
+    centres, radii, inner = np.empty((k_n + 1, 3)), np.empty(k_n + 1), np.empty(k_n + 1)
+    anchors, p = np.ones(k_n + 1, dtype=np.bool_), np.empty(3)
+    for t in range(pi[_T]):
+        r, kt, pinned = targeted[t], -1, False
+        for k in range(k_n):
+            if tr[k] == r:
+                kt = k if kt < 0 else kt
+                pinned = pinned or hold[k]
+        if r == 0 or pinned:
+            continue
+        m = 0
+        for kp in range(-1, k_n):  # the root (the chain above), then the pins below
+            if kp >= 0:
+                below = hold[kp] and tr[kp] != r
+                for b in range(_NB):
+                    below = below and path[kt * _NB + b] <= path[kp * _NB + b]
+                if not below:
+                    continue
+            reach, longest = 0.0, 0.0
+            for b in range(_NB):
+                w = path[kt * _NB + b] * lens[b]
+                if kp >= 0:
+                    w = (path[kp * _NB + b] - path[kt * _NB + b]) * lens[b]
+                reach += w
+                longest = max(longest, w)
+            for c in range(3):
+                centres[m, c] = tpos[kp, c] if kp >= 0 else root[c]
+            d0, d1, d2 = (
+                aim[t, 0] - centres[m, 0],
+                aim[t, 1] - centres[m, 1],
+                aim[t, 2] - centres[m, 2],
+            )
+            dist = min(np.sqrt(d0 * d0 + d1 * d1 + d2 * d2), reach)
+            inner[m] = max(2.0 * longest - reach, 0.0)
+            radii[m] = max(max(0.99 * reach, dist), inner[m])
+            m += 1
+        if m > 1:
+            p[:] = proposal[r]
+            _project_root(p, centres[:m], radii[:m], inner[:m], anchors[:m])
+            proposal[r, :] = p
+
+
+@jit
 def _iterate(
     x: F64, proposal: F64, y: F64, lens: F64, pi: I64, pf: F64, clamp: bool, start: F64,
     tpos: F64, radii: F64, inner: F64, anchors: Bool, safe: bool, frozen: bool,
@@ -354,6 +402,9 @@ def _solve(
             for k in range(k_n):
                 s += jt[t * k_n + k] * tpos[k, c]
             proposal[targeted[t], c] = s
+    aim = np.empty((t_n, 3))
+    for t in range(t_n):
+        aim[t, :] = proposal[targeted[t], :]
     clamp = pi[_ROOT_FREE] == 1 or (hold_any and pi[_ROOT_MOVES] == 1)
     if clamp:
         _shells(x0, lens, tpos, path, hold, hold_any, errors, tol, radii, inner, anchors)
@@ -362,6 +413,8 @@ def _solve(
     strikes, its, frozen = 0, 0, False
     while its < max_it and not done:
         its += 1
+        if hold_any:  # kinematics._solve: a target above a pin, as far as the pin allows
+            _hold_targets(proposal, aim, pi, pf, lens, tpos, hold, x[0])
         args = (x, proposal, y, lens, pi, pf, clamp, start, tpos, radii, inner, anchors)
         if not _iterate(*args, False, frozen):
             _iterate(*args, True, frozen)

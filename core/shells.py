@@ -18,6 +18,7 @@ import numpy as np
 import numpy.typing as npt
 
 F64 = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.intp]
 BoolArray = npt.NDArray[np.bool_]
 
 #: Distance (metres) at or below which a direction is undefined: in effect only exact
@@ -104,3 +105,33 @@ def onto_pins(x0: F64, where: Shells) -> F64:
     unchanged otherwise."""
     out: F64 = x0 + (project_root(x0[0], where) - x0[0])[None]
     return out
+
+
+def hold_targets(
+    proposal: F64, aim: F64, targeted: IntArray, ranks: IntArray, path: F64, lens: F64,
+    tpos: F64, hold: BoolArray, root: F64,
+) -> None:  # fmt: skip
+    """In place, every iteration: a targeted joint other than the root, not itself pinned,
+    with pins below it (``ranks`` of the K targets, ``path`` their ``[K, 20]`` chains from
+    the root) has its proposal moved towards its target (``aim[i]`` for ``targeted[i]``)
+    into each such pin's shell (the chain between them) and its own chain's from
+    the ``root`` where it is now: a pinned wrist keeps a dragged elbow on the sphere of its
+    forearm, a dragged chest stays within both arms' reach of pinned hands, at a point its
+    spine can bring it to. The target is approached as far as the pins allow (the root's
+    own target: :func:`clamp_root`). The projections start from the proposal of the
+    iteration before (the target at first), the root's shell first and the pins' last: a
+    lone bone's shell is a sphere, which alternating projections approach slowly where it
+    barely meets the root's, so each iteration goes on where the last one stopped."""
+    for i, r in enumerate(targeted.tolist()):
+        mine = np.flatnonzero(ranks == r)
+        if r == 0 or hold[mine].any():
+            continue
+        kt = int(mine[0])
+        below = [kp for kp in np.flatnonzero(hold).tolist()
+                 if ranks[kp] != r and bool(np.all(path[kp] >= path[kt]))]  # fmt: skip
+        if below:
+            chains = np.concatenate([path[kt][None], path[below] - path[kt]])
+            centres = np.concatenate([root[None], tpos[below]])
+            where = shells(chains, lens, aim[i], centres,
+                           np.ones((len(below) + 1, 1), dtype=np.bool_), True)  # fmt: skip
+            proposal[r] = project_root(proposal[r], where)

@@ -93,6 +93,8 @@ def test_fabrik_and_polish_match_numpy(
         ("left_hip", "left_ankle"),
         ("left_knee", "pelvis"),
         ("left_ankle", "head"),
+        ("left_wrist", "left_elbow"),
+        ("left_shoulder", "spine2"),
     ],
 )
 @pytest.mark.parametrize("polish", [False, True])

@@ -77,7 +77,12 @@ OFF_LEGS = [
     ("spine2", "head"),
     ("left_hip", "left_ankle"),
     ("left_knee", "pelvis"),
+    ("left_wrist", "left_elbow"),  # a target above the pin: as far as the pin allows
+    ("left_shoulder", "left_collar"),
+    ("right_wrist", "spine2"),
 ]
+#: targets above their pin: they come no nearer than the pin allows, which may be nowhere
+ABOVE = {("left_wrist", "left_elbow"), ("left_shoulder", "left_collar"), ("right_wrist", "spine2")}
 
 
 @pytest.mark.parametrize(("pin", "joint"), OFF_LEGS)
@@ -97,5 +102,10 @@ def test_a_pin_off_the_legs_holds_under_a_far_target(  # type: ignore[no-untyped
         start = pose + moved * rng.normal(size=3)
         res = solver(start, bone_lengths(pose), idx, goal, pinned=[False, True], max_iterations=256)
         assert res.errors[1] <= TOL, (b, res.errors)
-        if not moved:  # approached (a moved start is first brought back within the pin's reach)
-            assert res.errors[0] < np.linalg.norm(pose[J[joint]] - goal[0])
+        before = np.linalg.norm(pose[J[joint]] - goal[0])
+        if moved:  # (a moved start is first brought back within the pin's reach)
+            continue
+        if (pin, joint) in ABOVE:  # no farther than a centimetre beyond where it was
+            assert res.errors[0] < before + 0.01
+        else:  # approached
+            assert res.errors[0] < before
