@@ -213,13 +213,11 @@ def _shells(
 
 
 @jit
-def _hold_targets(
-    proposal: F64, aim: F64, pi: I64, pf: F64, lens: F64, tpos: F64, hold: Bool, root: F64
-) -> None:  # pragma: no cover - compiled
-    """``shells.hold_targets`` for one item, ``proposal`` in place."""
+def _above_pins(pi: I64, pf: F64, hold: Bool) -> tuple[I64, Bool]:  # pragma: no cover
+    """``shells.above_pins`` for one target set: per targeted joint its first target (-1
+    where it holds nothing: the root, pinned, or no pin below) and the pins below it."""
     k_n, tr, targeted, path = pi[_K], pi[pi[_O_TR] :], pi[pi[_O_TGT] :], pf[pi[_O_PATH] :]
-    centres, radii, inner = np.empty((k_n + 1, 3)), np.empty(k_n + 1), np.empty(k_n + 1)
-    anchors, p = np.ones(k_n + 1, dtype=np.bool_), np.empty(3)
+    kts, below = np.full(pi[_T], -1, dtype=np.int64), np.zeros((pi[_T], k_n), dtype=np.bool_)
     for t in range(pi[_T]):
         r, kt, pinned = targeted[t], -1, False
         for k in range(k_n):
@@ -228,14 +226,34 @@ def _hold_targets(
                 pinned = pinned or hold[k]
         if r == 0 or pinned:
             continue
+        for kp in range(k_n):
+            under = hold[kp] and tr[kp] != r
+            for b in range(_NB):
+                under = under and path[kt * _NB + b] <= path[kp * _NB + b]
+            below[t, kp] = under
+            if under:
+                kts[t] = kt
+    return kts, below
+
+
+@jit
+def _hold_targets(
+    proposal: F64, aim: F64, pi: I64, pf: F64, lens: F64, tpos: F64, root: F64, kts: I64,
+    below: Bool,
+) -> None:  # pragma: no cover - compiled  # fmt: skip
+    """``shells.hold_targets`` for one item (``kts``, ``below``: :func:`_above_pins`),
+    ``proposal`` in place."""
+    k_n, targeted, path = pi[_K], pi[pi[_O_TGT] :], pf[pi[_O_PATH] :]
+    centres, radii, inner = np.empty((k_n + 1, 3)), np.empty(k_n + 1), np.empty(k_n + 1)
+    anchors, p = np.ones(k_n + 1, dtype=np.bool_), np.empty(3)
+    for t in range(pi[_T]):
+        kt = kts[t]
+        if kt < 0:
+            continue
         m = 0
         for kp in range(-1, k_n):  # the root (the chain above), then the pins below
-            if kp >= 0:
-                below = hold[kp] and tr[kp] != r
-                for b in range(_NB):
-                    below = below and path[kt * _NB + b] <= path[kp * _NB + b]
-                if not below:
-                    continue
+            if kp >= 0 and not below[t, kp]:
+                continue
             reach, longest = 0.0, 0.0
             for b in range(_NB):
                 w = path[kt * _NB + b] * lens[b]
@@ -254,10 +272,9 @@ def _hold_targets(
             inner[m] = max(2.0 * longest - reach, 0.0)
             radii[m] = max(max(0.99 * reach, dist), inner[m])
             m += 1
-        if m > 1:
-            p[:] = proposal[r]
-            _project_root(p, centres[:m], radii[:m], inner[:m], anchors[:m])
-            proposal[r, :] = p
+        p[:] = proposal[targeted[t]]
+        _project_root(p, centres[:m], radii[:m], inner[:m], anchors[:m])
+        proposal[targeted[t], :] = p
 
 
 @jit
@@ -410,11 +427,13 @@ def _solve(
         _shells(x0, lens, tpos, path, hold, hold_any, errors, tol, radii, inner, anchors)
     new_errors = np.empty(k_n)
     y = np.empty_like(x)
+    kts, below = _above_pins(pi, pf, hold if hold_any else np.zeros(k_n, dtype=np.bool_))
+    holding = bool((kts >= 0).any())
     strikes, its, frozen = 0, 0, False
     while its < max_it and not done:
         its += 1
-        if hold_any:  # kinematics._solve: a target above a pin, as far as the pin allows
-            _hold_targets(proposal, aim, pi, pf, lens, tpos, hold, x[0])
+        if holding:  # kinematics._solve: a target above a pin, as far as the pin allows
+            _hold_targets(proposal, aim, pi, pf, lens, tpos, x[0], kts, below)
         args = (x, proposal, y, lens, pi, pf, clamp, start, tpos, radii, inner, anchors)
         if not _iterate(*args, False, frozen):
             _iterate(*args, True, frozen)

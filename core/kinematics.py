@@ -30,7 +30,7 @@ import numpy.typing as npt
 
 from core.rest import REST_DIRS
 from core.shells import TINY as _TINY
-from core.shells import Shells, clamp_root, hold_targets, onto_pins, shells
+from core.shells import Shells, above_pins, clamp_root, hold_targets, onto_pins, shells
 from core.shells import dot3 as _dot3
 from core.shells import norm3 as _norm3
 from core.skeleton import BONE_CHILDREN, DEPTH, NUM_JOINTS, PARENTS
@@ -536,12 +536,12 @@ def _solve(
     frozen = (
         np.zeros(x0.shape[-1], dtype=np.bool_) if pins is not None and plan.root_moves else None
     )
+    above = [] if hold is None else above_pins(plan.targeted, plan.target_ranks, plan.path, hold)
     iterations = 0
     while iterations < max_iterations and not bool(np.all(done)):
         iterations += 1
-        if hold is not None:  # a target above a pin: as far as the pin allows
-            hold_targets(proposal, joint_t, plan.targeted, plan.target_ranks, plan.path, lens,
-                         tpos, hold, x[0])  # fmt: skip
+        if above:  # a target above a pin: as far as the pin allows
+            hold_targets(proposal, joint_t, above, plan.path, lens, tpos, x[0])
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             y = _iterate(x, proposal, plan, level_lengths, clamp, False, frozen)
         if not np.isfinite(np.add.reduce(y, axis=None)):

@@ -107,21 +107,14 @@ def onto_pins(x0: F64, where: Shells) -> F64:
     return out
 
 
-def hold_targets(
-    proposal: F64, aim: F64, targeted: IntArray, ranks: IntArray, path: F64, lens: F64,
-    tpos: F64, hold: BoolArray, root: F64,
-) -> None:  # fmt: skip
-    """In place, every iteration: a targeted joint other than the root, not itself pinned,
-    with pins below it (``ranks`` of the K targets, ``path`` their ``[K, 20]`` chains from
-    the root) has its proposal moved towards its target (``aim[i]`` for ``targeted[i]``)
-    into each such pin's shell (the chain between them) and its own chain's from
-    the ``root`` where it is now: a pinned wrist keeps a dragged elbow on the sphere of its
-    forearm, a dragged chest stays within both arms' reach of pinned hands, at a point its
-    spine can bring it to. The target is approached as far as the pins allow (the root's
-    own target: :func:`clamp_root`). The projections start from the proposal of the
-    iteration before (the target at first), the root's shell first and the pins' last: a
-    lone bone's shell is a sphere, which alternating projections approach slowly where it
-    barely meets the root's, so each iteration goes on where the last one stopped."""
+def above_pins(
+    targeted: IntArray, ranks: IntArray, path: F64, hold: BoolArray
+) -> list[tuple[int, int, int, list[int]]]:
+    """(index into ``targeted``, rank, its first target, the pins below it) of every targeted
+    joint other than the root, not itself pinned, with pins below it (``ranks`` of the K
+    targets, ``path`` their ``[K, 20]`` chains from the root): what :func:`hold_targets`
+    holds, the same for every iteration of a solve."""
+    out = []
     for i, r in enumerate(targeted.tolist()):
         mine = np.flatnonzero(ranks == r)
         if r == 0 or hold[mine].any():
@@ -130,8 +123,27 @@ def hold_targets(
         below = [kp for kp in np.flatnonzero(hold).tolist()
                  if ranks[kp] != r and bool(np.all(path[kp] >= path[kt]))]  # fmt: skip
         if below:
-            chains = np.concatenate([path[kt][None], path[below] - path[kt]])
-            centres = np.concatenate([root[None], tpos[below]])
-            where = shells(chains, lens, aim[i], centres,
-                           np.ones((len(below) + 1, 1), dtype=np.bool_), True)  # fmt: skip
-            proposal[r] = project_root(proposal[r], where)
+            out.append((i, r, kt, below))
+    return out
+
+
+def hold_targets(
+    proposal: F64, aim: F64, above: list[tuple[int, int, int, list[int]]], path: F64,
+    lens: F64, tpos: F64, root: F64,
+) -> None:  # fmt: skip
+    """In place, every iteration: each targeted joint above pins (:func:`above_pins`) has its
+    proposal moved towards its target (``aim[i]`` for ``targeted[i]``) into each such pin's
+    shell (the chain between them) and its own chain's from the ``root`` where it is now: a
+    pinned wrist keeps a dragged elbow on the sphere of its forearm, a dragged chest stays
+    within both arms' reach of pinned hands, at a point its spine can bring it to. The
+    target is approached as far as the pins allow (the root's own target:
+    :func:`clamp_root`). The projections start from the proposal of the iteration before
+    (the target at first), the root's shell first and the pins' last: a lone bone's shell
+    is a sphere, which alternating projections approach slowly where it barely meets the
+    root's, so each iteration goes on where the last one stopped."""
+    for i, r, kt, below in above:
+        chains = np.concatenate([path[kt][None], path[below] - path[kt]])
+        centres = np.concatenate([root[None], tpos[below]])
+        where = shells(chains, lens, aim[i], centres,
+                       np.ones((len(below) + 1, 1), dtype=np.bool_), True)  # fmt: skip
+        proposal[r] = project_root(proposal[r], where)
