@@ -4,9 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from typer.testing import CliRunner
-
 from bench.bvh_route import app
+from tests.bench.tables import table_of
 from tests.character_files import extract_bvh
 
 
@@ -15,9 +14,7 @@ def test_a_row_per_file_with_each_step_timed(
 ) -> None:
     files = extract_bvh(mocap_dir, tmp_path)
     args = [str(files["bandai"]), "--models", str(models_dir), "--calls", "1"]
-    result = CliRunner().invoke(app, args)
-    assert result.exit_code == 0, result.output
-    header, _, row = result.output.strip().splitlines()
+    header, (row,) = table_of(app, args)
     assert header.startswith("| file | MB | frames | read whole | read the frame")
     cells = [c.strip() for c in row.strip("|").split("|")]
     assert cells[0] == files["bandai"].name and cells[2] == "195"

@@ -6,10 +6,10 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from typer.testing import CliRunner
 
 from bench.characters import SETS, app, frame_pairs, score_file
 from service.engine import Engine
+from tests.bench.tables import table_of
 from tests.character_files import extract_bvh
 
 
@@ -26,9 +26,7 @@ def test_a_row_per_set_scored_against_the_later_frame(
 ) -> None:
     files = extract_bvh(mocap_dir, tmp_path)
     args = [str(files["bandai"]), "--models", str(models_dir), "--edits", "3"]
-    result = CliRunner().invoke(app, args)
-    assert result.exit_code == 0, result.output
-    header, _, *rows = result.output.strip().splitlines()
+    header, rows = table_of(app, args)
     assert header.startswith("| file | set | edits | start | FABRIK | soft | exact |")
     assert len(rows) == len(SETS)
     for row, (name, _) in zip(rows, SETS, strict=True):

@@ -1,0 +1,16 @@
+"""Running a benchmark's command line that prints a markdown table."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from typer.testing import CliRunner
+
+
+def table_of(app: Any, args: list[str]) -> tuple[str, list[str]]:
+    """The header line and the rows of the markdown table ``app`` prints for ``args``
+    (the command must succeed)."""
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == 0, result.output
+    header, _, *rows = result.output.strip().splitlines()
+    return header, rows
