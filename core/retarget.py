@@ -476,22 +476,20 @@ def _fit(
     did (a pinned neck is not left off to keep a wrist the answer met)."""
     goal = np.array(solved, dtype=np.float64)
     body = [_PELVIS, *plan.groups.get(jmap.anchors[_PELVIS].joint, [])]
-    hard = pins
-    pins = [*pins, *held]
-    met = [*exact, *pins]
+    kept = [*pins, *held]  # held as pins are while the body is laid out
     # the pins and held goals and their parents (a pinned head: its neck, a chest's child)
-    heavy = {j for j, _ in pins} | {PARENTS[j] for j, _ in pins}
+    heavy = frozenset({j for j, _ in kept} | {PARENTS[j] for j, _ in kept})
     for _ in range(_ROUNDS):
         new, changed, shift, root = _attempt(
-            skel, pose, jmap, plan, goal, met, tolerance, shifts, frozenset(heavy)
+            skel, pose, jmap, plan, goal, [*exact, *kept], tolerance, shifts, heavy
         )
         if shift is None:
             break
         goal[body] += shift  # out of reach from the pelvis: move the whole body towards it
     # (soft reach: the targets come near, no phase for them alone)
-    if hard and held:
-        changed |= polish(skel, new, jmap, [*exact, *held], hard, tolerance, root)
+    if pins and held:
+        changed |= polish(skel, new, jmap, [*exact, *held], pins, tolerance, root)
     else:
-        changed |= polish(skel, new, jmap, soft or exact, pins, tolerance, root, finish=not soft)
+        changed |= polish(skel, new, jmap, soft or exact, kept, tolerance, root, finish=not soft)
     g_rot, g_pos = forward_kinematics(skel, new)
     return Retargeted(new, jmap.points(g_rot, g_pos), frozenset(changed))
