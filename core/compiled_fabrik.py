@@ -192,16 +192,25 @@ def _project_root(
 
 
 @jit
+def _reach(path: F64, lens: F64, k: int, kt: int) -> tuple[float, float]:  # pragma: no cover
+    """Full stretch and longest bone of target ``k``'s chain from the root (``kt`` -1), or
+    from target ``kt``'s joint above it: ``path`` the plan's ``[K, 20]`` flat."""
+    reach, longest = 0.0, 0.0
+    for b in range(_NB):
+        w = path[k * _NB + b] if kt < 0 else path[k * _NB + b] - path[kt * _NB + b]
+        reach += w * lens[b]
+        longest = max(longest, w * lens[b])
+    return reach, longest
+
+
+@jit
 def _shells(
     x0: F64, lens: F64, tpos: F64, path: F64, hold: Bool, hold_any: bool, errors: F64,
     tol: float, radii: F64, inner: F64, anchors: Bool,
 ) -> None:  # pragma: no cover - compiled  # fmt: skip
     """``shells.shells`` for one item into ``radii``, ``inner`` and ``anchors``."""
     for k in range(tpos.shape[0]):
-        reach, longest = 0.0, 0.0
-        for b in range(lens.shape[0]):
-            reach += path[k * _NB + b] * lens[b]
-            longest = max(longest, path[k * _NB + b] * lens[b])
+        reach, longest = _reach(path, lens, k, -1)
         d0, d1, d2 = x0[0, 0] - tpos[k, 0], x0[0, 1] - tpos[k, 1], x0[0, 2] - tpos[k, 2]
         dist = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
         anchors[k] = errors[k] <= tol
@@ -254,13 +263,7 @@ def _hold_targets(
         for kp in range(-1, k_n):  # the root (the chain above), then the pins below
             if kp >= 0 and not below[t, kp]:
                 continue
-            reach, longest = 0.0, 0.0
-            for b in range(_NB):
-                w = path[kt * _NB + b] * lens[b]
-                if kp >= 0:
-                    w = (path[kp * _NB + b] - path[kt * _NB + b]) * lens[b]
-                reach += w
-                longest = max(longest, w)
+            reach, longest = _reach(path, lens, kt, -1) if kp < 0 else _reach(path, lens, kp, kt)
             for c in range(3):
                 centres[m, c] = tpos[kp, c] if kp >= 0 else root[c]
             d0, d1, d2 = (
