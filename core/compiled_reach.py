@@ -10,7 +10,11 @@ need SciPy, which the service does not install). A pivot that is not positive is
 JᵀJ of a rank-deficient J (a twist about a bone) once the damping has fallen below its
 rounding; the step is then solved again with ten times the damping, as numpy's LU on the
 other side never needed (a review: refusing the step instead wasted up to 11 of a phase's
-30 steps and broke a pin numpy held). The turns by Rodrigues' formula,
+30 steps and broke a pin numpy held). A step is cut to the largest turn (``max_turn``);
+where targets and pins pull together and the cut bites, the step of a damping raised until
+it fits is tried beside it and the better kept (a far wrist's swing of the arm had shrunk
+the spine's turn that brings a pinned neck back: `python -m bench.pins --characters`, 48
+edits with a pin over 2 mm off, up to 91.5 mm, before; none after). The turns by Rodrigues' formula,
 forward kinematics (:func:`core.compiled_characters.forward_kinematics_into`). Products in
 source order, no fused multiply-add: the same request gives the same bits.
 """
@@ -151,6 +155,9 @@ def descend_into(
     jac, err = np.zeros((nrow, ncol)), np.empty(nrow)
     small = min(nrow, ncol)
     normal, rhs, step = np.empty((small, small)), np.empty(small), np.empty(ncol)
+    part, a_rot, a_tr = np.empty(ncol), np.empty((nj, 3, 3)), np.empty((nj, 3))
+    a_grot, a_gpos, a_pts, a_now = (np.empty((nj, 3, 3)), np.empty((nj, 3)),
+                                    np.empty((npts, 3)), np.empty(npts))  # fmt: skip
     forward_kinematics_into(parents, rotations, translations, g_rot, g_pos)
     _points_into(g_rot, g_pos, anchor, offset, pts)
     cost = _cost(misses, weight)
@@ -187,51 +194,41 @@ def descend_into(
                 err[3 * i + r] = (goals[i, r] - pts[i, r]) * w
         ok = False  # a pivot not positive (J rank-deficient, the damping below rounding):
         while not ok and damping <= 1e8 * scale * scale:  # more damping, the same step
-            if nrow <= ncol:  # (J Jᵀ + λI) y = e, step = Jᵀ y
-                _gram_into(jac, damping, normal)
-                rhs[:] = err
-                ok = _cholesky_solve(normal, rhs)
-                _product_into(jac.T, rhs, step)
-            else:  # (JᵀJ + λI) step = Jᵀ e
-                _gram_into(jac.T, damping, normal)
-                _product_into(jac.T, err, rhs)
-                ok = _cholesky_solve(normal, rhs)
-                step[:] = rhs
+            ok = _damped_into(jac, err, damping, normal, rhs, step)
             if not ok:
                 damping *= 10.0
         if not ok:
             break  # no damping the cap allows makes it positive definite
-        big = 0.0
+        big = _largest(step)
         for c in range(ncol):
-            big = max(big, abs(step[c]))
-        cut = min(1.0, max_turn / max(big, 1e-300))
-        for c in range(ncol):
-            step[c] *= cut
-        for j in range(nj):
-            for r in range(3):
-                new_tr[j, r] = translations[j, r]
-                for c in range(3):
-                    new_rot[j, r, c] = rotations[j, r, c]
-        for m in range(nm):
-            _turn_into(step, m, parents[movable[m]], movable[m], g_rot, rotations, new_rot)
-        if root >= 0:
-            p = parents[root]
-            for r in range(3):
-                shift = step[3 * nm + r] * scale
-                if p >= 0:  # into the parent's frame: g_rot[p]ᵀ shift
-                    shift = (
-                        g_rot[p, 0, r] * step[3 * nm] * scale
-                        + g_rot[p, 1, r] * step[3 * nm + 1] * scale
-                        + g_rot[p, 2, r] * step[3 * nm + 2] * scale
-                    )
-                new_tr[root, r] = translations[root, r] + shift
-        forward_kinematics_into(parents, new_rot, new_tr, n_rot, n_pos)
-        _points_into(n_rot, n_pos, anchor, offset, n_pts)
-        _misses_into(n_pts, goals, now)
-        new = _cost(now, weight)
-        for i in range(k, n):
-            if not now[i] <= hold:
-                new = np.inf  # a pin taken too far: refused
+            part[c] = step[c] * min(1.0, max_turn / max(big, 1e-300))
+        new = _scored(part, parents, movable, root, scale, g_rot, rotations, translations,
+                      anchor, offset, goals, weight, hold, n, k, new_rot, new_tr, n_rot, n_pos,
+                      n_pts, now)  # fmt: skip
+        if 0 < k < n and big > max_turn:
+            # Cut short where targets and pins pull together: a far target's swing of an
+            # arm can be the largest turn, and the whole step cut to it shrinks the turns
+            # that bring a pin back. Also tried: the step of a damping raised until it fits
+            # (a trust region), which favours the moves that gain most for their size; the
+            # better of the two is taken, and its damping kept.
+            raised, fits = damping, False
+            while not fits and raised <= 1e8 * scale * scale:
+                raised *= 10.0
+                if _damped_into(jac, err, raised, normal, rhs, part):
+                    fits = _largest(part) <= max_turn
+            alt = np.inf
+            if fits:
+                alt = _scored(part, parents, movable, root, scale, g_rot, rotations,
+                              translations, anchor, offset, goals, weight, hold, n, k, a_rot,
+                              a_tr, a_grot, a_gpos, a_pts, a_now)  # fmt: skip
+            if alt < new:
+                new, damping = alt, raised
+                new_rot[:] = a_rot
+                new_tr[:] = a_tr
+                n_rot[:] = a_grot
+                n_pos[:] = a_gpos
+                n_pts[:] = a_pts
+                now[:] = a_now
         if new < cost:
             cost = new
             rotations[:] = new_rot
@@ -240,7 +237,8 @@ def descend_into(
             g_pos[:] = n_pos
             pts[:] = n_pts
             misses[:] = now
-            damping = max(damping / 10.0, (1e-6 * scale) ** 2)
+            damping = max(damping / 3.0, (1e-6 * scale) ** 2)  # (/ 10 wasted every other
+            # step: the damping that worked, a tenth of it refused, back, ...)
             taken += 1
             seen[taken] = cost
         else:
@@ -248,6 +246,86 @@ def descend_into(
             if damping > 1e8 * scale * scale:  # no step, however short, helps
                 break
     return taken
+
+
+@jit
+def _damped_into(
+    jac: F64, err: F64, damping: float, normal: F64, rhs: F64, step: F64
+) -> bool:  # pragma: no cover - compiled
+    """The damped least-squares step ``step`` of ``jac``, ``err`` on the smaller side;
+    False where a Cholesky pivot is not positive."""
+    if jac.shape[0] <= jac.shape[1]:  # (J Jᵀ + λI) y = e, step = Jᵀ y
+        _gram_into(jac, damping, normal)
+        rhs[:] = err
+        ok = _cholesky_solve(normal, rhs)
+        _product_into(jac.T, rhs, step)
+        return ok
+    _gram_into(jac.T, damping, normal)  # (JᵀJ + λI) step = Jᵀ e
+    _product_into(jac.T, err, rhs)
+    ok = _cholesky_solve(normal, rhs)
+    step[:] = rhs
+    return ok
+
+
+@jit
+def _largest(step: F64) -> float:  # pragma: no cover - compiled
+    big = 0.0
+    for c in range(step.shape[0]):
+        big = max(big, abs(step[c]))
+    return big
+
+
+@jit
+def _scored(
+    part: F64,
+    parents: I64,
+    movable: I64,
+    root: int,
+    scale: float,
+    g_rot: F64,
+    rotations: F64,
+    translations: F64,
+    anchor: I64,
+    offset: F64,
+    goals: F64,
+    weight: F64,
+    hold: float,
+    n: int,
+    k: int,
+    new_rot: F64,
+    new_tr: F64,
+    n_rot: F64,
+    n_pos: F64,
+    n_pts: F64,
+    now: F64,
+) -> float:  # pragma: no cover - compiled
+    """The pose the step ``part`` leads to, into ``new_rot``, ``new_tr`` (local) and
+    ``n_rot``, ``n_pos``, ``n_pts``, ``now`` (world, the points, their misses), and its
+    weighted cost (inf where a pin goes farther than ``hold``: refused)."""
+    nm = movable.shape[0]
+    new_rot[:] = rotations
+    new_tr[:] = translations
+    for m in range(nm):
+        _turn_into(part, m, parents[movable[m]], movable[m], g_rot, rotations, new_rot)
+    if root >= 0:
+        p = parents[root]
+        for r in range(3):
+            shift = part[3 * nm + r] * scale
+            if p >= 0:  # into the parent's frame: g_rot[p]ᵀ shift
+                shift = (
+                    g_rot[p, 0, r] * part[3 * nm] * scale
+                    + g_rot[p, 1, r] * part[3 * nm + 1] * scale
+                    + g_rot[p, 2, r] * part[3 * nm + 2] * scale
+                )
+            new_tr[root, r] = translations[root, r] + shift
+    forward_kinematics_into(parents, new_rot, new_tr, n_rot, n_pos)
+    _points_into(n_rot, n_pos, anchor, offset, n_pts)
+    _misses_into(n_pts, goals, now)
+    cost = _cost(now, weight)
+    for i in range(k, n):
+        if not now[i] <= hold:
+            cost = np.inf
+    return cost
 
 
 @jit

@@ -113,3 +113,30 @@ def test_a_turn_that_moves_nothing_does_not_stall_the_steps() -> None:
         1e-6, 30, 0.1, 5, 0.01, misses,
     )  # fmt: skip
     assert misses[0] < 1e-3, misses
+
+
+def test_a_far_target_s_swing_of_an_arm_does_not_stall_a_pin() -> None:
+    """Found with ``python -m bench.pins --characters``: a wrist dragged far out of reach
+    asks its arm for turns of tens of radians, and the step cut to the largest turn (0.1
+    rad) shrank the spine's turn that brings a pinned neck back with it: the steps stalled
+    with the neck 9 cm off here (42 mm on a real file, both ankles pinned too). Where
+    targets and pins pull together, the step of a damping raised until it fits is tried
+    too; it turns the spine and brings the pin back. Weights as in the pins-first phase."""
+    parents = np.array([-1, 0, 1, 1, 3, 4], np.int64)  # root, spine, neck; an arm off the spine
+    rotations = np.repeat(np.eye(3)[None], 6, axis=0)
+    translations = np.array(
+        [[0, 0, 0], [0, 0.5, 0], [0, 0.5, 0], [0.2, 0.4, 0], [0.3, 0, 0], [0.3, 0, 0]], float
+    )
+    spine, neck = translations[:2].sum(axis=0), translations[:3].sum(axis=0)
+    c, s = np.cos(0.2), np.sin(0.2)  # the neck's pin: its place turned 0.2 rad about the spine
+    pinned = spine + np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]) @ (neck - spine)
+    goals = np.array([[20.0, 0.0, 0.0], pinned])  # the hand 19 m out of reach
+    hand = translations[[0, 1, 3, 4, 5]].sum(axis=0)
+    misses = np.linalg.norm(np.array([hand, neck]) - goals, axis=1)
+    descend_into(
+        parents, rotations, translations, np.array([5, 2], np.int64), np.zeros((2, 3)), goals,
+        np.array([0.1, 30.0]), np.array([1, 3, 4], np.int64),
+        np.array([[1.0, 1.0], [1.0, 0.0], [1.0, 0.0]]), -1, 0.1, 1.0, 2, 1, 1e-3, 30, 0.1, 5,
+        0.01, misses,
+    )  # fmt: skip
+    assert misses[1] < 1e-3, misses
