@@ -48,8 +48,12 @@ def extract_bvh(mocap: Path, out: Path) -> dict[str, Path]:
         if not (mocap / archive).is_file():
             pytest.skip(f"mocap archive {archive} not found in {mocap}")
         by_archive.setdefault(archive, []).append(member)
-    for archive, members in by_archive.items():
-        subprocess.run([tar, "-xJf", str(mocap / archive), "-C", str(out), *members], check=True)
+    procs = [  # the archives in parallel
+        subprocess.Popen([tar, "-xJf", str(mocap / archive), "-C", str(out), *members])
+        for archive, members in by_archive.items()
+    ]
+    for proc in procs:
+        assert proc.wait() == 0, f"tar failed ({proc.args})"
     return {name: out / member for name, (_, member, _, _) in FILES.items()}
 
 

@@ -11,6 +11,8 @@ Mocap (real data, session-scoped):
 - ``more_mocap``: a few real files of the three multi-body archives (CMU ASF/AMC, ReActIdle,
   AnimatedDrawings), laid out like the archives; skipped when those archives are absent.
 - ``real_poses``: real canonical poses and (start, goal) pairs from ``small_dataset``.
+- ``bvh_files``: the character files of :data:`tests.character_files.FILES` (five studios'
+  BVH), extracted once; read them, never write them.
 
 Every test that uses one of these (directly or through another fixture) is marked
 ``mocap`` by :func:`pytest_collection_modifyitems`: ``pytest -m "not mocap"`` runs the
@@ -395,3 +397,12 @@ def make_client(models_dir: Path, **settings: Any) -> Any:
 def client(models_dir: Path) -> Iterator[Any]:
     with make_client(models_dir) as c:
         yield c
+
+
+@pytest.fixture(scope="session")
+def bvh_files(mocap_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """:func:`tests.character_files.extract_bvh` once per session (each module extracting
+    its own copy cost ~10 s of xz a module)."""
+    from tests.character_files import extract_bvh
+
+    return extract_bvh(mocap_dir, tmp_path_factory.mktemp("bvh_files"))

@@ -6,17 +6,13 @@ from pathlib import Path
 
 from bench.bvh_route import app
 from tests.bench.tables import table_of
-from tests.character_files import extract_bvh
 
 
-def test_a_row_per_file_with_each_step_timed(
-    mocap_dir: Path, models_dir: Path, tmp_path: Path
-) -> None:
-    files = extract_bvh(mocap_dir, tmp_path)
-    args = [str(files["bandai"]), "--models", str(models_dir), "--calls", "1"]
+def test_a_row_per_file_with_each_step_timed(bvh_files: dict[str, Path], models_dir: Path) -> None:
+    args = [str(bvh_files["bandai"]), "--models", str(models_dir), "--calls", "1"]
     header, (row,) = table_of(app, args)
     assert header.startswith("| file | MB | frames | read whole | read the frame")
     cells = [c.strip() for c in row.strip("|").split("|")]
-    assert cells[0] == files["bandai"].name and cells[2] == "195"
+    assert cells[0] == bvh_files["bandai"].name and cells[2] == "195"
     times = [float(c) for c in cells[3:]]
     assert all(t > 0 for t in times) and len(times) == 5

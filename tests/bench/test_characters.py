@@ -10,7 +10,6 @@ import numpy as np
 from bench.characters import SETS, app, frame_pairs, score_file
 from service.engine import Engine
 from tests.bench.tables import table_of
-from tests.character_files import extract_bvh
 
 
 def test_frame_pairs_are_a_fifth_to_one_second_apart() -> None:
@@ -22,16 +21,15 @@ def test_frame_pairs_are_a_fifth_to_one_second_apart() -> None:
 
 
 def test_a_row_per_set_scored_against_the_later_frame(
-    mocap_dir: Path, models_dir: Path, tmp_path: Path
+    bvh_files: dict[str, Path], models_dir: Path
 ) -> None:
-    files = extract_bvh(mocap_dir, tmp_path)
-    args = [str(files["bandai"]), "--models", str(models_dir), "--edits", "3"]
+    args = [str(bvh_files["bandai"]), "--models", str(models_dir), "--edits", "3"]
     header, rows = table_of(app, args)
     assert header.startswith("| file | set | edits | start | FABRIK | soft | exact |")
     assert len(rows) == len(SETS)
     for row, (name, _) in zip(rows, SETS, strict=True):
         cells = [c.strip() for c in row.strip("|").split("|")]
-        assert cells[:3] == [files["bandai"].name, name, "3"]
+        assert cells[:3] == [bvh_files["bandai"].name, name, "3"]
         start, fabrik, soft, exact, soft_c, exact_c = map(float, cells[3:9])
         assert float(cells[9].split("/")[1]) <= 0.1  # exact reach: within 1 mm (in cm)
         if name == "5 end eff.":  # a walk: five joints where they went say most of it
@@ -39,9 +37,9 @@ def test_a_row_per_set_scored_against_the_later_frame(
 
 
 def test_a_file_shorter_than_a_fifth_of_a_second_gives_no_row(
-    mocap_dir: Path, models_dir: Path, tmp_path: Path
+    bvh_files: dict[str, Path], models_dir: Path, tmp_path: Path
 ) -> None:
-    text = extract_bvh(mocap_dir, tmp_path)["bandai"].read_text()
+    text = bvh_files["bandai"].read_text()
     head, _, motion = text.partition("MOTION")
     lines = motion.strip().splitlines()  # "Frames: N", "Frame Time: t", then the frames
     short = tmp_path / "short.bvh"

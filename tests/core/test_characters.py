@@ -23,16 +23,10 @@ from core.characters_maps import resolve_map, rest_points
 from core.rest import rest_pose
 from core.retarget import _aim_group, _aim_pass, _plan, canonical_points, retarget
 from core.skeleton import JOINT_INDEX, JOINT_NAMES, PARENTS
-from tests.character_files import extract_bvh
 
 
-@pytest.fixture(scope="module")
-def files(mocap_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    return extract_bvh(mocap_dir, tmp_path_factory.mktemp("core-characters"))
-
-
-def test_writer_round_trip(files: dict[str, Path]) -> None:
-    for path in files.values():
+def test_writer_round_trip(bvh_files: dict[str, Path]) -> None:
+    for path in bvh_files.values():
         bvh = read_bvh(path)
         again = parse_bvh(format_bvh(bvh))
         assert again.joints == bvh.joints
@@ -42,8 +36,8 @@ def test_writer_round_trip(files: dict[str, Path]) -> None:
         assert splice_frame(bvh, 3, bvh.motion[3], []) == bvh.text
 
 
-def test_real_files_map_automatically(files: dict[str, Path]) -> None:
-    schemes = {n: resolve_map(skeleton_of(read_bvh(p))).scheme for n, p in files.items()}
+def test_real_files_map_automatically(bvh_files: dict[str, Path]) -> None:
+    schemes = {n: resolve_map(skeleton_of(read_bvh(p))).scheme for n, p in bvh_files.items()}
     assert schemes == {
         "fair1-child-inches-zup": "mixamo",
         "cmu-asf-bvh": "cmu-asf-bvh",
@@ -198,8 +192,8 @@ def test_bad_skeletons() -> None:
         build_skeleton(["a"], [None], [[0, float("nan"), 0]])
 
 
-def test_retarget_swing_only_and_exact(files: dict[str, Path]) -> None:
-    bvh = read_bvh(files["cmu-daz-salsa"])
+def test_retarget_swing_only_and_exact(bvh_files: dict[str, Path]) -> None:
+    bvh = read_bvh(bvh_files["cmu-daz-salsa"])
     skel = skeleton_of(bvh)
     jmap = resolve_map(skel)
     pose = pose_of(bvh, 200)
@@ -229,11 +223,11 @@ def test_retarget_swing_only_and_exact(files: dict[str, Path]) -> None:
 
 
 @pytest.mark.parametrize("stretch", [0.5, 0.99, 0.997, 0.9999])
-def test_retarget_exact_reach_near_full_stretch(files: dict[str, Path], stretch: float) -> None:
+def test_retarget_exact_reach_near_full_stretch(bvh_files: dict[str, Path], stretch: float) -> None:
     """A leg pinned or dragged almost straight (a standing character) reaches its goal to
     rounding: the two-bone chain is solved in closed form (FABRIK alone was still 2 mm
     short after 64 rounds at 99.7 % of the leg's length)."""
-    bvh = read_bvh(files["cmu-daz-salsa"])
+    bvh = read_bvh(bvh_files["cmu-daz-salsa"])
     skel = skeleton_of(bvh)
     jmap = resolve_map(skel)
     pose = pose_of(bvh, 200)
@@ -252,11 +246,11 @@ def test_retarget_exact_reach_near_full_stretch(files: dict[str, Path], stretch:
     assert bent @ before > 0
 
 
-def test_retarget_exact_reach_bends_a_straight_leg_forward(files: dict[str, Path]) -> None:
+def test_retarget_exact_reach_bends_a_straight_leg_forward(bvh_files: dict[str, Path]) -> None:
     """A leg solved dead straight, its ankle then pinned nearer the hip along that line
     (a T-pose leg under a lowered pelvis): no bend plane exists, and FABRIK cannot bend a
     straight chain; the closed form bends the knee towards where the foot points."""
-    bvh = read_bvh(files["cmu-daz-salsa"])
+    bvh = read_bvh(bvh_files["cmu-daz-salsa"])
     skel = skeleton_of(bvh)
     jmap = resolve_map(skel)
     pose = pose_of(bvh, 200)
@@ -345,12 +339,12 @@ def test_character_modules_import_no_scipy() -> None:
 
 
 def test_compiled_forward_kinematics_is_the_matrix_products_of_the_joints(
-    files: dict[str, Path],
+    bvh_files: dict[str, Path],
 ) -> None:
     """core.compiled_characters against the plain numpy products, joint by joint, on
     every file's skeleton and several of its frames; the same answer on every call, and
     the anchors' points as the per-anchor formula gives them."""
-    for name, path in files.items():
+    for name, path in bvh_files.items():
         bvh = read_bvh(path)
         skel = skeleton_of(bvh)
         jmap = resolve_map(skel, None)
@@ -395,14 +389,14 @@ def test_compiled_swing_is_the_numpy_swing() -> None:
         np.testing.assert_allclose(out @ ua, ub, rtol=0, atol=1e-12)
 
 
-def test_compiled_aim_pass_is_the_numpy_aim_of_each_group(files: dict[str, Path]) -> None:
+def test_compiled_aim_pass_is_the_numpy_aim_of_each_group(bvh_files: dict[str, Path]) -> None:
     """The aim pass (``core.retarget._aim_pass``: the single-child groups compiled, the
     others numpy) against the numpy aim of every group in turn (``_aim_group``), on every
     file's skeleton, two frames each, goals the start's points moved by up to a tenth of
     the body's size (one run skipping the first group, as a turned pelvis is): rotations
     to 1e-12, the same joints changed, the same bytes on a second run."""
     rng = np.random.default_rng(7)
-    for name, path in files.items():
+    for name, path in bvh_files.items():
         bvh = read_bvh(path)
         skel = skeleton_of(bvh)
         jmap = resolve_map(skel, None)

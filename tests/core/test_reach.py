@@ -17,16 +17,14 @@ from core.characters_maps import JointMap, resolve_map
 from core.compiled_reach import descend_into
 from core.reach import polish
 from core.skeleton import JOINT_INDEX
-from tests.character_files import FILES, extract_bvh
+from tests.character_files import FILES
 
 WRIST, ANKLES = JOINT_INDEX["left_wrist"], (JOINT_INDEX["left_ankle"], JOINT_INDEX["right_ankle"])
 
 
 @pytest.fixture(scope="module")
-def bandai(
-    mocap_dir: Path, tmp_path_factory: pytest.TempPathFactory
-) -> tuple[Skeleton, Pose, JointMap]:
-    path = extract_bvh(mocap_dir, tmp_path_factory.mktemp("reach"))["bandai"]
+def bandai(bvh_files: dict[str, Path]) -> tuple[Skeleton, Pose, JointMap]:
+    path = bvh_files["bandai"]
     bvh = read_bvh(path)
     skel = skeleton_of(bvh)
     pose = pose_of(bvh, FILES["bandai"][3])

@@ -32,18 +32,13 @@ from service.characters import (
     solve_prepared,
 )
 from service.engine import Engine
-from tests.character_files import FILES, extract_bvh
+from tests.character_files import FILES
 
 TOL = 1e-3  # m, the default tolerance
 PINS = ["left_ankle", "right_ankle"]
 #: (canonical joint, direction, move as a fraction of the pelvis-head distance)
 EDITS = [("head", "fwd", 0.10), ("head", "side", 0.10), ("neck", "fwd", 0.10),
          ("neck", "side", 0.10), ("pelvis", "up", -0.15)]  # fmt: skip
-
-
-@pytest.fixture(scope="module")
-def files(mocap_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    return extract_bvh(mocap_dir, tmp_path_factory.mktemp("reach"))
 
 
 def _body(text: str, name: str, joint: str, way: str, amount: float, reach: str) -> dict[str, Any]:
@@ -81,12 +76,12 @@ def _summary(rows: list[tuple[str, str, str, float, float]], what: str) -> None:
 
 
 def test_exact_reach_meets_trunk_targets_and_holds_pins(
-    client: Any, files: dict[str, Path]
+    client: Any, bvh_files: dict[str, Path]
 ) -> None:
     """Every pin within 1 mm on every edit (the report measures the file as written); every
     target met but at most one of the 25 edits, and a miss says so."""
     rows = []
-    for name, path in files.items():
+    for name, path in bvh_files.items():
         text = path.read_text()
         for joint, way, amount in EDITS:
             r = client.post("/v1/bvh/solve", json=_body(text, name, joint, way, amount, "exact"))
@@ -103,12 +98,12 @@ def test_exact_reach_meets_trunk_targets_and_holds_pins(
 
 
 def test_soft_reach_lays_targets_where_the_canonical_answer_put_them(
-    engine: Engine, files: dict[str, Path]
+    engine: Engine, bvh_files: dict[str, Path]
 ) -> None:
     """In soft reach the character's targeted joint ends as near its target as the
     canonical answer's did (within the tolerance), and its pins are held."""
     rows = []
-    for name, path in files.items():
+    for name, path in bvh_files.items():
         text = path.read_text()
         bvh = read_request_bvh(text)
         for joint, way, amount in EDITS:
@@ -140,13 +135,13 @@ def _answer(engine: Engine, text: str, name: str, body: dict[str, Any]) -> tuple
 
 @pytest.mark.parametrize("name", ["bandai", "cmu-daz-salsa", "reactidle-6ch"])
 def test_a_wrist_out_of_reach_neither_breaks_a_pin_nor_loses_the_pelvis(
-    engine: Engine, files: dict[str, Path], name: str
+    engine: Engine, bvh_files: dict[str, Path], name: str
 ) -> None:
     """A review's finds: for a wrist out of reach the whole body was shifted towards it, so
     a pinned pelvis moved up to 0.97 m and a pelvis target the answer met was missed by up
     to 2.2 m; a pin the answer broke for a target (an elbow far from its pinned wrist) was
     held by the character instead, which left the elbow 1.4 m from where the answer put it."""
-    text = files[name].read_text()
+    text = bvh_files[name].read_text()
     pts = _points(text, name)
     up = pts[JOINT_INDEX["head"]] - pts[JOINT_INDEX["pelvis"]]
     far = (pts[JOINT_INDEX["right_wrist"]] + 4.0 * np.roll(up, 1)).tolist()  # across, far
@@ -196,13 +191,13 @@ def _scale(out: dict[str, Any]) -> float:
 
 @pytest.mark.parametrize("name", ["cmu-asf-bvh", "bandai"])
 def test_a_dragged_pelvis_meets_its_target_beside_older_ones(
-    engine: Engine, files: dict[str, Path], name: str
+    engine: Engine, bvh_files: dict[str, Path], name: str
 ) -> None:
     """The editor's case: a pelvis dragged 20 cm down or across while both ankles and a
     wrist keep targets from earlier drags (exact reach). The canonical answer meets all
     four; at 9a8bcd9 the character left the pelvis 1.2-4.6 mm off (a helper measured 9-14 cm
     in the editor on a tree between the two)."""
-    text = files[name].read_text()
+    text = bvh_files[name].read_text()
     pts = _points(text, name)
     label = resolve_map(skeleton_of(parse_bvh(text))).describe()
     up = pts[JOINT_INDEX["head"]] - pts[JOINT_INDEX["pelvis"]]
@@ -224,14 +219,14 @@ def test_a_dragged_pelvis_meets_its_target_beside_older_ones(
 
 
 def test_a_chain_whose_top_sits_on_its_parent_solves_without_a_numeric_warning(
-    engine: Engine, files: dict[str, Path]
+    engine: Engine, bvh_files: dict[str, Path]
 ) -> None:
     """A review's find: on cmu1/jumping_jacks a chain's top joint sits on the origin of the
     joint that aims it (a zero offset), and the exact-reach widening asked for the turn
     between two zero-length directions: numpy's "invalid value in divide", NaN goals the
     caller then threw away. Two of the review's edits, solved with warnings as errors: the
     character's target as near as the canonical answer's."""
-    text = files["cmu-asf-bvh"].read_text()
+    text = bvh_files["cmu-asf-bvh"].read_text()
     bvh = parse_bvh(text)
     skel = skeleton_of(bvh)
     label = resolve_map(skel).describe()
@@ -254,7 +249,7 @@ def test_a_chain_whose_top_sits_on_its_parent_solves_without_a_numeric_warning(
 
 
 def test_targets_the_answer_met_do_not_carry_the_body_across(
-    engine: Engine, files: dict[str, Path]
+    engine: Engine, bvh_files: dict[str, Path]
 ) -> None:
     """Exact reach, a wrist or an elbow moved 10-40 cm (seeded directions, no pins): where
     the canonical answer meets it, so does the character, with its pelvis where the answer
@@ -264,7 +259,7 @@ def test_targets_the_answer_met_do_not_carry_the_body_across(
     beyond 5 cm; now 2.9 cm at most); the polish turns the joints above the chain instead."""
     rng = np.random.default_rng(7)
     off = []
-    for name, path in files.items():
+    for name, path in bvh_files.items():
         text = path.read_text()
         _, _, units, frame = FILES[name]
         bvh = read_request_bvh(text)
@@ -302,7 +297,7 @@ def test_targets_the_answer_met_do_not_carry_the_body_across(
 @pytest.mark.parametrize("pin", ["head", "neck"])
 @pytest.mark.parametrize("name", sorted(FILES))
 def test_a_pinned_head_or_neck_holds_on_the_character_under_far_wrists(
-    engine: Engine, files: dict[str, Path], name: str, pin: str
+    engine: Engine, bvh_files: dict[str, Path], name: str, pin: str
 ) -> None:
     """Both wrists dragged 1.5 m (seeded directions), the head or the neck pinned: the
     canonical answer holds the pin, and the character's chest, which aims its neck and
@@ -314,7 +309,7 @@ def test_a_pinned_head_or_neck_holds_on_the_character_under_far_wrists(
     where the canonical neck is on every chest, and the polish's steps, cut short by the
     far wrist's swing of the arm, did not bring it back): now within 2 mm, as the head."""
     bound = 2e-3
-    text = files[name].read_text()
+    text = bvh_files[name].read_text()
     pts = _points(text, name)
     label = resolve_map(skeleton_of(parse_bvh(text))).describe()
     still = {"joint": label["head"], "position": pts[JOINT_INDEX["head"]].tolist()}

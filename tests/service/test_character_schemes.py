@@ -28,7 +28,7 @@ from service.characters import (
     solve_prepared,
 )
 from service.engine import Engine
-from tests.character_files import FILES, extract_bvh
+from tests.character_files import FILES
 
 #: Bandai-Namco's names, canonical order (centre, then limbs with "{s}" for L / R)
 _BANDAI = ["Hips", "Spine", "Chest", "Neck", "Head", "Shoulder_{s}", "UpperArm_{s}", "LowerArm_{s}",
@@ -107,8 +107,8 @@ def _edit(engine: Engine, text: str, names: dict[str, str]) -> Any:
 
 
 @pytest.fixture(scope="module")
-def bandai(mocap_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> str:
-    return extract_bvh(mocap_dir, tmp_path_factory.mktemp("schemes"))["bandai"].read_text()
+def bandai(bvh_files: dict[str, Path]) -> str:
+    return bvh_files["bandai"].read_text()
 
 
 @pytest.mark.parametrize("scheme", list(_RENAMED))

@@ -19,15 +19,10 @@ from core.characters_maps import resolve_map
 from core.retarget import canonical_points
 from core.skeleton import JOINT_INDEX
 from core.units import UNITS
-from tests.character_files import FILES, RefBVH, extract_bvh
+from tests.character_files import FILES, RefBVH
 
 MM = 1e-3
 ROUND_TRIP: dict[str, dict[str, float]] = {}  # measured errors, printed at the end
-
-
-@pytest.fixture(scope="module")
-def files(mocap_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    return extract_bvh(mocap_dir, tmp_path_factory.mktemp("characters"))
 
 
 def _goal(text: str, frame: int) -> tuple[str, np.ndarray, str]:
@@ -46,9 +41,9 @@ def _goal(text: str, frame: int) -> tuple[str, np.ndarray, str]:
 
 
 @pytest.mark.parametrize("name", list(FILES))
-def test_bvh_round_trip(client: Any, files: dict[str, Path], name: str) -> None:
+def test_bvh_round_trip(client: Any, bvh_files: dict[str, Path], name: str) -> None:
     _, _, units, frame = FILES[name]
-    text = files[name].read_text()
+    text = bvh_files[name].read_text()
     wrist, goal, ankle = _goal(text, frame)
     body: dict[str, Any] = {
         "bvh": text,
@@ -104,8 +99,8 @@ def test_round_trip_report() -> None:
     print(json.dumps(ROUND_TRIP, indent=1))
 
 
-def test_bvh_units_and_up_inferred(client: Any, files: dict[str, Path]) -> None:
-    text = files["fair1-child-inches-zup"].read_text()
+def test_bvh_units_and_up_inferred(client: Any, bvh_files: dict[str, Path]) -> None:
+    text = bvh_files["fair1-child-inches-zup"].read_text()
     wrist, goal, _ = _goal(text, 120)
     body = {"bvh": text, "frame": 120, "targets": [{"joint": wrist, "position": goal.tolist()}]}
     r = client.post("/v1/bvh/solve", json=body)  # a child in inches is not plain: asked
@@ -114,7 +109,7 @@ def test_bvh_units_and_up_inferred(client: Any, files: dict[str, Path]) -> None:
     r = client.post("/v1/bvh/solve", json={**body, "units": "in"})
     assert r.status_code == 200, r.text
     assert r.json()["up"] == "+Z" and r.json()["scheme"] == "mixamo"
-    text = files["reactidle-6ch"].read_text()
+    text = bvh_files["reactidle-6ch"].read_text()
     wrist, goal, _ = _goal(text, 0)
     body = {
         "bvh": text,
@@ -163,8 +158,8 @@ def _fk(
     return g_pos
 
 
-def test_character_rotations(client: Any, files: dict[str, Path]) -> None:
-    text = files["cmu-daz-salsa"].read_text()  # 43 joints: fingers and eyes are unmapped
+def test_character_rotations(client: Any, bvh_files: dict[str, Path]) -> None:
+    text = bvh_files["cmu-daz-salsa"].read_text()  # 43 joints: fingers and eyes are unmapped
     body, skel, _ = _character_body(text, 300)
     start = _fk(body, body["rotations"], body["root_position"])
     sh, wr = start["lShldr"], start["lHand"]
@@ -225,8 +220,8 @@ def _bad(client: Any, path: str, body: dict[str, Any], *needles: str) -> str:
     return detail
 
 
-def test_bad_bvh_files(client: Any, files: dict[str, Path]) -> None:
-    text = files["bandai"].read_text()
+def test_bad_bvh_files(client: Any, bvh_files: dict[str, Path]) -> None:
+    text = bvh_files["bandai"].read_text()
     target = [{"joint": "Hand_L", "position": [0.0, 100.0, 0.0]}]
 
     def post(bvh: str, *needles: str) -> str:
@@ -255,12 +250,12 @@ def test_bad_bvh_files(client: Any, files: dict[str, Path]) -> None:
 
 
 def test_a_joint_whose_angles_cannot_be_written_back_keeps_them(
-    client: Any, files: dict[str, Path]
+    client: Any, bvh_files: dict[str, Path]
 ) -> None:
     """A joint whose rotation channels repeat an axis in a row (``Xrotation Xrotation
     Yrotation``: no unique angles to write back) is not turned: the edit still answers,
     that joint's columns as they were, the others solved (was a 500)."""
-    text = files["bandai"].read_text()
+    text = bvh_files["bandai"].read_text()
     old = "JOINT LowerArm_L\n            {\n              OFFSET 24.3286 1.87007e-05 0\n"
     assert text.count(old + "              CHANNELS 6 Xposition Yposition Zposition "
                       "Zrotation Xrotation Yrotation") == 1  # fmt: skip

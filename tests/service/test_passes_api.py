@@ -17,7 +17,7 @@ from core.skeleton import JOINT_INDEX
 from service import limits
 from service.engine import Engine
 from service.problems import SolveProblem
-from tests.character_files import FILES, extract_bvh
+from tests.character_files import FILES
 from tests.conftest import PosePairs
 from tests.service.test_api import as_array, assert_problem, engine_pose, solve_body
 from tests.service.test_characters import _goal
@@ -30,11 +30,6 @@ WRISTS = ["left_wrist", "right_wrist"]
 @pytest.fixture(scope="module")
 def by_passes(models_dir: Path) -> dict[int, Engine]:
     return {p: Engine(models_dir, serving={"passes": p}) for p in (1, 3)}
-
-
-@pytest.fixture(scope="module")
-def files(mocap_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    return extract_bvh(mocap_dir, tmp_path_factory.mktemp("passes"))
 
 
 def test_models_say_their_default(client: Any, engine: Engine) -> None:
@@ -92,9 +87,9 @@ def test_columnar_passes_apply_to_every_item(
     assert default["poses"] != col.json()["poses"]
 
 
-def test_character_and_bvh_routes_take_passes(client: Any, files: dict[str, Path]) -> None:
+def test_character_and_bvh_routes_take_passes(client: Any, bvh_files: dict[str, Path]) -> None:
     name = "reactidle-6ch"
-    body = character_body(files[name], name, reach="soft")
+    body = character_body(bvh_files[name], name, reach="soft")
     answers = {}
     for passes in (None, 1, 2):
         b = body if passes is None else {**body, "options": {"reach": "soft", "passes": passes}}
@@ -109,7 +104,7 @@ def test_character_and_bvh_routes_take_passes(client: Any, files: dict[str, Path
     assert_problem(client.post("/v1/solve", json=bad), 422, "options.passes")
 
     _, _, units, frame = FILES[name]
-    text = files[name].read_text()
+    text = bvh_files[name].read_text()
     wrist, goal, _ = _goal(text, frame)
     bvh: dict[str, Any] = {"bvh": text, "frame": frame,
                            "targets": [{"joint": wrist, "position": goal.tolist()}]}  # fmt: skip

@@ -32,7 +32,7 @@ from core.skeleton import JOINT_INDEX, JOINT_NAMES
 from core.units import UNITS
 from service import characters
 from service.routes import characters as character_routes
-from tests.character_files import FILES, extract_bvh
+from tests.character_files import FILES
 from tests.conftest import make_client
 from tests.service.test_api import as_array, assert_problem
 
@@ -45,11 +45,6 @@ SKELETONS: dict[str, tuple[str | float, str]] = {
     "reactidle-6ch": ("m", "+Y"),
 }
 FK_ERROR_M: dict[str, float] = {}  # measured, printed by test_fk_report
-
-
-@pytest.fixture(scope="module")
-def files(mocap_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    return extract_bvh(mocap_dir, tmp_path_factory.mktemp("solve_forms"))
 
 
 def metres(units: str | float) -> float:
@@ -125,9 +120,9 @@ def fk(body: dict[str, Any], out: dict[str, Any]) -> dict[str, np.ndarray]:
 
 @pytest.mark.parametrize("name", list(SKELETONS))
 def test_character_form_answers_as_the_alias(
-    client: Any, files: dict[str, Path], name: str
+    client: Any, bvh_files: dict[str, Path], name: str
 ) -> None:
-    body = character_body(files[name], name)
+    body = character_body(bvh_files[name], name)
     r = client.post("/v1/solve", json=body)
     assert r.status_code == 200, r.text
     alias = client.post("/v1/character/solve", json=body)
@@ -156,13 +151,13 @@ def test_fk_report() -> None:
     print(json.dumps(FK_ERROR_M, indent=1))
 
 
-def test_mixed_batch_equals_the_singles(client: Any, files: dict[str, Path]) -> None:
+def test_mixed_batch_equals_the_singles(client: Any, bvh_files: dict[str, Path]) -> None:
     chars = {
-        n: character_body(files[n], n)
+        n: character_body(bvh_files[n], n)
         for n in ("cmu-daz-salsa", "bandai", "fair1-child-inches-zup")
     }
-    chars["soft"] = character_body(files["reactidle-6ch"], "reactidle-6ch", reach="soft")
-    poses = [pose_body(files[n], n) for n in ("bandai", "cmu-asf-bvh", "reactidle-6ch")]
+    chars["soft"] = character_body(bvh_files["reactidle-6ch"], "reactidle-6ch", reach="soft")
+    poses = [pose_body(bvh_files[n], n) for n in ("bandai", "cmu-asf-bvh", "reactidle-6ch")]
     items = [
         poses[0],
         chars["cmu-daz-salsa"],
@@ -195,10 +190,10 @@ def test_mixed_batch_equals_the_singles(client: Any, files: dict[str, Path]) -> 
 
 
 def test_both_or_neither_form_is_a_422_naming_the_field(
-    client: Any, files: dict[str, Path]
+    client: Any, bvh_files: dict[str, Path]
 ) -> None:
-    char = character_body(files["bandai"], "bandai")
-    pose = pose_body(files["bandai"], "bandai")
+    char = character_body(bvh_files["bandai"], "bandai")
+    pose = pose_body(bvh_files["bandai"], "bandai")
     both = {**char, "pose": pose["pose"]}
     body = assert_problem(client.post("/v1/solve", json=both), 422, "character:", "not both")
     assert body["errors"] == [{"location": "character", "message": body["detail"][11:]}]
@@ -220,9 +215,9 @@ def test_both_or_neither_form_is_a_422_naming_the_field(
     }
 
 
-def test_batch_errors_name_the_item(client: Any, files: dict[str, Path]) -> None:
-    pose = pose_body(files["bandai"], "bandai")
-    char = character_body(files["cmu-daz-salsa"], "cmu-daz-salsa")
+def test_batch_errors_name_the_item(client: Any, bvh_files: dict[str, Path]) -> None:
+    pose = pose_body(bvh_files["bandai"], "bandai")
+    char = character_body(bvh_files["cmu-daz-salsa"], "cmu-daz-salsa")
 
     def batch_with(bad: dict[str, Any]) -> dict[str, Any]:
         return {"items": [pose, char, pose, bad]}
@@ -251,7 +246,7 @@ def test_batch_errors_name_the_item(client: Any, files: dict[str, Path]) -> None
 
 
 def test_oversized_character_batch_is_refused(
-    models_dir: Path, files: dict[str, Path], monkeypatch: pytest.MonkeyPatch
+    models_dir: Path, bvh_files: dict[str, Path], monkeypatch: pytest.MonkeyPatch
 ) -> None:
     read: list[str] = []
     original = characters.character_from_request
@@ -261,8 +256,8 @@ def test_oversized_character_batch_is_refused(
         return original(req, where)
 
     monkeypatch.setattr(character_routes, "character_from_request", counting)
-    char = character_body(files["cmu-daz-salsa"], "cmu-daz-salsa")  # exact reach, a pin
-    pose = pose_body(files["bandai"], "bandai")
+    char = character_body(bvh_files["cmu-daz-salsa"], "cmu-daz-salsa")  # exact reach, a pin
+    pose = pose_body(bvh_files["bandai"], "bandai")
     exact_pose = {**pose, "options": {"reach": "exact"}}
     with make_client(models_dir, max_batch_items=4) as small:
         # 4 of the costliest pose items fit; so do 2 small characters; 3 big ones do not
