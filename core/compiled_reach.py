@@ -13,10 +13,12 @@ other side never needed (a review: refusing the step instead wasted up to 11 of 
 30 steps and broke a pin numpy held). A step is cut to the largest turn (``max_turn``);
 where targets and pins pull together and the cut bites, the step of a damping raised until
 it fits is tried beside it and the better kept (a far wrist's swing of the arm had shrunk
-the spine's turn that brings a pinned neck back: `python -m bench.pins --characters`, 48
-edits with a pin over 2 mm off, up to 91.5 mm, before; none after). The turns by Rodrigues' formula,
-forward kinematics (:func:`core.compiled_characters.forward_kinematics_into`). Products in
-source order, no fused multiply-add: the same request gives the same bits.
+the spine's turn that brings a pinned neck back: ``python -m bench.pins --characters``, 48
+edits with a pin over 2 mm off, up to 91.5 mm, before; none after). A step taken divides
+the damping by 3 (by 10, every other step was refused and the damping put back). The turns
+by Rodrigues' formula, forward kinematics
+(:func:`core.compiled_characters.forward_kinematics_into`). Products in source order, no
+fused multiply-add: the same request gives the same bits.
 """
 
 from __future__ import annotations
@@ -237,8 +239,7 @@ def descend_into(
             g_pos[:] = n_pos
             pts[:] = n_pts
             misses[:] = now
-            damping = max(damping / 3.0, (1e-6 * scale) ** 2)  # (/ 10 wasted every other
-            # step: the damping that worked, a tenth of it refused, back, ...)
+            damping = max(damping / 3.0, (1e-6 * scale) ** 2)
             taken += 1
             seen[taken] = cost
         else:
