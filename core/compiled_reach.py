@@ -223,14 +223,11 @@ def descend_into(
                 alt = _scored(part, parents, movable, root, scale, g_rot, rotations,
                               translations, anchor, offset, goals, weight, hold, n, k, a_rot,
                               a_tr, a_grot, a_gpos, a_pts, a_now)  # fmt: skip
-            if alt < new:
+            if alt < new:  # (the scratch buffers swapped: the other's are the new ones)
                 new, damping = alt, raised
-                new_rot[:] = a_rot
-                new_tr[:] = a_tr
-                n_rot[:] = a_grot
-                n_pos[:] = a_gpos
-                n_pts[:] = a_pts
-                now[:] = a_now
+                new_rot, a_rot, new_tr, a_tr = a_rot, new_rot, a_tr, new_tr
+                n_rot, a_grot, n_pos, a_gpos = a_grot, n_rot, a_gpos, n_pos
+                n_pts, a_pts, now, a_now = a_pts, n_pts, a_now, now
         if new < cost:
             cost = new
             rotations[:] = new_rot
@@ -278,28 +275,11 @@ def _largest(step: F64) -> float:  # pragma: no cover - compiled
 
 @jit
 def _scored(
-    part: F64,
-    parents: I64,
-    movable: I64,
-    root: int,
-    scale: float,
-    g_rot: F64,
-    rotations: F64,
-    translations: F64,
-    anchor: I64,
-    offset: F64,
-    goals: F64,
-    weight: F64,
-    hold: float,
-    n: int,
-    k: int,
-    new_rot: F64,
-    new_tr: F64,
-    n_rot: F64,
-    n_pos: F64,
-    n_pts: F64,
-    now: F64,
-) -> float:  # pragma: no cover - compiled
+    part: F64, parents: I64, movable: I64, root: int, scale: float, g_rot: F64,
+    rotations: F64, translations: F64, anchor: I64, offset: F64, goals: F64, weight: F64,
+    hold: float, n: int, k: int,
+    new_rot: F64, new_tr: F64, n_rot: F64, n_pos: F64, n_pts: F64, now: F64,
+) -> float:  # pragma: no cover - compiled  # fmt: skip
     """The pose the step ``part`` leads to, into ``new_rot``, ``new_tr`` (local) and
     ``n_rot``, ``n_pos``, ``n_pts``, ``now`` (world, the points, their misses), and its
     weighted cost (inf where a pin goes farther than ``hold``: refused)."""
