@@ -52,8 +52,8 @@ def extract_bvh(mocap: Path, out: Path) -> dict[str, Path]:
         subprocess.Popen([tar, "-xJf", str(mocap / archive), "-C", str(out), *members])
         for archive, members in by_archive.items()
     ]
-    for proc in procs:
-        assert proc.wait() == 0, f"tar failed ({proc.args})"
+    failed = [proc.args for proc in procs if proc.wait() != 0]  # (every one waited for)
+    assert not failed, f"tar failed: {failed}"
     return {name: out / member for name, (_, member, _, _) in FILES.items()}
 
 
