@@ -294,10 +294,14 @@ def test_targets_the_answer_met_do_not_carry_the_body_across(
     assert max(off) <= 0.05
 
 
-@pytest.mark.parametrize("pin", ["head", "neck"])
+@pytest.mark.parametrize(
+    "pins",
+    [("head",), ("neck",), ("neck", "left_ankle", "right_ankle")],
+    ids=["head", "neck", "neck+ankles"],
+)
 @pytest.mark.parametrize("name", sorted(FILES))
 def test_a_pinned_head_or_neck_holds_on_the_character_under_far_wrists(
-    engine: Engine, bvh_files: dict[str, Path], name: str, pin: str
+    engine: Engine, bvh_files: dict[str, Path], name: str, pins: tuple[str, ...]
 ) -> None:
     """Both wrists dragged 1.5 m (seeded directions), the head or the neck pinned: the
     canonical answer holds the pin, and the character's chest, which aims its neck and
@@ -307,7 +311,8 @@ def test_a_pinned_head_or_neck_holds_on_the_character_under_far_wrists(
     puts the pin before the wrists the answer met (``core.reach._better``). A pinned neck
     still ended up to 1 cm off in exact reach on some of these files (its anchor is not
     where the canonical neck is on every chest, and the polish's steps, cut short by the
-    far wrist's swing of the arm, did not bring it back): now within 2 mm, as the head."""
+    far wrist's swing of the arm, did not bring it back): now within 2 mm, as the head, and
+    with both ankles pinned too (the neck was 42 mm off on CMU salsa)."""
     bound = 2e-3
     text = bvh_files[name].read_text()
     pts = _points(text, name)
@@ -323,6 +328,6 @@ def test_a_pinned_head_or_neck_holds_on_the_character_under_far_wrists(
                 {"joint": label[w], "position": (pts[JOINT_INDEX[w]] + far * d[k]).tolist()}
                 for k, w in enumerate(("left_wrist", "right_wrist"))
             ]
-            body = {"targets": wrists, "pins": [label[pin]], "options": options}
+            body = {"targets": wrists, "pins": [label[p] for p in pins], "options": options}
             _, out = _answer(engine, text, name, body)
-            assert out["pins"][0]["error"] <= bound, (options, out["pins"])
+            assert max(p["error"] for p in out["pins"]) <= bound, (options, out["pins"])
