@@ -389,15 +389,13 @@ def _errors(x: F64, tpos: F64, pi: I64, out: F64) -> None:  # pragma: no cover -
 @jit
 def _solve(
     x0: F64, lens: F64, tpos: F64, pi: I64, pf: F64, tol: float, max_it: int,
-    hold: Bool, has_hold: bool, x: F64, errors: F64,
+    hold: Bool, hold_any: bool, kts: I64, below: Bool, x: F64, errors: F64,
 ) -> tuple[int, bool]:  # pragma: no cover - compiled  # fmt: skip
-    """``kinematics._solve`` for one item (rank order); ``x``/``errors`` receive the answer."""
+    """``kinematics._solve`` for one item (rank order); ``x``/``errors`` receive the answer.
+    ``hold_any``: some target is pinned (``hold``); ``kts``, ``below``: the plan's targets
+    above pins (:func:`_above_pins`, the same for every item of a batch)."""
     k_n, t_n = pi[_K], pi[_T]
     stall = tol * 1e-3
-    hold_any = False
-    if has_hold:
-        for k in range(k_n):
-            hold_any = hold_any or hold[k]
     radii, inner, anchors = np.empty(k_n), np.empty(k_n), np.zeros(k_n, dtype=np.bool_)
     start, path = x0[0].copy(), pf[pi[_O_PATH] :]
     if hold_any and pi[_ROOT_MOVES] == 0:  # shells.onto_pins, x0 moved in place
@@ -430,7 +428,6 @@ def _solve(
         _shells(x0, lens, tpos, path, hold, hold_any, errors, tol, radii, inner, anchors)
     new_errors = np.empty(k_n)
     y = np.empty_like(x)
-    kts, below = _above_pins(pi, pf, hold if hold_any else np.zeros(k_n, dtype=np.bool_))
     holding = bool((kts >= 0).any())
     strikes, its, frozen = 0, 0, False
     while its < max_it and not done:
@@ -485,6 +482,9 @@ def solve_batch(
                         np.empty((NUM_JOINTS, 3)), np.empty(_NB))  # fmt: skip
     x0, x = np.empty((NUM_JOINTS, 3)), np.empty((NUM_JOINTS, 3))
     lens, tp = np.empty(_NB), np.empty((k_n, 3))
+    hold_any, free = has_hold and bool(hold.any()), np.zeros(k_n, dtype=np.bool_)
+    l_kts, l_below = _above_pins(li, lf, free)  # (the trunk-locked stage holds no pins)
+    g_kts, g_below = _above_pins(gi, gf, hold if hold_any else free)
     for b in range(m):
         bone_pass_item(starts[b], lengths[b], starts[b], False, pose, xr, lr, rr)
         for r in range(NUM_JOINTS):
@@ -496,7 +496,8 @@ def solve_batch(
         n_it = 0
         solved = False
         if polish and has_local:
-            n_it, c = _solve(x0, lens, tp, li, lf, tol, max_it, hold, False, x, errs[b])
+            n_it, c = _solve(x0, lens, tp, li, lf, tol, max_it, hold, False, l_kts, l_below, x,
+                             errs[b])  # fmt: skip
             solved = True
             for k in range(k_n):
                 solved = solved and errs[b, k] <= tol
@@ -504,7 +505,8 @@ def solve_batch(
             if not solved:
                 x0[:, :] = x
         if not solved:
-            g_it, c = _solve(x0, lens, tp, gi, gf, tol, max_it, hold, has_hold, x, errs[b])
+            g_it, c = _solve(x0, lens, tp, gi, gf, tol, max_it, hold, hold_any, g_kts, g_below,
+                             x, errs[b])  # fmt: skip
             n_it += g_it
             conv[b] = c
         its[b] = n_it
