@@ -145,10 +145,7 @@ def _character_frame(
     still = [{"joint": "head", "position": [0.0, 0.0, 0.0]}]  # (the character alone)
     ch = character_from_bvh(bvh, BVHSolveRequest.model_validate({**base, "targets": still}))
     here = canonical_points(ch.skel, ch.pose, ch.jmap)
-    label = ch.jmap.describe()
-    world = ch.to_service(here)
-    head, pelvis = JOINT_INDEX["head"], JOINT_INDEX["pelvis"]
-    metres = np.linalg.norm(world[head] - world[pelvis]) / np.linalg.norm(here[head] - here[pelvis])
+    label, metres = ch.jmap.describe(), ch.scale  # (metres per unit of the file)
     cases = itertools.product(CHARACTER_PINS, CHARACTER_TARGETS, (0.5, 1.5), CHARACTER_OPTIONS)
     for pins, targets, dist, options in cases:
         if set(pins) & set(targets):
@@ -175,20 +172,16 @@ def print_table(res: dict[tuple[str, ...], list[tuple[float, float]]]) -> None:
         "| pins | edits | pin > 1 mm | pin > 2 mm | farthest pin (mm) | targets' mean miss (cm) |"
     )
     print("|---|---|---|---|---|---|")
-    total = [0, 0, 0]
+    total = np.zeros(3, dtype=np.int64)
     for pins, rows in res.items():
-        off = np.asarray([r[0] for r in rows])
-        miss = np.asarray([r[1] for r in rows])
-        total = [
-            total[0] + len(off),
-            total[1] + int((off > 1e-3).sum()),
-            total[2] + int((off > 2e-3).sum()),
-        ]
+        off, miss = np.asarray(rows).T
+        counts = np.asarray([len(off), (off > 1e-3).sum(), (off > 2e-3).sum()])
+        total += counts
         print(
-            f"| {' + '.join(pins)} | {len(off)} | {(off > 1e-3).sum()} | {(off > 2e-3).sum()} | "
+            f"| {' + '.join(pins)} | {' | '.join(map(str, counts))} | "
             f"{1000 * off.max():.1f} | {100 * miss.mean():.1f} |"
         )
-    print(f"| all | {total[0]} | {total[1]} | {total[2]} | | |")
+    print(f"| all | {' | '.join(map(str, total))} | | |")
 
 
 def main(
