@@ -37,9 +37,9 @@ import numpy as np
 import numpy.typing as npt
 
 from core.characters import F64, Pose, Skeleton, forward_kinematics
-from core.characters_maps import JointMap
+from core.characters_maps import Anchor, JointMap
 from core.compiled_reach import descend_into
-from core.skeleton import JOINT_INDEX
+from core.skeleton import JOINT_INDEX, JOINT_NAMES, NUM_JOINTS, PARENTS
 
 _PELVIS = JOINT_INDEX["pelvis"]
 _STEPS = 30  # damped steps tried at most per phase (each one forward kinematics)
@@ -166,3 +166,32 @@ def _descend(
         float(tolerance), _STEPS, _MAX_TURN, _STALL, _GAIN, misses,
     )  # fmt: skip
     return rotations, translations, misses
+
+
+#: The canonical skeleton's own joints as a joint map (every point on its joint), and which
+#: of them turn something (a joint with children).
+_CANONICAL_MAP = JointMap(
+    tuple(Anchor(j, np.zeros(3), name) for j, name in enumerate(JOINT_NAMES)), "canonical"
+)
+_TURNS = tuple(j in PARENTS for j in range(NUM_JOINTS))
+
+
+def polish_canonical(
+    pose: F64,
+    exact: Sequence[tuple[int, F64]],
+    pins: Sequence[tuple[int, F64]],
+    tolerance: float,
+    finish: bool,
+) -> F64 | None:
+    """:func:`polish` of a canonical pose ``[21, 3]`` (world, metres) as a body of its own
+    bones: each joint turns its subtree rigidly (the pelvis its spine and hips together, the
+    chest its neck and collars), the pelvis moves, bone lengths stay as they are. ``exact``
+    and ``pins``: (canonical joint, goal). The polished pose, or None where it found none
+    better (:func:`_better`: pins first)."""
+    parents = np.asarray(PARENTS)
+    offsets = pose - np.where(parents[:, None] >= 0, pose[np.maximum(parents, 0)], 0.0)
+    skel = Skeleton(JOINT_NAMES, PARENTS, offsets, _TURNS, tuple(p < 0 for p in PARENTS))
+    body = Pose(np.tile(np.eye(3), (NUM_JOINTS, 1, 1)), offsets.copy())
+    if not polish(skel, body, _CANONICAL_MAP, exact, pins, tolerance, 0, finish):
+        return None
+    return forward_kinematics(skel, body)[1]

@@ -54,6 +54,7 @@ from service.lean import (
     solve_lean,
     uncovered,
 )
+from service.pins import hold_pins
 from service.problems import (
     PELVIS,
     BatchAnswer,
@@ -234,7 +235,8 @@ class Engine:
         items = items.travelled(
             self.serving.pelvis_travel, self.serving.reach_travel, self.turn_search.min_targets
         )
-        return self._result(p, self._retry(items, lean_answer(self, items, passes, seq)), 0)
+        ans = self._retry(items, lean_answer(self, items, passes, seq))
+        return self._result(p, hold_pins(items, ans), 0)
 
     def passes_of(self, p: SolveProblem) -> int:
         """The neural passes ``p`` asks for (``serving.passes`` unless it says)."""
@@ -327,7 +329,8 @@ class Engine:
             self.serving.pelvis_travel, self.serving.reach_travel, self.turn_search.min_targets
         )
         items, turned, known = turns.search(self, items, reps, self._solve_items)
-        return turns.mark(self._retry(items, self._solve_rest(items, reps, known)), turned)
+        ans = self._retry(items, self._solve_rest(items, reps, known))
+        return turns.mark(hold_pins(items, ans), turned)
 
     def _solve_rest(
         self, items: _Items, reps: npt.NDArray[np.int64], known: turns.Known | None

@@ -169,7 +169,10 @@ class SolveResponse(BaseModel):
         default_factory=list, description="How far each pinned joint moved (m)."
     )
     max_bone_length_error: float = Field(description="Max relative bone-length error.")
-    solvers: list[str] = Field(description="Solver sequence used (target-set keys).")
+    solvers: list[str] = Field(
+        description="Solver sequence used (target-set keys), then the polishes that ran: "
+        "`fabrik-polish`, `fabrik-fallback`, `pin-polish` (pins still off, polished onto them)."
+    )
     model: str = Field(description="Manifest version of the models.")
     method: Literal["neural", "fabrik"]
     iterations: int = Field(description="FABRIK iterations used (0 when none ran).")

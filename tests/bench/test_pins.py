@@ -18,5 +18,5 @@ def test_pins_hold_across_the_bench_edits(models_dir: Path, real_poses: PosePair
     skipped = sum(bool(set(p) & set(t)) for p in pins.PIN_SETS for t in pins.TARGET_SETS)
     assert len(rows) == (len(pins.PIN_SETS) * len(pins.TARGET_SETS) - skipped) * 3 * 4
     off = np.asarray([r[0] for r in rows])
-    assert (off > 2e-3).mean() < 0.005 and off.max() < 0.01, np.sort(off)[-5:]
+    assert off.max() <= 1e-3, np.sort(off)[-5:]  # every pin within its tolerance
     assert all(np.isfinite(r[1]) for r in rows)

@@ -1,0 +1,59 @@
+"""Pins hold where two pinned chains share the trunk (``service.pins``): both wrists pinned
+and the head, the pelvis or an ankle dragged far away, on real poses."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+
+from core.skeleton import JOINT_INDEX, bone_lengths
+from service.engine import Engine
+from service.problems import SolveProblem
+from tests.conftest import PosePairs
+
+WRISTS = (JOINT_INDEX["left_wrist"], JOINT_INDEX["right_wrist"])
+
+
+def _problems(poses: np.ndarray, seed: int) -> list[SolveProblem]:
+    """Every pose with both wrists pinned and the head, the pelvis or the left ankle moved
+    1 or 3 m in a seeded direction, neural and FABRIK, soft and exact reach."""
+    rng = np.random.default_rng(seed)
+    out = []
+    cases = itertools.product(
+        ("head", "pelvis", "left_ankle"), (1.0, 3.0), ("neural", "fabrik"), ("soft", "exact")
+    )
+    for joint, dist, method, reach in cases:
+        idx = np.asarray([JOINT_INDEX[joint], *WRISTS], dtype=np.intp)
+        for pose in poses:
+            d = rng.normal(size=3)
+            goal = pose[idx].copy()
+            goal[0] += dist * d / np.linalg.norm(d)
+            floor = float(pose[:, 1].min()) - 10.0  # out of the way: pins and reach alone
+            problem = SolveProblem(
+                pose=pose, target_idx=idx, target_pos=goal, weights=np.ones(3), n_targets=1,
+                method=method, reach=reach, floor=floor,
+            )  # fmt: skip
+            out.append(problem)
+    return out
+
+
+@pytest.mark.slow
+def test_both_wrists_stay_pinned_under_far_trunk_and_leg_targets(
+    engine: Engine, real_poses: PosePairs
+) -> None:
+    poses = real_poses.poses[real_poses.starts[:12]]
+    problems = _problems(poses, seed=4)
+    results = engine.solve(problems)
+    off = np.asarray([float(r.pin_errors.max()) for r in results])
+    assert off.max() <= 1e-3, (np.sort(off)[-5:], int((off > 1e-3).sum()))
+    polished = [r for r in results if "pin-polish" in r.solvers]
+    assert polished, "no edit needed the pin polish: the test no longer tests it"
+    for p, r in zip(problems, results, strict=True):
+        assert r.max_bone_error <= 1e-5
+        np.testing.assert_allclose(bone_lengths(r.pose), bone_lengths(p.pose), rtol=1e-5)
+    # the same answers one at a time, bit for bit
+    for i in range(0, len(problems), 7):
+        again = engine.solve([problems[i]])[0]
+        assert np.array_equal(again.pose, results[i].pose), i
