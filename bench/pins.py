@@ -6,7 +6,9 @@ with one pin set (a joint or two held where they are) and one far target set (jo
 shipped models: neural and FABRIK, soft and exact reach. A pin is a hard constraint
 (docs/service.md, "Pins"): the table counts the edits that left a pin more than its
 tolerance (1 mm) and more than 2 mm from where it was asked, and the farthest, per pin
-set; beside them the targets' mean miss, which says the targets were still approached.
+set; beside them the targets' mean miss, which says the targets were still approached, and
+the edits whose answer the pin polish finished (``pin-polish`` in its solvers,
+:mod:`service.pins`) with the median time of a solve, those and the others (one thread).
 
 ``--characters``: the same question on users' own files through ``/v1/bvh/solve``'s steps
 in process (:mod:`bench.characters`' twelve files, two frames each): the neck, the head, an
@@ -18,6 +20,7 @@ own joints (the canonical answer it is laid onto holds its pins).
 from __future__ import annotations
 
 import itertools
+import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
@@ -59,16 +62,18 @@ def sample_poses(dataset: Path, n: int, seed: int) -> np.ndarray:
     return out
 
 
-def run(
-    models: Path, poses: np.ndarray, seed: int
-) -> dict[tuple[str, ...], list[tuple[float, float]]]:
-    """Per pin set: (farthest pin, targets' mean miss) of every edit, metres."""
+#: Of one edit: farthest pin, targets' mean miss (m), pin-polished, seconds of its solve.
+Row = tuple[float, float, bool, float]
+
+
+def run(models: Path, poses: np.ndarray, seed: int) -> dict[tuple[str, ...], list[Row]]:
+    """Per pin set: a :data:`Row` of every edit."""
     from service.engine import Engine
     from service.problems import SolveProblem
 
     engine = Engine(models, threads=1)
     rng = np.random.default_rng(seed)
-    out: dict[tuple[str, ...], list[tuple[float, float]]] = {p: [] for p in PIN_SETS}
+    out: dict[tuple[str, ...], list[Row]] = {p: [] for p in PIN_SETS}
     cases = itertools.product(
         PIN_SETS, TARGET_SETS, DISTANCES, ("neural", "fabrik"), ("soft", "exact")
     )
@@ -85,8 +90,12 @@ def run(
                 pose=pose, target_idx=idx, target_pos=goal, weights=np.ones(len(idx)),
                 n_targets=len(targets), method=method, reach=reach, floor=floor,
             )  # fmt: skip
+            t0 = time.perf_counter()
             res = engine.solve([problem])[0]
-            out[pins].append((float(res.pin_errors.max()), float(res.errors.mean())))
+            took = time.perf_counter() - t0
+            polished = "pin-polish" in res.solvers
+            off, miss = float(res.pin_errors.max()), float(res.errors.mean())
+            out[pins].append((off, miss, polished, took))
     return out
 
 
@@ -101,11 +110,9 @@ CHARACTER_TARGETS: tuple[tuple[str, ...], ...] = (
 CHARACTER_OPTIONS = ({"reach": "soft"}, {"reach": "exact"}, {"method": "fabrik", "reach": "exact"})
 
 
-def run_characters(
-    models: Path, mocap: Path, seed: int
-) -> dict[tuple[str, ...], list[tuple[float, float]]]:
-    """Per pin set: (farthest pin on the character, targets' mean miss) of every edit,
-    metres, over :mod:`bench.characters`' files, two frames each."""
+def run_characters(models: Path, mocap: Path, seed: int) -> dict[tuple[str, ...], list[Row]]:
+    """Per pin set: a :data:`Row` of every edit (the pin measured on the character, the
+    time of its solve and polish), over :mod:`bench.characters`' files, two frames each."""
     import tempfile
 
     from bench.characters import extract, frame_pairs
@@ -114,7 +121,7 @@ def run_characters(
 
     engine = Engine(models, threads=1)
     rng = np.random.default_rng(seed)
-    out: dict[tuple[str, ...], list[tuple[float, float]]] = {p: [] for p in CHARACTER_PINS}
+    out: dict[tuple[str, ...], list[Row]] = {p: [] for p in CHARACTER_PINS}
     with tempfile.TemporaryDirectory() as tmp:
         for path, units in extract(mocap, Path(tmp)):
             text = path.read_text(encoding="utf-8", errors="replace")
@@ -131,7 +138,7 @@ def run_characters(
 
 def _character_frame(
     engine: Engine, bvh: BVH, base: dict[str, object], rng: np.random.Generator,
-    out: dict[tuple[str, ...], list[tuple[float, float]]],
+    out: dict[tuple[str, ...], list[Row]],
 ) -> None:  # fmt: skip
     """Every pin set, target set, distance and option on one frame of a file, into ``out``."""
     from core.retarget import canonical_points
@@ -159,29 +166,37 @@ def _character_frame(
         ]
         body = {**base, "options": options, "pins": [label[p] for p in pins], "targets": moved}
         req = BVHSolveRequest.model_validate(body)
+        t0 = time.perf_counter()
         edit = solve_prepared(engine, ch, character_problem(ch, req))
+        took = time.perf_counter() - t0
         got = canonical_points(ch.skel, edit.pose, ch.jmap)
         held = [JOINT_INDEX[p] for p in pins]
         off = np.linalg.norm(got[held] - here[held], axis=1).max()
         miss = np.linalg.norm(got[idx] - asked, axis=1).mean()
-        out[pins].append((float(off * metres), float(miss * metres)))
+        polished = "pin-polish" in edit.result.solvers
+        out[pins].append((float(off * metres), float(miss * metres), polished, took))
 
 
-def print_table(res: dict[tuple[str, ...], list[tuple[float, float]]]) -> None:
+def _ms(seconds: np.ndarray) -> str:
+    return f"{1000 * float(np.median(seconds)):.2f}" if seconds.size else "-"
+
+
+def print_table(res: dict[tuple[str, ...], list[Row]]) -> None:
     print(
-        "| pins | edits | pin > 1 mm | pin > 2 mm | farthest pin (mm) | targets' mean miss (cm) |"
+        "| pins | edits | pin > 1 mm | pin > 2 mm | farthest pin (mm) | targets' mean miss (cm) "
+        "| pin-polished | ms p50 (pin-polished / others) |"
     )
-    print("|---|---|---|---|---|---|")
-    total = np.zeros(3, dtype=np.int64)
-    for pins, rows in res.items():
-        off, miss = np.asarray(rows).T
-        counts = np.asarray([len(off), (off > 1e-3).sum(), (off > 2e-3).sum()])
-        total += counts
+    print("|---|---|---|---|---|---|---|---|")
+    every = [r for rows in res.values() for r in rows]
+    for pins, rows in [*res.items(), (("all",), every)]:
+        off, miss, took = (np.asarray([r[i] for r in rows]) for i in (0, 1, 3))
+        polished = np.asarray([r[2] for r in rows], dtype=np.bool_)
+        counts = [len(off), int((off > 1e-3).sum()), int((off > 2e-3).sum())]
+        far = "|" if rows is every else f"{1000 * off.max():.1f} | {100 * miss.mean():.1f}"
         print(
-            f"| {' + '.join(pins)} | {' | '.join(map(str, counts))} | "
-            f"{1000 * off.max():.1f} | {100 * miss.mean():.1f} |"
+            f"| {' + '.join(pins)} | {' | '.join(map(str, counts))} | {far} | "
+            f"{int(polished.sum())} | {_ms(took[polished])} / {_ms(took[~polished])} |"
         )
-    print(f"| all | {' | '.join(map(str, total))} | | |")
 
 
 def main(
