@@ -29,9 +29,9 @@ def hold_pins(items: _Items, ans: BatchAnswer) -> BatchAnswer:
     with the rest of the body following); items without pins off are untouched."""
     if not (items.cnt > items.n_t).any():  # no pins (the common case): one reduction
         return ans
-    cols = np.arange(items.tidx.shape[1])[None, :]
+    cols = np.arange(ans.errors.shape[1])[None, :]
     pinned = (cols >= items.n_t[:, None]) & (cols < items.cnt[:, None])
-    off = (ans.errors[:, : cols.shape[1]] > items.tols[:, None]) & pinned
+    off = (ans.errors > items.tols[:, None]) & pinned
     sel = np.flatnonzero(off.any(axis=1))
     if sel.size == 0:
         return ans
