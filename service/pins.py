@@ -27,7 +27,7 @@ def hold_pins(items: _Items, ans: BatchAnswer) -> BatchAnswer:
     """``ans`` with every item whose pins it leaves beyond the item's tolerance polished
     onto them (its targets pursued as its reach asks: exact reach to the end, soft reach
     with the rest of the body following); items without pins off are untouched."""
-    if not (items.cnt > items.n_t).any():  # no pins (the common case): one reduction
+    if items.cnt.tobytes() == items.n_t.tobytes():  # no pins (the common case): cnt = n_t
         return ans
     cols = np.arange(ans.errors.shape[1])[None, :]
     pinned = (cols >= items.n_t[:, None]) & (cols < items.cnt[:, None])
