@@ -304,6 +304,23 @@ SCHEMES: Final[dict[str, Scheme]] = {
         ankle="{s}Foot",
         foot="{s}ToeBase",
     ),
+    "soma": _scheme(
+        "SOMA 30-joint rig (Neck1 / Neck2; LeftLeg is the thigh, LeftShin the shin)",
+        (("Left", "Right"),),
+        pelvis="Hips",
+        spine1="Spine1",
+        spine2="Chest",
+        neck="Neck1",
+        head="Head",
+        collar="{s}Shoulder",
+        shoulder="{s}Arm",
+        elbow="{s}ForeArm",
+        wrist="{s}Hand",
+        hip="{s}Leg",
+        knee="{s}Shin",
+        ankle="{s}Foot",
+        foot="{s}ToeBase|{s}Foot_end",
+    ),
 }
 
 #: Fraction of its own bone by which a canonical joint sitting on its parent is moved.

@@ -2,7 +2,7 @@
 
 A real Bandai-Namco file (tests/character_files.py) is renamed joint by joint into the names
 of each naming scheme of ``core.characters_maps.SCHEMES`` that no shared file uses (Xsens,
-Rokoko, 3ds Max Biped, SMPL, DAZ Genesis 8 and 9, Character Creator, HumanIK's
+Rokoko, 3ds Max Biped, SMPL, DAZ Genesis 8 and 9, Character Creator, SOMA, HumanIK's
 ``Character1_``, Unity's humanoid names, Xsens's BVH export): the map must pick that
 scheme, and an edit of the renamed file must write exactly the frame values the original's
 does (the same joints anchor the same points).
@@ -58,6 +58,8 @@ _RENAMED: dict[str, tuple[str, tuple[str, str]]] = {
             "{s}UpperLeg {s}LowerLeg {s}Foot {s}Toes", ("Left", "Right")),  # Unity's
     "cmu-asf-bvh": ("Hips Chest Chest4 Neck Head {s}Collar {s}Shoulder {s}Elbow {s}Wrist "
                     "{s}Hip {s}Knee {s}Ankle {s}Toe", ("Left", "Right")),  # Xsens MVN BVH
+    "soma": ("Hips Spine1 Chest Neck1 Head {s}Shoulder {s}Arm {s}ForeArm {s}Hand {s}Leg {s}Shin "
+             "{s}Foot {s}ToeBase", ("Left", "Right")),
     "mixamo": ("Character1_Hips Character1_Spine Character1_Spine2 Character1_Neck "
                "Character1_Head Character1_{s}Shoulder Character1_{s}Arm Character1_{s}ForeArm "
                "Character1_{s}Hand Character1_{s}UpLeg Character1_{s}Leg Character1_{s}Foot "
