@@ -17,6 +17,7 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+import numpy.typing as npt
 
 from core.reach import polish_canonical
 from core.skeleton import bone_lengths
@@ -29,10 +30,7 @@ def hold_pins(items: _Items, ans: BatchAnswer) -> BatchAnswer:
     with the rest of the body following); items without pins off are untouched."""
     if items.cnt.tobytes() == items.n_t.tobytes():  # no pins (the common case): cnt = n_t
         return ans
-    cols = np.arange(ans.errors.shape[1])[None, :]
-    pinned = (cols >= items.n_t[:, None]) & (cols < items.cnt[:, None])
-    off = (ans.errors > items.tols[:, None]) & pinned
-    sel = np.flatnonzero(off.any(axis=1))
+    sel = _off(items, ans)
     if sel.size == 0:
         return ans
     before = ans.take(sel)
@@ -58,3 +56,17 @@ def hold_pins(items: _Items, ans: BatchAnswer) -> BatchAnswer:
         paths=tuple((*path, "pin-polish") for path in before.paths),
     ).take(keep)  # fmt: skip
     return ans.with_items(sel[keep], out)
+
+
+def _off(items: _Items, ans: BatchAnswer) -> npt.NDArray[np.intp]:
+    """The items with a pin beyond their tolerance (one edit, the interactive case, without
+    the array temporaries: they cost ~8 µs of a 0.55 ms pinned solve)."""
+    if items.cnt.size == 1:
+        pins = ans.errors[0, int(items.n_t[0]) : int(items.cnt[0])].tolist()
+        return np.arange(int(max(pins) > float(items.tols[0])), dtype=np.intp)
+    cols = np.arange(ans.errors.shape[1])[None, :]
+    pinned = (cols >= items.n_t[:, None]) & (cols < items.cnt[:, None])
+    out: npt.NDArray[np.intp] = np.flatnonzero(
+        ((ans.errors > items.tols[:, None]) & pinned).any(axis=1)
+    )
+    return out
