@@ -138,3 +138,25 @@ def test_a_far_target_s_swing_of_an_arm_does_not_stall_a_pin() -> None:
         0.01, misses,
     )  # fmt: skip
     assert misses[1] < 1e-3, misses
+
+
+def test_polish_canonical_holds_both_wrists_under_a_far_pelvis_with_the_bones_kept() -> None:
+    """The canonical skeleton as a body of its own bones (``polish_canonical``, the engine's
+    pin polish): both wrists pinned where they are and the pelvis asked 1 m away and down,
+    out of what the arms allow. The wrists stay within the tolerance, the pelvis comes
+    nearer, every bone keeps its length; where the pins already hold and nothing is asked,
+    there is nothing to do."""
+    from core.reach import polish_canonical
+    from core.rest import rest_pose
+    from core.skeleton import bone_lengths
+
+    pose = rest_pose()
+    wrists = [(j, pose[j].copy()) for j in (JOINT_INDEX["left_wrist"], JOINT_INDEX["right_wrist"])]
+    pelvis = JOINT_INDEX["pelvis"]
+    goal = pose[pelvis] + np.array([0.0, -0.6, 0.8])
+    got = polish_canonical(pose, [(pelvis, goal)], wrists, 1e-3, True)
+    assert got is not None
+    assert max(float(np.linalg.norm(got[j] - g)) for j, g in wrists) <= 1e-3
+    assert np.linalg.norm(got[pelvis] - goal) < np.linalg.norm(pose[pelvis] - goal) - 0.1
+    np.testing.assert_allclose(bone_lengths(got), bone_lengths(pose), rtol=0, atol=1e-9)
+    assert polish_canonical(pose, [], wrists, 1e-3, True) is None
