@@ -321,6 +321,24 @@ SCHEMES: Final[dict[str, Scheme]] = {
         ankle="{s}Foot",
         foot="{s}ToeBase|{s}Foot_end",
     ),
+    "azure-kinect": _scheme(
+        "Azure Kinect Body Tracking (k4abt joint ids, K4ABT_JOINT_ optional; SPINE_NAVAL too)",
+        (("LEFT", "RIGHT"),),
+        ("", "K4ABT_JOINT_"),
+        pelvis="PELVIS",
+        spine1="SPINE_NAVEL|SPINE_NAVAL",
+        spine2="SPINE_CHEST",
+        neck="NECK",
+        head="HEAD",
+        collar="CLAVICLE_{s}",
+        shoulder="SHOULDER_{s}",
+        elbow="ELBOW_{s}",
+        wrist="WRIST_{s}",
+        hip="HIP_{s}",
+        knee="KNEE_{s}",
+        ankle="ANKLE_{s}",
+        foot="FOOT_{s}",
+    ),
 }
 
 #: Fraction of its own bone by which a canonical joint sitting on its parent is moved.

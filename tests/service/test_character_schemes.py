@@ -2,7 +2,7 @@
 
 A real Bandai-Namco file (tests/character_files.py) is renamed joint by joint into the names
 of each naming scheme of ``core.characters_maps.SCHEMES`` that no shared file uses (Xsens,
-Rokoko, 3ds Max Biped, SMPL, DAZ Genesis 8 and 9, Character Creator, SOMA, HumanIK's
+Rokoko, 3ds Max Biped, SMPL, DAZ Genesis 8 and 9, Character Creator, SOMA, Azure Kinect, HumanIK's
 ``Character1_``, Unity's humanoid names, Xsens's BVH export): the map must pick that
 scheme, and an edit of the renamed file must write exactly the frame values the original's
 does (the same joints anchor the same points).
@@ -60,6 +60,11 @@ _RENAMED: dict[str, tuple[str, tuple[str, str]]] = {
                     "{s}Hip {s}Knee {s}Ankle {s}Toe", ("Left", "Right")),  # Xsens MVN BVH
     "soma": ("Hips Spine1 Chest Neck1 Head {s}Shoulder {s}Arm {s}ForeArm {s}Hand {s}Leg {s}Shin "
              "{s}Foot {s}ToeBase", ("Left", "Right")),
+    "azure-kinect": ("K4ABT_JOINT_PELVIS K4ABT_JOINT_SPINE_NAVEL K4ABT_JOINT_SPINE_CHEST "
+                     "K4ABT_JOINT_NECK K4ABT_JOINT_HEAD K4ABT_JOINT_CLAVICLE_{s} "
+                     "K4ABT_JOINT_SHOULDER_{s} K4ABT_JOINT_ELBOW_{s} K4ABT_JOINT_WRIST_{s} "
+                     "K4ABT_JOINT_HIP_{s} K4ABT_JOINT_KNEE_{s} K4ABT_JOINT_ANKLE_{s} "
+                     "K4ABT_JOINT_FOOT_{s}", ("LEFT", "RIGHT")),
     "mixamo": ("Character1_Hips Character1_Spine Character1_Spine2 Character1_Neck "
                "Character1_Head Character1_{s}Shoulder Character1_{s}Arm Character1_{s}ForeArm "
                "Character1_{s}Hand Character1_{s}UpLeg Character1_{s}Leg Character1_{s}Foot "
