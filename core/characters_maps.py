@@ -47,10 +47,17 @@ def _scheme(
     description: str,
     sides: tuple[tuple[str, str], ...],
     prefixes: tuple[str, ...] = ("",),
+    /,
     **joints: str,
 ) -> Scheme:
     return Scheme(description, sides, {k: tuple(v.split("|")) for k, v in joints.items()}, prefixes)
 
+
+#: MotionBuilder's (HumanIK's) arm names, kept by Mixamo, Rokoko and SOMA: ``{s}Shoulder`` is
+#: the clavicle, ``{s}Arm`` the upper arm.
+_MB_ARMS: Final[dict[str, str]] = {
+    "collar": "{s}Shoulder", "shoulder": "{s}Arm", "elbow": "{s}ForeArm", "wrist": "{s}Hand",
+}  # fmt: skip
 
 #: Naming schemes found automatically. "{s}" is the side token; "a|b" tries a, then b;
 #: "X_end" is the End Site of joint X. spine1/spine2 are structural unless named.
@@ -130,10 +137,7 @@ SCHEMES: Final[dict[str, Scheme]] = {
         pelvis="Hips",
         neck="Neck",
         head="Head",
-        collar="{s}Shoulder",
-        shoulder="{s}Arm",
-        elbow="{s}ForeArm",
-        wrist="{s}Hand",
+        **_MB_ARMS,
         hip="{s}UpLeg",
         knee="{s}Leg",
         ankle="{s}Foot",
@@ -224,10 +228,7 @@ SCHEMES: Final[dict[str, Scheme]] = {
         spine2="Spine4|Spine3|Spine2",
         neck="Neck",
         head="Head",
-        collar="{s}Shoulder",
-        shoulder="{s}Arm",
-        elbow="{s}ForeArm",
-        wrist="{s}Hand",
+        **_MB_ARMS,
         hip="{s}Thigh",
         knee="{s}Shin",
         ankle="{s}Foot",
@@ -312,10 +313,7 @@ SCHEMES: Final[dict[str, Scheme]] = {
         spine2="Chest",
         neck="Neck1",
         head="Head",
-        collar="{s}Shoulder",
-        shoulder="{s}Arm",
-        elbow="{s}ForeArm",
-        wrist="{s}Hand",
+        **_MB_ARMS,
         hip="{s}Leg",
         knee="{s}Shin",
         ankle="{s}Foot",
