@@ -235,8 +235,7 @@ class Engine:
         items = items.travelled(
             self.serving.pelvis_travel, self.serving.reach_travel, self.turn_search.min_targets
         )
-        ans = self._retry(items, lean_answer(self, items, passes, seq))
-        return self._result(p, hold_pins(items, ans), 0)
+        return self._result(p, self._last_steps(items, lean_answer(self, items, passes, seq)), 0)
 
     def passes_of(self, p: SolveProblem) -> int:
         """The neural passes ``p`` asks for (``serving.passes`` unless it says)."""
@@ -329,8 +328,7 @@ class Engine:
             self.serving.pelvis_travel, self.serving.reach_travel, self.turn_search.min_targets
         )
         items, turned, known = turns.search(self, items, reps, self._solve_items)
-        ans = self._retry(items, self._solve_rest(items, reps, known))
-        return turns.mark(hold_pins(items, ans), turned)
+        return turns.mark(self._last_steps(items, self._solve_rest(items, reps, known)), turned)
 
     def _solve_rest(
         self, items: _Items, reps: npt.NDArray[np.int64], known: turns.Known | None
@@ -363,6 +361,12 @@ class Engine:
         cols = np.arange(items.tidx.shape[1])[None, :] < items.cnt[:, None]
         on_pelvis = ((items.tidx == PELVIS) & cols).any(axis=1)
         return np.where(few & ~on_pelvis, self.serving.keep_pelvis, 0.0)
+
+    def _last_steps(self, items: _Items, ans: BatchAnswer) -> BatchAnswer:
+        """What every answer goes through last, the lean path's too: one more pass for
+        soft items left short (:meth:`_retry`), then pins still off polished onto them
+        (:func:`service.pins.hold_pins`)."""
+        return hold_pins(items, self._retry(items, ans))
 
     def _retry(self, items: _Items, ans: BatchAnswer) -> BatchAnswer:
         """``ans`` with one more pass, from its answer, for every soft neural item (bone

@@ -40,7 +40,7 @@ def hold_pins(items: _Items, ans: BatchAnswer) -> BatchAnswer:
         n_t, cnt = int(items.n_t[b]), int(items.cnt[b])
         goals = [(int(j), items.tpos[b, q]) for q, j in enumerate(items.tidx[b, :cnt].tolist())]
         got = polish_canonical(
-            np.asarray(ans.pose[b], dtype=np.float64), goals[:n_t], goals[n_t:],
+            pose[i], goals[:n_t], goals[n_t:],
             float(items.tols[b]), bool(items.ex[b]),
         )  # fmt: skip
         if got is None:
