@@ -400,7 +400,8 @@ class Engine:
         """``ans`` with every item still short (:meth:`_short`) polished from its answer
         onto its targets, to its own tolerance, as exact reach polishes: the compiled
         FABRIK polish, trunk held first, pins held (``serving.retry_polish``,
-        docs/generalisation-serving-2.md item 37). Its ``solvers`` get ``fabrik-polish``. An
+        docs/generalisation-serving-2.md item 37). Its ``solvers`` end with ``fabrik-polish``
+        (once: a path that already ends with it is not given it twice). An
         item the polish would leave no nearer (the iteration cap) keeps its answer."""
         sel = self._short(items, ans)
         if sel.size == 0:
@@ -419,7 +420,8 @@ class Engine:
         nearer = np.flatnonzero(short.farthest(errors) < short.farthest(before.errors))
         polished = BatchAnswer(
             world, errors, bone_err, iterations,
-            tuple((*path, "fabrik-polish") for path in before.paths), before.path_of,
+            tuple(path if path[-1:] == ("fabrik-polish",) else (*path, "fabrik-polish")
+                  for path in before.paths), before.path_of,
         ).take(nearer)  # fmt: skip
         return ans.with_items(sel[nearer], polished)
 
