@@ -46,6 +46,9 @@ TARGET_SETS: tuple[tuple[str, ...], ...] = (
     ("left_ankle",), ("left_elbow",), ("pelvis",), ("spine2",), ("left_collar",),
 )  # fmt: skip
 DISTANCES = (0.3, 1.0, 3.0)
+#: The row of pins drawn at random: 2-6 of any joints (trunk and collars too), 1-3 other
+#: joints dragged (a normal step of 0.7 m per axis), RANDOM_SETS per pose.
+RANDOM_PINS, RANDOM_SETS = ("any 2-6 joints",), 40
 
 
 def sample_poses(dataset: Path, n: int, seed: int) -> np.ndarray:
@@ -69,34 +72,48 @@ Row = tuple[float, float, bool, float]
 def run(models: Path, poses: np.ndarray, seed: int) -> dict[tuple[str, ...], list[Row]]:
     """Per pin set: a :data:`Row` of every edit."""
     from service.engine import Engine
-    from service.problems import SolveProblem
 
     engine = Engine(models, threads=1)
     rng = np.random.default_rng(seed)
-    out: dict[tuple[str, ...], list[Row]] = {p: [] for p in PIN_SETS}
-    cases = itertools.product(
-        PIN_SETS, TARGET_SETS, DISTANCES, ("neural", "fabrik"), ("soft", "exact")
-    )
-    for pins, targets, dist, method, reach in cases:
+    out: dict[tuple[str, ...], list[Row]] = {p: [] for p in (*PIN_SETS, RANDOM_PINS)}
+    modes = list(itertools.product(("neural", "fabrik"), ("soft", "exact")))
+    cases = itertools.product(PIN_SETS, TARGET_SETS, DISTANCES, modes)
+    for pins, targets, dist, mode in cases:
         if set(pins) & set(targets):
             continue
         idx = np.asarray([JOINT_INDEX[j] for j in (*targets, *pins)], dtype=np.intp)
         for pose in poses:
             d = rng.normal(size=(len(targets), 3))
-            goal = pose[idx].copy()
-            goal[: len(targets)] += dist * d / np.linalg.norm(d, axis=1, keepdims=True)
-            floor = float(pose[:, 1].min()) - 10.0  # out of the way: pins and reach alone
-            problem = SolveProblem(
-                pose=pose, target_idx=idx, target_pos=goal, weights=np.ones(len(idx)),
-                n_targets=len(targets), method=method, reach=reach, floor=floor,
-            )  # fmt: skip
-            t0 = time.perf_counter()
-            res = engine.solve([problem])[0]
-            took = time.perf_counter() - t0
-            polished = "pin-polish" in res.solvers
-            off, miss = float(res.pin_errors.max()), float(res.errors.mean())
-            out[pins].append((off, miss, polished, took))
+            step = dist * d / np.linalg.norm(d, axis=1, keepdims=True)
+            out[pins].append(_edit(engine, pose, idx, step, mode))
+    for pose in poses:
+        for _ in range(RANDOM_SETS):
+            k, m = int(rng.integers(1, 4)), int(rng.integers(2, 7))
+            idx = rng.permutation(len(JOINT_INDEX))[: k + m].astype(np.intp)
+            step = rng.normal(0.0, 0.7, (k, 3))
+            for mode in modes:
+                out[RANDOM_PINS].append(_edit(engine, pose, idx, step, mode))
     return out
+
+
+def _edit(
+    engine: Engine, pose: np.ndarray, idx: np.ndarray, step: np.ndarray, mode: tuple[str, str]
+) -> Row:
+    """One edit: the joints ``idx`` (targets, then pins), the targets moved by ``step``."""
+    from service.problems import SolveProblem
+
+    goal = pose[idx].copy()
+    goal[: len(step)] += step
+    floor = float(pose[:, 1].min()) - 10.0  # out of the way: pins and reach alone
+    problem = SolveProblem(
+        pose=pose, target_idx=idx, target_pos=goal, weights=np.ones(len(idx)),
+        n_targets=len(step), method=mode[0], reach=mode[1], floor=floor,
+    )  # fmt: skip
+    t0 = time.perf_counter()
+    res = engine.solve([problem])[0]
+    took = time.perf_counter() - t0
+    polished = "pin-polish" in res.solvers
+    return float(res.pin_errors.max()), float(res.errors.mean()), polished, took
 
 
 #: (pins, targets) on a character (canonical names; the file's own joints by its map)

@@ -57,3 +57,35 @@ def test_both_wrists_stay_pinned_under_far_trunk_and_leg_targets(
     for i in range(0, len(problems), 7):
         again = engine.solve([problems[i]])[0]
         assert np.array_equal(again.pose, results[i].pose), i
+
+
+def test_random_pin_sets_hold_even_where_the_answer_cannot_be_polished_onto_them(
+    engine: Engine, real_poses: PosePairs
+) -> None:
+    """Any joints pinned (two to six, spine and collars too) and one to three others
+    dragged ~1 m: where the polish from the answer stays in a fold that breaks a pin (a
+    pinned collar 13 cm off beside a dragged one, a pinned head between a pinned chest and
+    a dragged neck), the polish from the caller's start, which holds every pin, answers."""
+    rng = np.random.default_rng(7)
+    poses = real_poses.poses[real_poses.starts[:4]]
+    problems = []
+    for i in range(240):
+        pose = poses[i % len(poses)]
+        k, m = int(rng.integers(1, 4)), int(rng.integers(2, 7))
+        joints = rng.permutation(len(JOINT_INDEX))
+        idx = np.r_[joints[:k], joints[k : k + m]].astype(np.intp)
+        goal = pose[idx].copy()
+        goal[:k] += rng.normal(0.0, 0.7, (k, 3))
+        method, reach = ("neural", "fabrik")[i % 2], ("soft", "soft", "exact", "exact")[i % 4]
+        floor = float(pose[:, 1].min()) - 10.0
+        problem = SolveProblem(
+            pose=pose, target_idx=idx, target_pos=goal, weights=np.ones(k + m), n_targets=k,
+            method=method, reach=reach, floor=floor,
+        )  # fmt: skip
+        problems.append(problem)
+    results = engine.solve(problems)
+    off = np.asarray([float(r.pin_errors.max()) for r in results])
+    assert off.max() <= 1e-3, (np.sort(off)[-5:], int((off > 1e-3).sum()))
+    assert max(r.max_bone_error for r in results) <= 1e-5
+    for i in range(0, len(problems), 11):  # one at a time, bit for bit
+        assert np.array_equal(engine.solve([problems[i]])[0].pose, results[i].pose), i
