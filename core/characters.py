@@ -30,7 +30,13 @@ F64 = npt.NDArray[np.float64]
 
 
 class CharacterError(ValueError):
-    """A skeleton, pose or joint map that cannot be used; the message says what and why."""
+    """A skeleton, pose or joint map that cannot be used; the message says what and why.
+    ``location``: the field, where the message's own prefix cannot say it plainly (a
+    client's joint name, which may hold spaces, colons or capitals)."""
+
+    def __init__(self, detail: str, location: str | None = None) -> None:
+        super().__init__(detail)
+        self.location = location
 
 
 @dataclass(frozen=True)

@@ -297,7 +297,11 @@ class Character:
 
 
 def _invalid(exc: Exception) -> InvalidRequest:
-    return InvalidRequest(str(exc))
+    detail, where = str(exc), getattr(exc, "location", None)
+    if where is None:  # the message's own prefix names the field (service.errors)
+        return InvalidRequest(detail)
+    message = detail.removeprefix(f"{where}: ")
+    return InvalidRequest(detail, errors=[{"location": where, "message": message}])
 
 
 def _character(
@@ -479,7 +483,8 @@ def character_from_request(req: CharacterSolveRequest, where: str = "") -> Chara
             with np.errstate(over="ignore"):  # a huge one is fine: normalised overflow-safe
                 length = float(np.linalg.norm(q))
             if length < 1e-6:
-                raise CharacterError(f"{prefix}rotations.{name}: zero-length quaternion {q}")
+                where = f"{prefix}rotations.{clip(name, 40)}"  # as a schema error names it
+                raise CharacterError(f"{where}: zero-length quaternion {q}", where)
             rot[skel.index[name]] = quat_to_matrix(q)
         trans = skel.offsets.copy()
         roots = [j for j, p in enumerate(skel.parents) if p < 0]

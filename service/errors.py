@@ -167,9 +167,10 @@ def problem(
 
 
 #: A field's place as the messages write it (``items[2].targets[0].joint``, ``bvh``):
-#: lower-case names and indices only, so a client's own name in a detail (``Bip01 L
-#: Forearm``, ``L: Forearm``) is never taken for one.
-_LOCATION = re.compile(r"[a-z_]+(\[\d+\])*(\.[a-z_]+(\[\d+\])*)*")
+#: lower-case names (``spine2``) and indices only, so a client's own name in a detail
+#: (``Bip01 L Forearm``, ``L: Forearm``) is never taken for one (an error on a field named
+#: by the client's name says its location itself: ``core.characters.CharacterError``).
+_LOCATION = re.compile(r"[a-z_][a-z0-9_]*(\[\d+\])*(\.[a-z_][a-z0-9_]*(\[\d+\])*)*")
 
 
 def error_response(exc: PoseError) -> JSONResponse:

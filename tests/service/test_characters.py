@@ -302,6 +302,31 @@ def test_bad_character_skeletons(client: Any) -> None:
     assert r.status_code == 422  # a quaternion has 4 numbers
 
 
+def test_a_character_error_names_its_field_even_by_the_clients_joint_name(
+    client: Any, bvh_files: dict[str, Path]
+) -> None:
+    """The client's own joint names (capitals, spaces, colons) and the canonical names
+    with a digit (``spine2``) are locations as the schema's own errors write them (they
+    were ``body``)."""
+    body, _, _ = _character_body(bvh_files["cmu-daz-salsa"].read_text(), 300)
+    body["targets"] = [{"joint": "lHand", "position": [0.0, 1.0, 0.0]}]
+
+    def where(b: dict[str, Any]) -> list[str]:
+        r = client.post("/v1/character/solve", json=b)
+        assert r.status_code == 422 and "problem+json" in r.headers["content-type"], r.text
+        return [e["location"] for e in r.json()["errors"]]
+
+    zero = {**body["rotations"], "lShldr": [0.0, 0.0, 0.0, 0.0]}
+    assert where({**body, "rotations": zero}) == ["rotations.lShldr"]
+    renamed = json.loads(json.dumps(body).replace('"lShldr"', '"L: Shoulder 2"'))
+    renamed["rotations"]["L: Shoulder 2"] = [0.0, 0.0, 0.0, 0.0]
+    assert where(renamed) == ["rotations.L: Shoulder 2"]
+    assert where({**body, "joint_map": {"spine2": "Nope"}}) == ["joint_map.spine2"]
+    item = {"character": body["skeleton"], **{k: v for k, v in body.items() if k != "skeleton"}}
+    items = client.post("/v1/solve/batch", json={"items": [{**item, "rotations": zero}]})
+    assert [e["location"] for e in items.json()["errors"]] == ["items[0].rotations.lShldr"]
+
+
 def test_unit_and_up_axis_names_in_the_contract_are_the_core_ones() -> None:
     from typing import get_args
 
