@@ -399,7 +399,9 @@ class Engine:
     def _polish_short(self, items: _Items, ans: BatchAnswer) -> BatchAnswer:
         """``ans`` with every item still short (:meth:`_short`) polished from its answer
         onto its targets, to its own tolerance, as exact reach polishes: the compiled
-        FABRIK polish, trunk held first, pins held (``serving.retry_polish``,
+        FABRIK polish, trunk held first, pins held, and where that leaves a target beyond
+        the tolerance, exact reach's fallback from the caller's start (plain FABRIK, the
+        body moved across: :meth:`exact_fallback`) (``serving.retry_polish``,
         docs/generalisation-serving-2.md item 37). Its ``solvers`` end with ``fabrik-polish``
         (once: a path that already ends with it is not given it twice). An
         item the polish would leave no nearer (the iteration cap) keeps its answer."""
@@ -414,7 +416,7 @@ class Engine:
         for g in _groups(short.cnt, short.n_t, short.tidx, short.w):
             m = g.members
             world[m], errors[m], bone_err[m], its = solve_fabrik(
-                self, short.take(m), polish=True, lengths=lengths[m]
+                self, short.take(m), polish=True, lengths=lengths[m], origin=items.poses[sel[m]]
             )
             iterations[m] += its
         nearer = np.flatnonzero(short.farthest(errors) < short.farthest(before.errors))

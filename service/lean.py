@@ -167,22 +167,30 @@ def fabrik_batch(items: _Items) -> bool:
 
 
 def solve_fabrik(
-    engine: Engine, items: _Items, *, polish: bool = False, lengths: F64 | None = None
-) -> Solved:
+    engine: Engine, items: _Items, *, polish: bool = False, lengths: F64 | None = None,
+    origin: F64 | None = None,
+) -> Solved:  # fmt: skip
     """FABRIK for every item of ``items`` (one target set, its targets then its pins): the
     canonical frame, the compiled FABRIK, the way back; as :func:`solve_lean` answers.
     ``polish``: the exact-reach polish instead (trunk held first); ``lengths`` ``[B, 20]``:
-    the bones to keep (default: the poses' own)."""
+    the bones to keep (default: the poses' own); ``origin`` ``[B, 21, 3]`` (world): the
+    callers' starts, from which exact reach's fallback tries plain FABRIK (and the body
+    moved across) where the polish leaves a target beyond its tolerance
+    (:meth:`Engine.exact_fallback`)."""
     n = items.poses.shape[0]
     c = int(items.cnt[0])
     tpos, (canon, facing, trans, own, _scales, tcan, _x, _canvas) = engine._prepare(
         items.poses, items, np.zeros(n, dtype=np.bool_)
     )
     lengths = own if lengths is None else lengths
-    out, iterations, _ = engine._fabrik(
-        polish, canon, lengths, tcan[:, :c], items.tols, items.tidx[0, :c], items.w[0, :c],
-        np.arange(c) >= int(items.n_t[0]),
-    )  # fmt: skip
+    idx, w, pins = items.tidx[0, :c], items.w[0, :c], np.arange(c) >= int(items.n_t[0])
+    polished = engine._fabrik(polish, canon, lengths, tcan[:, :c], items.tols, idx, w, pins)
+    out, iterations = polished[0], polished[1]
+    if origin is not None:
+        start = engine.origin_in(origin, facing, trans, items.floors)
+        out, iterations, _ = engine.exact_fallback(
+            polished, start, lengths, tcan[:, :c], items.tols, idx, w, pins
+        )
     pose, errors, bone_err = compiled.finish(
         out, facing, trans, items.floors, items.tidx, tpos, items.cnt, lengths
     )
