@@ -227,13 +227,14 @@ class Budget:
         if await self.request.is_disconnected():
             raise ClientDisconnected(f"client went away after {done} of {total} items")
 
-    async def check(self, done: int = 0, total: int = 0) -> None:
-        """Raise when the work should stop: client gone, deadline passed."""
+    async def check(self, done: int = 0, total: int = 0, noun: str = "items") -> None:
+        """Raise when the work should stop: client gone, deadline passed (the 504 says
+        ``done`` of ``total`` ``noun`` were done)."""
         await self.client_gone(done, total)
         if self.left <= 0:
             raise DeadlineExceeded(
                 f"the request needed more than the {self.deadline_seconds:g} s deadline "
-                f"({done} of {total} items done); send smaller batches"
+                f"({done} of {total} {noun} done); send smaller batches"
             )
 
     async def token(self, limiter: ComputeLimiter, borrower: object, stage: str) -> None:
@@ -268,13 +269,18 @@ class Budget:
             limiter.release_on_behalf_of(borrower)
 
     async def run(self, fn: Callable[[Sequence[SolveProblem]], list[R]],
-                  problems: Sequence[SolveProblem], pricing: Pricing) -> list[R]:  # fmt: skip
+                  problems: Sequence[SolveProblem], pricing: Pricing,
+                  noun: str = "items") -> list[R]:  # fmt: skip
         """``fn`` over ``problems`` chunk by chunk, off the event loop, within budget
-        (``pricing``: the engine's, :meth:`Pricing.of`)."""
-        parts = await self.run_parts(lambda part: fn(problems[part]), chunks(problems, pricing))
+        (``pricing``: the engine's, :meth:`Pricing.of`; ``noun``: what a 504 counts)."""
+        parts = await self.run_parts(
+            lambda part: fn(problems[part]), chunks(problems, pricing), noun
+        )
         return [r for part in parts for r in part]
 
-    async def run_parts(self, fn: Callable[[slice], R], parts: Sequence[slice]) -> list[R]:
+    async def run_parts(
+        self, fn: Callable[[slice], R], parts: Sequence[slice], noun: str = "items"
+    ) -> list[R]:
         """``fn`` over consecutive ``parts`` of a batch of ``parts[-1].stop`` items (the
         array path): like :meth:`run`, each part in a worker thread within budget.
 
@@ -289,7 +295,7 @@ class Budget:
         out: list[R] = []
         for w in range(0, len(parts), width):
             wave = parts[w : w + width]
-            await self.check(wave[0].start, total)
+            await self.check(wave[0].start, total, noun)
             t = time.perf_counter()
             out.extend(await _wave(fn, wave, limiter, self))
             self.compute += time.perf_counter() - t

@@ -75,9 +75,10 @@ async def solve_read(
     state: ServiceState,
     req: CharacterSolveRequest,
     prepared: Prepared,
+    where: str = "",
 ) -> dict[str, object]:
     """Stage two: solve alone, retarget, answer (the same for a single request and a batch
-    item, so both give the same bits)."""
+    item, so both give the same bits); a 504 names ``where`` (a batch's item)."""
     ch, p = prepared
 
     def work() -> dict[str, object]:
@@ -85,7 +86,7 @@ async def solve_read(
         state.metrics.solved(edit.problem.method, edit.result.solvers)
         return character_answer(ch, edit, req.rotations)
 
-    return await step(budget, "the solve", work)
+    return await step(budget, f"solving {where}" if where else "the solve", work)
 
 
 async def answer_character(

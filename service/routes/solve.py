@@ -147,11 +147,16 @@ async def solve_batch(body: BatchBody, engine: ReadyEngine, budget: RequestBudge
 
     problems = await off_loop(budget, prepare, len(items), "preparing the items")
     prepared = {i: await read_character(budget, f, f"items[{i}]") for i, f in chars.items()}
-    results = await budget.run(engine.solve, problems, Pricing.of(engine))
+    # a mixed batch's pose items run first (a 504 then counts them), its characters after
+    noun = f"pose items (then {len(chars)} character items)" if chars else "items"
+    results = await budget.run(engine.solve, problems, Pricing.of(engine), noun)
     state.metrics.batch.observe(len(forms))
     for p, r in zip(problems, results, strict=True):
         state.metrics.solved(p.method, r.solvers)
-    solved = {i: await solve_read(budget, engine, state, chars[i], prepared[i]) for i in chars}
+    solved = {
+        i: await solve_read(budget, engine, state, chars[i], prepared[i], f"items[{i}]")
+        for i in chars
+    }
 
     def answer() -> Response:
         pairs = iter(zip(problems, results, strict=True))

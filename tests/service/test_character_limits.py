@@ -91,3 +91,20 @@ def test_the_work_runs_under_the_compute_limiter(
             assert resp.headers["x-compute-time"].endswith("ms")
             assert float(resp.headers["x-compute-time"][:-2]) > 0
     assert borrowed == [1, 1]
+
+
+def test_a_mixed_batch_past_its_deadline_says_what_it_counted(models_dir: Path) -> None:
+    """The pose items of a mixed batch run first, its characters after: a 504 among the
+    pose items counts them as pose items (it said "N of 600 items" of a 602-item batch)."""
+    pose_form = json.loads((EXAMPLES / "solve.json").read_text())
+    heavy = {"reach": "exact", "passes": 4, "turn_search": True}
+    five = ["head", "left_wrist", "right_wrist", "left_elbow", "right_knee"]
+    targets = [{"joint": j, "position": [c + 0.2 for c in pose_form["pose"][j]]} for j in five]
+    item = {"pose": pose_form["pose"], "targets": targets, "options": heavy}
+    char = example("/v1/character/solve")
+    char["character"] = char.pop("skeleton")  # (the batch's name of the alias route's key)
+    items = [item] * 600 + [char] * 2
+    with make_client(models_dir, deadline_seconds=0.5) as c:
+        resp = c.post("/v1/solve/batch", json={"items": items})
+        body = assert_problem(resp, 504, "0.5 s deadline")
+        assert "of 600 pose items (then 2 character items) done" in body["detail"], body
