@@ -235,6 +235,16 @@ VARIANTS: dict[str, str] = {
     "turned, each pair as one rigid part, to the start's angle after the bone pass "
     "(`--serving keep_pairs=true`): not shipped, a held-out set crosses FABRIK the wrong way",
     "captured_keep_pairs": "`keep_pairs` on the captured edits",
+    "retry_1mm": "mx1-25bb75ec3824 with `serving.retry_reach` 1 mm instead of 2 cm "
+    "(`--serving retry_reach=0.001`; item 46)",
+    "retry_2mm": "the same at 2 mm",
+    "captured_retry_2mm": "`retry_2mm` on the captured edits",
+    "retry_5mm": "the same at 5 mm",
+    "fallback": "mx1-25bb75ec3824 with exact reach's fallback after the retry's polish "
+    "(`Engine._polish_short`, item 46)",
+    "captured_fallback": "`fallback` on the captured edits",
+    "retry_5mm_fallback": "the fallback and the retry at 5 mm: shipped as mx1-3ca9545e56de",
+    "captured_retry_5mm_fallback": "`retry_5mm_fallback` on the captured edits",
 }
 COMPLETION = "6-point completion"
 

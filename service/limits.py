@@ -13,10 +13,12 @@ poses/s on 2); between waves the request checks its deadline and its client, and
 (504 or 499) instead of computing answers nobody will read.
 
 The polish of a soft answer its retry still leaves short (``serving.retry_polish``) is not
-priced: it runs for the few answers the networks leave over 2 cm short (2-3 % of real
-edits, docs/generalisation-serving-2.md item 37), each bounded by the iteration cap (at most
-~0.6 ms an item, 5 targets at tolerance 0, both stages at the cap: 512 iterations), so a
-chunk of soft items that all polish runs at most some tens of ms longer. Priced as exact
+priced: it runs for the few answers the networks leave over ``retry_reach`` (5 mm) short
+(2-10 % of real edits, docs/generalisation-serving-2.md items 37 and 46), each bounded by
+the iteration cap (at most ~0.6 ms an item, 5 targets at tolerance 0, both stages at the
+cap: 512 iterations; where the polish leaves a target short, exact reach's fallback runs
+FABRIK twice more, from the caller's start and from the body moved across, each as
+bounded), so a chunk of soft items that all polish runs at most some tens of ms longer. Priced as exact
 reach's, it would cut a chunk of shipped 2-target soft items to under a third (42 -> 12
 items at 256 units a chunk) and halve a batch's poses/s on 2 threads (18-22k -> 8-9k,
 measured in one process).

@@ -80,7 +80,9 @@ def test_a_degenerate_pair_is_left_as_it_is(moved: tuple[np.ndarray, np.ndarray]
 
 def test_the_engine_keeps_a_new_body_width(models_dir: Path, real_poses: PosePairs) -> None:
     """``serving.keep_pairs``: every soft answer (no pins) on bodies the models never saw
-    has the start's hip and collar widths; off (the shipped default), the networks'."""
+    has the start's hip and collar widths, but those the retry's FABRIK polish finished
+    (it turns each hip on its own: docs/generalisation-serving-2.md item 45); off (the
+    shipped default), the networks'."""
     starts, goals = on_random_bodies(real_poses, 11)
     idx = np.asarray([JOINT_INDEX["head"], JOINT_INDEX["left_wrist"]], dtype=np.intp)
     problems = [
@@ -89,9 +91,12 @@ def test_the_engine_keeps_a_new_body_width(models_dir: Path, real_poses: PosePai
     ]
     kept = Engine(models_dir, serving={"keep_pairs": True})
     assert not Engine(models_dir).serving.keep_pairs
-    answers = np.stack([r.pose for r in kept.solve(problems)])
+    results = kept.solve(problems)
+    answers = np.stack([r.pose for r in results])
+    plain = np.asarray(["fabrik-polish" not in r.solvers for r in results])
+    assert plain.sum() >= len(problems) // 2
     for _, left, right in PAIRS:
         ratio = _width(answers, left, right) / _width(starts, left, right)
-        assert np.abs(ratio - 1.0).max() < 1e-9
+        assert np.abs(ratio[plain] - 1.0).max() < 1e-9
     again = np.stack([r.pose for r in kept.solve(problems[:5])])
     assert np.array_equal(again, answers[:5])  # batch vs single: the same bits

@@ -190,7 +190,8 @@ def test_composition_and_uncovered_joints(client: Any, real_poses: PosePairs) ->
     assert max(t["error"] for t in out["targets"]) < 0.15
     # a superset composes: the largest trained subset first, then what it leaves
     out = client.post("/v1/solve", json=solve_body(real_poses, 3, [*five, "left_knee"])).json()
-    assert out["solvers"] == [key, "left_knee"]
+    assert out["solvers"][:2] == [key, "left_knee"]  # (then the retry's polish, if it ran)
+    assert set(out["solvers"][2:]) <= {"fabrik-polish"}
     assert max(t["error"] for t in out["targets"]) < 0.15
     out = client.post("/v1/solve", json=solve_body(real_poses, 3, five[:3])).json()
     assert sorted(out["solvers"]) == ["head", "left_wrist+right_wrist"]

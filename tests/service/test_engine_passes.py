@@ -191,7 +191,7 @@ def test_a_soft_answer_left_short_gets_one_more_pass(
     what one more pass gives it (bit for bit an engine of one more pass), alone or in a
     batch; answers within it, exact reach and FABRIK are untouched. The shipped models
     retry at 2 cm."""
-    assert Engine(models_dir).serving.retry_reach == 0.02
+    assert Engine(models_dir).serving.retry_reach == 0.005
     plain = Engine(models_dir, serving={"passes": 2, "retry_reach": 0.0})
     more = Engine(models_dir, serving={"passes": 3, "retry_reach": 0.0})
     retry = Engine(models_dir, serving={"passes": 2, "retry_reach": 0.01, "retry_polish": False})

@@ -36,7 +36,7 @@ def test_models_say_their_default(client: Any, engine: Engine) -> None:
     r = client.get("/v1/models")
     assert r.status_code == 200
     assert r.json()["passes"] == engine.manifest.serving.passes == engine.serving.passes
-    assert r.json()["retry_reach"] == engine.manifest.serving.retry_reach == 0.02
+    assert r.json()["retry_reach"] == engine.manifest.serving.retry_reach == 0.005
 
 
 def test_pose_form_passes_equal_an_engine_built_with_them(
