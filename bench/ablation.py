@@ -245,6 +245,9 @@ VARIANTS: dict[str, str] = {
     "captured_fallback": "`fallback` on the captured edits",
     "retry_5mm_fallback": "the fallback and the retry at 5 mm: shipped as mx1-3ca9545e56de",
     "captured_retry_5mm_fallback": "`retry_5mm_fallback` on the captured edits",
+    "critic_canonical": "mx1-3ca9545e56de with the turn search's completion critic reading "
+    "each answer in its own canonical frame, not at the world's yaw (item 47): shipped",
+    "captured_critic_canonical": "`critic_canonical` on the captured edits",
 }
 COMPLETION = "6-point completion"
 

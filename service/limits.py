@@ -18,10 +18,10 @@ priced: it runs for the few answers the networks leave over ``retry_reach`` (5 m
 the iteration cap (at most ~0.6 ms an item, 5 targets at tolerance 0, both stages at the
 cap: 512 iterations; where the polish leaves a target short, exact reach's fallback runs
 FABRIK twice more, from the caller's start and from the body moved across, each as
-bounded), so a chunk of soft items that all polish runs at most some tens of ms longer. Priced as exact
-reach's, it would cut a chunk of shipped 2-target soft items to under a third (42 -> 12
-items at 256 units a chunk) and halve a batch's poses/s on 2 threads (18-22k -> 8-9k,
-measured in one process).
+bounded), so a chunk of soft items that all polish runs at most some tens of ms longer.
+Priced as exact reach's, it would cut a chunk of shipped 2-target soft items to under a
+third (42 -> 12 items at 256 units a chunk) and halve a batch's poses/s on 2 threads
+(18-22k -> 8-9k, measured in one process).
 """
 
 from __future__ import annotations

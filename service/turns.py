@@ -46,6 +46,7 @@ from typing import TYPE_CHECKING, Literal
 import numpy as np
 import numpy.typing as npt
 
+from core.geometry import canonicalise
 from core.manifest import Serving
 from service import completion
 from service.problems import PELVIS, BatchAnswer, _Items
@@ -277,8 +278,12 @@ def implausibility(engine: Engine, poses: npt.NDArray[np.floating], floors: F64)
     world = np.asarray(poses, dtype=np.float64).copy()
     other: npt.NDArray[np.floating]
     if engine.turn_search.critic == "completion":
-        world[:, :, [0, 2]] -= world[:, PELVIS : PELVIS + 1, [0, 2]]
+        # each answer facing +Z over its pelvis floor point (its own canonical frame, as the
+        # solve's): the networks were trained at every yaw but answer each a little
+        # differently, and the world's yaw must not pick the turn (it did: 12 of 60
+        # random 5-8-target edits turned the world 37, 90 or 180 degrees kept another)
         world[:, :, 1] -= floors[:, None]
+        world = np.asarray(canonicalise(world), dtype=np.float64)
         other = completion.implied_bodies(engine, world)
     else:
         world[:, :, 1] -= floors[:, None]
