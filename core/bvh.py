@@ -378,6 +378,8 @@ def parse_bvh(text: str, name: str = "<string>", frames: Iterable[int] | None = 
     """Parse BVH text; ``name`` is used in error messages. ``frames``: read only these
     frames' values (those in range), where the MOTION block holds one frame per line (else
     all are read); each line read is checked as a whole block is."""
+    if "\r" in text and "\n" not in text:  # lines ended by CR alone (classic Mac OS):
+        text = text.replace("\r", "\n")  # read as LF; an edited file comes back so
     match = _MOTION_RE.search(text)
     if match is None:
         if "HIERARCHY" not in text:

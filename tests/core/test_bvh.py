@@ -193,6 +193,18 @@ def test_raw_text_and_frame_lines_are_kept_for_a_writer() -> None:
     np.testing.assert_array_equal(bvh.motion[1], [1, 2, 3, 90, 0, 0, 0, 90, 0])
 
 
+def test_a_file_whose_lines_end_in_cr_alone_is_read_as_lf() -> None:
+    """Classic Mac OS line ends (CR alone): read as the same file with LF ends, which is
+    the text an edit is written back into (it said "missing MOTION section")."""
+    lf = parse_bvh(TINY, "lf.bvh")
+    cr = parse_bvh(TINY.replace("\n", "\r"), "cr.bvh")
+    assert cr.text == TINY
+    assert cr.motion.tobytes() == lf.motion.tobytes()
+    assert [j.name for j in cr.joints] == [j.name for j in lf.joints]
+    one = parse_bvh(TINY.replace("\n", "\r"), "cr.bvh", frames=[2])
+    assert one.motion[2].tobytes() == lf.motion[2].tobytes()
+
+
 _BODIES = [
     "1 2 3 0 0 0 0 0 0\n\n1 2 3 90 0 0 0 90 0\n \t\n0 0 0 90 90 0 0 0 0\n0 0 0 0 0 0 0 0 90",
     "1 2 3 0 0 0 0 0 0\r\n1 2 3 90 0 0 0 90 0\r\n\r\n0 0 0 90 90 0 0 0 0 0 0 0 0 0 0 0 0 90\r\n",
