@@ -21,6 +21,7 @@ over it, joint by joint. Then two structural rules apply to every map:
 
 from __future__ import annotations
 
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Final
@@ -505,12 +506,16 @@ def resolve_map(
     for i, name in enumerate(skel.names):  # "Character1_LeftArm" is also "LeftArm"
         lookup.setdefault(_key(name)[len(shared) :], i)
     given: dict[str, int] = {}
+    slid: dict[str, str] = {}  # a point part-way along a bone, as a map describes it
     for canon, name in (explicit or {}).items():
         if canon not in JOINT_INDEX:
             raise CharacterError(
                 f"{where}: unknown canonical joint {quoted(canon)}; "
                 f"joints are {', '.join(JOINT_NAMES)}"
             )
+        along = _SLID.fullmatch(name) if name not in skel.index else None
+        if along is not None and along.group(1) in skel.index:  # "0.5 of Spine1->Neck"
+            slid[canon], name = name, along.group(1)
         if name not in skel.index:
             raise CharacterError(f"{where}.{canon}: the skeleton has no joint {quoted(name)}")
         given[canon] = skel.index[name]
@@ -539,7 +544,20 @@ def resolve_map(
             "give them in joint_map as {canonical: joint name}; schemes found automatically: "
             + ", ".join(SCHEMES)
         )
-    return _anchors(skel, best_found, best_name, where)
+    jmap = _anchors(skel, best_found, best_name, where)
+    for canon, label in slid.items():  # as the map itself slides it, or refused
+        got = jmap.anchors[JOINT_INDEX[canon]].label
+        if got != label:
+            raise CharacterError(
+                f"{where}.{canon}: {quoted(label)} is not a point this map makes (it makes "
+                f"{quoted(got)}); name a joint of the skeleton"
+            )
+    return jmap
+
+
+#: A point part-way along a bone as :meth:`JointMap.describe` writes it (a joint sliding
+#: along its bone, where it would sit on its parent): accepted back in a ``joint_map``.
+_SLID = re.compile(r"[0-9.]+ of (.+)->(.+)")
 
 
 def _anchors(skel: Skeleton, found: dict[str, int], scheme: str, where: str) -> JointMap:

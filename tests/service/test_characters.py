@@ -341,3 +341,33 @@ def test_unit_and_up_axis_names_in_the_contract_are_the_core_ones() -> None:
     assert literals(Units) == set(UNITS)
     for model in (CharacterSkeleton, BVHSolveRequest, BVHInspectRequest):
         assert literals(model.model_fields["up"].annotation) == set(UP_AXES), model
+
+
+def test_the_joint_map_an_answer_gives_can_be_sent_back(
+    client: Any, bvh_files: dict[str, Path]
+) -> None:
+    """Every file's joint map, as ``/v1/bvh/inspect`` answers it (points part-way along a
+    bone written ``"0.5 of spine.001->neck"``), sent back as the request's ``joint_map``
+    gives the same points (it was a 422: "the skeleton has no joint '0.5 of ...'"); a
+    fraction or a bone the map does not make is refused naming the field."""
+    slid = 0
+    for name, (_, _, units, frame) in FILES.items():
+        base: dict[str, Any] = {"bvh": bvh_files[name].read_text(), "frame": frame}
+        if units is not None:
+            base["units"] = units
+        first = client.post("/v1/bvh/inspect", json=base)
+        assert first.status_code == 200, (name, first.text)
+        jmap = first.json()["joint_map"]
+        again = client.post("/v1/bvh/inspect", json={**base, "joint_map": jmap})
+        assert again.status_code == 200, (name, again.text)
+        assert (
+            again.json()["joint_map"] == jmap and again.json()["points"] == first.json()["points"]
+        )
+        for canon, label in jmap.items():
+            if " of " in label:
+                slid += 1
+                wrong = {canon: label.replace(label.split(" of ")[0], "0.123", 1)}
+                r = client.post("/v1/bvh/inspect", json={**base, "joint_map": wrong})
+                assert r.status_code == 422, r.text
+                assert r.json()["errors"][0]["location"] == f"joint_map.{canon}", r.text
+    assert slid > 0  # some file's map slides a point along a bone
