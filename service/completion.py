@@ -30,6 +30,13 @@ MIN_SPAN = 0.01
 #: lying or sitting there) is as low as the training data went; 9 m above the key points,
 #: the floor made bones up to 1.25 m long.
 FLOOR_REACH = 4.0
+#: The sizes the completion networks know, as pelvis-to-neck distances over the reference
+#: skeleton's spine (its three bones): they were trained on the recorded bodies (0.93-1.29,
+#: 1st-99th percentile of the training split; held-out bodies 0.86-1.45) at x0.6-1.2
+#: (``trainer.train.augment``). Key points of a body outside are scaled into it first and
+#: the answer back: at x3 a key point was missed by 15 % of the body's size, bones came out
+#: 30 % off (reviewed 2026-12-05). Inside, nothing changes.
+TORSO_BAND = (0.55, 1.55)
 
 
 def complete(
@@ -83,6 +90,7 @@ def complete(
         scale = float(completion_scales(engine, lengths))
         for j, value in given_lengths.items():
             lengths[bones[j]] = value
+    scale *= _out_of_band(engine, torso)
     given = {j: (v - origin) / scale for j, v in keypoints.items()}
     last = len(levels)
     for n, entry in enumerate(levels, start=1):
@@ -104,7 +112,7 @@ def complete(
         run.append(n)
     assert pred is not None
     if not given_lengths:  # the network's own estimate of this body's proportions
-        lengths = np.asarray(bone_lengths(pred), dtype=np.float64)
+        lengths = np.asarray(bone_lengths(pred), dtype=np.float64) * scale
     idx = np.asarray([JOINT_INDEX[j] for j in keypoints], dtype=np.intp)
     goal = np.stack([given[j] * scale for j in keypoints])
     # the compiled exact-reach polish (core.compiled_fabrik), as a solve's exact reach runs:
@@ -119,6 +127,15 @@ def complete(
     return CompleteResult(
         pose=world, errors=errors, reached=errors <= tolerance, levels=run, floor=float(origin[1])
     )
+
+
+def _out_of_band(engine: Engine, torso: float) -> float:
+    """How much the key points are scaled down (below 1: up) to bring a body whose
+    pelvis-to-neck distance is ``torso`` into :data:`TORSO_BAND`; 1 inside it."""
+    bones = {JOINT_NAMES[c]: b for b, (c, _) in enumerate(BONES)}
+    spine = sum(float(engine.reference_lengths[bones[j]]) for j in ("spine1", "spine2", "neck"))
+    ratio = torso / spine
+    return ratio / min(max(ratio, TORSO_BAND[0]), TORSO_BAND[1])
 
 
 def completion_scales(engine: Engine, lengths: F64) -> F64:

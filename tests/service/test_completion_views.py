@@ -108,3 +108,30 @@ def test_mirror_views_need_mirror_closed_key_points(models_dir: Path) -> None:
     level["joints"] = [j.replace("right_wrist", "spine1") for j in level["joints"]]
     with pytest.raises(ValidationError, match="mirror image"):
         Manifest.model_validate(manifest)
+
+
+def test_a_body_of_a_size_completion_never_saw_is_completed_at_one_it_knows(
+    engine: Engine, real_poses: PosePairs
+) -> None:
+    """Key points of real poses scaled x3 and x0.3 (a giant, a doll) are completed as
+    those at the edge of the sizes the networks know (``service.completion.TORSO_BAND``),
+    the answer scaled back: near the real pose relative to its size, bones near its
+    own. Before, x3 answers were 9.8 cm per joint off at x1 (3.5 unscaled), bones 30 % off,
+    and x0.3 ones 14 cm. Key points of bodies inside the band are completed as they are."""
+    from service.completion import TORSO_BAND, _out_of_band
+
+    poses = real_poses.poses[real_poses.starts[:10]]
+    for k in (0.3, 1.0, 3.0):
+        off, bones = [], []
+        for pose in poses:
+            got = engine.complete(keypoints(pose * k), None).pose / k
+            off.append(float(np.linalg.norm(got - pose, axis=1).mean()))
+            bones.append(float(np.abs(bone_lengths(got) / bone_lengths(pose) - 1.0).mean()))
+        assert np.mean(off) < 0.05 and np.mean(bones) < 0.2, (k, np.mean(off), np.mean(bones))
+    bone = {JOINT_NAMES[c]: b for b, c in enumerate(BONE_CHILDREN)}
+    spine = sum(float(engine.reference_lengths[bone[j]]) for j in ("spine1", "spine2", "neck"))
+    lo, hi = TORSO_BAND
+    for ratio in (lo, 1.0, hi):  # within the band: no scaling
+        assert _out_of_band(engine, ratio * spine) == pytest.approx(1.0, abs=1e-12)
+    assert _out_of_band(engine, 2 * hi * spine) == pytest.approx(2.0)
+    assert _out_of_band(engine, lo * spine / 4) == pytest.approx(0.25)
