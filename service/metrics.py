@@ -26,6 +26,12 @@ class _SlowReaders(Collector):
         return [CounterMetricFamily("pose_slow_readers", help_, value=dropped)]
 
 
+#: Steps of a solver path that are not trained solvers: the FABRIK polish and fallback,
+#: the pins' polish, the turn search's turn or fitted start (``service.engine``,
+#: ``service.pins``, ``service.turns``).
+_STEPS = ("fabrik", "pin-polish", "turn ", "fit ")
+
+
 class Metrics:
     def __init__(self) -> None:
         self.registry = CollectorRegistry()
@@ -61,7 +67,7 @@ class Metrics:
 
     def solved(self, method: str, solvers: list[str], n: int = 1) -> None:
         """Count ``n`` solves under a bounded label (never an open-ended combination)."""
-        neural = [s for s in solvers if not s.startswith("fabrik")]
+        neural = [s for s in solvers if not s.startswith(_STEPS)]
         if method == "fabrik":
             label = "fabrik"
         elif not neural:

@@ -237,3 +237,25 @@ def test_solver_metric_labels_are_bounded(client: Any, models_dir: Path) -> None
     allowed = set(load_manifest(models_dir).solvers()) | {"composed", "none", "fabrik"}
     assert labels and {s for _, s in labels} <= allowed
     assert ("neural", "composed") in labels
+
+
+def test_solve_metrics_name_the_trained_solver_whatever_steps_follow_it() -> None:
+    """A path's other steps (the polish, the pins' polish, a turn, a fitted start) are not
+    solvers: a single trained solver with them is still that solver (it was counted as
+    ``composed``, and a pin polish alone as a solver named ``pin-polish``)."""
+    from service.metrics import Metrics
+
+    metrics = Metrics()
+    metrics.solved("neural", ["left_wrist", "fabrik-polish", "pin-polish", "turn 90"])
+    metrics.solved("neural", ["head", "fit -37"])
+    metrics.solved("neural", ["fabrik-polish", "pin-polish"])
+    metrics.solved("neural", ["head", "left_knee", "turn 30"])
+    labels = {
+        tuple(s.labels.values()): s.value
+        for m in metrics.registry.collect() if m.name == "pose_solves"
+        for s in m.samples if s.name == "pose_solves_total"
+    }  # fmt: skip
+    assert labels == {
+        ("neural", "left_wrist"): 1.0, ("neural", "head"): 1.0, ("neural", "none"): 1.0,
+        ("neural", "composed"): 1.0,
+    }  # fmt: skip
