@@ -117,7 +117,12 @@ def main() -> None:
     doc = {
         "description": "Poses from the test split of data/poses.npz (canonical frame: metres, "
         "+Y up, facing +Z, left +X). Exported by scripts/export_sample_poses.py.",
-        "licences": ds.meta.get("licences", {}),
+        # the licences of the sources the samples come from (not of every source)
+        "licences": {
+            k: v
+            for k, v in ds.meta.get("licences", {}).items()
+            if k in {s["source"] for s in samples}
+        },
         "samples": samples,
     }
     args.out.parent.mkdir(parents=True, exist_ok=True)
