@@ -4,8 +4,8 @@ Outermost first: the headers of every answer (``headers``: request id, ``x-total
 hardening), CORS preflights and last-resort answers included; the access log
 (``context.AccessLog``: preflights included); CORS (``cors``); the last-resort answers
 (``context.RequestContext``); Prometheus metrics (``metrics``); the gate (``gate``: API
-key, content type, body limits and the per-worker admission bound), and innermost the hot
-paths (``fastpath``: the pose form of ``/v1/solve`` and the columnar batch answered without
+key, content type, body limits and the per-worker admission bound), HEAD answered as GET
+(``head``), and innermost the hot paths (``fastpath``: the pose form of ``/v1/solve`` and the columnar batch answered without
 the router). Every rejection is problem+json.
 """
 
@@ -20,6 +20,7 @@ from service.metrics import Metrics
 from service.middleware.context import AccessLog, RequestContext
 from service.middleware.cors import ProblemCORS
 from service.middleware.gate import Gate
+from service.middleware.head import HeadAsGet
 from service.middleware.headers import AnswerHeaders
 from service.middleware.metrics import RequestMetrics
 from service.settings import Settings
@@ -36,6 +37,7 @@ def install(
     from service.middleware.fastpath import FastPath  # imports the routes' modules
 
     app.add_middleware(FastPath, app_routes=routes)
+    app.add_middleware(HeadAsGet)  # the routes see GET; the layers outside, HEAD
     app.add_middleware(Gate, settings=settings)
     app.add_middleware(RequestMetrics, metrics=metrics, app_routes=routes)
     app.add_middleware(RequestContext)

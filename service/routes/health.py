@@ -14,16 +14,13 @@ from service.schemas import Health
 router = APIRouter(tags=["health"])
 
 
-# HEAD outermost: registered after GET, so a 405's Allow header names GET, the method the
-# schema documents (Starlette answers with the first route that matched the path)
-@router.head("/v2/health/live", include_in_schema=False)  # load balancers probe with HEAD
+# load balancers probe with HEAD: answered as GET (service.middleware.head)
 @router.get("/v2/health/live", response_model=Health)
 async def live() -> Health:
     """The process is up (Open Inference Protocol liveness)."""
     return Health(status="live")
 
 
-@router.head("/v2/health/ready", include_in_schema=False)
 @router.get(
     "/v2/health/ready",
     response_model=Health,

@@ -238,9 +238,14 @@ def test_a_floor_far_from_the_key_points_gives_a_body_of_their_size(
     assert at.json()["floor"] == pelvis
 
 
-@pytest.mark.parametrize("path", ["/v2/health/live", "/v2/health/ready"])
-def test_health_answers_head_as_get(client: Any, path: str) -> None:
-    """HEAD was a 405 on the health routes, which load balancers probe with."""
+@pytest.mark.parametrize(
+    "path",
+    ["/v2/health/live", "/v2/health/ready", "/v1/models", "/v1/skeleton", "/metrics", "/docs",
+     "/editor", "/openapi.json"],
+)  # fmt: skip
+def test_every_get_route_answers_head_as_get(client: Any, path: str) -> None:
+    """HEAD was a 405 on the health routes, which load balancers probe with, and then on
+    every GET route but those (``service.middleware.head``)."""
     get, head = client.get(path), client.head(path)
     assert head.status_code == get.status_code == 200
     assert head.content == b"" and head.headers["content-type"] == get.headers["content-type"]
