@@ -5,8 +5,8 @@ hardening), CORS preflights and last-resort answers included; the access log
 (``context.AccessLog``: preflights included); CORS (``cors``); the last-resort answers
 (``context.RequestContext``); Prometheus metrics (``metrics``); the gate (``gate``: API
 key, content type, body limits and the per-worker admission bound), HEAD answered as GET
-(``head``), and innermost the hot paths (``fastpath``: the pose form of ``/v1/solve`` and the columnar batch answered without
-the router). Every rejection is problem+json.
+(``head``), and innermost the hot paths (``fastpath``: the pose form of ``/v1/solve``
+and the columnar batch answered without the router). Every rejection is problem+json.
 """
 
 from __future__ import annotations
