@@ -69,7 +69,7 @@ function wireControls() {
       const t = doc.tried;
       if (!t) return;
       const open = doc.active && t.name === doc.name && t.text === doc.original;
-      if (open) openText(doc.text, doc.name, doc.original, doc.encoding);
+      if (open) openText(doc.text, doc.name, doc.original, doc.encoding, doc.frame);
       else openText(t.text, t.name, t.text, t.encoding);
     });
   }

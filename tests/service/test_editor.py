@@ -867,3 +867,90 @@ def test_editor_reads_an_answer_by_its_frame_line(
         assert max(dist(a, b) for a, b in zip(got, want, strict=True)) < 1e-6
     finally:
         page.context.close()
+
+
+@pytest.mark.browser
+def test_editor_keeps_screen_file_and_history_in_step(server: str, browser: Any) -> None:
+    """Found by a browser audit (2026-12-05): a drag whose last solve failed left a
+    mid-drag answer on screen while Export wrote the file unedited; picking a sample threw
+    an edited file's work away unasked; a units change re-opened a closed file; re-reading
+    the open file jumped to frame 0; a file whose lines end in CR alone broke the page;
+    Ctrl+Z before a drag's last answer undid the edit before it too."""
+    text = json.loads((REPO_ROOT / "docs" / "examples" / "bvh_solve.json").read_text())["bvh"]
+    page = open_editor(browser, server)
+    errors: list[str] = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+
+    def open_file(body: str, name: str) -> None:
+        page.set_input_files(
+            "#bvh-file", files=[{"name": name, "mimeType": "text/plain", "buffer": body.encode()}]
+        )
+        page.wait_for_function(f"() => {M}.bvh() && {M}.bvh().name === '{name}'")
+
+    def shown_is_committed() -> bool:
+        got, want = page.evaluate(f"{M}.pose()"), page.evaluate(f"{M}.committedPose()")
+        return all(dist(got[j], want[j]) < 1e-9 for j in want)
+
+    try:
+        # a file whose lines end in CR alone opens, is drawn as served, and can be edited
+        open_file(text.replace("\n", "\r"), "cr.bvh")
+        assert page.evaluate(f"{M}.bvhText()") == text  # read as LF, as the service reads it
+        drag_joint(page, "left_wrist", 40, -60)
+        assert page.evaluate(f"{M}.bvh()")["edited"]
+
+        # the drag's answers arrive, its last solve fails: the screen shows the pose as it was
+        before = page.evaluate(f"{M}.bvhText()")
+        xy = page.evaluate(f"{M}.projectJoint('right_wrist')")
+        page.mouse.move(xy["x"], xy["y"])
+        page.mouse.down()
+        page.mouse.move(xy["x"] - 40, xy["y"] - 60, steps=6)
+        settle(page)
+        assert not shown_is_committed()  # a mid-drag answer on screen
+        page.route("**/v1/bvh/solve", lambda route: route.abort())
+        page.mouse.up()
+        page.wait_for_function(f"() => {M}.error() !== null")
+        settle(page)
+        assert page.evaluate(f"{M}.error()")["status"] == 0
+        assert shown_is_committed() and page.evaluate(f"{M}.bvhText()") == before
+        assert page.locator("#status").inner_text() == "server unreachable"
+        page.unroute("**/v1/bvh/solve")
+
+        # Ctrl+Z while a drag's answer is on its way drops that drag alone
+        steps = page.evaluate(f"{M}.history()")
+        held: list[Any] = []
+        page.route("**/v1/bvh/solve", lambda route: held.append(route))
+        xy = page.evaluate(f"{M}.projectJoint('head')")
+        page.mouse.move(xy["x"], xy["y"])
+        page.mouse.down()
+        page.mouse.move(xy["x"] + 30, xy["y"] - 30, steps=4)
+        page.mouse.up()
+        page.wait_for_function(f"() => {M}.solveCount().inflight")
+        page.keyboard.press("Control+z")
+        for route in held:
+            route.continue_()
+        page.unroute("**/v1/bvh/solve")
+        settle(page)
+        assert page.evaluate(f"{M}.history()") == steps
+        assert page.evaluate(f"{M}.bvhText()") == before and shown_is_committed()
+
+        # re-read with other units: the frame shown stays
+        page.locator("#bvh-frame").fill("2")
+        page.wait_for_function(f"() => {M}.bvh().frame === 2")
+        page.select_option("#bvh-units", "cm")
+        page.wait_for_function(f"() => {M}.bvh().units === 'cm'")
+        assert page.evaluate(f"{M}.bvh()")["frame"] == 2
+
+        # a sample while the file is edited: asked first; "no" keeps the file, "yes" closes
+        page.once("dialog", lambda d: d.dismiss())
+        page.select_option("#sample", index=1)
+        assert page.evaluate(f"{M}.bvh()") is not None and page.evaluate(f"{M}.bvh()")["edited"]
+        page.once("dialog", lambda d: d.accept())
+        page.select_option("#sample", index=1)
+        page.wait_for_function(f"() => {M}.bvh() === null")
+        # units changed now: the closed file is not opened again
+        page.select_option("#bvh-units", "m")
+        page.wait_for_timeout(300)
+        assert page.evaluate(f"{M}.bvh()") is None
+        assert not errors, errors
+    finally:
+        page.context.close()

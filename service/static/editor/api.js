@@ -35,8 +35,10 @@ export async function api(method, path, body) {
       cache: 'no-store',
     });
   } catch (err) {
+    $('status').textContent = 'server unreachable';
     throw new ApiError(0, 'Server unreachable', `${method} /${path} failed (${err.message})`);
   }
+  if ($('status').textContent === 'server unreachable') $('status').textContent = 'connected';
   const text = await res.text();
   const rtt = performance.now() - t0;
   let data = null;

@@ -91,7 +91,7 @@ let opening = 0;
 // Open ``text`` as the file ``name``; ``original`` is the file as opened (Reset returns to
 // it): the text itself, unless an open file is read again with other units or up axis,
 // its edits kept.
-export async function openText(text, name, original = text, encoding = 'utf-8') {
+export async function openText(text, name, original = text, encoding = 'utf-8', frame = 0) {
   doc.tried = { text: original, name, encoding };
   const ticket = ++opening;
   $('status').textContent = `opening ${name}…`;
@@ -119,7 +119,8 @@ export async function openText(text, name, original = text, encoding = 'utf-8') 
   ui.hovered = null;
   history.stack = [];
   history.index = -1;
-  restore({ pose: filePose(text, 0), targets: [], pins: [], text, frame: 0 });
+  const at = Math.min(Math.max(frame, 0), Math.max(info.frames - 1, 0));
+  restore({ pose: filePose(text, at), targets: [], pins: [], text, frame: at });
   pushHistory();
   const pelvis = state.pose.pelvis;
   controls.target.set(0, pelvis[1], 0);
@@ -127,7 +128,7 @@ export async function openText(text, name, original = text, encoding = 'utf-8') 
   controls.update();
   const slider = $('bvh-frame');
   slider.max = String(Math.max(info.frames - 1, 0));
-  slider.value = '0';
+  slider.value = String(at);
   $('bvh-loaded').hidden = false;
   $('bvh-name').textContent = name;
   const fps = info.frame_time > 0 ? ` @ ${(1 / info.frame_time).toFixed(4).replace(/\.?0+$/, '')} fps` : '';
@@ -172,8 +173,12 @@ export async function openFile(file) {
     showError(new ApiError(-1, 'Cannot read the file', `${file.name}: ${err.message}`));
     return;
   }
-  const { text, encoding } = decodeFile(bytes);
-  await openText(text, file.name, text, encoding);
+  const decoded = decodeFile(bytes);
+  // lines ended by CR alone (classic Mac OS): read as LF, as the service reads them (an
+  // edit then comes back with LF ends); the page's own reader splits at LF
+  const crOnly = decoded.text.includes('\r') && !decoded.text.includes('\n');
+  const text = crOnly ? decoded.text.replaceAll('\r', '\n') : decoded.text;
+  await openText(text, file.name, text, decoded.encoding);
 }
 
 export function closeFile() {
@@ -188,6 +193,7 @@ export function closeFile() {
   $('export').title = 'Download the pose as JSON';
   history.stack = [];
   history.index = -1;
+  doc.tried = null; // closed: a units / up change no longer re-opens it
   controls.target.set(0, 0.85, 0);
   camera.position.set(0.75, 1.3, 2.9);
   controls.update();

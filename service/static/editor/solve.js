@@ -77,6 +77,15 @@ export function cancelSolves() {
 // Undo and redo show the frame of the edit they undo or redo (a scrub changes no step):
 // undo, the step before at the undone edit's frame; redo, the redone step as it was made.
 export function undo() {
+  if (solver.commitPending || ui.drag) {
+    // a gesture not yet a step (a drag, or its last answer still on the way): undo drops
+    // it alone (it also undid the step before)
+    endDrag(false);
+    cancelSolves();
+    restore(history.stack[history.index]);
+    refresh();
+    return;
+  }
   if (history.index <= 0) return;
   endDrag(false);
   cancelSolves();
@@ -96,6 +105,11 @@ export function redo() {
 }
 
 export function loadSample(i) {
+  const edited = doc.active && doc.text !== doc.original;
+  if (edited && !window.confirm(`Close ${doc.name}? Its edits are lost unless exported.`)) {
+    $('sample').value = ''; // the file stays open, edits and history kept
+    return;
+  }
   endDrag(false);
   cancelSolves();
   if (doc.active) closeFile();
@@ -217,8 +231,11 @@ export async function sendSolve() {
     if (epoch !== solver.epoch) return;
     if (commit && !solver.dirty) {
       // The gesture's final solve failed: keep its targets (so it can be retried) but not
-      // a pose the server never produced.
+      // a pose the server never produced, nor one of the drag's answers: the screen shows
+      // the pose as it was, the one Export writes and the next solve starts from.
       solver.commitPending = false;
+      state.pose = clonePose(state.committed);
+      doc.shown = doc.text;
       pushHistory();
     }
     showError(err);
