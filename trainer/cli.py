@@ -46,6 +46,13 @@ def _train_and_export(
     from trainer.stages import console
     from trainer.train import train_all
 
+    if export:  # before the training: a folder the export would refuse (trainer.export)
+        from trainer.export import check_replaceable
+
+        try:
+            check_replaceable(Path(cfg.out_dir))
+        except FileExistsError as exc:
+            raise typer.BadParameter(str(exc), param_hint="--out") from None
     t0 = time.perf_counter()
     trained = train_all(cfg, fresh=fresh)
     if int(__import__("os").environ.get("RANK", "0")) != 0 or not export:

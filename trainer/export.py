@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import hashlib
+import os
 import platform
+import shutil
 import subprocess
 import tempfile
 import warnings
@@ -49,10 +51,24 @@ from trainer.train import (
 )
 
 PARITY_TOLERANCE = 1e-5
-LICENCE = (
-    "CC BY-NC 4.0 (non-commercial): trained on the Bandai-Namco-Research-Motiondataset "
-    "(CC BY-NC 4.0) and CMU motion capture. See models/README.md."
-)
+
+
+def licence_of(meta: dict[str, Any]) -> str:
+    """The terms the weights inherit: the licence each source trained on has in the
+    dataset (its map's ``licence``; a source held out whole is not trained on). It was one
+    text for every export: a studio's models, trained on its own data, were labelled with
+    the shipped models' non-commercial licence."""
+    licences: dict[str, str] = meta.get("licences", {})
+    held: dict[str, list[str]] = meta.get("holdout", {})
+    used = {s: t for s, t in sorted(licences.items()) if held.get(s) != ["**"]}
+    if not used:
+        return "not recorded: the dataset names no licence for its sources"
+    terms = "; ".join(f"{s}: {t}" for s, t in used.items())
+    nc = any("non-commercial" in t.lower() or "by-nc" in t.lower() for t in used.values())
+    return (
+        f"{'Non-commercial: ' if nc else ''}these weights inherit the terms of the motion "
+        f"capture they were trained on ({terms}). See the model card (README.md)."
+    )
 
 
 class EncoderGraph(nn.Module):
@@ -177,15 +193,18 @@ def body_shapes(lengths: np.ndarray, min_share: float = 0.01, most: int = 16) ->
 
 
 def git_commit_of(out: Path) -> str:
-    """HEAD, with ``-dirty`` if a tracked file other than the export's own (``out``) is
-    modified."""
+    """HEAD of the repository this code runs from (not of the current directory: a studio
+    exporting from its own repository recorded that one's), with ``-dirty`` if a tracked
+    file other than the export's own (``out``) is modified; "unknown" outside one."""
+    here = Path(__file__).resolve().parent
     try:
         head = subprocess.run(
-            ["git", "rev-parse", "HEAD"], capture_output=True, text=True, check=True
+            ["git", "rev-parse", "HEAD"], capture_output=True, text=True, check=True, cwd=here
         ).stdout.strip()
         top = subprocess.run(
-            ["git", "rev-parse", "--show-toplevel"], capture_output=True, text=True, check=True
-        ).stdout.strip()
+            ["git", "rev-parse", "--show-toplevel"], capture_output=True, text=True, check=True,
+            cwd=here,
+        ).stdout.strip()  # fmt: skip
         spec = ["--", top]
         if out.resolve().is_relative_to(Path(top).resolve()):
             spec.append(f":(exclude){out.resolve()}")
@@ -194,6 +213,7 @@ def git_commit_of(out: Path) -> str:
             capture_output=True,
             text=True,
             check=True,
+            cwd=here,
         ).stdout.strip()
         return head + ("-dirty" if dirty else "")
     except (OSError, subprocess.CalledProcessError):
@@ -232,9 +252,52 @@ def export_all(
     metrics: dict[str, dict[str, dict[str, float]]],
     out_dir: Path | None = None,
 ) -> Manifest:
-    """Export every network to ``out_dir`` and write the manifest (atomic writes)."""
-    out = Path(out_dir or cfg.out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    """Export every network to ``out_dir`` and write the manifest: into a folder beside it,
+    swapped into place once whole (:func:`_swap_into`), so that an interrupted export
+    leaves the models that were there (it left new networks beside the old manifest:
+    a folder the service refused), and no file of an older export stays behind."""
+    final = Path(out_dir or cfg.out_dir)
+    check_replaceable(final)
+    out = final.parent / f".{final.name}.partial-{os.getpid()}"
+    shutil.rmtree(out, ignore_errors=True)
+    out.mkdir(parents=True)
+    try:
+        manifest = _export_into(cfg, trained, metrics, out, final)
+        _swap_into(out, final)
+    finally:
+        shutil.rmtree(out, ignore_errors=True)
+    return manifest
+
+
+def check_replaceable(final: Path) -> None:
+    """Refuse to replace a folder that holds files but is not a models folder."""
+    if final.is_dir() and any(final.iterdir()) and not (final / "manifest.json").is_file():
+        raise FileExistsError(
+            f"{final}: the folder holds files but no manifest.json (not a models folder); "
+            "export into a new or empty folder, or a models folder to replace"
+        )
+
+
+def _swap_into(new: Path, final: Path) -> None:
+    """``new`` in place of ``final``: the old folder moved aside, the new one renamed in,
+    the old one removed (if the process dies in between, the old models are in
+    ``.<name>.old-<pid>`` beside it)."""
+    old = final.parent / f".{final.name}.old-{os.getpid()}"
+    if final.exists():
+        shutil.rmtree(old, ignore_errors=True)
+        final.rename(old)
+    new.rename(final)
+    shutil.rmtree(old, ignore_errors=True)
+
+
+def _export_into(
+    cfg: TrainConfig,
+    trained: Trained,
+    metrics: dict[str, dict[str, dict[str, float]]],
+    out: Path,
+    final: Path,
+) -> Manifest:
+    """:func:`export_all`'s work, into ``out`` (the folder to become ``final``)."""
     ae, bank = trained.ae, trained.bank
     val = flat(trained.splits.val.positions)
     sample = val[: min(len(val), 512)]
@@ -367,15 +430,18 @@ def export_all(
     skeletons = body_shapes(all_lengths)
     ref = {JOINT_NAMES[child]: round(float(lengths[i]), 6) for i, (child, _) in enumerate(BONES)}
     data_meta = dict(trained.splits.train.meta)
-    archives = [
-        {"name": str(a.get("file") or a.get("path")), "sha256": str(a.get("sha256"))}
+    archives = [  # an archive's sha256, else a folder's (trainer.data.build.folder_digest)
+        {
+            "name": str(a.get("file") or a.get("path")),
+            "sha256": str(a.get("sha256") or a.get("files_sha256") or "not recorded"),
+        }
         for a in data_meta.get("archives", [])
     ]
     serving = serving_of(cfg)
     manifest = Manifest(
         schema_version=SCHEMA_VERSION,
         version=model_version(entries, serving),
-        licence=LICENCE,
+        licence=licence_of(data_meta),
         opset=cfg.opset,
         latent_dim=latent,
         skeleton=SkeletonSpec(
@@ -400,7 +466,7 @@ def export_all(
             },
             split_seed=int(data_meta.get("seed", 0)),
             config=cfg.model_dump(mode="json"),
-            git_commit=git_commit_of(out),
+            git_commit=git_commit_of(final),
             versions={
                 "python": platform.python_version(),
                 "torch": torch.__version__,

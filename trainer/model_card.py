@@ -37,9 +37,9 @@ Trained on real motion capture, resampled to {fps} fps, canonicalised, split by 
 on. Sources (frames; licence; held out):
 {sources}
 
-**Licence of these weights: {licence}** They inherit the non-commercial term of the
-Bandai-Namco data. For commercial use, retrain on motion capture you may use commercially:
-write a joint map for it (`trainer/maps/`, see `docs/data.md`), then
+**Licence of these weights: {licence}** Weights inherit the terms of the data they were
+trained on. To have weights under terms of your own, train on motion capture you may use
+so: write a joint map for it (a folder of maps, see `docs/data.md`), then
 
 ```
 pose-trainer dataset --mocap /path/to/your/mocap --maps your_maps/ --out data/poses.npz

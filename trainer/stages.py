@@ -11,6 +11,7 @@ run ends with the same weights as an uninterrupted one.
 from __future__ import annotations
 
 import contextlib
+import functools
 import hashlib
 import io
 import json
@@ -32,7 +33,7 @@ from rich.table import Table
 from torch import nn
 from torch.utils.data import DistributedSampler
 
-from core.io import write_atomic
+from core.io import sha256_file, write_atomic
 from trainer.config import SERVING_SETTINGS, LrSchedule, TrainConfig, seen_by_losses
 
 console = Console(stderr=True)
@@ -146,13 +147,27 @@ def host() -> str:
     return f"{model}, {capability}, torch {torch.__version__}, {torch.get_num_threads()} threads"
 
 
+@functools.cache
+def _sha256_of(path: str, size: int, mtime_ns: int) -> str:
+    return sha256_file(Path(path))
+
+
+def dataset_sha256(path: str | Path) -> str:
+    """The sha256 of the dataset file at ``path`` (once per file version in a process)."""
+    st = Path(path).stat()
+    return _sha256_of(str(Path(path).resolve()), st.st_size, st.st_mtime_ns)
+
+
 def save_checkpoint(
-    path: Path, model: nn.Module, optim: torch.optim.Optimizer, state: StageState, tag: str
-) -> None:
+    path: Path, model: nn.Module, optim: torch.optim.Optimizer, state: StageState, tag: str,
+    dataset: str = "",
+) -> None:  # fmt: skip
+    """``dataset``: the sha256 of the dataset trained on (a checkpoint is resumed only on it)."""
     buf = io.BytesIO()
     torch.save(
         {
             "tag": tag,
+            "dataset_sha256": dataset,
             "epoch": state.epoch,
             "history": state.history,
             "seconds": state.seconds,
@@ -166,14 +181,25 @@ def save_checkpoint(
 
 
 def load_checkpoint(
-    path: Path, model: nn.Module, optim: torch.optim.Optimizer, tags: tuple[str, ...]
-) -> StageState:
-    """The checkpoint at ``path`` if its tag is one of ``tags`` (see :func:`stage_tags`)."""
+    path: Path, model: nn.Module, optim: torch.optim.Optimizer, tags: tuple[str, ...],
+    dataset: str = "",
+) -> StageState:  # fmt: skip
+    """The checkpoint at ``path`` if its tag is one of ``tags`` (see :func:`stage_tags`) and
+    it was trained on the dataset whose sha256 is ``dataset`` (the tag names the dataset by
+    its path: a dataset rebuilt at the same path had its old weights resumed, the manifest
+    naming the new file; a checkpoint from before the sha was recorded is resumed)."""
     if not path.exists():
         return StageState()
     ckpt = torch.load(path, map_location="cpu", weights_only=False)
     if ckpt.get("tag") not in tags:
         console.print(f"[yellow]{path.name}: written by another config; starting the stage anew")
+        return StageState()
+    was = ckpt.get("dataset_sha256") or ""
+    if dataset and was and was != dataset:
+        console.print(
+            f"[yellow]{path.name}: trained on another dataset (sha256 {was[:12]}, now "
+            f"{dataset[:12]}); starting the stage anew"
+        )
         return StageState()
     model.load_state_dict(ckpt["model"])
     optim.load_state_dict(ckpt["optim"])
@@ -281,7 +307,8 @@ def run_stage(
     ckpt = Path(cfg.run_dir) / f"{name}.pt"
     tags = stage_tags(cfg, name)
     tag = tags[0]
-    state = StageState() if fresh else load_checkpoint(ckpt, trainable, optim, tags)
+    data = dataset_sha256(cfg.dataset)
+    state = StageState() if fresh else load_checkpoint(ckpt, trainable, optim, tags, data)
     if d.world > 1:  # every rank starts from rank 0's weights
         for p in trainable.state_dict().values():
             dist.broadcast(p, src=0)
@@ -312,7 +339,7 @@ def run_stage(
                 + ", ".join(f"{k}={v:.5g}" for k, v in row.items() if k != "epoch")
                 + f" ({time.perf_counter() - t0:.1f}s)"
             )
-            save_checkpoint(ckpt, trainable, optim, state, tag)
+            save_checkpoint(ckpt, trainable, optim, state, tag, data)
         d.barrier()
     if d.main:
         console.print(epoch_table(f"{name}: losses per epoch", state.history))

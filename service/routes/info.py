@@ -9,7 +9,9 @@ from service.deps import ReadyEngine, State
 from service.schemas import ModelInfo, ModelsResponse, SkeletonResponse
 
 router = APIRouter(tags=["info"])
-MODEL_CARD = "https://github.com/marionette/marionette/blob/main/models/README.md"
+#: Where the served models' card is: theirs, not the project's (a studio's retrained models
+#: pointed at the shipped ones' card).
+MODEL_CARD = "README.md beside manifest.json in the models folder served (pose-trainer model-card)"
 
 
 @router.get("/v1/skeleton", response_model=SkeletonResponse)

@@ -47,6 +47,8 @@ def test_small_dataset_format(small_dataset: Path) -> None:
     assert set(meta["dropped_frames"]) == set(DROP_REASONS)
     assert {m["source"] for m in meta["maps"]} == {"bandai-namco", "cmu-dance"}
     assert all(a["kind"] == "folder" for a in meta["archives"])
+    # a folder source is hashed by its files (the manifest named it with the sha256 "None")
+    assert all(a["files"] > 0 and len(a["files_sha256"]) == 64 for a in meta["archives"])
     bones = meta["mean_bone_lengths_m"]["bandai-namco"]
     assert 0.3 < bones["left_knee"] < 0.5  # thigh, metres
     assert meta["build_seconds"] > 0
@@ -342,3 +344,39 @@ def test_builder_reads_the_multi_body_archives_and_holds_out_what_the_maps_name(
     world = ds.world()
     assert np.abs(world[ds.source_mask("reactidle"), :, 1].min(axis=1)).max() < 0.05
     assert (ds.positions[:, JOINT_INDEX["head"], 1] > ds.positions[:, 0, 1]).all()
+
+
+def test_a_folder_source_is_hashed_as_sha256sum_lists_its_files(tmp_path: Path) -> None:
+    import hashlib
+
+    from trainer.data.build import folder_digest
+
+    (tmp_path / "b").mkdir()
+    (tmp_path / "a.bvh").write_bytes(b"one")
+    (tmp_path / "b" / "c.bvh").write_bytes(b"two")
+    listing = "".join(
+        f"{hashlib.sha256(data).hexdigest()}  {rel}\n"
+        for rel, data in (("a.bvh", b"one"), ("b/c.bvh", b"two"))
+    )
+    want = hashlib.sha256(listing.encode()).hexdigest()
+    assert folder_digest(tmp_path, ["b/c.bvh", "a.bvh"]) == want  # sorted by path
+    (tmp_path / "a.bvh").write_bytes(b"changed")
+    assert folder_digest(tmp_path, ["a.bvh", "b/c.bvh"]) != want
+
+
+def test_the_licence_of_weights_is_their_data_s() -> None:
+    """Every export was labelled with the shipped models' non-commercial licence, a
+    studio's trained on its own data too."""
+    from trainer.export import licence_of
+
+    shipped = {
+        "licences": {"bandai-namco": "CC BY-NC 4.0", "cmu-dance": "CMU terms", "fair": "MIT"},
+        "holdout": {"fair": ["**"], "cmu-dance": ["**/07_*.amc"]},
+    }
+    text = licence_of(shipped)
+    assert text.startswith("Non-commercial") and "bandai-namco: CC BY-NC 4.0" in text
+    assert "cmu-dance: CMU terms" in text and "MIT" not in text  # fair: held out whole
+    studio = licence_of({"licences": {"acme": "internal use only"}})
+    assert "acme: internal use only" in studio and "CC BY-NC" not in studio
+    assert not studio.startswith("Non-commercial")
+    assert licence_of({}).startswith("not recorded")

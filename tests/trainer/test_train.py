@@ -3,6 +3,7 @@ determinism and DDP."""
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import re
@@ -95,6 +96,47 @@ def trained(small_dataset: Path, tmp_path_factory: pytest.TempPathFactory) -> tu
     result = train_all(cfg, fresh=True)
     export_all(cfg, result, evaluate(cfg, result))
     return result, root / "models"
+
+
+def test_an_export_replaces_a_models_folder_whole_or_not_at_all(
+    trained: tuple[Trained, Path], small_dataset: Path, tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:  # fmt: skip
+    """An export went file by file into the folder: interrupted, it left new networks
+    beside the old manifest (models the service refused, the old ones gone); it also
+    overwrote a folder of other files, and left an older export's extra files. Now it is
+    written beside the folder and swapped in whole; a folder that is not a models folder
+    is refused."""
+    import trainer.export as export
+
+    result, models = trained
+    target = tmp_path / "models"
+    shutil.copytree(models, target)
+    (target / "stale_solver.onnx").write_bytes(b"an older export's file")
+    manifest = (target / "manifest.json").read_bytes()
+    cfg = tiny_config(small_dataset, tmp_path / "run", target)
+    metrics = evaluate(cfg, result)
+
+    def interrupted(*_: Any) -> None:
+        raise KeyboardInterrupt
+
+    with monkeypatch.context() as m:  # interrupted at its last step: nothing replaced
+        m.setattr(export, "write_model_card", interrupted)
+        with pytest.raises(KeyboardInterrupt):
+            export_all(cfg, result, metrics)
+    assert (target / "manifest.json").read_bytes() == manifest
+    assert (target / "stale_solver.onnx").exists()
+    load_manifest(target, verify=True)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["models"]  # no partial folder
+    export_all(cfg, result, metrics)  # whole: the older export's file gone
+    assert not (target / "stale_solver.onnx").exists()
+    load_manifest(target, verify=True)
+    notes = tmp_path / "notes"
+    notes.mkdir()
+    (notes / "README.md").write_text("a studio's notes")
+    with pytest.raises(FileExistsError, match="not a models folder"):
+        export_all(tiny_config(small_dataset, tmp_path / "run", notes), result, metrics)
+    assert (notes / "README.md").read_text() == "a studio's notes"
 
 
 def test_manifest_is_valid_and_hashes_verify(trained: tuple[Trained, Path]) -> None:
@@ -474,6 +516,30 @@ def test_completion_checkpoints_tagged_with_the_autoencoder_stay_valid(tmp_path:
     assert load_checkpoint(ckpt, net, optim, stage_tags(cfg, "completion1")).epoch == 4
     assert load_checkpoint(ckpt, net, optim, stage_tags(other, "completion1")).epoch == 0
     assert stage_tags(cfg, "solvers") == (config_tag(cfg, "solvers"),)
+
+
+def test_a_checkpoint_is_resumed_only_on_the_dataset_it_was_trained_on(tmp_path: Path) -> None:
+    """The tag names the dataset by its path: a dataset rebuilt at the same path had its
+    old weights resumed (every stage "complete in checkpoint, skipping") while the manifest
+    named the new file. The checkpoint records the dataset's sha256: another one starts the
+    stage anew; a checkpoint from before it was recorded is resumed as it was."""
+    from trainer.stages import dataset_sha256
+
+    cfg = load_config(None, {})
+    net = torch.nn.Linear(2, 2)
+    optim = torch.optim.Adam(net.parameters())
+    tags = stage_tags(cfg, "solvers")
+    first, second = tmp_path / "a.npz", tmp_path / "b.npz"
+    first.write_bytes(b"one dataset")
+    second.write_bytes(b"another one")
+    sha = dataset_sha256(first)
+    assert sha == hashlib.sha256(b"one dataset").hexdigest() != dataset_sha256(second)
+    ckpt = tmp_path / "solvers.pt"
+    save_checkpoint(ckpt, net, optim, StageState(epoch=4), tags[0], sha)
+    assert load_checkpoint(ckpt, net, optim, tags, sha).epoch == 4
+    assert load_checkpoint(ckpt, net, optim, tags, dataset_sha256(second)).epoch == 0
+    save_checkpoint(ckpt, net, optim, StageState(epoch=4), tags[0])  # (none recorded)
+    assert load_checkpoint(ckpt, net, optim, tags, dataset_sha256(second)).epoch == 4
 
 
 def test_stay_term_in_the_local_frame_measures_offsets_from_parents(

@@ -22,6 +22,7 @@ atomically by :func:`trainer.data.dataset.save_dataset`.
 
 from __future__ import annotations
 
+import hashlib
 import multiprocessing
 import os
 import shutil
@@ -247,6 +248,14 @@ def _selected_files(root: Path, mocap_map: MocapMap) -> list[str]:
     return [rel for rel in _all_files(root) if mocap_map.selects(rel)]
 
 
+def folder_digest(root: Path, files: Sequence[str]) -> str:
+    """A folder source's content, hashed: the sha256 of its files' lines ``<sha256>  <relative
+    path>`` (``sha256sum``'s form), sorted by path (a folder had no hash: the manifest
+    named it with the sha256 "None")."""
+    lines = "".join(f"{sha256_file(root / rel)}  {rel}\n" for rel in sorted(files))
+    return hashlib.sha256(lines.encode()).hexdigest()
+
+
 def pair_skeleton(mocap_map: MocapMap, relpath: str, files: Sequence[str]) -> str:
     """The one file of ``files`` (relative paths) matching the map's ``skeleton`` globs for
     a motion file; ``MapError`` naming the globs when none or several match."""
@@ -290,8 +299,11 @@ def locate_sources(
             candidates.append(mocap_dir / m.archive_stem)
         candidates.append(mocap_dir)
         for root in candidates:
-            if root.is_dir() and _selected_files(root, m):
-                origin: dict[str, Any] = {"kind": "folder", "path": str(root)}
+            if root.is_dir() and (selected := _selected_files(root, m)):
+                origin: dict[str, Any] = {
+                    "kind": "folder", "path": str(root), "files": len(selected),
+                    "files_sha256": folder_digest(root, selected),
+                }  # fmt: skip
                 if m.archive and m.archive in checksums:
                     # Not verifiable from a folder: the sum SHA256SUMS lists for its archive.
                     origin.update(file=m.archive, sha256=checksums[m.archive], verified=False)
