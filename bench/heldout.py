@@ -714,7 +714,18 @@ def main(
         engine = Engine(models, threads=1, serving=asked)
     except ValueError as exc:  # not a setting, fixed by training, or out of range
         raise typer.BadParameter(str(exc), param_hint="--serving") from None
-    res = run_heldout(engine, load_dataset(dataset), cfg, split=split, log=console.log)
+    data = load_dataset(dataset)
+    try:
+        present = bool(data.split_mask(split).any())
+    except ValueError as exc:  # not a split name
+        raise typer.BadParameter(str(exc), param_hint="--split") from None
+    if not present:  # (a studio's dataset has no held-out bodies)
+        raise typer.BadParameter(
+            f"{dataset} has no {split!r} frames: no bodies to test on; another split "
+            "(--split test) or a dataset whose maps hold bodies out (docs/data.md)",
+            param_hint="--split",
+        )
+    res = run_heldout(engine, data, cfg, split=split, log=console.log)
     res.models = {
         "dir": str(models), "version": engine.version, "overrides": asked,
         **engine.serving.model_dump(mode="json"),

@@ -39,7 +39,11 @@ def _train_and_export(
         overrides["run_dir"] = str(run_dir)
     elif quick:
         overrides["run_dir"] = "runs/quick"
-    cfg = load_config(config, overrides)
+    try:  # a config that cannot be read: one line, not a traceback (as `serving` says it)
+        cfg = load_config(config, overrides)
+    except (OSError, ValueError) as exc:  # missing file, TOML, a setting wrong (pydantic)
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(1) from None
 
     from rich.table import Table
 
@@ -53,8 +57,14 @@ def _train_and_export(
             check_replaceable(Path(cfg.out_dir))
         except FileExistsError as exc:
             raise typer.BadParameter(str(exc), param_hint="--out") from None
+    from trainer.data.dataset import DatasetError
+
     t0 = time.perf_counter()
-    trained = train_all(cfg, fresh=fresh)
+    try:
+        trained = train_all(cfg, fresh=fresh)
+    except DatasetError as exc:  # missing, unreadable, or a split without frames
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(1) from None
     if int(__import__("os").environ.get("RANK", "0")) != 0 or not export:
         return
     from trainer.export import evaluate, export_all

@@ -31,7 +31,7 @@ from trainer.augment import (
 )
 from trainer.augment import mirror as mirror_poses
 from trainer.config import AugmentConfig, TrainConfig
-from trainer.data.dataset import FPS, PoseDataset, load_dataset
+from trainer.data.dataset import FPS, DatasetError, PoseDataset, load_dataset
 from trainer.models import (
     CompletionNet,
     Normaliser,
@@ -81,11 +81,21 @@ def load_splits(cfg: TrainConfig) -> Splits:
         sizes = np.array([(train.clip == c).sum() for c in clips])
         keep = clips[: max(1, int(np.searchsorted(np.cumsum(sizes), cfg.max_train_frames)) + 1)]
         train = train.subset(np.isin(train.clip, keep))
-    return Splits(
+    splits = Splits(
         train=train,
         val=data.subset(data.split_mask("val")),
         test=data.subset(data.split_mask("test")),
     )
+    for name in ("train", "val"):  # (it failed deep in training: "cannot reshape array")
+        if len(getattr(splits, name).positions) == 0:
+            counts = {s: int(data.split_mask(s).sum()) for s in ("train", "val", "test")}
+            raise DatasetError(
+                f"{cfg.dataset}: no {name} frames (frames per split: {counts}); clips are split "
+                "by clip within each source, content and actor: 1 clip -> test, 2 -> test + "
+                "train, 3 or more give val one (docs/data.md, Splits): add clips, or force a "
+                "clip's split with an [[override]] split = ... in the map"
+            )
+    return splits
 
 
 def flat(positions: np.ndarray) -> torch.Tensor:

@@ -247,3 +247,25 @@ def test_joint_breakdown_adds_up_to_the_heldout_sets(
     assert res["left_elbow"]["fabrik"][PELVIS] == 0.0
     assert res["left_elbow"]["neural_bone"][PELVIS] > 0.0
     assert res["left_elbow"]["neural_exact"][JOINT_INDEX["left_elbow"]] < 0.1  # 1 mm polish
+
+
+def test_the_command_refuses_a_dataset_without_the_split_in_one_line(
+    models_dir: Path, small_dataset: Path
+) -> None:
+    """A studio's dataset holds no bodies out: the command ended in a traceback; now a
+    usage error that names the split and points at --split test; a split that does not
+    exist is one too."""
+    import typer
+    from typer.testing import CliRunner
+
+    from bench.heldout import main
+
+    app = typer.Typer()
+    app.command()(main)
+    runner = CliRunner()
+    base = ["--models", str(models_dir), "--dataset", str(small_dataset), "--quick"]
+    r = runner.invoke(app, base)
+    assert r.exit_code == 2 and "no 'holdout' frames" in r.output, r.output
+    assert "--split test" in r.output and "Traceback" not in r.output
+    r = runner.invoke(app, [*base, "--split", "nosuch"])
+    assert r.exit_code == 2 and "unknown split" in r.output, r.output

@@ -607,3 +607,30 @@ def test_every_stage_records_the_host_that_trained_it(
     assert torch.backends.cpu.get_cpu_capability() in host()
     assert f"Trained on: {host()}." in (models / "README.md").read_text()
     assert manifest.provenance.dataset["file_sha256"] == sha256_file(small_dataset)
+
+
+def test_train_says_in_one_line_what_is_wrong_with_its_config_or_data(
+    small_dataset: Path, tmp_path: Path
+) -> None:
+    """A config mistake ended in a 50-70-line traceback, and a dataset whose split left
+    val empty (2 clips of one content) failed deep in training ("cannot reshape array of
+    size 0"): now one line that says what and where, exit code 1, nothing trained."""
+    from typer.testing import CliRunner
+
+    from trainer.cli import app
+
+    runner = CliRunner()
+    typo = tmp_path / "typo.toml"
+    typo.write_text("[autoencoder]\nepoch = 1\n")
+    r = runner.invoke(app, ["train", "--config", str(typo), "--run-dir", str(tmp_path / "run")])
+    assert r.exit_code == 1 and "autoencoder.epoch" in r.output and "Traceback" not in r.output
+    with np.load(small_dataset, allow_pickle=False) as npz:
+        arrays = {k: npz[k] for k in npz.files}
+    arrays["clip_split"] = np.where(arrays["clip_split"] == "val", "test", arrays["clip_split"])
+    no_val = tmp_path / "no_val.npz"
+    np.savez(no_val, **arrays)
+    args = ["train", "--dataset", str(no_val), "--run-dir", str(tmp_path / "run"),
+            "--out", str(tmp_path / "models")]  # fmt: skip
+    r = runner.invoke(app, args)
+    assert r.exit_code == 1 and "no val frames" in r.output, r.output
+    assert not (tmp_path / "models").exists()
