@@ -380,3 +380,26 @@ def test_the_licence_of_weights_is_their_data_s() -> None:
     assert "acme: internal use only" in studio and "CC BY-NC" not in studio
     assert not studio.startswith("Non-commercial")
     assert licence_of({}).startswith("not recorded")
+
+
+def test_the_builder_warns_of_a_map_whose_units_up_axis_or_sides_look_wrong(
+    small_dataset: Path,
+) -> None:
+    """Inches read as cm, +Z read as +Y and swapped sides built without a word (11 cm
+    thighs, figures lying down, toes backwards): the summary now warns, per source."""
+    import dataclasses
+
+    from trainer.data.build import sanity_warnings
+
+    ds = load_dataset(small_dataset)
+    assert sanity_warnings(ds) == []
+    small = dataclasses.replace(ds, positions=ds.positions * 0.39)
+    assert any("thigh" in w and "unit" in w for w in sanity_warnings(small))
+    lying = dataclasses.replace(ds, positions=ds.positions[..., [0, 2, 1]])
+    assert any("head" in w and "up_axis" in w for w in sanity_warnings(lying))
+    backwards = dataclasses.replace(ds, positions=ds.positions * np.array([-1, 1, -1], np.float32))
+    assert any("swap_sides" in w for w in sanity_warnings(backwards))
+    no_val = dataclasses.replace(
+        ds, clip_split=np.where(ds.clip_split == "val", "test", ds.clip_split)
+    )
+    assert any("no val clips" in w for w in sanity_warnings(no_val))

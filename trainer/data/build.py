@@ -37,7 +37,7 @@ from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import Any, Final
 
 import numpy as np
 import numpy.typing as npt
@@ -45,7 +45,7 @@ import numpy.typing as npt
 from core.bvh import BVH, BVHError, read_bvh
 from core.geometry import canonical_transform, transform_yaw
 from core.io import sha256_file
-from core.skeleton import BONE_CHILDREN, JOINT_NAMES, NUM_JOINTS, bone_lengths
+from core.skeleton import BONE_CHILDREN, JOINT_INDEX, JOINT_NAMES, NUM_JOINTS, bone_lengths
 from trainer.data.asf import AMC, ASFError, read_amc, read_asf
 from trainer.data.dataset import FORMAT_VERSION, FPS, SPLITS, PoseDataset, save_dataset
 from trainer.data.maps import MapError, MocapMap, glob_to_regex, joint_positions, load_maps
@@ -718,6 +718,40 @@ def summary_tables(report: BuildReport) -> list[Any]:
     return [counts, drops, bones]
 
 
+#: Plausible medians of a source's poses (canonical frame, metres): the thigh's length, the
+#: head's height over the pelvis, the toes ahead of the ankles. Outside them a map's units,
+#: up axis or sides are likely wrong (inches read as cm gave 11 cm thighs; +Z read as +Y,
+#: figures lying down, the head 2 mm over the pelvis; sides swapped, toes 10 cm behind).
+PLAUSIBLE: Final = {"thigh": (0.2, 0.7), "head": (0.2, 1.2), "toes": (0.0, 0.4)}
+
+
+def sanity_warnings(ds: PoseDataset) -> list[str]:
+    """What a source's poses say of its map, where implausible (a warning each); and a
+    split the training needs (train, val) without frames."""
+    out = []
+    j = JOINT_INDEX
+    for source in sorted(set(ds.clip_source.tolist())):
+        p = ds.positions[ds.clip_source[ds.clip] == source][::10].astype(np.float64)
+        thigh = float(np.median(np.linalg.norm(p[:, j["left_knee"]] - p[:, j["left_hip"]], axis=1)))
+        head = float(np.median(p[:, j["head"], 1] - p[:, j["pelvis"], 1]))
+        toes = float(np.median(p[:, [j["left_foot"], j["right_foot"]], 2]
+                               - p[:, [j["left_ankle"], j["right_ankle"]], 2]))  # fmt: skip
+        checks = (
+            ("thigh", thigh, "the thigh is {v:.3f} m long: are the map's `unit` right?"),
+            ("head", head, "the head is {v:.3f} m above the pelvis: is the map's `up_axis` right?"),
+            ("toes", toes, "the toes are {v:.3f} m ahead of the ankles (facing +Z): are left and "
+             "right swapped (`swap_sides`)?"),
+        )  # fmt: skip
+        for key, value, text in checks:
+            lo, hi = PLAUSIBLE[key]
+            if not lo <= value <= hi:
+                out.append(f"{source}: median " + text.format(v=value))
+    for split in ("train", "val"):
+        if not (ds.clip_split == split).any():
+            out.append(f"no {split} clips: training refuses this dataset (docs/data.md, splits)")
+    return out
+
+
 def print_summary(report: BuildReport, console: Any = None) -> None:
     from rich.console import Console
 
@@ -727,6 +761,8 @@ def print_summary(report: BuildReport, console: Any = None) -> None:
     meta = report.meta
     for item in meta["skipped_files"]:
         console.print(f"skipped: {item['reason']}")
+    for warning in sanity_warnings(report.dataset):
+        console.print(f"[yellow]warning: {warning}")
     console.print(
         f"{meta['num_clips']} clips, {meta['num_frames']:,} poses ({NUM_JOINTS} joints) -> "
         f"{report.out} ({report.out.stat().st_size / 2**20:.1f} MiB) "
