@@ -269,3 +269,13 @@ def test_bad_new_map_keys_are_named(tmp_path: Path, edit: Any, message: str) -> 
         load_map(bad)
     assert message in str(info.value)
     assert str(bad) in str(info.value)
+
+
+def test_maps_are_read_from_a_folder_or_one_file(tmp_path: Path) -> None:
+    """``--maps`` given a map file said "no *.toml joint maps found": one file is its map."""
+    one = sorted(MAPS.glob("*.toml"))[0]
+    assert [m.source for m in load_maps(one)] == [load_map(one).source]
+    with pytest.raises(MapError, match="no such folder"):
+        load_maps(tmp_path / "missing")
+    with pytest.raises(MapError, match="no \\*.toml joint maps found"):
+        load_maps(tmp_path)

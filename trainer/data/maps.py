@@ -550,11 +550,13 @@ def load_map(path: str | Path) -> MocapMap:
 
 
 def load_maps(folder: str | Path) -> list[MocapMap]:
-    """All ``*.toml`` maps of a folder, sorted by file name; sources must be unique."""
+    """All ``*.toml`` maps of a folder, sorted by file name (or one map file); sources must
+    be unique."""
     folder = Path(folder)
-    files = sorted(folder.glob("*.toml"))
+    files = [folder] if folder.is_file() else sorted(folder.glob("*.toml"))
     if not files:
-        raise MapError(f"{folder}: no *.toml joint maps found")
+        what = "no such folder" if not folder.exists() else "no *.toml joint maps found"
+        raise MapError(f"{folder}: {what}")
     maps = [load_map(f) for f in files]
     seen: dict[str, str] = {}
     for m in maps:
