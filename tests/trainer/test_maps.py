@@ -277,5 +277,5 @@ def test_maps_are_read_from_a_folder_or_one_file(tmp_path: Path) -> None:
     assert [m.source for m in load_maps(one)] == [load_map(one).source]
     with pytest.raises(MapError, match="no such folder"):
         load_maps(tmp_path / "missing")
-    with pytest.raises(MapError, match="no \\*.toml joint maps found"):
+    with pytest.raises(MapError, match=r"no \*\.toml joint maps found"):
         load_maps(tmp_path)
