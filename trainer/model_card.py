@@ -34,7 +34,7 @@ input and output is in metres, in the canonical frame.
 ## Data and licence
 Trained on real motion capture, resampled to {fps} fps, canonicalised, split by clip (seed
 {seed}) into train / val / test; the held-out bodies (split `holdout`) are never trained
-on. Sources (frames; licence; held out):
+on. Sources (frames in the dataset; licence; held out):
 {sources}
 
 **Licence of these weights: {licence}** Weights inherit the terms of the data they were
@@ -87,15 +87,22 @@ def _fmt(metrics: dict[str, float], split: str) -> str:
 
 def _sources(dataset: dict[str, Any]) -> str:
     """One line per source of the dataset's provenance: frames, licence, what is held out."""
-    frames: dict[str, int] = dataset.get("source_frames", {})
+    native: dict[str, int] = dataset.get("source_frames", {})
+    resampled: dict[str, int] = dataset.get("resampled_frames", {})
+    dropped: dict[str, dict[str, int]] = dataset.get("dropped_frames_by_source", {})
     licences: dict[str, str] = dataset.get("licences", {})
     holdout: dict[str, list[str]] = dataset.get("holdout", {})
     lines = []
-    for source in sorted(set(frames) | set(licences)):
+    for source in sorted(set(native) | set(licences)):
         held = holdout.get(source, [])
         out = "all of it" if held == ["**"] else ", ".join(f"`{g}`" for g in held) or "none"
-        count = f"{frames[source]:,}" if source in frames else "?"
-        lines.append(f"- `{source}`: {count} frames; {licences.get(source, '?')}; held out: {out}")
+        if source in resampled:  # the frames in the dataset (30 fps, less those dropped)
+            kept = resampled[source] - sum(dropped.get(source, {}).values())
+            fps, recorded = dataset.get("fps", 30), native.get(source, 0)
+            count = f"{kept:,} frames at {fps} fps ({recorded:,} as recorded)"
+        else:  # (a dataset from before the resampled counts were recorded)
+            count = f"{native[source]:,} frames as recorded" if source in native else "? frames"
+        lines.append(f"- `{source}`: {count}; {licences.get(source, '?')}; held out: {out}")
     return "\n".join(lines) or "- (not recorded: the dataset predates its provenance)"
 
 
