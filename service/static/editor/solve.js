@@ -82,7 +82,7 @@ export function undo() {
     // it alone (it also undid the step before)
     endDrag(false);
     cancelSolves();
-    restore(history.stack[history.index]);
+    restore(history.stack[history.index], doc.active ? doc.frame : undefined); // (the frame shown)
     refresh();
     return;
   }
