@@ -44,7 +44,7 @@ def hold_pins(items: _Items, ans: BatchAnswer) -> BatchAnswer:
         n_t, cnt, tol = int(items.n_t[b]), int(items.cnt[b]), float(items.tols[b])
         goals = [(int(j), items.tpos[b, q]) for q, j in enumerate(items.tidx[b, :cnt].tolist())]
         idx, where = items.tidx[b, :cnt], items.tpos[b, :cnt]
-        best, rank = None, _rank(errors[i, :cnt], n_t, tol)
+        best, misses, rank = None, errors[i, :cnt], _rank(errors[i, :cnt], n_t, tol)
         # from the answer; then, where pins are still off, from the caller's start, which
         # holds every pin (pins are where the start has them): no step of its polish takes
         # one past half the tolerance, so the targets come as near as the pins let them
@@ -53,14 +53,17 @@ def hold_pins(items: _Items, ans: BatchAnswer) -> BatchAnswer:
             got = polish_canonical(origin, goals[:n_t], goals[n_t:], tol, bool(items.ex[b]))
             if got is None and origin is start:
                 got = start  # no polish nearer: the start itself holds the pins
-            if got is not None and (r := _rank(_misses(got, idx, where), n_t, tol)) < rank:
-                best, rank = got, r
+            if got is None:
+                continue
+            m = np.linalg.norm(got[idx] - where, axis=1)
+            if (r := _rank(m, n_t, tol)) < rank:
+                best, misses, rank = got, m, r
             if rank[0] == 0.0:
                 break
         if best is None:
             continue
         polished[i], pose[i] = True, best
-        errors[i, :cnt] = _misses(best, idx, where)
+        errors[i, :cnt] = misses
         bone_err[i] = float(np.abs(bone_lengths(best) / bone_lengths(items.poses[b]) - 1.0).max())
     if not polished.any():
         return ans
@@ -70,13 +73,6 @@ def hold_pins(items: _Items, ans: BatchAnswer) -> BatchAnswer:
         paths=tuple((*path, "pin-polish") for path in before.paths),
     ).take(keep)  # fmt: skip
     return ans.with_items(sel[keep], out)
-
-
-def _misses(
-    pose: npt.NDArray[np.float64], idx: npt.NDArray[np.int64], goals: npt.NDArray[np.float64]
-) -> npt.NDArray[np.float64]:
-    out: npt.NDArray[np.float64] = np.linalg.norm(pose[idx] - goals, axis=1)
-    return out
 
 
 def _rank(misses: npt.NDArray[Any], n_t: int, tolerance: float) -> tuple[float, float]:
