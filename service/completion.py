@@ -37,6 +37,8 @@ FLOOR_REACH = 4.0
 #: the answer back: at x3 a key point was missed by 15 % of the body's size, bones came out
 #: 30 % off (reviewed 2026-12-05). Inside, nothing changes.
 TORSO_BAND = (0.55, 1.55)
+#: Each bone's index, by its child joint's name.
+_BONE = {JOINT_NAMES[c]: b for b, (c, _) in enumerate(BONES)}
 
 
 def complete(
@@ -74,22 +76,21 @@ def complete(
         )
     origin[1] = min(max(floor, origin[1] - FLOOR_REACH * torso), origin[1])
     ref = engine.reference_lengths
-    bones = {JOINT_NAMES[c]: b for b, (c, _) in enumerate(BONES)}
     lengths = ref.copy()
     scale = 1.0
     if given_lengths:
-        bad = sorted(set(given_lengths) - set(bones))
+        bad = sorted(set(given_lengths) - set(_BONE))
         if bad:
             raise InvalidRequest(
                 f"bone_lengths: no bone ends at {bad} (name the child joint of each bone)"
             )
-        ratio = float(np.median([given_lengths[j] / ref[bones[j]] for j in given_lengths]))
+        ratio = float(np.median([given_lengths[j] / ref[_BONE[j]] for j in given_lengths]))
         lengths = ref * ratio
         # networks trained on random bodies at random sizes read the size from the key
         # points; older ones are fed the size of their nearest training skeleton
         scale = float(completion_scales(engine, lengths))
         for j, value in given_lengths.items():
-            lengths[bones[j]] = value
+            lengths[_BONE[j]] = value
     scale *= _out_of_band(engine, torso)
     given = {j: (v - origin) / scale for j, v in keypoints.items()}
     last = len(levels)
@@ -132,8 +133,7 @@ def complete(
 def _out_of_band(engine: Engine, torso: float) -> float:
     """How much the key points are scaled down (below 1: up) to bring a body whose
     pelvis-to-neck distance is ``torso`` into :data:`TORSO_BAND`; 1 inside it."""
-    bones = {JOINT_NAMES[c]: b for b, (c, _) in enumerate(BONES)}
-    spine = sum(float(engine.reference_lengths[bones[j]]) for j in ("spine1", "spine2", "neck"))
+    spine = sum(float(engine.reference_lengths[_BONE[j]]) for j in ("spine1", "spine2", "neck"))
     ratio = torso / spine
     return ratio / min(max(ratio, TORSO_BAND[0]), TORSO_BAND[1])
 
