@@ -37,6 +37,7 @@ from trainer.fused import FusedGraph, LeanFusedGraph
 from trainer.mirror import mirror_entries
 from trainer.model_card import write_model_card
 from trainer.models import SingleSolver, TiedAutoencoder, target_columns
+from trainer.stages import dataset_sha256
 from trainer.train import (
     PairSource,
     Trained,
@@ -462,7 +463,7 @@ def _export_into(
             data=archives,
             dataset={
                 **{k: v for k, v in data_meta.items() if k != "archives"},
-                "file_sha256": sha256_file(Path(cfg.dataset)),  # the npz trained on
+                "file_sha256": dataset_sha256(cfg.dataset),  # the npz trained on (hashed once)
             },
             split_seed=int(data_meta.get("seed", 0)),
             config=cfg.model_dump(mode="json"),
