@@ -11,7 +11,7 @@ where *carried* is its bone in the start pose turned by the minimal rotation (sw
 takes the targeted joint's bone from the start to the answer. Bone lengths stay exact.
 
 Batched numpy over ``[..., 21, 3]`` with one target set: the reference the compiled
-kernel (``core.compiled.carry_item``, in ``unscale``) is held to in tests.
+kernel (``core.compiled_limbs.carry_item``, in ``unscale``) is held to in tests.
 """
 
 from __future__ import annotations

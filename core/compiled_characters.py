@@ -85,7 +85,7 @@ def mul33_into(a: F64, b: F64, out: F64) -> None:  # pragma: no cover - compiled
 def swing_matrix_into(a: F64, b: F64, out: F64) -> None:  # pragma: no cover - compiled
     """``out [3, 3]``: the minimal rotation taking the direction of ``a`` to that of ``b``
     (``core.characters.swing``, the same steps written for 3-vectors; opposite directions
-    give a half turn). Not ``core.compiled.swing_into``: that one turns a vector and leaves
+    give a half turn). Not ``core.compiled_limbs.swing_into``: that one turns a vector and leaves
     it as it is where the directions are opposite, as the pose path's ``_swing`` does);
     the identity where either has no direction (zero length)."""
     na = np.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])

@@ -23,16 +23,8 @@ import numpy as np
 import numpy.typing as npt
 
 from core import kinematics
-from core.compiled import (
-    LEN_ORDER,
-    ORDER,
-    PARENT_RANK,
-    REST_DIRS_RANK,
-    TINY,
-    bone_pass_item,
-    swing_into,
-    unit_or,
-)
+from core.compiled import LEN_ORDER, ORDER, PARENT_RANK, REST_DIRS_RANK, bone_pass_item
+from core.compiled_limbs import TINY, swing_into, unit_or
 from core.jit import jit
 from core.skeleton import JOINT_INDEX, NUM_JOINTS
 

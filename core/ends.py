@@ -26,7 +26,7 @@ the difference in length, so without the collar the bone pass leaves it where th
 character's trunk and upper arm end (docs/generalisation-serving.md item 29).
 
 Batched numpy over ``[..., 21, 3]`` with one target set: the reference the compiled kernel
-(``core.compiled.ends_item``, in ``unscale``) is held to in tests.
+(``core.compiled_limbs.ends_item``, in ``unscale``) is held to in tests.
 """
 
 from __future__ import annotations

@@ -1,5 +1,5 @@
 """The carry below targets (core.carry) on real poses, and its compiled kernel
-(core.compiled.carry_item) against it."""
+(core.compiled_limbs.carry_item) against it."""
 
 from __future__ import annotations
 
@@ -8,6 +8,7 @@ import pytest
 
 from core import compiled
 from core.carry import carry_anchors, carry_below
+from core.compiled_limbs import carry_item
 from core.skeleton import JOINT_INDEX, bone_lengths
 from tests.conftest import PosePairs
 
@@ -84,9 +85,7 @@ def test_compiled_carry_matches_numpy(answers: tuple[np.ndarray, np.ndarray, np.
             ref = carry_below(answer, start, lens, targets, weight)
             got = answer.copy()
             for b in range(len(got)):
-                compiled.carry_item(
-                    got[b], start[b], lens[b], tidx, len(targets), weight, scratch, *ints
-                )
+                carry_item(got[b], start[b], lens[b], tidx, len(targets), weight, scratch, *ints)
             assert np.abs(got - ref).max() < 1e-12
     # degenerate: an elbow on its shoulder; a forearm opposite the rigid one (the mix cancels
     # only if the upper arm has not turned, so this checks the fallbacks agree, not a case)
@@ -97,7 +96,7 @@ def test_compiled_carry_matches_numpy(answers: tuple[np.ndarray, np.ndarray, np.
     ref = carry_below(bad, start[:2], lens[:2], [e], 0.5)
     got = bad.copy()
     for b in range(2):
-        compiled.carry_item(got[b], start[b], lens[b], np.asarray([e]), 1, 0.5, scratch, *ints)
+        carry_item(got[b], start[b], lens[b], np.asarray([e]), 1, 0.5, scratch, *ints)
     assert np.all(np.isfinite(got)) and np.abs(got - ref).max() < 1e-12
     # nothing to turn by: the forearm keeps the answer's direction, at its length
     forearm = lens[0, w - 1]

@@ -1,5 +1,5 @@
 """Targeted limb ends kept through the bone pass (core.ends) on real poses, and its compiled
-kernel (core.compiled.ends_item) against it."""
+kernel (core.compiled_limbs.ends_item) against it."""
 
 from __future__ import annotations
 
@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from core import compiled
+from core.compiled_limbs import ends_item
 from core.ends import BELOW, CHAINS, active, keep_ends, kept_chains
 from core.skeleton import JOINT_INDEX, bone_lengths
 from tests.conftest import PosePairs
@@ -102,9 +103,7 @@ def test_compiled_ends_match_numpy(limbs: tuple[np.ndarray, np.ndarray]) -> None
         ref = keep_ends(passed, network, targets)
         got = passed.copy()
         for b in range(len(got)):
-            compiled.ends_item(
-                got[b], network[b], tidx, len(targets), active(), flags, vecs, 0.0, False
-            )
+            ends_item(got[b], network[b], tidx, len(targets), active(), flags, vecs, 0.0, False)
         assert np.abs(got - ref).max() < 1e-12
     for names in [("left_elbow",), ("left_elbow", "right_elbow", "left_ankle"),
                   ("right_elbow", "right_wrist", "head")]:  # fmt: skip
@@ -113,9 +112,7 @@ def test_compiled_ends_match_numpy(limbs: tuple[np.ndarray, np.ndarray]) -> None
         ref = keep_ends(passed, network, targets, ELBOWS)
         got = passed.copy()
         for b in range(len(got)):
-            compiled.ends_item(
-                got[b], network[b], tidx, len(targets), ELBOWS, flags, vecs, 0.0, False
-            )
+            ends_item(got[b], network[b], tidx, len(targets), ELBOWS, flags, vecs, 0.0, False)
         assert np.abs(got - ref).max() < 1e-12
     # degenerate: the network's wrist on the shoulder; an arm straight along the line to it
     bad, net = passed[:2].copy(), network[:2].copy()
@@ -125,7 +122,7 @@ def test_compiled_ends_match_numpy(limbs: tuple[np.ndarray, np.ndarray]) -> None
     ref = keep_ends(bad, net, [end])
     got = bad.copy()
     for b in range(2):
-        compiled.ends_item(got[b], net[b], np.asarray([end]), 1, active(), flags, vecs, 0.0, False)
+        ends_item(got[b], net[b], np.asarray([end]), 1, active(), flags, vecs, 0.0, False)
     assert np.all(np.isfinite(got)) and np.abs(got - ref).max() < 1e-12
     assert np.array_equal(got, bad)  # nothing to place by: left as the bone pass had it
 
@@ -171,7 +168,7 @@ def test_eased_ends_go_back_in_proportion_and_match_compiled(
     tidx = np.asarray([*targets, 0, 0], dtype=np.int64)
     got = passed.copy()
     for b in range(len(got)):
-        compiled.ends_item(got[b], network[b], tidx, len(targets), ELBOWS, flags, vecs, ease, False)
+        ends_item(got[b], network[b], tidx, len(targets), ELBOWS, flags, vecs, ease, False)
     assert np.abs(got - eased).max() < 1e-12
     assert np.abs(bone_lengths(eased) / bone_lengths(passed) - 1).max() < 1e-12
     for top, mid, end in (L_ARM, R_LEG):
@@ -234,6 +231,6 @@ def test_a_wrist_out_of_reach_turns_its_shoulder_about_the_collar(
     flags, vecs = np.empty(21, np.int64), np.empty((5, 3))
     got = passed.copy()
     for b in range(len(got)):
-        compiled.ends_item(got[b], net[b], np.asarray(targets), 1, active(), flags, vecs, 0.0, True)
+        ends_item(got[b], net[b], np.asarray(targets), 1, active(), flags, vecs, 0.0, True)
     assert np.abs(got - turned).max() < 1e-12
     assert collar not in targets

@@ -1,0 +1,261 @@
+"""Compiled limb kernels of a solve: unit vectors, bone swings, the branch carried below a
+dragged joint (``serving.carry``) and the limb ends kept where the networks put them
+(``serving.keep_ends``), for one pose at a time in machine code (numba, :mod:`core.jit`).
+
+Each is the numpy function named in its docstring (:mod:`core.carry`, :mod:`core.ends`,
+:mod:`core.kinematics`) computed in the same order, held to it in tests/core/test_carry.py
+and tests/core/test_ends.py; :func:`core.compiled.unscale` runs them over a batch.
+Layout as in :mod:`core.compiled`: a pose ``[21, 3]`` in joint order, float64.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+
+from core.carry import BONE_OF
+from core.ends import BELOW as _ENDS_BELOW
+from core.ends import CHAINS as _CHAINS
+from core.ends import COLLARS as _ENDS_COLLARS
+from core.ends import TINY as _ENDS_TINY
+from core.jit import jit
+from core.skeleton import JOINT_INDEX, NUM_JOINTS, PARENTS
+
+F64 = npt.NDArray[np.float64]
+I64 = npt.NDArray[np.int64]
+Bool = npt.NDArray[np.bool_]
+
+_PELVIS = JOINT_INDEX["pelvis"]
+#: Parent of each joint (joint order; the root's is itself).
+PARENTS_J: I64 = np.asarray([max(p, 0) for p in PARENTS], dtype=np.int64)
+#: Distance at or below which a direction is undefined (as in core.kinematics).
+TINY = 1e-300
+
+
+@jit
+def unit_into(v: F64, out: F64) -> bool:  # pragma: no cover - compiled
+    """``v [3]`` divided by its norm into ``out``; False (``out`` untouched) when it has none."""
+    n = np.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+    if n > TINY:
+        out[0], out[1], out[2] = v[0] / n, v[1] / n, v[2] / n
+        return True
+    return False
+
+
+@jit
+def unit_or(v: F64, f1: F64, f2: F64, out: F64, n_fallbacks: int) -> None:  # pragma: no cover
+    """``kinematics._unit_or(v, f1, f2)`` for one 3-vector (``n_fallbacks`` of them used):
+    the first vector with a direction, the last one divided by its norm or by 1."""
+    for level in range(n_fallbacks + 1):
+        a = v if level == 0 else (f1 if level == 1 else f2)
+        n = np.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
+        if n > TINY or level == n_fallbacks:
+            d = n if n > TINY else 1.0
+            out[0], out[1], out[2] = a[0] / d, a[1] / d, a[2] / d
+            return
+
+
+@jit
+def swing_into(a: F64, b: F64, v: F64, out: F64) -> None:  # pragma: no cover - compiled
+    """``kinematics._swing`` for one vector: ``v`` turned by the rotation taking a to b."""
+    au, bu, zero = np.empty(3), np.empty(3), np.zeros(3)
+    unit_or(a, zero, zero, au, 1)
+    unit_or(b, zero, zero, bu, 1)
+    c = au[0] * bu[0] + au[1] * bu[1] + au[2] * bu[2]
+    w0 = au[1] * bu[2] - au[2] * bu[1]
+    w1 = au[2] * bu[0] - au[0] * bu[2]
+    w2 = au[0] * bu[1] - au[1] * bu[0]
+    scale = (w0 * v[0] + w1 * v[1] + w2 * v[2]) / max(1.0 + c, 1e-12)
+    same = (a[0] == b[0] and a[1] == b[1] and a[2] == b[2]) or not (
+        au[0] != 0.0 or au[1] != 0.0 or au[2] != 0.0
+    ) or not (bu[0] != 0.0 or bu[1] != 0.0 or bu[2] != 0.0)  # fmt: skip
+    if same:
+        out[0], out[1], out[2] = v[0], v[1], v[2]
+        return
+    out[0] = (c * v[0] + (w1 * v[2] - w2 * v[1])) + w0 * scale
+    out[1] = (c * v[1] + (w2 * v[0] - w0 * v[2])) + w1 * scale
+    out[2] = (c * v[2] + (w0 * v[1] - w1 * v[0])) + w2 * scale
+
+
+@jit
+def carry_item(
+    out: F64,
+    start: F64,
+    lengths: F64,
+    tidx: I64,
+    count: int,
+    weight: float,
+    scratch: F64,
+    flags: I64,
+    anchor: I64,
+    vecs: F64,
+) -> None:  # pragma: no cover - compiled
+    """``core.carry.carry_below`` for one pose ``out [21, 3]`` (joint order, bone lengths
+    exact), in place: every joint below a targeted joint (not the root) with no target
+    below it turns, from ``start``, with its anchor's bone, by ``weight``. Scratch:
+    ``scratch [21, 3]``, ``flags``, ``anchor`` ``[21]`` (int64), ``vecs [5, 3]``."""
+    for j in range(NUM_JOINTS):
+        flags[j] = 0  # 1 targeted, 2 has a target below
+        anchor[j] = -1
+    for q in range(count):
+        flags[tidx[q]] = 1
+    for j in range(NUM_JOINTS - 1, 0, -1):
+        if flags[j] != 0:
+            p = PARENTS_J[j]
+            flags[p] = flags[p] | 2
+    found = False
+    for j in range(1, NUM_JOINTS):
+        p = PARENTS_J[j]
+        if flags[j] != 0:
+            continue
+        if flags[p] & 1 and p != _PELVIS:
+            anchor[j] = p
+            found = True
+        elif anchor[p] >= 0:
+            anchor[j] = anchor[p]
+    if not found:
+        return
+    for j in range(NUM_JOINTS):
+        for i in range(3):
+            scratch[j, i] = out[j, i]
+    a_s, a_o, v, u, d = vecs[0], vecs[1], vecs[2], vecs[3], vecs[4]
+    for j in range(1, NUM_JOINTS):
+        a = anchor[j]
+        if a < 0:
+            continue
+        p, pa = PARENTS_J[j], PARENTS_J[a]
+        for i in range(3):
+            a_s[i] = start[a, i] - start[pa, i]
+            a_o[i] = out[a, i] - out[pa, i]
+            v[i] = start[j, i] - start[p, i]
+            d[i] = scratch[j, i] - scratch[p, i]
+        swing_into(a_s, a_o, v, u)  # the start's bone, turned with the anchor's
+        carried, ok = unit_into(u, u), unit_into(d, d)
+        if carried and ok:
+            for i in range(3):
+                u[i] = weight * u[i] + (1.0 - weight) * d[i]
+            ok = unit_into(u, d)
+        elif carried:
+            ok = unit_into(u, d)
+        b = BONE_OF[j]
+        for i in range(3):
+            if ok:
+                out[j, i] = out[p, i] + d[i] * lengths[b]
+            else:  # nothing to turn by or to: the joint keeps its place on its parent
+                out[j, i] = out[p, i] + scratch[j, i] - scratch[p, i]
+
+
+@jit
+def ends_item(
+    out: F64,
+    network: F64,
+    tidx: I64,
+    count: int,
+    chains: Bool,
+    flags: I64,
+    vecs: F64,
+    ease: float,
+    collar: bool,
+) -> None:  # pragma: no cover - compiled
+    """``core.ends.keep_ends`` for one pose ``out [21, 3]`` (after the bone pass) and its
+    network pose ``network [21, 3]``, in place, for the chains ``chains [C]`` marks
+    (``core.ends.active``), eased over ``ease`` m, wrists reached by turning the collar
+    with ``collar``; ``flags [21]`` (int64) and ``vecs [5, 3]`` are scratch."""
+    for j in range(NUM_JOINTS):
+        flags[j] = 0
+    for q in range(count):
+        flags[tidx[q]] = 1
+    s, e0, w0, u, v = vecs[0], vecs[1], vecs[2], vecs[3], vecs[4]
+    for c in range(_CHAINS.shape[0]):
+        top, mid, end = _CHAINS[c, 0], _CHAINS[c, 1], _CHAINS[c, 2]
+        if not chains[c] or flags[end] == 0 or flags[mid] != 0 or flags[top] != 0:
+            continue
+        below = False
+        for j in range(NUM_JOINTS):
+            if _ENDS_BELOW[c, j] and flags[j] != 0:
+                below = True
+        if below:
+            continue
+        for i in range(3):
+            s[i], e0[i], w0[i] = out[top, i], out[mid, i], out[end, i]
+        a = np.sqrt((e0[0] - s[0]) ** 2 + (e0[1] - s[1]) ** 2 + (e0[2] - s[2]) ** 2)
+        b = np.sqrt((w0[0] - e0[0]) ** 2 + (w0[1] - e0[1]) ** 2 + (w0[2] - e0[2]) ** 2)
+        for i in range(3):  # the goal of the end, then the line to it from the top
+            u[i] = network[end, i]
+        if ease > 0.0:
+            gap = np.sqrt(
+                (network[end, 0] - w0[0]) ** 2
+                + (network[end, 1] - w0[1]) ** 2
+                + (network[end, 2] - w0[2]) ** 2
+            )
+            if gap < ease:
+                for i in range(3):
+                    u[i] = w0[i] + (gap / ease) * (network[end, i] - w0[i])
+        k = _ENDS_COLLARS[c]
+        if collar and k >= 0 and flags[k] == 0 and _collar_turn(out, k, c, top, mid, end, u, a + b):
+            for i in range(3):
+                s[i], e0[i], w0[i] = out[top, i], out[mid, i], out[end, i]
+        for i in range(3):
+            u[i] = u[i] - s[i]
+        d0 = np.sqrt(u[0] ** 2 + u[1] ** 2 + u[2] ** 2)
+        if not (d0 > _ENDS_TINY and a > _ENDS_TINY):
+            continue
+        for i in range(3):
+            u[i] = u[i] / d0
+        d = min(max(d0, abs(a - b)), a + b)
+        along = (e0[0] - s[0]) * u[0] + (e0[1] - s[1]) * u[1] + (e0[2] - s[2]) * u[2]
+        for i in range(3):
+            v[i] = (e0[i] - s[i]) - along * u[i]
+        nb = np.sqrt(v[0] ** 2 + v[1] ** 2 + v[2] ** 2)
+        if not nb > _ENDS_TINY:
+            continue
+        for i in range(3):
+            v[i] = v[i] / nb
+        cos = min(max((a * a + d * d - b * b) / (2.0 * a * d), -1.0), 1.0)
+        sin = np.sqrt(max(0.0, 1.0 - cos * cos))
+        for i in range(3):
+            shift = (s[i] + d * u[i]) - w0[i]
+            out[mid, i] = s[i] + a * (cos * u[i] + sin * v[i])
+            out[end, i] = w0[i] + shift
+            for j in range(NUM_JOINTS):
+                if _ENDS_BELOW[c, j]:
+                    out[j, i] += shift
+
+
+@jit
+def _collar_turn(
+    out: F64, k: int, c: int, top: int, mid: int, end: int, goal: F64, reach: float
+) -> bool:  # pragma: no cover - compiled
+    """``core.ends._collar_turn`` for one pose, in place: the shoulder ``top`` turned about
+    the collar ``k`` towards ``goal [3]``, the arm (``mid``, ``end`` and chain ``c``'s
+    joints below it) moved with it. Whether it moved."""
+    cx, cy, cz = out[k, 0], out[k, 1], out[k, 2]
+    px, py, pz = out[top, 0] - cx, out[top, 1] - cy, out[top, 2] - cz
+    cl = np.sqrt(px * px + py * py + pz * pz)
+    dx, dy, dz = goal[0] - out[top, 0], goal[1] - out[top, 1], goal[2] - out[top, 2]
+    if not (dx * dx + dy * dy + dz * dz > reach * reach and cl > _ENDS_TINY):
+        return False
+    px, py, pz = px / cl, py / cl, pz / cl
+    wx, wy, wz = goal[0] - cx, goal[1] - cy, goal[2] - cz
+    wp = wx * px + wy * py + wz * pz
+    qx, qy, qz = wx - wp * px, wy - wp * py, wz - wp * pz
+    wq = np.sqrt(qx * qx + qy * qy + qz * qz)
+    if not wq > _ENDS_TINY:
+        return False
+    qx, qy, qz = qx / wq, qy / wq, qz / wq
+    rho = np.sqrt(wp * wp + wq * wq)
+    kk = (wx * wx + wy * wy + wz * wz + cl * cl - reach * reach) / (2.0 * cl)
+    phi = np.arctan2(wq, wp)
+    th = phi - np.arccos(min(kk / rho, 1.0)) if kk < rho else phi
+    th = max(th, 0.0)
+    ct, st = np.cos(th), np.sin(th)
+    shift = (
+        (cx + cl * (ct * px + st * qx)) - out[top, 0],
+        (cy + cl * (ct * py + st * qy)) - out[top, 1],
+        (cz + cl * (ct * pz + st * qz)) - out[top, 2],
+    )
+    for j in range(NUM_JOINTS):
+        if j in (top, mid, end) or _ENDS_BELOW[c, j]:
+            for i in range(3):
+                out[j, i] = out[j, i] + shift[i]
+    return True
