@@ -446,6 +446,9 @@ def eval_ablation(models_dir: Path, b1_five: Edits, b3: Edits, cfg: EvalConfig) 
     out: Json = {}
     for label, kwargs in cfg.strategies:
         engine = Engine(models_dir, threads=1, **dict(kwargs))
+        if engine.inert_settings():  # bit-identical to the default on these models
+            _log(f"ablation {label}: left out, {engine.inert_settings()} do nothing here")
+            continue
         row: Json = {}
         for name, edits in ((f"B1 {COMPOSED5}", b1_five), ("B3 2+ joints", b3)):
             for method in ("neural_raw", "neural_bone"):
@@ -513,6 +516,7 @@ def evaluate_accuracy(
         "composition_passes": engine.composition_passes,
         "composition": engine.composition,
         "composition_projections": engine.projections,
+        "delta": engine.serving.delta,
         "bytes": model_bytes(engine),
     }
     res["dataset"] = {

@@ -105,8 +105,13 @@ def render_report(results: Json, plots: dict[str, str], title: str) -> str:
         "",
         f"- Models: `{models.get('dir')}` (manifest `{models.get('version')}`; service default "
         f"composition `{models.get('composition')}`, "
-        f"{models.get('composition_projections')} projection(s), "
-        f"{models.get('composition_passes')} pass(es)).",
+        + (
+            "delta answers: a composed sequence runs once, the targets pasted before each "
+            "later solver)."
+            if models.get("delta")
+            else f"{models.get('composition_projections')} projection(s), "
+            f"{models.get('composition_passes')} pass(es))."
+        ),
         f"- Data: TEST split of `{data.get('path')}`: {fmt(data.get('test_frames'))} frames in "
         f"{fmt(data.get('test_clips'))} clips never seen in training.",
         f"- Sample sizes: {cfg.get('edits')} B1 edits (the same pose pairs for every set), "
@@ -343,7 +348,9 @@ def render_report(results: Json, plots: dict[str, str], title: str) -> str:
             "ẑ = S_t3(S_t2(S_t1(z))); *passes*: cycles through that sequence; *re-encode*: "
             "before each later solver, decode, paste the targets solved so far and "
             "re-encode; *projections*: rounds of paste-all-targets and re-encode at the end "
-            "(docs/service.md). B1's pairs with five targets no trained set covers whole (head, "
+            "(docs/service.md; passes and projections only on models without "
+            "`serving.delta`, so their rows are left out for delta models). B1's pairs "
+            "with five targets no trained set covers whole (head, "
             "both elbows, both knees: five single-joint solvers) and B3's subsets of 2 or "
             "more joints.",
             "",

@@ -17,11 +17,16 @@ _PROBLEM_STATUS = {
     401: "Missing or wrong API key (only when POSE_API_KEY is set).",
     408: "The body did not arrive within the deadline (a stalled upload): the connection closes.",
     413: "Body or batch larger than the configured limit.",
-    415: "Body is not application/json.",
+    415: "Body is not application/json, or has a Content-Encoding other than identity.",
     422: "Invalid request: the detail says which field and why.",
     429: "Too many requests in flight on this worker: retry after Retry-After seconds.",
     503: "Models not loaded yet, or broken (see /v2/health/ready), or shutting down.",
     504: "The request needed more than the deadline: send smaller batches.",
+}
+
+#: Routes that answer without the models: their 503 is the shutdown's alone.
+_NO_MODELS_503 = {
+    "/v1/bvh/inspect": "Shutting down (this route needs no models: it answers while they load)."
 }
 
 
@@ -50,8 +55,11 @@ def document_problems(app: FastAPI) -> None:
                 post = [400, 401, 408, 413, 415, 422, 429, 503, 504]
                 codes = post if method == "post" else [401, 503]
                 for code in codes:
+                    text = _PROBLEM_STATUS[code]
+                    if code == 503:
+                        text = _NO_MODELS_503.get(path, text)
                     op["responses"][str(code)] = {
-                        "description": _PROBLEM_STATUS[code],
+                        "description": text,
                         "content": {"application/problem+json": {"schema": ref}},
                     }
         app.openapi_schema = schema

@@ -55,7 +55,11 @@ class Settings(BaseSettings):
     cors_origins: list[str] = Field(default_factory=list)
     api_key: SecretStr | None = None
     composition_passes: int = Field(
-        default=1, ge=1, le=8, description="Cycles through the solvers of a composed set."
+        default=1,
+        ge=1,
+        le=8,
+        description="Cycles through the solvers of a composed set; models without "
+        "`serving.delta` only (the shipped ones answer in deltas: ignored, with a warning).",
     )
     composition: Literal["reencode", "sequential"] = Field(
         default="reencode",
@@ -63,7 +67,11 @@ class Settings(BaseSettings):
         "sequential: the paper's plain chain of solvers.",
     )
     composition_projections: int = Field(
-        default=1, ge=0, le=8, description="Paste-all-targets-and-re-encode rounds at the end."
+        default=1,
+        ge=0,
+        le=8,
+        description="Paste-all-targets-and-re-encode rounds at the end; models without "
+        "`serving.delta` only (the shipped ones answer in deltas: ignored, with a warning).",
     )
     fabrik_max_iterations: int = Field(default=MAX_ITERATIONS, ge=1, le=10_000)
     solve_mirror: bool | None = Field(

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from core.skeleton import JOINT_INDEX, JOINT_NAMES, bone_lengths
-from tests.conftest import PosePairs, make_client
+from tests.conftest import REPO_ROOT, PosePairs, make_client
 
 PROBLEM = "application/problem+json"
 
@@ -408,7 +408,36 @@ def test_corrupt_model_is_not_ready_with_a_reason(
         assert c.get("/v1/skeleton").json()["joints"] == list(JOINT_NAMES)
         out = c.post("/v1/solve", json=solve_body(synthetic_poses, 0, ["head"]))
         assert_problem(out, 503, "decoder.onnx")
+        # reading a file needs no models: inspect answers (its contract's 503 is shutdown's)
+        example = json.loads((REPO_ROOT / "docs/examples/bvh_solve.json").read_text())
+        inspect = {"bvh": example["bvh"], "frame": example["frame"]}
+        assert c.post("/v1/bvh/inspect", json=inspect).status_code == 200
     assert any("decoder.onnx" in r.getMessage() for r in caplog.records)
+
+
+def test_composition_settings_the_models_ignore_are_named_at_load(
+    models_dir: Path, client: Any, caplog: pytest.LogCaptureFixture, synthetic_poses: PosePairs
+) -> None:
+    """The shipped models answer in deltas, where the latent chain's passes and projections
+    change nothing: a deployment that sets them is told so in the log at load, and its
+    answers are the default's, byte for byte (a composed set: head, both elbows)."""
+    body = solve_body(synthetic_poses, 0, ["head", "left_elbow", "right_elbow"])
+    with (
+        caplog.at_level(logging.WARNING, logger="service"),
+        make_client(models_dir, composition_passes=2, composition_projections=0) as c,
+    ):
+        assert (
+            c.post("/v1/solve", json=body).json()["pose"]
+            == client.post("/v1/solve", json=body).json()["pose"]
+        )
+    (line,) = [
+        json.loads(r.getMessage()) for r in caplog.records if "settings_ignored" in r.getMessage()
+    ]
+    assert line["settings"] == ["POSE_COMPOSITION_PASSES", "POSE_COMPOSITION_PROJECTIONS"]
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="service"), make_client(models_dir) as c:
+        assert c.get("/v2/health/ready").status_code == 200
+    assert not [r for r in caplog.records if "settings_ignored" in r.getMessage()]
 
 
 def test_api_key_guards_v1_only(models_dir: Path, synthetic_poses: PosePairs) -> None:
