@@ -86,9 +86,11 @@ class Unauthorized(PoseError):
     type_ = "unauthorized"
 
 
-class Forbidden(PoseError):
-    status = 403
-    title = "Origin not allowed"
+class CorsRejected(PoseError):
+    """A CORS preflight from an origin, method or header not allowed (Starlette's 400)."""
+
+    status = 400
+    title = "CORS preflight rejected"
     type_ = "cors-rejected"
 
 

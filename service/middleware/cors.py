@@ -2,13 +2,11 @@
 
 from __future__ import annotations
 
-import json
-
 from starlette.datastructures import Headers
 from starlette.middleware.cors import CORSMiddleware
 from starlette.responses import Response
 
-from service.errors import PROBLEM_BASE, PROBLEM_JSON
+from service.errors import CorsRejected, error_response
 
 
 class ProblemCORS(CORSMiddleware):
@@ -17,16 +15,10 @@ class ProblemCORS(CORSMiddleware):
         if response.status_code < 400:
             return response
         detail = bytes(response.body).decode("utf-8", "replace")
-        body = {
-            "type": PROBLEM_BASE + "cors-rejected",
-            "title": "CORS preflight rejected",
-            "status": response.status_code,
-            "detail": f"{detail} (allowed origins are configured with POSE_CORS_ORIGINS)",
-        }
-        keep = {
-            k: v for k, v in response.headers.items() if k not in ("content-length", "content-type")
-        }
-        return Response(
-            json.dumps(body), status_code=response.status_code, headers=keep,
-            media_type=PROBLEM_JSON,
-        )  # fmt: skip
+        answer = error_response(
+            CorsRejected(f"{detail} (allowed origins are configured with POSE_CORS_ORIGINS)")
+        )
+        for key, value in response.headers.items():  # Starlette's Vary and allow-* headers
+            if key not in ("content-length", "content-type"):
+                answer.headers[key] = value
+        return answer
