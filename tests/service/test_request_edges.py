@@ -251,6 +251,19 @@ def test_every_get_route_answers_head_as_get(client: Any, path: str) -> None:
     assert head.content == b"" and head.headers["content-type"] == get.headers["content-type"]
 
 
+def test_head_requests_are_counted_under_their_route(models_dir: Path) -> None:
+    """A HEAD probe was counted as ``route="unmatched"``: the route the router found was
+    written into the GET copy of the scope that the metrics outside never saw."""
+    with make_client(models_dir) as c:
+        for _ in range(3):
+            assert c.head("/v1/skeleton").status_code == 200
+        assert c.head("/v2/health/live").status_code == 200
+        metrics = c.get("/metrics").text
+    assert 'pose_requests_total{route="/v1/skeleton",status="200"} 3.0' in metrics
+    assert 'pose_requests_total{route="/v2/health/live",status="200"} 1.0' in metrics
+    assert 'route="unmatched"' not in metrics
+
+
 @pytest.mark.parametrize("joint", ["neck", "spine2", "left_collar"])
 def test_exact_reach_lifts_the_body_for_a_trunk_target_out_of_its_reach(
     client: Any, joint: str
