@@ -24,6 +24,7 @@ import time
 
 from core.text import clip
 from service.errors import (
+    ClientDisconnected,
     MalformedBody,
     PayloadTooLarge,
     PoseError,
@@ -166,7 +167,7 @@ class Gate:
         deadline = self.settings.deadline_seconds
         chunks: list[bytes] = []
         size = 0
-        late = False
+        late = gone = False
         task = asyncio.current_task()
         assert task is not None
         self._reading[task] = scope.get(T0, time.perf_counter()) + deadline
@@ -175,7 +176,8 @@ class Gate:
         try:
             while size <= limit:
                 message = await receive()
-                if message["type"] != "http.request":
+                if message["type"] != "http.request":  # the client closed mid-body
+                    gone = True
                     break
                 chunks.append(message.get("body", b""))
                 size += len(chunks[-1])
@@ -194,8 +196,13 @@ class Gate:
             scope[REASON] = big.type_
             await error_response(big)(scope, receive, send)
             return None
+        of = f" of {length}" if length is not None else ""
+        if gone:  # an unfinished body is never handed on (logged 499, nothing sent)
+            left = ClientDisconnected(f"client went away after {size}{of} bytes of the body")
+            scope[REASON] = left.type_
+            await error_response(left)(scope, receive, send)
+            return None
         if late:
-            of = f" of {length}" if length is not None else ""
             timeout = RequestTimeout(
                 f"the request body did not arrive within the {deadline:g} s deadline "
                 f"({size}{of} bytes received): send the body without pauses, or a smaller one"

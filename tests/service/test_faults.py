@@ -132,6 +132,78 @@ def test_abandoned_batches_stop_and_say_so(models_dir: Path, tmp_path: Path) -> 
         assert all(x["outcome"] == "client_disconnected" for x in gone)
 
 
+def test_a_body_cut_short_by_its_client_is_never_solved(models_dir: Path, tmp_path: Path) -> None:
+    """A client that closes before its body is whole is a 499 in the log, never handed on:
+    a Content-Length body cut short was read as a whole one (a 400 for its broken JSON),
+    and a chunked body whose first chunk held a whole JSON object was solved (a 200)."""
+    solve = (Path(__file__).parents[2] / "docs" / "examples" / "solve.json").read_bytes()
+    head = "POST /v1/solve HTTP/1.1\r\nhost: x\r\ncontent-type: application/json\r\n"
+    with serve(models_dir, tmp_path) as s:
+        with socket.create_connection(("127.0.0.1", s.port)) as sock:
+            sock.sendall(f"{head}content-length: {len(solve) + 10}\r\n\r\n".encode() + solve)
+            time.sleep(0.3)
+        with socket.create_connection(("127.0.0.1", s.port)) as sock:
+            chunk = f"{len(solve):x}\r\n".encode() + solve + b"\r\n"  # no last chunk
+            sock.sendall(f"{head}transfer-encoding: chunked\r\n\r\n".encode() + chunk)
+            time.sleep(0.3)
+        lines: list[dict[str, Any]] = []
+        t = time.perf_counter()
+        while len(lines) < 2 and time.perf_counter() - t < 10:
+            time.sleep(0.1)
+            lines = [x for x in s.log_lines() if x.get("path") == "/v1/solve"]
+        metrics = s.request("GET", "/metrics")[2].decode()
+        assert s.request("POST", "/v1/solve", solve)[0] == 200  # the worker goes on
+    assert [(x["status"], x["outcome"]) for x in lines] == [(499, "client_disconnected")] * 2
+    # neither was read as a body: no solve, no broken JSON; each refused as the client's
+    assert "pose_solves_total{" not in metrics and "malformed-body" not in metrics, metrics
+    assert 'pose_rejections_total{reason="client-disconnected",route="/v1/solve"} 2.0' in metrics
+
+
+@pytest.mark.parametrize("framing", ["content-length", "chunked"])
+def test_the_gate_never_hands_on_a_body_its_client_left(framing: str) -> None:
+    """The gate itself, as the server runs it, fed what uvicorn gives an app when the client
+    closes mid-body (a first part, then ``http.disconnect``): it answered the app with the
+    part as if whole (a chunked body whose first chunk was a whole JSON object was solved;
+    whether the end-to-end test above sees it depends on timing). Now a 499, nothing on."""
+    import asyncio
+
+    from service.middleware.gate import Gate
+    from service.middleware.types import REASON
+    from service.settings import Settings
+
+    solve = (Path(__file__).parents[2] / "docs" / "examples" / "solve.json").read_bytes()
+    framing_header = (
+        (b"content-length", str(len(solve) + 10).encode())
+        if framing == "content-length"
+        else (b"transfer-encoding", b"chunked")
+    )
+    scope: dict[str, Any] = {
+        "type": "http", "method": "POST", "path": "/v1/solve", "query_string": b"",
+        "headers": [(b"content-type", b"application/json"), framing_header],
+    }  # fmt: skip
+    inbox = [
+        {"type": "http.request", "body": solve, "more_body": True},
+        {"type": "http.disconnect"},
+    ]
+    sent: list[dict[str, Any]] = []
+    reached: list[bytes] = []
+
+    async def receive() -> dict[str, Any]:
+        return inbox.pop(0) if inbox else {"type": "http.disconnect"}
+
+    async def send(message: dict[str, Any]) -> None:
+        sent.append(message)
+
+    async def app(scope: Any, receive: Any, send: Any) -> None:
+        reached.append((await receive())["body"])
+
+    gate = Gate(app, Settings())
+    asyncio.run(gate(scope, receive, send))  # type: ignore[arg-type]
+    assert reached == [], "the body was handed on"
+    assert sent[0]["status"] == 499 and scope[REASON] == "client-disconnected"
+    assert gate.active == 0 and gate.held == 0  # its admission slot and bytes given back
+
+
 def test_liveness_answers_while_big_bodies_are_parsed(models_dir: Path, tmp_path: Path) -> None:
     body = json.dumps(json.loads(heavy_batch(seed=7)), indent=1).encode()
     with serve(models_dir, tmp_path, POSE_DEADLINE_SECONDS="1") as s:
