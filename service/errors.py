@@ -12,6 +12,7 @@ from __future__ import annotations
 import logging
 import re
 from collections.abc import Sequence
+from http import HTTPStatus
 from typing import Any
 
 from fastapi import FastAPI, HTTPException, Request
@@ -52,6 +53,23 @@ class MalformedBody(PoseError):
     status = 400
     title = "Malformed request body"
     type_ = "malformed-body"
+
+
+class MalformedHTTP(PoseError):
+    """Bytes the server's HTTP parser cannot read as a request (answered below the app, by
+    the protocol: :mod:`service.transport`, with :func:`raw_answer`)."""
+
+    status = 400
+    title = "Malformed HTTP request"
+    type_ = "malformed-http"
+
+
+class HeadTooLarge(PoseError):
+    """A request line and headers longer than the server reads (:mod:`service.transport`)."""
+
+    status = 431
+    title = "Request header fields too large"
+    type_ = "head-too-large"
 
 
 class RequestTimeout(PoseError):
@@ -166,6 +184,17 @@ def problem(
     if status == 401:
         headers = {**(headers or {}), "WWW-Authenticate": "ApiKey, Bearer"}
     return JSONResponse(body, status_code=status, media_type=PROBLEM_JSON, headers=headers)
+
+
+def raw_answer(exc: PoseError) -> bytes:
+    """``exc``'s answer as the bytes of a whole HTTP/1.1 response that closes the
+    connection, for the protocol layer, which answers before any app runs: the body and
+    headers of :func:`error_response`."""
+    resp = error_response(exc)
+    lines = [f"HTTP/1.1 {resp.status_code} {HTTPStatus(resp.status_code).phrase}"]
+    lines += [f"{k}: {v}" for k, v in resp.headers.items()]
+    lines += ["x-content-type-options: nosniff", "connection: close", "", ""]
+    return "\r\n".join(lines).encode("latin-1") + bytes(resp.body)
 
 
 #: A field's place as the messages write it (``items[2].targets[0].joint``, ``bvh``):

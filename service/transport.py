@@ -17,6 +17,13 @@ while the worker holds more than that for clients that do not. (A floor on each 
 pace was tried first: the client's own socket buffer, megabytes on loopback, hides its
 reading from the server for seconds at a time, so steady readers were cut off.)
 
+A request's line and headers are bounded too (:data:`MAX_HEAD_BYTES`): uvicorn's httptools
+parser keeps whatever a client sends before the blank line that ends them, so four
+connections each sending an unfinished 50 MB header took a worker from 340 to 620 MB (an
+audit's script on loopback); past the bound the connection gets a 431 problem+json and is
+closed. The parser's own refusals (bytes that are not HTTP) are problem+json too, not
+uvicorn's plain text (:func:`service.errors.raw_answer`).
+
 Each answer also leaves in one write where it is small: uvicorn writes the status line and
 headers, then the body, each at once, so a small answer cost two ``send`` system calls
 and two TCP segments, and its client woke up twice to read it (:class:`Coalescing`).
@@ -31,6 +38,7 @@ from typing import Any, ClassVar
 import orjson
 from uvicorn.protocols.http.auto import AutoHTTPProtocol
 
+from service.errors import HeadTooLarge, MalformedHTTP, PoseError, raw_answer
 from service.settings import get_settings
 
 log = logging.getLogger("service.transport")
@@ -40,6 +48,13 @@ log = logging.getLogger("service.transport")
 #: larger one goes at once with what waits (no copy of a big body, and uvicorn's flow
 #: control sees it).
 COALESCE_BYTES = 64 * 1024
+#: Bytes of a request's line and headers a client may send (h11, the fallback parser,
+#: bounds them itself: uvicorn's ``h11_max_incomplete_event_size``, 16 KiB by default).
+MAX_HEAD_BYTES = 64 * 1024
+#: How long a refused connection's further bytes are read and dropped before it closes.
+LINGER_SECONDS = 1.0
+#: Whether the parser tells where a request's head begins and ends (httptools does).
+_HEADS = hasattr(AutoHTTPProtocol, "on_headers_complete")
 
 
 class Coalescing:
@@ -108,6 +123,52 @@ class PacedHTTPProtocol(AutoHTTPProtocol):  # type: ignore[misc, valid-type]
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
         self._budget = get_settings().max_unsent_bytes
+        self._head = 0 if _HEADS else -1  # bytes of the request head so far (-1: not in one)
+        self._refused = False
+
+    def data_received(self, data: bytes) -> None:
+        if self._refused:  # read and dropped until the close (see refuse)
+            return
+        if self._head >= 0:
+            self._head += len(data)
+            if self._head > MAX_HEAD_BYTES:
+                self.refuse(
+                    HeadTooLarge(
+                        f"the request line and headers exceed {MAX_HEAD_BYTES} bytes "
+                        "(the server reads no more of them)"
+                    )
+                )
+                return
+        super().data_received(data)
+
+    def on_message_begin(self) -> None:  # httptools: a request's head begins
+        super().on_message_begin()
+        self._head = 0
+
+    def on_headers_complete(self) -> None:
+        self._head = -1
+        super().on_headers_complete()
+
+    def send_400_response(self, msg: str) -> None:
+        """The parser's refusal (uvicorn's plain text) as a problem."""
+        self.refuse(MalformedHTTP(f"{msg.rstrip('.')}: the bytes sent are not an HTTP/1.1 request"))
+
+    def refuse(self, exc: PoseError) -> None:
+        """Answer ``exc`` before any app runs, and close the connection: our side at once,
+        theirs after ``LINGER_SECONDS`` of reading and dropping what they still send (a
+        close with their bytes unread would reset the connection, and the client could
+        lose the answer before reading it)."""
+        self._head = -1
+        if self._refused or self.transport.is_closing():
+            return
+        self._refused = True
+        self.keep_alive = False
+        self.transport.write(raw_answer(exc))
+        if self.transport.can_write_eof():
+            self.transport.write_eof()
+            asyncio.get_running_loop().call_later(LINGER_SECONDS, self.transport.close)
+        else:
+            self.transport.close()
 
     def connection_made(self, transport: asyncio.Transport) -> None:
         super().connection_made(Coalescing(transport))

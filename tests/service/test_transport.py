@@ -92,3 +92,60 @@ def test_big_and_small_answers_keep_their_order(models_dir: Path, tmp_path: Path
                 assert exchange(sock, "POST", "/v1/solve/batch", batch) == (200, alone)
         finally:
             sock.close()
+
+
+def _answer_to_close(sock: socket.socket) -> tuple[str, dict[str, str], bytes]:
+    """Everything the server sends until it closes: status line, headers, body."""
+    buf = b""
+    while chunk := sock.recv(1 << 16):
+        buf += chunk
+    raw, _, body = buf.partition(b"\r\n\r\n")
+    lines = raw.decode("latin-1").split("\r\n")
+    return lines[0], dict(line.lower().split(": ", 1) for line in lines[1:]), body
+
+
+def test_request_heads_are_bounded_and_parser_refusals_are_problems(
+    models_dir: Path, tmp_path: Path
+) -> None:
+    """A request line and headers that never end were kept whole by the parser (four
+    unfinished 50 MB headers took a worker from 340 to 620 MB): past ``MAX_HEAD_BYTES``
+    the connection gets a 431 problem and is closed. Bytes that are not HTTP were uvicorn's
+    plain-text 400; now a problem too. A head of fair size (a 20 kB header) is served."""
+    from service.transport import MAX_HEAD_BYTES
+
+    with serve(models_dir, tmp_path) as s:
+        sock = connect(s.port)
+        rss = s.rss_mib()
+        sock.sendall(b"GET /v2/health/live HTTP/1.1\r\nhost: x\r\nx-big: ")
+        sent = 0
+        try:
+            while sent < 20 * MAX_HEAD_BYTES:  # the server stops reading, then closes
+                sock.sendall(b"a" * 8192)
+                sent += 8192
+        except OSError:
+            pass
+        line, fields, body = _answer_to_close(sock)
+        sock.close()
+        assert line == "HTTP/1.1 431 Request Header Fields Too Large", (line, sent)
+        assert fields["content-type"] == "application/problem+json"
+        problem = json.loads(body)
+        assert problem["type"].endswith("/head-too-large") and problem["status"] == 431
+        assert str(MAX_HEAD_BYTES) in problem["detail"]
+        assert s.rss_mib() < rss + 20
+
+        sock = connect(s.port)
+        sock.sendall(b"NOT HTTP AT ALL\r\n\r\n")
+        line, fields, body = _answer_to_close(sock)
+        sock.close()
+        assert line == "HTTP/1.1 400 Bad Request" and fields["connection"] == "close"
+        assert fields["content-type"] == "application/problem+json"
+        assert json.loads(body)["type"].endswith("/malformed-http")
+
+        sock = connect(s.port)
+        head = f"GET /v2/health/live HTTP/1.1\r\nhost: x\r\nx-fair: {'b' * 20_000}\r\n\r\n"
+        sock.sendall(head.encode())
+        buf = b""
+        while b"\r\n\r\n" not in buf:
+            buf += sock.recv(1 << 16)
+        sock.close()
+        assert buf.startswith(b"HTTP/1.1 200 ")
