@@ -110,6 +110,12 @@ class Gate:
                 f"content encoding {clip(coding, 40)!r} is not accepted: send the body "
                 "uncompressed (no Content-Encoding, or identity)"
             )
+        codings = [t.strip() for t in headers.get("transfer-encoding", "").lower().split(",")]
+        if any(t not in ("", "chunked", "identity") for t in codings):
+            raise UnsupportedMediaType(
+                f"transfer coding {clip(headers['transfer-encoding'], 40)!r} is not accepted: "
+                "send the body uncompressed (chunked, or with a Content-Length)"
+            )
         if length is not None and not length.isdigit():
             raise MalformedBody(f"Content-Length is not a number: {length[:40]!r}")
         size = s.max_body_bytes if chunked else int(length or 0)

@@ -197,6 +197,22 @@ def test_a_compressed_body_is_a_415(client: Any, coding: str) -> None:
         assert_problem(r, 415, coding)
 
 
+def test_a_compressed_transfer_coding_is_a_415(client: Any) -> None:
+    """``Transfer-Encoding: gzip, chunked`` was read as a plain body (and solved)."""
+    plain = json.dumps(_example("solve")).encode()
+    for coding in ("gzip, chunked", "deflate"):
+        r = client.post(
+            "/v1/solve", content=gzip.compress(plain),
+            headers={"content-type": "application/json", "transfer-encoding": coding},
+        )  # fmt: skip
+        assert_problem(r, 415, "transfer coding", coding.split(",")[0])
+    r = client.post(
+        "/v1/solve", content=plain,
+        headers={"content-type": "application/json", "transfer-encoding": "chunked"},
+    )  # fmt: skip
+    assert r.status_code == 200, r.text
+
+
 def test_completion_refuses_key_points_at_one_spot(client: Any) -> None:
     body = _example("complete")
     for k in body["keypoints"]:
