@@ -612,6 +612,12 @@ LEG_BANDS: Final[tuple[tuple[float, float, str], ...]] = (
 )
 
 
+#: Rest-pose leg length in metres (hip to ankle) a NAMED unit may give (a figure 30 cm
+#: to 15 m tall): beyond it the unit is taken for a slip (a file in centimetres sent as
+#: "m", in millimetres as "cm") and refused; a number of metres per unit is taken as given.
+NAMED_UNIT_LEG_M: Final[tuple[float, float]] = (0.1, 5.0)
+
+
 def rest_points(skel: Skeleton, jmap: JointMap) -> F64:
     """The 21 canonical points of the rest pose (identity rotations)."""
     rest = skel.rest_positions()

@@ -44,10 +44,11 @@ from core.characters import (
     units_scale,
     up_rotation,
 )
-from core.characters_maps import JointMap, infer_units, infer_up, resolve_map
+from core.characters_maps import NAMED_UNIT_LEG_M, JointMap, infer_units, infer_up, resolve_map
 from core.retarget import canonical_points, retarget
 from core.skeleton import BONES, JOINT_INDEX, JOINT_NAMES
 from core.text import clip, quoted
+from core.units import UNITS
 from service.engine import Engine
 from service.errors import InvalidRequest
 from service.problems import SolveProblem, SolveResult
@@ -311,7 +312,22 @@ def _character(
     units: Any,
     up: str | None,
     points: F64 | None = None,
+    where: str = "units",
 ) -> Character:
+    """The character of a pose; ``units`` and ``up`` as the client gave them (None: read
+    from the file), ``where``: the field of ``units``, which errors name."""
+    if isinstance(units, str) and units in UNITS:  # a named unit: a slip is refused
+        name, leg = infer_units(skel, jmap)
+        metres = leg * UNITS[units]
+        low, high = NAMED_UNIT_LEG_M
+        if not low <= metres <= high:
+            reads = f'; its leg reads as {name}: "units": "{name}"' if name else ""
+            raise InvalidRequest(
+                f"{where}: {quoted(units)} makes the rest-pose leg (hip to ankle, {leg:.4g} "
+                f"file units) {metres:.4g} m long, outside the {low:g}-{high:g} m a named "
+                f"unit may give{reads}; a character of that size: units as metres per unit "
+                "(a number), taken as given"
+            )
     if units is None:
         name, leg = infer_units(skel, jmap)
         if name is None:
@@ -497,7 +513,8 @@ def character_from_request(req: CharacterSolveRequest, where: str = "") -> Chara
             trans[roots[0]] = req.root_position
         pose = Pose(rot, trans)
         jmap = resolve_map(skel, req.joint_map, where=f"{prefix}joint_map")
-        return _character(skel, pose, jmap, req.character.units, req.character.up)
+        units, up = req.character.units, req.character.up
+        return _character(skel, pose, jmap, units, up, where=f"{prefix}character.units")
     except CharacterError as exc:
         raise _invalid(exc) from None
 

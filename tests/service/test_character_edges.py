@@ -82,6 +82,24 @@ def test_units_that_shrink_the_body_to_nothing_are_named(client: Any) -> None:
     _refused(client, "/v1/bvh/solve", body, "units:", "check the units")
 
 
+def test_a_named_unit_that_makes_no_body_is_refused(client: Any) -> None:
+    """A file in centimetres sent with ``"units": "m"`` (an 85 m leg), or ``"mm"`` (8.5 cm)
+    was solved as asked, the answer off its targets by millimetres and the character a
+    giant or a doll: a named unit is held to a 0.1-5 m leg and the error says what the
+    file reads as; a number of metres per unit is taken as given, for who means it."""
+    body = _example("bvh_solve")
+    for units in ("m", "mm"):
+        detail = _refused(client, "/v1/bvh/solve", {**body, "units": units}, "units: ")
+        assert f"'{units}' makes the rest-pose leg" in detail and '"units": "cm"' in detail
+    for units in ("cm", 0.01, 1.0):
+        r = client.post("/v1/bvh/solve", json={**body, "units": units})
+        assert r.status_code == 200, (units, r.text)
+    character = _example("solve_character")
+    character["character"]["units"] = "cm"  # its values are metres
+    _refused(client, "/v1/solve", character, "character.units: 'cm'", "0.1-5 m")
+    assert client.post("/v1/solve", json=_example("solve_character")).status_code == 200
+
+
 def test_a_target_beyond_the_service_is_named(client: Any) -> None:
     """A target that lands beyond ±1e4 m once in metres (was: a 200 whose error was NaN,
     written as null) is refused by its index."""
