@@ -514,8 +514,14 @@ def resolve_map(
                 f"joints are {', '.join(JOINT_NAMES)}"
             )
         along = _SLID.fullmatch(name) if name not in skel.index else None
-        if along is not None and along.group(1) in skel.index:  # "0.5 of Spine1->Neck"
-            slid[canon], name = name, along.group(1)
+        if along is not None and along.group(2) in skel.index:  # "0.5 of Spine1->Neck"
+            if _SLIDE.get(canon) != _fraction(along.group(1)):
+                raise CharacterError(
+                    f"{where}.{canon}: {quoted(name)} is not a point a map makes (only "
+                    + ", ".join(f"{k} slides {v:g} of its bone" for k, v in _SLIDE.items())
+                    + "); name a joint of the skeleton"
+                )
+            slid[canon], name = name, along.group(2)
         if name not in skel.index:
             raise CharacterError(f"{where}.{canon}: the skeleton has no joint {quoted(name)}")
         given[canon] = skel.index[name]
@@ -557,7 +563,14 @@ def resolve_map(
 
 #: A point part-way along a bone as :meth:`JointMap.describe` writes it (a joint sliding
 #: along its bone, where it would sit on its parent): accepted back in a ``joint_map``.
-_SLID = re.compile(r"[0-9.]+ of (.+)->(.+)")
+_SLID = re.compile(r"([0-9.]+) of (.+)->(.+)")
+
+
+def _fraction(text: str) -> float | None:
+    try:
+        return float(text)
+    except ValueError:
+        return None
 
 
 def _anchors(skel: Skeleton, found: dict[str, int], scheme: str, where: str) -> JointMap:

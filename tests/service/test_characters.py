@@ -370,4 +370,10 @@ def test_the_joint_map_an_answer_gives_can_be_sent_back(
                 r = client.post("/v1/bvh/inspect", json={**base, "joint_map": wrong})
                 assert r.status_code == 422, r.text
                 assert r.json()["errors"][0]["location"] == f"joint_map.{canon}", r.text
+        # a joint the map never slides, given as a point along its bone: named as that
+        # (was a 422 at joint_map saying the wrist "sits on left_elbow")
+        along = f"0.25 of {jmap['left_elbow']}->{jmap['left_wrist']}"
+        r = client.post("/v1/bvh/inspect", json={**base, "joint_map": {"left_wrist": along}})
+        assert r.status_code == 422 and "is not a point a map makes" in r.text, r.text
+        assert r.json()["errors"][0]["location"] == "joint_map.left_wrist", r.text
     assert slid > 0  # some file's map slides a point along a bone
