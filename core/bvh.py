@@ -328,8 +328,14 @@ def _parse_hierarchy(file: str, text: str) -> list[BVHJoint]:
             line = toks.line()
             ch = toks.next("a channel name")
             if ch.lower() not in _POSITION_CHANNELS and ch.lower() not in _ROTATION_CHANNELS:
+                short = (
+                    f" (CHANNELS {count} lists {len(channels)}?)"
+                    if ch.upper() in ("JOINT", "END", "}", "{", "OFFSET")
+                    else ""
+                )
                 raise _error(
-                    file, f"line {line}: unknown channel {quoted(ch)} of joint {quoted(name)}"
+                    file,
+                    f"line {line}: unknown channel {quoted(ch)} of joint {quoted(name)}{short}",
                 )
             channels.append(ch)
         index = len(joints)
@@ -411,9 +417,14 @@ def parse_bvh(text: str, name: str = "<string>", frames: Iterable[int] | None = 
         raise _error(name, f"line {motion_line + 2}: expected 'Frame Time: <seconds>', got {got}")
     try:
         n_frames = int(frames_match.group(1))
+    except ValueError:
+        got = quoted(frames_match.group(1))
+        raise _error(name, f"line {motion_line + 1}: bad frame count {got}") from None
+    try:
         frame_time = float(time_match.group(1))
     except ValueError:
-        raise _error(name, f"line {motion_line + 1}: bad Frames / Frame Time values") from None
+        got = quoted(time_match.group(1))
+        raise _error(name, f"line {motion_line + 2}: bad Frame Time {got}: not a number") from None
     if n_frames < 0:
         raise _error(name, f"line {motion_line + 1}: negative frame count {n_frames}")
     if not np.isfinite(frame_time) or frame_time <= 0:

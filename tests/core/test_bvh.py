@@ -116,6 +116,16 @@ Frame Time: 0.01
         (lambda t: t.replace("  }\n}\nMOTION", "MOTION"), "unexpected end of HIERARCHY"),
         (lambda t: "garbage\x00\x01 not a bvh at all", "not a BVH file"),
         (lambda t: t.replace("Frame Time: 0.0333333", "Frame Time: 0"), "bad Frame Time"),
+        # each was blamed on the line before, as "bad Frames / Frame Time values"
+        (
+            lambda t: t.replace("Frame Time: 0.0333333", "Frame Time: 0,0333333"),
+            "line 18: bad Frame Time '0,0333333': not a number",
+        ),
+        # a count above the names read the next keyword as a channel, and said only that
+        (
+            lambda t: t.replace("CHANNELS 3 Zrotation", "CHANNELS 4 Zrotation"),
+            "unknown channel 'End' of joint 'child' (CHANNELS 4 lists 3?)",
+        ),
     ],
 )
 def test_malformed_files_raise_bvherror_naming_file_and_reason(
