@@ -140,6 +140,19 @@ def turned_by(poses: F64, yaws: F64) -> F64:
     return out
 
 
+def own_sum(x: npt.NDArray[np.floating], widths: npt.NDArray[np.int64]) -> F64:
+    """``x [N, K, ...]`` summed over each row's own first ``widths[n]`` target columns, as
+    numpy sums them for the row alone: the columns a batch pads an item with never take
+    part (numpy pairs a sum's terms differently at each width, so a searching item's
+    answer moved by ~1e-13 m beside a wider item, and a near tie could have kept another
+    candidate)."""
+    out = np.zeros(x.shape[:1] + x.shape[2:])
+    for width in np.unique(widths):
+        rows = np.flatnonzero(widths == width)
+        out[rows] = x[rows, :width].sum(axis=1)
+    return out
+
+
 def fitted(poses: F64, items: _Items, rows: npt.NDArray[np.intp]) -> tuple[F64, F64]:
     """``poses [N, 21, 3]`` (world, +Y up; the starts of ``items[rows]``) each moved by
     the turn about the vertical and the shift across that best carry its targeted joints
@@ -147,15 +160,16 @@ def fitted(poses: F64, items: _Items, rows: npt.NDArray[np.intp]) -> tuple[F64, 
     in radians, as :func:`turned` would turn it."""
     tidx, tpos = items.tidx[rows], items.tpos[rows]
     use = items.targets()[rows].astype(np.float64)  # [N, K]
-    n = use.sum(axis=1, keepdims=True)
+    own = items.n_t[rows]
+    n = own_sum(use, own)[:, None]
     src = np.take_along_axis(poses, tidx[:, :, None], axis=1)[:, :, [0, 2]]  # [N, K, 2]
     dst = tpos[:, :, [0, 2]]
-    sc = (src * use[:, :, None]).sum(axis=1) / n  # centroids [N, 2]
-    dc = (dst * use[:, :, None]).sum(axis=1) / n
+    sc = own_sum(src * use[:, :, None], own) / n  # centroids [N, 2]
+    dc = own_sum(dst * use[:, :, None], own) / n
     a, b = (src - sc[:, None]) * use[:, :, None], dst - dc[:, None]
     # turned(): x' = c x + s z, z' = -s x + c z; maximise sum(b . R a)
-    cos = (a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1]).sum(axis=1)
-    sin = (a[..., 1] * b[..., 0] - a[..., 0] * b[..., 1]).sum(axis=1)
+    cos = own_sum(a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1], own)
+    sin = own_sum(a[..., 1] * b[..., 0] - a[..., 0] * b[..., 1], own)
     yaw = np.arctan2(sin, cos)
     c, s = np.cos(yaw)[:, None], np.sin(yaw)[:, None]
     x, z = poses[:, :, 0] - sc[:, :1], poses[:, :, 2] - sc[:, 1:]
@@ -266,7 +280,7 @@ def _candidates(
 def _score(engine: Engine, soft: _Items, ans: BatchAnswer) -> F64:
     """Each candidate's score: the mean distance of its targets, plus ``plausibility``
     times its answer's distance to what the critic makes of it (never negative)."""
-    score: F64 = (ans.errors * soft.targets()).sum(axis=1) / soft.n_t
+    score: F64 = own_sum(ans.errors * soft.targets(), soft.n_t) / soft.n_t
     if engine.turn_search.plausibility > 0:  # how unlike a real body the answer is
         score += engine.turn_search.plausibility * implausibility(engine, ans.pose, soft.floors)
     return score
