@@ -16,7 +16,9 @@ over it, joint by joint. Then two structural rules apply to every map:
 - a canonical joint that lands on its canonical parent (zero rest length) is moved part-way
   along its own bone: a collar a quarter of the way to the shoulder (CMU skeletons start
   both clavicles on the midline), the chest half-way to the neck (ReActIdle has one chest
-  joint). Any other zero-length canonical bone is an error asking for an explicit map.
+  joint); so are two collars on one point (CMU ASF and Rigify start both clavicles where
+  the neck does). Any other zero-length canonical bone is an error asking for an explicit
+  map.
 """
 
 from __future__ import annotations
@@ -589,15 +591,23 @@ def _anchors(skel: Skeleton, found: dict[str, int], scheme: str, where: str) -> 
                 f"{where}: {canon} -> {quoted(skel.names[j])} is not below {parent} -> "
                 f"{quoted(skel.names[pj])} in the skeleton"
             )
-    # zero-length canonical bones: slide the child part-way along its own bone
+
+    # zero-length canonical bones: slide the child part-way along its own bone; so too two
+    # collars on one point (CMU ASF's clavicles both start where the neck does, not on the
+    # chest: the networks never saw a body without shoulders' width there)
+    def point(canon: str) -> F64:
+        out: F64 = rest[anchors[canon].joint] + anchors[canon].offset
+        return out
+
+    twins = float(np.linalg.norm(point("left_collar") - point("right_collar"))) <= 1e-3 * span
     for canon in JOINT_NAMES:
         parent = PARENT_NAMES[canon]
         if parent is None:
             continue
         a, pa = anchors[canon], anchors[parent]
-        here = rest[a.joint] + a.offset
-        there = rest[pa.joint] + pa.offset
-        if np.linalg.norm(here - there) > 1e-3 * span:
+        here, there = point(canon), point(parent)
+        on_twin = twins and canon in ("left_collar", "right_collar")
+        if np.linalg.norm(here - there) > 1e-3 * span and not on_twin:
             continue
         child = next((c for c in JOINT_NAMES if PARENT_NAMES[c] == canon), None)
         if canon not in _SLIDE or child is None:

@@ -422,3 +422,27 @@ def test_compiled_aim_pass_is_the_numpy_aim_of_each_group(bvh_files: dict[str, P
             alias = pose.copy()
             assert _aim_pass(skel, alias, jmap, plan, goal, skip, alias) == changed, name
             np.testing.assert_allclose(alias.rotations, got.rotations, rtol=0, atol=1e-12)
+
+
+def test_collars_on_one_point_slide_apart() -> None:
+    """CMU ASF's clavicles both start where the neck does (the end of ``thorax``), not on
+    the chest: the two collars were mapped to one midline point, a body the networks never
+    saw, and a map that slid them (sent back as the answer's own labels) was refused. Now
+    both slide a quarter along their bones, as collars on the chest do."""
+    names, parents, offsets = _named_skeleton("cmu-asf")
+    rest = rest_pose()
+    neck = rest[JOINT_INDEX["neck"]] - rest[JOINT_INDEX["spine2"]]
+    for side in ("left", "right"):
+        collar, shoulder = JOINT_INDEX[f"{side}_collar"], JOINT_INDEX[f"{side}_shoulder"]
+        offsets[collar] = neck.tolist()  # on the neck's point, from the chest
+        offsets[shoulder] = (rest[shoulder] - rest[JOINT_INDEX["spine2"]] - neck).tolist()
+    skel, _ = build_skeleton(names, parents, offsets)
+    jmap = resolve_map(skel)
+    got = jmap.describe()
+    assert got["left_collar"] == "0.25 of lclavicle->lhumerus"
+    assert got["right_collar"] == "0.25 of rclavicle->rhumerus"
+    pts = rest_points(skel, jmap)
+    left, right = pts[JOINT_INDEX["left_collar"]], pts[JOINT_INDEX["right_collar"]]
+    width = np.linalg.norm(rest[JOINT_INDEX["left_shoulder"]] - rest[JOINT_INDEX["right_shoulder"]])
+    assert np.linalg.norm(left - right) > 0.2 * width
+    assert resolve_map(skel, {"left_collar": got["left_collar"]}).describe() == got
