@@ -277,7 +277,11 @@ def install_handlers(app: FastAPI) -> None:
             request.scope[REASON] = "invalid-request"
             return validation_problem(exc.errors)
         detail = clip(exc.detail)
-        return problem(exc.status_code, detail, detail, headers=dict(exc.headers or {}))
+        headers = dict(exc.headers or {})
+        allow = [m.strip() for m in headers.get("Allow", "").split(",") if m.strip()]
+        if "GET" in allow and "HEAD" not in allow:  # every GET route answers HEAD too
+            headers["Allow"] = ", ".join([*allow, "HEAD"])
+        return problem(exc.status_code, detail, detail, headers=headers)
 
     @app.exception_handler(Exception)
     async def _unexpected(request: Request, exc: Exception) -> JSONResponse:

@@ -267,6 +267,14 @@ def test_every_get_route_answers_head_as_get(client: Any, path: str) -> None:
     assert head.content == b"" and head.headers["content-type"] == get.headers["content-type"]
 
 
+def test_a_405_allows_head_where_it_allows_get(client: Any) -> None:
+    """Every GET route answers HEAD (``service.middleware.head``); a 405's ``Allow`` said
+    only GET."""
+    r = client.post("/v1/skeleton", json={})
+    assert r.status_code == 405
+    assert [m.strip() for m in r.headers["allow"].split(",")] == ["GET", "HEAD"]
+
+
 def test_head_requests_are_counted_under_their_route(models_dir: Path) -> None:
     """A HEAD probe was counted as ``route="unmatched"``: the route the router found was
     written into the GET copy of the scope that the metrics outside never saw."""
