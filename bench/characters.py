@@ -20,6 +20,7 @@ import subprocess
 import tempfile
 from collections.abc import Sequence
 from dataclasses import dataclass
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -200,6 +201,9 @@ def main(
         for path, stated in todo:
             for name, scores in score_file(engine, path, edits, seed, stated, on_pelvis).items():
                 rows.append((path.name, name, scores))
+    mode = " --on-pelvis" if on_pelvis else ""
+    when = datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC")
+    print(f"Written by `python -m bench.characters{mode}` ({when}, models {engine.version}).\n")
     print("\n".join(table(rows)))
 
 

@@ -12,5 +12,5 @@ def table_of(app: Any, args: list[str]) -> tuple[str, list[str]]:
     (the command must succeed)."""
     result = CliRunner().invoke(app, args)
     assert result.exit_code == 0, result.output
-    header, _, *rows = result.output.strip().splitlines()
+    header, _, *rows = [ln for ln in result.output.strip().splitlines() if ln.startswith("|")]
     return header, rows
