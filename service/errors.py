@@ -186,15 +186,15 @@ def problem(
     return JSONResponse(body, status_code=status, media_type=PROBLEM_JSON, headers=headers)
 
 
-def raw_answer(exc: PoseError) -> bytes:
+def raw_answer(exc: PoseError, extra: Sequence[tuple[bytes, bytes]] = ()) -> bytes:
     """``exc``'s answer as the bytes of a whole HTTP/1.1 response that closes the
     connection, for the protocol layer, which answers before any app runs: the body and
-    headers of :func:`error_response`."""
+    headers of :func:`error_response`, then ``extra`` headers."""
     resp = error_response(exc)
-    lines = [f"HTTP/1.1 {resp.status_code} {HTTPStatus(resp.status_code).phrase}"]
-    lines += [f"{k}: {v}" for k, v in resp.headers.items()]
-    lines += ["x-content-type-options: nosniff", "connection: close", "", ""]
-    return "\r\n".join(lines).encode("latin-1") + bytes(resp.body)
+    head = [f"HTTP/1.1 {resp.status_code} {HTTPStatus(resp.status_code).phrase}".encode()]
+    head += [k.encode("latin-1") + b": " + v.encode("latin-1") for k, v in resp.headers.items()]
+    head += [k + b": " + v for k, v in extra] + [b"connection: close", b"", b""]
+    return b"\r\n".join(head) + bytes(resp.body)
 
 
 #: A field's place as the messages write it (``items[2].targets[0].joint``, ``bvh``):

@@ -53,8 +53,6 @@ COALESCE_BYTES = 64 * 1024
 MAX_HEAD_BYTES = 64 * 1024
 #: How long a refused connection's further bytes are read and dropped before it closes.
 LINGER_SECONDS = 1.0
-#: Whether the parser tells where a request's head begins and ends (httptools does).
-_HEADS = hasattr(AutoHTTPProtocol, "on_headers_complete")
 
 
 class Coalescing:
@@ -123,13 +121,20 @@ class PacedHTTPProtocol(AutoHTTPProtocol):  # type: ignore[misc, valid-type]
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
         self._budget = get_settings().max_unsent_bytes
-        self._head = 0 if _HEADS else -1  # bytes of the request head so far (-1: not in one)
-        self._refused = False
+        self._head = -1  # bytes of a request's head read so far (-1: not inside one)
+        self._refused = False  # answered below the app: what comes is dropped
+        self._refusal: bytes | None = None  # that answer, while one before it is still due
+        self._began = False  # a head began in the read being parsed
 
     def data_received(self, data: bytes) -> None:
         if self._refused:  # read and dropped until the close (see refuse)
             return
-        if self._head >= 0:
+        self._began = False
+        super().data_received(data)
+        # a read that ended inside a head begun before it was all head; one whose head began
+        # in it may have held a request before that head (pipelined), so it is not counted:
+        # a head is bounded at MAX_HEAD_BYTES and one read
+        if self._head >= 0 and not self._began and not self._refused:
             self._head += len(data)
             if self._head > MAX_HEAD_BYTES:
                 self.refuse(
@@ -138,12 +143,10 @@ class PacedHTTPProtocol(AutoHTTPProtocol):  # type: ignore[misc, valid-type]
                         "(the server reads no more of them)"
                     )
                 )
-                return
-        super().data_received(data)
 
     def on_message_begin(self) -> None:  # httptools: a request's head begins
         super().on_message_begin()
-        self._head = 0
+        self._head, self._began = 0, True
 
     def on_headers_complete(self) -> None:
         self._head = -1
@@ -154,16 +157,37 @@ class PacedHTTPProtocol(AutoHTTPProtocol):  # type: ignore[misc, valid-type]
         self.refuse(MalformedHTTP(f"{msg.rstrip('.')}: the bytes sent are not an HTTP/1.1 request"))
 
     def refuse(self, exc: PoseError) -> None:
-        """Answer ``exc`` before any app runs, and close the connection: our side at once,
-        theirs after ``LINGER_SECONDS`` of reading and dropping what they still send (a
-        close with their bytes unread would reset the connection, and the client could
-        lose the answer before reading it)."""
+        """Answer ``exc`` before any app runs and close the connection, after the answers
+        still due on it (pipelined requests before this one): our side at once, theirs
+        after ``LINGER_SECONDS`` of reading and dropping what they still send (a close with
+        their bytes unread would reset the connection, and the client could lose the
+        answer before reading it)."""
         self._head = -1
         if self._refused or self.transport.is_closing():
             return
         self._refused = True
-        self.keep_alive = False
-        self.transport.write(raw_answer(exc))
+        from service.middleware.headers import BASE_HEADERS  # (the package imports this one)
+
+        self._refusal = raw_answer(exc, BASE_HEADERS)
+        if not self._answers_due():
+            self._send_refusal()
+
+    def _answers_due(self) -> bool:
+        cycle = getattr(self, "cycle", None)
+        return bool(getattr(self, "pipeline", None)) or (
+            cycle is not None and not cycle.response_complete
+        )
+
+    def on_response_complete(self) -> None:
+        super().on_response_complete()  # (starts the next pipelined request, if any)
+        if self._refusal is not None and not self._answers_due():
+            self._send_refusal()
+
+    def _send_refusal(self) -> None:
+        answer, self._refusal = self._refusal, None
+        if answer is None or self.transport.is_closing():
+            return
+        self.transport.write(answer)
         if self.transport.can_write_eof():
             self.transport.write_eof()
             asyncio.get_running_loop().call_later(LINGER_SECONDS, self.transport.close)

@@ -17,7 +17,8 @@ from service.middleware.types import REQUEST_ID, T0, ASGIApp, Message, Receive, 
 
 #: JSON answers load nothing.
 API_CSP = b"default-src 'none'; frame-ancestors 'none'; base-uri 'none'"
-_BASE = [
+#: The hardening headers of every answer (also the HTTP protocol's own: service.transport).
+BASE_HEADERS = [
     (b"x-content-type-options", b"nosniff"),
     (b"x-frame-options", b"DENY"),
     (b"referrer-policy", b"no-referrer"),
@@ -54,7 +55,7 @@ class AnswerHeaders:
                 names = {k.lower() for k, _ in headers}
                 ms = f"{(time.perf_counter() - t0) * 1000:.3f}ms".encode()
                 extra = [tag, (b"x-total-time", ms)]
-                extra += [(k, v) for k, v in _BASE if k not in names]
+                extra += [(k, v) for k, v in BASE_HEADERS if k not in names]
                 if b"content-security-policy" not in names:  # pages set their own
                     extra.append((b"content-security-policy", API_CSP))
                 message["headers"] = headers + extra

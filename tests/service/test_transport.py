@@ -5,6 +5,7 @@ answers is in test_faults.py.)"""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import socket
 import struct
@@ -15,7 +16,7 @@ from typing import Any
 import pytest
 
 from service.transport import COALESCE_BYTES
-from tests.service.server import serve, solve_item
+from tests.service.server import heavy_batch, serve, solve_item
 
 pytestmark = pytest.mark.slow
 
@@ -110,7 +111,8 @@ def test_request_heads_are_bounded_and_parser_refusals_are_problems(
     """A request line and headers that never end were kept whole by the parser (four
     unfinished 50 MB headers took a worker from 340 to 620 MB): past ``MAX_HEAD_BYTES``
     the connection gets a 431 problem and is closed. Bytes that are not HTTP were uvicorn's
-    plain-text 400; now a problem too. A head of fair size (a 20 kB header) is served."""
+    plain-text 400; now a problem too. A head of fair size (a 20 kB header) is served, and
+    so are big bodies."""
     from service.transport import MAX_HEAD_BYTES
 
     with serve(models_dir, tmp_path) as s:
@@ -140,6 +142,35 @@ def test_request_heads_are_bounded_and_parser_refusals_are_problems(
         assert line == "HTTP/1.1 400 Bad Request" and fields["connection"] == "close"
         assert fields["content-type"] == "application/problem+json"
         assert json.loads(body)["type"].endswith("/malformed-http")
+
+        # a big body in the same read as its small head is no head: answered (a first cut
+        # counted the whole read, and refused such batches at random with a 431)
+        for n in (200, 600):
+            batch = heavy_batch(n)
+            assert len(batch) > 2 * MAX_HEAD_BYTES
+            sock = connect(s.port)
+            status, _ = exchange(sock, "POST", "/v1/solve/batch", batch)
+            sock.close()
+            assert status == 200, (n, len(batch))
+
+        # a head too large behind a request still being answered, on one connection: the
+        # answer due first, then the refusal (it went first, taken for the first's answer)
+        sock = connect(s.port)
+        batch = heavy_batch(100)
+        first = (
+            f"POST /v1/solve/batch HTTP/1.1\r\nhost: x\r\ncontent-type: application/json\r\n"
+            f"content-length: {len(batch)}\r\n\r\n"
+        ).encode() + batch
+        sock.sendall(first + b"GET /v2/health/live HTTP/1.1\r\nhost: x\r\nx-big: ")
+        with contextlib.suppress(OSError):
+            for _ in range(20):
+                sock.sendall(b"a" * 8192)
+        buf = b""
+        while chunk := sock.recv(1 << 16):
+            buf += chunk
+        sock.close()
+        assert buf.startswith(b"HTTP/1.1 200 "), buf[:200]
+        assert b"HTTP/1.1 431 " in buf and buf.index(b"HTTP/1.1 431 ") > 0
 
         sock = connect(s.port)
         head = f"GET /v2/health/live HTTP/1.1\r\nhost: x\r\nx-fair: {'b' * 20_000}\r\n\r\n"
