@@ -446,7 +446,7 @@ def eval_ablation(models_dir: Path, b1_five: Edits, b3: Edits, cfg: EvalConfig) 
     out: Json = {}
     for label, kwargs in cfg.strategies:
         engine = Engine(models_dir, threads=1, **dict(kwargs))
-        if engine.inert_settings():  # bit-identical to the default on these models
+        if engine.inert_settings():  # the same answers as without those settings here
             _log(f"ablation {label}: left out, {engine.inert_settings()} do nothing here")
             continue
         row: Json = {}

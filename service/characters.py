@@ -313,17 +313,20 @@ def _character(
     up: str | None,
     points: F64 | None = None,
     where: str = "units",
+    stated: bool = True,
 ) -> Character:
     """The character of a pose; ``units`` and ``up`` as the client gave them (None: read
-    from the file), ``where``: the field of ``units``, which errors name."""
+    from the file; ``stated`` False: the character form's default), ``where``: the field
+    of ``units``, which errors name."""
     if isinstance(units, str) and units in UNITS:  # a named unit: a slip is refused
         name, leg = infer_units(skel, jmap)
         metres = leg * UNITS[units]
         low, high = NAMED_UNIT_LEG_M
         if not low <= metres <= high:
             reads = f'; its leg reads as {name}: "units": "{name}"' if name else ""
+            given = "" if stated else " (the default: no units were given)"
             raise InvalidRequest(
-                f"{where}: {quoted(units)} makes the rest-pose leg (hip to ankle, {leg:.4g} "
+                f"{where}: {quoted(units)}{given} makes the rest-pose leg (hip to ankle, {leg:.4g} "
                 f"file units) {metres:.4g} m long, outside the {low:g}-{high:g} m a named "
                 f"unit may give{reads}; a character of that size: units as metres per unit "
                 "(a number), taken as given"
@@ -514,7 +517,9 @@ def character_from_request(req: CharacterSolveRequest, where: str = "") -> Chara
         pose = Pose(rot, trans)
         jmap = resolve_map(skel, req.joint_map, where=f"{prefix}joint_map")
         units, up = req.character.units, req.character.up
-        return _character(skel, pose, jmap, units, up, where=f"{prefix}character.units")
+        stated = "units" in req.character.model_fields_set
+        where = f"{prefix}character.units"
+        return _character(skel, pose, jmap, units, up, where=where, stated=stated)
     except CharacterError as exc:
         raise _invalid(exc) from None
 

@@ -17,7 +17,8 @@ _PROBLEM_STATUS = {
     401: "Missing or wrong API key (only when POSE_API_KEY is set).",
     408: "The body did not arrive within the deadline (a stalled upload): the connection closes.",
     413: "Body or batch larger than the configured limit.",
-    415: "Body is not application/json, or has a Content-Encoding other than identity.",
+    415: "Body is not application/json, or compressed (a Content-Encoding other than "
+    "identity, a Transfer-Encoding other than chunked).",
     422: "Invalid request: the detail says which field and why.",
     429: "Too many requests in flight on this worker: retry after Retry-After seconds.",
     503: "Models not loaded yet, or broken (see /v2/health/ready), or shutting down.",

@@ -22,7 +22,14 @@ REQUEST_ID = "pose.request_id"
 
 
 def header_map(scope: Scope) -> dict[str, str]:
-    return {k.decode("latin-1").lower(): v.decode("latin-1") for k, v in scope["headers"]}
+    """The request's headers by lower-case name; a name sent on several lines has its values
+    joined with ", ", as one list (RFC 9110 5.3: ``Transfer-Encoding: gzip`` then
+    ``Transfer-Encoding: chunked`` is ``gzip, chunked``, not the last line alone)."""
+    out: dict[str, str] = {}
+    for k, v in scope["headers"]:
+        name, value = k.decode("latin-1").lower(), v.decode("latin-1")
+        out[name] = f"{out[name]}, {value}" if name in out else value
+    return out
 
 
 async def observed(

@@ -97,6 +97,12 @@ def test_a_named_unit_that_makes_no_body_is_refused(client: Any) -> None:
     character = _example("solve_character")
     character["character"]["units"] = "cm"  # its values are metres
     _refused(client, "/v1/solve", character, "character.units: 'cm'", "0.1-5 m")
+    # left to the form's default, "m", for joints in centimetres: said so
+    character = _example("solve_character")
+    del character["character"]["units"]
+    for joint in character["character"]["joints"]:
+        joint["offset"] = [100.0 * v for v in joint["offset"]]
+    _refused(client, "/v1/solve", character, "'m' (the default: no units were given)")
     assert client.post("/v1/solve", json=_example("solve_character")).status_code == 200
 
 

@@ -206,6 +206,13 @@ def test_a_compressed_transfer_coding_is_a_415(client: Any) -> None:
             headers={"content-type": "application/json", "transfer-encoding": coding},
         )  # fmt: skip
         assert_problem(r, 415, "transfer coding", coding.split(",")[0])
+    # the same as two header lines (the last, "chunked", was taken alone)
+    r = client.post(
+        "/v1/solve", content=gzip.compress(plain),
+        headers=[("content-type", "application/json"), ("transfer-encoding", "gzip"),
+                 ("transfer-encoding", "chunked")],
+    )  # fmt: skip
+    assert_problem(r, 415, "transfer coding", "gzip, chunked")
     r = client.post(
         "/v1/solve", content=plain,
         headers={"content-type": "application/json", "transfer-encoding": "chunked"},
