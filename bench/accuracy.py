@@ -446,8 +446,9 @@ def eval_ablation(models_dir: Path, b1_five: Edits, b3: Edits, cfg: EvalConfig) 
     out: Json = {}
     for label, kwargs in cfg.strategies:
         engine = Engine(models_dir, threads=1, **dict(kwargs))
-        if engine.inert_settings():  # the same answers as without those settings here
-            _log(f"ablation {label}: left out, {engine.inert_settings()} do nothing here")
+        inert, why = engine.inert_settings()
+        if inert:  # the same answers as without those settings here
+            _log(f"ablation {label}: left out, {inert} do nothing ({why})")
             continue
         row: Json = {}
         for name, edits in ((f"B1 {COMPOSED5}", b1_five), ("B3 2+ joints", b3)):

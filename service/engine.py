@@ -176,17 +176,22 @@ class Engine:
         self.fabrik_max_iterations = fabrik_max_iterations
         self.version = m.version
 
-    def inert_settings(self) -> tuple[str, ...]:
-        """The composition settings set away from their default that these models ignore:
-        delta models (``serving.delta``) run a composed sequence once, pasting the targets
-        solved so far before each later solver, so the latent chain's cycles
-        (``composition_passes``) and closing rounds (``composition_projections``) change
-        nothing there (:func:`service.networks.run_once`)."""
-        if not self.serving.delta:
-            return ()
-        chain = (("composition_passes", self.composition_passes),
-                 ("composition_projections", self.projections))  # fmt: skip
-        return tuple(name for name, value in chain if value != 1)
+    def inert_settings(self) -> tuple[tuple[str, ...], str]:
+        """The composition settings set away from their default that change nothing here,
+        and why: delta models (``serving.delta``) run a composed sequence once, so the
+        latent chain's cycles (``composition_passes``) and closing rounds
+        (``composition_projections``) have nothing to act on; the paper's plain chain
+        (``composition="sequential"``) has no closing rounds (:mod:`service.networks`)."""
+        chain: tuple[tuple[str, int], ...]
+        if self.serving.delta:
+            chain = (("composition_passes", self.composition_passes),
+                     ("composition_projections", self.projections))  # fmt: skip
+            why = "the models answer in deltas (serving.delta): a composed sequence runs once"
+        elif self.composition == "sequential":
+            chain, why = (("composition_projections", self.projections),), "the plain chain"
+        else:
+            return (), ""
+        return tuple(name for name, value in chain if value != 1), why
 
     def scales_of(self, lengths: F64) -> F64:
         """How much bigger each character ``[..., 20]`` is than the body size the networks

@@ -76,13 +76,12 @@ class ModelRepository:
             return
         self.engine = engine
         self.reason = ""
-        if engine.inert_settings():  # set, but these models have nothing for them to change
+        inert, why = engine.inert_settings()
+        if inert:  # set, but nothing here for them to change
             log.warning(
                 json.dumps(
                     {"event": "settings_ignored", "version": engine.version,
-                     "settings": [f"POSE_{n.upper()}" for n in engine.inert_settings()],
-                     "reason": "the models answer in deltas (serving.delta): a composed "
-                     "sequence runs once, the targets pasted before each later solver"}
+                     "settings": [f"POSE_{n.upper()}" for n in inert], "reason": why}
                 )
             )  # fmt: skip
         log.info(

@@ -159,14 +159,13 @@ def fitted(poses: F64, items: _Items, rows: npt.NDArray[np.intp]) -> tuple[F64, 
     onto their targets (least squares over x and z; heights as they were), and each turn
     in radians, as :func:`turned` would turn it."""
     tidx, tpos = items.tidx[rows], items.tpos[rows]
-    use = items.targets()[rows].astype(np.float64)  # [N, K]
-    own = items.n_t[rows]
-    n = own_sum(use, own)[:, None]
+    own = items.n_t[rows]  # each item's targets: its first columns (no pins: it searches)
+    n = own[:, None].astype(np.float64)
     src = np.take_along_axis(poses, tidx[:, :, None], axis=1)[:, :, [0, 2]]  # [N, K, 2]
     dst = tpos[:, :, [0, 2]]
-    sc = own_sum(src * use[:, :, None], own) / n  # centroids [N, 2]
-    dc = own_sum(dst * use[:, :, None], own) / n
-    a, b = (src - sc[:, None]) * use[:, :, None], dst - dc[:, None]
+    sc = own_sum(src, own) / n  # centroids [N, 2]
+    dc = own_sum(dst, own) / n
+    a, b = src - sc[:, None], dst - dc[:, None]
     # turned(): x' = c x + s z, z' = -s x + c z; maximise sum(b . R a)
     cos = own_sum(a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1], own)
     sin = own_sum(a[..., 1] * b[..., 0] - a[..., 0] * b[..., 1], own)
