@@ -26,7 +26,7 @@
 import { $, doc, history, solver, state, ui } from './editor/state.js';
 import { api, ApiError, clearError, showError } from './editor/api.js';
 import {
-  clonePose, loadSample, options, redo, requestSolve, reset, sendSolve, undo,
+  clonePose, loadSample, options, redo, requestSolve, reset, sendSolve, undo, whenCommitted,
 } from './editor/solve.js';
 import {
   buildSkeleton, camera, pinRings, renderer, resize, scene, viewport,
@@ -35,7 +35,7 @@ import {
   clearTargets, endDrag, onPointerDown, onPointerMove, onPointerUp, toScreen,
 } from './editor/interaction.js';
 import { exportDocument, exportPose, refresh } from './editor/panel.js';
-import { fileFrame, openFile, openText, setFrame } from './editor/file.js';
+import { fileFrame, mayReplace, openFile, openText, setFrame } from './editor/file.js';
 
 // ------------------------------------------------------------------------------------
 // Wiring: pointer, keyboard, panel controls, file picker and drop
@@ -65,13 +65,13 @@ function wireControls() {
   // edits are kept and Reset still returns to it as opened (the undo history starts anew:
   // its poses were in the old units); if its opening failed, that file, not the open one.
   for (const id of ['bvh-units', 'bvh-up']) {
-    $(id).addEventListener('change', () => {
+    $(id).addEventListener('change', () => whenCommitted(() => {
       const t = doc.tried;
       if (!t) return;
       const open = doc.active && t.name === doc.name && t.text === doc.original;
       if (open) openText(doc.text, doc.name, doc.original, doc.encoding, doc.frame);
-      else openText(t.text, t.name, t.text, t.encoding);
-    });
+      else if (mayReplace(t.name)) openText(t.text, t.name, t.text, t.encoding);
+    }));
   }
   $('bvh-frame').addEventListener('input', (ev) => setFrame(Number(ev.target.value)));
   let dragDepth = 0;

@@ -514,9 +514,12 @@ def test_editor_opens_poses_scrubs_and_exports_a_real_bvh_file(
         assert abs(min(heights)) < 1e-9
         assert 1.3 < max(heights) < 2.1, max(heights)
 
-        # -- drag and drop opens a file too --------------------------------------------------
+        # -- drag and drop opens a file too: its units found anew (the file's before are no
+        # guide: inches carried over drew a centimetre file as a giant), so stated again ------
         scrub(10)
-        assert drop(original, "dropped.bvh") == 200
+        assert drop(original, "dropped.bvh") == 422
+        assert page.locator("#bvh-units").input_value() == "auto"
+        page.select_option("#bvh-units", str(units))
         page.wait_for_function(f"() => {m}.bvh().name === 'dropped.bvh'")
         assert page.evaluate(f"{m}.bvh().frame") == 0
 
@@ -951,6 +954,94 @@ def test_editor_keeps_screen_file_and_history_in_step(server: str, browser: Any)
         page.select_option("#bvh-units", "m")
         page.wait_for_timeout(300)
         assert page.evaluate(f"{M}.bvh()") is None
+        assert not errors, errors
+    finally:
+        page.context.close()
+
+
+@pytest.mark.browser
+def test_editor_never_drops_an_edit_when_the_file_changes(server: str, browser: Any) -> None:
+    """Found by a browser audit on users' own files (2026-12-05): opening another file (or
+    the same again) threw an edited file away unasked; a scrub or a units change while a
+    drag's last answer was on its way dropped the edit, and Export wrote the file without
+    it; a units choice made for one file (inches) drew the next (centimetres) as a giant;
+    after a refused units change the menu showed the refused unit; a refusal did not say
+    which file; a file cut short in its last frame opened without a word."""
+    text = json.loads((REPO_ROOT / "docs" / "examples" / "bvh_solve.json").read_text())["bvh"]
+    page = open_editor(browser, server)
+    errors: list[str] = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+
+    def choose(body: str, name: str) -> None:
+        page.set_input_files(
+            "#bvh-file", files=[{"name": name, "mimeType": "text/plain", "buffer": body.encode()}]
+        )
+
+    def held_drag(joint: str) -> list[Any]:
+        """A drag released while its answers are held back (the routes, to release)."""
+        held: list[Any] = []
+        page.route("**/v1/bvh/solve", lambda route: held.append(route))
+        xy = page.evaluate(f"{M}.projectJoint('{joint}')")
+        page.mouse.move(xy["x"], xy["y"])
+        page.mouse.down()
+        page.mouse.move(xy["x"] + 30, xy["y"] - 40, steps=4)
+        page.mouse.up()
+        page.wait_for_function(f"() => {M}.solveCount().inflight")
+        return held
+
+    def release(held: list[Any]) -> None:
+        for route in held:
+            route.continue_()
+        page.unroute("**/v1/bvh/solve")
+        settle(page)
+
+    try:
+        choose(text, "a.bvh")
+        page.wait_for_function(f"() => {M}.bvh() && {M}.bvh().name === 'a.bvh'")
+        drag_joint(page, "left_wrist", 40, -60)
+        edited = page.evaluate(f"{M}.bvhText()")
+        # another file over an edited one: asked; "no" keeps the edits
+        page.once("dialog", lambda d: d.dismiss())
+        choose(text, "b.bvh")
+        page.wait_for_timeout(300)
+        assert page.evaluate(f"{M}.bvh()")["name"] == "a.bvh"
+        assert page.evaluate(f"{M}.bvhText()") == edited
+
+        # a scrub, then Export, while the drag's last answer is on its way: both wait for it
+        held = held_drag("right_wrist")
+        page.locator("#bvh-frame").fill("2")
+        with page.expect_download() as download:
+            page.click("#export")
+            release(held)
+        page.wait_for_function(f"() => {M}.bvh().frame === 2")
+        saved = Path(download.value.path()).read_text()
+        assert saved == page.evaluate(f"{M}.bvhText()") != edited  # the drag is in it
+
+        # a units change the service refuses: the menu goes back to what the file was read with
+        page.select_option("#bvh-units", "mm")
+        page.wait_for_function(f"() => {M}.error() !== null")
+        detail = page.evaluate(f"{M}.error()")["detail"]
+        assert detail.startswith("a.bvh: units: 'mm' makes the rest-pose leg"), detail
+        assert page.locator("#bvh-units").input_value() == "auto"
+        assert page.evaluate(f"{M}.bvh()")["units"] == "cm"
+
+        # inches chosen for this file do not carry over to the next one
+        page.select_option("#bvh-units", "in")
+        page.wait_for_function(f"() => {M}.bvh().units === 'in'")
+        page.once("dialog", lambda d: d.accept())
+        choose(text, "b.bvh")
+        page.wait_for_function(f"() => {M}.bvh().name === 'b.bvh'")
+        assert page.evaluate(f"{M}.bvh()")["units"] == "cm"
+        assert page.locator("#bvh-units").input_value() == "auto"
+
+        # a file cut short in its last frame opens, saying so
+        cut = text.rstrip("\n")
+        cut = cut[: cut.rindex(" ", 0, len(cut) - 40)] + "\n"
+        choose(cut, "cut.bvh")
+        page.wait_for_function(f"() => {M}.bvh().name === 'cut.bvh'")
+        error = page.evaluate(f"{M}.error()")
+        assert error is not None and error["title"] == "Broken file", error
+        assert "cut.bvh: its last frame (2) holds" in error["detail"]
         assert not errors, errors
     finally:
         page.context.close()

@@ -3,9 +3,9 @@
 
 import * as THREE from 'three';
 import { anchorPoints, forwardKinematics, frameValues, parseMotion } from '../bvh.js';
-import { $, doc, history, state, ui } from './state.js';
+import { $, doc, history, solver, state, ui } from './state.js';
 import { api, ApiError, clearError, showError } from './api.js';
-import { cancelSolves, clonePose, pushHistory, restore } from './solve.js';
+import { cancelSolves, clonePose, pushHistory, restore, whenCommitted } from './solve.js';
 import { buildCharacterBones, buildSkeleton, camera, controls, UP } from './scene.js';
 import { endDrag } from './interaction.js';
 import { refresh } from './panel.js';
@@ -101,7 +101,15 @@ export async function openText(text, name, original = text, encoding = 'utf-8', 
     if (ticket !== opening) return;
   } catch (err) {
     if (ticket !== opening) return;
-    showError(err);
+    const again = doc.active && name === doc.name && original === doc.original;
+    if (again && doc.settings) { // the open file stays as it was read: say so
+      $('bvh-units').value = doc.settings.units;
+      $('bvh-up').value = doc.settings.up;
+    }
+    const stays = doc.active && !again ? ` (${doc.name} stays open)` : '';
+    showError(err instanceof ApiError
+      ? new ApiError(err.status, err.title, `${name}${stays}: ${err.detail}`, err.requestId)
+      : err);
     $('status').textContent = ui.connected ? 'connected' : 'server not ready';
     return;
   }
@@ -111,6 +119,7 @@ export async function openText(text, name, original = text, encoding = 'utf-8', 
   lastRow = { text: null, frame: -1, row: null };
   const info = res.data;
   Object.assign(doc, { active: true, name, original, text, shown: text, info, frame: 0, encoding });
+  doc.settings = { units: $('bvh-units').value, up: $('bvh-up').value };
   const frame0 = fileFrame(text, 0);
   doc.toWorld = worldMapping(info, frame0);
   doc.fromWorld = doc.toWorld.clone().invert();
@@ -136,10 +145,26 @@ export async function openText(text, name, original = text, encoding = 'utf-8', 
     + `${info.scheme} map, units ${info.units}, up ${info.up}`;
   $('export').textContent = 'Export BVH';
   $('export').title = 'Download the edited BVH file';
+  $('reset').title = 'Back to the file as opened, no targets, no pins';
   $('sample').value = '';
   $('status').textContent = ui.connected ? 'connected' : 'server not ready';
   clearError();
   refresh();
+  warnIfCut(text, info);
+}
+
+// A file whose last frame line holds fewer values than its channels (cut short: an
+// interrupted copy) opens, but that frame would be drawn as half a body without a word.
+function warnIfCut(text, info) {
+  const n = info.joints.reduce((acc, j) => acc + j.channels.length, 0);
+  const last = info.frames - 1;
+  if (last < 0) return;
+  const row = frameRow(text, last, n);
+  const have = row.length === n ? row.filter((v) => Number.isFinite(v)).length : row.length;
+  if (have === n) return;
+  showError(new ApiError(-1, 'Broken file', `${doc.name}: its last frame (${last}) holds ${have} `
+    + `of ${n} values: the file is cut short there. The frames before it open and edit; `
+    + 'Export writes that line as it was.'));
 }
 
 // A file's bytes as text, and how to write them back byte for byte: UTF-8 (a byte order
@@ -164,6 +189,13 @@ export function encodeFile(text, encoding) {
   return Uint8Array.from(text, (c) => c.charCodeAt(0)); // edits write ASCII digits only
 }
 
+// Whether the open file may give way to ``name``: yes unless it has edits and the user
+// says no (its edits are lost unless exported; a sample asks the same).
+export function mayReplace(name) {
+  const edited = doc.active && doc.text !== doc.original;
+  return !edited || window.confirm(`Open ${name}? The edits to ${doc.name} are lost unless exported.`);
+}
+
 export async function openFile(file) {
   if (!file) return;
   let bytes;
@@ -173,6 +205,11 @@ export async function openFile(file) {
     showError(new ApiError(-1, 'Cannot read the file', `${file.name}: ${err.message}`));
     return;
   }
+  if (!mayReplace(file.name)) return;
+  // each file is read with units and up axis found anew (a choice made for the file before,
+  // inches say, drew a centimetre file as a giant)
+  $('bvh-units').value = 'auto';
+  $('bvh-up').value = 'auto';
   const decoded = decodeFile(bytes);
   // lines ended by CR alone (classic Mac OS): read as LF, as the service reads them (an
   // edit then comes back with LF ends); the page's own reader splits at LF
@@ -191,6 +228,7 @@ export function closeFile() {
   $('bvh-loaded').hidden = true;
   $('export').textContent = 'Export JSON';
   $('export').title = 'Download the pose as JSON';
+  $('reset').title = 'Back to the sample pose, no targets, no pins';
   history.stack = [];
   history.index = -1;
   doc.tried = null; // closed: a units / up change no longer re-opens it
@@ -202,6 +240,10 @@ export function closeFile() {
 // Show another frame of the file: its targets go (they were for the other frame), pins stay.
 export function setFrame(frame) {
   if (!doc.active || frame === doc.frame) return;
+  if (solver.commitPending) { // the gesture's last answer first: a scrub dropped it
+    whenCommitted(() => setFrame(frame));
+    return;
+  }
   endDrag(false);
   cancelSolves();
   doc.frame = frame;

@@ -1,7 +1,7 @@
 // The side panel (last solve, targets, pins, buttons) and export (JSON, or the edited BVH).
 
 import { $, doc, history, solver, state } from './state.js';
-import { clonePose, options } from './solve.js';
+import { clonePose, options, whenCommitted } from './solve.js';
 import { drawPose } from './scene.js';
 import { removeTarget } from './interaction.js';
 import { encodeFile, refreshFrame } from './file.js';
@@ -95,6 +95,10 @@ function exportName() {
 }
 
 export function exportPose() {
+  if (solver.commitPending) { // the gesture's last answer first: the export left it out
+    whenCommitted(exportPose);
+    return;
+  }
   const blob = doc.active
     ? new Blob([encodeFile(doc.text, doc.encoding)], { type: 'text/plain' })
     : new Blob([JSON.stringify(exportDocument(), null, 2)], { type: 'application/json' });

@@ -72,6 +72,19 @@ export function cancelSolves() {
   solver.epoch += 1;
   solver.dirty = false;
   solver.commitPending = false;
+  solver.afterCommit.length = 0;
+}
+
+// ``fn`` now, or once the gesture's last answer is committed (or refused) where one is on
+// its way: a scrub, an export or a units change made then dropped the edit shown, or wrote
+// the file without it.
+export function whenCommitted(fn) {
+  if (solver.commitPending) solver.afterCommit.push(fn);
+  else fn();
+}
+
+function settled() {
+  for (const fn of solver.afterCommit.splice(0)) fn();
 }
 
 // Undo and redo show the frame of the edit they undo or redo (a scrub changes no step):
@@ -79,11 +92,13 @@ export function cancelSolves() {
 export function undo() {
   if (solver.commitPending || ui.drag) {
     // a gesture not yet a step (a drag, or its last answer still on the way): undo drops
-    // it alone (it also undid the step before)
+    // it alone (it also undid the step before); what waited for it goes on
+    const waiting = solver.afterCommit.splice(0);
     endDrag(false);
     cancelSolves();
     restore(history.stack[history.index], doc.active ? doc.frame : undefined); // (the frame shown)
     refresh();
+    for (const fn of waiting) fn();
     return;
   }
   if (history.index <= 0) return;
@@ -185,6 +200,7 @@ export function requestSolve(commit) {
       pushHistory();
     }
     refresh();
+    settled();
     return;
   }
   solver.dirty = true;
@@ -227,6 +243,8 @@ export async function sendSolve() {
       pushHistory();
     }
     refresh();
+    solver.inflight = false; // (what waited may send the next solve)
+    if (!solver.commitPending) settled();
   } catch (err) {
     if (epoch !== solver.epoch) return;
     if (commit && !solver.dirty) {
@@ -240,6 +258,8 @@ export async function sendSolve() {
     }
     showError(err);
     refresh();
+    solver.inflight = false; // (what waited may send the next solve)
+    if (!solver.commitPending) settled();
   } finally {
     solver.inflight = false;
   }

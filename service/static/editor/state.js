@@ -39,6 +39,7 @@ export const solver = {
   inflight: false,
   epoch: 0, // bumped by undo/redo/reset/sample: answers of older epochs are dropped
   commitPending: false, // commit the answer to the latest edit (end of a gesture)
+  afterCommit: [], // what waits for that commit: a scrub, an export, a units change
   sent: 0,
   answered: 0,
   last: null,
