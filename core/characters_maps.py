@@ -34,6 +34,7 @@ import numpy.typing as npt
 from core.characters import F64, CharacterError, Skeleton
 from core.skeleton import JOINT_INDEX, JOINT_NAMES, PARENT_NAMES
 from core.text import quoted
+from core.units import UNITS
 
 _LIMBS = ("collar", "shoulder", "elbow", "wrist", "hip", "knee", "ankle", "foot")
 
@@ -639,6 +640,13 @@ LEG_BANDS: Final[tuple[tuple[float, float, str], ...]] = (
 #: to 15 m tall): beyond it the unit is taken for a slip (a file in centimetres sent as
 #: "m", in millimetres as "cm") and refused; a number of metres per unit is taken as given.
 NAMED_UNIT_LEG_M: Final[tuple[float, float]] = (0.1, 5.0)
+
+
+def human_units(leg: float) -> list[str]:
+    """The unit names that make a rest-pose leg of ``leg`` file units a person's (the
+    metre band of :data:`LEG_BANDS`), for a message to suggest."""
+    low, high, _ = LEG_BANDS[0]
+    return [name for name, scale in UNITS.items() if low <= leg * scale <= high]
 
 
 def rest_points(skel: Skeleton, jmap: JointMap) -> F64:

@@ -44,7 +44,14 @@ from core.characters import (
     units_scale,
     up_rotation,
 )
-from core.characters_maps import NAMED_UNIT_LEG_M, JointMap, infer_units, infer_up, resolve_map
+from core.characters_maps import (
+    NAMED_UNIT_LEG_M,
+    JointMap,
+    human_units,
+    infer_units,
+    infer_up,
+    resolve_map,
+)
 from core.retarget import canonical_points, retarget
 from core.skeleton import BONES, JOINT_INDEX, JOINT_NAMES
 from core.text import clip, quoted
@@ -319,11 +326,12 @@ def _character(
     from the file; ``stated`` False: the character form's default), ``where``: the field
     of ``units``, which errors name."""
     if isinstance(units, str) and units in UNITS:  # a named unit: a slip is refused
-        name, leg = infer_units(skel, jmap)
+        _, leg = infer_units(skel, jmap)
         metres = leg * UNITS[units]
         low, high = NAMED_UNIT_LEG_M
         if not low <= metres <= high:
-            reads = f'; its leg reads as {name}: "units": "{name}"' if name else ""
+            fits = human_units(leg)
+            reads = f'; a person\'s leg in {fits}: "units": "{fits[0]}"' if fits else ""
             given = "" if stated else " (the default: no units were given)"
             raise InvalidRequest(
                 f"{where}: {quoted(units)}{given} makes the rest-pose leg (hip to ankle, {leg:.4g} "
@@ -334,10 +342,13 @@ def _character(
     if units is None:
         name, leg = infer_units(skel, jmap)
         if name is None:
+            fits = human_units(leg)
+            hint = f"a person's leg in {fits}: " if fits else ""
             raise InvalidRequest(
                 f"units: not plain from the file (rest-pose leg, hip to ankle, is {leg:.4g} "
                 "units: not 0.3-1.3 m, 45-130 cm or 450-1300 mm); state them, e.g. "
-                '"units": "in" or "units": 0.0564444'
+                f'{hint}"units": "{fits[0] if fits else "in"}", or a number of metres per '
+                'unit ("units": 0.0564444 for CMU ASF)'
             )
         units = name
     if up is None:
