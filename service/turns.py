@@ -146,6 +146,9 @@ def own_sum(x: npt.NDArray[np.floating], widths: npt.NDArray[np.int64]) -> F64:
     part (numpy pairs a sum's terms differently at each width, so a searching item's
     answer moved by ~1e-13 m beside a wider item, and a near tie could have kept another
     candidate)."""
+    if widths.size and widths.min() == widths.max() == x.shape[1]:  # no padding: one sum
+        whole: F64 = x.sum(axis=1)
+        return whole
     out = np.zeros(x.shape[:1] + x.shape[2:])
     for width in np.unique(widths):
         rows = np.flatnonzero(widths == width)
