@@ -312,6 +312,12 @@ def _invalid(exc: Exception) -> InvalidRequest:
     return InvalidRequest(detail, errors=[{"location": where, "message": message}])
 
 
+def _leg_in(leg: float) -> str:
+    """The named units that make a leg of ``leg`` file units a person's, each with the leg
+    it makes (a message's hint: the file's own tool knows which it is)."""
+    return " or ".join(f'"units": "{u}" ({leg * UNITS[u]:.2f} m)' for u in human_units(leg))
+
+
 def _character(
     skel: Skeleton,
     pose: Pose,
@@ -330,8 +336,8 @@ def _character(
         metres = leg * UNITS[units]
         low, high = NAMED_UNIT_LEG_M
         if not low <= metres <= high:
-            fits = human_units(leg)
-            reads = f'; a person\'s leg in {fits}: "units": "{fits[0]}"' if fits else ""
+            fits = _leg_in(leg)
+            reads = f"; a person's leg (0.3-1.3 m) with {fits}" if fits else ""
             given = "" if stated else " (the default: no units were given)"
             raise InvalidRequest(
                 f"{where}: {quoted(units)}{given} makes the rest-pose leg (hip to ankle, {leg:.4g} "
@@ -342,13 +348,11 @@ def _character(
     if units is None:
         name, leg = infer_units(skel, jmap)
         if name is None:
-            fits = human_units(leg)
-            hint = f"a person's leg in {fits}: " if fits else ""
+            fits = _leg_in(leg) or '"units": "in"'
             raise InvalidRequest(
                 f"units: not plain from the file (rest-pose leg, hip to ankle, is {leg:.4g} "
                 "units: not 0.3-1.3 m, 45-130 cm or 450-1300 mm); state them, e.g. "
-                f'{hint}"units": "{fits[0] if fits else "in"}", or a number of metres per '
-                'unit ("units": 0.0564444 for CMU ASF)'
+                f'{fits}, or a number of metres per unit ("units": 0.0564444 for CMU ASF)'
             )
         units = name
     if up is None:

@@ -70,7 +70,7 @@ function wireControls() {
       if (!t) return;
       const open = doc.active && t.name === doc.name && t.text === doc.original;
       if (open) openText(doc.text, doc.name, doc.original, doc.encoding, doc.frame);
-      else if (mayReplace(t.name)) openText(t.text, t.name, t.text, t.encoding);
+      else if (t.confirmed || mayReplace(t.name)) openText(t.text, t.name, t.text, t.encoding);
     }));
   }
   $('bvh-frame').addEventListener('input', (ev) => setFrame(Number(ev.target.value)));

@@ -106,9 +106,9 @@ def test_bvh_units_and_up_inferred(client: Any, bvh_files: dict[str, Path]) -> N
     r = client.post("/v1/bvh/solve", json=body)  # a child in inches is not plain: asked
     assert r.status_code == 422
     assert "units" in r.json()["detail"]
-    assert "a person's leg in ['in']" in r.json()["detail"]  # (the unit that makes it one)
+    assert '"units": "in" (0.55 m)' in r.json()["detail"]  # (the unit that makes it one)
     r = client.post("/v1/bvh/solve", json={**body, "units": "mm"})  # a slip: named as one
-    assert r.status_code == 422 and "a person's leg in ['in']" in r.json()["detail"], r.text
+    assert r.status_code == 422 and '"units": "in" (0.55 m)' in r.json()["detail"], r.text
     r = client.post("/v1/bvh/solve", json={**body, "units": "in"})
     assert r.status_code == 200, r.text
     assert r.json()["up"] == "+Z" and r.json()["scheme"] == "mixamo"

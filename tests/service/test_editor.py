@@ -1017,6 +1017,39 @@ def test_editor_never_drops_an_edit_when_the_file_changes(server: str, browser: 
         saved = Path(download.value.path()).read_text()
         assert saved == page.evaluate(f"{M}.bvhText()") != edited  # the drag is in it
 
+        # scrubbed away and back while waiting: the frame asked last (it ended on the other)
+        held = held_drag("left_wrist")
+        page.locator("#bvh-frame").fill("0")
+        page.locator("#bvh-frame").fill("2")
+        release(held)
+        page.wait_for_timeout(200)
+        assert page.evaluate(f"{M}.bvh()")["frame"] == 2
+
+        # a file opened while waiting asks too: the edit on its way counts
+        held = held_drag("right_wrist")
+        dialogs: list[str] = []
+        page.once("dialog", lambda d: (dialogs.append(d.message), d.dismiss()))
+        choose(text, "b.bvh")
+        page.wait_for_timeout(300)
+        release(held)
+        assert dialogs and page.evaluate(f"{M}.bvh()")["name"] == "a.bvh"
+
+        # a press released without moving while the drag's answer came back: that answer
+        # was held for the press and never asked again, and Export waited for ever
+        held = held_drag("head")
+        xy = page.evaluate(f"{M}.projectJoint('left_ankle')")
+        page.mouse.move(xy["x"], xy["y"])
+        page.mouse.down()
+        for route in held:
+            route.continue_()
+        page.unroute("**/v1/bvh/solve")
+        page.wait_for_timeout(300)
+        page.mouse.up()
+        with page.expect_download(timeout=5_000) as download:
+            page.click("#export")
+        settle(page)
+        assert Path(download.value.path()).read_text() == page.evaluate(f"{M}.bvhText()")
+
         # a units change the service refuses: the menu goes back to what the file was read with
         page.select_option("#bvh-units", "mm")
         page.wait_for_function(f"() => {M}.error() !== null")

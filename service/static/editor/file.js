@@ -160,9 +160,8 @@ function warnIfCut(text, info) {
   const last = info.frames - 1;
   if (last < 0) return;
   const row = frameRow(text, last, n);
-  const have = row.length === n ? row.filter((v) => Number.isFinite(v)).length : row.length;
-  if (have === n) return;
-  showError(new ApiError(-1, 'Broken file', `${doc.name}: its last frame (${last}) holds ${have} `
+  if (row.length === n) return;
+  showError(new ApiError(-1, 'Broken file', `${doc.name}: its last frame (${last}) holds ${row.length} `
     + `of ${n} values: the file is cut short there. The frames before it open and edit; `
     + 'Export writes that line as it was.'));
 }
@@ -192,7 +191,7 @@ export function encodeFile(text, encoding) {
 // Whether the open file may give way to ``name``: yes unless it has edits and the user
 // says no (its edits are lost unless exported; a sample asks the same).
 export function mayReplace(name) {
-  const edited = doc.active && doc.text !== doc.original;
+  const edited = doc.active && (doc.text !== doc.original || solver.commitPending);
   return !edited || window.confirm(`Open ${name}? The edits to ${doc.name} are lost unless exported.`);
 }
 
@@ -216,6 +215,8 @@ export async function openFile(file) {
   const crOnly = decoded.text.includes('\r') && !decoded.text.includes('\n');
   const text = crOnly ? decoded.text.replaceAll('\r', '\n') : decoded.text;
   await openText(text, file.name, text, decoded.encoding);
+  // refused: a units change re-trying it does not ask again (the user said yes already)
+  if (doc.tried && doc.tried.name === file.name) doc.tried.confirmed = true;
 }
 
 export function closeFile() {
@@ -239,11 +240,11 @@ export function closeFile() {
 
 // Show another frame of the file: its targets go (they were for the other frame), pins stay.
 export function setFrame(frame) {
-  if (!doc.active || frame === doc.frame) return;
-  if (solver.commitPending) { // the gesture's last answer first: a scrub dropped it
+  if (doc.active && solver.commitPending) { // the gesture's last answer first: a scrub dropped it
     whenCommitted(() => setFrame(frame));
     return;
   }
+  if (!doc.active || frame === doc.frame) return;
   endDrag(false);
   cancelSolves();
   doc.frame = frame;

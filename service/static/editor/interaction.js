@@ -2,7 +2,7 @@
 // hover label, pins and target removal.
 
 import * as THREE from 'three';
-import { $, doc, state, ui } from './state.js';
+import { $, doc, solver, state, ui } from './state.js';
 import { cancelSolves, commitShown, requestSolve, restore, snapshot } from './solve.js';
 import {
   camera, controls, drawPose, handleRadius, renderer, TARGET_RADIUS, viewport,
@@ -121,7 +121,10 @@ export function endDrag(commit) {
   ui.drag = null;
   controls.enabled = true;
   viewport.style.cursor = '';
-  if (!d.moved) return; // a click, not a drag
+  if (!d.moved) { // a click, not a drag; its press held back the last gesture's answer:
+    if (commit && solver.commitPending) requestSolve(true); // asked again, to commit it
+    return;
+  }
   if (commit) {
     requestSolve(true);
   } else {

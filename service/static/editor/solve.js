@@ -72,15 +72,23 @@ export function cancelSolves() {
   solver.epoch += 1;
   solver.dirty = false;
   solver.commitPending = false;
-  solver.afterCommit.length = 0;
+  // the gesture is dropped: what waited for it runs once the action dropping it is done
+  const waiting = solver.afterCommit.splice(0);
+  if (waiting.length) queueMicrotask(() => waiting.forEach((fn) => fn()));
 }
 
-// ``fn`` now, or once the gesture's last answer is committed (or refused) where one is on
-// its way: a scrub, an export or a units change made then dropped the edit shown, or wrote
-// the file without it.
+// ``fn`` now, or once the gesture's last answer is committed (or refused, or the gesture
+// dropped) where one is on its way: a scrub, an export or a units change made then dropped
+// the edit shown, or wrote the file without it. Only for the file it was asked on.
 export function whenCommitted(fn) {
-  if (solver.commitPending) solver.afterCommit.push(fn);
-  else fn();
+  if (!solver.commitPending) {
+    fn();
+    return;
+  }
+  const owner = doc.original;
+  solver.afterCommit.push(() => {
+    if (doc.original === owner) fn();
+  });
 }
 
 function settled() {
@@ -93,12 +101,10 @@ export function undo() {
   if (solver.commitPending || ui.drag) {
     // a gesture not yet a step (a drag, or its last answer still on the way): undo drops
     // it alone (it also undid the step before); what waited for it goes on
-    const waiting = solver.afterCommit.splice(0);
     endDrag(false);
     cancelSolves();
     restore(history.stack[history.index], doc.active ? doc.frame : undefined); // (the frame shown)
     refresh();
-    for (const fn of waiting) fn();
     return;
   }
   if (history.index <= 0) return;
@@ -211,6 +217,7 @@ export async function sendSolve() {
   solver.inflight = true;
   const epoch = solver.epoch;
   const commit = solver.commitPending;
+  let settle = false; // the gesture's answer is in: run what waited for it
   const body = solveBody();
   solver.sent += 1;
   $('solve-count').textContent = String(solver.sent);
@@ -243,8 +250,7 @@ export async function sendSolve() {
       pushHistory();
     }
     refresh();
-    solver.inflight = false; // (what waited may send the next solve)
-    if (!solver.commitPending) settled();
+    settle = !solver.commitPending;
   } catch (err) {
     if (epoch !== solver.epoch) return;
     if (commit && !solver.dirty) {
@@ -258,9 +264,9 @@ export async function sendSolve() {
     }
     showError(err);
     refresh();
-    solver.inflight = false; // (what waited may send the next solve)
-    if (!solver.commitPending) settled();
+    settle = !solver.commitPending;
   } finally {
     solver.inflight = false;
+    if (settle) settled(); // (outside the try: what waited is not a solve that failed)
   }
 }
