@@ -675,6 +675,27 @@ def open_editor(browser: Any, server: str) -> Any:
     return page
 
 
+def give_file(page: Any, body: str, name: str) -> None:
+    """``body`` given to the editor's file picker as the file ``name``."""
+    page.set_input_files(
+        "#bvh-file", files=[{"name": name, "mimeType": "text/plain", "buffer": body.encode()}]
+    )
+
+
+def held_drag(page: Any, joint: str, dx: float = 30, dy: float = -40) -> list[Any]:
+    """Drag ``joint`` by (dx, dy) and release it while the answers are held back: the
+    held routes, to continue."""
+    held: list[Any] = []
+    page.route("**/v1/bvh/solve", lambda route: held.append(route))
+    xy = page.evaluate(f"{M}.projectJoint('{joint}')")
+    page.mouse.move(xy["x"], xy["y"])
+    page.mouse.down()
+    page.mouse.move(xy["x"] + dx, xy["y"] + dy, steps=4)
+    page.mouse.up()
+    page.wait_for_function(f"() => {M}.solveCount().inflight")
+    return held
+
+
 def settle(page: Any) -> None:
     page.wait_for_function(f"() => (s => !s.dirty && !s.inflight)({M}.solveCount())", polling=50)
 
@@ -885,9 +906,7 @@ def test_editor_keeps_screen_file_and_history_in_step(server: str, browser: Any)
     page.on("pageerror", lambda e: errors.append(str(e)))
 
     def open_file(body: str, name: str) -> None:
-        page.set_input_files(
-            "#bvh-file", files=[{"name": name, "mimeType": "text/plain", "buffer": body.encode()}]
-        )
+        give_file(page, body, name)
         page.wait_for_function(f"() => {M}.bvh() && {M}.bvh().name === '{name}'")
 
     def shown_is_committed() -> bool:
@@ -920,14 +939,7 @@ def test_editor_keeps_screen_file_and_history_in_step(server: str, browser: Any)
 
         # Ctrl+Z while a drag's answer is on its way drops that drag alone
         steps = page.evaluate(f"{M}.history()")
-        held: list[Any] = []
-        page.route("**/v1/bvh/solve", lambda route: held.append(route))
-        xy = page.evaluate(f"{M}.projectJoint('head')")
-        page.mouse.move(xy["x"], xy["y"])
-        page.mouse.down()
-        page.mouse.move(xy["x"] + 30, xy["y"] - 30, steps=4)
-        page.mouse.up()
-        page.wait_for_function(f"() => {M}.solveCount().inflight")
+        held = held_drag(page, "head", 30, -30)
         page.keyboard.press("Control+z")
         for route in held:
             route.continue_()
@@ -972,23 +984,6 @@ def test_editor_never_drops_an_edit_when_the_file_changes(server: str, browser: 
     errors: list[str] = []
     page.on("pageerror", lambda e: errors.append(str(e)))
 
-    def choose(body: str, name: str) -> None:
-        page.set_input_files(
-            "#bvh-file", files=[{"name": name, "mimeType": "text/plain", "buffer": body.encode()}]
-        )
-
-    def held_drag(joint: str) -> list[Any]:
-        """A drag released while its answers are held back (the routes, to release)."""
-        held: list[Any] = []
-        page.route("**/v1/bvh/solve", lambda route: held.append(route))
-        xy = page.evaluate(f"{M}.projectJoint('{joint}')")
-        page.mouse.move(xy["x"], xy["y"])
-        page.mouse.down()
-        page.mouse.move(xy["x"] + 30, xy["y"] - 40, steps=4)
-        page.mouse.up()
-        page.wait_for_function(f"() => {M}.solveCount().inflight")
-        return held
-
     def release(held: list[Any]) -> None:
         for route in held:
             route.continue_()
@@ -996,19 +991,19 @@ def test_editor_never_drops_an_edit_when_the_file_changes(server: str, browser: 
         settle(page)
 
     try:
-        choose(text, "a.bvh")
+        give_file(page, text, "a.bvh")
         page.wait_for_function(f"() => {M}.bvh() && {M}.bvh().name === 'a.bvh'")
         drag_joint(page, "left_wrist", 40, -60)
         edited = page.evaluate(f"{M}.bvhText()")
         # another file over an edited one: asked; "no" keeps the edits
         page.once("dialog", lambda d: d.dismiss())
-        choose(text, "b.bvh")
+        give_file(page, text, "b.bvh")
         page.wait_for_timeout(300)
         assert page.evaluate(f"{M}.bvh()")["name"] == "a.bvh"
         assert page.evaluate(f"{M}.bvhText()") == edited
 
         # a scrub, then Export, while the drag's last answer is on its way: both wait for it
-        held = held_drag("right_wrist")
+        held = held_drag(page, "right_wrist")
         page.locator("#bvh-frame").fill("2")
         with page.expect_download() as download:
             page.click("#export")
@@ -1018,7 +1013,7 @@ def test_editor_never_drops_an_edit_when_the_file_changes(server: str, browser: 
         assert saved == page.evaluate(f"{M}.bvhText()") != edited  # the drag is in it
 
         # scrubbed away and back while waiting: the frame asked last (it ended on the other)
-        held = held_drag("left_wrist")
+        held = held_drag(page, "left_wrist")
         page.locator("#bvh-frame").fill("0")
         page.locator("#bvh-frame").fill("2")
         release(held)
@@ -1026,17 +1021,17 @@ def test_editor_never_drops_an_edit_when_the_file_changes(server: str, browser: 
         assert page.evaluate(f"{M}.bvh()")["frame"] == 2
 
         # a file opened while waiting asks too: the edit on its way counts
-        held = held_drag("right_wrist")
+        held = held_drag(page, "right_wrist")
         dialogs: list[str] = []
         page.once("dialog", lambda d: (dialogs.append(d.message), d.dismiss()))
-        choose(text, "b.bvh")
+        give_file(page, text, "b.bvh")
         page.wait_for_timeout(300)
         release(held)
         assert dialogs and page.evaluate(f"{M}.bvh()")["name"] == "a.bvh"
 
         # a press released without moving while the drag's answer came back: that answer
         # was held for the press and never asked again, and Export waited for ever
-        held = held_drag("head")
+        held = held_drag(page, "head")
         xy = page.evaluate(f"{M}.projectJoint('left_ankle')")
         page.mouse.move(xy["x"], xy["y"])
         page.mouse.down()
@@ -1062,7 +1057,7 @@ def test_editor_never_drops_an_edit_when_the_file_changes(server: str, browser: 
         page.select_option("#bvh-units", "in")
         page.wait_for_function(f"() => {M}.bvh().units === 'in'")
         page.once("dialog", lambda d: d.accept())
-        choose(text, "b.bvh")
+        give_file(page, text, "b.bvh")
         page.wait_for_function(f"() => {M}.bvh().name === 'b.bvh'")
         assert page.evaluate(f"{M}.bvh()")["units"] == "cm"
         assert page.locator("#bvh-units").input_value() == "auto"
@@ -1070,7 +1065,7 @@ def test_editor_never_drops_an_edit_when_the_file_changes(server: str, browser: 
         # a file cut short in its last frame opens, saying so
         cut = text.rstrip("\n")
         cut = cut[: cut.rindex(" ", 0, len(cut) - 40)] + "\n"
-        choose(cut, "cut.bvh")
+        give_file(page, cut, "cut.bvh")
         page.wait_for_function(f"() => {M}.bvh().name === 'cut.bvh'")
         error = page.evaluate(f"{M}.error()")
         assert error is not None and error["title"] == "Broken file", error
