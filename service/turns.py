@@ -282,7 +282,7 @@ def _candidates(
 def _score(engine: Engine, soft: _Items, ans: BatchAnswer) -> F64:
     """Each candidate's score: the mean distance of its targets, plus ``plausibility``
     times its answer's distance to what the critic makes of it (never negative)."""
-    score: F64 = own_sum(ans.errors * soft.targets(), soft.n_t) / soft.n_t
+    score: F64 = own_sum(ans.errors, soft.n_t) / soft.n_t  # (its targets: its first columns)
     if engine.turn_search.plausibility > 0:  # how unlike a real body the answer is
         score += engine.turn_search.plausibility * implausibility(engine, ans.pose, soft.floors)
     return score
@@ -292,17 +292,16 @@ def implausibility(engine: Engine, poses: npt.NDArray[np.floating], floors: F64)
     """Mean per-joint distance (m) of world ``poses [N, 21, 3]`` (over ``floors [N]``) to
     what the search's critic makes of them: small for poses like the training ones."""
     world = np.asarray(poses, dtype=np.float64).copy()
+    world[:, :, 1] -= floors[:, None]
     other: npt.NDArray[np.floating]
     if engine.turn_search.critic == "completion":
         # each answer facing +Z over its pelvis floor point (its own canonical frame, as the
         # solve's): the networks were trained at every yaw but answer each a little
         # differently, and the world's yaw must not pick the turn (it did: 12 of 60
         # random 5-8-target edits turned the world 37, 90 or 180 degrees kept another)
-        world[:, :, 1] -= floors[:, None]
         world = np.asarray(canonicalise(world), dtype=np.float64)
         other = completion.implied_bodies(engine, world)
     else:
-        world[:, :, 1] -= floors[:, None]
         other = engine.reconstruct(world)
     out: F64 = np.linalg.norm(other - world, axis=-1).mean(axis=-1)
     return out

@@ -239,11 +239,12 @@ export function closeFile() {
 }
 
 // Show another frame of the file: its targets go (they were for the other frame), pins stay.
+// (after the gesture's last answer, where one is on its way: a scrub dropped it)
 export function setFrame(frame) {
-  if (doc.active && solver.commitPending) { // the gesture's last answer first: a scrub dropped it
-    whenCommitted(() => setFrame(frame));
-    return;
-  }
+  whenCommitted(() => showFrame(frame));
+}
+
+function showFrame(frame) {
   if (!doc.active || frame === doc.frame) return;
   endDrag(false);
   cancelSolves();

@@ -94,11 +94,12 @@ function exportName() {
   return `${doc.name.replace(/\.bvh$/i, '')}-edited.bvh`;
 }
 
+// (after the gesture's last answer, where one is on its way: the export left it out)
 export function exportPose() {
-  if (solver.commitPending) { // the gesture's last answer first: the export left it out
-    whenCommitted(exportPose);
-    return;
-  }
+  whenCommitted(writeExport);
+}
+
+function writeExport() {
   const blob = doc.active
     ? new Blob([encodeFile(doc.text, doc.encoding)], { type: 'text/plain' })
     : new Blob([JSON.stringify(exportDocument(), null, 2)], { type: 'application/json' });
