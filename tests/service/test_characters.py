@@ -121,7 +121,7 @@ def test_bvh_units_and_up_inferred(client: Any, bvh_files: dict[str, Path]) -> N
     }
     out = client.post("/v1/bvh/solve", json=body).json()
     assert (out["units"], out["up"], out["scheme"]) == ("m", "+Y", "rigify")
-    assert out["joint_map"]["spine2"] == "0.5 of spine.001->neck"
+    assert out["joint_map"]["spine2"] == "0.35 of spine.001->neck"
 
 
 # --------------------------------------------------------------------------------------
@@ -350,7 +350,7 @@ def test_the_joint_map_an_answer_gives_can_be_sent_back(
     client: Any, bvh_files: dict[str, Path]
 ) -> None:
     """Every file's joint map, as ``/v1/bvh/inspect`` answers it (points part-way along a
-    bone written ``"0.5 of spine.001->neck"``), sent back as the request's ``joint_map``
+    bone written ``"0.35 of spine.001->neck"``), sent back as the request's ``joint_map``
     gives the same points (it was a 422: "the skeleton has no joint '0.5 of ...'"); a
     fraction or a bone the map does not make is refused naming the field."""
     slid = 0

@@ -279,3 +279,31 @@ def test_maps_are_read_from_a_folder_or_one_file(tmp_path: Path) -> None:
         load_maps(tmp_path / "missing")
     with pytest.raises(MapError, match=r"no \*\.toml joint maps found"):
         load_maps(tmp_path)
+
+
+def test_the_service_maps_each_source_to_the_points_its_training_map_makes(
+    bvh_files: dict[str, Path],
+) -> None:
+    """One definition of each canonical point: a real file of every BVH source, mapped by
+    the service's automatic map (``core.characters_maps``), gives the points its training
+    map (trainer/maps/*.toml) builds the dataset from. It did not for ReActIdle: the service
+    put its chest half-way up the one spine bone, the map (and the training bodies) 0.35
+    of the way; 3.5 cm apart."""
+    from core.bvh_write import pose_of, skeleton_of
+    from core.characters import forward_kinematics
+    from core.characters_maps import resolve_map
+    from tests.character_files import FILES
+    from trainer.data.maps import joint_positions
+
+    maps = load_maps(MAPS)
+    sources = set()
+    for name, (_, member, _, frame) in FILES.items():
+        (mocap_map,) = [m for m in maps if m.selects(member)]
+        sources.add(mocap_map.source)
+        clip = read_bvh(bvh_files[name])
+        wanted = joint_positions(clip, mocap_map.joints_for(member), np.array([frame]))[0]
+        skel = skeleton_of(clip)
+        served = resolve_map(skel).points(*forward_kinematics(skel, pose_of(clip, frame)))
+        metres = (wanted - served) * mocap_map.scale_for(member)
+        np.testing.assert_allclose(metres, 0.0, rtol=0, atol=1e-9, err_msg=name)
+    assert sources == {"bandai-namco", "cmu-dance", "fair", "reactidle"}  # cmu-asf: ASF/AMC
