@@ -124,8 +124,12 @@ class JointSpec(_Body):
 
 class CharacterSkeleton(_Body):
     joints: list[JointSpec] = Field(min_length=1, max_length=2000)
-    units: Units = "m"
-    up: Literal["+Y", "+Z"] = "+Y"
+    units: Units | None = Field(
+        default="m", description="null: inferred from the rest pose (or else the pose)."
+    )
+    up: Literal["+Y", "+Z"] | None = Field(
+        default="+Y", description="null: inferred from the rest pose (or else the pose)."
+    )
 
 
 class CharacterSolveRequest(_Frame):
@@ -325,12 +329,13 @@ def _character(
     units: Any,
     up: str | None,
     points: F64 | None = None,
-    where: str = "units",
+    prefix: str = "",
     stated: bool = True,
 ) -> Character:
     """The character of a pose; ``units`` and ``up`` as the client gave them (None: read
-    from the file; ``stated`` False: the character form's default), ``where``: the field
-    of ``units``, which errors name."""
+    from the rest pose; ``stated`` False: the character form's default), errors naming
+    the fields ``<prefix>units`` and ``<prefix>up``."""
+    where = f"{prefix}units"
     if isinstance(units, str) and units in UNITS:  # a named unit: a slip is refused
         _, leg = infer_units(skel, jmap)
         metres = leg * UNITS[units]
@@ -350,7 +355,7 @@ def _character(
         if name is None:
             fits = _leg_in(leg) or '"units": "in"'
             raise InvalidRequest(
-                f"units: not plain from the file (rest-pose leg, hip to ankle, is {leg:.4g} "
+                f"{where}: not plain from the rest pose (its leg, hip to ankle, is {leg:.4g} "
                 "units: not 0.3-1.3 m, 45-130 cm or 450-1300 mm); state them, e.g. "
                 f'{fits}, or a number of metres per unit ("units": 0.0564444 for CMU ASF)'
             )
@@ -359,7 +364,7 @@ def _character(
         found = infer_up(skel, jmap, points)
         if found is None:
             raise InvalidRequest(
-                "up: neither the rest pose nor this frame stands up along +Y or +Z; "
+                f"{prefix}up: neither the rest pose nor this frame stands up along +Y or +Z; "
                 'state it, e.g. "up": "+Z"'
             )
         up = found
@@ -533,8 +538,9 @@ def character_from_request(req: CharacterSolveRequest, where: str = "") -> Chara
         jmap = resolve_map(skel, req.joint_map, where=f"{prefix}joint_map")
         units, up = req.character.units, req.character.up
         stated = "units" in req.character.model_fields_set
-        where = f"{prefix}character.units"
-        return _character(skel, pose, jmap, units, up, where=where, stated=stated)
+        points = None if up is not None else jmap.points(*forward_kinematics(skel, pose))
+        where = f"{prefix}character."
+        return _character(skel, pose, jmap, units, up, points, prefix=where, stated=stated)
     except CharacterError as exc:
         raise _invalid(exc) from None
 

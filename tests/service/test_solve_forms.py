@@ -146,6 +146,27 @@ def test_character_form_answers_as_the_alias(
     assert out["targets"][0]["reached"] and out["pins"][0]["reached"]
 
 
+def test_character_form_infers_units_and_up_given_as_null(
+    client: Any, bvh_files: dict[str, Path]
+) -> None:
+    """``"units": null`` / ``"up": null`` read them from the rest pose, as the BVH form does
+    (they were a 422 here): the same bytes as the plain units stated; where the units are
+    not plain (the child in inches, CMU ASF's 0.0564 m), a 422 naming the field (inside a
+    batch, its item's) and the unit that would fit."""
+    for name, (units, _) in SKELETONS.items():
+        body = character_body(bvh_files[name], name)
+        blank = {**body, "character": {**body["character"], "units": None, "up": None}}
+        r = client.post("/v1/solve", json=blank)
+        if units in ("m", "cm", "mm"):
+            assert r.status_code == 200, (name, r.text)
+            assert r.content == client.post("/v1/solve", json=body).content, name
+            continue
+        hint = '"units": "in"' if units == "in" else "metres per unit"
+        assert_problem(r, 422, "character.units: not plain from the rest pose", hint)
+        r = client.post("/v1/solve/batch", json={"items": [body, blank]})
+        assert_problem(r, 422, "items[1].character.units: not plain")
+
+
 def test_fk_report() -> None:
     """Prints the measured FK reproduction errors in metres (run with -s)."""
     print(json.dumps(FK_ERROR_M, indent=1))
