@@ -331,10 +331,11 @@ def _character(
     points: F64 | None = None,
     prefix: str = "",
     stated: bool = True,
+    up_stated: bool = True,
 ) -> Character:
     """The character of a pose; ``units`` and ``up`` as the client gave them (None: read
-    from the rest pose; ``stated`` False: the character form's default), errors naming
-    the fields ``<prefix>units`` and ``<prefix>up``."""
+    from the rest pose; ``stated`` / ``up_stated`` False: the character form's default),
+    errors naming the fields ``<prefix>units`` and ``<prefix>up``."""
     where = f"{prefix}units"
     if isinstance(units, str) and units in UNITS:  # a named unit: a slip is refused
         _, leg = infer_units(skel, jmap)
@@ -360,6 +361,14 @@ def _character(
                 f'{fits}, or a number of metres per unit ("units": 0.0564444 for CMU ASF)'
             )
         units = name
+    if up is not None:  # given (or the default): a rest pose standing up otherwise refuses it
+        rest_up = infer_up(skel, jmap)
+        if rest_up is not None and rest_up != up:
+            given = "" if up_stated else " (the default: no up was given)"
+            raise InvalidRequest(
+                f"{prefix}up: {quoted(up)}{given}, but the rest pose stands up along "
+                f'{rest_up} (ankles to head); give "up": "{rest_up}", or null to infer it'
+            )
     if up is None:
         found = infer_up(skel, jmap, points)
         if found is None:
@@ -537,10 +546,12 @@ def character_from_request(req: CharacterSolveRequest, where: str = "") -> Chara
         pose = Pose(rot, trans)
         jmap = resolve_map(skel, req.joint_map, where=f"{prefix}joint_map")
         units, up = req.character.units, req.character.up
-        stated = "units" in req.character.model_fields_set
+        given = req.character.model_fields_set
         points = None if up is not None else jmap.points(*forward_kinematics(skel, pose))
         where = f"{prefix}character."
-        return _character(skel, pose, jmap, units, up, points, prefix=where, stated=stated)
+        return _character(
+            skel, pose, jmap, units, up, points, where, "units" in given, "up" in given
+        )
     except CharacterError as exc:
         raise _invalid(exc) from None
 

@@ -167,6 +167,32 @@ def test_character_form_infers_units_and_up_given_as_null(
         assert_problem(r, 422, "items[1].character.units: not plain")
 
 
+def test_an_up_axis_the_rest_pose_contradicts_is_refused(
+    client: Any, bvh_files: dict[str, Path]
+) -> None:
+    """A character whose rest pose stands up along one axis, solved with the other (the
+    character form's default "+Y" for the Z-up child, or either form stating it), was
+    solved lying down (200, its targets met by a body the networks never saw); now a 422
+    naming the up field and the axis the rest pose gives. A rest pose that stands along
+    neither (Bandai-Namco's offsets are in bone-local axes) leaves the stated one as given."""
+    body = character_body(bvh_files["fair1-child-inches-zup"], "fair1-child-inches-zup")
+    default = {**body, "character": {k: v for k, v in body["character"].items() if k != "up"}}
+    r = client.post("/v1/solve", json=default)
+    assert_problem(r, 422, "character.up: '+Y' (the default", 'give "up": "+Z"')
+    wrong = {**body, "character": {**body["character"], "up": "+Y"}}
+    problem = assert_problem(client.post("/v1/solve", json=wrong), 422, "character.up: '+Y', but")
+    assert problem["errors"][0]["location"] == "character.up"
+    r = client.post("/v1/solve/batch", json={"items": [body, wrong]})
+    assert_problem(r, 422, "items[1].character.up: '+Y', but")
+    child = {"bvh": bvh_files["fair1-child-inches-zup"].read_text(), "frame": 120, "units": "in"}
+    assert_problem(client.post("/v1/bvh/inspect", json={**child, "up": "+Y"}), 422, "up: '+Y', but")
+    assert client.post("/v1/bvh/inspect", json={**child, "up": "+Z"}).status_code == 200
+    bandai = {"bvh": bvh_files["bandai"].read_text(), "frame": 30}
+    for up in ("+Y", "+Z"):
+        r = client.post("/v1/bvh/inspect", json={**bandai, "up": up})
+        assert r.status_code == 200 and r.json()["up"] == up, r.text
+
+
 def test_fk_report() -> None:
     """Prints the measured FK reproduction errors in metres (run with -s)."""
     print(json.dumps(FK_ERROR_M, indent=1))
