@@ -12,10 +12,22 @@ _ITEMS = 4  # elements of a list or object a message shows (…, then how many i
 _DIGITS = 30  # digits of an integer a message shows (longer ones: their digit count)
 
 
+def printable(text: str) -> str:
+    """``text`` with any lone surrogate (``"\\ud800"`` is valid JSON; no UTF-8 encodes it)
+    written as its escape, so that an answer quoting it can be encoded."""
+    if text.isascii():
+        return text
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError:
+        return text.encode("utf-8", "backslashreplace").decode("utf-8")
+    return text
+
+
 def clip(text: object, limit: int = QUOTE) -> str:
-    """``text`` as a string of at most ``limit`` characters (``…`` marks a cut). A value
-    that is not a string is shown as :func:`shown` shows it."""
-    s = text if isinstance(text, str) else shown(text)
+    """``text`` as a string of at most ``limit`` characters (``…`` marks a cut), lone
+    surrogates escaped. A value that is not a string is shown as :func:`shown` shows it."""
+    s = printable(text) if isinstance(text, str) else shown(text)
     return s if len(s) <= limit else s[: limit - 1] + "…"
 
 

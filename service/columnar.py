@@ -11,7 +11,7 @@ notation and with the messages of the pydantic field errors (``service.errors``)
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -42,14 +42,24 @@ class _Errors:
 
     def __init__(self) -> None:
         self.raw: list[dict[str, Any]] = []
+        self.total = 0  # errors found, kept or not (the first MAX_ERRORS are kept)
+        self.partial = False  # the look stopped before the body's end: more may follow
 
     def add(self, loc: tuple[Any, ...], kind: str, msg: str, **extra: Any) -> None:
+        self.total += 1
         if len(self.raw) < MAX_ERRORS:
             self.raw.append({"loc": loc, "type": kind, "msg": msg, **extra})
 
+    def add_all(self, where: npt.NDArray[np.intp], error: Callable[[int, int], None]) -> None:
+        """``error(b, i)`` for the first MAX_ERRORS of ``where`` (``np.argwhere`` rows);
+        the others counted."""
+        for b, i in where[:MAX_ERRORS].tolist():
+            error(b, i)
+        self.total += max(0, len(where) - MAX_ERRORS)
+
     def raise_any(self) -> None:
         if self.raw:
-            raise BodyInvalid(self.raw)
+            raise BodyInvalid(self.raw, self.total, self.partial)
 
 
 def is_columnar(data: Any) -> bool:
@@ -123,6 +133,7 @@ def _numbers(rows: Any, loc: tuple[Any, ...], width: int, n: int, errs: _Errors,
                         errs.add((*loc, b, i), "float_type", "Input should be a valid number",
                                  input=v)  # fmt: skip
             if len(errs.raw) >= MAX_ERRORS:
+                errs.partial = b + 1 < len(rows)
                 break
         if errs.raw:
             return None
@@ -130,16 +141,21 @@ def _numbers(rows: Any, loc: tuple[Any, ...], width: int, n: int, errs: _Errors,
     out = np.ascontiguousarray(arr, dtype=np.float64)
     bad = ~np.isfinite(out)
     if bad.any():
-        for b, i in np.argwhere(bad)[:MAX_ERRORS].tolist():
-            errs.add((*loc, b, i), "finite_number", "Input should be a finite number")
+        errs.add_all(
+            np.argwhere(bad),
+            lambda b, i: errs.add((*loc, b, i), "finite_number", "Input should be a finite number"),
+        )
         return None
     far = np.abs(out) > (np.inf if bound is None else bound)
     if far.any():
-        for b, i in np.argwhere(far)[:MAX_ERRORS].tolist():
+
+        def beyond(b: int, i: int) -> None:
             v = float(out[b, i])
             kind, key = ("less_than_equal", "le") if v > 0 else ("greater_than_equal", "ge")
             sign = MAX_COORDINATE if v > 0 else -MAX_COORDINATE
             errs.add((*loc, b, i), kind, f"beyond {sign:g}", ctx={key: sign}, input=v)
+
+        errs.add_all(np.argwhere(far), beyond)
         return None
     return out
 
@@ -168,10 +184,13 @@ def _names(value: Any, loc: tuple[Any, ...], n: int, errs: _Errors, least: int
         dtype=np.int64,
     ).reshape(len(rows), k)
     if (idx < 0).any():
-        for b, i in np.argwhere(idx < 0)[:MAX_ERRORS].tolist():
+
+        def unknown(b: int, i: int) -> None:
             where = (*loc, i) if shared else (*loc, b, i)
             errs.add(where, "literal_error", "unknown joint", ctx={"expected": "'spine1'"},
                      input=rows[b][i])  # fmt: skip
+
+        errs.add_all(np.argwhere(idx < 0), unknown)
         return None
     out: I64 = np.require(np.broadcast_to(idx, (n, k)), requirements=["C", "W"])
     return out
@@ -254,9 +273,17 @@ def parse(data: dict[str, Any], max_items: int, suspect: bool = True) -> Columns
             else _numbers(w, ("targets", "weights"), k, n, errs, suspect, None)
         )
         if got is not None and not ((got > 0) & (got <= MAX_WEIGHT)).all():
-            b, i = np.argwhere(~((got > 0) & (got <= MAX_WEIGHT)))[0].tolist()
-            loc = ("targets", "weights", i) if shared else ("targets", "weights", b, i)
-            errs.add(loc, "weight", f"must be greater than 0 and at most {MAX_WEIGHT:g}")
+            weights_in = got[:1] if shared else got
+
+            def weight(b: int, i: int) -> None:  # pydantic's words (the item list's)
+                loc = ("targets", "weights", i) if shared else ("targets", "weights", b, i)
+                if weights_in[b, i] <= 0:
+                    errs.add(loc, "greater_than", "Input should be greater than 0")
+                else:
+                    errs.add(loc, "less_than_equal",
+                             f"Input should be less than or equal to {MAX_WEIGHT:g}")  # fmt: skip
+
+            errs.add_all(np.argwhere(~((weights_in > 0) & (weights_in <= MAX_WEIGHT))), weight)
         if got is not None:
             weights[:, :k] = got
     errs.raise_any()

@@ -21,7 +21,7 @@ from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from core.skeleton import JOINT_NAMES
-from core.text import QUOTE, clip, quoted
+from core.text import QUOTE, clip, printable, quoted
 
 PROBLEM_JSON = "application/problem+json"
 PROBLEM_BASE = "https://marionette.dev/problems/"
@@ -160,9 +160,11 @@ class BodyError(HTTPException):
 class BodyInvalid(HTTPException):
     """Field errors found while validating the body off the event loop."""
 
-    def __init__(self, errors: Sequence[Any]) -> None:
+    def __init__(self, errors: Sequence[Any], total: int = 0, partial: bool = False) -> None:
         super().__init__(422, "invalid request body")
         self.errors = list(errors)
+        self.total = max(total, len(self.errors))  # errors found, listed or not
+        self.partial = partial  # the look stopped early: more may follow
 
 
 def problem(
@@ -181,9 +183,20 @@ def problem(
         "detail": detail,
     }
     body.update(extra)
+    body = _printable(body)  # a client's lone surrogate quoted anywhere: its escape
     if status == 401:
         headers = {**(headers or {}), "WWW-Authenticate": "ApiKey, Bearer"}
     return JSONResponse(body, status_code=status, media_type=PROBLEM_JSON, headers=headers)
+
+
+def _printable(value: Any) -> Any:
+    if isinstance(value, str):
+        return printable(value)
+    if isinstance(value, dict):
+        return {printable(str(k)): _printable(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_printable(v) for v in value]
+    return value
 
 
 def raw_answer(exc: PoseError, extra: Sequence[tuple[bytes, bytes]] = ()) -> bytes:
@@ -249,11 +262,14 @@ def _message(error: Any) -> str:
     return clip(error.get("msg", "invalid"), 2 * QUOTE)
 
 
-def validation_problem(raw: Sequence[Any]) -> JSONResponse:
+def validation_problem(raw: Sequence[Any], total: int = 0, partial: bool = False) -> JSONResponse:
+    """The 422 of field errors; ``total``: how many were found where only the first few
+    are in ``raw`` (``partial``: the look stopped there, so there may be more)."""
     errors = [{"location": _location(e.get("loc", ())), "message": _message(e)} for e in raw]
     detail = "; ".join(f"{e['location']}: {e['message']}" for e in errors[:3])
-    if len(errors) > 3:
-        detail += f"; and {len(errors) - 3} more"
+    total = max(total, len(errors))
+    if total > 3 or partial:
+        detail += f"; and {'at least ' if partial else ''}{total - 3} more"
     return problem(422, PoseError.title, detail, type_=PoseError.type_, errors=errors[:MAX_ERRORS])
 
 
@@ -275,7 +291,7 @@ def install_handlers(app: FastAPI) -> None:
             return error_response(exc.error)
         if isinstance(exc, BodyInvalid):
             request.scope[REASON] = "invalid-request"
-            return validation_problem(exc.errors)
+            return validation_problem(exc.errors, exc.total, exc.partial)
         detail = clip(exc.detail)
         headers = dict(exc.headers or {})
         allow = [m.strip() for m in headers.get("Allow", "").split(",") if m.strip()]

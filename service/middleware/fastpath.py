@@ -191,7 +191,7 @@ class FastPath:
             return True
         except BodyInvalid as exc:
             scope[REASON] = "invalid-request"
-            await validation_problem(exc.errors)(scope, receive, send)
+            await validation_problem(exc.errors, exc.total, exc.partial)(scope, receive, send)
             return True
         except PoseError as exc:
             await _problem(scope, receive, send, exc)

@@ -227,6 +227,47 @@ def test_columnar_errors_name_item_and_field(client: Any, synthetic_poses: PoseP
     assert "targets: Field required" in _problem(client, good)
 
 
+def test_columnar_errors_are_counted_and_worded_as_the_item_lists(
+    client: Any, synthetic_poses: PosePairs
+) -> None:
+    """A batch audit's finds: 40 bad rows were "and 17 more" (the item list: 37), the
+    columnar form stopping its count where it stops listing; a bad weight had its own
+    words, and only the first was named; a lone surrogate in a key (valid JSON) was a 500
+    (the answer quoting it could not be encoded), now a 422 quoting its escape."""
+    good = columns(synthetic_poses, 40)
+    bad = json.loads(json.dumps(good))
+    for row in bad["poses"]:
+        row[0] = float("inf")
+    listed = json.loads(json.dumps(items(bad)).replace("Infinity", '"x"'))  # 40 bad items
+    want = "; and 37 more"
+    assert _problem(client, bad).endswith(want)
+    assert _problem(client, {"items": listed}).endswith(want)
+    for w, words in ((0.0, "greater than 0"), (1001.0, "less than or equal to 1000")):
+        weights = [[1.0, w]] * 40
+        col = {**good, "targets": {**good["targets"], "weights": weights}}
+        resp = client.post("/v1/solve/batch", json=col)
+        errors = resp.json()["errors"]
+        assert [e["location"] for e in errors] == [f"targets.weights[{b}][1]" for b in range(20)]
+        assert errors[0]["message"] == f"Input should be {words}", errors[0]
+        item = items(good)[:1]
+        item[0]["targets"][1]["weight"] = w
+        one = client.post("/v1/solve/batch", json={"items": item}).json()["errors"][0]
+        assert one["message"] == errors[0]["message"] and resp.json()["detail"].endswith("37 more")
+    for raw, where in (
+        (json.dumps(good)[:-1] + ', "\\ud800": 1}', "\\ud800"),
+        (
+            json.dumps(good).replace('"targets": {', '"targets": {"\\udc00x": 1, ', 1),
+            "targets.\\udc00x",
+        ),
+    ):
+        resp = client.post(
+            "/v1/solve/batch", content=raw, headers={"content-type": "application/json"}
+        )
+        assert resp.status_code == 422, resp.text
+        assert "Extra inputs are not permitted" in resp.json()["detail"]
+        assert resp.json()["errors"][0]["location"] == where, resp.text  # a backslash, "ud800"
+
+
 def test_columnar_limits(models_dir: Path, synthetic_poses: PosePairs) -> None:
     body = columns(synthetic_poses, 5)
     with make_client(models_dir, max_batch_items=4) as small:
