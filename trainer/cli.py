@@ -144,8 +144,8 @@ def dataset(
         report = build_dataset(
             mocap, out, maps_dir=maps, seed=seed, workers=workers, log=console.print
         )
-    except (BuildError, MapError) as exc:
-        console.print(f"[red]error:[/red] {exc}")
+    except (BuildError, MapError) as exc:  # as text: "[[override]] #6" is no markup
+        typer.echo(f"error: {exc}", err=True)
         raise typer.Exit(1) from None
     print_summary(report, console)
 

@@ -2,12 +2,20 @@
 
 from __future__ import annotations
 
+import difflib
 import tomllib
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
 
 from core.manifest import Serving
 from core.skeleton import BASE_KEYPOINTS, JOINT_NAMES
@@ -337,7 +345,11 @@ class TrainConfig(_Section):
     run_dir: str = "runs/default"
     out_dir: str = "models"
     opset: int = 18
-    max_train_frames: int | None = Field(default=None, description="Cap, for smoke runs.")
+    max_train_frames: int | None = Field(
+        default=None,
+        description="Cap, for smoke runs: whole clips in a seeded order, the clip that "
+        "crosses the cap kept (so a few long clips may exceed it).",
+    )
     max_eval_frames: int = 20000
     autoencoder: AutoencoderConfig = AutoencoderConfig()
     solver: SolverConfig = SolverConfig()
@@ -351,13 +363,40 @@ def _read_toml(path: Path, seen: tuple[Path, ...] = ()) -> dict[str, Any]:
     path = path.resolve()
     if path in seen:
         raise ValueError(f"{path}: 'extends' loops back to itself")
-    with path.open("rb") as fh:
-        data = tomllib.load(fh)
+    try:
+        with path.open("rb") as fh:
+            data = tomllib.load(fh)
+    except FileNotFoundError:
+        via = f" (extends = in {seen[-1]}: a path relative to that file's folder)" if seen else ""
+        raise ValueError(f"{path}: no such config file{via}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ValueError(f"{path}: not TOML: {exc}") from None
     parent = data.pop("extends", None)
     if parent is None:
         return data
     base = _read_toml(path.parent / str(parent), (*seen, path))
     return _merge(base, data)
+
+
+def _config_errors(path: Path | str | None, exc: ValidationError) -> ValueError:
+    """pydantic's errors as one line naming the file, each field and, for a key that is
+    not a setting, the settings of its section that are near it."""
+    parts = []
+    for e in exc.errors(include_url=False):
+        where = ".".join(str(x) for x in e["loc"])
+        message = str(e["msg"])
+        if e["type"] == "extra_forbidden":
+            model: type[BaseModel] = TrainConfig
+            for key in e["loc"][:-1]:
+                field = model.model_fields.get(str(key))
+                annotation = field.annotation if field is not None else None
+                if not (isinstance(annotation, type) and issubclass(annotation, BaseModel)):
+                    break
+                model = annotation
+            near = difflib.get_close_matches(str(e["loc"][-1]), list(model.model_fields), 3)
+            message = "not a setting" + (f"; did you mean {', '.join(near)}?" if near else "")
+        parts.append(f"{where}: {message}")
+    return ValueError(f"{path or 'the defaults'}: " + "; ".join(parts))
 
 
 def _merge(base: dict[str, Any], overrides: dict[str, Any]) -> dict[str, Any]:
@@ -373,7 +412,10 @@ def _merge(base: dict[str, Any], overrides: dict[str, Any]) -> dict[str, Any]:
 def load_config(path: Path | str | None, overrides: dict[str, Any] | None = None) -> TrainConfig:
     """Load a TOML config (or the defaults), then apply ``overrides`` (shallow per section)."""
     data: dict[str, Any] = {} if path is None else _read_toml(Path(path))
-    return TrainConfig.model_validate(_merge(data, overrides or {}))
+    try:
+        return TrainConfig.model_validate(_merge(data, overrides or {}))
+    except ValidationError as exc:
+        raise _config_errors(path, exc) from None
 
 
 #: Overrides of ``--quick``: a seconds-long smoke run of every stage.

@@ -54,6 +54,28 @@ from trainer.train import (
 PARITY_TOLERANCE = 1e-5
 
 
+def recorded_source(origin: dict[str, Any]) -> dict[str, str]:
+    """What the manifest says a source was read from (its ``provenance.data`` entry): an
+    archive by its name and sha256 (``verified`` "false" where SHA256SUMS did not list
+    it); an extracted folder by its name and the sha256 of its files' list
+    (``trainer.data.build.folder_digest``), never by the sum of an archive that was not read
+    (a folder with files taken out was recorded as the whole archive)."""
+    if origin.get("kind") == "folder":
+        entry = {
+            "name": Path(str(origin.get("path", "?"))).name + "/",
+            "sha256": str(origin.get("files_sha256", "not recorded")),
+            "kind": "folder",
+            "files": str(origin.get("files", "?")),
+        }
+        if origin.get("file"):
+            entry["archive"] = str(origin["file"])  # the one SHA256SUMS names: not checked
+        return entry
+    entry = {"name": str(origin.get("file")), "sha256": str(origin.get("sha256", "not recorded"))}
+    if origin.get("verified") is False:
+        entry["verified"] = "false"
+    return entry
+
+
 def licence_of(meta: dict[str, Any]) -> str:
     """The terms the weights inherit: the licence each source trained on has in the
     dataset (its map's ``licence``; a source held out whole is not trained on). It was one
@@ -431,13 +453,7 @@ def _export_into(
     skeletons = body_shapes(all_lengths)
     ref = {JOINT_NAMES[child]: round(float(lengths[i]), 6) for i, (child, _) in enumerate(BONES)}
     data_meta = dict(trained.splits.train.meta)
-    archives = [  # an archive's sha256, else a folder's (trainer.data.build.folder_digest)
-        {
-            "name": str(a.get("file") or a.get("path")),
-            "sha256": str(a.get("sha256") or a.get("files_sha256") or "not recorded"),
-        }
-        for a in data_meta.get("archives", [])
-    ]
+    archives = [recorded_source(a) for a in data_meta.get("archives", [])]
     serving = serving_of(cfg)
     manifest = Manifest(
         schema_version=SCHEMA_VERSION,

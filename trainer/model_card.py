@@ -52,9 +52,10 @@ Archives used (sha256):
 ## Intended use and limits
 - Interactive pose editing: drag a few joints of a plausible human pose, get a natural
   full-body pose; key-point completion for blocking out poses.
-- Learned from everyday actions, locomotion, gestures, martial arts and dance; poses far
-  from these (lying, crawling, acrobatics, contact with props) are out of distribution and
-  come back smoothed towards the data.
+- Learned from the motion capture listed above and nothing else; poses far from it (for
+  the shipped data of everyday actions, locomotion, gestures, martial arts and dance: lying,
+  crawling, acrobatics, contact with props) are out of distribution and come back smoothed
+  towards the data.
 - The networks do not know joint limits: the service restores bone lengths exactly and can
   polish targets exactly (FABRIK), but does not enforce anatomical angle limits.
 - Positions only: no joint rotations, no hands or fingers, no toes beyond the foot point.
@@ -106,6 +107,18 @@ def _sources(dataset: dict[str, Any]) -> str:
     return "\n".join(lines) or "- (not recorded: the dataset predates its provenance)"
 
 
+def _archive_line(a: dict[str, str]) -> str:
+    """One source read (``trainer.export.recorded_source``)."""
+    if a.get("kind") == "folder":
+        of = f"; extracted from `{a['archive']}`, not checked against it" if "archive" in a else ""
+        files = a.get("files", "?")
+        return (
+            f"- `{a['name']}` (a folder of {files} files{of}): `{a['sha256']}` (of its files' list)"
+        )
+    unverified = " (not listed in SHA256SUMS: not verified)" if a.get("verified") == "false" else ""
+    return f"- `{a['name']}`: `{a['sha256']}`{unverified}"
+
+
 def render(manifest: Manifest) -> str:
     cfg = manifest.provenance.config
     rows = "\n".join(
@@ -113,7 +126,7 @@ def render(manifest: Manifest) -> str:
         f"{_fmt(m.metrics, 'test')} |"
         for m in manifest.models
     )
-    archives = "\n".join(f"- `{a['name']}`: `{a['sha256']}`" for a in manifest.provenance.data)
+    archives = "\n".join(_archive_line(a) for a in manifest.provenance.data)
     seconds = ", ".join(f"{k} {v:.0f}" for k, v in manifest.provenance.training_seconds.items())
     return _INTRO.format(
         version=manifest.version,

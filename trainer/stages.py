@@ -35,6 +35,7 @@ from torch.utils.data import DistributedSampler
 
 from core.io import sha256_file, write_atomic
 from trainer.config import SERVING_SETTINGS, LrSchedule, TrainConfig, seen_by_losses
+from trainer.data.dataset import DatasetError
 
 console = Console(stderr=True)
 
@@ -108,7 +109,15 @@ def batches(n: int, batch_size: int, d: Dist, seed: int, epoch: int) -> Iterator
 
 
 def steps_per_epoch(n: int, batch_size: int, d: Dist) -> int:
-    return (n // d.world) // batch_size
+    """Optimiser steps in an epoch of ``n`` samples; refuses none (the stage would train
+    nothing and its losses read 0)."""
+    steps = (n // d.world) // batch_size
+    if steps == 0:
+        raise DatasetError(
+            f"{n} training samples over {d.world} process(es) fill no batch of {batch_size}: "
+            "no training step would run; lower batch_size or add training data"
+        )
+    return steps
 
 
 # --------------------------------------------------------------------------------------

@@ -95,6 +95,21 @@ def load_splits(cfg: TrainConfig) -> Splits:
                 "train, 3 or more give val one (docs/data.md, Splits): add clips, or force a "
                 "clip's split with an [[override]] split = ... in the map"
             )
+    n = len(splits.train.positions)
+    batches = {
+        f"[{name}] batch_size": section.batch_size
+        for name, section in (
+            ("autoencoder", cfg.autoencoder), ("solver", cfg.solver), ("completion", cfg.completion)
+        )
+    }  # fmt: skip
+    short = {key: size for key, size in batches.items() if size > n}
+    if short:  # (it trained nothing: no step ran, losses 0, and the models were exported)
+        wanted = ", ".join(f"{key} = {size}" for key, size in short.items())
+        raise DatasetError(
+            f"{cfg.dataset}: the train split has {n} frames, fewer than one batch ({wanted}): "
+            "no training step would run; add clips to train (an [[override]] split = "
+            f'"train" in the map) or lower those batch sizes in the config to at most {n}'
+        )
     return splits
 
 

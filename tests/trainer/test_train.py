@@ -162,6 +162,41 @@ def test_manifest_is_valid_and_hashes_verify(trained: tuple[Trained, Path]) -> N
         assert all(batch_dims), f"{entry.file}: batch axis is not dynamic"
 
 
+def test_a_folder_source_is_recorded_as_the_folder_read(
+    trained: tuple[Trained, Path], mocap_clips: Any, tmp_path: Path
+) -> None:
+    """A studio audit's find: an extracted folder whose archive SHA256SUMS lists was
+    recorded in the manifest and the model card as that archive's sha256 (files taken out
+    of the folder or not); each source is now recorded as what was read: a folder by its
+    name (not a local path) and the sha256 of its files' list."""
+    from trainer.data.build import build_dataset
+    from trainer.export import recorded_source
+    from trainer.model_card import render
+
+    result, models = trained
+    manifest = load_manifest(models)
+    origins = result.splits.train.meta["archives"]
+    assert [recorded_source(o) for o in origins] == manifest.provenance.data
+    for entry, origin in zip(manifest.provenance.data, origins, strict=True):
+        assert entry["kind"] == "folder" and entry["sha256"] == origin["files_sha256"]
+        assert not Path(entry["name"]).is_absolute() and "archive" not in entry
+    root = tmp_path / "mocap"
+    shutil.copytree(mocap_clips.root, root)
+    listed = "0" * 64  # the archive's sum as SHA256SUMS gives it; the archive is absent
+    (root / "SHA256SUMS").write_text(f"{listed}  bandai-namco-research-motiondataset.tar.xz\n")
+    build_dataset(root, tmp_path / "poses.npz", seed=0, workers=1, progress=False)
+    origins = load_dataset(tmp_path / "poses.npz").meta["archives"]
+    (bandai,) = [o for o in origins if o["source"] == "bandai-namco"]
+    assert bandai["sha256"] == listed and bandai["verified"] is False  # the dataset's meta
+    entry = recorded_source(bandai)
+    assert entry["sha256"] == bandai["files_sha256"] != listed, entry
+    assert entry["archive"] == "bandai-namco-research-motiondataset.tar.xz"
+    card = render(manifest.model_copy(update={"provenance": manifest.provenance.model_copy(
+        update={"data": [entry]})}))  # fmt: skip
+    assert f"extracted from `{entry['archive']}`, not checked against it" in card
+    assert listed not in card
+
+
 def test_onnx_matches_torch_on_real_poses(trained: tuple[Trained, Path]) -> None:
     result, models = trained
     poses = flat(result.splits.test.positions[:300])
@@ -623,7 +658,14 @@ def test_train_says_in_one_line_what_is_wrong_with_its_config_or_data(
     typo = tmp_path / "typo.toml"
     typo.write_text("[autoencoder]\nepoch = 1\n")
     r = runner.invoke(app, ["train", "--config", str(typo), "--run-dir", str(tmp_path / "run")])
-    assert r.exit_code == 1 and "autoencoder.epoch" in r.output and "Traceback" not in r.output
+    assert r.exit_code == 1 and "Traceback" not in r.output
+    # the file and the key named, the near setting offered (was pydantic's 4-line text)
+    assert f"{typo}: autoencoder.epoch: not a setting; did you mean epochs?" in r.output
+    far = tmp_path / "far.toml"
+    far.write_text('extends = "trainer/configs/default.toml"\n')  # relative to far.toml
+    r = runner.invoke(app, ["train", "--config", str(far), "--run-dir", str(tmp_path / "run")])
+    want = f"{tmp_path}/trainer/configs/default.toml: no such config file (extends = in {far}"
+    assert r.exit_code == 1 and want in r.output.replace("\n", ""), r.output
     with np.load(small_dataset, allow_pickle=False) as npz:
         arrays = {k: npz[k] for k in npz.files}
     arrays["clip_split"] = np.where(arrays["clip_split"] == "val", "test", arrays["clip_split"])
@@ -633,4 +675,15 @@ def test_train_says_in_one_line_what_is_wrong_with_its_config_or_data(
             "--out", str(tmp_path / "models")]  # fmt: skip
     r = runner.invoke(app, args)
     assert r.exit_code == 1 and "no val frames" in r.output, r.output
+    assert not (tmp_path / "models").exists()
+    # a train split smaller than one batch trained nothing (losses 0) and was exported,
+    # served as ready (a studio audit): now refused, naming the frames and the batch
+    n = int((arrays["clip_split"][arrays["clip"]] == "train").sum())
+    big = tmp_path / "big_batch.toml"
+    big.write_text(f"[solver]\nbatch_size = {n + 1}\n")
+    args = ["train", "--config", str(big), "--dataset", str(small_dataset), "--run-dir",
+            str(tmp_path / "run2"), "--out", str(tmp_path / "models")]  # fmt: skip
+    r = runner.invoke(app, args)
+    assert r.exit_code == 1, r.output
+    assert f"train split has {n} frames, fewer than one batch ([solver] batch_size" in r.output
     assert not (tmp_path / "models").exists()
