@@ -367,8 +367,7 @@ JointRow = Annotated[list[Joint], Field(min_length=1, max_length=21)]
 
 
 class ColumnarTargets(_Body):
-    joints: list[Joint] | list[JointRow] = Field(
-        min_length=1,
+    joints: JointRow | Annotated[list[JointRow], Field(min_length=1)] = Field(
         description="K joint names shared by every item, or one row of K names per item "
         "(every row the same length K).",
     )

@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import time
 from typing import Any, ClassVar
 
 import orjson
@@ -109,6 +110,13 @@ class Coalescing:
         self._transport.abort()
 
 
+def _head_too_large() -> HeadTooLarge:
+    return HeadTooLarge(
+        f"the request line and headers exceed {MAX_HEAD_BYTES} bytes "
+        "(the server reads no more of them)"
+    )
+
+
 class PacedHTTPProtocol(AutoHTTPProtocol):  # type: ignore[misc, valid-type]
     """uvicorn's HTTP protocol with a bound on the answers waiting for their clients, its
     small writes coalesced (:class:`Coalescing`)."""
@@ -125,6 +133,8 @@ class PacedHTTPProtocol(AutoHTTPProtocol):  # type: ignore[misc, valid-type]
         self._refused = False  # answered below the app: what comes is dropped
         self._refusal: bytes | None = None  # that answer, while one before it is still due
         self._began = False  # a head began in the read being parsed
+        self._too_long = False  # a whole head over the bound: the parse stopped on it
+        self._t0 = time.perf_counter()  # when the last head began (a refusal's total time)
 
     def data_received(self, data: bytes) -> None:
         if self._refused:  # read and dropped until the close (see refuse)
@@ -132,28 +142,39 @@ class PacedHTTPProtocol(AutoHTTPProtocol):  # type: ignore[misc, valid-type]
         self._began = False
         super().data_received(data)
         # a read that ended inside a head begun before it was all head; one whose head began
-        # in it may have held a request before that head (pipelined), so it is not counted:
-        # a head is bounded at MAX_HEAD_BYTES and one read
+        # in it may have held a request before that head (pipelined), so it is not counted
+        # here: an unfinished head is bounded at MAX_HEAD_BYTES and one read, a whole one at
+        # MAX_HEAD_BYTES (on_headers_complete)
         if self._head >= 0 and not self._began and not self._refused:
             self._head += len(data)
             if self._head > MAX_HEAD_BYTES:
-                self.refuse(
-                    HeadTooLarge(
-                        f"the request line and headers exceed {MAX_HEAD_BYTES} bytes "
-                        "(the server reads no more of them)"
-                    )
-                )
+                self.refuse(_head_too_large())
 
     def on_message_begin(self) -> None:  # httptools: a request's head begins
         super().on_message_begin()
-        self._head, self._began = 0, True
+        self._head, self._began, self._t0 = 0, True, time.perf_counter()
 
     def on_headers_complete(self) -> None:
+        # a whole head that came in one read (never counted above): its size from what the
+        # parser gathered (line and headers, their separators); past the bound the parse is
+        # stopped here (httptools turns the raise into its error, uvicorn's data_received
+        # calls send_400_response) before any request exists
+        size = (
+            16
+            + len(getattr(self, "url", b""))
+            + sum(len(k) + len(v) + 4 for k, v in getattr(self, "headers", ()))
+        )
         self._head = -1
+        if size > MAX_HEAD_BYTES:
+            self._too_long = True
+            raise ValueError("request head too long")
         super().on_headers_complete()
 
     def send_400_response(self, msg: str) -> None:
         """The parser's refusal (uvicorn's plain text) as a problem."""
+        if self._too_long:
+            self.refuse(_head_too_large())
+            return
         self.refuse(MalformedHTTP(f"{msg.rstrip('.')}: the bytes sent are not an HTTP/1.1 request"))
 
     def refuse(self, exc: PoseError) -> None:
@@ -166,9 +187,9 @@ class PacedHTTPProtocol(AutoHTTPProtocol):  # type: ignore[misc, valid-type]
         if self._refused or self.transport.is_closing():
             return
         self._refused = True
-        from service.middleware.headers import BASE_HEADERS  # (the package imports this one)
+        from service.middleware.headers import protocol_headers  # (its package imports this)
 
-        self._refusal = raw_answer(exc, BASE_HEADERS)
+        self._refusal = raw_answer(exc, protocol_headers(self._t0))
         if not self._answers_due():
             self._send_refusal()
 

@@ -143,7 +143,10 @@ class Gate:
             reserved = self._check(scope, headers)
         except PoseError as exc:
             scope[REASON] = exc.type_
-            await error_response(exc)(scope, receive, send)
+            answer = error_response(exc)
+            if isinstance(exc, PayloadTooLarge):  # its body is not worth taking: no keep-alive
+                answer.headers["connection"] = "close"
+            await answer(scope, receive, send)
             return
         admitted = scope["path"].startswith("/v1/") and reserved > 0
         if admitted:
@@ -200,7 +203,9 @@ class Gate:
         if size > limit:
             big = PayloadTooLarge(f"body exceeds the {limit}-byte limit")
             scope[REASON] = big.type_
-            await error_response(big)(scope, receive, send)
+            answer = error_response(big)
+            answer.headers["connection"] = "close"  # the rest of the body is not read
+            await answer(scope, receive, send)
             return None
         of = f" of {length}" if length is not None else ""
         if gone:  # an unfinished body is never handed on (logged 499, nothing sent)

@@ -26,6 +26,20 @@ BASE_HEADERS = [
 ]
 
 
+def protocol_headers(t0: float) -> list[tuple[bytes, bytes]]:
+    """The headers of an answer the HTTP protocol gives before any app runs (a head too
+    large, bytes that are not HTTP: ``service.transport``), as this layer stamps every
+    other: a fresh request id (the request's own headers may be what was refused), the
+    time since its head began, the hardening headers and the API's CSP."""
+    ms = f"{(time.perf_counter() - t0) * 1000:.3f}ms".encode()
+    return [
+        (b"x-request-id", os.urandom(16).hex().encode()),
+        (b"x-total-time", ms),
+        *BASE_HEADERS,
+        (b"content-security-policy", API_CSP),
+    ]
+
+
 def request_id(scope: Scope) -> str:
     """The request's id: the client's ``X-Request-ID`` (printable, at most 128 characters)
     or 32 random hex digits; made once per request and kept in its scope."""

@@ -352,11 +352,11 @@ def test_content_type_and_body_size(models_dir: Path, synthetic_poses: PosePairs
             "application/json",
         )
         huge = body + b" " * 5000
-        assert_problem(
-            c.post("/v1/solve", content=huge, headers={"content-type": "application/json"}),
-            413,
-            "4096",
-        )
+        resp = c.post("/v1/solve", content=huge, headers={"content-type": "application/json"})
+        assert_problem(resp, 413, "4096")
+        # the connection closes: the body is not worth taking (it stayed open, the client
+        # sending the rest; a batch audit)
+        assert resp.headers["connection"] == "close"
 
 
 # -- operations ------------------------------------------------------------------------------
@@ -493,6 +493,7 @@ def test_chunked_body_over_the_limit_is_a_413(models_dir: Path, synthetic_poses:
             "/v1/solve", content=iter(chunks), headers={"content-type": "application/json"}
         )
         assert_problem(resp, 413, "4096")
+        assert resp.headers["connection"] == "close"  # the rest of the body is not read
         small = json.dumps(solve_body(synthetic_poses, 0, ["head"])).encode()
         ok = c.post(
             "/v1/solve",

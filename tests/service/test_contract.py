@@ -18,6 +18,28 @@ from tests.conftest import make_client
 REPO = Path(__file__).resolve().parents[2]
 
 
+def test_length_keywords_sit_on_their_own_types() -> None:
+    """A string's length bound on a list (or a list's on a string) binds nothing in the
+    contract: ``ColumnarTargets.joints`` had ``minLength: 1`` over its two list forms, so
+    ``"joints": []`` was valid by openapi.yaml and a 422 from the server (a batch audit)."""
+    misplaced: list[str] = []
+
+    def walk(node: Any, where: str) -> None:
+        if isinstance(node, dict):
+            for key, kind in (("minLength", "string"), ("maxLength", "string"),
+                              ("minItems", "array"), ("maxItems", "array")):  # fmt: skip
+                if key in node and node.get("type") != kind:
+                    misplaced.append(f"{where}: {key} on {node.get('type') or 'a union'}")
+            for key, value in node.items():
+                walk(value, f"{where}/{key}")
+        elif isinstance(node, list):
+            for i, value in enumerate(node):
+                walk(value, f"{where}[{i}]")
+
+    walk(yaml.safe_load(CONTRACT.read_text(encoding="utf-8")), "")
+    assert not misplaced, misplaced
+
+
 def test_openapi_yaml_matches_the_app() -> None:
     committed = CONTRACT.read_text(encoding="utf-8")
     assert committed == render(app_schema()), (

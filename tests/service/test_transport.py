@@ -111,7 +111,7 @@ def test_request_heads_are_bounded_and_parser_refusals_are_problems(
     """A request line and headers that never end were kept whole by the parser (four
     unfinished 50 MB headers took a worker from 340 to 620 MB): past ``MAX_HEAD_BYTES``
     the connection gets a 431 problem and is closed. Bytes that are not HTTP were uvicorn's
-    plain-text 400; now a problem too. A head of fair size (a 20 kB header) is served, and
+    plain-text 400; now a problem too. A head of fair size (a 60 kB header) is served, and
     so are big bodies."""
     from service.transport import MAX_HEAD_BYTES
 
@@ -134,6 +134,19 @@ def test_request_heads_are_bounded_and_parser_refusals_are_problems(
         assert problem["type"].endswith("/head-too-large") and problem["status"] == 431
         assert str(MAX_HEAD_BYTES) in problem["detail"]
         assert s.rss_mib() < rss + 20
+        # stamped as every answer is (a batch audit: these had no id, time or CSP)
+        assert len(fields["x-request-id"]) == 32 and fields["x-total-time"].endswith("ms")
+        assert fields["content-security-policy"].startswith("default-src 'none'")
+
+        # a whole head over the bound in one read (one write of 200 kB) is refused too (the
+        # read a head begins in is not counted: it went through whole)
+        sock = connect(s.port)
+        big = f"GET /v2/health/live HTTP/1.1\r\nhost: x\r\nx-big: {'c' * 200_000}\r\n\r\n"
+        sock.sendall(big.encode())
+        line, fields, body = _answer_to_close(sock)
+        sock.close()
+        assert line == "HTTP/1.1 431 Request Header Fields Too Large", line
+        assert fields["content-security-policy"] and fields["x-request-id"]
 
         sock = connect(s.port)
         sock.sendall(b"NOT HTTP AT ALL\r\n\r\n")
@@ -142,6 +155,7 @@ def test_request_heads_are_bounded_and_parser_refusals_are_problems(
         assert line == "HTTP/1.1 400 Bad Request" and fields["connection"] == "close"
         assert fields["content-type"] == "application/problem+json"
         assert json.loads(body)["type"].endswith("/malformed-http")
+        assert fields["x-request-id"] and fields["content-security-policy"]
 
         # a big body in the same read as its small head is no head: answered (a first cut
         # counted the whole read, and refused such batches at random with a 431)
@@ -173,7 +187,7 @@ def test_request_heads_are_bounded_and_parser_refusals_are_problems(
         assert b"HTTP/1.1 431 " in buf and buf.index(b"HTTP/1.1 431 ") > 0
 
         sock = connect(s.port)
-        head = f"GET /v2/health/live HTTP/1.1\r\nhost: x\r\nx-fair: {'b' * 20_000}\r\n\r\n"
+        head = f"GET /v2/health/live HTTP/1.1\r\nhost: x\r\nx-fair: {'b' * 60_000}\r\n\r\n"
         sock.sendall(head.encode())
         buf = b""
         while b"\r\n\r\n" not in buf:
