@@ -5,8 +5,10 @@ Innermost (inside the gate: the API key, content type, body limits and admission
 so the request id, access log, timing, metrics and hardening headers are as for any
 request. What it answers, it answers exactly as the routes would (the same problem
 assembly, engine call and answer; for the columnar form the same code). Anything else - the
-character form, the item list, a body that is not plainly valid, models not ready - goes
-on to the app with the body replayed, so every error is the routes' own.
+character form, the item list, a body that is not plainly valid, a single solve while the
+models are not ready - goes on to the app with the body replayed, so every error is the
+routes' own. A columnar batch is read here ready or not (its errors are this form's
+words either way), then answered 503 while the models load.
 
 Why: FastAPI's routing, dependency injection and response classes cost ~0.3 ms per
 request, twice the engine's own time of a solve (docs/service.md, "The hot path").
@@ -118,11 +120,11 @@ class FastPath:
         body = b"".join(chunks)
         scope["route"] = self.routes[path]  # the metrics' label
         done = False
-        if messages[-1]["type"] == "http.request" and state.repository.ready:
-            if path == SOLVE:
+        if messages[-1]["type"] == "http.request":
+            if path == SOLVE and state.repository.ready:
                 done = await self._solve(scope, receive, send, state, body)
-            else:
-                done = await self._columns(scope, receive, send, state, body)
+            elif path != SOLVE:  # read whether or not the models are ready: the same words
+                done = await self._columns(scope, receive, send, state, body)  # (then a 503)
         if done:
             return
         replay = list(reversed(messages))

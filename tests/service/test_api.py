@@ -408,6 +408,15 @@ def test_corrupt_model_is_not_ready_with_a_reason(
         assert c.get("/v1/skeleton").json()["joints"] == list(JOINT_NAMES)
         out = c.post("/v1/solve", json=solve_body(synthetic_poses, 0, ["head"]))
         assert_problem(out, 503, "decoder.onnx")
+        # a columnar batch is read as when ready (its errors were pydantic's words while
+        # the models loaded: "List should have at least 63 items"), then the 503
+        pose = solve_body(synthetic_poses, 0, ["head"])["pose"]
+        row = [x for name in JOINT_NAMES for x in pose[name]]
+        columns = {"poses": [row[:62]], "targets": {"joints": ["head"], "positions": [[0, 1, 0]]}}
+        out = c.post("/v1/solve/batch", json=columns)
+        assert_problem(out, 422, "poses[0]: must hold 63 numbers, got 62")
+        out = c.post("/v1/solve/batch", json={**columns, "poses": [row]})
+        assert_problem(out, 503, "decoder.onnx")
         # reading a file needs no models: inspect answers (its contract's 503 is shutdown's)
         example = json.loads((REPO_ROOT / "docs/examples/bvh_solve.json").read_text())
         inspect = {"bvh": example["bvh"], "frame": example["frame"]}
