@@ -387,9 +387,12 @@ def _resolve_joint(ch: Character, name: str, where: str) -> int:
     if name in JOINT_INDEX:
         return JOINT_INDEX[name]
     mapped = ", ".join(f"{n} ({lbl})" for n, lbl in ch.jmap.describe().items())
+    known = [*(ch.skel.names[a.joint] for a in ch.jmap.anchors if not a.offset.any()), *JOINT_INDEX]
+    same = [k for k in known if k.lower() == name.lower()]  # names map without case; not here
+    near = f" (did you mean {quoted(same[0])}?)" if same else ""
     raise InvalidRequest(
         f"{where}: {quoted(name)} is neither a mapped joint of this skeleton nor a canonical "
-        f"joint; mapped: {mapped}"
+        f"joint{near}; mapped: {mapped}"
     )
 
 

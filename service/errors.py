@@ -9,6 +9,7 @@ are at most ``MAX_DETAIL`` characters.
 
 from __future__ import annotations
 
+import difflib
 import logging
 import re
 from collections.abc import Sequence
@@ -242,6 +243,16 @@ def _location(loc: Sequence[Any]) -> str:
     return clip(out or "body", QUOTE)
 
 
+def _near(value: Any) -> str:
+    """`` (did you mean 'left_wrist'?)`` for a joint name near a canonical one (another
+    case, a dash for the underscore, a letter off), else nothing."""
+    if not isinstance(value, str) or len(value) > 40:
+        return ""
+    key = value.strip().lower().replace("-", "_").replace(" ", "_")
+    near = difflib.get_close_matches(key, JOINT_NAMES, 1, 0.8)
+    return f" (did you mean {near[0]!r}?)" if near else ""
+
+
 def _message(error: Any) -> str:
     """pydantic's message, made specific where it is vague and never echoing much input."""
     kind = error.get("type", "")
@@ -249,7 +260,7 @@ def _message(error: Any) -> str:
     value = error.get("input")
     if kind == "literal_error" and "'spine1'" in str(ctx.get("expected", "")):
         where = "no bone ends at" if "[key]" in error.get("loc", ()) else "unknown joint"
-        return f"{where} {quoted(value)}; joints are {', '.join(JOINT_NAMES)}"
+        return f"{where} {quoted(value)}{_near(value)}; joints are {', '.join(JOINT_NAMES)}"
     if kind == "finite_number":
         return "must be a finite number (NaN and infinities are not)"
     if kind == "float_type" and type(value) is int:  # JSON allows any integer; a float not

@@ -280,6 +280,13 @@ def test_batch_errors_name_the_item(client: Any, bvh_files: dict[str, Path]) -> 
     target = {**char, "targets": [{"joint": "tail", "position": [0.0, 1.0, 0.0]}]}
     r = client.post("/v1/solve/batch", json=batch_with(target))
     assert_problem(r, 422, "items[3].targets[0].joint", "'tail'")
+    # a name off by its case (maps compare names without it; targets do not) is pointed at
+    cased = {**char, "targets": [{**char["targets"][0], "joint": "LHAND"}]}
+    r = client.post("/v1/solve/batch", json=batch_with(cased))
+    assert_problem(r, 422, "items[3].targets[0].joint", "'LHAND'", "(did you mean 'lHand'?)")
+    upper = {**pose, "targets": [{**pose["targets"][0], "joint": "Left-Wrist"}]}
+    r = client.post("/v1/solve/batch", json=batch_with(upper))
+    assert_problem(r, 422, "items[3].targets[0].joint", "(did you mean 'left_wrist'?)")
     rotations = {**char, "rotations": {"nope": [0.0, 0.0, 0.0, 1.0]}}
     assert_problem(
         client.post("/v1/solve/batch", json=batch_with(rotations)), 422, "items[3].rotations"
