@@ -403,3 +403,215 @@ def test_the_builder_warns_of_a_map_whose_units_up_axis_or_sides_look_wrong(
         ds, clip_split=np.where(ds.clip_split == "val", "test", ds.clip_split)
     )
     assert any("no val clips" in w for w in sanity_warnings(no_val))
+
+
+# --------------------------------------------------------------------------- a studio's map
+# Two real ReActIdle takes laid out as a studio's own folder (takes/<actor>/idle_01.bvh),
+# read by a map written as docs/data.md tells a studio to, then broken one way at a time.
+
+_REACTIDLE = "reactidle_bvh/Enekoassets+ReActIdle@90b0ac7/genuine"
+STUDIO_MAP = """format = 2
+source = "studio"
+licence = "internal use only"
+archive = "studio.tar.gz"
+unit = "m"
+root_position = "add"
+include = ["takes/**/*.bvh"]
+
+[metadata]
+pattern = '^takes/(?P<actor>[^/]+)/(?P<content>[a-z]+)_(?P<take>[0-9]+)[.]bvh$'
+name = "studio/{actor}/{content}_{take}"
+content = "{content}"
+actor = "{actor}"
+
+"""
+
+
+def _studio(more_mocap: Path, tmp_path: Path, edits: dict[str, str] | None = None) -> Path:
+    """``tmp_path/mocap/studio/takes/p00{2,3}/idle_01.bvh`` and ``tmp_path/maps/studio.toml``
+    (the ReActIdle joints); ``edits`` replace text of the map. Returns the maps folder."""
+    for person in ("002", "003"):
+        take = tmp_path / "mocap" / "studio" / "takes" / f"p{person}" / "idle_01.bvh"
+        take.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy(more_mocap / _REACTIDLE / f"{person}_genuine.bvh", take)
+    joints = (MAPS / "reactidle.toml").read_text().split("[joints]")[1]
+    text = STUDIO_MAP + "[joints]" + joints
+    for old, new in (edits or {}).items():
+        assert old in text, old
+        text = text.replace(old, new, 1)
+    maps = tmp_path / "maps"
+    maps.mkdir(exist_ok=True)
+    (maps / "studio.toml").write_text(text)
+    return maps
+
+
+def _build(tmp_path: Path, maps: Path | None) -> Any:
+    out = tmp_path / "out.npz"
+    return build_dataset(tmp_path / "mocap", out, maps_dir=maps, workers=1, progress=False)
+
+
+def test_a_joint_name_in_none_of_a_maps_files_fails_the_build(
+    more_mocap: Path, tmp_path: Path
+) -> None:
+    """`forearm.l` for `forearm.L` skipped every file one by one; with an override's typo
+    the build exited 0 with that body's data gone. Now a MapError naming the map, the key
+    and the close name."""
+    from typer.testing import CliRunner
+
+    from trainer.cli import app
+    from trainer.data.maps import MapError
+
+    maps = _studio(more_mocap, tmp_path, {'left_elbow = "forearm.L"': 'left_elbow = "forearm.l"'})
+    with pytest.raises(MapError) as info:
+        _build(tmp_path, maps)
+    assert str(info.value) == (
+        f"map {maps / 'studio.toml'}: [joints] left_elbow = 'forearm.l' is in none of its "
+        "2 files; did you mean 'forearm.L'?"
+    )
+    typo = '[[override]]\nglob = "takes/p003/*"\njoints.left_elbow = "forearm_L"\n\n[metadata]'
+    maps = _studio(more_mocap, tmp_path, {"[metadata]": typo})
+    args = ["dataset", "--mocap", str(tmp_path / "mocap"), "--maps", str(maps)]
+    result = CliRunner().invoke(app, [*args, "--out", str(tmp_path / "cli.npz")])
+    assert result.exit_code == 1, result.output
+    assert "[[override]] #1 joints.left_elbow = 'forearm_L' is in none of" in result.output
+    assert "did you mean 'forearm.L'?" in result.output
+
+
+def test_a_joint_missing_from_some_files_skips_them_and_the_summary_counts_them(
+    more_mocap: Path, tmp_path: Path
+) -> None:
+    maps = _studio(more_mocap, tmp_path)
+    take = tmp_path / "mocap/studio/takes/p003/idle_01.bvh"
+    take.write_text(take.read_text().replace("JOINT shin.L", "JOINT shin.Left", 1))
+    report = _build(tmp_path, maps)
+    assert report.dataset.clip_name.tolist() == ["studio/p002/idle_01"]
+    assert f"map {maps / 'studio.toml'}: 1 of its 2 files skipped (1 lacking joints)" in (
+        "\n".join(report.meta["warnings"])
+    )
+    assert report.meta["skipped_files"][0]["kind"] == "lacking joints"
+
+
+def test_include_globs_matching_nothing_name_the_map_the_globs_and_paths_held(
+    more_mocap: Path, tmp_path: Path
+) -> None:
+    """An archive packed with its top folder: "no frames survived; see the skipped files
+    above", and nothing above."""
+    import tarfile
+
+    from trainer.data.build import BuildError
+
+    maps = _studio(more_mocap, tmp_path)
+    folder = tmp_path / "mocap" / "studio"
+    with tarfile.open(tmp_path / "mocap" / "studio.tar.gz", "w:gz") as tf:
+        tf.add(folder, arcname="studio")
+    shutil.rmtree(folder)
+    with pytest.raises(BuildError) as info:
+        _build(tmp_path, maps)
+    text = str(info.value)
+    assert text.startswith(
+        f"map {maps / 'studio.toml'}: include ['takes/**/*.bvh'] matches no file in "
+        "studio.tar.gz; it holds 2 files, e.g. studio/takes/p002/idle_01.bvh"
+    )
+    assert "top folder 'studio/'" in text and "'studio/takes/**/*.bvh'" in text
+
+
+def test_a_zip_archive_is_refused_in_one_line(more_mocap: Path, tmp_path: Path) -> None:
+    import zipfile
+
+    from trainer.data.build import BuildError
+
+    maps = _studio(more_mocap, tmp_path, {"studio.tar.gz": "studio.zip"})
+    take = tmp_path / "mocap/studio/takes/p002/idle_01.bvh"
+    with zipfile.ZipFile(tmp_path / "mocap" / "studio.zip", "w") as zf:
+        zf.write(take, "takes/p002/idle_01.bvh")
+    shutil.rmtree(tmp_path / "mocap" / "studio")
+    with pytest.raises(BuildError, match="a zip archive") as info:
+        _build(tmp_path, maps)
+    assert "\n" not in str(info.value) and "tar archives (.tar, .tar.gz" in str(info.value)
+
+
+def test_a_source_not_found_is_named_and_with_own_maps_an_error(
+    more_mocap: Path, small_dataset: Path, tmp_path: Path
+) -> None:
+    """A second map whose archive is missing was one log line, then rc 0 without it."""
+    from trainer.data.build import BuildError
+
+    maps = _studio(more_mocap, tmp_path)
+    text = (maps / "studio.toml").read_text()
+    other = text.replace('"studio"', '"studio-b"').replace("studio.tar.gz", "studio-b.tar.xz")
+    (maps / "studio_b.toml").write_text(other)
+    with pytest.raises(BuildError) as info:
+        _build(tmp_path, maps)
+    assert (
+        f"map {maps / 'studio_b.toml'}: source 'studio-b': no archive 'studio-b.tar.xz' nor "
+        f"folder 'studio-b/' in {tmp_path / 'mocap'}"
+    ) in str(info.value)
+    assert str(maps / "studio_b.toml") in str(info.value)
+    # The shipped maps: a source not found is a warning of the summary (the fixture's folder
+    # holds only Bandai-Namco and CMU dance clips).
+    warnings = load_dataset(small_dataset).meta["warnings"]
+    assert any(
+        w.startswith("not built: map ") and "no archive 'reactidle_bvh.tar.xz'" in w
+        for w in warnings
+    ), warnings
+
+
+def test_unused_override_and_holdout_globs_and_a_missing_licence_are_warned(
+    more_mocap: Path, tmp_path: Path
+) -> None:
+    override = '[[override]]\nglob = "takes/p03/*.bvh"\nsplit = "val"\n\n[metadata]'
+    edits = {
+        'licence = "internal use only"\n': "",
+        'include = ["takes/**/*.bvh"]': 'include = ["takes/**/*.bvh"]\nholdout = ["takes/p2/**"]',
+        "[metadata]": override,
+    }
+    maps = _studio(more_mocap, tmp_path, edits)
+    warnings = _build(tmp_path, maps).meta["warnings"]
+    path = maps / "studio.toml"
+    assert (
+        f"map {path}: [[override]] #1 glob 'takes/p03/*.bvh' matches none of its 2 selected "
+        "files: its settings are unused"
+    ) in "\n".join(warnings)
+    assert f"map {path}: holdout glob 'takes/p2/**' matches none of its 2 selected" in (
+        "\n".join(warnings)
+    )
+    assert any(w.startswith(f"map {path}: no `licence` for source 'studio'") for w in warnings)
+
+
+def test_plausibility_is_checked_per_actor_and_on_the_floor(
+    more_mocap: Path, small_dataset: Path, tmp_path: Path
+) -> None:
+    """An override giving one actor's files the wrong unit (3 mm thighs), and a map without
+    `root_position = "add"` (figures sunk 0.7 m through the floor), built without a word."""
+    import dataclasses
+
+    from trainer.data.build import sanity_warnings
+
+    override = '[[override]]\nglob = "takes/p003/*.bvh"\nunit = "cm"\n\n[metadata]'
+    maps = _studio(more_mocap, tmp_path, {"[metadata]": override})
+    (warning,) = sanity_warnings(_build(tmp_path, maps).dataset)[:1]
+    assert warning.startswith("studio, actor 'p003': median thigh length 0.00")
+    assert "`unit`" in warning
+    maps = _studio(more_mocap, tmp_path, {'root_position = "add"\n': ""})
+    (warning,) = [w for w in sanity_warnings(_build(tmp_path, maps).dataset) if "studio" in w]
+    assert warning.startswith("studio: median lowest joint at y = -0.")
+    assert 'root_position` right ("add"' in warning
+    ds = load_dataset(small_dataset)
+    sunk = dataclasses.replace(ds, positions=ds.positions - np.float32([0, 0.9, 0]))
+    assert all("root_position" in w for w in sanity_warnings(sunk))
+
+
+def test_a_wrong_unit_is_blamed_alone(small_dataset: Path) -> None:
+    """Metres read as inches (x 39): the thigh blamed the unit, and the head the up axis
+    and the toes the sides for the same source ("median the thigh is")."""
+    import dataclasses
+
+    from trainer.data.build import sanity_warnings
+
+    ds = load_dataset(small_dataset)
+    huge = dataclasses.replace(ds, positions=ds.positions * 39.37)
+    warnings = sanity_warnings(huge)
+    assert len(warnings) == 2, warnings  # one per source
+    for w in warnings:
+        assert "median thigh length" in w and "`unit`" in w, w
+        assert "up_axis" not in w and "swap_sides" not in w and "median the" not in w

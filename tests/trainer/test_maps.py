@@ -307,3 +307,26 @@ def test_the_service_maps_each_source_to_the_points_its_training_map_makes(
         metres = (wanted - served) * mocap_map.scale_for(member)
         np.testing.assert_allclose(metres, 0.0, rtol=0, atol=1e-9, err_msg=name)
     assert sources == {"bandai-namco", "cmu-dance", "fair", "reactidle"}  # cmu-asf: ASF/AMC
+
+
+def test_a_template_field_not_a_pattern_group_is_a_map_error(tmp_path: Path) -> None:
+    """`actor = "{actr}"` skipped every file at build time ("... actor = '{actr}': 'actr'");
+    now the map is refused when read, naming the field and the pattern's groups. A map
+    without `format` said "format = None"."""
+    bad = tmp_path / "bad.toml"
+    text = (MAPS / "reactidle.toml").read_text()
+    bad.write_text(text.replace('actor = "{person}"', 'actor = "{persn}"'))
+    with pytest.raises(MapError) as info:
+        load_map(bad)
+    assert str(info.value) == (
+        f"{bad}: [metadata] actor = '{{persn}}': {{persn}} is not a group of the [metadata] "
+        "pattern; its groups are ['style', 'person', 'source', 'dir']; did you mean 'person'?"
+    )
+    fair = (MAPS / "fair.toml").read_text()
+    bad.write_text(fair.replace('actor = "fair1-a"', 'actor = "{folder}-{clp}"'))
+    with pytest.raises(MapError, match=r"\[\[override\]\] #3 actor = '\{folder\}-\{clp\}'"):
+        load_map(bad)
+    bad.write_text(text.replace("format = 2\n", ""))
+    with pytest.raises(MapError) as info:
+        load_map(bad)
+    assert str(info.value) == f"{bad}: missing `format = 2` (the map format's version)"

@@ -15,9 +15,12 @@ Pipeline, per clip (in worker processes):
    than 5 % + 1 mm);
 5. canonicalise every pose with :func:`core.geometry.canonicalise`.
 
-Then clips are split by clip: the clips a map holds out go to ``holdout``, the others to
-train/val/test (stratified by source, content and actor, seeded); everything is written
-atomically by :func:`trainer.data.dataset.save_dataset`.
+Then clips are split by clip (:mod:`trainer.data.splits`): the clips a map holds out go to
+``holdout``, the others to train/val/test (stratified by source, content and actor, seeded);
+everything is written atomically by :func:`trainer.data.dataset.save_dataset`. What the
+build tells of its maps (a source not found or whose globs select nothing, a joint name in
+none of a map's files, unused globs, no licence, implausible bodies) is
+:mod:`trainer.data.checks`; the printed summary :mod:`trainer.data.summary`.
 """
 
 from __future__ import annotations
@@ -30,14 +33,14 @@ import subprocess
 import tarfile
 import tempfile
 import time
-import zlib
+import zipfile
 from collections import Counter, defaultdict
 from collections.abc import Iterator, Sequence
 from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any, Final
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -45,13 +48,28 @@ import numpy.typing as npt
 from core.bvh import BVH, BVHError, read_bvh
 from core.geometry import canonical_transform, transform_yaw
 from core.io import sha256_file
-from core.skeleton import BONE_CHILDREN, JOINT_INDEX, JOINT_NAMES, NUM_JOINTS, bone_lengths
+from core.skeleton import BONE_CHILDREN, JOINT_NAMES, bone_lengths
 from trainer.data.asf import AMC, ASFError, read_amc, read_asf
-from trainer.data.dataset import FORMAT_VERSION, FPS, SPLITS, PoseDataset, save_dataset
-from trainer.data.maps import MapError, MocapMap, glob_to_regex, joint_positions, load_maps
+from trainer.data.checks import (
+    licence_warning,
+    lost_files_warnings,
+    missing_joint_errors,
+    no_match_message,
+    not_found_message,
+    unused_glob_warnings,
+)
+from trainer.data.checks import sanity_warnings as sanity_warnings
+from trainer.data.dataset import FORMAT_VERSION, FPS, PoseDataset, save_dataset
+from trainer.data.maps import (
+    MapError,
+    MocapMap,
+    close_match,
+    glob_to_regex,
+    joint_positions,
+    load_maps,
+)
+from trainer.data.splits import SPLIT_FRACTIONS, assign_splits
 
-#: Default split fractions (train, val, test).
-SPLIT_FRACTIONS: dict[str, float] = {"train": 0.90, "val": 0.05, "test": 0.05}
 #: Drop-rule thresholds.
 BONE_TOLERANCE = 0.05  # relative deviation from the clip's median bone length
 BONE_TOLERANCE_ABS = 0.001  # metres, added to the relative tolerance (short bones)
@@ -94,6 +112,18 @@ class ClipResult:
     drops: dict[str, int] = field(default_factory=dict)
     bone_sum: npt.NDArray[np.float64] | None = None  # sum over kept frames, per bone
     error: str | None = None
+    kind: str = ""  # why the file was skipped (a few words), with ``error``
+    checked: bool = False  # the file was read and its joint names compared with the map's
+    missing: dict[str, str] = field(default_factory=dict)  # map's names not in it -> close one
+
+
+class MissingJoints(MapError):
+    """Source joints a map names that a file lacks (each with a close name of the file's,
+    or '')."""
+
+    def __init__(self, message: str, missing: dict[str, str]) -> None:
+        super().__init__(message)
+        self.missing = missing
 
 
 def _clean_fps(fps: float) -> float:
@@ -151,24 +181,41 @@ def drop_reasons(world: npt.NDArray[np.float64]) -> npt.NDArray[np.int8]:
     return code
 
 
+def read_clip(job: ClipJob) -> tuple[BVH | AMC, float | None]:
+    """Parse one clip: ``(clip, metres per unit of its ASF skeleton or None)``."""
+    if job.map.reader != "asf":
+        return read_bvh(job.path, name=job.label), None
+    if job.skeleton is None:
+        raise MapError(f"{job.label}: no ASF skeleton paired with this AMC")
+    skeleton = read_asf(job.skeleton)
+    return read_amc(job.path, skeleton, name=job.label), skeleton.metres_per_unit
+
+
+def check_joints(job: ClipJob, clip: BVH | AMC) -> None:
+    """``MissingJoints`` if the file lacks source joints the map names for it."""
+    names = {n for j in job.map.joints_for(job.relpath) for n in j.names}
+    missing = sorted(names - set(clip.joint_names))
+    if missing:
+        raise MissingJoints(
+            f"{job.label}: joints {missing} of map {job.map.path} not in the file",
+            {n: close_match(n, clip.joint_names) or "" for n in missing},
+        )
+
+
 def read_world(job: ClipJob) -> tuple[npt.NDArray[np.float64], int, float, int]:
     """Read one clip and give its 21 canonical joints at 30 fps in world metres, +Y up:
     ``(world [n_out, 21, 3], source frames, source fps, n_out)``. Raises ``BVHError`` /
     ``ASFError`` / ``MapError`` for unreadable files and maps that do not fit them."""
-    clip: BVH | AMC
-    scale_hint: float | None = None
-    if job.map.reader == "asf":
-        if job.skeleton is None:
-            raise MapError(f"{job.label}: no ASF skeleton paired with this AMC")
-        skeleton = read_asf(job.skeleton)
-        clip = read_amc(job.path, skeleton, name=job.label)
-        scale_hint = skeleton.metres_per_unit
-    else:
-        clip = read_bvh(job.path, name=job.label)
+    clip, scale_hint = read_clip(job)
+    check_joints(job, clip)
+    return clip_world(job, clip, scale_hint)
+
+
+def clip_world(
+    job: ClipJob, clip: BVH | AMC, scale_hint: float | None
+) -> tuple[npt.NDArray[np.float64], int, float, int]:
+    """:func:`read_world` of a parsed clip whose joints the map's names are in."""
     joints = job.map.joints_for(job.relpath)
-    missing = sorted({n for j in joints for n in j.names} - set(clip.joint_names))
-    if missing:
-        raise MapError(f"{job.label}: joints {missing} of map {job.map.path} not in the file")
     fps = _clean_fps(job.map.fps_for(job.relpath, clip.fps))
     k, n_out = resample_indices(clip.num_frames, fps)
     if k:
@@ -192,7 +239,10 @@ def process_clip(job: ClipJob) -> ClipResult:
     """Read, resample, convert, filter and canonicalise one clip (runs in a worker)."""
     result = ClipResult(job=job)
     try:
-        world, result.source_frames, result.source_fps, n_out = read_world(job)
+        clip, scale_hint = read_clip(job)
+        result.checked = True
+        check_joints(job, clip)
+        world, result.source_frames, result.source_fps, n_out = clip_world(job, clip, scale_hint)
         result.resampled_frames = n_out
         code = drop_reasons(world)
         result.drops = {r: int((code == i + 1).sum()) for i, r in enumerate(DROP_REASONS)}
@@ -204,10 +254,14 @@ def process_clip(job: ClipJob) -> ClipResult:
         result.root = frame.translation.astype(np.float32)
         result.frames = np.flatnonzero(keep).astype(np.int32)
         result.bone_sum = bone_lengths(canon).sum(axis=0)
-    except (BVHError, ASFError, MapError) as exc:
-        result.error = str(exc)
+    except MissingJoints as exc:
+        result.error, result.kind, result.missing = str(exc), "lacking joints", exc.missing
+    except (BVHError, ASFError) as exc:
+        result.error, result.kind = str(exc), "unreadable"
+    except MapError as exc:
+        result.error, result.kind = str(exc), "not fitting the map"
     except Exception as exc:  # one bad file must not stop the build
-        result.error = f"{job.label}: {type(exc).__name__}: {exc}"
+        result.error, result.kind = f"{job.label}: {type(exc).__name__}: {exc}", "failed"
     return result
 
 
@@ -219,6 +273,22 @@ class SourceInput:
     map: MocapMap
     root: Path
     origin: dict[str, Any]  # provenance: archive (+sha256) or folder
+    files: list[str] = field(default_factory=list)  # every file under root (relative)
+
+    @property
+    def selected(self) -> list[str]:
+        """The files the map selects (include, not exclude)."""
+        return [rel for rel in self.files if self.map.selects(rel)]
+
+
+@dataclass
+class Located:
+    """What :func:`locate_sources` found: the sources, and messages for the maps whose data
+    is missing, or found but with no file the map's include globs select."""
+
+    sources: list[SourceInput] = field(default_factory=list)
+    missing: list[str] = field(default_factory=list)
+    unmatched: list[str] = field(default_factory=list)
 
 
 def read_checksums(mocap_dir: Path) -> dict[str, str]:
@@ -280,127 +350,113 @@ def _start_extract(archive: Path, dest: Path) -> subprocess.Popen[bytes] | None:
     )
 
 
+def _refuse_zip(archive: Path, mocap_map: MocapMap) -> None:
+    """A zip archive is refused in one line (tar printed "This does not look like a tar
+    archive" and more)."""
+    if archive.suffix.lower() == ".zip" or zipfile.is_zipfile(archive):
+        raise BuildError(
+            f"{archive}: a zip archive (map {mocap_map.path}); the builder reads tar archives "
+            "(.tar, .tar.gz, .tgz, .tar.bz2, .tar.xz) or an extracted folder: repack it as "
+            f".tar.xz or unzip it into {archive.parent / (mocap_map.archive_stem or '')}/"
+        )
+
+
+def _folder_source(
+    mocap_map: MocapMap, roots: Sequence[Path], checksums: dict[str, str]
+) -> SourceInput | None:
+    """The first of ``roots`` (extracted folders) holding files the map selects."""
+    for root in roots:
+        if not root.is_dir():
+            continue
+        files = _all_files(root)
+        selected = [rel for rel in files if mocap_map.selects(rel)]
+        if selected:
+            origin: dict[str, Any] = {
+                "kind": "folder", "path": str(root), "files": len(selected),
+                "files_sha256": folder_digest(root, selected),
+            }  # fmt: skip
+            if mocap_map.archive and mocap_map.archive in checksums:
+                # Not verifiable from a folder: the sum SHA256SUMS lists for its archive.
+                archive = mocap_map.archive
+                origin.update(file=archive, sha256=checksums[archive], verified=False)
+            return SourceInput(mocap_map, root, origin, files)
+    return None
+
+
+def _extracted_source(
+    mocap_map: MocapMap,
+    archive: Path,
+    dest: Path,
+    proc: subprocess.Popen[bytes] | None,
+    checksums: dict[str, str],
+    log: Any,
+) -> SourceInput:
+    """Check an archive's sha256 (while tar runs), wait for its extraction into ``dest``."""
+    digest = sha256_file(archive)
+    expected = checksums.get(archive.name)
+    if expected is not None and expected != digest:
+        raise BuildError(
+            f"{archive}: sha256 {digest} does not match SHA256SUMS ({expected}); "
+            "the archive is corrupt or not the documented one"
+        )
+    if expected is None and log is not None:
+        log(f"[yellow]{_escape(archive.name)}: not listed in SHA256SUMS, checksum not verified")
+    if proc is None:
+        with tarfile.open(archive) as tf:
+            tf.extractall(dest, filter="data")
+    else:
+        _, err = proc.communicate()
+        if proc.returncode != 0:
+            first = err.decode(errors="replace").strip().splitlines()[:1]
+            raise BuildError(f"{archive}: tar failed: {' '.join(first)}")
+    origin = {"kind": "archive", "file": archive.name, "sha256": digest}
+    return SourceInput(
+        mocap_map, dest, dict(origin, verified=expected is not None), _all_files(dest)
+    )
+
+
 def locate_sources(
-    mocap_dir: Path, maps: Sequence[MocapMap], workdir: Path, log: Any = None
-) -> list[SourceInput]:
+    mocap_dir: Path,
+    maps: Sequence[MocapMap],
+    workdir: Path,
+    log: Any = None,
+    *,
+    required: bool = False,
+) -> Located:
     """Find each map's data: ``<mocap>/<archive>`` (extracted into ``workdir``, all archives
-    in parallel), else an extracted folder ``<mocap>/<archive stem>/`` or ``<mocap>/``."""
+    in parallel), else an extracted folder ``<mocap>/<archive stem>/`` or ``<mocap>/``.
+    ``required``: a map whose data is not found is a ``BuildError`` (before extracting)."""
     checksums = read_checksums(mocap_dir)
-    pending: list[tuple[MocapMap, Path, Path, subprocess.Popen[bytes] | None]] = []
-    found: list[SourceInput] = []
+    archives: list[tuple[MocapMap, Path]] = []
+    located = Located()
     for m in maps:
         archive = mocap_dir / m.archive if m.archive else None
         if archive is not None and archive.is_file():
-            dest = workdir / m.source
-            pending.append((m, archive, dest, _start_extract(archive, dest)))
+            _refuse_zip(archive, m)
+            archives.append((m, archive))
             continue
-        candidates = []
-        if m.archive_stem:
-            candidates.append(mocap_dir / m.archive_stem)
-        candidates.append(mocap_dir)
-        for root in candidates:
-            if root.is_dir() and (selected := _selected_files(root, m)):
-                origin: dict[str, Any] = {
-                    "kind": "folder", "path": str(root), "files": len(selected),
-                    "files_sha256": folder_digest(root, selected),
-                }  # fmt: skip
-                if m.archive and m.archive in checksums:
-                    # Not verifiable from a folder: the sum SHA256SUMS lists for its archive.
-                    origin.update(file=m.archive, sha256=checksums[m.archive], verified=False)
-                found.append(SourceInput(m, root, origin))
-                break
+        stem = mocap_dir / m.archive_stem if m.archive_stem else None
+        roots = [r for r in (stem, mocap_dir) if r is not None]
+        if (src := _folder_source(m, roots, checksums)) is not None:
+            located.sources.append(src)
+        elif stem is not None and stem.is_dir():
+            located.unmatched.append(no_match_message(m, f"folder {stem}", _all_files(stem)))
         else:
-            if log is not None:
-                log(f"[yellow]no data for source {m.source!r} in {mocap_dir} (map {m.path})")
-    # Hash the archives while tar runs.
-    for m, archive, dest, proc in pending:
-        digest = sha256_file(archive)
-        expected = checksums.get(archive.name)
-        if expected is not None and expected != digest:
-            raise BuildError(
-                f"{archive}: sha256 {digest} does not match SHA256SUMS ({expected}); "
-                "the archive is corrupt or not the documented one"
-            )
-        if expected is None and log is not None:
-            log(f"[yellow]{archive.name}: not listed in SHA256SUMS, checksum not verified")
-        if proc is None:
-            with tarfile.open(archive) as tf:
-                tf.extractall(dest, filter="data")
+            taken = {n for o in maps if o is not m for n in (o.archive, o.archive_stem) if n}
+            located.missing.append(not_found_message(m, mocap_dir, taken))
+    if required and located.missing:
+        head = "sources not found (with --maps, every map's data is needed):"
+        raise BuildError("\n".join([head, *located.missing]))
+    pending = [(m, a, workdir / m.source) for m, a in archives]
+    procs = [_start_extract(archive, dest) for _, archive, dest in pending]
+    for (m, archive, dest), proc in zip(pending, procs, strict=True):
+        src = _extracted_source(m, archive, dest, proc, checksums, log)
+        if any(m.selects(f) for f in src.files):
+            located.sources.append(src)
         else:
-            _, err = proc.communicate()
-            if proc.returncode != 0:
-                raise BuildError(f"{archive}: tar failed: {err.decode(errors='replace').strip()}")
-        found.append(
-            SourceInput(
-                m,
-                dest,
-                {
-                    "kind": "archive",
-                    "file": archive.name,
-                    "sha256": digest,
-                    "verified": expected is not None,
-                },
-            )
-        )
-    found.sort(key=lambda s: s.map.source)
-    return found
-
-
-# --------------------------------------------------------------------------- splits
-
-
-def assign_splits(
-    names: Sequence[str],
-    sources: Sequence[str],
-    contents: Sequence[str],
-    seed: int,
-    fractions: dict[str, float] | None = None,
-    *,
-    actors: Sequence[str] | None = None,
-    fixed: Sequence[str] | None = None,
-) -> npt.NDArray[np.str_]:
-    """Split clips by clip, stratified by (source, content, actor), deterministic from
-    ``seed``. A clip whose ``fixed`` entry is a split name (``holdout``, or a split a map
-    forces) goes there and takes no part in the strata; ``holdout`` is never assigned
-    otherwise.
-
-    Per stratum of n clips (shuffled by a generator seeded with ``seed`` and the stratum):
-    n = 1 -> test; n = 2 -> 1 test + 1 train; n >= 3 -> max(1, round(n * f_test)) test,
-    max(1, round(n * f_val)) val, the rest train. So every source, content and actor appears
-    in test, and in val where it has at least 3 clips. Independent of clip order. (An empty
-    actor leaves the stratum, and so the split, as it was before actors were used.)
-    """
-    fr = fractions or SPLIT_FRACTIONS
-    out = np.full(len(names), "train", dtype="<U7")
-    given = [""] * len(names) if fixed is None else list(fixed)
-    if len(given) != len(names):
-        raise ValueError(f"fixed has {len(given)} entries for {len(names)} clips")
-    held = np.array([bool(g) for g in given], dtype=bool)
-    for i, g in enumerate(given):
-        if g:
-            out[i] = g
-    who = [""] * len(names) if actors is None else list(actors)
-    strata: dict[tuple[str, str, str], list[int]] = defaultdict(list)
-    for i, key in enumerate(zip(sources, contents, who, strict=True)):
-        if not held[i]:
-            strata[key].append(i)
-    for (source, content, actor), idx in strata.items():
-        idx = sorted(idx, key=lambda i: names[i])
-        stratum = f"{source}\0{content}" + (f"\0{actor}" if actor else "")
-        crc = zlib.crc32(stratum.encode())
-        rng = np.random.default_rng([seed & 0xFFFFFFFF, crc])
-        order = [idx[i] for i in rng.permutation(len(idx))]
-        n = len(order)
-        if n <= 2:
-            n_test, n_val = 1, 0
-        else:
-            n_test = max(1, round(n * fr["test"]))
-            n_val = max(1, round(n * fr["val"]))
-        for i in order[:n_test]:
-            out[i] = "test"
-        for i in order[n_test : n_test + n_val]:
-            out[i] = "val"
-    return out
+            located.unmatched.append(no_match_message(m, archive.name, src.files))
+    located.sources.sort(key=lambda s: s.map.source)
+    return located
 
 
 # --------------------------------------------------------------------------- build
@@ -420,6 +476,7 @@ def _progress(enabled: bool) -> Iterator[Any]:
     if not enabled:
         yield None
         return
+    from rich.console import Console
     from rich.progress import (
         BarColumn,
         MofNCompleteColumn,
@@ -436,6 +493,7 @@ def _progress(enabled: bool) -> Iterator[Any]:
         MofNCompleteColumn(),
         TimeElapsedColumn(),
         transient=False,
+        console=Console(stderr=True),  # stdout: the summary only
     ) as progress:
         yield progress
 
@@ -453,6 +511,46 @@ def _iter_results(jobs: list[ClipJob], workers: int) -> Iterator[ClipResult]:
         yield from pool.imap_unordered(process_clip, jobs, chunksize=4)
 
 
+def _escape(text: str) -> str:
+    """``text`` printed as it is by rich (map keys like ``[joints]`` are not markup)."""
+    from rich.markup import escape
+
+    return escape(text)
+
+
+def _skip(skipped: list[dict[str, str]], say: Any, label: str, reason: str, kind: str) -> None:
+    """Record a skipped file (its ``kind``: why, in a few words, for the per-map count)."""
+    skipped.append({"file": label, "reason": reason, "kind": kind})
+    text = reason if reason.startswith(label) else f"{label}: {reason}"
+    say(f"[yellow]skipped {_escape(text)}")
+
+
+def _jobs_of(src: SourceInput, skipped: list[dict[str, str]], say: Any) -> list[ClipJob]:
+    """A job per file the map selects (an AMC with its ASF, or skipped without one)."""
+    jobs = []
+    for rel in src.selected:
+        label = f"{src.map.source}:{rel}"
+        skeleton = None
+        if src.map.reader == "asf":
+            try:
+                skeleton = str(src.root / pair_skeleton(src.map, rel, src.files))
+            except MapError as exc:
+                _skip(skipped, say, label, str(exc), "without one ASF skeleton")
+                continue
+        jobs.append(ClipJob(str(src.root / rel), rel, label, src.map, skeleton))
+    return jobs
+
+
+def _source_warnings(located: Located) -> list[str]:
+    """Build-time warnings of the sources: not found, unused globs, no licence."""
+    out = [f"not built: {m}" for m in located.missing]
+    for src in located.sources:
+        out += unused_glob_warnings(src.map, src.selected)
+        if (w := licence_warning(src.map)) is not None:
+            out.append(w)
+    return out
+
+
 def build_dataset(
     mocap_dir: str | Path,
     out: str | Path,
@@ -468,6 +566,7 @@ def build_dataset(
     mocap_dir = Path(mocap_dir)
     if not mocap_dir.is_dir():
         raise BuildError(f"{mocap_dir}: mocap folder not found")
+    required = maps_dir is not None  # --maps: the user's own sources, each one needed
     maps_dir = Path(maps_dir) if maps_dir is not None else Path(__file__).parent.parent / "maps"
     maps = load_maps(maps_dir)
     say = log if log is not None else (lambda _msg: None)
@@ -476,29 +575,23 @@ def build_dataset(
         workdir = Path(tempfile.mkdtemp(prefix="marionette-mocap-"))
         stack.callback(shutil.rmtree, workdir, True)
         task = bar.add_task("extracting archives", total=None) if bar else None
-        sources = locate_sources(mocap_dir, maps, workdir, log=say)
+        located = locate_sources(mocap_dir, maps, workdir, log=say, required=required)
         if bar is not None and task is not None:
             bar.update(task, total=1, completed=1)
+        if located.unmatched:
+            raise BuildError("\n".join(located.unmatched))
+        sources = located.sources
         if not sources:
-            raise BuildError(f"{mocap_dir}: no mocap found for any map in {maps_dir}")
+            raise BuildError(
+                "\n".join(
+                    [f"{mocap_dir}: no mocap found for any map in {maps_dir}", *located.missing]
+                )
+            )
+        warnings = _source_warnings(located)  # printed with the summary
 
-        jobs: list[ClipJob] = []
         skipped: list[dict[str, str]] = []
-        for src in sources:
-            files = _all_files(src.root)
-            for rel in files:
-                if not src.map.selects(rel):
-                    continue
-                label = f"{src.map.source}:{rel}"
-                skeleton = None
-                if src.map.reader == "asf":
-                    try:
-                        skeleton = str(src.root / pair_skeleton(src.map, rel, files))
-                    except MapError as exc:
-                        skipped.append({"file": label, "reason": str(exc)})
-                        say(f"[yellow]skipped {label}: {exc}")
-                        continue
-                jobs.append(ClipJob(str(src.root / rel), rel, label, src.map, skeleton))
+        jobs = [job for src in sources for job in _jobs_of(src, skipped, say)]
+        totals = {src.map.source: (src.map, len(src.selected)) for src in sources}
         # Largest files first: better load balance across workers.
         jobs.sort(key=lambda j: -os.path.getsize(j.path))
         infos = {}
@@ -506,8 +599,7 @@ def build_dataset(
             try:
                 infos[job.path] = job.map.clip_info(job.relpath)
             except MapError as exc:
-                skipped.append({"file": job.label, "reason": str(exc)})
-                say(f"[yellow]skipped {job.label}: {exc}")
+                _skip(skipped, say, job.label, str(exc), "not matched by [metadata] pattern")
                 jobs.remove(job)
         names = Counter(i.name for i in infos.values())
         dupes = sorted(n for n, c in names.items() if c > 1)
@@ -516,27 +608,27 @@ def build_dataset(
                 f"clip names are not unique: {dupes[:5]} (fix the map's name template)"
             )
 
-        results: list[ClipResult] = []
+        read: list[ClipResult] = []
         task = bar.add_task("reading clips", total=len(jobs)) if bar else None
         for res in _iter_results(jobs, workers):
+            read.append(res)
             if res.error is not None:
-                skipped.append({"file": res.job.label, "reason": res.error})
-                say(f"[yellow]skipped {res.error}")
+                _skip(skipped, say, res.job.label, res.error, res.kind)
             elif res.positions is None or len(res.positions) == 0:
                 reason = "no frames left after resampling and the drop rule"
-                skipped.append({"file": res.job.label, "reason": reason})
-                say(f"[yellow]skipped {res.job.label}: {reason}")
-                results.append(res)
-            else:
-                results.append(res)
+                _skip(skipped, say, res.job.label, reason, "without frames")
             if bar is not None and task is not None:
                 bar.advance(task)
+        fatal = missing_joint_errors(read)
+        if fatal:
+            raise MapError("\n".join(fatal))
+    warnings += lost_files_warnings(totals, skipped)
 
     # Deterministic order: by clip name, whatever order the workers finished in.
-    results.sort(key=lambda r: infos[r.job.path].name)
+    results = sorted((r for r in read if r.error is None), key=lambda r: infos[r.job.path].name)
     kept = [r for r in results if r.positions is not None and len(r.positions)]
     if not kept:
-        raise BuildError("no frames survived; see the skipped files above")
+        raise BuildError(f"no frames survived: {len(skipped)} files skipped (listed above)")
     clip_infos = [infos[r.job.path] for r in kept]
     positions = np.concatenate([r.positions for r in kept if r.positions is not None])
     frames = np.concatenate([r.frames for r in kept if r.frames is not None])
@@ -615,6 +707,7 @@ def build_dataset(
         "dropped_frames": drops,
         "dropped_frames_by_source": drops_by_source,
         "skipped_files": skipped,
+        "warnings": warnings,
         "source_frames": {
             s.map.source: sum(r.source_frames for r in results if r.job.map.source == s.map.source)
             for s in sources
@@ -669,102 +762,8 @@ def _display_path(path: str) -> str:
 # --------------------------------------------------------------------------- summary
 
 
-def summary_tables(report: BuildReport) -> list[Any]:
-    """Rich tables: clips/frames per source and split, drops, mean bone lengths."""
-    from rich.table import Table
-
-    ds, meta = report.dataset, report.meta
-    sources = sorted(set(ds.clip_source.tolist()))
-    counts = Table(title=f"{report.out}: clips / frames (30 fps) per source and split")
-    counts.add_column("source")
-    for s in SPLITS:
-        counts.add_column(s, justify="right")
-    counts.add_column("total", justify="right")
-    frame_split = ds.clip_split[ds.clip]
-    frame_source = ds.clip_source[ds.clip]
-    for source in [*sources, "all"]:
-        row = [source]
-        csel = np.ones(ds.num_clips, bool) if source == "all" else ds.clip_source == source
-        fsel = np.ones(len(ds), bool) if source == "all" else frame_source == source
-        for split in SPLITS:
-            nc = int((csel & (ds.clip_split == split)).sum())
-            nf = int((fsel & (frame_split == split)).sum())
-            row.append(f"{nc} / {nf:,}")
-        row.append(f"{int(csel.sum())} / {int(fsel.sum()):,}")
-        counts.add_row(*row)
-
-    drops = Table(title="frames: source (native fps) -> 30 fps -> dropped -> kept")
-    drops.add_column("source")
-    for col in ("native", "at 30 fps", *DROP_REASONS, "kept", "files skipped"):
-        drops.add_column(col, justify="right")
-    skipped_by_source = Counter(f["file"].split(":", 1)[0] for f in meta["skipped_files"])
-    for source in sorted(meta["dropped_frames_by_source"]):
-        per = meta["dropped_frames_by_source"][source]
-        drops.add_row(
-            source,
-            f"{meta['source_frames'].get(source, 0):,}",
-            f"{meta['resampled_frames'].get(source, 0):,}",
-            *[f"{per[r]:,}" for r in DROP_REASONS],
-            f"{int((frame_source == source).sum()):,}",
-            str(skipped_by_source.get(source, 0)),
-        )
-
-    bones = Table(title="mean bone lengths (m), bone named by its child joint")
-    bones.add_column("bone")
-    for source in sources:
-        bones.add_column(source, justify="right")
-    for b in BONE_NAMES:
-        bones.add_row(b, *[f"{meta['mean_bone_lengths_m'][s][b]:.3f}" for s in sources])
-    return [counts, drops, bones]
-
-
-#: Plausible medians of a source's poses (canonical frame, metres): the thigh's length, the
-#: head's height over the pelvis, the toes ahead of the ankles. Outside them a map's units,
-#: up axis or sides are likely wrong (inches read as cm gave 11 cm thighs; +Z read as +Y,
-#: figures lying down, the head 2 mm over the pelvis; sides swapped, toes 10 cm behind).
-PLAUSIBLE: Final = {"thigh": (0.2, 0.7), "head": (0.2, 1.2), "toes": (0.0, 0.4)}
-
-
-def sanity_warnings(ds: PoseDataset) -> list[str]:
-    """What a source's poses say of its map, where implausible (a warning each); and a
-    split the training needs (train, val) without frames."""
-    out = []
-    j = JOINT_INDEX
-    for source in sorted(set(ds.clip_source.tolist())):
-        p = ds.positions[ds.clip_source[ds.clip] == source][::10].astype(np.float64)
-        thigh = float(np.median(np.linalg.norm(p[:, j["left_knee"]] - p[:, j["left_hip"]], axis=1)))
-        head = float(np.median(p[:, j["head"], 1] - p[:, j["pelvis"], 1]))
-        toes = float(np.median(p[:, [j["left_foot"], j["right_foot"]], 2]
-                               - p[:, [j["left_ankle"], j["right_ankle"]], 2]))  # fmt: skip
-        checks = (
-            ("thigh", thigh, "the thigh is {v:.3f} m long: are the map's `unit` right?"),
-            ("head", head, "the head is {v:.3f} m above the pelvis: is the map's `up_axis` right?"),
-            ("toes", toes, "the toes are {v:.3f} m ahead of the ankles (facing +Z): are left and "
-             "right swapped (`swap_sides`)?"),
-        )  # fmt: skip
-        for key, value, text in checks:
-            lo, hi = PLAUSIBLE[key]
-            if not lo <= value <= hi:
-                out.append(f"{source}: median " + text.format(v=value))
-    for split in ("train", "val"):
-        if not (ds.clip_split == split).any():
-            out.append(f"no {split} clips: training refuses this dataset (docs/data.md, splits)")
-    return out
-
-
 def print_summary(report: BuildReport, console: Any = None) -> None:
-    from rich.console import Console
+    """Print the build's tables, skipped files and warnings (:mod:`trainer.data.summary`)."""
+    from trainer.data.summary import print_summary as print_tables
 
-    console = console or Console()
-    for table in summary_tables(report):
-        console.print(table)
-    meta = report.meta
-    for item in meta["skipped_files"]:
-        console.print(f"skipped: {item['reason']}")
-    for warning in sanity_warnings(report.dataset):
-        console.print(f"[yellow]warning: {warning}")
-    console.print(
-        f"{meta['num_clips']} clips, {meta['num_frames']:,} poses ({NUM_JOINTS} joints) -> "
-        f"{report.out} ({report.out.stat().st_size / 2**20:.1f} MiB) "
-        f"in {meta['build_seconds']:.1f} s"
-    )
+    print_tables(report, console)

@@ -10,12 +10,14 @@ two source joints) feeds each of the 21 canonical joints. The format is document
 
 from __future__ import annotations
 
+import difflib
 import functools
 import hashlib
 import math
 import re
+import string
 import tomllib
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
@@ -72,6 +74,23 @@ FIXED_SPLITS: tuple[str, ...] = ("train", "val", "test")
 
 class MapError(ValueError):
     """An invalid joint-map file (names the file and the problem)."""
+
+
+def close_match(name: str, candidates: Iterable[str]) -> str | None:
+    """The candidate ``name`` was probably meant to be: the same but for case, else the
+    closest by :func:`difflib.get_close_matches`; ``None`` if none is close."""
+    names = list(dict.fromkeys(candidates))
+    for c in names:
+        if c.casefold() == name.casefold():
+            return c
+    found = difflib.get_close_matches(name, names, n=1, cutoff=0.6)
+    return found[0] if found else None
+
+
+def did_you_mean(name: str, candidates: Iterable[str]) -> str:
+    """``"; did you mean 'x'?"`` for the closest candidate, or ``""``."""
+    match = close_match(name, candidates)
+    return f"; did you mean {match!r}?" if match is not None else ""
 
 
 class Reader(Protocol):
@@ -238,6 +257,20 @@ class MocapMap:
         if any(j.towards is not None for j in joints):
             raise MapError(f"{self.path}: part-way joints: use joints_for / joint_positions")
         return tuple(j.joint for j in joints)
+
+    def joint_ref(self, name: str) -> str:
+        """Where the map names source joint ``name``, as written: ``[joints] left_elbow =
+        'forearm.l'`` or ``[[override]] #2 joints.left_elbow = ...`` (the first use)."""
+        tables = [("[joints] ", dict(zip(JOINT_NAMES, self.joints, strict=True)))]
+        for i, o in enumerate(self.overrides):
+            tables.append((f"[[override]] #{i + 1} joints.", o.get("joints") or {}))
+        for prefix, table in tables:
+            for canon, j in table.items():
+                if j.towards is None and j.joint == name:
+                    return f"{prefix}{canon} = {name!r}"
+                if name in j.names:
+                    return f"{prefix}{canon} = {{ between = {list(j.names)!r} }}: {name!r}"
+        return f"joint {name!r}"
 
     def scale_for(self, relpath: str, asf_metres_per_unit: float | None = None) -> float:
         """Metres per file unit for this file (``asf``: the skeleton's own unit)."""
@@ -442,6 +475,47 @@ def _parse_override(item: Any, index: int, file: str, reader: str) -> Override:
     return Override(item["glob"], tuple(values.items()))
 
 
+def _template_fields(template: str) -> list[str]:
+    """The field names of a ``str.format`` template (``ValueError`` if malformed)."""
+    fields = [f for _, f, _, _ in string.Formatter().parse(template) if f is not None]
+    return [re.split(r"[.\[!:]", f, maxsplit=1)[0] for f in fields]
+
+
+def _check_template(where: str, template: str, groups: Sequence[str]) -> None:
+    """``MapError`` unless every ``{field}`` of ``template`` is one of ``groups``."""
+    try:
+        fields = _template_fields(template)
+    except ValueError as exc:
+        raise MapError(f"{where} = {template!r}: {exc}") from None
+    for name in fields:
+        if name not in groups:
+            raise MapError(
+                f"{where} = {template!r}: {{{name}}} is not a group of the [metadata] "
+                f"pattern; its groups are {list(groups)}{did_you_mean(name, groups)}"
+            )
+
+
+def _check_templates(
+    file: str,
+    pattern: str,
+    templates: dict[str, str],
+    overrides: Sequence[Override],
+    skeleton: Sequence[str],
+) -> None:
+    """Every template field must be a named group of the pattern (or ``source``, ``dir``):
+    a typo (``{actr}``) skipped every file one by one at build time."""
+    groups = [*re.compile(pattern).groupindex, "source", "dir"]
+    for key, template in templates.items():
+        _check_template(f"{file}: [metadata] {key}", template, groups)
+    for i, o in enumerate(overrides):
+        for key in ("content", "style", "actor"):
+            value = o.get(key)
+            if isinstance(value, str):
+                _check_template(f"{file}: [[override]] #{i + 1} {key}", value, groups)
+    for template in skeleton:
+        _check_template(f"{file}: skeleton", template, groups)
+
+
 def load_map(path: str | Path) -> MocapMap:
     """Read and validate one map file (``MapError`` naming the file and the problem)."""
     path = Path(path)
@@ -452,6 +526,8 @@ def load_map(path: str | Path) -> MocapMap:
     except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
         raise MapError(f"{file}: cannot read map: {exc}") from None
 
+    if "format" not in data:
+        raise MapError(f"{file}: missing `format = {MAP_FORMAT}` (the map format's version)")
     if data.get("format") != MAP_FORMAT:
         hint = (
             " (format 1: rename [[fps_override]] to [[override]])"
@@ -520,6 +596,7 @@ def load_map(path: str | Path) -> MocapMap:
     }
     if not all(isinstance(v, str) for v in templates.values()):
         raise MapError(f"{file}: [metadata] templates must be strings")
+    _check_templates(file, pattern, templates, overrides, skeleton)
 
     if "joints" not in data:
         raise MapError(f"{file}: missing [joints] table")

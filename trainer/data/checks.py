@@ -1,0 +1,257 @@
+"""What a build tells of its maps: checks of ``pose-trainer dataset``.
+
+- maps against the mocap they read: a source not found, include globs that select no file
+  of an archive, a source joint name in none of a map's files (a build failure), files a map
+  lost, override / holdout globs that match nothing, a map without a licence;
+- poses against plausible bodies (:func:`sanity_warnings`): per source and per actor, the
+  thigh's length (the unit), the head over the pelvis (the up axis), the floor and the
+  pelvis height (the root position), the toes ahead of the ankles (the sides).
+"""
+
+from __future__ import annotations
+
+from collections import Counter, defaultdict
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Final
+
+import numpy as np
+import numpy.typing as npt
+
+from core.skeleton import JOINT_INDEX
+from trainer.data.dataset import PoseDataset
+from trainer.data.maps import MocapMap, close_match, did_you_mean, glob_to_regex
+
+if TYPE_CHECKING:
+    from trainer.data.build import ClipResult
+
+#: Example paths shown when a map's globs match nothing.
+EXAMPLES = 3
+
+# --------------------------------------------------------------------------- sources
+
+
+def _examples(m: MocapMap, files: Sequence[str]) -> list[str]:
+    """A few of ``files``, those with the include globs' extension first."""
+    suffixes = {Path(g).suffix for g in m.include} - {""}
+    like = [f for f in files if Path(f).suffix in suffixes]
+    return (like or list(files))[:EXAMPLES]
+
+
+def _holds(m: MocapMap, files: Sequence[str]) -> str:
+    if not files:
+        return "; it holds no file"
+    return f"; it holds {len(files)} files, e.g. {', '.join(_examples(m, files))}"
+
+
+def _top_folder_hint(m: MocapMap, files: Sequence[str]) -> str:
+    """A hint when every file sits under one top folder that the globs leave out."""
+    tops = {f.split("/", 1)[0] if "/" in f else "" for f in files}
+    if len(tops) != 1 or "" in tops:
+        return ""
+    top = tops.pop()
+    if not any(m.selects(f.split("/", 1)[1]) for f in files):
+        return ""
+    return (
+        f"; its files sit under a top folder '{top}/': the map's globs and [metadata] "
+        f"pattern are relative to the archive root, so start them with '{top}/' (e.g. "
+        f"include = ['{top}/{m.include[0]}']) or pack the archive from inside '{top}/'"
+    )
+
+
+def no_match_message(m: MocapMap, where: str, files: Sequence[str]) -> str:
+    """An archive or folder found for a map whose include globs select none of its files."""
+    globs = f"include {list(m.include)}" + (f" (exclude {list(m.exclude)})" if m.exclude else "")
+    return (
+        f"map {m.path}: {globs} matches no file in {where}"
+        f"{_holds(m, files)}{_top_folder_hint(m, files)}"
+    )
+
+
+def not_found_message(m: MocapMap, mocap_dir: Path, taken: Iterable[str] = ()) -> str:
+    """A map whose archive (or extracted folder) is not in the mocap folder: what was looked
+    for, and a close name if there is one (not one of ``taken``: other maps' archives)."""
+    entries = sorted(p.name for p in mocap_dir.iterdir()) if mocap_dir.is_dir() else []
+    entries = [e for e in entries if e not in set(taken)]
+    globs = f"include {list(m.include)}"
+    if m.archive is None:
+        return (
+            f"map {m.path}: source {m.source!r} has no `archive` and no file in {mocap_dir} "
+            f"matches its {globs}"
+        )
+    return (
+        f"map {m.path}: source {m.source!r}: no archive {m.archive!r} nor folder "
+        f"'{m.archive_stem}/' in {mocap_dir} (nor files matching its {globs} there)"
+        f"{did_you_mean(m.archive, entries)}"
+    )
+
+
+# --------------------------------------------------------------------------- map vs files
+
+
+def unused_glob_warnings(m: MocapMap, selected: Sequence[str]) -> list[str]:
+    """Override and holdout globs that match none of the map's selected files (a typo
+    leaves their settings, or the held-out bodies, silently out)."""
+    out = []
+
+    def unused(glob: str) -> str | None:
+        regex = glob_to_regex(glob)
+        if any(regex.match(f) for f in selected):
+            return None
+        near = close_match(glob, selected)
+        return f" (a close file: {near!r})" if near else ""
+
+    for i, o in enumerate(m.overrides):
+        if (hint := unused(o.glob)) is not None:
+            out.append(
+                f"map {m.path}: [[override]] #{i + 1} glob {o.glob!r} matches none of its "
+                f"{len(selected)} selected files: its settings are unused{hint}"
+            )
+    for glob in m.holdout:
+        if (hint := unused(glob)) is not None:
+            out.append(
+                f"map {m.path}: holdout glob {glob!r} matches none of its {len(selected)} "
+                f"selected files: it holds nothing out{hint}"
+            )
+    return out
+
+
+def licence_warning(m: MocapMap) -> str | None:
+    """A map without a licence: the data's licence is a term of the models trained on it."""
+    if m.licence.strip():
+        return None
+    return (
+        f"map {m.path}: no `licence` for source {m.source!r}: the data's licence becomes a "
+        'term of the models trained on it (their manifest lists it); add licence = "..."'
+    )
+
+
+def missing_joint_errors(results: Sequence[ClipResult]) -> list[str]:
+    """A source joint name (a map's, or an override's) that none of the files using it
+    has: a typo, not a bad file. One message per name; [] if none."""
+    by_map: dict[str, list[ClipResult]] = defaultdict(list)
+    for r in results:
+        if r.checked:
+            by_map[r.job.map.path].append(r)
+    out = []
+    for rs in by_map.values():
+        m = rs[0].job.map
+        need = Counter(
+            n for r in rs for n in {n for j in m.joints_for(r.job.relpath) for n in j.names}
+        )
+        lack = Counter(n for r in rs for n in r.missing)
+        for name, count in sorted(lack.items()):
+            if count < need[name]:
+                continue
+            hints = Counter(r.missing[name] for r in rs if r.missing.get(name))
+            hint = f"; did you mean {hints.most_common(1)[0][0]!r}?" if hints else ""
+            files = f"its {count} files" if count == len(rs) else f"the {count} files using it"
+            out.append(f"map {m.path}: {m.joint_ref(name)} is in none of {files}{hint}")
+    return out
+
+
+def lost_files_warnings(
+    totals: dict[str, tuple[MocapMap, int]], skipped: Sequence[dict[str, str]]
+) -> list[str]:
+    """Per map (``totals``: source -> (map, selected files)), how many files were skipped
+    and why (the ``kind`` of each ``skipped`` entry)."""
+    kinds: dict[str, Counter[str]] = defaultdict(Counter)
+    for item in skipped:
+        kinds[item["file"].split(":", 1)[0]][item.get("kind", "other")] += 1
+    out = []
+    for source, (m, total) in sorted(totals.items()):
+        if kinds[source]:
+            why = ", ".join(f"{n} {kind}" for kind, n in kinds[source].most_common())
+            lost = sum(kinds[source].values())
+            out.append(f"map {m.path}: {lost} of its {total} files skipped ({why}); see 'skipped:'")
+    return out
+
+
+# --------------------------------------------------------------------------- plausible bodies
+
+#: Plausible medians of a group of poses (canonical frame, metres): the thigh's length, the
+#: head's height over the pelvis, the lowest joint's height and the pelvis's (the floor is
+#: y = 0), the toes ahead of the ankles. Outside them a map's unit, up axis, root position or
+#: sides are likely wrong (inches read as cm gave 11 cm thighs; +Z read as +Y, figures lying
+#: down, the head 2 mm over the pelvis; root channels replacing an offset they displace,
+#: figures sunk 0.72 m through the floor; sides swapped, toes 10 cm behind).
+PLAUSIBLE: Final = {
+    "thigh": (0.2, 0.7),
+    "head": (0.2, 1.2),
+    "floor": (-0.15, 0.2),
+    "pelvis": (0.3, 1.4),
+    "toes": (0.0, 0.4),
+}
+
+
+def _medians(p: npt.NDArray[np.float64]) -> dict[str, float]:
+    j = JOINT_INDEX
+    feet = [j["left_foot"], j["right_foot"]]
+    ankles = [j["left_ankle"], j["right_ankle"]]
+    return {
+        "thigh": float(
+            np.median(np.linalg.norm(p[:, j["left_knee"]] - p[:, j["left_hip"]], axis=1))
+        ),
+        "head": float(np.median(p[:, j["head"], 1] - p[:, j["pelvis"], 1])),
+        "floor": float(np.median(p[:, :, 1].min(axis=1))),
+        "pelvis": float(np.median(p[:, j["pelvis"], 1])),
+        "toes": float(np.median(p[:, feet, 2] - p[:, ankles, 2])),
+    }
+
+
+def _outside(key: str, value: float) -> bool:
+    lo, hi = PLAUSIBLE[key]
+    return not lo <= value <= hi
+
+
+def _problem(v: dict[str, float]) -> str | None:
+    """The likeliest wrong key of a group's medians, or None: the unit first (a wrong scale
+    upsets every other measure), then the up axis, the root position, the sides."""
+    if _outside("thigh", v["thigh"]):
+        return f"median thigh length {v['thigh']:.3f} m (plausible 0.2-0.7): is the `unit` right?"
+    if _outside("head", v["head"]):
+        return (
+            f"median head height over the pelvis {v['head']:.3f} m (plausible 0.2-1.2): "
+            "is the `up_axis` right?"
+        )
+    if _outside("floor", v["floor"]) or _outside("pelvis", v["pelvis"]):
+        return (
+            f"median lowest joint at y = {v['floor']:.3f} m and pelvis at {v['pelvis']:.3f} m "
+            "(the floor is y = 0; plausible -0.15-0.2 and 0.3-1.4): is `root_position` right "
+            '("add" when the root\'s position channels are a displacement from its OFFSET)?'
+        )
+    if v["toes"] < PLAUSIBLE["toes"][0]:
+        return (
+            f"median toes {-v['toes']:.3f} m behind the ankles (facing +Z): are left and "
+            "right swapped (`swap_sides`)?"
+        )
+    if v["toes"] > PLAUSIBLE["toes"][1]:
+        return (
+            f"median toes {v['toes']:.3f} m ahead of the ankles (plausible up to 0.4): "
+            "is the `unit` right?"
+        )
+    return None
+
+
+def sanity_warnings(ds: PoseDataset) -> list[str]:
+    """What poses say of their map, where implausible (one warning per source, naming the
+    likeliest wrong key; else one per actor, e.g. an [[override]] with a wrong unit); and a
+    split the training needs (train, val) without frames."""
+    out = []
+    source = ds.clip_source[ds.clip]
+    actor = ds.clip_actor[ds.clip]
+    for s in sorted(set(ds.clip_source.tolist())):
+        sel = source == s
+        problem = _problem(_medians(ds.positions[sel][::10].astype(np.float64)))
+        if problem is not None:
+            out.append(f"{s}: {problem}")
+            continue
+        actors = sorted(set(actor[sel].tolist()))
+        for a in actors if len(actors) > 1 else []:
+            p = ds.positions[sel & (actor == a)][::10].astype(np.float64)
+            if (problem := _problem(_medians(p))) is not None:
+                out.append(f"{s}, actor {a!r}: {problem} (the map's, or an [[override]]'s)")
+    for split in ("train", "val"):
+        if not (ds.clip_split == split).any():
+            out.append(f"no {split} clips: training refuses this dataset (docs/data.md, splits)")
+    return out
