@@ -60,7 +60,14 @@ from service.engine import Engine
 from service.errors import InvalidRequest
 from service.problems import SolveProblem, SolveResult
 from service.schemas import MAX_COORDINATE as MAX_METRES
-from service.schemas import MAX_WEIGHT, SolveOptions, SolveRequest, SolveResponse, TargetResult
+from service.schemas import (
+    MAX_WEIGHT,
+    WHOLE,
+    SolveOptions,
+    SolveRequest,
+    SolveResponse,
+    TargetResult,
+)
 from service.validation import MIN_BONE, problem_of, validate_as
 
 MAX_COORDINATE = 1.0e7  # client units; beyond this a coordinate is nonsense
@@ -71,7 +78,11 @@ Vec3 = Annotated[
 ]
 Quat = Annotated[
     list[Annotated[float, Field(allow_inf_nan=False)]],
-    Field(min_length=4, max_length=4, description="[x, y, z, w] (scalar last), any length > 0."),
+    Field(
+        min_length=4,
+        max_length=4,
+        description="[x, y, z, w] (scalar last); any norm above 0 (normalised here).",
+    ),
 ]
 
 
@@ -108,7 +119,13 @@ class CharacterTarget(_Body):
 
 class _Frame(_Body):
     targets: list[CharacterTarget] = Field(min_length=1, max_length=21)
-    pins: list[str] = Field(default_factory=list, max_length=21)
+    pins: list[str] = Field(
+        default_factory=list,
+        max_length=21,
+        json_schema_extra={"uniqueItems": True},
+        description="Joints held where they are: the client's mapped joint names or "
+        "canonical ones, as targets take (each once; not a target too).",
+    )
     options: SolveOptions = Field(default_factory=SolveOptions)
     joint_map: dict[str, str] | None = Field(
         default=None, description="canonical joint -> the client's joint name; wins over the "
@@ -118,7 +135,9 @@ class _Frame(_Body):
 
 class JointSpec(_Body):
     name: str = Field(min_length=1, max_length=200)
-    parent: str | None = None
+    parent: str | None = Field(
+        default=None, description="The parent joint's name; null for the root (one root)."
+    )
     offset: Vec3 = Field(description="Rest offset from the parent (root: rest position).")
 
 
@@ -150,10 +169,26 @@ def _field_error(title: str, loc: tuple[str, ...], message: str, data: Any) -> V
     return ValidationError.from_exception_data(title, [error])
 
 
+def _alias_schema(schema: dict[str, Any]) -> None:
+    """The contract of the alias as it is read: `skeleton` (deprecated) or `character`, one
+    of the two (a contract audit: the documented example, which uses `skeleton`, was
+    invalid by the schema and answered 200)."""
+    props = schema["properties"]
+    props["skeleton"] = {
+        **props["character"],
+        "deprecated": True,
+        "description": "The earlier name of `character`: give one of the two (both: a 422).",
+    }
+    schema["required"] = [r for r in schema.get("required", []) if r != "character"]
+    schema["oneOf"] = [{"required": ["character"]}, {"required": ["skeleton"]}]
+
+
 class CharacterAliasRequest(CharacterSolveRequest):
     """The body of `POST /v1/character/solve`, an alias of the character form of
     `POST /v1/solve`: the same fields; `skeleton` is accepted as the earlier name of
     `character`."""
+
+    model_config = ConfigDict(extra="forbid", strict=True, json_schema_extra=_alias_schema)
 
     @model_validator(mode="before")
     @classmethod
@@ -168,14 +203,18 @@ class CharacterAliasRequest(CharacterSolveRequest):
 
 class BVHSolveRequest(_Frame):
     bvh: str = Field(min_length=1, description="The whole BVH file.")
-    frame: int = Field(ge=0, description="Index of the frame to edit (0 = first).")
+    frame: Annotated[int, Field(ge=0), WHOLE] = Field(
+        description="Index of the frame to edit (0 = first)."
+    )
     units: Units | None = Field(default=None, description="Default: inferred from the file.")
     up: Literal["+Y", "+Z"] | None = Field(default=None, description="Default: inferred.")
 
 
 class BVHInspectRequest(_Body):
     bvh: str = Field(min_length=1, description="The whole BVH file.")
-    frame: int = Field(default=0, ge=0, description="Frame whose positions are answered.")
+    frame: Annotated[int, Field(ge=0), WHOLE] = Field(
+        default=0, description="Frame whose positions are answered."
+    )
     units: Units | None = Field(default=None, description="Default: inferred from the file.")
     up: Literal["+Y", "+Z"] | None = Field(default=None, description="Default: inferred.")
     joint_map: dict[str, str] | None = Field(
@@ -203,11 +242,13 @@ class BVHInspectResponse(BaseModel):
     anchors: dict[str, BVHAnchor] = Field(description="canonical joint -> its point.")
     joint_map: dict[str, str]
     scheme: str
-    units: str | float
+    units: str | float = Field(
+        description="As given, else as inferred (named, or metres per unit)."
+    )
     metres_per_unit: float
-    up: str
-    frames: int
-    frame_time: float
+    up: str = Field(description="As given, else as inferred.")
+    frames: int = Field(description="Frames in the file.")
+    frame_time: float = Field(description="Seconds per frame, as the file states it.")
     frame: int
     positions: list[list[float]] = Field(description="World position of every joint (units).")
     points: dict[str, list[float]] = Field(description="The 21 canonical points (units).")
@@ -218,8 +259,10 @@ class _Answer(BaseModel):
     pins: list[TargetResult]
     joint_map: dict[str, str] = Field(description="canonical joint -> the point it was mapped to")
     scheme: str = Field(description="Naming scheme of the automatic map, or 'explicit'.")
-    units: str | float
-    up: str
+    units: str | float = Field(
+        description="As given, else as inferred (named, or metres per unit)."
+    )
+    up: str = Field(description="As given, else as inferred.")
     solvers: list[str]
     model: str
     method: Literal["neural", "fabrik"]
@@ -228,8 +271,10 @@ class _Answer(BaseModel):
 
 class CharacterSolveResponse(_Answer):
     rotations: dict[str, list[float]] = Field(description="Every joint: [x, y, z, w].")
-    root_position: list[float]
-    positions: dict[str, list[float]] = Field(description="Every joint, by FK of the answer.")
+    root_position: list[float] = Field(description="The root's position (the client's units).")
+    positions: dict[str, list[float]] = Field(
+        description="Every joint, by FK of the answer (the client's units)."
+    )
 
 
 class BVHSolveResponse(_Answer):

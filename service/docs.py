@@ -25,6 +25,63 @@ _PROBLEM_STATUS = {
     504: "The request needed more than the deadline: send smaller batches.",
 }
 
+#: Statuses the HTTP protocol itself may answer on any route, before any app runs.
+_PROTOCOL_STATUS = {
+    400: "Bytes that are not an HTTP/1.1 request (`malformed-http`; the connection closes).",
+    431: "Request line and headers over 64 KiB (`head-too-large`; the connection closes).",
+}
+
+#: Headers of the answers (docs/service.md, Headers).
+_HEADERS = {
+    "X-Request-ID": "The client's X-Request-ID (printable, at most 128 characters), else "
+    "32 random hex digits.",
+    "X-Total-Time": "The whole request, from arrival to the answer's headers (e.g. 0.612ms).",
+}
+_COMPUTE_TIME = "The engine's own work for the request (e.g. 0.274ms): not parsing or writing."
+_RETRY_AFTER = "Seconds after which a retry may succeed."
+_WWW_AUTHENTICATE = "ApiKey, Bearer"
+
+#: The API key (POSE_API_KEY), when set: either header; the `{}` alternative is an
+#: unguarded deployment (no key set), the default.
+SECURITY_SCHEMES = {
+    "ApiKey": {"type": "apiKey", "in": "header", "name": "X-API-Key"},
+    "Bearer": {"type": "http", "scheme": "bearer"},
+}
+
+
+def operation_id(path: str, method: str) -> str:
+    """A stable id from the path (``/v1/solve/batch`` -> ``solveBatch``, ``/v2/health/live``
+    -> ``healthLive``): generated clients name their functions after it, so it must not
+    follow the handlers' Python names (FastAPI's ``solve_batch_v1_solve_batch_post``)."""
+    words = [w for w in path.strip("/").split("/") if not (w[:1] == "v" and w[1:].isdigit())]
+    words = [p for w in words for p in w.replace("-", "_").split("_")]
+    return words[0] + "".join(w.capitalize() for w in words[1:])
+
+
+def _header(description: str, schema: dict[str, Any] | None = None) -> dict[str, Any]:
+    return {"description": description, "schema": schema or {"type": "string"}}
+
+
+#: components/headers: each described once, referred to by the answers that carry it.
+HEADERS = {
+    **{name: _header(text) for name, text in _HEADERS.items()},
+    "X-Compute-Time": _header(_COMPUTE_TIME),
+    "Retry-After": _header(_RETRY_AFTER, {"type": "integer"}),
+    "WWW-Authenticate": _header(_WWW_AUTHENTICATE),
+}
+
+
+def _answer_headers(code: str, method: str) -> list[str]:
+    """The headers an answer declares: every answer carries X-Request-ID and X-Total-Time
+    (declared on the 200s, said in docs/service.md for all); then what a client acts on."""
+    names = [*_HEADERS, *(["X-Compute-Time"] if method == "post" else [])] if code == "200" else []
+    if code in ("429", "503", "504"):
+        names.append("Retry-After")
+    if code == "401":
+        names.append("WWW-Authenticate")
+    return names
+
+
 #: Routes that answer without the models: their 503 is the shutdown's alone.
 _NO_MODELS_503 = {
     "/v1/bvh/inspect": "Shutting down (this route needs no models: it answers while they load)."
@@ -48,21 +105,36 @@ def document_problems(app: FastAPI) -> None:
         )
         for name in ("HTTPValidationError", "ValidationError"):
             components.pop(name, None)
+        schema["components"]["securitySchemes"] = SECURITY_SCHEMES
+        schema["components"]["headers"] = HEADERS
+        components.update(components["Problem"].pop("$defs", {}))  # (FieldError)
         ref = {"$ref": "#/components/schemas/Problem"}
         for path, ops in schema["paths"].items():
             for method, op in ops.items():
-                if not path.startswith("/v1/"):
-                    continue
-                post = [400, 401, 408, 413, 415, 422, 429, 503, 504]
-                codes = post if method == "post" else [401, 503]
+                op["operationId"] = operation_id(path, method)
+                codes: list[int] = []
+                if path.startswith("/v1/"):
+                    post = [400, 401, 408, 413, 415, 422, 429, 503, 504]
+                    codes = post if method == "post" else [401, 503]
+                    op["security"] = [{}, {"ApiKey": []}, {"Bearer": []}]
                 for code in codes:
                     text = _PROBLEM_STATUS[code]
                     if code == 503:
                         text = _NO_MODELS_503.get(path, text)
-                    op["responses"][str(code)] = {
-                        "description": text,
-                        "content": {"application/problem+json": {"schema": ref}},
-                    }
+                    op["responses"][str(code)] = {"description": text}
+                for code, text in _PROTOCOL_STATUS.items():
+                    op["responses"].setdefault(str(code), {"description": text})
+                for code, answer in op["responses"].items():
+                    if int(code) >= 400:
+                        answer["content"] = {"application/problem+json": {"schema": ref}}
+                    if names := _answer_headers(code, method):
+                        answer["headers"] = {
+                            n: {"$ref": f"#/components/headers/{n}"} for n in names
+                        }
+        metrics = schema["paths"].get("/metrics", {}).get("get")
+        if metrics is not None:  # Prometheus's text format
+            plain = {"schema": {"type": "string"}}
+            metrics["responses"]["200"]["content"] = {"text/plain; version=0.0.4": plain}
         app.openapi_schema = schema
         return schema
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, create_model
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, create_model
 
 from core.rest import rest_pose
 from core.skeleton import BASE_KEYPOINTS, JOINT_NAMES, PARENT_NAMES
@@ -77,6 +77,18 @@ class Target(_Body):
     )
 
 
+def _whole(value: Any) -> Any:
+    """A number with no fraction written as a float (``2.0``) is the integer JSON Schema
+    says it is (a contract audit: ``"passes": 2.0`` was a 422); any other value as sent."""
+    return int(value) if type(value) is float and value.is_integer() else value
+
+
+#: An integer field of a request takes a JSON integer, or a float with no fraction:
+#: ``Annotated[int, Field(<bounds>), WHOLE]`` (the bounds before it, so that the schema
+#: states them as bounds).
+WHOLE = BeforeValidator(_whole)
+
+
 class SolveOptions(_Body):
     method: Literal["neural", "fabrik"] = "neural"
     preserve_bone_lengths: bool = True
@@ -91,10 +103,8 @@ class SolveOptions(_Body):
         description="Height (m, world y) of the ground the character stands on. The "
         "networks learned poses over a floor at y = 0; a character on a 1 m box needs 1.0.",
     )
-    passes: int | None = Field(
+    passes: Annotated[int, Field(ge=1, le=MAX_PASSES), WHOLE] | None = Field(
         default=None,
-        ge=1,
-        le=MAX_PASSES,
         description="Neural solves per edit, each from the previous answer with the bone "
         "lengths restored (absent: the models' default, `passes` of `GET /v1/models`). "
         "More passes reach closer on bodies unlike the training ones; each costs about one "
@@ -157,7 +167,10 @@ class SolveRequest(_Body):
 
 
 class TargetResult(BaseModel):
-    joint: str
+    joint: str = Field(
+        description="The canonical joint (`left_wrist`), in the character and BVH forms too "
+        "(whatever name the request gave: its `joint_map` maps one to the other)."
+    )
     error: float = Field(description="Distance (m) from the joint to its target.")
     reached: bool = Field(description="error <= tolerance.")
 
@@ -166,7 +179,7 @@ class SolveResponse(BaseModel):
     pose: PoseOut
     targets: list[TargetResult]
     pins: list[TargetResult] = Field(
-        default_factory=list, description="How far each pinned joint moved (m)."
+        description="How far each pinned joint moved (m); [] when none was pinned."
     )
     max_bone_length_error: float = Field(description="Max relative bone-length error.")
     solvers: list[str] = Field(
@@ -331,6 +344,16 @@ class ModelsResponse(BaseModel):
     models: list[ModelInfo]
 
 
+class FieldError(BaseModel):
+    location: str = Field(description="The field: `items[2].targets[0].joint`, `body`.")
+    message: str
+
+
+def _no_default(schema: dict[str, Any]) -> None:
+    """An answer's field that is absent, not empty, when it does not apply: no default."""
+    schema.pop("default", None)
+
+
 class Problem(BaseModel):
     """RFC 9457 problem details: every 4xx/5xx answer (``application/problem+json``)."""
 
@@ -340,10 +363,16 @@ class Problem(BaseModel):
     title: str
     status: int
     detail: str
-    errors: list[dict[str, str]] | None = Field(
-        default=None, description="Per-field errors of an invalid body."
+    errors: list[FieldError] = Field(
+        default_factory=list,
+        description="Per-field errors of an invalid body (422 only; absent otherwise).",
+        json_schema_extra=_no_default,
     )
-    missing: list[str] | None = Field(default=None, description="Missing base key points.")
+    missing: list[str] = Field(
+        default_factory=list,
+        description="Missing base key points (a completion's 422 only; absent otherwise).",
+        json_schema_extra=_no_default,
+    )
 
 
 class Health(BaseModel):

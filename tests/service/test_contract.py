@@ -40,6 +40,46 @@ def test_length_keywords_sit_on_their_own_types() -> None:
     assert not misplaced, misplaced
 
 
+def test_the_contract_says_what_a_generated_client_needs(models_dir: Path) -> None:
+    """A contract audit with generated clients (openapi-python-client, openapi-typescript):
+    the API key was in no security scheme, operation ids were the handlers' Python names
+    (``solve_batch_v1_solve_batch_post``, a generated function's name), the protocol's 431
+    and /metrics' text were undeclared, ``Problem.errors`` was nullable with a null default
+    (the server leaves it out: typed clients refused real 422s), integer fields refused
+    ``2.0`` (an integer by JSON Schema), and ``pins`` of an answer was optional."""
+    spec = yaml.safe_load(CONTRACT.read_text(encoding="utf-8"))
+    schemes = spec["components"]["securitySchemes"]
+    assert schemes["ApiKey"] == {"type": "apiKey", "in": "header", "name": "X-API-Key"}
+    ids = []
+    for path, ops in spec["paths"].items():
+        for method, op in ops.items():
+            ids.append(op["operationId"])
+            assert "_" not in op["operationId"], op["operationId"]
+            assert "431" in op["responses"] and "400" in op["responses"], (method, path)
+            if path.startswith("/v1/"):
+                assert {"ApiKey": []} in op["security"] and {} in op["security"]
+    assert len(set(ids)) == len(ids) and "solveBatch" in ids and "healthLive" in ids
+    assert (
+        "text/plain; version=0.0.4"
+        in spec["paths"]["/metrics"]["get"]["responses"]["200"]["content"]
+    )
+    problem = spec["components"]["schemas"]["Problem"]["properties"]
+    assert "default" not in problem["errors"] and problem["errors"]["type"] == "array"
+    assert set(spec["components"]["schemas"]["FieldError"]["required"]) == {"location", "message"}
+    assert "pins" in spec["components"]["schemas"]["SolveResponse"]["required"]
+    from core.rest import rest_pose
+    from core.skeleton import JOINT_NAMES
+
+    pose = {n: p.tolist() for n, p in zip(JOINT_NAMES, rest_pose(), strict=True)}
+    body = {"pose": pose, "targets": [{"joint": "head", "position": [0.05, 1.6, 0.1]}]}
+    with make_client(models_dir) as c:
+        two = c.post("/v1/solve", json={**body, "options": {"passes": 2}})
+        assert two.status_code == 200, two.text
+        assert c.post("/v1/solve", json={**body, "options": {"passes": 2.0}}).content == two.content
+        late = c.post("/v1/solve", json={**body, "options": {"passes": 2.5}})
+        assert late.status_code == 422 and "options.passes" in late.text
+
+
 def test_openapi_yaml_matches_the_app() -> None:
     committed = CONTRACT.read_text(encoding="utf-8")
     assert committed == render(app_schema()), (
