@@ -11,7 +11,9 @@ maps every error to problem+json in one place.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import gc
+import threading
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 
@@ -29,6 +31,13 @@ from service.routes import characters, complete, health, info, solve
 from service.settings import Settings, get_settings
 
 
+def _load(state: ServiceState, loop: asyncio.AbstractEventLoop) -> None:
+    """Load the models, then freeze what is alive on the event loop's thread."""
+    state.repository.load()
+    with contextlib.suppress(RuntimeError):  # the loop closed: the process is exiting
+        loop.call_soon_threadsafe(gc.freeze)
+
+
 def create_app(settings: Settings | None = None, *, load_in_background: bool = True) -> FastAPI:
     """The app. Once the models are loaded, everything alive then (modules, sessions,
     schemas) is moved out of the garbage collector's reach (``gc.freeze``): collections
@@ -40,10 +49,15 @@ def create_app(settings: Settings | None = None, *, load_in_background: bool = T
     @asynccontextmanager
     async def lifespan(_: FastAPI) -> AsyncIterator[None]:
         if load_in_background:
-            task = asyncio.create_task(asyncio.to_thread(state.repository.load))
-            task.add_done_callback(lambda _: gc.freeze())
+            # A daemon thread, not awaited at shutdown: a stop while the models load (a
+            # cold numba cache compiles for ~50 s) exits at once. The load was awaited, in
+            # asyncio's executor, whose threads the interpreter also waits for: SIGTERM
+            # then ran into the grace period and a SIGKILL (an ops audit).
+            loop = asyncio.get_running_loop()
+            threading.Thread(
+                target=_load, args=(state, loop), name="marionette-load", daemon=True
+            ).start()
             yield
-            await task
         else:
             state.repository.load()
             gc.freeze()

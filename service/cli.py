@@ -7,10 +7,12 @@ from __future__ import annotations
 
 import argparse
 import logging
+import logging.config
 import os
 import sys
 from pathlib import Path
 
+from service.logs import log_config
 from service.settings import Settings
 
 
@@ -43,7 +45,8 @@ def main(argv: list[str] | None = None) -> None:
             file=sys.stderr,
         )
         raise SystemExit(2)
-    logging.basicConfig(level=settings.log_level.upper(), format="%(message)s", stream=sys.stderr)
+    config = log_config(settings.log_level)
+    logging.config.dictConfig(config)
     uvicorn.run(
         "service.app:create_app",
         factory=True,
@@ -51,6 +54,7 @@ def main(argv: list[str] | None = None) -> None:
         port=settings.port,
         workers=args.workers,
         log_level=settings.log_level,
+        log_config=config,  # every line JSON (service.logs), uvicorn's too
         access_log=False,
         http="service.transport:PacedHTTPProtocol",  # a floor on how fast answers are taken
         timeout_graceful_shutdown=settings.shutdown_grace_seconds,

@@ -216,6 +216,10 @@ def test_compiled_kernels_load_from_the_seed_not_compiled(engine: Engine, image:
     )  # fmt: skip
     assert "data loaded" in log, log[-2000:]
     assert "data saved" not in log, log[-2000:]
+    # compiled for generic x86-64, not this host's CPU model (which other nodes lack)
+    index = "import glob; print(open(sorted(glob.glob('/opt/marionette/numba-seed/**/*.nbi', recursive=True))[0], 'rb').read().count(b'generic'))"  # noqa: E501
+    count = engine.run("run", "--rm", "--entrypoint", "/opt/venv/bin/python", image, "-c", index)
+    assert int(count.strip().splitlines()[-1]) > 0, count
 
 
 # --------------------------------------------------------------------------- the running service

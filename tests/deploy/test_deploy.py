@@ -234,6 +234,18 @@ def test_runtime_env_matches_settings(
     assert _in_runtime(final_stage, env["POSE_MODELS_DIR"]), "the models are in the image"
 
 
+def test_the_numba_seed_is_compiled_for_any_cpu(
+    dockerfile: list[tuple[str, str]], final_stage: list[tuple[str, str]]
+) -> None:
+    """The kernels' cache seed and the runtime both target ``generic`` x86-64: numba keys
+    its cache on the CPU it compiles for, and a seed compiled for the build host's CPU was
+    compiled again (~50 s a pod) on nodes of another CPU model (an ops audit)."""
+    assert _env(final_stage).get("NUMBA_CPU_NAME") == "generic"
+    assert _env(final_stage).get("OPENBLAS_NUM_THREADS") == "1"  # not one per node CPU
+    seed = [args for ins, args in dockerfile if ins == "RUN" and "numba-seed" in args]
+    assert seed and all("NUMBA_CPU_NAME=generic" in args for args in seed), seed
+
+
 def test_image_installs_only_the_service_extra(dockerfile: list[tuple[str, str]]) -> None:
     runs = [args for ins, args in dockerfile if ins == "RUN"]
     commands = [c.strip() for run in runs for c in re.split(r";|&&|\|\|", run)]
@@ -424,6 +436,8 @@ def test_hpa_scales_the_deployment_on_cpu(k8s: dict[str, dict[str, Any]]) -> Non
     ref = spec["scaleTargetRef"]
     assert (ref["kind"], ref["name"]) == ("Deployment", k8s["Deployment"]["metadata"]["name"])
     assert 1 <= spec["minReplicas"] <= spec["maxReplicas"]
+    # the HPA owns the count: a Deployment's own `replicas` is set back on every apply
+    assert "replicas" not in k8s["Deployment"]["spec"]
     (metric,) = spec["metrics"]
     assert metric["type"] == "Resource"
     assert metric["resource"]["name"] == "cpu"

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import logging
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -50,3 +51,37 @@ def test_a_cors_preflight_has_its_line_too(
         ("OPTIONS", "/v1/solve", 200, "editor.example"),
         ("OPTIONS", "/v1/solve", 400, "evil.example"),
     ]
+
+
+@pytest.mark.slow
+def test_every_line_of_a_real_servers_log_is_json(models_dir: Path, tmp_path: Path) -> None:
+    """uvicorn's own lines (start, stop, a client's malformed bytes: "Invalid HTTP request
+    received.") and an unexpected error's traceback were plain text among the JSON lines a
+    collector reads (an ops audit); now each is a JSON object (``service.logs``)."""
+    import socket
+    import time
+
+    from service.logs import JSONLines
+    from tests.service.server import serve
+
+    with serve(models_dir, tmp_path) as s:
+        with socket.create_connection(("127.0.0.1", s.port), timeout=5) as sock:
+            sock.sendall(b"NOT HTTP AT ALL\r\n\r\n")
+            sock.recv(1 << 16)
+        assert s.request("GET", "/v2/health/live")[0] == 200
+        s.proc.terminate()
+        s.proc.wait(30)
+    time.sleep(0.1)
+    lines = [x for x in s.log.read_text().splitlines() if x.strip()]
+    parsed = [json.loads(x) for x in lines]  # every one, or this raises naming it
+    events = {(p.get("event"), p.get("message")) for p in parsed}
+    assert ("log", "Invalid HTTP request received.") in events, lines
+    assert any(p.get("event") == "models_ready" for p in parsed), lines
+    assert any(p.get("event") == "request" for p in parsed), lines
+    try:
+        raise ValueError("boom")
+    except ValueError:
+        record = logging.LogRecord("service", logging.ERROR, __file__, 1, "failed", (), None)
+        record.exc_info = sys.exc_info()
+    line = json.loads(JSONLines().format(record))
+    assert line["level"] == "error" and "ValueError: boom" in line["exception"]

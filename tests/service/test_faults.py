@@ -271,6 +271,25 @@ def test_sigterm_under_load_answers_problems_not_text(models_dir: Path, tmp_path
         assert "Traceback" not in s.log.read_text()
 
 
+def test_sigterm_while_the_models_load_exits_at_once(models_dir: Path, tmp_path: Path) -> None:
+    """An ops audit's find: a stop during the load (here a cold numba cache, as on a node
+    whose CPU the image's seed was not compiled for: ~20-50 s of compiling) waited for the
+    whole load, past the grace period, and the container was killed (137)."""
+    env = {"NUMBA_CACHE_DIR": str(tmp_path / "cold-cache"), "POSE_SHUTDOWN_GRACE_SECONDS": "1"}
+    with serve(models_dir, tmp_path, False, **env) as s:
+        status, _, body = s.request("GET", "/v2/health/ready")
+        assert status == 503 and b"loading" in body, body  # the kernels compile
+        t0 = time.monotonic()
+        s.proc.send_signal(signal.SIGTERM)
+        s.proc.wait(30)
+        took = time.monotonic() - t0
+        # (-15: uvicorn ends by re-raising the signal it handled; PID 1 in a container
+        # exits 0 instead)
+        assert s.proc.returncode in (0, -signal.SIGTERM) and took < 5, (s.proc.returncode, took)
+        log = s.log.read_text()
+        assert "Application shutdown complete." in log and "Traceback" not in log
+
+
 @pytest.mark.parametrize("fault", ["corrupt-model", "truncated-manifest"])
 def test_broken_models_are_not_ready_with_file_names(
     models_dir: Path, tmp_path: Path, fault: str
