@@ -6,14 +6,17 @@ trainer's and the bench's CLIs use typer)."""
 from __future__ import annotations
 
 import argparse
+import json
 import logging
 import logging.config
 import os
 import sys
 from pathlib import Path
 
+from pydantic import ValidationError
+
 from service.logs import log_config
-from service.settings import Settings
+from service.settings import Settings, unknown_variables
 
 
 def parser() -> argparse.ArgumentParser:
@@ -37,7 +40,13 @@ def main(argv: list[str] | None = None) -> None:
     for key, value in overrides.items():  # worker processes read settings from the env
         if value:
             os.environ[f"POSE_{key.upper()}"] = str(value)
-    settings = Settings()
+    try:
+        settings = Settings()
+    except ValidationError as exc:  # one line per setting, not a traceback
+        for e in exc.errors(include_url=False):
+            name = f"POSE_{'_'.join(str(x) for x in e['loc']).upper()}"
+            print(f"{name}: {e['msg']} (got {e.get('input')!r})", file=sys.stderr)
+        raise SystemExit(2) from None
     if not (settings.models_dir / "manifest.json").is_file():
         print(
             f"no models at {settings.models_dir} (manifest.json missing): train them with "
@@ -47,6 +56,10 @@ def main(argv: list[str] | None = None) -> None:
         raise SystemExit(2)
     config = log_config(settings.log_level)
     logging.config.dictConfig(config)
+    for name in unknown_variables(dict(os.environ)):
+        logging.getLogger("service").warning(
+            json.dumps({"event": "unknown_setting", "variable": name, "detail": "ignored"})
+        )
     uvicorn.run(
         "service.app:create_app",
         factory=True,

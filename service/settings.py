@@ -4,9 +4,9 @@ from __future__ import annotations
 
 from functools import lru_cache
 from pathlib import Path
-from typing import Literal
+from typing import Annotated, Literal
 
-from pydantic import Field, SecretStr
+from pydantic import BeforeValidator, Field, SecretStr
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from core.compiled_fabrik import MAX_ITERATIONS
@@ -81,8 +81,26 @@ class Settings(BaseSettings):
         "the networks' work for a deployment that wants speed more than the last tenth of "
         "a millimetre.",
     )
-    log_level: Literal["debug", "info", "warning", "error"] = "info"
+    log_level: Annotated[
+        Literal["debug", "info", "warning", "error"],
+        BeforeValidator(lambda v: v.lower() if isinstance(v, str) else v),  # INFO too
+    ] = "info"
     access_log: bool = True
+
+
+def unknown_variables(environ: dict[str, str]) -> list[str]:
+    """``POSE_*`` variables of ``environ`` that are no setting (a typo is ignored by the
+    settings: ``POSE_DEADLINE=9`` left the deadline at 2 s, an ops audit), each with the
+    setting nearest it."""
+    import difflib
+
+    known = [f"POSE_{name.upper()}" for name in Settings.model_fields]
+    out = []
+    for key in sorted(k for k in environ if k.upper().startswith("POSE_")):
+        if key.upper() not in known:
+            near = difflib.get_close_matches(key.upper(), known, 1, 0.6)
+            out.append(f"{key}" + (f" (did you mean {near[0]}?)" if near else ""))
+    return out
 
 
 @lru_cache(maxsize=1)

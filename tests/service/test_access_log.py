@@ -64,7 +64,10 @@ def test_every_line_of_a_real_servers_log_is_json(models_dir: Path, tmp_path: Pa
     from service.logs import JSONLines
     from tests.service.server import serve
 
-    with serve(models_dir, tmp_path) as s:
+    # a typo'd variable is named in the log (it was ignored without a word); a level in
+    # capitals is taken (it was a traceback)
+    env = {"POSE_DEADLINE": "9", "POSE_LOG_LEVEL": "INFO"}
+    with serve(models_dir, tmp_path, **env) as s:
         with socket.create_connection(("127.0.0.1", s.port), timeout=5) as sock:
             sock.sendall(b"NOT HTTP AT ALL\r\n\r\n")
             sock.recv(1 << 16)
@@ -78,6 +81,8 @@ def test_every_line_of_a_real_servers_log_is_json(models_dir: Path, tmp_path: Pa
     assert ("log", "Invalid HTTP request received.") in events, lines
     assert any(p.get("event") == "models_ready" for p in parsed), lines
     assert any(p.get("event") == "request" for p in parsed), lines
+    (unknown,) = [p for p in parsed if p.get("event") == "unknown_setting"]
+    assert unknown["variable"] == "POSE_DEADLINE (did you mean POSE_DEADLINE_SECONDS?)"
     try:
         raise ValueError("boom")
     except ValueError:
@@ -85,3 +90,19 @@ def test_every_line_of_a_real_servers_log_is_json(models_dir: Path, tmp_path: Pa
         record.exc_info = sys.exc_info()
     line = json.loads(JSONLines().format(record))
     assert line["level"] == "error" and "ValueError: boom" in line["exception"]
+
+
+def test_a_bad_setting_is_one_line_not_a_traceback(tmp_path: Path) -> None:
+    import os
+    import subprocess
+
+    from tests.conftest import REPO_ROOT
+
+    env = {**os.environ, "POSE_DEADLINE_SECONDS": "soon"}
+    proc = subprocess.run(
+        [sys.executable, "-c", "from service.cli import main; main()"],
+        cwd=REPO_ROOT, env=env, capture_output=True, text=True, timeout=60,
+    )  # fmt: skip
+    assert proc.returncode == 2, proc.stderr
+    assert "POSE_DEADLINE_SECONDS: Input should be a valid number" in proc.stderr
+    assert "Traceback" not in proc.stderr, proc.stderr
