@@ -679,13 +679,15 @@ def infer_up(skel: Skeleton, jmap: JointMap, frame_points: F64 | None = None) ->
     """ "+Y" or "+Z" when the rest pose's ankles-to-head vector lies within ~37 degrees of
     that axis (its component along it at least 0.8 of its length); failing that, the same
     test on ``frame_points`` (the 21 points of the frame being edited); else None."""
-    found = _up_of(rest_points(skel, jmap))
+    found = up_of(rest_points(skel, jmap))
     if found is None and frame_points is not None:
-        found = _up_of(frame_points)
+        found = up_of(frame_points)
     return found
 
 
-def _up_of(pts: F64) -> str | None:
+def up_of(pts: F64) -> str | None:
+    """ "+Y" or "+Z" when the 21 points' ankles-to-head vector lies within ~37 degrees of
+    that axis, else None."""
     v = pts[JOINT_INDEX["head"]] - 0.5 * (
         pts[JOINT_INDEX["left_ankle"]] + pts[JOINT_INDEX["right_ankle"]]
     )

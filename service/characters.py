@@ -51,13 +51,14 @@ from core.characters_maps import (
     infer_units,
     infer_up,
     resolve_map,
+    up_of,
 )
 from core.retarget import canonical_points, retarget
 from core.skeleton import BONES, JOINT_INDEX, JOINT_NAMES
 from core.text import clip, quoted
 from core.units import UNITS
 from service.engine import Engine
-from service.errors import InvalidRequest
+from service.errors import InvalidRequest, name_key
 from service.problems import SolveProblem, SolveResult
 from service.schemas import MAX_COORDINATE as MAX_METRES
 from service.schemas import (
@@ -406,13 +407,16 @@ def _character(
                 f'{fits}, or a number of metres per unit ("units": 0.0564444 for CMU ASF)'
             )
         units = name
-    if up is not None:  # given (or the default): a rest pose standing up otherwise refuses it
+    if up is not None and points is not None:  # given (or the default) against the body:
+        # refused where the rest pose AND the frame stand up along the other axis (a rig
+        # whose rest is Z-up but whose root turns it to stand up along +Y is right in +Y)
         rest_up = infer_up(skel, jmap)
-        if rest_up is not None and rest_up != up:
+        if rest_up is not None and rest_up != up and up_of(points) == rest_up:
             given = "" if up_stated else " (the default: no up was given)"
             raise InvalidRequest(
-                f"{prefix}up: {quoted(up)}{given}, but the rest pose stands up along "
-                f'{rest_up} (ankles to head); give "up": "{rest_up}", or null to infer it'
+                f"{prefix}up: {quoted(up)}{given}, but the rest pose and this frame stand "
+                f'up along {rest_up} (ankles to head); give "up": "{rest_up}", or null to '
+                "infer it"
             )
     if up is None:
         found = infer_up(skel, jmap, points)
@@ -433,7 +437,7 @@ def _resolve_joint(ch: Character, name: str, where: str) -> int:
         return JOINT_INDEX[name]
     mapped = ", ".join(f"{n} ({lbl})" for n, lbl in ch.jmap.describe().items())
     known = [*(ch.skel.names[a.joint] for a in ch.jmap.anchors if not a.offset.any()), *JOINT_INDEX]
-    same = [k for k in known if k.lower() == name.lower()]  # names map without case; not here
+    same = [k for k in known if name_key(k) == name_key(name)]  # maps ignore case; not here
     near = f" (did you mean {quoted(same[0])}?)" if same else ""
     raise InvalidRequest(
         f"{where}: {quoted(name)} is neither a mapped joint of this skeleton nor a canonical "
@@ -595,7 +599,7 @@ def character_from_request(req: CharacterSolveRequest, where: str = "") -> Chara
         jmap = resolve_map(skel, req.joint_map, where=f"{prefix}joint_map")
         units, up = req.character.units, req.character.up
         given = req.character.model_fields_set
-        points = None if up is not None else jmap.points(*forward_kinematics(skel, pose))
+        points = jmap.points(*forward_kinematics(skel, pose))  # (the up axis is checked)
         where = f"{prefix}character."
         return _character(
             skel, pose, jmap, units, up, points, where, "units" in given, "up" in given

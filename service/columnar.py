@@ -99,6 +99,8 @@ def _shared(row: list[Any], loc: tuple[Any, ...], width: int, n: int, errs: _Err
     for e in one.raw:  # drop the row index _numbers gave them
         extra = {key: v for key, v in e.items() if key not in ("loc", "type", "msg")}
         errs.add((*loc, *e["loc"][len(loc) + 1 :]), e["type"], e["msg"], **extra)
+    errs.total += one.total - len(one.raw)  # those found past the ones kept
+    errs.partial = errs.partial or one.partial
     return None if got is None else np.repeat(got, n, axis=0)
 
 

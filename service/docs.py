@@ -49,13 +49,18 @@ SECURITY_SCHEMES = {
 }
 
 
-def operation_id(path: str, method: str) -> str:
+def operation_id(path: str, method: str, methods: int = 1) -> str:
     """A stable id from the path (``/v1/solve/batch`` -> ``solveBatch``, ``/v2/health/live``
-    -> ``healthLive``): generated clients name their functions after it, so it must not
-    follow the handlers' Python names (FastAPI's ``solve_batch_v1_solve_batch_post``)."""
+    -> ``healthLive``; the method first where a path has several: ``getThing``): generated
+    clients name their functions after it, so it must not follow the handlers' Python
+    names (FastAPI's ``solve_batch_v1_solve_batch_post``). Unique ids: ``document_problems``
+    checks."""
     words = [w for w in path.strip("/").split("/") if not (w[:1] == "v" and w[1:].isdigit())]
-    words = [p for w in words for p in w.replace("-", "_").split("_")]
-    return words[0] + "".join(w.capitalize() for w in words[1:])
+    words = [p for w in words for p in w.replace("-", "_").replace("{", "").replace("}", "")
+             .split("_") if p] or ["root"]  # fmt: skip
+    if methods > 1:
+        words = [method.lower(), *words]
+    return words[0] + "".join(w[:1].upper() + w[1:] for w in words[1:])
 
 
 def _header(description: str, schema: dict[str, Any] | None = None) -> dict[str, Any]:
@@ -111,7 +116,7 @@ def document_problems(app: FastAPI) -> None:
         ref = {"$ref": "#/components/schemas/Problem"}
         for path, ops in schema["paths"].items():
             for method, op in ops.items():
-                op["operationId"] = operation_id(path, method)
+                op["operationId"] = operation_id(path, method, len(ops))
                 codes: list[int] = []
                 if path.startswith("/v1/"):
                     post = [400, 401, 408, 413, 415, 422, 429, 503, 504]
@@ -131,6 +136,11 @@ def document_problems(app: FastAPI) -> None:
                         answer["headers"] = {
                             n: {"$ref": f"#/components/headers/{n}"} for n in names
                         }
+        ids = [op["operationId"] for ops in schema["paths"].values() for op in ops.values()]
+        if len(set(ids)) != len(ids):  # (a /v2 copy of a /v1 path would repeat one)
+            raise RuntimeError(
+                f"operation ids repeat: {sorted(i for i in ids if ids.count(i) > 1)}"
+            )
         metrics = schema["paths"].get("/metrics", {}).get("get")
         if metrics is not None:  # Prometheus's text format
             plain = {"schema": {"type": "string"}}

@@ -248,9 +248,17 @@ def _near(value: Any) -> str:
     case, a dash for the underscore, a letter off), else nothing."""
     if not isinstance(value, str) or len(value) > 40:
         return ""
-    key = value.strip().lower().replace("-", "_").replace(" ", "_")
-    near = difflib.get_close_matches(key, JOINT_NAMES, 1, 0.8)
-    return f" (did you mean {near[0]!r}?)" if near else ""
+    key = name_key(value)
+    near = difflib.get_close_matches(key, JOINT_NAMES, 2, 0.85)  # a typo, not a neighbour
+    ratio = [difflib.SequenceMatcher(None, key, n).ratio() for n in near]
+    if not near or (len(near) == 2 and ratio[0] == ratio[1]):  # none, or no one nearest
+        return ""
+    return f" (did you mean {near[0]!r}?)"
+
+
+def name_key(name: str) -> str:
+    """A joint name as a suggestion compares it: no case, ``-`` and blanks as ``_``."""
+    return name.strip().lower().replace("-", "_").replace(" ", "_")
 
 
 def _message(error: Any) -> str:

@@ -135,6 +135,7 @@ class PacedHTTPProtocol(AutoHTTPProtocol):  # type: ignore[misc, valid-type]
         self._began = False  # a head began in the read being parsed
         self._too_long = False  # a whole head over the bound: the parse stopped on it
         self._t0 = time.perf_counter()  # when the last head began (a refusal's total time)
+        self._fields = 0  # bytes of the head's header lines so far, as sent
 
     def data_received(self, data: bytes) -> None:
         if self._refused:  # read and dropped until the close (see refuse)
@@ -153,17 +154,20 @@ class PacedHTTPProtocol(AutoHTTPProtocol):  # type: ignore[misc, valid-type]
     def on_message_begin(self) -> None:  # httptools: a request's head begins
         super().on_message_begin()
         self._head, self._began, self._t0 = 0, True, time.perf_counter()
+        self._fields = 0
+
+    def on_header(self, name: bytes, value: bytes) -> None:
+        # counted as sent: uvicorn keeps the value without its trailing blanks (a head
+        # padded with 100 kB of spaces went through as small)
+        self._fields += len(name) + len(value) + 4
+        super().on_header(name, value)
 
     def on_headers_complete(self) -> None:
         # a whole head that came in one read (never counted above): its size from what the
-        # parser gathered (line and headers, their separators); past the bound the parse is
+        # parser gave (line and header lines as sent, their separators); past the bound the parse is
         # stopped here (httptools turns the raise into its error, uvicorn's data_received
         # calls send_400_response) before any request exists
-        size = (
-            16
-            + len(getattr(self, "url", b""))
-            + sum(len(k) + len(v) + 4 for k, v in getattr(self, "headers", ()))
-        )
+        size = 16 + len(getattr(self, "url", b"")) + self._fields
         self._head = -1
         if size > MAX_HEAD_BYTES:
             self._too_long = True

@@ -253,6 +253,16 @@ def test_columnar_errors_are_counted_and_worded_as_the_item_lists(
         item[0]["targets"][1]["weight"] = w
         one = client.post("/v1/solve/batch", json={"items": item}).json()["errors"][0]
         assert one["message"] == errors[0]["message"] and resp.json()["detail"].endswith("37 more")
+    # a shared row's errors counted past the 20 listed too (21 names: "17 more" was 18)
+    every = {
+        "poses": good["poses"][:2],
+        "targets": {
+            "joints": list(JOINT_NAMES),
+            "positions": [sum(([0.0, 1.0, 0.0] for _ in JOINT_NAMES), [])] * 2,
+            "weights": ["heavy"] * len(JOINT_NAMES),
+        },
+    }
+    assert _problem(client, every).endswith("; and 18 more")
     for raw, where in (
         (json.dumps(good)[:-1] + ', "\\ud800": 1}', "\\ud800"),
         (

@@ -33,7 +33,7 @@ from core.units import UNITS
 from service import characters
 from service.routes import characters as character_routes
 from tests.character_files import FILES
-from tests.conftest import make_client
+from tests.conftest import REPO_ROOT, make_client
 from tests.service.test_api import as_array, assert_problem
 
 #: file -> (units to state, up axis) of the JSON skeleton built from it
@@ -191,6 +191,27 @@ def test_an_up_axis_the_rest_pose_contradicts_is_refused(
     for up in ("+Y", "+Z"):
         r = client.post("/v1/bvh/inspect", json={**bandai, "up": up})
         assert r.status_code == 200 and r.json()["up"] == up, r.text
+    # a rig whose rest offsets stand up along +Z but whose root turns it to stand along +Y
+    # (a review's find: its right "+Y" was refused, the two axes offered both wrong)
+    from scipy.spatial.transform import Rotation
+
+    example = json.loads((REPO_ROOT / "docs/examples/solve_character.json").read_text())
+    turn = Rotation.from_euler("x", 90, degrees=True)
+    turned = json.loads(json.dumps(example))
+    for joint in turned["character"]["joints"]:
+        joint["offset"] = turn.apply(joint["offset"]).tolist()
+    turned["rotations"] = {
+        name: (turn * Rotation.from_quat(q) * turn.inv()).as_quat().tolist()
+        for name, q in example["rotations"].items()
+    }
+    root = example["character"]["joints"][0]
+    rest = Rotation.from_quat(example["rotations"].get(root["name"], [0, 0, 0, 1]))
+    turned["rotations"][root["name"]] = (rest * turn.inv()).as_quat().tolist()
+    turned["root_position"] = example.get("root_position") or root["offset"]
+    first, again = (client.post("/v1/solve", json=b) for b in (example, turned))
+    assert again.status_code == 200, again.text
+    for name, p in first.json()["positions"].items():
+        assert np.allclose(again.json()["positions"][name], p, atol=1e-6), name
 
 
 def test_fk_report() -> None:
@@ -287,6 +308,12 @@ def test_batch_errors_name_the_item(client: Any, bvh_files: dict[str, Path]) -> 
     upper = {**pose, "targets": [{**pose["targets"][0], "joint": "Left-Wrist"}]}
     r = client.post("/v1/solve/batch", json=batch_with(upper))
     assert_problem(r, 422, "items[3].targets[0].joint", "(did you mean 'left_wrist'?)")
+    dashed = {**char, "targets": [{**char["targets"][0], "joint": "left-wrist"}]}
+    r = client.post("/v1/solve/batch", json=batch_with(dashed))  # the character form too
+    assert_problem(r, 422, "(did you mean 'left_wrist'?)")
+    leg = {**pose, "targets": [{**pose["targets"][0], "joint": "right_leg"}]}
+    r = client.post("/v1/solve/batch", json=batch_with(leg))  # a neighbour, not a typo
+    assert "did you mean" not in assert_problem(r, 422, "'right_leg'")["detail"]
     rotations = {**char, "rotations": {"nope": [0.0, 0.0, 0.0, 1.0]}}
     assert_problem(
         client.post("/v1/solve/batch", json=batch_with(rotations)), 422, "items[3].rotations"
