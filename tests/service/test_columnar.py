@@ -258,7 +258,7 @@ def test_columnar_errors_are_counted_and_worded_as_the_item_lists(
         "poses": good["poses"][:2],
         "targets": {
             "joints": list(JOINT_NAMES),
-            "positions": [sum(([0.0, 1.0, 0.0] for _ in JOINT_NAMES), [])] * 2,
+            "positions": [[0.0, 1.0, 0.0] * len(JOINT_NAMES)] * 2,
             "weights": ["heavy"] * len(JOINT_NAMES),
         },
     }
