@@ -13,20 +13,21 @@
 // of the file, thin grey) and the 21 canonical joints as handles, placed by the service's
 // joint map (POST v1/bvh/inspect). Dragging solves with POST v1/bvh/solve (the whole file,
 // the frame, targets in the file's units and axes) and the answer's `bvh` becomes the file;
-// the frame slider scrubs; Export downloads the edited file. The page's world is the file's
+// the frame slider (or the frame box) scrubs; Export downloads the edited file. The page's world is the file's
 // mapped to metres, +Y up, the character (as opened) facing +Z on the grid.
 //
 // Tests read the page through `window.marionette` (read-only).
 //
 // Modules (static/editor/): state.js (shared state), api.js (requests, error banner),
 // solve.js (edits, undo history, solving), scene.js (three.js drawing), interaction.js
-// (picking, dragging, pins), panel.js (side panel, export), file.js (BVH files). This entry
-// module wires the controls, runs the frame loop, starts up and sets the test hook.
+// (picking, dragging, pins), panel.js (side panel, export), file.js (BVH files), jointmap.js
+// (a file's joint map). This entry module wires the controls, runs the frame loop, starts up
+// and sets the test hook.
 
 import { $, doc, history, solver, state, ui } from './editor/state.js';
 import { api, ApiError, clearError, showError } from './editor/api.js';
 import {
-  clonePose, loadSample, options, redo, requestSolve, reset, sendSolve, undo, whenCommitted,
+  clonePose, loadSample, options, redo, requestSolve, reset, sendSolve, undo,
 } from './editor/solve.js';
 import {
   buildSkeleton, camera, pinRings, renderer, resize, scene, viewport,
@@ -35,7 +36,7 @@ import {
   clearTargets, endDrag, onPointerDown, onPointerMove, onPointerUp, toScreen,
 } from './editor/interaction.js';
 import { exportDocument, exportPose, refresh } from './editor/panel.js';
-import { fileFrame, mayReplace, openFile, openText, setFrame } from './editor/file.js';
+import { fileFrame, jumpToFrame, openFile, readAgain, setFrame } from './editor/file.js';
 
 // ------------------------------------------------------------------------------------
 // Wiring: pointer, keyboard, panel controls, file picker and drop
@@ -61,19 +62,35 @@ function wireControls() {
     openFile(ev.target.files[0]);
     ev.target.value = ''; // the same file can be opened again
   });
-  // Units or up changed: read again the file last asked for. If that is the open file, its
-  // edits are kept and Reset still returns to it as opened (the undo history starts anew:
-  // its poses were in the old units); if its opening failed, that file, not the open one.
-  for (const id of ['bvh-units', 'bvh-up']) {
-    $(id).addEventListener('change', () => whenCommitted(() => {
-      const t = doc.tried;
-      if (!t) return;
-      const open = doc.active && t.name === doc.name && t.text === doc.original;
-      if (open) openText(doc.text, doc.name, doc.original, doc.encoding, doc.frame);
-      else if (t.confirmed || mayReplace(t.name)) openText(t.text, t.name, t.text, t.encoding);
-    }));
-  }
+  // Units, up or the joint map changed: read again the file last asked for (file.js).
+  for (const id of ['bvh-units', 'bvh-up']) $(id).addEventListener('change', readAgain);
+  $('bvh-map-apply').addEventListener('click', readAgain);
+  $('bvh-map-clear').addEventListener('click', () => {
+    $('bvh-map').value = '';
+    $('bvh-map-joints').hidden = true;
+  });
   $('bvh-frame').addEventListener('input', (ev) => setFrame(Number(ev.target.value)));
+  // The frame box: typed, then Enter (or leaving it): that frame; Escape: back; arrows: +-1.
+  const box = $('bvh-frame-number');
+  box.addEventListener('input', () => { box.dataset.editing = '1'; });
+  box.addEventListener('change', () => {
+    if (box.dataset.editing) jumpToFrame(box.value);
+  });
+  box.addEventListener('keydown', (ev) => {
+    if (ev.key === 'Enter') {
+      ev.preventDefault();
+      jumpToFrame(box.value);
+    } else if (ev.key === 'Escape') {
+      jumpToFrame('');
+    } else if (ev.key === 'ArrowUp' || ev.key === 'ArrowDown') {
+      ev.preventDefault();
+      const next = Number($('bvh-frame').value) + (ev.key === 'ArrowUp' ? 1 : -1);
+      if (next >= 0 && next <= Number(box.max)) setFrame(next);
+    }
+  });
+  box.addEventListener('blur', () => {
+    if (box.dataset.editing) jumpToFrame(box.value);
+  });
   let dragDepth = 0;
   const hasFiles = (ev) => ev.dataTransfer && [...ev.dataTransfer.types].includes('Files');
   window.addEventListener('dragenter', (ev) => {
@@ -107,6 +124,7 @@ function wireControls() {
     requestSolve(false);
   });
   window.addEventListener('keydown', (ev) => {
+    if (ev.target instanceof HTMLTextAreaElement) return; // the joint map: its own keys
     if (ev.target instanceof HTMLInputElement && !['checkbox', 'radio', 'range'].includes(ev.target.type)) return;
     const mod = ev.ctrlKey || ev.metaKey;
     if (ev.key === 'Escape') {
@@ -253,6 +271,7 @@ window.marionette = Object.freeze({
     scheme: doc.info.scheme,
     joints: doc.info.joints.map((j) => j.name),
     edited: doc.text !== doc.original,
+    jointMap: doc.jointMap ? { ...doc.jointMap } : null,
   } : null),
   bvhText: () => (doc.active ? doc.text : null),
   // every joint of the file on screen: file units and axes, and page (world) coordinates

@@ -9,6 +9,7 @@ import { cancelSolves, clonePose, pushHistory, restore, whenCommitted } from './
 import { buildCharacterBones, buildSkeleton, camera, controls, UP } from './scene.js';
 import { endDrag } from './interaction.js';
 import { refresh } from './panel.js';
+import { offerTemplate, readMap, showMap } from './jointmap.js';
 
 // ------------------------------------------------------------------------------------
 // A file's frames: forward kinematics, the page's world
@@ -58,7 +59,7 @@ export function filePose(text, frame) {
 }
 
 // ------------------------------------------------------------------------------------
-// BVH files: open (picker or drop), scrub, close
+// BVH files: open (picker or drop), read again, scrub, close
 // ------------------------------------------------------------------------------------
 function fileSettings() {
   const units = $('bvh-units').value;
@@ -90,17 +91,19 @@ let opening = 0;
 
 // Open ``text`` as the file ``name``; ``original`` is the file as opened (Reset returns to
 // it): the text itself, unless an open file is read again with other units or up axis,
-// its edits kept.
-export async function openText(text, name, original = text, encoding = 'utf-8', frame = 0) {
-  doc.tried = { text: original, name, encoding };
+// its edits kept. ``jointMap``: sent with its inspection and, once open, its solves.
+export async function openText(text, name, original = text, encoding = 'utf-8', frame = 0, jointMap = null) {
+  doc.tried = { text: original, name, encoding, jointMap };
   const ticket = ++opening;
   $('status').textContent = `opening ${name}…`;
   let res;
   try {
-    res = await api('POST', 'v1/bvh/inspect', { bvh: text, frame: 0, ...fileSettings() });
+    const map = jointMap ? { joint_map: jointMap } : {};
+    res = await api('POST', 'v1/bvh/inspect', { bvh: text, frame: 0, ...fileSettings(), ...map });
     if (ticket !== opening) return;
   } catch (err) {
     if (ticket !== opening) return;
+    offerTemplate(err, text);
     const again = doc.active && name === doc.name && original === doc.original;
     if (again && doc.settings) { // the open file stays as it was read: say so
       $('bvh-units').value = doc.settings.units;
@@ -118,7 +121,8 @@ export async function openText(text, name, original = text, encoding = 'utf-8', 
   motionCache.clear();
   lastRow = { text: null, frame: -1, row: null };
   const info = res.data;
-  Object.assign(doc, { active: true, name, original, text, shown: text, info, frame: 0, encoding });
+  Object.assign(doc, { active: true, name, original, text, shown: text, info, frame: 0, encoding, jointMap });
+  showMap(jointMap);
   doc.settings = { units: $('bvh-units').value, up: $('bvh-up').value };
   const frame0 = fileFrame(text, 0);
   doc.toWorld = worldMapping(info, frame0);
@@ -135,9 +139,11 @@ export async function openText(text, name, original = text, encoding = 'utf-8', 
   controls.target.set(0, pelvis[1], 0);
   camera.position.set(0.85, pelvis[1] + 0.5, 3.3);
   controls.update();
-  const slider = $('bvh-frame');
-  slider.max = String(Math.max(info.frames - 1, 0));
-  slider.value = String(at);
+  for (const input of [$('bvh-frame'), $('bvh-frame-number')]) {
+    input.max = String(Math.max(info.frames - 1, 0));
+    input.value = String(at);
+  }
+  delete $('bvh-frame-number').dataset.editing;
   $('bvh-loaded').hidden = false;
   $('bvh-name').textContent = name;
   const fps = info.frame_time > 0 ? ` @ ${(1 / info.frame_time).toFixed(4).replace(/\.?0+$/, '')} fps` : '';
@@ -205,23 +211,72 @@ export async function openFile(file) {
     return;
   }
   if (!mayReplace(file.name)) return;
-  // each file is read with units and up axis found anew (a choice made for the file before,
-  // inches say, drew a centimetre file as a giant)
-  $('bvh-units').value = 'auto';
-  $('bvh-up').value = 'auto';
   const decoded = decodeFile(bytes);
   // lines ended by CR alone (classic Mac OS): read as LF, as the service reads them (an
   // edit then comes back with LF ends); the page's own reader splits at LF
   const crOnly = decoded.text.includes('\r') && !decoded.text.includes('\n');
   const text = crOnly ? decoded.text.replaceAll('\r', '\n') : decoded.text;
-  await openText(text, file.name, text, decoded.encoding);
+  let jointMap;
+  try {
+    jointMap = mapFor(file.name, text);
+  } catch (err) {
+    showError(err);
+    return;
+  }
+  // each file is read with units and up axis found anew (a choice made for the file before,
+  // inches say, drew a centimetre file as a giant)
+  $('bvh-units').value = 'auto';
+  $('bvh-up').value = 'auto';
+  showMap(jointMap);
+  await openText(text, file.name, text, decoded.encoding, 0, jointMap);
   // refused: a units change re-trying it does not ask again (the user said yes already)
   if (doc.tried && doc.tried.name === file.name) doc.tried.confirmed = true;
+}
+
+// The joint map a file opened from the picker (or a drop) is read with: the field's, for the
+// file last asked for opened again; the open file's own, for it; none for another file.
+function mapFor(name, text) {
+  const t = doc.tried;
+  if (t && t.name === name && t.text === text) return readMap();
+  if (doc.active && doc.name === name && doc.original === text) return doc.jointMap;
+  return null;
+}
+
+// Units, up axis or joint map changed: read again the file last asked for, with the joint
+// map in the field. If that is the open file, its edits are kept and Reset still returns
+// to it as opened (the undo history starts anew: its poses were in the old units); if its
+// opening failed, that file, not the open one. (After a drag's last answer.)
+export function readAgain() {
+  whenCommitted(() => {
+    const t = doc.tried;
+    if (!t) {
+      if (!doc.active && $('bvh-map').value.trim()) {
+        showError(new ApiError(-1, 'Joint map', 'open a BVH file first: the map is sent with its requests'));
+      }
+      return;
+    }
+    const open = doc.active && t.name === doc.name && t.text === doc.original;
+    let jointMap;
+    try {
+      jointMap = readMap();
+    } catch (err) {
+      if (open && doc.settings) { // not read again: the menus say what the file was read with
+        $('bvh-units').value = doc.settings.units;
+        $('bvh-up').value = doc.settings.up;
+      }
+      showError(err);
+      return;
+    }
+    if (open) openText(doc.text, doc.name, doc.original, doc.encoding, doc.frame, jointMap);
+    else if (t.confirmed || mayReplace(t.name)) openText(t.text, t.name, t.text, t.encoding, 0, jointMap);
+  });
 }
 
 export function closeFile() {
   doc.active = false;
   doc.info = null;
+  doc.jointMap = null;
+  showMap(null);
   motionCache.clear();
   lastRow = { text: null, frame: -1, row: null };
   buildSkeleton();
@@ -241,7 +296,32 @@ export function closeFile() {
 // Show another frame of the file: its targets go (they were for the other frame), pins stay.
 // (after the gesture's last answer, where one is on its way: a scrub dropped it)
 export function setFrame(frame) {
+  $('bvh-frame').value = String(frame); // both controls show the frame asked for meanwhile
+  const box = $('bvh-frame-number');
+  delete box.dataset.editing;
+  box.value = String(frame);
   whenCommitted(() => showFrame(frame));
+}
+
+// The frame box: show the frame typed (0-based, as the API's `frame`), or say why not and
+// show the frame asked for before.
+export function jumpToFrame(typed) {
+  const box = $('bvh-frame-number');
+  if (!doc.active) return;
+  const last = doc.info.frames - 1;
+  const raw = String(typed).trim();
+  const frame = Number(raw);
+  if (raw === '' || !Number.isInteger(frame) || frame < 0 || frame > last) {
+    delete box.dataset.editing;
+    box.value = $('bvh-frame').value;
+    if (raw !== '') {
+      showError(new ApiError(-1, 'No such frame', `${doc.name}: frame ${raw.slice(0, 20)}: `
+        + `it has frames 0 to ${last} (0-based, as the API's frame)`));
+    }
+    return;
+  }
+  if (ui.currentError && ui.currentError.title === 'No such frame') clearError();
+  setFrame(frame);
 }
 
 function showFrame(frame) {
@@ -260,6 +340,8 @@ function showFrame(frame) {
 export function refreshFrame() {
   if (!doc.active) return;
   $('bvh-frame').value = String(doc.frame);
+  const box = $('bvh-frame-number');
+  if (!box.dataset.editing) box.value = String(doc.frame); // (not what the user is typing)
   const t = doc.frame * doc.info.frame_time;
-  $('bvh-frame-label').textContent = `${doc.frame} / ${doc.info.frames - 1} (${t.toFixed(2)} s)`;
+  $('bvh-frame-label').textContent = `/ ${doc.info.frames - 1} (${t.toFixed(2)} s)`;
 }

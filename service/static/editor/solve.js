@@ -183,6 +183,7 @@ function solveBody() {
       targets: [...state.targets].map(([joint, p]) => ({ joint, position: toFile(p), weight: 1.0 })),
       pins: [...state.pins].filter((j) => !state.targets.has(j)),
       options: options(),
+      ...(doc.jointMap ? { joint_map: doc.jointMap } : {}),
     };
   }
   return {

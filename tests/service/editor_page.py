@@ -1,0 +1,207 @@
+"""The editor's browser tests' shared parts: the real server (uvicorn, real models) on a free
+loopback port, a real headless Chromium driven by Playwright, and helpers that drive the page.
+
+Chromium: ``$MARIONETTE_CHROMIUM``, else ``/usr/bin/chromium`` (Debian: ``apt-get install -y
+chromium``), else ``chromium``/``chromium-browser``/``google-chrome`` on PATH. The tests are
+skipped, saying so, only when none exists.
+
+The test modules name this module in ``pytest_plugins``, so its fixtures are found: ``server``
+is session-scoped (one server, a subprocess, for every editor test module), ``browser``
+module-scoped (each module's own Chromium, closed with it). It holds no asserts
+(PYTEST_DONT_REWRITE: the tests import it before it becomes their plugin, and pytest would
+warn that it cannot rewrite it).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import shutil
+import socket
+import subprocess
+import sys
+import time
+import urllib.error
+import urllib.request
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+REPO_ROOT = Path(__file__).resolve().parents[2]
+CHROMIUM_ARGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--no-first-run",
+    # WebGL on the CPU (SwiftShader); without the flag newer Chromium refuses it headless.
+    "--enable-unsafe-swiftshader",
+]
+
+# The service as `pose-service` runs it, plus the editor routes (a no-op once create_app
+# mounts them itself).
+SERVER = """
+import sys
+import uvicorn
+from service.app import create_app
+from service.editor import mount_editor
+from service.settings import Settings
+
+app = create_app(Settings(models_dir=sys.argv[1], access_log=False))
+if not any(getattr(r, "path", None) == "/editor" for r in app.routes):
+    mount_editor(app)
+uvicorn.run(app, host="127.0.0.1", port=int(sys.argv[2]), log_level="warning")
+"""
+
+
+def find_chromium() -> str | None:
+    env = os.environ.get("MARIONETTE_CHROMIUM")
+    if env:
+        return env
+    if Path("/usr/bin/chromium").is_file():
+        return "/usr/bin/chromium"
+    for name in ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable"):
+        found = shutil.which(name)
+        if found:
+            return found
+    return None
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@pytest.fixture(scope="session")
+def server(models_dir: Path) -> Iterator[str]:
+    """The real service on a free loopback port; yields its base URL once it is ready."""
+    port = free_port()
+    proc = subprocess.Popen(
+        [sys.executable, "-c", SERVER, str(models_dir), str(port)],
+        cwd=REPO_ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+    )
+    base = f"http://127.0.0.1:{port}"
+    try:
+        deadline = time.monotonic() + 60
+        while True:
+            if proc.poll() is not None:
+                out = proc.stdout.read().decode(errors="replace") if proc.stdout else ""
+                pytest.fail(f"the server exited with {proc.returncode}:\n{out}")
+            try:
+                with urllib.request.urlopen(f"{base}/v2/health/ready", timeout=2) as r:
+                    if r.status == 200:
+                        break
+            except urllib.error.HTTPError as exc:  # 503: loading, or failed for good
+                detail = json.loads(exc.read() or b"{}").get("detail")
+                if detail and detail != "loading models":
+                    pytest.fail(f"the server cannot load the models in {models_dir}: {detail}")
+            except OSError:
+                pass
+            if time.monotonic() > deadline:
+                pytest.fail("the server was not ready within 60 s")
+            time.sleep(0.2)
+        yield base
+    finally:
+        proc.terminate()
+        try:
+            proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+@pytest.fixture(scope="module")
+def browser() -> Iterator[Any]:
+    executable = find_chromium()
+    if executable is None:
+        pytest.skip(
+            "no Chromium found: install it (Debian: apt-get install -y chromium) "
+            "or set MARIONETTE_CHROMIUM to a Chromium/Chrome executable"
+        )
+    sync_api = pytest.importorskip("playwright.sync_api", reason="the playwright package")
+    with sync_api.sync_playwright() as p:
+        b = p.chromium.launch(executable_path=executable, headless=True, args=CHROMIUM_ARGS)
+        try:
+            yield b
+        finally:
+            b.close()
+
+
+def dist(a: list[float], b: list[float]) -> float:
+    return math.dist(a, b)
+
+
+def post_json(url: str, body: dict[str, Any]) -> Any:
+    req = urllib.request.Request(
+        url, data=json.dumps(body).encode(), headers={"Content-Type": "application/json"}
+    )
+    with urllib.request.urlopen(req, timeout=30) as r:
+        return json.loads(r.read())
+
+
+# -- the review's defects: each found by a test run against the page before its fix ------------
+M = "window.marionette"
+
+
+def open_editor(browser: Any, server: str) -> Any:
+    """A fresh page on the editor, loaded and connected (its context closed with the page's
+    ``context``)."""
+    context = browser.new_context(viewport={"width": 1280, "height": 800}, device_scale_factor=1)
+    page = context.new_page()
+    page.set_default_timeout(20_000)
+    page.goto(server + "/editor")
+    page.wait_for_function(f"() => {M} && {M}.ready()")
+    page.wait_for_function("() => document.getElementById('status').textContent === 'connected'")
+    return page
+
+
+def give_file(page: Any, body: str, name: str) -> None:
+    """``body`` given to the editor's file picker as the file ``name``."""
+    page.set_input_files(
+        "#bvh-file", files=[{"name": name, "mimeType": "text/plain", "buffer": body.encode()}]
+    )
+
+
+def held_drag(page: Any, joint: str, dx: float = 30, dy: float = -40) -> list[Any]:
+    """Drag ``joint`` by (dx, dy) and release it while the answers are held back: the
+    held routes, to continue."""
+    held: list[Any] = []
+    page.route("**/v1/bvh/solve", lambda route: held.append(route))
+    xy = page.evaluate(f"{M}.projectJoint('{joint}')")
+    page.mouse.move(xy["x"], xy["y"])
+    page.mouse.down()
+    page.mouse.move(xy["x"] + dx, xy["y"] + dy, steps=4)
+    page.mouse.up()
+    page.wait_for_function(f"() => {M}.solveCount().inflight")
+    return held
+
+
+def settle(page: Any) -> None:
+    page.wait_for_function(f"() => (s => !s.dirty && !s.inflight)({M}.solveCount())", polling=50)
+
+
+def release(page: Any, held: list[Any]) -> None:
+    """Let the BVH solves a test held (``held_drag``) through, stop holding, and settle."""
+    for route in held:
+        route.continue_()
+    page.unroute("**/v1/bvh/solve")
+    settle(page)
+
+
+def drag_joint(page: Any, joint: str, dx: float, dy: float, steps: int = 8) -> None:
+    """Drag ``joint``'s handle by (dx, dy) pixels and wait for the gesture's last solve."""
+    xy = page.evaluate(f"{M}.projectJoint('{joint}')")
+    page.mouse.move(xy["x"], xy["y"])
+    page.mouse.down()
+    for i in range(1, steps + 1):
+        page.mouse.move(xy["x"] + dx * i / steps, xy["y"] + dy * i / steps)
+        page.wait_for_timeout(16)
+    page.mouse.up()
+    settle(page)

@@ -1,0 +1,365 @@
+"""The browser editor editing a file (real Chromium, the real server): undo and redo
+across scrubs, and the screen, the file and the history kept in step through failed
+solves, early undos, scrubs, exports, units changes and other files opened while a drag's
+last answer is on its way. Shared parts: ``tests/service/editor_page.py``.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from tests.service.editor_page import (
+    REPO_ROOT,
+    M,
+    dist,
+    drag_joint,
+    give_file,
+    held_drag,
+    open_editor,
+    post_json,
+    release,
+    settle,
+)
+
+# the fixtures `server` (one for the session) and `browser` (one per module)
+pytest_plugins = ("tests.service.editor_page",)
+
+
+@pytest.mark.browser
+def test_editor_undo_after_scrubbing_returns_to_the_state_before(server: str, browser: Any) -> None:
+    """Scrubbing rewrote the current undo step with the frame scrubbed to (and no targets):
+    after an edit at frame 1 was undone, a scrub to frame 0 and a redo, undo showed frame 0
+    (the scrubbed frame) instead of frame 1 before the edit, and a redo after a scrub lost
+    the edit's frame and target. Now scrubbing changes no step: undo and redo show the frame
+    of the edit they undo or redo (with its targets)."""
+    text = json.loads((REPO_ROOT / "docs" / "examples" / "bvh_solve.json").read_text())["bvh"]
+    page = open_editor(browser, server)
+
+    def scrub(frame: int) -> None:
+        page.locator("#bvh-frame").fill(str(frame))
+        page.wait_for_function(f"() => {M}.bvh().frame === {frame}")
+
+    def shown() -> tuple[bool, int, list[str]]:
+        """(the original text?, frame, targets), and the frame drawn is the text's."""
+        now = page.evaluate(f"{M}.bvhText()")
+        frame = page.evaluate(f"{M}.bvh().frame")
+        want = post_json(server + "/v1/bvh/inspect", {"bvh": now, "frame": frame})["positions"]
+        got = page.evaluate(f"{M}.bvhPositions()")
+        assert max(dist(a, b) for a, b in zip(got, want, strict=True)) < 1e-6
+        return now == text, frame, sorted(page.evaluate(f"{M}.targets()"))
+
+    try:
+        page.set_input_files(
+            "#bvh-file",
+            files=[{"name": "three.bvh", "mimeType": "text/plain", "buffer": text.encode()}],
+        )
+        page.wait_for_function(f"() => {M}.bvh() && {M}.bvh().name === 'three.bvh'")
+        scrub(1)
+        drag_joint(page, "left_wrist", 40, -60)
+        edited = page.evaluate(f"{M}.bvhText()")
+        assert edited != text
+        assert page.evaluate(f"{M}.history()") == {"length": 2, "index": 1}
+        assert shown() == (False, 1, ["left_wrist"])
+
+        scrub(2)  # not an undo step
+        assert page.evaluate(f"{M}.history()") == {"length": 2, "index": 1}
+        assert shown() == (False, 2, [])
+        page.click("#undo")  # the state before the edit: the file as opened, frame 1
+        assert shown() == (True, 1, [])
+        scrub(0)
+        page.click("#redo")  # the edit, at its frame, with its target
+        assert shown() == (False, 1, ["left_wrist"])
+        assert page.evaluate(f"{M}.bvhText()") == edited
+        page.click("#undo")  # was: frame 0, the frame scrubbed to
+        assert shown() == (True, 1, [])
+        page.click("#redo")
+
+        # an edit after a scrub: undoing it shows its frame, the step before it the first
+        # edit's frame
+        scrub(2)
+        drag_joint(page, "right_wrist", -40, -60)
+        assert page.evaluate(f"{M}.history()") == {"length": 3, "index": 2}
+        assert shown() == (False, 2, ["right_wrist"])
+        page.click("#undo")
+        assert page.evaluate(f"{M}.bvhText()") == edited
+        assert shown() == (False, 2, [])
+        page.click("#undo")
+        assert shown() == (True, 1, [])
+        page.click("#redo")
+        page.click("#redo")
+        assert shown() == (False, 2, ["right_wrist"])
+        # a scrub, then an option changed with no targets: still no step of its own
+        scrub(0)
+        page.get_by_label("Preserve bone lengths").click()
+        settle(page)
+        assert page.evaluate(f"{M}.history()") == {"length": 3, "index": 2}
+    finally:
+        page.context.close()
+
+
+@pytest.mark.browser
+def test_editor_keeps_screen_file_and_history_in_step(server: str, browser: Any) -> None:
+    """Found by a browser audit (2026-12-05): a drag whose last solve failed left a
+    mid-drag answer on screen while Export wrote the file unedited; picking a sample threw
+    an edited file's work away unasked; a units change re-opened a closed file; re-reading
+    the open file jumped to frame 0; a file whose lines end in CR alone broke the page;
+    Ctrl+Z before a drag's last answer undid the edit before it too."""
+    text = json.loads((REPO_ROOT / "docs" / "examples" / "bvh_solve.json").read_text())["bvh"]
+    page = open_editor(browser, server)
+    errors: list[str] = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+
+    def open_file(body: str, name: str) -> None:
+        give_file(page, body, name)
+        page.wait_for_function(f"() => {M}.bvh() && {M}.bvh().name === '{name}'")
+
+    def shown_is_committed() -> bool:
+        got, want = page.evaluate(f"{M}.pose()"), page.evaluate(f"{M}.committedPose()")
+        return all(dist(got[j], want[j]) < 1e-9 for j in want)
+
+    try:
+        # a file whose lines end in CR alone opens, is drawn as served, and can be edited
+        open_file(text.replace("\n", "\r"), "cr.bvh")
+        assert page.evaluate(f"{M}.bvhText()") == text  # read as LF, as the service reads it
+        drag_joint(page, "left_wrist", 40, -60)
+        assert page.evaluate(f"{M}.bvh()")["edited"]
+
+        # the drag's answers arrive, its last solve fails: the screen shows the pose as it was
+        before = page.evaluate(f"{M}.bvhText()")
+        xy = page.evaluate(f"{M}.projectJoint('right_wrist')")
+        page.mouse.move(xy["x"], xy["y"])
+        page.mouse.down()
+        page.mouse.move(xy["x"] - 40, xy["y"] - 60, steps=6)
+        settle(page)
+        assert not shown_is_committed()  # a mid-drag answer on screen
+        page.route("**/v1/bvh/solve", lambda route: route.abort())
+        page.mouse.up()
+        page.wait_for_function(f"() => {M}.error() !== null")
+        settle(page)
+        assert page.evaluate(f"{M}.error()")["status"] == 0
+        assert shown_is_committed() and page.evaluate(f"{M}.bvhText()") == before
+        assert page.locator("#status").inner_text() == "server unreachable"
+        page.unroute("**/v1/bvh/solve")
+
+        # Ctrl+Z while a drag's answer is on its way drops that drag alone
+        steps = page.evaluate(f"{M}.history()")
+        held = held_drag(page, "head", 30, -30)
+        page.keyboard.press("Control+z")
+        for route in held:
+            route.continue_()
+        page.unroute("**/v1/bvh/solve")
+        settle(page)
+        assert page.evaluate(f"{M}.history()") == steps
+        assert page.evaluate(f"{M}.bvhText()") == before and shown_is_committed()
+
+        # re-read with other units: the frame shown stays
+        page.locator("#bvh-frame").fill("2")
+        page.wait_for_function(f"() => {M}.bvh().frame === 2")
+        page.select_option("#bvh-units", "cm")
+        page.wait_for_function(f"() => {M}.bvh().units === 'cm'")
+        assert page.evaluate(f"{M}.bvh()")["frame"] == 2
+
+        # a sample while the file is edited: asked first; "no" keeps the file, "yes" closes
+        page.once("dialog", lambda d: d.dismiss())
+        page.select_option("#sample", index=1)
+        assert page.evaluate(f"{M}.bvh()") is not None and page.evaluate(f"{M}.bvh()")["edited"]
+        page.once("dialog", lambda d: d.accept())
+        page.select_option("#sample", index=1)
+        page.wait_for_function(f"() => {M}.bvh() === null")
+        # units changed now: the closed file is not opened again
+        page.select_option("#bvh-units", "m")
+        page.wait_for_timeout(300)
+        assert page.evaluate(f"{M}.bvh()") is None
+        assert not errors, errors
+    finally:
+        page.context.close()
+
+
+@pytest.mark.browser
+def test_editor_never_drops_an_edit_when_the_file_changes(server: str, browser: Any) -> None:
+    """Found by a browser audit on users' own files (2026-12-05): opening another file (or
+    the same again) threw an edited file away unasked; a scrub or a units change while a
+    drag's last answer was on its way dropped the edit, and Export wrote the file without
+    it; a units choice made for one file (inches) drew the next (centimetres) as a giant;
+    after a refused units change the menu showed the refused unit; a refusal did not say
+    which file; a file cut short in its last frame opened without a word."""
+    text = json.loads((REPO_ROOT / "docs" / "examples" / "bvh_solve.json").read_text())["bvh"]
+    page = open_editor(browser, server)
+    errors: list[str] = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+
+    try:
+        give_file(page, text, "a.bvh")
+        page.wait_for_function(f"() => {M}.bvh() && {M}.bvh().name === 'a.bvh'")
+        drag_joint(page, "left_wrist", 40, -60)
+        edited = page.evaluate(f"{M}.bvhText()")
+        # another file over an edited one: asked; "no" keeps the edits
+        page.once("dialog", lambda d: d.dismiss())
+        give_file(page, text, "b.bvh")
+        page.wait_for_timeout(300)
+        assert page.evaluate(f"{M}.bvh()")["name"] == "a.bvh"
+        assert page.evaluate(f"{M}.bvhText()") == edited
+
+        # a scrub, then Export, while the drag's last answer is on its way: both wait for it
+        held = held_drag(page, "right_wrist")
+        page.locator("#bvh-frame").fill("2")
+        with page.expect_download() as download:
+            page.click("#export")
+            release(page, held)
+        page.wait_for_function(f"() => {M}.bvh().frame === 2")
+        saved = Path(download.value.path()).read_text()
+        assert saved == page.evaluate(f"{M}.bvhText()") != edited  # the drag is in it
+
+        # scrubbed away and back while waiting: the frame asked last (it ended on the other)
+        held = held_drag(page, "left_wrist")
+        page.locator("#bvh-frame").fill("0")
+        page.locator("#bvh-frame").fill("2")
+        release(page, held)
+        page.wait_for_timeout(200)
+        assert page.evaluate(f"{M}.bvh()")["frame"] == 2
+
+        # a file opened while waiting asks too: the edit on its way counts
+        held = held_drag(page, "right_wrist")
+        dialogs: list[str] = []
+        page.once("dialog", lambda d: (dialogs.append(d.message), d.dismiss()))
+        give_file(page, text, "b.bvh")
+        page.wait_for_timeout(300)
+        release(page, held)
+        assert dialogs and page.evaluate(f"{M}.bvh()")["name"] == "a.bvh"
+
+        # a press released without moving while the drag's answer came back: that answer
+        # was held for the press and never asked again, and Export waited for ever
+        held = held_drag(page, "head")
+        xy = page.evaluate(f"{M}.projectJoint('left_ankle')")
+        page.mouse.move(xy["x"], xy["y"])
+        page.mouse.down()
+        for route in held:
+            route.continue_()
+        page.unroute("**/v1/bvh/solve")
+        page.wait_for_timeout(300)
+        page.mouse.up()
+        with page.expect_download(timeout=5_000) as download:
+            page.click("#export")
+        settle(page)
+        assert Path(download.value.path()).read_text() == page.evaluate(f"{M}.bvhText()")
+
+        # a units change the service refuses: the menu goes back to what the file was read with
+        page.select_option("#bvh-units", "mm")
+        page.wait_for_function(f"() => {M}.error() !== null")
+        detail = page.evaluate(f"{M}.error()")["detail"]
+        assert detail.startswith("a.bvh: units: 'mm' makes the rest-pose leg"), detail
+        assert page.locator("#bvh-units").input_value() == "auto"
+        assert page.evaluate(f"{M}.bvh()")["units"] == "cm"
+
+        # inches chosen for this file do not carry over to the next one
+        page.select_option("#bvh-units", "in")
+        page.wait_for_function(f"() => {M}.bvh().units === 'in'")
+        page.once("dialog", lambda d: d.accept())
+        give_file(page, text, "b.bvh")
+        page.wait_for_function(f"() => {M}.bvh().name === 'b.bvh'")
+        assert page.evaluate(f"{M}.bvh()")["units"] == "cm"
+        assert page.locator("#bvh-units").input_value() == "auto"
+
+        # a file cut short in its last frame opens, saying so
+        cut = text.rstrip("\n")
+        cut = cut[: cut.rindex(" ", 0, len(cut) - 40)] + "\n"
+        give_file(page, cut, "cut.bvh")
+        page.wait_for_function(f"() => {M}.bvh().name === 'cut.bvh'")
+        error = page.evaluate(f"{M}.error()")
+        assert error is not None and error["title"] == "Broken file", error
+        assert "cut.bvh: its last frame (2) holds" in error["detail"]
+        assert not errors, errors
+    finally:
+        page.context.close()
+
+
+@pytest.mark.browser
+def test_editor_frame_box_jumps_to_a_typed_frame(
+    server: str, browser: Any, more_mocap: Path
+) -> None:
+    """A long file (ReActIdle 003, 918 frames) could only be scrubbed: the frame box beside
+    the slider shows the frame (0-based, the API's `frame`), jumps to a typed one on Enter,
+    refuses one out of range saying so, follows the slider and its keys (and steps with its
+    own arrows), keeps what is being typed while an answer redraws the panel, and waits for
+    a drag's last answer as a scrub does."""
+    path = next(more_mocap.rglob("genuine/003_genuine.bvh"))
+    text = path.read_text()
+    page = open_editor(browser, server)
+    errors: list[str] = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    box, slider = page.locator("#bvh-frame-number"), page.locator("#bvh-frame")
+
+    def jump(value: str) -> None:
+        box.fill(value)
+        box.press("Enter")
+
+    def shows(frame: int) -> None:
+        page.wait_for_function(f"() => {M}.bvh().frame === {frame}")
+        assert box.input_value() == slider.input_value() == str(frame)
+
+    try:
+        page.set_input_files("#bvh-file", str(path))
+        page.wait_for_function(f"() => {M}.bvh() !== null")
+        assert page.evaluate(f"{M}.bvh().frames") == 918
+        assert box.is_visible()
+        assert box.input_value() == "0"
+        assert box.get_attribute("max") == "917"
+
+        # typed, then Enter: that frame, drawn as the service has it
+        jump("700")
+        shows(700)
+        want = post_json(server + "/v1/bvh/inspect", {"bvh": text, "frame": 700})["positions"]
+        got = page.evaluate(f"{M}.bvhPositions()")
+        assert max(dist(a, b) for a, b in zip(got, want, strict=True)) < 1e-6
+        assert page.locator("#bvh-frame-label").inner_text().startswith("/ 917 (")
+
+        # the slider and its keys move the box; the box's own arrows step
+        slider.focus()
+        page.keyboard.press("ArrowRight")
+        shows(701)
+        page.keyboard.press("End")
+        shows(917)
+        box.focus()
+        page.keyboard.press("ArrowDown")
+        shows(916)
+
+        # out of range, or not a whole frame: refused, saying so; the frame stays
+        for bad in ("918", "-1", "12.5"):
+            jump(bad)
+            error = page.evaluate(f"{M}.error()")
+            assert error is not None and error["title"] == "No such frame", error
+            assert f"003_genuine.bvh: frame {bad}: it has frames 0 to 917" in error["detail"]
+            assert page.locator("#error").is_visible()
+            shows(916)
+        jump("10")  # a frame it has: shown, the refusal gone
+        shows(10)
+        assert page.evaluate(f"{M}.error()") is None
+
+        # a jump while a drag's last answer is on its way waits for it: the edit is kept
+        held = held_drag(page, "left_wrist")
+        jump("20")
+        page.wait_for_timeout(200)
+        assert page.evaluate(f"{M}.bvh().frame") == 10
+        release(page, held)
+        shows(20)
+        assert page.evaluate(f"{M}.history()") == {"length": 2, "index": 1}
+        assert page.evaluate(f"{M}.bvhText()") != text
+
+        # what is being typed stays while the answer to a drag redraws the panel
+        held = held_drag(page, "right_wrist")
+        box.fill("3")
+        release(page, held)
+        assert page.evaluate(f"{M}.history()") == {"length": 3, "index": 2}
+        assert box.input_value() == "3"
+        assert page.evaluate(f"{M}.bvh().frame") == 20
+        box.press("Enter")
+        shows(3)
+        page.click("#undo")  # the state before the edit, at its frame: the box follows
+        shows(20)
+        assert not errors, errors
+    finally:
+        page.context.close()
