@@ -352,7 +352,12 @@ class ModelEntry(_Strict):
 
 
 class Provenance(_Strict):
-    data: list[dict[str, str]] = Field(description="Archives used: name and sha256.")
+    data: list[dict[str, str]] = Field(
+        description="Sources read (trainer.export.recorded_source): an archive's name and "
+        'sha256 (`verified`: "false" where SHA256SUMS did not list it); an extracted '
+        "folder's name, the sha256 of its files' list, `kind`, `files` and the `archive` "
+        "SHA256SUMS names for it (not checked against it)."
+    )
     dataset: dict[str, Any] = Field(default_factory=dict)
     split_seed: int
     config: dict[str, Any]
