@@ -39,6 +39,10 @@ def fingerprint(folder: Path) -> str:
     return digest.hexdigest()[:16]
 
 
+class CacheDirError(RuntimeError):
+    """No folder to keep compiled kernels in (``pose-service`` says so in one line)."""
+
+
 def _cache_dir() -> None:
     """Point numba's cache at this package's sources' :func:`fingerprint` folder: under
     ``core/__pycache__`` when writable, else ``$NUMBA_CACHE_DIR`` or a per-user temp
@@ -55,7 +59,14 @@ def _cache_dir() -> None:
             base = str(here / "__pycache__" / "numba")
         else:
             uid = os.getuid() if hasattr(os, "getuid") else 0
-            base = str(Path(tempfile.gettempdir()) / f"marionette-numba-{uid}")
+            try:
+                temp = tempfile.gettempdir()
+            except FileNotFoundError:  # a read-only root without its writable /tmp
+                raise CacheDirError(
+                    "no writable folder for the compiled kernels' cache: mount a writable "
+                    "/tmp (an emptyDir, a tmpfs) or set NUMBA_CACHE_DIR to one"
+                ) from None
+            base = str(Path(temp) / f"marionette-numba-{uid}")
     os.environ["NUMBA_CACHE_DIR"] = str(Path(base) / mark)  # numba reads it on import
     if seed and Path(seed).is_dir() and not Path(base).exists():
         with contextlib.suppress(OSError):  # no seed then: the kernels compile at warm-up

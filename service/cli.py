@@ -15,8 +15,12 @@ from pathlib import Path
 
 from pydantic import ValidationError
 
-from service.logs import log_config
-from service.settings import Settings, unknown_variables
+try:  # importing the settings imports the kernels: their cache folder is chosen then
+    from service.logs import log_config
+    from service.settings import Settings, unknown_variables
+except RuntimeError as exc:  # core.jit.CacheDirError: one line, not a traceback
+    print(f"pose-service: {exc}", file=sys.stderr)
+    raise SystemExit(2) from None
 
 
 def parser() -> argparse.ArgumentParser:

@@ -106,3 +106,28 @@ def test_a_bad_setting_is_one_line_not_a_traceback(tmp_path: Path) -> None:
     assert proc.returncode == 2, proc.stderr
     assert "POSE_DEADLINE_SECONDS: Input should be a valid number" in proc.stderr
     assert "Traceback" not in proc.stderr, proc.stderr
+
+
+def test_no_folder_for_the_kernels_cache_is_one_line() -> None:
+    """A read-only root without its writable /tmp crashed the start with a traceback from
+    the temp-folder lookup (an ops audit); now one line saying what to mount, exit 2."""
+    import os
+    import subprocess
+
+    from tests.conftest import REPO_ROOT
+
+    script = (
+        "import tempfile\n"
+        "def gone():\n"
+        "    raise FileNotFoundError('No usable temporary directory found')\n"
+        "tempfile.gettempdir = gone\n"
+        "import service.cli\n"
+    )
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    env["MARIONETTE_NUMBA_SEED"] = "/nonexistent-seed"  # as in the image: no core/__pycache__
+    proc = subprocess.run(
+        [sys.executable, "-c", script], cwd=REPO_ROOT, env=env, capture_output=True, text=True,
+        timeout=60,
+    )  # fmt: skip
+    assert proc.returncode == 2, proc.stderr
+    assert "mount a writable /tmp" in proc.stderr and "Traceback" not in proc.stderr
