@@ -297,6 +297,38 @@ def test_complete_uses_larger_schemes_and_bone_lengths(
         assert abs(got[b] - value) < 1e-6
 
 
+def test_complete_keeps_the_bones_its_key_points_fix(
+    client: Any, real_poses: PosePairs, models_dir: Path
+) -> None:
+    """A bone whose two ends are key points (neck-head, elbow-wrist, knee-ankle ...) has the
+    length they fix, and all 21 key points give the pose back (a completion audit: the
+    network's estimate of those bones missed 16 and 19 of 20 11- and 16-point requests'
+    key points by up to 8 mm, and the 21 points came back 2.9 mm off). A key point whose
+    chain to the next has no key point in it (pelvis to neck) may still be out of reach of
+    the estimated bones: 2 and 9 of 40 test poses at 11 and 16 points (27 and 38 before,
+    `/tmp` count of the TEST split, seed 0)."""
+    from core.manifest import load_manifest
+    from core.skeleton import BONES
+
+    levels = [list(e.joints) for e in load_manifest(models_dir).completion_levels()]
+    assert [len(j) for j in levels] == [6, 11, 16]
+    missed = 0
+    for k in range(8):
+        true = real_poses.poses[real_poses.goals[k]]
+        for joints in (levels[1], levels[2], list(JOINT_NAMES)):
+            kp = [{"joint": j, "position": true[JOINT_INDEX[j]].tolist()} for j in joints]
+            out = client.post("/v1/complete", json={"keypoints": kp}).json()
+            missed += not all(p["reached"] for p in out["keypoints"])
+            pose = as_array(out["pose"])
+            for c, p in BONES:
+                if JOINT_NAMES[c] in joints and JOINT_NAMES[p] in joints:
+                    want = np.linalg.norm(true[c] - true[p])
+                    assert abs(np.linalg.norm(pose[c] - pose[p]) - want) < 1e-9
+            if len(joints) == len(JOINT_NAMES):
+                assert np.abs(pose - true).max() < 1e-6
+    assert missed <= 3, missed  # of 16 requests at 11 and 16 points
+
+
 def test_complete_names_missing_base_points(client: Any) -> None:
     body = {
         "keypoints": [
