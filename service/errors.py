@@ -243,13 +243,13 @@ def _location(loc: Sequence[Any]) -> str:
     return clip(out or "body", QUOTE)
 
 
-def _near(value: Any) -> str:
+def _near(value: Any, names: Sequence[str] = JOINT_NAMES) -> str:
     """`` (did you mean 'left_wrist'?)`` for a joint name near a canonical one (another
     case, a dash for the underscore, a letter off), else nothing."""
     if not isinstance(value, str) or len(value) > 40:
         return ""
     key = name_key(value)
-    near = difflib.get_close_matches(key, JOINT_NAMES, 2, 0.85)  # a typo, not a neighbour
+    near = difflib.get_close_matches(key, names, 2, 0.85)  # a typo, not a neighbour
     ratio = [difflib.SequenceMatcher(None, key, n).ratio() for n in near]
     if not near or (len(near) == 2 and ratio[0] == ratio[1]):  # none, or no one nearest
         return ""
@@ -267,8 +267,12 @@ def _message(error: Any) -> str:
     ctx = error.get("ctx") or {}
     value = error.get("input")
     if kind == "literal_error" and "'spine1'" in str(ctx.get("expected", "")):
-        where = "no bone ends at" if "[key]" in error.get("loc", ()) else "unknown joint"
-        return f"{where} {quoted(value)}{_near(value)}; joints are {', '.join(JOINT_NAMES)}"
+        if "[key]" in error.get("loc", ()):  # a bone, named by its child joint
+            bones = JOINT_NAMES[1:]  # (the root ends none)
+            root = " (the root: no bone ends at it)" if value == JOINT_NAMES[0] else ""
+            near = "" if root else _near(value, bones)
+            return f"no bone ends at {quoted(value)}{root}{near}; bones end at {', '.join(bones)}"
+        return f"unknown joint {quoted(value)}{_near(value)}; joints are {', '.join(JOINT_NAMES)}"
     if kind == "finite_number":
         return "must be a finite number (NaN and infinities are not)"
     if kind == "float_type" and type(value) is int:  # JSON allows any integer; a float not

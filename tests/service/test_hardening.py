@@ -90,7 +90,15 @@ def test_nan_bone_length_and_unknown_bone_are_field_errors(client: Any) -> None:
     data = json.dumps({"keypoints": points[:6], "bone_lengths": {"left_knee": float("nan")}})
     assert_problem(post(client, data, "/v1/complete"), 422, "bone_lengths.left_knee: must be")
     data = json.dumps({"keypoints": points[:6], "bone_lengths": {"pelvis": 0.3}})
-    assert_problem(post(client, data, "/v1/complete"), 422, "no bone ends at 'pelvis'")
+    # the root named as such, the bones' names listed (it offered "did you mean 'pelvis'?"
+    # and the joints, pelvis among them: a completion audit)
+    detail = assert_problem(post(client, data, "/v1/complete"), 422, "no bone ends at 'pelvis'")[
+        "detail"
+    ]
+    assert "(the root: no bone ends at it); bones end at spine1," in detail
+    assert "did you mean" not in detail and "at pelvis," not in detail
+    data = json.dumps({"keypoints": points[:6], "bone_lengths": {"left_kne": 0.4}})
+    assert_problem(post(client, data, "/v1/complete"), 422, "(did you mean 'left_knee'?)")
 
 
 # -- limits ------------------------------------------------------------------------------------
