@@ -408,15 +408,16 @@ def _character(
             )
         units = name
     if up is not None and points is not None:  # given (or the default) against the body:
-        # refused where the rest pose AND the frame stand up along the other axis (a rig
-        # whose rest is Z-up but whose root turns it to stand up along +Y is right in +Y)
+        # refused where the rest pose stands up along the other axis and the frame does not
+        # stand along this one (a rig whose rest is Z-up but whose root turns it to stand
+        # up along +Y is right in +Y; the Z-up child, upright or bent, is not)
         rest_up = infer_up(skel, jmap)
-        if rest_up is not None and rest_up != up and up_of(points) == rest_up:
+        if rest_up is not None and rest_up != up and up_of(points) != up:
             given = "" if up_stated else " (the default: no up was given)"
             raise InvalidRequest(
-                f"{prefix}up: {quoted(up)}{given}, but the rest pose and this frame stand "
-                f'up along {rest_up} (ankles to head); give "up": "{rest_up}", or null to '
-                "infer it"
+                f"{prefix}up: {quoted(up)}{given}, but the rest pose stands up along "
+                f"{rest_up} (ankles to head) and this frame not along {up}; give "
+                f'"up": "{rest_up}", or null to infer it'
             )
     if up is None:
         found = infer_up(skel, jmap, points)

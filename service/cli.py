@@ -19,6 +19,8 @@ try:  # importing the settings imports the kernels: their cache folder is chosen
     from service.logs import log_config
     from service.settings import Settings, unknown_variables
 except RuntimeError as exc:  # core.jit.CacheDirError: one line, not a traceback
+    if type(exc).__name__ != "CacheDirError":  # (the class is not importable before it)
+        raise
     print(f"pose-service: {exc}", file=sys.stderr)
     raise SystemExit(2) from None
 

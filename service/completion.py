@@ -12,6 +12,7 @@ from core.geometry import symmetry_views, unview
 from core.skeleton import BONES, JOINT_INDEX, JOINT_NAMES, MIRROR, NUM_JOINTS, bone_lengths
 from service.errors import InvalidRequest
 from service.problems import CompleteResult
+from service.schemas import BONE_M
 
 if TYPE_CHECKING:
     from service.engine import Engine
@@ -114,12 +115,15 @@ def complete(
     assert pred is not None
     if not given_lengths:  # the network's own estimate of this body's proportions
         lengths = np.asarray(bone_lengths(pred), dtype=np.float64) * scale
-    # a bone whose two ends are key points has the length they fix, unless bone_lengths
-    # names it (the network's estimate missed them by up to 8 mm, at levels 2 and 3)
+    # a bone whose two ends are key points has the length they fix (within what a bone
+    # may be: the answer is a pose /v1/solve takes), unless bone_lengths names it (the
+    # network's estimate missed them by up to 11 mm, at levels 2 and 3)
     for b, (c, p) in enumerate(BONES):
         child, parent = JOINT_NAMES[c], JOINT_NAMES[p]
         if child in keypoints and parent in keypoints and child not in (given_lengths or {}):
-            lengths[b] = float(np.linalg.norm(keypoints[child] - keypoints[parent]))
+            fixed = float(np.linalg.norm(keypoints[child] - keypoints[parent]))
+            if BONE_M[0] <= fixed <= BONE_M[1]:
+                lengths[b] = fixed
     idx = np.asarray([JOINT_INDEX[j] for j in keypoints], dtype=np.intp)
     goal = np.stack([given[j] * scale for j in keypoints])
     # the compiled exact-reach polish (core.compiled_fabrik), as a solve's exact reach runs:

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Annotated, Any, Literal
+from typing import TYPE_CHECKING, Annotated, Any, Final, Literal
 
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, create_model
 
@@ -196,6 +196,11 @@ class Keypoint(_Body):
     position: Vec3
 
 
+#: The length a bone of a completion may have, metres (``bone_lengths``; a bone two key
+#: points fix takes their distance only within it: ``service.completion``).
+BONE_M: Final[tuple[float, float]] = (1e-3, 2.0)
+
+
 class CompleteRequest(_Body):
     model_config = ConfigDict(
         extra="forbid",
@@ -214,10 +219,12 @@ class CompleteRequest(_Body):
         le=MAX_COORDINATE,
         description="Height (m, world y) of the ground.",
     )
-    bone_lengths: dict[BoneName, Annotated[Finite, Field(ge=1e-3, le=2.0)]] | None = Field(
-        default=None,
-        description="Length (m) of the bone ending at each named joint; missing bones "
-        "take the reference length scaled like the given ones.",
+    bone_lengths: dict[BoneName, Annotated[Finite, Field(ge=BONE_M[0], le=BONE_M[1])]] | None = (
+        Field(
+            default=None,
+            description="Length (m) of the bone ending at each named joint; missing bones "
+            "take the reference length scaled like the given ones.",
+        )
     )
 
 

@@ -59,6 +59,10 @@ def test_the_contract_says_what_a_generated_client_needs(models_dir: Path) -> No
             if path.startswith("/v1/"):
                 assert {"ApiKey": []} in op["security"] and {} in op["security"]
     assert len(set(ids)) == len(ids) and "solveBatch" in ids and "healthLive" in ids
+    from service.docs import operation_id
+
+    assert operation_id("/", "get") == "root"
+    assert operation_id("/v1/items/{item_id}", "delete", 2) == "deleteItemsItemId"
     assert (
         "text/plain; version=0.0.4"
         in spec["paths"]["/metrics"]["get"]["responses"]["200"]["content"]

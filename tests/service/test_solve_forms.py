@@ -179,6 +179,18 @@ def test_an_up_axis_the_rest_pose_contradicts_is_refused(
     default = {**body, "character": {k: v for k, v in body["character"].items() if k != "up"}}
     r = client.post("/v1/solve", json=default)
     assert_problem(r, 422, "character.up: '+Y' (the default", 'give "up": "+Z"')
+    # bent 60 degrees (standing along neither axis): still refused (a review: a first fix
+    # asked the frame to stand along the rest pose's axis too, and let this through)
+    from scipy.spatial.transform import Rotation
+
+    root_name = body["character"]["joints"][0]["name"]
+    lean = Rotation.from_euler("x", 60, degrees=True)
+    root_q = Rotation.from_quat(body["rotations"].get(root_name, [0, 0, 0, 1]))
+    bent = {
+        **default,
+        "rotations": {**body["rotations"], root_name: (lean * root_q).as_quat().tolist()},
+    }
+    assert_problem(client.post("/v1/solve", json=bent), 422, "character.up: '+Y' (the default")
     wrong = {**body, "character": {**body["character"], "up": "+Y"}}
     problem = assert_problem(client.post("/v1/solve", json=wrong), 422, "character.up: '+Y', but")
     assert problem["errors"][0]["location"] == "character.up"
@@ -193,8 +205,6 @@ def test_an_up_axis_the_rest_pose_contradicts_is_refused(
         assert r.status_code == 200 and r.json()["up"] == up, r.text
     # a rig whose rest offsets stand up along +Z but whose root turns it to stand along +Y
     # (a review's find: its right "+Y" was refused, the two axes offered both wrong)
-    from scipy.spatial.transform import Rotation
-
     example = json.loads((REPO_ROOT / "docs/examples/solve_character.json").read_text())
     turn = Rotation.from_euler("x", 90, degrees=True)
     turned = json.loads(json.dumps(example))

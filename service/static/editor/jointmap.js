@@ -2,7 +2,7 @@
 // JSON {canonical joint: the file's joint name} in the panel's text field, sent as
 // `joint_map` with every v1/bvh/inspect and v1/bvh/solve of the file it was given for
 // (file.js). A refusal naming unmapped joints opens the field with a template of them and
-// lists the file's joints (End Sites as `<joint>_end`, as the service names them).
+// lists the file's joints (End Sites as `<joint>_end`, `_end2`, ..., as the service names them).
 
 import { $ } from './state.js';
 import { ApiError } from './api.js';
@@ -45,6 +45,7 @@ export function showMap(map) {
 export function fileJoints(text) {
   const names = [];
   const stack = [];
+  const ends = new Map();
   let last = null;
   for (const raw of text.split('\n', 100_000)) {
     const line = raw.trim();
@@ -54,7 +55,10 @@ export function fileJoints(text) {
       last = joint[1].trim();
       names.push(last);
     } else if (/^End\s+Site\b/.test(line)) {
-      last = `${stack[stack.length - 1]}_end`;
+      // a joint's second End Site is `<joint>_end2`, and so on (core/bvh.py names them so)
+      const owner = stack[stack.length - 1];
+      ends.set(owner, (ends.get(owner) || 0) + 1);
+      last = ends.get(owner) === 1 ? `${owner}_end` : `${owner}_end${ends.get(owner)}`;
       names.push(last);
     } else if (line.startsWith('{')) {
       stack.push(last);
