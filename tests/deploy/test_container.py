@@ -122,6 +122,9 @@ def image(engine: Engine, base_image: str, figures: dict[str, str]) -> str:
         flags += ["--build-arg", f"PIP_INDEX_URL={os.environ['PIP_INDEX_URL']}"]
     if os.environ.get("SMOKE_NO_CACHE") == "1":
         flags.append("--no-cache")
+    revision = subprocess.run(["git", "rev-parse", "HEAD"], cwd=ROOT, capture_output=True,
+                              text=True, check=False).stdout.strip() or "unknown"  # fmt: skip
+    flags += ["--build-arg", f"REVISION={revision}"]
     t0 = time.perf_counter()
     proc = subprocess.run([*engine.cmd, "build", *flags, str(ROOT)], env=engine.env,
                           capture_output=True, text=True, timeout=1800, cwd=ROOT)  # fmt: skip
@@ -190,6 +193,12 @@ def service(engine: Engine, image: str, figures: dict[str, str]) -> Iterator[Con
 def test_image_runs_unprivileged_with_a_healthcheck_and_only_the_service(
     engine: Engine, image: str
 ) -> None:
+    revision = engine.inspect(
+        "image", image, '{{index .Config.Labels "org.opencontainers.image.revision"}}'
+    )
+    head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=ROOT, capture_output=True,
+                          text=True, check=False).stdout.strip() or "unknown"  # fmt: skip
+    assert revision == head, (revision, head)  # which commit the image holds
     user = engine.inspect("image", image, "{{.Config.User}}")
     assert user and user.split(":")[0] not in ("0", "root"), f"runs as root: {user!r}"
     assert "healthcheck.py" in engine.inspect("image", image, "{{json .Config.Healthcheck}}")

@@ -246,6 +246,14 @@ def test_the_numba_seed_is_compiled_for_any_cpu(
     assert seed and all("NUMBA_CPU_NAME=generic" in args for args in seed), seed
 
 
+def test_the_image_names_its_commit(final_stage: list[tuple[str, str]]) -> None:
+    """An OCI label records the commit (``REVISION``, a build argument): an image rebuilt
+    under the same tag told nothing of the code it held (an ops audit)."""
+    labels = " ".join(args for ins, args in final_stage if ins == "LABEL")
+    assert 'org.opencontainers.image.revision="${REVISION}"' in labels
+    assert ("ARG", "REVISION=unknown") in final_stage
+
+
 def test_image_installs_only_the_service_extra(dockerfile: list[tuple[str, str]]) -> None:
     runs = [args for ins, args in dockerfile if ins == "RUN"]
     commands = [c.strip() for run in runs for c in re.split(r";|&&|\|\|", run)]
