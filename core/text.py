@@ -4,7 +4,9 @@ Shared by the core's readers and the service's errors (``service.errors``)."""
 
 from __future__ import annotations
 
+import difflib
 import itertools
+from collections.abc import Iterable
 
 QUOTE = 100  # characters of client input an error detail may quote
 _DEPTH = 3  # levels of a nested JSON value a message shows ([[…]] below them)
@@ -70,3 +72,15 @@ def quoted(value: object) -> str:
     """How a message names what a client sent: a string in quotes, clipped to
     :data:`QUOTE` characters; anything else as :func:`shown` shows it."""
     return repr(clip(value)) if isinstance(value, str) else clip(shown(value))
+
+
+def close_match(name: str, candidates: Iterable[str], cutoff: float = 0.6) -> str | None:
+    """The candidate ``name`` was probably meant to be: the same but for case, else the
+    closest by :func:`difflib.get_close_matches` at ``cutoff``; ``None`` if none is close
+    (a map's joint, a setting's variable: "did you mean ...?")."""
+    names = list(dict.fromkeys(candidates))
+    for c in names:
+        if c.casefold() == name.casefold():
+            return c
+    found = difflib.get_close_matches(name, names, n=1, cutoff=cutoff)
+    return found[0] if found else None

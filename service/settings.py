@@ -10,6 +10,7 @@ from pydantic import BeforeValidator, Field, SecretStr
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from core.compiled_fabrik import MAX_ITERATIONS
+from core.text import close_match
 
 #: The models shipped with the repository (``<repo>/models``).
 BUNDLED_MODELS = Path(__file__).resolve().parent.parent / "models"
@@ -92,14 +93,12 @@ def unknown_variables(environ: dict[str, str]) -> list[str]:
     """``POSE_*`` variables of ``environ`` that are no setting (a typo is ignored by the
     settings: ``POSE_DEADLINE=9`` left the deadline at 2 s, an ops audit), each with the
     setting nearest it."""
-    import difflib
-
     known = [f"POSE_{name.upper()}" for name in Settings.model_fields]
     out = []
     for key in sorted(k for k in environ if k.upper().startswith("POSE_")):
         if key.upper() not in known:
-            near = difflib.get_close_matches(key.upper(), known, 1, 0.6)
-            out.append(f"{key}" + (f" (did you mean {near[0]}?)" if near else ""))
+            near = close_match(key.upper(), known)
+            out.append(f"{key}" + (f" (did you mean {near}?)" if near else ""))
     return out
 
 

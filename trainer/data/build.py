@@ -49,6 +49,7 @@ from core.bvh import BVH, BVHError, read_bvh
 from core.geometry import canonical_transform, transform_yaw
 from core.io import sha256_file
 from core.skeleton import BONE_CHILDREN, JOINT_NAMES, bone_lengths
+from core.text import close_match
 from trainer.data.asf import AMC, ASFError, read_amc, read_asf
 from trainer.data.checks import (
     licence_warning,
@@ -63,7 +64,6 @@ from trainer.data.dataset import FORMAT_VERSION, FPS, PoseDataset, save_dataset
 from trainer.data.maps import (
     MapError,
     MocapMap,
-    close_match,
     glob_to_regex,
     joint_positions,
     load_maps,

@@ -19,8 +19,9 @@ import numpy as np
 import numpy.typing as npt
 
 from core.skeleton import JOINT_INDEX
+from core.text import close_match
 from trainer.data.dataset import PoseDataset
-from trainer.data.maps import MocapMap, close_match, did_you_mean, glob_to_regex
+from trainer.data.maps import MocapMap, did_you_mean, glob_to_regex
 
 if TYPE_CHECKING:
     from trainer.data.build import ClipResult

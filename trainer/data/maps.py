@@ -10,7 +10,6 @@ two source joints) feeds each of the 21 canonical joints. The format is document
 
 from __future__ import annotations
 
-import difflib
 import functools
 import hashlib
 import math
@@ -26,6 +25,7 @@ import numpy as np
 import numpy.typing as npt
 
 from core.skeleton import JOINT_NAMES, MIRROR
+from core.text import close_match
 from core.units import UNITS, UP_AXES
 
 MAP_FORMAT = 2
@@ -74,17 +74,6 @@ FIXED_SPLITS: tuple[str, ...] = ("train", "val", "test")
 
 class MapError(ValueError):
     """An invalid joint-map file (names the file and the problem)."""
-
-
-def close_match(name: str, candidates: Iterable[str]) -> str | None:
-    """The candidate ``name`` was probably meant to be: the same but for case, else the
-    closest by :func:`difflib.get_close_matches`; ``None`` if none is close."""
-    names = list(dict.fromkeys(candidates))
-    for c in names:
-        if c.casefold() == name.casefold():
-            return c
-    found = difflib.get_close_matches(name, names, n=1, cutoff=0.6)
-    return found[0] if found else None
 
 
 def did_you_mean(name: str, candidates: Iterable[str]) -> str:
