@@ -10,6 +10,7 @@ from fastapi import FastAPI
 from fastapi.responses import HTMLResponse
 from fastapi.staticfiles import StaticFiles
 
+from service.errors import WWW_AUTHENTICATE
 from service.schemas import Problem
 
 _PROBLEM_STATUS = {
@@ -39,7 +40,6 @@ _HEADERS = {
 }
 _COMPUTE_TIME = "The engine's own work for the request (e.g. 0.274ms): not parsing or writing."
 _RETRY_AFTER = "Seconds after which a retry may succeed."
-_WWW_AUTHENTICATE = "ApiKey, Bearer"
 
 #: The API key (POSE_API_KEY), when set: either header; the `{}` alternative is an
 #: unguarded deployment (no key set), the default.
@@ -72,7 +72,7 @@ HEADERS = {
     **{name: _header(text) for name, text in _HEADERS.items()},
     "X-Compute-Time": _header(_COMPUTE_TIME),
     "Retry-After": _header(_RETRY_AFTER, {"type": "integer"}),
-    "WWW-Authenticate": _header(_WWW_AUTHENTICATE),
+    "WWW-Authenticate": _header(WWW_AUTHENTICATE),
 }
 
 

@@ -168,6 +168,10 @@ class BodyInvalid(HTTPException):
         self.partial = partial  # the look stopped early: more may follow
 
 
+#: The schemes a 401 names (the gate takes X-API-Key or Authorization: Bearer).
+WWW_AUTHENTICATE = "ApiKey, Bearer"
+
+
 def problem(
     status: int,
     title: str,
@@ -186,7 +190,7 @@ def problem(
     body.update(extra)
     body = _printable(body)  # a client's lone surrogate quoted anywhere: its escape
     if status == 401:
-        headers = {**(headers or {}), "WWW-Authenticate": "ApiKey, Bearer"}
+        headers = {**(headers or {}), "WWW-Authenticate": WWW_AUTHENTICATE}
     return JSONResponse(body, status_code=status, media_type=PROBLEM_JSON, headers=headers)
 
 
