@@ -184,7 +184,10 @@ def held_drag(page: Any, joint: str, dx: float = 30, dy: float = -40) -> list[An
 
 
 def settle(page: Any) -> None:
-    page.wait_for_function(f"() => (s => !s.dirty && !s.inflight)({M}.solveCount())", polling=50)
+    """Wait until the page has no solve waiting or in flight."""
+    page.wait_for_function(
+        f"() => {M} && (s => !s.dirty && !s.inflight)({M}.solveCount())", polling=50
+    )
 
 
 def release(page: Any, held: list[Any]) -> None:
@@ -205,3 +208,30 @@ def drag_joint(page: Any, joint: str, dx: float, dy: float, steps: int = 8) -> N
         page.wait_for_timeout(16)
     page.mouse.up()
     settle(page)
+
+
+def watched_page(
+    browser: Any, timeout_ms: int, solve_path: str
+) -> tuple[Any, Any, list[str], list[str], list[str], list[dict[str, Any]]]:
+    """A fresh context and page (1280 x 800, downloads on) recording what a test checks:
+    ``(context, page, console errors, page errors, every URL asked, the bodies POSTed to
+    solve_path)``."""
+    context = browser.new_context(
+        viewport={"width": 1280, "height": 800}, device_scale_factor=1, accept_downloads=True
+    )
+    page = context.new_page()
+    page.set_default_timeout(timeout_ms)
+    console_errors: list[str] = []
+    page_errors: list[str] = []
+    page.on("console", lambda m: console_errors.append(m.text) if m.type == "error" else None)
+    page.on("pageerror", lambda e: page_errors.append(str(e)))
+    urls: list[str] = []
+    page.on("request", lambda r: urls.append(r.url))
+    solves: list[dict[str, Any]] = []
+    page.on(
+        "request",
+        lambda r: (
+            solves.append(json.loads(r.post_data or "{}")) if r.url.endswith(solve_path) else None
+        ),
+    )
+    return context, page, console_errors, page_errors, urls, solves

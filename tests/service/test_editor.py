@@ -21,7 +21,16 @@ from typing import Any
 import pytest
 
 from core.skeleton import JOINT_NAMES
-from tests.service.editor_page import REPO_ROOT, M, dist, drag_joint, open_editor, post_json
+from tests.service.editor_page import (
+    REPO_ROOT,
+    M,
+    dist,
+    drag_joint,
+    open_editor,
+    post_json,
+    settle,
+    watched_page,
+)
 
 # the fixtures `server` (one for the session) and `browser` (one per module)
 pytest_plugins = ("tests.service.editor_page",)
@@ -109,31 +118,10 @@ def test_sample_poses_are_small_complete_and_from_the_test_split() -> None:
 # -- in the browser -------------------------------------------------------------------------
 @pytest.mark.browser
 def test_editor_drag_solve_fabrik_errors(server: str, browser: Any, tmp_path: Path) -> None:
-    context = browser.new_context(
-        viewport={"width": 1280, "height": 800}, device_scale_factor=1, accept_downloads=True
-    )
-    page = context.new_page()
-    page.set_default_timeout(15_000)
-    console_errors: list[str] = []
-    page_errors: list[str] = []
-    page.on("console", lambda m: console_errors.append(m.text) if m.type == "error" else None)
-    page.on("pageerror", lambda e: page_errors.append(str(e)))
-    urls: list[str] = []
-    page.on("request", lambda r: urls.append(r.url))
-    solves: list[dict[str, Any]] = []
-    page.on(
-        "request",
-        lambda r: (
-            solves.append(json.loads(r.post_data or "{}")) if r.url.endswith("/v1/solve") else None
-        ),
+    context, page, console_errors, page_errors, urls, solves = watched_page(
+        browser, 15_000, "/v1/solve"
     )
     m = "window.marionette"
-
-    def settled() -> None:
-        """Wait until no solve is waiting or in flight."""
-        page.wait_for_function(
-            f"() => {m} && (s => !s.dirty && !s.inflight)({m}.solveCount())", polling=50
-        )
 
     try:
         # -- the page: / redirects to /editor, the skeleton comes from the samples ----------
@@ -167,7 +155,7 @@ def test_editor_drag_solve_fabrik_errors(server: str, browser: Any, tmp_path: Pa
             page.mouse.move(wrist["x"] + t * 70, wrist["y"] - t * 160)
             page.wait_for_timeout(16)
         page.mouse.up()
-        settled()
+        settle(page)
 
         assert solves, "dragging sent no /v1/solve"
         first = solves[0]
@@ -202,7 +190,7 @@ def test_editor_drag_solve_fabrik_errors(server: str, browser: Any, tmp_path: Pa
         # -- FABRIK --------------------------------------------------------------------------
         n = len(solves)
         page.locator(".segmented label", has_text="FABRIK").click()  # as a user does
-        settled()
+        settle(page)
         assert len(solves) == n + 1
         assert solves[-1]["options"]["method"] == "fabrik"
         last = page.evaluate(f"{m}.lastSolve()")
@@ -266,12 +254,12 @@ def test_editor_drag_solve_fabrik_errors(server: str, browser: Any, tmp_path: Pa
         # -- the branch carry: the models' default until the slider moves ----------------
         page.locator(".segmented label", has_text="Neural").click()
         page.wait_for_function(f"() => {m}.error() === null")
-        settled()
+        settle(page)
         assert "carry" not in solves[-1]["options"]
         assert "models' default" in page.locator("#carry-label").inner_text()
         assert page.locator("#carry").input_value() == "0.5"  # GET /v1/models says so
         page.locator("#carry").fill("1")
-        settled()
+        settle(page)
         assert solves[-1]["options"]["carry"] == 1
         last = page.evaluate(f"{m}.lastSolve()")
         direct = post_json(server + "/v1/solve", last["request"])
@@ -280,7 +268,7 @@ def test_editor_drag_solve_fabrik_errors(server: str, browser: Any, tmp_path: Pa
         # -- the turn search: the models' default until unchecked ------------------------
         assert "turn_search" not in solves[-1]["options"]
         page.get_by_label("Search the body's turn").uncheck()
-        settled()
+        settle(page)
         assert solves[-1]["options"]["turn_search"] is False
 
         # Only the browser's own log lines of the two forced failures.

@@ -23,6 +23,8 @@ from tests.service.editor_page import (
     give_file,
     open_editor,
     post_json,
+    settle,
+    watched_page,
 )
 
 # the fixtures `server` (one for the session) and `browser` (one per module)
@@ -43,32 +45,10 @@ def test_editor_opens_poses_scrubs_and_exports_a_real_bvh_file(
     path = next(more_mocap.rglob("cmu1/jumping_jacks.bvh"))
     original = path.read_text()
     units = 0.0564444  # CMU ASF units: the file's leg is ~15 of them, not plain
-    context = browser.new_context(
-        viewport={"width": 1280, "height": 800}, device_scale_factor=1, accept_downloads=True
-    )
-    page = context.new_page()
-    page.set_default_timeout(20_000)
-    console_errors: list[str] = []
-    page_errors: list[str] = []
-    page.on("console", lambda m: console_errors.append(m.text) if m.type == "error" else None)
-    page.on("pageerror", lambda e: page_errors.append(str(e)))
-    urls: list[str] = []
-    page.on("request", lambda r: urls.append(r.url))
-    solves: list[dict[str, Any]] = []
-    page.on(
-        "request",
-        lambda r: (
-            solves.append(json.loads(r.post_data or "{}"))
-            if r.url.endswith("/v1/bvh/solve")
-            else None
-        ),
+    context, page, console_errors, page_errors, urls, solves = watched_page(
+        browser, 20_000, "/v1/bvh/solve"
     )
     m = "window.marionette"
-
-    def settled() -> None:
-        page.wait_for_function(
-            f"() => {m} && (s => !s.dirty && !s.inflight)({m}.solveCount())", polling=50
-        )
 
     def inspect(text: str, frame: int) -> Any:
         body = {"bvh": text, "frame": frame, "units": units}
@@ -160,7 +140,7 @@ def test_editor_opens_poses_scrubs_and_exports_a_real_bvh_file(
             page.mouse.move(wrist["x"] + t * dx, wrist["y"] + t * dy)
             page.wait_for_timeout(16)
         page.mouse.up()
-        settled()
+        settle(page)
 
         assert solves, "dragging sent no /v1/bvh/solve"
         assert len(solves) <= 13  # throttled, latest wins
