@@ -8,7 +8,7 @@ MOCAP_DIR ?= ../shared/mocap
 DATASET ?= data/poses.npz
 CONFIG ?= trainer/configs/default.toml
 
-.PHONY: help venv run test test-fast lint format dataset train export bench soak clean
+.PHONY: help venv run test test-fast lint format lock dataset train export bench soak clean
 
 help:
 	@echo "make run    - create the venv, install, serve the bundled models on http://127.0.0.1:8000"
@@ -16,13 +16,26 @@ help:
 	@echo "make lint   - ruff + mypy"
 	@echo "make dataset / train / bench - build the pose dataset, train the models, run benchmarks"
 
-# The venv is (re)installed whenever pyproject.toml changes. torch is pinned to the CPU
-# wheel available on this machine (pip finds it; uv does not).
-$(STAMP): pyproject.toml
+# The venv is (re)installed whenever pyproject.toml or constraints.txt changes, at the
+# versions constraints.txt locks. torch is pinned to the CPU wheel available on this
+# machine (pip finds it; uv does not).
+$(STAMP): pyproject.toml constraints.txt
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
-	$(BIN)/pip install --quiet -e '.[service,train,dev]'
+	$(BIN)/pip install --quiet -c constraints.txt -e '.[service,train,dev]'
 	touch $(STAMP)
+
+# constraints.txt anew: a scratch venv from pyproject.toml's ranges alone, frozen (its
+# comment header kept; torch's local +cpu label dropped, so the pin reads as pyproject's).
+# Then `make test`: the suite is what says the new versions are good.
+lock:
+	tmp="$$(mktemp -d)"; trap 'rm -rf "$$tmp"' EXIT; \
+	$(PYTHON) -m venv "$$tmp/venv" && \
+	"$$tmp/venv/bin/pip" install --quiet --upgrade pip && \
+	"$$tmp/venv/bin/pip" install --quiet '.[service,train,dev]' && \
+	{ grep '^#' constraints.txt; "$$tmp/venv/bin/pip" freeze | grep -vi '^marionette' \
+	  | sed -E 's/\+cpu$$//'; } > "$$tmp/constraints.txt" && \
+	mv "$$tmp/constraints.txt" constraints.txt
 
 venv: $(STAMP)
 
