@@ -7,11 +7,13 @@ STAMP := $(VENV)/.installed
 MOCAP_DIR ?= ../shared/mocap
 DATASET ?= data/poses.npz
 CONFIG ?= trainer/configs/default.toml
+HOST ?= 127.0.0.1
+PORT ?= 8000
 
 .PHONY: help venv run test test-fast lint format lock dataset train export bench soak clean
 
 help:
-	@echo "make run    - create the venv, install, serve the bundled models on http://127.0.0.1:8000"
+	@echo "make run    - create the venv, install, serve the bundled models on http://$(HOST):$(PORT) (make run PORT=8080)"
 	@echo "make test   - create/update the venv, lint, type-check and run the whole test suite"
 	@echo "make lint   - ruff + mypy"
 	@echo "make dataset / train / bench - build the pose dataset, train the models, run benchmarks"
@@ -40,7 +42,7 @@ lock:
 venv: $(STAMP)
 
 run: $(STAMP)
-	$(BIN)/pose-service --host 127.0.0.1 --port 8000
+	$(BIN)/pose-service --host $(HOST) --port $(PORT)
 
 lint: $(STAMP)
 	$(BIN)/ruff check core service trainer tests bench
