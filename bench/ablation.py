@@ -248,6 +248,22 @@ VARIANTS: dict[str, str] = {
     "critic_canonical": "mx1-3ca9545e56de with the turn search's completion critic reading "
     "each answer in its own canonical frame, not at the world's yaw (item 47): shipped",
     "captured_critic_canonical": "`critic_canonical` on the captured edits",
+    "turn_off": "mx1-3ca9545e56de without the turn search (`--serving turn_yaws=1`; item 48)",
+    "ae_cos3e3_c1": "`ae_cos3e3` trained again and served as mx1-3ca9545e56de, the shipped "
+    "completion networks copied in (ae_cos3e3_c1.toml; item 48's control)",
+    "captured_ae_cos3e3_c1": "`ae_cos3e3_c1` on the captured edits",
+    "ae_cos3e3_noise001": "`ae_cos3e3_c1` with each autoencoder step also reconstructing the "
+    "batch from latents shaken by 0.01 x each dimension's batch std "
+    "(autoencoder.latent_noise, ae_cos3e3_noise001.toml; item 48)",
+    "captured_ae_cos3e3_noise001": "`ae_cos3e3_noise001` on the captured edits",
+    "ae_cos3e3_noise001_turn_off": "`ae_cos3e3_noise001` without the turn search",
+    "ae_cos3e3_noise003": "the same at 0.03 (ae_cos3e3_noise003.toml)",
+    "ae_cos3e3_noise005": "the same at 0.05 (ae_cos3e3_noise005.toml)",
+    "ae_cos3e3_noise01": "the same at 0.1 (ae_cos3e3_noise01.toml)",
+    "captured_ae_cos3e3_noise01": "`ae_cos3e3_noise01` on the captured edits",
+    "ae_cos3e3_noise01_long4": "`ae_cos3e3_noise01` with its 5-end-effector solver trained 4 "
+    "epochs instead of 8 (ae_cos3e3_noise01_long4.toml)",
+    "ae_cos3e3_noise01_long16": "the same, 16 epochs (ae_cos3e3_noise01_long16.toml)",
 }
 COMPLETION = "6-point completion"
 

@@ -54,6 +54,13 @@ class AutoencoderConfig(_Section):
         description="Reconstruction loss: MSE of the normalised coordinates, or the mean "
         "per-joint distance in metres (MPJPE, what the benchmarks score).",
     )
+    latent_noise: float = Field(
+        default=0.0,
+        ge=0.0,
+        description="Each step also reconstructs the batch from latents shaken by Gaussian "
+        "noise of this many times each latent dimension's batch std, and adds that loss: a "
+        "decoder smooth around real poses' codes, where the solvers move them. 0 = off.",
+    )
 
 
 def _serving(name: str) -> Any:

@@ -86,8 +86,15 @@ class TiedAutoencoder(nn.Module):
                 h = torch.relu(h)
         return self.norm.denormalise(h)
 
-    def forward(self, pose: torch.Tensor) -> torch.Tensor:
-        return self.decode(self.encode(pose))
+    def forward(self, pose: torch.Tensor, noise: float = 0.0) -> torch.Tensor:
+        """The round trip of ``pose``; with ``noise`` > 0, ``[clean; shaken]`` round trips
+        (the second half decoded from latents plus Gaussian noise of ``noise`` times each
+        latent dimension's batch std: trainer.config.AutoencoderConfig.latent_noise)."""
+        z = self.encode(pose)
+        if noise > 0:
+            shake = torch.randn_like(z) * (noise * z.detach().std(dim=0, keepdim=True))
+            z = torch.cat([z, z + shake])
+        return self.decode(z)
 
 
 def target_columns(joints: list[str]) -> list[int]:

@@ -223,7 +223,7 @@ def load_checkpoint(
 #: Fields added after checkpoints of their stages existed: in a tag only where they differ
 #: from their default, so that runs from before them stay valid.
 _ADDED_LATER: dict[str, tuple[str, ...]] = {
-    "autoencoder": ("loss", "lr_schedule"),
+    "autoencoder": ("loss", "lr_schedule", "latent_noise"),
     "solver": (
         "rigid_loss",
         "joint_loss",

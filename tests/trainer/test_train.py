@@ -536,6 +536,33 @@ def test_autoencoder_loss_choice_reaches_the_tags_of_its_latent_space() -> None:
         assert changes == (not stage.startswith("completion")), stage
 
 
+def test_latent_noise_shakes_a_second_copy_and_retrains_what_reads_the_latent(
+    small_dataset: Path,
+) -> None:
+    """``autoencoder.latent_noise``: the round trip gives the clean reconstructions, then
+    those decoded from latents shaken in proportion to each dimension's batch std (more
+    noise, farther); seeded, so a run is repeatable. Off, every tag is as it was."""
+    poses = flat(load_dataset(small_dataset).positions[:256])
+    torch.manual_seed(0)
+    ae = TiedAutoencoder(Normaliser(*feature_stats(poses, 0.01)), [200, 200], 64)
+    with torch.no_grad():
+        clean = ae(poses)
+        torch.manual_seed(1)
+        shaken = {s: ae(poses, s) for s in (0.1, 0.3)}
+        torch.manual_seed(1)
+        again = ae(poses, 0.1)
+    assert shaken[0.1].shape == (512, 63)
+    assert torch.equal(shaken[0.1][:256], clean) and torch.equal(again, shaken[0.1])
+    moved = {s: float((out[256:] - clean).norm(dim=1).mean()) for s, out in shaken.items()}
+    assert 0 < moved[0.1] < moved[0.3]
+    off = load_config(None, {"autoencoder": {"latent_noise": 0.0}})
+    on = load_config(None, {"autoencoder": {"latent_noise": 0.1}})
+    for stage in ("autoencoder", "solvers", "solvers_long", "completion1"):
+        assert config_tag(off, stage) == config_tag(load_config(None, {}), stage)
+        changes = config_tag(on, stage) != config_tag(off, stage)
+        assert changes == (not stage.startswith("completion")), stage
+
+
 def test_completion_checkpoints_tagged_with_the_autoencoder_stay_valid(tmp_path: Path) -> None:
     """Completion tags used to hash the autoencoder's section too: such a checkpoint is
     still resumed under the same config, and not under another autoencoder."""
