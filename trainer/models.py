@@ -86,14 +86,17 @@ class TiedAutoencoder(nn.Module):
                 h = torch.relu(h)
         return self.norm.denormalise(h)
 
-    def forward(self, pose: torch.Tensor, noise: float = 0.0) -> torch.Tensor:
+    def forward(
+        self, pose: torch.Tensor, noise: float = 0.0, generator: torch.Generator | None = None
+    ) -> torch.Tensor:
         """The round trip of ``pose``; with ``noise`` > 0, ``[clean; shaken]`` round trips
-        (the second half decoded from latents plus Gaussian noise of ``noise`` times each
-        latent dimension's batch std: trainer.config.AutoencoderConfig.latent_noise)."""
+        (the second half decoded from latents plus Gaussian noise, drawn from ``generator``,
+        of ``noise`` times each latent dimension's batch std:
+        trainer.config.AutoencoderConfig.latent_noise)."""
         z = self.encode(pose)
         if noise > 0:
-            shake = torch.randn_like(z) * (noise * z.detach().std(dim=0, keepdim=True))
-            z = torch.cat([z, z + shake])
+            draw = torch.randn(z.shape, generator=generator, dtype=z.dtype, device=z.device)
+            z = torch.cat([z, z + draw * (noise * z.detach().std(dim=0, keepdim=True))])
         return self.decode(z)
 
 

@@ -168,11 +168,15 @@ def train_autoencoder(
 
     def train_epoch(epoch: int, bar: Bar) -> float:
         rng = stage_rng(cfg.seed, "autoencoder", epoch)
+        # the latents' noise: its own stream per epoch and rank, so a resumed run draws what
+        # an uninterrupted one does (the global torch generator is not in the checkpoint)
+        noise_rng = stage_rng(cfg.seed, f"autoencoder-noise:{d.rank}", epoch)
+        shakes = torch.Generator().manual_seed(int(noise_rng.integers(2**62)))
         total_loss, count = torch.zeros((), dtype=torch.float64), 0
         for step, idx in enumerate(batches(len(train), ac.batch_size, d, cfg.seed, epoch)):
             schedule_lr(optim, ac.lr, ac.lr_schedule, epoch, step, steps, ac.epochs)
             x = ae_samples(train[idx], rng, aug, total)
-            recon = net(x, ac.latent_noise) if ac.latent_noise > 0 else net(x)
+            recon = net(x, ac.latent_noise, shakes) if ac.latent_noise > 0 else net(x)
             if ac.latent_noise > 0:  # [clean; shaken] reconstructions of the batch
                 x = torch.cat([x, x])
             if ac.loss == "mpjpe":

@@ -22,6 +22,7 @@ import torch
 from core.io import sha256_file
 from core.manifest import ManifestError, load_manifest
 from core.skeleton import JOINT_INDEX
+from trainer import stages
 from trainer.config import QUICK, TrainConfig, load_config
 from trainer.data.dataset import load_dataset
 from trainer.export import evaluate, export_all, model_version
@@ -38,6 +39,7 @@ from trainer.models import (
 from trainer.rigid import parent_offsets_t
 from trainer.stages import (
     StageState,
+    _section,
     config_tag,
     host,
     load_checkpoint,
@@ -371,17 +373,29 @@ def _state(result: Trained) -> dict[str, torch.Tensor]:
 
 
 @pytest.mark.slow
-def test_same_seed_same_models_and_resume_is_exact(small_dataset: Path, tmp_path: Path) -> None:
+def test_same_seed_same_models_and_resume_is_exact(
+    small_dataset: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     a = train_all(tiny_config(small_dataset, tmp_path / "a", tmp_path / "ma"), fresh=True)
     b = train_all(tiny_config(small_dataset, tmp_path / "b", tmp_path / "mb"), fresh=True)
     sa, sb = _state(a), _state(b)
     assert all(torch.equal(sa[k], sb[k]) for k in sa)
-    # interrupted after one AE epoch, then resumed to two: equals two epochs straight
-    two = {"autoencoder": {"epochs": 2}}
+    # interrupted after one AE epoch (at its checkpoint), then resumed to two: equals two
+    # epochs straight, the latents shaken too (their noise drawn on resuming as it was)
+    two = {"autoencoder": {"epochs": 2, "latent_noise": 0.1}}
     straight = train_all(
         tiny_config(small_dataset, tmp_path / "c", tmp_path / "mc", **two), fresh=True
     )
-    train_all(tiny_config(small_dataset, tmp_path / "d", tmp_path / "md"), fresh=True)
+    save = stages.save_checkpoint
+
+    def save_then_stop(*args: Any, **kwargs: Any) -> None:
+        save(*args, **kwargs)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(stages, "save_checkpoint", save_then_stop)
+    with pytest.raises(KeyboardInterrupt):
+        train_all(tiny_config(small_dataset, tmp_path / "d", tmp_path / "md", **two), fresh=True)
+    monkeypatch.setattr(stages, "save_checkpoint", save)
     resumed = train_all(tiny_config(small_dataset, tmp_path / "d", tmp_path / "md", **two))
     assert resumed.states["autoencoder"].epoch == 2
     s1, s2 = _state(straight), _state(resumed)
@@ -530,6 +544,8 @@ def test_autoencoder_loss_choice_reaches_the_tags_of_its_latent_space() -> None:
     completion levels, which read nothing of it."""
     mse = load_config(None, {"autoencoder": {"loss": "mse"}})
     mpjpe = load_config(None, {"autoencoder": {"loss": "mpjpe"}})
+    section = _section(mse, "autoencoder")
+    assert "loss" not in section and "lr_schedule" not in section  # the tags of before
     for stage in ("autoencoder", "solvers", "solvers_long", "completion1"):
         assert config_tag(mse, stage) == config_tag(load_config(None, {}), stage)
         changes = config_tag(mpjpe, stage) != config_tag(mse, stage)
@@ -541,24 +557,25 @@ def test_latent_noise_shakes_a_second_copy_and_retrains_what_reads_the_latent(
 ) -> None:
     """``autoencoder.latent_noise``: the round trip gives the clean reconstructions, then
     those decoded from latents shaken in proportion to each dimension's batch std (more
-    noise, farther); seeded, so a run is repeatable. Off, every tag is as it was."""
+    noise, farther), drawn from the generator given, so a run is repeatable. Off, it is not
+    in any tag (checkpoints from before the option keep theirs); on, it retrains the
+    autoencoder and the solvers, not the completion levels."""
     poses = flat(load_dataset(small_dataset).positions[:256])
     torch.manual_seed(0)
     ae = TiedAutoencoder(Normaliser(*feature_stats(poses, 0.01)), [200, 200], 64)
     with torch.no_grad():
         clean = ae(poses)
-        torch.manual_seed(1)
-        shaken = {s: ae(poses, s) for s in (0.1, 0.3)}
-        torch.manual_seed(1)
-        again = ae(poses, 0.1)
-    assert shaken[0.1].shape == (512, 63)
-    assert torch.equal(shaken[0.1][:256], clean) and torch.equal(again, shaken[0.1])
+        shaken = {s: ae(poses, s, torch.Generator().manual_seed(1)) for s in (0.1, 0.3)}
+        again = ae(poses, 0.1, torch.Generator().manual_seed(1))
+    assert shaken[0.1].shape == (512, 63) and torch.equal(again, shaken[0.1])
+    assert torch.allclose(shaken[0.1][:256], clean, atol=1e-6)
     moved = {s: float((out[256:] - clean).norm(dim=1).mean()) for s, out in shaken.items()}
     assert 0 < moved[0.1] < moved[0.3]
     off = load_config(None, {"autoencoder": {"latent_noise": 0.0}})
     on = load_config(None, {"autoencoder": {"latent_noise": 0.1}})
+    assert "latent_noise" not in _section(off, "autoencoder")
+    assert _section(on, "autoencoder")["latent_noise"] == 0.1
     for stage in ("autoencoder", "solvers", "solvers_long", "completion1"):
-        assert config_tag(off, stage) == config_tag(load_config(None, {}), stage)
         changes = config_tag(on, stage) != config_tag(off, stage)
         assert changes == (not stage.startswith("completion")), stage
 
