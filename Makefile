@@ -7,8 +7,10 @@ STAMP := $(VENV)/.installed
 MOCAP_DIR ?= ../shared/mocap
 DATASET ?= data/poses.npz
 CONFIG ?= trainer/configs/default.toml
-HOST ?= 127.0.0.1
-PORT ?= 8000
+# make run HOST=… PORT=… on the command line; not read from the environment (tcsh exports
+# HOST as the machine's name, some platforms PORT)
+HOST := 127.0.0.1
+PORT := 8000
 
 .PHONY: help venv run test test-fast lint format lock dataset train export bench soak clean
 
@@ -27,15 +29,21 @@ $(STAMP): pyproject.toml constraints.txt
 	$(BIN)/pip install --quiet -c constraints.txt -e '.[service,train,dev]'
 	touch $(STAMP)
 
-# constraints.txt anew: a scratch venv from pyproject.toml's ranges alone, frozen (its
-# comment header kept; torch's local +cpu label dropped, so the pin reads as pyproject's).
+# constraints.txt anew: a scratch venv of pyproject.toml's ranges alone (the project itself
+# not built), frozen with its build tools (setuptools, which torch needs at run time; pip
+# itself left out), the comment header kept, torch's local +cpu label dropped (so the pin
+# reads as pyproject's).
 # Then `make test`: the suite is what says the new versions are good.
 lock:
 	tmp="$$(mktemp -d)"; trap 'rm -rf "$$tmp"' EXIT; \
 	$(PYTHON) -m venv "$$tmp/venv" && \
 	"$$tmp/venv/bin/pip" install --quiet --upgrade pip && \
-	"$$tmp/venv/bin/pip" install --quiet '.[service,train,dev]' && \
-	{ grep '^#' constraints.txt; "$$tmp/venv/bin/pip" freeze | grep -vi '^marionette' \
+	"$$tmp/venv/bin/python" -c "import tomllib; p = tomllib.load(open('pyproject.toml', 'rb'))\
+	['project']; e = p['optional-dependencies']; print('\n'.join(p['dependencies'] + e['service']\
+	+ e['train'] + e['dev']))" > "$$tmp/requirements.txt" && \
+	"$$tmp/venv/bin/pip" install --quiet -r "$$tmp/requirements.txt" && \
+	"$$tmp/venv/bin/pip" freeze --all > "$$tmp/frozen.txt" && \
+	{ grep '^#' constraints.txt; grep -viE '^pip==' "$$tmp/frozen.txt" \
 	  | sed -E 's/\+cpu$$//'; } > "$$tmp/constraints.txt" && \
 	mv "$$tmp/constraints.txt" constraints.txt
 
