@@ -264,6 +264,18 @@ VARIANTS: dict[str, str] = {
     "ae_cos3e3_noise01_long4": "`ae_cos3e3_noise01` with its 5-end-effector solver trained 4 "
     "epochs instead of 8 (ae_cos3e3_noise01_long4.toml)",
     "ae_cos3e3_noise01_long16": "the same, 16 epochs (ae_cos3e3_noise01_long16.toml)",
+    "ae_cos3e3_noise005_long_other001": "`ae_cos3e3_noise005` with its 5-end-effector solver "
+    "trained with the goal's other joints weighted 0.01 instead of 0.03 "
+    "(solver.long_other_weight; item 49)",
+    "ae_cos3e3_noise005_long_other010": "the same at 0.1",
+    "ae_cos3e3_noise005_long_other030": "the same at 0.3",
+    "captured_ae_cos3e3_noise005_long_other030": "`ae_cos3e3_noise005_long_other030` on the "
+    "captured edits",
+    "ae_cos3e3_noise005_long_other100": "the same at 1.0",
+    "ae_cos3e3_noise005_long_other300": "the same at 3.0",
+    "long_other030": "the shipped recipe (its autoencoder and shared bank) with the "
+    "5-end-effector solver's other joints weighted 0.3 (long_other030.toml; item 49)",
+    "captured_long_other030": "`long_other030` on the captured edits",
 }
 COMPLETION = "6-point completion"
 

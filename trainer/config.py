@@ -187,6 +187,11 @@ class SolverConfig(_Section):
         "many targets keeps improving past the one epoch after which single joints drift.",
     )
     long_epochs: int = Field(default=8, ge=1)
+    long_other_weight: float | None = Field(
+        default=None,
+        ge=0,
+        description="other_weight for the long_sets' bank alone (None: other_weight).",
+    )
 
     _v = field_validator("sets", "long_sets")(_check_joints)
 

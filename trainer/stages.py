@@ -232,6 +232,7 @@ _ADDED_LATER: dict[str, tuple[str, ...]] = {
         "ends_loss",
         "keep_elbows",
         "elbows_loss",
+        "long_other_weight",
     ),
     "augment": ("lift_start", "joint_shift"),
     "completion": ("loss",),
@@ -267,7 +268,11 @@ def config_tag(cfg: TrainConfig, stage: str, *, legacy: bool = False) -> str:
     if stage.startswith("solver"):
         # each bank reads only its own sets and epochs (its own seed and pair stream), so
         # neither is retrained when only the other's change; passes, carry: serving only
-        other = ("sets", "epochs") if stage == "solvers_long" else ("long_sets", "long_epochs")
+        other = (
+            ("sets", "epochs")
+            if stage == "solvers_long"
+            else ("long_sets", "long_epochs", "long_other_weight")
+        )
         # (carry, keep_ends and keep_elbows are training settings too where the losses see
         # them: solver.carry_loss, solver.ends_loss, solver.elbows_loss)
         keep = seen_by_losses(cfg.solver.model_dump())

@@ -415,10 +415,14 @@ def train_solvers(
     optim = torch.optim.Adam(params, lr=sc.lr)
     steps = steps_per_epoch(len(src.poses), sc.batch_size, d)
 
+    other_weight = sc.other_weight
+    if long and sc.long_other_weight is not None:
+        other_weight = sc.long_other_weight
+
     def losses(model: nn.Module, start: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
         """:func:`solver_losses` with this config's terms (training and validation alike)."""
         out, _ = solver_losses(
-            ae, bank, model, start, goal, sc.other_weight, sc.bone_weight, mode,
+            ae, bank, model, start, goal, other_weight, sc.bone_weight, mode,
             sc.stay_weight, sc.rigid_loss, sc.joint_loss == "distance",
             sc.stay_frame == "local", sc.carry if sc.carry_loss else 0.0,
             active(sc.keep_ends, sc.keep_elbows and sc.elbows_loss) if sc.ends_loss else None,

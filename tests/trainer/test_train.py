@@ -580,6 +580,16 @@ def test_latent_noise_shakes_a_second_copy_and_retrains_what_reads_the_latent(
         assert changes == (not stage.startswith("completion")), stage
 
 
+def test_long_other_weight_retrains_the_long_bank_alone() -> None:
+    """``solver.long_other_weight``: the long bank's own weight of the goal's other joints;
+    unset, no tag changes (it is not hashed); set, only ``solvers_long`` is trained anew."""
+    base = load_config(None, {})
+    assert "long_other_weight" not in _section(base, "solver")
+    own = load_config(None, {"solver": {"long_other_weight": 0.1}})
+    for stage in ("autoencoder", "solvers", "solvers_long", "completion1"):
+        assert (config_tag(own, stage) != config_tag(base, stage)) == (stage == "solvers_long")
+
+
 def test_completion_checkpoints_tagged_with_the_autoencoder_stay_valid(tmp_path: Path) -> None:
     """Completion tags used to hash the autoencoder's section too: such a checkpoint is
     still resumed under the same config, and not under another autoencoder."""
