@@ -276,6 +276,7 @@ VARIANTS: dict[str, str] = {
     "long_other030": "the shipped recipe (its autoencoder and shared bank) with the "
     "5-end-effector solver's other joints weighted 0.3 (long_other030.toml; item 49)",
     "captured_long_other030": "`long_other030` on the captured edits",
+    "long_other100": "the same at 1.0 (long_other100.toml)",
 }
 COMPLETION = "6-point completion"
 
