@@ -176,9 +176,10 @@ def train_autoencoder(
         for step, idx in enumerate(batches(len(train), ac.batch_size, d, cfg.seed, epoch)):
             schedule_lr(optim, ac.lr, ac.lr_schedule, epoch, step, steps, ac.epochs)
             x = ae_samples(train[idx], rng, aug, total)
-            recon = net(x, ac.latent_noise, shakes) if ac.latent_noise > 0 else net(x)
             if ac.latent_noise > 0:  # [clean; shaken] reconstructions of the batch
-                x = torch.cat([x, x])
+                recon, x = net(x, ac.latent_noise, shakes), torch.cat([x, x])
+            else:
+                recon = net(x)
             if ac.loss == "mpjpe":
                 loss = mpjpe_loss(recon, x)
             else:
