@@ -74,13 +74,13 @@ def quoted(value: object) -> str:
     return repr(clip(value)) if isinstance(value, str) else clip(shown(value))
 
 
-def close_match(name: str, candidates: Iterable[str], cutoff: float = 0.6) -> str | None:
+def close_match(name: str, candidates: Iterable[str]) -> str | None:
     """The candidate ``name`` was probably meant to be: the same but for case, else the
-    closest by :func:`difflib.get_close_matches` at ``cutoff``; ``None`` if none is close
+    closest by :func:`difflib.get_close_matches` (cutoff 0.6); ``None`` if none is close
     (a map's joint, a setting's variable: "did you mean ...?")."""
     names = list(dict.fromkeys(candidates))
     for c in names:
         if c.casefold() == name.casefold():
             return c
-    found = difflib.get_close_matches(name, names, n=1, cutoff=cutoff)
+    found = difflib.get_close_matches(name, names, n=1, cutoff=0.6)
     return found[0] if found else None

@@ -374,7 +374,6 @@ def _character(
     jmap: JointMap,
     units: Any,
     up: str | None,
-    points: F64 | None = None,
     prefix: str = "",
     stated: bool = True,
     up_stated: bool = True,
@@ -407,12 +406,16 @@ def _character(
                 f'{fits}, or a number of metres per unit ("units": 0.0564444 for CMU ASF)'
             )
         units = name
-    if up is not None and points is not None:  # given (or the default) against the body:
-        # refused where the rest pose stands up along the other axis and the frame does not
-        # stand along this one (a rig whose rest is Z-up but whose root turns it to stand
-        # up along +Y is right in +Y; the Z-up child, upright or bent, is not)
+    if up is not None:  # given (or the default) against the body: refused where the rest
+        # pose stands up along the other axis and the frame does not stand along this one
+        # (a rig whose rest is Z-up but whose root turns it to stand up along +Y is right in
+        # +Y; the Z-up child, upright or bent, is not)
         rest_up = infer_up(skel, jmap)
-        if rest_up is not None and rest_up != up and up_of(points) != up:
+        if (
+            rest_up is not None
+            and rest_up != up
+            and up_of(canonical_points(skel, pose, jmap)) != up
+        ):
             given = "" if up_stated else " (the default: no up was given)"
             raise InvalidRequest(
                 f"{prefix}up: {quoted(up)}{given}, but the rest pose stands up along "
@@ -420,7 +423,7 @@ def _character(
                 f'"up": "{rest_up}", or null to infer it'
             )
     if up is None:
-        found = infer_up(skel, jmap, points)
+        found = infer_up(skel, jmap, canonical_points(skel, pose, jmap))
         if found is None:
             raise InvalidRequest(
                 f"{prefix}up: neither the rest pose nor this frame stands up along +Y or +Z; "
@@ -600,11 +603,8 @@ def character_from_request(req: CharacterSolveRequest, where: str = "") -> Chara
         jmap = resolve_map(skel, req.joint_map, where=f"{prefix}joint_map")
         units, up = req.character.units, req.character.up
         given = req.character.model_fields_set
-        points = jmap.points(*forward_kinematics(skel, pose))  # (the up axis is checked)
         where = f"{prefix}character."
-        return _character(
-            skel, pose, jmap, units, up, points, where, "units" in given, "up" in given
-        )
+        return _character(skel, pose, jmap, units, up, where, "units" in given, "up" in given)
     except CharacterError as exc:
         raise _invalid(exc) from None
 
@@ -672,9 +672,7 @@ def character_from_bvh(bvh: BVH, req: BVHSolveRequest | BVHInspectRequest) -> Ch
         skel = skeleton_of(bvh)
         pose = pose_of(bvh, req.frame)
         jmap = resolve_map(skel, req.joint_map)
-        g_rot, g_pos = forward_kinematics(skel, pose)
-        points = jmap.points(g_rot, g_pos)
-        return _character(skel, pose, jmap, req.units, req.up, points)
+        return _character(skel, pose, jmap, req.units, req.up)
     except (CharacterError, BVHError) as exc:
         raise _invalid(exc) from None
 

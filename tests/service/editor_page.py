@@ -15,10 +15,8 @@ warn that it cannot rewrite it).
 from __future__ import annotations
 
 import json
-import math
 import os
 import shutil
-import socket
 import subprocess
 import sys
 import time
@@ -30,7 +28,9 @@ from typing import Any
 
 import pytest
 
-REPO_ROOT = Path(__file__).resolve().parents[2]
+from tests.conftest import REPO_ROOT
+from tests.service.server import free_port
+
 CHROMIUM_ARGS = [
     "--headless",
     "--no-sandbox",
@@ -69,12 +69,6 @@ def find_chromium() -> str | None:
         if found:
             return found
     return None
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 @pytest.fixture(scope="session")
@@ -132,10 +126,6 @@ def browser() -> Iterator[Any]:
             yield b
         finally:
             b.close()
-
-
-def dist(a: list[float], b: list[float]) -> float:
-    return math.dist(a, b)
 
 
 def post_json(url: str, body: dict[str, Any]) -> Any:

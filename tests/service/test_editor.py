@@ -15,6 +15,7 @@ import json
 import math
 import os
 import re
+from math import dist
 from pathlib import Path
 from typing import Any
 
@@ -24,7 +25,6 @@ from core.skeleton import JOINT_NAMES
 from tests.service.editor_page import (
     REPO_ROOT,
     M,
-    dist,
     drag_joint,
     open_editor,
     post_json,

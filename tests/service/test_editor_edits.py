@@ -7,6 +7,7 @@ last answer is on its way. Shared parts: ``tests/service/editor_page.py``.
 from __future__ import annotations
 
 import json
+from math import dist
 from pathlib import Path
 from typing import Any
 
@@ -15,7 +16,6 @@ import pytest
 from tests.service.editor_page import (
     REPO_ROOT,
     M,
-    dist,
     drag_joint,
     give_file,
     held_drag,

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+from math import dist
 from pathlib import Path
 from typing import Any
 
@@ -18,7 +19,6 @@ from core.skeleton import JOINT_NAMES
 from tests.service.editor_page import (
     REPO_ROOT,
     M,
-    dist,
     drag_joint,
     give_file,
     open_editor,
