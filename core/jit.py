@@ -30,6 +30,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TypeVar, cast
 
+from core import CacheDirError
+
 
 def fingerprint(folder: Path) -> str:
     """A short hash of the contents of every ``*.py`` in ``folder`` (names and bytes)."""
@@ -37,10 +39,6 @@ def fingerprint(folder: Path) -> str:
     for path in sorted(folder.glob("*.py")):
         digest.update(path.name.encode() + b"\0" + path.read_bytes() + b"\0")
     return digest.hexdigest()[:16]
-
-
-class CacheDirError(RuntimeError):
-    """No folder to keep compiled kernels in (``pose-service`` says so in one line)."""
 
 
 def _cache_dir() -> None:

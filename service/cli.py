@@ -15,12 +15,12 @@ from pathlib import Path
 
 from pydantic import ValidationError
 
+from core import CacheDirError
+
 try:  # importing the settings imports the kernels: their cache folder is chosen then
     from service.logs import log_config
     from service.settings import Settings, unknown_variables
-except RuntimeError as exc:  # core.jit.CacheDirError: one line, not a traceback
-    if type(exc).__name__ != "CacheDirError":  # (the class is not importable before it)
-        raise
+except CacheDirError as exc:  # one line, not a traceback
     print(f"pose-service: {exc}", file=sys.stderr)
     raise SystemExit(2) from None
 
