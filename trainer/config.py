@@ -6,7 +6,7 @@ import difflib
 import tomllib
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 from pydantic import (
     BaseModel,
@@ -18,7 +18,7 @@ from pydantic import (
 )
 
 from core.manifest import Serving
-from core.skeleton import BASE_KEYPOINTS, JOINT_NAMES
+from core.skeleton import BASE_KEYPOINTS, JOINT_NAMES, set_key
 
 
 class _Section(BaseModel):
@@ -192,6 +192,13 @@ class SolverConfig(_Section):
         ge=0,
         description="other_weight for the long_sets' bank alone (None: other_weight).",
     )
+    other_weights: dict[str, Annotated[float, Field(ge=0)]] = Field(
+        default={},
+        description="other_weight of single sets of `sets`, by key (the set's joints sorted "
+        "and joined by '+', as the manifest names it); the other sets: other_weight (a key "
+        "of no set of `sets` weighs nothing: a config that changes the sets inherits them). "
+        "Each set's solver is trained on its own loss alone: a set's weight changes no other.",
+    )
 
     _v = field_validator("sets", "long_sets")(_check_joints)
 
@@ -200,6 +207,10 @@ class SolverConfig(_Section):
         both = {tuple(sorted(j)) for j in self.sets} & {tuple(sorted(j)) for j in self.long_sets}
         if both:
             raise ValueError(f"solver sets in both sets and long_sets: {sorted(both)}")
+        for key in self.other_weights:  # joints sorted, joined by '+': the manifest's key
+            _check_joints([key.split("+")])
+            if key != set_key(key.split("+")):
+                raise ValueError(f"other_weights: {key!r} is not a set's key (sorted joints)")
         return self
 
 

@@ -233,6 +233,7 @@ _ADDED_LATER: dict[str, tuple[str, ...]] = {
         "keep_elbows",
         "elbows_loss",
         "long_other_weight",
+        "other_weights",
     ),
     "augment": ("lift_start", "joint_shift"),
     "completion": ("loss",),
@@ -269,7 +270,7 @@ def config_tag(cfg: TrainConfig, stage: str, *, legacy: bool = False) -> str:
         # each bank reads only its own sets and epochs (its own seed and pair stream), so
         # neither is retrained when only the other's change; passes, carry: serving only
         other = (
-            ("sets", "epochs")
+            ("sets", "epochs", "other_weights")
             if stage == "solvers_long"
             else ("long_sets", "long_epochs", "long_other_weight")
         )

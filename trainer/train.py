@@ -17,7 +17,7 @@ from torch import nn
 from torch.nn.parallel import DistributedDataParallel
 
 from core.ends import active
-from core.skeleton import JOINT_INDEX, NUM_JOINTS
+from core.skeleton import JOINT_INDEX, NUM_JOINTS, set_key
 from core.skeleton import bone_lengths as bone_lengths_np
 from trainer.augment import (
     FrameSource,
@@ -276,7 +276,7 @@ def solver_losses(
     net: nn.Module,
     start: torch.Tensor,
     goal: torch.Tensor,
-    other_weight: float,
+    other_weight: float | torch.Tensor,
     bone_weight: float = 0.0,
     mode: str = "plain",
     stay_weight: float = 0.0,
@@ -288,7 +288,8 @@ def solver_losses(
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """Per-solver loss ``[S]`` and answers ``[S, B, 63]`` for a batch of pairs (``mode`` as
     the service answers, :func:`solved_poses`):
-    MSE(target joints) + other_weight * MSE(other joints)
+    MSE(target joints) + other_weight * MSE(other joints) (``other_weight``: one for every
+    solver, or ``[S]``, one each)
     + bone_weight * MSE(decoded bone lengths - start bone lengths) (same clip, same body)
     + stay_weight * MSE(other joints - their start positions).
     ``rigid``: the joint terms are measured on the answer after the service's bone pass
@@ -416,9 +417,12 @@ def train_solvers(
     optim = torch.optim.Adam(params, lr=sc.lr)
     steps = steps_per_epoch(len(src.poses), sc.batch_size, d)
 
-    other_weight = sc.other_weight
+    other_weight: float | torch.Tensor = sc.other_weight
     if long and sc.long_other_weight is not None:
         other_weight = sc.long_other_weight
+    elif not long and sc.other_weights:  # per set [S]: each set's loss weighs its own
+        weights = [sc.other_weights.get(set_key(s), sc.other_weight) for s in sets]
+        other_weight = torch.tensor(weights, dtype=torch.float32)
 
     def losses(model: nn.Module, start: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
         """:func:`solver_losses` with this config's terms (training and validation alike)."""

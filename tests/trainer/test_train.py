@@ -42,6 +42,7 @@ from trainer.stages import (
     _section,
     config_tag,
     host,
+    init_distributed,
     load_checkpoint,
     save_checkpoint,
     schedule_lr,
@@ -52,8 +53,10 @@ from trainer.train import (
     completion_loss,
     flat,
     mpjpe_cm,
+    reference_lengths,
     solver_losses,
     train_all,
+    train_solvers,
 )
 
 REPO = Path(__file__).resolve().parents[2]
@@ -588,6 +591,40 @@ def test_long_other_weight_retrains_the_long_bank_alone() -> None:
     own = load_config(None, {"solver": {"long_other_weight": 0.1}})
     for stage in ("autoencoder", "solvers", "solvers_long", "completion1"):
         assert (config_tag(own, stage) != config_tag(base, stage)) == (stage == "solvers_long")
+
+
+def test_other_weights_weigh_each_set_of_the_shared_bank_alone(
+    trained: tuple[Trained, Path], small_dataset: Path, tmp_path: Path
+) -> None:
+    """``solver.other_weights``: a set named there trains exactly, bit for bit, as in a bank
+    whose every set has that weight, the others as with ``other_weight`` (each set's solver
+    is trained on its own loss alone); unset it is in no tag, set it retrains the shared
+    bank only; a key that is no set's key (an unknown joint, joints out of order) is
+    refused."""
+    result, _ = trained
+    d = init_distributed()
+    total = float(reference_lengths(result.splits.train).sum())
+
+    def bank(name: str, **solver: Any) -> list[torch.Tensor]:
+        cfg = tiny_config(small_dataset, tmp_path / name, tmp_path / "models", solver=solver)
+        trained_bank, _ = train_solvers(cfg, d, result.ae, result.splits, total, fresh=True)
+        return [p.detach() for n, p in trained_bank.named_parameters() if not n.startswith("norm.")]
+
+    low, high = bank("low", other_weight=0.01), bank("high", other_weight=1.0)
+    mixed = bank("mixed", other_weight=0.01, other_weights={"left_ankle+right_ankle": 1.0})
+    assert len(mixed) == len(low) and all(len(p) == 2 for p in mixed)  # [S, ...] each
+    assert not all(torch.equal(a[1], b[1]) for a, b in zip(low, high, strict=True))
+    for m, lo, hi in zip(mixed, low, high, strict=True):
+        assert torch.equal(m[0], lo[0]) and torch.equal(m[1], hi[1])
+    base = load_config(None, {})
+    assert "other_weights" not in _section(base, "solver")
+    own = load_config(None, {"solver": {"other_weights": {"left_knee": 0.3}}})
+    for stage in ("autoencoder", "solvers", "solvers_long", "completion1"):
+        assert (config_tag(own, stage) != config_tag(base, stage)) == (stage == "solvers")
+    with pytest.raises(ValueError, match=r"unknown joints \['left_wirst'\]"):
+        load_config(None, {"solver": {"other_weights": {"left_wirst": 0.3}}})
+    with pytest.raises(ValueError, match="'right_wrist\\+left_wrist' is not a set's key"):
+        load_config(None, {"solver": {"other_weights": {"right_wrist+left_wrist": 0.3}}})
 
 
 def test_completion_checkpoints_tagged_with_the_autoencoder_stay_valid(tmp_path: Path) -> None:
