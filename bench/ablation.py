@@ -273,10 +273,31 @@ VARIANTS: dict[str, str] = {
     "captured edits",
     "ae_cos3e3_noise005_long_other100": "the same at 1.0",
     "ae_cos3e3_noise005_long_other300": "the same at 3.0",
-    "long_other030": "the shipped recipe (its autoencoder and shared bank) with the "
-    "5-end-effector solver's other joints weighted 0.3 (long_other030.toml; item 49)",
+    "long_other030": "the recipe of mx1-3ca9545e56de (mx1_3ca9.toml: its autoencoder and "
+    "shared bank) with the 5-end-effector solver's other joints weighted 0.3 "
+    "(long_other030.toml; item 49)",
     "captured_long_other030": "`long_other030` on the captured edits",
     "long_other100": "the same at 1.0 (long_other100.toml)",
+    "captured_ae_cos3e3_noise005_long_other100": "`ae_cos3e3_noise005_long_other100` on the "
+    "captured edits",
+    "ae_cos3e3_noise005_other005_long100": "`ae_cos3e3_noise005_long_other100` with the "
+    "shared bank's other joints weighted 0.05 instead of 0.03 (solver.other_weight, "
+    "ae_cos3e3_noise005_other005_long100.toml; item 50)",
+    "ae_cos3e3_noise005_other01_long100": "the same at 0.1 "
+    "(ae_cos3e3_noise005_other01_long100.toml)",
+    "captured_ae_cos3e3_noise005_other01_long100": "`ae_cos3e3_noise005_other01_long100` on "
+    "the captured edits",
+    "other01_legs": "`ae_cos3e3_noise005_other01_long100` with only the legs' seven sets "
+    "(ankles, knees, feet, both ankles) at 0.1, the others' networks taken from "
+    "`ae_cos3e3_noise005_long_other100` (each set's solver trains on its own loss alone)",
+    "other01_arms003": "`ae_cos3e3_noise005_other01_long100` with the arms' five sets "
+    "(wrists, elbows, both wrists) at 0.03 (solver.other_weights), their networks taken "
+    "from `ae_cos3e3_noise005_long_other100`; retrained as such (default.toml with "
+    "other_weight 0.1), bit-identical by sha256",
+    "captured_other01_arms003": "`other01_arms003` on the captured edits",
+    "other005_arms003": "the same at 0.05 (the arms at 0.03): shipped since "
+    "(mx1-ae7aa5c7b2c0, item 50; default.toml), its files by sha256",
+    "captured_other005_arms003": "`other005_arms003` on the captured edits",
 }
 COMPLETION = "6-point completion"
 
@@ -377,7 +398,8 @@ def main(
         "other row is a full-budget model scored with `python -m bench.heldout --models DIR "
         "[--serving KEY=VALUE ...] --out reports/ablation/NAME.json` (e.g. `passes=3`)."
         " Rows scored with the numpy engine, before the compiled one, agree with it to "
-        "5e-14 m (docs/benchmarks.md)."
+        "5e-14 m (docs/benchmarks.md). A row's config that extends trainer/configs/default.toml "
+        "extends it as it was when the row was trained (`git log` of the row's JSON)."
         "\n\n" + render(rows)
     )
     write_atomic(out, text.encode())
