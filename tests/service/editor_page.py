@@ -15,6 +15,7 @@ warn that it cannot rewrite it).
 from __future__ import annotations
 
 import json
+import math
 import os
 import shutil
 import subprocess
@@ -138,6 +139,14 @@ def post_json(url: str, body: dict[str, Any]) -> Any:
 
 # -- the review's defects: each found by a test run against the page before its fix ------------
 M = "window.marionette"
+
+
+def drawn_as_inspected(page: Any, server: str, body: dict[str, Any]) -> None:
+    """The page draws the BVH frame as ``/v1/bvh/inspect`` lays out ``body`` (its text,
+    frame, map), to 1e-6: the page's forward kinematics are the service's."""
+    want = post_json(server + "/v1/bvh/inspect", body)["positions"]
+    got = page.evaluate(f"{M}.bvhPositions()")
+    assert max(math.dist(a, b) for a, b in zip(got, want, strict=True)) < 1e-6
 
 
 def open_editor(browser: Any, server: str) -> Any:

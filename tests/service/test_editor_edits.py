@@ -17,10 +17,10 @@ from tests.service.editor_page import (
     REPO_ROOT,
     M,
     drag_joint,
+    drawn_as_inspected,
     give_file,
     held_drag,
     open_editor,
-    post_json,
     release,
     settle,
 )
@@ -47,9 +47,7 @@ def test_editor_undo_after_scrubbing_returns_to_the_state_before(server: str, br
         """(the original text?, frame, targets), and the frame drawn is the text's."""
         now = page.evaluate(f"{M}.bvhText()")
         frame = page.evaluate(f"{M}.bvh().frame")
-        want = post_json(server + "/v1/bvh/inspect", {"bvh": now, "frame": frame})["positions"]
-        got = page.evaluate(f"{M}.bvhPositions()")
-        assert max(dist(a, b) for a, b in zip(got, want, strict=True)) < 1e-6
+        drawn_as_inspected(page, server, {"bvh": now, "frame": frame})
         return now == text, frame, sorted(page.evaluate(f"{M}.targets()"))
 
     try:
@@ -312,9 +310,7 @@ def test_editor_frame_box_jumps_to_a_typed_frame(
         # typed, then Enter: that frame, drawn as the service has it
         jump("700")
         shows(700)
-        want = post_json(server + "/v1/bvh/inspect", {"bvh": text, "frame": 700})["positions"]
-        got = page.evaluate(f"{M}.bvhPositions()")
-        assert max(dist(a, b) for a, b in zip(got, want, strict=True)) < 1e-6
+        drawn_as_inspected(page, server, {"bvh": text, "frame": 700})
         assert page.locator("#bvh-frame-label").inner_text().startswith("/ 917 (")
 
         # the slider and its keys move the box; the box's own arrows step
