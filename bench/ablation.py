@@ -289,14 +289,16 @@ VARIANTS: dict[str, str] = {
     "the captured edits",
     "other01_legs": "`ae_cos3e3_noise005_other01_long100` with only the legs' seven sets "
     "(ankles, knees, feet, both ankles) at 0.1, the others' networks taken from "
-    "`ae_cos3e3_noise005_long_other100` (each set's solver trains on its own loss alone)",
+    "`ae_cos3e3_noise005_long_other100` (each set's solver trains on its own loss alone; "
+    "other01_legs.toml)",
     "other01_arms003": "`ae_cos3e3_noise005_other01_long100` with the arms' five sets "
-    "(wrists, elbows, both wrists) at 0.03 (solver.other_weights), their networks taken "
-    "from `ae_cos3e3_noise005_long_other100`; retrained as such (default.toml with "
-    "other_weight 0.1), bit-identical by sha256",
+    "(wrists, elbows, both wrists) at 0.03 (solver.other_weights, other01_arms003.toml), "
+    "their networks taken from `ae_cos3e3_noise005_long_other100`: that config's banks, "
+    "trained from a copy of that run's autoencoder, by sha256",
     "captured_other01_arms003": "`other01_arms003` on the captured edits",
-    "other005_arms003": "the same at 0.05 (the arms at 0.03): shipped since "
-    "(mx1-ae7aa5c7b2c0, item 50; default.toml), its files by sha256",
+    "other005_arms003": "the same at 0.05 (the arms at 0.03; other005_arms003.toml): the "
+    "shipped recipe on item 48's autoencoder (default.toml retrained from nothing is "
+    "mx1-6863ea85cf16, item 50)",
     "captured_other005_arms003": "`other005_arms003` on the captured edits",
 }
 COMPLETION = "6-point completion"

@@ -196,7 +196,8 @@ class SolverConfig(_Section):
         default={},
         description="other_weight of single sets of `sets`, by key (the set's joints sorted "
         "and joined by '+', as the manifest names it); the other sets: other_weight (a key "
-        "of no set of `sets` weighs nothing: a config that changes the sets inherits them). "
+        "of no set of `sets`, a long_sets one too, weighs nothing and is in no checkpoint "
+        "tag: a config that changes the sets inherits them). "
         "Each set's solver is trained on its own loss alone: a set's weight changes no other.",
     )
 

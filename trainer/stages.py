@@ -34,6 +34,7 @@ from torch import nn
 from torch.utils.data import DistributedSampler
 
 from core.io import sha256_file, write_atomic
+from core.skeleton import set_key
 from trainer.config import SERVING_SETTINGS, LrSchedule, TrainConfig, seen_by_losses
 from trainer.data.dataset import DatasetError
 
@@ -278,7 +279,20 @@ def config_tag(cfg: TrainConfig, stage: str, *, legacy: bool = False) -> str:
         # them: solver.carry_loss, solver.ends_loss, solver.elbows_loss)
         keep = seen_by_losses(cfg.solver.model_dump())
         serving = tuple(k for k in SERVING_SETTINGS if k not in keep)
-        relevant["solver"] = _section(cfg, "solver", (*serving, *other))
+        solver = _section(cfg, "solver", (*serving, *other))
+        # what the weights are, not how they are written: a long bank weighted as the shared
+        # one, and per-set weights of no set trained or equal to other_weight, train the same
+        if solver.get("long_other_weight") == cfg.solver.other_weight:
+            del solver["long_other_weight"]
+        if "other_weights" in solver:
+            keys = {set_key(s) for s in cfg.solver.sets}
+            own = {k: w for k, w in cfg.solver.other_weights.items()
+                   if k in keys and w != cfg.solver.other_weight}  # fmt: skip
+            if own:
+                solver["other_weights"] = own
+            else:
+                del solver["other_weights"]
+        relevant["solver"] = solver
         relevant["augment"] = _section(cfg, "augment")
     if stage.startswith("completion"):  # serving_*: serving only; joint_shift: not read
         relevant["augment"] = _section(cfg, "augment", (*pairs_only, "joint_shift"))

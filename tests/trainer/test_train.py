@@ -621,6 +621,14 @@ def test_other_weights_weigh_each_set_of_the_shared_bank_alone(
     own = load_config(None, {"solver": {"other_weights": {"left_knee": 0.3}}})
     for stage in ("autoencoder", "solvers", "solvers_long", "completion1"):
         assert (config_tag(own, stage) != config_tag(base, stage)) == (stage == "solvers")
+    # the tags hash the weights trained with, not how they are written: a key of no set
+    # trained, a weight equal to other_weight, the long bank's equal to it
+    same = {"left_knee": base.solver.other_weight, "neck": 0.3, "left_wrist+neck": 0.3}
+    for extra in ({"other_weights": same}, {"long_other_weight": base.solver.other_weight}):
+        for stage in ("solvers", "solvers_long"):
+            assert config_tag(load_config(None, {"solver": extra}), stage) == config_tag(
+                base, stage
+            )
     with pytest.raises(ValueError, match=r"unknown joints \['left_wirst'\]"):
         load_config(None, {"solver": {"other_weights": {"left_wirst": 0.3}}})
     with pytest.raises(ValueError, match="'right_wrist\\+left_wrist' is not a set's key"):
