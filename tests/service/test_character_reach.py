@@ -159,7 +159,11 @@ def test_a_wrist_out_of_reach_neither_breaks_a_pin_nor_loses_the_pelvis(
             engine, text, name, {"targets": [pelvis, wrist], "options": {"reach": reach}}
         )
         assert result.errors[0] <= TOL, (reach, result.errors)
-        assert out["targets"][0]["error"] <= result.errors[0] + TOL, (reach, out["targets"])
+        # exact: held as a pin is; soft: near where the answer put it (the polish's first
+        # phase only, docs/characters.md, a compromise with the wrist 1.5 m out of reach:
+        # 0.5-0.9 mm with the models of mx1-3ca9545e56de, up to 1.6 mm (CMU salsa) since)
+        near = TOL if reach == "exact" else 5 * TOL
+        assert out["targets"][0]["error"] <= result.errors[0] + near, (reach, out["targets"])
     # an elbow 2 m from its pinned wrist: where the answer breaks the pin for it, the
     # character follows the answer (it held the pin: the elbow 1.4 m off); soft reach ends
     # its polish before the targets alone, so it may stay a few cm short of the answer

@@ -54,8 +54,12 @@ def test_pose_form_passes_equal_an_engine_built_with_them(
             out = client.post("/v1/solve", json={**body, "options": {"passes": p}})
             assert out.status_code == 200, out.text
             assert np.array_equal(as_array(out.json()["pose"]), engine_pose(other, body)), p
-        one = client.post("/v1/solve", json={**body, "options": {"passes": 1}}).json()
-        assert one["pose"] != default["pose"]
+        # the count reaches the engine: a third pass moves every answer (one pass may not:
+        # an answer it leaves more than serving.retry_reach short is retried, and then gets
+        # what a second pass gives, the default's; 5 of these 6 with the models of
+        # docs/generalisation-3.md item 50)
+        three = client.post("/v1/solve", json={**body, "options": {"passes": 3}}).json()
+        assert three["pose"] != default["pose"]
 
 
 def test_batch_mixes_passes_item_by_item(client: Any, real_poses: PosePairs) -> None:
