@@ -165,7 +165,11 @@ def test_characters_beyond_the_trained_sizes_are_solved_at_scale(
             "/v1/solve", json=solve_body(synthetic_poses, 1, joints, transform=bigger)
         ).json()["pose"]
     )
-    assert np.abs(a * (1.7 / 1.5) - b).max() < 1e-4
+    # the networks see both at the same size; the retry's threshold is in metres (5 mm), so
+    # the bigger body's answer may take one more pass and the polish (1.7x here, since the
+    # models of docs/generalisation-3.md item 50: 0.69 mm apart); a scale wrong by the
+    # ratio would put them centimetres apart
+    assert np.abs(a * (1.7 / 1.5) - b).max() < 1e-3
     start = as_array(solve_body(synthetic_poses, 1, joints, transform=bigger)["pose"])
     assert np.allclose(bone_lengths(b), bone_lengths(start), rtol=1e-5)
     tiny = yaw_shift(0.0, (0, 0, 0), scale=0.6)
