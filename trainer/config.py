@@ -203,6 +203,14 @@ class SolverConfig(_Section):
 
     _v = field_validator("sets", "long_sets")(_check_joints)
 
+    def weight_of(self, joints: list[str], long: bool = False) -> float:
+        """The weight of the goal's other joints the solver of ``joints`` trains with: the
+        long bank's (``long``) ``long_other_weight``, a shared set's its ``other_weights``
+        entry; else ``other_weight``. The trainer and the checkpoint tags read it here."""
+        if long:
+            return self.other_weight if self.long_other_weight is None else self.long_other_weight
+        return self.other_weights.get(set_key(joints), self.other_weight)
+
     @model_validator(mode="after")
     def _apart(self) -> SolverConfig:
         both = {tuple(sorted(j)) for j in self.sets} & {tuple(sorted(j)) for j in self.long_sets}

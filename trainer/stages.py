@@ -270,28 +270,20 @@ def config_tag(cfg: TrainConfig, stage: str, *, legacy: bool = False) -> str:
     if stage.startswith("solver"):
         # each bank reads only its own sets and epochs (its own seed and pair stream), so
         # neither is retrained when only the other's change; passes, carry: serving only
-        other = (
-            ("sets", "epochs", "other_weights")
-            if stage == "solvers_long"
-            else ("long_sets", "long_epochs", "long_other_weight")
-        )
+        other = ("sets", "epochs") if stage == "solvers_long" else ("long_sets", "long_epochs")
         # (carry, keep_ends and keep_elbows are training settings too where the losses see
         # them: solver.carry_loss, solver.ends_loss, solver.elbows_loss)
         keep = seen_by_losses(cfg.solver.model_dump())
         serving = tuple(k for k in SERVING_SETTINGS if k not in keep)
-        solver = _section(cfg, "solver", (*serving, *other))
-        # what the weights are, not how they are written: a long bank weighted as the shared
-        # one, and per-set weights of no set trained or equal to other_weight, train the same
-        if solver.get("long_other_weight") == cfg.solver.other_weight:
-            del solver["long_other_weight"]
-        if "other_weights" in solver:
-            keys = {set_key(s) for s in cfg.solver.sets}
-            own = {k: w for k, w in cfg.solver.other_weights.items()
-                   if k in keys and w != cfg.solver.other_weight}  # fmt: skip
-            if own:
-                solver["other_weights"] = own
-            else:
-                del solver["other_weights"]
+        solver = _section(cfg, "solver", (*serving, *other, "long_other_weight", "other_weights"))
+        # the weights trained with (SolverConfig.weight_of), not how they are written; where
+        # one is other_weight, absent, as in the tags from before the two options
+        sc = cfg.solver
+        if sc.weight_of([], long=True) != sc.other_weight and stage == "solvers_long":
+            solver["long_other_weight"] = sc.weight_of([], long=True)
+        own = {set_key(s): sc.weight_of(s) for s in sc.sets if sc.weight_of(s) != sc.other_weight}
+        if own and stage == "solvers":
+            solver["other_weights"] = own
         relevant["solver"] = solver
         relevant["augment"] = _section(cfg, "augment")
     if stage.startswith("completion"):  # serving_*: serving only; joint_shift: not read

@@ -17,7 +17,7 @@ from torch import nn
 from torch.nn.parallel import DistributedDataParallel
 
 from core.ends import active
-from core.skeleton import JOINT_INDEX, NUM_JOINTS, set_key
+from core.skeleton import JOINT_INDEX, NUM_JOINTS
 from core.skeleton import bone_lengths as bone_lengths_np
 from trainer.augment import (
     FrameSource,
@@ -417,11 +417,9 @@ def train_solvers(
     optim = torch.optim.Adam(params, lr=sc.lr)
     steps = steps_per_epoch(len(src.poses), sc.batch_size, d)
 
-    other_weight: float | torch.Tensor = sc.other_weight
-    if long and sc.long_other_weight is not None:
-        other_weight = sc.long_other_weight
-    elif not long and sc.other_weights:  # per set [S]: each set's loss weighs its own
-        weights = [sc.other_weights.get(set_key(s), sc.other_weight) for s in sets]
+    weights = [sc.weight_of(s, long) for s in sets]
+    other_weight: float | torch.Tensor = weights[0]
+    if len(set(weights)) > 1:  # per set [S]: each set's loss weighs its own
         other_weight = torch.tensor(weights, dtype=torch.float32)
 
     def losses(model: nn.Module, start: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
