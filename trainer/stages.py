@@ -57,6 +57,13 @@ class Dist:
         if self.world > 1:
             dist.barrier()
 
+    def close(self) -> None:
+        """Leave the process group (after the ranks' last collective): its threads end
+        here, not in the interpreter's teardown, where a rank once aborted ("terminate
+        called without an active exception") after training had ended."""
+        if self.world > 1 and dist.is_initialized():
+            dist.destroy_process_group()
+
 
 def init_distributed() -> Dist:
     """Join the torchrun process group when launched by torchrun, else single process."""

@@ -659,5 +659,6 @@ def train_all(cfg: TrainConfig, *, fresh: bool = False) -> Trained:
                 digest.update(tensor.detach().contiguous().numpy().tobytes())
         print(f"weights digest rank {d.rank}: {digest.hexdigest()}", flush=True)
         d.barrier()
+        d.close()
     states.update({f"completion{i + 1}": s for i, s in enumerate(completion_states)})
     return Trained(ae=ae, bank=bank, completion=completion, states=states, splits=splits)
