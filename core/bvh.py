@@ -8,7 +8,8 @@ Conventions implemented here:
 - Position channels, on any joint (6-channel joints: Bandai-Namco, ReActIdle), *replace*
   the matching component of the joint's OFFSET. Offsets are never added to them.
 - ``End Site`` blocks become pseudo-joints named ``<parent>_end`` (``_end2``... if a joint
-  has several), addressable by joint maps like any other joint.
+  has several), addressable by joint maps like any other joint. A name a real joint of the
+  file has stays the joint's: its End Site takes the next free ``_endK``.
 - Nothing of the file is lost, so a writer can round-trip it: every joint keeps its
   channel names in file order (:attr:`BVHJoint.channels`) and first MOTION column
   (:attr:`BVHJoint.channel_start`); :attr:`BVH.motion` holds the raw channel values, one
@@ -31,7 +32,7 @@ from __future__ import annotations
 
 import re
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from itertools import compress, islice
 from pathlib import Path
 
@@ -357,10 +358,7 @@ def _parse_hierarchy(file: str, text: str) -> list[BVHJoint]:
                 toks.expect("}")
                 end_count += 1
                 end_name = f"{name}_end" if end_count == 1 else f"{name}_end{end_count}"
-                if end_name in names:
-                    raise _error(file, f"line {line}: End Site name {quoted(end_name)} is taken")
-                names.add(end_name)
-                joints.append(
+                joints.append(  # (named anew below where a real joint has that name)
                     BVHJoint(end_name, index, (ex, ey, ez), (), n_channels, end_site=True)
                 )
             else:
@@ -377,7 +375,24 @@ def _parse_hierarchy(file: str, text: str) -> list[BVHJoint]:
         raise _error(
             file, f"line {toks.line()}: unexpected {quoted(toks.peek())} after the hierarchy"
         )
-    return joints
+    return _end_sites_named(joints, names)
+
+
+def _end_sites_named(joints: list[BVHJoint], taken: set[str]) -> list[BVHJoint]:
+    """``joints`` with each End Site whose name is ``taken`` (the real joints' names, and
+    the End Sites' before it) renamed to its parent's next free ``_endK``, in file order:
+    a file whose joint is called ``Hand_end`` beside ``Hand``'s End Site is valid BVH."""
+    out = []
+    for joint in joints:
+        if joint.end_site:
+            name, k = joint.name, 1
+            while name in taken:
+                k += 1
+                name = f"{joints[joint.parent].name}_end{k}"
+            taken.add(name)
+            joint = replace(joint, name=name)
+        out.append(joint)
+    return out
 
 
 def parse_bvh(text: str, name: str = "<string>", frames: Iterable[int] | None = None) -> BVH:

@@ -239,13 +239,36 @@ def test_motion_values_numpy_does_not_read_are_read_as_python_reads_them() -> No
         parse_bvh(TINY.replace("1 2 3 90 0 0 0 90 0", "1 2 3 0x1p3 0 0 0 90 0"), "x.bvh")
 
 
-def test_end_site_name_clash_is_an_error() -> None:
-    # The root's End Site would be "root_end", the name of a joint already read.
-    clash = TINY.replace("JOINT child", "JOINT root_end").replace(
+def test_a_joint_keeps_its_name_where_an_end_site_would_take_it() -> None:
+    """Found by a users' files audit (2026-12-05): a joint called ``X_end`` beside X's End
+    Site was refused ('duplicate joint name', or 'End Site name ... is taken'), though the
+    file names nothing twice: the End Site's name is the reader's own."""
+    # the root's End Site after a joint named "root_end"
+    after = TINY.replace("JOINT child", "JOINT root_end").replace(
         "  }\n}\nMOTION", "  }\n  End Site\n  {\n    OFFSET 1 0 0\n  }\n}\nMOTION"
     )
-    with pytest.raises(BVHError, match="End Site name 'root_end' is taken"):
-        parse_bvh(clash, "clash.bvh")
+    bvh = parse_bvh(after, "after.bvh")
+    assert bvh.joint_names == ("root", "root_end", "root_end_end", "root_end2")
+    assert [j.end_site for j in bvh.joints] == [False, False, True, True]
+    assert bvh.joints[3].parent == 0 and bvh.joints[3].offset == (1.0, 0.0, 0.0)
+    # the child's End Site before a joint named "child_end" (its sibling's child)
+    before = TINY.replace(
+        "      OFFSET 0 5 0\n    }\n",
+        "      OFFSET 0 5 0\n    }\n    JOINT child_end\n    {\n      OFFSET 0 1 0\n"
+        "      CHANNELS 3 Zrotation Xrotation Yrotation\n      End Site\n      {\n"
+        "        OFFSET 0 2 0\n      }\n    }\n",
+    ).replace("0 0 0 0 0 0 0 0 90\n", "0 0 0 0 0 0 0 0 90 0 0 0\n")
+    before = (
+        "\n".join(
+            line + " 0 0 0" if line[:1].isdigit() and line.count(" ") == 8 else line
+            for line in before.splitlines()
+        )
+        + "\n"
+    )
+    bvh = parse_bvh(before, "before.bvh")
+    assert bvh.joint_names == ("root", "child", "child_end2", "child_end", "child_end_end")
+    assert bvh.motion.shape == (4, 12)
+    # unclashed names are as they always were
     renamed = parse_bvh(TINY.replace("JOINT child", "JOINT child_end"), "ok.bvh")
     assert renamed.joint_names == ("root", "child_end", "child_end_end")
 
