@@ -12,6 +12,7 @@ import logging.config
 import os
 import sys
 from pathlib import Path
+from typing import Any
 
 from pydantic import ValidationError
 
@@ -19,6 +20,7 @@ from core import CacheDirError
 
 try:  # importing the settings imports the kernels: their cache folder is chosen then
     from service.logs import log_config
+    from service.metrics import shared
     from service.settings import Settings, unknown_variables
 except CacheDirError as exc:  # one line, not a traceback
     print(f"pose-service: {exc}", file=sys.stderr)
@@ -40,8 +42,6 @@ def parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> None:
     args = parser().parse_args(argv)
-    import uvicorn
-
     overrides = {"host": args.host, "port": args.port, "models_dir": args.models_dir}
     for key, value in overrides.items():  # worker processes read settings from the env
         if value:
@@ -66,12 +66,19 @@ def main(argv: list[str] | None = None) -> None:
         logging.getLogger("service").warning(
             json.dumps({"event": "unknown_setting", "variable": name, "detail": "ignored"})
         )
+    with shared(args.workers):  # one /metrics over every worker
+        _run(settings, config, args.workers)
+
+
+def _run(settings: Settings, config: dict[str, Any], workers: int) -> None:
+    import uvicorn
+
     uvicorn.run(
         "service.app:create_app",
         factory=True,
         host=settings.host,
         port=settings.port,
-        workers=args.workers,
+        workers=workers,
         log_level=settings.log_level,
         log_config=config,  # every line JSON (service.logs), uvicorn's too
         access_log=False,

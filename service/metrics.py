@@ -1,29 +1,46 @@
-"""Prometheus collectors of one app instance (own registry: apps don't collide).
+"""Prometheus collectors of one app instance (own registry: apps don't collide), and the
+worker processes' sum when there are several (:func:`shared`).
 
 Every label has a bounded set of values: routes are route templates (or ``unmatched``),
 solver sequences are a trained key, ``composed``, ``none`` or ``fabrik``."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import contextlib
+import os
+import shutil
+import tempfile
+from collections.abc import Iterator, Sequence
 
 import numpy as np
 import numpy.typing as npt
-from prometheus_client import CollectorRegistry, Counter, Histogram
-from prometheus_client.core import CounterMetricFamily
-from prometheus_client.registry import Collector
+from prometheus_client import CollectorRegistry, Counter, Histogram, generate_latest, multiprocess
 
-from service.transport import PacedHTTPProtocol
+from service.transport import SLOW_READERS
+
+#: prometheus_client's multiprocess mode: where set (before the client library is
+#: imported), every process writes its metrics into files in this folder, and a scrape of
+#: any of them reads the sum over all (:meth:`Metrics.exposition`).
+SHARED_DIR = "PROMETHEUS_MULTIPROC_DIR"
 
 
-class _SlowReaders(Collector):
-    """Connections closed on a client that did not take its answer (``service.transport``,
-    counted per process, as the protocol has no app to count in)."""
-
-    def collect(self) -> list[CounterMetricFamily]:
-        help_ = "Connections closed on a client that did not take its answer"
-        dropped = PacedHTTPProtocol.dropped
-        return [CounterMetricFamily("pose_slow_readers", help_, value=dropped)]
+@contextlib.contextmanager
+def shared(workers: int) -> Iterator[None]:
+    """``pose-service --workers N`` (N > 1): the workers' metrics in one fresh folder,
+    removed at the end, so that ``/metrics`` answers the service's counts whichever worker
+    takes the scrape (each worker kept its own before: a scrape read one worker's). An
+    operator's own ``PROMETHEUS_MULTIPROC_DIR`` is used as it is (emptied by them before a
+    start, as prometheus_client asks)."""
+    if workers <= 1 or os.environ.get(SHARED_DIR):
+        yield
+        return
+    folder = tempfile.mkdtemp(prefix="marionette-metrics-")
+    os.environ[SHARED_DIR] = folder  # the workers, spawned afresh, inherit it
+    try:
+        yield
+    finally:
+        os.environ.pop(SHARED_DIR, None)
+        shutil.rmtree(folder, ignore_errors=True)
 
 
 #: Steps of a solver path that are not trained solvers: the FABRIK polish and fallback,
@@ -63,7 +80,17 @@ class Metrics:
             buckets=(1, 2, 4, 8, 16, 32, 64, 128, 256, 512, 1024, 4096),
             registry=self.registry,
         )
-        self.registry.register(_SlowReaders())
+        self.registry.register(SLOW_READERS)
+
+    def exposition(self) -> bytes:
+        """The text ``/metrics`` answers: this app's collectors, or with several worker
+        processes (:data:`SHARED_DIR` set) the sum of every worker's."""
+        folder = os.environ.get(SHARED_DIR)
+        if not folder:
+            return generate_latest(self.registry)
+        registry = CollectorRegistry()
+        multiprocess.MultiProcessCollector(registry, path=folder)  # type: ignore[no-untyped-call]
+        return generate_latest(registry)
 
     def solved(self, method: str, solvers: list[str], n: int = 1) -> None:
         """Count ``n`` solves under a bounded label (never an open-ended combination)."""

@@ -37,6 +37,7 @@ import time
 from typing import Any, ClassVar
 
 import orjson
+from prometheus_client import Counter
 from uvicorn.protocols.http.auto import AutoHTTPProtocol
 
 from service.errors import HeadTooLarge, MalformedHTTP, PoseError, raw_answer
@@ -110,6 +111,16 @@ class Coalescing:
         self._transport.abort()
 
 
+#: Connections closed on a client that did not take its answer (``pose_slow_readers_total``;
+#: the protocol has no app to count in, so the count is the process's, which every app's
+#: registry shows: ``service.metrics``).
+SLOW_READERS = Counter(
+    "pose_slow_readers",
+    "Connections closed on a client that did not take its answer",
+    registry=None,
+)
+
+
 def _head_too_large() -> HeadTooLarge:
     return HeadTooLarge(
         f"the request line and headers exceed {MAX_HEAD_BYTES} bytes "
@@ -124,7 +135,6 @@ class PacedHTTPProtocol(AutoHTTPProtocol):  # type: ignore[misc, valid-type]
     #: this worker's connections whose answer waits, in the order they began to wait (a
     #: dict: insertion order, and removal by key)
     waiting: ClassVar[dict[PacedHTTPProtocol, None]] = {}
-    dropped: ClassVar[int] = 0  # connections closed on a slow reader (service.metrics)
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
@@ -238,7 +248,7 @@ class PacedHTTPProtocol(AutoHTTPProtocol):  # type: ignore[misc, valid-type]
         """Close this connection and drop the ``unsent`` bytes of its answer (``left``:
         what the others still hold)."""
         PacedHTTPProtocol.waiting.pop(self, None)
-        PacedHTTPProtocol.dropped += 1
+        SLOW_READERS.inc()
         client = getattr(self, "client", None)
         line = {
             "event": "slow-reader", "client": f"{client[0]}:{client[1]}" if client else None,

@@ -6,7 +6,6 @@ from __future__ import annotations
 from fastapi import APIRouter, Response
 from fastapi.responses import RedirectResponse
 from prometheus_client import CONTENT_TYPE_LATEST
-from prometheus_client import generate_latest as prometheus_latest
 
 from service.deps import State
 from service.schemas import Health
@@ -39,8 +38,8 @@ async def ready(response: Response, state: State) -> Health:
 
 @router.get("/metrics", response_class=Response)
 async def metrics(state: State) -> Response:
-    """Prometheus metrics."""
-    return Response(prometheus_latest(state.metrics.registry), media_type=CONTENT_TYPE_LATEST)
+    """Prometheus metrics (with several worker processes, the sum of all of them)."""
+    return Response(state.metrics.exposition(), media_type=CONTENT_TYPE_LATEST)
 
 
 @router.get("/", include_in_schema=False)

@@ -12,7 +12,7 @@ import socket
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -70,13 +70,17 @@ class Server:
 
 
 @contextlib.contextmanager
-def serve(models_dir: Path, tmp: Path, ready: bool = True, **env: str) -> Iterator[Server]:
+def serve(
+    models_dir: Path, tmp: Path, ready: bool = True, argv: Sequence[str] = (), **env: str
+) -> Iterator[Server]:
+    """``pose-service`` (with ``argv``) on a free port, once ready (or ``ready`` False:
+    live); SIGTERM at the end."""
     port = free_port()
     log = tmp / f"server-{port}.log"
     environ = {**os.environ, "POSE_MODELS_DIR": str(models_dir), "POSE_PORT": str(port), **env}
     with log.open("wb") as sink:
         proc = subprocess.Popen(
-            [sys.executable, "-c", "from service.cli import main; main()"],
+            [sys.executable, "-c", f"from service.cli import main; main({list(argv)!r})"],
             cwd=REPO, env=environ, stdout=sink, stderr=subprocess.STDOUT,
         )  # fmt: skip
     server = Server(proc, port, log)
