@@ -288,6 +288,12 @@ class _Tokens:
 #: the deepest nesting of joints read (a real rig's fingers or hair are tens deep; the
 #: reader recurses once per level, and Python's stack holds about a thousand)
 MAX_DEPTH = 256
+#: the most joints a hierarchy may hold, End Sites included (a real rig has tens to a few
+#: hundred: fingers, toes, a face); what the service reads of a character in any form
+#: (``service.characters``). A file past it is refused as soon as the reader gets there:
+#: an 8 MiB body of End Sites alone held ~295,000, and reading, mapping and answering
+#: them took a worker 6-12 s past its 2 s deadline (an API audit, 2026-12-05).
+MAX_JOINTS = 2000
 
 
 def _parse_hierarchy(file: str, text: str) -> list[BVHJoint]:
@@ -299,6 +305,13 @@ def _parse_hierarchy(file: str, text: str) -> list[BVHJoint]:
     names: set[str] = set()
     n_channels = 0
 
+    def too_many(line: int) -> None:
+        if len(joints) >= MAX_JOINTS:
+            raise _error(
+                file, f"line {line}: more than {MAX_JOINTS} joints (End Sites included): "
+                "more than a character the service reads may have",
+            )  # fmt: skip
+
     def parse_joint(parent: int, depth: int) -> None:
         nonlocal n_channels
         line = toks.line()
@@ -307,6 +320,7 @@ def _parse_hierarchy(file: str, text: str) -> list[BVHJoint]:
         name = toks.rest_of_line("a joint name")
         if not name:
             raise _error(file, f"line {line}: missing joint name")
+        too_many(line)
         if name in names:
             raise _error(file, f"line {line}: duplicate joint name {quoted(name)}")
         names.add(name)
@@ -356,6 +370,7 @@ def _parse_hierarchy(file: str, text: str) -> list[BVHJoint]:
                 toks.expect("OFFSET")
                 ex, ey, ez = toks.floats(3, f"End Site OFFSET of {name}")
                 toks.expect("}")
+                too_many(line)
                 end_count += 1
                 end_name = f"{name}_end" if end_count == 1 else f"{name}_end{end_count}"
                 joints.append(  # (named anew below where a real joint has that name)

@@ -30,7 +30,7 @@ from pydantic import (
 )
 from pydantic_core import InitErrorDetails, PydanticCustomError
 
-from core.bvh import BVH, BVHError, parse_bvh
+from core.bvh import BVH, MAX_JOINTS, BVHError, parse_bvh
 from core.bvh_write import pose_of, row_of, skeleton_of, splice_frame
 from core.characters import (
     F64,
@@ -72,6 +72,9 @@ from service.schemas import (
 from service.validation import MIN_BONE, problem_of, validate_as
 
 MAX_COORDINATE = 1.0e7  # client units; beyond this a coordinate is nonsense
+#: The shortest quaternion a client may send (normalised here; shorter ones say nothing of
+#: a rotation that float noise does not).
+MIN_QUAT_LENGTH = 1e-6
 
 Number = Annotated[float, Field(allow_inf_nan=False, ge=-MAX_COORDINATE, le=MAX_COORDINATE)]
 Vec3 = Annotated[
@@ -82,7 +85,8 @@ Quat = Annotated[
     Field(
         min_length=4,
         max_length=4,
-        description="[x, y, z, w] (scalar last); any norm above 0 (normalised here).",
+        description=f"[x, y, z, w] (scalar last); any length from {MIN_QUAT_LENGTH:g} (normalised "
+        "here).",
     ),
 ]
 
@@ -143,7 +147,7 @@ class JointSpec(_Body):
 
 
 class CharacterSkeleton(_Body):
-    joints: list[JointSpec] = Field(min_length=1, max_length=2000)
+    joints: list[JointSpec] = Field(min_length=1, max_length=MAX_JOINTS)
     units: Units | None = Field(
         default="m", description="null: inferred from the rest pose (or else the pose)."
     )
@@ -586,9 +590,11 @@ def character_from_request(req: CharacterSolveRequest, where: str = "") -> Chara
         for name, q in req.rotations.items():
             with np.errstate(over="ignore"):  # a huge one is fine: normalised overflow-safe
                 length = float(np.linalg.norm(q))
-            if length < 1e-6:
+            if length < MIN_QUAT_LENGTH:
                 where = f"{prefix}rotations.{clip(name, 40)}"  # as a schema error names it
-                raise CharacterError(f"{where}: zero-length quaternion {q}", where)
+                raise CharacterError(
+                    f"{where}: quaternion {q} shorter than {MIN_QUAT_LENGTH:g}", where
+                )
             rot[skel.index[name]] = quat_to_matrix(q)
         trans = skel.offsets.copy()
         roots = [j for j, p in enumerate(skel.parents) if p < 0]

@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from core.bvh import BVHError, euler_matrices, parse_bvh, read_bvh
+from core.bvh import MAX_JOINTS, BVHError, euler_matrices, parse_bvh, read_bvh
 
 # Root: 6 channels (position + Z X Y rotation), child 10 up, end site 5 up the child.
 TINY = """HIERARCHY
@@ -271,6 +271,22 @@ def test_a_joint_keeps_its_name_where_an_end_site_would_take_it() -> None:
     # unclashed names are as they always were
     renamed = parse_bvh(TINY.replace("JOINT child", "JOINT child_end"), "ok.bvh")
     assert renamed.joint_names == ("root", "child_end", "child_end_end")
+
+
+def test_a_hierarchy_of_more_joints_than_a_character_has_is_refused_where_it_passes() -> None:
+    """An 8 MiB body of End Sites held ~295,000 joints, and reading them took seconds (an
+    API audit, 2026-12-05): the reader stops at the first joint past ``MAX_JOINTS``."""
+
+    def with_ends(n: int) -> str:
+        ends = "    End Site\n    {\n      OFFSET 0 5 0\n    }\n" * n
+        return TINY.replace("    End Site\n    {\n      OFFSET 0 5 0\n    }\n", ends)
+
+    assert len(parse_bvh(with_ends(MAX_JOINTS - 2), "most.bvh").joints) == MAX_JOINTS
+    first_past = 10 + 4 * (MAX_JOINTS - 2)  # the line of the End Site past the limit
+    with pytest.raises(BVHError, match=f"line {first_past}: more than {MAX_JOINTS} joints"):
+        parse_bvh(with_ends(MAX_JOINTS - 1), "past.bvh")
+    with pytest.raises(BVHError, match=f"line {first_past}: more than {MAX_JOINTS} joints"):
+        parse_bvh(with_ends(200_000), "flood.bvh")  # said where it passed, not at the end
 
 
 def test_reactidle_file_with_6_channel_joints(more_mocap: Path) -> None:
