@@ -2,9 +2,11 @@
 
 Conventions implemented here:
 
-- Any rotation channel order, on any joint. BVH Euler channels are *intrinsic* rotations
+- Any rotation channel order, on any joint (at most :data:`MAX_JOINT_CHANNELS` channels
+  on one, :data:`MAX_JOINTS` joints in all). BVH Euler channels are *intrinsic* rotations
   applied in the listed order, ``R = R_c1 @ R_c2 @ R_c3`` (degrees); e.g. ``Zrotation
-  Xrotation Yrotation`` gives ``Rz @ Rx @ Ry``. Any number of rotation channels works.
+  Xrotation Yrotation`` gives ``Rz @ Rx @ Ry``. Any number of rotation channels works
+  (within that bound).
 - Position channels, on any joint (6-channel joints: Bandai-Namco, ReActIdle), *replace*
   the matching component of the joint's OFFSET. Offsets are never added to them.
 - ``End Site`` blocks become pseudo-joints named ``<parent>_end`` (``_end2``... if a joint
@@ -294,6 +296,10 @@ MAX_DEPTH = 256
 #: an 8 MiB body of End Sites alone held ~295,000, and reading, mapping and answering
 #: them took a worker 6-12 s past its 2 s deadline (an API audit, 2026-12-05).
 MAX_JOINTS = 2000
+#: the most channels one joint may list (real files list 3 or 6; any order and any number
+#: of rotation channels up to this are read): one joint of 400,000 rotation channels took
+#: a worker past its deadline too (the same audit).
+MAX_JOINT_CHANNELS = 12
 
 
 def _parse_hierarchy(file: str, text: str) -> list[BVHJoint]:
@@ -338,6 +344,11 @@ def _parse_hierarchy(file: str, text: str) -> list[BVHJoint]:
             raise _error(
                 file, f"line {line}: bad channel count {quoted(count_tok)}: not a whole number >= 0"
             )
+        if count > MAX_JOINT_CHANNELS:
+            raise _error(
+                file, f"line {line}: {count} channels on joint {quoted(name)}: at most "
+                f"{MAX_JOINT_CHANNELS} are read (3 positions and 3 rotations is the most files have)",
+            )  # fmt: skip
         channels: list[str] = []
         for _ in range(count):
             line = toks.line()

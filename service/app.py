@@ -70,6 +70,9 @@ def create_app(settings: Settings | None = None, *, load_in_background: bool = T
         lifespan=lifespan,
         docs_url=None,  # mount_docs: self-hosted Swagger UI
         redoc_url=None,
+        # /v1/solve/ is not /v1/solve: a 404 problem, not a bare 307 whose Location
+        # repeats the client's Host header (an API audit, 2026-12-05)
+        redirect_slashes=False,
         # metrics are Prometheus (service.metrics); FastAPI's OpenTelemetry hooks would
         # only look up unconfigured providers on every request (~10 µs)
         telemetry={"tracing": False, "metrics": False, "logs": False},
@@ -86,5 +89,6 @@ def create_app(settings: Settings | None = None, *, load_in_background: bool = T
     # route templates for the metrics of requests refused before routing
     templates = [r for router in routers for r in router.routes]
     templates += [r for r in app.router.routes if getattr(r, "path", None)]
+    app.state.route_paths = frozenset(getattr(r, "path", "") for r in templates)
     middleware.install(app, settings, state.metrics, templates)
     return app

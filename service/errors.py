@@ -319,16 +319,25 @@ def install_handlers(app: FastAPI) -> None:
         if isinstance(exc, BodyInvalid):
             request.scope[REASON] = "invalid-request"
             return validation_problem(exc.errors, exc.total, exc.partial)
-        detail = clip(exc.detail)
+        title = detail = clip(exc.detail)
+        path = request.url.path
+        if exc.status_code == 404 and path.endswith("/") and _is_route(request, path[:-1]):
+            detail = f"no route {clip(path)}: the route is {clip(path[:-1])}, without the slash"
         headers = dict(exc.headers or {})
         allow = [m.strip() for m in headers.get("Allow", "").split(",") if m.strip()]
         if "GET" in allow and "HEAD" not in allow:  # every GET route answers HEAD too
             headers["Allow"] = ", ".join([*allow, "HEAD"])
-        return problem(exc.status_code, detail, detail, headers=headers)
+        return problem(exc.status_code, title, detail, headers=headers)
 
     @app.exception_handler(Exception)
     async def _unexpected(request: Request, exc: Exception) -> JSONResponse:
         return internal_error(request.method, request.url.path)
+
+
+def _is_route(request: Request, path: str) -> bool:
+    """Whether ``path`` is one of the app's routes (``service.app``: a 404 for it with a
+    slash says so)."""
+    return path in getattr(request.app.state, "route_paths", ())
 
 
 def internal_error(method: str, path: str) -> JSONResponse:

@@ -43,5 +43,6 @@ async def metrics(state: State) -> Response:
 
 
 @router.get("/", include_in_schema=False)
+@router.get("/editor/", include_in_schema=False)  # (no slash redirects otherwise: service.app)
 async def root() -> RedirectResponse:
-    return RedirectResponse("/editor")
+    return RedirectResponse("/editor")  # a path: the Location never repeats the Host header

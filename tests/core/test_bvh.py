@@ -287,6 +287,15 @@ def test_a_hierarchy_of_more_joints_than_a_character_has_is_refused_where_it_pas
         parse_bvh(with_ends(MAX_JOINTS - 1), "past.bvh")
     with pytest.raises(BVHError, match=f"line {first_past}: more than {MAX_JOINTS} joints"):
         parse_bvh(with_ends(200_000), "flood.bvh")  # said where it passed, not at the end
+    # and channels: one joint of 400,000 rotation channels was the audit's other file
+    many = "CHANNELS 12 " + "Zrotation Xrotation Yrotation " * 4
+    motion = "\n".join(" ".join(["0"] * 18) for _ in range(4))
+    ok = TINY.replace("CHANNELS 3 Zrotation Xrotation Yrotation", many.strip())
+    ok = ok.split("Frame Time: 0.0333333\n")[0] + "Frame Time: 0.0333333\n" + motion + "\n"
+    assert parse_bvh(ok, "twelve.bvh").joints[1].rotation_order == "ZXY" * 4
+    flood = TINY.replace("CHANNELS 3 Zrotation", "CHANNELS 400000 Zrotation")
+    with pytest.raises(BVHError, match="line 9: 400000 channels on joint 'child': at most 12"):
+        parse_bvh(flood, "flood.bvh")
 
 
 def test_reactidle_file_with_6_channel_joints(more_mocap: Path) -> None:
@@ -366,13 +375,19 @@ def test_a_block_too_short_for_its_values_is_refused_without_a_table_for_them() 
     """A review's find: the reader made the NaN table of every frame and channel before
     looking at a line, so a 0.2 MB body declaring 1,000 channels and 100,000 one-value lines
     filled 0.8 GB (a 4 MB one asked for 1.46 TiB: a 500). Now it is read whole, which
-    compares the count of values first."""
-    head = "HIERARCHY\nROOT Hips\n{\n OFFSET 0 0 0\n CHANNELS 1000 " + "Xrotation " * 1000
-    text = head + "\n End Site\n {\n OFFSET 0 1 0\n }\n}\nMOTION\nFrames: 100000\n"
-    text += "Frame Time: 0.01\n" + "0\n" * 100_000
+    compares the count of values first. (Its 1,000 channels were one joint's; a joint may
+    list 12 now, so they are spread over a chain.)"""
+    # 84 joints of 12 channels in a chain (the most one joint may list): 1,008 values a frame
+    joint = "JOINT j\n{\n OFFSET 0 1 0\n CHANNELS 12 " + "Xrotation " * 12 + "\n"
+    head = "HIERARCHY\nROOT Hips\n{\n OFFSET 0 0 0\n CHANNELS 12 " + "Xrotation " * 12 + "\n"
+    head += "".join(joint.replace("j", f"j{k}", 1) for k in range(83))
+    text = head + " End Site\n {\n OFFSET 0 1 0\n }\n" + "}\n" * 84 + "MOTION\nFrames: 100000\n"
+    text += "Frame Time: 0.01\n"
+    first = text.count("\n") + 1  # the line of the first frame
+    text += "0\n" * 100_000
     tracemalloc.start()
     try:
-        with pytest.raises(BVHError, match="line 14: expected 1000 values per frame, got 1"):
+        with pytest.raises(BVHError, match=f"line {first}: expected 1008 values per frame, got 1"):
             parse_bvh(text, "x", [0])
         assert tracemalloc.get_traced_memory()[1] < 50e6
     finally:

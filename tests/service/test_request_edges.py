@@ -135,6 +135,24 @@ def test_an_empty_post_to_no_route_is_still_a_404(client: Any) -> None:
     assert _raw(client, "/v1/nothing-here", "").status_code == 404
 
 
+def test_a_trailing_slash_is_a_404_that_names_the_route(client: Any) -> None:
+    """An API audit (2026-12-05): ``POST /v1/solve/`` was a bare 307 (no problem, no
+    body) whose Location repeated the client's Host header. Now a 404 problem that names
+    the route; the editor's page alone still redirects, to a path."""
+    body = _example("solve")
+    for method, path in (("POST", "/v1/solve/"), ("GET", "/v1/skeleton/"), ("GET", "/metrics/")):
+        r = client.request(method, path, json=body if method == "POST" else None,
+                           headers={"host": "evil.example"}, follow_redirects=False)  # fmt: skip
+        assert r.status_code == 404 and "location" not in r.headers, r.headers
+        assert r.headers["content-type"] == "application/problem+json"
+        assert r.json()["detail"] == (
+            f"no route {path}: the route is {path[:-1]}, without the slash"
+        )
+    assert client.get("/nothing-here/").json()["detail"] == "Not Found"
+    r = client.get("/editor/", headers={"host": "evil.example"}, follow_redirects=False)
+    assert r.status_code == 307 and r.headers["location"] == "/editor"
+
+
 def test_field_and_cross_field_errors_are_one_problem_shape(client: Any) -> None:
     """Type invalid-request had two titles, and cross-field errors no ``errors`` list."""
     bad = _example("bad")
