@@ -347,7 +347,7 @@ def _parse_hierarchy(file: str, text: str) -> list[BVHJoint]:
         if count > MAX_JOINT_CHANNELS:
             raise _error(
                 file, f"line {line}: {count} channels on joint {quoted(name)}: at most "
-                f"{MAX_JOINT_CHANNELS} are read (3 positions and 3 rotations is the most files have)",
+                f"{MAX_JOINT_CHANNELS} are read (files list 3 or 6)",
             )  # fmt: skip
         channels: list[str] = []
         for _ in range(count):
