@@ -201,6 +201,17 @@ class PacedHTTPProtocol(AutoHTTPProtocol):  # type: ignore[misc, valid-type]
         if self._refused or self.transport.is_closing():
             return
         self._refused = True
+        cycle = getattr(self, "cycle", None)
+        if (
+            cycle is not None and cycle.more_body and not cycle.response_started
+            and not any(c is cycle for c, _ in getattr(self, "pipeline", ()))
+        ):  # fmt: skip
+            # the bad bytes are the running request's body (a chunk size that is no
+            # number): that request is the one refused, not an answer due before the
+            # refusal; its app reads a disconnect (it waited for the rest of the body, and
+            # the client got a 408 at the deadline instead of this 400: an API audit)
+            cycle.disconnected = True
+            cycle.message_event.set()
         from service.middleware.headers import protocol_headers  # (its package imports this)
 
         self._refusal = raw_answer(exc, protocol_headers(self._t0))
@@ -210,7 +221,7 @@ class PacedHTTPProtocol(AutoHTTPProtocol):  # type: ignore[misc, valid-type]
     def _answers_due(self) -> bool:
         cycle = getattr(self, "cycle", None)
         return bool(getattr(self, "pipeline", None)) or (
-            cycle is not None and not cycle.response_complete
+            cycle is not None and not cycle.response_complete and not cycle.disconnected
         )
 
     def on_response_complete(self) -> None:

@@ -201,3 +201,29 @@ def test_request_heads_are_bounded_and_parser_refusals_are_problems(
             buf += sock.recv(1 << 16)
         sock.close()
         assert buf.startswith(b"HTTP/1.1 200 ")
+
+
+def test_a_body_whose_chunks_are_not_http_is_a_400_not_a_wait(
+    models_dir: Path, tmp_path: Path
+) -> None:
+    """An API audit (2026-12-05): a chunked body whose chunk size is no number (``zz``,
+    ``-1``, 20 hex digits) got a 408 at the 2 s body deadline, its admission slot held the
+    while: the refusal waited for the answer of the very request it refused. Now the
+    parser's 400 problem, and the connection closed; the worker serves on."""
+    with serve(models_dir, tmp_path) as s:
+        for path, size in (("/v1/solve", b"zz"), ("/v1/solve", b"-1"),
+                           ("/v2/health/live", b"f" * 20)):  # fmt: skip
+            sock = connect(s.port)
+            method = "GET" if path.startswith("/v2") else "POST"
+            head = f"{method} {path} HTTP/1.1\r\nhost: x\r\ncontent-type: application/json\r\n"
+            sock.sendall(head.encode() + b"transfer-encoding: chunked\r\n\r\n" + size
+                         + b"\r\n{}\r\n0\r\n\r\n")  # fmt: skip
+            line, fields, body = _answer_to_close(sock)
+            sock.close()
+            assert line == "HTTP/1.1 400 Bad Request", (path, size, line, body[:200])
+            assert json.loads(body)["type"].endswith("/malformed-http")
+            assert fields["connection"] == "close"
+        sock = connect(s.port)
+        status, _ = exchange(sock, "POST", "/v1/solve", json.dumps(solve_item(1)).encode())
+        sock.close()
+        assert status == 200
