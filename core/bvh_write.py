@@ -158,11 +158,13 @@ def row_of(
         rot_cols = [j.channel_start + k for k, c in enumerate(j.channels) if c.lower() in _ROT]
         if len(rot_cols) == 3 and invertible_order(j.rotation_order):  # else never turned
             angles = _nearest_euler(j.rotation_order, pose.rotations[i], row[rot_cols])
-            row[rot_cols] = angles
-            columns += rot_cols
+            written = [float(f"{a:.{DECIMALS}f}") for a in angles.tolist()]
+            if written != row[rot_cols].tolist():  # (turned by less than is written: kept)
+                row[rot_cols] = angles
+                columns += rot_cols
         for k, c in enumerate(j.channels):
             value = float(pose.translations[i, _POS.get(c.lower(), 0)])
-            if c.lower() in _POS and value != row[j.channel_start + k]:
+            if c.lower() in _POS and float(f"{value:.{DECIMALS}f}") != row[j.channel_start + k]:
                 row[j.channel_start + k] = value
                 columns.append(j.channel_start + k)
     for col in columns:  # the values as they will be read back

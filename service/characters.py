@@ -691,9 +691,18 @@ def bvh_answer(bvh: BVH, ch: Character, req: BVHSolveRequest, edit: Edit) -> dic
     return {
         "bvh": text,
         "frame": req.frame,
-        "changed_joints": [ch.skel.names[j] for j in sorted(edit.changed)],
+        "changed_joints": [ch.skel.names[j] for j in sorted(_written(bvh, columns))],
         **_report(ch, edit, points),
     }
+
+
+def _written(bvh: BVH, columns: list[int]) -> set[int]:
+    """The joints of ``bvh`` one of whose channel ``columns`` the answer rewrites."""
+    cols = set(columns)
+    return {
+        i for i, j in enumerate(bvh.joints)
+        if cols.intersection(range(j.channel_start, j.channel_start + len(j.channels)))
+    }  # fmt: skip
 
 
 def bvh_inspect(bvh: BVH, ch: Character, frame: int) -> dict[str, Any]:

@@ -394,3 +394,36 @@ def test_the_joint_map_an_answer_gives_can_be_sent_back(
         assert r.status_code == 422 and "is not a point a map makes" in r.text, r.text
         assert r.json()["errors"][0]["location"] == "joint_map.left_wrist", r.text
     assert slid > 0  # some file's map slides a point along a bone
+
+
+def test_changed_joints_are_the_joints_whose_values_the_answer_rewrites(
+    client: Any, bvh_files: dict[str, Path]
+) -> None:
+    """A users' files audit (2026-12-05): in this edit the left hand was listed in
+    ``changed_joints`` and its angles rewritten as the same numbers (``-2.8925`` ->
+    ``-2.892500``): a joint turned by less than the written precision keeps its text, and
+    ``changed_joints`` names exactly the joints one of whose values changes."""
+    text = bvh_files["fair1-child-inches-zup"].read_text()
+    bvh = parse_bvh(text)
+    names = [j.name for j in bvh.joints]
+    frame = 100
+    at = bvh.forward_kinematics(["LeftHand"], np.asarray([frame]))[0, 0]  # inches, +Z up
+    goal = [float(at[0]), float(at[1]) - 3.0, float(at[2]) + 4.0]
+    body = {"bvh": text, "frame": frame, "units": "in", "up": "+Z",
+            "targets": [{"joint": "LeftHand", "position": goal}]}  # fmt: skip
+    r = client.post("/v1/bvh/solve", json=body)
+    assert r.status_code == 200, r.text
+    lines_in, lines_out = text.split("\n"), r.json()["bvh"].split("\n")
+    motion = lines_in.index("MOTION") + 3 + frame
+    old, new = lines_in[motion].split(), lines_out[motion].split()
+    rewritten = {
+        names[i] for i, j in enumerate(bvh.joints)
+        for c in range(j.channel_start, j.channel_start + len(j.channels)) if old[c] != new[c]
+    }  # fmt: skip
+    moved = {
+        names[i] for i, j in enumerate(bvh.joints)
+        for c in range(j.channel_start, j.channel_start + len(j.channels))
+        if float(old[c]) != float(new[c])
+    }  # fmt: skip
+    assert set(r.json()["changed_joints"]) == rewritten == moved
+    assert "LeftHand" not in rewritten
