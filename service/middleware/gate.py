@@ -99,10 +99,17 @@ class Gate:
         chunked = length is None and "transfer-encoding" in headers
         if method not in ("POST", "PUT", "PATCH") or (length in (None, "0") and not chunked):
             return 0
-        ctype = headers.get("content-type", "").split(";")[0].strip().lower()
+        ctype, *params = headers.get("content-type", "").lower().split(";")
+        ctype = ctype.strip()
         if ctype != "application/json":
             raise UnsupportedMediaType(
                 f"content type must be application/json, got {ctype[:60] or 'none'!r}"
+            )
+        charset = next((p.split("=", 1)[1].strip(' "') for p in params if "charset=" in p), None)
+        if charset not in (None, "utf-8", "utf8"):  # JSON is UTF-8 (RFC 8259 section 8.1)
+            raise UnsupportedMediaType(
+                f"charset {clip(charset, 40)!r} is not accepted: JSON is sent as UTF-8 "
+                "(charset=utf-8, or none)"
             )
         coding = headers.get("content-encoding", "identity").strip().lower()
         if coding not in ("", "identity"):

@@ -215,6 +215,18 @@ def test_a_compressed_body_is_a_415(client: Any, coding: str) -> None:
         assert_problem(r, 415, coding)
 
 
+def test_a_charset_other_than_utf8_is_a_415(client: Any) -> None:
+    """An API audit (2026-12-05): ``charset=latin-1`` was read as UTF-8 (a Latin-1 name
+    then got a 400 'not UTF-8'). JSON is UTF-8 (RFC 8259): another charset is a 415 that
+    says so; UTF-8 declared in any spelling is served."""
+    plain = json.dumps(_example("solve")).encode()
+    for ctype in ("application/json; charset=latin-1", 'application/json;charset="UTF-16"'):
+        r = client.post("/v1/solve", content=plain, headers={"content-type": ctype})
+        assert_problem(r, 415, "charset", "UTF-8")
+    for ctype in ("application/json; charset=UTF-8", "application/json;charset=utf8"):
+        assert client.post("/v1/solve", content=plain, headers={"content-type": ctype}).is_success
+
+
 def test_a_compressed_transfer_coding_is_a_415(client: Any) -> None:
     """``Transfer-Encoding: gzip, chunked`` was read as a plain body (and solved)."""
     plain = json.dumps(_example("solve")).encode()
