@@ -5,6 +5,7 @@ from __future__ import annotations
 import hashlib
 import os
 import platform
+import re
 import shutil
 import subprocess
 import tempfile
@@ -76,6 +77,11 @@ def recorded_source(origin: dict[str, Any]) -> dict[str, str]:
     return entry
 
 
+#: A licence text that forbids commercial use, as it is spelt: "CC BY-NC 4.0", "CC BY NC",
+#: "Attribution-NonCommercial 4.0 International", "non-commercial", "noncommercial use".
+NON_COMMERCIAL = re.compile(r"non[\s_-]?commercial|\bby[\s_-]?nc\b", re.IGNORECASE)
+
+
 def licence_of(meta: dict[str, Any]) -> str:
     """The terms the weights inherit: the licence each source trained on has in the
     dataset (its map's ``licence``; a source held out whole is not trained on). It was one
@@ -86,8 +92,9 @@ def licence_of(meta: dict[str, Any]) -> str:
     used = {s: t for s, t in sorted(licences.items()) if held.get(s) != ["**"]}
     if not used:
         return "not recorded: the dataset names no licence for its sources"
-    terms = "; ".join(f"{s}: {t}" for s, t in used.items())
-    nc = any("non-commercial" in t.lower() or "by-nc" in t.lower() for t in used.values())
+    terms = "; ".join(f"{s}: {t.strip() or 'no licence given (its map names none)'}"
+                      for s, t in used.items())  # fmt: skip
+    nc = any(NON_COMMERCIAL.search(t) for t in used.values())
     return (
         f"{'Non-commercial: ' if nc else ''}these weights inherit the terms of the motion "
         f"capture they were trained on ({terms}). See the model card (README.md)."

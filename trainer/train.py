@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 import torch
+from rich.markup import escape
 from torch import nn
 from torch.nn.parallel import DistributedDataParallel
 
@@ -633,6 +634,8 @@ def train_all(cfg: TrainConfig, *, fresh: bool = False) -> Trained:
     Path(cfg.run_dir).mkdir(parents=True, exist_ok=True)
     splits = load_splits(cfg)
     if d.main:
+        for warning in splits.train.meta.get("warnings", []):  # the build's, again
+            console.print(f"[yellow]warning: dataset: {escape(warning)}")
         console.print(
             f"train {len(splits.train.positions)} frames, val {len(splits.val.positions)}, "
             f"test {len(splits.test.positions)}; world size {d.world}"

@@ -380,6 +380,14 @@ def test_the_licence_of_weights_is_their_data_s() -> None:
     assert "acme: internal use only" in studio and "CC BY-NC" not in studio
     assert not studio.startswith("Non-commercial")
     assert licence_of({}).startswith("not recorded")
+    # a studio audit (2026-12-05): CC's own names of NC terms were missed, and a source
+    # without a licence gave an empty term ("(studio-idle: )")
+    for nc in ("Attribution-NonCommercial 4.0 International", "CC BY NC 4.0",
+               "noncommercial research only", "CC-BY-NC-SA 4.0"):  # fmt: skip
+        assert licence_of({"licences": {"acme": nc}}).startswith("Non-commercial: "), nc
+    for free in ("CC BY 4.0", "MIT", "commercial use allowed"):
+        assert not licence_of({"licences": {"acme": free}}).startswith("Non-commercial"), free
+    assert "(acme: no licence given (its map names none))" in licence_of({"licences": {"acme": ""}})
 
 
 def test_the_builder_warns_of_a_map_whose_units_up_axis_or_sides_look_wrong(
@@ -448,6 +456,19 @@ def _studio(more_mocap: Path, tmp_path: Path, edits: dict[str, str] | None = Non
 def _build(tmp_path: Path, maps: Path | None) -> Any:
     out = tmp_path / "out.npz"
     return build_dataset(tmp_path / "mocap", out, maps_dir=maps, workers=1, progress=False)
+
+
+def test_what_the_poses_say_of_their_map_is_kept_in_the_dataset(
+    more_mocap: Path, tmp_path: Path
+) -> None:
+    """A studio audit (2026-12-05): a map read in the wrong unit (4 mm thighs) was warned
+    of in the summary only: ``meta["warnings"]`` (docs/data.md: "the build's warnings")
+    held nothing of it, nor did the manifest trained from it. Now the dataset keeps it."""
+    maps = _studio(more_mocap, tmp_path, {'unit = "m"': 'unit = "mm"'})
+    report = _build(tmp_path, maps)
+    said = [w for w in report.meta["warnings"] if "thigh" in w and "unit" in w]
+    assert said, report.meta["warnings"]
+    assert load_dataset(report.out).meta["warnings"] == report.meta["warnings"]
 
 
 def test_a_joint_name_in_none_of_a_maps_files_fails_the_build(

@@ -587,7 +587,7 @@ def build_dataset(
                     [f"{mocap_dir}: no mocap found for any map in {maps_dir}", *located.missing]
                 )
             )
-        warnings = _source_warnings(located)  # printed with the summary
+        warnings = _source_warnings(located)  # printed with the summary, kept in meta
 
         skipped: list[dict[str, str]] = []
         jobs = [job for src in sources for job in _jobs_of(src, skipped, say)]
@@ -738,6 +738,9 @@ def build_dataset(
         clip_split=split.astype(str),
         meta=meta,
     )
+    # what the poses say of their maps (a wrong unit, up axis, sides; a split without
+    # frames): kept with the others, so the dataset, the manifest and training say it too
+    meta["warnings"] = [*warnings, *sanity_warnings(dataset)]
     meta["build_seconds"] = round(time.perf_counter() - t0, 1)
     out = save_dataset(out, dataset)
     return BuildReport(meta=meta, dataset=dataset, out=out)

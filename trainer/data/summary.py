@@ -11,7 +11,6 @@ from rich.markup import escape
 
 from core.skeleton import NUM_JOINTS
 from trainer.data.build import BONE_NAMES, DROP_REASONS
-from trainer.data.checks import sanity_warnings
 from trainer.data.dataset import SPLITS
 
 if TYPE_CHECKING:
@@ -76,7 +75,7 @@ def print_summary(report: BuildReport, console: Any = None) -> None:
     meta = report.meta
     for item in meta["skipped_files"]:
         console.print(f"skipped: {escape(item['reason'])}")
-    for warning in [*meta.get("warnings", []), *sanity_warnings(report.dataset)]:
+    for warning in meta.get("warnings", []):
         console.print(f"[yellow]warning: {escape(warning)}")
     console.print(
         f"{meta['num_clips']} clips, {meta['num_frames']:,} poses ({NUM_JOINTS} joints) -> "
