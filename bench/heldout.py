@@ -701,7 +701,8 @@ def main(
     """Held-out bodies and the stress set only, against any models folder."""
     from rich.console import Console
 
-    from trainer.data.dataset import load_dataset
+    from core.manifest import ManifestError
+    from trainer.data.dataset import SPLITS, DatasetError, load_dataset
 
     if not (models / "manifest.json").is_file():
         raise typer.BadParameter(f"no manifest.json in {models}", param_hint="--models")
@@ -712,17 +713,24 @@ def main(
     asked = overrides(serving or [])
     try:
         engine = Engine(models, threads=1, serving=asked)
+    except ManifestError as exc:  # a file missing or not the one the manifest names
+        raise typer.BadParameter(str(exc), param_hint="--models") from None
     except ValueError as exc:  # not a setting, fixed by training, or out of range
         raise typer.BadParameter(str(exc), param_hint="--serving") from None
-    data = load_dataset(dataset)
+    try:
+        data = load_dataset(dataset)
+    except DatasetError as exc:
+        raise typer.BadParameter(str(exc), param_hint="--dataset") from None
     try:
         present = bool(data.split_mask(split).any())
     except ValueError as exc:  # not a split name
         raise typer.BadParameter(str(exc), param_hint="--split") from None
     if not present:  # (a studio's dataset has no held-out bodies)
+        have = [s for s in SPLITS if s != split and data.split_mask(s).any()]
         raise typer.BadParameter(
             f"{dataset} has no {split!r} frames: no bodies to test on; another split "
-            "(--split test) or a dataset whose maps hold bodies out (docs/data.md)",
+            f"({', '.join(f'--split {s}' for s in have) or 'none has frames'}) or a dataset "
+            "whose maps hold bodies out (docs/data.md)",
             param_hint="--split",
         )
     res = run_heldout(engine, data, cfg, split=split, log=console.log)

@@ -125,7 +125,7 @@ def dataset(
     ] = Path("../shared/mocap"),
     out: Annotated[Path, typer.Option(help="Output .npz file.")] = Path("data/poses.npz"),
     seed: Annotated[int, typer.Option(help="Seed of the train/val/test split.")] = 0,
-    workers: Annotated[int, typer.Option(help="Worker processes.")] = 2,
+    workers: Annotated[int, typer.Option(help="Worker processes.", min=1)] = 2,
     maps: Annotated[
         Optional[Path],  # noqa: UP045
         typer.Option(help="Folder of joint maps (*.toml); default: trainer/maps."),
@@ -140,6 +140,11 @@ def dataset(
     from trainer.data.maps import MapError
 
     console = Console() if sys.stdout.isatty() else Console(width=100)
+    if out.is_dir():  # (it failed at the end of the build, with a traceback)
+        raise typer.BadParameter(
+            f"{out} is a folder: give the dataset file's name (e.g. {out / 'poses.npz'})",
+            param_hint="--out",
+        )
     try:
         report = build_dataset(
             mocap, out, maps_dir=maps, seed=seed, workers=workers, log=console.print

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -250,7 +251,7 @@ def test_joint_breakdown_adds_up_to_the_heldout_sets(
 
 
 def test_the_command_refuses_a_dataset_without_the_split_in_one_line(
-    models_dir: Path, small_dataset: Path
+    models_dir: Path, small_dataset: Path, tmp_path: Path
 ) -> None:
     """A studio's dataset holds no bodies out: the command ended in a traceback; now a
     usage error that names the split and points at --split test; a split that does not
@@ -269,3 +270,24 @@ def test_the_command_refuses_a_dataset_without_the_split_in_one_line(
     assert "--split test" in r.output and "Traceback" not in r.output
     r = runner.invoke(app, [*base, "--split", "nosuch"])
     assert r.exit_code == 2 and "unknown split" in r.output, r.output
+    # a studio audit (2026-12-05): the hint named the split asked for; models whose files
+    # are not the manifest's, and a file that is no dataset, were 50-line tracebacks
+    r = runner.invoke(app, [*base, "--split", "test"])
+    assert r.exit_code == 0, r.output
+    tampered = tmp_path / "models"
+    shutil.copytree(models_dir, tampered)
+    solver = tampered / "solver_left_wrist.onnx"
+    data = bytearray(solver.read_bytes())
+    data[-1] ^= 1
+    solver.write_bytes(bytes(data))
+    r = runner.invoke(app, ["--models", str(tampered), *base[2:]])
+
+    def said(out: str) -> str:  # the message as one line (rich boxes and wraps it)
+        return " ".join(out.replace("│", " ").split())
+
+    assert r.exit_code == 2 and "does not match the manifest" in said(r.output), r.output
+    assert "--models" in r.output and "Traceback" not in r.output
+    text = tmp_path / "bad.npz"
+    text.write_text("hi\n")
+    r = runner.invoke(app, [*base[:2], "--dataset", str(text), "--quick"])
+    assert r.exit_code == 2 and "bad.npz: not a dataset file" in said(r.output), r.output

@@ -223,9 +223,14 @@ def test_loader_rejects_bad_files(small_dataset: Path, tmp_path: Path) -> None:
         arrays = {k: npz[k] for k in npz.files}
     with pytest.raises(DatasetError, match="no such dataset"):
         load_dataset(tmp_path / "missing.npz")
+    # not a zip: a text file (numpy's reason was that it holds pickled data, to be loaded
+    # unsafely), one array saved with np.save (a TypeError) (a studio audit, 2026-12-05)
     (tmp_path / "junk.npz").write_bytes(b"not a zip")
-    with pytest.raises(DatasetError, match="not a readable"):
-        load_dataset(tmp_path / "junk.npz")
+    with open(tmp_path / "array.npz", "wb") as f:
+        np.save(f, arrays["positions"][:10])
+    for junk in ("junk.npz", "array.npz"):
+        with pytest.raises(DatasetError, match=f"{junk}: not a dataset file: a dataset is the"):
+            load_dataset(tmp_path / junk)
     bad = dict(arrays)
     del bad["clip_actor"]
     np.savez(tmp_path / "missing_key.npz", **bad)
@@ -291,6 +296,12 @@ def test_cli_dataset_and_plot(mocap_clips: Any, small_dataset: Path, tmp_path: P
     result = runner.invoke(app, ["dataset", "--mocap", str(tmp_path / "nowhere")])
     assert result.exit_code == 1
     assert "not found" in result.output
+    # --out a folder: refused before the build (it failed after it, a traceback)
+    result = runner.invoke(
+        app, ["dataset", "--mocap", str(mocap_clips.root), "--out", str(tmp_path)]
+    )
+    assert result.exit_code == 2 and "is a folder" in result.output, result.output
+    assert "Traceback" not in result.output
 
 
 def test_builder_reads_the_multi_body_archives_and_holds_out_what_the_maps_name(

@@ -208,6 +208,11 @@ def load_dataset(path: str | Path) -> PoseDataset:
     path = Path(path)
     if not path.is_file():
         raise DatasetError(f"{path}: no such dataset file (build it with `pose-trainer dataset`)")
+    if not zipfile.is_zipfile(path):  # (numpy would read it as a pickle, or one array)
+        raise DatasetError(
+            f"{path}: not a dataset file: a dataset is the .npz (zip) archive `pose-trainer "
+            "dataset` writes"
+        )
     try:
         with np.load(path, allow_pickle=False) as npz:
             arrays = {k: npz[k] for k in npz.files}
