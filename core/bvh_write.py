@@ -106,8 +106,10 @@ def skeleton_of(bvh: BVH) -> Skeleton:
     return skel
 
 
-def pose_of(bvh: BVH, frame: int, row: F64 | None = None) -> Pose:
-    """Local rotations and translations of one frame (of ``row`` instead, when given)."""
+def pose_of(bvh: BVH, frame: int, row: F64 | None = None, *, root_add: bool = False) -> Pose:
+    """Local rotations and translations of one frame (of ``row`` instead, when given).
+    ``root_add``: a root's position channels are a displacement from its OFFSET (some
+    exporters, ReActIdle's), not its position (the BVH convention)."""
     row = bvh.row(frame) if row is None else row
     n = len(bvh.joints)
     rot = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()
@@ -122,7 +124,8 @@ def pose_of(bvh: BVH, frame: int, row: F64 | None = None) -> Pose:
             columns.append(cols)
         for k, c in enumerate(j.channels):
             if c.lower() in _POS:
-                trans[i, _POS[c.lower()]] = row[j.channel_start + k]
+                shift = j.offset[_POS[c.lower()]] if root_add and j.parent < 0 else 0.0
+                trans[i, _POS[c.lower()]] = row[j.channel_start + k] + shift
     for seq, (joints, columns) in orders.items():
         rot[joints] = euler_matrices(seq, np.deg2rad(row[np.array(columns)]))
     return Pose(rot, trans)
@@ -147,10 +150,11 @@ def _nearest_euler(seq: str, matrix: F64, old: F64) -> F64:
 
 
 def row_of(
-    bvh: BVH, frame: int, pose: Pose, joints: set[int] | frozenset[int]
+    bvh: BVH, frame: int, pose: Pose, joints: set[int] | frozenset[int], *, root_add: bool = False
 ) -> tuple[F64, list[int]]:
     """The motion row of ``pose`` for the changed ``joints`` (others keep their values), and
-    the columns that changed, as they will be written (rounded to :data:`DECIMALS`)."""
+    the columns that changed, as they will be written (rounded to :data:`DECIMALS`);
+    ``root_add`` as :func:`pose_of` reads it."""
     row = bvh.row(frame).copy()
     columns: list[int] = []
     for i in sorted(joints):
@@ -163,7 +167,9 @@ def row_of(
                 row[rot_cols] = angles
                 columns += rot_cols
         for k, c in enumerate(j.channels):
-            value = float(pose.translations[i, _POS.get(c.lower(), 0)])
+            axis = _POS.get(c.lower(), 0)
+            shift = j.offset[axis] if root_add and j.parent < 0 else 0.0
+            value = float(pose.translations[i, axis]) - shift
             if c.lower() in _POS and float(f"{value:.{DECIMALS}f}") != row[j.channel_start + k]:
                 row[j.channel_start + k] = value
                 columns.append(j.channel_start + k)

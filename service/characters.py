@@ -206,6 +206,17 @@ class CharacterAliasRequest(CharacterSolveRequest):
         return data
 
 
+#: How a file's root position channels are read (and an edit written back).
+RootPosition = Annotated[
+    Literal["replace", "add"],
+    Field(
+        description="How the root's position channels are read: as its position "
+        "(`replace`, the BVH convention) or as a displacement from its OFFSET (`add`: some "
+        "exporters write that, ReActIdle's among them); an edit is written back the same way."
+    ),
+]
+
+
 class BVHSolveRequest(_Frame):
     bvh: str = Field(min_length=1, description="The whole BVH file.")
     frame: Annotated[int, Field(ge=0), WHOLE] = Field(
@@ -213,6 +224,7 @@ class BVHSolveRequest(_Frame):
     )
     units: Units | None = Field(default=None, description="Default: inferred from the file.")
     up: Literal["+Y", "+Z"] | None = Field(default=None, description="Default: inferred.")
+    root_position: RootPosition = "replace"
 
 
 class BVHInspectRequest(_Body):
@@ -222,6 +234,7 @@ class BVHInspectRequest(_Body):
     )
     units: Units | None = Field(default=None, description="Default: inferred from the file.")
     up: Literal["+Y", "+Z"] | None = Field(default=None, description="Default: inferred.")
+    root_position: RootPosition = "replace"
     joint_map: dict[str, str] | None = Field(
         default=None, description="canonical joint -> the file's joint name (as in solve)."
     )
@@ -676,7 +689,7 @@ def character_from_bvh(bvh: BVH, req: BVHSolveRequest | BVHInspectRequest) -> Ch
         )
     try:
         skel = skeleton_of(bvh)
-        pose = pose_of(bvh, req.frame)
+        pose = pose_of(bvh, req.frame, root_add=req.root_position == "add")
         jmap = resolve_map(skel, req.joint_map)
         return _character(skel, pose, jmap, req.units, req.up)
     except (CharacterError, BVHError) as exc:
@@ -684,10 +697,11 @@ def character_from_bvh(bvh: BVH, req: BVHSolveRequest | BVHInspectRequest) -> Ch
 
 
 def bvh_answer(bvh: BVH, ch: Character, req: BVHSolveRequest, edit: Edit) -> dict[str, Any]:
-    row, columns = row_of(bvh, req.frame, edit.pose, edit.changed)
+    add = req.root_position == "add"
+    row, columns = row_of(bvh, req.frame, edit.pose, edit.changed, root_add=add)
     text = splice_frame(bvh, req.frame, row, columns)
     # the report is measured on the values as written (rounded), read back
-    points = canonical_points(ch.skel, pose_of(bvh, req.frame, row), ch.jmap)
+    points = canonical_points(ch.skel, pose_of(bvh, req.frame, row, root_add=add), ch.jmap)
     return {
         "bvh": text,
         "frame": req.frame,

@@ -427,3 +427,41 @@ def test_changed_joints_are_the_joints_whose_values_the_answer_rewrites(
     }  # fmt: skip
     assert set(r.json()["changed_joints"]) == rewritten == moved
     assert "LeftHand" not in rewritten
+
+
+def test_a_root_whose_channels_are_a_displacement_is_read_and_written_so(
+    client: Any, bvh_files: dict[str, Path]
+) -> None:
+    """``root_position: "add"``: ReActIdle's exporter writes the root's displacement from
+    its OFFSET in its position channels. Read as the BVH convention has it (``replace``,
+    the default), the figure stood 0.72 m low, ankles 0.67 m under the floor the networks
+    are told of (a studio audit, 2026-12-05: the dataset's maps had this option, the
+    service not). With ``add`` the whole figure is 0.72 m higher, feet on the floor, and
+    an edit is written back as a displacement."""
+    text = bvh_files["reactidle-6ch"].read_text()
+    frame = 500
+    seen = {}
+    for mode in ("replace", "add"):
+        r = client.post(
+            "/v1/bvh/inspect", json={"bvh": text, "frame": frame, "root_position": mode}
+        )
+        assert r.status_code == 200, r.text
+        seen[mode] = r.json()
+    lift = np.asarray(seen["add"]["positions"]) - np.asarray(seen["replace"]["positions"])
+    root = seen["add"]["joints"][0]
+    assert root["parent"] == -1 and root["channels"][:3] == ["Xposition", "Yposition", "Zposition"]
+    np.testing.assert_allclose(lift, np.broadcast_to(root["offset"], lift.shape), atol=1e-12)
+    assert seen["replace"]["points"]["left_ankle"][1] < -0.5
+    assert abs(seen["add"]["points"]["left_ankle"][1]) < 0.15
+    goal = (np.asarray(seen["add"]["points"]["left_wrist"]) + np.asarray([0.1, 0.2, 0.0])).tolist()
+    body = {"bvh": text, "frame": frame, "root_position": "add",
+            "targets": [{"joint": "left_wrist", "position": goal}]}  # fmt: skip
+    r = client.post("/v1/bvh/solve", json=body)
+    assert r.status_code == 200 and r.json()["targets"][0]["reached"], r.text
+    lines_in, lines_out = text.split("\n"), r.json()["bvh"].split("\n")
+    motion = lines_in.index("MOTION") + 3 + frame
+    assert [a == b for a, b in zip(lines_in, lines_out, strict=True)].count(False) == 1
+    old, new = (
+        np.asarray(ln.split()[:3], dtype=float) for ln in (lines_in[motion], lines_out[motion])
+    )
+    assert np.abs(new - old).max() < 0.1  # a displacement still, not a position (0.72 m up)
