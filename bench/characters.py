@@ -41,18 +41,20 @@ SETS: tuple[tuple[str, tuple[str, ...]], ...] = (
 _AD = "animateddrawings_fair_bvh/facebookresearch+AnimatedDrawings@74ee7f0/examples/bvh"
 _RI = "reactidle_bvh/Enekoassets+ReActIdle@90b0ac7"
 _BN = "dataset/Bandai-Namco-Research-Motiondataset-1/data"
-#: (archive, member, units to state or None) of the files scored when none is given: bodies
-#: no model was trained on (AnimatedDrawings' child and CMU retarget, five ReActIdle
-#: people), then two of the training studios' for reference
-DEFAULT_FILES: tuple[tuple[str, str, str | float | None], ...] = (
-    *[("animateddrawings_fair_bvh.tar.xz", f"{_AD}/fair1/{n}.bvh", "in")
+#: (archive, member, units to state or None, root_position) of the files scored when none
+#: is given: bodies no model was trained on (AnimatedDrawings' child and CMU retarget, five
+#: ReActIdle people, whose root channels are a displacement: "add"), then two of the
+#: training studios' for reference
+DEFAULT_FILES: tuple[tuple[str, str, str | float | None, str], ...] = (
+    *[("animateddrawings_fair_bvh.tar.xz", f"{_AD}/fair1/{n}.bvh", "in", "replace")
       for n in ("dab", "jumping", "wave_hello", "zombie")],
-    ("animateddrawings_fair_bvh.tar.xz", f"{_AD}/cmu1/jumping_jacks.bvh", 0.0564444),
-    *[("reactidle_bvh.tar.xz", f"{_RI}/{n}.bvh", None)
+    ("animateddrawings_fair_bvh.tar.xz", f"{_AD}/cmu1/jumping_jacks.bvh", 0.0564444, "replace"),
+    *[("reactidle_bvh.tar.xz", f"{_RI}/{n}.bvh", None, "add")
       for n in ("acted/001_acted", "acted/002_acted", "acted/008_acted",
                 "genuine/003_genuine", "genuine/011_genuine")],
-    ("bandai-namco-research-motiondataset.tar.xz", f"{_BN}/dataset-1_walk_normal_001.bvh", None),
-    ("cmu-dance.tar.xz", "train_data_bvh/salsa/01.bvh", None),
+    ("bandai-namco-research-motiondataset.tar.xz", f"{_BN}/dataset-1_walk_normal_001.bvh", None,
+     "replace"),
+    ("cmu-dance.tar.xz", "train_data_bvh/salsa/01.bvh", None, "replace"),
 )  # fmt: skip
 #: (column, options of the request)
 METHODS: tuple[tuple[str, dict[str, str]], ...] = (
@@ -92,6 +94,7 @@ def score_file(
     seed: int,
     units: str | float | None = None,
     on_pelvis: bool = False,
+    root_position: str = "replace",
 ) -> dict[str, Scores]:
     """Every set's scores on one file (see the module docstring)."""
     from core.bvh_write import pose_of
@@ -113,9 +116,11 @@ def score_file(
         base: dict[str, Any] = {"bvh": text, "frame": i, "targets": [head]}
         if units is not None:
             base["units"] = units
+        if root_position != "replace":
+            base["root_position"] = root_position
         ch = character_from_bvh(bvh, BVHSolveRequest.model_validate(base))
         here = canonical_points(ch.skel, ch.pose, ch.jmap)
-        real = canonical_points(ch.skel, pose_of(bvh, j), ch.jmap)
+        real = canonical_points(ch.skel, pose_of(bvh, j, root_add=root_position == "add"), ch.jmap)
         if on_pelvis:  # frame j moved so its pelvis is the start's (no travel between)
             real = real - real[JOINT_INDEX["pelvis"]] + here[JOINT_INDEX["pelvis"]]
         truth = ch.to_service(real)
@@ -156,15 +161,15 @@ def table(rows: Sequence[tuple[str, str, Scores]]) -> list[str]:
     return lines
 
 
-def extract(mocap: Path, out: Path) -> list[tuple[Path, str | float | None]]:
+def extract(mocap: Path, out: Path) -> list[tuple[Path, str | float | None, str]]:
     """:data:`DEFAULT_FILES` out of their archives in ``mocap`` into ``out`` (GNU tar)."""
     by_archive: dict[str, list[str]] = {}
-    for archive, member, _ in DEFAULT_FILES:
+    for archive, member, _, _ in DEFAULT_FILES:
         by_archive.setdefault(archive, []).append(member)
     for archive, members in by_archive.items():
         subprocess.run(["tar", "-xJf", str(mocap / archive), "-C", str(out), *members],
                        check=True)  # fmt: skip
-    return [(out / member, units) for _, member, units in DEFAULT_FILES]
+    return [(out / member, units, root) for _, member, units, root in DEFAULT_FILES]
 
 
 @app.command()
@@ -180,6 +185,9 @@ def main(
     on_pelvis: Annotated[
         bool, typer.Option(help="frame j moved onto the start's pelvis (no travel)")
     ] = False,
+    root_position: Annotated[
+        str, typer.Option(help="the files' root channels: replace (BVH) or add (a displacement)")
+    ] = "replace",
     serving: Annotated[
         list[str] | None,
         typer.Option(metavar="KEY=VALUE", help="a serving setting instead (bench.heldout's)"),
@@ -195,12 +203,12 @@ def main(
     given: str | float | None = units
     if units is not None and units.replace(".", "", 1).isdigit():
         given = float(units)  # metres per unit
-    rows = []
+    rows: list[tuple[str, str, Scores]] = []
     with tempfile.TemporaryDirectory() as tmp:
-        todo = [(p, given) for p in files] if files else extract(mocap, Path(tmp))
-        for path, stated in todo:
-            for name, scores in score_file(engine, path, edits, seed, stated, on_pelvis).items():
-                rows.append((path.name, name, scores))
+        todo = [(p, given, root_position) for p in files] if files else extract(mocap, Path(tmp))
+        for path, stated, root in todo:
+            scored = score_file(engine, path, edits, seed, stated, on_pelvis, root)
+            rows.extend((path.name, name, scores) for name, scores in scored.items())
     mode = " --on-pelvis" if on_pelvis else ""
     when = datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC")
     print(f"Written by `python -m bench.characters{mode}` ({when}, models {engine.version}).\n")

@@ -140,7 +140,7 @@ def run_characters(models: Path, mocap: Path, seed: int) -> dict[tuple[str, ...]
     rng = np.random.default_rng(seed)
     out: dict[tuple[str, ...], list[Row]] = {p: [] for p in CHARACTER_PINS}
     with tempfile.TemporaryDirectory() as tmp:
-        for path, units in extract(mocap, Path(tmp)):
+        for path, units, root in extract(mocap, Path(tmp)):
             text = path.read_text(encoding="utf-8", errors="replace")
             bvh = read_request_bvh(text)
             for i, _ in frame_pairs(
@@ -149,6 +149,8 @@ def run_characters(models: Path, mocap: Path, seed: int) -> dict[tuple[str, ...]
                 base: dict[str, object] = {"bvh": text, "frame": i}
                 if units is not None:
                     base["units"] = units
+                if root != "replace":
+                    base["root_position"] = root
                 _character_frame(engine, bvh, base, rng, out)
     return out
 

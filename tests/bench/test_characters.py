@@ -45,3 +45,23 @@ def test_a_file_shorter_than_a_fifth_of_a_second_gives_no_row(
     short = tmp_path / "short.bvh"
     short.write_text(f"{head}MOTION\nFrames: 3\n{lines[1]}\n" + "\n".join(lines[2:5]) + "\n")
     assert score_file(Engine(models_dir), short, 5, 0) == {}
+
+
+def test_files_whose_root_channels_are_a_displacement_are_scored_as_such(
+    bvh_files: dict[str, Path], models_dir: Path
+) -> None:
+    """ReActIdle's root channels are a displacement from its OFFSET: the default files
+    score them with ``root_position: "add"``, and a file given takes ``--root-position``."""
+    from bench.characters import DEFAULT_FILES
+
+    roots = {member.split("/")[-2]: root for _, member, _, root in DEFAULT_FILES}
+    assert roots["acted"] == roots["genuine"] == "add" and roots["fair1"] == "replace"
+    path = bvh_files["reactidle-6ch"]
+    scored = {
+        root: table_of(
+            app, [str(path), "--models", str(models_dir), "--edits", "2", "--root-position", root]
+        )[1]
+        for root in ("replace", "add")
+    }
+    assert len(scored["add"]) == len(SETS)
+    assert scored["add"] != scored["replace"]  # the floor the networks are told of moved
