@@ -469,6 +469,24 @@ def _build(tmp_path: Path, maps: Path | None) -> Any:
     return build_dataset(tmp_path / "mocap", out, maps_dir=maps, workers=1, progress=False)
 
 
+def test_a_metadata_pattern_that_matches_no_file_fails_the_build(
+    more_mocap: Path, tmp_path: Path
+) -> None:
+    """A studio audit (2026-12-05): a typo in the [metadata] pattern (``idel`` for
+    ``idle``) skipped every file of the source one by one and the build exited 0 with the
+    source gone (beside another map's clips). Like a joint name in none of its files, a
+    MapError that names the map."""
+    from trainer.data.maps import MapError
+
+    typo = "(?P<content>[a-z]+)_(?P<take>[0-9]+)"
+    maps = _studio(more_mocap, tmp_path, {typo: "(?P<content>idel)_(?P<take>[0-9]+)"})
+    with pytest.raises(MapError) as info:
+        _build(tmp_path, maps)
+    said = str(info.value)
+    assert said.startswith(f"map {maps / 'studio.toml'}: its [metadata] pattern matches none")
+    assert "of its 2 files; the first: " in said
+
+
 def test_what_the_poses_say_of_their_map_is_kept_in_the_dataset(
     more_mocap: Path, tmp_path: Path
 ) -> None:

@@ -595,12 +595,20 @@ def build_dataset(
         # Largest files first: better load balance across workers.
         jobs.sort(key=lambda j: -os.path.getsize(j.path))
         infos = {}
+        missed: dict[str, list[str]] = defaultdict(list)  # per source, why each file missed
         for job in list(jobs):
             try:
                 infos[job.path] = job.map.clip_info(job.relpath)
             except MapError as exc:
                 _skip(skipped, say, job.label, str(exc), "not matched by [metadata] pattern")
+                missed[job.map.source].append(str(exc))
                 jobs.remove(job)
+        for source, (m, total) in totals.items():  # a pattern no file matches is a typo
+            if total and len(missed[source]) == total:  # (the source went without a word)
+                raise MapError(
+                    f"map {m.path}: its [metadata] pattern matches none of its {total} files; "
+                    f"the first: {missed[source][0]}"
+                )
         names = Counter(i.name for i in infos.values())
         dupes = sorted(n for n, c in names.items() if c > 1)
         if dupes:
