@@ -626,6 +626,17 @@ def test_unused_override_and_holdout_globs_and_a_missing_licence_are_warned(
         "\n".join(warnings)
     )
     assert any(w.startswith(f"map {path}: no `licence` for source 'studio'") for w in warnings)
+    # a split asked for files the map holds out (the holdout wins) was silently unused (a
+    # studio audit, 2026-12-05)
+    edits = {
+        'include = ["takes/**/*.bvh"]': 'include = ["takes/**/*.bvh"]\nholdout = ["takes/p002/**"]',
+        "[metadata]": override.replace("takes/p03/", "takes/p00*/"),
+    }
+    warnings = _build(tmp_path, _studio(more_mocap, tmp_path, edits)).meta["warnings"]
+    assert (
+        f"map {path}: [[override]] #1 puts 1 file(s) in split 'val' that the map holds out "
+        "(e.g. 'takes/p002/idle_01.bvh'): held out they stay"
+    ) in warnings, warnings
 
 
 def test_plausibility_is_checked_per_actor_and_on_the_floor(

@@ -92,7 +92,8 @@ def not_found_message(m: MocapMap, mocap_dir: Path, taken: Iterable[str] = ()) -
 
 def unused_glob_warnings(m: MocapMap, selected: Sequence[str]) -> list[str]:
     """Override and holdout globs that match none of the map's selected files (a typo
-    leaves their settings, or the held-out bodies, silently out)."""
+    leaves their settings, or the held-out bodies, silently out); an override's split on
+    files the map holds out (the holdout wins)."""
     out = []
 
     def unused(glob: str) -> str | None:
@@ -113,6 +114,15 @@ def unused_glob_warnings(m: MocapMap, selected: Sequence[str]) -> list[str]:
             out.append(
                 f"map {m.path}: holdout glob {glob!r} matches none of its {len(selected)} "
                 f"selected files: it holds nothing out{hint}"
+            )
+    for i, o in enumerate(m.overrides):  # held out wins: a split asked there is unused
+        regex = glob_to_regex(o.glob)
+        held = [f for f in selected if regex.match(f) and m.is_holdout(f)]
+        if o.get("split") is not None and held:
+            out.append(
+                f"map {m.path}: [[override]] #{i + 1} puts {len(held)} file(s) in split "
+                f"{o.get('split')!r} that the map holds out (e.g. {held[0]!r}): held out "
+                "they stay"
             )
     return out
 
