@@ -87,8 +87,10 @@ function axisRotation(axis, radians) {
 
 const IDENTITY = [1, 0, 0, 0, 1, 0, 0, 0, 1];
 
-// World rotations and positions (file units and axes) of every joint for one MOTION row.
-export function forwardKinematics(joints, row) {
+// World rotations and positions (file units and axes) of every joint for one MOTION row;
+// ``rootAdd``: a root's position channels are a displacement from its OFFSET (the
+// service's ``root_position: "add"``), not its position.
+export function forwardKinematics(joints, row, rootAdd = false) {
   const rot = new Array(joints.length);
   const pos = new Array(joints.length);
   joints.forEach((j, i) => {
@@ -97,7 +99,7 @@ export function forwardKinematics(joints, row) {
     j.channels.forEach((name, k) => {
       const key = name.toLowerCase();
       const v = row[j.channel_start + k];
-      if (key in POSITION) t[POSITION[key]] = v;
+      if (key in POSITION) t[POSITION[key]] = v + (rootAdd && j.parent < 0 ? j.offset[POSITION[key]] : 0);
       else r = mul(r, axisRotation(ROTATION[key], v * DEG));
     });
     if (j.parent < 0) {

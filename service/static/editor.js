@@ -63,7 +63,7 @@ function wireControls() {
     ev.target.value = ''; // the same file can be opened again
   });
   // Units, up or the joint map changed: read again the file last asked for (file.js).
-  for (const id of ['bvh-units', 'bvh-up']) $(id).addEventListener('change', readAgain);
+  for (const id of ['bvh-units', 'bvh-up', 'bvh-root']) $(id).addEventListener('change', readAgain);
   $('bvh-map-apply').addEventListener('click', readAgain);
   $('bvh-map-clear').addEventListener('click', () => {
     $('bvh-map').value = '';
@@ -268,6 +268,7 @@ window.marionette = Object.freeze({
     frames: doc.info.frames,
     units: doc.info.units,
     up: doc.info.up,
+    root: doc.settings.root,
     scheme: doc.info.scheme,
     joints: doc.info.joints.map((j) => j.name),
     edited: doc.text !== doc.original,

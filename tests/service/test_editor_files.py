@@ -449,3 +449,50 @@ def test_editor_opens_a_file_with_a_joint_map(server: str, browser: Any, more_mo
         assert not errors, errors
     finally:
         page.context.close()
+
+
+@pytest.mark.browser
+def test_editor_reads_a_root_whose_channels_are_a_displacement(
+    server: str, browser: Any, more_mocap: Path
+) -> None:
+    """ReActIdle's root channels are a displacement from its OFFSET: the Root channels menu
+    (``root_position``) reads the open file again so, draws it where the service lays it
+    out, sends it with the file's solves, and starts at the BVH way for the next file."""
+    path = next(more_mocap.rglob("genuine/003_genuine.bvh"))
+    text = path.read_text()
+    page = open_editor(browser, server)
+    errors: list[str] = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    sent: list[dict[str, Any]] = []
+    page.on(
+        "request",
+        lambda r: sent.append(json.loads(r.post_data or "{}")) if "/v1/bvh/" in r.url else None,
+    )
+    try:
+        give_file(page, text, "idle.bvh")
+        page.wait_for_function(f"() => {M}.bvh() && {M}.bvh().name === 'idle.bvh'")
+        assert page.evaluate(f"{M}.bvh()")["root"] == "replace"
+        drawn_as_inspected(page, server, {"bvh": text, "frame": 0})
+        low = page.evaluate(f"{M}.bvhPositions()")[0][1]
+        with page.expect_response("**/v1/bvh/inspect"):
+            page.select_option("#bvh-root", "add")
+        page.wait_for_function(f"() => {M}.bvh().root === 'add'")
+        assert sent[-1]["root_position"] == "add"
+        drawn_as_inspected(page, server, {"bvh": text, "frame": 0, "root_position": "add"})
+        high = page.evaluate(f"{M}.bvhPositions()")[0][1]
+        root_offset = float(text.split("OFFSET", 1)[1].split()[1])  # the root's y, metres
+        assert abs((high - low) - root_offset) < 1e-9, (low, high, root_offset)
+        drag_joint(page, "left_wrist", 30, -40)
+        settle(page)
+        solves = [b for b in sent if "targets" in b]
+        assert solves and all(b.get("root_position") == "add" for b in solves)
+        assert page.evaluate(f"{M}.error()") is None
+        # another file starts where BVH does
+        page.once("dialog", lambda d: d.accept())  # (the edited file: asked before closing)
+        give_file(page, text, "again.bvh")
+        page.wait_for_function(f"() => {M}.bvh() && {M}.bvh().name === 'again.bvh'")
+        assert page.evaluate(f"{M}.bvh()")["root"] == "replace"
+        assert page.locator("#bvh-root").input_value() == "replace"
+        assert not errors, errors
+    finally:
+        page.context.close()

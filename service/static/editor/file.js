@@ -45,7 +45,7 @@ export function fileFrame(text, frame) {
   const joints = doc.info.joints;
   const n = joints.reduce((acc, j) => acc + j.channels.length, 0);
   const row = frameRow(text, frame, n);
-  const fk = forwardKinematics(joints, row);
+  const fk = forwardKinematics(joints, row, doc.settings && doc.settings.root === 'add');
   return { fk, points: anchorPoints(joints, doc.info.anchors, fk) };
 }
 
@@ -61,13 +61,32 @@ export function filePose(text, frame) {
 // ------------------------------------------------------------------------------------
 // BVH files: open (picker or drop), read again, scrub, close
 // ------------------------------------------------------------------------------------
-function fileSettings() {
-  const units = $('bvh-units').value;
-  const up = $('bvh-up').value;
+// How a file is read: the menus' settings, as a file opened from the picker starts them
+// (units and up axis found anew: a choice made for the file before, inches say, drew a
+// centimetre file as a giant; the root's channels as BVH has them).
+const MENUS = { units: 'bvh-units', up: 'bvh-up', root: 'bvh-root' };
+const DEFAULT_SETTINGS = { units: 'auto', up: 'auto', root: 'replace' };
+
+function menuSettings() {
+  return Object.fromEntries(Object.entries(MENUS).map(([key, id]) => [key, $(id).value]));
+}
+
+function showSettings(settings) {
+  for (const [key, id] of Object.entries(MENUS)) $(id).value = settings[key];
+}
+
+// The request fields of the menus' settings (what "auto" or the default leaves out).
+function settingsFields(settings) {
+  const { units, up, root } = settings;
   const out = {};
   if (units !== 'auto') out.units = Number.isFinite(Number(units)) ? Number(units) : units;
   if (up !== 'auto') out.up = up;
+  if (root !== 'replace') out.root_position = root;
   return out;
+}
+
+function fileSettings() {
+  return settingsFields(menuSettings());
 }
 
 // The page's world: metres, +Y up, the character as opened facing +Z with its pelvis
@@ -105,10 +124,7 @@ export async function openText(text, name, original = text, encoding = 'utf-8', 
     if (ticket !== opening) return;
     offerTemplate(err, text);
     const again = doc.active && name === doc.name && original === doc.original;
-    if (again && doc.settings) { // the open file stays as it was read: say so
-      $('bvh-units').value = doc.settings.units;
-      $('bvh-up').value = doc.settings.up;
-    }
+    if (again && doc.settings) showSettings(doc.settings); // the open file stays as it was read: say so
     const stays = doc.active && !again ? ` (${doc.name} stays open)` : '';
     showError(err instanceof ApiError
       ? new ApiError(err.status, err.title, `${name}${stays}: ${err.detail}`, err.requestId)
@@ -123,7 +139,7 @@ export async function openText(text, name, original = text, encoding = 'utf-8', 
   const info = res.data;
   Object.assign(doc, { active: true, name, original, text, shown: text, info, frame: 0, encoding, jointMap });
   showMap(jointMap);
-  doc.settings = { units: $('bvh-units').value, up: $('bvh-up').value };
+  doc.settings = menuSettings();
   const frame0 = fileFrame(text, 0);
   doc.toWorld = worldMapping(info, frame0);
   doc.fromWorld = doc.toWorld.clone().invert();
@@ -223,10 +239,7 @@ export async function openFile(file) {
     showError(err);
     return;
   }
-  // each file is read with units and up axis found anew (a choice made for the file before,
-  // inches say, drew a centimetre file as a giant)
-  $('bvh-units').value = 'auto';
-  $('bvh-up').value = 'auto';
+  showSettings(DEFAULT_SETTINGS); // each file read anew (MENUS, above)
   showMap(jointMap);
   await openText(text, file.name, text, decoded.encoding, 0, jointMap);
   // refused: a units change re-trying it does not ask again (the user said yes already)
@@ -260,10 +273,7 @@ export function readAgain() {
     try {
       jointMap = readMap();
     } catch (err) {
-      if (open && doc.settings) { // not read again: the menus say what the file was read with
-        $('bvh-units').value = doc.settings.units;
-        $('bvh-up').value = doc.settings.up;
-      }
+      if (open && doc.settings) showSettings(doc.settings); // not read again: the menus say how it was
       showError(err);
       return;
     }

@@ -180,6 +180,7 @@ function solveBody() {
       frame: doc.frame,
       units: doc.info.units,
       up: doc.info.up,
+      ...(doc.settings.root === 'add' ? { root_position: 'add' } : {}),
       targets: [...state.targets].map(([joint, p]) => ({ joint, position: toFile(p), weight: 1.0 })),
       pins: [...state.pins].filter((j) => !state.targets.has(j)),
       options: options(),
