@@ -631,8 +631,8 @@ def train_all(cfg: TrainConfig, *, fresh: bool = False) -> Trained:
     torch.set_num_threads(cfg.threads)
     torch.use_deterministic_algorithms(True)
     seed_all(cfg.seed)
+    splits = load_splits(cfg)  # (before the run folder: a dataset refused leaves none)
     Path(cfg.run_dir).mkdir(parents=True, exist_ok=True)
-    splits = load_splits(cfg)
     if d.main:
         for warning in splits.train.meta.get("warnings", []):  # the build's, again
             console.print(f"[yellow]warning: dataset: {escape(warning)}")

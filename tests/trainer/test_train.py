@@ -775,6 +775,7 @@ def test_train_says_in_one_line_what_is_wrong_with_its_config_or_data(
     r = runner.invoke(app, args)
     assert r.exit_code == 1 and "no val frames" in r.output, r.output
     assert not (tmp_path / "models").exists()
+    assert not (tmp_path / "run").exists()  # (a studio audit: an empty run folder was left)
     # a train split smaller than one batch trained nothing (losses 0) and was exported,
     # served as ready (a studio audit): now refused, naming the frames and the batch
     n = int((arrays["clip_split"][arrays["clip"]] == "train").sum())
@@ -785,4 +786,4 @@ def test_train_says_in_one_line_what_is_wrong_with_its_config_or_data(
     r = runner.invoke(app, args)
     assert r.exit_code == 1, r.output
     assert f"train split has {n} frames, fewer than one batch ([solver] batch_size" in r.output
-    assert not (tmp_path / "models").exists()
+    assert not (tmp_path / "models").exists() and not (tmp_path / "run2").exists()
