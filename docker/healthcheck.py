@@ -19,8 +19,11 @@ def main() -> int:
     port = os.environ.get("POSE_PORT", "8000")
     path = os.environ.get("POSE_HEALTH_PATH", DEFAULT_PATH)
     url = f"http://127.0.0.1:{port}{path}"
+    # no proxy: a container given http_proxy (docker sets it from its client's config)
+    # asked the proxy for its own loopback and was marked unhealthy (an ops audit)
+    opener = urllib.request.build_opener(urllib.request.ProxyHandler({}))
     try:
-        with urllib.request.urlopen(url, timeout=3) as response:
+        with opener.open(url, timeout=3) as response:
             status = int(response.status)
     except urllib.error.HTTPError as exc:  # 503 while loading / warming up
         status = exc.code

@@ -12,19 +12,34 @@ import logging.config
 import os
 import sys
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 from pydantic import ValidationError
+from pydantic_settings import SettingsError
 
 from core import CacheDirError
 
+
+def refuse(*details: str) -> NoReturn:
+    """A start refused: each reason one JSON line on stderr, as every line the service
+    writes (docs/deploy.md; a crash loop shows only these), and exit 2."""
+    for detail in details:
+        print(json.dumps({"event": "start_refused", "detail": detail}), file=sys.stderr)
+    raise SystemExit(2)
+
+
 try:  # importing the settings imports the kernels: their cache folder is chosen then
     from service.logs import log_config
-    from service.metrics import shared
-    from service.settings import Settings, unknown_variables
+    from service.settings import SHARED_DIR, Settings, unknown_variables
 except CacheDirError as exc:  # one line, not a traceback
-    print(f"pose-service: {exc}", file=sys.stderr)
-    raise SystemExit(2) from None
+    refuse(f"pose-service: {exc}")
+
+
+def _workers(text: str) -> int:
+    n = int(text)
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"{n}: at least 1")
+    return n
 
 
 def parser() -> argparse.ArgumentParser:
@@ -36,7 +51,7 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--host", help="Bind address (POSE_HOST).")
     p.add_argument("--port", type=int, help="Port (POSE_PORT).")
     p.add_argument("--models-dir", type=Path, help="Models (POSE_MODELS_DIR).")
-    p.add_argument("--workers", type=int, default=1, help="Worker processes.")
+    p.add_argument("--workers", type=_workers, default=1, help="Worker processes (>= 1).")
     return p
 
 
@@ -49,17 +64,23 @@ def main(argv: list[str] | None = None) -> None:
     try:
         settings = Settings()
     except ValidationError as exc:  # one line per setting, not a traceback
-        for e in exc.errors(include_url=False):
-            name = f"POSE_{'_'.join(str(x) for x in e['loc']).upper()}"
-            print(f"{name}: {e['msg']} (got {e.get('input')!r})", file=sys.stderr)
-        raise SystemExit(2) from None
+        refuse(*(
+            f"POSE_{'_'.join(str(x) for x in e['loc']).upper()}: {e['msg']} "
+            f"(got {e.get('input')!r})"
+            for e in exc.errors(include_url=False)
+        ))  # fmt: skip
+    except SettingsError as exc:  # a list setting that is not JSON (POSE_CORS_ORIGINS)
+        refuse(f"{exc}: a list setting is JSON, e.g. POSE_CORS_ORIGINS='[\"http://x\"]'")
     if not (settings.models_dir / "manifest.json").is_file():
-        print(
+        refuse(
             f"no models at {settings.models_dir} (manifest.json missing): train them with "
-            "`pose-trainer train` or set POSE_MODELS_DIR",
-            file=sys.stderr,
+            "`pose-trainer train` or set POSE_MODELS_DIR"
         )
-        raise SystemExit(2)
+    folder = os.environ.get(SHARED_DIR)
+    if folder and not Path(folder).is_dir():  # (its metrics are files opened at import)
+        refuse(f"{SHARED_DIR}={folder!r} is no folder: make it (empty) or unset it")
+    from service.metrics import shared  # (after that check: it opens the metrics' files)
+
     config = log_config(settings.log_level)
     logging.config.dictConfig(config)
     for name in unknown_variables(dict(os.environ)):

@@ -16,12 +16,8 @@ import numpy as np
 import numpy.typing as npt
 from prometheus_client import CollectorRegistry, Counter, Histogram, generate_latest, multiprocess
 
+from service.settings import SHARED_DIR
 from service.transport import SLOW_READERS
-
-#: prometheus_client's multiprocess mode: where set (before the client library is
-#: imported), every process writes its metrics into files in this folder, and a scrape of
-#: any of them reads the sum over all (:meth:`Metrics.exposition`).
-SHARED_DIR = "PROMETHEUS_MULTIPROC_DIR"
 
 
 @contextlib.contextmanager

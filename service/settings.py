@@ -22,7 +22,7 @@ class Settings(BaseSettings):
 
     model_config = SettingsConfigDict(env_prefix="POSE_", extra="ignore", frozen=True)
 
-    host: str = "127.0.0.1"
+    host: str = Field(default="127.0.0.1", min_length=1)  # (empty bound every interface)
     port: int = Field(default=8000, ge=1, le=65535)
     models_dir: Path = BUNDLED_MODELS
     ort_threads: int = Field(default=1, ge=1, le=64, description="onnxruntime intra-op threads.")
@@ -89,11 +89,21 @@ class Settings(BaseSettings):
     access_log: bool = True
 
 
+#: prometheus_client's multiprocess mode: where set (before the client library is
+#: imported), every process writes its metrics into files in this folder, and a scrape of
+#: any of them reads the sum over all (``service.metrics``; ``pose-service --workers N``).
+SHARED_DIR = "PROMETHEUS_MULTIPROC_DIR"
+
+#: ``POSE_*`` variables read by something else than the settings (a start does not call
+#: them unknown): the image's health check's route (docker/healthcheck.py).
+OTHER_VARIABLES = ("POSE_HEALTH_PATH",)
+
+
 def unknown_variables(environ: dict[str, str]) -> list[str]:
     """``POSE_*`` variables of ``environ`` that are no setting (a typo is ignored by the
     settings: ``POSE_DEADLINE=9`` left the deadline at 2 s, an ops audit), each with the
     setting nearest it."""
-    known = [f"POSE_{name.upper()}" for name in Settings.model_fields]
+    known = [f"POSE_{name.upper()}" for name in Settings.model_fields] + list(OTHER_VARIABLES)
     out = []
     for key in sorted(k for k in environ if k.upper().startswith("POSE_")):
         if key.upper() not in known:

@@ -350,6 +350,15 @@ def test_healthcheck_script_exit_codes(
     assert check.main() == 1  # 404
     monkeypatch.setenv("POSE_PORT", "1")  # nothing listens there
     assert check.main() == 1
+    # a proxy in the environment (docker sets one from its client's config) is not asked
+    # for the container's own loopback (an ops audit: a ready service marked unhealthy)
+    monkeypatch.setenv("POSE_PORT", str(port))
+    monkeypatch.delenv("POSE_HEALTH_PATH")
+    for name in ("http_proxy", "HTTP_PROXY"):
+        monkeypatch.setenv(name, "http://127.0.0.1:1")  # nothing listens there either
+    monkeypatch.delenv("no_proxy", raising=False)
+    monkeypatch.delenv("NO_PROXY", raising=False)
+    assert check.main() == 0
 
 
 # --------------------------------------------------------------------------- compose

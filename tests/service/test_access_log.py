@@ -104,8 +104,54 @@ def test_a_bad_setting_is_one_line_not_a_traceback(tmp_path: Path) -> None:
         cwd=REPO_ROOT, env=env, capture_output=True, text=True, timeout=60,
     )  # fmt: skip
     assert proc.returncode == 2, proc.stderr
-    assert "POSE_DEADLINE_SECONDS: Input should be a valid number" in proc.stderr
-    assert "Traceback" not in proc.stderr, proc.stderr
+    (line,) = [json.loads(line) for line in proc.stderr.splitlines()]  # JSON, as all lines
+    assert line["event"] == "start_refused"
+    assert line["detail"].startswith("POSE_DEADLINE_SECONDS: Input should be a valid number")
+
+
+@pytest.mark.parametrize(
+    ("env", "argv", "said"),
+    [
+        ({"POSE_CORS_ORIGINS": "http://x"}, [], "a list setting is JSON"),
+        ({"POSE_HOST": ""}, [], "POSE_HOST: String should have at least 1 character"),
+        ({"PROMETHEUS_MULTIPROC_DIR": "/nonexistent-folder"}, [], "is no folder"),
+    ],
+)
+def test_a_start_refused_says_why_in_one_json_line(
+    env: dict[str, str], argv: list[str], said: str
+) -> None:
+    """An ops audit (2026-12-05): a list setting that is not JSON and a multiprocess
+    metrics folder that does not exist were 20-line tracebacks (exit 1), an empty
+    POSE_HOST bound every interface, and the start's refusals were the only lines on
+    stderr that were not JSON."""
+    import os
+    import subprocess
+
+    from tests.conftest import REPO_ROOT
+
+    proc = subprocess.run(
+        [sys.executable, "-c", f"from service.cli import main; main({argv!r})"],
+        cwd=REPO_ROOT, env={**os.environ, **env}, capture_output=True, text=True, timeout=60,
+    )  # fmt: skip
+    assert proc.returncode == 2, proc.stderr
+    lines = [json.loads(line) for line in proc.stderr.splitlines()]
+    assert len(lines) == 1 and lines[0]["event"] == "start_refused", proc.stderr
+    assert said in lines[0]["detail"], lines
+
+
+def test_workers_are_at_least_one_and_the_health_path_is_a_known_variable() -> None:
+    """``--workers 0`` (or -1) ran one worker without a word; POSE_HEALTH_PATH, the image's
+    health check's, was logged at every start as an unknown setting (an ops audit)."""
+    from service.cli import parser
+    from service.settings import unknown_variables
+
+    for bad in ("0", "-1"):
+        with pytest.raises(SystemExit):
+            parser().parse_args(["--workers", bad])
+    assert parser().parse_args(["--workers", "2"]).workers == 2
+    assert unknown_variables({"POSE_HEALTH_PATH": "/x", "POSE_DEADLINE": "9"}) == [
+        "POSE_DEADLINE (did you mean POSE_DEADLINE_SECONDS?)"
+    ]
 
 
 def test_no_folder_for_the_kernels_cache_is_one_line() -> None:
