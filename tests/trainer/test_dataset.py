@@ -597,6 +597,15 @@ def test_a_source_not_found_is_named_and_with_own_maps_an_error(
         f"folder 'studio-b/' in {tmp_path / 'mocap'}"
     ) in str(info.value)
     assert str(maps / "studio_b.toml") in str(info.value)
+    # a zip beside it is no archive the builder reads: the hint says so (a studio audit:
+    # it offered the zip, whose map then failed on it)
+    (tmp_path / "mocap" / "studio-b.zip").write_bytes(b"PK")
+    with pytest.raises(BuildError) as info:
+        _build(tmp_path, maps)
+    assert (
+        "did you mean 'studio-b.zip'? A zip is not read: repack it as .tar.xz or unzip it into "
+        "'studio-b/'."
+    ) in str(info.value)
     # The shipped maps: a source not found is a warning of the summary (the fixture's folder
     # holds only Bandai-Namco and CMU dance clips).
     warnings = load_dataset(small_dataset).meta["warnings"]

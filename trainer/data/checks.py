@@ -80,10 +80,15 @@ def not_found_message(m: MocapMap, mocap_dir: Path, taken: Iterable[str] = ()) -
             f"map {m.path}: source {m.source!r} has no `archive` and no file in {mocap_dir} "
             f"matches its {globs}"
         )
+    hint = did_you_mean(m.archive, entries)
+    if hint.lower().endswith(".zip'?"):  # (the builder reads tar archives and folders)
+        hint = (
+            hint[:-1]
+            + f" A zip is not read: repack it as .tar.xz or unzip it into '{m.archive_stem}/'."
+        )
     return (
         f"map {m.path}: source {m.source!r}: no archive {m.archive!r} nor folder "
-        f"'{m.archive_stem}/' in {mocap_dir} (nor files matching its {globs} there)"
-        f"{did_you_mean(m.archive, entries)}"
+        f"'{m.archive_stem}/' in {mocap_dir} (nor files matching its {globs} there){hint}"
     )
 
 
