@@ -359,3 +359,84 @@ def test_editor_frame_box_jumps_to_a_typed_frame(
         assert not errors, errors
     finally:
         page.context.close()
+
+
+@pytest.mark.browser
+def test_editor_keys_late_answers_samples_and_status_after_an_editor_audit(
+    server: str, browser: Any, more_mocap: Path
+) -> None:
+    """An editor audit (2026-12-05): a frame typed in its box kept the focus through a drag,
+    so Ctrl+Z undid the box's text and not the drag; a target removed (its x) or pinned
+    (Shift-click) while its drag's answer was on the way left that late answer drawn and
+    never committed (Export wrote the file unedited); a Sample closed a file whose drag's
+    answer was on its way without asking; a file refused for an unreachable server left
+    the status saying "connected"."""
+    path = next(more_mocap.rglob("genuine/003_genuine.bvh"))
+    text = path.read_text()
+    page = open_editor(browser, server)
+    errors: list[str] = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    try:
+        give_file(page, text, "idle.bvh")
+        page.wait_for_function(f"() => {M}.bvh() && {M}.bvh().name === 'idle.bvh'")
+        # a frame typed, then a drag: the keys are the page's again
+        box = page.locator("#bvh-frame-number")
+        box.fill("120")
+        box.press("Enter")
+        page.wait_for_function(f"() => {M}.bvh().frame === 120")
+        steps = page.evaluate(f"{M}.history()")
+        drag_joint(page, "left_wrist", 30, -40)
+        settle(page)
+        assert page.evaluate(f"{M}.history()") != steps
+        page.keyboard.press("Control+z")
+        page.wait_for_function(f"() => {M}.history().index === {steps['index']}")  # undone
+        assert page.evaluate(f"{M}.bvh().frame") == 120 and box.input_value() == "120"
+
+        # the target removed, and a target pinned, while the drag's answer is held: the
+        # screen shows what is committed, which is what Export writes
+        for how in ("remove", "pin"):
+            held = held_drag(page, "right_wrist", 30, -40)
+            page.wait_for_function(f"() => {M}.solveCount().inflight")
+            if how == "remove":
+                page.click("#targets tbody button")
+            else:
+                xy = page.evaluate(f"{M}.projectJoint('right_wrist')")
+                page.keyboard.down("Shift")
+                page.mouse.click(xy["x"], xy["y"])
+                page.keyboard.up("Shift")
+            release(page, held)
+            page.wait_for_timeout(200)
+            got, want = page.evaluate(f"{M}.pose()"), page.evaluate(f"{M}.committedPose()")
+            assert all(dist(got[j], want[j]) < 1e-9 for j in want), how
+
+        # a Sample while a drag's answer is on its way asks first; "no" keeps the file
+        held = held_drag(page, "head", 20, -20)
+        asked: list[str] = []
+
+        def no(dialog: Any) -> None:
+            asked.append(dialog.message)
+            dialog.dismiss()
+
+        page.once("dialog", no)
+        page.select_option("#sample", index=1)
+        assert asked and page.evaluate(f"{M}.bvh()") is not None
+        release(page, held)
+        assert not errors, errors
+    finally:
+        page.context.close()
+
+
+@pytest.mark.browser
+def test_editor_status_stays_unreachable_after_a_file_refused_for_it(
+    server: str, browser: Any, more_mocap: Path
+) -> None:
+    text = next(more_mocap.rglob("genuine/003_genuine.bvh")).read_text()
+    page = open_editor(browser, server)
+    try:
+        page.route("**/v1/bvh/inspect", lambda route: route.abort())
+        give_file(page, text, "idle.bvh")
+        page.wait_for_function(f"() => {M}.error() !== null")
+        assert page.evaluate(f"{M}.error()")["status"] == 0
+        assert page.locator("#status").inner_text() == "server unreachable"
+    finally:
+        page.context.close()

@@ -129,7 +129,9 @@ export async function openText(text, name, original = text, encoding = 'utf-8', 
     showError(err instanceof ApiError
       ? new ApiError(err.status, err.title, `${name}${stays}: ${err.detail}`, err.requestId)
       : err);
-    $('status').textContent = ui.connected ? 'connected' : 'server not ready';
+    if (!(err instanceof ApiError && err.status === 0)) { // (unreachable: api() said so)
+      $('status').textContent = ui.connected ? 'connected' : 'server not ready';
+    }
     return;
   }
   endDrag(false);

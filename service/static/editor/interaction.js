@@ -67,6 +67,9 @@ export function onPointerDown(ev) {
   if (!hit) return; // empty space: OrbitControls gets the event
   ev.stopPropagation();
   ev.preventDefault();
+  // (preventDefault keeps the focus where it was: a panel field typed in would take the
+  // keys, Ctrl+Z undoing its text and not the drag)
+  if (document.activeElement instanceof HTMLElement) document.activeElement.blur();
   const { joint } = hit;
   if (ev.altKey) {
     if (state.targets.has(joint)) removeTarget(joint);
@@ -161,7 +164,9 @@ function togglePin(joint) {
   } else {
     state.pins.add(joint);
     if (state.targets.delete(joint)) {
-      // It was targeted: it now stays where the last solve put it.
+      // It was targeted: it now stays where the last solve put it (an answer still on its
+      // way, for the targets before, is dropped: drawn, it was never committed)
+      cancelSolves();
       commitShown();
     }
   }
@@ -171,6 +176,7 @@ function togglePin(joint) {
 
 export function removeTarget(joint) {
   state.targets.delete(joint);
+  cancelSolves(); // (as clearTargets: a late answer for the targets before is not drawn)
   commitShown();
   requestSolve(true);
   refresh();

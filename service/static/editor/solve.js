@@ -126,7 +126,8 @@ export function redo() {
 }
 
 export function loadSample(i) {
-  const edited = doc.active && doc.text !== doc.original;
+  // (a drag's answer still on its way is an edit too, as opening another file asks)
+  const edited = doc.active && (doc.text !== doc.original || solver.commitPending);
   if (edited && !window.confirm(`Close ${doc.name}? Its edits are lost unless exported.`)) {
     $('sample').value = ''; // the file stays open, edits and history kept
     return;
