@@ -82,10 +82,7 @@ def not_found_message(m: MocapMap, mocap_dir: Path, taken: Iterable[str] = ()) -
         )
     hint = did_you_mean(m.archive, entries)
     if hint.lower().endswith(".zip'?"):  # (the builder reads tar archives and folders)
-        hint = (
-            hint[:-1]
-            + f" A zip is not read: repack it as .tar.xz or unzip it into '{m.archive_stem}/'."
-        )
+        hint += f" A zip is not read: repack it as .tar.xz or unzip it into '{m.archive_stem}/'."
     return (
         f"map {m.path}: source {m.source!r}: no archive {m.archive!r} nor folder "
         f"'{m.archive_stem}/' in {mocap_dir} (nor files matching its {globs} there){hint}"
