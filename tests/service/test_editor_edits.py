@@ -440,3 +440,37 @@ def test_editor_status_stays_unreachable_after_a_file_refused_for_it(
         assert page.locator("#status").inner_text() == "server unreachable"
     finally:
         page.context.close()
+
+
+@pytest.mark.browser
+def test_editor_a_sample_chosen_while_a_file_opens_stands(
+    server: str, browser: Any, more_mocap: Path
+) -> None:
+    """An editor audit (2026-12-05): a Sample chosen, and edited, while a file was still
+    opening was overwritten by the file when its answer came, the edits lost unasked. The
+    later choice stands: the file's late answer is dropped."""
+    text = next(more_mocap.rglob("genuine/003_genuine.bvh")).read_text()
+    page = open_editor(browser, server)
+    errors: list[str] = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    try:
+        held: list[Any] = []
+        page.route("**/v1/bvh/inspect", lambda route: held.append(route))
+        give_file(page, text, "idle.bvh")
+        page.wait_for_function(f"() => {M}.bvh() === null")
+        page.wait_for_timeout(200)
+        assert held  # the file's inspection is on its way
+        page.select_option("#sample", index=2)
+        drag_joint(page, "left_wrist", 30, -40)
+        settle(page)
+        steps = page.evaluate(f"{M}.history()")
+        for route in held:
+            route.continue_()
+        page.unroute("**/v1/bvh/inspect")
+        page.wait_for_timeout(1000)
+        assert page.evaluate(f"{M}.bvh()") is None  # the sample stands, its edit kept
+        assert page.evaluate(f"{M}.history()") == steps
+        assert page.locator("#status").inner_text() == "connected"
+        assert not errors, errors
+    finally:
+        page.context.close()

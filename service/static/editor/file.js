@@ -108,6 +108,16 @@ function worldMapping(info, frame0) {
 
 let opening = 0;
 
+// A file's opening still on its way is given up (a Sample chosen meanwhile: the later
+// choice stands; the file's late answer opened it over the sample's edits, unasked).
+export function cancelOpening() {
+  opening += 1; // (an answer on its way finds its ticket stale and is dropped)
+  doc.tried = null; // (nor does a units / up change re-open it)
+  if ($('status').textContent.startsWith('opening ')) {
+    $('status').textContent = ui.connected ? 'connected' : 'server not ready';
+  }
+}
+
 // Open ``text`` as the file ``name``; ``original`` is the file as opened (Reset returns to
 // it): the text itself, unless an open file is read again with other units or up axis,
 // its edits kept. ``jointMap``: sent with its inspection and, once open, its solves.

@@ -5,7 +5,7 @@ import { $, doc, history, solver, state, ui } from './state.js';
 import { api, clearError, showError } from './api.js';
 import { endDrag } from './interaction.js';
 import { refresh, updateButtons } from './panel.js';
-import { closeFile, filePose, toFile } from './file.js';
+import { cancelOpening, closeFile, filePose, toFile } from './file.js';
 
 // ------------------------------------------------------------------------------------
 // Snapshots and undo history; undo, redo, samples, reset
@@ -134,6 +134,7 @@ export function loadSample(i) {
   }
   endDrag(false);
   cancelSolves();
+  cancelOpening();
   if (doc.active) closeFile();
   state.sample = i;
   ui.hovered = null;
