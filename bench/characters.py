@@ -113,11 +113,9 @@ def score_file(
     out: dict[str, Scores] = {name: Scores({}, {}) for name, _ in SETS} if pairs else {}
     for i, j in pairs:  # the character and the real frame once per pair, every set on them
         head = {"joint": "head", "position": [0.0, 0.0, 0.0]}  # (the character alone)
-        base: dict[str, Any] = {"bvh": text, "frame": i, "targets": [head]}
-        if units is not None:
-            base["units"] = units
-        if root_position != "replace":
-            base["root_position"] = root_position
+        base: dict[str, Any] = {
+            "bvh": text, "frame": i, "targets": [head], **read_as(units, root_position)
+        }  # fmt: skip
         ch = character_from_bvh(bvh, BVHSolveRequest.model_validate(base))
         here = canonical_points(ch.skel, ch.pose, ch.jmap)
         real = canonical_points(ch.skel, pose_of(bvh, j, root_add=root_position == "add"), ch.jmap)
@@ -137,6 +135,14 @@ def score_file(
                 _add(scores, column, got, truth, idx)
                 if column != "FABRIK":
                     _add(scores, f"{column} canonical", np.asarray(edit.result.pose), truth, idx)
+    return out
+
+
+def read_as(units: str | float | None, root_position: str) -> dict[str, Any]:
+    """The request fields that say how a file is read, where they are not the defaults."""
+    out: dict[str, Any] = {} if units is None else {"units": units}
+    if root_position != "replace":
+        out["root_position"] = root_position
     return out
 
 

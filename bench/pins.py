@@ -132,7 +132,7 @@ def run_characters(models: Path, mocap: Path, seed: int) -> dict[tuple[str, ...]
     time of its solve and polish), over :mod:`bench.characters`' files, two frames each."""
     import tempfile
 
-    from bench.characters import extract, frame_pairs
+    from bench.characters import extract, frame_pairs, read_as
     from service.characters import read_request_bvh
     from service.engine import Engine
 
@@ -146,11 +146,7 @@ def run_characters(models: Path, mocap: Path, seed: int) -> dict[tuple[str, ...]
             for i, _ in frame_pairs(
                 bvh.num_frames, 1.0 / bvh.frame_time, 2, np.random.default_rng(1)
             ):
-                base: dict[str, object] = {"bvh": text, "frame": i}
-                if units is not None:
-                    base["units"] = units
-                if root != "replace":
-                    base["root_position"] = root
+                base: dict[str, object] = {"bvh": text, "frame": i, **read_as(units, root)}
                 _character_frame(engine, bvh, base, rng, out)
     return out
 

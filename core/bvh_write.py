@@ -19,7 +19,7 @@ import re
 
 import numpy as np
 
-from core.bvh import BVH, BVHError, euler_angles, euler_matrices, invertible_order
+from core.bvh import BVH, BVHError, BVHJoint, euler_angles, euler_matrices, invertible_order
 from core.characters import F64, Pose, Skeleton, build_skeleton
 
 DECIMALS = 6
@@ -106,6 +106,12 @@ def skeleton_of(bvh: BVH) -> Skeleton:
     return skel
 
 
+def _root_shift(joint: BVHJoint, axis: int, root_add: bool) -> float:
+    """What a position channel of ``joint`` on ``axis`` is read with and written without:
+    a root's OFFSET there where its channels are a displacement (``root_add``), else 0."""
+    return joint.offset[axis] if root_add and joint.parent < 0 else 0.0
+
+
 def pose_of(bvh: BVH, frame: int, row: F64 | None = None, *, root_add: bool = False) -> Pose:
     """Local rotations and translations of one frame (of ``row`` instead, when given).
     ``root_add``: a root's position channels are a displacement from its OFFSET (some
@@ -124,8 +130,8 @@ def pose_of(bvh: BVH, frame: int, row: F64 | None = None, *, root_add: bool = Fa
             columns.append(cols)
         for k, c in enumerate(j.channels):
             if c.lower() in _POS:
-                shift = j.offset[_POS[c.lower()]] if root_add and j.parent < 0 else 0.0
-                trans[i, _POS[c.lower()]] = row[j.channel_start + k] + shift
+                axis = _POS[c.lower()]
+                trans[i, axis] = row[j.channel_start + k] + _root_shift(j, axis, root_add)
     for seq, (joints, columns) in orders.items():
         rot[joints] = euler_matrices(seq, np.deg2rad(row[np.array(columns)]))
     return Pose(rot, trans)
@@ -168,8 +174,7 @@ def row_of(
                 columns += rot_cols
         for k, c in enumerate(j.channels):
             axis = _POS.get(c.lower(), 0)
-            shift = j.offset[axis] if root_add and j.parent < 0 else 0.0
-            value = float(pose.translations[i, axis]) - shift
+            value = float(pose.translations[i, axis]) - _root_shift(j, axis, root_add)
             if c.lower() in _POS and float(f"{value:.{DECIMALS}f}") != row[j.channel_start + k]:
                 row[j.channel_start + k] = value
                 columns.append(j.channel_start + k)

@@ -76,17 +76,13 @@ function showSettings(settings) {
 }
 
 // The request fields of the menus' settings (what "auto" or the default leaves out).
-function settingsFields(settings) {
-  const { units, up, root } = settings;
+function fileSettings() {
+  const { units, up, root } = menuSettings();
   const out = {};
   if (units !== 'auto') out.units = Number.isFinite(Number(units)) ? Number(units) : units;
   if (up !== 'auto') out.up = up;
   if (root !== 'replace') out.root_position = root;
   return out;
-}
-
-function fileSettings() {
-  return settingsFields(menuSettings());
 }
 
 // The page's world: metres, +Y up, the character as opened facing +Z with its pelvis
