@@ -17,6 +17,7 @@ from core.carry import BONE_OF
 from core.ends import BELOW as _ENDS_BELOW
 from core.ends import CHAINS as _CHAINS
 from core.ends import COLLARS as _ENDS_COLLARS
+from core.ends import PREFER as _PREFER
 from core.ends import TINY as _ENDS_TINY
 from core.jit import jit
 from core.skeleton import JOINT_INDEX, NUM_JOINTS, PARENTS
@@ -156,11 +157,13 @@ def ends_item(
     vecs: F64,
     ease: float,
     collar: bool,
+    side: float,
 ) -> None:  # pragma: no cover - compiled
     """``core.ends.keep_ends`` for one pose ``out [21, 3]`` (after the bone pass) and its
     network pose ``network [21, 3]``, in place, for the chains ``chains [C]`` marks
     (``core.ends.active``), eased over ``ease`` m, wrists reached by turning the collar
-    with ``collar``; ``flags [21]`` (int64) and ``vecs [5, 3]`` are scratch."""
+    with ``collar``, bent towards ``core.ends.PREFER`` by ``side``; ``flags [21]`` (int64)
+    and ``vecs [5, 3]`` are scratch."""
     for j in range(NUM_JOINTS):
         flags[j] = 0
     for q in range(count):
@@ -206,13 +209,24 @@ def ends_item(
         along = (e0[0] - s[0]) * u[0] + (e0[1] - s[1]) * u[1] + (e0[2] - s[2]) * u[2]
         for i in range(3):
             v[i] = (e0[i] - s[i]) - along * u[i]
+        cos = min(max((a * a + d * d - b * b) / (2.0 * a * d), -1.0), 1.0)
+        sin = np.sqrt(max(0.0, 1.0 - cos * cos))
+        if side > 0.0:  # towards PREFER where the networks' bend is short of what is needed
+            need = a * sin
+            nb = np.sqrt(v[0] ** 2 + v[1] ** 2 + v[2] ** 2)
+            w = 1.0 - nb / (side * need) if need > _ENDS_TINY else 0.0
+            if w > 0.0:
+                for i in range(3):  # e0 (done with) takes the side u @ PREFER[c, :3] + PREFER[c, 3]
+                    e0[i] = (u[0] * _PREFER[c, 0, i] + u[1] * _PREFER[c, 1, i]
+                             + u[2] * _PREFER[c, 2, i]) + _PREFER[c, 3, i]  # fmt: skip
+                pa = e0[0] * u[0] + e0[1] * u[1] + e0[2] * u[2]
+                for i in range(3):
+                    v[i] = v[i] + (w * need) * (e0[i] - pa * u[i])
         nb = np.sqrt(v[0] ** 2 + v[1] ** 2 + v[2] ** 2)
         if not nb > _ENDS_TINY:
             continue
         for i in range(3):
             v[i] = v[i] / nb
-        cos = min(max((a * a + d * d - b * b) / (2.0 * a * d), -1.0), 1.0)
-        sin = np.sqrt(max(0.0, 1.0 - cos * cos))
         for i in range(3):
             shift = (s[i] + d * u[i]) - w0[i]
             out[mid, i] = s[i] + a * (cos * u[i] + sin * v[i])

@@ -15,7 +15,20 @@ elbow or knee, its shoulder or hip, or below it:
 - the branch below the end (the foot) moves with it.
 
 The shoulder (hip) and everything above stay as the bone pass left them; bone lengths stay
-exact. A limb bent in no plane (straight along the line to the end) is left as it was.
+exact. A limb bent in no plane (straight along the line to the end) is left as it was
+(without ``side``, below).
+
+Which side the limb bends to (``side``, ``serving.bend_side``): where the networks drew the
+limb nearly straight but the character's bones must bend it (a body whose arm is longer
+than the one the networks drew), the plane they bent it in is a few millimetres of their
+answer, and its side turns all the way round between two nearly equal edits (an elbow 30
+cm away for a target 1 cm away; docs/generalisation-3.md item 52). With ``side`` > 0,
+where the networks' bend ``n`` (the middle joint's distance from the line to the end) is
+less than ``side`` times the bend ``h`` the character's lengths need, the elbow or knee
+turns towards the side they bend to in the training poses for a limb pointing that way
+(:data:`PREFER`), by ``(1 - n / (side * h)) * h``: the bend plane is that of
+the networks' bend plus that much of the preferred side, and goes smoothly from the one to
+the other as the networks' bend shrinks.
 
 A targeted elbow (with ``serving.keep_elbows``) is kept the same way one level up: its
 chain is collar, shoulder, elbow. Where no target is on its shoulder or collar or below it
@@ -61,6 +74,35 @@ COLLARS: Final[npt.NDArray[np.int64]] = np.asarray(
 )  # fmt: skip
 
 
+#: The side a left elbow and a left knee bend to for a limb pointing along ``u`` (unit,
+#: shoulder or hip to wrist or ankle, canonical frame: +x the body's left, +y up, +z its
+#: front): ``u @ W[:3] + W[3]``, whose part across ``u`` is the side (``side`` in
+#: :func:`keep_ends`). Least squares of the unit bend side of the training poses' limbs
+#: bent 2 cm or more (the right ones mirrored in) on ``[u, 1]``: ``pose-trainer
+#: bend-sides`` on the shipped dataset's train split, which these are; it puts 99.98 % of
+#: those elbows and 99.99 % of those knees within 90 degrees of their side.
+BEND_ELBOW: Final = np.asarray(
+    [[-0.445, -0.29, -0.298], [0.352, -0.001, 0.491], [0.093, -0.87, 0.272], [0.596, 0.046, -0.387]]
+)
+BEND_KNEE: Final = np.asarray(
+    [[0.114, 0.182, 0.029], [-0.269, 0.019, -0.885], [-0.238, 0.981, 0.033], [-0.1, 0.021, 0.086]]
+)
+
+
+def mirrored_side(w: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    """The right limb's table of a left limb's ``w [4, 3]`` (x negated in and out)."""
+    flip = np.asarray([-1.0, 1.0, 1.0])
+    return np.asarray(w * np.concatenate([flip, [1.0]])[:, None] * flip[None, :], dtype=np.float64)
+
+
+#: Per chain (rows of :data:`CHAINS`), its side table ``[C, 4, 3]``; zeros (no side) for the
+#: elbows' own chains.
+PREFER: Final[npt.NDArray[np.float64]] = np.stack(
+    [BEND_ELBOW, mirrored_side(BEND_ELBOW), BEND_KNEE, mirrored_side(BEND_KNEE),
+     np.zeros((4, 3)), np.zeros((4, 3))]
+)  # fmt: skip
+
+
 #: Per chain, the joints below its end ``[4, 21]``.
 _ENDS = CHAINS[:, 2]
 BELOW: Final[npt.NDArray[np.bool_]] = SUBTREE[_ENDS] & ~np.eye(NUM_JOINTS, dtype=np.bool_)[_ENDS]
@@ -99,6 +141,7 @@ def keep_ends(
     chains: npt.NDArray[np.bool_] | None = None,
     ease: float = 0.0,
     collar: bool = False,
+    side: float = 0.0,
 ) -> F64:
     """``pose [..., 21, 3]`` (after the bone pass: the character's lengths) with each kept
     chain's end (of those ``chains`` marks, default the limb ends) where ``network`` (the
@@ -108,7 +151,8 @@ def keep_ends(
     a straight knee; continuous in ``g``). ``collar``: a kept wrist whose goal lies beyond
     the arm's reach from its shoulder first turns the shoulder about its collar towards the
     goal, as little as brings it within reach (all the way where nothing does), the arm
-    moving with it. A new array."""
+    moving with it. ``side`` (0-1): a limb the networks bent less than ``side`` times what the
+    character's lengths need bends towards :data:`PREFER` (see the module). A new array."""
     out = np.array(pose, dtype=np.float64, copy=True)
     net = np.asarray(network, dtype=np.float64)
     targets = list(targets)
@@ -133,11 +177,22 @@ def keep_ends(
         u = line / np.where(d0 > TINY, d0, 1.0)[..., None]
         d = np.minimum(np.maximum(d0, np.abs(a - b)), a + b)
         bend = (e0 - s) - np.sum((e0 - s) * u, axis=-1)[..., None] * u
+        reach = (d0 > TINY) & (a > TINY)
+        cos = np.clip((a * a + d * d - b * b) / np.where(reach, 2.0 * a * d, 1.0), -1.0, 1.0)
+        sin = np.sqrt(np.maximum(0.0, 1.0 - cos * cos))
+        if side > 0.0:  # towards PREFER where the networks' bend is short of what is needed
+            need = a * sin
+            nb = np.sqrt(np.sum(bend**2, axis=-1))
+            w = np.where(need > TINY, 1.0 - nb / np.where(need > TINY, side * need, 1.0), 0.0)
+            table = PREFER[c]  # u @ table[:3] + table[3], summed in the kernel's order
+            pref = u[..., 0:1] * table[0] + u[..., 1:2] * table[1] + u[..., 2:3] * table[2]
+            pref = pref + table[3]
+            along = pref[..., 0] * u[..., 0] + pref[..., 1] * u[..., 1] + pref[..., 2] * u[..., 2]
+            pref = pref - along[..., None] * u
+            bend = bend + (np.maximum(w, 0.0) * need)[..., None] * pref
         nb = np.sqrt(np.sum(bend**2, axis=-1))
         v = bend / np.where(nb > TINY, nb, 1.0)[..., None]
-        ok = (d0 > TINY) & (nb > TINY) & (a > TINY)
-        cos = np.clip((a * a + d * d - b * b) / np.where(ok, 2.0 * a * d, 1.0), -1.0, 1.0)
-        sin = np.sqrt(np.maximum(0.0, 1.0 - cos * cos))
+        ok = reach & (nb > TINY)
         elbow = s + a[..., None] * (cos[..., None] * u + sin[..., None] * v)
         wrist = s + d[..., None] * u
         shift = np.where(ok[..., None], wrist - w0, 0.0)

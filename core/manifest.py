@@ -160,6 +160,16 @@ class Serving(_Strict):
         "(0: all the way), so that a millimetre of the networks' answer does not bend a "
         "straight limb (core.ends).",
     )
+    bend_side: float = Field(
+        default=0.0,
+        ge=0.0,
+        le=1.0,
+        description="With keep_ends: where the networks drew a kept limb bent less than "
+        "this fraction of the bend the character's own lengths need, its elbow or knee "
+        "turns towards the side elbows and knees bend to in the training poses (out, down "
+        "and back; forward), the more the straighter, so that the side does not turn round "
+        "between two nearly equal edits (0: the networks' plane alone; core.ends).",
+    )
     keep_pairs: bool = Field(
         default=False,
         description="After the bone pass, the two hips on the pelvis and the two collars on "

@@ -507,6 +507,7 @@ class Engine:
                 out = compiled.unscale(
                     decoded, scales, canon, lengths, bone, tidx, cnt, batch.carry, self.chain_mask,
                     self.serving.keep_ease, collar, hold, self.serving.keep_pairs,
+                    self.serving.bend_side,
                 )  # fmt: skip
             else:
                 items = np.flatnonzero(neural)
@@ -521,7 +522,7 @@ class Engine:
                     decoded[items], scales[items], canon[items], lengths[items], bone[items],
                     tidx[items], cnt[items], batch.carry[items], self.chain_mask,
                     self.serving.keep_ease, collar[items], hold[items],
-                    self.serving.keep_pairs,
+                    self.serving.keep_pairs, self.serving.bend_side,
                 )  # fmt: skip
         start = canon
         if origin is not None and moved is not None and moved.any():

@@ -134,12 +134,13 @@ def solve_lean(
             pose, errors, bone_err = compiled.settle(
                 decoded, scales, canon, lengths, facing, trans, floors, tidx, tpos, counts,
                 items.carry, engine.chain_mask, engine.serving.keep_ease, collar, hold,
-                engine.serving.keep_pairs,
+                engine.serving.keep_pairs, engine.serving.bend_side,
             )  # fmt: skip
             continue
         out = compiled.unscale(
             decoded, scales, canon, lengths, every, tidx, counts, items.carry, engine.chain_mask,
             engine.serving.keep_ease, collar, hold, engine.serving.keep_pairs,
+            engine.serving.bend_side,
         )  # fmt: skip
         # exact: every column onto its goal; soft: the pins, the solved targets held
         goal = (

@@ -322,6 +322,11 @@ class ModelsResponse(BaseModel):
         "networks' goes back only in proportion (0: all the way; the manifest's "
         "`serving.keep_ease`)."
     )
+    bend_side: float = Field(
+        description="Below this fraction of the bend the character's lengths need, a kept "
+        "limb the networks drew too straight bends towards the side elbows and knees bend "
+        "to (0: the networks' plane alone; the manifest's `serving.bend_side`)."
+    )
     keep_collar: bool = Field(
         description="Whether a soft answer's kept wrist beyond the arm's reach turns its "
         "shoulder about the collar first (the manifest's `serving.keep_collar`)."

@@ -174,6 +174,40 @@ def plot_data(
     typer.echo(f"wrote {path}")
 
 
+@app.command("bend-sides")
+def bend_sides(
+    dataset: Annotated[Path, typer.Option(help="Dataset .npz.")] = Path("data/poses.npz"),
+    every: Annotated[int, typer.Option(min=1, help="Fit on every n-th pose.")] = 3,
+    split: Annotated[str, typer.Option(help="The split whose poses to fit on.")] = "train",
+    min_bend: Annotated[
+        float, typer.Option(min=0.001, help="Limbs bent less (m) are left out.")
+    ] = 0.02,
+) -> None:
+    """Fit the side elbows and knees bend to on a split of the dataset (trainer.bend_sides;
+    core.ends' tables, which serving.bend_side uses, are the train split's), beside core.ends'
+    own tables on the same poses."""
+    import numpy as np
+
+    from core.ends import BEND_ELBOW, BEND_KNEE
+    from trainer.bend_sides import agreement, fit_sides, lines_and_sides
+    from trainer.data.dataset import DatasetError, load_dataset
+
+    try:
+        data = load_dataset(dataset)
+        poses = data.positions[data.split_mask(split)][::every].astype(np.float64)
+        for limb, shipped in (("elbow", BEND_ELBOW), ("knee", BEND_KNEE)):
+            fit = fit_sides(poses, limb, min_bend)
+            share, cosine = agreement(shipped, *lines_and_sides(poses, limb, min_bend))
+            typer.echo(
+                f"{limb}: {np.round(fit.w, 3).tolist()}\n  {fit.limbs} limbs; within 90 degrees "
+                f"of their side: {fit.agree:.4f} (mean cosine {fit.cosine:.3f}); core.ends' "
+                f"table: {share:.4f} ({cosine:.3f})"
+            )
+    except (DatasetError, ValueError) as exc:
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(1) from None
+
+
 @app.command("serving")
 def serving_cmd(
     config: Annotated[Path, typer.Option(help="Config whose serving settings to apply (TOML).")],

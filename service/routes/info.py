@@ -50,6 +50,7 @@ async def models(engine: ReadyEngine) -> ModelsResponse:
         keep_ends=engine.serving.keep_ends,
         keep_elbows=engine.serving.keep_elbows,
         keep_ease=engine.serving.keep_ease,
+        bend_side=engine.serving.bend_side,
         keep_collar=engine.serving.keep_collar,
         keep_pairs=engine.serving.keep_pairs,
         keep_pelvis=engine.serving.keep_pelvis,

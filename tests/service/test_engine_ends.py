@@ -44,6 +44,9 @@ def test_shipped_models_keep_ends(engines: tuple[Engine, Engine], client: Any) -
     # and wrists out of reach turn the collar (serving.keep_collar, set without retraining)
     assert engines[1].manifest.serving.keep_collar
     assert client.get("/v1/models").json()["keep_collar"] is True
+    # and limbs drawn too straight bend to their side (serving.bend_side, docs item 52)
+    assert engines[1].serving.bend_side == engines[1].manifest.serving.bend_side == 0.5
+    assert client.get("/v1/models").json()["bend_side"] == 0.5
 
 
 def test_only_the_targeted_limb_moves_and_reaches_nearer(
@@ -156,3 +159,46 @@ def test_out_of_reach_wrists_turn_the_collar_in_soft_answers_only(
     two = [Engine(models_dir, serving={"passes": 2, "keep_collar": k}) for k in (False, True)]
     for x, y in zip(two[0].solve(exact), two[1].solve(exact + probs[:4])[:16], strict=True):
         assert np.array_equal(x.pose, y.pose)
+
+
+def test_a_nearly_straight_arm_keeps_its_side_from_frame_to_frame(
+    models_dir: Path, bvh_files: dict[str, Path]
+) -> None:
+    """``serving.bend_side`` on a real walk (a batch audit's clip): the left wrist dragged
+    along a smooth path, both feet pinned. Where the networks draw the arm nearly straight
+    but the character's longer arm must bend, the side they drew it bent to, a few
+    millimetres of their answer, turned round between frames 138 and 139 (the elbow 314
+    mm away, FABRIK's 56) and over a 9 mm move of the target from one start (370 mm)."""
+    from bench.clips import clip_points
+
+    points = clip_points(bvh_files["bandai"], None, "replace", 200)
+    lw, la, ra, le = (J[n] for n in ("left_wrist", "left_ankle", "right_ankle", "left_elbow"))
+    t = np.arange(len(points)) / 30.0
+    path = 0.3 * np.stack([0.15 * np.sin(2 * np.pi * t / 3), 0.35 * np.sin(np.pi * t / t[-1]) ** 2,
+                           0.15 * (1 - np.cos(2 * np.pi * t / 3))], axis=1)  # fmt: skip
+    idx = np.asarray([[lw, la, ra]] * 2)
+    shipped, plain = Engine(models_dir), Engine(models_dir, serving={"bend_side": 0.0})
+    assert shipped.serving.bend_side == 0.5
+    frames = points[[138, 139]]
+    goals = np.stack([frames[:, lw] + path[[138, 139]], frames[:, la], frames[:, ra]], axis=1)
+
+    def elbow_step(engine: Engine, **options: Any) -> float:
+        pose = np.asarray(engine.solve_arrays(frames, idx, goals, n_targets=1, **options).pose)
+        return float(np.linalg.norm(pose[1, le] - pose[0, le]))
+
+    fabrik = elbow_step(shipped, fabrik=True, exact=True)
+    assert 0.04 < fabrik < 0.08
+    assert elbow_step(plain) > 0.25 and elbow_step(plain, exact=True) > 0.25
+    assert elbow_step(shipped) < 1.2 * fabrik and elbow_step(shipped, exact=True) < 1.2 * fabrik
+    # one start (frame 83), its wrist target (the path at full size) moved 9.4 mm in 20 steps
+    g0 = points[83, lw] + path[83] / 0.3
+    g1 = g0 + 0.1 * (points[84, lw] + path[84] / 0.3 - g0)
+    goal = g0 + np.linspace(0.0, 1.0, 21)[:, None] * (g1 - g0)
+    starts = np.repeat(points[83][None], 21, axis=0)
+    travel = [
+        np.linalg.norm(np.diff(np.asarray(e.solve_arrays(starts, np.full((21, 1), lw),
+                                                         goal[:, None]).pose)[:, le], axis=0),
+                       axis=-1).sum()
+        for e in (plain, shipped)
+    ]  # fmt: skip
+    assert travel[0] > 0.2 and travel[1] < 0.02, travel  # the elbow's path: 370 mm, then 14
