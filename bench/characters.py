@@ -178,13 +178,22 @@ def extract(mocap: Path, out: Path) -> list[tuple[Path, str | float | None, str]
     return [(out / member, units, root) for _, member, units, root in DEFAULT_FILES]
 
 
+#: The command line's options shared with bench.clips: files given, else the default files
+#: out of the archives in ``mocap``; the models; serving settings instead of the manifest's.
+Files = Annotated[list[Path] | None, typer.Argument()]
+Mocap = Annotated[Path, typer.Option(help="archives of the default files")]
+Models = Annotated[Path, typer.Option(help="models folder")]
+Serving = Annotated[
+    list[str] | None,
+    typer.Option(metavar="KEY=VALUE", help="a serving setting instead (bench.heldout's)"),
+]
+
+
 @app.command()
 def main(
-    files: Annotated[list[Path] | None, typer.Argument()] = None,
-    mocap: Annotated[Path, typer.Option(help="archives of the default files")] = Path(
-        "../shared/mocap"
-    ),
-    models: Annotated[Path, typer.Option(help="models folder")] = Path("models"),
+    files: Files = None,
+    mocap: Mocap = Path("../shared/mocap"),
+    models: Models = Path("models"),
     edits: Annotated[int, typer.Option(min=1, max=10_000, help="edits per file and set")] = 40,
     seed: Annotated[int, typer.Option(help="seed of the frame pairs")] = 0,
     units: Annotated[str | None, typer.Option(help="units, where not plain from a file")] = None,
@@ -194,18 +203,11 @@ def main(
     root_position: Annotated[
         str, typer.Option(help="the files' root channels: replace (BVH) or add (a displacement)")
     ] = "replace",
-    serving: Annotated[
-        list[str] | None,
-        typer.Option(metavar="KEY=VALUE", help="a serving setting instead (bench.heldout's)"),
-    ] = None,
+    serving: Serving = None,
 ) -> None:
-    from bench.heldout import overrides
-    from service.engine import Engine
+    from bench.heldout import engine_for
 
-    try:
-        engine = Engine(models, serving=overrides(serving or []))
-    except ValueError as exc:  # not a setting, fixed by training, or out of range
-        raise typer.BadParameter(str(exc), param_hint="--serving") from None
+    engine = engine_for(models, serving)
     given: str | float | None = units
     if units is not None and units.replace(".", "", 1).isdigit():
         given = float(units)  # metres per unit

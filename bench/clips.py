@@ -33,6 +33,7 @@ from typing import Annotated, Any
 import numpy as np
 import typer
 
+from bench.characters import Files, Mocap, Models, Serving
 from core.skeleton import JOINT_INDEX, NUM_JOINTS
 
 app = typer.Typer(add_completion=False)
@@ -174,26 +175,17 @@ def score(engine: Any, todo: Sequence[tuple[Path, str | float | None, str]], fra
 
 @app.command()
 def main(
-    files: Annotated[list[Path] | None, typer.Argument()] = None,
-    mocap: Annotated[Path, typer.Option(help="archives of the default files")] = Path(
-        "../shared/mocap"
-    ),
-    models: Annotated[Path, typer.Option(help="models folder")] = Path("models"),
+    files: Files = None,
+    mocap: Mocap = Path("../shared/mocap"),
+    models: Models = Path("models"),
     frames: Annotated[int, typer.Option(min=3, max=100_000, help="frames per clip")] = 240,
     seed: Annotated[int, typer.Option(help="seed of the offset paths")] = 0,
-    serving: Annotated[
-        list[str] | None,
-        typer.Option(metavar="KEY=VALUE", help="a serving setting instead (bench.heldout's)"),
-    ] = None,
+    serving: Serving = None,
 ) -> None:
     from bench.characters import extract
-    from bench.heldout import overrides
-    from service.engine import Engine
+    from bench.heldout import engine_for
 
-    try:
-        engine = Engine(models, serving=overrides(serving or []))
-    except ValueError as exc:  # not a setting, fixed by training, or out of range
-        raise typer.BadParameter(str(exc), param_hint="--serving") from None
+    engine = engine_for(models, serving)
     with tempfile.TemporaryDirectory() as tmp:
         todo = [(p, None, "replace") for p in files] if files else extract(mocap, Path(tmp))
         rows = score(engine, todo, frames, seed)

@@ -678,6 +678,21 @@ def overrides(pairs: Sequence[str]) -> dict[str, Any]:
     return out
 
 
+def engine_for(models: Path, serving: Sequence[str] | None, **kw: Any) -> Engine:
+    """The engine of ``models`` with the ``--serving`` pairs ``serving`` (:func:`overrides`),
+    its refusals as the command line's errors: a models folder not as its manifest says
+    (``--models``), a setting unknown, fixed by training or out of range (``--serving``)."""
+    from core.manifest import ManifestError
+
+    asked = overrides(serving or [])
+    try:
+        return Engine(models, serving=asked, **kw)
+    except ManifestError as exc:  # a file missing or not the one the manifest names
+        raise typer.BadParameter(str(exc), param_hint="--models") from None
+    except ValueError as exc:  # not a setting, fixed by training, or out of range
+        raise typer.BadParameter(str(exc), param_hint="--serving") from None
+
+
 def main(
     models: Annotated[Path, typer.Option(help="Models folder (manifest.json).")] = Path("models"),
     dataset: Annotated[Path, typer.Option(help="Dataset file (format 2).")] = DEFAULT_DATASET,
@@ -701,7 +716,6 @@ def main(
     """Held-out bodies and the stress set only, against any models folder."""
     from rich.console import Console
 
-    from core.manifest import ManifestError
     from trainer.data.dataset import SPLITS, DatasetError, load_dataset
 
     if not (models / "manifest.json").is_file():
@@ -710,13 +724,7 @@ def main(
         raise typer.BadParameter(f"no dataset file at {dataset}", param_hint="--dataset")
     console = Console(stderr=True)
     cfg = dataclasses.replace(QUICK if quick else HeldoutConfig(), seed=seed, captured=captured)
-    asked = overrides(serving or [])
-    try:
-        engine = Engine(models, threads=1, serving=asked)
-    except ManifestError as exc:  # a file missing or not the one the manifest names
-        raise typer.BadParameter(str(exc), param_hint="--models") from None
-    except ValueError as exc:  # not a setting, fixed by training, or out of range
-        raise typer.BadParameter(str(exc), param_hint="--serving") from None
+    engine = engine_for(models, serving, threads=1)
     try:
         data = load_dataset(dataset)
     except DatasetError as exc:
@@ -735,7 +743,7 @@ def main(
         )
     res = run_heldout(engine, data, cfg, split=split, log=console.log)
     res.models = {
-        "dir": str(models), "version": engine.version, "overrides": asked,
+        "dir": str(models), "version": engine.version, "overrides": overrides(serving or []),
         **engine.serving.model_dump(mode="json"),
     }  # fmt: skip
     if out is not None:
