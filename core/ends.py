@@ -26,9 +26,11 @@ cm away for a target 1 cm away; docs/generalisation-3.md item 52). With ``side``
 where the networks' bend ``n`` (the middle joint's distance from the line to the end) is
 less than ``side`` times the bend ``h`` the character's lengths need, the elbow or knee
 turns towards the side they bend to in the training poses for a limb pointing that way
-(:data:`PREFER`), by ``(1 - n / (side * h)) * h``: the bend plane is that of
-the networks' bend plus that much of the preferred side, and goes smoothly from the one to
-the other as the networks' bend shrinks.
+(:data:`PREFER`): the bend plane is that of the networks' bend plus ``(1 - n / (side *
+h)) * h`` times the preferred side's part across the line (a vector of length about 1, not
+exactly), and goes smoothly from the one to the other as the networks' bend shrinks. ``n``
+is measured after the bone pass, which keeps the networks' bone directions and so their
+plane.
 
 A targeted elbow (with ``serving.keep_elbows``) is kept the same way one level up: its
 chain is collar, shoulder, elbow. Where no target is on its shoulder or collar or below it
