@@ -18,7 +18,8 @@ from __future__ import annotations
 
 import subprocess
 import tempfile
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
@@ -138,6 +139,18 @@ def score_file(
     return out
 
 
+@contextmanager
+def unreadable(path: Path) -> Iterator[None]:
+    """A file the BVH route refuses (not BVH, a joint map not found, ...) as the command
+    line's one-line error naming it."""
+    from service.errors import PoseError
+
+    try:
+        yield
+    except PoseError as exc:
+        raise typer.BadParameter(f"{path}: {exc}", param_hint="FILES") from None
+
+
 def read_as(units: str | float | None, root_position: str) -> dict[str, Any]:
     """The request fields that say how a file is read, where they are not the defaults."""
     out: dict[str, Any] = {} if units is None else {"units": units}
@@ -180,7 +193,7 @@ def extract(mocap: Path, out: Path) -> list[tuple[Path, str | float | None, str]
 
 #: The command line's options shared with bench.clips: files given, else the default files
 #: out of the archives in ``mocap``; the models; serving settings instead of the manifest's.
-Files = Annotated[list[Path] | None, typer.Argument()]
+Files = Annotated[list[Path] | None, typer.Argument(exists=True, dir_okay=False, readable=True)]
 Mocap = Annotated[Path, typer.Option(help="archives of the default files")]
 Models = Annotated[Path, typer.Option(help="models folder")]
 Serving = Annotated[
@@ -215,7 +228,8 @@ def main(
     with tempfile.TemporaryDirectory() as tmp:
         todo = [(p, given, root_position) for p in files] if files else extract(mocap, Path(tmp))
         for path, stated, root in todo:
-            scored = score_file(engine, path, edits, seed, stated, on_pelvis, root)
+            with unreadable(path):
+                scored = score_file(engine, path, edits, seed, stated, on_pelvis, root)
             rows.extend((path.name, name, scores) for name, scores in scored.items())
     mode = " --on-pelvis" if on_pelvis else ""
     when = datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC")

@@ -33,7 +33,7 @@ from typing import Annotated, Any
 import numpy as np
 import typer
 
-from bench.characters import Files, Mocap, Models, Serving
+from bench.characters import Files, Mocap, Models, Serving, unreadable
 from core.skeleton import JOINT_INDEX, NUM_JOINTS
 
 app = typer.Typer(add_completion=False)
@@ -165,7 +165,11 @@ def score(engine: Any, todo: Sequence[tuple[Path, str | float | None, str]], fra
     rng = np.random.default_rng(seed)
     rows: dict[str, dict[str, list[np.ndarray]]] = {}
     for path, units, root in todo:
-        points = clip_points(path, units, root, frames)
+        with unreadable(path):
+            points = clip_points(path, units, root, frames)
+        if len(points) < 2:
+            raise typer.BadParameter(f"{path}: {len(points)} frame; a clip needs 2 or more",
+                                     param_hint="FILES")  # fmt: skip
         assert points.shape[1:] == (NUM_JOINTS, 3)
         for name, steps in edit_steps(engine, points, rng).items():
             for column, s in steps.items():

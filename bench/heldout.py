@@ -35,6 +35,7 @@ from typing import Annotated, Any, Optional
 import numpy as np
 import numpy.typing as npt
 import typer
+from pydantic import ValidationError
 
 from bench.edits import (
     CM,
@@ -689,7 +690,10 @@ def engine_for(models: Path, serving: Sequence[str] | None, **kw: Any) -> Engine
         return Engine(models, serving=asked, **kw)
     except ManifestError as exc:  # a file missing or not the one the manifest names
         raise typer.BadParameter(str(exc), param_hint="--models") from None
-    except ValueError as exc:  # not a setting, fixed by training, or out of range
+    except ValidationError as exc:  # out of range, or not of the setting's type
+        where = "; ".join(f"{'.'.join(map(str, e['loc']))}: {e['msg']}" for e in exc.errors())
+        raise typer.BadParameter(where, param_hint="--serving") from None
+    except ValueError as exc:  # not a setting, or fixed by training
         raise typer.BadParameter(str(exc), param_hint="--serving") from None
 
 

@@ -41,3 +41,35 @@ def test_a_row_per_set_with_each_method(bvh_files: dict[str, Path], models_dir: 
         for cell in cells[4:]:
             step, jumps, flipped = (float(x) for x in cell.split("/"))
             assert 0.0 < step < 1000.0 and 0 <= jumps <= 39 and 0 <= flipped <= 4 * 39
+
+
+def test_files_and_settings_it_cannot_use_are_one_line_errors(
+    bvh_files: dict[str, Path], models_dir: Path, tmp_path: Path
+) -> None:
+    """No traceback: a file missing, a folder, not BVH, one frame; a setting out of range."""
+    from typer.testing import CliRunner
+
+    text = bvh_files["bandai"].read_text()
+    head, _, motion = text.partition("MOTION")
+    lines = motion.strip().splitlines()
+    (tmp_path / "one.bvh").write_text(f"{head}MOTION\nFrames: 1\n{lines[1]}\n{lines[2]}\n")
+    (tmp_path / "junk.bvh").write_text("not a bvh\n")
+    cases = {
+        str(tmp_path / "nosuch.bvh"): "does not exist",
+        str(tmp_path): "is a directory",
+        str(tmp_path / "junk.bvh"): "not a BVH file",
+        str(tmp_path / "one.bvh"): "1 frame; a clip needs 2 or more",
+    }
+
+    def said(output: str) -> str:  # the message without rich's box and line breaks
+        return " ".join(output.translate({ord(c): " " for c in "│╭╮╰╯─"}).split())
+
+    for arg, says in cases.items():
+        got = CliRunner().invoke(app, [arg, "--models", str(models_dir)])
+        assert got.exit_code == 2 and says in said(got.output), got.output
+        assert "Traceback" not in got.output
+    bad = CliRunner().invoke(
+        app, [str(bvh_files["bandai"]), "--models", str(models_dir), "--serving", "bend_side=2"]
+    )
+    assert bad.exit_code == 2
+    assert "bend_side: Input should be less than or equal to 1" in said(bad.output)
