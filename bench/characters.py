@@ -23,12 +23,16 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import numpy as np
 import typer
 
 from core.skeleton import JOINT_INDEX, JOINT_NAMES
+
+if TYPE_CHECKING:  # pragma: no cover
+    from core.bvh import BVH
+    from service.characters import Character
 
 app = typer.Typer(add_completion=False)
 
@@ -98,11 +102,9 @@ def score_file(
     root_position: str = "replace",
 ) -> dict[str, Scores]:
     """Every set's scores on one file (see the module docstring)."""
-    from core.bvh_write import pose_of
     from core.retarget import canonical_points
     from service.characters import (
         BVHSolveRequest,
-        character_from_bvh,
         character_problem,
         read_request_bvh,
         solve_prepared,
@@ -113,13 +115,9 @@ def score_file(
     pairs = frame_pairs(bvh.num_frames, 1.0 / bvh.frame_time, edits, np.random.default_rng(seed))
     out: dict[str, Scores] = {name: Scores({}, {}) for name, _ in SETS} if pairs else {}
     for i, j in pairs:  # the character and the real frame once per pair, every set on them
-        head = {"joint": "head", "position": [0.0, 0.0, 0.0]}  # (the character alone)
-        base: dict[str, Any] = {
-            "bvh": text, "frame": i, "targets": [head], **read_as(units, root_position)
-        }  # fmt: skip
-        ch = character_from_bvh(bvh, BVHSolveRequest.model_validate(base))
+        ch, base = file_character(bvh, text, i, units, root_position)
         here = canonical_points(ch.skel, ch.pose, ch.jmap)
-        real = canonical_points(ch.skel, pose_of(bvh, j, root_add=root_position == "add"), ch.jmap)
+        real = frame_points(ch, bvh, j, root_position)
         if on_pelvis:  # frame j moved so its pelvis is the start's (no travel between)
             real = real - real[JOINT_INDEX["pelvis"]] + here[JOINT_INDEX["pelvis"]]
         truth = ch.to_service(real)
@@ -149,6 +147,29 @@ def unreadable(path: Path) -> Iterator[None]:
         yield
     except PoseError as exc:
         raise typer.BadParameter(f"{path}: {exc}", param_hint="FILES") from None
+
+
+def file_character(
+    bvh: BVH, text: str, frame: int, units: str | float | None, root_position: str
+) -> tuple[Character, dict[str, Any]]:
+    """The character of ``frame`` of a file (``bvh``, parsed from ``text``) as
+    ``/v1/bvh/solve`` reads it (:func:`read_as`), and the request fields that read it so
+    (their one target a placeholder)."""
+    from service.characters import BVHSolveRequest, character_from_bvh
+
+    head = {"joint": "head", "position": [0.0, 0.0, 0.0]}  # (the character alone)
+    base = {"bvh": text, "frame": frame, "targets": [head], **read_as(units, root_position)}
+    return character_from_bvh(bvh, BVHSolveRequest.model_validate(base)), base
+
+
+def frame_points(ch: Character, bvh: BVH, frame: int, root_position: str) -> np.ndarray:
+    """Frame ``frame``'s canonical points on the skeleton of ``ch`` (:func:`file_character`),
+    in the file's units and axes."""
+    from core.bvh_write import pose_of
+    from core.retarget import canonical_points
+
+    pose = pose_of(bvh, frame, root_add=root_position == "add")
+    return np.asarray(canonical_points(ch.skel, pose, ch.jmap))
 
 
 def read_as(units: str | float | None, root_position: str) -> dict[str, Any]:

@@ -34,6 +34,7 @@ import numpy as np
 import typer
 
 from bench.characters import Files, Mocap, Models, Serving, unreadable
+from core.ends import across
 from core.skeleton import JOINT_INDEX, NUM_JOINTS
 
 app = typer.Typer(add_completion=False)
@@ -60,24 +61,15 @@ JUMP, GAIN = 0.03, 3.0
 def clip_points(path: Path, units: str | float | None, root: str, frames: int) -> np.ndarray:
     """The clip's frames (about 30 a second, at most ``frames``) as the service's 21
     points ``[F, 21, 3]``, metres, +Y up, as ``/v1/bvh/solve`` reads them."""
-    from bench.characters import read_as
-    from core.bvh_write import pose_of
-    from core.retarget import canonical_points
-    from service.characters import BVHSolveRequest, character_from_bvh, read_request_bvh
+    from bench.characters import file_character, frame_points
+    from service.characters import read_request_bvh
 
     text = path.read_text(encoding="utf-8", errors="replace")
     bvh = read_request_bvh(text)
-    head = {"joint": "head", "position": [0.0, 0.0, 0.0]}  # (the character alone)
-    req = BVHSolveRequest.model_validate(
-        {"bvh": text, "frame": 0, "targets": [head], **read_as(units, root)}
-    )
-    ch = character_from_bvh(bvh, req)
+    ch, _ = file_character(bvh, text, 0, units, root)
     step = max(1, round(1.0 / (30.0 * bvh.frame_time)))
     picked = range(0, bvh.num_frames, step)[:frames]
-    return np.stack([
-        ch.to_service(canonical_points(ch.skel, pose_of(bvh, f, root_add=root == "add"), ch.jmap))
-        for f in picked
-    ])  # fmt: skip
+    return np.stack([ch.to_service(frame_points(ch, bvh, f, root)) for f in picked])
 
 
 def offsets(n: int, rng: np.random.Generator) -> np.ndarray:
@@ -105,7 +97,7 @@ def flips(poses: np.ndarray) -> np.ndarray:
     top, mid, end = (poses[:, LIMBS[:, k]] for k in range(3))  # [F, 4, 3]
     axis = end - top
     axis /= np.maximum(np.linalg.norm(axis, axis=-1, keepdims=True), 1e-12)
-    bend = (mid - top) - np.sum((mid - top) * axis, axis=-1, keepdims=True) * axis
+    bend = across(mid - top, axis)
     size = np.linalg.norm(bend, axis=-1)
     big = (size[1:] >= FLIP_BEND) & (size[:-1] >= FLIP_BEND)
     turned = np.sum(bend[1:] * bend[:-1], axis=-1) < 0.0

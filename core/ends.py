@@ -97,6 +97,20 @@ def mirrored_side(w: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
     return np.asarray(w * np.concatenate([flip, [1.0]])[:, None] * flip[None, :], dtype=np.float64)
 
 
+def across(v: F64, u: F64) -> F64:
+    """The part of ``v [..., 3]`` across the unit line ``u [..., 3]``."""
+    out: F64 = v - np.sum(v * u, axis=-1)[..., None] * u
+    return out
+
+
+def preferred_side(table: F64, u: F64) -> F64:
+    """The side ``[..., 3]`` a limb along the unit ``u [..., 3]`` bends to by ``table [4, 3]``
+    (:data:`BEND_ELBOW`, ...): ``u @ table[:3] + table[3]`` across ``u``, summed in the
+    compiled kernel's order (``core.compiled_limbs.ends_item``), bit for bit."""
+    side = u[..., 0:1] * table[0] + u[..., 1:2] * table[1] + u[..., 2:3] * table[2]
+    return across(side + table[3], u)
+
+
 #: Per chain (rows of :data:`CHAINS`), its side table ``[C, 4, 3]``; zeros (no side) for the
 #: elbows' own chains.
 PREFER: Final[npt.NDArray[np.float64]] = np.stack(
@@ -178,7 +192,7 @@ def keep_ends(
         d0 = np.sqrt(np.sum(line**2, axis=-1))
         u = line / np.where(d0 > TINY, d0, 1.0)[..., None]
         d = np.minimum(np.maximum(d0, np.abs(a - b)), a + b)
-        bend = (e0 - s) - np.sum((e0 - s) * u, axis=-1)[..., None] * u
+        bend = across(e0 - s, u)
         reach = (d0 > TINY) & (a > TINY)
         cos = np.clip((a * a + d * d - b * b) / np.where(reach, 2.0 * a * d, 1.0), -1.0, 1.0)
         sin = np.sqrt(np.maximum(0.0, 1.0 - cos * cos))
@@ -186,11 +200,7 @@ def keep_ends(
             need = a * sin
             nb = np.sqrt(np.sum(bend**2, axis=-1))
             w = np.where(need > TINY, 1.0 - nb / np.where(need > TINY, side * need, 1.0), 0.0)
-            table = PREFER[c]  # u @ table[:3] + table[3], summed in the kernel's order
-            pref = u[..., 0:1] * table[0] + u[..., 1:2] * table[1] + u[..., 2:3] * table[2]
-            pref = pref + table[3]
-            along = pref[..., 0] * u[..., 0] + pref[..., 1] * u[..., 1] + pref[..., 2] * u[..., 2]
-            pref = pref - along[..., None] * u
+            pref = preferred_side(PREFER[c], u)
             bend = bend + (np.maximum(w, 0.0) * need)[..., None] * pref
         nb = np.sqrt(np.sum(bend**2, axis=-1))
         v = bend / np.where(nb > TINY, nb, 1.0)[..., None]

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from core.ends import across, preferred_side
 from core.skeleton import JOINT_INDEX
 
 F64 = npt.NDArray[np.float64]
@@ -53,7 +54,7 @@ def lines_and_sides(poses: F64, limb: str, min_bend: float = MIN_BEND) -> tuple[
         top, mid, end = (poses[:, JOINT_INDEX[n]] * flip for n in names)
         u = end - top
         u = u / np.maximum(np.linalg.norm(u, axis=-1, keepdims=True), 1e-12)
-        off = (mid - top) - np.sum((mid - top) * u, axis=-1, keepdims=True) * u
+        off = across(mid - top, u)
         size = np.linalg.norm(off, axis=-1)
         keep = size >= min_bend
         us.append(u[keep])
@@ -64,8 +65,7 @@ def lines_and_sides(poses: F64, limb: str, min_bend: float = MIN_BEND) -> tuple[
 def agreement(w: F64, u: F64, p: F64) -> tuple[float, float]:
     """The share of limbs ``(u, p)`` whose side the table ``w`` puts within 90 degrees, and
     the mean cosine between the two."""
-    side = u @ w[:3] + w[3]
-    side = side - np.sum(side * u, axis=-1, keepdims=True) * u
+    side = preferred_side(w, u)
     cos = np.sum(side * p, axis=-1) / np.maximum(np.linalg.norm(side, axis=-1), 1e-12)
     return float(np.mean(cos > 0.0)), float(np.mean(cos))
 
