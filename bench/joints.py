@@ -3,21 +3,22 @@ method, on the same world-space edits as :mod:`bench.heldout` (the held-out sour
 pooled, or the in-studio TEST split as captured), and the sum over body parts divided by
 the joint count, so the parts add up to the set's MPJPE.
 
-``python -m bench.joints --set left_elbow --set right_elbow [--split test] [--carry W]``
+``python -m bench.joints --set left_elbow --set right_elbow [--split test] [--serving K=V]``
 """
 
 from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Annotated, Any, Optional
+from typing import Annotated, Any
 
 import numpy as np
 import numpy.typing as npt
 import typer
 
+from bench.characters import Serving
 from bench.edits import solve
-from bench.heldout import DEFAULT_DATASET, METHODS, HeldoutConfig, _rng, family_sets
+from bench.heldout import DEFAULT_DATASET, METHODS, HeldoutConfig, _rng, engine_for, family_sets
 from core.skeleton import JOINT_INDEX, JOINT_NAMES, NUM_JOINTS
 from service.engine import Engine
 
@@ -76,16 +77,13 @@ def main(
     models: Annotated[Path, typer.Option(help="Models folder (manifest.json).")] = Path("models"),
     dataset: Annotated[Path, typer.Option(help="Dataset file (format 2).")] = DEFAULT_DATASET,
     split: Annotated[str, typer.Option(help="holdout (pooled) or test.")] = "holdout",
-    carry: Annotated[
-        Optional[float],  # noqa: UP045
-        typer.Option(help="Carry below targets, 0-1 (default: the manifest's serving.carry)."),
-    ] = None,
+    serving: Serving = None,
     seed: Annotated[int, typer.Option(help="Seed of every sample.")] = 0,
 ) -> None:
     """Print per joint and per body part where each method's error sits."""
     from trainer.data.dataset import load_dataset
 
-    engine = Engine(models, threads=1, serving={"carry": carry})
+    engine = engine_for(models, serving, threads=1)
     cfg = HeldoutConfig(seed=seed)
     res = joint_errors(engine, load_dataset(dataset), set_, split, cfg)
     for name, by in res.items():

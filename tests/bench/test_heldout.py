@@ -250,6 +250,29 @@ def test_joint_breakdown_adds_up_to_the_heldout_sets(
     assert res["left_elbow"]["neural_exact"][JOINT_INDEX["left_elbow"]] < 0.1  # 1 mm polish
 
 
+def test_the_joints_command_runs_on_its_defaults_and_takes_serving_settings(
+    models_dir: Path, holdout_dataset: Path
+) -> None:
+    """``python -m bench.joints --set left_elbow`` ended in a pydantic error (its ``--carry``
+    default, None, was passed to the engine as a setting); now it prints the table, and a
+    serving setting is given as bench.heldout's are (``--serving KEY=VALUE``), a bad one
+    refused in one line."""
+    import typer
+    from typer.testing import CliRunner
+
+    from bench.joints import main
+
+    app = typer.Typer()
+    app.command()(main)
+    args = ["--set", "left_elbow", "--models", str(models_dir), "--dataset", str(holdout_dataset)]
+    for extra in ([], ["--serving", "carry=1"]):
+        result = CliRunner().invoke(app, [*args, *extra])
+        assert result.exit_code == 0, result.output
+        assert "left_elbow (holdout)" in result.output and "MPJPE" in result.output
+    bad = CliRunner().invoke(app, [*args, "--serving", "carry=2"])
+    assert bad.exit_code == 2 and "carry" in bad.output and "Traceback" not in bad.output
+
+
 def test_the_command_refuses_a_dataset_without_the_split_in_one_line(
     models_dir: Path, small_dataset: Path, tmp_path: Path
 ) -> None:
