@@ -319,3 +319,50 @@ def test_editor_picks_the_nearest_joint_fairly(server: str, browser: Any) -> Non
         assert list(page.evaluate(f"{M}.targets()")) == ["neck"]
     finally:
         page.context.close()
+
+
+@pytest.mark.browser
+def test_editor_undo_across_a_sample_change_restores_that_sample(server: str, browser: Any) -> None:
+    """An editor audit: the sample shown was not part of an undo step, so undoing a Sample
+    change brought back the edited pose of the sample before while the menu, Export's
+    ``sample`` and Reset still named (and went back to) the newer sample. Now undo and redo
+    restore the sample with the step: menu, export and Reset agree with the pose."""
+    samples = json.loads((STATIC / "samples.json").read_text())["samples"]
+    page = open_editor(browser, server)
+    errors: list[str] = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+
+    def shows(i: int) -> None:
+        assert page.locator("#sample").input_value() == str(i)
+        assert page.evaluate(f"{M}.exportDocument()")["sample"] == samples[i]["name"]
+
+    def is_sample(i: int) -> bool:
+        pose = page.evaluate(f"{M}.pose()")
+        return all(dist(pose[j], samples[i]["pose"][j]) < 1e-9 for j in JOINT_NAMES)
+
+    try:
+        shows(0)
+        drag_joint(page, "left_wrist", 40, -60)
+        edited = page.evaluate(f"{M}.pose()")
+        assert not is_sample(0)
+        page.select_option("#sample", index=3)
+        assert is_sample(3)
+        shows(3)
+
+        page.click("#undo")  # the edit on sample 0: its name, not sample 3's
+        assert page.evaluate(f"{M}.pose()") == edited
+        shows(0)
+        page.click("#redo")
+        assert is_sample(3)
+        shows(3)
+        page.click("#undo")
+        shows(0)
+        page.click("#reset")  # back to the sample shown (was: sample 3)
+        assert is_sample(0)
+        shows(0)
+        page.click("#undo")  # before the reset: the edit, on sample 0
+        assert page.evaluate(f"{M}.pose()") == edited
+        shows(0)
+        assert not errors, errors
+    finally:
+        page.context.close()

@@ -21,6 +21,8 @@ export function snapshot() {
   if (doc.active) {
     snap.text = doc.text; // shared, not copied: a string is immutable
     snap.frame = doc.frame;
+  } else {
+    snap.sample = state.sample; // (its name in the menu and the export, Reset's pose)
   }
   return snap;
 }
@@ -33,6 +35,10 @@ export function restore(snap, frame = snap.frame) {
   state.pose = clonePose(state.committed);
   state.targets = new Map(moved ? [] : snap.targets.map(([j, p]) => [j, [...p]]));
   state.pins = new Set(snap.pins);
+  if (!doc.active && snap.sample !== undefined) {
+    state.sample = snap.sample;
+    $('sample').value = String(snap.sample);
+  }
   if (doc.active && snap.text !== undefined) {
     doc.text = snap.text;
     doc.shown = snap.text;
@@ -136,13 +142,11 @@ export function loadSample(i) {
   cancelSolves();
   cancelOpening();
   if (doc.active) closeFile();
-  state.sample = i;
   ui.hovered = null;
   $('hud').hidden = true;
   const pose = state.samples[i].pose;
-  restore({ pose, targets: [], pins: [] });
+  restore({ pose, targets: [], pins: [], sample: i });
   pushHistory();
-  $('sample').value = String(i);
   refresh();
 }
 
