@@ -474,3 +474,84 @@ def test_editor_a_sample_chosen_while_a_file_opens_stands(
         assert not errors, errors
     finally:
         page.context.close()
+
+
+@pytest.mark.browser
+def test_editor_asks_again_when_a_refused_file_would_replace_new_edits(
+    server: str, browser: Any
+) -> None:
+    """An editor audit: the "yes" to replacing an edited file by one whose opening was then
+    refused was kept for good, so a joint map (or units) applied later opened the refused
+    file without asking, and the edits made to the open file since the "yes" were lost
+    unasked. Now the yes covers the edits it was given for: re-trying with no new edits
+    does not ask again, with new edits it asks (and "no" keeps them, the menus as the open
+    file was read)."""
+    text = json.loads((REPO_ROOT / "docs" / "examples" / "bvh_solve.json").read_text())["bvh"]
+    renamed = text.replace("JOINT LeftForeArm", "JOINT ForeArm_Lft")
+    page = open_editor(browser, server)
+    errors: list[str] = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    asked: list[str] = []
+    answer = {"yes": True}
+
+    def dialog(d: Any) -> None:
+        asked.append(d.message)
+        if answer["yes"]:
+            d.accept()
+        else:
+            d.dismiss()
+
+    page.on("dialog", dialog)
+
+    def apply(value: dict[str, str]) -> None:
+        page.locator("#bvh-map").fill(json.dumps(value))
+        page.click("#bvh-map-apply")
+
+    def error_says(words: str) -> None:
+        page.wait_for_function(
+            f"() => {M}.error() !== null && {M}.error().detail.includes({json.dumps(words)})"
+        )
+
+    try:
+        give_file(page, text, "a.bvh")
+        page.wait_for_function(f"() => {M}.bvh() && {M}.bvh().name === 'a.bvh'")
+        drag_joint(page, "left_wrist", 40, -60)
+        edited = page.evaluate(f"{M}.bvhText()")
+
+        # b.bvh over the edited a.bvh: asked, yes; refused (its left elbow has no name)
+        give_file(page, renamed, "b.bvh")
+        page.wait_for_function(f"() => {M}.error() !== null")
+        assert page.evaluate(f"{M}.error()")["detail"].startswith("b.bvh (a.bvh stays open)")
+        assert len(asked) == 1
+        assert page.evaluate(f"{M}.bvhText()") == edited
+
+        # new edits to a.bvh, then b.bvh re-tried (units): asked again; "no" keeps them,
+        # the menu back to how a.bvh was read
+        drag_joint(page, "right_wrist", -40, -60)
+        newer = page.evaluate(f"{M}.bvhText()")
+        assert newer != edited
+        answer["yes"] = False
+        page.select_option("#bvh-units", "cm")
+        assert len(asked) == 2, asked
+        assert "a.bvh" in asked[-1]
+        page.wait_for_timeout(300)
+        assert page.evaluate(f"{M}.bvh()")["name"] == "a.bvh"
+        assert page.evaluate(f"{M}.bvhText()") == newer
+        assert page.locator("#bvh-units").input_value() == "auto"
+
+        # asked, yes (refused again: a wrong name); re-tried with no new edits since: the
+        # yes holds, through a second refusal too
+        answer["yes"] = True
+        apply({"left_elbow": "Nope"})
+        error_says("Nope")
+        assert len(asked) == 3
+        page.click("#error-close")
+        apply({"left_elbow": "Nope2"})
+        error_says("Nope2")
+        apply({"left_elbow": "ForeArm_Lft"})
+        page.wait_for_function(f"() => {M}.bvh().name === 'b.bvh'")
+        assert len(asked) == 3, asked
+        assert page.evaluate(f"{M}.bvh()")["jointMap"] == {"left_elbow": "ForeArm_Lft"}
+        assert not errors, errors
+    finally:
+        page.context.close()

@@ -117,8 +117,10 @@ export function cancelOpening() {
 // Open ``text`` as the file ``name``; ``original`` is the file as opened (Reset returns to
 // it): the text itself, unless an open file is read again with other units or up axis,
 // its edits kept. ``jointMap``: sent with its inspection and, once open, its solves.
-export async function openText(text, name, original = text, encoding = 'utf-8', frame = 0, jointMap = null) {
-  doc.tried = { text: original, name, encoding, jointMap };
+// ``yes``: the open file's state the user agreed to replace (``replaceable``), kept with
+// the file tried so that re-trying it after a refusal asks only about newer edits.
+export async function openText(text, name, original = text, encoding = 'utf-8', frame = 0, jointMap = null, yes = null) {
+  doc.tried = { text: original, name, encoding, jointMap, yes };
   const ticket = ++opening;
   $('status').textContent = `opening ${name}…`;
   let res;
@@ -225,6 +227,17 @@ export function mayReplace(name) {
   return !edited || window.confirm(`Open ${name}? The edits to ${doc.name} are lost unless exported.`);
 }
 
+// What a yes to replacing the open file covers: the file with the edits it has now.
+function replaceable() {
+  return doc.active ? { original: doc.original, text: doc.text } : null;
+}
+
+// Whether ``yes`` (``replaceable``'s, or null) still covers the open file: no edit since.
+function stillCovers(yes) {
+  if (!doc.active) return true; // (nothing to lose)
+  return Boolean(yes) && !solver.commitPending && yes.original === doc.original && yes.text === doc.text;
+}
+
 export async function openFile(file) {
   if (!file) return;
   let bytes;
@@ -235,6 +248,7 @@ export async function openFile(file) {
     return;
   }
   if (!mayReplace(file.name)) return;
+  const yes = replaceable(); // (re-trying the file after a refusal asks only about newer edits)
   const decoded = decodeFile(bytes);
   // lines ended by CR alone (classic Mac OS): read as LF, as the service reads them (an
   // edit then comes back with LF ends); the page's own reader splits at LF
@@ -249,9 +263,7 @@ export async function openFile(file) {
   }
   showSettings(DEFAULT_SETTINGS); // each file read anew (MENUS, above)
   showMap(jointMap);
-  await openText(text, file.name, text, decoded.encoding, 0, jointMap);
-  // refused: a units change re-trying it does not ask again (the user said yes already)
-  if (doc.tried && doc.tried.name === file.name) doc.tried.confirmed = true;
+  await openText(text, file.name, text, decoded.encoding, 0, jointMap, yes);
 }
 
 // The joint map a file opened from the picker (or a drop) is read with: the field's, for the
@@ -266,7 +278,8 @@ function mapFor(name, text) {
 // Units, up axis or joint map changed: read again the file last asked for, with the joint
 // map in the field. If that is the open file, its edits are kept and Reset still returns
 // to it as opened (the undo history starts anew: its poses were in the old units); if its
-// opening failed, that file, not the open one. (After a drag's last answer.)
+// opening failed, that file, not the open one, asking first if the open file has edits
+// newer than the yes to its opening. (After a drag's last answer.)
 export function readAgain() {
   whenCommitted(() => {
     const t = doc.tried;
@@ -285,8 +298,15 @@ export function readAgain() {
       showError(err);
       return;
     }
-    if (open) openText(doc.text, doc.name, doc.original, doc.encoding, doc.frame, jointMap);
-    else if (t.confirmed || mayReplace(t.name)) openText(t.text, t.name, t.text, t.encoding, 0, jointMap);
+    if (open) {
+      openText(doc.text, doc.name, doc.original, doc.encoding, doc.frame, jointMap);
+    } else if (stillCovers(t.yes) || mayReplace(t.name)) {
+      // the user said yes to these edits being lost (then, or just now): asked again only
+      // if there are newer ones
+      openText(t.text, t.name, t.text, t.encoding, 0, jointMap, replaceable());
+    } else if (doc.settings) {
+      showSettings(doc.settings); // "no": nothing read; the menus say how the open file was
+    }
   });
 }
 
