@@ -555,3 +555,102 @@ def test_editor_asks_again_when_a_refused_file_would_replace_new_edits(
         assert not errors, errors
     finally:
         page.context.close()
+
+
+@pytest.mark.browser
+def test_editor_keeps_edits_made_while_the_file_is_read_again(server: str, browser: Any) -> None:
+    """An editor audit: a units / up axis / root channels / joint map change reads the open
+    file again, and its answer replaced the state with the file and frame as they were when
+    it was asked: a drag or a pin made meanwhile was drawn, then silently lost. Now editing
+    waits, visibly, while the file is read again (a grab, a pin, undo, redo, Reset refused;
+    the status says so), and the answer keeps what did change meanwhile: the frame scrubbed
+    to, and an option's re-solve (the answer waits for it)."""
+    text = json.loads((REPO_ROOT / "docs" / "examples" / "bvh_solve.json").read_text())["bvh"]
+    page = open_editor(browser, server)
+    errors: list[str] = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+
+    def held_inspect() -> list[Any]:
+        held: list[Any] = []
+        page.route("**/v1/bvh/inspect", lambda route: held.append(route))
+        return held
+
+    def wait_for(held: list[Any]) -> None:
+        for _ in range(100):
+            if held:
+                return
+            page.wait_for_timeout(50)
+        raise AssertionError("no request was held")
+
+    def state() -> tuple[str, int, list[str], dict[str, Any]]:
+        return (
+            page.evaluate(f"{M}.bvhText()"),
+            page.evaluate(f"{M}.bvh().frame"),
+            page.evaluate(f"{M}.pins()"),
+            page.evaluate(f"{M}.history()"),
+        )
+
+    try:
+        give_file(page, text, "a.bvh")
+        page.wait_for_function(f"() => {M}.bvh() && {M}.bvh().name === 'a.bvh'")
+        drag_joint(page, "left_wrist", 40, -60)
+        edited = page.evaluate(f"{M}.bvhText()")
+        assert edited != text
+
+        # the units changed: while the file is read again, editing waits, and says so
+        held = held_inspect()
+        page.select_option("#bvh-units", "in")
+        wait_for(held)
+        assert "editing waits" in page.locator("#status").inner_text()
+        for button in ("#undo", "#reset", "#clear-targets"):
+            assert page.locator(button).is_disabled(), button
+        sent = page.evaluate(f"{M}.solveCount().sent")
+        drag_joint(page, "right_wrist", -40, -60)  # refused
+        xy = page.evaluate(f"{M}.projectJoint('left_ankle')")
+        page.keyboard.down("Shift")
+        page.mouse.click(xy["x"], xy["y"])  # a pin: refused
+        page.keyboard.up("Shift")
+        page.keyboard.press("Control+z")  # refused
+        assert page.evaluate(f"{M}.solveCount().sent") == sent
+        page.locator("#bvh-frame").fill("2")  # not an edit: shown
+        page.wait_for_function(f"() => {M}.bvh().frame === 2")
+        during = state()
+        assert during[0] == edited and during[2] == []
+        for route in held:
+            route.continue_()
+        page.unroute("**/v1/bvh/inspect")
+        page.wait_for_function(f"() => {M}.bvh().units === 'in'")
+        assert state()[:3] == during[:3]  # nothing shown meanwhile is lost (was: frame 0)
+        assert "editing waits" not in page.locator("#status").inner_text()
+        drag_joint(page, "right_wrist", -40, -60)  # editing again
+        assert page.evaluate(f"{M}.bvhText()") != edited
+        assert not page.locator("#undo").is_disabled()
+
+        # an option changed while the file is read again: its re-solve is an edit too; the
+        # answer to the read waits for it and keeps it
+        held = held_inspect()
+        page.select_option("#bvh-units", "cm")
+        wait_for(held)
+        solves = held_solves(page)
+        page.locator(".segmented label", has_text="FABRIK").click()
+        page.wait_for_function(f"() => {M}.solveCount().inflight")
+        for route in held:
+            route.continue_()
+        page.unroute("**/v1/bvh/inspect")
+        page.wait_for_timeout(300)
+        release(page, solves)
+        page.wait_for_function(f"() => {M}.bvh().units === 'cm'")
+        last = page.evaluate(f"{M}.lastSolve()")
+        assert last["request"]["options"]["method"] == "fabrik"  # its answer was not dropped
+        assert page.evaluate(f"{M}.bvhText()") == last["response"]["bvh"]
+        assert "editing waits" not in page.locator("#status").inner_text()
+        assert not errors, errors
+    finally:
+        page.context.close()
+
+
+def held_solves(page: Any) -> list[Any]:
+    """Hold the page's BVH solves from now on (``release`` lets them through)."""
+    held: list[Any] = []
+    page.route("**/v1/bvh/solve", lambda route: held.append(route))
+    return held

@@ -8,7 +8,7 @@ import { api, ApiError, clearError, showError } from './api.js';
 import { cancelSolves, clonePose, pushHistory, restore, whenCommitted } from './solve.js';
 import { buildCharacterBones, buildSkeleton, camera, controls, UP } from './scene.js';
 import { endDrag } from './interaction.js';
-import { refresh } from './panel.js';
+import { refresh, refreshPanel } from './panel.js';
 import { offerTemplate, readMap, showMap } from './jointmap.js';
 
 // ------------------------------------------------------------------------------------
@@ -76,8 +76,7 @@ function showSettings(settings) {
 }
 
 // The request fields of the menus' settings (what "auto" or the default leaves out).
-function fileSettings() {
-  const { units, up, root } = menuSettings();
+function fileSettings({ units, up, root }) {
   const out = {};
   if (units !== 'auto') out.units = Number.isFinite(Number(units)) ? Number(units) : units;
   if (up !== 'auto') out.up = up;
@@ -104,36 +103,59 @@ function worldMapping(info, frame0) {
 
 let opening = 0;
 
+// A file being opened, or the open one read again: editing waits for the answer, which
+// replaces the pose, the file and the history (an edit made meanwhile was drawn, then
+// lost when it came), and the status says so. Choosing a sample or another file is not an
+// edit: it gives this one up (cancelOpening) or takes its place.
+function startReading(text) {
+  ui.reading = text;
+  $('status').textContent = `${text}… (editing waits)`;
+  $('status').classList.add('busy');
+  refreshPanel();
+}
+
+function stopReading() {
+  ui.reading = null;
+  $('status').classList.remove('busy');
+  refreshPanel();
+}
+
 // A file's opening still on its way is given up (a Sample chosen meanwhile: the later
 // choice stands; the file's late answer opened it over the sample's edits, unasked).
 export function cancelOpening() {
   opening += 1; // (an answer on its way finds its ticket stale and is dropped)
   doc.tried = null; // (nor does a units / up change re-open it)
-  if ($('status').textContent.startsWith('opening ')) {
+  if (ui.reading) {
+    stopReading();
     $('status').textContent = ui.connected ? 'connected' : 'server not ready';
   }
 }
 
 // Open ``text`` as the file ``name``; ``original`` is the file as opened (Reset returns to
-// it): the text itself, unless an open file is read again with other units or up axis,
-// its edits kept. ``jointMap``: sent with its inspection and, once open, its solves.
-// ``yes``: the open file's state the user agreed to replace (``replaceable``), kept with
-// the file tried so that re-trying it after a refusal asks only about newer edits.
-export async function openText(text, name, original = text, encoding = 'utf-8', frame = 0, jointMap = null, yes = null) {
+// it): the text itself, unless the open file is read ``again`` with other units, up axis,
+// root channels or joint map (its edits kept, at the frame shown when the answer comes).
+// ``jointMap``: sent with its inspection and, once open, its solves. ``yes``: the open
+// file's state the user agreed to replace (``replaceable``), kept with the file tried so
+// that re-trying it after a refusal asks only about newer edits.
+export async function openText(text, name, {
+  original = text, encoding = 'utf-8', jointMap = null, yes = null, again = false,
+} = {}) {
   doc.tried = { text: original, name, encoding, jointMap, yes };
   const ticket = ++opening;
-  $('status').textContent = `opening ${name}…`;
+  const settings = menuSettings(); // (as sent: the menus may change before the answer)
+  startReading(again ? `reading ${name} again` : `opening ${name}`);
   let res;
   try {
     const map = jointMap ? { joint_map: jointMap } : {};
-    res = await api('POST', 'v1/bvh/inspect', { bvh: text, frame: 0, ...fileSettings(), ...map });
+    res = await api('POST', 'v1/bvh/inspect', { bvh: text, frame: 0, ...fileSettings(settings), ...map });
     if (ticket !== opening) return;
   } catch (err) {
     if (ticket !== opening) return;
+    stopReading();
     offerTemplate(err, text);
-    const again = doc.active && name === doc.name && original === doc.original;
-    if (again && doc.settings) showSettings(doc.settings); // the open file stays as it was read: say so
-    const stays = doc.active && !again ? ` (${doc.name} stays open)` : '';
+    const same = doc.active && name === doc.name && original === doc.original;
+    if (same && doc.settings) showSettings(doc.settings); // the open file stays as it was read: say so
+    const stays = doc.active && !same ? ` (${doc.name} stays open)` : '';
     showError(err instanceof ApiError
       ? new ApiError(err.status, err.title, `${name}${stays}: ${err.detail}`, err.requestId)
       : err);
@@ -142,14 +164,26 @@ export async function openText(text, name, original = text, encoding = 'utf-8', 
     }
     return;
   }
+  const opened = { info: res.data, name, original, encoding, jointMap, settings };
+  // read again: the file and frame as they are when the answer comes (an option changed
+  // meanwhile re-solves the file: that answer is an edit too, and is waited for)
+  if (!again) {
+    showOpened({ ...opened, text, frame: 0 });
+    return;
+  }
+  whenCommitted(() => {
+    if (ticket === opening) showOpened({ ...opened, text: doc.text, frame: doc.frame });
+  });
+}
+
+function showOpened({ info, text, name, original, encoding, jointMap, settings, frame }) {
+  stopReading();
   endDrag(false);
   cancelSolves();
   motionCache.clear();
   lastRow = { text: null, frame: -1, row: null };
-  const info = res.data;
-  Object.assign(doc, { active: true, name, original, text, shown: text, info, frame: 0, encoding, jointMap });
+  Object.assign(doc, { active: true, name, original, text, shown: text, info, frame: 0, encoding, jointMap, settings });
   showMap(jointMap);
-  doc.settings = menuSettings();
   const frame0 = fileFrame(text, 0);
   doc.toWorld = worldMapping(info, frame0);
   doc.fromWorld = doc.toWorld.clone().invert();
@@ -263,7 +297,7 @@ export async function openFile(file) {
   }
   showSettings(DEFAULT_SETTINGS); // each file read anew (MENUS, above)
   showMap(jointMap);
-  await openText(text, file.name, text, decoded.encoding, 0, jointMap, yes);
+  await openText(text, file.name, { encoding: decoded.encoding, jointMap, yes });
 }
 
 // The joint map a file opened from the picker (or a drop) is read with: the field's, for the
@@ -281,7 +315,12 @@ function mapFor(name, text) {
 // opening failed, that file, not the open one, asking first if the open file has edits
 // newer than the yes to its opening. (After a drag's last answer.)
 export function readAgain() {
-  whenCommitted(() => {
+  whenCommitted(function readNow() {
+    if (ui.drag) { // (begun while the drag before was being committed): committed first
+      endDrag(true);
+      whenCommitted(readNow);
+      return;
+    }
     const t = doc.tried;
     if (!t) {
       if (!doc.active && $('bvh-map').value.trim()) {
@@ -299,11 +338,11 @@ export function readAgain() {
       return;
     }
     if (open) {
-      openText(doc.text, doc.name, doc.original, doc.encoding, doc.frame, jointMap);
+      openText(doc.text, doc.name, { original: doc.original, encoding: doc.encoding, jointMap, again: true });
     } else if (stillCovers(t.yes) || mayReplace(t.name)) {
       // the user said yes to these edits being lost (then, or just now): asked again only
       // if there are newer ones
-      openText(t.text, t.name, t.text, t.encoding, 0, jointMap, replaceable());
+      openText(t.text, t.name, { encoding: t.encoding, jointMap, yes: replaceable() });
     } else if (doc.settings) {
       showSettings(doc.settings); // "no": nothing read; the menus say how the open file was
     }

@@ -67,6 +67,10 @@ export function onPointerDown(ev) {
   if (!hit) return; // empty space: OrbitControls gets the event
   ev.stopPropagation();
   ev.preventDefault();
+  if (ui.reading) { // a file being opened or read again: editing waits for it (file.js)
+    moveHud(ev.clientX, ev.clientY, `${ui.reading}: editing waits`);
+    return;
+  }
   // (preventDefault keeps the focus where it was: a panel field typed in would take the
   // keys, Ctrl+Z undoing its text and not the drag)
   if (document.activeElement instanceof HTMLElement) document.activeElement.blur();
@@ -140,7 +144,7 @@ export function endDrag(commit) {
 function updateHover(ev) {
   const hit = ev.target === renderer.domElement ? pick(ev.clientX, ev.clientY) : null;
   const name = hit ? hit.joint : null;
-  viewport.style.cursor = hit ? 'grab' : '';
+  viewport.style.cursor = hit ? (ui.reading ? 'progress' : 'grab') : '';
   if (name !== ui.hovered) {
     ui.hovered = name;
     drawPose();
@@ -159,6 +163,7 @@ function moveHud(x, y, text) {
 }
 
 function togglePin(joint) {
+  if (ui.reading) return; // (editing waits for a file's answer)
   if (state.pins.has(joint)) {
     state.pins.delete(joint);
   } else {
@@ -175,6 +180,7 @@ function togglePin(joint) {
 }
 
 export function removeTarget(joint) {
+  if (ui.reading) return;
   state.targets.delete(joint);
   cancelSolves(); // (as clearTargets: a late answer for the targets before is not drawn)
   commitShown();
@@ -183,7 +189,7 @@ export function removeTarget(joint) {
 }
 
 export function clearTargets() {
-  if (state.targets.size === 0) return;
+  if (ui.reading || state.targets.size === 0) return;
   cancelSolves();
   state.targets.clear();
   commitShown();

@@ -1,6 +1,6 @@
 // The side panel (last solve, targets, pins, buttons) and export (JSON, or the edited BVH).
 
-import { $, doc, history, solver, state } from './state.js';
+import { $, doc, history, solver, state, ui } from './state.js';
 import { clonePose, options, whenCommitted } from './solve.js';
 import { drawPose } from './scene.js';
 import { removeTarget } from './interaction.js';
@@ -38,6 +38,7 @@ export function refreshPanel() {
     btn.type = 'button';
     btn.textContent = '×';
     btn.title = `Remove the target of ${joint}`;
+    btn.disabled = Boolean(ui.reading);
     btn.addEventListener('click', () => removeTarget(joint));
     td.appendChild(btn);
     tr.appendChild(td);
@@ -62,9 +63,11 @@ export function refreshPanel() {
 }
 
 export function updateButtons() {
-  $('undo').disabled = history.index <= 0;
-  $('redo').disabled = history.index >= history.stack.length - 1;
-  $('clear-targets').disabled = state.targets.size === 0;
+  const reading = Boolean(ui.reading); // editing waits for a file's answer (file.js)
+  $('undo').disabled = reading || history.index <= 0;
+  $('redo').disabled = reading || history.index >= history.stack.length - 1;
+  $('reset').disabled = reading;
+  $('clear-targets').disabled = reading || state.targets.size === 0;
 }
 
 export function refresh() {

@@ -104,6 +104,7 @@ function settled() {
 // Undo and redo show the frame of the edit they undo or redo (a scrub changes no step):
 // undo, the step before at the undone edit's frame; redo, the redone step as it was made.
 export function undo() {
+  if (ui.reading) return; // editing waits for a file's answer (file.js)
   if (solver.commitPending || ui.drag) {
     // a gesture not yet a step (a drag, or its last answer still on the way): undo drops
     // it alone (it also undid the step before); what waited for it goes on
@@ -123,7 +124,7 @@ export function undo() {
 }
 
 export function redo() {
-  if (history.index >= history.stack.length - 1) return;
+  if (ui.reading || history.index >= history.stack.length - 1) return;
   endDrag(false);
   cancelSolves();
   history.index += 1;
@@ -151,6 +152,7 @@ export function loadSample(i) {
 }
 
 export function reset() {
+  if (ui.reading) return;
   if (!doc.active) {
     loadSample(state.sample);
     return;

@@ -74,4 +74,5 @@ export const ui = {
   needsRender: true, // the frame loop renders when set
   drag: null, // the gesture in progress (interaction.js), or null
   connected: false, // GET v1/skeleton has answered
+  reading: null, // a file being opened or read again (file.js): editing waits for its answer
 };
