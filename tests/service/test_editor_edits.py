@@ -654,3 +654,74 @@ def held_solves(page: Any) -> list[Any]:
     held: list[Any] = []
     page.route("**/v1/bvh/solve", lambda route: held.append(route))
     return held
+
+
+@pytest.mark.browser
+def test_editor_keeps_pins_and_targets_when_the_file_is_read_again(
+    server: str, browser: Any
+) -> None:
+    """An editor audit: reading the open file again (units, up axis, root channels, joint
+    map) kept its edits but dropped its pins and targets without a word, so the next drag
+    moved the feet the user had pinned and let go of the wrist placed before. Now they are
+    kept, each target carried with its joint (at the same place on the figure, in the
+    file's units), and the next solve sends them."""
+    text = json.loads((REPO_ROOT / "docs" / "examples" / "bvh_solve.json").read_text())["bvh"]
+    page = open_editor(browser, server)
+    errors: list[str] = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    sent: list[dict[str, Any]] = []
+    page.on(
+        "request",
+        lambda r: (
+            sent.append(json.loads(r.post_data or "{}")) if "/v1/bvh/solve" in r.url else None
+        ),
+    )
+    ankles = ["left_ankle", "right_ankle"]
+
+    def on_its_joint() -> float:
+        """How far the left wrist's target is from the wrist drawn (exact reach: ~0)."""
+        return float(
+            dist(
+                page.evaluate(f"{M}.targets()")["left_wrist"],
+                page.evaluate(f"{M}.pose()")["left_wrist"],
+            )
+        )
+
+    try:
+        give_file(page, text, "a.bvh")
+        page.wait_for_function(f"() => {M}.bvh() && {M}.bvh().name === 'a.bvh'")
+        for ankle in ankles:
+            xy = page.evaluate(f"{M}.projectJoint('{ankle}')")
+            page.keyboard.down("Shift")
+            page.mouse.click(xy["x"], xy["y"])
+            page.keyboard.up("Shift")
+        drag_joint(page, "left_wrist", 40, -60)
+        assert sorted(page.evaluate(f"{M}.pins()")) == ankles
+        assert on_its_joint() < 0.002
+        placed = sent[-1]["targets"][0]["position"]  # the target in the file's units
+        edited = page.evaluate(f"{M}.bvhText()")
+
+        for menu, value in (("#bvh-units", "in"), ("#bvh-root", "add"), ("#bvh-up", "+Y")):
+            page.select_option(menu, value)
+            page.wait_for_function(
+                f"() => {M}.history().length === 1 && !{M}.solveCount().inflight"
+            )
+            page.wait_for_timeout(100)
+            assert sorted(page.evaluate(f"{M}.pins()")) == ankles, menu
+            assert list(page.evaluate(f"{M}.targets()")) == ["left_wrist"], menu
+            assert on_its_joint() < 0.002 * 2.54, menu  # (read in inches: 2.54 times larger)
+            assert page.evaluate(f"{M}.bvhText()") == edited
+        assert "left_ankle" in page.locator("#pins").inner_text()
+
+        # the next drag sends them: the pins, and the wrist's target where it was placed
+        page.select_option("#bvh-root", "replace")
+        page.wait_for_function(f"() => {M}.bvh().root === 'replace'")
+        drag_joint(page, "right_wrist", -40, -60)
+        last = sent[-1]
+        assert sorted(last["pins"]) == ankles
+        targets = {t["joint"]: t["position"] for t in last["targets"]}
+        assert sorted(targets) == ["left_wrist", "right_wrist"]
+        assert dist(targets["left_wrist"], placed) < 1e-6
+        assert not errors, errors
+    finally:
+        page.context.close()

@@ -172,11 +172,23 @@ export async function openText(text, name, {
     return;
   }
   whenCommitted(() => {
-    if (ticket === opening) showOpened({ ...opened, text: doc.text, frame: doc.frame });
+    if (ticket === opening) showOpened({ ...opened, text: doc.text, frame: doc.frame, kept: keptEdits() });
   });
 }
 
-function showOpened({ info, text, name, original, encoding, jointMap, settings, frame }) {
+// What a file read again keeps besides its text: the pins, and the targets, each carried
+// with its joint (the same offset from it in the file's units: where it was on the
+// figure, whose handles the new reading scales, turns or moves). Before the new reading.
+function keptEdits() {
+  const { points } = fileFrame(doc.text, doc.frame);
+  const targets = [...state.targets].map(([joint, p]) => {
+    const at = toFile(p);
+    return [joint, at.map((v, i) => v - points[joint][i])];
+  });
+  return { targets, pins: [...state.pins] };
+}
+
+function showOpened({ info, text, name, original, encoding, jointMap, settings, frame, kept = null }) {
   stopReading();
   endDrag(false);
   cancelSolves();
@@ -193,7 +205,9 @@ function showOpened({ info, text, name, original, encoding, jointMap, settings, 
   history.stack = [];
   history.index = -1;
   const at = Math.min(Math.max(frame, 0), Math.max(info.frames - 1, 0));
-  restore({ pose: filePose(text, at), targets: [], pins: [], text, frame: at });
+  const { points } = fileFrame(text, at);
+  const targets = (kept ? kept.targets : []).map(([joint, d]) => [joint, toWorld(points[joint].map((v, i) => v + d[i]))]);
+  restore({ pose: filePose(text, at), targets, pins: kept ? kept.pins : [], text, frame: at });
   pushHistory();
   const pelvis = state.pose.pelvis;
   controls.target.set(0, pelvis[1], 0);
