@@ -170,6 +170,16 @@ class Serving(_Strict):
         "and back; forward), the more the straighter, so that the side does not turn round "
         "between two nearly equal edits (0: the networks' plane alone; core.ends).",
     )
+    critic_fabrik: float = Field(
+        default=0.0,
+        ge=0.0,
+        le=1.0,
+        description="A neural answer (bone lengths kept) that the turn search's critic finds "
+        "more than this many metres (mean per joint) further from a real body than FABRIK's "
+        "answer to the same edit from the caller's start, FABRIK's reaching every target "
+        "and pin within the item's tolerance, is replaced by FABRIK's (its solvers end with "
+        "`fabrik-critic`; service.fallback). 0: never.",
+    )
     keep_pairs: bool = Field(
         default=False,
         description="After the bone pass, the two hips on the pelvis and the two collars on "

@@ -45,6 +45,7 @@ from core.skeleton import (
     set_key,
 )
 from service import completion, networks, turns
+from service.fallback import prefer_fabrik
 from service.lean import (
     covering,
     fabrik_batch,
@@ -248,11 +249,12 @@ class Engine:
             passes, seq = self.passes_of(p), covering(self, tidx, weights)
             if seq is None or passes < 1:
                 return None
-        items = _Items.of_problem(p, self.carry_of(p), self.mirror_of(p))
-        items = items.travelled(
+        asked = _Items.of_problem(p, self.carry_of(p), self.mirror_of(p))
+        items = asked.travelled(
             self.serving.pelvis_travel, self.serving.reach_travel, self.turn_search.min_targets
         )
-        return self._result(p, self._last_steps(items, lean_answer(self, items, passes, seq)), 0)
+        ans = self._last_steps(items, lean_answer(self, items, passes, seq))
+        return self._result(p, prefer_fabrik(self, asked, ans, self._solve_items), 0)
 
     def passes_of(self, p: SolveProblem) -> int:
         """The neural passes ``p`` asks for (``serving.passes`` unless it says)."""
@@ -341,11 +343,13 @@ class Engine:
         if n and int(reps.min()) < 1:
             raise ValueError(f"passes must be at least 1, got {int(reps.min())}")
         reps = np.where(fab, 1, reps)  # FABRIK items: one solve (and not the caller's array)
+        asked = items
         items = items.travelled(
             self.serving.pelvis_travel, self.serving.reach_travel, self.turn_search.min_targets
         )
         items, turned, known = turns.search(self, items, reps, self._solve_items)
-        return turns.mark(self._last_steps(items, self._solve_rest(items, reps, known)), turned)
+        ans = turns.mark(self._last_steps(items, self._solve_rest(items, reps, known)), turned)
+        return prefer_fabrik(self, asked, ans, self._solve_items)
 
     def _solve_rest(
         self, items: _Items, reps: npt.NDArray[np.int64], known: turns.Known | None

@@ -184,7 +184,8 @@ class SolveResponse(BaseModel):
     max_bone_length_error: float = Field(description="Max relative bone-length error.")
     solvers: list[str] = Field(
         description="Solver sequence used (target-set keys), then the polishes that ran: "
-        "`fabrik-polish`, `fabrik-fallback`, `pin-polish` (pins still off, polished onto them)."
+        "`fabrik-polish`, `fabrik-fallback`, `pin-polish` (pins still off, polished onto them), "
+        "`fabrik-critic` (FABRIK's answer instead: the manifest's `serving.critic_fabrik`)."
     )
     model: str = Field(description="Manifest version of the models.")
     method: Literal["neural", "fabrik"]
@@ -330,6 +331,11 @@ class ModelsResponse(BaseModel):
     keep_collar: bool = Field(
         description="Whether a soft answer's kept wrist beyond the arm's reach turns its "
         "shoulder about the collar first (the manifest's `serving.keep_collar`)."
+    )
+    critic_fabrik: float = Field(
+        description="Metres (mean per joint) by which the critic must find a neural answer "
+        "less like a real body than FABRIK's, FABRIK's reaching every target, for the edit "
+        "to be answered by FABRIK (0: never; the manifest's `serving.critic_fabrik`)."
     )
     keep_pairs: bool = Field(
         description="Whether the hips and the collars keep the start's width between them, "

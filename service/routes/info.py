@@ -52,6 +52,7 @@ async def models(engine: ReadyEngine) -> ModelsResponse:
         keep_ease=engine.serving.keep_ease,
         bend_side=engine.serving.bend_side,
         keep_collar=engine.serving.keep_collar,
+        critic_fabrik=engine.serving.critic_fabrik,
         keep_pairs=engine.serving.keep_pairs,
         keep_pelvis=engine.serving.keep_pelvis,
         pelvis_travel=engine.serving.pelvis_travel,

@@ -719,6 +719,7 @@ def test_serving_settings_enter_the_solver_tags_only_where_the_losses_see_them()
         assert tag(stage, keep_elbows=True) == tag(stage, keep_elbows=False)
         assert tag(stage, keep_ease=0.005) == tag(stage)  # serving only: never in the losses
         assert tag(stage, bend_side=0.25) == tag(stage)
+        assert tag(stage, critic_fabrik=0.005) == tag(stage)
         assert tag(stage, keep_collar=True) == tag(stage)
         assert tag(stage, keep_pelvis=0.02) == tag(stage)
         assert tag(stage, pelvis_travel=True) == tag(stage)
