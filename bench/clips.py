@@ -52,6 +52,8 @@ METHODS: tuple[tuple[str, dict[str, Any]], ...] = (
     ("FABRIK", {"fabrik": True, "exact": True}),
     ("soft", {}),
     ("exact", {"exact": True}),
+    ("soft, soft_ik 1 cm", {"soft_ik": 0.01}),
+    ("exact, soft_ik 1 cm", {"exact": True, "soft_ik": 0.01}),
 )
 #: A jump: a frame step whose edit changes more than JUMP (m) and GAIN times the motion
 #: (the frame's largest joint step plus the offset's step).

@@ -174,9 +174,12 @@ def solver_joints(engine: Engine) -> list[str]:
     return [e.joints[0] for e in engine.manifest.solvers().values() if len(e.joints) == 1]
 
 
-def problems(edits: Edits, method: str, turn_search: bool | None = None) -> list[SolveProblem]:
+def problems(
+    edits: Edits, method: str, turn_search: bool | None = None, soft_ik: float = 0.0
+) -> list[SolveProblem]:
     """The engine problems of ``edits`` for one solving method (``METHOD_OPTIONS``;
-    ``turn_search``: the option of every problem, None: the models' default)."""
+    ``turn_search``: the option of every problem, None: the models' default; ``soft_ik``:
+    every problem's)."""
     engine_method, preserve, reach = METHOD_OPTIONS[method]
     return [
         SolveProblem(
@@ -190,18 +193,20 @@ def problems(edits: Edits, method: str, turn_search: bool | None = None) -> list
             reach=reach,
             tolerance=TOLERANCE,
             turn_search=turn_search,
+            soft_ik=soft_ik,
         )
         for i in range(len(edits))
     ]
 
 
 def solve(
-    engine: Engine, edits: Edits, method: str, chunk: int = 2048, turn_search: bool | None = None
-) -> F64:
+    engine: Engine, edits: Edits, method: str, chunk: int = 2048,
+    turn_search: bool | None = None, soft_ik: float = 0.0,
+) -> F64:  # fmt: skip
     """Solved poses ``[N, 21, 3]`` (world, as given) of one method."""
     if method == "identity":
         return edits.start.copy()
-    probs = problems(edits, method, turn_search)
+    probs = problems(edits, method, turn_search, soft_ik)
     out: list[F64] = []
     for s in range(0, len(probs), chunk):
         out.extend(r.pose for r in engine.solve(probs[s : s + chunk]))

@@ -50,6 +50,7 @@ from bench.edits import (
 )
 from bench.metrics import per_item
 from core.bodies import body_lengths, random_bodies, rebuild
+from core.ends import SOFT_IK_MAX
 from core.io import write_atomic
 from core.skeleton import (
     BASE_KEYPOINTS,
@@ -97,6 +98,8 @@ class HeldoutConfig:
     #: the start left where it was captured (the pelvis must travel too) instead of on
     #: the target's pelvis, as the issue's edits put it
     captured: bool = False
+    #: every neural edit asks ``options.soft_ik`` (m; kept limbs ease into full stretch)
+    soft_ik: float = 0.0
 
 
 #: A seconds-long configuration for tests and smoke runs.
@@ -329,14 +332,14 @@ def _items(edits: Edits, poses: F64, turn: F64, seconds: float) -> Items:
 
 
 def run_sets(
-    engine: Engine, sets: dict[str, Edits], turn: dict[str, F64], chunk: int
+    engine: Engine, sets: dict[str, Edits], turn: dict[str, F64], chunk: int, soft_ik: float = 0.0
 ) -> dict[str, dict[str, Items]]:
     out: dict[str, dict[str, Items]] = {}
     for name, edits in sets.items():
         out[name] = {}
         for method in METHODS:
             t0 = time.perf_counter()
-            poses = solve(engine, edits, method, chunk)
+            poses = solve(engine, edits, method, chunk, soft_ik=soft_ik)
             out[name][method] = _items(edits, poses, turn[name], time.perf_counter() - t0)
     return out
 
@@ -483,7 +486,7 @@ def evaluate_family(
 ) -> tuple[dict[str, dict[str, Items]], WorldPairs]:
     """Every set and method of one family (``body`` rebuilds the pairs as other bodies)."""
     sets, turn, pairs = family_sets(engine, data, world, n, cfg, rng, body)
-    items = run_sets(engine, sets, turn, cfg.chunk)
+    items = run_sets(engine, sets, turn, cfg.chunk, cfg.soft_ik)
     m = min(n_completion, len(pairs))
     sub = WorldPairs(
         pairs.start[:m], pairs.goal[:m], pairs.turn[:m], (pairs.rows[0][:m], pairs.rows[1][:m])
@@ -716,6 +719,10 @@ def main(
         bool,
         typer.Option(help="Starts left where captured, not on the target's pelvis."),
     ] = False,
+    soft_ik: Annotated[
+        float,
+        typer.Option(min=0.0, max=SOFT_IK_MAX, help="Every neural edit asks options.soft_ik (m)."),
+    ] = 0.0,
 ) -> None:
     """Held-out bodies and the stress set only, against any models folder."""
     from rich.console import Console
@@ -727,7 +734,9 @@ def main(
     if not dataset.is_file():
         raise typer.BadParameter(f"no dataset file at {dataset}", param_hint="--dataset")
     console = Console(stderr=True)
-    cfg = dataclasses.replace(QUICK if quick else HeldoutConfig(), seed=seed, captured=captured)
+    cfg = dataclasses.replace(
+        QUICK if quick else HeldoutConfig(), seed=seed, captured=captured, soft_ik=soft_ik
+    )
     engine = engine_for(models, serving, threads=1)
     try:
         data = load_dataset(dataset)

@@ -408,6 +408,7 @@ def unscale(
     hold: F64,
     pairs: bool,
     side: float,
+    soft: F64,
 ) -> F64:  # pragma: no cover - compiled
     """Network answers ``[M, 63]`` (float32, at the networks' size) back to the body's
     size (float64), with the bone pass (reference: the start pose) where ``bone``, and
@@ -415,7 +416,8 @@ def unscale(
     at the start's angles), then, where ``carry[b]`` > 0, :func:`carry_item` below the
     item's targets ``tidx[b, :counts[b]]`` by that weight, then :func:`ends_item` of the
     chains ``chains`` marks (the limb ends back where the network put them; a limb the
-    networks drew too straight bent towards ``core.ends.PREFER`` by ``side``).
+    networks drew too straight bent towards ``core.ends.PREFER`` by ``side``; easing into
+    full stretch over ``soft[b]`` m: ``core.ends.soft_reach``).
     Where ``hold[b]`` > 0 the bone pass starts from a pelvis held near the start's
     (:func:`hold_pelvis`)."""
     m = decoded.shape[0]
@@ -444,7 +446,7 @@ def unscale(
                            flags, anchor, vecs)  # fmt: skip
             if ends:
                 ends_item(out[b], pose, tidx[b], counts[b], chains, flags, vecs, ease, collar[b],
-                          side)  # fmt: skip
+                          side, soft[b])  # fmt: skip
         else:
             out[b] = pose
     return out
@@ -515,13 +517,14 @@ def settle(
     hold: F64,
     pairs: bool,
     side: float,
+    soft: F64,
 ) -> tuple[F64, F64, F64]:  # pragma: no cover - compiled
     """:func:`unscale` with the bone pass for every item, then :func:`finish`, in one call
     (the lean path of ``service.lean``): the same arithmetic in the same order."""
     bone = np.ones(decoded.shape[0], dtype=np.bool_)
     out = unscale(
         decoded, scales, canon, lengths, bone, tidx, counts, carry, chains, ease, collar, hold,
-        pairs, side,
+        pairs, side, soft,
     )  # fmt: skip
     return finish(out, facing, trans, floors, tidx, tpos, counts, lengths)
 
@@ -549,14 +552,14 @@ def warm() -> None:
     )  # fmt: skip
     unscale(
         out[6], out[4], out[0], out[3], np.ones(1, dtype=np.bool_), tidx, counts, np.full(1, 0.5),
-        chains, 0.0, np.ones(1, dtype=np.bool_), np.full(1, 0.02), True, 0.5,
+        chains, 0.0, np.ones(1, dtype=np.bool_), np.full(1, 0.02), True, 0.5, np.full(1, 0.01),
     )  # fmt: skip
     finish(out[0], out[1], out[2], np.zeros(1), tidx, tpos, counts, out[3])
     one = np.ones(1, dtype=np.bool_)
     travel(pose, tidx, tpos, counts, counts, ~one, True, True, 5)
     settle(
         out[6], out[4], out[0], out[3], out[1], out[2], np.zeros(1), tidx, tpos, counts,
-        np.full(1, 0.5), chains, 0.0, one, np.full(1, 0.02), True, 0.5,
+        np.full(1, 0.5), chains, 0.0, one, np.full(1, 0.02), True, 0.5, np.full(1, 0.01),
     )  # fmt: skip
 
 

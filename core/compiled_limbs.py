@@ -158,12 +158,14 @@ def ends_item(
     ease: float,
     collar: bool,
     side: float,
+    soft: float,
 ) -> None:  # pragma: no cover - compiled
     """``core.ends.keep_ends`` for one pose ``out [21, 3]`` (after the bone pass) and its
     network pose ``network [21, 3]``, in place, for the chains ``chains [C]`` marks
     (``core.ends.active``), eased over ``ease`` m, wrists reached by turning the collar
-    with ``collar``, bent towards ``core.ends.PREFER`` by ``side``; ``flags [21]`` (int64)
-    and ``vecs [5, 3]`` are scratch."""
+    with ``collar``, bent towards ``core.ends.PREFER`` by ``side``, into full stretch
+    over ``soft`` m (``core.ends.soft_reach``); ``flags [21]`` (int64) and ``vecs [5, 3]``
+    are scratch."""
     for j in range(NUM_JOINTS):
         flags[j] = 0
     for q in range(count):
@@ -205,7 +207,10 @@ def ends_item(
             continue
         for i in range(3):
             u[i] = u[i] / d0
-        d = min(max(d0, abs(a - b)), a + b)
+        d = d0
+        if soft > 0.0 and d0 > a + b - soft:  # core.ends.soft_reach
+            d = (a + b) - soft * np.exp(-(d0 - ((a + b) - soft)) / soft)
+        d = min(max(d, abs(a - b)), a + b)
         along = (e0[0] - s[0]) * u[0] + (e0[1] - s[1]) * u[1] + (e0[2] - s[2]) * u[2]
         for i in range(3):
             v[i] = (e0[i] - s[i]) - along * u[i]

@@ -150,6 +150,30 @@ def kept_chains(targets: Iterable[int], chains: npt.NDArray[np.bool_] | None = N
     ]
 
 
+#: The largest ``soft`` distance a request may ask for (m; the API's ``soft_ik``): a tenth
+#: of an adult arm, past which a limb never gets near straight.
+SOFT_IK_MAX: Final[float] = 0.1
+
+
+def soft_reach(d: F64, reach: F64, soft: npt.ArrayLike) -> F64:
+    """How far a limb of full ``reach`` (m) reaches towards a goal ``d`` (m) away when it
+    eases into full stretch over ``soft`` (m; 0: none) ("soft IK"): ``d`` up to ``reach -
+    soft``, then ``reach - soft exp(-(d - reach + soft) / soft)``, continuous with its first
+    derivative and never quite ``reach``, so that the elbow or knee no longer swings from
+    bent to straight as the goal crosses the limb's reach (its distance off the line grows
+    as the square root of how far inside the reach the end is); the end falls short of
+    the goal by at most ``soft / e`` where the goal lies at ``reach``. Per element."""
+    d = np.asarray(d, dtype=np.float64)
+    k = np.broadcast_to(np.asarray(soft, dtype=np.float64), d.shape)
+    knee = reach - k
+    over = (k > 0.0) & (d > knee)
+    if not over.any():
+        return d
+    safe = np.where(over, k, 1.0)
+    out: F64 = np.where(over, reach - safe * np.exp(-(d - knee) / safe), d)
+    return out
+
+
 def keep_ends(
     pose: F64,
     network: F64,
@@ -158,6 +182,7 @@ def keep_ends(
     ease: float = 0.0,
     collar: bool = False,
     side: float = 0.0,
+    soft: npt.ArrayLike = 0.0,
 ) -> F64:
     """``pose [..., 21, 3]`` (after the bone pass: the character's lengths) with each kept
     chain's end (of those ``chains`` marks, default the limb ends) where ``network`` (the
@@ -168,7 +193,9 @@ def keep_ends(
     the arm's reach from its shoulder first turns the shoulder about its collar towards the
     goal, as little as brings it within reach (all the way where nothing does), the arm
     moving with it. ``side`` (0-1): a limb the networks bent less than ``side`` times what the
-    character's lengths need bends towards :data:`PREFER` (see the module). A new array."""
+    character's lengths need bends towards :data:`PREFER` (see the module). ``soft`` (m,
+    scalar or ``[...]``): the limb eases into full stretch over that distance
+    (:func:`soft_reach`). A new array."""
     out = np.array(pose, dtype=np.float64, copy=True)
     net = np.asarray(network, dtype=np.float64)
     targets = list(targets)
@@ -191,7 +218,7 @@ def keep_ends(
         line = goal - s
         d0 = np.sqrt(np.sum(line**2, axis=-1))
         u = line / np.where(d0 > TINY, d0, 1.0)[..., None]
-        d = np.minimum(np.maximum(d0, np.abs(a - b)), a + b)
+        d = np.minimum(np.maximum(soft_reach(d0, a + b, soft), np.abs(a - b)), a + b)
         bend = across(e0 - s, u)
         reach = (d0 > TINY) & (a > TINY)
         cos = np.clip((a * a + d * d - b * b) / np.where(reach, 2.0 * a * d, 1.0), -1.0, 1.0)

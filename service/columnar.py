@@ -308,7 +308,7 @@ def solve(engine: Engine, cols: Columns, part: slice) -> BatchAnswer:
         weights=cols.weights[part], fabrik=o.method == "fabrik",
         preserve_bone_lengths=o.preserve_bone_lengths, exact=o.reach == "exact",
         tolerance=o.tolerance, floor=o.floor, passes=o.passes, carry=o.carry,
-        turn_search=o.turn_search is not False, mirror=o.mirror,
+        turn_search=o.turn_search is not False, mirror=o.mirror, soft_ik=o.soft_ik,
     )  # fmt: skip
 
 

@@ -67,6 +67,7 @@ from service.problems import (
     _Items,
     _per_item,
     others,
+    solver_paths,
     stacked,
 )
 from service.runtime import ROW_BLOCK, Fused, Net, session_options
@@ -300,6 +301,7 @@ class Engine:
         carry: npt.ArrayLike | None = None,
         turn_search: npt.ArrayLike = True,
         mirror: npt.ArrayLike | None = None,
+        soft_ik: npt.ArrayLike = 0.0,
     ) -> BatchAnswer:
         """Solve a batch given as arrays (validated like :class:`SolveProblem`), no
         per-item objects: ``poses [B, 21, 3]`` world; ``target_idx [B, K]`` joints (per
@@ -310,7 +312,8 @@ class Engine:
         ``passes`` (neural solves; default ``serving.passes``), ``carry`` (the
         branch below each target, 0-1, :mod:`core.carry`; default the engine's ``carry``),
         ``turn_search`` (False: never search the turn, :mod:`service.turns`), ``mirror``
-        (also solve the mirror image; default ``serving.solve_mirror``).
+        (also solve the mirror image; default ``serving.solve_mirror``), ``soft_ik`` (m:
+        kept limbs ease into full stretch, ``core.ends.soft_reach``; 0: none).
 
         Geometry runs in compiled kernels (:mod:`core.compiled`), one call per stage for
         the whole batch; items that share a solver sequence share one onnxruntime run per
@@ -337,6 +340,7 @@ class Engine:
             carry=self.serving.carry if carry is None else carry,
             turn_search=turn_search,
             mirror=self.serving.solve_mirror if mirror is None else mirror,
+            soft_ik=soft_ik,
         )
         n, fab = items.poses.shape[0], items.fab
         reps = _per_item(self.serving.passes if passes is None else passes, n, np.int64)
@@ -425,8 +429,10 @@ class Engine:
         body moved across: :meth:`exact_fallback`) (``serving.retry_polish``,
         docs/generalisation-serving-2.md item 37). Its ``solvers`` end with ``fabrik-polish``
         (once: a path that already ends with it is not given it twice). An
-        item the polish would leave no nearer (the iteration cap) keeps its answer."""
+        item the polish would leave no nearer (the iteration cap) keeps its answer, and so
+        does one asked to ease into full stretch (``soft_ik``), which the polish straightens."""
         sel = self._short(items, ans)
+        sel = sel[items.soft_ik[sel] == 0.0]  # (asked to ease into full stretch: left so)
         if sel.size == 0:
             return ans
         short = dataclasses.replace(items.take(sel), poses=compiled.as_f64(ans.pose[sel]))
@@ -511,7 +517,7 @@ class Engine:
                 out = compiled.unscale(
                     decoded, scales, canon, lengths, bone, tidx, cnt, batch.carry, self.chain_mask,
                     self.serving.keep_ease, collar, hold, self.serving.keep_pairs,
-                    self.serving.bend_side,
+                    self.serving.bend_side, batch.soft_ik,
                 )  # fmt: skip
             else:
                 items = np.flatnonzero(neural)
@@ -526,7 +532,7 @@ class Engine:
                     decoded[items], scales[items], canon[items], lengths[items], bone[items],
                     tidx[items], cnt[items], batch.carry[items], self.chain_mask,
                     self.serving.keep_ease, collar[items], hold[items],
-                    self.serving.keep_pairs, self.serving.bend_side,
+                    self.serving.keep_pairs, self.serving.bend_side, batch.soft_ik[items],
                 )  # fmt: skip
         start = canon
         if origin is not None and moved is not None and moved.any():
@@ -538,7 +544,7 @@ class Engine:
         world, errors, bone_err = compiled.finish(
             out, facing, trans, floors, tidx, tpos, cnt, lengths
         )
-        paths, path_of = self._paths(seq_of, suffix, sequences)
+        paths, path_of = solver_paths(seq_of, suffix, sequences)
         return BatchAnswer(world, errors, bone_err, iterations, paths, path_of)
 
     def _prepare(
@@ -701,24 +707,6 @@ class Engine:
             goal = np.where(place, tcan[sel, :k], out[sel][:, g.idx])
             out[sel], iterations[sel], _ = run(True, sel, out[sel], goal)
             suffix[sel] = 1
-
-    @staticmethod
-    def _paths(
-        seq_of: npt.NDArray[np.int64], suffix: npt.NDArray[np.int64],
-        sequences: list[tuple[str, ...]],
-    ) -> tuple[tuple[tuple[str, ...], ...], npt.NDArray[np.int64]]:  # fmt: skip
-        """Each item's solver path as an index into the distinct paths of the batch."""
-        code = (seq_of + 1) * 3 + suffix
-        if len(code) == 1 or bool((code == code[0]).all()):
-            distinct, path_of = code[:1], np.zeros(len(code), dtype=np.int64)
-        else:
-            distinct, path_of = np.unique(code, return_inverse=True)
-        ends: tuple[tuple[str, ...], ...] = ((), ("fabrik-polish",), ("fabrik-fallback",))
-        paths = tuple(
-            ("fabrik",) if c < 3 else (*sequences[c // 3 - 1], *ends[c % 3])
-            for c in distinct.tolist()
-        )
-        return paths, path_of.astype(np.int64).reshape(-1)
 
     def reconstruct(self, world: F64) -> F64:
         """The autoencoder's round trip of world poses ``[B, 21, 3]`` through the same body

@@ -23,7 +23,7 @@ import numpy.typing as npt
 from core import compiled
 from core.skeleton import JOINT_NAMES
 from service import networks
-from service.problems import BatchAnswer, _Items
+from service.problems import BatchAnswer, _Items, solver_paths
 
 if TYPE_CHECKING:  # pragma: no cover
     from service.engine import Engine
@@ -97,7 +97,7 @@ def lean_answer(
         )
         polished = exact or int(items.cnt[0]) > int(items.n_t[0])
         seq_of, suffix = np.zeros(n, np.int64), np.where(fell, 2, int(polished))
-    paths, path_of = engine._paths(seq_of, suffix, [sequence or ()])
+    paths, path_of = solver_paths(seq_of, suffix, [sequence or ()])
     return BatchAnswer(world, errors, bone_err, iterations, paths, path_of)
 
 
@@ -134,13 +134,13 @@ def solve_lean(
             pose, errors, bone_err = compiled.settle(
                 decoded, scales, canon, lengths, facing, trans, floors, tidx, tpos, counts,
                 items.carry, engine.chain_mask, engine.serving.keep_ease, collar, hold,
-                engine.serving.keep_pairs, engine.serving.bend_side,
+                engine.serving.keep_pairs, engine.serving.bend_side, items.soft_ik,
             )  # fmt: skip
             continue
         out = compiled.unscale(
             decoded, scales, canon, lengths, every, tidx, counts, items.carry, engine.chain_mask,
             engine.serving.keep_ease, collar, hold, engine.serving.keep_pairs,
-            engine.serving.bend_side,
+            engine.serving.bend_side, items.soft_ik,
         )  # fmt: skip
         # exact: every column onto its goal; soft: the pins, the solved targets held
         goal = (

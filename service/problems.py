@@ -16,6 +16,7 @@ import numpy as np
 import numpy.typing as npt
 
 from core import compiled
+from core.ends import SOFT_IK_MAX
 from core.skeleton import JOINT_INDEX, NUM_JOINTS, ROOT
 
 F64 = npt.NDArray[np.floating[Any]]
@@ -41,6 +42,7 @@ class SolveProblem:
     carry: float | None = None  # the branch below targets, 0-1 (None: the engine's)
     turn_search: bool | None = None  # search the turn (service.turns; None: if the models do)
     mirror: bool | None = None  # also solve the mirror image (None: if the models do)
+    soft_ik: float = 0.0  # kept limbs ease into full stretch over this many m (core.ends)
 
 
 @dataclass(frozen=True)
@@ -98,6 +100,25 @@ class BatchAnswer:
         return BatchAnswer.scatter(len(self.pose), [(rest, self.take(rest)), (sel, other)])
 
 
+def solver_paths(
+    seq_of: npt.NDArray[np.int64], suffix: npt.NDArray[np.int64],
+    sequences: list[tuple[str, ...]],
+) -> tuple[tuple[tuple[str, ...], ...], npt.NDArray[np.int64]]:  # fmt: skip
+    """Each item's solver path as an index into the distinct paths of the batch: ``seq_of``
+    the item's solver sequence in ``sequences`` (-1: FABRIK), ``suffix`` what ran after it
+    (0: nothing, 1: the FABRIK polish, 2: exact reach's FABRIK fallback)."""
+    code = (seq_of + 1) * 3 + suffix
+    if len(code) == 1 or bool((code == code[0]).all()):
+        distinct, path_of = code[:1], np.zeros(len(code), dtype=np.int64)
+    else:
+        distinct, path_of = np.unique(code, return_inverse=True)
+    ends: tuple[tuple[str, ...], ...] = ((), ("fabrik-polish",), ("fabrik-fallback",))
+    paths = tuple(
+        ("fabrik",) if c < 3 else (*sequences[c // 3 - 1], *ends[c % 3]) for c in distinct.tolist()
+    )
+    return paths, path_of.astype(np.int64).reshape(-1)
+
+
 def others(n: int, sel: npt.NDArray[np.intp]) -> npt.NDArray[np.intp]:
     """The items of ``n`` not in ``sel``, in order."""
     keep = np.ones(n, dtype=np.bool_)
@@ -136,6 +157,9 @@ class _Items:
     asked_soft: npt.NDArray[np.bool_]
     #: [B] each neural pass also solves the mirror image (``serving.solve_mirror``)
     mirror: npt.NDArray[np.bool_]
+    #: [B] kept limbs ease into full stretch over this many metres (0: none; the
+    #: request's ``soft_ik``, ``core.ends.soft_reach``)
+    soft_ik: compiled.F64
 
     @staticmethod
     def of_problem(p: SolveProblem, carry: float, mirror: bool) -> _Items:
@@ -145,7 +169,7 @@ class _Items:
         # each per-item option a one-element view of one array per dtype (an array each
         # cost 1-2 us: a third of a lean solve's Python before this)
         ints = np.array([k, p.n_targets], dtype=np.int64)
-        reals = np.array([p.tolerance, p.floor, carry], dtype=np.float64)
+        reals = np.array([p.tolerance, p.floor, carry, p.soft_ik], dtype=np.float64)
         flags = np.array(
             [p.method == "fabrik", p.preserve_bone_lengths, p.reach == "exact",
              p.turn_search is not False, p.reach != "exact", mirror], dtype=np.bool_,
@@ -154,7 +178,7 @@ class _Items:
             compiled.as_f64(p.pose)[None], tidx[None],
             compiled.as_f64(p.target_pos).reshape(1, k, 3), ints[0:1], ints[1:2],
             compiled.as_f64(p.weights)[None], flags[0:1], flags[1:2], flags[2:3], reals[0:1],
-            reals[1:2], reals[2:3], flags[3:4], flags[4:5], flags[5:6],
+            reals[1:2], reals[2:3], flags[3:4], flags[4:5], flags[5:6], reals[3:4],
         )  # fmt: skip
 
     @staticmethod
@@ -164,7 +188,7 @@ class _Items:
         weights: npt.ArrayLike | None, fabrik: npt.ArrayLike,
         preserve_bone_lengths: npt.ArrayLike, exact: npt.ArrayLike, tolerance: npt.ArrayLike,
         floor: npt.ArrayLike, carry: npt.ArrayLike, turn_search: npt.ArrayLike,
-        mirror: npt.ArrayLike,
+        mirror: npt.ArrayLike, soft_ik: npt.ArrayLike = 0.0,
     ) -> _Items:  # fmt: skip
         """A batch given as arrays (:meth:`Engine.solve_arrays`' arguments, per-item
         options as ``[B]`` arrays or scalars) as contiguous per-item arrays."""
@@ -181,10 +205,12 @@ class _Items:
             _per_item(fabrik, n, np.bool_), _per_item(preserve_bone_lengths, n, np.bool_), ex,
             _per_item(tolerance, n, np.float64), _per_item(floor, n, np.float64),
             _per_item(carry, n, np.float64), _per_item(turn_search, n, np.bool_), ~ex,
-            _per_item(mirror, n, np.bool_),
+            _per_item(mirror, n, np.bool_), _per_item(soft_ik, n, np.float64),
         )  # fmt: skip
         if n and not bool(np.all((items.carry >= 0.0) & (items.carry <= 1.0))):
             raise ValueError("carry must be in [0, 1]")
+        if n and not bool(np.all((items.soft_ik >= 0.0) & (items.soft_ik <= SOFT_IK_MAX))):
+            raise ValueError(f"soft_ik must be in [0, {SOFT_IK_MAX}] m")
         return items
 
     def targets(self) -> npt.NDArray[np.bool_]:
@@ -230,7 +256,7 @@ class _Items:
         return _Items(
             poses[sel], self.tidx[sel], self.tpos[sel], self.cnt[sel], self.n_t[sel],
             self.w[sel], no, ~no, no, self.tols[sel], self.floors[sel], self.carry[sel],
-            self.turn[sel], self.asked_soft[sel], self.mirror[sel],
+            self.turn[sel], self.asked_soft[sel], self.mirror[sel], self.soft_ik[sel],
         )  # fmt: skip
 
 
@@ -300,6 +326,7 @@ def stacked(problems: Sequence[SolveProblem]) -> dict[str, Any]:
         tolerance=np.fromiter((p.tolerance for p in problems), np.float64, n),
         floor=np.fromiter((p.floor for p in problems), np.float64, n),
         turn_search=np.fromiter((p.turn_search is not False for p in problems), np.bool_, n),
+        soft_ik=np.fromiter((p.soft_ik for p in problems), np.float64, n),
     )  # fmt: skip
 
 

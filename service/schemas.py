@@ -6,6 +6,7 @@ from typing import TYPE_CHECKING, Annotated, Any, Final, Literal
 
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, create_model
 
+from core.ends import SOFT_IK_MAX
 from core.rest import rest_pose
 from core.skeleton import BASE_KEYPOINTS, JOINT_NAMES, PARENT_NAMES
 
@@ -135,6 +136,17 @@ class SolveOptions(_Body):
         "bodies unlike the training ones, at twice the networks' work. Absent: the models' "
         "default, `solve_mirror` of `GET /v1/models`; `false` is the fast path. `method: "
         "fabrik` ignores it.",
+    )
+    soft_ik: Finite = Field(
+        default=0.0,
+        ge=0.0,
+        le=SOFT_IK_MAX,
+        description="Metres over which a targeted wrist's or ankle's limb eases into full "
+        "stretch (soft IK): its elbow or knee no longer swings from bent to straight as the "
+        "target crosses the limb's reach, and a cleaned clip no longer pops there; the "
+        "limb then falls short of full stretch by up to `soft_ik`/e (exact reach still "
+        "polishes onto the target). 0 (default): none. 0.01 for clip clean-up "
+        "(docs/service.md). `method: fabrik` ignores it.",
     )
 
 

@@ -117,6 +117,7 @@ def problem_of(
         carry=o.carry,
         turn_search=o.turn_search,
         mirror=o.mirror,
+        soft_ik=o.soft_ik,
     )
 
 

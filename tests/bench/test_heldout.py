@@ -314,3 +314,34 @@ def test_the_command_refuses_a_dataset_without_the_split_in_one_line(
     text.write_text("hi\n")
     r = runner.invoke(app, [*base[:2], "--dataset", str(text), "--quick"])
     assert r.exit_code == 2 and "bad.npz: not a dataset file" in said(r.output), r.output
+
+
+def test_the_command_asks_soft_ik_of_every_neural_edit(
+    models_dir: Path, holdout_dataset: Path, tmp_path: Path
+) -> None:
+    """``--soft-ik M``: every neural edit asks ``options.soft_ik`` M (recorded in the
+    results' config); the soft answers change, FABRIK's do not; out of range is refused."""
+    import typer
+    from typer.testing import CliRunner
+
+    from bench.heldout import main
+
+    app = typer.Typer()
+    app.command()(main)
+    args = ["--quick", "--models", str(models_dir), "--dataset", str(holdout_dataset)]
+    runs = {}
+    for k in ("0", "0.02"):
+        out = tmp_path / f"h{k}.json"
+        result = CliRunner().invoke(app, [*args, "--soft-ik", k, "--out", str(out)])
+        assert result.exit_code == 0, result.output
+        runs[k] = json.loads(out.read_text())
+    assert runs["0.02"]["config"]["soft_ik"] == 0.02 and runs["0"]["config"]["soft_ik"] == 0.0
+    pooled = {
+        k: {f["name"]: f for f in r["families"]}["holdout: all"]["sets"] for k, r in runs.items()
+    }
+    mpjpe = {k: {s: {m: v["mpjpe"] for m, v in by.items()} for s, by in p.items()}
+             for k, p in pooled.items()}  # fmt: skip
+    assert all(mpjpe["0"][s]["fabrik"] == by["fabrik"] for s, by in mpjpe["0.02"].items())
+    assert any(mpjpe["0"][s]["neural_bone"] != by["neural_bone"] for s, by in mpjpe["0.02"].items())
+    bad = CliRunner().invoke(app, [*args, "--soft-ik", "0.5"])
+    assert bad.exit_code == 2 and "soft-ik" in bad.output

@@ -8,7 +8,7 @@ import pytest
 
 from core import compiled
 from core.compiled_limbs import ends_item
-from core.ends import BELOW, CHAINS, PREFER, active, keep_ends, kept_chains
+from core.ends import BELOW, CHAINS, PREFER, active, keep_ends, kept_chains, soft_reach
 from core.skeleton import JOINT_INDEX, bone_lengths
 from tests.conftest import PosePairs
 
@@ -104,7 +104,7 @@ def test_compiled_ends_match_numpy(limbs: tuple[np.ndarray, np.ndarray]) -> None
         got = passed.copy()
         for b in range(len(got)):
             ends_item(got[b], network[b], tidx, len(targets), active(), flags, vecs, 0.0, False,
-                      0.0)  # fmt: skip
+                      0.0, 0.0)  # fmt: skip
         assert np.array_equal(got, ref)  # bit for bit
     for names in [("left_elbow",), ("left_elbow", "right_elbow", "left_ankle"),
                   ("right_elbow", "right_wrist", "head")]:  # fmt: skip
@@ -113,7 +113,8 @@ def test_compiled_ends_match_numpy(limbs: tuple[np.ndarray, np.ndarray]) -> None
         ref = keep_ends(passed, network, targets, ELBOWS)
         got = passed.copy()
         for b in range(len(got)):
-            ends_item(got[b], network[b], tidx, len(targets), ELBOWS, flags, vecs, 0.0, False, 0.0)
+            ends_item(got[b], network[b], tidx, len(targets), ELBOWS, flags, vecs, 0.0, False, 0.0,
+                      0.0)  # fmt: skip
         assert np.array_equal(got, ref)  # bit for bit
     # degenerate: the network's wrist on the shoulder; an arm straight along the line to it
     bad, net = passed[:2].copy(), network[:2].copy()
@@ -123,7 +124,7 @@ def test_compiled_ends_match_numpy(limbs: tuple[np.ndarray, np.ndarray]) -> None
     ref = keep_ends(bad, net, [end])
     got = bad.copy()
     for b in range(2):
-        ends_item(got[b], net[b], np.asarray([end]), 1, active(), flags, vecs, 0.0, False, 0.0)
+        ends_item(got[b], net[b], np.asarray([end]), 1, active(), flags, vecs, 0.0, False, 0.0, 0.0)
     assert np.all(np.isfinite(got)) and np.array_equal(got, ref)
     assert np.array_equal(got, bad)  # nothing to place by: left as the bone pass had it
 
@@ -184,7 +185,7 @@ def test_a_limb_drawn_too_straight_bends_to_the_preferred_side(
         ref = keep_ends(passed, network, idx, chains, side=0.5)
         got = passed.copy()
         for b in range(len(got)):
-            ends_item(got[b], network[b], tidx, len(idx), chains, flags, vecs, 0.0, False, 0.5)
+            ends_item(got[b], network[b], tidx, len(idx), chains, flags, vecs, 0.0, False, 0.5, 0.0)
         assert np.array_equal(got, ref)  # bit for bit
 
 
@@ -229,7 +230,8 @@ def test_eased_ends_go_back_in_proportion_and_match_compiled(
     tidx = np.asarray([*targets, 0, 0], dtype=np.int64)
     got = passed.copy()
     for b in range(len(got)):
-        ends_item(got[b], network[b], tidx, len(targets), ELBOWS, flags, vecs, ease, False, 0.0)
+        ends_item(got[b], network[b], tidx, len(targets), ELBOWS, flags, vecs, ease, False, 0.0,
+                  0.0)  # fmt: skip
     assert np.abs(got - eased).max() < 1e-12
     assert np.abs(bone_lengths(eased) / bone_lengths(passed) - 1).max() < 1e-12
     for top, mid, end in (L_ARM, R_LEG):
@@ -292,6 +294,56 @@ def test_a_wrist_out_of_reach_turns_its_shoulder_about_the_collar(
     flags, vecs = np.empty(21, np.int64), np.empty((5, 3))
     got = passed.copy()
     for b in range(len(got)):
-        ends_item(got[b], net[b], np.asarray(targets), 1, active(), flags, vecs, 0.0, True, 0.0)
+        ends_item(
+            got[b], net[b], np.asarray(targets), 1, active(), flags, vecs, 0.0, True, 0.0, 0.0
+        )
     assert np.abs(got - turned).max() < 1e-12
     assert collar not in targets
+
+
+def test_soft_reach_eases_a_limb_into_full_stretch() -> None:
+    """Soft IK: the goal's distance as it is up to ``reach - soft``; beyond, a curve that
+    meets it with the same slope, rises towards ``reach`` without reaching it, and falls
+    short of a goal at full reach by ``soft / e``; ``soft`` 0 changes nothing."""
+    reach, k = 0.6, 0.01
+    d = np.linspace(0.5, 0.7, 20001)
+    out = soft_reach(d, reach, k)
+    below = d <= reach - k
+    assert np.array_equal(out[below], d[below])
+    assert np.all(out < reach) and np.all(np.diff(out) > 0.0)
+    slope = np.diff(out) / np.diff(d)
+    assert slope.max() <= 1.0 + 1e-9 and abs(slope[np.searchsorted(d, reach - k)] - 1.0) < 1e-3
+    assert soft_reach(np.asarray(reach), reach, k) == pytest.approx(reach - k / np.e, abs=1e-15)
+    assert np.array_equal(soft_reach(d, reach, 0.0), d)
+    # per element: a batch with soft 0 and soft k answers each as alone
+    both = soft_reach(np.stack([d, d]), reach, np.asarray([[0.0], [k]]))
+    assert np.array_equal(both[0], d) and np.array_equal(both[1], out)
+
+
+def test_soft_ik_bends_a_limb_near_full_stretch_and_matches_the_kernel(
+    limbs: tuple[np.ndarray, np.ndarray],
+) -> None:
+    """With ``soft``, an arm whose goal lies near or past its reach keeps a bend (its
+    wrist a little short), one well inside it is placed as without; the compiled kernel
+    gives the numpy reference's answers (to the last bits of ``exp``)."""
+    network, passed = limbs
+    wrist = _idx("left_wrist")
+    top, mid, end = (JOINT_INDEX[n] for n in ("left_shoulder", "left_elbow", "left_wrist"))
+    plain = keep_ends(passed, network, wrist)
+    soft = keep_ends(passed, network, wrist, soft=0.02)
+    a = np.linalg.norm(passed[:, mid] - passed[:, top], axis=-1)
+    b = np.linalg.norm(passed[:, end] - passed[:, mid], axis=-1)
+    d = np.linalg.norm(network[:, end] - plain[:, top], axis=-1)
+    inside, near = d < a + b - 0.05, d > a + b - 0.005
+    assert inside.any() and near.any()
+    assert np.array_equal(soft[inside], plain[inside])
+    short = np.linalg.norm(soft[near, end] - network[near, end], axis=-1)
+    assert np.all(short > np.linalg.norm(plain[near, end] - network[near, end], axis=-1))
+    extent = np.linalg.norm(soft[near, end] - soft[near, top], axis=-1)
+    assert np.all(extent < (a + b)[near])  # never quite straight
+    flags, vecs = np.empty(21, np.int64), np.empty((5, 3))
+    got = passed.copy()
+    tidx = np.asarray(wrist, dtype=np.int64)
+    for i in range(len(got)):
+        ends_item(got[i], network[i], tidx, 1, active(), flags, vecs, 0.0, False, 0.0, 0.02)
+    assert np.abs(got - soft).max() < 1e-12

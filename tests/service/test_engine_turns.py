@@ -276,7 +276,7 @@ def test_search_ends_early_with_the_answers_of_the_full_search(
         args["poses"], args["target_idx"], args["target_pos"], np.full(n, k), np.full(n, k),
         np.ones((n, k)), np.zeros(n, bool), np.ones(n, bool), args["exact"],
         np.full(n, 1e-3), np.zeros(n), np.full(n, engine.serving.carry), np.ones(n, bool),
-        ~args["exact"], np.full(n, engine.serving.solve_mirror),
+        ~args["exact"], np.full(n, engine.serving.solve_mirror), np.zeros(n),
     )  # fmt: skip
     reps = np.full(n, engine.serving.passes)
     from service.turns import search
