@@ -39,7 +39,11 @@ class Settings(BaseSettings):
         description="Request bodies (declared or streamed) held at once per worker; 429 past it.",
     )
     deadline_seconds: float = Field(
-        default=2.0, gt=0, le=600, description="Wall time one request may take; 504 past it."
+        default=2.0,
+        gt=0,
+        le=600,
+        description="Wall time one request's work may take; 504 past it (a batch whose "
+        "items are all done is answered).",
     )
     max_unsent_bytes: int = Field(
         default=64 * 1024 * 1024,

@@ -164,7 +164,7 @@ async def solve_batch(body: BatchBody, engine: ReadyEngine, budget: RequestBudge
                for i in range(len(forms))]  # fmt: skip
         return json_response({"items": out}, budget.compute)
 
-    return await off_loop(budget, answer, len(forms), "writing the answer")
+    return await answer_off_loop(budget, answer, len(forms))
 
 
 def check_price(forms: list[SolveRequest | CharacterSolveRequest], max_items: int,
@@ -205,6 +205,15 @@ async def off_loop(budget: Budget, work: Callable[[], R], items: int, stage: str
     return await budget.in_thread(work, stage)
 
 
+async def answer_off_loop(budget: Budget, work: Callable[[], R], items: int) -> R:
+    """The answer of a batch whose ``items`` are all solved: in a worker thread for a big
+    batch as :func:`off_loop`, but without waiting for a compute token, so past the
+    deadline too: a 504 now would throw the done work away (``Budget.answer_in_thread``)."""
+    if items <= INLINE_ITEMS:
+        return work()
+    return await budget.answer_in_thread(work, items)
+
+
 async def solve_columns(cols: columnar.Columns, engine: Engine, budget: Budget,
                         state: ServiceState, request: Request) -> Response:  # fmt: skip
     """A validated columnar batch: solved in priced parts within the budget, answered
@@ -216,7 +225,7 @@ async def solve_columns(cols: columnar.Columns, engine: Engine, budget: Budget,
     ans = columnar.merge(parts)
     state.metrics.batch.observe(cols.size)
     state.metrics.solved_paths(cols.options.method, ans.paths, ans.path_of)
-    body = await off_loop(
-        budget, lambda: columnar.answer(cols, ans, engine.version), cols.size, "writing the answer"
+    body = await answer_off_loop(
+        budget, lambda: columnar.answer(cols, ans, engine.version), cols.size
     )
     return raw_response(body, budget.compute)

@@ -83,6 +83,51 @@ def test_the_answer_is_the_same_on_one_compute_thread_or_two(
     assert answers[0] == answers[1]
 
 
+@pytest.mark.parametrize("route", ["columnar", "items"])
+def test_a_batch_whose_items_are_all_done_is_answered_with_no_compute_thread_free(
+    models_dir: Path, real_poses: PosePairs, route: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Every item solved, then the one compute thread taken by another request until
+    after this one's deadline: the answer is written anyway, the same bytes as on a calm
+    server. Before, writing the answer waited for a compute token within the deadline, and
+    under overload a batch whose items were all done was a 504 "before writing the
+    answer", its work thrown away (an overload audit; docs/service.md)."""
+    body: dict[str, Any] = columns(real_poses, 300)  # > 32 items: answered in a worker thread
+    if route == "items":
+        from tests.service.test_columnar import items
+
+        body = {"items": items(body)}
+    deadline = 1.0
+    with make_client(models_dir, deadline_seconds=deadline, compute_threads=1) as c:
+        calm = c.post("/v1/solve/batch", json=body)
+        assert calm.status_code == 200, calm.text
+        limiter, metrics = c.app.state.compute_limiter, c.app.state.pose.metrics
+        holder, timers = object(), []
+        batch = metrics.batch
+
+        class TakenOnceDone:
+            """The batch metric, observed on the event loop once every item is solved:
+            the moment the other request takes the token and keeps it past the deadline."""
+
+            def observe(self, n: int) -> None:
+                batch.observe(n)
+                limiter.acquire_on_behalf_of_nowait(holder)  # the last wave gave it back
+                release = (limiter.release_on_behalf_of, holder)
+                timers.append(threading.Timer(deadline + 1.0, c.portal.call, release))
+                timers[-1].start()
+
+        monkeypatch.setattr(metrics, "batch", TakenOnceDone())
+        try:
+            resp = c.post("/v1/solve/batch", json=body)
+            held = [t.is_alive() for t in timers]
+        finally:
+            for t in timers:
+                t.join()
+        assert held == [True]  # answered while the token was still taken
+        assert resp.status_code == 200, resp.text
+        assert resp.content == calm.content
+
+
 def test_soft_unpinned_edits_run_on_the_loop_and_the_rest_in_a_worker(
     client: Any, real_poses: PosePairs, monkeypatch: pytest.MonkeyPatch
 ) -> None:
