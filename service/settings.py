@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Annotated, Literal
 
 from pydantic import BeforeValidator, Field, SecretStr
+from pydantic_core import PydanticCustomError
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from core.compiled_fabrik import MAX_ITERATIONS
@@ -14,6 +15,23 @@ from core.text import close_match
 
 #: The models shipped with the repository (``<repo>/models``).
 BUNDLED_MODELS = Path(__file__).resolve().parent.parent / "models"
+
+
+def _not_blank(value: object) -> object:
+    """Refuse an API key that is empty or only blanks. An empty ``POSE_API_KEY`` turned
+    authentication off without a word (an ops audit): a deployment whose secret came out
+    empty (a secretKeyRef to an empty value, ``POSE_API_KEY=$UNSET_VARIABLE``) served /v1
+    to anyone while its operator believed it guarded. A key of blanks no client can send
+    (HTTP parsers skip the blanks before a header's value: it arrives empty), so every /v1
+    request would be a 401. Refused as other settings are (``service.cli``: one
+    ``start_refused`` line, exit 2); unset the variable to serve /v1 without a key."""
+    if isinstance(value, str) and not value.strip():
+        raise PydanticCustomError(
+            "blank_api_key",
+            "empty or only blanks (an empty key left /v1 open, blanks no client can send): "
+            "set the key, or unset POSE_API_KEY to serve /v1 without one",
+        )
+    return value
 
 
 class Settings(BaseSettings):
@@ -58,7 +76,11 @@ class Settings(BaseSettings):
         default=10, ge=0, le=3600, description="After SIGTERM, time to finish in-flight work."
     )
     cors_origins: list[str] = Field(default_factory=list)
-    api_key: SecretStr | None = None
+    api_key: Annotated[SecretStr | None, BeforeValidator(_not_blank)] = Field(
+        default=None,
+        description="The key /v1 requests must send (X-API-Key or Authorization: Bearer); "
+        "unset, /v1 is open. Empty or blank refuses the start.",
+    )
     composition_passes: int = Field(
         default=1,
         ge=1,

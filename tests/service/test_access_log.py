@@ -114,6 +114,8 @@ def test_a_bad_setting_is_one_line_not_a_traceback(tmp_path: Path) -> None:
     [
         ({"POSE_CORS_ORIGINS": "http://x"}, [], "a list setting is JSON"),
         ({"POSE_HOST": ""}, [], "POSE_HOST: String should have at least 1 character"),
+        ({"POSE_API_KEY": ""}, [], "POSE_API_KEY: empty or only blanks (an empty key left"),
+        ({"POSE_API_KEY": " \t"}, [], "POSE_API_KEY: empty or only blanks"),
         ({"PROMETHEUS_MULTIPROC_DIR": "/nonexistent-folder"}, [], "is no folder"),
     ],
 )
@@ -123,7 +125,8 @@ def test_a_start_refused_says_why_in_one_json_line(
     """An ops audit (2026-12-05): a list setting that is not JSON and a multiprocess
     metrics folder that does not exist were 20-line tracebacks (exit 1), an empty
     POSE_HOST bound every interface, and the start's refusals were the only lines on
-    stderr that were not JSON."""
+    stderr that were not JSON. An empty POSE_API_KEY served /v1 with no key (a later
+    audit); a blank one would have refused every /v1 request."""
     import os
     import subprocess
 
