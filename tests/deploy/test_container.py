@@ -341,7 +341,11 @@ def test_memory_stays_within_the_kubernetes_request_and_limit(
     """Once ready the service's RSS is within the Deployment's memory request, and its
     peak under the heaviest loads the default limits admit (:func:`heavy_loads`, one kind
     after the other, each kind's requests all at once) stays under 85 % of its limit: a
-    pod is not killed for what the service lets in. Every answer is a 200, a 429 or a 504."""
+    pod is not killed for what the service lets in. Every answer is a 200, a 429 or a 504.
+    Once the burst is over, the RSS it keeps (the allocator does not give the memory of
+    those requests back to the system: 378-471 MiB from 265 once ready) is within the
+    request too: a pod is scheduled for what it holds after a burst, not only at start (the
+    request was 320 Mi, below the 385 MiB a pod kept after this burst; an ops audit)."""
     request_mib, limit_mib = k8s_memory_mib(k8s)
     ready = vm(engine, service.name, "VmRSS")
     figures["rss_mib_ready"] = f"{ready:.0f}"
@@ -362,7 +366,11 @@ def test_memory_stays_within_the_kubernetes_request_and_limit(
         assert set(codes) <= {200, 429, 504} and len(codes) == n, (path, sorted(set(codes)))
     peak = vm(engine, service.name, "VmHWM")
     figures["rss_mib_peak"] = f"{peak:.0f}"
+    time.sleep(5)  # every answer sent: what stays is what the pod keeps (flat for 60 s after)
+    after = vm(engine, service.name, "VmRSS")
+    figures["rss_mib_after_burst"] = f"{after:.0f}"
     assert peak <= 0.85 * limit_mib, (peak, limit_mib)
+    assert after <= request_mib, (after, request_mib)
     assert status(service.client, "/v2/health/ready") == 200
 
 
