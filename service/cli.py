@@ -30,9 +30,18 @@ def refuse(*details: str) -> NoReturn:
 
 try:  # importing the settings imports the kernels: their cache folder is chosen then
     from service.logs import log_config
-    from service.settings import SHARED_DIR, Settings, unknown_variables
+    from service.settings import SECRET_SETTINGS, SHARED_DIR, Settings, unknown_variables
 except CacheDirError as exc:  # one line, not a traceback
     refuse(f"pose-service: {exc}")
+
+
+def _shown(error: Any) -> str:
+    """What a refused setting's line says of the value it got: never a secret's (the
+    line goes to the logs; ``SECRET_SETTINGS``), whose length alone is told."""
+    got = error.get("input")
+    if error["loc"] and error["loc"][0] in SECRET_SETTINGS:
+        return f"not shown: a secret, {len(str(got))} characters"
+    return f"got {got!r}"
 
 
 def _workers(text: str) -> int:
@@ -66,7 +75,7 @@ def main(argv: list[str] | None = None) -> None:
     except ValidationError as exc:  # one line per setting, not a traceback
         refuse(*(
             f"POSE_{'_'.join(str(x) for x in e['loc']).upper()}: {e['msg']} "
-            f"(got {e.get('input')!r})"
+            f"({_shown(e)})"
             for e in exc.errors(include_url=False)
         ))  # fmt: skip
     except SettingsError as exc:  # a list setting that is not JSON (POSE_CORS_ORIGINS)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from functools import lru_cache
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated, Literal, get_args
 
 from pydantic import BeforeValidator, Field, SecretStr
 from pydantic_core import PydanticCustomError
@@ -123,6 +123,12 @@ SHARED_DIR = "PROMETHEUS_MULTIPROC_DIR"
 #: ``POSE_*`` variables read by something else than the settings (a start does not call
 #: them unknown): the image's health check's route (docker/healthcheck.py).
 OTHER_VARIABLES = ("POSE_HEALTH_PATH",)
+
+#: Settings whose values are secrets (``SecretStr``): a refused start names them and never
+#: echoes their value (``service.cli``).
+SECRET_SETTINGS: frozenset[str] = frozenset(
+    name for name, f in Settings.model_fields.items() if SecretStr in get_args(f.annotation)
+)
 
 
 def unknown_variables(environ: dict[str, str]) -> list[str]:

@@ -116,6 +116,7 @@ def test_a_bad_setting_is_one_line_not_a_traceback(tmp_path: Path) -> None:
         ({"POSE_HOST": ""}, [], "POSE_HOST: String should have at least 1 character"),
         ({"POSE_API_KEY": ""}, [], "POSE_API_KEY: empty or only blanks (an empty key left"),
         ({"POSE_API_KEY": " \t"}, [], "POSE_API_KEY: empty or only blanks"),
+        ({"POSE_API_KEY": "  "}, [], "(not shown: a secret, 2 characters)"),
         ({"PROMETHEUS_MULTIPROC_DIR": "/nonexistent-folder"}, [], "is no folder"),
     ],
 )
@@ -140,6 +141,7 @@ def test_a_start_refused_says_why_in_one_json_line(
     lines = [json.loads(line) for line in proc.stderr.splitlines()]
     assert len(lines) == 1 and lines[0]["event"] == "start_refused", proc.stderr
     assert said in lines[0]["detail"], lines
+    assert "got" not in lines[0]["detail"] or "POSE_API_KEY" not in lines[0]["detail"]
 
 
 def test_workers_are_at_least_one_and_the_health_path_is_a_known_variable() -> None:
