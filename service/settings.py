@@ -18,18 +18,27 @@ BUNDLED_MODELS = Path(__file__).resolve().parent.parent / "models"
 
 
 def _not_blank(value: object) -> object:
-    """Refuse an API key that is empty or only blanks. An empty ``POSE_API_KEY`` turned
-    authentication off without a word (an ops audit): a deployment whose secret came out
-    empty (a secretKeyRef to an empty value, ``POSE_API_KEY=$UNSET_VARIABLE``) served /v1
-    to anyone while its operator believed it guarded. A key of blanks no client can send
-    (HTTP parsers skip the blanks before a header's value: it arrives empty), so every /v1
-    request would be a 401. Refused as other settings are (``service.cli``: one
-    ``start_refused`` line, exit 2); unset the variable to serve /v1 without a key."""
+    """Refuse an API key that is empty or only blanks, or that has blanks around it. An
+    empty ``POSE_API_KEY`` turned authentication off without a word (an ops audit): a
+    deployment whose secret came out empty (a secretKeyRef to an empty value,
+    ``POSE_API_KEY=$UNSET_VARIABLE``) served /v1 to anyone while its operator believed it
+    guarded. A key of blanks, or with blanks around it, no client can send (HTTP parsers
+    skip the blanks around a header's value), so every /v1 request would be a 401. Refused
+    as other settings are (``service.cli``: one ``start_refused`` line, exit 2); unset the
+    variable to serve /v1 without a key."""
     if isinstance(value, str) and not value.strip():
         raise PydanticCustomError(
             "blank_api_key",
             "empty or only blanks (an empty key left /v1 open, blanks no client can send): "
             "set the key, or unset POSE_API_KEY to serve /v1 without one",
+        )
+    if isinstance(value, str) and value != value.strip():
+        # (a Secret made from a file that ends in a newline: the key no client sends, as a
+        # header's value arrives without them, and every /v1 request a 401 with no hint)
+        raise PydanticCustomError(
+            "padded_api_key",
+            "blanks or a newline before or after the key (a Secret made from a file that "
+            "ends in a newline?): no client sends them; remove them",
         )
     return value
 
@@ -79,7 +88,7 @@ class Settings(BaseSettings):
     api_key: Annotated[SecretStr | None, BeforeValidator(_not_blank)] = Field(
         default=None,
         description="The key /v1 requests must send (X-API-Key or Authorization: Bearer); "
-        "unset, /v1 is open. Empty or blank refuses the start.",
+        "unset, /v1 is open. Empty, blank or with blanks around it refuses the start.",
     )
     composition_passes: int = Field(
         default=1,

@@ -117,6 +117,7 @@ def test_a_bad_setting_is_one_line_not_a_traceback(tmp_path: Path) -> None:
         ({"POSE_API_KEY": ""}, [], "POSE_API_KEY: empty or only blanks (an empty key left"),
         ({"POSE_API_KEY": " \t"}, [], "POSE_API_KEY: empty or only blanks"),
         ({"POSE_API_KEY": "  "}, [], "(not shown: a secret, 2 characters)"),
+        ({"POSE_API_KEY": "s3cret\n"}, [], "POSE_API_KEY: blanks or a newline before or after"),
         ({"PROMETHEUS_MULTIPROC_DIR": "/nonexistent-folder"}, [], "is no folder"),
     ],
 )

@@ -582,6 +582,10 @@ def test_gate_rejections_carry_cors_and_keys_are_strict(
     for blank in ("", "  "):
         with pytest.raises(ValidationError, match="empty or only blanks"):
             Settings(models_dir=models_dir, api_key=blank)
+    for padded in ("s3cret\n", " s3cret", "s3cret\t"):  # (a Secret made from a file)
+        with pytest.raises(ValidationError, match="blanks or a newline before or after"):
+            Settings(models_dir=models_dir, api_key=padded)
+    assert Settings(models_dir=models_dir, api_key="s3 cret").api_key is not None
     assert Settings(models_dir=models_dir).api_key is None  # unset: no key, as documented
 
 
