@@ -19,7 +19,10 @@ and targets. Per set and method, over every frame step of every clip:
 * flips: an arm or leg bent 5 cm or more in both frames whose bend turns to the other side
   (more than a right angle) between them (:func:`flips`; the clips' own, beside): an
   elbow or knee swapping sides between two nearly equal edits (``serving.bend_side``,
-  docs/generalisation-3.md item 52).
+  docs/generalisation-3.md item 52);
+* and over every frame, the dragged targets' miss (the farthest one's distance): its mean
+  and the frames missing by more than 1 cm (a smoother answer that leaves its target is
+  no cleaner clip: ``options.soft_ik``, item 56).
 """
 
 from __future__ import annotations
@@ -126,6 +129,7 @@ def edit_steps(engine: Any, points: np.ndarray, rng: np.random.Generator) -> dic
             edit = np.asarray(ans.pose) - points
             steps[column] = np.linalg.norm(np.diff(edit, axis=0), axis=-1).max(axis=-1)
             steps[f"{column} flips"] = flips(np.asarray(ans.pose))
+            steps[f"{column} miss"] = np.asarray(ans.errors)[:, : len(dragged)].max(axis=-1)
         steps["clip flips"] = flips(points)
         out[name] = steps
     return out
@@ -134,10 +138,11 @@ def edit_steps(engine: Any, points: np.ndarray, rng: np.random.Generator) -> dic
 def table(rows: dict[str, dict[str, list[np.ndarray]]]) -> list[str]:
     """Markdown lines: per set, the frame steps, the motion's p99 and max (mm) and the
     clip's own flips; per column the edit's largest step (mm), the jumps (steps beyond
-    :data:`JUMP` and :data:`GAIN` times the motion) and the flips (:func:`flips`)."""
+    :data:`JUMP` and :data:`GAIN` times the motion), the flips (:func:`flips`) and the
+    dragged targets' miss: its mean (mm) and the frames missing by more than 1 cm."""
     cols = [c for c, _ in METHODS]
     head = ["set", "frame steps", "motion p99 / max mm", "clip flips",
-            *(f"{c}: step max mm / jumps / flips" for c in cols)]  # fmt: skip
+            *(f"{c}: step max mm / jumps / flips / miss mm / > 1 cm" for c in cols)]  # fmt: skip
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for name, per in rows.items():
         motion = np.concatenate(per["motion"])
@@ -148,7 +153,9 @@ def table(rows: dict[str, dict[str, list[np.ndarray]]]) -> list[str]:
             s = np.concatenate(per[c])
             jumps = int(((s > JUMP) & (s > GAIN * motion)).sum())
             flipped = int(np.concatenate(per[f"{c} flips"]).sum())
-            cells.append(f"{s.max() * 1000:.0f} / {jumps} / {flipped}")
+            miss = np.concatenate(per[f"{c} miss"])
+            cells.append(f"{s.max() * 1000:.0f} / {jumps} / {flipped} / "
+                         f"{miss.mean() * 1000:.1f} / {int((miss > 0.01).sum())}")  # fmt: skip
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
     return lines
 

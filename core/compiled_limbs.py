@@ -18,6 +18,7 @@ from core.ends import BELOW as _ENDS_BELOW
 from core.ends import CHAINS as _CHAINS
 from core.ends import COLLARS as _ENDS_COLLARS
 from core.ends import PREFER as _PREFER
+from core.ends import SOFT_IK_LIMB as _SOFT_IK_LIMB
 from core.ends import TINY as _ENDS_TINY
 from core.jit import jit
 from core.skeleton import JOINT_INDEX, NUM_JOINTS, PARENTS
@@ -208,8 +209,9 @@ def ends_item(
         for i in range(3):
             u[i] = u[i] / d0
         d = d0
-        if soft > 0.0 and d0 > a + b - soft:  # core.ends.soft_reach
-            d = (a + b) - soft * np.exp(-(d0 - ((a + b) - soft)) / soft)
+        k = min(soft, _SOFT_IK_LIMB * (a + b))  # core.ends.soft_reach
+        if k > 0.0 and d0 > a + b - k:
+            d = (a + b) - k * np.exp(-(d0 - ((a + b) - k)) / k)
         d = min(max(d, abs(a - b)), a + b)
         along = (e0[0] - s[0]) * u[0] + (e0[1] - s[1]) * u[1] + (e0[2] - s[2]) * u[2]
         for i in range(3):

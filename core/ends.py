@@ -153,6 +153,9 @@ def kept_chains(targets: Iterable[int], chains: npt.NDArray[np.bool_] | None = N
 #: The largest ``soft`` distance a request may ask for (m; the API's ``soft_ik``): a tenth
 #: of an adult arm, past which a limb never gets near straight.
 SOFT_IK_MAX: Final[float] = 0.1
+#: ... and at most this share of the limb's own reach (a doll's arm of 10 cm asked to ease
+#: over 10 cm would fold: :func:`soft_reach`).
+SOFT_IK_LIMB: Final[float] = 0.25
 
 
 def soft_reach(d: F64, reach: F64, soft: npt.ArrayLike) -> F64:
@@ -162,9 +165,12 @@ def soft_reach(d: F64, reach: F64, soft: npt.ArrayLike) -> F64:
     derivative and never quite ``reach``, so that the elbow or knee no longer swings from
     bent to straight as the goal crosses the limb's reach (its distance off the line grows
     as the square root of how far inside the reach the end is); the end falls short of
-    the goal by at most ``soft / e`` where the goal lies at ``reach``. Per element."""
+    the goal by at most ``soft / e`` where the goal lies at ``reach``. ``soft`` is taken
+    at most :data:`SOFT_IK_LIMB` times ``reach`` (larger, the eased distance went to zero
+    or below, and the limb folded onto its top). Per element."""
     d = np.asarray(d, dtype=np.float64)
-    k = np.broadcast_to(np.asarray(soft, dtype=np.float64), d.shape)
+    asked = np.broadcast_to(np.asarray(soft, dtype=np.float64), d.shape)
+    k = np.minimum(asked, SOFT_IK_LIMB * np.asarray(reach, dtype=np.float64))
     knee = reach - k
     over = (k > 0.0) & (d > knee)
     if not over.any():

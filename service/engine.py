@@ -416,8 +416,10 @@ class Engine:
 
     def _short(self, items: _Items, ans: BatchAnswer) -> npt.NDArray[np.intp]:
         """The soft neural items (bone lengths kept) of ``ans`` whose farthest user target
-        is more than ``serving.retry_reach`` away."""
-        far = items.farthest(ans.errors) > self.serving.retry_reach
+        is more than ``serving.retry_reach`` away, plus ``soft_ik / e`` for an item asked to
+        ease into full stretch (the shortfall it asked for: neither a retry nor the polish,
+        which straightens the limb, is for that)."""
+        far = items.farthest(ans.errors) > self.serving.retry_reach + items.soft_ik / np.e
         out: npt.NDArray[np.intp] = np.flatnonzero(far & ~items.fab & ~items.ex & items.keep)
         return out
 
@@ -429,10 +431,8 @@ class Engine:
         body moved across: :meth:`exact_fallback`) (``serving.retry_polish``,
         docs/generalisation-serving-2.md item 37). Its ``solvers`` end with ``fabrik-polish``
         (once: a path that already ends with it is not given it twice). An
-        item the polish would leave no nearer (the iteration cap) keeps its answer, and so
-        does one asked to ease into full stretch (``soft_ik``), which the polish straightens."""
+        item the polish would leave no nearer (the iteration cap) keeps its answer."""
         sel = self._short(items, ans)
-        sel = sel[items.soft_ik[sel] == 0.0]  # (asked to ease into full stretch: left so)
         if sel.size == 0:
             return ans
         short = dataclasses.replace(items.take(sel), poses=compiled.as_f64(ans.pose[sel]))

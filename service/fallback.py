@@ -9,9 +9,11 @@ as the caller's start has it. The turn search's critic (``serving.turn_critic``,
 completion networks make of its key points) tells such answers: where it finds the neural
 answer more than ``critic_fabrik`` metres further from a real body than FABRIK's answer
 to the same edit, and FABRIK's answer reaches every target and pin within the item's
-tolerance, the edit is answered by FABRIK (its solver path ends with ``fabrik-critic``).
-An answer FABRIK cannot give (a target out of its chains' reach from where the body
-stands, which the networks may reach by moving the body) stays the networks'.
+tolerance, the edit is answered by FABRIK (its solver path: the networks' solvers, which
+ran, then ``fabrik-critic``). An answer FABRIK cannot give (a target out of its chains'
+reach from where the body stands, which the networks may reach by moving the body) stays
+the networks', and so does an edit asked to ease into full stretch (``soft_ik``): a switch
+between two answers is not smooth, and FABRIK's does not ease.
 
 Per item, in the same kernels as any FABRIK edit: an item's answer does not depend on
 its batch. FABRIK runs only for the items the networks answered with bone lengths kept
@@ -20,13 +22,12 @@ whose own score is above the margin (no FABRIK answer can then be better by more
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
 
-from service.problems import BatchAnswer, _Items
+from service.problems import BatchAnswer, Solve, _Items
 from service.turns import implausibility
 
 if TYPE_CHECKING:
@@ -34,10 +35,6 @@ if TYPE_CHECKING:
 
 #: The end of the solver path of an edit answered by FABRIK instead of the networks.
 STEP = "fabrik-critic"
-
-
-#: :meth:`Engine._solve_items`: items and their passes to their answers
-Solve = Callable[[_Items, npt.NDArray[np.int64]], BatchAnswer]
 
 
 def prefer_fabrik(engine: Engine, asked: _Items, ans: BatchAnswer, solve: Solve) -> BatchAnswer:
@@ -48,7 +45,9 @@ def prefer_fabrik(engine: Engine, asked: _Items, ans: BatchAnswer, solve: Solve)
     margin = engine.serving.critic_fabrik
     if margin <= 0.0 or ans.pose.shape[0] == 0:
         return ans
-    sel = np.flatnonzero(~asked.fab & asked.keep)
+    # (an edit asked to ease into full stretch is left to the networks: a switch between
+    # two answers is no smooth answer, and FABRIK's does not ease)
+    sel = np.flatnonzero(~asked.fab & asked.keep & (asked.soft_ik == 0.0))
     if sel.size == 0:
         return ans
     mine = implausibility(engine, ans.pose[sel], asked.floors[sel])
@@ -67,6 +66,10 @@ def prefer_fabrik(engine: Engine, asked: _Items, ans: BatchAnswer, solve: Solve)
         return ans
     rows = sel[better]
     was = ans.take(rows)
-    paths = tuple((*path, STEP) for path in was.paths)
+    # the networks' solvers (they ran, and lost), then this step: not the turn, polish or
+    # pin steps of an answer that is not given
+    paths = tuple(
+        (*(s for s in path if s in engine.manifest.solvers()), STEP) for path in was.paths
+    )
     chosen = fab.take(better)
     return ans.with_items(rows, dataclasses.replace(chosen, paths=paths, path_of=was.path_of))

@@ -8,7 +8,7 @@ The engine (:mod:`service.engine`) works on these; the HTTP layer builds
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, fields
 from typing import Any
 
@@ -165,6 +165,8 @@ class _Items:
     def of_problem(p: SolveProblem, carry: float, mirror: bool) -> _Items:
         """One problem as a batch of one (``carry``, ``mirror``: what it asks for), as
         :meth:`of_arrays` makes it from :func:`stacked` ``([p])``."""
+        if not (0.0 <= carry <= 1.0 and 0.0 <= p.soft_ik <= SOFT_IK_MAX):  # as of_arrays
+            raise ValueError(f"carry must be in [0, 1], soft_ik in [0, {SOFT_IK_MAX}] m")
         tidx, k = compiled.as_i64(p.target_idx), len(p.target_idx)
         # each per-item option a one-element view of one array per dtype (an array each
         # cost 1-2 us: a third of a lean solve's Python before this)
@@ -258,6 +260,11 @@ class _Items:
             self.w[sel], no, ~no, no, self.tols[sel], self.floors[sel], self.carry[sel],
             self.turn[sel], self.asked_soft[sel], self.mirror[sel], self.soft_ik[sel],
         )  # fmt: skip
+
+
+#: :meth:`service.engine.Engine._solve_items`: items and their passes to their answers (what
+#: the turn search and the critic's FABRIK solve with).
+Solve = Callable[[_Items, npt.NDArray[np.int64]], BatchAnswer]
 
 
 @dataclass(frozen=True)

@@ -141,12 +141,14 @@ class SolveOptions(_Body):
         default=0.0,
         ge=0.0,
         le=SOFT_IK_MAX,
-        description="Metres over which a targeted wrist's or ankle's limb eases into full "
-        "stretch (soft IK): its elbow or knee no longer swings from bent to straight as the "
-        "target crosses the limb's reach, and a cleaned clip no longer pops there; the "
-        "limb then falls short of full stretch by up to `soft_ik`/e (exact reach still "
-        "polishes onto the target). 0 (default): none. 0.01 for clip clean-up "
-        "(docs/service.md). `method: fabrik` ignores it.",
+        description="Metres over which a kept limb (a targeted wrist's or ankle's arm or "
+        "leg, a lone targeted elbow's collar and shoulder) eases into full stretch (soft "
+        "IK; at most a quarter of the limb's reach): its elbow or knee no longer swings "
+        "from bent to straight as the target crosses the limb's reach, and a cleaned clip "
+        "no longer pops there; the end falls short of full stretch by up to `soft_ik`/e "
+        "(exact reach still polishes onto the target; a soft answer is retried and "
+        "polished only when short by more than that too). 0 (default): none. 0.01 for "
+        "clip clean-up (docs/service.md). `method: fabrik` ignores it.",
     )
 
 

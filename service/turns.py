@@ -39,7 +39,6 @@ for that form (measured, not shipped: docs/generalisation-serving-2.md item 40).
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Literal
 
@@ -49,7 +48,7 @@ import numpy.typing as npt
 from core.geometry import canonicalise
 from core.manifest import Serving
 from service import completion
-from service.problems import PELVIS, BatchAnswer, _Items
+from service.problems import PELVIS, BatchAnswer, Solve, _Items
 
 if TYPE_CHECKING:  # pragma: no cover
     from service.engine import Engine
@@ -196,7 +195,7 @@ class Turns:
 
 def search(
     engine: Engine, items: _Items, reps: npt.NDArray[np.int64],
-    solve: Callable[[_Items, npt.NDArray[np.int64]], BatchAnswer],
+    solve: Solve,
 ) -> tuple[_Items, Turns, Known | None]:  # fmt: skip
     """``items`` with the start of every searching item turned as the search chose, what
     it did to each (:class:`Turns`), and the answers it already has: a soft
@@ -252,7 +251,7 @@ def search(
 
 def _candidates(
     engine: Engine, items: _Items, reps: npt.NDArray[np.int64], sel: npt.NDArray[np.intp],
-    steps: npt.NDArray[np.int64], solve: Callable[[_Items, npt.NDArray[np.int64]], BatchAnswer],
+    steps: npt.NDArray[np.int64], solve: Solve,
 ) -> tuple[F64, BatchAnswer, F64]:  # fmt: skip
     """Items ``sel`` solved soft from their starts turned by ``steps`` (of the search's
     ``yaws`` steps; 0 unturned) in one batch (with ``quick``: one pass, no mirror image),

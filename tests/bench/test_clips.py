@@ -39,8 +39,9 @@ def test_a_row_per_set_with_each_method(bvh_files: dict[str, Path], models_dir: 
         cells = [c.strip() for c in row.strip("|").split("|")]
         assert cells[:2] == [name, "39"] and cells[3] == "0"
         for cell in cells[4:]:
-            step, jumps, flipped = (float(x) for x in cell.split("/"))
+            step, jumps, flipped, miss, far = (float(x) for x in cell.split("/"))
             assert 0.0 < step < 1000.0 and 0 <= jumps <= 39 and 0 <= flipped <= 4 * 39
+            assert 0.0 <= miss < 1000.0 and 0 <= far <= 40
 
 
 def test_files_and_settings_it_cannot_use_are_one_line_errors(

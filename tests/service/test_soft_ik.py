@@ -88,3 +88,61 @@ def test_bad_soft_ik_is_422_naming_the_field(
     client: Any, real_poses: PosePairs, value: object
 ) -> None:
     assert_bad_option(client, real_poses, "soft_ik", value)
+
+
+def test_the_engine_refuses_it_out_of_range_alone_as_in_a_batch(
+    engine: Engine, real_poses: PosePairs
+) -> None:
+    """A lone edit (the lean path) was solved with ``soft_ik`` 0.5, NaN or -0.01, where
+    the same edit in a batch of two was refused (a review)."""
+    edit = across_the_reach(real_poses, 0, "left")[0]
+    for bad in (0.5, float("nan"), -0.01):
+        wrong = dataclasses.replace(edit, soft_ik=bad)
+        for batch in ([wrong], [wrong, edit]):
+            with pytest.raises(ValueError, match="soft_ik"):
+                engine.solve(batch)
+
+
+def test_a_doll_asked_the_largest_ease_keeps_its_arm(engine: Engine, real_poses: PosePairs) -> None:
+    """A body a tenth of the size (an arm of about 5 cm) asked to ease over 10 cm: the
+    easing was larger than the arm's reach, the eased distance went below zero, and the
+    answer was all NaN (equal bones) or the arm folded onto its shoulder; now the easing
+    is at most a quarter of the limb's reach (``core.ends.SOFT_IK_LIMB``)."""
+    edits = across_the_reach(real_poses, 1, "right")
+    doll = [
+        dataclasses.replace(p, pose=0.1 * p.pose, target_pos=0.1 * p.target_pos, soft_ik=0.1,
+                            reach=reach)
+        for p in edits[::10] for reach in ("soft", "exact")
+    ]  # fmt: skip
+    top, end = JOINT_INDEX["right_shoulder"], JOINT_INDEX["right_wrist"]
+    for p, r in zip(doll, engine.solve(doll), strict=True):
+        assert np.all(np.isfinite(r.pose)) and r.max_bone_error <= 1e-5
+        reach = np.linalg.norm(np.diff(p.pose[[top, JOINT_INDEX["right_elbow"], end]], axis=0),
+                               axis=-1).sum()  # fmt: skip
+        assert np.linalg.norm(r.pose[end] - r.pose[top]) > 0.7 * reach  # not folded
+
+
+def test_the_retry_and_polish_still_serve_an_eased_edit_beyond_its_ease(
+    engine: Engine, real_poses: PosePairs
+) -> None:
+    """A soft edit asked to ease is retried and polished as any other once it is short by
+    more than the retry's reach plus the ease it asked for (``soft_ik`` / e): an edit
+    with ``soft_ik`` 1e-9, which eases nothing, was left 15 cm short where 0 reached
+    within millimetres (the polish was skipped for any ``soft_ik`` > 0: a review)."""
+    rng = np.random.default_rng(7)
+    wrists = np.asarray([JOINT_INDEX["left_wrist"], JOINT_INDEX["right_wrist"]])
+    edits = []
+    for k in range(24):
+        pose = real_poses.poses[real_poses.starts[k]]
+        away = rng.normal(size=(2, 3))
+        goal = pose[wrists] + 0.3 * away / np.linalg.norm(away, axis=-1, keepdims=True)
+        edits.append(SolveProblem(pose=pose, target_idx=wrists, target_pos=goal,
+                                  weights=np.ones(2), n_targets=2))  # fmt: skip
+    reach = engine.serving.retry_reach
+    for soft in (1e-9, 0.01):
+        plain = engine.solve(edits)
+        eased = engine.solve([dataclasses.replace(p, soft_ik=soft) for p in edits])
+        for a, b in zip(plain, eased, strict=True):
+            # at most the ease asked for more than without it (a target out of reach: both
+            # as near as the arm goes)
+            assert b.errors.max() <= max(a.errors.max(), reach) + soft / np.e + 1e-6, soft
