@@ -52,6 +52,10 @@ function wireControls() {
   for (const input of document.querySelectorAll('input[name=method], #exact, #preserve, #tolerance, #turn-search')) {
     input.addEventListener('change', () => requestSolve(true));
   }
+  $('soft-ik').addEventListener('change', (ev) => {
+    if (ev.target.value === '') ev.target.value = '0'; // emptied: off, and shown so
+    requestSolve(true);
+  });
   $('carry').addEventListener('change', (ev) => {
     ev.target.dataset.touched = '1';
     $('carry-label').textContent = ev.target.valueAsNumber.toFixed(2);

@@ -26,6 +26,7 @@ from tests.service.editor_page import (
     REPO_ROOT,
     M,
     drag_joint,
+    give_file,
     open_editor,
     post_json,
     settle,
@@ -366,3 +367,113 @@ def test_editor_undo_across_a_sample_change_restores_that_sample(server: str, br
         assert not errors, errors
     finally:
         page.context.close()
+
+
+@pytest.mark.browser
+def test_editor_sends_soft_ik_in_metres_and_re_solves_when_it_changes(
+    server: str, browser: Any
+) -> None:
+    """The Soft IK field (cm; 0 = off) is ``options.soft_ik`` in metres on every solve the
+    page sends (a drag's, an option's re-solve, a file's ``/v1/bvh/solve``), absent when 0;
+    changing it re-solves the current targets once; out of range, the service's 422 is
+    shown; FABRIK's solves carry it too (the service ignores it there)."""
+    context, page, console_errors, page_errors, _, solves = watched_page(
+        browser, 20_000, "/v1/solve"
+    )
+    bvh_solves: list[dict[str, Any]] = []
+    page.on(
+        "request",
+        lambda r: (
+            bvh_solves.append(json.loads(r.post_data or "{}"))
+            if r.url.endswith("/v1/bvh/solve")
+            else None
+        ),
+    )
+
+    def set_soft_ik(cm: str) -> None:
+        field.fill(cm)
+        field.press("Tab")  # a number field's change: on leaving it, as a user does
+        settle(page)
+
+    try:
+        page.goto(server + "/editor")
+        page.wait_for_function(f"() => {M} && {M}.ready()")
+        page.wait_for_function(
+            "() => document.getElementById('status').textContent === 'connected'"
+        )
+        field = page.get_by_label("Soft IK (cm)")
+        assert field.input_value() == "0"  # off by default, as the service
+
+        # -- off: a drag's solves carry no soft_ik ---------------------------------------
+        drag_joint(page, "left_wrist", 60, -90)
+        assert solves, "dragging sent no /v1/solve"
+        assert all(s["options"].get("soft_ik", 0) == 0 for s in solves)
+        assert "soft_ik" not in page.evaluate(f"{M}.options()")
+
+        # -- 1 cm: the current targets re-solved once, with 0.01 m -----------------------
+        n = len(solves)
+        set_soft_ik("1")
+        assert len(solves) == n + 1, "changing Soft IK did not re-solve"
+        assert solves[-1]["options"]["soft_ik"] == 0.01
+        assert [t["joint"] for t in solves[-1]["targets"]] == ["left_wrist"]
+        last = page.evaluate(f"{M}.lastSolve()")
+        assert last["request"]["options"]["soft_ik"] == 0.01
+        assert page.evaluate(f"{M}.error()") is None
+        # the pose drawn is the service's answer to that request
+        assert post_json(server + "/v1/solve", last["request"])["pose"] == page.evaluate(
+            f"{M}.pose()"
+        )
+
+        # -- a drag with it on: every solve of the gesture carries it ---------------------
+        n = len(solves)
+        drag_joint(page, "right_wrist", -60, -90)
+        assert len(solves) > n
+        assert all(s["options"]["soft_ik"] == 0.01 for s in solves[n:])
+        assert page.evaluate(f"{M}.exportDocument()")["options"]["soft_ik"] == 0.01
+
+        # -- FABRIK: sent as well, ignored by the service (no error) ----------------------
+        page.locator(".segmented label", has_text="FABRIK").click()
+        settle(page)
+        assert solves[-1]["options"]["method"] == "fabrik"
+        assert solves[-1]["options"]["soft_ik"] == 0.01
+        assert page.evaluate(f"{M}.error()") is None
+        page.locator(".segmented label", has_text="Neural").click()
+        settle(page)
+
+        # -- out of range (12 cm > 10): the service's 422 names it; 0 puts it off --------
+        n = len(solves)
+        field.fill("12")
+        field.press("Tab")
+        page.wait_for_function(f"() => {M}.error() !== null")
+        assert solves[n]["options"]["soft_ik"] == 0.12
+        err = page.evaluate(f"{M}.error()")
+        assert err["status"] == 422, err
+        assert "soft_ik" in err["detail"], err
+        n = len(solves)
+        set_soft_ik("0")
+        page.wait_for_function(f"() => {M}.error() === null")
+        assert len(solves) == n + 1
+        assert "soft_ik" not in solves[-1]["options"]
+
+        # -- 0.5 cm, then a file: its /v1/bvh/solve requests carry 0.005 m ---------------
+        n = len(solves)
+        set_soft_ik("0.5")
+        assert len(solves) == n + 1
+        assert solves[-1]["options"]["soft_ik"] == 0.005
+        text = json.loads((REPO_ROOT / "docs" / "examples" / "bvh_solve.json").read_text())["bvh"]
+        give_file(page, text, "three.bvh")
+        page.wait_for_function(f"() => {M}.bvh() && {M}.bvh().name === 'three.bvh'")
+        drag_joint(page, "left_wrist", 40, -60)
+        assert bvh_solves, "dragging the file's wrist sent no /v1/bvh/solve"
+        assert all(s["options"]["soft_ik"] == 0.005 for s in bvh_solves)
+        n = len(bvh_solves)
+        set_soft_ik("2")  # ... and a change re-solves the file's target
+        assert len(bvh_solves) == n + 1
+        assert bvh_solves[-1]["options"]["soft_ik"] == 0.02
+        assert page.evaluate(f"{M}.error()") is None
+
+        assert page_errors == []
+        unexpected = [e for e in console_errors if not e.startswith("Failed to load resource")]
+        assert unexpected == [], unexpected  # (only the forced 422's own line)
+    finally:
+        context.close()

@@ -178,6 +178,10 @@ export function options() {
   // the models' own default (GET /v1/models) until the slider is moved
   if ($('carry').dataset.touched) out.carry = $('carry').valueAsNumber;
   if (!$('turn-search').checked) out.turn_search = false; // checked: the models' default
+  // soft IK: the field in cm, sent in metres; 0 (off, the service's default) is not sent.
+  // Out of range (over 10 cm, negative) it is sent as typed: the service's 422 says so.
+  const softIk = $('soft-ik').valueAsNumber;
+  if (!Number.isNaN(softIk) && softIk !== 0) out.soft_ik = softIk / 100;
   return out;
 }
 
