@@ -177,10 +177,11 @@ class _Items:
              p.turn_search is not False, p.reach != "exact", mirror], dtype=np.bool_,
         )  # fmt: skip
         return _Items(
-            compiled.as_f64(p.pose)[None], tidx[None],
-            compiled.as_f64(p.target_pos).reshape(1, k, 3), ints[0:1], ints[1:2],
-            compiled.as_f64(p.weights)[None], flags[0:1], flags[1:2], flags[2:3], reals[0:1],
-            reals[1:2], reals[2:3], flags[3:4], flags[4:5], flags[5:6], reals[3:4],
+            poses=compiled.as_f64(p.pose)[None], tidx=tidx[None],
+            tpos=compiled.as_f64(p.target_pos).reshape(1, k, 3), cnt=ints[0:1], n_t=ints[1:2],
+            w=compiled.as_f64(p.weights)[None], fab=flags[0:1], keep=flags[1:2], ex=flags[2:3],
+            tols=reals[0:1], floors=reals[1:2], carry=reals[2:3], turn=flags[3:4],
+            asked_soft=flags[4:5], mirror=flags[5:6], soft_ik=reals[3:4],
         )  # fmt: skip
 
     @staticmethod
@@ -201,13 +202,16 @@ class _Items:
         cnt = _per_item(k_max if counts is None else counts, n, np.int64)
         ex = _per_item(exact, n, np.bool_)
         items = _Items(
-            pose_a, tidx, np.array(target_pos, dtype=np.float64).reshape(n, k_max, 3), cnt,
-            cnt if n_targets is None else _per_item(n_targets, n, np.int64),
-            _per_item(1.0 if weights is None else weights, n, np.float64, k_max),
-            _per_item(fabrik, n, np.bool_), _per_item(preserve_bone_lengths, n, np.bool_), ex,
-            _per_item(tolerance, n, np.float64), _per_item(floor, n, np.float64),
-            _per_item(carry, n, np.float64), _per_item(turn_search, n, np.bool_), ~ex,
-            _per_item(mirror, n, np.bool_), _per_item(soft_ik, n, np.float64),
+            poses=pose_a, tidx=tidx,
+            tpos=np.array(target_pos, dtype=np.float64).reshape(n, k_max, 3), cnt=cnt,
+            n_t=cnt if n_targets is None else _per_item(n_targets, n, np.int64),
+            w=_per_item(1.0 if weights is None else weights, n, np.float64, k_max),
+            fab=_per_item(fabrik, n, np.bool_),
+            keep=_per_item(preserve_bone_lengths, n, np.bool_), ex=ex,
+            tols=_per_item(tolerance, n, np.float64), floors=_per_item(floor, n, np.float64),
+            carry=_per_item(carry, n, np.float64), turn=_per_item(turn_search, n, np.bool_),
+            asked_soft=~ex, mirror=_per_item(mirror, n, np.bool_),
+            soft_ik=_per_item(soft_ik, n, np.float64),
         )  # fmt: skip
         if n and not bool(np.all((items.carry >= 0.0) & (items.carry <= 1.0))):
             raise ValueError("carry must be in [0, 1]")
@@ -255,11 +259,7 @@ class _Items:
         """Items ``sel`` from ``poses`` as a refinement pass solves them: neural, soft
         reach, bone lengths restored."""
         no = np.zeros(len(sel), dtype=np.bool_)
-        return _Items(
-            poses[sel], self.tidx[sel], self.tpos[sel], self.cnt[sel], self.n_t[sel],
-            self.w[sel], no, ~no, no, self.tols[sel], self.floors[sel], self.carry[sel],
-            self.turn[sel], self.asked_soft[sel], self.mirror[sel], self.soft_ik[sel],
-        )  # fmt: skip
+        return dataclasses.replace(self.take(sel), poses=poses[sel], fab=no, keep=~no, ex=no)
 
 
 #: :meth:`service.engine.Engine._solve_items`: items and their passes to their answers (what

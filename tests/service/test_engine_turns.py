@@ -273,10 +273,11 @@ def test_search_ends_early_with_the_answers_of_the_full_search(
         return engine._solve_items(items, reps)
 
     items = _Items(
-        args["poses"], args["target_idx"], args["target_pos"], np.full(n, k), np.full(n, k),
-        np.ones((n, k)), np.zeros(n, bool), np.ones(n, bool), args["exact"],
-        np.full(n, 1e-3), np.zeros(n), np.full(n, engine.serving.carry), np.ones(n, bool),
-        ~args["exact"], np.full(n, engine.serving.solve_mirror), np.zeros(n),
+        poses=args["poses"], tidx=args["target_idx"], tpos=args["target_pos"],
+        cnt=np.full(n, k), n_t=np.full(n, k), w=np.ones((n, k)), fab=np.zeros(n, bool),
+        keep=np.ones(n, bool), ex=args["exact"], tols=np.full(n, 1e-3), floors=np.zeros(n),
+        carry=np.full(n, engine.serving.carry), turn=np.ones(n, bool), asked_soft=~args["exact"],
+        mirror=np.full(n, engine.serving.solve_mirror), soft_ik=np.zeros(n),
     )  # fmt: skip
     reps = np.full(n, engine.serving.passes)
     from service.turns import search
