@@ -2,18 +2,18 @@
 FABRIK's like one (``serving.critic_fabrik``, docs/generalisation-3.md item 55).
 
 The networks answer most edits with a body like the ones they learnt; now and then, on a
-body or a pose unlike those, they answer with one that is not (a spine folded, a hip
-pushed out), where FABRIK, which moves only the chains to the targets, leaves the body
-as the caller's start has it. The turn search's critic (``serving.turn_critic``,
-:func:`service.turns.implausibility`: the mean distance of a pose to the body the
-completion networks make of its key points) tells such answers: where it finds the neural
-answer more than ``critic_fabrik`` metres further from a real body than FABRIK's answer
-to the same edit, and FABRIK's answer reaches every target and pin within the item's
-tolerance, the edit is answered by FABRIK (its solver path: the networks' solvers, which
-ran, then ``fabrik-critic``). An answer FABRIK cannot give (a target out of its chains'
-reach from where the body stands, which the networks may reach by moving the body) stays
-the networks', and so does an edit asked to ease into full stretch (``soft_ik``): a switch
-between two answers is not smooth, and FABRIK's does not ease.
+body or a pose unlike those, they answer with one that is not, where FABRIK, which moves
+only the chains to the targets, leaves the rest of the body as the caller's start has it.
+The turn search's critic (``serving.turn_critic``, :func:`service.turns.implausibility`:
+the mean distance of a pose to the body the completion networks make of its key points)
+tells such answers: where it finds the neural answer more than ``critic_fabrik`` metres
+further from a real body than FABRIK's answer to the same edit, and FABRIK's answer reaches
+every target and pin within the item's tolerance, the edit is answered by FABRIK (its
+solver path: the networks' solvers, which ran, then ``fabrik-critic``). An answer FABRIK
+cannot give (a target out of its chains' reach from where the body stands, which the
+networks may reach by moving the body) stays the networks', and so does an edit asked to
+ease into full stretch (``soft_ik``): a switch between two answers is not smooth, and
+FABRIK's does not ease.
 
 Per item, in the same kernels as any FABRIK edit: an item's answer does not depend on
 its batch. FABRIK runs only for the items the networks answered with bone lengths kept

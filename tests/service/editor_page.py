@@ -226,11 +226,16 @@ def watched_page(
     page.on("pageerror", lambda e: page_errors.append(str(e)))
     urls: list[str] = []
     page.on("request", lambda r: urls.append(r.url))
-    solves: list[dict[str, Any]] = []
+    solves = recorded(page, lambda url: url.endswith(solve_path))
+    return context, page, console_errors, page_errors, urls, solves
+
+
+def recorded(page: Any, wanted: Any) -> list[dict[str, Any]]:
+    """The JSON bodies of the requests ``page`` sends to a URL ``wanted(url)`` accepts,
+    appended as they go out."""
+    bodies: list[dict[str, Any]] = []
     page.on(
         "request",
-        lambda r: (
-            solves.append(json.loads(r.post_data or "{}")) if r.url.endswith(solve_path) else None
-        ),
+        lambda r: bodies.append(json.loads(r.post_data or "{}")) if wanted(r.url) else None,
     )
-    return context, page, console_errors, page_errors, urls, solves
+    return bodies

@@ -29,6 +29,7 @@ from tests.service.editor_page import (
     give_file,
     open_editor,
     post_json,
+    recorded,
     settle,
     watched_page,
 )
@@ -380,15 +381,7 @@ def test_editor_sends_soft_ik_in_metres_and_re_solves_when_it_changes(
     context, page, console_errors, page_errors, _, solves = watched_page(
         browser, 20_000, "/v1/solve"
     )
-    bvh_solves: list[dict[str, Any]] = []
-    page.on(
-        "request",
-        lambda r: (
-            bvh_solves.append(json.loads(r.post_data or "{}"))
-            if r.url.endswith("/v1/bvh/solve")
-            else None
-        ),
-    )
+    bvh_solves = recorded(page, lambda url: url.endswith("/v1/bvh/solve"))
 
     def set_soft_ik(cm: str) -> None:
         field.fill(cm)

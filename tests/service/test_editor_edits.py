@@ -21,6 +21,7 @@ from tests.service.editor_page import (
     give_file,
     held_drag,
     open_editor,
+    recorded,
     release,
     settle,
 )
@@ -669,13 +670,7 @@ def test_editor_keeps_pins_and_targets_when_the_file_is_read_again(
     page = open_editor(browser, server)
     errors: list[str] = []
     page.on("pageerror", lambda e: errors.append(str(e)))
-    sent: list[dict[str, Any]] = []
-    page.on(
-        "request",
-        lambda r: (
-            sent.append(json.loads(r.post_data or "{}")) if "/v1/bvh/solve" in r.url else None
-        ),
-    )
+    sent = recorded(page, lambda url: "/v1/bvh/solve" in url)
     ankles = ["left_ankle", "right_ankle"]
 
     def on_its_joint() -> float:

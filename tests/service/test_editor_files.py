@@ -24,6 +24,7 @@ from tests.service.editor_page import (
     give_file,
     open_editor,
     post_json,
+    recorded,
     settle,
     watched_page,
 )
@@ -463,11 +464,7 @@ def test_editor_reads_a_root_whose_channels_are_a_displacement(
     page = open_editor(browser, server)
     errors: list[str] = []
     page.on("pageerror", lambda e: errors.append(str(e)))
-    sent: list[dict[str, Any]] = []
-    page.on(
-        "request",
-        lambda r: sent.append(json.loads(r.post_data or "{}")) if "/v1/bvh/" in r.url else None,
-    )
+    sent = recorded(page, lambda url: "/v1/bvh/" in url)
     try:
         give_file(page, text, "idle.bvh")
         page.wait_for_function(f"() => {M}.bvh() && {M}.bvh().name === 'idle.bvh'")
