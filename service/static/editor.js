@@ -27,7 +27,7 @@
 import { $, doc, history, solver, state, ui } from './editor/state.js';
 import { api, ApiError, clearError, showError } from './editor/api.js';
 import {
-  clonePose, loadSample, options, redo, requestSolve, reset, sendSolve, undo,
+  checkField, clonePose, loadSample, options, redo, requestSolve, reset, sendSolve, setUpFields, undo,
 } from './editor/solve.js';
 import {
   buildSkeleton, camera, pinRings, renderer, resize, scene, viewport,
@@ -49,12 +49,16 @@ function wireControls() {
   renderer.domElement.addEventListener('pointerleave', () => {
     if (!ui.drag) $('hud').hidden = true;
   });
-  for (const input of document.querySelectorAll('input[name=method], #exact, #preserve, #tolerance, #turn-search')) {
+  for (const input of document.querySelectorAll('input[name=method], #exact, #preserve, #turn-search')) {
     input.addEventListener('change', () => requestSolve(true));
   }
+  // checked in the page (solve.js, checkField): refused, nothing changes and nothing is sent
+  $('tolerance').addEventListener('change', () => {
+    if (checkField('tolerance')) requestSolve(true);
+  });
   $('soft-ik').addEventListener('change', (ev) => {
-    if (ev.target.value === '') ev.target.value = '0'; // emptied: off, and shown so
-    requestSolve(true);
+    if (ev.target.value === '' && !ev.target.validity.badInput) ev.target.value = '0'; // emptied: off, and shown so
+    if (checkField('soft-ik')) requestSolve(true);
   });
   $('carry').addEventListener('change', (ev) => {
     ev.target.dataset.touched = '1';
@@ -219,6 +223,7 @@ async function loadSamples() {
 async function main() {
   buildSkeleton();
   resize();
+  setUpFields();
   wireControls();
   requestAnimationFrame(frame);
   try {

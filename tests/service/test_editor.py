@@ -229,9 +229,18 @@ def test_editor_drag_solve_fabrik_errors(server: str, browser: Any, tmp_path: Pa
         assert all(u.startswith((server + "/", "blob:", "data:")) for u in urls), urls
 
         # -- API errors are shown: a bad tolerance is the server's 422 ----------------------
-        page.fill("#tolerance", "0")
+        # (the page refuses one typed: test_editor_refuses_out_of_range_options_in_the_page;
+        # here the request is altered on its way, to the real service)
+        def zero_tolerance(route: Any) -> None:
+            body = json.loads(route.request.post_data or "{}")
+            body["options"]["tolerance"] = 0
+            route.continue_(post_data=json.dumps(body))
+
+        page.route("**/v1/solve", zero_tolerance)
+        page.fill("#tolerance", "0.002")
         page.press("#tolerance", "Tab")
         page.wait_for_function(f"() => {m}.error() !== null")
+        page.unroute("**/v1/solve")
         err = page.evaluate(f"{m}.error()")
         assert err["status"] == 422, err
         assert "tolerance" in err["detail"], err
@@ -376,8 +385,8 @@ def test_editor_sends_soft_ik_in_metres_and_re_solves_when_it_changes(
 ) -> None:
     """The Soft IK field (cm; 0 = off) is ``options.soft_ik`` in metres on every solve the
     page sends (a drag's, an option's re-solve, a file's ``/v1/bvh/solve``), absent when 0;
-    changing it re-solves the current targets once; out of range, the service's 422 is
-    shown; FABRIK's solves carry it too (the service ignores it there)."""
+    changing it re-solves the current targets once; FABRIK's solves carry it too (the
+    service ignores it there)."""
     context, page, console_errors, page_errors, _, solves = watched_page(
         browser, 20_000, "/v1/solve"
     )
@@ -433,18 +442,10 @@ def test_editor_sends_soft_ik_in_metres_and_re_solves_when_it_changes(
         page.locator(".segmented label", has_text="Neural").click()
         settle(page)
 
-        # -- out of range (12 cm > 10): the service's 422 names it; 0 puts it off --------
-        n = len(solves)
-        field.fill("12")
-        field.press("Tab")
-        page.wait_for_function(f"() => {M}.error() !== null")
-        assert solves[n]["options"]["soft_ik"] == 0.12
-        err = page.evaluate(f"{M}.error()")
-        assert err["status"] == 422, err
-        assert "soft_ik" in err["detail"], err
+        # -- (out of range: refused in the page, test_editor_refuses_out_of_range_options_
+        # in_the_page); 0 puts it off -----------------------------------------------------
         n = len(solves)
         set_soft_ik("0")
-        page.wait_for_function(f"() => {M}.error() === null")
         assert len(solves) == n + 1
         assert "soft_ik" not in solves[-1]["options"]
 
@@ -466,7 +467,81 @@ def test_editor_sends_soft_ik_in_metres_and_re_solves_when_it_changes(
         assert page.evaluate(f"{M}.error()") is None
 
         assert page_errors == []
-        unexpected = [e for e in console_errors if not e.startswith("Failed to load resource")]
-        assert unexpected == [], unexpected  # (only the forced 422's own line)
+        assert console_errors == [], console_errors
+    finally:
+        context.close()
+
+
+@pytest.mark.browser
+def test_editor_refuses_out_of_range_options_in_the_page(server: str, browser: Any) -> None:
+    """Found by an editor review: Tolerance (m) and Soft IK (cm) were sent as typed, so a
+    value out of the service's range (tolerance 1e-6 to 1 m, soft IK 0 to 10 cm) made every
+    solve fail with its 422 until mended. Now the page refuses it at once: the field is
+    marked invalid and says the range, nothing is sent for it, and the solves (a drag's,
+    an option's re-solve) keep the last valid value until the field is mended."""
+    context, page, console_errors, page_errors, _, solves = watched_page(
+        browser, 20_000, "/v1/solve"
+    )
+
+    def enter(field_id: str, typed: str) -> None:
+        page.fill(f"#{field_id}", "")
+        page.locator(f"#{field_id}").press_sequentially(typed)  # as typed ("1e" too)
+        page.press(f"#{field_id}", "Tab")  # a number field's change: on leaving it
+        settle(page)
+
+    def refused(field_id: str, says: str) -> None:
+        assert page.get_attribute(f"#{field_id}", "aria-invalid") == "true"
+        note = page.locator(f"#{field_id}-problem")
+        assert note.is_visible() and says in note.inner_text(), note.inner_text()
+
+    def accepted(field_id: str) -> None:
+        assert page.get_attribute(f"#{field_id}", "aria-invalid") != "true"
+        assert not page.locator(f"#{field_id}-problem").is_visible()
+
+    try:
+        page.goto(server + "/editor")
+        page.wait_for_function(f"() => {M} && {M}.ready()")
+        page.wait_for_function(
+            "() => document.getElementById('status').textContent === 'connected'"
+        )
+        accepted("tolerance")
+        accepted("soft-ik")
+        drag_joint(page, "left_wrist", 60, -90)
+        enter("soft-ik", "1")
+        assert solves[-1]["options"]["soft_ik"] == 0.01
+
+        # -- out of range, or not a number: refused at once, nothing sent -----------------
+        for typed in ("0", "-0.001", "2", "1e-7"):
+            n = len(solves)
+            enter("tolerance", typed)
+            assert len(solves) == n, f"tolerance {typed} was sent"
+            refused("tolerance", "0.000001 to 1 m")
+        for typed in ("12", "-1", "1e"):
+            n = len(solves)
+            enter("soft-ik", typed)
+            assert len(solves) == n, f"soft IK {typed} was sent"
+            refused("soft-ik", "0 to 10 cm")
+        assert page.evaluate(f"{M}.error()") is None
+
+        # -- a drag meanwhile solves with the last valid values -------------------------
+        n = len(solves)
+        drag_joint(page, "right_wrist", -60, -90)
+        assert len(solves) > n
+        assert all(s["options"]["tolerance"] == 0.001 for s in solves[n:])
+        assert all(s["options"]["soft_ik"] == 0.01 for s in solves[n:])
+        assert page.evaluate(f"{M}.error()") is None
+        assert page.evaluate(f"{M}.options()")["tolerance"] == 0.001
+
+        # -- mended: accepted, and the targets re-solved with it ------------------------
+        n = len(solves)
+        enter("tolerance", "0.002")
+        accepted("tolerance")
+        assert len(solves) == n + 1 and solves[-1]["options"]["tolerance"] == 0.002
+        enter("soft-ik", "10")
+        accepted("soft-ik")
+        assert len(solves) == n + 2 and solves[-1]["options"]["soft_ik"] == 0.1
+        assert page.evaluate(f"{M}.error()") is None
+        assert page_errors == []
+        assert console_errors == [], console_errors
     finally:
         context.close()

@@ -168,20 +168,54 @@ export function reset() {
 // ------------------------------------------------------------------------------------
 // Solving: the request body, throttled requests, answers
 // ------------------------------------------------------------------------------------
+// The number fields the service bounds, checked in the page: the bounds are the service's
+// (service/schemas.py: SolveOptions.tolerance ge=1e-6, le=1.0 m; SolveOptions.soft_ik
+// ge=0, le=core.ends.SOFT_IK_MAX = 0.1 m, the field in cm). A value outside (or not a
+// number) is refused at once: the field is marked and says the range, and the solves keep
+// the last valid value (``inUse``) until it is mended; it was sent as typed, and every
+// solve failed with the service's 422 until then. The fields' min / max are set from here.
+const BOUNDS = {
+  tolerance: { name: 'Tolerance', min: 1e-6, max: 1, unit: 'm', range: '0.000001 to 1 m' },
+  'soft-ik': { name: 'Soft IK', min: 0, max: 10, unit: 'cm', range: '0 to 10 cm (0: off)' },
+};
+const inUse = {}; // field id -> the value the solves send (the field's unit)
+
+// The field ``id``'s value checked: kept for the solves when in range (true), else refused.
+export function checkField(id) {
+  const input = $(id);
+  const { name, min, max, unit, range } = BOUNDS[id];
+  const value = input.valueAsNumber;
+  const ok = !input.validity.badInput && value >= min && value <= max; // (NaN: false)
+  if (ok) inUse[id] = value;
+  input.setAttribute('aria-invalid', String(!ok));
+  const note = $(`${id}-problem`);
+  note.textContent = ok ? '' : `${name}: ${range}; the solves use ${inUse[id]} ${unit} until then`;
+  note.hidden = ok;
+  return ok;
+}
+
+export function setUpFields() {
+  for (const [id, { min, max }] of Object.entries(BOUNDS)) {
+    // (tolerance: no min, it would be the spinner's step base: 0.001 -> 0.001001)
+    if (id !== 'tolerance') $(id).min = String(min);
+    $(id).max = String(max);
+    inUse[id] = Number($(id).defaultValue); // (the page's default, until a value is checked)
+    checkField(id);
+  }
+}
+
 export function options() {
   const out = {
     method: document.querySelector('input[name=method]:checked').value,
     preserve_bone_lengths: $('preserve').checked,
     reach: $('exact').checked ? 'exact' : 'soft',
-    tolerance: $('tolerance').valueAsNumber,
+    tolerance: inUse.tolerance,
   };
   // the models' own default (GET /v1/models) until the slider is moved
   if ($('carry').dataset.touched) out.carry = $('carry').valueAsNumber;
   if (!$('turn-search').checked) out.turn_search = false; // checked: the models' default
   // soft IK: the field in cm, sent in metres; 0 (off, the service's default) is not sent.
-  // Out of range (over 10 cm, negative) it is sent as typed: the service's 422 says so.
-  const softIk = $('soft-ik').valueAsNumber;
-  if (!Number.isNaN(softIk) && softIk !== 0) out.soft_ik = softIk / 100;
+  if (inUse['soft-ik'] !== 0) out.soft_ik = inUse['soft-ik'] / 100;
   return out;
 }
 
