@@ -720,3 +720,79 @@ def test_editor_keeps_pins_and_targets_when_the_file_is_read_again(
         assert not errors, errors
     finally:
         page.context.close()
+
+
+@pytest.mark.browser
+def test_editor_asks_before_dropping_a_files_pins_and_targets(server: str, browser: Any) -> None:
+    """Found by an editor review: the "has edits?" question before a file is replaced or
+    closed looked at its text only, so pins (a shift-click) and targets placed without a
+    drag committed (its solve failed: the targets are kept to retry) were dropped unasked
+    when a Sample was chosen or another file opened. Now they count as edits: both ask,
+    and "no" keeps the file with them; a file with none still goes unasked."""
+    text = json.loads((REPO_ROOT / "docs" / "examples" / "bvh_solve.json").read_text())["bvh"]
+    page = open_editor(browser, server)
+    errors: list[str] = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    asked: list[str] = []
+
+    def no(dialog: Any) -> None:
+        asked.append(dialog.message)
+        dialog.dismiss()
+
+    page.on("dialog", no)
+
+    def shift_click(joint: str) -> None:
+        xy = page.evaluate(f"{M}.projectJoint('{joint}')")
+        page.keyboard.down("Shift")
+        page.mouse.click(xy["x"], xy["y"])
+        page.keyboard.up("Shift")
+
+    def kept(pins: list[str], targets: list[str]) -> None:
+        """Asked once more, and "no" kept a.bvh as it was, with its pins and targets."""
+        page.wait_for_timeout(300)
+        assert len(asked) == n + 1, asked
+        assert "a.bvh" in asked[-1]
+        assert page.evaluate(f"{M}.bvh()")["name"] == "a.bvh"
+        assert page.evaluate(f"{M}.bvhText()") == text
+        assert page.evaluate(f"{M}.pins()") == pins
+        assert sorted(page.evaluate(f"{M}.targets()")) == targets
+
+    try:
+        give_file(page, text, "a.bvh")
+        page.wait_for_function(f"() => {M}.bvh() && {M}.bvh().name === 'a.bvh'")
+
+        # -- a pin alone (no drag): a Sample, another file: both ask ------------------------
+        shift_click("left_ankle")
+        assert page.evaluate(f"{M}.pins()") == ["left_ankle"]
+        assert not page.evaluate(f"{M}.bvh()")["edited"]  # (the text is as opened)
+        n = len(asked)
+        page.select_option("#sample", index=1)
+        kept(["left_ankle"], [])
+        n = len(asked)
+        give_file(page, text, "b.bvh")
+        kept(["left_ankle"], [])
+        shift_click("left_ankle")  # unpinned
+        assert page.evaluate(f"{M}.pins()") == []
+
+        # -- a target alone (its drag's solve failed: kept to retry, the text unchanged) --
+        page.route("**/v1/bvh/solve", lambda route: route.abort())
+        drag_joint(page, "left_wrist", 40, -60)
+        page.unroute("**/v1/bvh/solve")
+        assert page.evaluate(f"{M}.error()")["status"] == 0
+        n = len(asked)
+        page.select_option("#sample", index=1)
+        kept([], ["left_wrist"])
+        n = len(asked)
+        give_file(page, text, "b.bvh")
+        kept([], ["left_wrist"])
+
+        # -- with neither (Reset): a Sample closes the file unasked ----------------------
+        page.click("#reset")
+        assert page.evaluate(f"{M}.targets()") == {} and page.evaluate(f"{M}.pins()") == []
+        n = len(asked)
+        page.select_option("#sample", index=1)
+        page.wait_for_function(f"() => {M}.bvh() === null")
+        assert len(asked) == n
+        assert not errors, errors
+    finally:
+        page.context.close()

@@ -268,22 +268,34 @@ export function encodeFile(text, encoding) {
   return Uint8Array.from(text, (c) => c.charCodeAt(0)); // edits write ASCII digits only
 }
 
+// Whether the open file has edits to lose: its text changed, a drag's answer on its way,
+// or pins or targets placed (work to an animator, though no drag changed the text yet: a
+// shift-click's pins, a drag's targets kept after its solve failed; they used to go
+// unasked). Asked about before it is replaced or closed (mayReplace, a sample).
+export function hasEdits() {
+  if (!doc.active) return false;
+  return doc.text !== doc.original || solver.commitPending || state.targets.size > 0 || state.pins.size > 0;
+}
+
 // Whether the open file may give way to ``name``: yes unless it has edits and the user
 // says no (its edits are lost unless exported; a sample asks the same).
 export function mayReplace(name) {
-  const edited = doc.active && (doc.text !== doc.original || solver.commitPending);
-  return !edited || window.confirm(`Open ${name}? The edits to ${doc.name} are lost unless exported.`);
+  return !hasEdits() || window.confirm(`Open ${name}? The edits to ${doc.name} are lost unless exported.`);
 }
+
+// The open file's pins and targets, to compare (``replaceable``).
+const marks = () => JSON.stringify([[...state.targets], [...state.pins]]);
 
 // What a yes to replacing the open file covers: the file with the edits it has now.
 function replaceable() {
-  return doc.active ? { original: doc.original, text: doc.text } : null;
+  return doc.active ? { original: doc.original, text: doc.text, marks: marks() } : null;
 }
 
 // Whether ``yes`` (``replaceable``'s, or null) still covers the open file: no edit since.
 function stillCovers(yes) {
   if (!doc.active) return true; // (nothing to lose)
-  return Boolean(yes) && !solver.commitPending && yes.original === doc.original && yes.text === doc.text;
+  return Boolean(yes) && !solver.commitPending && yes.original === doc.original && yes.text === doc.text
+    && yes.marks === marks();
 }
 
 export async function openFile(file) {

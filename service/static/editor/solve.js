@@ -5,7 +5,7 @@ import { $, doc, history, solver, state, ui } from './state.js';
 import { api, clearError, showError } from './api.js';
 import { endDrag } from './interaction.js';
 import { refresh, updateButtons } from './panel.js';
-import { cancelOpening, closeFile, filePose, toFile } from './file.js';
+import { cancelOpening, closeFile, filePose, hasEdits, toFile } from './file.js';
 
 // ------------------------------------------------------------------------------------
 // Snapshots and undo history; undo, redo, samples, reset
@@ -133,9 +133,8 @@ export function redo() {
 }
 
 export function loadSample(i) {
-  // (a drag's answer still on its way is an edit too, as opening another file asks)
-  const edited = doc.active && (doc.text !== doc.original || solver.commitPending);
-  if (edited && !window.confirm(`Close ${doc.name}? Its edits are lost unless exported.`)) {
+  // (as opening another file asks: a drag's answer on its way, pins, targets count too)
+  if (hasEdits() && !window.confirm(`Close ${doc.name}? Its edits are lost unless exported.`)) {
     $('sample').value = ''; // the file stays open, edits and history kept
     return;
   }
