@@ -150,8 +150,8 @@ def kept_chains(targets: Iterable[int], chains: npt.NDArray[np.bool_] | None = N
     ]
 
 
-#: The largest ``soft`` distance a request may ask for (m; the API's ``soft_ik``): a tenth
-#: of an adult arm, past which a limb never gets near straight.
+#: The largest ``soft`` distance a request may ask for (m; the API's ``soft_ik``): about a
+#: fifth of an adult arm's reach; eased over more, a limb never gets near straight.
 SOFT_IK_MAX: Final[float] = 0.1
 #: ... and at most this share of the limb's own reach (a doll's arm of 10 cm asked to ease
 #: over 10 cm would fold: :func:`soft_reach`).

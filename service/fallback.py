@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import numpy.typing as npt
 
-from service.problems import BatchAnswer, Solve, _Items
+from service.problems import BatchAnswer, Solve, _Items, trained_solvers
 from service.turns import implausibility
 
 if TYPE_CHECKING:
@@ -68,8 +68,6 @@ def prefer_fabrik(engine: Engine, asked: _Items, ans: BatchAnswer, solve: Solve)
     was = ans.take(rows)
     # the networks' solvers (they ran, and lost), then this step: not the turn, polish or
     # pin steps of an answer that is not given
-    paths = tuple(
-        (*(s for s in path if s in engine.manifest.solvers()), STEP) for path in was.paths
-    )
+    paths = tuple((*trained_solvers(path), STEP) for path in was.paths)
     chosen = fab.take(better)
     return ans.with_items(rows, dataclasses.replace(chosen, paths=paths, path_of=was.path_of))

@@ -16,6 +16,7 @@ import numpy as np
 import numpy.typing as npt
 from prometheus_client import CollectorRegistry, Counter, Histogram, generate_latest, multiprocess
 
+from service.problems import trained_solvers
 from service.settings import SHARED_DIR
 from service.transport import SLOW_READERS
 
@@ -37,12 +38,6 @@ def shared(workers: int) -> Iterator[None]:
     finally:
         os.environ.pop(SHARED_DIR, None)
         shutil.rmtree(folder, ignore_errors=True)
-
-
-#: Steps of a solver path that are not trained solvers: the FABRIK polish and fallback,
-#: the pins' polish, the turn search's turn or fitted start (``service.engine``,
-#: ``service.pins``, ``service.turns``).
-_STEPS = ("fabrik", "pin-polish", "turn ", "fit ")
 
 
 class Metrics:
@@ -90,7 +85,7 @@ class Metrics:
 
     def solved(self, method: str, solvers: list[str], n: int = 1) -> None:
         """Count ``n`` solves under a bounded label (never an open-ended combination)."""
-        neural = [s for s in solvers if not s.startswith(_STEPS)]
+        neural = trained_solvers(solvers)
         if method == "fabrik":
             label = "fabrik"
         elif not neural:

@@ -100,6 +100,18 @@ class BatchAnswer:
         return BatchAnswer.scatter(len(self.pose), [(rest, self.take(rest)), (sel, other)])
 
 
+#: Steps of a solver path that are not trained solvers: FABRIK, its polish, exact reach's
+#: fallback and the critic's choice (``fabrik-*``), the pins' polish, the turn search's turn
+#: or fitted start (``service.engine``, ``service.fallback``, ``service.pins``,
+#: ``service.turns``).
+PATH_STEPS = ("fabrik", "pin-polish", "turn ", "fit ")
+
+
+def trained_solvers(path: Sequence[str]) -> list[str]:
+    """The trained solvers' keys of a solver path, in order (its other steps left out)."""
+    return [s for s in path if not s.startswith(PATH_STEPS)]
+
+
 def solver_paths(
     seq_of: npt.NDArray[np.int64], suffix: npt.NDArray[np.int64],
     sequences: list[tuple[str, ...]],

@@ -146,3 +146,29 @@ def test_the_retry_and_polish_still_serve_an_eased_edit_beyond_its_ease(
             # at most the ease asked for more than without it (a target out of reach: both
             # as near as the arm goes)
             assert b.errors.max() <= max(a.errors.max(), reach) + soft / np.e + 1e-6, soft
+
+
+def test_the_editors_bounds_are_the_services() -> None:
+    """The editor checks Tolerance and Soft IK in the page against bounds of its own
+    (``service/static/editor/solve.js``, ``BOUNDS``); they must be the request schema's,
+    Soft IK in centimetres."""
+    import re
+
+    from service.schemas import SolveOptions
+    from tests.conftest import REPO_ROOT
+
+    js = (REPO_ROOT / "service" / "static" / "editor" / "solve.js").read_text()
+
+    def page(field: str) -> tuple[float, float]:
+        m = re.search(rf"'?{field}'?: {{[^}}]*min: ([0-9.e-]+), max: ([0-9.e-]+)", js)
+        assert m, field
+        return float(m.group(1)), float(m.group(2))
+
+    def schema(name: str) -> tuple[float, float]:
+        meta = SolveOptions.model_fields[name].metadata
+        lo = next(x.ge for x in meta if hasattr(x, "ge"))
+        hi = next(x.le for x in meta if hasattr(x, "le"))
+        return float(lo), float(hi)
+
+    assert page("tolerance") == schema("tolerance")
+    assert page("soft-ik") == tuple(100.0 * v for v in schema("soft_ik"))
