@@ -27,7 +27,8 @@
 import { $, doc, history, solver, state, ui } from './editor/state.js';
 import { api, ApiError, clearError, showError } from './editor/api.js';
 import {
-  checkField, clonePose, loadSample, options, redo, requestSolve, reset, sendSolve, setUpFields, undo,
+  BOUNDED, checkField, clonePose, loadSample, options, redo, requestSolve, reset, sendSolve,
+  setUpFields, takeField, undo,
 } from './editor/solve.js';
 import {
   buildSkeleton, camera, pinRings, renderer, resize, scene, viewport,
@@ -52,14 +53,14 @@ function wireControls() {
   for (const input of document.querySelectorAll('input[name=method], #exact, #preserve, #turn-search')) {
     input.addEventListener('change', () => requestSolve(true));
   }
-  // checked in the page (solve.js, checkField): refused, nothing changes and nothing is sent
-  $('tolerance').addEventListener('change', () => {
-    if (checkField('tolerance')) requestSolve(true);
-  });
-  $('soft-ik').addEventListener('change', (ev) => {
-    if (ev.target.value === '' && !ev.target.validity.badInput) ev.target.value = '0'; // emptied: off, and shown so
-    if (checkField('soft-ik')) requestSolve(true);
-  });
+  // checked in the page (solve.js, checkField): as typed, marked or cleared at once; left
+  // (or Enter), a value in range re-solves, one out of it is refused and nothing is sent
+  for (const id of BOUNDED) {
+    $(id).addEventListener('input', () => checkField(id, { typing: true }));
+    $(id).addEventListener('change', () => {
+      if (takeField(id)) requestSolve(true);
+    });
+  }
   $('carry').addEventListener('change', (ev) => {
     ev.target.dataset.touched = '1';
     $('carry-label').textContent = ev.target.valueAsNumber.toFixed(2);

@@ -545,3 +545,88 @@ def test_editor_refuses_out_of_range_options_in_the_page(server: str, browser: A
         assert console_errors == [], console_errors
     finally:
         context.close()
+
+
+@pytest.mark.browser
+def test_editor_checks_option_fields_as_they_are_typed(server: str, browser: Any) -> None:
+    """Found by an editor review: Tolerance and Soft IK were checked only when the field was
+    left (``change``), so a value out of range typed in the field showed nothing wrong until
+    then. Now each keystroke checks it: out of range (or not a number), the field is marked
+    with its line at once; back in range, cleared at once; nothing is sent while typing,
+    and leaving the field takes the value (refused or re-solved) as before."""
+    context, page, console_errors, page_errors, _, solves = watched_page(
+        browser, 20_000, "/v1/solve"
+    )
+
+    def typed(field_id: str, key: str) -> None:
+        page.keyboard.press(key)
+        assert page.evaluate(f"document.activeElement.id === '{field_id}'")  # not left
+
+    def refused(field_id: str, says: str) -> None:
+        assert page.get_attribute(f"#{field_id}", "aria-invalid") == "true"
+        note = page.locator(f"#{field_id}-problem")
+        assert note.is_visible() and says in note.inner_text(), note.inner_text()
+
+    def accepted(field_id: str) -> None:
+        assert page.get_attribute(f"#{field_id}", "aria-invalid") == "false"
+        assert not page.locator(f"#{field_id}-problem").is_visible()
+
+    try:
+        page.goto(server + "/editor")
+        page.wait_for_function(f"() => {M} && {M}.ready()")
+        page.wait_for_function(
+            "() => document.getElementById('status').textContent === 'connected'"
+        )
+        drag_joint(page, "left_wrist", 60, -90)
+        n = len(solves)
+
+        # -- Tolerance: "0.002" typed over "0.001" -------------------------------------------
+        page.click("#tolerance")
+        page.keyboard.press("Control+a")
+        for key in ("0", ".", "0", "0"):  # 0, 0., 0.0, 0.00: out of range at each key
+            typed("tolerance", key)
+            refused("tolerance", "Tolerance: 0.000001 to 1 m; the solves use 0.001 m")
+        typed("tolerance", "2")  # 0.002: cleared at once, still typing
+        accepted("tolerance")
+        assert page.evaluate(f"{M}.options()")["tolerance"] == 0.001  # (not taken yet)
+        typed("tolerance", "Backspace")  # 0.00 again
+        refused("tolerance", "0.000001 to 1 m")
+        typed("tolerance", "5")
+        accepted("tolerance")
+        assert len(solves) == n, "a solve was sent while typing"
+        page.keyboard.press("Tab")  # left: taken, the targets re-solved with it
+        settle(page)
+        accepted("tolerance")
+        assert len(solves) == n + 1 and solves[-1]["options"]["tolerance"] == 0.005
+
+        # -- Soft IK: 1, 12, 1, (empty: off), 1e, 1 ------------------------------------------
+        n = len(solves)
+        page.click("#soft-ik")
+        page.keyboard.press("Control+a")
+        typed("soft-ik", "1")
+        accepted("soft-ik")
+        typed("soft-ik", "2")  # 12 cm
+        refused("soft-ik", "Soft IK: 0 to 10 cm (0: off); the solves use 0 cm")
+        typed("soft-ik", "Backspace")
+        accepted("soft-ik")
+        typed("soft-ik", "Backspace")  # emptied: off, a valid value
+        accepted("soft-ik")
+        for key in ("1", "e"):
+            page.keyboard.press(key)
+        refused("soft-ik", "0 to 10 cm")  # 1e: not a number
+        # Enter on a refused value: still refused, nothing sent
+        page.keyboard.press("Enter")
+        settle(page)
+        refused("soft-ik", "the solves use 0 cm")
+        assert len(solves) == n
+        typed("soft-ik", "Backspace")  # 1
+        accepted("soft-ik")
+        page.keyboard.press("Enter")
+        settle(page)
+        assert len(solves) == n + 1 and solves[-1]["options"]["soft_ik"] == 0.01
+        assert solves[-1]["options"]["tolerance"] == 0.005
+        assert page.evaluate(f"{M}.error()") is None
+        assert page_errors == []
+        assert console_errors == [], console_errors
+    finally:
+        context.close()

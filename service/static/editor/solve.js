@@ -170,27 +170,44 @@ export function reset() {
 // The number fields the service bounds, checked in the page: the bounds are the service's
 // (service/schemas.py: SolveOptions.tolerance ge=1e-6, le=1.0 m; SolveOptions.soft_ik
 // ge=0, le=core.ends.SOFT_IK_MAX = 0.1 m, the field in cm). A value outside (or not a
-// number) is refused at once: the field is marked and says the range, and the solves keep
-// the last valid value (``inUse``) until it is mended; it was sent as typed, and every
-// solve failed with the service's 422 until then. The fields' min / max are set from here.
+// number) is refused: the field is marked and says the range, as it is typed (each
+// ``input``), and the solves keep the last valid value (``inUse``) until it is mended; it
+// was sent as typed, and every solve failed with the service's 422 until then. A value is
+// taken when the field is left or Enter pressed (``change``). The fields' min / max are
+// set from here. ``empty``: what an emptied field means (soft IK: off), if anything.
 const BOUNDS = {
   tolerance: { name: 'Tolerance', min: 1e-6, max: 1, unit: 'm', range: '0.000001 to 1 m' },
-  'soft-ik': { name: 'Soft IK', min: 0, max: 10, unit: 'cm', range: '0 to 10 cm (0: off)' },
+  'soft-ik': {
+    name: 'Soft IK', min: 0, max: 10, unit: 'cm', range: '0 to 10 cm (0: off)', empty: 0,
+  },
 };
+export const BOUNDED = Object.keys(BOUNDS); // (editor.js checks them on input and change)
 const inUse = {}; // field id -> the value the solves send (the field's unit)
 
-// The field ``id``'s value checked: kept for the solves when in range (true), else refused.
-export function checkField(id) {
+// The field ``id``'s value checked, and the field marked (or cleared) so: in range, true,
+// and (unless ``typing``: on each keystroke, not yet taken) kept for the solves.
+export function checkField(id, { typing = false } = {}) {
   const input = $(id);
-  const { name, min, max, unit, range } = BOUNDS[id];
-  const value = input.valueAsNumber;
+  const { name, min, max, unit, range, empty } = BOUNDS[id];
+  const blank = input.value === '' && !input.validity.badInput && empty !== undefined;
+  const value = blank ? empty : input.valueAsNumber;
   const ok = !input.validity.badInput && value >= min && value <= max; // (NaN: false)
-  if (ok) inUse[id] = value;
+  if (ok && !typing) inUse[id] = value;
   input.setAttribute('aria-invalid', String(!ok));
   const note = $(`${id}-problem`);
   note.textContent = ok ? '' : `${name}: ${range}; the solves use ${inUse[id]} ${unit} until then`;
   note.hidden = ok;
   return ok;
+}
+
+// The field ``id`` left (or Enter): its value taken if in range (true; an emptied field
+// shows what it means), else refused.
+export function takeField(id) {
+  const input = $(id);
+  const { empty } = BOUNDS[id];
+  const emptied = input.value === '' && !input.validity.badInput;
+  if (emptied && empty !== undefined) input.value = String(empty);
+  return checkField(id);
 }
 
 export function setUpFields() {
