@@ -27,8 +27,8 @@
 import { $, doc, history, solver, state, ui } from './editor/state.js';
 import { api, ApiError, clearError, showError } from './editor/api.js';
 import {
-  BOUNDED, checkField, clonePose, loadSample, options, redo, requestSolve, reset, sendSolve,
-  setUpFields, takeField, undo,
+  BOUNDED, checkField, chooseSample, clonePose, loadSample, options, redo, requestSolve, reset,
+  sendSolve, setUpFields, takeField, undo,
 } from './editor/solve.js';
 import {
   buildSkeleton, camera, pinRings, renderer, resize, scene, viewport,
@@ -66,7 +66,7 @@ function wireControls() {
     $('carry-label').textContent = ev.target.valueAsNumber.toFixed(2);
     requestSolve(true);
   });
-  $('sample').addEventListener('change', (ev) => loadSample(Number(ev.target.value)));
+  $('sample').addEventListener('change', (ev) => chooseSample(Number(ev.target.value)));
   $('bvh-file').addEventListener('change', (ev) => {
     openFile(ev.target.files[0]);
     ev.target.value = ''; // the same file can be opened again

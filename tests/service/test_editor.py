@@ -356,6 +356,7 @@ def test_editor_undo_across_a_sample_change_restores_that_sample(server: str, br
         drag_joint(page, "left_wrist", 40, -60)
         edited = page.evaluate(f"{M}.pose()")
         assert not is_sample(0)
+        page.once("dialog", lambda d: d.accept())  # (the edits dropped: asked first)
         page.select_option("#sample", index=3)
         assert is_sample(3)
         shows(3)

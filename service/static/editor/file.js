@@ -268,19 +268,42 @@ export function encodeFile(text, encoding) {
   return Uint8Array.from(text, (c) => c.charCodeAt(0)); // edits write ASCII digits only
 }
 
-// Whether the open file has edits to lose: its text changed, a drag's answer on its way,
-// or pins or targets placed (work to an animator, though no drag changed the text yet: a
-// shift-click's pins, a drag's targets kept after its solve failed; they used to go
-// unasked). Asked about before it is replaced or closed (mayReplace, a sample).
+// What giving up the state shown loses: edits to the pose (a file's text changed, a
+// sample's pose moved from the sample's own, a drag's answer on its way), its pins and its
+// targets (work to an animator, though no drag changed the pose yet: a shift-click's pins,
+// a drag's targets kept after its solve failed; they used to go unasked). Asked about
+// before it gives way (mayReplace, a Sample: solve.js chooseSample).
+export function unsaved() {
+  const sample = state.samples[state.sample];
+  const moved = doc.active
+    ? doc.text !== doc.original
+    : Boolean(sample && state.committed) && !samePose(state.committed, sample.pose);
+  const pose = moved || solver.commitPending;
+  return { pose, pins: state.pins.size, targets: state.targets.size };
+}
+
+const samePose = (a, b) => Object.keys(b).every((j) => a[j] && a[j].every((v, i) => v === b[j][i]));
+
+// Whether the state shown (the open file, or the sample) has anything to lose (``unsaved``).
 export function hasEdits() {
-  if (!doc.active) return false;
-  return doc.text !== doc.original || solver.commitPending || state.targets.size > 0 || state.pins.size > 0;
+  const { pose, pins, targets } = unsaved();
+  return pose || pins > 0 || targets > 0;
+}
+
+const counted = (n, word) => `${n} ${word}${n === 1 ? '' : 's'}`;
+
+// What ``unsaved()`` holds, named: "your edits to the pose, 2 pins and 1 target".
+export function named({ pose, pins, targets }, edits = 'your edits to the pose') {
+  const some = [pose && edits, pins && counted(pins, 'pin'), targets && counted(targets, 'target')]
+    .filter(Boolean);
+  return some.length > 1 ? `${some.slice(0, -1).join(', ')} and ${some.at(-1)}` : some.join('');
 }
 
 // Whether the open file may give way to ``name``: yes unless it has edits and the user
 // says no (its edits are lost unless exported; a sample asks the same).
 export function mayReplace(name) {
-  return !hasEdits() || window.confirm(`Open ${name}? The edits to ${doc.name} are lost unless exported.`);
+  if (!doc.active || !hasEdits()) return true; // (a sample's edits: see solve.js chooseSample)
+  return window.confirm(`Open ${name}? The edits to ${doc.name} are lost unless exported.`);
 }
 
 // The open file's pins and targets, to compare (``replaceable``).

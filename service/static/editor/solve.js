@@ -5,7 +5,9 @@ import { $, doc, history, solver, state, ui } from './state.js';
 import { api, clearError, showError } from './api.js';
 import { endDrag } from './interaction.js';
 import { refresh, updateButtons } from './panel.js';
-import { cancelOpening, closeFile, filePose, hasEdits, toFile } from './file.js';
+import {
+  cancelOpening, closeFile, filePose, hasEdits, named, toFile, unsaved,
+} from './file.js';
 
 // ------------------------------------------------------------------------------------
 // Snapshots and undo history; undo, redo, samples, reset
@@ -132,12 +134,29 @@ export function redo() {
   refresh();
 }
 
-export function loadSample(i) {
-  // (as opening another file asks: a drag's answer on its way, pins, targets count too)
-  if (hasEdits() && !window.confirm(`Close ${doc.name}? Its edits are lost unless exported.`)) {
-    $('sample').value = ''; // the file stays open, edits and history kept
+// A sample chosen in the menu: asked first when the state shown has anything to lose (the
+// open file's edits, or the sample's own: its pose edited, pins, targets; file.js unsaved;
+// a sample's pins and targets went unasked); "no" keeps it all, the menu as it was.
+export function chooseSample(i) {
+  if (hasEdits() && !window.confirm(sampleQuestion(i))) {
+    $('sample').value = doc.active ? '' : String(state.sample);
     return;
   }
+  loadSample(i);
+}
+
+// A sample's question: what is lost, named (a sample's edits are not: Undo brings back the
+// steps before the sample; only an edit whose answer is on its way is dropped).
+function sampleQuestion(i) {
+  if (doc.active) return `Close ${doc.name}? Its edits are lost unless exported.`;
+  const shown = state.samples[state.sample].name;
+  const as = solver.commitPending ? 'it was before the edit being solved' : 'it is now';
+  return `Load the sample "${state.samples[i].name}"? This drops ${named(unsaved())} `
+    + `on "${shown}" (Undo returns to "${shown}" as ${as}).`;
+}
+
+// Show sample ``i``: no targets, no pins (start-up, Reset, the menu once asked).
+export function loadSample(i) {
   endDrag(false);
   cancelSolves();
   cancelOpening();

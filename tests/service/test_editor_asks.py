@@ -1,0 +1,160 @@
+"""The browser editor asking before it drops the user's work (real Chromium, the real
+server): a Sample chosen over a sample's own edits, pins and targets, and the questions
+naming what would be lost. Shared parts: ``tests/service/editor_page.py``; a file's pins and
+targets asked about before a Sample or another file: ``test_editor_edits.py -k
+dropping_a_files``.
+"""
+
+from __future__ import annotations
+
+import json
+from math import dist
+from typing import Any
+
+import pytest
+
+from tests.service.editor_page import REPO_ROOT, M, drag_joint, open_editor, settle
+
+# the fixtures `server` (one for the session) and `browser` (one per module)
+pytest_plugins = ("tests.service.editor_page",)
+
+SAMPLES = json.loads((REPO_ROOT / "service" / "static" / "samples.json").read_text())["samples"]
+NAMES = [s["name"] for s in SAMPLES]
+
+
+class Dialogs:
+    """Every question the page asks, answered as ``yes`` says (no, unless set)."""
+
+    def __init__(self, page: Any) -> None:
+        self.asked: list[str] = []
+        self.yes = False
+        page.on("dialog", self.answer)
+
+    def answer(self, dialog: Any) -> None:
+        self.asked.append(dialog.message)
+        if self.yes:
+            dialog.accept()
+        else:
+            dialog.dismiss()
+
+
+def shift_click(page: Any, joint: str) -> None:
+    """Pin (or unpin) ``joint``, as a user does: Shift held, its handle clicked."""
+    xy = page.evaluate(f"{M}.projectJoint('{joint}')")
+    page.keyboard.down("Shift")
+    page.mouse.click(xy["x"], xy["y"])
+    page.keyboard.up("Shift")
+    settle(page)
+
+
+@pytest.mark.browser
+def test_editor_asks_before_a_sample_drops_a_samples_pins_and_targets(
+    server: str, browser: Any
+) -> None:
+    """Found by an editor review: with no file open, choosing a Sample dropped the sample
+    shown with its edited pose, pins and targets without asking (only an open file's edits
+    were asked about). Now it asks whenever there is anything to drop, naming it, and "no"
+    keeps everything (the pose, pins, targets, history, the menu); a pristine sample and
+    Reset go unasked, as before; "yes" loads the sample, and Undo returns to the edits, as
+    the question says."""
+    page = open_editor(browser, server)
+    errors: list[str] = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    dialogs = Dialogs(page)
+
+    def state() -> dict[str, Any]:
+        return {
+            "sample": page.locator("#sample").input_value(),
+            "pose": page.evaluate(f"{M}.pose()"),
+            "pins": page.evaluate(f"{M}.pins()"),
+            "targets": page.evaluate(f"{M}.targets()"),
+            "history": page.evaluate(f"{M}.history()"),
+        }
+
+    def is_sample(i: int) -> bool:
+        pose = page.evaluate(f"{M}.pose()")
+        return all(dist(pose[j], SAMPLES[i]["pose"][j]) < 1e-9 for j in pose)
+
+    def asked_no(i: int, says: str) -> None:
+        """Sample ``i`` chosen: asked once, saying ``says``; "no" kept all of it."""
+        before, n = state(), len(dialogs.asked)
+        page.select_option("#sample", index=i)
+        page.wait_for_timeout(200)
+        assert len(dialogs.asked) == n + 1, dialogs.asked
+        assert dialogs.asked[-1] == says
+        assert state() == before
+
+    try:
+        # -- nothing to drop: a Sample goes unasked ---------------------------------------
+        page.select_option("#sample", index=1)
+        assert is_sample(1) and dialogs.asked == []
+
+        # -- a pin alone: asked, "no" keeps it; Reset (an undo step) is not asked about ----
+        shift_click(page, "left_ankle")
+        assert page.evaluate(f"{M}.pins()") == ["left_ankle"] and is_sample(1)
+        asked_no(
+            2,
+            f'Load the sample "{NAMES[2]}"? This drops 1 pin on "{NAMES[1]}" '
+            f'(Undo returns to "{NAMES[1]}" as it is now).',
+        )
+        page.click("#reset")
+        assert page.evaluate(f"{M}.pins()") == [] and len(dialogs.asked) == 1
+
+        # -- a target alone (its drag's solve failed: kept to retry, the pose as it was) --
+        page.route("**/v1/solve", lambda route: route.abort())
+        drag_joint(page, "left_wrist", 40, -60)
+        page.unroute("**/v1/solve")
+        assert list(page.evaluate(f"{M}.targets()")) == ["left_wrist"] and is_sample(1)
+        asked_no(
+            3,
+            f'Load the sample "{NAMES[3]}"? This drops 1 target on "{NAMES[1]}" '
+            f'(Undo returns to "{NAMES[1]}" as it is now).',
+        )
+
+        # -- the pose edited (a drag), two pins and a target ------------------------------
+        page.click("#reset")
+        drag_joint(page, "left_wrist", 40, -60)
+        shift_click(page, "left_ankle")
+        shift_click(page, "right_ankle")
+        assert not is_sample(1)
+        asked_no(
+            2,
+            f'Load the sample "{NAMES[2]}"? This drops your edits to the pose, 2 pins and '
+            f'1 target on "{NAMES[1]}" (Undo returns to "{NAMES[1]}" as it is now).',
+        )
+
+        # -- an edit whose answer is on its way: asked too ---------------------------------
+        held: list[Any] = []
+        page.route("**/v1/solve", lambda route: held.append(route))
+        xy = page.evaluate(f"{M}.projectJoint('right_wrist')")
+        page.mouse.move(xy["x"], xy["y"])
+        page.mouse.down()
+        page.mouse.move(xy["x"] - 30, xy["y"] - 40, steps=4)
+        page.mouse.up()
+        page.wait_for_function(f"() => {M}.solveCount().inflight")
+        n = len(dialogs.asked)
+        page.select_option("#sample", index=2)
+        assert len(dialogs.asked) == n + 1
+        assert dialogs.asked[-1].endswith("as it was before the edit being solved).")
+        assert page.locator("#sample").input_value() == "1"
+        for route in held:
+            route.continue_()
+        page.unroute("**/v1/solve")
+        settle(page)
+        assert sorted(page.evaluate(f"{M}.targets()")) == ["left_wrist", "right_wrist"]
+        edited = state()
+
+        # -- "yes": the sample, and Undo returns to the edits as they were ---------------
+        dialogs.yes = True
+        page.select_option("#sample", index=2)
+        assert len(dialogs.asked) == n + 2
+        assert is_sample(2) and page.evaluate(f"{M}.pins()") == []
+        assert page.evaluate(f"{M}.targets()") == {}
+        page.click("#undo")
+        back = state()
+        assert {k: back[k] for k in ("sample", "pose", "pins", "targets")} == {
+            k: edited[k] for k in ("sample", "pose", "pins", "targets")
+        }
+        assert not errors, errors
+    finally:
+        page.context.close()
