@@ -1,8 +1,8 @@
 """The browser editor asking before it drops the user's work (real Chromium, the real
 server): a Sample chosen over a sample's own edits, pins and targets, and the questions
-naming what would be lost. Shared parts: ``tests/service/editor_page.py``; a file's pins and
-targets asked about before a Sample or another file: ``test_editor_edits.py -k
-dropping_a_files``.
+naming what would be lost (a sample's, a file's). Shared parts:
+``tests/service/editor_page.py``; a file's pins and targets asked about before a Sample or
+another file: ``test_editor_edits.py -k dropping_a_files``.
 """
 
 from __future__ import annotations
@@ -13,7 +13,8 @@ from typing import Any
 
 import pytest
 
-from tests.service.editor_page import REPO_ROOT, M, drag_joint, open_editor, settle
+from tests.conftest import REPO_ROOT
+from tests.service.editor_page import M, drag_joint, give_file, open_editor, settle
 
 # the fixtures `server` (one for the session) and `browser` (one per module)
 pytest_plugins = ("tests.service.editor_page",)
@@ -29,6 +30,15 @@ class Dialogs:
         self.asked: list[str] = []
         self.yes = False
         page.on("dialog", self.answer)
+
+    def next(self, page: Any, n: int) -> str:
+        """The question after the first ``n``, once asked (within 5 s)."""
+        for _ in range(100):
+            if len(self.asked) > n:
+                break
+            page.wait_for_timeout(50)
+        assert len(self.asked) == n + 1, self.asked
+        return self.asked[-1]
 
     def answer(self, dialog: Any) -> None:
         self.asked.append(dialog.message)
@@ -155,6 +165,70 @@ def test_editor_asks_before_a_sample_drops_a_samples_pins_and_targets(
         assert {k: back[k] for k in ("sample", "pose", "pins", "targets")} == {
             k: edited[k] for k in ("sample", "pose", "pins", "targets")
         }
+        assert not errors, errors
+    finally:
+        page.context.close()
+
+
+@pytest.mark.browser
+def test_editor_names_what_closing_a_file_loses(server: str, browser: Any) -> None:
+    """Found by an editor review: a file about to be replaced or closed was asked about as
+    "The edits to a.bvh are lost unless exported" even when it had no edit, only pins or
+    targets (which Export BVH does not keep either). Now the question names what would be
+    lost (edits to the file, so many pins, so many targets) and says what an export keeps,
+    for another file opened and for a Sample alike."""
+    text = json.loads((REPO_ROOT / "docs" / "examples" / "bvh_solve.json").read_text())["bvh"]
+    page = open_editor(browser, server)
+    errors: list[str] = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    dialogs = Dialogs(page)  # (all answered "no": a.bvh stays open)
+
+    def asked(opening: str) -> str:
+        """The question asked when ``opening`` (a file name, or "sample") replaces a.bvh."""
+        n = len(dialogs.asked)
+        if opening == "sample":
+            page.select_option("#sample", index=1)
+        else:
+            give_file(page, text, opening)
+        said = dialogs.next(page, n)
+        page.wait_for_timeout(100)
+        assert page.evaluate(f"{M}.bvh()")["name"] == "a.bvh"
+        return said
+
+    try:
+        give_file(page, text, "a.bvh")
+        page.wait_for_function(f"() => {M}.bvh() && {M}.bvh().name === 'a.bvh'")
+
+        # -- a pin alone: named, no "edits", nothing said of exporting --------------------
+        shift_click(page, "left_ankle")
+        assert asked("b.bvh") == "Open b.bvh? Closing a.bvh loses 1 pin."
+        assert asked("sample") == f'Load the sample "{NAMES[1]}"? Closing a.bvh loses 1 pin.'
+
+        # -- two pins and a target (its drag's solve failed), the text as opened ----------
+        shift_click(page, "right_ankle")
+        page.route("**/v1/bvh/solve", lambda route: route.abort())
+        drag_joint(page, "left_wrist", 40, -60)
+        page.unroute("**/v1/bvh/solve")
+        assert not page.evaluate(f"{M}.bvh()")["edited"]
+        assert asked("b.bvh") == "Open b.bvh? Closing a.bvh loses 2 pins and 1 target."
+
+        # -- an edit to the file and its target: what Export BVH keeps ----------------------
+        page.click("#reset")
+        drag_joint(page, "left_wrist", 40, -60)
+        assert page.evaluate(f"{M}.bvh()")["edited"]
+        assert asked("b.bvh") == (
+            "Open b.bvh? Closing a.bvh loses your edits to the file and 1 target "
+            "(Export BVH keeps the edits, not pins or targets)."
+        )
+
+        # -- the edit alone (its target cleared) ------------------------------------------
+        page.click("#clear-targets")
+        settle(page)
+        assert page.evaluate(f"{M}.targets()") == {} and page.evaluate(f"{M}.pins()") == []
+        assert asked("sample") == (
+            f'Load the sample "{NAMES[1]}"? Closing a.bvh loses your edits to the file '
+            "unless exported."
+        )
         assert not errors, errors
     finally:
         page.context.close()

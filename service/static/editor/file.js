@@ -300,10 +300,22 @@ export function named({ pose, pins, targets }, edits = 'your edits to the pose')
 }
 
 // Whether the open file may give way to ``name``: yes unless it has edits and the user
-// says no (its edits are lost unless exported; a sample asks the same).
+// says no (a sample asks the same: closingQuestion).
 export function mayReplace(name) {
   if (!doc.active || !hasEdits()) return true; // (a sample's edits: see solve.js chooseSample)
-  return window.confirm(`Open ${name}? The edits to ${doc.name} are lost unless exported.`);
+  return window.confirm(closingQuestion(`Open ${name}`));
+}
+
+// The question before the open file gives way to ``what`` ("Open b.bvh", "Load the sample
+// "walk""): what closing it loses, named (``unsaved``), and what Export BVH would keep: the
+// edits to the file, not pins or targets (it said "The edits to a.bvh are lost unless
+// exported" of a file with one pin and no edit, which no export keeps).
+export function closingQuestion(what) {
+  const w = unsaved();
+  let kept = '';
+  if (w.pose && (w.pins || w.targets)) kept = ' (Export BVH keeps the edits, not pins or targets)';
+  else if (w.pose) kept = ' unless exported';
+  return `${what}? Closing ${doc.name} loses ${named(w, 'your edits to the file')}${kept}.`;
 }
 
 // The open file's pins and targets, to compare (``replaceable``).

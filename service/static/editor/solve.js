@@ -6,7 +6,7 @@ import { api, clearError, showError } from './api.js';
 import { endDrag } from './interaction.js';
 import { refresh, updateButtons } from './panel.js';
 import {
-  cancelOpening, closeFile, filePose, hasEdits, named, toFile, unsaved,
+  cancelOpening, closeFile, closingQuestion, filePose, hasEdits, named, toFile, unsaved,
 } from './file.js';
 
 // ------------------------------------------------------------------------------------
@@ -145,10 +145,11 @@ export function chooseSample(i) {
   loadSample(i);
 }
 
-// A sample's question: what is lost, named (a sample's edits are not: Undo brings back the
-// steps before the sample; only an edit whose answer is on its way is dropped).
+// A sample's question: what is lost, named (a file's: file.js closingQuestion; a sample's
+// edits are not: Undo brings back the steps before the sample, only an edit whose answer
+// is on its way is dropped).
 function sampleQuestion(i) {
-  if (doc.active) return `Close ${doc.name}? Its edits are lost unless exported.`;
+  if (doc.active) return closingQuestion(`Load the sample "${state.samples[i].name}"`);
   const shown = state.samples[state.sample].name;
   const as = solver.commitPending ? 'it was before the edit being solved' : 'it is now';
   return `Load the sample "${state.samples[i].name}"? This drops ${named(unsaved())} `
