@@ -456,8 +456,16 @@ def test_editor_sends_soft_ik_in_metres_and_re_solves_when_it_changes(
         assert len(solves) == n + 1
         assert solves[-1]["options"]["soft_ik"] == 0.005
         text = json.loads((REPO_ROOT / "docs" / "examples" / "bvh_solve.json").read_text())["bvh"]
+        asked: list[str] = []  # the sample's edited pose dropped: asked first, "yes"
+
+        def yes(dialog: Any) -> None:
+            asked.append(dialog.message)
+            dialog.accept()
+
+        page.once("dialog", yes)
         give_file(page, text, "three.bvh")
         page.wait_for_function(f"() => {M}.bvh() && {M}.bvh().name === 'three.bvh'")
+        assert len(asked) == 1 and asked[0].startswith("Open three.bvh? This drops"), asked
         drag_joint(page, "left_wrist", 40, -60)
         assert bvh_solves, "dragging the file's wrist sent no /v1/bvh/solve"
         assert all(s["options"]["soft_ik"] == 0.005 for s in bvh_solves)

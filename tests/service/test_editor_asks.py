@@ -1,6 +1,6 @@
 """The browser editor asking before it drops the user's work (real Chromium, the real
-server): a Sample chosen over a sample's own edits, pins and targets, and the questions
-naming what would be lost (a sample's, a file's). Shared parts:
+server): a Sample or a BVH file chosen over a sample's own edits, pins and targets, and the
+questions naming what would be lost (a sample's, a file's). Shared parts:
 ``tests/service/editor_page.py``; a file's pins and targets asked about before a Sample or
 another file: ``test_editor_edits.py -k dropping_a_files``.
 """
@@ -229,6 +229,124 @@ def test_editor_names_what_closing_a_file_loses(server: str, browser: Any) -> No
             f'Load the sample "{NAMES[1]}"? Closing a.bvh loses your edits to the file '
             "unless exported."
         )
+        assert not errors, errors
+    finally:
+        page.context.close()
+
+
+def drop_file(page: Any, body: str, name: str) -> None:
+    """``body`` dropped on the page as the file ``name`` (a drag from the desktop)."""
+    page.evaluate(
+        """([body, name]) => {
+          const dt = new DataTransfer();
+          dt.items.add(new File([body], name, { type: 'text/plain' }));
+          window.dispatchEvent(
+            new DragEvent('drop', { dataTransfer: dt, bubbles: true, cancelable: true }));
+        }""",
+        [body, name],
+    )
+
+
+def recorded_urls(page: Any, ending: str) -> list[str]:
+    """The URLs ending with ``ending`` that ``page`` asks for, appended as they go out."""
+    urls: list[str] = []
+    page.on("request", lambda r: urls.append(r.url) if r.url.endswith(ending) else None)
+    return urls
+
+
+@pytest.mark.browser
+def test_editor_asks_before_a_file_replaces_a_samples_work(server: str, browser: Any) -> None:
+    """Found by an editor review: a BVH file opened (the picker, a drop) over a sample
+    with pins, targets or an edited pose dropped them without asking, and Undo could not
+    bring them back (opening a file starts the undo history anew). Now it asks once,
+    naming what is lost, and "no" keeps the pose, pins, targets, history (Undo still
+    works) and the menu; "yes" opens the file; a pristine sample opens it unasked, as before."""
+    text = json.loads((REPO_ROOT / "docs" / "examples" / "bvh_solve.json").read_text())["bvh"]
+    page = open_editor(browser, server)
+    errors: list[str] = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    dialogs = Dialogs(page)  # "no", until set
+    shown = NAMES[1]
+
+    def question(name: str, lost: str) -> str:
+        return (
+            f'Open {name}? This drops {lost} on "{shown}" (Undo cannot return to '
+            f'"{shown}": a file opened starts the undo history anew).'
+        )
+
+    def state() -> dict[str, Any]:
+        return {
+            "sample": page.locator("#sample").input_value(),
+            "pose": page.evaluate(f"{M}.pose()"),
+            "committed": page.evaluate(f"{M}.committedPose()"),
+            "pins": page.evaluate(f"{M}.pins()"),
+            "targets": page.evaluate(f"{M}.targets()"),
+            "history": page.evaluate(f"{M}.history()"),
+            "bvh": page.evaluate(f"{M}.bvh()"),
+        }
+
+    def asked_no(give: Any, name: str, lost: str) -> None:
+        """The file ``name`` given (``give``) over the sample: asked once, exactly; "no"
+        kept all of it (nothing opened, nothing sent)."""
+        before, n = state(), len(dialogs.asked)
+        give(page, text, name)
+        assert dialogs.next(page, n) == question(name, lost)
+        page.wait_for_timeout(300)
+        assert len(dialogs.asked) == n + 1, dialogs.asked
+        assert state() == before
+
+    try:
+        page.select_option("#sample", index=1)
+        assert dialogs.asked == []
+        inspected = recorded_urls(page, "/v1/bvh/inspect")
+
+        # -- a pin alone: asked (picker and drop alike), "no" keeps it -------------------
+        shift_click(page, "left_ankle")
+        assert page.evaluate(f"{M}.pins()") == ["left_ankle"]
+        asked_no(give_file, "b.bvh", "1 pin")
+        asked_no(drop_file, "c.bvh", "1 pin")
+
+        # -- a target alone (its drag's solve failed: kept to retry, the pose as it was) --
+        page.click("#reset")
+        page.route("**/v1/solve", lambda route: route.abort())
+        drag_joint(page, "left_wrist", 40, -60)
+        page.unroute("**/v1/solve")
+        assert list(page.evaluate(f"{M}.targets()")) == ["left_wrist"]
+        asked_no(give_file, "b.bvh", "1 target")
+
+        # -- the pose edited alone (a drag, its target cleared): "no", and Undo still works
+        page.click("#reset")
+        drag_joint(page, "left_wrist", 40, -60)
+        dragged = state()
+        page.click("#clear-targets")
+        settle(page)
+        assert page.evaluate(f"{M}.targets()") == {} and page.evaluate(f"{M}.pins()") == []
+        asked_no(give_file, "b.bvh", "your edits to the pose")
+        asked_no(drop_file, "b.bvh", "your edits to the pose")
+        assert inspected == []  # nothing was read
+        page.click("#undo")  # back to the drag, its target
+        assert {k: v for k, v in state().items() if k != "history"} == {
+            k: v for k, v in dragged.items() if k != "history"
+        }
+        page.click("#redo")
+
+        # -- "yes" opens the file ---------------------------------------------------------
+        dialogs.yes = True
+        n = len(dialogs.asked)
+        give_file(page, text, "b.bvh")
+        page.wait_for_function(f"() => {M}.bvh() && {M}.bvh().name === 'b.bvh'")
+        assert len(dialogs.asked) == n + 1
+        assert dialogs.asked[-1] == question("b.bvh", "your edits to the pose")
+
+        # -- a pristine sample: the file opens unasked, as before --------------------------
+        page.select_option("#sample", index=1)  # (b.bvh unedited: unasked)
+        assert page.evaluate(f"{M}.bvh()") is None
+        give_file(page, text, "e.bvh")
+        page.wait_for_function(f"() => {M}.bvh() && {M}.bvh().name === 'e.bvh'")
+        page.select_option("#sample", index=1)
+        drop_file(page, text, "f.bvh")
+        page.wait_for_function(f"() => {M}.bvh() && {M}.bvh().name === 'f.bvh'")
+        assert len(dialogs.asked) == n + 1, dialogs.asked
         assert not errors, errors
     finally:
         page.context.close()

@@ -299,11 +299,22 @@ export function named({ pose, pins, targets }, edits = 'your edits to the pose')
   return some.length > 1 ? `${some.slice(0, -1).join(', ')} and ${some.at(-1)}` : some.join('');
 }
 
-// Whether the open file may give way to ``name``: yes unless it has edits and the user
-// says no (a sample asks the same: closingQuestion).
+// Whether the state shown (the open file, or a sample) may give way to the file ``name``:
+// yes unless it has anything to lose (``unsaved``) and the user says no (a Sample asks the
+// same: closingQuestion, solve.js sampleQuestion). A sample's own edits, pins and targets
+// went unasked, and opening a file clears the undo history: they were lost for good.
 export function mayReplace(name) {
-  if (!doc.active || !hasEdits()) return true; // (a sample's edits: see solve.js chooseSample)
-  return window.confirm(closingQuestion(`Open ${name}`));
+  if (!hasEdits()) return true;
+  return window.confirm(doc.active ? closingQuestion(`Open ${name}`) : openingQuestion(name));
+}
+
+// The question before the file ``name`` replaces a sample with edits: what is lost, named,
+// and that Undo cannot bring it back (a file opened starts the undo history anew).
+function openingQuestion(name) {
+  const sample = state.samples[state.sample];
+  const shown = sample ? `"${sample.name}"` : 'the sample';
+  return `Open ${name}? This drops ${named(unsaved())} on ${shown} `
+    + `(Undo cannot return to ${shown}: a file opened starts the undo history anew).`;
 }
 
 // The question before the open file gives way to ``what`` ("Open b.bvh", "Load the sample
