@@ -256,12 +256,14 @@ def recorded_urls(page: Any, ending: str) -> list[str]:
 
 @pytest.mark.browser
 def test_editor_asks_before_a_file_replaces_a_samples_work(server: str, browser: Any) -> None:
-    """Found by an editor review: a BVH file opened (the picker, a drop) over a sample
-    with pins, targets or an edited pose dropped them without asking, and Undo could not
-    bring them back (opening a file starts the undo history anew). Now it asks once,
-    naming what is lost, and "no" keeps the pose, pins, targets, history (Undo still
-    works) and the menu; "yes" opens the file; a pristine sample opens it unasked, as before."""
+    """Found by an editor review: a BVH file opened (the picker, a drop, a refused file
+    re-tried by a units change) over a sample with pins, targets or an edited pose dropped
+    them without asking, and Undo could not bring them back (opening a file starts the
+    undo history anew). Now it asks once, naming what is lost, and "no" keeps the pose,
+    pins, targets, history (Undo still works) and the menu; "yes" opens the file; a
+    pristine sample opens it unasked, as before."""
     text = json.loads((REPO_ROOT / "docs" / "examples" / "bvh_solve.json").read_text())["bvh"]
+    renamed = text.replace("JOINT LeftForeArm", "JOINT ForeArm_Lft")  # refused: unmapped
     page = open_editor(browser, server)
     errors: list[str] = []
     page.on("pageerror", lambda e: errors.append(str(e)))
@@ -329,6 +331,30 @@ def test_editor_asks_before_a_file_replaces_a_samples_work(server: str, browser:
             k: v for k, v in dragged.items() if k != "history"
         }
         page.click("#redo")
+        edited = state()
+
+        # -- "yes" to a file the service refuses: the sample stays, its edits kept; re-tried
+        # (units) with no edit since: not asked again; with a pin since: asked, "no" keeps
+        # it, the menu back to how the file was last tried
+        dialogs.yes = True
+        n = len(dialogs.asked)
+        give_file(page, renamed, "d.bvh")
+        page.wait_for_function(f"() => ({M}.error() || {{}}).detail?.startsWith('d.bvh')")
+        assert len(dialogs.asked) == n + 1
+        assert state() == edited
+        page.click("#error-close")
+        page.select_option("#bvh-units", "cm")
+        page.wait_for_function(f"() => {M}.error() !== null")
+        assert len(dialogs.asked) == n + 1 and state() == edited
+        page.click("#error-close")
+        shift_click(page, "right_ankle")
+        dialogs.yes = False
+        page.select_option("#bvh-units", "m")
+        assert dialogs.next(page, n + 1) == question("d.bvh", "your edits to the pose and 1 pin")
+        page.wait_for_timeout(300)
+        assert page.evaluate(f"{M}.bvh()") is None
+        assert page.evaluate(f"{M}.pins()") == ["right_ankle"]
+        assert page.locator("#bvh-units").input_value() == "cm"
 
         # -- "yes" opens the file ---------------------------------------------------------
         dialogs.yes = True
@@ -336,7 +362,7 @@ def test_editor_asks_before_a_file_replaces_a_samples_work(server: str, browser:
         give_file(page, text, "b.bvh")
         page.wait_for_function(f"() => {M}.bvh() && {M}.bvh().name === 'b.bvh'")
         assert len(dialogs.asked) == n + 1
-        assert dialogs.asked[-1] == question("b.bvh", "your edits to the pose")
+        assert dialogs.asked[-1] == question("b.bvh", "your edits to the pose and 1 pin")
 
         # -- a pristine sample: the file opens unasked, as before --------------------------
         page.select_option("#sample", index=1)  # (b.bvh unedited: unasked)

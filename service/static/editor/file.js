@@ -134,15 +134,15 @@ export function cancelOpening() {
 // Open ``text`` as the file ``name``; ``original`` is the file as opened (Reset returns to
 // it): the text itself, unless the open file is read ``again`` with other units, up axis,
 // root channels or joint map (its edits kept, at the frame shown when the answer comes).
-// ``jointMap``: sent with its inspection and, once open, its solves. ``yes``: the open
-// file's state the user agreed to replace (``replaceable``), kept with the file tried so
-// that re-trying it after a refusal asks only about newer edits.
+// ``jointMap``: sent with its inspection and, once open, its solves. ``yes``: the state
+// shown (the open file's, or a sample's) the user agreed to replace (``replaceable``), kept
+// with the file tried so that re-trying it after a refusal asks only about newer edits.
 export async function openText(text, name, {
   original = text, encoding = 'utf-8', jointMap = null, yes = null, again = false,
 } = {}) {
-  doc.tried = { text: original, name, encoding, jointMap, yes };
-  const ticket = ++opening;
   const settings = menuSettings(); // (as sent: the menus may change before the answer)
+  doc.tried = { text: original, name, encoding, jointMap, yes, settings };
+  const ticket = ++opening;
   startReading(again ? `reading ${name} again` : `opening ${name}`);
   let res;
   try {
@@ -329,19 +329,24 @@ export function closingQuestion(what) {
   return `${what}? Closing ${doc.name} loses ${named(w, 'your edits to the file')}${kept}.`;
 }
 
-// The open file's pins and targets, to compare (``replaceable``).
+// The pins and targets shown, to compare (``replaceable``).
 const marks = () => JSON.stringify([[...state.targets], [...state.pins]]);
 
-// What a yes to replacing the open file covers: the file with the edits it has now.
+// What a yes to replacing the state shown covers: the open file with the edits it has now,
+// or the sample with its pose, pins and targets as they are now.
 function replaceable() {
-  return doc.active ? { original: doc.original, text: doc.text, marks: marks() } : null;
+  if (doc.active) return { original: doc.original, text: doc.text, marks: marks() };
+  return { sample: state.sample, pose: JSON.stringify(state.committed), marks: marks() };
 }
 
-// Whether ``yes`` (``replaceable``'s, or null) still covers the open file: no edit since.
+// Whether ``yes`` (``replaceable``'s, or null) still covers the state shown: nothing to
+// lose, or no edit since (a sample's too: re-trying a refused file over a sample edited
+// since the yes opened it unasked).
 function stillCovers(yes) {
-  if (!doc.active) return true; // (nothing to lose)
-  return Boolean(yes) && !solver.commitPending && yes.original === doc.original && yes.text === doc.text
-    && yes.marks === marks();
+  if (!hasEdits()) return true; // (nothing to lose)
+  if (!yes || solver.commitPending || yes.marks !== marks()) return false;
+  if (doc.active) return yes.original === doc.original && yes.text === doc.text;
+  return yes.sample === state.sample && yes.pose === JSON.stringify(state.committed);
 }
 
 export async function openFile(file) {
@@ -415,8 +420,11 @@ export function readAgain() {
       // the user said yes to these edits being lost (then, or just now): asked again only
       // if there are newer ones
       openText(t.text, t.name, { encoding: t.encoding, jointMap, yes: replaceable() });
-    } else if (doc.settings) {
-      showSettings(doc.settings); // "no": nothing read; the menus say how the open file was
+    } else {
+      // "no": nothing read; the menus say how the open file was read (over a sample: how
+      // the file was last tried; an earlier file's, closed since, said nothing true)
+      const was = doc.active ? doc.settings : t.settings;
+      if (was) showSettings(was);
     }
   });
 }

@@ -58,7 +58,9 @@ export const doc = {
   frame: 0,
   toWorld: new THREE.Matrix4(),
   fromWorld: new THREE.Matrix4(),
-  tried: null, // {text, name, encoding, jointMap} of the last file opened (re-opened when units / up change)
+  // {text, name, encoding, jointMap, yes, settings} of the last file opened (re-opened when
+  // units / up change; yes: file.js replaceable; settings: the menus it was sent with)
+  tried: null,
   jointMap: null, // the open file's joint map ({canonical: the file's joint name}) or null: sent with its solves
   encoding: 'utf-8', // of the open file's bytes: 'utf-8' or 'latin-1' (written back the same)
   drawn: { text: null, frame: -1 }, // what the character's bones show
