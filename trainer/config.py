@@ -203,6 +203,12 @@ class SolverConfig(_Section):
         "Each set's solver is trained on its own loss alone: a set's weight changes no other.",
     )
 
+    stay_weights: dict[str, Annotated[float, Field(ge=0)]] = Field(
+        default={},
+        description="stay_weight of single sets of `sets`, by key, as other_weights (the long "
+        "bank and the other sets: stay_weight).",
+    )
+
     _v = field_validator("sets", "long_sets")(_check_joints)
 
     def weight_of(self, joints: list[str], long: bool = False) -> float:
@@ -213,15 +219,24 @@ class SolverConfig(_Section):
             return self.other_weight if self.long_other_weight is None else self.long_other_weight
         return self.other_weights.get(set_key(joints), self.other_weight)
 
+    def stay_of(self, joints: list[str], long: bool = False) -> float:
+        """The stay term's weight the solver of ``joints`` trains with: a shared set's
+        ``stay_weights`` entry, else ``stay_weight``."""
+        if long:
+            return self.stay_weight
+        return self.stay_weights.get(set_key(joints), self.stay_weight)
+
     @model_validator(mode="after")
     def _apart(self) -> SolverConfig:
         both = {tuple(sorted(j)) for j in self.sets} & {tuple(sorted(j)) for j in self.long_sets}
         if both:
             raise ValueError(f"solver sets in both sets and long_sets: {sorted(both)}")
-        for key in self.other_weights:  # joints sorted, joined by '+': the manifest's key
-            _check_joints([key.split("+")])
-            if key != set_key(key.split("+")):
-                raise ValueError(f"other_weights: {key!r} is not a set's key (sorted joints)")
+        own = (("other_weights", self.other_weights), ("stay_weights", self.stay_weights))
+        for name, weights in own:
+            for key in weights:  # joints sorted, joined by '+': the manifest's key
+                _check_joints([key.split("+")])
+                if key != set_key(key.split("+")):
+                    raise ValueError(f"{name}: {key!r} is not a set's key (sorted joints)")
         return self
 
 

@@ -242,6 +242,7 @@ _ADDED_LATER: dict[str, tuple[str, ...]] = {
         "elbows_loss",
         "long_other_weight",
         "other_weights",
+        "stay_weights",
     ),
     "augment": ("lift_start", "joint_shift"),
     "completion": ("loss",),
@@ -282,7 +283,8 @@ def config_tag(cfg: TrainConfig, stage: str, *, legacy: bool = False) -> str:
         # them: solver.carry_loss, solver.ends_loss, solver.elbows_loss)
         keep = seen_by_losses(cfg.solver.model_dump())
         serving = tuple(k for k in SERVING_SETTINGS if k not in keep)
-        solver = _section(cfg, "solver", (*serving, *other, "long_other_weight", "other_weights"))
+        per_set = ("long_other_weight", "other_weights", "stay_weights")
+        solver = _section(cfg, "solver", (*serving, *other, *per_set))
         # the weights trained with (SolverConfig.weight_of), not how they are written; where
         # one is other_weight, absent, as in the tags from before the two options
         sc = cfg.solver
@@ -291,6 +293,9 @@ def config_tag(cfg: TrainConfig, stage: str, *, legacy: bool = False) -> str:
         own = {set_key(s): sc.weight_of(s) for s in sc.sets if sc.weight_of(s) != sc.other_weight}
         if own and stage == "solvers":
             solver["other_weights"] = own
+        stay = {set_key(s): sc.stay_of(s) for s in sc.sets if sc.stay_of(s) != sc.stay_weight}
+        if stay and stage == "solvers":
+            solver["stay_weights"] = stay
         relevant["solver"] = solver
         relevant["augment"] = _section(cfg, "augment")
     if stage.startswith("completion"):  # serving_*: serving only; joint_shift: not read

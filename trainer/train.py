@@ -280,7 +280,7 @@ def solver_losses(
     other_weight: float | torch.Tensor,
     bone_weight: float = 0.0,
     mode: str = "plain",
-    stay_weight: float = 0.0,
+    stay_weight: float | torch.Tensor = 0.0,
     rigid: bool = False,
     distance: bool = False,
     stay_local: bool = False,
@@ -333,7 +333,8 @@ def solver_losses(
     target_term = (per_col * tm).sum(-1) / tm.sum(-1)
     other_term = (per_col * (1 - tm)).sum(-1) / (1 - tm).sum(-1)
     loss = target_term + other_weight * other_term
-    if stay_weight > 0:  # the joints not asked for move as little as the targets allow
+    if float(torch.as_tensor(stay_weight).max()) > 0:  # the joints not asked for move as
+        # little as the targets allow (``stay_weight``: one for every solver, or ``[S]``)
         frame = parent_offsets_t if stay_local else (lambda x: x)
         moved = per_item(frame(answer) - frame(start).unsqueeze(0))
         loss = loss + stay_weight * (moved * (1 - tm)).sum(-1) / (1 - tm).sum(-1)
@@ -394,6 +395,12 @@ def solver_metrics(
     return out
 
 
+def per_set(weights: list[float]) -> float | torch.Tensor:
+    """A loss term's weight for a bank: one float where every set has the same, else ``[S]``
+    (each set's loss weighs its own)."""
+    return weights[0] if len(set(weights)) == 1 else torch.tensor(weights, dtype=torch.float32)
+
+
 def train_solvers(
     cfg: TrainConfig, d: Dist, ae: TiedAutoencoder, splits: Splits, total: float, fresh: bool,
     long: bool = False,
@@ -418,16 +425,14 @@ def train_solvers(
     optim = torch.optim.Adam(params, lr=sc.lr)
     steps = steps_per_epoch(len(src.poses), sc.batch_size, d)
 
-    weights = [sc.weight_of(s, long) for s in sets]
-    other_weight: float | torch.Tensor = weights[0]
-    if len(set(weights)) > 1:  # per set [S]: each set's loss weighs its own
-        other_weight = torch.tensor(weights, dtype=torch.float32)
+    other_weight = per_set([sc.weight_of(s, long) for s in sets])
+    stay_weight = per_set([sc.stay_of(s, long) for s in sets])
 
     def losses(model: nn.Module, start: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
         """:func:`solver_losses` with this config's terms (training and validation alike)."""
         out, _ = solver_losses(
             ae, bank, model, start, goal, other_weight, sc.bone_weight, mode,
-            sc.stay_weight, sc.rigid_loss, sc.joint_loss == "distance",
+            stay_weight, sc.rigid_loss, sc.joint_loss == "distance",
             sc.stay_frame == "local", sc.carry if sc.carry_loss else 0.0,
             active(sc.keep_ends, sc.keep_elbows and sc.elbows_loss) if sc.ends_loss else None,
         )  # fmt: skip

@@ -593,14 +593,16 @@ def test_long_other_weight_retrains_the_long_bank_alone() -> None:
         assert (config_tag(own, stage) != config_tag(base, stage)) == (stage == "solvers_long")
 
 
-def test_other_weights_weigh_each_set_of_the_shared_bank_alone(
-    trained: tuple[Trained, Path], small_dataset: Path, tmp_path: Path
+@pytest.mark.parametrize(("single", "per_set"), [("other_weight", "other_weights"),
+                                                 ("stay_weight", "stay_weights")])  # fmt: skip
+def test_per_set_weights_weigh_each_set_of_the_shared_bank_alone(
+    trained: tuple[Trained, Path], small_dataset: Path, tmp_path: Path, single: str, per_set: str
 ) -> None:
-    """``solver.other_weights``: a set named there trains exactly, bit for bit, as in a bank
-    whose every set has that weight, the others as with ``other_weight`` (each set's solver
-    is trained on its own loss alone); unset it is in no tag, set it retrains the shared
-    bank only; a key that is no set's key (an unknown joint, joints out of order) is
-    refused."""
+    """``solver.other_weights`` / ``solver.stay_weights``: a set named there trains exactly,
+    bit for bit, as in a bank whose every set has that weight, the others as with
+    ``other_weight`` / ``stay_weight`` (each set's solver is trained on its own loss alone);
+    unset it is in no tag, set it retrains the shared bank only; a key that is no set's key
+    (an unknown joint, joints out of order) is refused."""
     result, _ = trained
     d = init_distributed()
     total = float(reference_lengths(result.splits.train).sum())
@@ -610,29 +612,32 @@ def test_other_weights_weigh_each_set_of_the_shared_bank_alone(
         trained_bank, _ = train_solvers(cfg, d, result.ae, result.splits, total, fresh=True)
         return [p.detach() for n, p in trained_bank.named_parameters() if not n.startswith("norm.")]
 
-    low, high = bank("low", other_weight=0.01), bank("high", other_weight=1.0)
-    mixed = bank("mixed", other_weight=0.01, other_weights={"left_ankle+right_ankle": 1.0})
+    low, high = bank("low", **{single: 0.01}), bank("high", **{single: 1.0})
+    mixed = bank("mixed", **{single: 0.01, per_set: {"left_ankle+right_ankle": 1.0}})
     assert len(mixed) == len(low) and all(len(p) == 2 for p in mixed)  # [S, ...] each
     assert not all(torch.equal(a[1], b[1]) for a, b in zip(low, high, strict=True))
     for m, lo, hi in zip(mixed, low, high, strict=True):
         assert torch.equal(m[0], lo[0]) and torch.equal(m[1], hi[1])
     base = load_config(None, {})
-    assert "other_weights" not in _section(base, "solver")
-    own = load_config(None, {"solver": {"other_weights": {"left_knee": 0.3}}})
+    assert per_set not in _section(base, "solver")
+    own = load_config(None, {"solver": {per_set: {"left_knee": 0.3}}})
     for stage in ("autoencoder", "solvers", "solvers_long", "completion1"):
         assert (config_tag(own, stage) != config_tag(base, stage)) == (stage == "solvers")
     # the tags hash the weights trained with, not how they are written: a key of no set
-    # trained, a weight equal to other_weight, the long bank's equal to it
-    same = {"left_knee": base.solver.other_weight, "neck": 0.3, "left_wrist+neck": 0.3}
-    for extra in ({"other_weights": same}, {"long_other_weight": base.solver.other_weight}):
+    # trained, a weight equal to the single one (the long bank's other weight equal to it)
+    same = {"left_knee": getattr(base.solver, single), "neck": 0.3, "left_wrist+neck": 0.3}
+    extras: list[dict[str, Any]] = [{per_set: same}]
+    if single == "other_weight":
+        extras.append({"long_other_weight": base.solver.other_weight})
+    for extra in extras:
         for stage in ("solvers", "solvers_long"):
             assert config_tag(load_config(None, {"solver": extra}), stage) == config_tag(
                 base, stage
             )
     with pytest.raises(ValueError, match=r"unknown joints \['left_wirst'\]"):
-        load_config(None, {"solver": {"other_weights": {"left_wirst": 0.3}}})
-    with pytest.raises(ValueError, match="'right_wrist\\+left_wrist' is not a set's key"):
-        load_config(None, {"solver": {"other_weights": {"right_wrist+left_wrist": 0.3}}})
+        load_config(None, {"solver": {per_set: {"left_wirst": 0.3}}})
+    with pytest.raises(ValueError, match=f"{per_set}: 'right_wrist\\+left_wrist' is not a set's"):
+        load_config(None, {"solver": {per_set: {"right_wrist+left_wrist": 0.3}}})
 
 
 def test_completion_checkpoints_tagged_with_the_autoencoder_stay_valid(tmp_path: Path) -> None:
