@@ -345,3 +345,36 @@ def test_the_command_asks_soft_ik_of_every_neural_edit(
     assert any(mpjpe["0"][s]["neural_bone"] != by["neural_bone"] for s, by in mpjpe["0.02"].items())
     bad = CliRunner().invoke(app, [*args, "--soft-ik", "0.5"])
     assert bad.exit_code == 2 and "soft-ik" in bad.output
+
+
+def test_the_canonical_view_scores_b1s_construction_per_held_out_source(
+    models_dir: Path, holdout_dataset: Path
+) -> None:
+    """``python -m bench.canonical``: make bench's B1 edits (start and goal each over its own
+    pelvis) on each held-out source, a Markdown table per source with every B1 set and the
+    start beside FABRIK and the neural answers; the start is the same pose in every set,
+    the five end effectors' answers land nearer the real pose than it; a split the dataset
+    does not hold is refused in one line."""
+    import typer
+    from typer.testing import CliRunner
+
+    from bench.canonical import main
+
+    app = typer.Typer()
+    app.command()(main)
+    args = ["--models", str(models_dir), "--dataset", str(holdout_dataset), "--edits", "12"]
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == 0, result.output
+    tables = [t for t in result.output.split("\nholdout: ")[1:]]
+    assert len(tables) >= 2  # one per held-out source the dataset holds
+    for table in tables:
+        rows = {
+            r.split(" | ")[0].strip("| "): [float(c.strip("* |")) for c in r.split(" | ")[1:]]
+            for r in table.splitlines()
+            if r.startswith("| ") and not r.startswith("| set")
+        }
+        assert len({r[0] for r in rows.values()}) == 1  # the same starts in every set
+        start, fabrik, soft, exact = rows["5 end effectors"]
+        assert soft < start and exact < start and fabrik < start
+    bad = CliRunner().invoke(app, [*args, "--split", "nowhere"])
+    assert bad.exit_code == 2 and "nowhere" in bad.output and "Traceback" not in bad.output
