@@ -300,6 +300,22 @@ VARIANTS: dict[str, str] = {
     "shipped recipe on item 48's autoencoder (default.toml retrained from nothing is "
     "mx1-6863ea85cf16, item 50)",
     "captured_other005_arms003": "`other005_arms003` on the captured edits",
+    "stay03_quick": "the shipped recipe (mx1-88cd5a3da912, whose 47 solver and autoencoder "
+    "files quick_completion.toml gives again by sha256) with the shared bank's stay term at "
+    "0.3 instead of 0.1 (solver.stay_weights, stay03_quick.toml; the shipped completion "
+    "networks swapped in; item 57)",
+    "captured_stay03_quick": "`stay03_quick` on the captured edits",
+    "stay10_quick": "the same at 1.0 (stay10_quick.toml)",
+    "stay03_legs": "`stay03_quick`'s head, pelvis and legs' sets beside the shipped arms' "
+    "sets (scripts/swap_models.py; each set trains on its own loss alone)",
+    "captured_stay03_legs": "`stay03_legs` on the captured edits",
+    "across_quick": "the shipped recipe with the stay term relative to the pelvis across "
+    "(solver.stay_frame across: a body moved across as a whole has stayed put; "
+    "across_quick.toml; both banks retrained)",
+    "captured_across_quick": "`across_quick` on the captured edits",
+    "across03_quick": "`across_quick` with the shared bank's stay term at 0.3 "
+    "(across03_quick.toml)",
+    "captured_across03_quick": "`across03_quick` on the captured edits",
 }
 COMPLETION = "6-point completion"
 

@@ -92,11 +92,13 @@ class SolverConfig(_Section):
         description="Weight of MSE(non-target joints - their start positions): the joints "
         "not asked for move as little as the targets allow.",
     )
-    stay_frame: Literal["world", "local"] = Field(
+    stay_frame: Literal["world", "local", "across"] = Field(
         default="world",
         description="Where the stay term measures how far a joint not asked for moved: its "
-        "world position, or its offset from its parent joint (the root: its position), so "
-        "that a joint carried along by a moved parent, as FABRIK carries it, has stayed put.",
+        "world position; its offset from its parent joint (the root: its position), so "
+        "that a joint carried along by a moved parent, as FABRIK carries it, has stayed put; "
+        "or its place relative to the pelvis across (x, z), so that a body that travels "
+        "across as a whole has stayed put (its height and shape have not).",
     )
     bone_weight: float = Field(
         default=1.0,

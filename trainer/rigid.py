@@ -39,6 +39,15 @@ def parent_offsets_t(flat_poses: torch.Tensor) -> torch.Tensor:
     return out.reshape(flat_poses.shape)
 
 
+def across_pelvis_t(flat_poses: torch.Tensor) -> torch.Tensor:
+    """Each joint relative to its pose's pelvis across (x, z), its height as it is:
+    ``[..., 63] -> [..., 63]`` (a body moved across as a whole is where it was; one moved
+    up or down, or reshaped, is not)."""
+    joints = flat_poses.reshape(*flat_poses.shape[:-1], NUM_JOINTS, 3)
+    across = joints[..., :1, :] * torch.tensor([1.0, 0.0, 1.0], dtype=joints.dtype)
+    return (joints - across).reshape(flat_poses.shape)
+
+
 def bone_pass_t(flat_poses: torch.Tensor, lengths: torch.Tensor) -> torch.Tensor:
     """``core.kinematics.bone_pass`` of flattened poses ``[..., 63]`` to ``lengths``
     ``[..., 20]`` (broadcastable), differentiable; the root keeps its position."""

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -43,7 +44,14 @@ from trainer.models import (
     target_columns,
 )
 from trainer.pairs import partner_ranges, sample_partners
-from trainer.rigid import bone_lengths_t, bone_pass_t, carry_t, ends_t, parent_offsets_t
+from trainer.rigid import (
+    across_pelvis_t,
+    bone_lengths_t,
+    bone_pass_t,
+    carry_t,
+    ends_t,
+    parent_offsets_t,
+)
 from trainer.stages import (
     Bar,
     Dist,
@@ -271,6 +279,14 @@ def answer_mode(delta: bool, anchor: bool) -> str:
     return "anchored" if delta and anchor else "delta" if delta else "plain"
 
 
+#: ``solver.stay_frame``: what the stay term compares of an answer and its start.
+STAY_FRAMES: dict[str, Callable[[torch.Tensor], torch.Tensor]] = {
+    "world": lambda x: x,
+    "local": parent_offsets_t,
+    "across": across_pelvis_t,
+}
+
+
 def solver_losses(
     ae: TiedAutoencoder,
     bank: SolverBank,
@@ -283,7 +299,7 @@ def solver_losses(
     stay_weight: float | torch.Tensor = 0.0,
     rigid: bool = False,
     distance: bool = False,
-    stay_local: bool = False,
+    stay_frame: str = "world",
     carry: float = 0.0,
     ends: npt.NDArray[np.bool_] | None = None,
 ) -> tuple[torch.Tensor, torch.Tensor]:
@@ -296,8 +312,9 @@ def solver_losses(
     ``rigid``: the joint terms are measured on the answer after the service's bone pass
     to the start's bone lengths (:mod:`trainer.rigid`), i.e. on what is served.
     ``distance``: the joint terms are mean per-joint distances instead of MSEs.
-    ``stay_local``: the stay term on each joint's offset from its parent (the root: its
-    position), not on its world position (:func:`trainer.rigid.parent_offsets_t`).
+    ``stay_frame``: the stay term on each joint's world position ("world"), its offset
+    from its parent ("local": the root's position; :func:`trainer.rigid.parent_offsets_t`)
+    or its place relative to the pelvis across ("across": :func:`trainer.rigid.across_pelvis_t`).
     ``carry`` (with ``rigid``): the answer also with the service's carry below each
     solver's targets (:func:`trainer.rigid.carry_t`), as served with ``serving.carry``.
     ``ends`` (with ``rigid``): then each solver's targeted joints of the chains it marks
@@ -335,7 +352,7 @@ def solver_losses(
     loss = target_term + other_weight * other_term
     if float(torch.as_tensor(stay_weight).max()) > 0:  # the joints not asked for move as
         # little as the targets allow (``stay_weight``: one for every solver, or ``[S]``)
-        frame = parent_offsets_t if stay_local else (lambda x: x)
+        frame = STAY_FRAMES[stay_frame]
         moved = per_item(frame(answer) - frame(start).unsqueeze(0))
         loss = loss + stay_weight * (moved * (1 - tm)).sum(-1) / (1 - tm).sum(-1)
     if bone_weight > 0:
@@ -433,7 +450,7 @@ def train_solvers(
         out, _ = solver_losses(
             ae, bank, model, start, goal, other_weight, sc.bone_weight, mode,
             stay_weight, sc.rigid_loss, sc.joint_loss == "distance",
-            sc.stay_frame == "local", sc.carry if sc.carry_loss else 0.0,
+            sc.stay_frame, sc.carry if sc.carry_loss else 0.0,
             active(sc.keep_ends, sc.keep_elbows and sc.elbows_loss) if sc.ends_loss else None,
         )  # fmt: skip
         return out

@@ -36,7 +36,7 @@ from trainer.models import (
     merge_banks,
     target_columns,
 )
-from trainer.rigid import parent_offsets_t
+from trainer.rigid import across_pelvis_t, parent_offsets_t
 from trainer.stages import (
     StageState,
     _section,
@@ -695,7 +695,7 @@ def test_stay_term_in_the_local_frame_measures_offsets_from_parents(
     with torch.no_grad():
         target, answers = solver_losses(ae, bank, bank, start, goal, 0.0, 0.0, "plain")
         both, _ = solver_losses(ae, bank, bank, start, goal, 0.0, 0.0, "plain", 1.0,
-                                stay_local=True)  # fmt: skip
+                                stay_frame="local")  # fmt: skip
     offsets = parent_offsets_t(answers) - parent_offsets_t(start).unsqueeze(0)
     for s, joints in enumerate(bank.sets):
         rest = [j for j in range(21) if j not in [JOINT_INDEX[n] for n in joints]]
@@ -710,6 +710,41 @@ def test_stay_term_in_the_local_frame_measures_offsets_from_parents(
     local = load_config(None, {"solver": {"stay_frame": "local"}})
     assert config_tag(local, "solvers") != config_tag(load_config(None, {}), "solvers")
     assert config_tag(local, "completion1") == config_tag(load_config(None, {}), "completion1")
+
+
+def test_stay_term_across_the_pelvis_lets_a_body_travel_as_a_whole(
+    trained: tuple[Trained, Path],
+) -> None:
+    """``solver.stay_frame = "across"``: the stay term is the MSE of the other joints' moves
+    relative to the pelvis across (x, z), on real pairs: a pose moved across as a whole
+    costs nothing, one moved up costs its every joint's rise; a checkpoint tag of its own."""
+    result, _ = trained
+    ae, bank = result.ae, result.bank
+    poses = flat(result.splits.test.positions[:48])
+    start, goal = poses[:24], poses[24:]
+    with torch.no_grad():
+        target, answers = solver_losses(ae, bank, bank, start, goal, 0.0, 0.0, "plain")
+        both, _ = solver_losses(ae, bank, bank, start, goal, 0.0, 0.0, "plain", 1.0,
+                                stay_frame="across")  # fmt: skip
+
+    def on_pelvis(x: torch.Tensor) -> torch.Tensor:  # joints minus the pelvis's (x, 0, z)
+        joints = x.reshape(*x.shape[:-1], 21, 3)
+        return (joints - joints[..., :1, :] * torch.tensor([1.0, 0.0, 1.0])).reshape(x.shape)
+
+    moves = on_pelvis(answers) - on_pelvis(start).unsqueeze(0)
+    for s, joints in enumerate(bank.sets):
+        rest = [j for j in range(21) if j not in [JOINT_INDEX[n] for n in joints]]
+        want = (moves[s].reshape(len(goal), 21, 3)[:, rest] ** 2).mean()
+        torch.testing.assert_close(both[s] - target[s], want, rtol=1e-4, atol=0)
+    across = start + torch.tensor([0.3, 0.0, -0.2]).repeat(21)
+    up = start + torch.tensor([0.0, 0.1, 0.0]).repeat(21)
+    torch.testing.assert_close(across_pelvis_t(across), across_pelvis_t(start))
+    rise = (across_pelvis_t(up) - across_pelvis_t(start)).reshape(-1, 21, 3)
+    torch.testing.assert_close(rise[..., 1], torch.full_like(rise[..., 1], 0.1))
+    assert float(rise[..., [0, 2]].abs().max()) < 1e-6
+    tags = {f: config_tag(load_config(None, {"solver": {"stay_frame": f}}), "solvers")
+            for f in ("world", "local", "across")}  # fmt: skip
+    assert len(set(tags.values())) == 3
 
 
 def test_serving_settings_enter_the_solver_tags_only_where_the_losses_see_them() -> None:
