@@ -224,6 +224,41 @@ Prepared = tuple[F64, F64, F64, F64, F64, F64, F32, F32]
 
 
 @jit
+def scale_item(
+    lengths: F64, shapes: F64, shape_totals: F64, total_length: bool, reference_total: float
+) -> float:  # pragma: no cover - compiled
+    """How much bigger a body of bone ``lengths [20]`` is than the networks' body size
+    (``Engine.scales_of``): its total over the reference total (``total_length``), or over
+    the total of the training skeleton whose proportions (``shapes``) are nearest."""
+    total = _sum_pairwise(lengths)
+    if total_length:
+        return float(total / reference_total)
+    best, best_d = 0, np.inf
+    for c in range(shapes.shape[0]):
+        d = 0.0
+        for i in range(NUM_JOINTS - 1):
+            e = lengths[i] / total - shapes[c, i]
+            d += e * e
+        d = np.sqrt(d)
+        if d < best_d:
+            best, best_d = c, d
+    return float(total / shape_totals[best])
+
+
+@jit
+def body_scales(
+    poses: F64, shapes: F64, shape_totals: F64, total_length: bool, reference_total: float
+) -> F64:  # pragma: no cover - compiled
+    """:func:`scale_item` of each pose ``[B, 21, 3]``: ``[B]``, as :func:`prepare` has them."""
+    out = np.empty(poses.shape[0])
+    lengths = np.empty(NUM_JOINTS - 1)
+    for b in range(poses.shape[0]):
+        bone_lengths_item(poses[b], lengths)
+        out[b] = scale_item(lengths, shapes, shape_totals, total_length, reference_total)
+    return out
+
+
+@jit
 def prepare(
     poses: F64,
     floors: F64,
@@ -289,20 +324,7 @@ def prepare(
             tcan[b, q, 1] = 0.0 * local[0] + 1.0 * local[1] + 0.0 * local[2]
             tcan[b, q, 2] = fx * local[0] + 0.0 * local[1] + fz * local[2]
         bone_lengths_item(pose, lengths[b])
-        total = _sum_pairwise(lengths[b])
-        if total_length:
-            scales[b] = total / reference_total
-        else:  # the nearest training skeleton's proportions
-            best, best_d = 0, np.inf
-            for c in range(shapes.shape[0]):
-                d = 0.0
-                for i in range(NUM_JOINTS - 1):
-                    e = lengths[b, i] / total - shapes[c, i]
-                    d += e * e
-                d = np.sqrt(d)
-                if d < best_d:
-                    best, best_d = c, d
-            scales[b] = total / shape_totals[best]
+        scales[b] = scale_item(lengths[b], shapes, shape_totals, total_length, reference_total)
         if not neural[b]:
             continue
         s = scales[b]

@@ -276,7 +276,9 @@ class Serving(_Strict):
         le=1.0,
         description="A soft neural answer (bone lengths kept) whose farthest target is more "
         "than this many metres away after its passes gets one more pass from that answer "
-        "(service.engine: the edits the passes left short, and only they); 0 = never.",
+        "(service.engine: the edits the passes left short, and only they); metres at the "
+        "networks' body size, scaled with each body as the networks see it (a character "
+        "twice the size: twice as far); 0 = never.",
     )
     retry_polish: bool = Field(
         default=False,

@@ -403,27 +403,40 @@ class Engine:
         onto its targets (:meth:`_polish_short`)."""
         if self.serving.retry_reach <= 0.0 or ans.pose.shape[0] == 0:
             return ans
-        if float(ans.errors.max()) <= self.serving.retry_reach:  # the common case, one reduction
+        reach = self._retry_reaches(items)
+        if float(ans.errors.max()) <= float(reach.min()):  # the common case, two reductions
             return ans
-        sel = self._short(items, ans)
+        sel = self._short(items, ans, reach)
         if sel.size == 0:
             return ans
         again = self._solve_items(
             items.soft(sel, compiled.as_f64(ans.pose)), np.ones(sel.size, np.int64)
         )
         ans = ans.with_items(sel, again)
-        return self._polish_short(items, ans) if self.serving.retry_polish else ans
+        return self._polish_short(items, ans, reach) if self.serving.retry_polish else ans
 
-    def _short(self, items: _Items, ans: BatchAnswer) -> npt.NDArray[np.intp]:
+    def _retry_reaches(self, items: _Items) -> F64:
+        """``[B]``: how far from a target each item's soft answer may end before it is
+        retried: ``serving.retry_reach`` at the networks' body size, scaled with the body
+        (:meth:`scales_of`: a 1.9 m or a 1.2 m copy of a character is answered as that
+        character; it was in metres for every body), plus ``soft_ik / e`` for an item asked
+        to ease into full stretch (the shortfall it asked for: neither a retry nor the
+        polish, which straightens the limb, is for that)."""
+        scales = compiled.body_scales(
+            items.poses, self._shapes_c, self._shape_totals,
+            self.serving.body == "total_length", self._reference_total,
+        )  # fmt: skip
+        out: F64 = self.serving.retry_reach * scales + items.soft_ik / np.e
+        return out
+
+    def _short(self, items: _Items, ans: BatchAnswer, reach: F64) -> npt.NDArray[np.intp]:
         """The soft neural items (bone lengths kept) of ``ans`` whose farthest user target
-        is more than ``serving.retry_reach`` away, plus ``soft_ik / e`` for an item asked to
-        ease into full stretch (the shortfall it asked for: neither a retry nor the polish,
-        which straightens the limb, is for that)."""
-        far = items.farthest(ans.errors) > self.serving.retry_reach + items.soft_ik / np.e
+        is more than their ``reach`` (:meth:`_retry_reaches`) away."""
+        far = items.farthest(ans.errors) > reach
         out: npt.NDArray[np.intp] = np.flatnonzero(far & ~items.fab & ~items.ex & items.keep)
         return out
 
-    def _polish_short(self, items: _Items, ans: BatchAnswer) -> BatchAnswer:
+    def _polish_short(self, items: _Items, ans: BatchAnswer, reach: F64) -> BatchAnswer:
         """``ans`` with every item still short (:meth:`_short`) polished from its answer
         onto its targets, to its own tolerance, as exact reach polishes: the compiled
         FABRIK polish, trunk held first, pins held, and where that leaves a target beyond
@@ -432,7 +445,7 @@ class Engine:
         docs/generalisation-serving-2.md item 37). Its ``solvers`` end with ``fabrik-polish``
         (once: a path that already ends with it is not given it twice). An
         item the polish would leave no nearer (the iteration cap) keeps its answer."""
-        sel = self._short(items, ans)
+        sel = self._short(items, ans, reach)
         if sel.size == 0:
             return ans
         short = dataclasses.replace(items.take(sel), poses=compiled.as_f64(ans.pose[sel]))

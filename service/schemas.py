@@ -315,7 +315,8 @@ class ModelsResponse(BaseModel):
     )
     retry_reach: float = Field(
         description="Metres beyond which a soft answer's farthest target gets one more pass "
-        "from that answer (0: never; the manifest's `serving.retry_reach`)."
+        "from that answer, at the networks' body size and scaled with each character's "
+        "(0: never; the manifest's `serving.retry_reach`)."
     )
     retry_polish: bool = Field(
         description="Whether a soft answer still farther than `retry_reach` from a target "
