@@ -246,16 +246,21 @@ def scale_item(
 
 
 @jit
-def body_scales(
-    poses: F64, shapes: F64, shape_totals: F64, total_length: bool, reference_total: float
-) -> F64:  # pragma: no cover - compiled
-    """:func:`scale_item` of each pose ``[B, 21, 3]``: ``[B]``, as :func:`prepare` has them."""
+def retry_reaches(
+    poses: F64, soft: F64, reach: float, shapes: F64, shape_totals: F64, total_length: bool,
+    reference_total: float,
+) -> tuple[F64, float]:  # pragma: no cover - compiled  # fmt: skip
+    """Each pose's ``[B, 21, 3]`` retry threshold ``[B]``: ``reach`` times its
+    :func:`scale_item` (as :func:`prepare` has it), plus ``soft [B]`` / e; and their least."""
     out = np.empty(poses.shape[0])
     lengths = np.empty(NUM_JOINTS - 1)
+    least = np.inf
     for b in range(poses.shape[0]):
         bone_lengths_item(poses[b], lengths)
-        out[b] = scale_item(lengths, shapes, shape_totals, total_length, reference_total)
-    return out
+        s = scale_item(lengths, shapes, shape_totals, total_length, reference_total)
+        out[b] = reach * s + soft[b] / np.e
+        least = min(least, out[b])
+    return out, least
 
 
 @jit

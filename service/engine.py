@@ -403,8 +403,8 @@ class Engine:
         onto its targets (:meth:`_polish_short`)."""
         if self.serving.retry_reach <= 0.0 or ans.pose.shape[0] == 0:
             return ans
-        reach = self._retry_reaches(items)
-        if float(ans.errors.max()) <= float(reach.min()):  # the common case, two reductions
+        reach, least = self._retry_reaches(items)
+        if float(ans.errors.max()) <= least:  # the common case: one reduction, one kernel
             return ans
         sel = self._short(items, ans, reach)
         if sel.size == 0:
@@ -415,19 +415,17 @@ class Engine:
         ans = ans.with_items(sel, again)
         return self._polish_short(items, ans, reach) if self.serving.retry_polish else ans
 
-    def _retry_reaches(self, items: _Items) -> F64:
+    def _retry_reaches(self, items: _Items) -> tuple[F64, float]:
         """``[B]``: how far from a target each item's soft answer may end before it is
-        retried: ``serving.retry_reach`` at the networks' body size, scaled with the body
-        (:meth:`scales_of`: a 1.9 m or a 1.2 m copy of a character is answered as that
-        character; it was in metres for every body), plus ``soft_ik / e`` for an item asked
-        to ease into full stretch (the shortfall it asked for: neither a retry nor the
-        polish, which straightens the limb, is for that)."""
-        scales = compiled.body_scales(
-            items.poses, self._shapes_c, self._shape_totals,
-            self.serving.body == "total_length", self._reference_total,
+        retried, and the least of them: ``serving.retry_reach`` at the networks' body size,
+        scaled with the body (:meth:`scales_of`: a 1.9 m or a 1.2 m copy of a character is
+        answered as that character; it was in metres for every body), plus ``soft_ik / e``
+        for an item asked to ease into full stretch (the shortfall it asked for: neither a
+        retry nor the polish, which straightens the limb, is for that)."""
+        return compiled.retry_reaches(
+            items.poses, items.soft_ik, self.serving.retry_reach, self._shapes_c,
+            self._shape_totals, self.serving.body == "total_length", self._reference_total,
         )  # fmt: skip
-        out: F64 = self.serving.retry_reach * scales + items.soft_ik / np.e
-        return out
 
     def _short(self, items: _Items, ans: BatchAnswer, reach: F64) -> npt.NDArray[np.intp]:
         """The soft neural items (bone lengths kept) of ``ans`` whose farthest user target
