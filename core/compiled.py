@@ -556,6 +556,82 @@ def settle(
     return finish(out, facing, trans, floors, tidx, tpos, counts, lengths)
 
 
+# --------------------------------------------------------------------------------------
+# One edit's soft passes in place (service.lean.solve_one): the same kernels as above,
+# their answers written into arrays the caller holds (onnxruntime's bound input buffers
+# and a per-thread workspace) instead of returned, which costs numba a boxed array each
+# (~0.6 us; prepare's eight were most of its call). The arithmetic is the same.
+# --------------------------------------------------------------------------------------
+@jit
+def _floor_off(tpos: F64, floors: F64) -> F64:  # pragma: no cover - compiled
+    """``tpos [B, K, 3]`` with each item's floor taken off y (``Engine._prepare``'s)."""
+    out = tpos.copy()
+    for b in range(out.shape[0]):
+        for q in range(out.shape[1]):
+            out[b, q, 1] -= floors[b]
+    return out
+
+
+@jit
+def prepare_into(
+    poses: F64, floors: F64, tidx: I64, tpos: F64, counts: I64, shapes: F64,
+    shape_totals: F64, total_length: bool, reference_total: float, cols: I64, x_in: F32,
+    t_in: F32, canon: F64, facing: F64, trans: F64, lengths: F64, scales: F64,
+) -> None:  # pragma: no cover - compiled  # fmt: skip
+    """:func:`prepare` of neural items (``tpos`` in the world, the floor not yet taken
+    off), written in place: the network input into ``x_in [B, 63]`` and the canvas's
+    flat columns ``cols`` (a graph's target inputs, in its order) into ``t_in``, and
+    what :func:`settle` needs into ``canon``, ``facing``, ``trans``, ``lengths`` and
+    ``scales``."""
+    n = poses.shape[0]
+    c, f, t, lens, s, _tcan, x, canvas = prepare(
+        poses, floors, tidx, _floor_off(tpos, floors), counts, np.ones(n, dtype=np.bool_),
+        shapes, shape_totals, total_length, reference_total,
+    )  # fmt: skip
+    canon[:] = c
+    facing[:] = f
+    trans[:] = t
+    lengths[:] = lens
+    scales[:] = s
+    x_in[:] = x
+    for b in range(n):
+        for i in range(cols.shape[0]):
+            t_in[b, i] = canvas[b, cols[i] // 3, cols[i] % 3]
+
+
+@jit
+def settle_prepare(
+    decoded: F32, scales: F64, canon: F64, lengths: F64, facing: F64, trans: F64,
+    floors: F64, tidx: I64, tpos: F64, counts: I64, carry: F64, chains: Bool, ease: float,
+    collar: Bool, hold: F64, pairs: bool, side: float, soft: F64, shapes: F64,
+    shape_totals: F64, total_length: bool, reference_total: float, cols: I64, x_in: F32,
+    t_in: F32,
+) -> None:  # pragma: no cover - compiled  # fmt: skip
+    """:func:`settle` of one pass (``tpos`` in the world), then :func:`prepare_into` of
+    the next from its answer: a soft pass's end and the next one's start in one call."""
+    pose, _errors, _bone = settle(
+        decoded, scales, canon, lengths, facing, trans, floors, tidx, _floor_off(tpos, floors),
+        counts, carry, chains, ease, collar, hold, pairs, side, soft,
+    )  # fmt: skip
+    prepare_into(
+        pose, floors, tidx, tpos, counts, shapes, shape_totals, total_length, reference_total,
+        cols, x_in, t_in, canon, facing, trans, lengths, scales,
+    )  # fmt: skip
+
+
+@jit
+def settle_last(
+    decoded: F32, scales: F64, canon: F64, lengths: F64, facing: F64, trans: F64,
+    floors: F64, tidx: I64, tpos: F64, counts: I64, carry: F64, chains: Bool, ease: float,
+    collar: Bool, hold: F64, pairs: bool, side: float, soft: F64,
+) -> tuple[F64, F64, F64]:  # pragma: no cover - compiled  # fmt: skip
+    """:func:`settle` with ``tpos`` in the world (the floor taken off here)."""
+    return settle(
+        decoded, scales, canon, lengths, facing, trans, floors, tidx, _floor_off(tpos, floors),
+        counts, carry, chains, ease, collar, hold, pairs, side, soft,
+    )  # fmt: skip
+
+
 def warm() -> None:
     """Compile (or load from the cache) every kernel of this module on tiny inputs, and of
     :mod:`core.compiled_characters` and :mod:`core.compiled_reach`."""
@@ -588,6 +664,16 @@ def warm() -> None:
         out[6], out[4], out[0], out[3], out[1], out[2], np.zeros(1), tidx, tpos, counts,
         np.full(1, 0.5), chains, 0.0, one, np.full(1, 0.02), True, 0.5, np.full(1, 0.01),
     )  # fmt: skip
+    cols = np.arange(3, dtype=np.int64)
+    x_in, t_in = np.empty((1, 3 * NUM_JOINTS), np.float32), np.empty((1, 3), np.float32)
+    state = (out[0].copy(), out[1].copy(), out[2].copy(), out[3].copy(), out[4].copy())
+    prepare_into(pose, np.zeros(1), tidx, tpos, counts, shapes, np.ones(1), True, 1.0, cols,
+                 x_in, t_in, *state)  # fmt: skip
+    rest = (np.zeros(1), tidx, tpos, counts, np.full(1, 0.5), chains, 0.0, one,
+            np.full(1, 0.02), True, 0.5, np.full(1, 0.01))  # fmt: skip
+    settle_prepare(x_in, state[4], state[0], state[3], state[1], state[2], *rest, shapes,
+                   np.ones(1), True, 1.0, cols, x_in, t_in)  # fmt: skip
+    settle_last(x_in, state[4], state[0], state[3], state[1], state[2], *rest)
 
 
 def as_i64(a: npt.ArrayLike) -> I64:

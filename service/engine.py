@@ -41,6 +41,7 @@ from core.skeleton import (
     MIRROR,
     NUM_JOINTS,
     bone_lengths,
+    flat_columns,
     mirror_key,
     set_key,
 )
@@ -117,6 +118,8 @@ class Engine:
             key: np.asarray([JOINT_INDEX[j] for j in entry.joints], dtype=np.intp)
             for key, entry in m.solvers().items()
         }
+        #: each solver's targets as flat canvas columns ``[3k]`` (its fused graph's input)
+        self.solver_columns = {key: flat_columns(j) for key, j in self.solver_joints.items()}
         #: how each solver's edit is asked of its mirror image (``serving.solve_mirror``),
         #: and the shipped graphs that ask both in one run (``trainer.mirror``)
         self.mirror_views = networks.mirror_views(self.solver_joints)

@@ -14,6 +14,7 @@ the answers are bit-identical to it (``tests/service/test_lean.py``).
 
 from __future__ import annotations
 
+import threading
 from functools import lru_cache
 from typing import TYPE_CHECKING
 
@@ -21,7 +22,7 @@ import numpy as np
 import numpy.typing as npt
 
 from core import compiled
-from core.skeleton import JOINT_NAMES
+from core.skeleton import JOINT_NAMES, NUM_JOINTS
 from service import networks
 from service.problems import BatchAnswer, _Items, solver_paths
 
@@ -29,6 +30,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from service.engine import Engine
 
 F64 = compiled.F64
+Bool = compiled.Bool
 #: A lean solve's world poses, target distances, bone errors and FABRIK iterations.
 Solved = tuple[F64, F64, F64, npt.NDArray[np.int64]]
 #: :func:`solve_lean`'s: and which items exact reach's fallback answered (plain FABRIK).
@@ -119,10 +121,14 @@ def solve_lean(
     tidx, counts, floors = items.tidx, items.cnt, items.floors
     every = np.ones(n, dtype=np.bool_)
     collar, hold = engine.collar_items(items), engine.pelvis_holds(items)
+    fell = np.zeros(n, dtype=np.bool_)
+    if n == 1 and not (exact or pinned):  # one soft edit: in place, when one graph answers
+        one = solve_one(engine, items, passes, sequence, collar, hold)
+        if one is not None:
+            return (*one, fell)
     pose = items.poses
     errors, bone_err = np.zeros(tidx.shape), np.zeros(n)
     iterations = np.zeros(n, dtype=np.int64)
-    fell = np.zeros(n, dtype=np.bool_)
     tpos = None  # the targets with the floor taken off: the first pass's, for every pass
     for k in range(passes):
         tpos, (canon, facing, trans, lengths, scales, tcan, x, canvas) = engine._prepare(
@@ -159,6 +165,59 @@ def solve_lean(
             out, facing, trans, floors, tidx, tpos, counts, lengths
         )
     return pose, errors, bone_err, iterations, fell
+
+
+#: Per thread: :func:`solve_one`'s canonical frame, lengths and scale between its kernels.
+_WORK = threading.local()
+
+
+def _workspace() -> tuple[F64, F64, F64, F64, F64]:
+    """This thread's ``canon [1, 21, 3]``, ``facing [1, 2]``, ``trans [1, 3]``,
+    ``lengths [1, 20]`` and ``scales [1]`` (overwritten by every :func:`solve_one`)."""
+    ws: tuple[F64, F64, F64, F64, F64] | None = getattr(_WORK, "ws", None)
+    if ws is None:
+        ws = _WORK.ws = (
+            np.empty((1, NUM_JOINTS, 3)), np.empty((1, 2)), np.empty((1, 3)),
+            np.empty((1, NUM_JOINTS - 1)), np.empty(1),
+        )  # fmt: skip
+    return ws
+
+
+def solve_one(
+    engine: Engine, items: _Items, passes: int, sequence: tuple[str, ...], collar: Bool,
+    hold: F64,
+) -> Solved | None:  # fmt: skip
+    """:func:`solve_lean` of one soft edit without pins (``items`` of one), where each
+    pass is one run of one graph (:func:`service.networks.one_run`); else None. The same
+    kernels in the same order, in three calls and no copies: the canonical inputs go
+    straight into onnxruntime's bound input buffers (:func:`core.compiled.prepare_into`),
+    each pass but the last ends and the next begins in one call from the bound output
+    (:func:`core.compiled.settle_prepare`), and the last ends in
+    :func:`core.compiled.settle_last`. Bit for bit :func:`solve_lean`'s answer
+    (``tests/service/test_lean.py``)."""
+    found = networks.one_run(engine, sequence, bool(items.mirror[0]))
+    if found is None:
+        return None
+    few, cols = found
+    (x_in, t_in), out, run = few.bound(((1, 3 * NUM_JOINTS), (1, cols.shape[0])))
+    canon, facing, trans, lengths, scales = _workspace()
+    s = engine.serving
+    body = (engine._shapes_c, engine._shape_totals, s.body == "total_length",
+            engine._reference_total)  # fmt: skip
+    compiled.prepare_into(
+        items.poses, items.floors, items.tidx, items.tpos, items.cnt, *body, cols, x_in, t_in,
+        canon, facing, trans, lengths, scales,
+    )  # fmt: skip
+    rest = (items.floors, items.tidx, items.tpos, items.cnt, items.carry, engine.chain_mask,
+            s.keep_ease, collar, hold, s.keep_pairs, s.bend_side, items.soft_ik)  # fmt: skip
+    for _ in range(passes - 1):
+        run()
+        compiled.settle_prepare(
+            out, scales, canon, lengths, facing, trans, *rest, *body, cols, x_in, t_in
+        )
+    run()
+    pose, errors, bone_err = compiled.settle_last(out, scales, canon, lengths, facing, trans, *rest)
+    return pose, errors, bone_err, np.zeros(1, dtype=np.int64)
 
 
 def fabrik_batch(items: _Items) -> bool:

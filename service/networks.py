@@ -22,6 +22,7 @@ from core.skeleton import (
     mirror_target_columns,
     mirrored_flat,
 )
+from service.runtime import Fused, _FewRows
 
 if TYPE_CHECKING:  # pragma: no cover
     from service.engine import Engine
@@ -110,6 +111,28 @@ def both_views(
         own, other = engine.fused[view.key](x, targets), engine.fused[view.back](x_m, t_m)
     own[rows] = (own[rows] + mirrored_flat(other)) * np.float32(0.5)
     return own
+
+
+#: :func:`one_run`'s answer: the graph's few-rows runner and its target columns.
+OneRun = tuple[_FewRows, npt.NDArray[np.intp]]
+
+
+def one_run(engine: Engine, sequence: tuple[str, ...], mirror: bool) -> OneRun | None:
+    """Where :func:`answer` of one row runs one graph once (a single solver; its mirror
+    graph where ``mirror`` asks and the models ship it): that graph's few-rows runner and
+    the flat canvas columns ``[3k]`` of its target input, in its order; else None."""
+    if len(sequence) != 1:
+        return None
+    key = sequence[0]
+    view = engine.mirror_views.get(key) if mirror else None
+    if view is not None:  # both_views: the mirror graph, else the numpy way (not one run)
+        graph = engine.mirror_graphs.get(view.key)
+        return None if graph is None else (graph.few, view.own)
+    # run_once (no mirror image asked, or none to ask): the set's fused graph
+    net = engine.fused.get(key)
+    if net is None or (isinstance(net, Fused) and net.chain is not None):  # not one run
+        return None
+    return net.few, engine.solver_columns[key]
 
 
 def mirror_of(engine: Engine, sequence: tuple[str, ...]) -> tuple[str, ...] | None:

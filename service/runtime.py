@@ -43,6 +43,9 @@ def session_options(threads: int = 1) -> ort.SessionOptions:
     return options
 
 
+#: A network's bound run (:meth:`_FewRows.bound`): its input buffers, its output, the run.
+Bound = tuple[list[npt.NDArray[np.float32]], npt.NDArray[np.float32], Callable[[], None]]
+
 #: Runs of at most this many rows go through :class:`_FewRows` (an edit alone, and its
 #: mirror image as a second row): the hot path's runs.
 FEW_ROWS = 4
@@ -60,26 +63,35 @@ class _FewRows:
         self.local = threading.local()
 
     def __call__(self, arrays: tuple[npt.NDArray[np.float32], ...]) -> npt.NDArray[np.float32]:
+        shapes = tuple([a.shape for a in arrays])  # (a list first: a generator costs more)
+        bufs, out, run = self.bound(shapes)
+        for buf, a in zip(bufs, arrays, strict=True):
+            np.copyto(buf, a)
+        run()
+        result: npt.NDArray[np.float32] = out.copy()
+        return result
+
+    def bound(self, shapes: tuple[tuple[int, ...], ...]) -> Bound:
+        """This thread's bound buffers for inputs of ``shapes``: the inputs (written in
+        place by the caller, as ``service.lean.solve_one``'s kernels do), the output
+        (overwritten by the next run) and the run."""
         states = getattr(self.local, "states", None)
         if states is None:
             states = self.local.states = {}
-        shapes = tuple([a.shape for a in arrays])  # (a list first: a generator costs more)
-        state = states.get(shapes)
+        state: Bound | None = states.get(shapes)
         if state is None:  # a few shapes per network: rows 1 to FEW_ROWS
-            first = self.session.run([self.output], dict(zip(self.inputs, arrays, strict=True)))
-            bufs = [np.empty(a.shape, dtype=np.float32) for a in arrays]
+            zeros = {
+                n: np.zeros(s, dtype=np.float32) for n, s in zip(self.inputs, shapes, strict=True)
+            }
+            first = self.session.run([self.output], zeros)
+            bufs = [np.empty(s, dtype=np.float32) for s in shapes]
             out = np.empty(first[0].shape, dtype=np.float32)
             io = self.session.io_binding()
             for name, buf in zip(self.inputs, bufs, strict=True):
                 io.bind_ortvalue_input(name, ort.OrtValue.ortvalue_from_numpy(buf))
             io.bind_ortvalue_output(self.output, ort.OrtValue.ortvalue_from_numpy(out))
             state = states[shapes] = (bufs, out, self._runner(io))
-        bufs, out, run = state
-        for buf, a in zip(bufs, arrays, strict=True):
-            np.copyto(buf, a)
-        run()
-        result: npt.NDArray[np.float32] = out.copy()
-        return result
+        return state
 
     def _runner(self, io: ort.IOBinding) -> Callable[[], None]:
         """The bound run. The public ``run_with_iobinding`` first checks for WebGPU graph

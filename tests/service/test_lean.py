@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from core.skeleton import JOINT_INDEX
+from service import lean
 from service.engine import Engine
 from service.lean import lean_sequence, solve_lean
 from service.problems import SolveProblem, _Items, stacked
@@ -196,3 +197,33 @@ def test_one_problem_as_items_equals_its_stacked_arrays(
         # per-item options are the engine's own copies, never the caller's arrays
         for name in ("w", "fab", "keep", "ex", "tols", "floors", "turn", "cnt", "n_t"):
             assert not any(np.shares_memory(getattr(other, name), g) for g in given.values()), name
+
+
+@pytest.mark.parametrize("mirror", [True, False])
+@pytest.mark.parametrize("passes", [1, 2, 3])
+@pytest.mark.parametrize("names", [WRISTS, ("left_knee",), ("head", "left_wrist")])
+def test_one_edit_in_place_is_the_per_pass_way(
+    engine: Engine, real_poses: PosePairs, monkeypatch: pytest.MonkeyPatch, names: tuple[str, ...],
+    passes: int, mirror: bool,
+) -> None:  # fmt: skip
+    """A lone soft edit's passes in place (``lean.solve_one``: the kernels write into
+    onnxruntime's bound buffers) give the per-pass way's bits (``solve_lean`` with it off),
+    options and floors included; a composed set (head and a wrist) has no one run."""
+    probs = [
+        dataclasses.replace(p, passes=passes, mirror=mirror, carry=(0.0, 1.0, None)[i % 3],
+                            soft_ik=0.02 * (i % 2))
+        for i, p in enumerate(_problems(real_poses, names)[:12])
+    ]  # fmt: skip
+    items, _ = _items(probs[:1], engine)
+    seq = lean_sequence(engine, items, np.array([passes]))
+    assert seq is not None
+    one = lean.solve_one(engine, items, passes, seq, engine.collar_items(items),
+                         engine.pelvis_holds(items))  # fmt: skip
+    assert (one is None) == (len(seq) > 1)
+    fast = [engine.solve([p])[0] for p in probs]
+    monkeypatch.setattr(lean, "solve_one", lambda *args: None)
+    for p, a in zip(probs, fast, strict=True):
+        (b,) = engine.solve([p])
+        assert np.array_equal(a.pose, b.pose) and np.array_equal(a.errors, b.errors)
+        assert a.max_bone_error == b.max_bone_error and a.solvers == b.solvers
+        assert a.iterations == b.iterations
