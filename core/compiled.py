@@ -623,13 +623,18 @@ def settle_prepare(
 def settle_last(
     decoded: F32, scales: F64, canon: F64, lengths: F64, facing: F64, trans: F64,
     floors: F64, tidx: I64, tpos: F64, counts: I64, carry: F64, chains: Bool, ease: float,
-    collar: Bool, hold: F64, pairs: bool, side: float, soft: F64,
-) -> tuple[F64, F64, F64]:  # pragma: no cover - compiled  # fmt: skip
-    """:func:`settle` with ``tpos`` in the world (the floor taken off here)."""
-    return settle(
+    collar: Bool, hold: F64, pairs: bool, side: float, soft: F64, world: F64, errors: F64,
+    bone_err: F64,
+) -> None:  # pragma: no cover - compiled  # fmt: skip
+    """:func:`settle` with ``tpos`` in the world (the floor taken off here), its answer
+    written into ``world [B, 21, 3]``, ``errors [B, K]`` and ``bone_err [B]``."""
+    w, e, b = settle(
         decoded, scales, canon, lengths, facing, trans, floors, tidx, _floor_off(tpos, floors),
         counts, carry, chains, ease, collar, hold, pairs, side, soft,
     )  # fmt: skip
+    world[:] = w
+    errors[:] = e
+    bone_err[:] = b
 
 
 def warm() -> None:
@@ -673,7 +678,8 @@ def warm() -> None:
             np.full(1, 0.02), True, 0.5, np.full(1, 0.01))  # fmt: skip
     settle_prepare(x_in, state[4], state[0], state[3], state[1], state[2], *rest, shapes,
                    np.ones(1), True, 1.0, cols, x_in, t_in)  # fmt: skip
-    settle_last(x_in, state[4], state[0], state[3], state[1], state[2], *rest)
+    settle_last(x_in, state[4], state[0], state[3], state[1], state[2], *rest, pose.copy(),
+                np.empty((1, 1)), np.empty(1))  # fmt: skip
 
 
 def as_i64(a: npt.ArrayLike) -> I64:

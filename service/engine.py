@@ -376,6 +376,9 @@ class Engine:
         few targets asked in soft reach. Exact reach has its FABRIK polish (its soft passes
         before go without); edits of many targets search the body's turn instead, whose
         soft candidates a collar turn would make look nearer than they are."""
+        if items.n_t.shape[0] == 1:  # one edit (the interactive case): without ufuncs
+            one = bool(items.asked_soft[0]) and int(items.n_t[0]) < self.turn_search.min_targets
+            return np.array([one and bool(self.serving.keep_collar)], dtype=np.bool_)
         few = items.n_t < self.turn_search.min_targets
         return items.asked_soft & few & self.serving.keep_collar
 

@@ -24,7 +24,7 @@ import numpy.typing as npt
 from core import compiled
 from core.skeleton import JOINT_NAMES, NUM_JOINTS
 from service import networks
-from service.problems import BatchAnswer, _Items, solver_paths
+from service.problems import BatchAnswer, _Items, solver_path, solver_paths
 
 if TYPE_CHECKING:  # pragma: no cover
     from service.engine import Engine
@@ -97,8 +97,11 @@ def lean_answer(
         world, errors, bone_err, iterations, fell = solve_lean(
             engine, items, passes, sequence, exact
         )
-        polished = exact or int(items.cnt[0]) > int(items.n_t[0])
-        seq_of, suffix = np.zeros(n, np.int64), np.where(fell, 2, int(polished))
+        polished = int(exact or int(items.cnt[0]) > int(items.n_t[0]))
+        if n == 1:  # one edit: its path without the arrays of codes (solver_paths' own)
+            path = solver_path(3 + (2 if fell[0] else polished), [sequence])
+            return BatchAnswer(world, errors, bone_err, iterations, (path,), np.zeros(1, np.int64))
+        seq_of, suffix = np.zeros(n, np.int64), np.where(fell, 2, polished)
     paths, path_of = solver_paths(seq_of, suffix, [sequence or ()])
     return BatchAnswer(world, errors, bone_err, iterations, paths, path_of)
 
@@ -116,16 +119,16 @@ def solve_lean(
     (:meth:`Engine.exact_fallback`, as the general path): those items are marked."""
     n = items.poses.shape[0]
     c = int(items.cnt[0])
+    collar, hold = engine.collar_items(items), engine.pelvis_holds(items)
+    fell = np.zeros(n, dtype=np.bool_)
+    if n == 1 and not exact and c == int(items.n_t[0]):  # one soft edit, no pins: in place
+        one = solve_one(engine, items, passes, sequence, collar, hold)
+        if one is not None:  # (one graph answers each pass)
+            return (*one, fell)
     pins = np.arange(c) >= int(items.n_t[0])
     pinned = bool(pins.any())
     tidx, counts, floors = items.tidx, items.cnt, items.floors
     every = np.ones(n, dtype=np.bool_)
-    collar, hold = engine.collar_items(items), engine.pelvis_holds(items)
-    fell = np.zeros(n, dtype=np.bool_)
-    if n == 1 and not (exact or pinned):  # one soft edit: in place, when one graph answers
-        one = solve_one(engine, items, passes, sequence, collar, hold)
-        if one is not None:
-            return (*one, fell)
     pose = items.poses
     errors, bone_err = np.zeros(tidx.shape), np.zeros(n)
     iterations = np.zeros(n, dtype=np.int64)
@@ -216,7 +219,10 @@ def solve_one(
             out, scales, canon, lengths, facing, trans, *rest, *body, cols, x_in, t_in
         )
     run()
-    pose, errors, bone_err = compiled.settle_last(out, scales, canon, lengths, facing, trans, *rest)
+    pose, errors, bone_err = np.empty((1, NUM_JOINTS, 3)), np.empty(items.tidx.shape), np.empty(1)
+    compiled.settle_last(
+        out, scales, canon, lengths, facing, trans, *rest, pose, errors, bone_err
+    )  # (into arrays made here: a returned one costs numba more)
     return pose, errors, bone_err, np.zeros(1, dtype=np.int64)
 
 

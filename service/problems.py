@@ -119,16 +119,26 @@ def solver_paths(
     """Each item's solver path as an index into the distinct paths of the batch: ``seq_of``
     the item's solver sequence in ``sequences`` (-1: FABRIK), ``suffix`` what ran after it
     (0: nothing, 1: the FABRIK polish, 2: exact reach's FABRIK fallback)."""
-    code = (seq_of + 1) * 3 + suffix
-    if len(code) == 1 or bool((code == code[0]).all()):
-        distinct, path_of = code[:1], np.zeros(len(code), dtype=np.int64)
+    if len(seq_of) == 1:  # one item: no array arithmetic
+        code = (int(seq_of[0]) + 1) * 3 + int(suffix[0])
+        return (solver_path(code, sequences),), np.zeros(1, dtype=np.int64)
+    codes = (seq_of + 1) * 3 + suffix
+    if bool((codes == codes[0]).all()):
+        distinct, path_of = codes[:1], np.zeros(len(codes), dtype=np.int64)
     else:
-        distinct, path_of = np.unique(code, return_inverse=True)
-    ends: tuple[tuple[str, ...], ...] = ((), ("fabrik-polish",), ("fabrik-fallback",))
-    paths = tuple(
-        ("fabrik",) if c < 3 else (*sequences[c // 3 - 1], *ends[c % 3]) for c in distinct.tolist()
-    )
+        distinct, path_of = np.unique(codes, return_inverse=True)
+    paths = tuple(solver_path(c, sequences) for c in distinct.tolist())
     return paths, path_of.astype(np.int64).reshape(-1)
+
+
+#: What ran after a solver sequence, by :func:`solver_paths`' suffix code.
+_ENDS: tuple[tuple[str, ...], ...] = ((), ("fabrik-polish",), ("fabrik-fallback",))
+
+
+def solver_path(code: int, sequences: Sequence[tuple[str, ...]]) -> tuple[str, ...]:
+    """The solver path of code ``(sequence index + 1) * 3 + suffix`` (:func:`solver_paths`;
+    below 3: FABRIK)."""
+    return ("fabrik",) if code < 3 else (*sequences[code // 3 - 1], *_ENDS[code % 3])
 
 
 def others(n: int, sel: npt.NDArray[np.intp]) -> npt.NDArray[np.intp]:
