@@ -30,6 +30,8 @@ from core.skeleton import (
     DEPTH,
     FACING_PAIRS,
     JOINT_INDEX,
+    MIRROR_COLUMNS,
+    MIRROR_SIGNS,
     NUM_JOINTS,
     PARENTS,
 )
@@ -572,17 +574,26 @@ def _floor_off(tpos: F64, floors: F64) -> F64:  # pragma: no cover - compiled
     return out
 
 
+#: ``core.skeleton.mirrored_flat``'s columns and signs (float32: the networks' type).
+_MCOLS: I64 = MIRROR_COLUMNS.astype(np.int64)
+_MSIGNS: F32 = MIRROR_SIGNS.astype(np.float32)
+
+
 @jit
 def prepare_into(
     poses: F64, floors: F64, tidx: I64, tpos: F64, counts: I64, shapes: F64,
-    shape_totals: F64, total_length: bool, reference_total: float, cols: I64, x_in: F32,
-    t_in: F32, canon: F64, facing: F64, trans: F64, lengths: F64, scales: F64,
+    shape_totals: F64, total_length: bool, reference_total: float, cols: I64, other: I64,
+    signs: F32, x_in: F32, t_in: F32, canon: F64, facing: F64, trans: F64, lengths: F64,
+    scales: F64,
 ) -> None:  # pragma: no cover - compiled  # fmt: skip
-    """:func:`prepare` of neural items (``tpos`` in the world, the floor not yet taken
-    off), written in place: the network input into ``x_in [B, 63]`` and the canvas's
-    flat columns ``cols`` (a graph's target inputs, in its order) into ``t_in``, and
-    what :func:`settle` needs into ``canon``, ``facing``, ``trans``, ``lengths`` and
-    ``scales``."""
+    """:func:`prepare` of ``B`` neural items (``tpos`` in the world, the floor not yet
+    taken off), written in place: the network input into ``x_in [B, 63]`` and the
+    canvas's flat columns ``cols`` (a graph's target inputs, in its order) into ``t_in``,
+    and what :func:`settle` needs into ``canon``, ``facing``, ``trans``, ``lengths`` and
+    ``scales``. Where ``x_in`` has ``2B`` rows, rows ``B..`` are the mirror images
+    (``service.networks.both_views``, one solver whose set is its own mirror image): the
+    input mirrored (``core.skeleton.mirrored_flat``) and the canvas's columns ``other``
+    times ``signs``; exact, as a permutation and a sign are."""
     n = poses.shape[0]
     c, f, t, lens, s, _tcan, x, canvas = prepare(
         poses, floors, tidx, _floor_off(tpos, floors), counts, np.ones(n, dtype=np.bool_),
@@ -593,10 +604,34 @@ def prepare_into(
     trans[:] = t
     lengths[:] = lens
     scales[:] = s
-    x_in[:] = x
+    x_in[:n] = x
     for b in range(n):
         for i in range(cols.shape[0]):
             t_in[b, i] = canvas[b, cols[i] // 3, cols[i] % 3]
+    if x_in.shape[0] == n:
+        return
+    for b in range(n):  # the mirror images
+        for i in range(3 * NUM_JOINTS):
+            x_in[n + b, i] = x[b, _MCOLS[i]] * _MSIGNS[i]
+        for i in range(other.shape[0]):
+            t_in[n + b, i] = canvas[b, other[i] // 3, other[i] % 3] * signs[i]
+
+
+@jit
+def _views(decoded: F32, n: int) -> F32:  # pragma: no cover - compiled
+    """The answer ``[n, 63]`` of a run of ``n`` rows, or of ``2n`` rows whose rows ``n..``
+    answer the mirror images (:func:`prepare_into`): the mean of each row's answer and
+    its mirror image's taken back, in float32 as ``service.networks.both_views``
+    computes it: ``(own + mirrored_flat(other)) * 0.5``."""
+    if decoded.shape[0] == n:
+        return decoded
+    out = np.empty((n, 3 * NUM_JOINTS), dtype=np.float32)
+    half = np.float32(0.5)
+    for b in range(n):
+        for i in range(3 * NUM_JOINTS):
+            back = decoded[n + b, _MCOLS[i]] * _MSIGNS[i]
+            out[b, i] = (decoded[b, i] + back) * half
+    return out
 
 
 @jit
@@ -604,18 +639,19 @@ def settle_prepare(
     decoded: F32, scales: F64, canon: F64, lengths: F64, facing: F64, trans: F64,
     floors: F64, tidx: I64, tpos: F64, counts: I64, carry: F64, chains: Bool, ease: float,
     collar: Bool, hold: F64, pairs: bool, side: float, soft: F64, shapes: F64,
-    shape_totals: F64, total_length: bool, reference_total: float, cols: I64, x_in: F32,
-    t_in: F32,
+    shape_totals: F64, total_length: bool, reference_total: float, cols: I64, other: I64,
+    signs: F32, x_in: F32, t_in: F32,
 ) -> None:  # pragma: no cover - compiled  # fmt: skip
-    """:func:`settle` of one pass (``tpos`` in the world), then :func:`prepare_into` of
-    the next from its answer: a soft pass's end and the next one's start in one call."""
+    """:func:`settle` of one pass (``tpos`` in the world; ``decoded``: the run's rows, both
+    views where :func:`prepare_into` made two, :func:`_views`), then :func:`prepare_into`
+    of the next from its answer: a soft pass's end and the next one's start in one call."""
     pose, _errors, _bone = settle(
-        decoded, scales, canon, lengths, facing, trans, floors, tidx, _floor_off(tpos, floors),
-        counts, carry, chains, ease, collar, hold, pairs, side, soft,
+        _views(decoded, scales.shape[0]), scales, canon, lengths, facing, trans, floors, tidx,
+        _floor_off(tpos, floors), counts, carry, chains, ease, collar, hold, pairs, side, soft,
     )  # fmt: skip
     prepare_into(
         pose, floors, tidx, tpos, counts, shapes, shape_totals, total_length, reference_total,
-        cols, x_in, t_in, canon, facing, trans, lengths, scales,
+        cols, other, signs, x_in, t_in, canon, facing, trans, lengths, scales,
     )  # fmt: skip
 
 
@@ -626,11 +662,12 @@ def settle_last(
     collar: Bool, hold: F64, pairs: bool, side: float, soft: F64, world: F64, errors: F64,
     bone_err: F64,
 ) -> None:  # pragma: no cover - compiled  # fmt: skip
-    """:func:`settle` with ``tpos`` in the world (the floor taken off here), its answer
-    written into ``world [B, 21, 3]``, ``errors [B, K]`` and ``bone_err [B]``."""
+    """:func:`settle` with ``tpos`` in the world (the floor taken off here; ``decoded``
+    as :func:`settle_prepare` takes it), its answer written into ``world [B, 21, 3]``,
+    ``errors [B, K]`` and ``bone_err [B]``."""
     w, e, b = settle(
-        decoded, scales, canon, lengths, facing, trans, floors, tidx, _floor_off(tpos, floors),
-        counts, carry, chains, ease, collar, hold, pairs, side, soft,
+        _views(decoded, scales.shape[0]), scales, canon, lengths, facing, trans, floors, tidx,
+        _floor_off(tpos, floors), counts, carry, chains, ease, collar, hold, pairs, side, soft,
     )  # fmt: skip
     world[:] = w
     errors[:] = e
@@ -669,17 +706,19 @@ def warm() -> None:
         out[6], out[4], out[0], out[3], out[1], out[2], np.zeros(1), tidx, tpos, counts,
         np.full(1, 0.5), chains, 0.0, one, np.full(1, 0.02), True, 0.5, np.full(1, 0.01),
     )  # fmt: skip
-    cols = np.arange(3, dtype=np.int64)
-    x_in, t_in = np.empty((1, 3 * NUM_JOINTS), np.float32), np.empty((1, 3), np.float32)
+    cols, signs = np.arange(3, dtype=np.int64), np.ones(3, np.float32)
     state = (out[0].copy(), out[1].copy(), out[2].copy(), out[3].copy(), out[4].copy())
-    prepare_into(pose, np.zeros(1), tidx, tpos, counts, shapes, np.ones(1), True, 1.0, cols,
-                 x_in, t_in, *state)  # fmt: skip
     rest = (np.zeros(1), tidx, tpos, counts, np.full(1, 0.5), chains, 0.0, one,
             np.full(1, 0.02), True, 0.5, np.full(1, 0.01))  # fmt: skip
-    settle_prepare(x_in, state[4], state[0], state[3], state[1], state[2], *rest, shapes,
-                   np.ones(1), True, 1.0, cols, x_in, t_in)  # fmt: skip
-    settle_last(x_in, state[4], state[0], state[3], state[1], state[2], *rest, pose.copy(),
-                np.empty((1, 1)), np.empty(1))  # fmt: skip
+    for rows in (1, 2):  # one view, both views
+        x_in = np.empty((rows, 3 * NUM_JOINTS), np.float32)
+        t_in = np.empty((rows, 3), np.float32)
+        prepare_into(pose, np.zeros(1), tidx, tpos, counts, shapes, np.ones(1), True, 1.0, cols,
+                     cols, signs, x_in, t_in, *state)  # fmt: skip
+        settle_prepare(x_in, state[4], state[0], state[3], state[1], state[2], *rest, shapes,
+                       np.ones(1), True, 1.0, cols, cols, signs, x_in, t_in)  # fmt: skip
+        settle_last(x_in, state[4], state[0], state[3], state[1], state[2], *rest, pose.copy(),
+                    np.empty((1, 1)), np.empty(1))  # fmt: skip
 
 
 def as_i64(a: npt.ArrayLike) -> I64:

@@ -201,22 +201,34 @@ def solve_one(
     found = networks.one_run(engine, sequence, bool(items.mirror[0]))
     if found is None:
         return None
-    few, cols = found
-    (x_in, t_in), out, run = few.bound(((1, 3 * NUM_JOINTS), (1, cols.shape[0])))
+    few, rows, cols, other, signs = found
+    (x_in, t_in), out, run = few.bound(((rows, 3 * NUM_JOINTS), (rows, cols.shape[0])))
     canon, facing, trans, lengths, scales = _workspace()
     s = engine.serving
     body = (engine._shapes_c, engine._shape_totals, s.body == "total_length",
             engine._reference_total)  # fmt: skip
     compiled.prepare_into(
-        items.poses, items.floors, items.tidx, items.tpos, items.cnt, *body, cols, x_in, t_in,
-        canon, facing, trans, lengths, scales,
+        items.poses, items.floors, items.tidx, items.tpos, items.cnt, *body, cols, other, signs,
+        x_in, t_in, canon, facing, trans, lengths, scales,
     )  # fmt: skip
     rest = (items.floors, items.tidx, items.tpos, items.cnt, items.carry, engine.chain_mask,
             s.keep_ease, collar, hold, s.keep_pairs, s.bend_side, items.soft_ik)  # fmt: skip
     for _ in range(passes - 1):
         run()
         compiled.settle_prepare(
-            out, scales, canon, lengths, facing, trans, *rest, *body, cols, x_in, t_in
+            out,
+            scales,
+            canon,
+            lengths,
+            facing,
+            trans,
+            *rest,
+            *body,
+            cols,
+            other,
+            signs,
+            x_in,
+            t_in,
         )
     run()
     pose, errors, bone_err = np.empty((1, NUM_JOINTS, 3)), np.empty(items.tidx.shape), np.empty(1)

@@ -10,7 +10,7 @@ the answer (bone pass, way back to the world); this module runs onnxruntime.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -113,26 +113,44 @@ def both_views(
     return own
 
 
-#: :func:`one_run`'s answer: the graph's few-rows runner and its target columns.
-OneRun = tuple[_FewRows, npt.NDArray[np.intp]]
+class OneRun(NamedTuple):
+    """How :func:`answer` of one row runs one graph once (:func:`one_run`): the graph's
+    few-rows runner, its rows (2: the mirror image's the second), the flat canvas columns
+    ``[3k]`` of its target input in its order (``own``), and for the second row, the
+    columns whose mirror images are its targets (``other``, x negated by ``signs``).
+    (A named tuple: a frozen dataclass cost ~1 us more per solve to make.)"""
+
+    few: _FewRows
+    rows: int
+    own: npt.NDArray[np.intp]
+    other: npt.NDArray[np.intp]
+    signs: npt.NDArray[np.float32]
+
+
+_NO_COLUMNS, _NO_SIGNS = np.zeros(0, dtype=np.intp), np.zeros(0, dtype=np.float32)
 
 
 def one_run(engine: Engine, sequence: tuple[str, ...], mirror: bool) -> OneRun | None:
-    """Where :func:`answer` of one row runs one graph once (a single solver; its mirror
-    graph where ``mirror`` asks and the models ship it): that graph's few-rows runner and
-    the flat canvas columns ``[3k]`` of its target input, in its order; else None."""
+    """Where :func:`answer` of one row runs one graph once (a single solver): the set's
+    fused graph; with ``mirror``, on two rows (the mirror image's the second) where the set
+    is its own mirror image (``both_views``' numpy way, bit for bit the mirror graph's:
+    the mirroring and the mean go into the kernels, ``core.compiled.prepare_into``, and the
+    run costs ~5 us less than the mirror graph's, whose ten gathers, products and sums are
+    each an onnxruntime node), else its mirror graph; None where it is not one run."""
     if len(sequence) != 1:
         return None
     key = sequence[0]
     view = engine.mirror_views.get(key) if mirror else None
-    if view is not None:  # both_views: the mirror graph, else the numpy way (not one run)
+    if view is not None and view.back != view.key:  # both_views: the mirror graph's run
         graph = engine.mirror_graphs.get(view.key)
-        return None if graph is None else (graph.few, view.own)
-    # run_once (no mirror image asked, or none to ask): the set's fused graph
+        return None if graph is None else OneRun(graph.few, 1, view.own, _NO_COLUMNS, _NO_SIGNS)
+    # run_once (no mirror image asked, or none to ask), or both views as rows of one run
     net = engine.fused.get(key)
     if net is None or (isinstance(net, Fused) and net.chain is not None):  # not one run
         return None
-    return net.few, engine.solver_columns[key]
+    if view is None:
+        return OneRun(net.few, 1, engine.solver_columns[key], _NO_COLUMNS, _NO_SIGNS)
+    return OneRun(net.few, 2, view.own, view.other, view.signs)
 
 
 def mirror_of(engine: Engine, sequence: tuple[str, ...]) -> tuple[str, ...] | None:

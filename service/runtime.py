@@ -56,11 +56,33 @@ class _FewRows:
     shape: the inputs are copied into the bound arrays and the output read from its bound
     array, which saves onnxruntime's per-call feed conversion and output allocation
     (measured 30 vs 36 us per fused call; rebinding per call was slower than ``run``).
-    Results are bit-identical to ``session.run``."""
+    Results are bit-identical to ``session.run``.
 
-    def __init__(self, session: ort.InferenceSession, inputs: list[str], output: str) -> None:
-        self.session, self.inputs, self.output = session, inputs, output
+    With ``make`` (a new session of the same graph), each shape runs on a session of its
+    own, made on first use (~2 ms, ~1.7 MB for a fused graph), the one it was first run
+    with: onnxruntime runs a session's first input shape fastest, every later shape 3-4 us
+    slower a run (the 2-target fused graph on one row: 20.9 us run first, 24.9 after two
+    rows; two rows 25.0 first, 27.7 after one; a /tmp script, same bits), so a batch's
+    blocks or another row count run first no longer slow the edit's runs."""
+
+    def __init__(
+        self, session: ort.InferenceSession, inputs: list[str], output: str,
+        make: Callable[[], ort.InferenceSession] | None = None,
+    ) -> None:  # fmt: skip
+        self.session, self.inputs, self.output, self.make = session, inputs, output, make
         self.local = threading.local()
+        self.sessions: dict[tuple[tuple[int, ...], ...], ort.InferenceSession] = {}
+        self.lock = threading.Lock()
+
+    def session_for(self, shapes: tuple[tuple[int, ...], ...]) -> ort.InferenceSession:
+        """The session runs of ``shapes`` run on: its own with ``make``, else the shared."""
+        if self.make is None:
+            return self.session
+        with self.lock:  # one per shape, whichever thread asks first
+            session = self.sessions.get(shapes)
+            if session is None:
+                session = self.sessions[shapes] = self.make()
+        return session
 
     def __call__(self, arrays: tuple[npt.NDArray[np.float32], ...]) -> npt.NDArray[np.float32]:
         shapes = tuple([a.shape for a in arrays])  # (a list first: a generator costs more)
@@ -83,25 +105,27 @@ class _FewRows:
             zeros = {
                 n: np.zeros(s, dtype=np.float32) for n, s in zip(self.inputs, shapes, strict=True)
             }
-            first = self.session.run([self.output], zeros)
+            session = self.session_for(shapes)
+            first = session.run([self.output], zeros)
             bufs = [np.empty(s, dtype=np.float32) for s in shapes]
             out = np.empty(first[0].shape, dtype=np.float32)
-            io = self.session.io_binding()
+            io = session.io_binding()
             for name, buf in zip(self.inputs, bufs, strict=True):
                 io.bind_ortvalue_input(name, ort.OrtValue.ortvalue_from_numpy(buf))
             io.bind_ortvalue_output(self.output, ort.OrtValue.ortvalue_from_numpy(out))
-            state = states[shapes] = (bufs, out, self._runner(io))
+            state = states[shapes] = (bufs, out, _runner(session, io))
         return state
 
-    def _runner(self, io: ort.IOBinding) -> Callable[[], None]:
-        """The bound run. The public ``run_with_iobinding`` first checks for WebGPU graph
-        capture (a few us per call, a third of a batch-of-one network run's overhead); a
-        CPU session never captures, so where the onnxruntime build exposes its binding
-        objects we call the session's own run directly: the same computation."""
-        sess, bound = getattr(self.session, "_sess", None), getattr(io, "_iobinding", None)
-        if sess is None or bound is None or not hasattr(sess, "run_with_iobinding"):
-            return lambda: self.session.run_with_iobinding(io)
-        return functools.partial(sess.run_with_iobinding, bound, None)
+
+def _runner(session: ort.InferenceSession, io: ort.IOBinding) -> Callable[[], None]:
+    """The bound run. The public ``run_with_iobinding`` first checks for WebGPU graph
+    capture (a few us per call, a third of a batch-of-one network run's overhead); a CPU
+    session never captures, so where the onnxruntime build exposes its binding objects we
+    call the session's own run directly: the same computation."""
+    sess, bound = getattr(session, "_sess", None), getattr(io, "_iobinding", None)
+    if sess is None or bound is None or not hasattr(sess, "run_with_iobinding"):
+        return lambda: session.run_with_iobinding(io)
+    return functools.partial(sess.run_with_iobinding, bound, None)
 
 
 class Net:
@@ -111,13 +135,17 @@ class Net:
         self, path: Path, entry: ModelEntry, options: ort.SessionOptions, block: int = ROW_BLOCK
     ) -> None:
         self.entry, self.block = entry, block
-        self.session = ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
+
+        def make() -> ort.InferenceSession:
+            return ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
+
+        self.session = make()
         self.inputs = [i.name for i in entry.inputs]
         self.output = entry.outputs[0].name
         got = [i.name for i in self.session.get_inputs()]
         if got != self.inputs:
             raise ValueError(f"{path.name}: graph inputs {got}, manifest says {self.inputs}")
-        self.few = _FewRows(self.session, self.inputs, self.output)
+        self.few = _FewRows(self.session, self.inputs, self.output, make)
 
     def __call__(self, *arrays: npt.NDArray[np.float32]) -> npt.NDArray[np.float32]:
         if arrays[0].shape[0] <= FEW_ROWS:
@@ -157,12 +185,15 @@ class Fused:
             first, load(dec, "d_"),
             io_map=[(f"s_{solver.outputs[0].name}", f"d_{dec.inputs[0].name}")],
         )  # fmt: skip
-        self.session = ort.InferenceSession(
-            graph.SerializeToString(), options, providers=["CPUExecutionProvider"]
-        )
+        data = graph.SerializeToString()
+
+        def make() -> ort.InferenceSession:
+            return ort.InferenceSession(data, options, providers=["CPUExecutionProvider"])
+
+        self.session = make()
         self.inputs = [f"e_{enc.inputs[0].name}", f"s_{solver.inputs[1].name}"]
         self.output = f"d_{dec.outputs[0].name}"
-        self.few = _FewRows(self.session, self.inputs, self.output)
+        self.few = _FewRows(self.session, self.inputs, self.output, make)
 
     def __call__(
         self, pose: npt.NDArray[np.float32], targets: npt.NDArray[np.float32]

@@ -71,3 +71,13 @@ def test_a_big_batch_answers_as_its_items_alone(engine: Engine, real_poses: Pose
     for i in (0, 255, 256, 299):
         alone = engine.solve_arrays(starts[i : i + 1], idx[i : i + 1], goals[i : i + 1][:, joints])
         assert np.array_equal(batch.pose[i], alone.pose[0]), i
+
+
+def test_each_few_rows_shape_runs_on_its_own_session(engine: Engine) -> None:
+    """A few-rows shape's runs go to a session of their own (onnxruntime runs a session's
+    first shape fastest), made once and shared by threads; the batch's blocks keep the
+    network's own."""
+    few = engine.fused["left_wrist+right_wrist"].few
+    one, two = ((1, 63), (1, 6)), ((2, 63), (2, 6))
+    assert few.session_for(one) is few.session_for(one)
+    assert len({id(few.session_for(one)), id(few.session_for(two)), id(few.session)}) == 3
