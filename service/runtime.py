@@ -59,11 +59,13 @@ class _FewRows:
     Results are bit-identical to ``session.run``.
 
     With ``make`` (a new session of the same graph), each shape runs on a session of its
-    own, made on first use (~2 ms, ~1.7 MB for a fused graph), the one it was first run
-    with: onnxruntime runs a session's first input shape fastest, every later shape 3-4 us
-    slower a run (the 2-target fused graph on one row: 20.9 us run first, 24.9 after two
-    rows; two rows 25.0 first, 27.7 after one; a /tmp script, same bits), so a batch's
-    blocks or another row count run first no longer slow the edit's runs."""
+    own, the one it was first run with: onnxruntime runs a session's first input shape
+    fastest, every later shape 3-4 us slower a run (the 2-target fused graph on one row:
+    20.9 us run first, 24.9 after two rows; two rows 25.0 first, 27.7 after one; a /tmp
+    script, same bits), so a batch's blocks or another row count run first no longer slow
+    the edit's runs. The first shape takes the network's own session where nothing has run
+    on it yet (``used``); each later one a session made on first use (~2 ms, ~1.7 MB for a
+    fused graph)."""
 
     def __init__(
         self, session: ort.InferenceSession, inputs: list[str], output: str,
@@ -73,15 +75,19 @@ class _FewRows:
         self.local = threading.local()
         self.sessions: dict[tuple[tuple[int, ...], ...], ort.InferenceSession] = {}
         self.lock = threading.Lock()
+        #: whether the shared session has run (a shape of its own, or a batch's blocks)
+        self.used = False
 
     def session_for(self, shapes: tuple[tuple[int, ...], ...]) -> ort.InferenceSession:
-        """The session runs of ``shapes`` run on: its own with ``make``, else the shared."""
+        """The session runs of ``shapes`` run on: its own with ``make`` (the shared one if
+        it has not run yet), else the shared."""
         if self.make is None:
             return self.session
         with self.lock:  # one per shape, whichever thread asks first
             session = self.sessions.get(shapes)
             if session is None:
-                session = self.sessions[shapes] = self.make()
+                session = self.session if not self.used else self.make()
+                self.sessions[shapes], self.used = session, True
         return session
 
     def __call__(self, arrays: tuple[npt.NDArray[np.float32], ...]) -> npt.NDArray[np.float32]:
@@ -150,6 +156,7 @@ class Net:
     def __call__(self, *arrays: npt.NDArray[np.float32]) -> npt.NDArray[np.float32]:
         if arrays[0].shape[0] <= FEW_ROWS:
             return self.few(arrays)
+        self.few.used = True  # (its first shape is no few-rows shape's now)
         return blocked(self.session, self.inputs, self.output, arrays, self.block)
 
 
@@ -203,6 +210,7 @@ class Fused:
             return decode(solve(encode(pose), targets))
         if pose.shape[0] <= FEW_ROWS:
             return self.few((pose, targets))
+        self.few.used = True
         return blocked(self.session, self.inputs, self.output, (pose, targets))
 
 

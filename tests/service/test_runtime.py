@@ -4,6 +4,7 @@ and every row's answer is the one a single run of the whole batch gives, bit for
 from __future__ import annotations
 
 import threading
+from pathlib import Path
 
 import numpy as np
 
@@ -73,11 +74,17 @@ def test_a_big_batch_answers_as_its_items_alone(engine: Engine, real_poses: Pose
         assert np.array_equal(batch.pose[i], alone.pose[0]), i
 
 
-def test_each_few_rows_shape_runs_on_its_own_session(engine: Engine) -> None:
+def test_each_few_rows_shape_runs_on_its_own_session(models_dir: Path) -> None:
     """A few-rows shape's runs go to a session of their own (onnxruntime runs a session's
-    first shape fastest), made once and shared by threads; the batch's blocks keep the
-    network's own."""
-    few = engine.fused["left_wrist+right_wrist"].few
+    first shape fastest), made once and shared by threads: the first shape the network's
+    own session while nothing has run on it, the others new ones; after a batch's blocks
+    (on the network's session) every shape a new one."""
+    engine = Engine(models_dir)
     one, two = ((1, 63), (1, 6)), ((2, 63), (2, 6))
-    assert few.session_for(one) is few.session_for(one)
-    assert len({id(few.session_for(one)), id(few.session_for(two)), id(few.session)}) == 3
+    few = engine.fused["left_wrist+right_wrist"].few
+    assert few.session_for(two) is few.session and few.session_for(two) is few.session
+    assert few.session_for(one) is few.session_for(one) is not few.session
+    net = engine.fused["left_ankle+right_ankle"]
+    rows = runtime.FEW_ROWS + 1
+    net(np.zeros((rows, 63), np.float32), np.zeros((rows, 6), np.float32))
+    assert net.few.session_for(one) is not net.few.session
