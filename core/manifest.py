@@ -234,7 +234,8 @@ class Serving(_Strict):
         ge=0.0,
         le=1.0,
         description="Metres by which a turned start's answer must land nearer the targets "
-        "(mean distance) than the unturned one's to be chosen.",
+        "(mean distance) than the unturned one's to be chosen; at the networks' body size "
+        "(scores are scaled with each body as the networks see it, so is `turn_fit`).",
     )
     turn_plausibility: float = Field(
         default=0.0,

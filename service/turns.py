@@ -13,7 +13,9 @@ to what ``turn_critic`` makes of it: the autoencoder's round trip of it, or the 
 completion level 1 builds from the answer's own base key points (pelvis, neck, wrists,
 ankles): a body bent towards targets it should have turned to is far from the body those
 points imply (docs/generalisation-serving.md items 22, 24), the unturned start winning unless
-another scores at least ``turn_margin`` metres lower. The edit is then solved as asked
+another scores at least ``turn_margin`` metres lower (scores, margin and ``turn_fit`` at
+the networks' body size: each answer over its body's scale, ``Engine.scales_of``, so that a
+character scaled up or down keeps the same start). The edit is then solved as asked
 from the kept start. Only neural items with at least ``turn_min_targets`` targets and no
 pins take part (``options.turn_search: false`` opts out): fewer targets say little about a
 facing, and pins ask for joints to stay where they are.
@@ -47,6 +49,7 @@ import numpy.typing as npt
 
 from core.geometry import canonicalise
 from core.manifest import Serving
+from core.skeleton import bone_lengths
 from service import completion
 from service.problems import PELVIS, BatchAnswer, Solve, _Items
 
@@ -273,17 +276,24 @@ def _candidates(
         ans = solve(soft, np.ones(len(rep), dtype=np.int64))
     else:
         ans = solve(soft, reps[rep])
-    scores = _score(engine, soft, ans).reshape(len(steps), -1)
+    scale: F64 = np.tile(np.asarray(engine.scales_of(bone_lengths(starts)), np.float64), len(steps))
+    scores = _score(engine, soft, ans, scale).reshape(len(steps), -1)
     scores[steps == y] += engine.turn_search.fit  # the fitted start's bar (0 if not tried)
     return scores, ans, poses
 
 
-def _score(engine: Engine, soft: _Items, ans: BatchAnswer) -> F64:
+def _score(engine: Engine, soft: _Items, ans: BatchAnswer, scale: F64) -> F64:
     """Each candidate's score: the mean distance of its targets, plus ``plausibility``
-    times its answer's distance to what the critic makes of it (never negative)."""
-    score: F64 = own_sum(ans.errors, soft.n_t) / soft.n_t  # (its targets: its first columns)
+    times its answer's distance to what the critic makes of it (never negative); both at
+    the networks' body size, the answer over its body's ``scale`` (``Engine.scales_of``),
+    as the margin and the fitted start's bar are: a character scaled up or down keeps the
+    same start (a 1.9 m copy of make bench's B5 edits kept others, 65 mm from the reference
+    answers, with scores in metres and the critic's completion networks, which read a
+    body's size from its key points, asked at the character's own size)."""
+    score: F64 = own_sum(ans.errors, soft.n_t) / soft.n_t / scale  # (its targets first)
     if engine.turn_search.plausibility > 0:  # how unlike a real body the answer is
-        score += engine.turn_search.plausibility * implausibility(engine, ans.pose, soft.floors)
+        at = np.asarray(ans.pose) / scale[:, None, None]
+        score += engine.turn_search.plausibility * implausibility(engine, at, soft.floors / scale)
     return score
 
 

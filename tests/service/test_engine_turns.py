@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from core.skeleton import JOINT_INDEX
+from core.skeleton import JOINT_INDEX, bone_lengths
 from service import limits
 from service.engine import Engine
 from service.problems import SolveProblem, others
@@ -122,6 +122,31 @@ def test_a_turned_goal_turns_the_start(
     for r, soft in zip(exact, searched[:8], strict=True):
         assert r.reached.all() and "fabrik-polish" in r.solvers
         assert _turn(r.solvers) == _turn(soft.solvers)
+
+
+N_SCALED = 200
+
+
+def test_a_character_scaled_keeps_the_start_its_reference_size_keeps(
+    engines: tuple[Engine, Engine], real_poses: PosePairs
+) -> None:
+    """The search scores candidates at the networks' body size (the mean distance of the
+    targets and the critic's, over ``Engine.scales_of``), as its margin and the fitted
+    start's bar are: the same edits on a copy of each body 1.5x, 1.15x and 0.6x as big keep
+    the same start (turn or fit) and answer the same pose scaled. Scored in metres, with
+    the critic asked at the character's own size, one of these edits kept another start at
+    1.5x ("turn -30" against none), and make bench's B5 1.9 m character ended 65 mm from
+    the reference answer (3 of 200 B1 five-end-effector edits kept another start at 1.15x,
+    218 mm off: a /tmp count)."""
+    on = engines[1]
+    start = real_poses.poses[real_poses.starts[:N_SCALED]]
+    goal = real_poses.poses[real_poses.goals[:N_SCALED]]
+    ref = on.solve(_problems(start, goal, FIVE))
+    for k in (1.5, 1.15, 0.6):
+        scaled = on.solve(_problems(start * k, goal * k, FIVE))
+        assert [r.solvers for r in scaled] == [r.solvers for r in ref], k
+        for a, b in zip(ref, scaled, strict=True):
+            np.testing.assert_allclose(b.pose / k, a.pose, atol=1e-3)  # the polish's 1 mm
 
 
 def test_who_searches(engines: tuple[Engine, Engine], real_poses: PosePairs) -> None:
@@ -290,7 +315,8 @@ def test_search_ends_early_with_the_answers_of_the_full_search(
                             for y in range(t.yaws)] + [moved])  # fmt: skip
     rep = np.tile(np.arange(n), c)
     soft = dataclasses.replace(items.soft(rep, items.poses), poses=every)
-    score = _score(engine, soft, engine._solve_items(soft, reps[rep])).reshape(c, n)
+    scale = engine.scales_of(bone_lengths(every))  # (turns and moves keep each body's)
+    score = _score(engine, soft, engine._solve_items(soft, reps[rep]), scale).reshape(c, n)
     score[0] -= t.margin
     score[t.yaws] += t.fit
     best = np.argmin(score, axis=0)
