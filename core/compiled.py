@@ -695,6 +695,7 @@ def warm() -> None:
         pose, np.zeros(1), tidx, tpos, counts, np.ones(1, dtype=np.bool_), shapes,
         np.ones(1), True, 1.0,
     )  # fmt: skip
+    retry_reaches(pose, np.zeros(1), 0.005, shapes, np.ones(1), True, 1.0)
     unscale(
         out[6], out[4], out[0], out[3], np.ones(1, dtype=np.bool_), tidx, counts, np.full(1, 0.5),
         chains, 0.0, np.ones(1, dtype=np.bool_), np.full(1, 0.02), True, 0.5, np.full(1, 0.01),

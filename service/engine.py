@@ -401,8 +401,9 @@ class Engine:
 
     def _retry(self, items: _Items, ans: BatchAnswer) -> BatchAnswer:
         """``ans`` with one more pass, from its answer, for every soft neural item (bone
-        lengths kept) whose farthest target is still more than ``serving.retry_reach``
-        away: the passes left it short, as the bone pass takes back what the networks
+        lengths kept) whose farthest target is still more than its threshold away
+        (:meth:`_retry_reaches`: ``serving.retry_reach`` scaled with the body): the passes
+        left it short, as the bone pass takes back what the networks
         reached for (docs/generalisation-serving.md item 25). Such an item gets what one
         more of its passes would give it; the others are untouched. With
         ``serving.retry_polish``, an item that pass still leaves short is then polished

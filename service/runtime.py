@@ -8,6 +8,7 @@ sessions in sequence, with the same results.
 from __future__ import annotations
 
 import functools
+import hashlib
 import threading
 from collections.abc import Callable
 from pathlib import Path
@@ -17,7 +18,7 @@ import numpy as np
 import numpy.typing as npt
 import onnxruntime as ort
 
-from core.manifest import ModelEntry
+from core.manifest import ManifestError, ModelEntry
 
 if TYPE_CHECKING:  # pragma: no cover
     import onnx
@@ -49,6 +50,8 @@ Bound = tuple[list[npt.NDArray[np.float32]], npt.NDArray[np.float32], Callable[[
 #: Runs of at most this many rows go through :class:`_FewRows` (an edit alone, and its
 #: mirror image as a second row): the hot path's runs.
 FEW_ROWS = 4
+#: Runs of at most this many rows may take a session of their own (:class:`_FewRows`).
+OWN_ROWS = 2
 
 
 class _FewRows:
@@ -64,8 +67,12 @@ class _FewRows:
     20.9 us run first, 24.9 after two rows; two rows 25.0 first, 27.7 after one; a /tmp
     script, same bits), so a batch's blocks or another row count run first no longer slow
     the edit's runs. The first shape takes the network's own session where nothing has run
-    on it yet (``used``); each later one a session made on first use (~2 ms, ~1.7 MB for a
-    fused graph)."""
+    on it yet (``used``); a later one of at most ``OWN_ROWS`` rows (a lone edit, and it with
+    its mirror image) a session made on first use (~2 ms, ~1.7 MB for a fused graph), from
+    the graph's bytes read and checked at load (``make``; a file changed or removed under a
+    running server gave a 500 or another network's answers: a review); 3 and 4 rows run on
+    the shared session, so a network holds at most two sessions (the worst case was four:
+    +125 MB an engine, a review's measurement)."""
 
     def __init__(
         self, session: ort.InferenceSession, inputs: list[str], output: str,
@@ -86,7 +93,8 @@ class _FewRows:
         with self.lock:  # one per shape, whichever thread asks first
             session = self.sessions.get(shapes)
             if session is None:
-                session = self.session if not self.used else self.make()
+                own = not self.used or shapes[0][0] > OWN_ROWS
+                session = self.session if own else self.make()
                 self.sessions[shapes], self.used = session, True
         return session
 
@@ -141,9 +149,12 @@ class Net:
         self, path: Path, entry: ModelEntry, options: ort.SessionOptions, block: int = ROW_BLOCK
     ) -> None:
         self.entry, self.block = entry, block
+        data = path.read_bytes()  # read once, checked: every session is made from these bytes
+        if hashlib.sha256(data).hexdigest() != entry.sha256:
+            raise ManifestError(path, "sha256 does not match the manifest (changed since read)")
 
         def make() -> ort.InferenceSession:
-            return ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
+            return ort.InferenceSession(data, options, providers=["CPUExecutionProvider"])
 
         self.session = make()
         self.inputs = [i.name for i in entry.inputs]

@@ -44,7 +44,9 @@ def across_pelvis_t(flat_poses: torch.Tensor) -> torch.Tensor:
     ``[..., 63] -> [..., 63]`` (a body moved across as a whole is where it was; one moved
     up or down, or reshaped, is not)."""
     joints = flat_poses.reshape(*flat_poses.shape[:-1], NUM_JOINTS, 3)
-    across = joints[..., :1, :] * torch.tensor([1.0, 0.0, 1.0], dtype=joints.dtype)
+    across = joints[..., :1, :] * torch.tensor(
+        [1.0, 0.0, 1.0], dtype=joints.dtype, device=joints.device
+    )
     return (joints - across).reshape(flat_poses.shape)
 
 

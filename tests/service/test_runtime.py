@@ -7,10 +7,12 @@ import threading
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from core.skeleton import JOINT_INDEX
 from service import runtime
 from service.engine import Engine
+from service.problems import SolveProblem
 from tests.conftest import PosePairs
 
 
@@ -88,3 +90,48 @@ def test_each_few_rows_shape_runs_on_its_own_session(models_dir: Path) -> None:
     rows = runtime.FEW_ROWS + 1
     net(np.zeros((rows, 63), np.float32), np.zeros((rows, 6), np.float32))
     assert net.few.session_for(one) is not net.few.session
+    # three and four rows run on the shared session: at most two sessions a network
+    three = ((3, 63), (3, 6))
+    assert few.session_for(three) is few.session
+    assert len({id(s) for s in few.sessions.values()} | {id(few.session)}) == 2
+
+
+def test_sessions_made_after_load_read_no_file(
+    models_dir: Path, real_poses: PosePairs, tmp_path: Path
+) -> None:
+    """A few-rows shape's own session is made on first use, long after load: from the
+    graph's bytes read and checked at load, not from the file. A models folder changed
+    under a running engine (another network copied over a file, a file removed) gave that
+    shape another network's answers, or a 500 while ready said 200 (a review); now every
+    answer is the verified network's. A file changed between the manifest's check and the
+    read is refused at load."""
+    import shutil
+
+    from core.manifest import ManifestError, load_manifest
+
+    folder = tmp_path / "models"
+    shutil.copytree(models_dir, folder)
+    engine, ref = Engine(folder), Engine(models_dir)
+    idx = np.array([JOINT_INDEX["left_wrist"], JOINT_INDEX["right_wrist"]])
+    start, goal = real_poses.poses[real_poses.starts[0]], real_poses.poses[real_poses.goals[0]]
+
+    def lone(e: Engine, mirror: bool) -> np.ndarray:  # a lone edit: its own in-place path
+        p = SolveProblem(pose=start, target_idx=idx, target_pos=goal[idx], weights=np.ones(2),
+                         n_targets=2, mirror=mirror)  # fmt: skip
+        return e.solve([p])[0].pose
+
+    lone(engine, False)  # one row a pass: the network's own session
+    by_name = {e.name: e for e in load_manifest(folder).models}
+    (folder / by_name["fused:left_wrist+right_wrist"].file).write_bytes(
+        (folder / by_name["fused:left_ankle+right_ankle"].file).read_bytes()
+    )
+    (folder / by_name["mirror:left_wrist+right_wrist"].file).unlink()
+    for mirror in (True, False):  # two rows a pass (the edit and its mirror): made now
+        assert np.array_equal(lone(engine, mirror), lone(ref, mirror)), mirror
+    few = engine.fused["left_wrist+right_wrist"].few
+    assert len({id(s) for s in few.sessions.values()}) == 2  # the second made after the swap
+    entry = by_name["autoencoder"]  # a file whose bytes are not the manifest's
+    path = folder / entry.file
+    path.write_bytes(path.read_bytes() + b"\0")
+    with pytest.raises(ManifestError, match="changed since read"):
+        runtime.Net(path, entry, runtime.session_options())
