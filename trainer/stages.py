@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import gc
 import hashlib
 import io
 import json
@@ -60,8 +61,13 @@ class Dist:
     def close(self) -> None:
         """Leave the process group (after the ranks' last collective): its threads end
         here, not in the interpreter's teardown, where a rank once aborted ("terminate
-        called without an active exception") after training had ended."""
+        called without an active exception") after training had ended. The training's
+        DistributedDataParallel wrappers (reference cycles) are collected first, while the
+        group is alive: left to the teardown, a reducer outliving its group is one way to
+        that abort (it happened again in CI on 2026-12-05, after the group was destroyed
+        and training had ended; not reproduced here)."""
         if self.world > 1 and dist.is_initialized():
+            gc.collect()
             dist.destroy_process_group()
 
 
