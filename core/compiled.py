@@ -248,6 +248,20 @@ def scale_item(
 
 
 @jit
+def body_scales(
+    poses: F64, shapes: F64, shape_totals: F64, total_length: bool, reference_total: float
+) -> F64:  # pragma: no cover - compiled
+    """:func:`scale_item` of each pose ``[B, 21, 3]``: ``[B]`` (``Engine.scales_of`` of
+    their bone lengths, ~1 us where numpy takes ~15)."""
+    out = np.empty(poses.shape[0])
+    lengths = np.empty(NUM_JOINTS - 1)
+    for b in range(poses.shape[0]):
+        bone_lengths_item(poses[b], lengths)
+        out[b] = scale_item(lengths, shapes, shape_totals, total_length, reference_total)
+    return out
+
+
+@jit
 def retry_reaches(
     poses: F64, soft: F64, reach: float, shapes: F64, shape_totals: F64, total_length: bool,
     reference_total: float,
@@ -696,6 +710,7 @@ def warm() -> None:
         np.ones(1), True, 1.0,
     )  # fmt: skip
     retry_reaches(pose, np.zeros(1), 0.005, shapes, np.ones(1), True, 1.0)
+    body_scales(pose, shapes, np.ones(1), True, 1.0)
     unscale(
         out[6], out[4], out[0], out[3], np.ones(1, dtype=np.bool_), tidx, counts, np.full(1, 0.5),
         chains, 0.0, np.ones(1, dtype=np.bool_), np.full(1, 0.02), True, 0.5, np.full(1, 0.01),

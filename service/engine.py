@@ -422,6 +422,14 @@ class Engine:
         ans = ans.with_items(sel, again)
         return self._polish_short(items, ans, reach) if self.serving.retry_polish else ans
 
+    def body_scales(self, poses: compiled.F64) -> compiled.F64:
+        """:meth:`scales_of` of world poses ``[B, 21, 3]``, compiled (``compiled.body_scales``:
+        the scale ``compiled.prepare`` gives the networks, bit for bit)."""
+        return compiled.body_scales(
+            poses, self._shapes_c, self._shape_totals, self.serving.body == "total_length",
+            self._reference_total,
+        )  # fmt: skip
+
     def _retry_reaches(self, items: _Items) -> tuple[F64, float]:
         """``[B]``: how far from a target each item's soft answer may end before it is
         retried, and the least of them: ``serving.retry_reach`` at the networks' body size,

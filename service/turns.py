@@ -49,7 +49,6 @@ import numpy.typing as npt
 
 from core.geometry import canonicalise
 from core.manifest import Serving
-from core.skeleton import bone_lengths
 from service import completion
 from service.problems import PELVIS, BatchAnswer, Solve, _Items
 
@@ -276,7 +275,7 @@ def _candidates(
         ans = solve(soft, np.ones(len(rep), dtype=np.int64))
     else:
         ans = solve(soft, reps[rep])
-    scale: F64 = np.tile(np.asarray(engine.scales_of(bone_lengths(starts)), np.float64), len(steps))
+    scale: F64 = np.tile(engine.body_scales(np.ascontiguousarray(starts)), len(steps))
     scores = _score(engine, soft, ans, scale).reshape(len(steps), -1)
     scores[steps == y] += engine.turn_search.fit  # the fitted start's bar (0 if not tried)
     return scores, ans, poses
