@@ -221,6 +221,14 @@ class SolverConfig(_Section):
             return self.other_weight if self.long_other_weight is None else self.long_other_weight
         return self.other_weights.get(set_key(joints), self.other_weight)
 
+    def unused_weights(self) -> list[str]:
+        """The ``other_weights`` and ``stay_weights`` keys that name no set of ``sets``
+        (ignored, and in no checkpoint tag, so that a config changing the sets inherits
+        them; a typo would train the baseline unsaid: the trainer warns of them)."""
+        trained = {set_key(s) for s in self.sets}
+        own = (("other_weights", self.other_weights), ("stay_weights", self.stay_weights))
+        return [f"{name}.{key}" for name, weights in own for key in weights if key not in trained]
+
     def stay_of(self, joints: list[str], long: bool = False) -> float:
         """The stay term's weight the solver of ``joints`` trains with: a shared set's
         ``stay_weights`` entry, else ``stay_weight``."""

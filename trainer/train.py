@@ -658,6 +658,9 @@ def train_all(cfg: TrainConfig, *, fresh: bool = False) -> Trained:
     if d.main:
         for warning in splits.train.meta.get("warnings", []):  # the build's, again
             console.print(f"[yellow]warning: dataset: {escape(warning)}")
+        for key in cfg.solver.unused_weights():  # a set's weight naming no set trained
+            console.print(f"[yellow]warning: solver.{escape(key)} names no set of solver.sets:"
+                          " ignored")  # fmt: skip
         console.print(
             f"train {len(splits.train.positions)} frames, val {len(splits.val.positions)}, "
             f"test {len(splits.test.positions)}; world size {d.world}"

@@ -634,6 +634,8 @@ def test_per_set_weights_weigh_each_set_of_the_shared_bank_alone(
             assert config_tag(load_config(None, {"solver": extra}), stage) == config_tag(
                 base, stage
             )
+    typo = load_config(None, {"solver": {per_set: {"left_elbow+right_elbow": 0.3, "head": 0.2}}})
+    assert typo.solver.unused_weights() == [f"{per_set}.left_elbow+right_elbow"]  # warned of
     with pytest.raises(ValueError, match=r"unknown joints \['left_wirst'\]"):
         load_config(None, {"solver": {per_set: {"left_wirst": 0.3}}})
     with pytest.raises(ValueError, match=f"{per_set}: 'right_wrist\\+left_wrist' is not a set's"):
