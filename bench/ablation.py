@@ -241,7 +241,7 @@ VARIANTS: dict[str, str] = {
     "captured_retry_2mm": "`retry_2mm` on the captured edits",
     "retry_5mm": "the same at 5 mm",
     "fallback": "mx1-25bb75ec3824 with exact reach's fallback after the retry's polish "
-    "(`Engine._polish_short`, item 46)",
+    "(`service.retry.polish_short`, item 46)",
     "captured_fallback": "`fallback` on the captured edits",
     "retry_5mm_fallback": "the fallback and the retry at 5 mm: shipped as mx1-3ca9545e56de",
     "captured_retry_5mm_fallback": "`retry_5mm_fallback` on the captured edits",

@@ -31,6 +31,7 @@ from core.skeleton import NUM_JOINTS
 from service import lean, networks
 from service.engine import Engine
 from service.problems import SolveProblem, _Items
+from service.retry import last_steps
 from service.runtime import Bound, _FewRows
 from trainer.data.dataset import load_dataset
 
@@ -86,8 +87,7 @@ def steps(engine: Engine, p: SolveProblem, windows: int, calls: int) -> dict[str
         out[f"onnxruntime: one run of {rows} rows, x{passes}"] = passes * timed(run)
         ws = lean._workspace()
         canon, facing, trans, lengths, scales = ws
-        body = (engine._shapes_c, engine._shape_totals, s.body == "total_length",
-                engine._reference_total)  # fmt: skip
+        body = engine.body_args
         rest = (items.floors, items.tidx, items.tpos, items.cnt, items.carry, engine.chain_mask,
                 s.keep_ease, collar, hold, s.keep_pairs, s.bend_side, items.soft_ik)  # fmt: skip
         out["kernel prepare_into"] = timed(
@@ -128,7 +128,7 @@ def steps(engine: Engine, p: SolveProblem, windows: int, calls: int) -> dict[str
             lambda: compiled.settle_last(dec, scales, canon, lengths, facing, trans, *rest, *into)
         )
     ans = lean.lean_answer(engine, items, passes, seq)
-    out["retry check and pins (_last_steps)"] = timed(lambda: engine._last_steps(items, ans))
+    out["retry check and pins (retry.last_steps)"] = timed(lambda: last_steps(engine, items, ans))
     out["the result (SolveResult)"] = timed(lambda: engine._result(p, ans, 0))
     return out
 

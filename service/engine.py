@@ -45,18 +45,16 @@ from core.skeleton import (
     mirror_key,
     set_key,
 )
-from service import completion, networks, turns
+from service import completion, networks, retry, turns
 from service.fallback import prefer_fabrik
 from service.lean import (
     covering,
     fabrik_batch,
     lean_answer,
     lean_sequence,
-    solve_fabrik,
     solve_lean,
     uncovered,
 )
-from service.pins import hold_pins
 from service.problems import (
     PELVIS,
     BatchAnswer,
@@ -167,6 +165,12 @@ class Engine:
         self._shapes = known / self._shape_totals[:, None]
         self._shapes_c = np.ascontiguousarray(self._shapes, dtype=np.float64)
         self._reference_total = float(np.sum(self.reference_lengths))
+        #: how the compiled kernels size a body (``compiled.scale_item``'s arguments, as
+        #: :meth:`scales_of`): the training skeletons' shapes and totals, the mode, the total
+        self.body_args: tuple[compiled.F64, compiled.F64, bool, float] = (
+            self._shapes_c, self._shape_totals, self.serving.body == "total_length",
+            self._reference_total,
+        )  # fmt: skip
         compiled.warm()  # compile the kernels, or load them from numba's cache
         compiled_fabrik.warm()
         if composition not in ("reencode", "sequential"):
@@ -257,7 +261,7 @@ class Engine:
         items = asked.travelled(
             self.serving.pelvis_travel, self.serving.reach_travel, self.turn_search.min_targets
         )
-        ans = self._last_steps(items, lean_answer(self, items, passes, seq))
+        ans = retry.last_steps(self, items, lean_answer(self, items, passes, seq))
         return self._result(p, prefer_fabrik(self, asked, ans, self._solve_items), 0)
 
     def passes_of(self, p: SolveProblem) -> int:
@@ -355,7 +359,9 @@ class Engine:
             self.serving.pelvis_travel, self.serving.reach_travel, self.turn_search.min_targets
         )
         items, turned, known = turns.search(self, items, reps, self._solve_items)
-        ans = turns.mark(self._last_steps(items, self._solve_rest(items, reps, known)), turned)
+        ans = turns.mark(
+            retry.last_steps(self, items, self._solve_rest(items, reps, known)), turned
+        )
         return prefer_fabrik(self, asked, ans, self._solve_items)
 
     def _solve_rest(
@@ -393,92 +399,10 @@ class Engine:
         on_pelvis = ((items.tidx == PELVIS) & cols).any(axis=1)
         return np.where(few & ~on_pelvis, self.serving.keep_pelvis, 0.0)
 
-    def _last_steps(self, items: _Items, ans: BatchAnswer) -> BatchAnswer:
-        """What every answer goes through last, the lean path's too: one more pass for
-        soft items left short (:meth:`_retry`), then pins still off polished onto them
-        (:func:`service.pins.hold_pins`)."""
-        return hold_pins(items, self._retry(items, ans))
-
-    def _retry(self, items: _Items, ans: BatchAnswer) -> BatchAnswer:
-        """``ans`` with one more pass, from its answer, for every soft neural item (bone
-        lengths kept) whose farthest target is still more than its threshold away
-        (:meth:`_retry_reaches`: ``serving.retry_reach`` scaled with the body): the passes
-        left it short, as the bone pass takes back what the networks
-        reached for (docs/generalisation-serving.md item 25). Such an item gets what one
-        more of its passes would give it; the others are untouched. With
-        ``serving.retry_polish``, an item that pass still leaves short is then polished
-        onto its targets (:meth:`_polish_short`)."""
-        if self.serving.retry_reach <= 0.0 or ans.pose.shape[0] == 0:
-            return ans
-        reach, least = self._retry_reaches(items)
-        if float(ans.errors.max()) <= least:  # the common case: one reduction, one kernel
-            return ans
-        sel = self._short(items, ans, reach)
-        if sel.size == 0:
-            return ans
-        again = self._solve_items(
-            items.soft(sel, compiled.as_f64(ans.pose)), np.ones(sel.size, np.int64)
-        )
-        ans = ans.with_items(sel, again)
-        return self._polish_short(items, ans, reach) if self.serving.retry_polish else ans
-
     def body_scales(self, poses: compiled.F64) -> compiled.F64:
         """:meth:`scales_of` of world poses ``[B, 21, 3]``, compiled (``compiled.body_scales``:
         the scale ``compiled.prepare`` gives the networks, bit for bit)."""
-        return compiled.body_scales(
-            poses, self._shapes_c, self._shape_totals, self.serving.body == "total_length",
-            self._reference_total,
-        )  # fmt: skip
-
-    def _retry_reaches(self, items: _Items) -> tuple[F64, float]:
-        """``[B]``: how far from a target each item's soft answer may end before it is
-        retried, and the least of them: ``serving.retry_reach`` at the networks' body size,
-        scaled with the body (:meth:`scales_of`: a 1.9 m or a 1.2 m copy of a character is
-        answered as that character; it was in metres for every body), plus ``soft_ik / e``
-        for an item asked to ease into full stretch (the shortfall it asked for: neither a
-        retry nor the polish, which straightens the limb, is for that)."""
-        return compiled.retry_reaches(
-            items.poses, items.soft_ik, self.serving.retry_reach, self._shapes_c,
-            self._shape_totals, self.serving.body == "total_length", self._reference_total,
-        )  # fmt: skip
-
-    def _short(self, items: _Items, ans: BatchAnswer, reach: F64) -> npt.NDArray[np.intp]:
-        """The soft neural items (bone lengths kept) of ``ans`` whose farthest user target
-        is more than their ``reach`` (:meth:`_retry_reaches`) away."""
-        far = items.farthest(ans.errors) > reach
-        out: npt.NDArray[np.intp] = np.flatnonzero(far & ~items.fab & ~items.ex & items.keep)
-        return out
-
-    def _polish_short(self, items: _Items, ans: BatchAnswer, reach: F64) -> BatchAnswer:
-        """``ans`` with every item still short (:meth:`_short`) polished from its answer
-        onto its targets, to its own tolerance, as exact reach polishes: the compiled
-        FABRIK polish, trunk held first, pins held, and where that leaves a target beyond
-        the tolerance, exact reach's fallback from the caller's start (plain FABRIK, the
-        body moved across: :meth:`exact_fallback`) (``serving.retry_polish``,
-        docs/generalisation-serving-2.md item 37). Its ``solvers`` end with ``fabrik-polish``
-        (once: a path that already ends with it is not given it twice). An
-        item the polish would leave no nearer (the iteration cap) keeps its answer."""
-        sel = self._short(items, ans, reach)
-        if sel.size == 0:
-            return ans
-        short = dataclasses.replace(items.take(sel), poses=compiled.as_f64(ans.pose[sel]))
-        lengths = np.ascontiguousarray(bone_lengths(items.poses[sel]))  # the caller's own
-        before = ans.take(sel)
-        world, errors = before.pose.copy(), before.errors.copy()
-        bone_err, iterations = before.max_bone_error.copy(), before.iterations.copy()
-        for g in _groups(short.cnt, short.n_t, short.tidx, short.w):
-            m = g.members
-            world[m], errors[m], bone_err[m], its = solve_fabrik(
-                self, short.take(m), polish=True, lengths=lengths[m], origin=items.poses[sel[m]]
-            )
-            iterations[m] += its
-        nearer = np.flatnonzero(short.farthest(errors) < short.farthest(before.errors))
-        polished = BatchAnswer(
-            world, errors, bone_err, iterations,
-            tuple(path if path[-1:] == ("fabrik-polish",) else (*path, "fabrik-polish")
-                  for path in before.paths), before.path_of,
-        ).take(nearer)  # fmt: skip
-        return ans.with_items(sel[nearer], polished)
+        return compiled.body_scales(poses, *self.body_args)
 
     def _solve_items(self, items: _Items, reps: npt.NDArray[np.int64]) -> BatchAnswer:
         """:meth:`solve_arrays` of normalised items with their passes ``reps``."""
@@ -585,9 +509,8 @@ class Engine:
             tpos = items.tpos.copy()
             tpos[:, :, 1] -= items.floors[:, None]
         return tpos, compiled.prepare(
-            poses, items.floors, items.tidx, tpos, items.cnt, neural, self._shapes_c,
-            self._shape_totals, self.serving.body == "total_length", self._reference_total,
-        )  # fmt: skip
+            poses, items.floors, items.tidx, tpos, items.cnt, neural, *self.body_args
+        )
 
     def _fabrik(
         self, polish: bool, starts: F64, lengths: F64, goals: F64, tols: F64,

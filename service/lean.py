@@ -205,8 +205,7 @@ def solve_one(
     (x_in, t_in), out, run = few.bound(((rows, 3 * NUM_JOINTS), (rows, cols.shape[0])))
     canon, facing, trans, lengths, scales = _workspace()
     s = engine.serving
-    body = (engine._shapes_c, engine._shape_totals, s.body == "total_length",
-            engine._reference_total)  # fmt: skip
+    body = engine.body_args
     compiled.prepare_into(
         items.poses, items.floors, items.tidx, items.tpos, items.cnt, *body, cols, other, signs,
         x_in, t_in, canon, facing, trans, lengths, scales,

@@ -80,7 +80,7 @@ class Priced(Protocol):
 class Pricing:
     """What an engine adds to an item's price: ``passes``, its default neural passes (for
     items that do not say); ``search``, its turn search; ``retry``, whether it gives a soft
-    answer left short one more pass (``serving.retry_reach``, ``Engine._retry``);
+    answer left short one more pass (``serving.retry_reach``, ``service.retry``);
     ``mirror``, whether its passes also solve the mirror image (for items that do not
     say; ``serving.solve_mirror``)."""
 

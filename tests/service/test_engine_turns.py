@@ -17,6 +17,7 @@ from core.skeleton import JOINT_INDEX, bone_lengths
 from service import limits
 from service.engine import Engine
 from service.problems import SolveProblem, others
+from service.retry import retry
 from service.turns import implausibility, turned, turned_by
 from tests.conftest import PosePairs
 from tests.service.test_api import assert_problem
@@ -332,7 +333,7 @@ def test_search_ends_early_with_the_answers_of_the_full_search(
     assert known is not None and np.array_equal(known[0], np.arange(40))  # the soft ones
     assert np.array_equal(known[1].pose, ref.pose[:40])
     assert np.array_equal(known[1].errors, ref.errors[:40])
-    got, want = engine.solve_arrays(**args), engine._retry(kept, ref)  # then the retry
+    got, want = engine.solve_arrays(**args), retry(engine, kept, ref)  # then the retry
     assert np.array_equal(got.pose, want.pose) and np.array_equal(got.errors, want.errors)
     # a lone item solves its 13 candidates in one batch: the same start, the same answer
     for i in (*np.flatnonzero(score[0] > 0)[:3], *np.flatnonzero(score[0] <= 0)[:2], n - 1):
