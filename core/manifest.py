@@ -264,6 +264,15 @@ class Serving(_Strict):
         "that has travelled as well as turned. Kept only if it scores this many metres "
         "below every other candidate (0: not tried).",
     )
+    turn_gate: float = Field(
+        default=0.0,
+        ge=0.0,
+        le=1.0,
+        description="Metres, at the networks' body size (as `turn_margin`): an edit searches "
+        "the turn only if its targets lie at least this far across (x, z) from the joints "
+        "they are for, on average; nearer, the edit asks for no turn of the body and is "
+        "solved from its start (0: every edit that may search does).",
+    )
     turn_quick: bool = Field(
         default=False,
         description="The turn search solves its candidates in their quick form, one pass "

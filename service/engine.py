@@ -247,12 +247,13 @@ class Engine:
         it qualifies: what :meth:`solve_arrays` gives it, without its option arrays."""
         tidx = compiled.as_i64(p.target_idx)
         weights = compiled.as_f64(p.weights)
-        passes, seq = 1, None
+        passes, seq, may_turn = 1, None, False
         if p.method != "fabrik":
             if not p.preserve_bone_lengths:
                 return None  # the bone pass left out: the general path
             pinned = p.n_targets < len(tidx)
-            if self.turn_search.searches(p.method, p.n_targets, pinned, p.turn_search):
+            may_turn = self.turn_search.searches(p.method, p.n_targets, pinned, p.turn_search)
+            if may_turn and self.turn_search.gate <= 0.0:
                 return None  # a turn search (service.turns): the general path
             passes, seq = self.passes_of(p), covering(self, tidx, weights)
             if seq is None or passes < 1:
@@ -261,6 +262,8 @@ class Engine:
         items = asked.travelled(
             self.serving.pelvis_travel, self.serving.reach_travel, self.turn_search.min_targets
         )
+        if may_turn and turns.searching(self, items).size:
+            return None  # its targets say the body turned: the search, on the general path
         ans = retry.last_steps(self, items, lean_answer(self, items, passes, seq))
         return self._result(p, prefer_fabrik(self, asked, ans, self._solve_items), 0)
 

@@ -304,6 +304,11 @@ class ModelsResponse(BaseModel):
         description="Whether the turn search scores its candidates on their quick form (one "
         "pass, no mirror image) before solving the edit as asked (`serving.turn_quick`)."
     )
+    turn_gate: float = Field(
+        description="Metres: an edit that may search its turn searches only if its targets "
+        "lie at least this far across from their joints on average, at the networks' body "
+        "size (0: always; `serving.turn_gate`)."
+    )
     turn_critic: str = Field(
         description="What judges how natural a searched turn's answer is: `completion` (the "
         "body completion builds from its base key points) or `autoencoder` (its round trip); "

@@ -33,6 +33,12 @@ that best carries the targeted joints onto their targets), for a body that trave
 well as turned (docs/generalisation-serving-2.md item 34). It is kept only if it scores
 ``turn_fit`` metres below every other candidate; its path ends with ``fit <deg>``.
 
+With ``turn_gate`` > 0 an item searches only if its targets lie at least that far across
+from the joints they are for, on average, at the networks' body size
+(:func:`target_motion`): targets that near ask for no turn (a quarter turn carries a
+standing body's wrists 0.3 m), and such an edit is solved from its start as if it could
+not search, on the lone edit's lean path too (docs/generalisation-3.md item 58).
+
 With ``turn_quick`` each candidate is solved in its quick form (one pass, no mirror
 image), and the edit then as asked from the start kept, soft ones too unless they asked
 for that form (measured, not shipped: docs/generalisation-serving-2.md item 40).
@@ -78,6 +84,10 @@ class TurnSearch:
     #: candidates solved in their quick form (one pass, no mirror image); the edit is then
     #: solved as asked from the start kept
     quick: bool = False
+    #: metres (at the networks' body size): an item searches only if its targets lie this
+    #: far across from their joints on average (:func:`target_motion`; 0: every item that
+    #: may search does)
+    gate: float = 0.0
 
     @property
     def candidates(self) -> int:
@@ -90,7 +100,7 @@ class TurnSearch:
         return TurnSearch(
             serving.turn_yaws, serving.turn_margin, serving.turn_min_targets,
             serving.turn_plausibility, serving.turn_critic, serving.turn_fit,
-            serving.turn_quick,
+            serving.turn_quick, serving.turn_gate,
         )  # fmt: skip
 
     def searches(
@@ -113,12 +123,18 @@ NO_SEARCH = TurnSearch.of(Serving())
 
 
 def searching(engine: Engine, items: _Items) -> npt.NDArray[np.intp]:
-    """The items that search: neural, enough targets, no pins (none if the search is off)."""
+    """The items that search: neural, enough targets, no pins, and with ``gate`` targets
+    that far from their joints (:func:`target_motion`; none if the search is off)."""
     t = engine.turn_search
     if t.yaws <= 1:
         return np.zeros(0, dtype=np.intp)
     ok = items.turn & items.neural_unpinned() & (items.n_t >= t.min_targets)
-    return np.flatnonzero(ok)
+    sel = np.flatnonzero(ok)
+    if t.gate > 0.0 and sel.size:  # only those whose targets say the body turned or moved
+        starts = items.poses[sel]
+        moved = target_motion(starts, items, sel) / engine.body_scales(starts)
+        sel = sel[moved >= t.gate]
+    return sel
 
 
 def turned(poses: F64, yaw: float) -> F64:
@@ -157,11 +173,40 @@ def own_sum(x: npt.NDArray[np.floating], widths: npt.NDArray[np.int64]) -> F64:
     return out
 
 
+def fitted_yaw(poses: F64, items: _Items, rows: npt.NDArray[np.intp]) -> F64:
+    """The turn of :func:`fitted` alone (radians)."""
+    return _fit(poses, items, rows)[0]
+
+
+def target_motion(poses: F64, items: _Items, rows: npt.NDArray[np.intp]) -> F64:
+    """How far across (m) the targets of each of ``items[rows]`` lie from the joints of its
+    start ``poses [N, 21, 3]`` they are for, on average: an edit that moves its targets
+    this little asks for no turn of the body (a quarter turn carries a standing body's
+    wrists 0.3 m and its ankles 0.15)."""
+    tidx, own = items.tidx[rows], items.n_t[rows]
+    src = np.take_along_axis(poses, tidx[:, :, None], axis=1)
+    gap = items.tpos[rows] - src
+    out: F64 = own_sum(np.hypot(gap[..., 0], gap[..., 2]), own) / own
+    return out
+
+
 def fitted(poses: F64, items: _Items, rows: npt.NDArray[np.intp]) -> tuple[F64, F64]:
     """``poses [N, 21, 3]`` (world, +Y up; the starts of ``items[rows]``) each moved by
     the turn about the vertical and the shift across that best carry its targeted joints
     onto their targets (least squares over x and z; heights as they were), and each turn
     in radians, as :func:`turned` would turn it."""
+    yaw, sc, dc = _fit(poses, items, rows)
+    c, s = np.cos(yaw)[:, None], np.sin(yaw)[:, None]
+    x, z = poses[:, :, 0] - sc[:, :1], poses[:, :, 2] - sc[:, 1:]
+    out = poses.copy()
+    out[:, :, 0] = c * x + s * z + dc[:, :1]
+    out[:, :, 2] = -s * x + c * z + dc[:, 1:]
+    return out, yaw
+
+
+def _fit(poses: F64, items: _Items, rows: npt.NDArray[np.intp]) -> tuple[F64, F64, F64]:
+    """:func:`fitted`'s turn (radians) and the centroids across (x, z) of the targeted
+    joints and of their targets."""
     tidx, tpos = items.tidx[rows], items.tpos[rows]
     own = items.n_t[rows]  # each item's targets: its first columns (no pins: it searches)
     n = own[:, None].astype(np.float64)
@@ -173,13 +218,7 @@ def fitted(poses: F64, items: _Items, rows: npt.NDArray[np.intp]) -> tuple[F64, 
     # turned(): x' = c x + s z, z' = -s x + c z; maximise sum(b . R a)
     cos = own_sum(a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1], own)
     sin = own_sum(a[..., 1] * b[..., 0] - a[..., 0] * b[..., 1], own)
-    yaw = np.arctan2(sin, cos)
-    c, s = np.cos(yaw)[:, None], np.sin(yaw)[:, None]
-    x, z = poses[:, :, 0] - sc[:, :1], poses[:, :, 2] - sc[:, 1:]
-    out = poses.copy()
-    out[:, :, 0] = c * x + s * z + dc[:, :1]
-    out[:, :, 2] = -s * x + c * z + dc[:, 1:]
-    return out, yaw
+    return np.arctan2(sin, cos), sc, dc
 
 
 #: Items whose final answer the search already has: their indices and that answer.
@@ -240,7 +279,7 @@ def search(
     deg = np.rint(360.0 * best / t.yaws).astype(np.int64)
     fit = np.flatnonzero(best == t.yaws) if t.fit > 0.0 else np.zeros(0, np.intp)
     if fit.size:  # the fitted start: its own turn
-        yaw = fitted(items.poses[sel[fit]], items, sel[fit])[1]
+        yaw = fitted_yaw(items.poses[sel[fit]], items, sel[fit])
         deg[fit] = np.rint(np.degrees(yaw)).astype(np.int64) % 360
         moved[sel[fit]] = True
     degrees[sel] = np.where(deg > 180, deg - 360, deg)

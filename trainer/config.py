@@ -128,6 +128,7 @@ class SolverConfig(_Section):
     turn_critic: Literal["autoencoder", "completion"] = _serving("turn_critic")
     turn_fit: float = _serving("turn_fit")
     turn_quick: bool = _serving("turn_quick")
+    turn_gate: float = _serving("turn_gate")
     retry_reach: float = _serving("retry_reach")
     retry_polish: bool = _serving("retry_polish")
     keep_ends: bool = _serving("keep_ends")
@@ -254,9 +255,9 @@ class SolverConfig(_Section):
 #: ``serving`` block under the same names, and not in the solvers' checkpoint tags.
 SERVING_SETTINGS: tuple[str, ...] = (
     "passes", "carry", "turn_yaws", "turn_margin", "turn_min_targets", "turn_plausibility",
-    "turn_critic", "turn_fit", "turn_quick", "retry_reach", "retry_polish", "keep_ends",
-    "keep_elbows", "keep_ease", "bend_side", "keep_collar", "keep_pairs", "keep_pelvis",
-    "pelvis_travel", "reach_travel", "solve_mirror", "critic_fabrik",
+    "turn_critic", "turn_fit", "turn_quick", "turn_gate", "retry_reach", "retry_polish",
+    "keep_ends", "keep_elbows", "keep_ease", "bend_side", "keep_collar", "keep_pairs",
+    "keep_pelvis", "pelvis_travel", "reach_travel", "solve_mirror", "critic_fabrik",
 )  # fmt: skip
 if not set(SERVING_SETTINGS) <= set(SolverConfig.model_fields) & set(Serving.model_fields):
     raise RuntimeError("SERVING_SETTINGS must name fields of SolverConfig and of Serving")

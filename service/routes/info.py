@@ -42,6 +42,7 @@ async def models(engine: ReadyEngine) -> ModelsResponse:
         turn_yaws=engine.turn_search.yaws,
         turn_fit=engine.turn_search.fit,
         turn_quick=engine.turn_search.quick,
+        turn_gate=engine.turn_search.gate,
         turn_min_targets=engine.turn_search.min_targets,
         turn_critic=engine.turn_search.critic,
         turn_plausibility=engine.turn_search.plausibility,
