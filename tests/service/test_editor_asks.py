@@ -14,7 +14,7 @@ from typing import Any
 import pytest
 
 from tests.conftest import REPO_ROOT
-from tests.service.editor_page import M, drag_joint, give_file, open_editor, settle
+from tests.service.editor_page import M, drag_joint, give_file, open_editor, recorded, settle
 
 # the fixtures `server` (one for the session) and `browser` (one per module)
 pytest_plugins = ("tests.service.editor_page",)
@@ -373,6 +373,156 @@ def test_editor_asks_before_a_file_replaces_a_samples_work(server: str, browser:
         drop_file(page, text, "f.bvh")
         page.wait_for_function(f"() => {M}.bvh() && {M}.bvh().name === 'f.bvh'")
         assert len(dialogs.asked) == n + 1, dialogs.asked
+        assert not errors, errors
+    finally:
+        page.context.close()
+
+
+def until(page: Any, done: Any) -> None:
+    """Wait (up to 5 s) until ``done()``, a check on what the test recorded, holds."""
+    for _ in range(100):
+        if done():
+            return
+        page.wait_for_timeout(50)
+    assert done()
+
+
+def inspect_held(page: Any) -> list[Any]:
+    """Hold back every ``/v1/bvh/inspect`` (a file being read stays so): the held routes."""
+    held: list[Any] = []
+    page.route("**/v1/bvh/inspect", lambda route: held.append(route))
+    return held
+
+
+def let_through(page: Any, held: list[Any]) -> None:
+    """Let the held inspections through, and stop holding them."""
+    for route in held:
+        route.continue_()
+    page.unroute("**/v1/bvh/inspect")
+
+
+def drop_files(page: Any, files: list[tuple[str, str]]) -> None:
+    """Each ``(body, name)`` dropped on the page in turn, in one task (the second while the
+    first one's bytes are still being read: a large file's take seconds)."""
+    page.evaluate(
+        """(files) => {
+          for (const [body, name] of files) {
+            const dt = new DataTransfer();
+            dt.items.add(new File([body], name, { type: 'text/plain' }));
+            window.dispatchEvent(
+              new DragEvent('drop', { dataTransfer: dt, bubbles: true, cancelable: true }));
+          }
+        }""",
+        [list(f) for f in files],
+    )
+
+
+@pytest.mark.browser
+def test_editor_asks_once_while_a_file_is_read(server: str, browser: Any) -> None:
+    """Found by a review: the user said yes to a file dropping a sample's work; while that
+    file was still being read (its bytes, or the service's inspection), the page asked the
+    same again for a second file picked, a Sample chosen or the units changed, and a "no"
+    kept nothing: the first file opened over the work all the same. Asked twice, word for
+    word, when the yes came while a drag's answer was on its way and the answer landed
+    during the read. Now a yes covers the state it was given for until the read ends (a
+    later choice takes its place unasked), and of two files dropped at once only the later
+    is asked about and read."""
+    text = json.loads((REPO_ROOT / "docs" / "examples" / "bvh_solve.json").read_text())["bvh"]
+    page = open_editor(browser, server)
+    errors: list[str] = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    dialogs = Dialogs(page)
+    inspected = recorded(page, lambda url: url.endswith("/v1/bvh/inspect"))  # the bodies
+    shown = NAMES[1]
+
+    def question(name: str, lost: str) -> str:
+        return (
+            f'Open {name}? This drops {lost} on "{shown}" (Undo cannot return to '
+            f'"{shown}": a file opened starts the undo history anew).'
+        )
+
+    def opened(name: str) -> None:
+        page.wait_for_function(f"() => {M}.bvh() && {M}.bvh().name === '{name}'")
+
+    try:
+        page.select_option("#sample", index=1)
+
+        # -- a second file picked while the first is inspected: not asked again; it opens
+        shift_click(page, "left_ankle")
+        dialogs.yes = True
+        held = inspect_held(page)
+        give_file(page, text, "a.bvh")
+        assert dialogs.next(page, 0) == question("a.bvh", "1 pin")
+        page.wait_for_function(
+            "() => document.getElementById('status').textContent"
+            " === 'opening a.bvh… (editing waits)'"
+        )
+        give_file(page, text, "b.bvh")
+        until(page, lambda: len(inspected) == 2)
+        page.wait_for_timeout(200)
+        assert len(dialogs.asked) == 1, dialogs.asked
+        assert page.evaluate(f"{M}.pins()") == ["left_ankle"]  # (still being read)
+        let_through(page, held)
+        opened("b.bvh")
+        assert len(dialogs.asked) == 1, dialogs.asked
+
+        # -- a Sample chosen while a file is inspected: not asked again; the file never opens
+        shift_click(page, "left_ankle")  # a pin on b.bvh
+        held = inspect_held(page)
+        give_file(page, text, "c.bvh")
+        assert dialogs.next(page, 1) == "Open c.bvh? Closing b.bvh loses 1 pin."
+        until(page, lambda: len(inspected) == 3)
+        page.select_option("#sample", index=1)
+        assert len(dialogs.asked) == 2, dialogs.asked
+        assert page.evaluate(f"{M}.bvh()") is None and page.evaluate(f"{M}.pins()") == []
+        let_through(page, held)
+        page.wait_for_timeout(300)
+        assert page.evaluate(f"{M}.bvh()") is None  # (its late answer dropped)
+
+        # -- the yes given while a drag's answer was on its way, the answer landing during
+        # the read: the units changed then read the file again unasked (was: asked again)
+        solves: list[Any] = []
+        page.route("**/v1/solve", lambda route: solves.append(route))
+        xy = page.evaluate(f"{M}.projectJoint('left_wrist')")
+        page.mouse.move(xy["x"], xy["y"])
+        page.mouse.down()
+        page.mouse.move(xy["x"] - 30, xy["y"] - 40, steps=4)
+        page.mouse.up()
+        page.wait_for_function(f"() => {M}.solveCount().inflight")
+        held = inspect_held(page)
+        give_file(page, text, "d.bvh")
+        assert dialogs.next(page, 2) == question("d.bvh", "your edits to the pose and 1 target")
+        for route in solves:
+            route.continue_()
+        page.unroute("**/v1/solve")
+        settle(page)  # (the drag's answer committed: an undo step, during the read)
+        assert page.evaluate(f"{M}.history()")["index"] == 1
+        page.select_option("#bvh-units", "m")
+        until(page, lambda: len(inspected) == 5)
+        assert inspected[-1]["units"] == "m" and len(dialogs.asked) == 3, dialogs.asked
+        give_file(page, text, "e.bvh")  # and a file picked then
+        until(page, lambda: len(inspected) == 6)
+        assert len(dialogs.asked) == 3, dialogs.asked
+        let_through(page, held)
+        opened("e.bvh")
+        assert len(dialogs.asked) == 3, dialogs.asked
+
+        # -- two files dropped at once (the second while the first one's bytes are read):
+        # one question, of the later; "no" reads neither, "yes" opens the later
+        page.select_option("#sample", index=1)  # (e.bvh unedited: unasked)
+        shift_click(page, "left_ankle")
+        dialogs.yes = False
+        before = len(inspected)
+        drop_files(page, [(text, "f.bvh"), (text, "g.bvh")])
+        assert dialogs.next(page, 3) == question("g.bvh", "1 pin")
+        page.wait_for_timeout(300)
+        assert len(dialogs.asked) == 4 and len(inspected) == before, dialogs.asked
+        assert page.evaluate(f"{M}.pins()") == ["left_ankle"]
+        dialogs.yes = True
+        drop_files(page, [(text, "f.bvh"), (text, "g.bvh")])
+        assert dialogs.next(page, 4) == question("g.bvh", "1 pin")
+        opened("g.bvh")
+        assert len(dialogs.asked) == 5 and len(inspected) == before + 1, dialogs.asked
         assert not errors, errors
     finally:
         page.context.close()

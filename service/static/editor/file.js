@@ -102,6 +102,7 @@ function worldMapping(info, frame0) {
 }
 
 let opening = 0;
+let picked = 0; // files picked or dropped: a later one (or a Sample) takes an earlier one's place
 
 // A file being opened, or the open one read again: editing waits for the answer, which
 // replaces the pose, the file and the history (an edit made meanwhile was drawn, then
@@ -124,6 +125,7 @@ function stopReading() {
 // choice stands; the file's late answer opened it over the sample's edits, unasked).
 export function cancelOpening() {
   opening += 1; // (an answer on its way finds its ticket stale and is dropped)
+  picked += 1; // (as does a file whose bytes are still being read)
   doc.tried = null; // (nor does a units / up change re-open it)
   if (ui.reading) {
     stopReading();
@@ -333,32 +335,57 @@ export function closingQuestion(what) {
 const marks = () => JSON.stringify([[...state.targets], [...state.pins]]);
 
 // What a yes to replacing the state shown covers: the open file with the edits it has now,
-// or the sample with its pose, pins and targets as they are now.
+// or the sample with its pose, pins and targets as they are now; and a drag's answer on its
+// way then (the question named it: "your edits to the pose"), once committed too.
 function replaceable() {
-  if (doc.active) return { original: doc.original, text: doc.text, marks: marks() };
-  return { sample: state.sample, pose: JSON.stringify(state.committed), marks: marks() };
+  const gesture = { pending: solver.commitPending, step: history.stack[history.index] };
+  if (doc.active) return { original: doc.original, text: doc.text, marks: marks(), ...gesture };
+  return { sample: state.sample, pose: JSON.stringify(state.committed), marks: marks(), ...gesture };
 }
 
 // Whether ``yes`` (``replaceable``'s, or null) still covers the state shown: nothing to
 // lose, or no edit since (a sample's too: re-trying a refused file over a sample edited
-// since the yes opened it unasked).
+// since the yes opened it unasked). The answer of a drag on its way at the yes, still on
+// its way or committed since (the next undo step), is no newer edit: it landed while the
+// file was read, and a units change then asked the same question again.
 function stillCovers(yes) {
   if (!hasEdits()) return true; // (nothing to lose)
-  if (!yes || solver.commitPending || yes.marks !== marks()) return false;
+  if (!yes || yes.marks !== marks()) return false;
+  if (yes.pending) {
+    const at = solver.commitPending ? history.index : history.index - 1; // (on its way, committed)
+    if (history.stack[at] === yes.step) return true;
+  }
+  if (solver.commitPending) return false;
   if (doc.active) return yes.original === doc.original && yes.text === doc.text;
   return yes.sample === state.sample && yes.pose === JSON.stringify(state.committed);
 }
 
+// Whether the state shown is given up already: a file being read that the user said yes to
+// opening over it, nothing newer since. Another file picked or dropped, or a Sample chosen,
+// meanwhile takes that file's place unasked: it asked the same again, and a "no" kept
+// nothing (the file being read opened over it all the same).
+export function givenUp() {
+  const t = doc.tried;
+  return Boolean(ui.reading && t && t.yes) && stillCovers(t.yes);
+}
+
+// A file picked or dropped: read, asked about (``mayReplace``) unless the state shown is
+// given up already (``givenUp``), and opened. One picked or dropped, or a Sample chosen,
+// while its bytes are read takes its place (a large file's take seconds: both were asked
+// about, and the first one asked opened after the later choice).
 export async function openFile(file) {
   if (!file) return;
+  const pick = ++picked;
   let bytes;
   try {
     bytes = new Uint8Array(await file.arrayBuffer());
   } catch (err) {
+    if (pick !== picked) return; // (a later choice stands)
     showError(new ApiError(-1, 'Cannot read the file', `${file.name}: ${err.message}`));
     return;
   }
-  if (!mayReplace(file.name)) return;
+  if (pick !== picked) return; // (a later choice stands)
+  if (!givenUp() && !mayReplace(file.name)) return;
   const yes = replaceable(); // (re-trying the file after a refusal asks only about newer edits)
   const decoded = decodeFile(bytes);
   // lines ended by CR alone (classic Mac OS): read as LF, as the service reads them (an

@@ -6,7 +6,7 @@ import { api, clearError, showError } from './api.js';
 import { endDrag } from './interaction.js';
 import { refresh, updateButtons } from './panel.js';
 import {
-  cancelOpening, closeFile, closingQuestion, filePose, hasEdits, named, toFile, unsaved,
+  cancelOpening, closeFile, closingQuestion, filePose, givenUp, hasEdits, named, toFile, unsaved,
 } from './file.js';
 
 // ------------------------------------------------------------------------------------
@@ -136,9 +136,10 @@ export function redo() {
 
 // A sample chosen in the menu: asked first when the state shown has anything to lose (the
 // open file's edits, or the sample's own: its pose edited, pins, targets; file.js unsaved;
-// a sample's pins and targets went unasked); "no" keeps it all, the menu as it was.
+// a sample's pins and targets went unasked); "no" keeps it all, the menu as it was. Not
+// asked again while a file the user said yes to is read over it (file.js givenUp).
 export function chooseSample(i) {
-  if (hasEdits() && !window.confirm(sampleQuestion(i))) {
+  if (hasEdits() && !givenUp() && !window.confirm(sampleQuestion(i))) {
     $('sample').value = doc.active ? '' : String(state.sample);
     return;
   }
