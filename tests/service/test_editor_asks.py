@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 from math import dist
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -523,6 +524,117 @@ def test_editor_asks_once_while_a_file_is_read(server: str, browser: Any) -> Non
         assert dialogs.next(page, 4) == question("g.bvh", "1 pin")
         opened("g.bvh")
         assert len(dialogs.asked) == 5 and len(inspected) == before + 1, dialogs.asked
+        assert not errors, errors
+    finally:
+        page.context.close()
+
+
+def pick_file(page: Any, path: Path) -> None:
+    """``path`` chosen in the file chooser that "Open BVH…" opens, as a user does (the same
+    file chosen again fires no change unless the page emptied the input)."""
+    with page.expect_file_chooser() as chooser:
+        page.click("label[for=bvh-file]")
+    chooser.value.set_files(str(path))
+
+
+@pytest.mark.browser
+def test_editor_asks_once_about_a_refused_file_picked_again(
+    server: str, browser: Any, tmp_path: Path
+) -> None:
+    """Found by a review: a file the service refused, picked again in the file chooser
+    (or dropped again), asked again the question the user had said yes to, though nothing
+    new would be lost (a units change re-trying it did not ask). Now re-picking the same
+    file re-tries it (the chooser's change fires for the same file), asking only about
+    edits newer than the yes, once; with the joint map filled in, it opens. The file open
+    re-picked with edits is still asked about (re-opening drops them)."""
+    text = json.loads((REPO_ROOT / "docs" / "examples" / "bvh_solve.json").read_text())["bvh"]
+    refused = tmp_path / "d.bvh"
+    refused.write_text(text.replace("JOINT LeftForeArm", "JOINT ForeArm_Lft"))  # unmapped
+    broken = tmp_path / "e.bvh"
+    broken.write_text(text.split("MOTION")[0][:400])  # cut short in its hierarchy
+    page = open_editor(browser, server)
+    errors: list[str] = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    dialogs = Dialogs(page)
+    inspected = recorded_urls(page, "/v1/bvh/inspect")
+    shown = NAMES[1]
+
+    def question(name: str, lost: str) -> str:
+        return (
+            f'Open {name}? This drops {lost} on "{shown}" (Undo cannot return to '
+            f'"{shown}": a file opened starts the undo history anew).'
+        )
+
+    def refused_again(pick: Any, name: str, asked: int) -> None:
+        """``pick()`` re-tries the file ``name``: read (one more inspection), refused, and
+        ``asked`` questions in all."""
+        n = len(inspected)
+        if page.evaluate(f"{M}.error()") is not None:
+            page.click("#error-close")
+        pick()
+        until(page, lambda: len(inspected) == n + 1)
+        page.wait_for_function(
+            f"() => ({M}.error() || {{}}).detail?.startsWith({json.dumps(name)})"
+        )
+        page.wait_for_timeout(200)
+        assert len(dialogs.asked) == asked, dialogs.asked
+
+    try:
+        page.select_option("#sample", index=1)
+        shift_click(page, "left_ankle")
+
+        # -- refused after a yes; picked again (and dropped again): re-tried, not asked ----
+        dialogs.yes = True
+        refused_again(lambda: pick_file(page, refused), "d.bvh", 1)
+        assert dialogs.asked[0] == question("d.bvh", "1 pin")
+        refused_again(lambda: pick_file(page, refused), "d.bvh", 1)
+        refused_again(lambda: drop_file(page, refused.read_text(), "d.bvh"), "d.bvh", 1)
+        assert page.evaluate(f"{M}.pins()") == ["left_ankle"]  # (the sample kept)
+
+        # -- a pin since, the joint map field unreadable: said, not asked, nothing read ------
+        shift_click(page, "right_ankle")
+        dialogs.yes = False
+        n = len(inspected)
+        page.click("#error-close")
+        page.locator("#bvh-map").fill('{"left_elbow": ')
+        pick_file(page, refused)
+        page.wait_for_function(f"() => ({M}.error() || {{}}).title === 'Joint map'")
+        page.wait_for_timeout(200)
+        assert len(dialogs.asked) == 1 and len(inspected) == n, dialogs.asked
+        page.locator("#bvh-map").fill("")
+
+        # -- the pin since: asked once, of both; "no" reads nothing; "yes" re-tries it -----
+        pick_file(page, refused)
+        assert dialogs.next(page, 1) == question("d.bvh", "2 pins")
+        page.wait_for_timeout(300)
+        assert len(inspected) == n and page.evaluate(f"{M}.pins()") == ["left_ankle", "right_ankle"]
+        dialogs.yes = True
+        refused_again(lambda: pick_file(page, refused), "d.bvh", 3)
+        refused_again(lambda: pick_file(page, refused), "d.bvh", 3)
+
+        # -- the joint map filled in, the file picked again: it opens, unasked -------------
+        page.locator("#bvh-map").fill(json.dumps({"left_elbow": "ForeArm_Lft"}))
+        pick_file(page, refused)
+        page.wait_for_function(f"() => {M}.bvh() && {M}.bvh().name === 'd.bvh'")
+        assert page.evaluate(f"{M}.bvh()")["jointMap"] == {"left_elbow": "ForeArm_Lft"}
+        assert len(dialogs.asked) == 3, dialogs.asked
+
+        # -- over the file open, edited: a refused file picked again is not asked about
+        # again; the open file picked again is (re-opening it drops the edit) -------------
+        drag_joint(page, "left_wrist", 40, -60)
+        assert page.evaluate(f"{M}.bvh()")["edited"]
+        refused_again(lambda: pick_file(page, broken), "e.bvh", 4)
+        assert dialogs.asked[3] == (
+            "Open e.bvh? Closing d.bvh loses your edits to the file and 1 target "
+            "(Export BVH keeps the edits, not pins or targets)."
+        )
+        assert "(d.bvh stays open)" in page.evaluate(f"{M}.error()")["detail"]
+        refused_again(lambda: pick_file(page, broken), "e.bvh", 4)
+        dialogs.yes = False
+        pick_file(page, refused)
+        assert dialogs.next(page, 4).startswith("Open d.bvh? Closing d.bvh loses your edits")
+        page.wait_for_timeout(300)
+        assert page.evaluate(f"{M}.bvh()")["edited"]
         assert not errors, errors
     finally:
         page.context.close()

@@ -369,10 +369,22 @@ export function givenUp() {
   return Boolean(ui.reading && t && t.yes) && stillCovers(t.yes);
 }
 
+// Whether the file ``name`` (``text``) is the file last tried, refused since, and the yes
+// to it still covers the state shown: picked (or dropped) again, it is asked about only
+// for newer edits, as a units change re-trying it is (``readAgain``); it was asked about
+// again each time. (The file open picked again is asked about: re-opening drops its edits.)
+function retried(name, text) {
+  const t = doc.tried;
+  if (!t || !t.yes || t.name !== name || t.text !== text) return false;
+  if (doc.active && doc.name === name && doc.original === text) return false;
+  return stillCovers(t.yes);
+}
+
 // A file picked or dropped: read, asked about (``mayReplace``) unless the state shown is
-// given up already (``givenUp``), and opened. One picked or dropped, or a Sample chosen,
-// while its bytes are read takes its place (a large file's take seconds: both were asked
-// about, and the first one asked opened after the later choice).
+// given up already (``givenUp``, ``retried``), and opened. One picked or dropped, or a
+// Sample chosen, while its bytes are read takes its place (a large file's take seconds:
+// both were asked about, and the first one asked opened after the later choice). A joint
+// map the page refuses is said before asking (it asked, then read nothing).
 export async function openFile(file) {
   if (!file) return;
   const pick = ++picked;
@@ -385,8 +397,6 @@ export async function openFile(file) {
     return;
   }
   if (pick !== picked) return; // (a later choice stands)
-  if (!givenUp() && !mayReplace(file.name)) return;
-  const yes = replaceable(); // (re-trying the file after a refusal asks only about newer edits)
   const decoded = decodeFile(bytes);
   // lines ended by CR alone (classic Mac OS): read as LF, as the service reads them (an
   // edit then comes back with LF ends); the page's own reader splits at LF
@@ -399,6 +409,8 @@ export async function openFile(file) {
     showError(err);
     return;
   }
+  if (!givenUp() && !retried(file.name, text) && !mayReplace(file.name)) return;
+  const yes = replaceable(); // (re-trying the file after a refusal asks only about newer edits)
   showSettings(DEFAULT_SETTINGS); // each file read anew (MENUS, above)
   showMap(jointMap);
   await openText(text, file.name, { encoding: decoded.encoding, jointMap, yes });
