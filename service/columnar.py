@@ -300,33 +300,48 @@ def parse(data: dict[str, Any], max_items: int, suspect: bool = True) -> Columns
     return Columns(pose3, tidx, tpos, weights, k, p, options)
 
 
-def solve(engine: Engine, cols: Columns, part: slice) -> BatchAnswer:
+@dataclass(frozen=True)
+class Part:
+    """A part's answers, and its answered poses already written as the answer's JSON rows
+    (in the compute thread that solved them, beside the other parts: the rows are most of
+    the answer's bytes, 1.5 of a 1,024-edit batch's 1.8 ms of writing)."""
+
+    ans: BatchAnswer
+    poses: bytes  # a JSON list of rows of WIDTH numbers
+
+
+def solve(engine: Engine, cols: Columns, part: slice) -> Part:
     """One part of the batch, as arrays."""
     o = cols.options
-    return engine.solve_arrays(
+    ans = engine.solve_arrays(
         cols.poses[part], cols.tidx[part], cols.tpos[part], n_targets=cols.n_targets,
         weights=cols.weights[part], fabrik=o.method == "fabrik",
         preserve_bone_lengths=o.preserve_bone_lengths, exact=o.reach == "exact",
         tolerance=o.tolerance, floor=o.floor, passes=o.passes, carry=o.carry,
         turn_search=o.turn_search is not False, mirror=o.mirror, soft_ik=o.soft_ik,
     )  # fmt: skip
+    rows = np.ascontiguousarray(ans.pose, dtype=np.float64).reshape(len(ans.pose), WIDTH)
+    return Part(ans, orjson.dumps(rows, option=orjson.OPT_SERIALIZE_NUMPY))
 
 
-def merge(parts: Sequence[BatchAnswer]) -> BatchAnswer:
+def merge(parts: Sequence[Part]) -> Part:
     """The answers of consecutive parts as one (solver paths renumbered)."""
     if len(parts) == 1:
         return parts[0]
-    ends = np.cumsum([len(a.pose) for a in parts])
-    rows = [np.arange(e - len(a.pose), e) for a, e in zip(parts, ends, strict=True)]
-    return BatchAnswer.scatter(int(ends[-1]), list(zip(rows, parts, strict=True)))
+    ends = np.cumsum([len(p.ans.pose) for p in parts])
+    rows = [np.arange(e - len(p.ans.pose), e) for p, e in zip(parts, ends, strict=True)]
+    ans = BatchAnswer.scatter(int(ends[-1]), [(r, p.ans) for r, p in zip(rows, parts, strict=True)])
+    poses = b"[" + b",".join(p.poses[1:-1] for p in parts if len(p.ans.pose)) + b"]"
+    return Part(ans, poses)
 
 
-def answer(cols: Columns, ans: BatchAnswer, version: str) -> bytes:
-    """The columnar answer, encoded from the arrays (no per-item objects)."""
-    n, k, p = cols.size, cols.n_targets, cols.n_pins
+def answer(cols: Columns, part: Part, version: str) -> bytes:
+    """The columnar answer, encoded from the arrays (no per-item objects), its poses the
+    rows :func:`solve` wrote."""
+    ans = part.ans
+    k, p = cols.n_targets, cols.n_pins
     errors = np.ascontiguousarray(ans.errors[:, :k], dtype=np.float64)
     body = {
-        "poses": np.ascontiguousarray(ans.pose, dtype=np.float64).reshape(n, WIDTH),
         "errors": errors,
         "reached": errors <= cols.options.tolerance,
         "pin_errors": np.ascontiguousarray(ans.errors[:, k : k + p], dtype=np.float64),
@@ -337,4 +352,5 @@ def answer(cols: Columns, ans: BatchAnswer, version: str) -> bytes:
         "model": version,
         "method": "fabrik" if cols.options.method == "fabrik" else "neural",
     }
-    return orjson.dumps(body, option=orjson.OPT_SERIALIZE_NUMPY)
+    rest = orjson.dumps(body, option=orjson.OPT_SERIALIZE_NUMPY)
+    return b'{"poses":' + part.poses + b"," + rest[1:]

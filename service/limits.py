@@ -26,6 +26,7 @@ third (42 -> 12 items at 256 units a chunk) and halve a batch's poses/s on 2 thr
 
 from __future__ import annotations
 
+import asyncio
 import heapq
 import itertools
 import math
@@ -40,7 +41,7 @@ import anyio.to_thread
 from fastapi import Request
 
 from service.errors import ClientDisconnected, DeadlineExceeded
-from service.middleware.types import T0
+from service.middleware.types import T0, Message
 from service.problems import SolveProblem
 from service.schemas import MAX_PASSES
 from service.turns import NO_SEARCH, TurnSearch
@@ -219,15 +220,34 @@ class Budget:
         self.t0: float = request.scope.get(T0, time.perf_counter())
         self.deadline_seconds = deadline_seconds
         self.compute = 0.0
+        self._watch: asyncio.Future[Message] | None = None
 
     @property
     def left(self) -> float:
         return self.t0 + self.deadline_seconds - time.perf_counter()
 
     async def client_gone(self, done: int = 0, total: int = 0) -> None:
-        """Raise (499, never sent) when the client has gone away."""
-        if await self.request.is_disconnected():
-            raise ClientDisconnected(f"client went away after {done} of {total} items")
+        """Raise (499, never sent) when the client has gone away.
+
+        The request's body is read by now, so its next ASGI message says the client left
+        (or the answer was sent): the first look starts a task awaiting it, lets it run
+        once (a message already there is taken at once), and every look reads that task.
+        Starlette's ``Request.is_disconnected`` asks anew each time, in a cancelled anyio
+        scope whose cancel message formats the task: ~0.3 ms a look, a wave of a batch
+        each (1.1 ms of a columnar 1,024-edit batch's 35 ms, in the event loop)."""
+        if self._watch is None:
+            self._watch = asyncio.ensure_future(self.request.receive())
+            self._watch.add_done_callback(_retrieved)
+            await asyncio.sleep(0)
+        if not self._watch.done():
+            return
+        w = self._watch
+        failed = w.cancelled() or w.exception() is not None  # (the connection broke: gone)
+        if not failed and w.result().get("type") != "http.disconnect":
+            # (a message of another kind: dropped, as Starlette drops it; look again)
+            self._watch = None
+            return
+        raise ClientDisconnected(f"client went away after {done} of {total} items")
 
     async def check(self, done: int = 0, total: int = 0, noun: str = "items") -> None:
         """Raise when the work should stop: client gone, deadline passed (the 504 says
@@ -322,6 +342,13 @@ class Budget:
             out.extend(await _wave(fn, wave, limiter, self))
             self.compute += time.perf_counter() - t
         return out
+
+
+def _retrieved(watch: asyncio.Future[Message]) -> None:
+    """A client watch that failed after its request's last look: its error read (asyncio
+    would log it as never retrieved)."""
+    if not watch.cancelled():
+        watch.exception()
 
 
 #: Threads for a wave's parts beyond its first (which runs in the request's own worker

@@ -222,10 +222,10 @@ async def solve_columns(cols: columnar.Columns, engine: Engine, budget: Budget,
         lambda part: columnar.solve(engine, cols, part),
         cols.parts(Pricing.of(engine)),
     )
-    ans = columnar.merge(parts)
+    whole = columnar.merge(parts)
     state.metrics.batch.observe(cols.size)
-    state.metrics.solved_paths(cols.options.method, ans.paths, ans.path_of)
+    state.metrics.solved_paths(cols.options.method, whole.ans.paths, whole.ans.path_of)
     body = await answer_off_loop(
-        budget, lambda: columnar.answer(cols, ans, engine.version), cols.size
+        budget, lambda: columnar.answer(cols, whole, engine.version), cols.size
     )
     return raw_response(body, budget.compute)

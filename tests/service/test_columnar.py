@@ -99,6 +99,46 @@ def test_columnar_equals_item_list_and_singles(
     assert again.content == col.content  # run to run, byte for byte
 
 
+def test_answer_written_in_parts_is_the_whole_answer_written_at_once(
+    engine: Any, real_poses: PosePairs
+) -> None:
+    """Each part writes its own poses' rows as it is solved; the answer spliced from them
+    is byte for byte the whole answer written at once (one part, several, and a part of
+    one item)."""
+    import orjson
+
+    from service import columnar
+
+    body = columns(real_poses, 7)
+    cols = columnar.parse({**body, "targets": {**body["targets"], "joints": SETS[0]},
+                           "pins": ["left_ankle"]}, 100)  # fmt: skip
+    whole = columnar.solve(engine, cols, slice(0, 7))
+    ans = whole.ans
+    k = cols.n_targets
+    errors = np.ascontiguousarray(ans.errors[:, :k])
+    want = orjson.dumps(
+        {
+            "poses": np.ascontiguousarray(ans.pose).reshape(7, -1),
+            "errors": errors,
+            "reached": errors <= cols.options.tolerance,
+            "pin_errors": np.ascontiguousarray(ans.errors[:, k : k + cols.n_pins]),
+            "max_bone_length_error": ans.max_bone_error,
+            "iterations": ans.iterations,
+            "solvers": [list(path) for path in ans.paths],
+            "solver_of": ans.path_of,
+            "model": engine.version,
+            "method": "neural",
+        },
+        option=orjson.OPT_SERIALIZE_NUMPY,
+    )
+    for cuts in ([7], [3, 7], [1, 2, 6, 7]):
+        bounds = zip([0, *cuts[:-1]], cuts, strict=True)
+        parts = [columnar.solve(engine, cols, slice(a, b)) for a, b in bounds]
+        got = columnar.answer(cols, columnar.merge(parts), engine.version)
+        assert got == want, cuts
+        assert len(orjson.loads(got)["poses"]) == 7
+
+
 def test_shared_joints_weights_and_pins_per_item(client: Any, real_poses: PosePairs) -> None:
     body = columns(real_poses, 8)
     body["targets"]["joints"] = ["left_wrist", "right_wrist"]
