@@ -71,7 +71,9 @@ def shown(value: object, depth: int = _DEPTH) -> str:
 def quoted(value: object) -> str:
     """How a message names what a client sent: a string in quotes, clipped to
     :data:`QUOTE` characters; anything else as :func:`shown` shows it."""
-    return repr(clip(value)) if isinstance(value, str) else clip(shown(value))
+    if isinstance(value, str):  # repr escapes a lone surrogate itself (once: "'\\ud800'")
+        return repr(value if len(value) <= QUOTE else value[: QUOTE - 1] + "…")
+    return clip(shown(value))
 
 
 def close_match(name: str, candidates: Iterable[str]) -> str | None:

@@ -363,6 +363,11 @@ class Character:
     up: F64  # rotation taking the client's up axis to +Y
     units: str | float
     up_name: str
+    #: where its units and up are (``character.`` in the character form, none for BVH)
+    fields: str = ""
+    #: what a degenerate pose of its mapped points is put down to: the client's joint map,
+    #: else its skeleton (``character.joints``) or its file (``bvh``)
+    points: str = "bvh"
 
     def to_service(self, p: F64) -> F64:
         return np.asarray(self.scale * (p @ self.up.T))
@@ -394,6 +399,7 @@ def _character(
     prefix: str = "",
     stated: bool = True,
     up_stated: bool = True,
+    points: str = "bvh",
 ) -> Character:
     """The character of a pose; ``units`` and ``up`` as the client gave them (None: read
     from the rest pose; ``stated`` / ``up_stated`` False: the character form's default),
@@ -447,7 +453,10 @@ def _character(
                 'state it, e.g. "up": "+Z"'
             )
         up = found
-    return Character(skel, pose, jmap, units_scale(units), up_rotation(up), units, up)
+    fields = prefix[prefix.rfind("character.") :] if "character." in prefix else ""
+    return Character(
+        skel, pose, jmap, units_scale(units), up_rotation(up), units, up, fields, points
+    )
 
 
 def _resolve_joint(ch: Character, name: str, where: str) -> int:
@@ -466,16 +475,23 @@ def _resolve_joint(ch: Character, name: str, where: str) -> int:
     )
 
 
-def _within_reach_of_metres(points: F64, what: str, ch: Character) -> None:
+def _refused(where: str, message: str) -> InvalidRequest:
+    """A 422 whose one error is at the field ``where``."""
+    return InvalidRequest(f"{where}: {message}", errors=[{"location": where, "message": message}])
+
+
+def _within_reach_of_metres(points: F64, where: str, what: str, ch: Character) -> None:
     """The service works within ±``MAX_METRES`` m, as the pose form does: a character
-    whose values times its units land beyond (or overflow) is refused by name, before any
-    geometry runs on numbers it cannot hold (an SVD that does not converge, a NaN error)."""
+    whose values times its units land beyond (or overflow) is refused by name (``what``,
+    at the field ``where``), before any geometry runs on numbers it cannot hold (an SVD
+    that does not converge, a NaN error)."""
     far = float(np.max(np.abs(points), initial=0.0))
     if not far <= MAX_METRES:
-        raise InvalidRequest(
-            f"{what}: {far:.4g} m from the origin in metres (values x units "
+        raise _refused(
+            where,
+            f"{what} {far:.4g} m from the origin in metres (values x units "
             f"{quoted(ch.units)} = {ch.scale:.4g} m per unit); the service works within "
-            f"±{MAX_METRES:g} m: check the units or move the character nearer the origin"
+            f"±{MAX_METRES:g} m: check the units or move the character nearer the origin",
         )
 
 
@@ -486,20 +502,25 @@ def character_problem(ch: Character, req: _Frame, where: str = "") -> SolveProbl
     with np.errstate(over="ignore", invalid="ignore"):  # refused by name just below
         pts = ch.to_service(canonical_points(ch.skel, ch.pose, ch.jmap))
         goals = [ch.to_service(np.asarray(t.position, dtype=np.float64)) for t in req.targets]
-    _within_reach_of_metres(pts, f"{prefix}the pose's mapped joints", ch)
+    # the pose's points come from the skeleton's offsets, the pose and the units: the
+    # character form's pose (its root_position, rotations), or the BVH file's frame
+    pose_at = f"{prefix}{ch.fields or 'bvh'}".removesuffix(".")
+    _within_reach_of_metres(pts, pose_at, "the pose's mapped joints lie", ch)
     for i, g in enumerate(goals):
-        _within_reach_of_metres(g, f"{prefix}targets[{i}].position", ch)
+        _within_reach_of_metres(g, f"{prefix}targets[{i}].position", "the target lies", ch)
     lengths = np.linalg.norm(pts[[c for c, _ in BONES]] - pts[[p for _, p in BONES]], axis=1)
     if lengths.min() < MIN_BONE:
         short = [JOINT_NAMES[c] for (c, _), n in zip(BONES, lengths, strict=True) if n < MIN_BONE]
         if len(short) == len(BONES):  # every bone: the units, not the map
-            raise InvalidRequest(
-                f"{prefix}units: the whole body spans {float(lengths.sum()):.3g} m of bones at "
-                f"{quoted(ch.units)} = {ch.scale:.4g} m per unit; check the units"
+            raise _refused(
+                f"{prefix}{ch.fields}units",
+                f"the whole body spans {float(lengths.sum()):.3g} m of bones at "
+                f"{quoted(ch.units)} = {ch.scale:.4g} m per unit; check the units",
             )
-        raise InvalidRequest(
-            f"{prefix}joint_map: the mapped points make zero-length bones ending at {short} "
-            f"(each canonical joint must be at least {MIN_BONE * 1000:g} mm from its parent)"
+        raise _refused(
+            f"{prefix}{ch.points}",
+            f"the mapped points make zero-length bones ending at {short} (each canonical "
+            f"joint must be at least {MIN_BONE * 1000:g} mm from its parent)",
         )
     return problem_of(
         pts,
@@ -623,7 +644,10 @@ def character_from_request(req: CharacterSolveRequest, where: str = "") -> Chara
         units, up = req.character.units, req.character.up
         given = req.character.model_fields_set
         where = f"{prefix}character."
-        return _character(skel, pose, jmap, units, up, where, "units" in given, "up" in given)
+        points = "joint_map" if req.joint_map else "character.joints"
+        return _character(
+            skel, pose, jmap, units, up, where, "units" in given, "up" in given, points
+        )
     except CharacterError as exc:
         raise _invalid(exc) from None
 
@@ -691,7 +715,8 @@ def character_from_bvh(bvh: BVH, req: BVHSolveRequest | BVHInspectRequest) -> Ch
         skel = skeleton_of(bvh)
         pose = pose_of(bvh, req.frame, root_add=req.root_position == "add")
         jmap = resolve_map(skel, req.joint_map)
-        return _character(skel, pose, jmap, req.units, req.up)
+        points = "joint_map" if req.joint_map else "bvh"
+        return _character(skel, pose, jmap, req.units, req.up, points=points)
     except (CharacterError, BVHError) as exc:
         raise _invalid(exc) from None
 

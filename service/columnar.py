@@ -126,7 +126,11 @@ def _numbers(rows: Any, loc: tuple[Any, ...], width: int, n: int, errs: _Errors,
             if not isinstance(row, list):
                 errs.add((*loc, b), "list_type", "Input should be a valid list")
             elif len(row) != width:
-                errs.add((*loc, b), "row_length", f"must hold {width} numbers, got {len(row)}")
+                errs.add(
+                    (*loc, b),
+                    "row_length",
+                    f"must hold {width} number{'s' if width != 1 else ''}, got {len(row)}",
+                )
             else:
                 for i, v in enumerate(row):
                     if type(v) is not float and type(v) is not int:
@@ -239,11 +243,17 @@ def parse(data: dict[str, Any], max_items: int, suspect: bool = True) -> Columns
     if n > max_items:
         raise TooManyItems(f"{n} items exceed the limit of {max_items} per batch")
     if isinstance(rows, list) and n == 0:
-        errs.add(("poses",), "too_short", "List should have at least 1 item, not 0")
+        errs.add(
+            ("poses",), "too_short", "List should have at least 1 item after validation, not 0"
+        )  # pydantic's
     errs.raise_any()
     poses = _numbers(rows, ("poses",), WIDTH, n, errs, suspect)
     if not isinstance(targets, dict):
-        errs.add(("targets",), "dict_type", "Input should be an object")
+        errs.add(
+            ("targets",),
+            "model_type",  # pydantic's words, as the other forms have them
+            "Input should be a valid dictionary or instance of ColumnarTargets",
+        )
         errs.raise_any()
         raise AssertionError  # unreachable
     for key in targets:

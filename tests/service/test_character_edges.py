@@ -189,3 +189,68 @@ def test_a_detail_quotes_a_long_value_clipped(client: Any) -> None:
         assert len(detail) <= MAX_DETAIL, (path, len(detail))
         assert "J" * QUOTE not in detail and "7" * QUOTE not in detail, detail[:300]
         assert "J" * (QUOTE // 2) in detail or "an integer of 400 digits" in detail, detail[:300]
+
+
+def _located(client: Any, path: str, body: dict[str, Any], where: str, *needles: str) -> None:
+    """A 422 whose error is at the field ``where`` (its detail starts there too)."""
+    r = client.post(path, json=body)
+    assert_problem(r, 422)
+    got = r.json()
+    assert got["detail"].startswith(f"{where}: "), got["detail"]
+    assert [e["location"] for e in got["errors"]] == [where], got["errors"]
+    for needle in needles:
+        assert needle in got["detail"], got["detail"]
+
+
+def _forearm_on_arm(body: dict[str, Any]) -> dict[str, Any]:
+    """The BVH example with LeftForeArm given position channels, all 0 in every frame: a
+    frame whose left elbow sits on its shoulder (the rest pose as it was)."""
+    lines = body["bvh"].split("\n")
+    joint = next(i for i, ln in enumerate(lines) if ln.strip() == "JOINT LeftForeArm")
+    seen, at = 0, -1
+    for i, ln in enumerate(lines):
+        words = ln.split()
+        if words[:1] == ["CHANNELS"]:
+            if at < 0 and i > joint:
+                at = seen
+                lines[i] = ln[: ln.index("CHANNELS")] + "CHANNELS 6 Xposition Yposition " + (
+                    "Zposition " + " ".join(words[2:]))  # fmt: skip
+            seen += int(words[1])
+    first = next(i for i, ln in enumerate(lines) if ln.startswith("Frame Time")) + 1
+    for i in range(first, len(lines)):
+        values = lines[i].split()
+        if len(values) == seen:
+            lines[i] = " ".join([*values[:at], "0", "0", "0", *values[at:]])
+    return {**body, "bvh": "\n".join(lines)}
+
+
+def test_character_errors_name_the_field_at_fault(client: Any) -> None:
+    """The character form's units are ``character.units`` (were ``units``, a field it does
+    not have); a pose beyond the service is put down to the character (was the location
+    ``body``, and in a batch it lost its item); zero-length mapped bones are put down to the
+    skeleton, or the file, when no joint map was sent (were always ``joint_map``)."""
+    body = _example("solve_character")
+    tiny = copy.deepcopy(body)
+    tiny["character"]["units"] = 1e-300
+    _located(client, "/v1/solve", tiny, "character.units", "check the units")
+    far = copy.deepcopy(body)
+    far["root_position"] = [1e7, 0.0, 0.0]
+    _located(client, "/v1/solve", far, "character", "mapped joints lie", "±10000 m")
+    r = client.post("/v1/solve/batch", json={"items": [_example("solve"), far]})
+    assert_problem(r, 422)
+    assert [e["location"] for e in r.json()["errors"]] == ["items[1].character"], r.json()
+    bvh = _example("bvh_solve")
+    _located(client, "/v1/bvh/solve", _forearm_on_arm(bvh), "bvh", "zero-length bones")
+    _located(client, "/v1/bvh/solve", {**bvh, "units": 1e-300}, "units", "check the units")
+
+
+def test_a_lone_surrogate_is_escaped_once(client: Any) -> None:
+    """A joint name holding a lone surrogate (valid JSON, no UTF-8) is quoted with one
+    backslash, as repr writes it (was two: escaped, then repr'd)."""
+    body = _example("solve_character")
+    body["targets"][0]["joint"] = "@@SURROGATE@@"
+    raw = json.dumps(body).replace("@@SURROGATE@@", "\\ud800")
+    r = client.post("/v1/solve", content=raw, headers={"content-type": "application/json"})
+    assert_problem(r, 422)
+    detail = r.json()["detail"]
+    assert "'\\ud800' is neither a mapped joint" in detail and "\\\\" not in detail, detail
