@@ -276,11 +276,14 @@ def test_search_ends_early_with_the_answers_of_the_full_search(
     only for items whose unturned score is beyond the margin) keeps the start the full
     search keeps, and its answers (soft: the kept candidate's own; exact: solved again) are
     the full search's bit for bit. The reference: every candidate in one batch, argmin with
-    the margin, then the edit solved as asked from the kept start."""
+    the margin, then the edit solved as asked from the kept start. Every edit searches
+    here (``turn_gate`` 0: the edits 0.2-1 s apart that move their targets less than the
+    shipped gate would not)."""
     from service.problems import _Items
     from service.turns import _score, fitted
 
-    engine = engines[1]
+    engine = copy.copy(engines[1])
+    engine.turn_search = dataclasses.replace(engine.turn_search, gate=0.0)
     t = engine.turn_search
     starts = real_poses.poses[real_poses.starts[:40]]
     goals = real_poses.poses[real_poses.goals[:40]]

@@ -167,7 +167,7 @@ def test_field_and_cross_field_errors_are_one_problem_shape(client: Any) -> None
 
 
 @pytest.mark.parametrize(
-    ("weights", "needle"), [([float("nan")], "finite"), ([1.0, 2.0], "1 numbers")]
+    ("weights", "needle"), [([float("nan")], "finite"), ([1.0, 2.0], "must hold 1 number, got 2")]
 )
 def test_shared_columnar_weights_are_named_once_where_they_are(
     client: Any, weights: list[float], needle: str
