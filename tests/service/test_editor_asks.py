@@ -58,6 +58,20 @@ def shift_click(page: Any, joint: str) -> None:
     settle(page)
 
 
+def drag_held(page: Any, joint: str) -> list[Any]:
+    """``joint`` dragged a little, its solve held (routes of /v1/solve kept, unanswered):
+    the held routes, once the answer is on its way."""
+    held: list[Any] = []
+    page.route("**/v1/solve", lambda route: held.append(route))
+    xy = page.evaluate(f"{M}.projectJoint('{joint}')")
+    page.mouse.move(xy["x"], xy["y"])
+    page.mouse.down()
+    page.mouse.move(xy["x"] - 30, xy["y"] - 40, steps=4)
+    page.mouse.up()
+    page.wait_for_function(f"() => {M}.solveCount().inflight")
+    return held
+
+
 @pytest.mark.browser
 def test_editor_asks_before_a_sample_drops_a_samples_pins_and_targets(
     server: str, browser: Any
@@ -135,14 +149,7 @@ def test_editor_asks_before_a_sample_drops_a_samples_pins_and_targets(
         )
 
         # -- an edit whose answer is on its way: asked too ---------------------------------
-        held: list[Any] = []
-        page.route("**/v1/solve", lambda route: held.append(route))
-        xy = page.evaluate(f"{M}.projectJoint('right_wrist')")
-        page.mouse.move(xy["x"], xy["y"])
-        page.mouse.down()
-        page.mouse.move(xy["x"] - 30, xy["y"] - 40, steps=4)
-        page.mouse.up()
-        page.wait_for_function(f"() => {M}.solveCount().inflight")
+        held = drag_held(page, "right_wrist")
         n = len(dialogs.asked)
         page.select_option("#sample", index=2)
         assert len(dialogs.asked) == n + 1
@@ -482,14 +489,7 @@ def test_editor_asks_once_while_a_file_is_read(server: str, browser: Any) -> Non
 
         # -- the yes given while a drag's answer was on its way, the answer landing during
         # the read: the units changed then read the file again unasked (was: asked again)
-        solves: list[Any] = []
-        page.route("**/v1/solve", lambda route: solves.append(route))
-        xy = page.evaluate(f"{M}.projectJoint('left_wrist')")
-        page.mouse.move(xy["x"], xy["y"])
-        page.mouse.down()
-        page.mouse.move(xy["x"] - 30, xy["y"] - 40, steps=4)
-        page.mouse.up()
-        page.wait_for_function(f"() => {M}.solveCount().inflight")
+        solves = drag_held(page, "left_wrist")
         held = inspect_held(page)
         give_file(page, text, "d.bvh")
         assert dialogs.next(page, 2) == question("d.bvh", "your edits to the pose and 1 target")
