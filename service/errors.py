@@ -27,6 +27,9 @@ from core.text import QUOTE, clip, printable, quoted
 PROBLEM_JSON = "application/problem+json"
 PROBLEM_BASE = "https://marionette.dev/problems/"
 REASON = "pose.reason"  # scope key: why a request was refused (a problem type), for metrics
+#: scope key: perf_counter() when the request arrived (its head read: the HTTP protocol,
+#: ``service.transport``; else when the app first saw it); its deadline counts from it
+T0 = "pose.t0"
 MAX_DETAIL = 4000  # characters of any detail, whatever built it
 MAX_ERRORS = 20  # field errors a problem lists
 log = logging.getLogger("service")

@@ -226,6 +226,20 @@ class Budget:
     def left(self) -> float:
         return self.t0 + self.deadline_seconds - time.perf_counter()
 
+    def late(self, stage: str) -> DeadlineExceeded:
+        """The 504 of a request whose deadline passed before ``stage`` began."""
+        return DeadlineExceeded(
+            f"the request needed more than the {self.deadline_seconds:g} s deadline "
+            f"(before {stage}); retry, or send a smaller request"
+        )
+
+    def due(self, stage: str) -> None:
+        """Raise :meth:`late` when the deadline has passed: one clock read and a float
+        comparison, for work run on the event loop without a compute token (the lone soft
+        edit, ``service.routes.solve.solve_one``), which :meth:`token` never sees."""
+        if time.perf_counter() >= self.t0 + self.deadline_seconds:
+            raise self.late(stage)
+
     async def client_gone(self, done: int = 0, total: int = 0) -> None:
         """Raise (499, never sent) when the client has gone away.
 
@@ -269,9 +283,9 @@ class Budget:
             with anyio.move_on_after(left):
                 await limiter.acquire_on_behalf_of(borrower, self.t0)
                 return
-        head = f"the request needed more than the {self.deadline_seconds:g} s deadline"
         if left <= 0:
-            raise DeadlineExceeded(f"{head} (before {stage}); retry, or send a smaller request")
+            raise self.late(stage)
+        head = f"the request needed more than the {self.deadline_seconds:g} s deadline"
         raise DeadlineExceeded(
             f"{head} (before {stage}, after {time.perf_counter() - t:.2f} s waiting for a "
             "compute thread): the server is busy; retry later, or send a smaller request"

@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Awaitable, Callable, MutableMapping
 from typing import Any
 
-from service.errors import REASON
+from service.errors import REASON, T0
 
 __all__ = [
     "REASON", "REQUEST_ID", "T0", "ASGIApp", "Message", "Receive", "Scope", "Send", "observed",
@@ -17,7 +17,6 @@ Receive = Callable[[], Awaitable[Message]]
 Send = Callable[[Message], Awaitable[None]]
 ASGIApp = Callable[[Scope, Receive, Send], Awaitable[None]]
 
-T0 = "pose.t0"  # perf_counter() when the request arrived
 REQUEST_ID = "pose.request_id"
 
 

@@ -107,8 +107,14 @@ async def solve_one(p: SolveProblem, pinned: bool, engine: Engine, budget: Budge
     else in a worker thread (FABRIK iterations can take milliseconds: the loop stays free).
     Inline even for the turn search: in a worker it shares the GIL with the loop, and over
     HTTP a lone 5-target edit took 6.2 against 5.0 ms, and beside a client of 2-target
-    edits 13-16 against 4-8 ms (docs/service.md, "Work per request")."""
+    edits 13-16 against 4-8 ms (docs/service.md, "Work per request").
+
+    The inline solve first checks the deadline (``Budget.due``: a clock read, no await),
+    as the worker path does before each wave: a request that waited on the busy loop past
+    it is a 504, not solved for nobody (64 clients of an 18-target turn-searching edit, a
+    2 s deadline: every answer a 200, the last after 4.75 s; an audit)."""
     if p.method == "neural" and p.reach == "soft" and not pinned:
+        budget.due("the solve")
         t = time.perf_counter()
         (result,) = engine.solve([p])
         budget.compute += time.perf_counter() - t

@@ -4,6 +4,7 @@ Each prints the figure it measures (``pytest -s`` shows them)."""
 
 from __future__ import annotations
 
+import http.client
 import json
 import shutil
 import signal
@@ -13,8 +14,11 @@ import time
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 
+from core.rest import rest_pose
+from core.skeleton import JOINT_NAMES
 from tests.service.server import heavy_batch, serve
 
 pytestmark = pytest.mark.slow
@@ -49,6 +53,66 @@ def test_heavy_batches_are_bounded_by_the_deadline(models_dir: Path, tmp_path: P
         print(f"\n4 heavy batches at once ({len(body) / 1e6:.1f} MB each): {results}")
         assert worst < 2 + 1.5, results  # the deadline plus one chunk and the answer
         assert s.request("GET", "/v2/health/live")[0] == 200
+
+
+def _slow_lone_edit(seed: int = 1) -> bytes:
+    """A lone soft edit slow to solve (on the event loop: no pins, soft reach): 18 targets,
+    4 passes, the turn search and the mirror image (20-60 ms on this 2-core host)."""
+    rng = np.random.default_rng(seed)
+    pose = rest_pose()
+    joints = [JOINT_NAMES[i] for i in rng.permutation(len(JOINT_NAMES))[:18]]
+    return json.dumps({
+        "pose": dict(zip(JOINT_NAMES, pose.round(4).tolist(), strict=True)),
+        "targets": [{"joint": j, "position": (pose[JOINT_NAMES.index(j)]
+                                              + rng.normal(0, 0.3, 3)).round(4).tolist()}
+                    for j in joints],
+        "options": {"passes": 4, "turn_search": True, "mirror": True, "tolerance": 1e-6},
+    }).encode()  # fmt: skip
+
+
+def test_lone_soft_edits_on_a_busy_loop_end_at_their_deadline(
+    models_dir: Path, tmp_path: Path
+) -> None:
+    """64 clients of one slow lone soft edit: the edits are solved on the event loop one
+    after another, so a request read with others waits for their solves. It never looked at
+    its deadline (an audit: 256 answers, all 200, the last 4.75 s into a 2 s deadline), and
+    its clock started only when its turn came (the middleware's), not when its head was
+    read. Now one whose deadline passed before its solve is a 504, unsolved; those solved
+    are answered within the deadline and one solve (X-Total-Time: the server's clock; a
+    30 ms deadline, for a few 504s whatever the host's pace)."""
+    body, deadline = _slow_lone_edit(), 0.03
+    answers: list[tuple[int, float, bytes]] = []
+    with serve(models_dir, tmp_path, POSE_DEADLINE_SECONDS=str(deadline)) as s:
+
+        def client() -> None:
+            conn = http.client.HTTPConnection("127.0.0.1", s.port, timeout=60)
+            try:
+                for _ in range(3):
+                    conn.request("POST", "/v1/solve", body, {"content-type": "application/json"})
+                    resp = conn.getresponse()
+                    data = resp.read()
+                    took = float(resp.getheader("x-total-time", "nan").removesuffix("ms")) / 1e3
+                    assert resp.status == 200 or resp.getheader("retry-after") == "1"
+                    answers.append((resp.status, took, data))
+            finally:
+                conn.close()
+
+        threads = [threading.Thread(target=client) for _ in range(64)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+        metrics = s.request("GET", "/metrics")[2].decode()
+    late = [json.loads(data)["detail"] for status, _, data in answers if status == 504]
+    served = [took for status, took, _ in answers if status == 200]
+    print(f"\n192 slow lone edits from 64 clients, {deadline} s deadline: {len(served)} 200s "
+          f"(X-Total-Time max {max(served, default=0):.3f} s), {len(late)} 504s")  # fmt: skip
+    assert len(answers) == 192 and len(late) + len(served) == 192, answers[:3]
+    # (64-103 of 192 here; 0 with the clock started in the middleware, 0 without the check)
+    assert len(late) >= 10, f"{len(late)} requests found their deadline passed"
+    assert all(f"the {deadline:g} s deadline (before the solve)" in d for d in late), late[:3]
+    assert 'reason="deadline-exceeded",route="/v1/solve"' in metrics
+    assert max(served, default=0) < deadline + 1.0, sorted(served)[-5:]
 
 
 def _stall(port: int, declared: int) -> socket.socket:
