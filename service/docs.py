@@ -16,13 +16,16 @@ from service.schemas import Problem
 _PROBLEM_STATUS = {
     400: "Body is not valid JSON (the detail says where), not UTF-8, or has duplicate keys.",
     401: "Missing or wrong API key (only when POSE_API_KEY is set).",
-    408: "The body did not arrive within the deadline (a stalled upload): the connection closes.",
+    408: "The body did not arrive within the deadline (a stalled upload), or the request "
+    "line and headers within POSE_HEAD_TIMEOUT_SECONDS of their first byte (`head-timeout`): "
+    "the connection closes.",
     413: "Body or batch larger than the configured limit.",
     415: "Body is not application/json, or compressed (a Content-Encoding other than "
     "identity, a Transfer-Encoding other than chunked).",
     422: "Invalid request: the detail says which field and why.",
     429: "Too many requests in flight on this worker: retry after Retry-After seconds.",
-    503: "Models not loaded yet, or broken (see /v2/health/ready), or shutting down.",
+    503: "Models not loaded yet, or broken (see /v2/health/ready), or shutting down, or too "
+    "many connections open on the worker (`too-many-connections`, before the request is read).",
     504: "The request needed more than the deadline: send smaller batches.",
 }
 
@@ -30,6 +33,10 @@ _PROBLEM_STATUS = {
 _PROTOCOL_STATUS = {
     400: "Bytes that are not an HTTP/1.1 request (`malformed-http`; the connection closes).",
     431: "Request line and headers over 64 KiB (`head-too-large`; the connection closes).",
+    408: "Request line and headers not whole within POSE_HEAD_TIMEOUT_SECONDS of their first "
+    "byte (`head-timeout`; the connection closes).",
+    503: "Too many connections open on the worker (`too-many-connections`, POSE_MAX_CONNECTIONS"
+    "; before the request is read; the connection closes).",
 }
 
 #: Headers of the answers (docs/service.md, Headers).
@@ -89,7 +96,8 @@ def _answer_headers(code: str, method: str) -> list[str]:
 
 #: Routes that answer without the models: their 503 is the shutdown's alone.
 _NO_MODELS_503 = {
-    "/v1/bvh/inspect": "Shutting down (this route needs no models: it answers while they load)."
+    "/v1/bvh/inspect": "Shutting down (this route needs no models: it answers while they "
+    "load), or too many connections open on the worker (`too-many-connections`)."
 }
 
 

@@ -76,6 +76,24 @@ class HeadTooLarge(PoseError):
     type_ = "head-too-large"
 
 
+class HeadTimeout(PoseError):
+    """A request line and headers not whole within the head timeout, from their first byte
+    (a slowloris: :mod:`service.transport`)."""
+
+    status = 408
+    title = "Request head timeout"
+    type_ = "head-timeout"
+
+
+class TooManyConnections(PoseError):
+    """A connection past the worker's bound on open ones (:mod:`service.transport`)."""
+
+    status = 503
+    title = "Too many connections"
+    type_ = "too-many-connections"
+    retry_after = 1
+
+
 class RequestTimeout(PoseError):
     """The body did not arrive within the deadline (a stalled or too slow upload)."""
 

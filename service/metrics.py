@@ -18,7 +18,7 @@ from prometheus_client import CollectorRegistry, Counter, Histogram, generate_la
 
 from service.problems import trained_solvers
 from service.settings import SHARED_DIR
-from service.transport import SLOW_READERS
+from service.transport import CONNECTIONS_CLOSED, SLOW_READERS
 
 
 @contextlib.contextmanager
@@ -72,6 +72,7 @@ class Metrics:
             registry=self.registry,
         )
         self.registry.register(SLOW_READERS)
+        self.registry.register(CONNECTIONS_CLOSED)
 
     def exposition(self) -> bytes:
         """The text ``/metrics`` answers: this app's collectors, or with several worker

@@ -78,6 +78,26 @@ class Settings(BaseSettings):
         description="Answers held per worker for clients that do not take them; past it, "
         "the longest-waiting connections are closed (service.transport).",
     )
+    max_connections: int = Field(
+        default=1024,
+        ge=1,
+        description="Open connections per worker; past it a new one is answered 503 "
+        "(too-many-connections) and closed (service.transport).",
+    )
+    idle_timeout_seconds: float = Field(
+        default=5.0,
+        gt=0,
+        le=3600,
+        description="A connection with no request under way is closed after this long: "
+        "before its first byte, and between requests (uvicorn's keep-alive timeout).",
+    )
+    head_timeout_seconds: float = Field(
+        default=5.0,
+        gt=0,
+        le=600,
+        description="Time a request's line and headers may take from their first byte; "
+        "past it, 408 (head-timeout) and the connection is closed.",
+    )
     compute_threads: int = Field(
         default=2, ge=1, le=64, description="Threads solving or parsing big bodies at once."
     )

@@ -24,6 +24,25 @@ audit's script on loopback); past the bound the connection gets a 431 problem+js
 closed. The parser's own refusals (bytes that are not HTTP) are problem+json too, not
 uvicorn's plain text (:func:`service.errors.raw_answer`).
 
+A connection's time and number are bounded too, as ops expect of a server facing clients
+it does not know (a slowloris: an audit held a head unfinished for 60 s and more, 1,000
+unfinished 60 KB heads took a worker from 355 to 419 MiB for good, and 19,980 fresh
+connections that never sent a byte were all open 30 s on). A fresh connection that sends
+nothing is closed after ``idle_timeout_seconds`` (uvicorn's keep-alive timeout between
+requests, the same setting); a request's line and headers must be whole within
+``head_timeout_seconds`` of their first byte, else a 408 problem+json (``head-timeout``) and
+the close; the rest of a body the app answered without reading (a 415, a 429 ...) must come
+within ``deadline_seconds`` of that answer, else the connection is closed (the body the app
+reads has the gate's own bound: ``service.middleware.gate``). One sweep a worker looks for
+connections past their time (:data:`SWEEP_SECONDS`), as the gate's one watch looks for
+bodies, instead of a timer per connection. Past ``max_connections`` open on the worker, a
+new connection is answered 503 (``too-many-connections``, ``Retry-After: 1``) and closed
+before anything of it is read (uvicorn's ``limit_concurrency`` would answer its plain text
+only once a head is whole, so the connection and its unfinished head stay). Each is counted
+in ``pose_connections_closed_total`` by reason and logged (``connection_closed``, at most a
+line a second per reason, with the count since the last: a flood of connections is not a
+flood of log lines).
+
 Each answer also leaves in one write where it is small: uvicorn writes the status line and
 headers, then the body, each at once, so a small answer cost two ``send`` system calls
 and two TCP segments, and its client woke up twice to read it (:class:`Coalescing`).
@@ -40,7 +59,15 @@ import orjson
 from prometheus_client import Counter
 from uvicorn.protocols.http.auto import AutoHTTPProtocol
 
-from service.errors import T0, HeadTooLarge, MalformedHTTP, PoseError, raw_answer
+from service.errors import (
+    T0,
+    HeadTimeout,
+    HeadTooLarge,
+    MalformedHTTP,
+    PoseError,
+    TooManyConnections,
+    raw_answer,
+)
 from service.settings import get_settings
 
 log = logging.getLogger("service.transport")
@@ -55,6 +82,13 @@ COALESCE_BYTES = 64 * 1024
 MAX_HEAD_BYTES = 64 * 1024
 #: How long a refused connection's further bytes are read and dropped before it closes.
 LINGER_SECONDS = 1.0
+#: How often a worker looks for connections past their time (idle, head, unread body).
+SWEEP_SECONDS = 0.25
+#: A ``connection_closed`` log line per reason at most this often (with the count since).
+LOG_EVERY_SECONDS = 1.0
+#: At ``max_connections``, a connection with no request under way that has waited this long
+#: (for its first byte, the rest of its head, its next request) is closed to make room.
+EVICT_AFTER_SECONDS = 1.0
 
 
 class Coalescing:
@@ -121,6 +155,31 @@ SLOW_READERS = Counter(
 )
 
 
+#: Connections closed for their pace or refused for their number, by reason
+#: (``pose_connections_closed_total``; the process's, as :data:`SLOW_READERS`).
+CONNECTIONS_CLOSED = Counter(
+    "pose_connections_closed",
+    "Connections closed for their pace or refused for their number, by reason",
+    ["reason"],
+    registry=None,
+)
+_logged: dict[str, tuple[float, int]] = {}  # reason -> (its last line's time, events since)
+
+
+def closed(reason: str, level: int, **fields: Any) -> None:
+    """Count a connection closed for ``reason`` and log it: a line per reason and
+    :data:`LOG_EVERY_SECONDS` at most, ``events`` saying how many since the last."""
+    CONNECTIONS_CLOSED.labels(reason).inc()
+    now = time.monotonic()
+    last, events = _logged.get(reason, (-LOG_EVERY_SECONDS, 0))
+    if now - last < LOG_EVERY_SECONDS:
+        _logged[reason] = (last, events + 1)
+        return
+    _logged[reason] = (now, 0)
+    line = {"event": "connection_closed", "reason": reason, **fields, "events": events + 1}
+    log.log(level, orjson.dumps(line).decode())
+
+
 def _head_too_large() -> HeadTooLarge:
     return HeadTooLarge(
         f"the request line and headers exceed {MAX_HEAD_BYTES} bytes "
@@ -129,16 +188,32 @@ def _head_too_large() -> HeadTooLarge:
 
 
 class PacedHTTPProtocol(AutoHTTPProtocol):  # type: ignore[misc, valid-type]
-    """uvicorn's HTTP protocol with a bound on the answers waiting for their clients, its
-    small writes coalesced (:class:`Coalescing`)."""
+    """uvicorn's HTTP protocol with a bound on the answers waiting for their clients, on
+    a connection's time and on the connections open, its small writes coalesced
+    (:class:`Coalescing`)."""
 
     #: this worker's connections whose answer waits, in the order they began to wait (a
     #: dict: insertion order, and removal by key)
     waiting: ClassVar[dict[PacedHTTPProtocol, None]] = {}
+    #: this worker's connections with no request under way, that must send something by a
+    #: time: -> (by when, what, since when), in the order they began to wait
+    due: ClassVar[dict[PacedHTTPProtocol, tuple[float, str, float]]] = {}
+    #: the sweep looking for them, and its loop (while any is due)
+    sweep: ClassVar[tuple[asyncio.TimerHandle, asyncio.AbstractEventLoop] | None] = None
+    #: this worker's connections open (counted against ``max_connections``)
+    open: ClassVar[int] = 0
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
-        self._budget = get_settings().max_unsent_bytes
+        s = get_settings()
+        self._budget = s.max_unsent_bytes
+        self._max_connections = s.max_connections
+        self._idle, self._head_time = s.idle_timeout_seconds, s.head_timeout_seconds
+        self._body_time = s.deadline_seconds
+        self.timeout_keep_alive = s.idle_timeout_seconds  # (uvicorn's, between requests)
+        self._counted = False  # counted in ``open``
+        self._waits: str | None = None  # what it must send by a time (``due``), if any
+        self._in_body = False  # the parser is inside a request's body
         self._head = -1  # bytes of a request's head read so far (-1: not inside one)
         self._refused = False  # answered below the app: what comes is dropped
         self._refusal: bytes | None = None  # that answer, while one before it is still due
@@ -150,6 +225,8 @@ class PacedHTTPProtocol(AutoHTTPProtocol):  # type: ignore[misc, valid-type]
     def data_received(self, data: bytes) -> None:
         if self._refused:  # read and dropped until the close (see refuse)
             return
+        if self._waits == "idle":
+            self._disarm()
         self._began = False
         super().data_received(data)
         # a read that ended inside a head begun before it was all head; one whose head began
@@ -160,6 +237,8 @@ class PacedHTTPProtocol(AutoHTTPProtocol):  # type: ignore[misc, valid-type]
             self._head += len(data)
             if self._head > MAX_HEAD_BYTES:
                 self.refuse(_head_too_large())
+        if self._head >= 0 and self._waits is None and not self._refused:  # not whole yet
+            self._arm(self._t0 + self._head_time, "head")
 
     def on_message_begin(self) -> None:  # httptools: a request's head begins
         super().on_message_begin()
@@ -179,15 +258,24 @@ class PacedHTTPProtocol(AutoHTTPProtocol):  # type: ignore[misc, valid-type]
         # calls send_400_response) before any request exists
         size = 16 + len(getattr(self, "url", b"")) + self._fields
         self._head = -1
+        if self._waits == "head":
+            self._disarm()
         if size > MAX_HEAD_BYTES:
             self._too_long = True
             raise ValueError("request head too long")
         super().on_headers_complete()
         if not self.pipeline or self.pipeline[0][0] is not self.cycle:  # started, not queued
             # its arrival, for its deadline and times: the task starts only once the loop
-            # is through what it was doing (lone soft edits solved on it, 64 clients of 30
-            # ms ones: seconds), which stamping it there (the middleware's) left uncounted
+            # is through what it was doing (lone soft edits solved on it, one after
+            # another), which stamping it there (the middleware's) left uncounted
             self.scope[T0] = time.perf_counter()
+        self._in_body = True  # (until on_message_complete, at once for a bodiless request)
+
+    def on_message_complete(self) -> None:
+        self._in_body = False
+        if self._waits == "body":
+            self._disarm()
+        super().on_message_complete()
 
     def send_400_response(self, msg: str) -> None:
         """The parser's refusal (uvicorn's plain text) as a problem."""
@@ -206,6 +294,7 @@ class PacedHTTPProtocol(AutoHTTPProtocol):  # type: ignore[misc, valid-type]
         if self._refused or self.transport.is_closing():
             return
         self._refused = True
+        self._disarm()
         cycle = getattr(self, "cycle", None)
         if (
             cycle is not None and cycle.more_body and not cycle.response_started
@@ -233,6 +322,19 @@ class PacedHTTPProtocol(AutoHTTPProtocol):  # type: ignore[misc, valid-type]
         super().on_response_complete()  # (starts the next pipelined request, if any)
         if self._refusal is not None and not self._answers_due():
             self._send_refusal()
+        elif (
+            self._waits is None
+            and self.cycle.response_complete
+            and not (self._refused or self.pipeline or self.transport.is_closing())
+        ):
+            now = time.perf_counter()
+            if self._in_body:
+                # answered before its body was read (415, 429 ...): uvicorn reads on and
+                # drops the rest, for as long as it trickles in (every byte put off its
+                # keep-alive timeout)
+                self._arm(now + self._body_time, "body")
+            elif self._head < 0:  # kept alive, idle (uvicorn's timer closes it too)
+                self._arm(now + self._idle, "idle")
 
     def _send_refusal(self) -> None:
         answer, self._refusal = self._refusal, None
@@ -247,6 +349,98 @@ class PacedHTTPProtocol(AutoHTTPProtocol):  # type: ignore[misc, valid-type]
 
     def connection_made(self, transport: asyncio.Transport) -> None:
         super().connection_made(Coalescing(transport))
+        cls = PacedHTTPProtocol
+        if cls.open >= self._max_connections and not self._make_room():
+            # refused before anything of it is read
+            closed("too-many-connections", logging.WARNING, client=self._client(),
+                   open=cls.open, max_connections=self._max_connections)  # fmt: skip
+            self.refuse(TooManyConnections(
+                f"{cls.open} connections open on this worker (limit {self._max_connections})"
+                "; retry later"
+            ))  # fmt: skip
+            return
+        cls.open += 1
+        self._counted = True
+        self._arm(time.perf_counter() + self._idle, "idle")
+
+    def _make_room(self) -> bool:
+        """Close the connection that has waited longest with no request under way, if it
+        has waited :data:`EVICT_AFTER_SECONDS` (idle, or its head unfinished: a client in no
+        hurry), to let this one in (as nginx drains idle connections when it runs out);
+        False if there is none such (every connection has a request under way, or began to
+        wait just now: this one is refused)."""
+        cls = PacedHTTPProtocol
+        now = time.perf_counter()
+        victim = None
+        for conn, (_, _, since) in cls.due.items():  # the longest waiting first
+            if now - since < EVICT_AFTER_SECONDS:
+                break
+            if not conn._answers_due():  # (a head begun behind a request still answered)
+                victim = conn
+                break
+        if victim is None:
+            return False
+        conn, (_, waits, since) = victim, cls.due[victim]
+        closed("evicted", logging.INFO, client=conn._client(), waited_for=waits,
+               seconds=round(now - since, 3))  # fmt: skip
+        conn._disarm()
+        conn._counted = False  # (on its way out)
+        cls.open -= 1
+        conn.transport.close()  # no answer: it has no request under way
+        return True
+
+    def _client(self) -> str | None:
+        client = getattr(self, "client", None)
+        return f"{client[0]}:{client[1]}" if client else None
+
+    def _arm(self, when: float, waits: str) -> None:
+        """The connection must have sent what it ``waits`` for by ``when`` (perf_counter)."""
+        cls = PacedHTTPProtocol
+        cls.due.pop(self, None)  # (to the end: the order is when each began to wait)
+        cls.due[self] = (when, waits, time.perf_counter())
+        self._waits = waits
+        if cls.sweep is None or cls.sweep[1] is not self.loop:
+            cls.sweep = (self.loop.call_later(SWEEP_SECONDS, cls.sweep_due), self.loop)
+
+    def _disarm(self) -> None:
+        PacedHTTPProtocol.due.pop(self, None)
+        self._waits = None
+
+    @classmethod
+    def sweep_due(cls) -> None:
+        """Close the connections past their time; look again while any is due."""
+        loop = cls.sweep[1] if cls.sweep is not None else asyncio.get_running_loop()
+        cls.sweep = None
+        now = time.perf_counter()
+        for conn, (when, waits, _) in list(cls.due.items()):
+            if now >= when:
+                conn._disarm()
+                conn.timed_out(waits)
+        if cls.due:
+            cls.sweep = (loop.call_later(SWEEP_SECONDS, cls.sweep_due), loop)
+
+    def timed_out(self, waits: str) -> None:
+        """The connection did not send what it ``waits`` for in time: a head (answered 408
+        after the answers due before it, then closed), its first byte or next request, or
+        the rest of a body answered already (closed: nothing to answer)."""
+        if self.transport.is_closing():
+            return
+        if waits == "head":
+            closed("head-timeout", logging.WARNING, client=self._client(),
+                   head_timeout_seconds=self._head_time)  # fmt: skip
+            self.refuse(HeadTimeout(
+                f"the request line and headers did not arrive within {self._head_time:g} s "
+                "of their first byte: send a request's head without pauses"
+            ))  # fmt: skip
+            return
+        if waits == "idle":
+            if getattr(self, "cycle", None) is None:  # (after a request: a keep-alive's end)
+                closed("idle-timeout", logging.INFO, client=self._client(),
+                       idle_timeout_seconds=self._idle)  # fmt: skip
+        else:
+            closed("body-timeout", logging.WARNING, client=self._client(),
+                   seconds=self._body_time)  # fmt: skip
+        self.transport.close()
 
     def pause_writing(self) -> None:
         super().pause_writing()
@@ -279,4 +473,8 @@ class PacedHTTPProtocol(AutoHTTPProtocol):  # type: ignore[misc, valid-type]
 
     def connection_lost(self, exc: Exception | None) -> None:
         PacedHTTPProtocol.waiting.pop(self, None)
+        self._disarm()
+        if self._counted:
+            self._counted = False
+            PacedHTTPProtocol.open -= 1
         super().connection_lost(exc)

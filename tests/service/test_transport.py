@@ -227,3 +227,139 @@ def test_a_body_whose_chunks_are_not_http_is_a_400_not_a_wait(
         status, _ = exchange(sock, "POST", "/v1/solve", json.dumps(solve_item(1)).encode())
         sock.close()
         assert status == 200
+
+
+def _until_closed(sock: socket.socket, limit: float = 10.0) -> tuple[float, bytes]:
+    """Seconds until the server closes ``sock`` (``limit``: still open), what it sent."""
+    sock.settimeout(limit)
+    t, buf = time.perf_counter(), b""
+    with contextlib.suppress(TimeoutError, ConnectionResetError):
+        while chunk := sock.recv(1 << 16):
+            buf += chunk
+    return time.perf_counter() - t, buf
+
+
+def _trickled(sock: socket.socket, line: bytes, limit: float = 10.0) -> tuple[float, bytes]:
+    """``line`` sent every 0.1 s until the server answers or closes: seconds, what it sent."""
+    sock.settimeout(0.1)
+    t, buf = time.perf_counter(), b""
+    while time.perf_counter() - t < limit:
+        try:
+            sock.sendall(line)
+            if not (chunk := sock.recv(1 << 16)):
+                break
+            buf += chunk
+        except TimeoutError:
+            continue
+        except OSError:  # reset: closed with our bytes unread
+            break
+    took = time.perf_counter() - t
+    return took + (_until_closed(sock, 3.0)[0] if buf else 0.0), buf
+
+
+def _problem_of(answer: bytes) -> tuple[str, dict[str, str], dict[str, Any]]:
+    raw, _, body = answer.partition(b"\r\n\r\n")
+    lines = raw.decode("latin-1").split("\r\n")
+    return lines[0], dict(line.lower().split(": ", 1) for line in lines[1:]), json.loads(body)
+
+
+def test_slow_or_silent_connections_are_closed_in_time(models_dir: Path, tmp_path: Path) -> None:
+    """An audit (slowloris): a request head never finished stayed open 60 s and more, sent
+    at once or a header line a second, on a fresh connection or a kept-alive one, and a
+    fresh connection that never sent a byte stayed open (19,980 of them, 30 s); the rest of
+    a body answered unread (a 415) could trickle in for as long as its client liked. Now a
+    head is due whole within POSE_HEAD_TIMEOUT_SECONDS of its first byte (a 408 problem,
+    then the close), a silent connection is closed after POSE_IDLE_TIMEOUT_SECONDS, the rest
+    of an unread body within the deadline of its answer, each counted and logged."""
+    env = {"POSE_HEAD_TIMEOUT_SECONDS": "0.5", "POSE_IDLE_TIMEOUT_SECONDS": "0.5",
+           "POSE_DEADLINE_SECONDS": "1"}  # fmt: skip
+    head = b"POST /v1/solve HTTP/1.1\r\nhost: x\r\n"
+    with serve(models_dir, tmp_path, **env) as s:
+        sock = connect(s.port)
+        sock.sendall(head)
+        took = {"at once": _until_closed(sock)}
+        sock = connect(s.port)
+        sock.sendall(head)
+        took["a line at a time"] = _trickled(sock, b"x-a: b\r\n")
+        sock = connect(s.port)
+        assert exchange(sock, "GET", "/v2/health/live")[0] == 200
+        sock.sendall(head)
+        took["kept alive"] = _until_closed(sock)
+        for case, (seconds, answer) in took.items():
+            assert answer.startswith(b"HTTP/1.1 408 "), (case, seconds, answer[:200])
+            _, fields, problem = _problem_of(answer)
+            assert problem["type"].endswith("/head-timeout") and "0.5 s" in problem["detail"]
+            assert fields["connection"] == "close" and fields["x-request-id"], fields
+            assert 0.4 < seconds < 3.0, (case, seconds)
+
+        silent = _until_closed(connect(s.port))
+        assert silent[1] == b"" and 0.4 < silent[0] < 3.0, silent
+
+        sock = connect(s.port)  # a 415 answered before its 100 kB body: the rest trickles
+        sock.sendall(b"POST /v1/solve HTTP/1.1\r\nhost: x\r\ncontent-type: text/plain\r\n"
+                     b"content-length: 100000\r\n\r\nx")  # fmt: skip
+        answer = sock.recv(1 << 16)
+        assert answer.startswith(b"HTTP/1.1 415 "), answer[:100]
+        seconds, more = _trickled(sock, b"x")
+        assert more == b"" and 0.9 < seconds < 4.0, (seconds, more[:100])
+        sock.close()
+
+        metrics = s.request("GET", "/metrics")[2].decode()
+        for reason, n in (("head-timeout", 3), ("idle-timeout", 1), ("body-timeout", 1)):
+            assert f'pose_connections_closed_total{{reason="{reason}"}} {n}.0' in metrics
+        lines = [e for e in s.log_lines() if e.get("event") == "connection_closed"]
+        assert {e["reason"] for e in lines} == {"head-timeout", "idle-timeout", "body-timeout"}
+    print(f"\nclosed after: {({k: round(v[0], 2) for k, v in took.items()})}, silent "
+          f"{silent[0]:.2f} s, unread body {seconds:.2f} s")  # fmt: skip
+
+
+def test_connections_past_the_bound_are_refused_or_make_room(
+    models_dir: Path, tmp_path: Path
+) -> None:
+    """The audit's 19,980 connections that never sent a byte were all open 30 s on: no
+    bound on a worker's connections. Past POSE_MAX_CONNECTIONS a new connection is answered
+    503 too-many-connections before anything of it is read, and closed, unless one of the
+    worker's connections has waited a second with no request under way: that one is closed
+    instead (a connection with a request under way never is)."""
+    from service.transport import EVICT_AFTER_SECONDS
+
+    env = {"POSE_MAX_CONNECTIONS": "8", "POSE_IDLE_TIMEOUT_SECONDS": "30",
+           "POSE_HEAD_TIMEOUT_SECONDS": "30", "POSE_DEADLINE_SECONDS": "30"}  # fmt: skip
+    live = b"GET /v2/health/live HTTP/1.1\r\nhost: x\r\n\r\n"
+    with serve(models_dir, tmp_path, **env) as s:
+        time.sleep(0.3)  # (the readiness polls' connections gone)
+        busy = [connect(s.port) for _ in range(8)]  # each a request under way: its body
+        for sock in busy:
+            sock.sendall(b"POST /v1/solve HTTP/1.1\r\nhost: x\r\ncontent-type: application/json"
+                         b"\r\ncontent-length: 100\r\n\r\n{")  # fmt: skip
+        time.sleep(EVICT_AFTER_SECONDS + 0.3)
+        sock = connect(s.port)
+        sock.sendall(live)
+        _, answer = _until_closed(sock)
+        line, fields, problem = _problem_of(answer)
+        assert line == "HTTP/1.1 503 Service Unavailable", answer[:300]
+        assert problem["type"].endswith("/too-many-connections") and "limit 8" in problem["detail"]
+        assert fields["retry-after"] == "1" and fields["connection"] == "close"
+        assert fields["x-request-id"] and fields["content-security-policy"], fields
+        for sock in busy:
+            sock.close()
+        time.sleep(0.3)
+
+        idle = [connect(s.port) for _ in range(8)]
+        time.sleep(0.2)
+        sock = connect(s.port)  # none has waited a second yet: refused
+        sock.sendall(live)
+        assert _until_closed(sock)[1].startswith(b"HTTP/1.1 503 ")
+        time.sleep(EVICT_AFTER_SECONDS)
+        sock = connect(s.port)  # the oldest makes room
+        assert exchange(sock, "GET", "/v2/health/live")[0] == 200
+        sock.close()
+        gone = _until_closed(idle[0], 3.0)
+        assert gone[0] < 3.0 and gone[1] == b"", gone  # closed, no answer: it asked nothing
+        assert _until_closed(idle[1], 0.3)[0] >= 0.3  # still open
+        for sock in idle:
+            sock.close()
+        time.sleep(0.3)
+        metrics = s.request("GET", "/metrics")[2].decode()
+    assert 'pose_connections_closed_total{reason="too-many-connections"} 2.0' in metrics
+    assert 'pose_connections_closed_total{reason="evicted"} 1.0' in metrics
