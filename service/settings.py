@@ -63,7 +63,8 @@ class Settings(BaseSettings):
     max_inflight_bytes: int = Field(
         default=64 * 1024 * 1024,
         ge=1024,
-        description="Request bodies (declared or streamed) held at once per worker; 429 past it.",
+        description="Request bodies (declared or streamed, any route's) held at once per "
+        "worker; 429 past it.",
     )
     deadline_seconds: float = Field(
         default=2.0,

@@ -111,6 +111,18 @@ def test_past_the_inflight_bytes_bound_is_a_429(models_dir: Path) -> None:
         assert c.post("/v1/solve", json=body()).status_code == 200
 
 
+def test_a_body_sent_to_a_route_that_takes_none_counts_as_held(models_dir: Path) -> None:
+    """The gate reads a body whole before any route sees it; one sent to a route that takes
+    none (a GET's, a POST to /v2/health/live) was read outside POSE_MAX_INFLIGHT_BYTES: 30
+    of 8 MiB at once took a real server from 687 to 899 MiB. Now every body counts."""
+    with make_client(models_dir, max_inflight_bytes=2048) as c:
+        for method, path in (("POST", "/v2/health/live"), ("GET", "/v2/health/live"),
+                             ("POST", "/nowhere")):  # fmt: skip
+            resp = c.request(method, path, content=b"{}" + b" " * 4096, headers=JSON)
+            assert_problem(resp, 429, "body bytes in flight")
+        assert c.get("/v2/health/live").status_code == 200
+
+
 def test_past_the_deadline_is_a_504_with_retry_after(models_dir: Path) -> None:
     items = [body(options={"reach": "exact", "method": "fabrik"}) for _ in range(64)]
     for k, item in enumerate(items):
