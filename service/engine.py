@@ -258,14 +258,29 @@ class Engine:
             passes, seq = self.passes_of(p), covering(self, tidx, weights)
             if seq is None or passes < 1:
                 return None
-        asked = _Items.of_problem(p, self.carry_of(p), self.mirror_of(p))
-        items = asked.travelled(
-            self.serving.pelvis_travel, self.serving.reach_travel, self.turn_search.min_targets
-        )
+        asked, items = self._items_of(p)
         if may_turn and turns.searching(self, items).size:
             return None  # its targets say the body turned: the search, on the general path
         ans = retry.last_steps(self, items, lean_answer(self, items, passes, seq))
         return self._result(p, prefer_fabrik(self, asked, ans, self._solve_items), 0)
+
+    def _items_of(self, p: SolveProblem) -> tuple[_Items, _Items]:
+        """One problem as items: as asked, and with its start moved across as the serving
+        settings move it before a solve (``_Items.travelled``)."""
+        asked = _Items.of_problem(p, self.carry_of(p), self.mirror_of(p))
+        return asked, asked.travelled(
+            self.serving.pelvis_travel, self.serving.reach_travel, self.turn_search.min_targets
+        )
+
+    def searches_turn(self, p: SolveProblem) -> bool:
+        """Whether the lone edit ``p`` searches its turn (:mod:`service.turns`), its
+        targets' look at the gate included: the edits that cost a dozen solves."""
+        pinned = p.n_targets < len(p.target_idx)
+        if not self.turn_search.searches(p.method, p.n_targets, pinned, p.turn_search):
+            return False
+        return self.turn_search.gate <= 0.0 or bool(
+            turns.searching(self, self._items_of(p)[1]).size
+        )
 
     def passes_of(self, p: SolveProblem) -> int:
         """The neural passes ``p`` asks for (``serving.passes`` unless it says)."""

@@ -103,17 +103,18 @@ async def solve(body: SolveBody, engine: ReadyEngine, budget: RequestBudget,
 
 async def solve_one(p: SolveProblem, pinned: bool, engine: Engine, budget: Budget) -> SolveResult:
     """One pose problem (``pinned``: it has pins), its engine time added to the budget's:
-    a neural soft solve without pins inline (0.3-0.7 ms; a turn search 2-4 ms), anything
-    else in a worker thread (FABRIK iterations can take milliseconds: the loop stays free).
-    Inline even for the turn search: in a worker it shares the GIL with the loop, and over
-    HTTP a lone 5-target edit took 6.2 against 5.0 ms, and beside a client of 2-target
-    edits 13-16 against 4-8 ms (docs/service.md, "Work per request").
+    a cheap one inline (:func:`inline`: 0.1-0.7 ms), anything else in a worker thread on a
+    compute token within the deadline (FABRIK iterations, pins, exact reach, a turn search
+    or extra passes can take milliseconds: the loop stays free). The search's look at the
+    targets (``serving.turn_gate``) is made twice for a 5-target edit: ~20 us.
 
-    The inline solve first checks the deadline (``Budget.due``: a clock read, no await),
-    as the worker path does before each wave: a request that waited on the busy loop past
-    it is a 504, not solved for nobody (64 clients of an 18-target turn-searching edit, a
-    2 s deadline: every answer a 200, the last after 4.75 s; an audit)."""
-    if p.method == "neural" and p.reach == "soft" and not pinned:
+    The turn search ran inline too, once (in a worker it shares the GIL with the loop: a
+    lone 5-target edit took 6.2 against 5.0 ms over HTTP), but a flood of them starved
+    the loop: 64 clients of an 18-target searching edit with 4 passes, a 2 s deadline,
+    every answer a 200, the last after 4.75 s, requests unread by the server for up to
+    10 s (an audit; uvloop). The inline solve also checks the deadline first
+    (``Budget.due``: a clock read, no await), as the worker path does before each wave."""
+    if inline(p, pinned, engine):
         budget.due("the solve")
         t = time.perf_counter()
         (result,) = engine.solve([p])
@@ -121,6 +122,16 @@ async def solve_one(p: SolveProblem, pinned: bool, engine: Engine, budget: Budge
         return result
     (result,) = await budget.run(engine.solve, [p], Pricing.of(engine))
     return result
+
+
+def inline(p: SolveProblem, pinned: bool, engine: Engine) -> bool:
+    """Whether a lone edit is solved on the event loop: neural, soft reach, no pins, no
+    more passes than the models serve, and no turn search (``Engine.searches_turn``: its
+    cost then a few network runs, ``service.lean``)."""
+    return (
+        p.method == "neural" and p.reach == "soft" and not pinned
+        and engine.passes_of(p) <= engine.serving.passes and not engine.searches_turn(p)
+    )  # fmt: skip
 
 
 @router.post("/v1/solve/batch", response_model=BatchResponse | ColumnarResponse)
