@@ -313,12 +313,13 @@ def _message(error: Any) -> str:
 def validation_problem(raw: Sequence[Any], total: int = 0, partial: bool = False) -> JSONResponse:
     """The 422 of field errors; ``total``: how many were found where only the first few
     are in ``raw`` (``partial``: the look stopped there, so there may be more)."""
-    errors = [{"location": _location(e.get("loc", ())), "message": _message(e)} for e in raw]
+    shown = raw[:MAX_ERRORS]  # worded only where shown (a suggestion is a fuzzy search)
+    errors = [{"location": _location(e.get("loc", ())), "message": _message(e)} for e in shown]
     detail = "; ".join(f"{e['location']}: {e['message']}" for e in errors[:3])
-    total = max(total, len(errors))
+    total = max(total, len(raw))
     if total > 3 or partial:
         detail += f"; and {'at least ' if partial else ''}{total - 3} more"
-    return problem(422, PoseError.title, detail, type_=PoseError.type_, errors=errors[:MAX_ERRORS])
+    return problem(422, PoseError.title, detail, type_=PoseError.type_, errors=errors)
 
 
 def install_handlers(app: FastAPI) -> None:
