@@ -24,6 +24,7 @@ from pydantic import (
     RootModel,
     Tag,
     ValidationError,
+    ValidationInfo,
     ValidatorFunctionWrapHandler,
     WrapValidator,
     model_validator,
@@ -333,7 +334,7 @@ class SolveBody(
 
     @model_validator(mode="wrap")
     @classmethod
-    def _form(cls, data: Any, handler: ValidatorFunctionWrapHandler) -> Any:
+    def _form(cls, data: Any, handler: ValidatorFunctionWrapHandler, info: ValidationInfo) -> Any:
         if isinstance(data, dict):
             if "character" in data and "pose" in data:
                 raise _field_error(cls.__name__, ("character",), f"{FORMS}, not both", data)
@@ -343,6 +344,7 @@ class SolveBody(
             data,
             handler,
             lambda d: CharacterSolveRequest if _form_of(d) == "character" else SolveRequest,
+            info.context,
         )
 
 

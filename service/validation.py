@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-from pydantic import BaseModel, ValidationError, ValidatorFunctionWrapHandler
+from pydantic import BaseModel, ValidatorFunctionWrapHandler
 
 from core.skeleton import BONES, JOINT_INDEX, JOINT_NAMES, bone_lengths
 from core.text import quoted
@@ -132,13 +132,16 @@ def keypoints(req: CompleteRequest) -> dict[str, F64]:
 
 
 def validate_as(
-    data: Any, handler: ValidatorFunctionWrapHandler, form: Callable[[Any], type[BaseModel]]
+    data: Any,
+    handler: ValidatorFunctionWrapHandler,
+    form: Callable[[Any], type[BaseModel]],
+    context: Any = None,
 ) -> Any:
-    """A union body's wrap validator: validate with ``handler``; on failure validate again as
-    the one form ``form(data)`` names, so the errors are located as in that form (without
-    the union's tag), and raise those."""
-    try:
+    """A union body's wrap validator: validate ``data`` as the one form ``form(data)`` names,
+    within the validation's ``context`` (``service.bounded``), so that its errors are
+    located as in that form (without the union's tag), and hand ``handler`` the instance
+    (which it takes as it is). A body is validated once: a failing one was validated
+    through the union, then again as its form."""
+    if isinstance(data, BaseModel):  # validated already (FastAPI hands the body back)
         return handler(data)
-    except ValidationError:
-        form(data).model_validate(data)
-        raise
+    return handler(form(data).model_validate(data, context=context))

@@ -76,7 +76,10 @@ class BatchBody(
         if settings is not None and isinstance(items, list):  # counted before validated
             too_many(len(items), settings.max_batch_items)
         return validate_as(
-            data, handler, lambda d: ColumnarBatch if _batch_form(d) == "columns" else BatchRequest
+            data,
+            handler,
+            lambda d: ColumnarBatch if _batch_form(d) == "columns" else BatchRequest,
+            info.context,
         )
 
 
