@@ -26,6 +26,7 @@ from fastapi.routing import APIRoute
 from pydantic import BaseModel, ValidationError
 
 from core.text import clip, quoted
+from service import bounded
 from service.errors import BodyError, BodyInvalid, DeadlineExceeded, MalformedBody, PoseError
 from service.limits import Budget
 
@@ -65,21 +66,23 @@ def decode(body: bytes) -> Any:
         raise MalformedBody(f"JSON number not accepted: {clip(str(exc), 80)}") from None
 
 
-def parse(body: bytes, model: type[BaseModel] | None, context: Any = None) -> Any:
-    """Decode ``body`` and validate it into ``model`` (``context``: pydantic's validation
-    context, the service's settings); raises ``BodyError`` (a ``PoseError``: 400, or a
-    validator's own, e.g. a batch over its item limit, 413) or ``BodyInvalid`` (422), the
-    exceptions FastAPI's body reader lets through."""
+def parse(body: bytes, model: type[BaseModel] | None, settings: Any = None) -> Any:
+    """Decode ``body`` and validate it into ``model`` (``settings``: the service's, in
+    pydantic's validation context, with an error budget: ``service.bounded``); raises
+    ``BodyError`` (a ``PoseError``: 400, or a validator's own, e.g. a batch over its item
+    limit, 413) or ``BodyInvalid`` (422), the exceptions FastAPI's body reader lets
+    through."""
     try:
         data = decode(body)
     except MalformedBody as exc:
         raise BodyError(exc) from None
     if model is None:
         return data
+    ctx = bounded.context(settings)
     try:
-        return model.model_validate(data, context=context)
-    except ValidationError as exc:
-        raise BodyInvalid(exc.errors(include_url=False, include_context=True)) from None
+        return model.model_validate(data, context=ctx)
+    except ValidationError as exc:  # the first errors, and how many (service.bounded)
+        raise BodyInvalid(*bounded.errors_of(exc, ctx)) from None
     except PoseError as exc:  # a validator's refusal of the whole body
         raise BodyError(exc) from None
 
@@ -91,14 +94,14 @@ class _Request(Request):
         if not hasattr(self, "_json"):
             body = await self.body()
             state = getattr(self.app.state, "pose", None)
-            context = None if state is None else {"settings": state.settings}
+            settings = None if state is None else state.settings
             if len(body) < INLINE_BYTES:
-                self._json = parse(body, self.model, context)
+                self._json = parse(body, self.model, settings)
             else:
                 deadline = state.settings.deadline_seconds if state is not None else math.inf
                 try:
                     self._json = await Budget(self, deadline).in_thread(
-                        lambda: parse(body, self.model, context), "reading the body"
+                        lambda: parse(body, self.model, settings), "reading the body"
                     )
                 except DeadlineExceeded as exc:  # FastAPI lets only HTTPException through
                     raise BodyError(exc) from None

@@ -58,6 +58,7 @@ from core.retarget import canonical_points, retarget
 from core.skeleton import BONES, JOINT_INDEX, JOINT_NAMES
 from core.text import clip, quoted
 from core.units import UNITS
+from service.bounded import Bounded
 from service.engine import Engine
 from service.errors import InvalidRequest, name_key
 from service.problems import SolveProblem, SolveResult
@@ -113,8 +114,8 @@ Units = Annotated[
 ]
 
 
-class _Body(BaseModel):
-    model_config = ConfigDict(extra="forbid", strict=True)
+class _Body(Bounded):
+    """A request model (``service.bounded``: strict, no unknown keys, bounded errors)."""
 
 
 class CharacterTarget(_Body):

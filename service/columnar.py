@@ -21,6 +21,7 @@ import orjson
 from pydantic import ValidationError
 
 from core.skeleton import JOINT_INDEX, JOINT_NAMES, NUM_JOINTS
+from service.bounded import context, errors_of
 from service.engine import Engine
 from service.errors import MAX_ERRORS, BodyInvalid, TooManyItems
 from service.limits import Pricing, chunks_of, searched_price
@@ -266,11 +267,14 @@ def parse(data: dict[str, Any], max_items: int, suspect: bool = True) -> Columns
     tj = _names(targets["joints"], ("targets", "joints"), n, errs, 1)
     pj = _names(data.get("pins", []), ("pins",), n, errs, 0)
     try:
-        options = SolveOptions.model_validate(data.get("options", {}))
+        options = SolveOptions.model_validate(data.get("options", {}), context=(ctx := context()))
     except ValidationError as exc:
-        for e in exc.errors(include_url=False, include_context=True):
+        shown, total, partial = errors_of(exc, ctx)
+        for e in shown:
             errs.add(("options", *e["loc"]), e["type"], e["msg"], ctx=e.get("ctx"),
                      input=e.get("input"))  # fmt: skip
+        errs.total += total - len(shown)
+        errs.partial = errs.partial or partial
     errs.raise_any()
     assert poses is not None and tj is not None and pj is not None
     k, p = tj.shape[1], pj.shape[1]

@@ -9,6 +9,7 @@ from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, create_model
 from core.ends import SOFT_IK_MAX
 from core.rest import rest_pose
 from core.skeleton import BASE_KEYPOINTS, JOINT_NAMES, PARENT_NAMES
+from service.bounded import Bounded
 
 #: Coordinates beyond this (metres) are rejected as nonsense.
 MAX_COORDINATE = 1.0e4
@@ -40,14 +41,6 @@ Vec3 = Annotated[
 Joint = Annotated[JointName, Field(description="A joint name of the canonical skeleton.")]
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 
-#: A whole pose: exactly the 21 joints, each [x, y, z] in metres (world frame).
-Pose: type[BaseModel] = create_model(
-    "Pose",
-    __config__=ConfigDict(extra="forbid", strict=True),
-    __doc__="Every one of the 21 joints, world space, metres.",
-    **{name: (Vec3, ...) for name in JOINT_NAMES},  # type: ignore[call-overload]
-)
-
 #: An answered pose: the 21 joints, world space, metres (not bounded like the input: a
 #: pose near the coordinate limit may be answered just beyond it).
 PoseOut: type[BaseModel] = create_model(
@@ -63,8 +56,17 @@ _REST_EXAMPLE: dict[str, Any] = {
 }
 
 
-class _Body(BaseModel):
-    model_config = ConfigDict(extra="forbid", strict=True)
+class _Body(Bounded):
+    """A request model (``service.bounded``: strict, no unknown keys, bounded errors)."""
+
+
+#: A whole pose: exactly the 21 joints, each [x, y, z] in metres (world frame).
+Pose: type[BaseModel] = create_model(
+    "Pose",
+    __base__=_Body,
+    __doc__="Every one of the 21 joints, world space, metres.",
+    **{name: (Vec3, ...) for name in JOINT_NAMES},  # type: ignore[call-overload]
+)
 
 
 class Target(_Body):
