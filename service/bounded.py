@@ -22,6 +22,7 @@ fast path's own look at a body) a model validates as plain pydantic.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any, get_args, get_origin
 
 from annotated_types import MaxLen
@@ -33,7 +34,7 @@ from pydantic import (
     ValidatorFunctionWrapHandler,
     model_validator,
 )
-from pydantic_core import ErrorDetails, PydanticCustomError
+from pydantic_core import ErrorDetails, PydanticCustomError, PydanticKnownError
 
 from service.errors import MAX_ERRORS
 
@@ -165,3 +166,17 @@ def errors_of(exc: ValidationError, ctx: Any) -> tuple[list[ErrorDetails], int, 
     if budget is None:
         return shown[:MAX_ERRORS], len(shown), False
     return shown[:MAX_ERRORS], len(shown) + budget.counted, budget.skipped
+
+
+def at_most(n: int) -> Callable[[Any], Any]:
+    """A before-validator refusing a JSON object of more than ``n`` entries before its
+    entries are validated (pydantic checks a dict's ``max_length`` after: every entry's
+    errors first)."""
+
+    def check(value: Any) -> Any:
+        if isinstance(value, dict) and len(value) > n:
+            given = {"field_type": "Dictionary", "max_length": n, "actual_length": len(value)}
+            raise PydanticKnownError("too_long", given)
+        return value
+
+    return check

@@ -13,11 +13,12 @@ bone lengths the character's own) -> rotations (JSON) or the file with that fram
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Literal, TypeVar
 
 import numpy as np
 from pydantic import (
     BaseModel,
+    BeforeValidator,
     ConfigDict,
     Discriminator,
     Field,
@@ -58,7 +59,7 @@ from core.retarget import canonical_points, retarget
 from core.skeleton import BONES, JOINT_INDEX, JOINT_NAMES
 from core.text import clip, quoted
 from core.units import UNITS
-from service.bounded import Bounded
+from service.bounded import Bounded, at_most
 from service.engine import Engine
 from service.errors import InvalidRequest, name_key
 from service.problems import SolveProblem, SolveResult
@@ -114,6 +115,14 @@ Units = Annotated[
 ]
 
 
+V = TypeVar("V")
+#: An object keyed by joint names: at most as many entries as a character has joints,
+#: counted before any entry is validated (``service.bounded.at_most``).
+JointKeyed = Annotated[
+    dict[str, V], Field(max_length=MAX_JOINTS), BeforeValidator(at_most(MAX_JOINTS))
+]
+
+
 class _Body(Bounded):
     """A request model (``service.bounded``: strict, no unknown keys, bounded errors)."""
 
@@ -134,7 +143,7 @@ class _Frame(_Body):
         "canonical ones, as targets take (each once; not a target too).",
     )
     options: SolveOptions = Field(default_factory=SolveOptions)
-    joint_map: dict[str, str] | None = Field(
+    joint_map: JointKeyed[str] | None = Field(
         default=None, description="canonical joint -> the client's joint name; wins over the "
         "automatic map joint by joint.",
     )  # fmt: skip
@@ -163,7 +172,7 @@ class CharacterSolveRequest(_Frame):
     rotations and root position; targets and pins name its joints or canonical ones."""
 
     character: CharacterSkeleton = Field(description="The skeleton: joints, units, up axis.")
-    rotations: dict[str, Quat] = Field(
+    rotations: JointKeyed[Quat] = Field(
         default_factory=dict, description="Local rotation per joint; missing joints: identity."
     )
     root_position: Vec3 | None = Field(default=None, description="Default: the root's offset.")
@@ -237,7 +246,7 @@ class BVHInspectRequest(_Body):
     units: Units | None = Field(default=None, description="Default: inferred from the file.")
     up: Literal["+Y", "+Z"] | None = Field(default=None, description="Default: inferred.")
     root_position: RootPosition = "replace"
-    joint_map: dict[str, str] | None = Field(
+    joint_map: JointKeyed[str] | None = Field(
         default=None, description="canonical joint -> the file's joint name (as in solve)."
     )
 

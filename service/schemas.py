@@ -6,10 +6,11 @@ from typing import TYPE_CHECKING, Annotated, Any, Final, Literal
 
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, create_model
 
+from core.bvh import MAX_JOINTS
 from core.ends import SOFT_IK_MAX
 from core.rest import rest_pose
 from core.skeleton import BASE_KEYPOINTS, JOINT_NAMES, PARENT_NAMES
-from service.bounded import Bounded
+from service.bounded import Bounded, at_most
 
 #: Coordinates beyond this (metres) are rejected as nonsense.
 MAX_COORDINATE = 1.0e4
@@ -236,12 +237,17 @@ class CompleteRequest(_Body):
         le=MAX_COORDINATE,
         description="Height (m, world y) of the ground.",
     )
-    bone_lengths: dict[BoneName, Annotated[Finite, Field(ge=BONE_M[0], le=BONE_M[1])]] | None = (
-        Field(
-            default=None,
-            description="Length (m) of the bone ending at each named joint; missing bones "
-            "take the reference length scaled like the given ones.",
-        )
+    bone_lengths: (
+        Annotated[
+            dict[BoneName, Annotated[Finite, Field(ge=BONE_M[0], le=BONE_M[1])]],
+            Field(max_length=MAX_JOINTS),
+            BeforeValidator(at_most(MAX_JOINTS)),
+        ]
+        | None
+    ) = Field(
+        default=None,
+        description="Length (m) of the bone ending at each named joint; missing bones "
+        "take the reference length scaled like the given ones.",
     )
 
 

@@ -241,6 +241,49 @@ def test_two_errors_per_three_bytes_cost_no_more_than_the_body(client: Any) -> N
     assert growth() < 150 and took < 2.5, (growth(), took)
 
 
+# -- objects keyed by joint names: at most as many entries as a character has joints ---------
+def test_rotations_beyond_any_characters_joints_are_refused_before_their_entries(
+    client: Any,
+) -> None:
+    body = _example("solve_character")
+    body["rotations"] = {f"r{i}": [] for i in range(2001)}
+    problem = assert_problem(client.post("/v1/solve", json=body), 422)
+    assert problem["errors"] == [
+        {
+            "location": "rotations",
+            "message": "Dictionary should have at most 2000 items after validation, not 2001",
+        }
+    ]
+    body["rotations"] = {f"r{i}": [] for i in range(2000)}  # within: each entry's error
+    problem = assert_problem(client.post("/v1/solve", json=body), 422, "; and 1997 more")
+    assert problem["errors"][0] == {
+        "location": "rotations.r0",
+        "message": "List should have at least 4 items after validation, not 0",
+    }
+
+
+@pytest.mark.parametrize(
+    ("path", "example", "field"),
+    [
+        ("/v1/solve", "solve_character", "joint_map"),
+        ("/v1/bvh/solve", "bvh_solve", "joint_map"),
+        ("/v1/complete", "complete", "bone_lengths"),
+    ],
+)
+def test_every_object_keyed_by_joints_is_bounded(
+    client: Any, path: str, example: str, field: str
+) -> None:
+    body = _example(example)
+    body[field] = {f"j{i}": 0 for i in range(5000)}
+    problem = assert_problem(client.post(path, json=body), 422)
+    assert problem["errors"] == [
+        {
+            "location": field,
+            "message": "Dictionary should have at most 2000 items after validation, not 5000",
+        }
+    ]
+
+
 # -- a real server: the answer, the event loop and the process's memory ---------------------
 def _post_watched(s: Server, path: str, body: bytes) -> tuple[int, bytes, float, float, int]:
     """POST ``body`` while another client asks ``/v2/health/live`` every 10 ms: status and
