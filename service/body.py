@@ -56,9 +56,10 @@ def decode(body: bytes) -> Any:
         ) from None
     try:
         return json.loads(text, object_pairs_hook=_object)
-    except json.JSONDecodeError as exc:
+    except json.JSONDecodeError as exc:  # ("Unterminated string starting at": the place)
+        what = exc.msg.removesuffix(" at").removesuffix(" starting")
         raise MalformedBody(
-            f"malformed JSON at line {exc.lineno} column {exc.colno} (char {exc.pos}): {exc.msg}"
+            f"malformed JSON at line {exc.lineno} column {exc.colno} (char {exc.pos}): {what}"
         ) from None
     except RecursionError:
         raise MalformedBody("JSON nested too deeply (arrays/objects within each other)") from None

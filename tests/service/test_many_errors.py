@@ -284,6 +284,19 @@ def test_every_object_keyed_by_joints_is_bounded(
     ]
 
 
+# -- strict JSON: no message ends on a dangling "at" ------------------------------------------
+@pytest.mark.parametrize(
+    ("text", "says"),
+    [
+        ('{"a\tb": 1}', "line 1 column 4 (char 3): Invalid control character"),
+        ('{"pose": "xx', "line 1 column 10 (char 9): Unterminated string"),
+    ],
+)
+def test_a_json_error_says_what_and_where_once(client: Any, text: str, says: str) -> None:
+    problem = assert_problem(client.post("/v1/solve", content=text, headers=JSON), 400)
+    assert problem["detail"].endswith(says), problem["detail"]
+
+
 # -- a real server: the answer, the event loop and the process's memory ---------------------
 def _post_watched(s: Server, path: str, body: bytes) -> tuple[int, bytes, float, float, int]:
     """POST ``body`` while another client asks ``/v2/health/live`` every 10 ms: status and
