@@ -11,7 +11,8 @@ the model through unchanged), so that:
 - bodies of ``INLINE_BYTES`` or more are decoded and validated in a worker thread
   (on one of the app's compute tokens, waited for no longer than the request's
   deadline), so a flood of big bodies never stalls the
-  event loop (liveness keeps answering).
+  event loop (liveness keeps answering); so is a smaller one found wrong in more than
+  ``INLINE_ERRORS`` places (validation is bounded: ``service.bounded``).
 """
 
 from __future__ import annotations
@@ -32,6 +33,9 @@ from service.limits import Budget
 
 NO_BODY = "the request has no body: send a JSON object"
 INLINE_BYTES = 64 * 1024  # smaller bodies are parsed on the loop (a thread hop costs more)
+#: Errors a body parsed on the loop has counted (~10 ms); one with more is read again in a
+#: worker thread, counted up to ``service.bounded.COUNT_LIMIT`` (64 KiB hold ~40,000).
+INLINE_ERRORS = 2_000
 
 
 def _object(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
@@ -67,9 +71,12 @@ def decode(body: bytes) -> Any:
         raise MalformedBody(f"JSON number not accepted: {clip(str(exc), 80)}") from None
 
 
-def parse(body: bytes, model: type[BaseModel] | None, settings: Any = None) -> Any:
+def parse(
+    body: bytes, model: type[BaseModel] | None, settings: Any = None, limit: int | None = None
+) -> Any:
     """Decode ``body`` and validate it into ``model`` (``settings``: the service's, in
-    pydantic's validation context, with an error budget: ``service.bounded``); raises
+    pydantic's validation context, with an error budget counting up to ``limit`` errors:
+    ``service.bounded``); raises
     ``BodyError`` (a ``PoseError``: 400, or a validator's own, e.g. a batch over its item
     limit, 413) or ``BodyInvalid`` (422), the exceptions FastAPI's body reader lets
     through."""
@@ -79,7 +86,7 @@ def parse(body: bytes, model: type[BaseModel] | None, settings: Any = None) -> A
         raise BodyError(exc) from None
     if model is None:
         return data
-    ctx = bounded.context(settings)
+    ctx = bounded.context(settings, limit)
     try:
         return model.model_validate(data, context=ctx)
     except ValidationError as exc:  # the first errors, and how many (service.bounded)
@@ -97,15 +104,19 @@ class _Request(Request):
             state = getattr(self.app.state, "pose", None)
             settings = None if state is None else state.settings
             if len(body) < INLINE_BYTES:
-                self._json = parse(body, self.model, settings)
-            else:
-                deadline = state.settings.deadline_seconds if state is not None else math.inf
                 try:
-                    self._json = await Budget(self, deadline).in_thread(
-                        lambda: parse(body, self.model, settings), "reading the body"
-                    )
-                except DeadlineExceeded as exc:  # FastAPI lets only HTTPException through
-                    raise BodyError(exc) from None
+                    self._json = parse(body, self.model, settings, INLINE_ERRORS)
+                    return self._json
+                except BodyInvalid as exc:
+                    if not exc.partial:  # all counted; else counted on, off the loop
+                        raise
+            deadline = settings.deadline_seconds if settings is not None else math.inf
+            try:
+                self._json = await Budget(self, deadline).in_thread(
+                    lambda: parse(body, self.model, settings), "reading the body"
+                )
+            except DeadlineExceeded as exc:  # FastAPI lets only HTTPException through
+                raise BodyError(exc) from None
         return self._json
 
 

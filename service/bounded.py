@@ -47,19 +47,21 @@ STAND_IN = "pose_counted"  # the type of the error that stands for a model's cou
 class ErrorBudget:
     """The errors of one validation, as the :class:`Bounded` models find them."""
 
-    __slots__ = ("counted", "seen", "skipped", "stand_ins")
+    __slots__ = ("counted", "limit", "seen", "skipped", "stand_ins")
 
-    def __init__(self) -> None:
+    def __init__(self, limit: int) -> None:
+        self.limit = limit  # errors counted exactly (COUNT_LIMIT)
         self.seen = 0  # errors known to come before the model being entered (a lower bound)
         self.counted = 0  # errors counted but not kept: stood in for, or unknown keys dropped
         self.stand_ins = 0  # stand-in errors raised and not since stood in for themselves
         self.skipped = False  # a model was not looked at: the count is a lower bound
 
 
-def context(settings: Any = None) -> dict[str, Any]:
-    """A validation context with a fresh :class:`ErrorBudget` (and the service's
-    ``settings``, which the batch reads)."""
-    return {"settings": settings, BUDGET: ErrorBudget()}
+def context(settings: Any = None, limit: int | None = None) -> dict[str, Any]:
+    """A validation context with a fresh :class:`ErrorBudget` counting up to ``limit``
+    errors (default ``COUNT_LIMIT``), and the service's ``settings`` (the batch reads
+    them)."""
+    return {"settings": settings, BUDGET: ErrorBudget(COUNT_LIMIT if limit is None else limit)}
 
 
 def _stand_in() -> PydanticCustomError:
@@ -135,7 +137,7 @@ class Bounded(BaseModel):
             return handler(data)  # (an instance, one type error; or no budget)
         budget: ErrorBudget = ctx[BUDGET]
         seen, counted, stand_ins = budget.seen, budget.counted, budget.stand_ins
-        if seen >= COUNT_LIMIT:
+        if seen >= budget.limit:
             budget.skipped = True
             budget.stand_ins += 1
             raise _stand_in()

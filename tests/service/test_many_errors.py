@@ -17,6 +17,7 @@ from typing import Any
 import pytest
 from pydantic import BaseModel, ValidationError
 
+from service import body as body_module
 from service import bounded, errors
 from service.characters import BVHSolveRequest, CharacterAliasRequest
 from service.errors import MAX_ERRORS, validation_problem
@@ -239,6 +240,32 @@ def test_two_errors_per_three_bytes_cost_no_more_than_the_body(client: Any) -> N
         "items[0].character.joints[1].offset",
     ]
     assert growth() < 150 and took < 2.5, (growth(), took)
+
+
+def test_a_small_body_wrong_in_many_places_is_counted_off_the_event_loop(
+    client: Any, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A body under INLINE_BYTES is parsed on the event loop; past INLINE_ERRORS errors the
+    look stops there and the body is read again in a worker thread, counted in full."""
+    read: list[tuple[int | None, str]] = []
+    parse = body_module.parse
+
+    def spied(*args: Any) -> Any:
+        read.append((args[3] if len(args) > 3 else None, threading.current_thread().name))
+        return parse(*args)
+
+    monkeypatch.setattr(body_module, "parse", spied)
+    character = _example("solve_character")
+    character["character"]["joints"] = [{}] * 1900  # 8 KB, 3,800 errors
+    problem = assert_problem(client.post("/v1/solve", json=character), 422, "; and 3797 more")
+    assert problem["errors"][0]["location"] == "character.joints[0].name"
+    (first, loop), (then, worker) = read
+    assert (first, then) == (body_module.INLINE_ERRORS, None) and loop != worker
+    read.clear()
+    few = _example("solve_character")
+    few["character"]["joints"] = [{}] * 3  # within INLINE_ERRORS: answered on the loop
+    assert_problem(client.post("/v1/solve", json=few), 422, "; and 3 more")
+    assert [limit for limit, _ in read] == [body_module.INLINE_ERRORS]
 
 
 # -- objects keyed by joint names: at most as many entries as a character has joints ---------
