@@ -19,8 +19,9 @@ import re
 
 import numpy as np
 
-from core.bvh import BVH, BVHError, BVHJoint, euler_angles, euler_matrices, invertible_order
+from core.bvh import BVH, BVHError, BVHJoint
 from core.characters import F64, Pose, Skeleton, build_skeleton
+from core.euler import euler_angles, euler_matrices, invertible_order
 
 DECIMALS = 6
 _POS = {"xposition": 0, "yposition": 1, "zposition": 2}
@@ -92,7 +93,7 @@ def splice_frame(bvh: BVH, frame: int, row: F64, columns: list[int]) -> str:
 def skeleton_of(bvh: BVH) -> Skeleton:
     """The BVH hierarchy as a :class:`Skeleton` (same joint order: the file's). A joint
     the solve may turn has three rotation channels whose angles can be written back
-    (:func:`core.bvh.invertible_order`); the others keep theirs."""
+    (:func:`core.euler.invertible_order`); the others keep theirs."""
     skel, order = build_skeleton(
         [j.name for j in bvh.joints],
         [None if j.parent < 0 else bvh.joints[j.parent].name for j in bvh.joints],

@@ -10,7 +10,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from core.bvh import MAX_JOINTS, BVHError, euler_matrices, parse_bvh, read_bvh
+from core.bvh import MAX_JOINTS, BVHError, parse_bvh, read_bvh
+from core.euler import euler_matrices
 
 # Root: 6 channels (position + Z X Y rotation), child 10 up, end site 5 up the child.
 TINY = """HIERARCHY

@@ -284,7 +284,7 @@ EULER_SEQS = [a + b + c for a in "XYZ" for b in "XYZ" for c in "XYZ" if a != b a
 def test_euler_angles_match_scipy_and_invert_euler_matrices(seq: str) -> None:
     from scipy.spatial.transform import Rotation
 
-    from core.bvh import euler_angles, euler_matrices
+    from core.euler import euler_angles, euler_matrices
 
     rots = Rotation.random(500, random_state=7)
     mats = rots.as_matrix()

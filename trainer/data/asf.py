@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
-from core.bvh import axis_rotations
+from core.euler import axis_rotations
 
 FloatArray = npt.NDArray[np.float64]
 
