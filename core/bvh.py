@@ -222,39 +222,106 @@ def _error(file: str, reason: str) -> BVHError:
     return BVHError(file, reason)
 
 
-def _lines(text: str) -> list[str]:
-    """``text`` split at \\n, \\r\\n or \\r (as ``re.split(r"\\r\\n|\\r|\\n")``, in C)."""
-    return text.replace("\r\n", "\n").replace("\r", "\n").split("\n")
+#: the deepest nesting of joints read (a real rig's fingers or hair are tens deep; the
+#: reader recurses once per level, and Python's stack holds about a thousand)
+MAX_DEPTH = 256
+#: the most joints a hierarchy may hold, End Sites included (a real rig has tens to a few
+#: hundred: fingers, toes, a face); what the service reads of a character in any form
+#: (``service.characters``). A file past it is refused as soon as the reader gets there:
+#: an 8 MiB body of End Sites alone held ~295,000, and reading, mapping and answering
+#: them took a worker 3.6-11.7 s against its 2 s deadline (an API audit, 2026-12-05).
+MAX_JOINTS = 2000
+#: the most channels one joint may list (real files list 3 or 6; any order and any number
+#: of rotation channels up to this are read): one joint of 400,000 rotation channels took
+#: a worker past its deadline too (the same audit).
+MAX_JOINT_CHANNELS = 12
+#: the longest joint name read (the skeleton form's limit too, ``service.characters``), and
+#: the longest word of a HIERARCHY (the real files' longest name has 19 characters, their
+#: longest word 15): refused where it stands, as a joint past MAX_JOINTS is.
+MAX_NAME = 200
+_NON_SPACE_RE = re.compile(r"\S")
+_CUT_RE = re.compile(r"\r\n|\s")  # where a window of a HIERARCHY may end: after this
+#: characters of a HIERARCHY split into words at a time (a real file's whole hierarchy)
+_WINDOW = 1 << 14
 
 
 class _Tokens:
-    """Hierarchy tokens with their (1-based) line numbers."""
+    """The words of a HIERARCHY, ``text[:end]``, with their 1-based line numbers, split a
+    window of :data:`_WINDOW` characters at a time as the parser asks for them (lines, then
+    words, as ``str.split()`` splits: in C), a window's words dropped once read. So a
+    hierarchy is refused at its first fault or limit whatever follows, in bounded memory:
+    an audit's 8 MiB hierarchy of 4 M words was split whole first, 2.2-3.9 s and ~420 MiB a
+    request (2026-12-06). A word longer than :data:`MAX_NAME` is refused where it stands.
+    Lines end at \\n, \\r\\n or \\r only: ``str.splitlines()`` also breaks at U+0085,
+    U+2028 and some control characters, which a Latin-1 joint name may hold (0x85, '…')."""
 
-    def __init__(self, file: str, lines: list[str]) -> None:
+    def __init__(self, file: str, text: str, end: int) -> None:
         self.file = file
-        self.items: list[tuple[str, int, int]] = []  # token, line number, position in line
-        # blank lines skipped in C, before the loop (8 M of them took seconds one by one)
-        for lineno, line in compress(enumerate(lines, start=1), map(str.strip, lines)):
-            if lineno == 1:  # a UTF-8 byte order mark (Windows exporters write one)
-                line = line.removeprefix("\ufeff")
-            for pos, tok in enumerate(line.split()):
-                self.items.append((tok, lineno, pos))
+        self._text, self._end = text, end
+        # a UTF-8 byte order mark opening the file (Windows exporters write one) is no word
+        self._from = 1 if text.startswith("\ufeff") else 0  # the next window's start
+        self._next_line = 1  # the line there
+        self.items: list[tuple[str, int]] = []  # the window's words and their lines
         self.pos = 0
+        self._long = 0  # the index in items of a word past MAX_NAME (len(items): none)
+        self._last = 1  # the line of the last word taken
 
+    def _more(self) -> bool:
+        """Split the next window into words (False at the end of the text). It ends just
+        after whitespace: a word is whole in it, or cut past MAX_NAME characters."""
+        text, at, end = self._text, self._from, self._end
+        found = _NON_SPACE_RE.search(text, at, end)  # (blank lines skipped in C)
+        if found is None:
+            return False
+        start = found.start()  # (a \r\n lies within [at, start): at follows whitespace)
+        first = self._next_line + text.count("\n", at, start) + text.count("\r", at, start)
+        first -= text.count("\r\n", at, start)
+        cut = min(start + _WINDOW, end)
+        if cut < end:
+            space = _CUT_RE.search(text, cut, min(cut + MAX_NAME + 1, end))
+            cut = min(cut + MAX_NAME + 1, end) if space is None else space.end()
+        window = text[start:cut]
+        lines = window.replace("\r\n", "\n").replace("\r", "\n").split("\n")
+        numbered = compress(enumerate(lines, start=first), map(str.strip, lines))
+        self.items = [(word, k) for k, line in numbered for word in line.split()]
+        self.pos = 0
+        self._long = len(self.items)
+        if max(map(len, lines)) > MAX_NAME:  # a line that may hold one (rare): word by word
+            long = (i for i, (w, _) in enumerate(self.items) if len(w) > MAX_NAME)
+            self._long = next(long, self._long)
+        self._from, self._next_line = cut, first + len(lines) - 1
+        return True
+
+    def _ready(self) -> bool:
+        """Whether a word is left (refused if longer than MAX_NAME)."""
+        while self.pos >= len(self.items):
+            if not self._more():
+                return False
+        if self.pos == self._long:
+            word, line = self.items[self.pos]
+            raise _error(
+                self.file, f"line {line}: a word of more than {MAX_NAME} characters: "
+                f"{quoted(word)} (no joint name, keyword or number is so long)",
+            )  # fmt: skip
+        return True
+
+    # (each first asks whether the word is one of the window's before any past MAX_NAME:
+    # a real file's hierarchy reads as fast as when it was split whole)
     def line(self) -> int:
-        if self.pos < len(self.items):
+        """The current word's line (at the end: the last word's)."""
+        if self.pos < self._long or self._ready():
             return self.items[self.pos][1]
-        return self.items[-1][1] if self.items else 1
+        return self._last
 
     def peek(self) -> str | None:
-        return self.items[self.pos][0] if self.pos < len(self.items) else None
+        return self.items[self.pos][0] if self.pos < self._long or self._ready() else None
 
     def next(self, what: str) -> str:
-        if self.pos >= len(self.items):
+        if self.pos >= self._long and not self._ready():
             raise _error(self.file, f"unexpected end of HIERARCHY, expected {what}")
-        tok = self.items[self.pos][0]
+        word, self._last = self.items[self.pos]
         self.pos += 1
-        return tok
+        return word
 
     def expect(self, word: str) -> None:
         line = self.line()
@@ -263,16 +330,22 @@ class _Tokens:
             raise _error(self.file, f"line {line}: expected {word!r}, got {quoted(tok)}")
 
     def rest_of_line(self, what: str) -> str:
-        """All remaining tokens on the current token's line (a joint name may have spaces)."""
-        if self.pos >= len(self.items):
+        """The words left on the current word's line, up to a '{' (a joint name may have
+        spaces), joined by one space: at most :data:`MAX_NAME` characters."""
+        line = self.line()
+        if self.peek() is None:
             raise _error(self.file, f"unexpected end of HIERARCHY, expected {what}")
-        lineno = self.items[self.pos][1]
         words: list[str] = []
-        while self.pos < len(self.items) and self.items[self.pos][1] == lineno:
-            if self.items[self.pos][0] == "{":
-                break
-            words.append(self.items[self.pos][0])
-            self.pos += 1
+        size = -1  # of the words joined
+        while (word := self.peek()) is not None and self.line() == line and word != "{":
+            size += 1 + len(word)
+            if size > MAX_NAME:
+                name = quoted(" ".join([*words, word]))
+                raise _error(
+                    self.file, f"line {line}: a joint name of more than {MAX_NAME} characters: "
+                    f"{name}",
+                )  # fmt: skip
+            words.append(self.next(what))
         return " ".join(words)
 
     def floats(self, n: int, what: str) -> list[float]:
@@ -288,52 +361,75 @@ class _Tokens:
         return out
 
 
-#: the deepest nesting of joints read (a real rig's fingers or hair are tens deep; the
-#: reader recurses once per level, and Python's stack holds about a thousand)
-MAX_DEPTH = 256
-#: the most joints a hierarchy may hold, End Sites included (a real rig has tens to a few
-#: hundred: fingers, toes, a face); what the service reads of a character in any form
-#: (``service.characters``). A file past it is refused as soon as the reader gets there:
-#: an 8 MiB body of End Sites alone held ~295,000, and reading, mapping and answering
-#: them took a worker 3.6-11.7 s against its 2 s deadline (an API audit, 2026-12-05).
-MAX_JOINTS = 2000
-#: the most channels one joint may list (real files list 3 or 6; any order and any number
-#: of rotation channels up to this are read): one joint of 400,000 rotation channels took
-#: a worker past its deadline too (the same audit).
-MAX_JOINT_CHANNELS = 12
+class _Hierarchy:
+    """The joints of a HIERARCHY as its words are read: a joint's children by recursion
+    (:meth:`joint`, at most :data:`MAX_DEPTH` deep), at most :data:`MAX_JOINTS` joints. A
+    class: a nested function that calls itself is in its own closure, a reference cycle
+    that kept the words of every hierarchy read until a full collection (the same audit:
+    five refused 8 MiB hierarchies held a worker at 2.4 GiB)."""
 
+    def __init__(self, toks: _Tokens) -> None:
+        self.toks = toks
+        self.file = toks.file
+        self.joints: list[BVHJoint] = []
+        self.names: set[str] = set()
+        self.n_channels = 0
 
-def _parse_hierarchy(file: str, text: str) -> list[BVHJoint]:
-    # lines end at \n, \r\n or \r only: str.splitlines() also breaks at U+0085, U+2028 and
-    # some control characters, which a Latin-1 joint name may hold (0x85, Windows' '…')
-    toks = _Tokens(file, _lines(text))
-    toks.expect("HIERARCHY")
-    joints: list[BVHJoint] = []
-    names: set[str] = set()
-    n_channels = 0
-
-    def too_many(line: int) -> None:
-        if len(joints) >= MAX_JOINTS:
+    def too_many(self, line: int) -> None:
+        if len(self.joints) >= MAX_JOINTS:
             raise _error(
-                file, f"line {line}: more than {MAX_JOINTS} joints (End Sites included): "
+                self.file, f"line {line}: more than {MAX_JOINTS} joints (End Sites included): "
                 "more than a character the service reads may have",
             )  # fmt: skip
 
-    def parse_joint(parent: int, depth: int) -> None:
-        nonlocal n_channels
+    def joint(self, parent: int, depth: int) -> None:
+        """A ROOT's or JOINT's block (its keyword read), its children's too."""
+        toks, file, joints = self.toks, self.file, self.joints
         line = toks.line()
         if depth > MAX_DEPTH:
             raise _error(file, f"line {line}: joints nested more than {MAX_DEPTH} deep")
         name = toks.rest_of_line("a joint name")
         if not name:
             raise _error(file, f"line {line}: missing joint name")
-        too_many(line)
-        if name in names:
+        self.too_many(line)
+        if name in self.names:
             raise _error(file, f"line {line}: duplicate joint name {quoted(name)}")
-        names.add(name)
+        self.names.add(name)
         toks.expect("{")
         toks.expect("OFFSET")
         ox, oy, oz = toks.floats(3, f"OFFSET of {name}")
+        channels = self.channels(name)
+        index = len(joints)
+        joints.append(BVHJoint(name, parent, (ox, oy, oz), channels, self.n_channels))
+        self.n_channels += len(channels)
+        end_count = 0
+        while True:
+            line = toks.line()
+            tok = toks.next("JOINT, End Site or '}'")
+            if tok == "}":
+                return
+            if tok == "JOINT":
+                self.joint(index, depth + 1)
+            elif tok == "End":
+                toks.expect("Site")
+                toks.expect("{")
+                toks.expect("OFFSET")
+                ex, ey, ez = toks.floats(3, f"End Site OFFSET of {name}")
+                toks.expect("}")
+                self.too_many(line)
+                end_count += 1
+                end_name = f"{name}_end" if end_count == 1 else f"{name}_end{end_count}"
+                joints.append(  # (named anew below where a real joint has that name)
+                    BVHJoint(end_name, index, (ex, ey, ez), (), self.n_channels, end_site=True)
+                )
+            else:
+                raise _error(
+                    file, f"line {line}: expected JOINT, End Site or '}}', got {quoted(tok)}"
+                )
+
+    def channels(self, name: str) -> tuple[str, ...]:
+        """A joint's CHANNELS line: the count, then as many channel names."""
+        toks, file = self.toks, self.file
         line = toks.line()
         toks.expect("CHANNELS")
         count_tok = toks.next("a channel count")
@@ -347,7 +443,7 @@ def _parse_hierarchy(file: str, text: str) -> list[BVHJoint]:
             )
         if count > MAX_JOINT_CHANNELS:
             raise _error(
-                file, f"line {line}: {count} channels on joint {quoted(name)}: at most "
+                file, f"line {line}: {quoted(count)} channels on joint {quoted(name)}: at most "
                 f"{MAX_JOINT_CHANNELS} are read (files list 3 or 6)",
             )  # fmt: skip
         channels: list[str] = []
@@ -365,44 +461,24 @@ def _parse_hierarchy(file: str, text: str) -> list[BVHJoint]:
                     f"line {line}: unknown channel {quoted(ch)} of joint {quoted(name)}{short}",
                 )
             channels.append(ch)
-        index = len(joints)
-        joints.append(BVHJoint(name, parent, (ox, oy, oz), tuple(channels), n_channels))
-        n_channels += count
-        end_count = 0
-        while True:
-            line = toks.line()
-            tok = toks.next("JOINT, End Site or '}'")
-            if tok == "}":
-                return
-            if tok == "JOINT":
-                parse_joint(index, depth + 1)
-            elif tok == "End":
-                toks.expect("Site")
-                toks.expect("{")
-                toks.expect("OFFSET")
-                ex, ey, ez = toks.floats(3, f"End Site OFFSET of {name}")
-                toks.expect("}")
-                too_many(line)
-                end_count += 1
-                end_name = f"{name}_end" if end_count == 1 else f"{name}_end{end_count}"
-                joints.append(  # (named anew below where a real joint has that name)
-                    BVHJoint(end_name, index, (ex, ey, ez), (), n_channels, end_site=True)
-                )
-            else:
-                raise _error(
-                    file, f"line {line}: expected JOINT, End Site or '}}', got {quoted(tok)}"
-                )
+        return tuple(channels)
 
+
+def _parse_hierarchy(file: str, text: str, end: int | None = None) -> list[BVHJoint]:
+    """The joints of the HIERARCHY ``text[:end]`` (read in place: no copy of it is made)."""
+    toks = _Tokens(file, text, len(text) if end is None else end)
+    toks.expect("HIERARCHY")
+    reader = _Hierarchy(toks)
     while toks.peek() == "ROOT":
         toks.next("ROOT")
-        parse_joint(-1, 1)
-    if not joints:
+        reader.joint(-1, 1)
+    if not reader.joints:
         raise _error(file, f"line {toks.line()}: no ROOT joint in HIERARCHY")
     if toks.peek() is not None:
         raise _error(
             file, f"line {toks.line()}: unexpected {quoted(toks.peek())} after the hierarchy"
         )
-    return _end_sites_named(joints, names)
+    return _end_sites_named(reader.joints, reader.names)
 
 
 def _end_sites_named(joints: list[BVHJoint], taken: set[str]) -> list[BVHJoint]:
@@ -433,13 +509,12 @@ def parse_bvh(text: str, name: str = "<string>", frames: Iterable[int] | None = 
         if "HIERARCHY" not in text:
             raise _error(name, "not a BVH file (no HIERARCHY keyword)")
         raise _error(name, "missing MOTION section")
-    head = text[: match.start()]
-    joints = _parse_hierarchy(name, head)
+    joints = _parse_hierarchy(name, text, match.start())
     n_channels = sum(len(j.channels) for j in joints)
     if n_channels == 0:
         raise _error(name, "the hierarchy has no channels")
 
-    motion_line = head.count("\n") + 1  # 1-based line number of MOTION
+    motion_line = text.count("\n", 0, match.start()) + 1  # 1-based line number of MOTION
     # the rest of the MOTION line (empty), then Frames, Frame Time and the body, found
     # without copying the body (one frame of a large file is read without it)
     ends = [text.find("\n", match.end())]

@@ -41,27 +41,30 @@ def format_bvh(bvh: BVH, motion: F64 | None = None) -> str:
     for i, j in enumerate(bvh.joints):
         kids.setdefault(j.parent, []).append(i)
     out = ["HIERARCHY"]
-
-    def emit(i: int, depth: int) -> None:
-        j = bvh.joints[i]
-        pad = "\t" * depth
-        offset = " ".join(_num(v) for v in j.offset)
-        if j.end_site:
-            out.extend([f"{pad}End Site", f"{pad}{{", f"{pad}\tOFFSET {offset}", f"{pad}}}"])
-            return
-        out.append(f"{pad}{'ROOT' if j.parent < 0 else 'JOINT'} {j.name}")
-        out.append(f"{pad}{{")
-        out.append(f"{pad}\tOFFSET {offset}")
-        out.append(f"{pad}\tCHANNELS {len(j.channels)} {' '.join(j.channels)}".rstrip())
-        for k in kids.get(i, []):
-            emit(k, depth + 1)
-        out.append(f"{pad}}}")
-
     for root in kids.get(-1, []):
-        emit(root, 0)
+        _emit(bvh, kids, out, root, 0)
     out += ["MOTION", f"Frames: {len(rows)}", f"Frame Time: {_num(bvh.frame_time)}"]
     out += [" ".join(_num(v) for v in row) for row in rows]
     return "\n".join(out) + "\n"
+
+
+def _emit(bvh: BVH, kids: dict[int, list[int]], out: list[str], i: int, depth: int) -> None:
+    """Joint ``i``'s block, its children's within, onto ``out``. A module function: a nested
+    one that calls itself is in its own closure, a reference cycle that kept each file's
+    lines until a full collection (as the reader's did: an audit, 2026-12-06)."""
+    j = bvh.joints[i]
+    pad = "\t" * depth
+    offset = " ".join(_num(v) for v in j.offset)
+    if j.end_site:
+        out.extend([f"{pad}End Site", f"{pad}{{", f"{pad}\tOFFSET {offset}", f"{pad}}}"])
+        return
+    out.append(f"{pad}{'ROOT' if j.parent < 0 else 'JOINT'} {j.name}")
+    out.append(f"{pad}{{")
+    out.append(f"{pad}\tOFFSET {offset}")
+    out.append(f"{pad}\tCHANNELS {len(j.channels)} {' '.join(j.channels)}".rstrip())
+    for k in kids.get(i, []):
+        _emit(bvh, kids, out, k, depth + 1)
+    out.append(f"{pad}}}")
 
 
 def splice_frame(bvh: BVH, frame: int, row: F64, columns: list[int]) -> str:

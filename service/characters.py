@@ -32,7 +32,7 @@ from pydantic import (
 )
 from pydantic_core import InitErrorDetails, PydanticCustomError
 
-from core.bvh import BVH, MAX_JOINTS, BVHError, parse_bvh
+from core.bvh import BVH, MAX_JOINTS, MAX_NAME, BVHError, parse_bvh
 from core.bvh_write import pose_of, row_of, skeleton_of, splice_frame
 from core.characters import (
     F64,
@@ -150,7 +150,7 @@ class _Frame(_Body):
 
 
 class JointSpec(_Body):
-    name: str = Field(min_length=1, max_length=200)
+    name: str = Field(min_length=1, max_length=MAX_NAME)
     parent: str | None = Field(
         default=None, description="The parent joint's name; null for the root (one root)."
     )

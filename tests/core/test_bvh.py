@@ -3,6 +3,8 @@ joints, End Sites, what a writer needs kept, clear errors, and real files of fou
 
 from __future__ import annotations
 
+import gc
+import time
 import tracemalloc
 from pathlib import Path
 from typing import Any
@@ -10,7 +12,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from core.bvh import MAX_JOINTS, BVHError, parse_bvh, read_bvh
+from core.bvh import MAX_JOINTS, MAX_NAME, BVHError, parse_bvh, read_bvh
 from core.euler import euler_matrices
 
 # Root: 6 channels (position + Z X Y rotation), child 10 up, end site 5 up the child.
@@ -37,6 +39,21 @@ Frame Time: 0.0333333
 0 0 0 90 90 0 0 0 0
 0 0 0 0 0 0 0 0 90
 """
+
+
+def _refusal(text: str, frames: tuple[int, ...] | None = None) -> str:
+    """The reason parse_bvh refuses ``text`` for (no exception kept: its traceback holds
+    the reader's frames)."""
+    try:
+        parse_bvh(text, "x.bvh", frames)
+    except BVHError as exc:
+        return exc.reason
+    raise AssertionError("read")
+
+
+_MOTION = "\nMOTION\nFrames: 1\nFrame Time: 0.1\n0\n"
+_TAIL = "\n{" + _MOTION
+_ROOT = "HIERARCHY\nROOT r\n{\nOFFSET 0 0 0\nCHANNELS 1 Xrotation\n}\n"
 
 
 def test_fk_matches_hand_computed_poses(tmp_path: Path) -> None:
@@ -408,17 +425,111 @@ def test_reading_one_frame_of_real_files_is_bit_identical(more_mocap: Path) -> N
         assert all(some.spans[f] == whole.frame_span(f) for f in picks[::20]), path
 
 
-def test_lines_end_at_lf_crlf_and_cr_only() -> None:
-    """The hierarchy's lines (``core.bvh._lines``, string methods in C where a regex split
-    took 0.7 s on 8 M blank lines) break where ``re.split(r"\\r\\n|\\r|\\n")`` does: not at
-    U+0085 or U+2028, which a Latin-1 joint name may hold."""
+@pytest.mark.parametrize("window", [1, 2, 5, 1 << 14])
+def test_hierarchy_words_and_lines_are_those_of_its_lines_split(
+    window: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The hierarchy's words, split a window at a time (``core.bvh._Tokens``), and their
+    lines are ``str.split()``'s of each line where lines end at \\n, \\r\\n or \\r only
+    (as ``re.split(r"\\r\\n|\\r|\\n")``: not at U+0085 or U+2028, which a Latin-1 joint
+    name may hold), less a byte order mark opening the file; whatever the window."""
     import random
     import re
 
-    from core.bvh import _lines
+    from core import bvh
+    from core.bvh import _Tokens
 
+    monkeypatch.setattr(bvh, "_WINDOW", window)
     ends = re.compile(r"\r\n|\r|\n")
-    rng = random.Random(0)
-    for _ in range(2000):
-        text = "".join(rng.choice("ab \t\r\n\x85\u2028") for _ in range(rng.randint(0, 40)))
-        assert _lines(text) == ends.split(text), repr(text)
+    rng = random.Random(window)
+    for _ in range(3000):
+        text = "".join(
+            rng.choice("ab \t\r\n\x85\u2028\x1c\ufeff") for _ in range(rng.randint(0, 40))
+        )
+        lines = ends.split(text)
+        lines[0] = lines[0].removeprefix("\ufeff")
+        want = [(k, w) for k, line in enumerate(lines, start=1) for w in line.split()]
+        toks = _Tokens("t", text, len(text))
+        got = []
+        while toks.peek() is not None:
+            got.append((toks.line(), toks.next("a word")))
+        assert got == want, repr(text)
+        assert toks.line() == (want[-1][0] if want else 1), repr(text)
+
+
+@pytest.mark.parametrize(
+    ("text", "reason"),
+    [  # (8.3 MB each, as much as a request body holds)
+        ("HIERARCHY\nROOT " + "a " * 4_150_000 + _TAIL, "line 2: a joint name of more than 200"),
+        ("HIERARCHY\n" + "a\n" * 4_150_000 + _MOTION, "line 2: no ROOT joint in HIERARCHY"),
+        (_ROOT + "a " * 4_150_000 + _MOTION, "line 7: unexpected 'a' after the hierarchy"),
+        ("HIERARCHY\nROOT " + "a" * 8_300_000 + _TAIL, "line 2: a word of more than 200"),
+        ("HIERARCHY\nROOT r\n{\nOFFSET 1 " + "1" * 8_300_000 + _TAIL, "line 4: a word of more"),
+    ],
+    ids=["one-line-of-words", "lines-of-a-word", "after-the-root", "a-long-name", "a-long-number"],
+)
+def test_a_huge_hierarchy_is_refused_at_its_first_fault_and_nothing_is_kept(
+    text: str, reason: str
+) -> None:
+    """An audit (2026-12-06) sent 8 MB hierarchies of 4 M words: the reader split them all
+    before looking at one (2.2-3.9 s, +430 MiB), and its recursive nested function, a
+    reference cycle, kept them after the refusal until a full collection (five requests took
+    a worker from 0.3 to 2.4 GiB). Now each is refused at its first fault or limit, its line
+    named, in bounded memory, and nothing of it is left without the cyclic collector."""
+    gc.collect()
+    gc.disable()
+    tracemalloc.start()
+    try:
+        base = tracemalloc.get_traced_memory()[0]
+        start = time.perf_counter()
+        got = _refusal(text)
+        took = time.perf_counter() - start
+        held, peak = (m - base for m in tracemalloc.get_traced_memory())
+    finally:
+        tracemalloc.stop()
+        gc.enable()
+    assert got.startswith(reason), got
+    assert len(got) < 400
+    assert peak < 4 << 20, peak  # (was 430-450 MiB)
+    assert held < 1 << 20, held  # (was 380-405 MiB; a tuple free list holds ~0.1 MiB)
+    assert took < 2.0, took  # (~0.1 s traced; was 5-17 s traced)
+
+
+def test_names_and_words_past_max_name_are_refused_where_they_stand() -> None:
+    """A joint name is at most MAX_NAME characters, its words joined by one space (the
+    skeleton form's limit), and no word of the hierarchy is longer."""
+    name = " ".join(["w" * 9] * 20)  # 199 characters
+    ok = TINY.replace("JOINT child", f"JOINT {name}x")
+    assert parse_bvh(ok, "ok.bvh").joints[1].name == f"{name}x"
+    assert _refusal(TINY.replace("JOINT child", f"JOINT {name}xy")).startswith(
+        f"line 6: a joint name of more than {MAX_NAME} characters: 'wwwwwwwww "
+    )
+    assert _refusal(TINY.replace("JOINT child", f"JOINT {name} x")).startswith(
+        f"line 6: a joint name of more than {MAX_NAME}"
+    )
+    word = "9" * (MAX_NAME + 1)
+    assert _refusal(TINY.replace("OFFSET 0 10 0", f"OFFSET 0 {word} 0")) == (
+        f"line 8: a word of more than {MAX_NAME} characters: '{'9' * 99}…' (no joint name, "
+        "keyword or number is so long)"
+    )
+    assert parse_bvh(TINY.replace("OFFSET 0 10 0", f"OFFSET 0 {word[1:]} 0"), "ok").joints
+
+
+def test_reading_and_writing_leave_no_reference_cycle() -> None:
+    """Neither the reader nor the writer leaves cyclic garbage (the reader's recursive
+    nested function was one, the writer's too), read or refused: what they made is freed
+    as soon as it is dropped, without the cyclic collector."""
+    from core.bvh_write import format_bvh
+
+    bvh_text = TINY
+    gc.collect()
+    gc.disable()
+    try:
+        for _ in range(3):
+            format_bvh(parse_bvh(bvh_text, "ok.bvh"))
+            parse_bvh(bvh_text, "ok.bvh", frames=(1,))
+            _refusal(bvh_text.replace("CHANNELS 3 Zrotation", "CHANNELS 3 Wrotation"))
+            _refusal(bvh_text.replace("    End Site", "    JOINT c2\n    End Site"))
+        assert gc.collect() == 0
+    finally:
+        gc.enable()

@@ -5,8 +5,11 @@ names what was wrong, or a right answer; never a 500 or an answer with a non-fin
 from __future__ import annotations
 
 import copy
+import gc
 import json
 import math
+import time
+import tracemalloc
 from typing import Any
 
 import pytest
@@ -162,6 +165,38 @@ def test_a_chain_nested_past_the_limit_is_refused(client: Any) -> None:
     motion = ["MOTION", "Frames: 1", "Frame Time: 0.033", " ".join(["0"] * 3 * (depth + 1))]
     text = "\n".join(head + motion) + "\n"
     _refused(client, "/v1/bvh/inspect", {"bvh": text}, f"nested more than {MAX_DEPTH} deep")
+
+
+def test_a_hierarchy_of_millions_of_words_is_refused_at_once_and_nothing_is_kept(
+    client: Any,
+) -> None:
+    """An audit's 8.3 MB body (2026-12-06): one ROOT line of 4.15 M words. The reader split
+    the whole hierarchy before any limit (2.2-3.9 s, +430 MiB) and a reference cycle kept
+    the words after the 422 (five such requests took a worker from 0.3 to 2.4 GiB, past its
+    pod's 768 Mi). Now the joint name's limit refuses it where it passes, naming the line,
+    in bounded memory, and nothing of it is left without the cyclic collector."""
+    bvh = "HIERARCHY\nROOT " + "a " * 4_150_000 + "\n{\nMOTION\nFrames: 1\nFrame Time: 0.1\n0\n"
+    body = json.dumps({"bvh": bvh, "frame": 0}).encode()
+    headers = {"content-type": "application/json"}
+    client.post("/v1/bvh/inspect", content=body, headers=headers)  # (the route's first use)
+    gc.collect()
+    gc.disable()
+    tracemalloc.start()
+    try:
+        base = tracemalloc.get_traced_memory()[0]
+        start = time.perf_counter()
+        r = client.post("/v1/bvh/inspect", content=body, headers=headers)
+        took = time.perf_counter() - start
+        held, peak = (m - base for m in tracemalloc.get_traced_memory())
+    finally:
+        tracemalloc.stop()
+        gc.enable()
+    assert held < 8 << 20, held  # (0.1 MiB; was ~420 MiB)
+    assert peak < 96 << 20, peak  # (26 MiB: the body, its text, their copies; was +430 MiB)
+    assert took < 2.0, took  # (0.1 s traced; was 2.2-3.9 s untraced)
+    assert_problem(r, 422)
+    detail = r.json()["detail"]
+    assert detail.startswith("bvh: line 2: a joint name of more than 200 characters: 'a a "), detail
 
 
 def test_a_detail_quotes_a_long_value_clipped(client: Any) -> None:

@@ -303,6 +303,32 @@ def test_liveness_answers_while_big_bodies_are_parsed(models_dir: Path, tmp_path
         assert max(latencies) < 1.0
 
 
+def test_huge_bvh_hierarchies_are_refused_fast_and_leave_no_memory(
+    models_dir: Path, tmp_path: Path
+) -> None:
+    """An audit's finding (2026-12-06): five 8.3 MB BVH bodies of 4.15 M hierarchy words
+    (an 8 MB request body holds that many) took a worker from 329 to 2,452 MiB, each
+    answered after 2.2-3.9 s: the reader split the whole hierarchy before any limit, and a
+    reference cycle kept the words. Now each is refused at once and the worker's memory
+    stays where it was (a few MiB of allocator slack a request)."""
+    bvh = "HIERARCHY\nROOT " + "a " * 4_150_000 + "\n{\nMOTION\nFrames: 1\nFrame Time: 0.1\n0\n"
+    body = json.dumps({"bvh": bvh, "frame": 0}).encode()
+    with serve(models_dir, tmp_path) as s:
+        before, took, rss, details = s.rss_mib(), [], [], []
+        for _ in range(5):
+            start = time.perf_counter()
+            status, headers, data = s.request("POST", "/v1/bvh/inspect", body)
+            took.append(time.perf_counter() - start)
+            rss.append(s.rss_mib())
+            details.append(assert_problem(status, headers, data, 422)["detail"])
+        print(f"\n5 x 8.3 MB hierarchies: {max(took):.2f} s at most, RSS {before:.0f} -> "
+              + " -> ".join(f"{r:.0f}" for r in rss) + " MiB")  # fmt: skip
+        assert rss[-1] - before < 100, (before, rss)  # (was +420 MiB a request)
+        assert max(took) < 1.5, took  # (was 2.2-3.9 s)
+        for detail in details:
+            assert detail.startswith("bvh: line 2: a joint name of more than 200"), detail
+
+
 def test_sigterm_under_load_answers_problems_not_text(models_dir: Path, tmp_path: Path) -> None:
     # 4096 exact-reach items take ~4 s to solve here (1024 took ~1 s once the engine was
     # compiled, so a batch could finish before the signal): all three are still in flight
