@@ -249,12 +249,77 @@ def test_frame_line_count_is_the_number_of_frame_lines(body: str) -> None:
     assert bvh.frame_line_count() == len([ln for ln in body.splitlines() if ln.strip()])
 
 
-def test_motion_values_numpy_does_not_read_are_read_as_python_reads_them() -> None:
-    # numpy's reader stops at "1_000"; Python's float() takes it, as the reader always did
-    bvh = parse_bvh(TINY.replace("1 2 3 90 0 0 0 90 0", "1 2 3 1_000 0 0 0 90 0"), "u.bvh")
-    np.testing.assert_array_equal(bvh.motion[1], [1, 2, 3, 1000, 0, 0, 0, 90, 0])
-    with pytest.raises(BVHError, match="line 20: not a number"):
-        parse_bvh(TINY.replace("1 2 3 90 0 0 0 90 0", "1 2 3 0x1p3 0 0 0 90 0"), "x.bvh")
+_NOT_BVH_NUMBERS = ["1_000", "١", "٣.5", "１", "nan", "-NaN", "inf", "+Infinity", "0x1p3", "1,5"]
+
+
+@pytest.mark.parametrize("word", _NOT_BVH_NUMBERS)
+def test_only_ascii_decimals_are_numbers(word: str) -> None:
+    """Python's ``float()`` reads ``1_000``, other scripts' digits and ``nan``/``inf``,
+    numpy's reader ``nan`` and ``inf``: no BVH writer writes them (an audit found the first
+    two read, 2026-12-06). Each is refused with its line: a value of the frames read whole
+    or one alone, an OFFSET, the Frame Time."""
+    hint = "(BVH numbers are finite decimals: -1.5, 2e-3)"
+    frame = TINY.replace("1 2 3 90 0 0 0 90 0", f"1 2 3 {word} 0 0 0 90 0")
+    assert _refusal(frame) == f"line 20: not a number: {word!r} {hint}"
+    assert _refusal(frame, (1,)) == f"line 20: not a number: {word!r} {hint}"
+    assert parse_bvh(frame, "x", (2,)).row(2).tolist() == [0, 0, 0, 90, 90, 0, 0, 0, 0]
+    offset = TINY.replace("OFFSET 0 10 0", f"OFFSET 0 {word} 0")
+    assert _refusal(offset) == f"line 8: 'OFFSET of child': not a number: {word!r} {hint}"
+    time = TINY.replace("Frame Time: 0.0333333", f"Frame Time: {word}")
+    assert _refusal(time) == f"line 18: bad Frame Time {word!r}: not a number"
+
+
+def test_a_number_is_what_the_number_pattern_reads() -> None:
+    """``core.bvh._number`` (``float()``, then a check cheaper than the pattern) takes the
+    words ``_NUMBER_RE`` takes, with ``float()``'s value, and no other."""
+    import random
+    import struct
+
+    from core.bvh import _NUMBER_RE, _number
+
+    rng = random.Random(0)
+    alphabet = "0123456789+-.eE_naifty NAIFTYx١٣１²"
+    for _ in range(200_000):
+        word = "".join(rng.choice(alphabet) for _ in range(rng.randint(1, 9))).strip() or "0"
+        want = float(word) if _NUMBER_RE.fullmatch(word) else None
+        got = _number(word)
+        assert (got is None) == (want is None), word
+        assert want is None or struct.pack("d", got) == struct.pack("d", want), word
+
+
+@pytest.mark.parametrize("word", ["1_0", "٣", "３", "3.0", "1e1", "x"])
+def test_counts_are_ascii_whole_numbers(word: str) -> None:
+    """A channel count and the frame count are ASCII digits (``int()`` also reads ``1_0``
+    and ``٣``)."""
+    channels = TINY.replace("CHANNELS 3 Zrotation", f"CHANNELS {word} Zrotation")
+    assert _refusal(channels) == f"line 9: bad channel count {word!r}: not a whole number >= 0"
+    assert _refusal(TINY.replace("Frames: 4", f"Frames: {word}")) == (
+        f"line 17: bad frame count {word!r}"
+    )
+
+
+def test_decimals_as_writers_write_them_are_read_as_float_reads_them() -> None:
+    """Signs, a point at either end, exponents, leading zeros: the values ``float()``
+    gives, read whole or one frame alone, and in an OFFSET. A decimal past the float range
+    is infinite (the service refuses it, naming its channel: tests/service)."""
+    words = ["+1.5", "-.5", "5.", "1E3", "-0", "1e-300", "007", "2.5e+2", "-1.25E-2"]
+    text = TINY.replace("1 2 3 90 0 0 0 90 0", " ".join(words))
+    want = np.array([float(w) for w in words])
+    assert parse_bvh(text, "ok").row(1).tobytes() == want.tobytes()
+    assert parse_bvh(text, "ok", (1,)).row(1).tobytes() == want.tobytes()
+    offset = parse_bvh(TINY.replace("OFFSET 0 10 0", "OFFSET +.5 -0 1E1"), "ok").joints[1]
+    assert offset.offset == (0.5, -0.0, 10.0)
+    huge = parse_bvh(TINY.replace("1 2 3 90 0 0 0 90 0", "1 2 3 1e999 0 0 0 90 0"), "ok")
+    assert huge.row(1)[3] == np.inf
+
+
+def test_a_blank_frame_line_holds_no_value() -> None:
+    """numpy's reader reads -1 of whitespace alone: a file of one channel whose one frame
+    line was blank read as -1 (a fuzz of the number forms found it)."""
+    text = _ROOT.replace("\n}\n", "\n}\nMOTION\nFrames: 1\nFrame Time: 0.1\n \n", 1)
+    assert _refusal(text) == "truncated: 'Frames:' declares 1 frames, found 0"
+    assert _refusal(text, (0,)) == "truncated: 'Frames:' declares 1 frames, found 0"
+    assert parse_bvh(text.replace(" \n", "-1\n"), "ok").row(0).tolist() == [-1.0]
 
 
 def test_a_joint_keeps_its_name_where_an_end_site_would_take_it() -> None:

@@ -55,6 +55,25 @@ def test_a_bvh_value_beyond_any_body_is_named(client: Any, value: str) -> None:
     _refused(client, "/v1/bvh/solve", body, f"line {row + 1}", "Xposition", "within ±1e+07")
 
 
+@pytest.mark.parametrize("value", ["1_000", "١", "nan", "-inf"])
+def test_a_bvh_value_that_is_no_number_a_writer_writes_is_named(client: Any, value: str) -> None:
+    """Python's ``float()`` reads ``1_000`` and other scripts' digits, numpy's reader
+    ``nan`` and ``inf`` (an audit had the first two answered 200, 2026-12-06): each is
+    refused where the reader meets it, its line named, by both routes that read a file; a
+    1e999 is a decimal past the float range, named as a value beyond any body is."""
+    body = _example("bvh_solve")
+    lines, row = _frame_values(body["bvh"], body["frame"])
+    values = lines[row].split()
+    lines[row] = " ".join([value, *values[1:]])
+    body["bvh"] = "\n".join(lines)
+    needles = (f"bvh: line {row + 1}: not a number: {value!r}", "finite decimals")
+    _refused(client, "/v1/bvh/solve", body, *needles)
+    _refused(client, "/v1/bvh/inspect", {"bvh": body["bvh"], "frame": body["frame"]}, *needles)
+    lines[row] = " ".join(["1e999", *values[1:]])
+    body["bvh"] = "\n".join(lines)
+    _refused(client, "/v1/bvh/solve", body, f"line {row + 1}", "Xposition is inf", "finite")
+
+
 @pytest.mark.parametrize(
     ("path", "name", "units"),
     [
