@@ -720,9 +720,9 @@ def read_request_bvh(text: str, frame: int | None = None) -> BVH:
 
 def character_from_bvh(bvh: BVH, req: BVHSolveRequest | BVHInspectRequest) -> Character:
     if req.frame >= bvh.num_frames:
-        raise InvalidRequest(
-            f"frame: {clip(req.frame)} is out of range: the file has {bvh.num_frames}"
-        )
+        n = bvh.num_frames
+        held = f"{n} frames: 0 to {n - 1}" if n > 1 else "1 frame: 0" if n else "no frames"
+        raise InvalidRequest(f"frame: {clip(req.frame)} is out of range: the file has {held}")
     try:
         skel = skeleton_of(bvh)
         pose = pose_of(bvh, req.frame, root_add=req.root_position == "add")

@@ -74,6 +74,23 @@ def test_a_bvh_value_that_is_no_number_a_writer_writes_is_named(client: Any, val
     _refused(client, "/v1/bvh/solve", body, f"line {row + 1}", "Xposition is inf", "finite")
 
 
+def test_a_frame_past_the_file_names_the_frames_it_has(client: Any) -> None:
+    """``frame: 3 is out of range: the file has 3`` said neither frames nor which (an
+    audit, 2026-12-06): now the count and the range, by both routes that read a file."""
+    body = _example("bvh_solve")
+    lines, first = _frame_values(body["bvh"], 0)
+    n = int(next(ln for ln in lines if ln.startswith("Frames:")).split()[1])
+    want = f"frame: {n} is out of range: the file has {n} frames: 0 to {n - 1}"
+    assert _refused(client, "/v1/bvh/solve", {**body, "frame": n}) == want
+    assert _refused(client, "/v1/bvh/inspect", {"bvh": body["bvh"], "frame": n}) == want
+    count = next(i for i, ln in enumerate(lines) if ln.startswith("Frames:"))
+    for k, held in ((1, "1 frame: 0"), (0, "no frames")):
+        text = [*lines[:count], f"Frames: {k}", *lines[count + 1 : first + k]]
+        one = {**body, "bvh": "\n".join(text) + "\n", "frame": 1}
+        want = f"frame: 1 is out of range: the file has {held}"
+        assert _refused(client, "/v1/bvh/solve", one) == want
+
+
 @pytest.mark.parametrize(
     ("path", "name", "units"),
     [
