@@ -20,8 +20,8 @@ Conventions implemented here:
 - Numbers are ASCII decimals as writers write them (``-1.5``, ``2e-3``): not ``1_000``,
   other scripts' digits or ``nan``/``inf``, which Python's ``float()`` reads.
 - The MOTION block is parsed in one go by numpy (``np.fromstring``, no Python object per
-  value), falling back to ``str.split`` + ``float`` (each word checked a number) for what
-  numpy does not read or reads as not finite, with a per-line check only on the error path.
+  value); where numpy does not read every word, or reads one not finite, one regex checks
+  them all numbers (then ``str.split`` + ``float``), and errors are found line by line.
 - ``parse_bvh(text, frames=[k])`` reads the values of those frames only, where the block
   holds one frame per line and no blank line (the service edits one frame of a file: a
   3.6 MB file's block takes ~90 ms to read whole on this host, its frame line ~5 ms to
@@ -39,7 +39,6 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field, replace
 from itertools import compress, islice
 from pathlib import Path
-from typing import NoReturn
 
 import numpy as np
 import numpy.typing as npt
@@ -228,7 +227,12 @@ def _error(file: str, reason: str) -> BVHError:
 #: a number as BVH writers write one: ASCII digits with a sign, a point and an exponent.
 #: ``float()`` also reads ``1_000``, other scripts' digits (``١``) and ``nan``/``inf``, which
 #: no writer writes: the reader refuses them (an audit found the first two read, 2026-12-06).
-_NUMBER_RE = re.compile(r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
+_NUMBER = r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?"
+_NUMBER_RE = re.compile(_NUMBER)
+#: a text's leading words that are numbers (each whole: atomic, possessive, no backtracking)
+_NUMBERS_RE = re.compile(rf"(?:\s*+(?>{_NUMBER})(?!\S))*+\s*+")
+_WORD_RE = re.compile(r"\S+")
+_SPACE_RE = re.compile(r"\s")
 _WHOLE_RE = re.compile(r"[+-]?[0-9]+")  # a whole number (a channel or frame count)
 
 
@@ -597,39 +601,52 @@ def parse_bvh(text: str, name: str = "<string>", frames: Iterable[int] | None = 
 
 def _read_all(name: str, body: str, first_line: int, n_frames: int, n_channels: int) -> FloatArray:
     """Every frame's values ``[F, C]`` of the MOTION block ``body``."""
-    expected = n_frames * n_channels
     values = _fromstring(body)
-    if values.size != expected or not _numbers_only(values, body):
-        tokens = body.split()
-        if len(tokens) != expected:
-            _explain_count(name, body, first_line, n_frames, n_channels)
-        values = _numbers(name, tokens, body, first_line)
-    return values.reshape(n_frames, n_channels)
+    count = _count_words(body) if values is None else values.size
+    if count != n_frames * n_channels:
+        _explain_count(name, body, first_line, n_frames, n_channels)
+    return _numbers(name, body, first_line, values).reshape(n_frames, n_channels)
 
 
-def _fromstring(text: str) -> FloatArray:
+def _fromstring(text: str) -> FloatArray | None:
     """The numbers of ``text`` as numpy's own reader reads them, no Python object per value
-    (an 8 MB file: 84 -> 30 MB peak); empty where it does not read them all."""
+    (an 8 MB file: 84 -> 30 MB peak); None where it does not read every word (none of
+    whitespace alone, where it reads -1)."""
     try:
-        return np.fromstring(text, dtype=np.float64, sep=" ")
+        values = np.fromstring(text, dtype=np.float64, sep=" ")
     except ValueError:  # a word numpy does not read
-        return np.zeros(0)
+        return None
+    return np.zeros(0) if values.size == 1 and text.isspace() else values
 
 
-def _numbers_only(values: FloatArray, text: str) -> bool:
-    """Whether :func:`_fromstring` read BVH numbers only: it reads ``nan``, ``inf`` and
-    ``infinity`` too, and -1 of whitespace alone; where its values are finite, every word
-    it read is one (a fuzz of 300,000 short texts found no other)."""
-    return bool(np.isfinite(values).all()) and (values.size != 1 or not text.isspace())
+def _count_words(text: str) -> int:
+    """``len(text.split())``, split :data:`_WINDOW` characters at a time (no list of every
+    word: a line of 2 M values took 128 MiB to count)."""
+    count, at, end = 0, 0, len(text)
+    while at < end:
+        cut = min(at + _WINDOW, end)
+        if cut < end:  # to the next whitespace: no word is cut
+            space = _SPACE_RE.search(text, cut)
+            cut = end if space is None else space.start()
+        count += len(text[at:cut].split())
+        at = cut
+    return count
 
 
-def _numbers(name: str, words: list[str], text: str, first_line: int) -> FloatArray:
-    """The values of ``words`` (``text``'s), each a BVH number (:data:`_NUMBER_RE`: neither
-    ``1_000``, ``١`` nor ``nan``, which Python's ``float()`` reads), else a BVHError naming
-    the first other one and its line."""
-    if not all(map(_NUMBER_RE.fullmatch, words)):
-        _explain_values(name, text, first_line)
-    return np.array(words, dtype=np.float64)
+def _numbers(name: str, text: str, first_line: int, values: FloatArray | None) -> FloatArray:
+    """The values of ``text``'s words (numpy's ``values`` where it read them all), each a BVH
+    number, else a BVHError naming the first other word and its line (one regex in C). numpy
+    reads ``nan`` and ``inf`` too, and no finite value of any other word (a fuzz: 300,000)."""
+    if values is not None and np.isfinite(values).all():
+        return values
+    numbers = _NUMBERS_RE.match(text)  # (always matches: maybe nothing)
+    word = _WORD_RE.search(text, numbers.end() if numbers else 0)
+    if word is not None:
+        start = word.start()
+        line = first_line + text.count("\n", 0, start)
+        shown = text[start : min(word.end(), start + MAX_NAME)]
+        raise _error(name, f"line {line}: {_not_a_number(shown)}")
+    return values if values is not None else np.array(text.split(), dtype=np.float64)
 
 
 def _read_frames(
@@ -664,45 +681,37 @@ def _read_frames(
         spans[f] = (start, end)
         line_at, line_frame = start, f
         line, number = text[start:end], first_line + f  # (no blank line among them)
-        tokens = line.split()
-        if len(tokens) != n_channels:
-            got = f"expected {n_channels} values per frame, got {len(tokens)}"
+        count = _count_words(line)
+        if count != n_channels:
+            got = f"expected {n_channels} values per frame, got {count}"
             raise _error(name, f"line {number}: {got}")
-        values = _fromstring(line)  # as the whole block is read
-        if values.size != n_channels or not _numbers_only(values, line):
-            values = _numbers(name, tokens, line, number)
-        motion[f] = values
+        motion[f] = _numbers(name, line, number, _fromstring(line))  # as a whole block is
     return motion, read, spans
 
 
 def _explain_count(name: str, body: str, first_line: int, n_frames: int, n_channels: int) -> None:
-    """Raise a BVHError pointing at the first MOTION line with the wrong number of values."""
-    seen = 0
-    for offset, line in enumerate(body.split("\n")):
-        count = len(line.split())
-        if count == 0:
-            continue
-        if seen >= n_frames:
+    """Raise a BVHError pointing at the first MOTION line with the wrong number of values
+    (the lines found one at a time: no list of them all)."""
+    seen, offset, at = 0, 0, 0
+    while at <= len(body):
+        end = body.find("\n", at)
+        end = len(body) if end < 0 else end
+        line = body[at:end]
+        count = len(line.split()) if len(line) <= _WINDOW else _count_words(line)
+        if count and seen >= n_frames:
             raise _error(
                 name,
                 f"line {first_line + offset}: more frame lines than the {n_frames} "
                 "declared in 'Frames:'",
             )
-        if count != n_channels:
+        if count and count != n_channels:
             raise _error(
                 name,
                 f"line {first_line + offset}: expected {n_channels} values per frame, got {count}",
             )
-        seen += 1
+        seen += count > 0
+        offset, at = offset + 1, end + 1
     raise _error(name, f"truncated: 'Frames:' declares {n_frames} frames, found {seen}")
-
-
-def _explain_values(name: str, body: str, first_line: int) -> NoReturn:
-    for offset, line in enumerate(body.split("\n")):
-        for tok in line.split():
-            if _NUMBER_RE.fullmatch(tok) is None:
-                raise _error(name, f"line {first_line + offset}: {_not_a_number(tok)}")
-    raise _error(name, "could not convert the MOTION values")
 
 
 def read_bvh(path: str | Path, name: str | None = None) -> BVH:

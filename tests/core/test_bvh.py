@@ -4,6 +4,8 @@ joints, End Sites, what a writer needs kept, clear errors, and real files of fou
 from __future__ import annotations
 
 import gc
+import random
+import re
 import time
 import tracemalloc
 from pathlib import Path
@@ -12,7 +14,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from core.bvh import MAX_JOINTS, MAX_NAME, BVHError, parse_bvh, read_bvh
+from core.bvh import _NUMBER, MAX_JOINTS, MAX_NAME, BVHError, parse_bvh, read_bvh
 from core.euler import euler_matrices
 
 # Root: 6 channels (position + Z X Y rotation), child 10 up, end site 5 up the child.
@@ -452,6 +454,119 @@ def test_reading_some_frames_reads_them_as_the_whole_read_does(body: str) -> Non
         parse_bvh(bad, "bad.bvh", frames=[2])
     assert str(some_error.value) == str(whole_error.value)
     assert parse_bvh(bad, "bad.bvh", frames=[1]).row(1).tobytes() == whole.row(1).tobytes()
+
+
+_NAN = "(BVH numbers are finite decimals: -1.5, 2e-3)"
+
+
+def _first_fault(body: str, first: int, n_frames: int, n_channels: int, some: bool) -> str | None:
+    """What the MOTION reader says of ``body``, as it said it when it split the block and
+    its lines whole (the reference the bounded reader is held to); ``some``: reading some
+    frames, line by line where the block holds one frame a line and no blank line."""
+    lines = body.split("\n")
+    ends = lines[:-1] if not lines[-1].strip() else lines  # (a blank last line is no frame)
+    read = 2 * n_frames * n_channels <= len(body) + 1  # (else read whole: too short)
+    if some and read and len(ends) == n_frames and all(map(str.strip, ends)):
+        for k, line in enumerate(ends):
+            if len(line.split()) != n_channels:
+                return f"line {first + k}: expected {n_channels} values per frame, got " + str(
+                    len(line.split())
+                )
+            bad = [w for w in line.split() if not re.fullmatch(_NUMBER, w)]
+            if bad:
+                return f"line {first + k}: not a number: {bad[0]!r} {_NAN}"
+        return None
+    if len(body.split()) != n_frames * n_channels:
+        seen = 0
+        for k, line in enumerate(lines):
+            count = len(line.split())
+            if count and seen >= n_frames:
+                return f"line {first + k}: more frame lines than the {n_frames} declared in " + (
+                    "'Frames:'"
+                )
+            if count and count != n_channels:
+                return f"line {first + k}: expected {n_channels} values per frame, got {count}"
+            seen += count > 0
+        return f"truncated: 'Frames:' declares {n_frames} frames, found {seen}"
+    for k, line in enumerate(lines):
+        bad = [w for w in line.split() if not re.fullmatch(_NUMBER, w)]
+        if bad:
+            return f"line {first + k}: not a number: {bad[0]!r} {_NAN}"
+    return None
+
+
+@pytest.mark.parametrize("window", [1, 4, 1 << 14])
+def test_motion_faults_are_found_as_when_the_block_was_split_whole(
+    window: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The MOTION block's words are counted a window at a time, its lines found one by one
+    and its numbers checked by one regex (no list of every word or line: an 8 MB block's
+    took 128-273 MiB): what the reader says of a random block is what it said when it split
+    it whole, read whole or frame by frame, whatever the window."""
+    from core import bvh
+
+    monkeypatch.setattr(bvh, "_WINDOW", window)
+    rng = random.Random(window)
+    words = ["0", "1.5", "-2e3", ".5", "1e999", "x", "nan", "1_0", "١", "+7."]
+    head = _ROOT.replace("CHANNELS 1 Xrotation", "CHANNELS 2 Xrotation Yrotation")
+    for _ in range(3000):
+        n_frames = rng.randint(0, 3)
+        body = "".join(
+            rng.choice([*words[:5] * 4, *words[5:]]) + rng.choice([" ", " ", "\n", "\t", "\r\n"])
+            for _ in range(rng.randint(0, 8))
+        )
+        text = f"{head}MOTION\nFrames: {n_frames}\nFrame Time: 0.1\n{body}"
+        for frames in (None, tuple(range(n_frames))):
+            want = _first_fault(body, 10, n_frames, 2, frames is not None)
+            try:
+                read = parse_bvh(text, "x", frames)
+            except BVHError as exc:
+                got: str | None = exc.reason
+            else:
+                got = None
+                values = [float(w) for w in body.split()]
+                assert read.motion.ravel().tolist() == values, (repr(body), frames)
+            assert got == want, (repr(body), frames)
+
+
+_H2 = _ROOT + "MOTION\n"  # one channel
+
+
+@pytest.mark.parametrize(
+    ("text", "frames", "reason"),
+    [  # (8.4 MB each; the old reader's peaks: 128, 273, 257, 254 MiB; the nan block was read)
+        (_H2 + "Frames: 1\nFrame Time: 0.1\n" + "0.0 " * 2_100_000, (0,), "line 10: expected 1 "),
+        (_H2 + "Frames: 1\nFrame Time: 0.1\n\n" + "0.0 " * 2_100_000, None, "line 11: expected 1"),
+        (_H2 + "Frames: 1\nFrame Time: 0.1\n\n" + "0.0 " * 2_100_000 + "x", None, "line 11: exp"),
+        (_H2 + "Frames: 2\nFrame Time: 0.1\n" + "0.0\n" * 2_100_000, None, "line 12: more frame"),
+        (_H2 + "Frames: 2100000\nFrame Time: 0.1\n" + "nan\n" * 2_100_000, None, "line 10: not a"),
+    ],
+    ids=["a-frame-line", "whole", "whole-and-a-word", "lines", "nan-lines"],
+)
+def test_a_huge_motion_block_is_refused_in_bounded_memory(
+    text: str, frames: tuple[int, ...] | None, reason: str
+) -> None:
+    """A MOTION block's faults are found without a list of its words or lines: an 8 MB
+    block of 2 M values takes numpy's table of them (16 MiB) and a copy of the block at
+    most, where splitting it took 128-273 MiB."""
+    tracemalloc.start()
+    try:
+        base = tracemalloc.get_traced_memory()[0]
+        got = _refusal(text, frames)
+        peak = tracemalloc.get_traced_memory()[1] - base
+    finally:
+        tracemalloc.stop()
+    assert got.startswith(reason), got
+    assert peak < 48 << 20, peak
+
+
+def test_no_frames_and_a_word_that_is_no_number_are_no_empty_motion() -> None:
+    """numpy's reader failing on a word left an empty table, which 'Frames: 0' took for all
+    the values: the block's words were never looked at (the fuzz against the old reader's
+    words found it)."""
+    text = _H2 + "Frames: 0\nFrame Time: 0.1\nx\n"
+    assert _refusal(text) == "line 10: more frame lines than the 0 declared in 'Frames:'"
+    assert parse_bvh(_H2 + "Frames: 0\nFrame Time: 0.1\n\n", "ok").motion.shape == (0, 1)
 
 
 def test_a_block_too_short_for_its_values_is_refused_without_a_table_for_them() -> None:
