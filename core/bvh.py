@@ -37,14 +37,26 @@ from __future__ import annotations
 import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field, replace
-from itertools import compress, islice
+from itertools import islice
 from pathlib import Path
 
 import numpy as np
 import numpy.typing as npt
 
+from core.bvh_words import MAX_NAME as MAX_NAME
+from core.bvh_words import (
+    WHOLE_RE,
+    Tokens,
+    as_number,
+    count_words,
+    explain_count,
+    fromstring,
+    motion_values,
+)
+from core.bvh_words import BVHError as BVHError
+from core.bvh_words import error as _error
 from core.euler import euler_matrices
-from core.text import quoted
+from core.text import clip, quoted
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -57,15 +69,6 @@ _BLANK_MID_RE = re.compile(r"\n[^\S\n]*\n")  # a blank line between two others
 _FRAME_LINE_RE = re.compile(r"^[^\n]*\S[^\n]*", re.MULTILINE)  # a non-blank line
 _FRAMES_RE = re.compile(r"^[ \t]*Frames:[ \t]*(\S+)[ \t]*\r?$")
 _FRAME_TIME_RE = re.compile(r"^[ \t]*Frame Time:[ \t]*(\S+)[ \t]*\r?$")
-
-
-class BVHError(ValueError):
-    """A malformed, truncated or unsupported BVH file; names the file and the reason."""
-
-    def __init__(self, file: str, reason: str) -> None:
-        super().__init__(f"{file}: {reason}")
-        self.file = file
-        self.reason = reason
 
 
 @dataclass(frozen=True)
@@ -220,40 +223,6 @@ def _after_newlines(text: str, at: int, k: int) -> int:
     return lo
 
 
-def _error(file: str, reason: str) -> BVHError:
-    return BVHError(file, reason)
-
-
-#: a number as BVH writers write one: ASCII digits with a sign, a point and an exponent.
-#: ``float()`` also reads ``1_000``, other scripts' digits (``١``) and ``nan``/``inf``, which
-#: no writer writes: the reader refuses them (an audit found the first two read, 2026-12-06).
-_NUMBER = r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?"
-_NUMBER_RE = re.compile(_NUMBER)
-#: a text's leading words that are numbers (each whole: atomic, possessive, no backtracking)
-_NUMBERS_RE = re.compile(rf"(?:\s*+(?>{_NUMBER})(?!\S))*+\s*+")
-_WORD_RE = re.compile(r"\S+")
-_SPACE_RE = re.compile(r"\s")
-_WHOLE_RE = re.compile(r"[+-]?[0-9]+")  # a whole number (a channel or frame count)
-
-
-def _number(word: str) -> float | None:
-    """``word``'s value if it is a BVH number, else None: what ``float()`` reads of an ASCII
-    word without ``_`` is a decimal where finite (else ``nan``, ``inf``, or a decimal past
-    the float range: the regex tells them apart). The same as the regex first (a fuzz of
-    2 M words agrees), at a third of its cost over ``float()`` alone (60 ns against 200)."""
-    try:
-        value = float(word)
-    except ValueError:
-        return None
-    if word.isascii() and "_" not in word and (value - value == 0 or _NUMBER_RE.fullmatch(word)):
-        return value
-    return None
-
-
-def _not_a_number(word: str) -> str:
-    return f"not a number: {quoted(word)} (BVH numbers are finite decimals: -1.5, 2e-3)"
-
-
 #: the deepest nesting of joints read (a real rig's fingers or hair are tens deep; the
 #: reader recurses once per level, and Python's stack holds about a thousand)
 MAX_DEPTH = 256
@@ -267,129 +236,6 @@ MAX_JOINTS = 2000
 #: of rotation channels up to this are read): one joint of 400,000 rotation channels took
 #: a worker past its deadline too (the same audit).
 MAX_JOINT_CHANNELS = 12
-#: the longest joint name read (the skeleton form's limit too, ``service.characters``), and
-#: the longest word of a HIERARCHY (the real files' longest name has 19 characters, their
-#: longest word 15): refused where it stands, as a joint past MAX_JOINTS is.
-MAX_NAME = 200
-_NON_SPACE_RE = re.compile(r"\S")
-_CUT_RE = re.compile(r"\r\n|\s")  # where a window of a HIERARCHY may end: after this
-#: characters of a HIERARCHY split into words at a time (a real file's whole hierarchy)
-_WINDOW = 1 << 14
-
-
-class _Tokens:
-    """The words of a HIERARCHY, ``text[:end]``, with their 1-based line numbers, split a
-    window of :data:`_WINDOW` characters at a time as the parser asks for them (lines, then
-    words, as ``str.split()`` splits: in C), a window's words dropped once read. So a
-    hierarchy is refused at its first fault or limit whatever follows, in bounded memory:
-    an audit's 8 MiB hierarchy of 4 M words was split whole first, 2.2-3.9 s and ~420 MiB a
-    request (2026-12-06). A word longer than :data:`MAX_NAME` is refused where it stands.
-    Lines end at \\n, \\r\\n or \\r only: ``str.splitlines()`` also breaks at U+0085,
-    U+2028 and some control characters, which a Latin-1 joint name may hold (0x85, '…')."""
-
-    def __init__(self, file: str, text: str, end: int) -> None:
-        self.file = file
-        self._text, self._end = text, end
-        # a UTF-8 byte order mark opening the file (Windows exporters write one) is no word
-        self._from = 1 if text.startswith("\ufeff") else 0  # the next window's start
-        self._next_line = 1  # the line there
-        self.items: list[tuple[str, int]] = []  # the window's words and their lines
-        self.pos = 0
-        self._long = 0  # the index in items of a word past MAX_NAME (len(items): none)
-        self._last = 1  # the line of the last word taken
-
-    def _more(self) -> bool:
-        """Split the next window into words (False at the end of the text). It ends just
-        after whitespace: a word is whole in it, or cut past MAX_NAME characters."""
-        text, at, end = self._text, self._from, self._end
-        found = _NON_SPACE_RE.search(text, at, end)  # (blank lines skipped in C)
-        if found is None:
-            return False
-        start = found.start()  # (a \r\n lies within [at, start): at follows whitespace)
-        first = self._next_line + text.count("\n", at, start) + text.count("\r", at, start)
-        first -= text.count("\r\n", at, start)
-        cut = min(start + _WINDOW, end)
-        if cut < end:
-            space = _CUT_RE.search(text, cut, min(cut + MAX_NAME + 1, end))
-            cut = min(cut + MAX_NAME + 1, end) if space is None else space.end()
-        window = text[start:cut]
-        lines = window.replace("\r\n", "\n").replace("\r", "\n").split("\n")
-        numbered = compress(enumerate(lines, start=first), map(str.strip, lines))
-        self.items = [(word, k) for k, line in numbered for word in line.split()]
-        self.pos = 0
-        self._long = len(self.items)
-        if max(map(len, lines)) > MAX_NAME:  # a line that may hold one (rare): word by word
-            long = (i for i, (w, _) in enumerate(self.items) if len(w) > MAX_NAME)
-            self._long = next(long, self._long)
-        self._from, self._next_line = cut, first + len(lines) - 1
-        return True
-
-    def _ready(self) -> bool:
-        """Whether a word is left (refused if longer than MAX_NAME)."""
-        while self.pos >= len(self.items):
-            if not self._more():
-                return False
-        if self.pos == self._long:
-            word, line = self.items[self.pos]
-            raise _error(
-                self.file, f"line {line}: a word of more than {MAX_NAME} characters: "
-                f"{quoted(word)} (no joint name, keyword or number is so long)",
-            )  # fmt: skip
-        return True
-
-    # (each first asks whether the word is one of the window's before any past MAX_NAME:
-    # a real file's hierarchy reads as fast as when it was split whole)
-    def line(self) -> int:
-        """The current word's line (at the end: the last word's)."""
-        if self.pos < self._long or self._ready():
-            return self.items[self.pos][1]
-        return self._last
-
-    def peek(self) -> str | None:
-        return self.items[self.pos][0] if self.pos < self._long or self._ready() else None
-
-    def next(self, what: str) -> str:
-        if self.pos >= self._long and not self._ready():
-            raise _error(self.file, f"unexpected end of HIERARCHY, expected {what}")
-        word, self._last = self.items[self.pos]
-        self.pos += 1
-        return word
-
-    def expect(self, word: str) -> None:
-        line = self.line()
-        tok = self.next(repr(word))
-        if tok != word:
-            raise _error(self.file, f"line {line}: expected {word!r}, got {quoted(tok)}")
-
-    def rest_of_line(self, what: str) -> str:
-        """The words left on the current word's line, up to a '{' (a joint name may have
-        spaces), joined by one space: at most :data:`MAX_NAME` characters."""
-        line = self.line()
-        if self.peek() is None:
-            raise _error(self.file, f"unexpected end of HIERARCHY, expected {what}")
-        words: list[str] = []
-        size = -1  # of the words joined
-        while (word := self.peek()) is not None and self.line() == line and word != "{":
-            size += 1 + len(word)
-            if size > MAX_NAME:
-                name = quoted(" ".join([*words, word]))
-                raise _error(
-                    self.file, f"line {line}: a joint name of more than {MAX_NAME} characters: "
-                    f"{name}",
-                )  # fmt: skip
-            words.append(self.next(what))
-        return " ".join(words)
-
-    def floats(self, n: int, what: str) -> list[float]:
-        out: list[float] = []
-        for _ in range(n):
-            line = self.line()
-            tok = self.next(what)
-            value = _number(tok)
-            if value is None:
-                raise _error(self.file, f"line {line}: {quoted(what)}: {_not_a_number(tok)}")
-            out.append(value)
-        return out
 
 
 class _Hierarchy:
@@ -399,7 +245,7 @@ class _Hierarchy:
     that kept the words of every hierarchy read until a full collection (the same audit:
     five refused 8 MiB hierarchies held a worker at 2.4 GiB)."""
 
-    def __init__(self, toks: _Tokens) -> None:
+    def __init__(self, toks: Tokens) -> None:
         self.toks = toks
         self.file = toks.file
         self.joints: list[BVHJoint] = []
@@ -464,7 +310,7 @@ class _Hierarchy:
         line = toks.line()
         toks.expect("CHANNELS")
         count_tok = toks.next("a channel count")
-        count = int(count_tok) if _WHOLE_RE.fullmatch(count_tok) else -1
+        count = int(count_tok) if WHOLE_RE.fullmatch(count_tok) else -1
         if count < 0:
             raise _error(
                 file, f"line {line}: bad channel count {quoted(count_tok)}: not a whole number >= 0"
@@ -494,7 +340,7 @@ class _Hierarchy:
 
 def _parse_hierarchy(file: str, text: str, end: int | None = None) -> list[BVHJoint]:
     """The joints of the HIERARCHY ``text[:end]`` (read in place: no copy of it is made)."""
-    toks = _Tokens(file, text, len(text) if end is None else end)
+    toks = Tokens(file, text, len(text) if end is None else end)
     toks.expect("HIERARCHY")
     reader = _Hierarchy(toks)
     while toks.peek() == "ROOT":
@@ -538,7 +384,8 @@ def parse_bvh(text: str, name: str = "<string>", frames: Iterable[int] | None = 
             raise _error(name, "not a BVH file (no HIERARCHY keyword)")
         raise _error(name, "missing MOTION section")
     joints = _parse_hierarchy(name, text, match.start())
-    n_channels = sum(len(j.channels) for j in joints)
+    columns = [f"{clip(j.name)}.{c}" for j in joints for c in j.channels]  # (errors name them)
+    n_channels = len(columns)
     if n_channels == 0:
         raise _error(name, "the hierarchy has no channels")
 
@@ -562,12 +409,12 @@ def parse_bvh(text: str, name: str = "<string>", frames: Iterable[int] | None = 
         raise _error(name, f"line {motion_line + 2}: expected 'Frame Time: <seconds>', got {got}")
     count = frames_match.group(1)
     try:
-        n_frames = int(count) if _WHOLE_RE.fullmatch(count) else None
+        n_frames = int(count) if WHOLE_RE.fullmatch(count) else None
     except ValueError:  # (past 4,300 digits)
         n_frames = None
     if n_frames is None:
         raise _error(name, f"line {motion_line + 1}: bad frame count {quoted(count)}")
-    frame_time = _number(time_match.group(1))
+    frame_time = as_number(time_match.group(1))
     if frame_time is None:
         got = quoted(time_match.group(1))
         raise _error(name, f"line {motion_line + 2}: bad Frame Time {got}: not a number")
@@ -580,11 +427,11 @@ def parse_bvh(text: str, name: str = "<string>", frames: Iterable[int] | None = 
     first_line = motion_line + 3
     some = None
     if frames is not None:
-        some = _read_frames(name, text, body_offset, first_line, n_frames, n_channels, frames)
+        some = _read_frames(name, text, body_offset, first_line, n_frames, columns, frames)
     read: frozenset[int] | None = None
     spans: dict[int, tuple[int, int]] = {}
     if some is None:
-        motion = _read_all(name, text[body_offset:], first_line, n_frames, n_channels)
+        motion = _read_all(name, text[body_offset:], first_line, n_frames, columns)
     else:
         motion, read, spans = some
     return BVH(
@@ -599,54 +446,15 @@ def parse_bvh(text: str, name: str = "<string>", frames: Iterable[int] | None = 
     )
 
 
-def _read_all(name: str, body: str, first_line: int, n_frames: int, n_channels: int) -> FloatArray:
-    """Every frame's values ``[F, C]`` of the MOTION block ``body``."""
-    values = _fromstring(body)
-    count = _count_words(body) if values is None else values.size
-    if count != n_frames * n_channels:
-        _explain_count(name, body, first_line, n_frames, n_channels)
-    return _numbers(name, body, first_line, values).reshape(n_frames, n_channels)
-
-
-def _fromstring(text: str) -> FloatArray | None:
-    """The numbers of ``text`` as numpy's own reader reads them, no Python object per value
-    (an 8 MB file: 84 -> 30 MB peak); None where it does not read every word (none of
-    whitespace alone, where it reads -1)."""
-    try:
-        values = np.fromstring(text, dtype=np.float64, sep=" ")
-    except ValueError:  # a word numpy does not read
-        return None
-    return np.zeros(0) if values.size == 1 and text.isspace() else values
-
-
-def _count_words(text: str) -> int:
-    """``len(text.split())``, split :data:`_WINDOW` characters at a time (no list of every
-    word: a line of 2 M values took 128 MiB to count)."""
-    count, at, end = 0, 0, len(text)
-    while at < end:
-        cut = min(at + _WINDOW, end)
-        if cut < end:  # to the next whitespace: no word is cut
-            space = _SPACE_RE.search(text, cut)
-            cut = end if space is None else space.start()
-        count += len(text[at:cut].split())
-        at = cut
-    return count
-
-
-def _numbers(name: str, text: str, first_line: int, values: FloatArray | None) -> FloatArray:
-    """The values of ``text``'s words (numpy's ``values`` where it read them all), each a BVH
-    number, else a BVHError naming the first other word and its line (one regex in C). numpy
-    reads ``nan`` and ``inf`` too, and no finite value of any other word (a fuzz: 300,000)."""
-    if values is not None and np.isfinite(values).all():
-        return values
-    numbers = _NUMBERS_RE.match(text)  # (always matches: maybe nothing)
-    word = _WORD_RE.search(text, numbers.end() if numbers else 0)
-    if word is not None:
-        start = word.start()
-        line = first_line + text.count("\n", 0, start)
-        shown = text[start : min(word.end(), start + MAX_NAME)]
-        raise _error(name, f"line {line}: {_not_a_number(shown)}")
-    return values if values is not None else np.array(text.split(), dtype=np.float64)
+def _read_all(
+    name: str, body: str, first_line: int, n_frames: int, columns: list[str]
+) -> FloatArray:
+    """Every frame's values ``[F, C]`` of the MOTION block ``body`` (``columns``: C names)."""
+    values = fromstring(body)
+    count = count_words(body) if values is None else values.size
+    if count != n_frames * len(columns):
+        explain_count(name, body, first_line, n_frames, len(columns))
+    return motion_values(name, body, first_line, values, columns, 0).reshape(n_frames, len(columns))
 
 
 def _read_frames(
@@ -655,7 +463,7 @@ def _read_frames(
     at: int,
     first_line: int,
     n_frames: int,
-    n_channels: int,
+    columns: list[str],
     frames: Iterable[int],
 ) -> tuple[FloatArray, frozenset[int], dict[int, tuple[int, int]]] | None:
     """The motion ``[F, C]`` with only ``frames``' rows read (the others NaN), the set read
@@ -663,6 +471,7 @@ def _read_frames(
     ``n_frames`` non-blank lines; None where it does not, or cannot hold the values
     (frames across lines, a count that does not match, fewer characters than the values
     need: the whole read explains it, and no table larger than the text allows is made)."""
+    n_channels = len(columns)
     if n_frames * n_channels * 2 > len(text) - at + 1:  # a value and a separator each
         return None
     if _BLANK_FIRST_RE.match(text, at) or _BLANK_MID_RE.search(text, at):
@@ -681,37 +490,12 @@ def _read_frames(
         spans[f] = (start, end)
         line_at, line_frame = start, f
         line, number = text[start:end], first_line + f  # (no blank line among them)
-        count = _count_words(line)
+        count = count_words(line)
         if count != n_channels:
             got = f"expected {n_channels} values per frame, got {count}"
             raise _error(name, f"line {number}: {got}")
-        motion[f] = _numbers(name, line, number, _fromstring(line))  # as a whole block is
+        motion[f] = motion_values(name, line, number, fromstring(line), columns, f)
     return motion, read, spans
-
-
-def _explain_count(name: str, body: str, first_line: int, n_frames: int, n_channels: int) -> None:
-    """Raise a BVHError pointing at the first MOTION line with the wrong number of values
-    (the lines found one at a time: no list of them all)."""
-    seen, offset, at = 0, 0, 0
-    while at <= len(body):
-        end = body.find("\n", at)
-        end = len(body) if end < 0 else end
-        line = body[at:end]
-        count = len(line.split()) if len(line) <= _WINDOW else _count_words(line)
-        if count and seen >= n_frames:
-            raise _error(
-                name,
-                f"line {first_line + offset}: more frame lines than the {n_frames} "
-                "declared in 'Frames:'",
-            )
-        if count and count != n_channels:
-            raise _error(
-                name,
-                f"line {first_line + offset}: expected {n_channels} values per frame, got {count}",
-            )
-        seen += count > 0
-        offset, at = offset + 1, end + 1
-    raise _error(name, f"truncated: 'Frames:' declares {n_frames} frames, found {seen}")
 
 
 def read_bvh(path: str | Path, name: str | None = None) -> BVH:

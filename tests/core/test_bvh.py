@@ -14,7 +14,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from core.bvh import _NUMBER, MAX_JOINTS, MAX_NAME, BVHError, parse_bvh, read_bvh
+from core.bvh import MAX_JOINTS, MAX_NAME, BVHError, parse_bvh, read_bvh
+from core.bvh_words import NUMBER
 from core.euler import euler_matrices
 
 # Root: 6 channels (position + Z X Y rotation), child 10 up, end site 5 up the child.
@@ -130,7 +131,7 @@ Frame Time: 0.01
         (lambda t: t.replace("Frames: 4", "Frames: 3"), "more frame lines than the 3"),
         (
             lambda t: t.replace("1 2 3 90 0 0 0 90 0", "1 2 3 90 x 0 0 90 0"),
-            "line 20: not a number",
+            "line 20: frame 1, channel root.Xrotation: not a number: 'x'",
         ),
         (lambda t: t.replace("CHANNELS 3 Zrotation", "CHANNELS 3 Wrotation"), "unknown channel"),
         (lambda t: t.replace("  }\n}\nMOTION", "MOTION"), "unexpected end of HIERARCHY"),
@@ -262,8 +263,9 @@ def test_only_ascii_decimals_are_numbers(word: str) -> None:
     or one alone, an OFFSET, the Frame Time."""
     hint = "(BVH numbers are finite decimals: -1.5, 2e-3)"
     frame = TINY.replace("1 2 3 90 0 0 0 90 0", f"1 2 3 {word} 0 0 0 90 0")
-    assert _refusal(frame) == f"line 20: not a number: {word!r} {hint}"
-    assert _refusal(frame, (1,)) == f"line 20: not a number: {word!r} {hint}"
+    at = "line 20: frame 1, channel root.Zrotation"
+    assert _refusal(frame) == f"{at}: not a number: {word!r} {hint}"
+    assert _refusal(frame, (1,)) == f"{at}: not a number: {word!r} {hint}"
     assert parse_bvh(frame, "x", (2,)).row(2).tolist() == [0, 0, 0, 90, 90, 0, 0, 0, 0]
     offset = TINY.replace("OFFSET 0 10 0", f"OFFSET 0 {word} 0")
     assert _refusal(offset) == f"line 8: 'OFFSET of child': not a number: {word!r} {hint}"
@@ -272,19 +274,19 @@ def test_only_ascii_decimals_are_numbers(word: str) -> None:
 
 
 def test_a_number_is_what_the_number_pattern_reads() -> None:
-    """``core.bvh._number`` (``float()``, then a check cheaper than the pattern) takes the
-    words ``_NUMBER_RE`` takes, with ``float()``'s value, and no other."""
+    """``core.bvh_words.as_number`` (``float()``, then a check cheaper than the pattern)
+    takes the words ``NUMBER_RE`` takes, with ``float()``'s value, and no other."""
     import random
     import struct
 
-    from core.bvh import _NUMBER_RE, _number
+    from core.bvh_words import NUMBER_RE, as_number
 
     rng = random.Random(0)
     alphabet = "0123456789+-.eE_naifty NAIFTYx١٣１²"
     for _ in range(200_000):
         word = "".join(rng.choice(alphabet) for _ in range(rng.randint(1, 9))).strip() or "0"
-        want = float(word) if _NUMBER_RE.fullmatch(word) else None
-        got = _number(word)
+        want = float(word) if NUMBER_RE.fullmatch(word) else None
+        got = as_number(word)
         assert (got is None) == (want is None), word
         assert want is None or struct.pack("d", got) == struct.pack("d", want), word
 
@@ -448,7 +450,9 @@ def test_reading_some_frames_reads_them_as_the_whole_read_does(body: str) -> Non
         some.forward_kinematics()
     # a bad value in the frame read is found as the whole read finds it, in another not
     bad = text.replace("0 0 0 90 90 0 0 0 0", "0 0 0 90 nope 0 0 0 0")
-    with pytest.raises(BVHError, match="line 21: not a number: 'nope'") as whole_error:
+    with pytest.raises(
+        BVHError, match=r"line 21: frame 2, channel root\.Xrotation: not a number: 'nope'"
+    ) as whole_error:
         parse_bvh(bad, "bad.bvh")
     with pytest.raises(BVHError) as some_error:
         parse_bvh(bad, "bad.bvh", frames=[2])
@@ -472,9 +476,10 @@ def _first_fault(body: str, first: int, n_frames: int, n_channels: int, some: bo
                 return f"line {first + k}: expected {n_channels} values per frame, got " + str(
                     len(line.split())
                 )
-            bad = [w for w in line.split() if not re.fullmatch(_NUMBER, w)]
+            bad = [i for i, w in enumerate(line.split()) if not re.fullmatch(NUMBER, w)]
             if bad:
-                return f"line {first + k}: not a number: {bad[0]!r} {_NAN}"
+                at = f"frame {k}, channel r.{'XY'[bad[0]]}rotation"
+                return f"line {first + k}: {at}: not a number: {line.split()[bad[0]]!r} {_NAN}"
         return None
     if len(body.split()) != n_frames * n_channels:
         seen = 0
@@ -488,10 +493,14 @@ def _first_fault(body: str, first: int, n_frames: int, n_channels: int, some: bo
                 return f"line {first + k}: expected {n_channels} values per frame, got {count}"
             seen += count > 0
         return f"truncated: 'Frames:' declares {n_frames} frames, found {seen}"
+    words = 0  # before the line
     for k, line in enumerate(lines):
-        bad = [w for w in line.split() if not re.fullmatch(_NUMBER, w)]
+        bad = [i for i, w in enumerate(line.split()) if not re.fullmatch(NUMBER, w)]
         if bad:
-            return f"line {first + k}: not a number: {bad[0]!r} {_NAN}"
+            frame, column = divmod(words + bad[0], n_channels)
+            at = f"frame {frame}, channel r.{'XY'[column]}rotation"
+            return f"line {first + k}: {at}: not a number: {line.split()[bad[0]]!r} {_NAN}"
+        words += len(line.split())
     return None
 
 
@@ -503,9 +512,9 @@ def test_motion_faults_are_found_as_when_the_block_was_split_whole(
     and its numbers checked by one regex (no list of every word or line: an 8 MB block's
     took 128-273 MiB): what the reader says of a random block is what it said when it split
     it whole, read whole or frame by frame, whatever the window."""
-    from core import bvh
+    from core import bvh_words
 
-    monkeypatch.setattr(bvh, "_WINDOW", window)
+    monkeypatch.setattr(bvh_words, "WINDOW", window)
     rng = random.Random(window)
     words = ["0", "1.5", "-2e3", ".5", "1e999", "x", "nan", "1_0", "١", "+7."]
     head = _ROOT.replace("CHANNELS 1 Xrotation", "CHANNELS 2 Xrotation Yrotation")
@@ -539,7 +548,11 @@ _H2 = _ROOT + "MOTION\n"  # one channel
         (_H2 + "Frames: 1\nFrame Time: 0.1\n\n" + "0.0 " * 2_100_000, None, "line 11: expected 1"),
         (_H2 + "Frames: 1\nFrame Time: 0.1\n\n" + "0.0 " * 2_100_000 + "x", None, "line 11: exp"),
         (_H2 + "Frames: 2\nFrame Time: 0.1\n" + "0.0\n" * 2_100_000, None, "line 12: more frame"),
-        (_H2 + "Frames: 2100000\nFrame Time: 0.1\n" + "nan\n" * 2_100_000, None, "line 10: not a"),
+        (
+            _H2 + "Frames: 2100000\nFrame Time: 0.1\n" + "nan\n" * 2_100_000,
+            None,
+            "line 10: frame 0, ",
+        ),
     ],
     ids=["a-frame-line", "whole", "whole-and-a-word", "lines", "nan-lines"],
 )
@@ -609,17 +622,17 @@ def test_reading_one_frame_of_real_files_is_bit_identical(more_mocap: Path) -> N
 def test_hierarchy_words_and_lines_are_those_of_its_lines_split(
     window: int, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """The hierarchy's words, split a window at a time (``core.bvh._Tokens``), and their
+    """The hierarchy's words, split a window at a time (``core.bvh_words.Tokens``), and their
     lines are ``str.split()``'s of each line where lines end at \\n, \\r\\n or \\r only
     (as ``re.split(r"\\r\\n|\\r|\\n")``: not at U+0085 or U+2028, which a Latin-1 joint
     name may hold), less a byte order mark opening the file; whatever the window."""
     import random
     import re
 
-    from core import bvh
-    from core.bvh import _Tokens
+    from core import bvh_words
+    from core.bvh_words import Tokens
 
-    monkeypatch.setattr(bvh, "_WINDOW", window)
+    monkeypatch.setattr(bvh_words, "WINDOW", window)
     ends = re.compile(r"\r\n|\r|\n")
     rng = random.Random(window)
     for _ in range(3000):
@@ -629,7 +642,7 @@ def test_hierarchy_words_and_lines_are_those_of_its_lines_split(
         lines = ends.split(text)
         lines[0] = lines[0].removeprefix("\ufeff")
         want = [(k, w) for k, line in enumerate(lines, start=1) for w in line.split()]
-        toks = _Tokens("t", text, len(text))
+        toks = Tokens("t", text, len(text))
         got = []
         while toks.peek() is not None:
             got.append((toks.line(), toks.next("a word")))

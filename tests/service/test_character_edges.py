@@ -66,7 +66,8 @@ def test_a_bvh_value_that_is_no_number_a_writer_writes_is_named(client: Any, val
     values = lines[row].split()
     lines[row] = " ".join([value, *values[1:]])
     body["bvh"] = "\n".join(lines)
-    needles = (f"bvh: line {row + 1}: not a number: {value!r}", "finite decimals")
+    at = f"bvh: line {row + 1}: frame {body['frame']}, channel "
+    needles = (at, f".Xposition: not a number: {value!r}", "finite decimals")
     _refused(client, "/v1/bvh/solve", body, *needles)
     _refused(client, "/v1/bvh/inspect", {"bvh": body["bvh"], "frame": body["frame"]}, *needles)
     lines[row] = " ".join(["1e999", *values[1:]])
