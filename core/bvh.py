@@ -56,7 +56,7 @@ from core.bvh_words import (
 from core.bvh_words import BVHError as BVHError
 from core.bvh_words import error as _error
 from core.euler import euler_matrices
-from core.text import clip, quoted
+from core.text import quoted
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -384,7 +384,7 @@ def parse_bvh(text: str, name: str = "<string>", frames: Iterable[int] | None = 
             raise _error(name, "not a BVH file (no HIERARCHY keyword)")
         raise _error(name, "missing MOTION section")
     joints = _parse_hierarchy(name, text, match.start())
-    columns = [f"{clip(j.name)}.{c}" for j in joints for c in j.channels]  # (errors name them)
+    columns = [(j.name, c) for j in joints for c in j.channels]  # (errors name them)
     n_channels = len(columns)
     if n_channels == 0:
         raise _error(name, "the hierarchy has no channels")
@@ -447,9 +447,10 @@ def parse_bvh(text: str, name: str = "<string>", frames: Iterable[int] | None = 
 
 
 def _read_all(
-    name: str, body: str, first_line: int, n_frames: int, columns: list[str]
+    name: str, body: str, first_line: int, n_frames: int, columns: list[tuple[str, str]]
 ) -> FloatArray:
-    """Every frame's values ``[F, C]`` of the MOTION block ``body`` (``columns``: C names)."""
+    """Every frame's values ``[F, C]`` of the MOTION block ``body`` (``columns``: the C
+    (joint name, channel) pairs)."""
     values = fromstring(body)
     count = count_words(body) if values is None else values.size
     if count != n_frames * len(columns):
@@ -463,7 +464,7 @@ def _read_frames(
     at: int,
     first_line: int,
     n_frames: int,
-    columns: list[str],
+    columns: list[tuple[str, str]],
     frames: Iterable[int],
 ) -> tuple[FloatArray, frozenset[int], dict[int, tuple[int, int]]] | None:
     """The motion ``[F, C]`` with only ``frames``' rows read (the others NaN), the set read

@@ -14,7 +14,7 @@ from itertools import compress
 import numpy as np
 import numpy.typing as npt
 
-from core.text import quoted
+from core.text import clip, quoted
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -213,7 +213,12 @@ def count_words(text: str, end: int | None = None) -> int:
 
 
 def motion_values(
-    name: str, text: str, first_line: int, values: FloatArray | None, columns: list[str], frame: int
+    name: str,
+    text: str,
+    first_line: int,
+    values: FloatArray | None,
+    columns: list[tuple[str, str]],
+    frame: int,
 ) -> FloatArray:
     """The values of ``text``'s words (numpy's ``values`` where it read them all), each a BVH
     number, else a BVHError naming the first other word, its line, frame (``text``'s first
@@ -227,7 +232,8 @@ def motion_values(
         start = word.start()
         line = first_line + text.count("\n", 0, start)
         frame_of, column = divmod(count_words(text, start), len(columns))
-        at = f"frame {frame + frame_of}, channel {columns[column]}"
+        joint, channel = columns[column]
+        at = f"frame {frame + frame_of}, channel {clip(joint)}.{channel}"
         shown = text[start : min(word.end(), start + MAX_NAME)]
         raise error(name, f"line {line}: {at}: {not_a_number(shown)}")
     return values if values is not None else np.array(text.split(), dtype=np.float64)
