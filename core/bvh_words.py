@@ -104,8 +104,8 @@ class Tokens:
         first = self._next_line + text.count("\n", at, start) + text.count("\r", at, start)
         first -= text.count("\r\n", at, start)
         cut = min(start + WINDOW, end)
-        if cut < end:
-            space = _CUT_RE.search(text, cut, min(cut + MAX_NAME + 1, end))
+        if cut < end:  # (+2: a \r\n after a word of MAX_NAME characters is whole)
+            space = _CUT_RE.search(text, cut, min(cut + MAX_NAME + 2, end))
             cut = min(cut + MAX_NAME + 1, end) if space is None else space.end()
         window = text[start:cut]
         lines = window.replace("\r\n", "\n").replace("\r", "\n").split("\n")
@@ -205,7 +205,7 @@ def count_words(text: str, end: int | None = None) -> int:
     while at < end:
         cut = min(at + WINDOW, end)
         if cut < end:  # to the next whitespace: no word is cut
-            space = _SPACE_RE.search(text, cut)
+            space = _SPACE_RE.search(text, cut, end)
             cut = end if space is None else space.start()
         count += len(text[at:cut].split())
         at = cut

@@ -648,6 +648,18 @@ def test_hierarchy_words_and_lines_are_those_of_its_lines_split(
             got.append((toks.line(), toks.next("a word")))
         assert got == want, repr(text)
         assert toks.line() == (want[-1][0] if want else 1), repr(text)
+    # a word of MAX_NAME characters where a window is cut, then \r\n: one line break
+    for before in ("x ", "x\n", "xy\r\n", "x  "):
+        text = before + "a" * MAX_NAME + "\r\nb\rc"
+        toks = Tokens("t", text, len(text))
+        got = [(toks.line(), toks.next("a word")) for _ in range(4)]
+        first = 1 + ("\n" in before)
+        assert got == [
+            (1, before.strip()),
+            (first, "a" * MAX_NAME),
+            (first + 1, "b"),
+            (first + 2, "c"),
+        ]
 
 
 @pytest.mark.parametrize(
