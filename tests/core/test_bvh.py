@@ -648,6 +648,14 @@ def test_hierarchy_words_and_lines_are_those_of_its_lines_split(
             got.append((toks.line(), toks.next("a word")))
         assert got == want, repr(text)
         assert toks.line() == (want[-1][0] if want else 1), repr(text)
+    # words up to MAX_NAME characters long, wherever a window is cut
+    words, spaces = ["a", "b", "x" * (MAX_NAME - 2), "y" * MAX_NAME], [" ", "\r", "\r\n", "\n\t"]
+    for _ in range(300):
+        text = "".join(rng.choice(words) + rng.choice(spaces) for _ in range(rng.randint(1, 9)))
+        lines = ends.split(text)
+        want = [(k, w) for k, line in enumerate(lines, start=1) for w in line.split()]
+        toks = Tokens("t", text, len(text))
+        assert [(toks.line(), toks.next("a word")) for _ in want] == want, repr(text)
     # a word of MAX_NAME characters where a window is cut, then \r\n: one line break
     for before in ("x ", "x\n", "xy\r\n", "x  "):
         text = before + "a" * MAX_NAME + "\r\nb\rc"
