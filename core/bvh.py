@@ -242,8 +242,8 @@ class _Hierarchy:
     """The joints of a HIERARCHY as its words are read: a joint's children by recursion
     (:meth:`joint`, at most :data:`MAX_DEPTH` deep), at most :data:`MAX_JOINTS` joints. A
     class: a nested function that calls itself is in its own closure, a reference cycle
-    that kept the words of every hierarchy read until a full collection (the same audit:
-    five refused 8 MiB hierarchies held a worker at 2.4 GiB)."""
+    that kept the words of every hierarchy read until a full collection (a hardening audit,
+    2026-12-06: five refused 8 MiB hierarchies held a worker at 2.4 GiB)."""
 
     def __init__(self, toks: Tokens) -> None:
         self.toks = toks
