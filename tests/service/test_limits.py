@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 import anyio
+import numpy as np
 import pytest
 
 from service.limits import ComputeLimiter, _wave
@@ -131,10 +132,11 @@ def test_a_batch_whose_items_are_all_done_is_answered_with_no_compute_thread_fre
 def test_soft_unpinned_edits_run_on_the_loop_and_the_rest_in_a_worker(
     client: Any, real_poses: PosePairs, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """A single edit in neural soft reach without pins is answered on the event loop's
-    thread, the turn search and composed solvers too (in a worker they share the GIL with
-    the loop and took longer: docs/service.md); pins, exact reach and FABRIK run in a
-    worker thread, so the loop stays free of their FABRIK iterations."""
+    """A single edit in neural soft reach without pins, no more passes than served and no
+    turn search is answered on the event loop's thread, composed solvers and a 5-target
+    edit the gate keeps from searching too (in a worker they share the GIL with the loop:
+    docs/service.md); pins, exact reach, FABRIK, extra passes and a turn search run in a
+    worker thread, so the loop stays free of their work (``service.routes.solve.inline``)."""
     from service.engine import Engine
     from tests.service.test_api import solve_body
 
@@ -149,17 +151,24 @@ def test_soft_unpinned_edits_run_on_the_loop_and_the_rest_in_a_worker(
     five = ["head", "left_wrist", "right_wrist", "left_ankle", "right_ankle"]
     wrists = solve_body(real_poses, 0, ["left_wrist", "right_wrist"])
     pinned = {**wrists, "pins": ["left_ankle"]}
+    still = solve_body(real_poses, 0, five)  # its targets 1 cm from its joints: no search
+    for t in still["targets"]:
+        t["position"] = [v + 0.01 for v in still["pose"][t["joint"]]]
+    turned = solve_body(real_poses, 0, five, lambda p: p @ np.diag([-1.0, 1.0, -1.0]))
+    turned["pose"] = still["pose"]  # its goal turned half round: it searches
     bodies = {
         "light": [
             wrists,
             solve_body(real_poses, 1, ["left_elbow"]),
-            solve_body(real_poses, 0, five),  # the turn search
+            still,
             solve_body(real_poses, 0, ["left_elbow", "right_knee"]),  # two solvers composed
         ],
         "worker": [
             pinned,
             solve_body(real_poses, 0, ["left_wrist"], reach="exact"),
             solve_body(real_poses, 0, ["left_wrist"], method="fabrik"),
+            solve_body(real_poses, 0, ["left_wrist"], passes=3),
+            turned,
         ],
     }
     threads: dict[str, list[int]] = {}
