@@ -383,6 +383,33 @@ def synthetic_poses() -> PosePairs:
     return make_synthetic_poses()
 
 
+def traced(work: Any, settle: float = 0.0, below: int = 0) -> tuple[Any, float, int, int]:
+    """``work()`` with the cyclic collector off and tracemalloc on: its result, seconds,
+    and the bytes it left held and at its peak (``settle`` s at most for what it held to
+    fall below ``below`` bytes: a thread of the app may still let go). Memory held without
+    the cyclic collector is what a reference cycle would keep."""
+    import gc
+    import time
+    import tracemalloc
+
+    gc.collect()
+    gc.disable()
+    tracemalloc.start()
+    try:
+        base = tracemalloc.get_traced_memory()[0]
+        start = time.perf_counter()
+        got = work()
+        took = time.perf_counter() - start
+        until = time.monotonic() + settle
+        while tracemalloc.get_traced_memory()[0] - base >= below and time.monotonic() < until:
+            time.sleep(0.05)
+        held, peak = (m - base for m in tracemalloc.get_traced_memory())
+    finally:
+        tracemalloc.stop()
+        gc.enable()
+    return got, took, held, peak
+
+
 def make_client(models_dir: Path, **settings: Any) -> Any:
     from fastapi.testclient import TestClient
 

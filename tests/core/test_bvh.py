@@ -6,7 +6,6 @@ from __future__ import annotations
 import gc
 import random
 import re
-import time
 import tracemalloc
 from pathlib import Path
 from typing import Any
@@ -17,6 +16,7 @@ import pytest
 from core.bvh import MAX_JOINTS, MAX_NAME, BVHError, parse_bvh, read_bvh
 from core.bvh_words import NUMBER
 from core.euler import euler_matrices
+from tests.conftest import traced
 
 # Root: 6 channels (position + Z X Y rotation), child 10 up, end site 5 up the child.
 TINY = """HIERARCHY
@@ -269,8 +269,8 @@ def test_only_ascii_decimals_are_numbers(word: str) -> None:
     assert parse_bvh(frame, "x", (2,)).row(2).tolist() == [0, 0, 0, 90, 90, 0, 0, 0, 0]
     offset = TINY.replace("OFFSET 0 10 0", f"OFFSET 0 {word} 0")
     assert _refusal(offset) == f"line 8: 'OFFSET of child': not a number: {word!r} {hint}"
-    time = TINY.replace("Frame Time: 0.0333333", f"Frame Time: {word}")
-    assert _refusal(time) == f"line 18: bad Frame Time {word!r}: not a number"
+    frame_time = TINY.replace("Frame Time: 0.0333333", f"Frame Time: {word}")
+    assert _refusal(frame_time) == f"line 18: bad Frame Time {word!r}: not a number"
 
 
 def test_a_number_is_what_the_number_pattern_reads() -> None:
@@ -689,18 +689,7 @@ def test_a_huge_hierarchy_is_refused_at_its_first_fault_and_nothing_is_kept(
     reference cycle, kept them after the refusal until a full collection (five requests took
     a worker from 0.3 to 2.4 GiB). Now each is refused at its first fault or limit, its line
     named, in bounded memory, and nothing of it is left without the cyclic collector."""
-    gc.collect()
-    gc.disable()
-    tracemalloc.start()
-    try:
-        base = tracemalloc.get_traced_memory()[0]
-        start = time.perf_counter()
-        got = _refusal(text)
-        took = time.perf_counter() - start
-        held, peak = (m - base for m in tracemalloc.get_traced_memory())
-    finally:
-        tracemalloc.stop()
-        gc.enable()
+    got, took, held, peak = traced(lambda: _refusal(text))
     assert got.startswith(reason), got
     assert len(got) < 400
     assert peak < 4 << 20, peak  # (was 430-450 MiB)

@@ -5,11 +5,8 @@ names what was wrong, or a right answer; never a 500 or an answer with a non-fin
 from __future__ import annotations
 
 import copy
-import gc
 import json
 import math
-import time
-import tracemalloc
 from typing import Any
 
 import pytest
@@ -17,7 +14,7 @@ import pytest
 from core.bvh import MAX_DEPTH
 from core.text import QUOTE
 from service.errors import MAX_DETAIL
-from tests.conftest import REPO_ROOT
+from tests.conftest import REPO_ROOT, traced
 from tests.service.test_api import assert_problem
 
 EXAMPLES = REPO_ROOT / "docs" / "examples"
@@ -216,23 +213,9 @@ def test_a_hierarchy_of_millions_of_words_is_refused_at_once_and_nothing_is_kept
     body = json.dumps({"bvh": bvh, "frame": 0}).encode()
     headers = {"content-type": "application/json"}
     client.post("/v1/bvh/inspect", content=body, headers=headers)  # (the route's first use)
-    gc.collect()
-    gc.disable()
-    tracemalloc.start()
-    try:
-        base = tracemalloc.get_traced_memory()[0]
-        start = time.perf_counter()
-        r = client.post("/v1/bvh/inspect", content=body, headers=headers)
-        took = time.perf_counter() - start
-        settled = time.monotonic() + 2  # (the app's thread may still let go of the body)
-        while tracemalloc.get_traced_memory()[0] - base >= 8 << 20:
-            if time.monotonic() > settled:
-                break
-            time.sleep(0.05)
-        held, peak = (m - base for m in tracemalloc.get_traced_memory())
-    finally:
-        tracemalloc.stop()
-        gc.enable()
+    r, took, held, peak = traced(
+        lambda: client.post("/v1/bvh/inspect", content=body, headers=headers), 2.0, 8 << 20
+    )  # (the app's thread may still let go of the body)
     assert held < 8 << 20, held  # (0.1 MiB; was ~420 MiB)
     assert peak < 96 << 20, peak  # (26 MiB: the body, its text, their copies; was +430 MiB)
     assert took < 2.0, took  # (0.1 s traced; was 2.2-3.9 s untraced)

@@ -135,18 +135,25 @@ def _cases(n: int) -> Iterator[tuple[int, type[BaseModel], Any, ValidationError]
             yield seed, model, data, exc
 
 
+def _bounded_cases(n: int) -> Iterator[tuple[Any, ...]]:
+    """:func:`_cases` validated under a budget: seed, context, the errors shown, their
+    total and whether it is partial, plain pydantic's error and its errors."""
+    for seed, model, data, plain in _cases(n):
+        ctx = bounded.context()
+        with pytest.raises(ValidationError) as caught:
+            model.model_validate(data, context=ctx)
+        shown, total, partial = bounded.errors_of(caught.value, ctx)
+        ref = plain.errors(include_url=False, include_context=True)
+        yield seed, ctx, shown, total, partial, plain, ref
+
+
 def _same(error: Any) -> tuple[Any, ...]:
     return error["loc"], error["type"], error["msg"], error.get("ctx")
 
 
 def test_bounded_validation_finds_pydantics_first_errors_and_count() -> None:
     checked = counted = 0
-    for seed, model, data, plain in _cases(300):
-        ctx = bounded.context()
-        with pytest.raises(ValidationError) as caught:
-            model.model_validate(data, context=ctx)
-        shown, total, partial = bounded.errors_of(caught.value, ctx)
-        ref = plain.errors(include_url=False, include_context=True)
+    for seed, ctx, shown, total, partial, plain, ref in _bounded_cases(300):
         assert (total, partial) == (plain.error_count(), False), seed
         assert [_same(e) for e in shown] == [_same(e) for e in ref[:MAX_ERRORS]], seed
         assert bytes(validation_problem(shown, total).body) == bytes(
@@ -162,12 +169,7 @@ def test_past_the_count_limit_the_count_is_at_least_and_the_first_errors_the_sam
 ) -> None:
     monkeypatch.setattr(bounded, "COUNT_LIMIT", 40)
     skipped = 0
-    for seed, model, data, plain in _cases(300):
-        ctx = bounded.context()
-        with pytest.raises(ValidationError) as caught:
-            model.model_validate(data, context=ctx)
-        shown, total, partial = bounded.errors_of(caught.value, ctx)
-        ref = plain.errors(include_url=False, include_context=True)
+    for seed, _, shown, total, partial, plain, ref in _bounded_cases(300):
         assert [_same(e) for e in shown] == [_same(e) for e in ref[:MAX_ERRORS]], seed
         assert total == plain.error_count() or (partial and 40 <= total <= plain.error_count())
         skipped += partial
