@@ -412,10 +412,13 @@ def _character(
     stated: bool = True,
     up_stated: bool = True,
     points: str = "bvh",
+    fields: str = "",
 ) -> Character:
     """The character of a pose; ``units`` and ``up`` as the client gave them (None: read
     from the rest pose; ``stated`` / ``up_stated`` False: the character form's default),
-    errors naming the fields ``<prefix>units`` and ``<prefix>up``."""
+    errors naming the fields ``<prefix>units`` and ``<prefix>up``; ``fields``: where its
+    units and up are, an item's prefix left out (``character.``; none for BVH), and
+    ``points``: what a degenerate pose of its mapped points is put down to."""
     where = f"{prefix}units"
     if isinstance(units, str) and units in UNITS:  # a named unit: a slip is refused
         _, leg = infer_units(skel, jmap)
@@ -465,7 +468,6 @@ def _character(
                 'state it, e.g. "up": "+Z"'
             )
         up = found
-    fields = prefix[prefix.rfind("character.") :] if "character." in prefix else ""
     return Character(
         skel, pose, jmap, units_scale(units), up_rotation(up), units, up, fields, points
     )
@@ -658,8 +660,9 @@ def character_from_request(req: CharacterSolveRequest, where: str = "") -> Chara
         where = f"{prefix}character."
         points = "joint_map" if req.joint_map else "character.joints"
         return _character(
-            skel, pose, jmap, units, up, where, "units" in given, "up" in given, points
-        )
+            skel, pose, jmap, units, up, where, "units" in given, "up" in given, points,
+            "character.",
+        )  # fmt: skip
     except CharacterError as exc:
         raise _invalid(exc) from None
 

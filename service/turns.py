@@ -173,11 +173,6 @@ def own_sum(x: npt.NDArray[np.floating], widths: npt.NDArray[np.int64]) -> F64:
     return out
 
 
-def fitted_yaw(poses: F64, items: _Items, rows: npt.NDArray[np.intp]) -> F64:
-    """The turn of :func:`fitted` alone (radians)."""
-    return _fit(poses, items, rows)[0]
-
-
 def target_motion(poses: F64, items: _Items, rows: npt.NDArray[np.intp]) -> F64:
     """How far across (m) the targets of each of ``items[rows]`` lie from the joints of its
     start ``poses [N, 21, 3]`` they are for, on average: an edit that moves its targets
@@ -195,18 +190,6 @@ def fitted(poses: F64, items: _Items, rows: npt.NDArray[np.intp]) -> tuple[F64, 
     the turn about the vertical and the shift across that best carry its targeted joints
     onto their targets (least squares over x and z; heights as they were), and each turn
     in radians, as :func:`turned` would turn it."""
-    yaw, sc, dc = _fit(poses, items, rows)
-    c, s = np.cos(yaw)[:, None], np.sin(yaw)[:, None]
-    x, z = poses[:, :, 0] - sc[:, :1], poses[:, :, 2] - sc[:, 1:]
-    out = poses.copy()
-    out[:, :, 0] = c * x + s * z + dc[:, :1]
-    out[:, :, 2] = -s * x + c * z + dc[:, 1:]
-    return out, yaw
-
-
-def _fit(poses: F64, items: _Items, rows: npt.NDArray[np.intp]) -> tuple[F64, F64, F64]:
-    """:func:`fitted`'s turn (radians) and the centroids across (x, z) of the targeted
-    joints and of their targets."""
     tidx, tpos = items.tidx[rows], items.tpos[rows]
     own = items.n_t[rows]  # each item's targets: its first columns (no pins: it searches)
     n = own[:, None].astype(np.float64)
@@ -218,7 +201,13 @@ def _fit(poses: F64, items: _Items, rows: npt.NDArray[np.intp]) -> tuple[F64, F6
     # turned(): x' = c x + s z, z' = -s x + c z; maximise sum(b . R a)
     cos = own_sum(a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1], own)
     sin = own_sum(a[..., 1] * b[..., 0] - a[..., 0] * b[..., 1], own)
-    return np.arctan2(sin, cos), sc, dc
+    yaw = np.arctan2(sin, cos)
+    c, s = np.cos(yaw)[:, None], np.sin(yaw)[:, None]
+    x, z = poses[:, :, 0] - sc[:, :1], poses[:, :, 2] - sc[:, 1:]
+    out = poses.copy()
+    out[:, :, 0] = c * x + s * z + dc[:, :1]
+    out[:, :, 2] = -s * x + c * z + dc[:, 1:]
+    return out, yaw
 
 
 #: Items whose final answer the search already has: their indices and that answer.
@@ -279,7 +268,7 @@ def search(
     deg = np.rint(360.0 * best / t.yaws).astype(np.int64)
     fit = np.flatnonzero(best == t.yaws) if t.fit > 0.0 else np.zeros(0, np.intp)
     if fit.size:  # the fitted start: its own turn
-        yaw = fitted_yaw(items.poses[sel[fit]], items, sel[fit])
+        yaw = fitted(items.poses[sel[fit]], items, sel[fit])[1]
         deg[fit] = np.rint(np.degrees(yaw)).astype(np.int64) % 360
         moved[sel[fit]] = True
     degrees[sel] = np.where(deg > 180, deg - 360, deg)
