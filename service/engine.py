@@ -24,7 +24,7 @@ import dataclasses
 from collections.abc import Mapping, Sequence
 from functools import lru_cache
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 import numpy.typing as npt
@@ -232,7 +232,7 @@ class Engine:
             return []
         if n == 1:  # one edit (the interactive case): the lean path, if it qualifies
             lean = self._lean_single(problems[0])
-            if lean is not None:
+            if isinstance(lean, SolveResult):
                 return [lean]
         ans = self.solve_arrays(
             **stacked(problems),
@@ -242,27 +242,39 @@ class Engine:
         )
         return [self._result(p, ans, b) for b, p in enumerate(problems)]
 
-    def _lean_single(self, p: SolveProblem) -> SolveResult | None:
+    def _lean_single(self, p: SolveProblem) -> SolveResult | Literal["searches"] | None:
         """One edit on the lean path (:mod:`service.lean`) straight from its problem, if
-        it qualifies: what :meth:`solve_arrays` gives it, without its option arrays."""
+        it qualifies: what :meth:`solve_arrays` gives it, without its option arrays;
+        ``"searches"`` if it searches its turn (:mod:`service.turns`), None if it takes the
+        general path for another reason."""
         tidx = compiled.as_i64(p.target_idx)
         weights = compiled.as_f64(p.weights)
-        passes, seq, may_turn = 1, None, False
+        passes, seq, look = 1, None, None
         if p.method != "fabrik":
+            pinned = p.n_targets < len(tidx)
+            if self.turn_search.searches(p.method, p.n_targets, pinned, p.turn_search):
+                if self.turn_search.gate <= 0.0:
+                    return "searches"
+                look = self._items_of(p)
+                if turns.searching(self, look[1]).size:
+                    return "searches"  # its targets say the body turned
             if not p.preserve_bone_lengths:
                 return None  # the bone pass left out: the general path
-            pinned = p.n_targets < len(tidx)
-            may_turn = self.turn_search.searches(p.method, p.n_targets, pinned, p.turn_search)
-            if may_turn and self.turn_search.gate <= 0.0:
-                return None  # a turn search (service.turns): the general path
             passes, seq = self.passes_of(p), covering(self, tidx, weights)
             if seq is None or passes < 1:
                 return None
-        asked, items = self._items_of(p)
-        if may_turn and turns.searching(self, items).size:
-            return None  # its targets say the body turned: the search, on the general path
+        asked, items = self._items_of(p) if look is None else look
         ans = retry.last_steps(self, items, lean_answer(self, items, passes, seq))
         return self._result(p, prefer_fabrik(self, asked, ans, self._solve_items), 0)
+
+    def solve_lone(self, p: SolveProblem) -> SolveResult | None:
+        """``solve([p])[0]``, or None if ``p`` searches its turn (a dozen solves: the
+        routes run those in a worker, the others on the event loop), its targets looked
+        at once for both."""
+        lean = self._lean_single(p)
+        if lean == "searches":
+            return None
+        return lean if isinstance(lean, SolveResult) else self.solve([p])[0]
 
     def _items_of(self, p: SolveProblem) -> tuple[_Items, _Items]:
         """One problem as items: as asked, and with its start moved across as the serving
@@ -270,16 +282,6 @@ class Engine:
         asked = _Items.of_problem(p, self.carry_of(p), self.mirror_of(p))
         return asked, asked.travelled(
             self.serving.pelvis_travel, self.serving.reach_travel, self.turn_search.min_targets
-        )
-
-    def searches_turn(self, p: SolveProblem) -> bool:
-        """Whether the lone edit ``p`` searches its turn (:mod:`service.turns`), its
-        targets' look at the gate included: the edits that cost a dozen solves."""
-        pinned = p.n_targets < len(p.target_idx)
-        if not self.turn_search.searches(p.method, p.n_targets, pinned, p.turn_search):
-            return False
-        return self.turn_search.gate <= 0.0 or bool(
-            turns.searching(self, self._items_of(p)[1]).size
         )
 
     def passes_of(self, p: SolveProblem) -> int:

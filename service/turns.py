@@ -53,6 +53,7 @@ from typing import TYPE_CHECKING, Literal
 import numpy as np
 import numpy.typing as npt
 
+from core import compiled
 from core.geometry import canonicalise
 from core.manifest import Serving
 from service import completion
@@ -177,12 +178,10 @@ def target_motion(poses: F64, items: _Items, rows: npt.NDArray[np.intp]) -> F64:
     """How far across (m) the targets of each of ``items[rows]`` lie from the joints of its
     start ``poses [N, 21, 3]`` they are for, on average: an edit that moves its targets
     this little asks for no turn of the body (a quarter turn carries a standing body's
-    wrists 0.3 m and its ankles 0.15)."""
-    tidx, own = items.tidx[rows], items.n_t[rows]
-    src = np.take_along_axis(poses, tidx[:, :, None], axis=1)
-    gap = items.tpos[rows] - src
-    out: F64 = own_sum(np.hypot(gap[..., 0], gap[..., 2]), own) / own
-    return out
+    wrists 0.3 m and its ankles 0.15). Compiled (``core.compiled.target_motion``)."""
+    return compiled.target_motion(
+        compiled.as_f64(poses), items.tidx, items.tpos, items.n_t, compiled.as_i64(rows)
+    )
 
 
 def fitted(poses: F64, items: _Items, rows: npt.NDArray[np.intp]) -> tuple[F64, F64]:

@@ -108,8 +108,9 @@ async def solve_one(p: SolveProblem, pinned: bool, engine: Engine, budget: Budge
     """One pose problem (``pinned``: it has pins), its engine time added to the budget's:
     a cheap one inline (:func:`inline`: 0.1-0.7 ms), anything else in a worker thread on a
     compute token within the deadline (FABRIK iterations, pins, exact reach, a turn search
-    or extra passes can take milliseconds: the loop stays free). The search's look at the
-    targets (``serving.turn_gate``) is made twice for a 5-target edit: ~20 us.
+    or extra passes can take milliseconds: the loop stays free). Whether an edit searches
+    its turn is known once its targets are looked at (``serving.turn_gate``):
+    ``Engine.solve_lone`` looks, and solves it unless it searches.
 
     The turn search ran inline too, once (in a worker it shares the GIL with the loop: a
     lone 5-target edit took 6.2 against 5.0 ms over HTTP), but a flood of them starved
@@ -120,20 +121,21 @@ async def solve_one(p: SolveProblem, pinned: bool, engine: Engine, budget: Budge
     if inline(p, pinned, engine):
         budget.due("the solve")
         t = time.perf_counter()
-        (result,) = engine.solve([p])
+        result = engine.solve_lone(p)
         budget.compute += time.perf_counter() - t
-        return result
+        if result is not None:
+            return result
     (result,) = await budget.run(engine.solve, [p], Pricing.of(engine))
     return result
 
 
 def inline(p: SolveProblem, pinned: bool, engine: Engine) -> bool:
-    """Whether a lone edit is solved on the event loop: neural, soft reach, no pins, no
-    more passes than the models serve, and no turn search (``Engine.searches_turn``: its
-    cost then a few network runs, ``service.lean``)."""
+    """Whether a lone edit may be solved on the event loop: neural, soft reach, no pins and
+    no more passes than the models serve (its cost then a few network runs,
+    ``service.lean``), unless it searches its turn (``Engine.solve_lone`` tells)."""
     return (
         p.method == "neural" and p.reach == "soft" and not pinned
-        and engine.passes_of(p) <= engine.serving.passes and not engine.searches_turn(p)
+        and engine.passes_of(p) <= engine.serving.passes
     )  # fmt: skip
 
 

@@ -140,14 +140,22 @@ def test_soft_unpinned_edits_run_on_the_loop_and_the_rest_in_a_worker(
     from service.engine import Engine
     from tests.service.test_api import solve_body
 
-    where: list[int] = []
-    solve = Engine.solve
+    where: list[int] = []  # the thread of each solve
+    solve, solve_lone = Engine.solve, Engine.solve_lone
 
     def spy(self: Engine, problems: Any) -> Any:
         where.append(threading.get_ident())
         return solve(self, problems)
 
+    def spy_lone(self: Engine, p: Any) -> Any:  # a solve where it answers (not a search)
+        n = len(where)
+        result = solve_lone(self, p)
+        if result is not None and len(where) == n:
+            where.append(threading.get_ident())
+        return result
+
     monkeypatch.setattr(Engine, "solve", spy)
+    monkeypatch.setattr(Engine, "solve_lone", spy_lone)
     five = ["head", "left_wrist", "right_wrist", "left_ankle", "right_ankle"]
     wrists = solve_body(real_poses, 0, ["left_wrist", "right_wrist"])
     pinned = {**wrists, "pins": ["left_ankle"]}
