@@ -595,6 +595,7 @@ def test_unexpected_errors_keep_the_request_id(
             raise RuntimeError("injected fault")
 
         monkeypatch.setattr(engine, "solve", boom)
+        monkeypatch.setattr(engine, "solve_lone", boom)  # (a lone soft edit's)
         resp = c.post(
             "/v1/solve",
             json=solve_body(synthetic_poses, 0, ["head"]),

@@ -149,16 +149,21 @@ def test_a_lone_soft_edit_past_its_deadline_is_a_504_not_a_solve(
     from service.middleware.fastpath import FastPath
 
     solved: list[int] = []
-    solve = Engine.solve
+    solve, solve_lone = Engine.solve, Engine.solve_lone
 
     def spy(self: Engine, problems: Any) -> Any:
         solved.append(len(problems))
         return solve(self, problems)
 
+    def spy_lone(self: Engine, p: Any) -> Any:
+        solved.append(1)
+        return solve_lone(self, p)
+
     async def decline(*args: Any) -> bool:
         return False
 
     monkeypatch.setattr(Engine, "solve", spy)
+    monkeypatch.setattr(Engine, "solve_lone", spy_lone)
     if way == "route":
         monkeypatch.setattr(FastPath, "_solve", decline)
     with make_client(models_dir, deadline_seconds=1e-6) as c:

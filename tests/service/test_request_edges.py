@@ -90,6 +90,7 @@ def test_a_500_carries_the_headers_of_every_answer(
             raise RuntimeError("injected fault")
 
         monkeypatch.setattr(engine, "solve", boom)
+        monkeypatch.setattr(engine, "solve_lone", boom)  # (a lone soft edit's)
         r = c.post("/v1/solve", json=_example("solve"), headers={"X-Request-ID": "r-500"})
         assert_problem(r, 500)
         assert r.headers["x-request-id"] == "r-500"
