@@ -8,9 +8,9 @@ from typing import Any
 
 from fastapi import FastAPI
 from fastapi.responses import HTMLResponse
-from fastapi.staticfiles import StaticFiles
 
 from service.errors import WWW_AUTHENTICATE
+from service.files import Files
 from service.schemas import Problem
 
 _PROBLEM_STATUS = {
@@ -191,4 +191,4 @@ def mount_docs(app: FastAPI) -> None:
     async def docs() -> HTMLResponse:
         return HTMLResponse(_PAGE, headers={"Content-Security-Policy": DOCS_CSP})
 
-    app.mount("/docs/assets", StaticFiles(directory=VENDOR), name="docs-assets")
+    app.mount("/docs/assets", Files(directory=VENDOR), name="docs-assets")

@@ -15,8 +15,8 @@ import re
 from pathlib import Path
 
 from fastapi import FastAPI
-from fastapi.responses import FileResponse
-from fastapi.staticfiles import StaticFiles
+
+from service.files import File, Files
 
 STATIC_DIR = Path(__file__).resolve().parent / "static"
 EDITOR_PAGE = STATIC_DIR / "editor.html"
@@ -41,12 +41,12 @@ def mount_editor(app: FastAPI) -> None:
     """Serve the editor page at ``/editor`` and its assets under ``/static``."""
 
     @app.get("/editor", include_in_schema=False)
-    async def editor() -> FileResponse:
+    async def editor() -> File:
         # no-cache: the page is tiny and must match the (versioned) API it talks to.
         headers = {
             "Cache-Control": "no-cache",
             "Content-Security-Policy": page_csp(EDITOR_PAGE.read_bytes()),
         }
-        return FileResponse(EDITOR_PAGE, media_type="text/html", headers=headers)
+        return File(EDITOR_PAGE, media_type="text/html", headers=headers)
 
-    app.mount("/static", StaticFiles(directory=STATIC_DIR), name="static")
+    app.mount("/static", Files(directory=STATIC_DIR), name="static")

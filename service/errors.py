@@ -42,6 +42,7 @@ class PoseError(Exception):
     title = "Invalid request body"  # the title of every invalid-request problem
     type_ = "invalid-request"
     retry_after: int | None = None
+    headers: dict[str, str] | None = None  # an answer's own headers (a 416's Content-Range)
 
     def __init__(self, detail: str, **extra: Any) -> None:
         super().__init__(detail)
@@ -100,6 +101,28 @@ class RequestTimeout(PoseError):
     status = 408
     title = "Request body timeout"
     type_ = "request-timeout"
+
+
+class MalformedRange(PoseError):
+    """A ``Range`` header on a static file that cannot be read as byte ranges
+    (:mod:`service.files`)."""
+
+    status = 400
+    title = "Malformed Range header"
+    type_ = "malformed-range"
+
+
+class RangeNotSatisfiable(PoseError):
+    """A ``Range`` of a static file that starts past its end (:mod:`service.files`); the
+    answer's ``Content-Range: bytes */<size>`` gives the file's size (RFC 9110 15.5.17)."""
+
+    status = 416
+    title = "Range not satisfiable"
+    type_ = "range-not-satisfiable"
+
+    def __init__(self, detail: str, size: int) -> None:
+        super().__init__(detail)
+        self.headers = {"Content-Range": f"bytes */{size}"}
 
 
 class TooManyItems(PoseError):
@@ -247,7 +270,9 @@ def error_response(exc: PoseError) -> JSONResponse:
     """The one problem+json answer of a domain error (with ``Retry-After`` when useful).
     An ``invalid-request`` one has the shape of a field error's: its ``errors`` list names
     the field (``targets[1]: duplicate target …`` -> location ``targets[1]``)."""
-    headers = {"Retry-After": str(exc.retry_after)} if exc.retry_after is not None else None
+    headers = dict(exc.headers or {})
+    if exc.retry_after is not None:
+        headers["Retry-After"] = str(exc.retry_after)
     detail = clip(exc.detail, MAX_DETAIL)
     extra = dict(exc.extra)
     if exc.type_ == "invalid-request" and "errors" not in extra:
@@ -255,7 +280,7 @@ def error_response(exc: PoseError) -> JSONResponse:
         if not (sep and _LOCATION.fullmatch(where)):
             where, message = "body", detail
         extra["errors"] = [{"location": where, "message": message}]
-    return problem(exc.status, exc.title, detail, type_=exc.type_, headers=headers, **extra)
+    return problem(exc.status, exc.title, detail, type_=exc.type_, headers=headers or None, **extra)
 
 
 def _location(loc: Sequence[Any]) -> str:

@@ -1,0 +1,73 @@
+"""The service's files (``service/files.py``: the editor's page and ``/static``, the docs'
+``/docs/assets``) through the real app: their refusals are problems like every other
+answer's, and their requests are counted and advised as what they are (an adversarial
+audit, 2026-12-06, defects 3-5)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import pytest
+from starlette.routing import Mount
+
+from service.docs import VENDOR
+from service.editor import EDITOR_PAGE, STATIC_DIR
+from tests.service.test_api import assert_problem
+
+#: A file under each mount the app has, and its size.
+FILES = {
+    "/static": ("editor.js", (STATIC_DIR / "editor.js").stat().st_size),
+    "/docs/assets": ("init.js", (VENDOR / "init.js").stat().st_size),
+}
+
+
+def mounts(client: Any) -> list[str]:
+    """The paths the app mounts (every one must be in ``FILES``)."""
+    paths = [r.path for r in client.app.routes if isinstance(r, Mount)]
+    assert set(paths) == set(FILES), paths
+    return paths
+
+
+def served(client: Any) -> list[tuple[str, int]]:
+    """Every kind of file the app serves: one under each mount, and the editor's page."""
+    out = [(f"{m}/{FILES[m][0]}", FILES[m][1]) for m in mounts(client)]
+    return [*out, ("/editor", EDITOR_PAGE.stat().st_size)]
+
+
+@pytest.mark.parametrize("method", ["GET", "HEAD"])
+def test_a_range_past_a_files_end_is_a_416_problem_with_its_size(client: Any, method: str) -> None:
+    """Was Starlette's 416 in text/plain with an empty body."""
+    for path, size in served(client):
+        r = client.request(method, path, headers={"Range": f"bytes={size + 10}-"})
+        assert r.status_code == 416, (path, r.text)
+        assert r.headers["content-type"] == "application/problem+json", path
+        assert r.headers["content-range"] == f"bytes */{size}", path
+        assert "x-request-id" in r.headers and "x-total-time" in r.headers
+        if method == "GET":
+            body = assert_problem(r, 416, f"'bytes={size + 10}-'", f"{size} bytes")
+            assert body["type"].endswith("/range-not-satisfiable") and body["title"]
+
+
+@pytest.mark.parametrize(
+    ("range_", "why"),
+    [
+        ("bytes=5-1", "a range ends before it starts"),
+        ("bytes=-", "it names no range"),
+        ("bytes", "not a unit and ranges"),
+    ],
+)
+def test_a_malformed_range_is_a_400_problem_that_says_why(
+    client: Any, range_: str, why: str
+) -> None:
+    """Was Starlette's 400 in text/plain ("Range header: start must be less than end")."""
+    for path, _ in served(client):
+        r = client.get(path, headers={"Range": range_})
+        body = assert_problem(r, 400, repr(range_), why)
+        assert body["type"].endswith("/malformed-range"), body
+
+
+def test_a_satisfiable_range_is_still_served(client: Any) -> None:
+    for path, size in served(client):
+        r = client.get(path, headers={"Range": "bytes=0-9"})
+        assert r.status_code == 206 and len(r.content) == 10, path
+        assert r.headers["content-range"] == f"bytes 0-9/{size}"
