@@ -1,6 +1,10 @@
 """Prometheus request metrics, labelled by route template (``/v1/solve``), also for
 requests refused before routing (matched here against the app's routes), plus a
-rejection counter by reason (the problem type)."""
+rejection counter by reason (the problem type). A request under a mount (``/static``,
+``/docs/assets``) is labelled with the mount's path, served or not: the mount sets no
+route in the scope, and its prefix, moved into the scope's ``root_path``, had the rest
+matched against the app's own routes (``/static/editor`` counted as a 404 of ``/editor``,
+``/static/`` of ``/``; an audit, 2026-12-06)."""
 
 from __future__ import annotations
 
@@ -22,11 +26,16 @@ class RequestMetrics:
         self.routes = app_routes
         self.children: dict[tuple[str, int], tuple[Any, Any]] = {}  # bounded: routes x statuses
 
-    def route_of(self, scope: Scope) -> str:
+    def route_of(self, scope: Scope, root_path: str = "") -> str:
+        """The label of a request whose scope is now ``scope`` and whose ``root_path`` was
+        ``root_path`` when it arrived (a mount moves its prefix into it)."""
         route: Any = scope.get("route")
         if route is not None and getattr(route, "path", None):
             return str(route.path)
-        for candidate in self.routes:  # refused before routing: find the template anyway
+        if scope.get("root_path", "") != root_path:  # under a mount: match the whole path
+            scope = {**scope, "root_path": root_path}
+        # refused before routing, or under a mount: find the template (or the mount) anyway
+        for candidate in self.routes:
             match, _ = candidate.matches(scope)
             if match is Match.FULL and getattr(candidate, "path", None):
                 return str(candidate.path)  # type: ignore[attr-defined]
@@ -37,6 +46,7 @@ class RequestMetrics:
             await self.app(scope, receive, send)
             return
         t0: float = scope.setdefault(T0, time.perf_counter())
+        root_path: str = scope.get("root_path", "")
         status = [500]
         try:
             await observed(self.app, scope, receive, send, status)
@@ -45,7 +55,7 @@ class RequestMetrics:
             scope[REASON] = "shutting-down"
             raise
         finally:
-            route = self.route_of(scope)
+            route = self.route_of(scope, root_path)
             m = self.metrics
             key = (route, status[0])
             children = self.children.get(key)

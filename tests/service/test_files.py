@@ -5,6 +5,8 @@ audit, 2026-12-06, defects 3-5)."""
 
 from __future__ import annotations
 
+import re
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -12,6 +14,7 @@ from starlette.routing import Mount
 
 from service.docs import VENDOR
 from service.editor import EDITOR_PAGE, STATIC_DIR
+from tests.conftest import make_client
 from tests.service.test_api import assert_problem
 
 #: A file under each mount the app has, and its size.
@@ -71,3 +74,38 @@ def test_a_satisfiable_range_is_still_served(client: Any) -> None:
         r = client.get(path, headers={"Range": "bytes=0-9"})
         assert r.status_code == 206 and len(r.content) == 10, path
         assert r.headers["content-range"] == f"bytes 0-9/{size}"
+
+
+def test_requests_under_a_mount_are_counted_under_the_mount(models_dir: Path) -> None:
+    """``/static/editor`` was counted as a 404 of the editor's page ``/editor``,
+    ``/static/`` and ``/docs/assets/`` as 404s of ``/``, and every file served as
+    ``unmatched`` (the label of requests that matched no route). Now each is counted
+    under its mount, one label per mount, whatever the file."""
+    with make_client(models_dir) as c:
+        for m in mounts(c):
+            name, _ = FILES[m]
+            assert c.get(f"{m}/").status_code == 404
+            assert c.get(f"{m}/editor").status_code == 404
+            assert c.get(f"{m}/nothing/here.js").status_code == 404
+            first = c.get(f"{m}/{name}")
+            assert first.status_code == 200
+            etag = {"If-None-Match": first.headers["etag"]}
+            assert c.get(f"{m}/{name}", headers=etag).status_code == 304
+            assert c.head(f"{m}/{name}").status_code == 200
+            assert c.get(f"{m}/{name}", headers={"Range": "bytes=0-1"}).status_code == 206
+            assert c.get(f"{m}/{name}", headers={"Range": "bytes=9-1"}).status_code == 400
+        assert c.get("/static").status_code == 404  # no mount's path (nor any route's)
+        text = c.get("/metrics").text
+        templates = {getattr(r, "path", "") for r in c.app.routes}
+    counted = re.findall(
+        r'^pose_requests_total\{route="([^"]*)",status="(\d+)"\} (\S+)', text, re.M
+    )
+    got = {(route, status): float(n) for route, status, n in counted}
+    for m in FILES:
+        assert got[(m, "404")] == 3.0, got
+        assert got[(m, "200")] == 2.0 and got[(m, "304")] == 1.0, got
+        assert got[(m, "206")] == 1.0 and got[(m, "400")] == 1.0, got
+        assert f'pose_rejections_total{{reason="malformed-range",route="{m}"}} 1.0' in text
+    assert got[("unmatched", "404")] == 1.0, got  # /static itself
+    assert ("/", "404") not in got and ("/editor", "404") not in got, got
+    assert {route for route, _ in got} <= templates | {"unmatched"}, got  # no label per file
