@@ -18,6 +18,7 @@ from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 
 from fastapi import FastAPI
+from starlette.routing import Mount
 
 from service import middleware
 from service.deps import ServiceState
@@ -89,6 +90,10 @@ def create_app(settings: Settings | None = None, *, load_in_background: bool = T
     # route templates for the metrics of requests refused before routing
     templates = [r for router in routers for r in router.routes]
     templates += [r for r in app.router.routes if getattr(r, "path", None)]
-    app.state.route_paths = frozenset(getattr(r, "path", "") for r in templates)
+    # the paths a request may be answered at, for a 404's "without the slash" (a mount's
+    # path is none: /static/ advised /static, itself a 404; an audit, 2026-12-06)
+    app.state.route_paths = frozenset(
+        getattr(r, "path", "") for r in templates if not isinstance(r, Mount)
+    )
     middleware.install(app, settings, state.metrics, templates)
     return app

@@ -9,6 +9,7 @@ are at most ``MAX_DETAIL`` characters.
 
 from __future__ import annotations
 
+import contextlib
 import difflib
 import logging
 import re
@@ -367,6 +368,8 @@ def install_handlers(app: FastAPI) -> None:
             request.scope[REASON] = "invalid-request"
             return validation_problem(exc.errors, exc.total, exc.partial)
         title = detail = clip(exc.detail)
+        with contextlib.suppress(ValueError):  # a detail of its own (service.files): the
+            title = HTTPStatus(exc.status_code).phrase  # status's phrase, as about:blank's
         path = request.url.path
         if exc.status_code == 404 and path.endswith("/") and _is_route(request, path[:-1]):
             detail = f"no route {clip(path)}: the route is {clip(path[:-1])}, without the slash"
@@ -383,7 +386,7 @@ def install_handlers(app: FastAPI) -> None:
 
 def _is_route(request: Request, path: str) -> bool:
     """Whether ``path`` is one of the app's routes (``service.app``: a 404 for it with a
-    slash says so)."""
+    slash says so; a mount's path is none: ``/static`` answers nothing)."""
     return path in getattr(request.app.state, "route_paths", ())
 
 

@@ -7,19 +7,26 @@ Starlette answers a ``Range`` it cannot serve in plain text (a 416 with an empty
 ``range-not-satisfiable`` with ``Content-Range: bytes */<size>`` and a 400
 ``malformed-range``, raised to the app's one problem mapping (an adversarial audit,
 2026-12-06).
+
+A file's path with a trailing slash (``/static/editor.js/``) is a 404 naming the file, as
+a route's is (docs/service.md); Starlette served the file there, where the relative URLs
+it holds resolve under ``editor.js/``. A mount's own path (``/static/``) is a plain 404.
 """
 
 from __future__ import annotations
 
 import os
+import stat
 
+import anyio
 from starlette.datastructures import Headers
+from starlette.exceptions import HTTPException
 from starlette.responses import FileResponse, MalformedRangeHeader, Response
 from starlette.responses import RangeNotSatisfiable as _Unsatisfiable
 from starlette.staticfiles import NotModifiedResponse, StaticFiles
 from starlette.types import Scope
 
-from core.text import quoted
+from core.text import clip, quoted
 from service.errors import MalformedRange, RangeNotSatisfiable
 
 #: Starlette's reasons for a malformed ``Range``, in the service's words.
@@ -47,7 +54,21 @@ class File(FileResponse):
 
 
 class Files(StaticFiles):
-    """``StaticFiles`` whose every error is a problem (see the module doc)."""
+    """``StaticFiles`` whose every error is a problem, and whose files are served at their
+    paths alone (see the module doc)."""
+
+    async def get_response(self, path: str, scope: Scope) -> Response:
+        asked: str = scope["path"]
+        if not (asked.endswith("/") and scope["method"] in ("GET", "HEAD")):
+            return await super().get_response(path, scope)
+        try:  # a directory's URL (html is off: none is served), or a file's with a slash
+            _, found = await anyio.to_thread.run_sync(self.lookup_path, path)
+        except (OSError, ValueError):  # a name too long, a NUL: no file
+            found = None
+        if found is not None and stat.S_ISREG(found.st_mode) and not asked.endswith("//"):
+            detail = f"no file {clip(asked)}: the file is {clip(asked[:-1])}, without the slash"
+            raise HTTPException(404, detail)
+        raise HTTPException(404)
 
     def file_response(
         self, full_path: str | os.PathLike[str], stat_result: os.stat_result, scope: Scope,

@@ -109,3 +109,31 @@ def test_requests_under_a_mount_are_counted_under_the_mount(models_dir: Path) ->
     assert got[("unmatched", "404")] == 1.0, got  # /static itself
     assert ("/", "404") not in got and ("/editor", "404") not in got, got
     assert {route for route, _ in got} <= templates | {"unmatched"}, got  # no label per file
+
+
+def test_a_mounts_own_path_is_a_plain_404_that_advises_nothing(client: Any) -> None:
+    """``/static/`` advised "the route is /static, without the slash", itself a 404."""
+    for m in mounts(client):
+        assert_problem(client.get(m), 404)
+        for path in (f"{m}/", f"{m}//"):
+            body = assert_problem(client.get(path), 404)
+            assert body["detail"] == body["title"] == "Not Found", (path, body)
+
+
+def test_a_files_path_with_a_trailing_slash_is_a_404_naming_the_file(client: Any) -> None:
+    """``/static/editor.js/`` was served (200), where the docs say a path with a trailing
+    slash is a 404 naming what is there; the relative URLs of a file served so resolve
+    under ``editor.js/``."""
+    for path, _ in served(client):
+        if path == "/editor":  # the page's own redirect (test_request_edges)
+            continue
+        for method in ("GET", "HEAD"):
+            r = client.request(method, path + "/")
+            assert r.status_code == 404 and r.headers["content-type"] == "application/problem+json"
+        body = assert_problem(client.get(path + "/"), 404)
+        assert body["title"] == "Not Found", body
+        assert body["detail"] == f"no file {path}/: the file is {path}, without the slash"
+        assert client.get(path).status_code == 200  # the advice is true
+        assert_problem(client.get(path + "//"), 404, "Not Found")
+    assert_problem(client.get("/static/editor/api.js/"), 404, "the file is /static/editor/api.js")
+    assert_problem(client.get("/static/editor/"), 404, "Not Found")  # a directory: no file
