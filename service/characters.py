@@ -632,8 +632,9 @@ def character_from_request(req: CharacterSolveRequest, where: str = "") -> Chara
         )
         unknown = sorted(set(req.rotations) - set(skel.names))
         if unknown:
-            names = ", ".join(quoted(n) for n in unknown[:8])
-            raise CharacterError(f"{prefix}rotations: unknown joints {names}")
+            names = ", ".join(quoted(n) for n in unknown[:8])  # then how many more, as
+            more = f"; and {len(unknown) - 8} more" if len(unknown) > 8 else ""  # errors do
+            raise CharacterError(f"{prefix}rotations: unknown joints {names}{more}")
         rot = np.broadcast_to(np.eye(3), (skel.size, 3, 3)).copy()
         for name, q in req.rotations.items():
             with np.errstate(over="ignore"):  # a huge one is fine: normalised overflow-safe

@@ -314,3 +314,20 @@ def test_a_lone_surrogate_is_escaped_once(client: Any) -> None:
     assert_problem(r, 422)
     detail = r.json()["detail"]
     assert "'\\ud800' is neither a mapped joint" in detail and "\\\\" not in detail, detail
+
+
+@pytest.mark.parametrize("n", [1, 8, 9, 1500])
+def test_unknown_rotation_keys_are_listed_up_to_8_then_counted(client: Any, n: int) -> None:
+    """1,500 unknown ``rotations`` keys listed 8 names and nothing after them; now the
+    list ends "; and N more", as the service's other capped lists do."""
+    body = _example("solve_character")
+    body["rotations"] = {f"j{i:04d}": [0.0, 0.0, 0.0, 1.0] for i in range(n)}
+    shown = ", ".join(f"'j{i:04d}'" for i in range(min(n, 8)))
+    more = f"; and {n - 8} more" if n > 8 else ""
+    for path, where in (("/v1/solve", "rotations"), ("/v1/character/solve", "rotations")):
+        _located(client, path, body, where)
+        detail = client.post(path, json=body).json()["detail"]
+        assert detail == f"{where}: unknown joints {shown}{more}", detail
+    batch = {"items": [_example("solve"), body]}
+    r = client.post("/v1/solve/batch", json=batch)
+    assert r.json()["detail"] == f"items[1].rotations: unknown joints {shown}{more}", r.text
