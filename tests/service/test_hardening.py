@@ -233,7 +233,50 @@ def test_cors_rejections_are_problems(models_dir: Path) -> None:
             "/v1/solve",
             headers={"Origin": "http://evil.example", "Access-Control-Request-Method": "POST"},
         )
-        assert_problem(resp, 400, "Disallowed CORS origin")
+        assert_problem(resp, 400, "Disallowed CORS origin", "POSE_CORS_ORIGINS")
+
+
+def test_cors_method_and_header_refusals_name_what_is_allowed(models_dir: Path) -> None:
+    """An allowed origin's preflight refused for its method or a header blamed the origin
+    setting ("allowed origins are configured with POSE_CORS_ORIGINS"); now the refusal
+    names the method or headers refused, those allowed, and that no setting changes them."""
+    good = "http://editor.example"
+    with make_client(models_dir, cors_origins=[good]) as c:
+
+        def refused(**headers: str) -> str:
+            resp = c.options("/v1/solve", headers={"Origin": good, **headers})
+            detail: str = assert_problem(resp, 400)["detail"]
+            assert resp.json()["type"].endswith("/cors-rejected")
+            assert "POSE_CORS_ORIGINS" not in detail and "origin" not in detail, detail
+            return detail
+
+        assert refused(**{"Access-Control-Request-Method": "DELETE"}) == (
+            "Disallowed CORS method 'DELETE': the allowed methods are GET, POST, OPTIONS "
+            "(the service's own, no setting)"
+        )
+        detail = refused(
+            **{"Access-Control-Request-Method": "POST",
+               "Access-Control-Request-Headers": "x-evil, Content-Type, X-Other"}
+        )  # fmt: skip
+        assert detail.startswith("Disallowed CORS headers 'x-evil', 'x-other': the allowed "), (
+            detail
+        )
+        for allowed in ("content-type", "x-api-key", "x-request-id", "authorization"):
+            assert allowed in detail, detail
+        assert "no setting" in detail and "'content-type'" not in detail, detail
+        many = ", ".join(f"x-h{i}" for i in range(30))
+        detail = refused(
+            **{"Access-Control-Request-Method": "POST", "Access-Control-Request-Headers": many}
+        )
+        assert "'x-h7' and 22 more: " in detail and "x-h8" not in detail, detail
+        ok = c.options("/v1/solve", headers={
+            "Origin": good, "Access-Control-Request-Method": "POST",
+            "Access-Control-Request-Headers": "content-type, x-api-key"})  # fmt: skip
+        assert ok.status_code == 200, ok.text
+        both = c.options("/v1/solve", headers={
+            "Origin": "http://evil.example", "Access-Control-Request-Method": "PUT"})  # fmt: skip
+        assert_problem(both, 400, "origin 'http://evil.example' (allowed origins are configured "
+                       "with POSE_CORS_ORIGINS); Disallowed CORS method 'PUT': ")  # fmt: skip
 
 
 # -- headers, docs, readiness, metrics -------------------------------------------------------
