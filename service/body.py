@@ -90,7 +90,7 @@ def parse(
     try:
         return model.model_validate(data, context=ctx)
     except ValidationError as exc:  # the first errors, and how many (service.bounded)
-        raise BodyInvalid(*bounded.errors_of(exc, ctx)) from None
+        raise BodyInvalid(*bounded.errors_of(exc, ctx, data)) from None
     except PoseError as exc:  # a validator's refusal of the whole body
         raise BodyError(exc) from None
 

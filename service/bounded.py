@@ -159,15 +159,43 @@ class Bounded(BaseModel):
             raise _stand_in() from None
 
 
-def errors_of(exc: ValidationError, ctx: Any) -> tuple[list[ErrorDetails], int, bool]:
-    """The first MAX_ERRORS errors of a bounded validation (``ctx``: its context), in
-    pydantic's shape, how many there are in all, and whether that count is a lower bound."""
+def errors_of(
+    exc: ValidationError, ctx: Any, data: Any = None
+) -> tuple[list[ErrorDetails], int, bool]:
+    """The first MAX_ERRORS errors of a bounded validation (``ctx``: its context) of
+    ``data`` (the JSON validated, to place a key's error: :func:`keyed`), in pydantic's
+    shape, how many there are in all, and whether that count is a lower bound."""
     raw = exc.errors(include_url=False, include_context=True)
     budget = ctx.get(BUDGET) if isinstance(ctx, dict) else None
-    shown = [e for e in raw if e["type"] != STAND_IN]
+    shown = [keyed(e, data) for e in raw if e["type"] != STAND_IN][:MAX_ERRORS]
+    n = sum(e["type"] != STAND_IN for e in raw)
     if budget is None:
-        return shown[:MAX_ERRORS], len(shown), False
-    return shown[:MAX_ERRORS], len(shown) + budget.counted, budget.skipped
+        return shown, n, False
+    return shown, n + budget.counted, budget.skipped
+
+
+def keyed(error: ErrorDetails, data: Any) -> ErrorDetails:
+    """``error`` placed at the key it is about, where it is about an object's key: pydantic
+    places a key that is no string (a lone surrogate, ``"\\udfff"``, valid JSON that no
+    UTF-8 encodes) at the object, as its own input; its place is then the object's with the
+    key after it (``options.\\udfff``), as an unknown key's is, and ``ctx.key`` says so
+    (false: a string value; absent: not known).
+    (The key was reported at the object, ``body`` for a top-level one: an audit,
+    2026-12-06.)"""
+    key = error.get("input")
+    if error["type"] != "string_unicode" or not isinstance(key, str) or data is None:
+        return error
+    node = data
+    for part in error["loc"]:
+        step = isinstance(node, list) and isinstance(part, int) and -len(node) <= part < len(node)
+        if not (step or (isinstance(node, dict) and part in node)):
+            return error  # a step of pydantic's own (a union's member): not placed
+        node = node[part]
+    if isinstance(node, str):  # a string value: its place is right
+        return {**error, "ctx": {"key": False}}
+    if not (isinstance(node, dict) and key in node):
+        return error
+    return {**error, "loc": (*error["loc"], key), "ctx": {"key": True}}
 
 
 def at_most(n: int) -> Callable[[Any], Any]:

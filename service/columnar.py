@@ -267,9 +267,10 @@ def parse(data: dict[str, Any], max_items: int, suspect: bool = True) -> Columns
     tj = _names(targets["joints"], ("targets", "joints"), n, errs, 1)
     pj = _names(data.get("pins", []), ("pins",), n, errs, 0)
     try:
-        options = SolveOptions.model_validate(data.get("options", {}), context=(ctx := context()))
+        given = data.get("options", {})
+        options = SolveOptions.model_validate(given, context=(ctx := context()))
     except ValidationError as exc:
-        shown, total, partial = errors_of(exc, ctx)
+        shown, total, partial = errors_of(exc, ctx, given)
         for e in shown:
             errs.add(("options", *e["loc"]), e["type"], e["msg"], ctx=e.get("ctx"),
                      input=e.get("input"))  # fmt: skip

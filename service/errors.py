@@ -324,6 +324,13 @@ def _message(error: Any) -> str:
             near = "" if root else _near(value, bones)
             return f"no bone ends at {quoted(value)}{root}{near}; bones end at {', '.join(bones)}"
         return f"unknown joint {quoted(value)}{_near(value)}; joints are {', '.join(JOINT_NAMES)}"
+    if kind == "string_unicode" and isinstance(value, str):  # a lone surrogate's escape
+        known = ctx.get("key")  # service.bounded.keyed: a key, a value, or not known
+        what = "key or string" if known is None else "key" if known else "string"
+        return (
+            f"the {what} {quoted(value)} holds a lone surrogate (a \\ud800-\\udfff escape "
+            "not in a pair), which no UTF-8 encodes"
+        )
     if kind == "finite_number":
         return "must be a finite number (NaN and infinities are not)"
     if kind == "float_type" and type(value) is int:  # JSON allows any integer; a float not

@@ -513,3 +513,34 @@ def test_a_health_routes_405_allows_get(client: Any) -> None:
     flagged it (its schema documents GET)."""
     r = client.post("/v2/health/live", content=b"{}", headers={"content-type": "application/json"})
     assert r.status_code == 405 and "GET" in r.headers["allow"], r.headers
+
+
+def test_a_lone_surrogate_in_a_key_is_placed_at_the_key_as_one_in_a_value(client: Any) -> None:
+    """An audit (2026-12-06): a lone surrogate (``"\\udfff"``: valid JSON, no UTF-8) in an
+    object's key was reported at the object (``body`` for a top-level key) in pydantic's
+    words ("unable to parse raw data as a unicode string"), naming no key. Now a key is
+    placed at its path, the key as JSON escapes it, as a value is at its own."""
+    solve = json.dumps(_example("solve"))
+    batch = json.dumps({"items": [_example("solve")]})
+    columns = json.dumps({**_columns(1), "options": {"reach": "soft"}})
+    cases = [  # path, body, location, the string the message names
+        ("/v1/solve", solve.replace('"options"', '"\\udfff"'), "\\udfff", "key '\\udfff'"),
+        ("/v1/solve", solve.replace('"reach"', '"re\\udfffach"'), "options.re\\udfffach",
+         "key 're\\udfffach'"),
+        ("/v1/solve", solve.replace('"head"', '"he\\ud800ad"', 1), "pose.he\\ud800ad",
+         "key 'he\\ud800ad'"),
+        ("/v1/solve/batch", batch.replace('"reach"', '"\\udfff"'), "items[0].options.\\udfff",
+         "key '\\udfff'"),
+        ("/v1/solve/batch", columns.replace('"reach"', '"\\udfff"'), "options.\\udfff",
+         "key '\\udfff'"),
+        ("/v1/solve", solve.replace('"joint": "left_wrist"', '"joint": "left\\ud800"', 1),
+         "targets[0].joint", "string 'left\\ud800'"),
+    ]  # fmt: skip
+    assert all(body.count("\\ud") == 1 for _, body, _, _ in cases)  # each replaced once
+    for path, body, where, named in cases:
+        r = client.post(path, content=body.encode(), headers={"content-type": "application/json"})
+        got = assert_problem(r, 422, f"{where}: the {named} holds a lone surrogate")
+        assert got["type"].endswith("/invalid-request"), got
+        assert got["errors"][0]["location"] == where, got["errors"]
+        assert "no UTF-8" in got["errors"][0]["message"], got["errors"]
+        assert "unable to parse raw data" not in r.text, r.text
