@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import difflib
 import itertools
+import math
 from collections.abc import Iterable
 
 QUOTE = 100  # characters of client input an error detail may quote
@@ -34,7 +35,7 @@ def clip(text: object, limit: int = QUOTE) -> str:
 
 
 def shown(value: object, depth: int = _DEPTH) -> str:
-    """A value from a client's JSON as JSON writes it (``null``, ``true``, ``[1, 2]``),
+    """A value from a client's JSON as JSON writes it (``null``, ``true``, ``[1, 2]``, ``1e300``),
     bounded: strings clipped, lists and objects cut after a few elements and a few levels,
     huge integers by their digit count. Never recursive beyond ``depth``: a list nested a
     thousand deep costs three levels (Python's own ``repr`` of it exhausts the stack)."""
@@ -50,6 +51,10 @@ def shown(value: object, depth: int = _DEPTH) -> str:
         while abs(value) >= 10**digits:
             digits += 1
         return f"{'-' if value < 0 else ''}<an integer of {digits} digits>"
+    if isinstance(value, float):  # (Python's json: 1e+300, Infinity; a client writes 1e300)
+        if math.isnan(value) or math.isinf(value):
+            return "NaN" if math.isnan(value) else ("-" if value < 0 else "") + "Infinity"
+        return repr(value).replace("e+", "e")
     if isinstance(value, str):
         return repr(value if len(value) <= QUOTE else value[: QUOTE - 1] + "…")
     if isinstance(value, list | tuple | dict):

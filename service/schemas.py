@@ -2,14 +2,17 @@
 
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING, Annotated, Any, Final, Literal
 
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, create_model
+from pydantic_core import PydanticCustomError
 
 from core.bvh import MAX_JOINTS
 from core.ends import SOFT_IK_MAX
 from core.rest import rest_pose
 from core.skeleton import BASE_KEYPOINTS, JOINT_NAMES, PARENT_NAMES
+from core.text import shown
 from service.bounded import Bounded, at_most
 
 #: Coordinates beyond this (metres) are rejected as nonsense.
@@ -81,15 +84,41 @@ class Target(_Body):
     )
 
 
+#: The largest whole number a JSON number written as a float (``2.0``, ``1e5``) is read
+#: as: past it a float holds integers only in steps of 2 or more (every one of them "has no
+#: fraction"), and RFC 8259 (section 6) calls integers within ±(2**53 - 1) the
+#: interoperable ones.
+MAX_WHOLE_FLOAT = 2**53 - 1
+
+
 def _whole(value: Any) -> Any:
     """A number with no fraction written as a float (``2.0``) is the integer JSON Schema
-    says it is (a contract audit: ``"passes": 2.0`` was a 422); any other value as sent."""
-    return int(value) if type(value) is float and value.is_integer() else value
+    says it is (a contract audit: ``"passes": 2.0`` was a 422); any other value as sent,
+    but a float that is no whole number, or one past :data:`MAX_WHOLE_FLOAT`, is refused
+    here, quoted as JSON writes it (an audit: ``"frame": 1e300`` was read as the integer
+    of 301 digits it rounds to, and answered as ``<an integer of 301 digits>``; ``3.5``
+    got "Input should be a valid integer", quoting nothing)."""
+    if type(value) is not float:
+        return value
+    if not math.isfinite(value):  # (worded as every field's: service.errors._message)
+        raise PydanticCustomError("finite_number", "Input should be a finite number")
+    if not value.is_integer():
+        raise PydanticCustomError(
+            "whole_number", "{value} is not a whole number", {"value": shown(value)}
+        )
+    if abs(value) > MAX_WHOLE_FLOAT:
+        raise PydanticCustomError(
+            "whole_number",
+            "{value} is not a whole number this API reads: a number written with a fraction "
+            "or an exponent stands for one only within ±{limit}",
+            {"value": shown(value), "limit": MAX_WHOLE_FLOAT},
+        )
+    return int(value)
 
 
-#: An integer field of a request takes a JSON integer, or a float with no fraction:
-#: ``Annotated[int, Field(<bounds>), WHOLE]`` (the bounds before it, so that the schema
-#: states them as bounds).
+#: An integer field of a request takes a JSON integer, or a float with no fraction within
+#: ±:data:`MAX_WHOLE_FLOAT`: ``Annotated[int, Field(<bounds>), WHOLE]`` (the bounds before
+#: it, so that the schema states them as bounds).
 WHOLE = BeforeValidator(_whole)
 
 
