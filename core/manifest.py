@@ -55,6 +55,11 @@ class ManifestError(Exception):
         self.path = str(path)
         self.reason = reason
 
+    def __reduce__(self) -> tuple[Any, ...]:
+        """Pickled as its arguments (``args`` holds the one message ``__init__`` does not
+        take: unpickling it was a TypeError), its fields as they are."""
+        return type(self), (self.path, self.reason), self.__dict__
+
 
 class _Strict(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)

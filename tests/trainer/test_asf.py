@@ -3,6 +3,7 @@ convention checked against CMU's own BVH conversion of the same take, and clear 
 
 from __future__ import annotations
 
+import pickle
 import shutil
 import subprocess
 from pathlib import Path
@@ -105,10 +106,20 @@ def test_fk_matches_hand_computed_poses() -> None:
     ],
 )
 def test_malformed_files_raise_asferror(asf: str, amc: str, message: str) -> None:
+    """Each names its file and reason, and survives pickling (the dataset builder's worker
+    processes): ``ASFError(file, reason)`` passed ``args`` its one message, and unpickling
+    it was a ``TypeError``."""
     with pytest.raises(ASFError) as info:
         parse_amc(amc, parse_asf(asf, "x.asf"), "x.amc")
     assert message in str(info.value)
     assert info.value.file in ("x.asf", "x.amc")
+    back = pickle.loads(pickle.dumps(info.value))
+    assert type(back) is ASFError and str(back) == str(info.value)
+    assert (back.file, back.reason, back.args) == (
+        info.value.file,
+        info.value.reason,
+        info.value.args,
+    )
 
 
 def test_real_cmu_walk(more_mocap: Path) -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import pickle
 import shutil
 from pathlib import Path
 from typing import Any
@@ -539,6 +540,25 @@ def test_a_joint_missing_from_some_files_skips_them_and_the_summary_counts_them(
         "\n".join(report.meta["warnings"])
     )
     assert report.meta["skipped_files"][0]["kind"] == "lacking joints"
+
+
+def test_a_missing_joints_error_survives_pickling(more_mocap: Path, tmp_path: Path) -> None:
+    """``MissingJoints(message, missing)`` passed ``args`` the message alone: unpickling it
+    (a worker process's error, back in the builder) was a ``TypeError``."""
+    from trainer.data.build import ClipJob, MissingJoints, read_world
+
+    maps = _studio(more_mocap, tmp_path)
+    take = tmp_path / "mocap/studio/takes/p003/idle_01.bvh"
+    take.write_text(take.read_text().replace("JOINT shin.L", "JOINT shin.Left", 1))
+    m = load_map(maps / "studio.toml")
+    rel = "takes/p003/idle_01.bvh"
+    with pytest.raises(MissingJoints) as info:
+        read_world(ClipJob(str(take), rel, f"{m.source}:{rel}", m))
+    err = info.value
+    assert list(err.missing) == ["shin.L"] and "shin.L" in str(err), err.missing
+    back = pickle.loads(pickle.dumps(err))
+    assert type(back) is MissingJoints and str(back) == str(err) and back.args == err.args
+    assert back.missing == err.missing and vars(back) == vars(err)
 
 
 def test_include_globs_matching_nothing_name_the_map_the_globs_and_paths_held(

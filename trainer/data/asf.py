@@ -30,6 +30,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -51,6 +52,11 @@ class ASFError(ValueError):
         super().__init__(f"{file}: {reason}")
         self.file = file
         self.reason = reason
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        """Pickled as its arguments (``args`` holds the one message ``__init__`` does not
+        take: unpickling it in the dataset builder's pool was a TypeError)."""
+        return type(self), (self.file, self.reason), self.__dict__
 
 
 @dataclass(frozen=True)

@@ -125,6 +125,11 @@ class MissingJoints(MapError):
         super().__init__(message)
         self.missing = missing
 
+    def __reduce__(self) -> tuple[Any, ...]:
+        """Pickled as its arguments (the default passes the message alone: unpickling it
+        in the dataset builder's pool was a TypeError)."""
+        return type(self), (self.args[0], self.missing), self.__dict__
+
 
 def _clean_fps(fps: float) -> float:
     """Snap header rates like 30.00003 (Frame Time 0.0333333) to the nearest integer."""

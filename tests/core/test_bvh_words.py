@@ -1,0 +1,59 @@
+"""``core.bvh_words.BVHError`` as a caller in another process or thread pool gets it: a
+reader's error on a real file, cut short, pickled and read back whole."""
+
+from __future__ import annotations
+
+import multiprocessing
+import pickle
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import pytest
+
+from core.bvh import BVHError, parse_bvh, read_bvh
+
+
+def _cut(bvh_files: dict[str, Path], tmp_path: Path) -> Path:
+    """The Bandai walk cut in the middle of its HIERARCHY (a truncated upload)."""
+    text = bvh_files["bandai"].read_text()
+    cut = tmp_path / "walk_cut.bvh"
+    cut.write_text(text[: text.index("MOTION") // 2])
+    return cut
+
+
+def _same(got: BVHError, want: BVHError) -> None:
+    assert type(got) is BVHError
+    assert str(got) == str(want) and got.args == want.args
+    assert (got.file, got.reason) == (want.file, want.reason)
+    assert vars(got) == vars(want)
+
+
+def test_a_bvh_error_survives_pickling(bvh_files: dict[str, Path], tmp_path: Path) -> None:
+    """``BVHError(file, reason)`` passed ``args`` its one message, which ``__init__`` does
+    not take: unpickling it was ``TypeError: missing 1 required positional argument:
+    'reason'``. Now it comes back as it was, its fields and any set on it since."""
+    cut = _cut(bvh_files, tmp_path)
+    with pytest.raises(BVHError) as info:
+        read_bvh(cut)
+    err = info.value
+    assert err.file == str(cut) and str(err) == f"{cut}: {err.reason}"
+    _same(pickle.loads(pickle.dumps(err)), err)
+    with pytest.raises(BVHError) as text_info:  # the service's reader: a request's text
+        parse_bvh(cut.read_text(), "bvh")
+    text_info.value.__notes__ = ["read by a worker"]  # (state set after it was raised)
+    for protocol in range(pickle.HIGHEST_PROTOCOL + 1):
+        _same(pickle.loads(pickle.dumps(text_info.value, protocol)), text_info.value)
+
+
+def test_a_bvh_error_raised_in_a_worker_process_reaches_the_caller(
+    bvh_files: dict[str, Path], tmp_path: Path
+) -> None:
+    """A process pool pickles a worker's exception back to the caller: the error unpickled
+    there, not a ``BrokenProcessPool`` (the pool's result thread died unpickling it)."""
+    cut = _cut(bvh_files, tmp_path)
+    with pytest.raises(BVHError) as here:
+        read_bvh(cut)
+    ctx = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(1, mp_context=ctx) as pool, pytest.raises(BVHError) as there:
+        pool.submit(read_bvh, cut).result(timeout=120)
+    _same(there.value, here.value)
