@@ -113,7 +113,12 @@ class Normalisation(_Strict):
 
 
 class Serving(_Strict):
-    """How the engine must feed the networks (fixed by how they were trained)."""
+    """How the engine must feed the networks (fixed by how they were trained). Every
+    number finite and in its bounds: the one check of a manifest's block, a trainer
+    config's serving settings (``trainer.config``, whose fields are these) and an engine's
+    overrides (:func:`serving_with`)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
     body: Literal["nearest_skeleton", "total_length"] = Field(
         default="nearest_skeleton",

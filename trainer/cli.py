@@ -3,6 +3,7 @@ benchmark is `python -m bench`)."""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Annotated, Optional
 
@@ -14,6 +15,14 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
 )
+
+
+def _finite(value: float) -> float:
+    """A float option's value, refused unless finite: click reads ``1e999`` as ``inf``, and
+    its ranges let ``nan`` through (every comparison with it is false)."""
+    if not math.isfinite(value):
+        raise typer.BadParameter(f"{value} is not a finite number")
+    return value
 
 
 def _train_and_export(
@@ -180,7 +189,8 @@ def bend_sides(
     every: Annotated[int, typer.Option(min=1, help="Fit on every n-th pose.")] = 3,
     split: Annotated[str, typer.Option(help="The split whose poses to fit on.")] = "train",
     min_bend: Annotated[
-        float, typer.Option(min=0.001, help="Limbs bent less (m) are left out.")
+        float,
+        typer.Option(min=0.001, callback=_finite, help="Limbs bent less (m) are left out."),
     ] = 0.02,
 ) -> None:
     """Fit the side elbows and knees bend to on a split of the dataset (trainer.bend_sides;

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import difflib
+import math
 import tomllib
 from collections.abc import Mapping
 from pathlib import Path
@@ -22,7 +23,37 @@ from core.skeleton import BASE_KEYPOINTS, JOINT_NAMES, set_key
 
 
 class _Section(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    """A section of the config: no unknown keys; every number finite (``allow_inf_nan``:
+    ``lr = 1e999``, read by ``tomllib`` as ``inf``, trained with an infinite rate, and
+    ``nan`` passed every bound but the serving ones)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+
+
+class Written(float):
+    """A TOML float that is no finite number (``1e999``, ``inf``, ``nan``), with the text
+    its file writes, so that the message refusing it quotes the file (``tomllib`` reads
+    ``1e999`` as ``inf``): :func:`toml_float`. Only ever refused (the schemas take finite
+    numbers), it is never a setting."""
+
+    text: str
+
+    def __new__(cls, text: str) -> Written:
+        self = super().__new__(cls, text)
+        self.text = text
+        return self
+
+    def __repr__(self) -> str:
+        return self.text
+
+    __str__ = __repr__
+
+
+def toml_float(text: str) -> float:
+    """``tomllib``'s ``parse_float`` for the trainer's TOML files (configs, joint maps): a
+    TOML float as ``float()`` reads it (tomllib's own), a non-finite one :class:`Written`."""
+    value = float(text)
+    return value if math.isfinite(value) else Written(text)
 
 
 def _check_joints(sets: list[list[str]]) -> list[list[str]]:
@@ -425,7 +456,7 @@ def _read_toml(path: Path, seen: tuple[Path, ...] = ()) -> dict[str, Any]:
         raise ValueError(f"{path}: 'extends' loops back to itself")
     try:
         with path.open("rb") as fh:
-            data = tomllib.load(fh)
+            data = tomllib.load(fh, parse_float=toml_float)
     except FileNotFoundError:
         via = f" (extends = in {seen[-1]}: a path relative to that file's folder)" if seen else ""
         raise ValueError(f"{path}: no such config file{via}") from None
@@ -455,6 +486,8 @@ def _config_errors(path: Path | str | None, exc: ValidationError) -> ValueError:
                 model = annotation
             near = difflib.get_close_matches(str(e["loc"][-1]), list(model.model_fields), 3)
             message = "not a setting" + (f"; did you mean {', '.join(near)}?" if near else "")
+        elif isinstance(e["input"], int | float) and not isinstance(e["input"], bool):
+            message += f", got {e['input']!r}"  # (a Written: 1e999, as the file writes it)
         parts.append(f"{where}: {message}")
     return ValueError(f"{path or 'the defaults'}: " + "; ".join(parts))
 

@@ -32,6 +32,8 @@ def test_overrides_change_only_what_they_name(shipped: Serving) -> None:
         ({"delta": not True, "body": "nearest_skeleton"}, "trained: body, delta"),
         ({"carry": 1.5}, "carry"),
         ({"passes": 0}, "passes"),
+        ({"carry": float("nan")}, "carry\n  Input should be a finite number"),
+        ({"keep_pelvis": float("inf")}, "keep_pelvis\n  Input should be a finite number"),
         ({"turn_critic": "critic"}, "turn_critic"),
     ],
 )

@@ -63,3 +63,8 @@ def test_the_command_prints_both_tables_beside_core_s(small_dataset: Path) -> No
     assert "core.ends' table: 0.99" in lines[1] or "core.ends' table: 1.0000" in lines[1]
     bad = CliRunner().invoke(app, ["bend-sides", "--dataset", str(small_dataset), "--split", "x"])
     assert bad.exit_code == 1 and "unknown split 'x'" in bad.output
+    for value, says in (("1e999", "inf is not a finite number"), ("nan", "--min-bend")):
+        args = ["bend-sides", "--dataset", str(small_dataset), "--min-bend", value]
+        bad = CliRunner().invoke(app, args)  # (1e999, read as inf, fitted no limb: 1 before)
+        words = " ".join(bad.output.replace("│", " ").split())  # (rich's box, its lines)
+        assert bad.exit_code == 2 and "--min-bend" in words and says in words, bad.output

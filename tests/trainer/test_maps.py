@@ -258,7 +258,14 @@ def test_reactidle_floor_spine2_and_collars(more_mocap: Path) -> None:
         (lambda t: t.replace('reader = "asf"', 'reader = "c3d"'), "'reader' must be one of"),
         (lambda t: t.replace("format = 2", "format = 1"), "rename [[fps_override]]"),
         (lambda t: t.replace("skeleton = [", "# skeleton = ["), "needs skeleton"),
-        (lambda t: t.replace("fps = 120", "fps = -1"), "fps must be > 0"),
+        (lambda t: t.replace("fps = 120", "fps = -1"), "fps must be > 0, got -1"),
+        # tomllib reads 1e999 as inf: it was a frame rate, and a unit of infinite metres
+        (lambda t: t.replace("fps = 120", "fps = 1e999"), "fps must be a finite number, got 1e999"),
+        (lambda t: t.replace("fps = 120", "fps = nan"), "fps must be a finite number, got nan"),
+        (
+            lambda t: t.replace('unit = "asf"', "unit = 1e999"),
+            "metres per unit (a finite number > 0), got 1e999",
+        ),
         (lambda t: t.replace('split = "train"', 'split = "holdout"'), "split must be one of"),
     ],
 )

@@ -83,3 +83,33 @@ def test_the_command_reports_the_change_or_the_refusal(models: Path, tmp_path: P
     ):
         got = CliRunner().invoke(app, ["serving", *args])
         assert got.exit_code == 1 and says in got.output and "Traceback" not in got.output
+
+
+@pytest.mark.parametrize(
+    ("line", "says"),
+    [
+        ("carry = 1e999", "solver.carry: Input should be a finite number, got 1e999"),
+        ("turn_margin = nan", "solver.turn_margin: Input should be a finite number, got nan"),
+        (
+            "keep_pelvis = 1.5",
+            "solver.keep_pelvis: Input should be less than or equal to 1, got 1.5",
+        ),
+        (
+            "turn_plausibility = -inf",
+            "solver.turn_plausibility: Input should be a finite number, got -inf",
+        ),
+    ],
+)
+def test_the_command_refuses_a_serving_value_not_finite_or_in_range(
+    models: Path, tmp_path: Path, line: str, says: str
+) -> None:
+    """A serving value is finite and in its bounds (``core.manifest.Serving``, whose fields
+    the config's are): refused naming the key and the value as the file writes it (was
+    "Input should be less than or equal to 1", the value not said), nothing written."""
+    cfg = tmp_path / "serving.toml"
+    cfg.write_text(f'extends = "{DEFAULT}"\n[solver]\n{line}\n')
+    text = (models / "manifest.json").read_text()
+    bad = CliRunner().invoke(app, ["serving", "--config", str(cfg), "--models", str(models)])
+    assert bad.exit_code == 1 and "Traceback" not in bad.output, bad.output
+    assert says in bad.output.replace("\n", ""), bad.output
+    assert (models / "manifest.json").read_text() == text

@@ -25,8 +25,9 @@ import numpy as np
 import numpy.typing as npt
 
 from core.skeleton import JOINT_NAMES, MIRROR
-from core.text import close_match
+from core.text import QUOTE, clip, close_match
 from core.units import UNITS, UP_AXES
+from trainer.config import toml_float
 
 MAP_FORMAT = 2
 
@@ -367,7 +368,7 @@ def _str_list(data: dict[str, Any], key: str, file: str) -> tuple[str, ...]:
 
 def _unit_scale(unit: Any) -> tuple[float, str]:
     """``(metres per unit, display name)``; 0.0 for ``asf``; ``ValueError`` if invalid."""
-    if isinstance(unit, int | float) and not isinstance(unit, bool) and unit > 0:
+    if isinstance(unit, int | float) and not isinstance(unit, bool) and 0 < unit < math.inf:
         return float(unit), f"{float(unit)} m"
     if isinstance(unit, str) and unit in UNITS:
         return UNITS[unit], unit
@@ -381,7 +382,8 @@ def _parse_unit(unit: Any, where: str, reader: str) -> tuple[float, str]:
         scale, name = _unit_scale(unit)
     except ValueError:
         raise MapError(
-            f"{where}: 'unit' must be one of {sorted(UNITS)}, 'asf' or metres per unit"
+            f"{where}: 'unit' must be one of {sorted(UNITS)}, 'asf' or metres per unit (a "
+            f"finite number > 0), got {clip(repr(unit), QUOTE)}"
         ) from None
     if name == ASF_UNIT and reader != "asf":
         raise MapError(f"{where}: unit 'asf' needs reader = 'asf'")
@@ -442,7 +444,9 @@ def _parse_override(item: Any, index: int, file: str, reader: str) -> Override:
             continue
         if key == "fps":
             if not isinstance(value, int | float) or isinstance(value, bool) or value <= 0:
-                raise MapError(f"{where}: fps must be > 0")
+                raise MapError(f"{where}: fps must be > 0, got {clip(repr(value), QUOTE)}")
+            if not math.isfinite(value):  # (1e999: a Written, quoted as the file writes it)
+                raise MapError(f"{where}: fps must be a finite number, got {value!r}")
             values[key] = float(value)
         elif key == "unit":
             _parse_unit(value, where, reader)
@@ -511,7 +515,7 @@ def load_map(path: str | Path) -> MocapMap:
     file = str(path)
     try:
         raw = path.read_bytes()
-        data = tomllib.loads(raw.decode("utf-8"))
+        data = tomllib.loads(raw.decode("utf-8"), parse_float=toml_float)
     except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
         raise MapError(f"{file}: cannot read map: {exc}") from None
 

@@ -1,0 +1,72 @@
+"""``trainer.config``: a config's numbers are finite, a bad one named with its key and the
+value as the file writes it (``tomllib`` reads ``1e999`` as ``inf``)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from trainer.cli import app
+from trainer.config import load_config
+
+DEFAULT = Path(__file__).resolve().parents[2] / "trainer" / "configs" / "default.toml"
+
+
+@pytest.mark.parametrize(
+    ("line", "says"),
+    [
+        ("[autoencoder]\nlr = 1e999", "autoencoder.lr: Input should be a finite number, got 1e999"),
+        (
+            "[solver]\nbone_weight = nan",
+            "solver.bone_weight: Input should be a finite number, got nan",
+        ),
+        (
+            "[augment]\nbone_sigma = +inf",
+            "augment.bone_sigma: Input should be a finite number, got +inf",
+        ),
+        (
+            "[solver]\nother_weights = { arms = -1e400 }",
+            "solver.other_weights.arms: Input should be a finite number, got -1e400",
+        ),
+        (
+            "[solver]\nlong_other_weight = 1e999",
+            "solver.long_other_weight: Input should be a finite",
+        ),
+        ("[completion]\nlr = 1E+999", "completion.lr: Input should be a finite number, got 1E+999"),
+        ("[solver]\ncarry = 1.5", "solver.carry: Input should be less than or equal to 1, got 1.5"),
+    ],
+)
+def test_a_number_that_is_not_finite_is_refused_naming_key_and_value(
+    tmp_path: Path, line: str, says: str
+) -> None:
+    """``lr = 1e999`` loaded as ``lr = inf`` and trained (a rate with no bound above);
+    ``nan`` passed every bound but the serving settings' own. Now the schema refuses it
+    (``allow_inf_nan``), naming the file, the key and the value as the file writes it."""
+    cfg = tmp_path / "cfg.toml"
+    cfg.write_text(f'extends = "{DEFAULT}"\n{line}\n')
+    with pytest.raises(ValueError, match=r"Input should be") as info:
+        load_config(cfg)
+    assert str(info.value).startswith(f"{cfg}: "), info.value
+    assert says in str(info.value), info.value
+
+
+def test_train_refuses_an_infinite_rate_in_one_line_and_trains_nothing(tmp_path: Path) -> None:
+    cfg = tmp_path / "inf.toml"
+    cfg.write_text(f'extends = "{DEFAULT}"\n[autoencoder]\nlr = 1e999\n')
+    run, out = tmp_path / "run", tmp_path / "models"
+    args = ["train", "--config", str(cfg), "--run-dir", str(run), "--out", str(out)]
+    r = CliRunner().invoke(app, args)
+    assert r.exit_code == 1 and "Traceback" not in r.output, r.output
+    flat = r.output.replace("\n", "")
+    assert f"{cfg}: autoencoder.lr: Input should be a finite number, got 1e999" in flat, flat
+    assert not run.exists() and not out.exists()
+
+
+def test_finite_numbers_are_read_as_before(tmp_path: Path) -> None:
+    cfg = tmp_path / "ok.toml"
+    cfg.write_text(f'extends = "{DEFAULT}"\n[autoencoder]\nlr = 2.5e-4\n[solver]\ncarry = 1e0\n')
+    got = load_config(cfg)
+    assert got.autoencoder.lr == 2.5e-4 and type(got.autoencoder.lr) is float
+    assert got.solver.carry == 1.0
