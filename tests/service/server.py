@@ -11,6 +11,7 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
@@ -103,6 +104,38 @@ def serve(
             except subprocess.TimeoutExpired:
                 proc.kill()
                 proc.wait()
+
+
+@contextlib.contextmanager
+def liveness_probed(server: Server, every: float, timeout: float) -> Iterator[list[float]]:
+    """While the block runs, another client asks ``server``'s ``/v2/health/live`` every
+    ``every`` seconds, each answer a 200 within ``timeout`` s; yields the answers'
+    latencies (s), filled as they come. A probe that failed is raised when the block ends
+    (an assertion in the probe's thread only warned, and stopped the probes)."""
+    latencies: list[float] = []
+    failed: list[BaseException] = []
+    done = threading.Event()
+
+    def probe() -> None:
+        try:
+            while not done.is_set():
+                t = time.perf_counter()
+                status = server.request("GET", "/v2/health/live", timeout=timeout)[0]
+                assert status == 200, f"/v2/health/live answered {status}"
+                latencies.append(time.perf_counter() - t)
+                time.sleep(every)
+        except BaseException as exc:  # (raised in the test's thread, below)
+            failed.append(exc)
+
+    prober = threading.Thread(target=probe)
+    prober.start()
+    try:
+        yield latencies
+    finally:
+        done.set()
+        prober.join()
+    if failed:
+        raise failed[0]
 
 
 def solve_item(seed: int, exact: bool = True) -> dict[str, Any]:

@@ -19,7 +19,7 @@ import pytest
 
 from core.rest import rest_pose
 from core.skeleton import JOINT_NAMES
-from tests.service.server import heavy_batch, serve
+from tests.service.server import heavy_batch, liveness_probed, serve
 
 pytestmark = pytest.mark.slow
 PROBLEM = "application/problem+json"
@@ -273,28 +273,16 @@ def test_the_gate_never_hands_on_a_body_its_client_left(framing: str) -> None:
 def test_liveness_answers_while_big_bodies_are_parsed(models_dir: Path, tmp_path: Path) -> None:
     body = json.dumps(json.loads(heavy_batch(seed=7)), indent=1).encode()
     with serve(models_dir, tmp_path, POSE_DEADLINE_SECONDS="1") as s:
-        done = threading.Event()
-        latencies: list[float] = []
 
         def flood() -> None:
             s.request("POST", "/v1/solve/batch", body)
 
-        def probe() -> None:
-            while not done.is_set():
-                t = time.perf_counter()
-                assert s.request("GET", "/v2/health/live", timeout=10)[0] == 200
-                latencies.append(time.perf_counter() - t)
-                time.sleep(0.05)
-
         floods = [threading.Thread(target=flood) for _ in range(16)]
-        prober = threading.Thread(target=probe)
-        prober.start()
-        for t in floods:
-            t.start()
-        for t in floods:
-            t.join()
-        done.set()
-        prober.join()
+        with liveness_probed(s, every=0.05, timeout=10) as latencies:
+            for t in floods:
+                t.start()
+            for t in floods:
+                t.join()
         rss = s.rss_mib()
         print(
             f"\nliveness during 16 x {len(body) / 2**20:.1f} MiB bodies: max "

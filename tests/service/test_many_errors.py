@@ -24,7 +24,7 @@ from service.errors import MAX_ERRORS, validation_problem
 from service.routes.solve import BatchBody, SolveBody
 from service.schemas import CompleteRequest
 from tests.conftest import REPO_ROOT
-from tests.service.server import Server, serve
+from tests.service.server import Server, liveness_probed, serve
 from tests.service.test_api import assert_problem
 
 EXAMPLES = REPO_ROOT / "docs" / "examples"
@@ -331,16 +331,6 @@ def _post_watched(s: Server, path: str, body: bytes) -> tuple[int, bytes, float,
     """POST ``body`` while another client asks ``/v2/health/live`` every 10 ms: status and
     answer, seconds it took, the slowest liveness answer (s), the server's peak RSS
     growth (MiB)."""
-    lat: list[float] = []
-    done = threading.Event()
-
-    def probe() -> None:
-        while not done.is_set():
-            t = time.perf_counter()
-            assert s.request("GET", "/v2/health/live", timeout=30)[0] == 200
-            lat.append(time.perf_counter() - t)
-            time.sleep(0.01)
-
     status = Path(f"/proc/{s.proc.pid}/status")
 
     def read(key: str) -> int:
@@ -349,14 +339,11 @@ def _post_watched(s: Server, path: str, body: bytes) -> tuple[int, bytes, float,
 
     Path(f"/proc/{s.proc.pid}/clear_refs").write_text("5")  # VmHWM := VmRSS
     start = read("VmRSS")
-    prober = threading.Thread(target=probe)
-    prober.start()
-    time.sleep(0.2)
-    t = time.perf_counter()
-    code, _, answer = s.request("POST", path, body)
-    took = time.perf_counter() - t
-    done.set()
-    prober.join()
+    with liveness_probed(s, every=0.01, timeout=30) as lat:
+        time.sleep(0.2)
+        t = time.perf_counter()
+        code, _, answer = s.request("POST", path, body)
+        took = time.perf_counter() - t
     return code, answer, took, max(lat), read("VmHWM") - start
 
 
