@@ -115,3 +115,7 @@ def _run(settings: Settings, config: dict[str, Any], workers: int) -> None:
         http="service.transport:PacedHTTPProtocol",  # a floor on how fast answers are taken
         timeout_graceful_shutdown=settings.shutdown_grace_seconds,
     )
+
+
+if __name__ == "__main__":  # `python -m service.cli`: as `pose-service`
+    main()
