@@ -13,7 +13,8 @@ over it, joint by joint. Then two structural rules apply to every map:
 - ``spine2`` (the chest) is, unless named, the lowest common ancestor of the two collars,
   and ``spine1``, unless named, the first joint below the pelvis on the way to it that is
   not on the pelvis;
-- a canonical joint that lands on its canonical parent (zero rest length) is moved part-way
+- a canonical joint that lands on its canonical parent (zero rest length: within a thousandth
+  of the mapped joints' extent, whatever joints the map leaves out) is moved part-way
   along its own bone: a collar a quarter of the way to the shoulder (CMU skeletons start
   both clavicles on the midline), the chest 0.35 of the way to the neck (ReActIdle has one chest
   joint); so are two collars on one point (CMU ASF and Rigify start both clavicles where
@@ -581,7 +582,10 @@ def _fraction(text: str) -> float | None:
 
 def _anchors(skel: Skeleton, found: dict[str, int], scheme: str, where: str) -> JointMap:
     rest = skel.rest_positions()
-    span = max(float(np.ptp(rest, axis=0).max()), 1e-9)
+    # the body's size: the mapped joints' extent, not the whole skeleton's (a prop, a camera
+    # or a second root far from the body must not make a real bone count as zero length)
+    body = rest[sorted(set(found.values()))]
+    span = max(float(np.ptp(body, axis=0).max()), 1e-9)
     anchors: dict[str, Anchor] = {}
     for canon in JOINT_NAMES:  # parents first
         j = found[canon]
