@@ -27,7 +27,7 @@ from service.errors import MAX_ERRORS, BodyInvalid, TooManyItems
 from service.limits import Pricing, chunks_of, searched_price
 from service.problems import BatchAnswer
 from service.schemas import MAX_COORDINATE, MAX_WEIGHT, SolveOptions
-from service.validation import check_bones
+from service.validation import check_bones, check_options
 
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]
@@ -279,6 +279,7 @@ def parse(data: dict[str, Any], max_items: int, suspect: bool = True) -> Columns
     errs.raise_any()
     assert poses is not None and tj is not None and pj is not None
     k, p = tj.shape[1], pj.shape[1]
+    check_options(options, p > 0)  # (as every other form's, by problem_of)
     goals = _numbers(targets["positions"], ("targets", "positions"), 3 * k, n, errs, suspect)
     weights = np.ones((n, k + p))
     if targets.get("weights") is not None:

@@ -124,7 +124,12 @@ WHOLE = BeforeValidator(_whole)
 
 class SolveOptions(_Body):
     method: Literal["neural", "fabrik"] = "neural"
-    preserve_bone_lengths: bool = True
+    preserve_bone_lengths: bool = Field(
+        default=True,
+        description="`false`: the networks' raw answer, without the bone pass (bones not "
+        "kept). `method: fabrik`, `reach: exact` and pins keep the bone lengths by "
+        "construction: `false` beside any of them is a 422 naming both fields.",
+    )
     reach: Literal["soft", "exact"] = "soft"
     tolerance: Finite = Field(
         default=0.001, ge=1e-6, le=1.0, description="Metres: `reached` and exact reach."

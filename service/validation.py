@@ -62,6 +62,34 @@ def solve_problem(req: SolveRequest, pose: F64, where: str = "") -> SolveProblem
     )
 
 
+def check_options(options: SolveOptions, pinned: bool, where: str = "") -> None:
+    """Refuse ``options.preserve_bone_lengths: false`` (the networks' raw answer, bones not
+    kept) beside what keeps the bone lengths by construction: ``method: "fabrik"``,
+    ``reach: "exact"`` and pins (each was silently ignored). Every request form checks its
+    options here: the pose, character and BVH forms and the batch's items through
+    :func:`problem_of`, the columnar batch through ``service.columnar.parse``."""
+    if options.preserve_bone_lengths:
+        return
+    against = [
+        name
+        for name, on in (
+            ('options.method "fabrik"', options.method == "fabrik"),
+            ('options.reach "exact"', options.reach == "exact"),
+            ("pins", pinned),
+        )
+        if on
+    ]
+    if against:
+        prefix = f"{where}." if where else ""
+        keep = "keep" if len(against) > 1 or against == ["pins"] else "keeps"
+        raise InvalidRequest(
+            f"{prefix}options.preserve_bone_lengths: false (the networks' raw answer, bones "
+            f"not kept) conflicts with {' and '.join(against)}, which {keep} the bone lengths "
+            "by construction; leave preserve_bone_lengths out (or true), or ask for the raw "
+            'answer with method "neural", reach "soft" and no pins'
+        )
+
+
 def problem_of(
     pose: F64,
     targets: Sequence[int],
@@ -74,8 +102,10 @@ def problem_of(
 ) -> SolveProblem:
     """The engine problem of canonical joint indices ``targets`` (at ``goals`` ``[K, 3]``)
     and ``pins`` (held where ``pose`` has them); refuses a joint targeted twice, pinned
-    twice, or both. Shared by ``/v1/solve`` and the character routes; ``given``: the names
+    twice, or both, and options that conflict (:func:`check_options`). Shared by
+    ``/v1/solve`` and the character routes; ``given``: the names
     the client sent for the targets and the pins (a character's own), for the messages."""
+    check_options(options, bool(len(pins)), where)
     prefix = f"{where}." if where else ""
 
     def named(j: int, k: int, pin: bool) -> str:

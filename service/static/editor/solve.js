@@ -242,10 +242,16 @@ export function setUpFields() {
 }
 
 export function options() {
+  const method = document.querySelector('input[name=method]:checked').value;
+  const exact = $('exact').checked;
+  // unchecked (the networks' raw answer) is sent only where it means something: FABRIK,
+  // exact reach and pins keep the bone lengths by construction (the service refuses
+  // preserve_bone_lengths: false beside them)
+  const pinned = [...state.pins].some((j) => !state.targets.has(j));
   const out = {
-    method: document.querySelector('input[name=method]:checked').value,
-    preserve_bone_lengths: $('preserve').checked,
-    reach: $('exact').checked ? 'exact' : 'soft',
+    method,
+    preserve_bone_lengths: $('preserve').checked || method === 'fabrik' || exact || pinned,
+    reach: exact ? 'exact' : 'soft',
     tolerance: inUse.tolerance,
   };
   // the models' own default (GET /v1/models) until the slider is moved
