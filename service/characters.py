@@ -56,12 +56,13 @@ from core.characters_maps import (
     up_of,
 )
 from core.retarget import canonical_points, retarget
-from core.skeleton import BONES, JOINT_INDEX, JOINT_NAMES
+from core.skeleton import BONES, JOINT_NAMES
 from core.text import clip, quoted
 from core.units import UNITS
 from service.bounded import Bounded, at_most
 from service.engine import Engine
-from service.errors import InvalidRequest, name_key
+from service.errors import InvalidRequest
+from service.joint_names import resolve_joint
 from service.problems import SolveProblem, SolveResult
 from service.schemas import MAX_COORDINATE as MAX_METRES
 from service.schemas import (
@@ -473,22 +474,6 @@ def _character(
     )
 
 
-def _resolve_joint(ch: Character, name: str, where: str) -> int:
-    for k, a in enumerate(ch.jmap.anchors):
-        if ch.skel.names[a.joint] == name and not a.offset.any():
-            return k
-    if name in JOINT_INDEX:
-        return JOINT_INDEX[name]
-    mapped = ", ".join(f"{n} ({lbl})" for n, lbl in ch.jmap.describe().items())
-    known = [*(ch.skel.names[a.joint] for a in ch.jmap.anchors if not a.offset.any()), *JOINT_INDEX]
-    same = [k for k in known if name_key(k) == name_key(name)]  # maps ignore case; not here
-    near = f" (did you mean {quoted(same[0])}?)" if same else ""
-    raise InvalidRequest(
-        f"{where}: {quoted(name)} is neither a mapped joint of this skeleton nor a canonical "
-        f"joint{near}; mapped: {mapped}"
-    )
-
-
 def _refused(where: str, message: str) -> InvalidRequest:
     """A 422 whose one error is at the field ``where``."""
     return InvalidRequest(f"{where}: {message}", errors=[{"location": where, "message": message}])
@@ -539,12 +524,15 @@ def character_problem(ch: Character, req: _Frame, where: str = "") -> SolveProbl
     return problem_of(
         pts,
         [
-            _resolve_joint(ch, t.joint, f"{prefix}targets[{i}].joint")
+            resolve_joint(ch.skel, ch.jmap, t.joint, f"{prefix}targets[{i}].joint")
             for i, t in enumerate(req.targets)
         ],
         np.asarray(goals, dtype=np.float64),
         [t.weight for t in req.targets],
-        [_resolve_joint(ch, name, f"{prefix}pins[{i}]") for i, name in enumerate(req.pins)],
+        [
+            resolve_joint(ch.skel, ch.jmap, name, f"{prefix}pins[{i}]")
+            for i, name in enumerate(req.pins)
+        ],
         req.options,
         where,
         ([t.joint for t in req.targets], list(req.pins)),
