@@ -34,7 +34,7 @@ import numpy.typing as npt
 
 from core.characters import F64, CharacterError, Skeleton
 from core.skeleton import JOINT_INDEX, JOINT_NAMES, PARENT_NAMES
-from core.text import quoted
+from core.text import clip, quoted
 from core.units import UNITS
 
 _LIMBS = ("collar", "shoulder", "elbow", "wrist", "hip", "knee", "ankle", "foot")
@@ -516,9 +516,11 @@ def resolve_map(
     slid: dict[str, str] = {}  # a point part-way along a bone, as a map describes it
     for canon, name in (explicit or {}).items():
         if canon not in JOINT_INDEX:
+            at = f"{where}.{clip(canon, 40)}"  # the key, as a schema error names one
             raise CharacterError(
-                f"{where}: unknown canonical joint {quoted(canon)}; "
-                f"joints are {', '.join(JOINT_NAMES)}"
+                f"{at}: unknown canonical joint {quoted(canon)}; "
+                f"joints are {', '.join(JOINT_NAMES)}",
+                at,
             )
         along = _SLID.fullmatch(name) if name not in skel.index else None
         if along is not None and along.group(2) in skel.index:  # "0.5 of Spine1->Neck"
@@ -528,6 +530,7 @@ def resolve_map(
                     + ", ".join(f"{k} slides {v:g} of its bone" for k, v in _SLIDE.items())
                     + "); name a joint of the skeleton"
                 )
+            _along_a_bone(skel, along, f"{where}.{canon}")
             slid[canon], name = name, along.group(2)
         if name not in skel.index:
             raise CharacterError(f"{where}.{canon}: the skeleton has no joint {quoted(name)}")
@@ -571,6 +574,27 @@ def resolve_map(
 #: A point part-way along a bone as :meth:`JointMap.describe` writes it (a joint sliding
 #: along its bone, where it would sit on its parent): accepted back in a ``joint_map``.
 _SLID = re.compile(r"([0-9.]+) of (.+)->(.+)")
+
+
+def _along_a_bone(skel: Skeleton, along: re.Match[str], where: str) -> None:
+    """Refuse a point ``<fraction> of <joint>-><joint below it>`` whose bone is not one:
+    an end the skeleton has not, or the two joints reversed (was: read as the first joint,
+    and refused by the map's hierarchy, the point itself not named)."""
+    point, top, bottom = along.group(0), along.group(2), along.group(3)
+    if bottom not in skel.index:
+        raise CharacterError(
+            f"{where}: {quoted(point)}: the skeleton has no joint {quoted(bottom)}"
+        )
+    t, b = skel.index[top], skel.index[bottom]
+    if t == b or not skel.is_ancestor(t, b):
+        hint = (
+            f" (reversed: {quoted(top)} is below it)" if t != b and skel.is_ancestor(b, t) else ""
+        )
+        raise CharacterError(
+            f"{where}: {quoted(point)} is no point along a bone: {quoted(bottom)} is not below "
+            f"{quoted(top)} in the skeleton{hint}; a point reads '<fraction> of "
+            "<joint>-><a joint below it>', as an answer's joint_map writes it"
+        )
 
 
 def _fraction(text: str) -> float | None:

@@ -77,3 +77,58 @@ def test_a_far_prop_root_in_a_bvh_leaves_the_body_as_it_was(client: Any) -> None
         got, want = _frame(r.json()["bvh"], body["frame"]), _frame(plain.json()["bvh"], 1)
         assert got[-6:] == [1.0, 2.0, 3.0, 0.0, 0.0, 0.0]
         np.testing.assert_allclose(got[:-6], want, atol=1e-3)
+
+
+def _map_error(client: Any, path: str, body: dict[str, Any]) -> dict[str, str]:
+    r = client.post(path, json=body)
+    assert r.status_code == 422, r.text
+    (error,) = r.json()["errors"]
+    assert r.json()["detail"] == f"{error['location']}: {error['message']}"
+    return dict(error)
+
+
+def test_an_unknown_canonical_key_is_located_at_the_key(client: Any) -> None:
+    """``joint_map: {"tail": ...}`` was located at ``joint_map`` while an unknown joint of
+    the skeleton is at ``joint_map.<canonical>`` (an audit, 2026-12-06): now at the key, in
+    every form that takes a map (a key that is no field name too)."""
+    body = _example("solve_character")
+    for key in ("tail", "Left Tail: 2"):
+        body["joint_map"] = {key: "Hips"}
+        error = _map_error(client, "/v1/solve", body)
+        assert error["location"] == f"joint_map.{key}", error
+        assert f"unknown canonical joint '{key}'; joints are pelvis, spine1" in error["message"]
+    error = _map_error(client, "/v1/solve/batch", {"items": [_example("solve"), body]})
+    assert error["location"] == "items[1].joint_map.Left Tail: 2", error
+    bvh = {**_example("bvh_solve"), "joint_map": {"tail": "Hips"}}
+    assert _map_error(client, "/v1/bvh/solve", bvh)["location"] == "joint_map.tail"
+
+
+def test_a_point_along_a_bone_that_is_no_bone_is_named(client: Any) -> None:
+    """``{"spine2": "0.35 of Neck->Spine2"}`` (the bone reversed) was read as the joint
+    ``Neck`` and refused as "left_collar -> 'LeftShoulder' is not below spine2 -> 'Neck'"
+    (an audit, 2026-12-06): now the point itself is named, and why; so is a point whose
+    end the skeleton has not. A point the answer's map writes is still taken back."""
+    body = _example("solve_character")
+    body["joint_map"] = {"spine2": "0.35 of Neck->Spine2"}
+    error = _map_error(client, "/v1/solve", body)
+    assert error["location"] == "joint_map.spine2", error
+    for needle in (
+        "'0.35 of Neck->Spine2' is no point along a bone",
+        "'Spine2' is not below 'Neck'",
+        "(reversed: 'Neck' is below it)",
+    ):
+        assert needle in error["message"], error["message"]
+    body["joint_map"] = {"spine2": "0.35 of Spine2->Nope"}
+    error = _map_error(client, "/v1/solve", body)
+    assert error["location"] == "joint_map.spine2", error
+    assert "'0.35 of Spine2->Nope': the skeleton has no joint 'Nope'" in error["message"]
+    # a chest on its spine joint (Spine2 moved onto Spine): the map slides it, and takes
+    # the point it writes back
+    body = _example("solve_character")
+    joints = body["character"]["joints"]
+    joints[2]["offset"], joints[3]["offset"] = [0.0, 0.0, 0.0], [0.0, 0.42, 0.0]
+    first = client.post("/v1/solve", json=body)
+    assert first.status_code == 200, first.text
+    assert first.json()["joint_map"]["spine2"] == "0.35 of Spine2->Neck"
+    again = client.post("/v1/solve", json={**body, "joint_map": first.json()["joint_map"]})
+    assert again.status_code == 200, again.text
