@@ -321,6 +321,13 @@ FORMS = (
     "(a skeleton of your own: joints with name, parent and rest offset)"
 )
 
+#: ``skeleton`` where the alias route is not: on ``/v1/solve`` and in a batch's item.
+SKELETON_HERE = (
+    "Extra inputs are not permitted: `skeleton` (the earlier name of `character`) is read "
+    "only by POST /v1/character/solve; here send the skeleton as `character`, or the 21 "
+    "canonical joints as `pose`"
+)
+
 
 def _form_of(data: Any) -> str:
     if isinstance(data, dict):
@@ -350,6 +357,8 @@ class SolveBody(
             if "character" in data and "pose" in data:
                 raise _field_error(cls.__name__, ("character",), f"{FORMS}, not both", data)
             if "character" not in data and "pose" not in data:
+                if "skeleton" in data:  # the alias route's earlier name of `character`
+                    raise _field_error(cls.__name__, ("skeleton",), SKELETON_HERE, data)
                 raise _field_error(cls.__name__, ("pose",), f"Field required: {FORMS}", data)
         return validate_as(
             data,

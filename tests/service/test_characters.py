@@ -21,6 +21,7 @@ from core.skeleton import JOINT_INDEX
 from core.units import UNITS
 from service.characters import MIN_QUAT_LENGTH
 from tests.character_files import FILES, RefBVH
+from tests.conftest import REPO_ROOT
 
 MM = 1e-3
 ROUND_TRIP: dict[str, dict[str, float]] = {}  # measured errors, printed at the end
@@ -465,3 +466,25 @@ def test_a_root_whose_channels_are_a_displacement_is_read_and_written_so(
         np.asarray(ln.split()[:3], dtype=float) for ln in (lines_in[motion], lines_out[motion])
     )
     assert np.abs(new - old).max() < 0.1  # a displacement still, not a position (0.72 m up)
+
+
+def test_a_skeleton_sent_where_only_the_alias_reads_it_is_named(client: Any) -> None:
+    """``skeleton`` (the earlier name of ``character``, read by ``/v1/character/solve``)
+    sent to ``/v1/solve`` or in a batch's item was "pose: Field required: give either pose
+    or character" (an audit, 2026-12-06): now the key itself is named, with the route that
+    reads it and the name to send instead; the alias still takes it."""
+    body = json.loads((REPO_ROOT / "docs" / "examples" / "character_solve.json").read_text())
+    assert "skeleton" in body and "character" not in body
+    for path, sent, where in (
+        ("/v1/solve", body, "skeleton"),
+        ("/v1/solve/batch", {"items": [body]}, "items[0].skeleton"),
+    ):
+        r = client.post(path, json=sent)
+        assert r.status_code == 422, r.text
+        (error,) = r.json()["errors"]
+        assert error["location"] == where, r.text
+        for needle in ("only by POST /v1/character/solve", "as `character`", "Extra inputs"):
+            assert needle in error["message"], error["message"]
+    assert client.post("/v1/character/solve", json=body).status_code == 200
+    character = {("character" if k == "skeleton" else k): v for k, v in body.items()}
+    assert client.post("/v1/solve", json=character).status_code == 200
