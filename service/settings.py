@@ -66,6 +66,13 @@ class Settings(BaseSettings):
         description="Request bodies (declared or streamed, any route's) held at once per "
         "worker; 429 past it.",
     )
+    decode_memory_bytes: int = Field(
+        default=160 * 1024 * 1024,
+        ge=1024 * 1024,
+        description="Memory a worker's request bodies may take decoded at once (each of "
+        "64 KiB or more priced by its shape, service.decoded); a body that alone needs "
+        "more is a 413, others wait for it within the deadline (504 past it).",
+    )
     deadline_seconds: float = Field(
         default=2.0,
         gt=0,

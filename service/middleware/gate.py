@@ -23,8 +23,10 @@ import hmac
 import time
 
 from core.text import clip
+from service.decoded import ESTIMATED_FROM, DecodeBudget, estimate
 from service.errors import (
     ClientDisconnected,
+    DeadlineExceeded,
     MalformedBody,
     PayloadTooLarge,
     PoseError,
@@ -67,6 +69,7 @@ class Gate:
         self._reading: dict[asyncio.Task[object], float] = {}
         self._late: set[asyncio.Task[object]] = set()  # cancelled for being late
         self._watch: asyncio.Task[None] | None = None
+        self.decoded = DecodeBudget(settings.decode_memory_bytes)
 
     async def _watch_reads(self) -> None:
         """Cancel every body read past its deadline, every ``WATCH_SECONDS``, while any
@@ -165,6 +168,7 @@ class Gate:
         if admitted:
             self.active += 1
         self.held += reserved
+        decoded = 0  # bytes of the decode budget this request holds
         try:
             length = headers.get("content-length")
             if (length is not None and length != "0") or (
@@ -173,18 +177,51 @@ class Gate:
                 buffered = await self._buffer(scope, receive, send, length)
                 if buffered is None:
                     return
-                receive = buffered
+                receive, body = buffered
+                if len(body) >= ESTIMATED_FROM:
+                    try:
+                        decoded = await self._reserve_decoded(scope, body)
+                    except PoseError as exc:
+                        scope[REASON] = exc.type_
+                        await error_response(exc)(scope, receive, send)
+                        return
             await self.app(scope, receive, send)
         finally:
             if admitted:
                 self.active -= 1
             self.held -= reserved
+            if decoded > 0:
+                self.decoded.release(decoded)
+
+    async def _reserve_decoded(self, scope: Scope, body: bytes) -> int:
+        """Reserve what ``body`` takes decoded (``service.decoded``) for the request's
+        life, waiting no longer than its deadline leaves; the bytes reserved. Raises 413
+        for a body that needs more than the whole budget, 504 when it is not free in time."""
+        need, budget = estimate(body), self.decoded.total
+        mib = 1024 * 1024
+        if need > budget:
+            raise PayloadTooLarge(
+                f"this body would take about {need // mib} MiB of memory decoded (its "
+                f"{len(body)} bytes hold that many values, objects and arrays), more than "
+                f"a worker decodes at once ({budget // mib} MiB): send fewer values, or "
+                "split the request"
+            )
+        t0 = scope.get(T0, time.perf_counter())
+        waited = time.perf_counter()
+        if await self.decoded.reserve(need, t0 + self.settings.deadline_seconds):
+            return need
+        raise DeadlineExceeded(
+            f"the request needed more than the {self.settings.deadline_seconds:g} s deadline "
+            f"(before reading the body, after {time.perf_counter() - waited:.2f} s waiting "
+            f"for {need // mib} MiB of memory to decode it in): the server is busy; retry "
+            "later, or send a smaller request"
+        )
 
     async def _buffer(
         self, scope: Scope, receive: Receive, send: Send, length: str | None
-    ) -> Receive | None:
-        """Read the body within the size limit and the deadline and hand it on whole
-        (None: refused, answered here)."""
+    ) -> tuple[Receive, bytes] | None:
+        """Read the body within the size limit and the deadline and hand it on whole,
+        with the body (None: refused, answered here)."""
         limit = self.settings.max_body_bytes
         deadline = self.settings.deadline_seconds
         chunks: list[bytes] = []
@@ -236,15 +273,10 @@ class Gate:
             answer.headers["connection"] = "close"
             await answer(scope, receive, send)
             return None
-        replay: list[Message] = [
-            {
-                "type": "http.request",
-                "body": chunks[0] if len(chunks) == 1 else b"".join(chunks),
-                "more_body": False,
-            }
-        ]
+        body = chunks[0] if len(chunks) == 1 else b"".join(chunks)
+        replay: list[Message] = [{"type": "http.request", "body": body, "more_body": False}]
 
         async def receive_buffered() -> Message:
             return replay.pop() if replay else await receive()
 
-        return receive_buffered
+        return receive_buffered, body

@@ -1,0 +1,113 @@
+"""What a JSON body costs once decoded, and the worker's budget for it.
+
+Decoded into Python objects, JSON text takes 2 to 45 times its bytes, by its shape
+(tracemalloc, ``json.loads`` with the routes' strict hook, then the route's validation;
+8.3 MB bodies): one long string 2.0x, a big BVH file 2.1x, 1,024 valid items 11.4x
+(validated), a list of numbers 6.5-9.1x, distinct unknown keys 20.4x, empty lists 22.6x,
+empty objects 26.9x, lists nested 200 deep 44.8x. Counted by bytes alone, six 8 MiB bodies
+of empty objects (each a 413 or a 422) took a worker from 330 to 840 MiB, eight of lists
+nested 200 deep to 1,103 MiB, over a 768 MiB pod limit.
+
+:func:`estimate` prices a body from a count of its bytes (numpy, ~1.5 ms a MiB: no
+decoding) at the most each kind of token was measured to cost; :class:`DecodeBudget` holds
+a worker's decoded bodies under ``POSE_DECODE_MEMORY_BYTES`` (``service.middleware.gate``:
+a body of ``ESTIMATED_FROM`` bytes or more reserves its estimate once read, until its
+request ends; one that alone would exceed the budget is a 413, others wait for it in
+arrival order no longer than their deadline leaves).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import collections
+import time
+
+import numpy as np
+
+#: Bodies this long or longer are priced (``service.body.INLINE_BYTES``: smaller ones are
+#: decoded on the event loop, one at a time, and cost at most ~3 MB decoded).
+ESTIMATED_FROM = 64 * 1024
+
+#: Bytes of Python objects per token, the most measured (CPython 3.11, 64-bit): a ``[``
+#: a list (56 B, 32 B of slots when it holds anything); a ``{`` a dict (64 B; its pairs,
+#: counted by ``:``, add their table); a ``,`` a value and its slot (a float 24 B, rounded
+#: up, 8 B a slot); a ``:`` a member: its key's string when distinct (~56 B), the pair
+#: the strict decoder's hook is handed (64 B), the dict's entry and the key's memo; a
+#: ``"`` half of a string's header. Per byte of the body: the text decoded (once as a
+#: whole, once as its strings' values) at the widest character it may hold (below).
+COSTS = {ord("["): 88, ord("{"): 72, ord(","): 32, ord(":"): 168, ord('"'): 12}
+
+
+def _width(a: np.ndarray[tuple[int], np.dtype[np.uint8]]) -> int:
+    """Bytes per character of a ``str`` holding this UTF-8 text: 1 (ASCII, Latin-1), 2
+    (a lead byte of U+0100..U+FFFF), 4 (one of a character beyond)."""
+    top = int(a.max(initial=0))
+    return 4 if top >= 0xF0 else 2 if top >= 0xC4 else 1
+
+
+def estimate(body: bytes) -> int:
+    """An upper bound of the bytes ``body`` takes decoded and validated (measured within
+    +0 to +90 % for every shape above; see the module doc)."""
+    a = np.frombuffer(body, dtype=np.uint8)
+    text = _width(a)
+    # a string is its text's copy, but one with escapes is written out character by
+    # character: begun narrow, copied wide at a surrogate pair's, grown by a quarter, and
+    # copied once more to its length (9 bytes a byte, measured)
+    values = 9 if b"\\u" in body else text
+    widened = 1 if text > 1 else 0  # the text, decoded narrow until a wide character comes
+    total = len(body) * (text + values + widened) + len(body) // 4
+    for byte, cost in COSTS.items():
+        total += cost * int(np.count_nonzero(a == byte))
+    return total
+
+
+class DecodeBudget:
+    """Bytes of decoded bodies a worker holds at once; reservations are granted in
+    arrival order (one that does not fit holds back those after it, so a big body is not
+    starved by small ones). Event-loop only."""
+
+    def __init__(self, total: int) -> None:
+        self.total = total
+        self.held = 0
+        self._waiting: collections.deque[tuple[int, asyncio.Future[None]]] = collections.deque()
+
+    def _grant(self) -> None:
+        while self._waiting:
+            size, ready = self._waiting[0]
+            if ready.done():  # (given up: its deadline)
+                self._waiting.popleft()
+                continue
+            if self.held + size > self.total:
+                return
+            self._waiting.popleft()
+            self.held += size
+            ready.set_result(None)
+
+    async def reserve(self, size: int, until: float) -> bool:
+        """Reserve ``size`` bytes (at most ``total``), waiting no later than ``until``
+        (``time.perf_counter``); False if they did not come by then."""
+        if not self._waiting and self.held + size <= self.total:
+            self.held += size
+            return True
+        ready: asyncio.Future[None] = asyncio.get_running_loop().create_future()
+        self._waiting.append((size, ready))
+        try:
+            await asyncio.wait_for(asyncio.shield(ready), max(0.0, until - time.perf_counter()))
+            return True
+        except TimeoutError:
+            if ready.done() and not ready.cancelled():  # granted as the wait ended
+                return True
+            ready.cancel()
+            self._grant()  # those behind it may fit now
+            return False
+        except BaseException:
+            if ready.done() and not ready.cancelled():
+                self.release(size)
+            else:
+                ready.cancel()
+                self._grant()
+            raise
+
+    def release(self, size: int) -> None:
+        self.held -= size
+        self._grant()
