@@ -168,6 +168,7 @@ class FastPath:
             except orjson.JSONDecodeError:  # NaN, or malformed: the strict decoder says which
                 pass
             if not strict:
+                data = None  # (orjson's objects freed before the body is decoded again)
                 try:
                     data = decode(body)
                 except PoseError as exc:
