@@ -79,44 +79,48 @@ class DecodeBudget:
     def __init__(self, total: int) -> None:
         self.total = total
         self.held = 0
-        self._waiting: collections.deque[tuple[int, asyncio.Future[None]]] = collections.deque()
+        self._waiting: collections.deque[tuple[int, asyncio.Future[bool]]] = collections.deque()
 
     def _grant(self) -> None:
         while self._waiting:
             size, ready = self._waiting[0]
-            if ready.done():  # (given up: its deadline)
+            if ready.done():  # (given up: its deadline, or its request cancelled)
                 self._waiting.popleft()
                 continue
             if self.held + size > self.total:
                 return
             self._waiting.popleft()
             self.held += size
-            ready.set_result(None)
+            ready.set_result(True)
+
+    def _expire(self, ready: asyncio.Future[bool]) -> None:
+        if not ready.done():
+            ready.set_result(False)
+            self._grant()  # those behind it may fit now
 
     async def reserve(self, size: int, until: float) -> bool:
         """Reserve ``size`` bytes (at most ``total``), waiting no later than ``until``
-        (``time.perf_counter``); False if they did not come by then."""
+        (``time.perf_counter``); False if they did not come by then. (The future is
+        awaited as it is: a request cancelled while it waits - the shutdown grace ran
+        out - ends at once and is answered; through ``asyncio.wait_for`` it took loop
+        turns the shutdown did not wait for, and its client got no answer.)"""
         if not self._waiting and self.held + size <= self.total:
             self.held += size
             return True
-        ready: asyncio.Future[None] = asyncio.get_running_loop().create_future()
+        loop = asyncio.get_running_loop()
+        ready: asyncio.Future[bool] = loop.create_future()
         self._waiting.append((size, ready))
+        timer = loop.call_later(max(0.0, until - time.perf_counter()), self._expire, ready)
         try:
-            await asyncio.wait_for(asyncio.shield(ready), max(0.0, until - time.perf_counter()))
-            return True
-        except TimeoutError:
-            if ready.done() and not ready.cancelled():  # granted as the wait ended
-                return True
-            ready.cancel()
-            self._grant()  # those behind it may fit now
-            return False
-        except BaseException:
-            if ready.done() and not ready.cancelled():
-                self.release(size)
+            return await ready
+        except asyncio.CancelledError:
+            if ready.done() and not ready.cancelled() and ready.result():
+                self.release(size)  # granted as it was cancelled
             else:
-                ready.cancel()
                 self._grant()
             raise
+        finally:
+            timer.cancel()
 
     def release(self, size: int) -> None:
         self.held -= size

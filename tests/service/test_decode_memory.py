@@ -102,6 +102,15 @@ def test_the_budget_grants_in_arrival_order_within_the_deadline() -> None:
         budget.release(80)
         budget.release(10)
         assert budget.held == 0 and not budget._waiting
+        # a request cancelled while it waits (the shutdown grace ran out) ends at once
+        assert await budget.reserve(100, time.perf_counter())
+        waiting = asyncio.create_task(budget.reserve(50, time.perf_counter() + 5))
+        await asyncio.sleep(0.01)
+        waiting.cancel()
+        await asyncio.sleep(0)  # (one turn of the loop: uvicorn's shutdown waits no longer)
+        assert waiting.cancelled()
+        budget.release(100)
+        assert budget.held == 0 and not budget._waiting
 
     asyncio.run(main())
 
