@@ -62,7 +62,8 @@ def estimate(body: bytes, orjson: bool = False) -> int:
     # a string is its text's copy, but one with escapes is written out character by
     # character: begun narrow, copied wide at a surrogate pair's, grown by a quarter, and
     # copied once more to its length (9 bytes a byte, measured)
-    values = 9 if b"\\u" in body else text
+    escaped = np.count_nonzero(a == ord("\\")) and b"\\u" in body  # (a search: 1 GB/s)
+    values = 9 if escaped else text
     widened = 1 if text > 1 else 0  # the text, decoded narrow until a wide character comes
     total = len(body) * (text + values + widened + (ORJSON_BYTES if orjson else 0))
     total += len(body) // 4
