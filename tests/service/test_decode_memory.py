@@ -11,8 +11,10 @@ import json
 import threading
 import time
 import tracemalloc
+import weakref
 from collections import Counter
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import orjson
@@ -21,7 +23,8 @@ from fastapi import HTTPException
 
 from service.body import parse
 from service.decoded import DecodeBudget, estimate
-from service.errors import PoseError
+from service.errors import PoseError, TooManyItems
+from service.limits import Budget, ComputeLimiter
 from service.routes.solve import BatchBody, SolveBody
 from service.settings import Settings
 from tests.service.server import heavy_batch, serve
@@ -113,6 +116,34 @@ def test_the_budget_grants_in_arrival_order_within_the_deadline() -> None:
         assert budget.held == 0 and not budget._waiting
 
     asyncio.run(main())
+
+
+def test_work_that_raised_in_a_thread_leaves_nothing_to_the_cyclic_collector() -> None:
+    """An error from a worker thread and anyio's future that carried it form a cycle
+    through the traceback; the frames of the work (a decoded body, in the columnar
+    reader) lived until the cyclic collector ran. ``Budget.in_thread`` clears them."""
+
+    class Decoded(list[int]):
+        pass
+
+    def work() -> None:
+        data = Decoded(range(1000))
+        gone.append(weakref.ref(data))
+        raise TooManyItems("too many")
+
+    async def main() -> None:
+        app = SimpleNamespace(state=SimpleNamespace(compute_limiter=ComputeLimiter(1)))
+        request: Any = SimpleNamespace(scope={}, app=app)
+        with pytest.raises(TooManyItems):
+            await Budget(request, 10.0).in_thread(work, "reading the body")
+
+    gone: list[weakref.ref[Decoded]] = []
+    gc.disable()
+    try:
+        asyncio.run(main())
+        assert gone[0]() is None  # freed without a collection
+    finally:
+        gc.enable()
 
 
 @pytest.mark.slow
