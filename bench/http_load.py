@@ -143,7 +143,7 @@ def _options(passes: int | None, mirror: bool | None = None) -> Json:
 def columnar_body(
     edits: Edits, rows: Sequence[int], passes: int | None = None, mirror: bool | None = None
 ) -> Json:
-    """The columnar form of the edits ``rows`` (docs/service.md): one row of 63 numbers per
+    """The columnar form of the edits ``rows`` (docs/limits.md): one row of 63 numbers per
     pose, target joints per item, one row of 3K numbers per item."""
     return {
         "poses": edits.start[np.asarray(rows)].reshape(len(rows), -1).tolist(),

@@ -4,7 +4,7 @@ Real poses (seeded, half from the TEST split, half from the held-out bodies), ea
 with one pin set (a joint or two held where they are) and one far target set (joints moved
 0.3, 1 or 3 m in seeded directions), through :class:`service.engine.Engine` with the
 shipped models: neural and FABRIK, soft and exact reach. A pin is a hard constraint
-(docs/service.md, "Pins"): the table counts the edits that left a pin more than its
+(docs/limits.md, "Pins"): the table counts the edits that left a pin more than its
 tolerance (1 mm) and more than 2 mm from where it was asked, and the farthest, per pin
 set; beside them the targets' mean miss, which says the targets were still approached, and
 the edits whose answer the pin polish finished (``pin-polish`` in its solvers,

@@ -1,5 +1,5 @@
 """The columnar form of ``POST /v1/solve/batch``: arrays in, arrays out, no per-item
-Python objects (docs/service.md, "The columnar batch").
+Python objects (docs/limits.md, "The columnar batch").
 
 The body is decoded by orjson into lists, turned into numpy arrays at once and checked
 vectorised (shapes, finite numbers, bounds, joint names -> indices, repeats, degenerate

@@ -39,7 +39,7 @@ _PROTOCOL_STATUS = {
     "; before the request is read; the connection closes).",
 }
 
-#: Headers of the answers (docs/service.md, Headers).
+#: Headers of the answers (docs/limits.md, Headers).
 _HEADERS = {
     "X-Request-ID": "The client's X-Request-ID (printable, at most 128 characters), else "
     "32 random hex digits.",
@@ -85,7 +85,7 @@ HEADERS = {
 
 def _answer_headers(code: str, method: str) -> list[str]:
     """The headers an answer declares: every answer carries X-Request-ID and X-Total-Time
-    (declared on the 200s, said in docs/service.md for all); then what a client acts on."""
+    (declared on the 200s, said in docs/limits.md for all); then what a client acts on."""
     names = [*_HEADERS, *(["X-Compute-Time"] if method == "post" else [])] if code == "200" else []
     if code in ("429", "503", "504"):
         names.append("Retry-After")

@@ -9,7 +9,7 @@ Starlette answers a ``Range`` it cannot serve in plain text (a 416 with an empty
 2026-12-06).
 
 A file's path with a trailing slash (``/static/editor.js/``) is a 404 naming the file, as
-a route's is (docs/service.md); Starlette served the file there, where the relative URLs
+a route's is (docs/limits.md); Starlette served the file there, where the relative URLs
 it holds resolve under ``editor.js/``. A mount's own path (``/static/``) is a plain 404.
 """
 

@@ -11,7 +11,7 @@ routes' own. A columnar batch is read here ready or not (its errors are this for
 words either way), then answered 503 while the models load.
 
 Why: FastAPI's routing, dependency injection and response classes cost ~0.3 ms per
-request, twice the engine's own time of a solve (docs/service.md, "The hot path").
+request, twice the engine's own time of a solve (docs/limits.md, "The hot path").
 """
 
 from __future__ import annotations

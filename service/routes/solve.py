@@ -66,7 +66,7 @@ class BatchBody(
 ):
     """A batch in one of two forms: the **item list** (`items`, each in the pose or the
     character form, answered item by item) or the **columnar form** (`poses`, `targets`,
-    `pins`, `options`: arrays in, arrays out; docs/service.md)."""
+    `pins`, `options`: arrays in, arrays out; docs/limits.md)."""
 
     @model_validator(mode="wrap")
     @classmethod

@@ -92,7 +92,7 @@ def test_a_batch_whose_items_are_all_done_is_answered_with_no_compute_thread_fre
     after this one's deadline: the answer is written anyway, the same bytes as on a calm
     server. Before, writing the answer waited for a compute token within the deadline, and
     under overload a batch whose items were all done was a 504 "before writing the
-    answer", its work thrown away (an overload audit; docs/service.md)."""
+    answer", its work thrown away (an overload audit; docs/limits.md)."""
     body: dict[str, Any] = columns(real_poses, 300)  # > 32 items: answered in a worker thread
     if route == "items":
         from tests.service.test_columnar import items
@@ -135,7 +135,7 @@ def test_soft_unpinned_edits_run_on_the_loop_and_the_rest_in_a_worker(
     """A single edit in neural soft reach without pins, no more passes than served and no
     turn search is answered on the event loop's thread, composed solvers and a 5-target
     edit the gate keeps from searching too (in a worker they share the GIL with the loop:
-    docs/service.md); pins, exact reach, FABRIK, extra passes and a turn search run in a
+    docs/limits.md); pins, exact reach, FABRIK, extra passes and a turn search run in a
     worker thread, so the loop stays free of their work (``service.routes.solve.inline``)."""
     from service.engine import Engine
     from tests.service.test_api import solve_body
