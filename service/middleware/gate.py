@@ -213,7 +213,7 @@ class Gate:
             return need
         raise DeadlineExceeded(
             f"the request needed more than the {self.settings.deadline_seconds:g} s deadline "
-            f"(before reading the body, after {time.perf_counter() - waited:.2f} s waiting "
+            f"(before decoding the body, after {time.perf_counter() - waited:.2f} s waiting "
             f"for {need // mib} MiB of memory to decode it in): the server is busy; retry "
             "later, or send a smaller request"
         )

@@ -13,7 +13,7 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -104,6 +104,20 @@ def serve(
             except subprocess.TimeoutExpired:
                 proc.kill()
                 proc.wait()
+
+
+def peak_mib(pid: int | str = "self") -> Callable[[], int]:
+    """Reset process ``pid``'s peak RSS (VmHWM, ``/proc``); the function returned reads
+    its growth since (MiB)."""
+    status = Path(f"/proc/{pid}/status")
+
+    def read(key: str) -> int:
+        line = next(x for x in status.read_text().splitlines() if x.startswith(key))
+        return int(line.split()[1]) // 1024
+
+    Path(f"/proc/{pid}/clear_refs").write_text("5")  # VmHWM := VmRSS
+    start = read("VmRSS")
+    return lambda: read("VmHWM") - start
 
 
 @contextlib.contextmanager

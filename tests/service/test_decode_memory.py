@@ -27,7 +27,7 @@ from service.errors import PoseError, TooManyItems
 from service.limits import Budget, ComputeLimiter
 from service.routes.solve import BatchBody, SolveBody
 from service.settings import Settings
-from tests.service.server import heavy_batch, serve
+from tests.service.server import heavy_batch, liveness_probed, peak_mib, serve
 from tests.service.test_many_errors import _example
 
 SIZE = 8_300_000  # under the 8 MiB body limit
@@ -162,24 +162,7 @@ def test_a_flood_of_dense_bodies_stays_within_the_decode_budget(
                                   "short strings")] * 2  # fmt: skip
     paths = ["/v1/solve", "/v1/solve/batch", "/v1/complete", "/v1/character/solve"] * 2
     with serve(models_dir, tmp_path) as s:
-        status = Path(f"/proc/{s.proc.pid}/status")
-
-        def read(key: str) -> int:
-            line = next(x for x in status.read_text().splitlines() if x.startswith(key))
-            return int(line.split()[1]) // 1024
-
-        Path(f"/proc/{s.proc.pid}/clear_refs").write_text("5")  # VmHWM := VmRSS
-        start = read("VmRSS")
         answers: list[tuple[int, dict[str, str], bytes]] = []
-        lat: list[float] = []
-        done = threading.Event()
-
-        def probe() -> None:
-            while not done.is_set():
-                t = time.perf_counter()
-                assert s.request("GET", "/v2/health/live", timeout=30)[0] == 200
-                lat.append(time.perf_counter() - t)
-                time.sleep(0.01)
 
         def post(path: str, body: bytes) -> None:
             try:
@@ -188,17 +171,15 @@ def test_a_flood_of_dense_bodies_stays_within_the_decode_budget(
                 answers.append((0, {}, repr(exc).encode()))
 
         threads = [threading.Thread(target=post, args=pb) for pb in zip(paths, bodies, strict=True)]
-        prober = threading.Thread(target=probe)
-        prober.start()
-        for t in threads:
-            t.start()
-        for t in threads:
-            t.join()
-        done.set()
-        prober.join()
-        growth = read("VmHWM") - start
+        growth = peak_mib(s.proc.pid)
+        with liveness_probed(s, every=0.01, timeout=30) as lat:
+            for t in threads:
+                t.start()
+            for t in threads:
+                t.join()
+        grown = growth()
         codes = Counter(code for code, _, _ in answers)
-        print(f"\n8 dense 8.3 MB bodies: {dict(codes)}, peak RSS {start} + {growth} MiB, "
+        print(f"\n8 dense 8.3 MB bodies: {dict(codes)}, peak RSS +{grown} MiB, "
               f"slowest liveness {max(lat) * 1000:.0f} ms")  # fmt: skip
         for code, headers, answer in answers:
             assert code in (413, 422, 504), answer[:300]
@@ -206,4 +187,4 @@ def test_a_flood_of_dense_bodies_stays_within_the_decode_budget(
             if code == 413:
                 assert "MiB of memory decoded" in json.loads(answer)["detail"]
         assert codes[413] >= 6
-        assert growth < 260, growth  # budget 160 MiB, bodies 66 MB (before: +450 to +900)
+        assert grown < 260, grown  # budget 160 MiB, bodies 66 MB (before: +450 to +900)

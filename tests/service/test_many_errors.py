@@ -24,7 +24,7 @@ from service.errors import MAX_ERRORS, validation_problem
 from service.routes.solve import BatchBody, SolveBody
 from service.schemas import CompleteRequest
 from tests.conftest import REPO_ROOT
-from tests.service.server import Server, liveness_probed, serve
+from tests.service.server import Server, liveness_probed, peak_mib, serve
 from tests.service.test_api import assert_problem
 
 EXAMPLES = REPO_ROOT / "docs" / "examples"
@@ -72,20 +72,6 @@ def worded(monkeypatch: pytest.MonkeyPatch) -> list[Any]:
 
     monkeypatch.setattr(errors, "_message", counted)
     return seen
-
-
-def _peak_mib() -> Any:
-    """Reset this process's peak RSS (VmHWM); the function returned reads its growth since
-    (MiB)."""
-    status = Path("/proc/self/status")
-
-    def read(key: str) -> int:
-        line = next(x for x in status.read_text().splitlines() if x.startswith(key))
-        return int(line.split()[1]) // 1024
-
-    Path("/proc/self/clear_refs").write_text("5")  # VmHWM := VmRSS
-    start = read("VmRSS")
-    return lambda: read("VmHWM") - start
 
 
 # -- the answers: the same first errors and count -------------------------------------------
@@ -191,7 +177,7 @@ def test_100000_unknown_keys_are_counted_not_collected(
     client: Any, worded: list[Any], path: str, example: str
 ) -> None:
     body = _unknown_keys(_example(example), 100_000)
-    growth = _peak_mib()
+    growth = peak_mib()
     t = time.perf_counter()
     resp = client.post(path, content=body, headers=JSON)
     took = time.perf_counter() - t
@@ -223,7 +209,7 @@ def test_an_item_list_of_near_miss_joint_names_is_searched_only_where_shown(
 
 def test_two_errors_per_three_bytes_cost_no_more_than_the_body(client: Any) -> None:
     """200 items of 2,000 empty joints (1.7 MB): 800,000 errors. Before: 6 s, 1.4 GiB."""
-    growth = _peak_mib()
+    growth = peak_mib()
     t = time.perf_counter()
     resp = client.post("/v1/solve/batch", content=_empty_joints(200), headers=JSON)
     took = time.perf_counter() - t
@@ -331,20 +317,13 @@ def _post_watched(s: Server, path: str, body: bytes) -> tuple[int, bytes, float,
     """POST ``body`` while another client asks ``/v2/health/live`` every 10 ms: status and
     answer, seconds it took, the slowest liveness answer (s), the server's peak RSS
     growth (MiB)."""
-    status = Path(f"/proc/{s.proc.pid}/status")
-
-    def read(key: str) -> int:
-        line = next(x for x in status.read_text().splitlines() if x.startswith(key))
-        return int(line.split()[1]) // 1024
-
-    Path(f"/proc/{s.proc.pid}/clear_refs").write_text("5")  # VmHWM := VmRSS
-    start = read("VmRSS")
+    growth = peak_mib(s.proc.pid)
     with liveness_probed(s, every=0.01, timeout=30) as lat:
         time.sleep(0.2)
         t = time.perf_counter()
         code, _, answer = s.request("POST", path, body)
         took = time.perf_counter() - t
-    return code, answer, took, max(lat), read("VmHWM") - start
+    return code, answer, took, max(lat), growth()
 
 
 @pytest.mark.slow
