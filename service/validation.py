@@ -5,6 +5,7 @@ field."""
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Callable, Sequence
 from operator import attrgetter
 from typing import Any
@@ -13,6 +14,7 @@ import numpy as np
 import numpy.typing as npt
 from pydantic import BaseModel, ValidatorFunctionWrapHandler
 
+from core import compiled
 from core.skeleton import BONES, JOINT_INDEX, JOINT_NAMES, bone_lengths
 from core.text import quoted
 from service.errors import InvalidRequest
@@ -27,9 +29,12 @@ _JOINTS = attrgetter(*JOINT_NAMES)  # a Pose's 21 [x, y, z], in joint order
 def poses(requests: Sequence[SolveRequest], where: Sequence[str]) -> F64:
     """The start poses ``[B, 21, 3]`` (joint order) of validated requests; a pose with a
     zero-length bone is refused, naming the pose and the joints."""
-    arr = np.array([_JOINTS(r.pose) for r in requests], dtype=np.float64).reshape(
-        len(requests), len(JOINT_NAMES), 3
-    )
+    flat = itertools.chain.from_iterable
+    arr = np.fromiter(
+        flat(flat(_JOINTS(r.pose) for r in requests)),
+        np.float64,
+        3 * len(JOINT_NAMES) * len(requests),
+    ).reshape(len(requests), len(JOINT_NAMES), 3)
     check_bones(arr, where.__getitem__)
     return arr
 
@@ -37,11 +42,13 @@ def poses(requests: Sequence[SolveRequest], where: Sequence[str]) -> F64:
 def check_bones(arr: F64, where: Callable[[int], str]) -> None:
     """Refuse poses ``[B, 21, 3]`` with a zero-length bone, naming the first such pose
     (``where(b)``) and its joints."""
-    lengths = bone_lengths(arr)
-    if lengths.size and lengths.min() < MIN_BONE:
-        b = int(np.argmax(lengths.min(axis=-1) < MIN_BONE))
+    shortest = compiled.shortest_bones(compiled.as_f64(arr))
+    if shortest.size and shortest.min() < MIN_BONE:
+        b = int(np.argmax(shortest < MIN_BONE))
         short = [
-            JOINT_NAMES[c] for (c, _), n in zip(BONES, lengths[b], strict=True) if n < MIN_BONE
+            JOINT_NAMES[c]
+            for (c, _), n in zip(BONES, bone_lengths(arr[b]), strict=True)
+            if n < MIN_BONE
         ]
         raise InvalidRequest(
             f"{where(b)}: degenerate pose: zero-length bones ending at {short} "
@@ -128,15 +135,14 @@ def problem_of(
         if j in idx:
             raise InvalidRequest(f"{prefix}pins[{i}]: joint {name} is pinned twice")
         idx.append(j)
-    target_idx = np.asarray(idx, dtype=np.intp)
-    w = np.ones(len(idx))
-    w[:n_targets] = weights
+    target_idx = np.array(idx, dtype=np.intp)
+    goals = np.reshape(goals, (-1, 3))
     o = options
     return SolveProblem(
         pose=pose,
         target_idx=target_idx,
-        target_pos=np.concatenate([np.reshape(goals, (-1, 3)), pose[target_idx[n_targets:]]]),
-        weights=w,
+        target_pos=np.concatenate([goals, pose[pins]]) if len(pins) else goals.copy(),
+        weights=np.array([*weights, *[1.0] * len(pins)], dtype=np.float64),
         n_targets=n_targets,
         method=o.method,
         preserve_bone_lengths=o.preserve_bone_lengths,
