@@ -337,3 +337,30 @@ def test_a_template_field_not_a_pattern_group_is_a_map_error(tmp_path: Path) -> 
     with pytest.raises(MapError) as info:
         load_map(bad)
     assert str(info.value) == f"{bad}: missing `format = 2` (the map format's version)"
+
+
+def test_two_canonical_joints_from_one_source_joint_is_a_map_error(tmp_path: Path) -> None:
+    """``right_wrist = "Hand_L"`` (a copy-paste slip) was accepted: the build kept a
+    dataset whose right wrist sat on the left hand (5/6 of the frames dropped as
+    ``bone_length``, no warning); ``spine2 = "Spine"`` kept a zero-length bone."""
+    text = (MAPS / "bandai_namco.toml").read_text()
+    bad = tmp_path / "bad.toml"
+    bad.write_text(text.replace('right_wrist = "Hand_R"', 'right_wrist = "Hand_L"'))
+    with pytest.raises(MapError) as info:
+        load_map(bad)
+    assert str(info.value) == (
+        f"{bad}: [joints] right_wrist = 'Hand_L' is also left_wrist's source joint: "
+        "each canonical joint needs a source joint of its own"
+    )
+    bad.write_text(text.replace('spine2 = "Chest"', 'spine2 = "Spine"'))
+    with pytest.raises(MapError, match=r"\[joints\] spine2 = 'Spine' is also spine1's"):
+        load_map(bad)
+    # an override's joints, merged with the map's, are checked the same way
+    over = '[[override]]\nglob = "**/x*.bvh"\njoints.neck = "Head"\n\n[metadata]'
+    bad.write_text(text.replace("[metadata]", over, 1))
+    with pytest.raises(MapError, match=r"\[\[override\]\] #1 joints.neck = 'Head' is also head's"):
+        load_map(bad)
+    # a swap of two joints in an override is fine: each still has a source of its own
+    swap = over.replace("\n\n[metadata]", '\njoints.head = "Neck"\n\n[metadata]')
+    bad.write_text(text.replace("[metadata]", swap, 1))
+    load_map(bad)

@@ -16,7 +16,7 @@ import math
 import re
 import string
 import tomllib
-from collections.abc import Iterable, Sequence
+from collections.abc import Collection, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
@@ -428,6 +428,22 @@ def _parse_joints(table: Any, where: str, complete: bool) -> dict[str, JointSour
     return {n: _parse_joint(v, f"{where} {n}") for n, v in table.items()}
 
 
+def _check_distinct(joints: dict[str, JointSource], where: str, changed: Collection[str]) -> None:
+    """Refuse two canonical joints fed by one source point (a copy-paste slip such as
+    ``right_wrist = 'LeftHand'``): the bone between them has no length or stretches with the
+    other side, so the build kept a zero bone or dropped most frames, without a word."""
+    first: dict[JointSource, str] = {}
+    for canon, source in joints.items():
+        other = first.setdefault(source, canon)
+        if other != canon and (canon in changed or other in changed):
+            if canon not in changed:  # name the joint the table being checked sets
+                canon, other = other, canon
+            raise MapError(
+                f"{where}{canon} = {str(source)!r} is also {other}'s source joint: "
+                "each canonical joint needs a source joint of its own"
+            )
+
+
 def _parse_override(item: Any, index: int, file: str, reader: str) -> Override:
     where = f"{file}: [[override]] #{index + 1}"
     if not isinstance(item, dict) or not isinstance(item.get("glob"), str):
@@ -594,6 +610,11 @@ def load_map(path: str | Path) -> MocapMap:
     if "joints" not in data:
         raise MapError(f"{file}: missing [joints] table")
     joints = _parse_joints(data["joints"], f"{file}: [joints]", complete=True)
+    _check_distinct(joints, f"{file}: [joints] ", JOINT_NAMES)
+    for i, o in enumerate(overrides):
+        table: dict[str, JointSource] = o.get("joints") or {}
+        merged = {n: table.get(n, j) for n, j in joints.items()}
+        _check_distinct(merged, f"{file}: [[override]] #{i + 1} joints.", table)
 
     return MocapMap(
         path=file,
