@@ -42,12 +42,14 @@ def _train_and_export(
     overrides: dict[str, object] = dict(QUICK) if quick else {}
     if dataset is not None:
         overrides["dataset"] = str(dataset)
-    if out is not None:
-        overrides["out_dir"] = str(out)
     if run_dir is not None:
         overrides["run_dir"] = str(run_dir)
     elif quick:
         overrides["run_dir"] = "runs/quick"
+    if out is not None:
+        overrides["out_dir"] = str(out)
+    elif quick:  # a smoke run replaced the config's models (the shipped `models/`) whole
+        overrides["out_dir"] = str(Path(str(overrides["run_dir"])) / "models")
     try:  # a config that cannot be read: one line, not a traceback (as `serving` says it)
         cfg = load_config(config, overrides)
     except (OSError, ValueError) as exc:  # missing file, TOML, a setting wrong (pydantic)
@@ -101,7 +103,13 @@ def _train_and_export(
 @app.command()
 def train(
     config: Annotated[Optional[Path], typer.Option(help="Training config (TOML).")] = None,  # noqa: UP045
-    quick: Annotated[bool, typer.Option(help="Seconds-long smoke run of every stage.")] = False,
+    quick: Annotated[
+        bool,
+        typer.Option(
+            help="Seconds-long smoke run of every stage: checkpoints in runs/quick, models in "
+            "<run dir>/models (unless --run-dir / --out)."
+        ),
+    ] = False,
     fresh: Annotated[bool, typer.Option(help="Ignore checkpoints; start anew.")] = False,
     dataset: Annotated[Optional[Path], typer.Option(help="Override the dataset path.")] = None,  # noqa: UP045
     out: Annotated[Optional[Path], typer.Option(help="Override the models directory.")] = None,  # noqa: UP045
@@ -118,7 +126,9 @@ def train(
 @app.command("export")
 def export_cmd(
     config: Annotated[Optional[Path], typer.Option(help="Training config (TOML).")] = None,  # noqa: UP045
-    quick: Annotated[bool, typer.Option(help="The --quick run's checkpoints.")] = False,
+    quick: Annotated[
+        bool, typer.Option(help="The --quick run's checkpoints, into <run dir>/models.")
+    ] = False,
     dataset: Annotated[Optional[Path], typer.Option(help="Override the dataset path.")] = None,  # noqa: UP045
     out: Annotated[Optional[Path], typer.Option(help="Override the models directory.")] = None,  # noqa: UP045
     run_dir: Annotated[Optional[Path], typer.Option(help="Checkpoint directory.")] = None,  # noqa: UP045

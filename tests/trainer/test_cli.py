@@ -1,0 +1,39 @@
+"""`pose-trainer` (trainer/cli.py): what its options write where."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from trainer.cli import app
+
+
+def test_a_quick_run_exports_into_its_run_dir_not_the_configs_models(
+    small_dataset: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``train --quick`` ("a seconds-long smoke run") kept the config's ``out_dir``, so a
+    studio's smoke run replaced the models its config names (``models/``, the shipped
+    ones, with the default config) by a few epochs' worth; it now exports into
+    ``<run dir>/models`` (``runs/quick/models``) unless ``--out`` says otherwise."""
+    monkeypatch.chdir(tmp_path)
+    studio = tmp_path / "models-studio"
+    studio.mkdir()
+    (studio / "manifest.json").write_text('{"version": "the studio\'s real models"}\n')
+    cfg = tmp_path / "my.toml"
+    cfg.write_text(
+        f'dataset = "{small_dataset}"\nout_dir = "models-studio"\nthreads = 1\n'
+        '[solver]\nsets = [["left_wrist"]]\nlong_sets = []\n'
+        '[completion]\nhidden = [32]\nschemes = [["pelvis", "neck", "left_wrist", '
+        '"right_wrist", "left_ankle", "right_ankle"]]\n'
+    )
+    r = CliRunner().invoke(app, ["train", "--quick", "--config", str(cfg)])
+    assert r.exit_code == 0, r.output
+    assert json.loads((studio / "manifest.json").read_text()) == {
+        "version": "the studio's real models"
+    }
+    quick = tmp_path / "runs" / "quick"
+    assert (quick / "autoencoder.pt").is_file()
+    assert json.loads((quick / "models" / "manifest.json").read_text())["models"]
