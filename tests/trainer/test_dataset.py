@@ -705,3 +705,22 @@ def test_a_wrong_unit_is_blamed_alone(small_dataset: Path) -> None:
     for w in warnings:
         assert "median thigh length" in w and "`unit`" in w, w
         assert "up_axis" not in w and "swap_sides" not in w and "median the" not in w
+
+
+def test_a_clip_losing_many_frames_to_the_drop_rule_is_warned_with_its_bones(
+    more_mocap: Path, tmp_path: Path
+) -> None:
+    """A map joining two source joints whose distance changes (here a slip: the left wrist
+    on the right clavicle) lost 749 of a clip's 1,898 frames as ``bone_length`` with no
+    warning: only the summary's drop counts, per source, said so. Now the clip, the count
+    and the bone; a clip losing 5 % or less (p003: 10 frames) is not named."""
+    maps = _studio(
+        more_mocap, tmp_path, {'left_wrist = "forearm.L_end"': 'left_wrist = "shoulder.R"'}
+    )
+    built = _build(tmp_path, maps)
+    assert built.meta["dropped_frames"]["bone_length"] == 759
+    dropped = [w for w in built.meta["warnings"] if "frames dropped" in w]
+    assert dropped == [
+        "studio:takes/p002/idle_01.bvh: 749 of its 1898 frames dropped (749 bone_length; "
+        "bones off their median length: left_wrist in 749); see the drop rule in docs/data.md"
+    ]

@@ -52,11 +52,13 @@ from core.skeleton import BONE_CHILDREN, JOINT_NAMES, bone_lengths
 from core.text import close_match
 from trainer.data.asf import AMC, ASFError, read_amc, read_asf
 from trainer.data.checks import (
+    dropped_frames_warnings,
     licence_warning,
     lost_files_warnings,
     missing_joint_errors,
     no_match_message,
     not_found_message,
+    stretched_bones,
     unused_glob_warnings,
 )
 from trainer.data.checks import sanity_warnings as sanity_warnings
@@ -110,6 +112,7 @@ class ClipResult:
     source_fps: float = 0.0
     resampled_frames: int = 0
     drops: dict[str, int] = field(default_factory=dict)
+    stretched: dict[str, int] = field(default_factory=dict)  # bone -> frames it dropped
     bone_sum: npt.NDArray[np.float64] | None = None  # sum over kept frames, per bone
     error: str | None = None
     kind: str = ""  # why the file was skipped (a few words), with ``error``
@@ -251,6 +254,7 @@ def process_clip(job: ClipJob) -> ClipResult:
         result.resampled_frames = n_out
         code = drop_reasons(world)
         result.drops = {r: int((code == i + 1).sum()) for i, r in enumerate(DROP_REASONS)}
+        result.stretched = stretched_bones(world, code == 3, BONE_TOLERANCE, BONE_TOLERANCE_ABS)
         keep = code == 0
         frame = canonical_transform(world[keep])
         canon = frame.to_canonical(world[keep])
@@ -635,7 +639,7 @@ def build_dataset(
         fatal = missing_joint_errors(read)
         if fatal:
             raise MapError("\n".join(fatal))
-    warnings += lost_files_warnings(totals, skipped)
+    warnings += lost_files_warnings(totals, skipped) + dropped_frames_warnings(read)
 
     # Deterministic order: by clip name, whatever order the workers finished in.
     results = sorted((r for r in read if r.error is None), key=lambda r: infos[r.job.path].name)

@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Final
 import numpy as np
 import numpy.typing as npt
 
-from core.skeleton import JOINT_INDEX
+from core.skeleton import BONE_CHILDREN, JOINT_INDEX, JOINT_NAMES, bone_lengths
 from core.text import close_match
 from trainer.data.dataset import PoseDataset
 from trainer.data.maps import MocapMap, did_you_mean, glob_to_regex
@@ -177,6 +177,53 @@ def lost_files_warnings(
             why = ", ".join(f"{n} {kind}" for kind, n in kinds[source].most_common())
             lost = sum(kinds[source].values())
             out.append(f"map {m.path}: {lost} of its {total} files skipped ({why}); see 'skipped:'")
+    return out
+
+
+#: A clip losing more than this fraction of its 30-fps frames to the drop rule is named in
+#: a warning (the full build of the five shipped sources drops no frame).
+DROPPED_WARN: Final = 0.05
+
+
+def stretched_bones(
+    world: npt.NDArray[np.float64], dropped: npt.NDArray[np.bool_], rel: float, abs_m: float
+) -> dict[str, int]:
+    """Of the ``dropped`` frames of ``[F, 21, 3]`` world metres, how many each bone (named
+    by its child joint) is off the clip's median length in, as the drop rule measures it
+    (``rel`` of the median + ``abs_m``); bones off in none left out."""
+    if not dropped.any():
+        return {}
+    lengths = bone_lengths(world)
+    finite = np.isfinite(world).all(axis=(1, 2))
+    median = np.median(lengths[finite], axis=0)
+    with np.errstate(invalid="ignore"):
+        off = (np.abs(lengths[dropped] - median) > rel * median + abs_m).sum(axis=0)
+    return {JOINT_NAMES[c]: int(n) for c, n in zip(BONE_CHILDREN, off, strict=True) if n}
+
+
+def dropped_frames_warnings(results: Sequence[ClipResult]) -> list[str]:
+    """Each clip that lost more than :data:`DROPPED_WARN` of its frames to the drop rule,
+    with the reasons and, for ``bone_length``, the bones off their length most often: a map
+    joining two source joints whose distance changes (docs/data.md, drop rule) lost frames
+    in the summary's counts alone."""
+    out = []
+    for r in sorted(results, key=lambda r: r.job.label):
+        lost = sum(r.drops.values())
+        if (
+            r.error is not None
+            or not r.resampled_frames
+            or lost <= DROPPED_WARN * r.resampled_frames
+        ):
+            continue
+        why = ", ".join(f"{n} {reason}" for reason, n in r.drops.items() if n)
+        if r.stretched:
+            top = sorted(r.stretched.items(), key=lambda kv: -kv[1])[:3]
+            bones = ", ".join(f"{bone} in {n}" for bone, n in top)
+            why += f"; bones off their median length: {bones}"
+        out.append(
+            f"{r.job.label}: {lost} of its {r.resampled_frames} frames dropped ({why}); "
+            "see the drop rule in docs/data.md"
+        )
     return out
 
 
