@@ -95,7 +95,9 @@ def load_splits(cfg: TrainConfig) -> Splits:
         val=data.subset(data.split_mask("val")),
         test=data.subset(data.split_mask("test")),
     )
-    for name in ("train", "val"):  # (it failed deep in training: "cannot reshape array")
+    # (it failed deep in training, or without test frames after it, in the evaluation:
+    # "cannot reshape array of size 0")
+    for name in ("train", "val", "test"):
         if len(getattr(splits, name).positions) == 0:
             counts = {s: int(data.split_mask(s).sum()) for s in ("train", "val", "test")}
             raise DatasetError(

@@ -423,6 +423,13 @@ def test_the_builder_warns_of_a_map_whose_units_up_axis_or_sides_look_wrong(
         ds, clip_split=np.where(ds.clip_split == "val", "test", ds.clip_split)
     )
     assert any("no val clips" in w for w in sanity_warnings(no_val))
+    # without test clips training ran every stage, then failed in the evaluation
+    no_test = dataclasses.replace(
+        ds, clip_split=np.where(ds.clip_split == "test", "val", ds.clip_split)
+    )
+    assert "no test clips: training refuses this dataset (docs/data.md, splits)" in (
+        sanity_warnings(no_test)
+    )
 
 
 # --------------------------------------------------------------------------- a studio's map

@@ -703,6 +703,15 @@ def test_train_says_in_one_line_what_is_wrong_with_its_config_or_data(
     assert r.exit_code == 1 and "no val frames" in r.output, r.output
     assert not (tmp_path / "models").exists()
     assert not (tmp_path / "run").exists()  # (a studio audit: an empty run folder was left)
+    # without test frames every stage trained, then the evaluation failed with a traceback
+    # ("cannot reshape array of size 0"): refused before training like the others
+    with np.load(small_dataset, allow_pickle=False) as npz:
+        split = npz["clip_split"]
+    no_test = tmp_path / "no_test.npz"
+    np.savez(no_test, **{**arrays, "clip_split": np.where(split == "test", "val", split)})
+    r = runner.invoke(app, [*args[:1], "--dataset", str(no_test), *args[3:]])
+    assert r.exit_code == 1 and "Traceback" not in r.output, r.output
+    assert "no test frames" in r.output and not (tmp_path / "run").exists(), r.output
     # a train split smaller than one batch trained nothing (losses 0) and was exported,
     # served as ready (a studio audit): now refused, naming the frames and the batch
     n = int((arrays["clip_split"][arrays["clip"]] == "train").sum())

@@ -311,7 +311,7 @@ def sanity_warnings(ds: PoseDataset) -> list[str]:
             p = ds.positions[sel & (actor == a)][::10].astype(np.float64)
             if (problem := _problem(_medians(p))) is not None:
                 out.append(f"{s}, actor {a!r}: {problem} (the map's, or an [[override]]'s)")
-    for split in ("train", "val"):
+    for split in ("train", "val", "test"):
         if not (ds.clip_split == split).any():
             out.append(f"no {split} clips: training refuses this dataset (docs/data.md, splits)")
     return out
