@@ -592,6 +592,30 @@ def test_include_globs_matching_nothing_name_the_map_the_globs_and_paths_held(
     assert "top folder 'studio/'" in text and "'studio/takes/**/*.bvh'" in text
 
 
+def test_files_left_out_only_for_letter_case_are_named(more_mocap: Path, tmp_path: Path) -> None:
+    """A take exported as ``idle_01.BVH`` beside ``.bvh`` ones was left out of the dataset
+    without a word (the include globs are case-sensitive); with every take ``.BVH`` the
+    error listed them but did not say why ``*.bvh`` missed them."""
+    from trainer.data.build import BuildError
+
+    maps = _studio(more_mocap, tmp_path)
+    takes = tmp_path / "mocap" / "studio" / "takes"
+    (takes / "p003" / "idle_01.bvh").rename(takes / "p003" / "idle_01.BVH")
+    built = _build(tmp_path, maps)
+    assert list(built.dataset.clip_name) == ["studio/p002/idle_01"]
+    assert (
+        f"map {maps / 'studio.toml'}: 1 file(s) match include ['takes/**/*.bvh'] only ignoring "
+        "letter case, e.g. 'takes/p003/idle_01.BVH': not read (globs are case-sensitive: add a "
+        "glob for them)"
+    ) in built.meta["warnings"]
+    (takes / "p002" / "idle_01.bvh").rename(takes / "p002" / "idle_01.BVH")
+    with pytest.raises(BuildError) as info:
+        _build(tmp_path, maps)
+    assert "; 2 of them match ignoring letter case (e.g. 'takes/p002/idle_01.BVH'): globs are " in (
+        str(info.value)
+    )
+
+
 def test_a_zip_archive_is_refused_in_one_line(more_mocap: Path, tmp_path: Path) -> None:
     import zipfile
 

@@ -52,6 +52,7 @@ from core.skeleton import BONE_CHILDREN, JOINT_NAMES, bone_lengths
 from core.text import close_match
 from trainer.data.asf import AMC, ASFError, read_amc, read_asf
 from trainer.data.checks import (
+    case_warnings,
     dropped_frames_warnings,
     licence_warning,
     lost_files_warnings,
@@ -554,7 +555,7 @@ def _source_warnings(located: Located) -> list[str]:
     """Build-time warnings of the sources: not found, unused globs, no licence."""
     out = [f"not built: {m}" for m in located.missing]
     for src in located.sources:
-        out += unused_glob_warnings(src.map, src.selected)
+        out += unused_glob_warnings(src.map, src.selected) + case_warnings(src.map, src.files)
         if (w := licence_warning(src.map)) is not None:
             out.append(w)
     return out

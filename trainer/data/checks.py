@@ -10,6 +10,7 @@
 
 from __future__ import annotations
 
+import re
 from collections import Counter, defaultdict
 from collections.abc import Iterable, Sequence
 from pathlib import Path
@@ -60,13 +61,51 @@ def _top_folder_hint(m: MocapMap, files: Sequence[str]) -> str:
     )
 
 
+def case_only(m: MocapMap, files: Sequence[str]) -> list[str]:
+    """The files the map's include globs would select but for letter case (``x.BVH`` for
+    ``*.bvh``; globs are case-sensitive), those its exclude globs leave out either way
+    left out."""
+    include = [re.compile(glob_to_regex(g).pattern, re.IGNORECASE) for g in m.include]
+    exclude = [re.compile(glob_to_regex(g).pattern, re.IGNORECASE) for g in m.exclude]
+    return [
+        f
+        for f in files
+        if any(r.match(f) for r in include)
+        and not any(r.match(f) for r in exclude)
+        and not m.selects(f)
+    ]
+
+
+def _case_hint(m: MocapMap, files: Sequence[str]) -> str:
+    miss = case_only(m, files)
+    if not miss:
+        return ""
+    return (
+        f"; {len(miss)} of them match ignoring letter case (e.g. {miss[0]!r}): globs are "
+        "case-sensitive, so write the include globs as the files are named"
+    )
+
+
 def no_match_message(m: MocapMap, where: str, files: Sequence[str]) -> str:
     """An archive or folder found for a map whose include globs select none of its files."""
     globs = f"include {list(m.include)}" + (f" (exclude {list(m.exclude)})" if m.exclude else "")
     return (
         f"map {m.path}: {globs} matches no file in {where}"
-        f"{_holds(m, files)}{_top_folder_hint(m, files)}"
+        f"{_holds(m, files)}{_case_hint(m, files)}{_top_folder_hint(m, files)}"
     )
+
+
+def case_warnings(m: MocapMap, files: Sequence[str]) -> list[str]:
+    """Files the map leaves unread only for letter case (``.BVH`` beside ``.bvh`` takes):
+    they went out of the dataset without a word."""
+    miss = case_only(m, files)
+    if not miss:
+        return []
+    return [
+        f"map {m.path}: {len(miss)} file(s) match include {list(m.include)} only ignoring "
+        f"letter case, e.g. {miss[0]!r}: not read (globs are case-sensitive: add a glob "
+        "for them)"
+    ]
 
 
 def not_found_message(m: MocapMap, mocap_dir: Path, taken: Iterable[str] = ()) -> str:
