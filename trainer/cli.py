@@ -177,7 +177,10 @@ def dataset(
 @app.command("plot-data")
 def plot_data(
     dataset: Annotated[Path, typer.Option(help="Dataset .npz.")] = Path("data/poses.npz"),
-    out: Annotated[Path, typer.Option(help="Output PNG.")] = Path("docs/img/data_poses.png"),
+    out: Annotated[
+        Optional[Path],  # noqa: UP045
+        typer.Option(help="Output PNG; default: the dataset's path with .png (data/poses.png)."),
+    ] = None,
     per_source: Annotated[int, typer.Option(help="Poses drawn per source.")] = 12,
     seed: Annotated[int, typer.Option(help="Seed of the pose draw.")] = 0,
 ) -> None:
@@ -185,6 +188,9 @@ def plot_data(
     from trainer.data.dataset import DatasetError
     from trainer.data.plot import plot_dataset
 
+    # (the default was docs/img/data_poses.png: a studio's check of its own data replaced
+    # the shipped data's figure in the repository)
+    out = dataset.with_suffix(".png") if out is None else out
     try:
         path = plot_dataset(dataset, out, per_source=per_source, seed=seed)
     except DatasetError as exc:

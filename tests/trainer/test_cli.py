@@ -37,3 +37,19 @@ def test_a_quick_run_exports_into_its_run_dir_not_the_configs_models(
     quick = tmp_path / "runs" / "quick"
     assert (quick / "autoencoder.pt").is_file()
     assert json.loads((quick / "models" / "manifest.json").read_text())["models"]
+
+
+def test_plot_data_draws_beside_its_dataset_by_default(small_dataset: Path, tmp_path: Path) -> None:
+    """``plot-data --dataset data/studio.npz`` (docs/data.md: a studio checks its figures)
+    wrote ``docs/img/data_poses.png``, the shipped data's figure in the repository; it now
+    writes beside the dataset (``data/studio.png``)."""
+    docs_png = Path(__file__).resolve().parents[2] / "docs" / "img" / "data_poses.png"
+    before = docs_png.read_bytes()
+    studio = tmp_path / "studio.npz"
+    studio.write_bytes(small_dataset.read_bytes())
+    args = ["plot-data", "--dataset", str(studio), "--per-source", "2"]
+    r = CliRunner().invoke(app, args)
+    assert r.exit_code == 0, r.output
+    assert (tmp_path / "studio.png").stat().st_size > 0
+    assert f"wrote {tmp_path / 'studio.png'}" in r.output.replace("\n", "")
+    assert docs_png.read_bytes() == before
