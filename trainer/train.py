@@ -33,6 +33,7 @@ from trainer.augment import (
 )
 from trainer.augment import mirror as mirror_poses
 from trainer.config import AugmentConfig, TrainConfig
+from trainer.data.checks import BONE_RANGE_TEXT, bad_bones
 from trainer.data.dataset import FPS, DatasetError, PoseDataset, load_dataset
 from trainer.models import (
     CompletionNet,
@@ -113,6 +114,15 @@ def load_splits(cfg: TrainConfig) -> Splits:
             ("autoencoder", cfg.autoencoder), ("solver", cfg.solver), ("completion", cfg.completion)
         )
     }  # fmt: skip
+    bad = bad_bones(reference_lengths(splits.train))
+    if bad:  # (it trained every stage, then the export failed: "reference bone lengths
+        # must be in (0, 2) metres", a pydantic traceback)
+        raise DatasetError(
+            f"{cfg.dataset}: the train split's mean bone length is outside {BONE_RANGE_TEXT} "
+            f"for {', '.join(bad)}: the map's two source joints of such a bone coincide (or "
+            "lie far apart: the `unit`?); fix the map and rebuild (the dataset summary warned "
+            "of it)"
+        )
     short = {key: size for key, size in batches.items() if size > n}
     if short:  # (it trained nothing: no step ran, losses 0, and the models were exported)
         wanted = ", ".join(f"{key} = {size}" for key, size in short.items())

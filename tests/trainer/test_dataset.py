@@ -592,6 +592,20 @@ def test_include_globs_matching_nothing_name_the_map_the_globs_and_paths_held(
     assert "top folder 'studio/'" in text and "'studio/takes/**/*.bvh'" in text
 
 
+def test_a_bone_whose_source_joints_coincide_is_warned(more_mocap: Path, tmp_path: Path) -> None:
+    """ReActIdle's ``spine`` sits on its ``pelvis``: a map with ``spine1 = "spine"`` built a
+    dataset whose spine1 bone is 0 m long without a word (0.000 in the bone table), and
+    training ran every stage on it to fail in the export (the manifest's reference bones
+    must be in (0, 2) m)."""
+    maps = _studio(more_mocap, tmp_path, {'spine1 = "spine.001"': 'spine1 = "spine"'})
+    warnings = _build(tmp_path, maps).meta["warnings"]
+    assert (
+        "studio: median bone length outside 1 mm - 2 m: spine1 (pelvis -> spine1) 0.0000 m: the "
+        "map's two source joints of such a bone coincide (or lie far apart); map one of them to "
+        "another joint (training refuses such a bone)"
+    ) in warnings, warnings
+
+
 def test_files_left_out_only_for_letter_case_are_named(more_mocap: Path, tmp_path: Path) -> None:
     """A take exported as ``idle_01.BVH`` beside ``.bvh`` ones was left out of the dataset
     without a word (the include globs are case-sensitive); with every take ``.BVH`` the

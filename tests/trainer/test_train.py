@@ -712,6 +712,18 @@ def test_train_says_in_one_line_what_is_wrong_with_its_config_or_data(
     r = runner.invoke(app, [*args[:1], "--dataset", str(no_test), *args[3:]])
     assert r.exit_code == 1 and "Traceback" not in r.output, r.output
     assert "no test frames" in r.output and not (tmp_path / "run").exists(), r.output
+    # a bone of length 0 (a map's two source joints coincide) trained every stage, then the
+    # export failed with a pydantic traceback: refused before training, naming the bone
+    flat_spine = arrays["positions"].copy()
+    flat_spine[:, JOINT_INDEX["spine1"]] = flat_spine[:, JOINT_INDEX["pelvis"]]
+    zero = tmp_path / "zero_bone.npz"
+    np.savez(zero, **{**arrays, "clip_split": split, "positions": flat_spine})
+    r = runner.invoke(app, [*args[:1], "--dataset", str(zero), *args[3:]])
+    assert r.exit_code == 1 and "Traceback" not in r.output, r.output
+    assert (
+        "the train split's mean bone length is outside 1 mm - 2 m for spine1 (pelvis -> "
+        "spine1) 0.0000 m"
+    ) in r.output.replace("\n", "") and not (tmp_path / "run").exists(), r.output
     # a train split smaller than one batch trained nothing (losses 0) and was exported,
     # served as ready (a studio audit): now refused, naming the frames and the batch
     n = int((arrays["clip_split"][arrays["clip"]] == "train").sum())

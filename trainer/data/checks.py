@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Final
 import numpy as np
 import numpy.typing as npt
 
-from core.skeleton import BONE_CHILDREN, JOINT_INDEX, JOINT_NAMES, bone_lengths
+from core.skeleton import BONE_CHILDREN, BONE_PARENTS, JOINT_INDEX, JOINT_NAMES, bone_lengths
 from core.text import close_match
 from trainer.data.dataset import PoseDataset
 from trainer.data.maps import MocapMap, did_you_mean, glob_to_regex
@@ -332,6 +332,25 @@ def _problem(v: dict[str, float]) -> str | None:
     return None
 
 
+#: Bone lengths a dataset trains on (metres, from inclusive, to exclusive): a map whose two
+#: source joints coincide (ReActIdle's ``spine`` sits on ``pelvis``) gives a bone of length
+#: 0, a wrong unit bones of metres, which the models' reference skeleton (the manifest:
+#: every bone in (0, 2) m) cannot hold.
+BONE_RANGE_M: Final = (0.001, 2.0)
+BONE_RANGE_TEXT: Final = "1 mm - 2 m"
+
+
+def bad_bones(lengths: npt.NDArray[np.float64]) -> list[str]:
+    """The bones (``[20]`` lengths in ``BONES`` order) outside :data:`BONE_RANGE_M`, each
+    as ``"spine1 (pelvis -> spine1) 0.0000 m"``."""
+    low, high = BONE_RANGE_M
+    return [
+        f"{JOINT_NAMES[c]} ({JOINT_NAMES[p]} -> {JOINT_NAMES[c]}) {v:.4f} m"
+        for c, p, v in zip(BONE_CHILDREN, BONE_PARENTS, lengths, strict=True)
+        if not low <= v < high
+    ]
+
+
 def sanity_warnings(ds: PoseDataset) -> list[str]:
     """What poses say of their map, where implausible (one warning per source, naming the
     likeliest wrong key; else one per actor, e.g. an [[override]] with a wrong unit); and a
@@ -345,6 +364,13 @@ def sanity_warnings(ds: PoseDataset) -> list[str]:
         if problem is not None:
             out.append(f"{s}: {problem}")
             continue
+        lengths = np.median(bone_lengths(ds.positions[sel][::10].astype(np.float64)), axis=0)
+        if bad := bad_bones(lengths):
+            out.append(
+                f"{s}: median bone length outside {BONE_RANGE_TEXT}: {', '.join(bad)}: the "
+                "map's two source joints of such a bone coincide (or lie far apart); map one "
+                "of them to another joint (training refuses such a bone)"
+            )
         actors = sorted(set(actor[sel].tolist()))
         for a in actors if len(actors) > 1 else []:
             p = ds.positions[sel & (actor == a)][::10].astype(np.float64)
