@@ -10,29 +10,18 @@ from __future__ import annotations
 
 import re
 from itertools import compress
-from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
+from core.io import FileError
 from core.text import clip, quoted
 
 FloatArray = npt.NDArray[np.float64]
 
 
-class BVHError(ValueError):
+class BVHError(FileError):
     """A malformed, truncated or unsupported BVH file; names the file and the reason."""
-
-    def __init__(self, file: str, reason: str) -> None:
-        super().__init__(f"{file}: {reason}")
-        self.file = file
-        self.reason = reason
-
-    def __reduce__(self) -> tuple[Any, ...]:
-        """Pickled as its arguments (the default, ``args``, holds the one message, which
-        ``__init__`` does not take): an error raised in a worker process or thread pool
-        reaches its caller whole, its fields and any set after it was raised."""
-        return type(self), (self.file, self.reason), self.__dict__
 
 
 def error(file: str, reason: str) -> BVHError:

@@ -1,4 +1,5 @@
-"""File I/O shared by the trainer, the bench and the service: atomic writes and digests."""
+"""File I/O shared by the trainer, the bench and the service: atomic writes, digests, and
+the error of a file that cannot be read."""
 
 from __future__ import annotations
 
@@ -6,6 +7,22 @@ import hashlib
 import os
 import tempfile
 from pathlib import Path
+from typing import Any
+
+
+class FileError(ValueError):
+    """A file that cannot be read (malformed, truncated, unsupported): names the file and
+    the reason. Pickled as its arguments (the default, ``args``, holds the one message,
+    which ``__init__`` does not take: unpickling one was a TypeError, and a process pool
+    broke), so an error raised in a worker reaches its caller whole, with its fields."""
+
+    def __init__(self, file: str, reason: str) -> None:
+        super().__init__(f"{file}: {reason}")
+        self.file = file
+        self.reason = reason
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        return type(self), (self.file, self.reason), self.__dict__
 
 
 def sha256_file(path: Path) -> str:

@@ -30,12 +30,12 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
 from core.euler import axis_rotations
+from core.io import FileError
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -45,18 +45,8 @@ _ROT_DOFS = {"rx": "X", "ry": "Y", "rz": "Z"}
 _ROOT_CHANNELS = {"tx", "ty", "tz", "rx", "ry", "rz"}
 
 
-class ASFError(ValueError):
+class ASFError(FileError):
     """A malformed or unsupported ASF/AMC file; names the file and the reason."""
-
-    def __init__(self, file: str, reason: str) -> None:
-        super().__init__(f"{file}: {reason}")
-        self.file = file
-        self.reason = reason
-
-    def __reduce__(self) -> tuple[Any, ...]:
-        """Pickled as its arguments (``args`` holds the one message ``__init__`` does not
-        take: unpickling it in the dataset builder's pool was a TypeError)."""
-        return type(self), (self.file, self.reason), self.__dict__
 
 
 @dataclass(frozen=True)
