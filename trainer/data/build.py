@@ -164,11 +164,25 @@ def interpolate_positions(
     return np.asarray(positions[i0] * (1.0 - w) + positions[i1] * w)
 
 
-def drop_reasons(world: npt.NDArray[np.float64]) -> npt.NDArray[np.int8]:
-    """Per-frame drop code for ``[F, 21, 3]`` world metres at 30 fps.
+def off_length(world: npt.NDArray[np.float64]) -> npt.NDArray[np.bool_]:
+    """``[F, 20]``: each bone of ``[F, 21, 3]`` world metres off its clip's median length
+    (over the finite frames) by more than the drop rule allows; none where no frame is
+    finite."""
+    lengths = bone_lengths(world)  # [F, 20]
+    finite = np.isfinite(world).all(axis=(1, 2))
+    if not finite.any():
+        return np.zeros(lengths.shape, dtype=np.bool_)
+    median = np.median(lengths[finite], axis=0)
+    with np.errstate(invalid="ignore"):
+        return np.abs(lengths - median) > BONE_TOLERANCE * median + BONE_TOLERANCE_ABS  # type: ignore[no-any-return]
 
-    0 = keep, otherwise ``1 + DROP_REASONS.index(reason)`` for the first matching reason.
-    """
+
+def drop_reasons(
+    world: npt.NDArray[np.float64], off: npt.NDArray[np.bool_] | None = None
+) -> npt.NDArray[np.int8]:
+    """Per-frame drop code for ``[F, 21, 3]`` world metres at 30 fps (``off``: its
+    :func:`off_length`, if known): 0 = keep, otherwise ``1 + DROP_REASONS.index(reason)``
+    for the first matching reason."""
     n = world.shape[0]
     code = np.zeros(n, dtype=np.int8)
     finite = np.isfinite(world).all(axis=(1, 2))
@@ -179,14 +193,8 @@ def drop_reasons(world: npt.NDArray[np.float64]) -> npt.NDArray[np.int8]:
         teleport = np.zeros(n, dtype=bool)
         teleport[1:] = step > TELEPORT_METRES
     code[(code == 0) & teleport] = 2
-    lengths = bone_lengths(world)  # [F, 20]
-    if finite.any():
-        median = np.median(lengths[finite], axis=0)
-        with np.errstate(invalid="ignore"):
-            bad = (np.abs(lengths - median) > BONE_TOLERANCE * median + BONE_TOLERANCE_ABS).any(
-                axis=1
-            )
-        code[(code == 0) & bad] = 3
+    bad = (off_length(world) if off is None else off).any(axis=1)
+    code[(code == 0) & bad] = 3
     return code
 
 
@@ -253,9 +261,10 @@ def process_clip(job: ClipJob) -> ClipResult:
         check_joints(job, clip)
         world, result.source_frames, result.source_fps, n_out = clip_world(job, clip, scale_hint)
         result.resampled_frames = n_out
-        code = drop_reasons(world)
+        off = off_length(world)
+        code = drop_reasons(world, off)
         result.drops = {r: int((code == i + 1).sum()) for i, r in enumerate(DROP_REASONS)}
-        result.stretched = stretched_bones(world, code == 3, BONE_TOLERANCE, BONE_TOLERANCE_ABS)
+        result.stretched = stretched_bones(off, code == 3)
         keep = code == 0
         frame = canonical_transform(world[keep])
         canon = frame.to_canonical(world[keep])

@@ -224,20 +224,12 @@ def lost_files_warnings(
 DROPPED_WARN: Final = 0.05
 
 
-def stretched_bones(
-    world: npt.NDArray[np.float64], dropped: npt.NDArray[np.bool_], rel: float, abs_m: float
-) -> dict[str, int]:
-    """Of the ``dropped`` frames of ``[F, 21, 3]`` world metres, how many each bone (named
-    by its child joint) is off the clip's median length in, as the drop rule measures it
-    (``rel`` of the median + ``abs_m``); bones off in none left out."""
-    if not dropped.any():
-        return {}
-    lengths = bone_lengths(world)
-    finite = np.isfinite(world).all(axis=(1, 2))
-    median = np.median(lengths[finite], axis=0)
-    with np.errstate(invalid="ignore"):
-        off = (np.abs(lengths[dropped] - median) > rel * median + abs_m).sum(axis=0)
-    return {JOINT_NAMES[c]: int(n) for c, n in zip(BONE_CHILDREN, off, strict=True) if n}
+def stretched_bones(off: npt.NDArray[np.bool_], dropped: npt.NDArray[np.bool_]) -> dict[str, int]:
+    """Of the ``dropped`` frames, how many each bone (named by its child joint) is off its
+    length in (``off``: ``trainer.data.build.off_length``, the drop rule's own test); bones
+    off in none left out."""
+    counts = off[dropped].sum(axis=0)
+    return {JOINT_NAMES[c]: int(n) for c, n in zip(BONE_CHILDREN, counts, strict=True) if n}
 
 
 def dropped_frames_warnings(results: Sequence[ClipResult]) -> list[str]:
