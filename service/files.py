@@ -8,6 +8,9 @@ Starlette answers a ``Range`` it cannot serve in plain text (a 416 with an empty
 ``malformed-range``, raised to the app's one problem mapping (an adversarial audit,
 2026-12-06).
 
+A ``Range`` in a unit other than bytes (``items=0-1``) is ignored and the whole file served,
+as RFC 9110 (section 14.2) requires of an origin server; Starlette answered it with a 400.
+
 A file's path with a trailing slash (``/static/editor.js/``) is a 404 naming the file, as
 a route's is (docs/limits.md); Starlette served the file there, where the relative URLs
 it holds resolve under ``editor.js/``. A mount's own path (``/static/``) is a plain 404.
@@ -32,7 +35,6 @@ from service.errors import MalformedRange, RangeNotSatisfiable
 #: Starlette's reasons for a malformed ``Range``, in the service's words.
 _WHY = {
     "Malformed range header.": "not a unit and ranges (bytes=0-99)",
-    "Only support bytes range": "only byte ranges are served (bytes=0-99)",
     "Range header: range must be requested": "it names no range",
     "Range header: start must be less than end": "a range ends before it starts",
 }
@@ -43,6 +45,9 @@ class File(FileResponse):
 
     @classmethod
     def _parse_range_header(cls, http_range: str, file_size: int) -> list[tuple[int, int]]:
+        unit, equals, _ = http_range.partition("=")
+        if equals and unit.strip().lower() != "bytes":
+            return []  # a unit not understood: the whole file (RFC 9110, section 14.2)
         try:
             return super()._parse_range_header(http_range, file_size)
         except MalformedRangeHeader as exc:
