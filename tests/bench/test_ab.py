@@ -19,9 +19,11 @@ def test_two_revisions_side_by_side(bench_dataset: Path) -> None:
     if subprocess.run(["git", "-C", str(REPO), "rev-parse", "HEAD"], check=False).returncode:
         pytest.skip("not a git checkout")
 
-    def worktrees() -> str:
-        return subprocess.run(["git", "-C", str(REPO), "worktree", "list"], capture_output=True,
-                              text=True, check=True).stdout  # fmt: skip
+    def worktrees() -> set[str]:
+        """The worktrees' paths (not their commits: another worktree may commit meanwhile)."""
+        out = subprocess.run(["git", "-C", str(REPO), "worktree", "list", "--porcelain"],
+                             capture_output=True, text=True, check=True).stdout  # fmt: skip
+        return {line.split(" ", 1)[1] for line in out.splitlines() if line.startswith("worktree ")}
 
     before = worktrees()
     result = ab.compare("HEAD", bench_dataset, rounds=1, edits=4, seed=0)
