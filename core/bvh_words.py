@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import re
 from itertools import compress
+from typing import NoReturn
 
 import numpy as np
 import numpy.typing as npt
@@ -88,6 +89,8 @@ class Tokens:
         self.pos = 0
         self._long = 0  # the index in items of a word past MAX_NAME (len(items): none)
         self._last = 1  # the line of the last word taken
+        self._start = 0  # where the window's first word starts in the text
+        self._seek = (-1, 0, 0)  # (a window's start, a word's index in it, where it starts)
 
     def _more(self) -> bool:
         """Split the next window into words (False at the end of the text). It ends just
@@ -107,7 +110,7 @@ class Tokens:
         lines = window.replace("\r\n", "\n").replace("\r", "\n").split("\n")
         numbered = compress(enumerate(lines, start=first), map(str.strip, lines))
         self.items = [(word, k) for k, line in numbered for word in line.split()]
-        self.pos = 0
+        self.pos, self._start = 0, start
         self._long = len(self.items)
         if max(map(len, lines)) > MAX_NAME:  # a line that may hold one (rare): word by word
             long = (i for i, (w, _) in enumerate(self.items) if len(w) > MAX_NAME)
@@ -152,24 +155,54 @@ class Tokens:
         if tok != word:
             raise error(self.file, f"line {line}: expected {word!r}, got {quoted(tok)}")
 
+    def _where(self, start: int, index: int) -> int:
+        """Where in the text the word ``index`` of the window that starts at ``start``
+        starts: found from the last one asked for where it can (the words of a name are
+        asked for in order: each window is searched once)."""
+        at, first, where = self._seek
+        if at != start or first > index:
+            first, where = 0, start
+        words = _WORD_RE.finditer(self._text, where, self._end)
+        for k, found in enumerate(words, start=first):
+            if k == index:
+                self._seek = (start, k, found.start())
+                return found.start()
+        raise AssertionError("a word of a window past its end")  # pragma: no cover
+
     def rest_of_line(self, what: str) -> str:
         """The words left on the current word's line, up to a '{' (a joint name may have
-        spaces), joined by one space: at most :data:`MAX_NAME` characters."""
+        spaces), as written: the text from the first to the last, whitespace and all (was
+        joined by one space: a file's ``Left  Hand`` was called ``Left Hand``, and a map
+        that named it as written refused); at most :data:`MAX_NAME` characters."""
         line = self.line()
         if self.peek() is None:
             raise error(self.file, f"unexpected end of HIERARCHY, expected {what}")
+        first = (self._start, self.pos)  # (where its first word is: asked for if not alone)
         words: list[str] = []
-        size = -1  # of the words joined
+        size = -1  # of the words joined by one space (no more than as written)
         while (word := self.peek()) is not None and self.line() == line and word != "{":
             size += 1 + len(word)
             if size > MAX_NAME:
-                name = quoted(" ".join([*words, word]))
-                raise error(
-                    self.file, f"line {line}: a joint name of more than {MAX_NAME} characters: "
-                    f"{name}",
-                )  # fmt: skip
+                self._too_long(line, " ".join([*words, word]))
             words.append(self.next(what))
-        return " ".join(words)
+        if len(words) < 2:
+            return "".join(words)
+        text, at = self._text, self._where(*first)
+        end = at + len(words[0])
+        for word in words[1:]:  # (on one line: only spaces, tabs and the like between)
+            found = _NON_SPACE_RE.search(text, end)
+            assert found is not None and text.startswith(word, found.start())
+            end = found.start() + len(word)
+        name = text[at:end]
+        if len(name) > MAX_NAME:
+            self._too_long(line, name)
+        return name
+
+    def _too_long(self, line: int, name: str) -> NoReturn:
+        raise error(
+            self.file,
+            f"line {line}: a joint name of more than {MAX_NAME} characters: {quoted(name)}",
+        )
 
     def floats(self, n: int, what: str) -> list[float]:
         out: list[float] = []
