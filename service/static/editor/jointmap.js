@@ -2,10 +2,11 @@
 // JSON {canonical joint: the file's joint name} in the panel's text field, sent as
 // `joint_map` with every v1/bvh/inspect and v1/bvh/solve of the file it was given for
 // (file.js). A refusal naming unmapped joints opens the field with a template of them and
-// lists the file's joints (End Sites as `<joint>_end`, `_end2`, ..., as the service names them).
+// lists the file's joints as the service names them (fileJoints).
 
 import { $ } from './state.js';
 import { ApiError } from './api.js';
+import { fileJoints } from './bvhnames.js';
 
 const SHAPE = 'give a JSON object {"canonical joint": "the file\'s joint name"}';
 
@@ -41,34 +42,6 @@ export function showMap(map) {
   if (map) $('bvh-map-box').open = true;
 }
 
-// The names a joint map may give: every joint of the file, End Sites as `<joint>_end`.
-export function fileJoints(text) {
-  const names = [];
-  const stack = [];
-  const ends = new Map();
-  let last = null;
-  for (const raw of text.split('\n', 100_000)) {
-    const line = raw.trim();
-    if (line.startsWith('MOTION')) break;
-    const joint = /^(?:ROOT|JOINT)\s+(.+)$/.exec(line);
-    if (joint) {
-      last = joint[1].trim();
-      names.push(last);
-    } else if (/^End\s+Site\b/.test(line)) {
-      // a joint's second End Site is `<joint>_end2`, and so on (core/bvh.py names them so)
-      const owner = stack[stack.length - 1];
-      ends.set(owner, (ends.get(owner) || 0) + 1);
-      last = ends.get(owner) === 1 ? `${owner}_end` : `${owner}_end${ends.get(owner)}`;
-      names.push(last);
-    } else if (line.startsWith('{')) {
-      stack.push(last);
-    } else if (line.startsWith('}')) {
-      stack.pop();
-    }
-  }
-  return names;
-}
-
 // A refusal of ``text`` that names the canonical joints no joint was found for: the field
 // opens with them added (blank, to fill in) to what it holds, and the file's joints listed.
 export function offerTemplate(err, text) {
@@ -88,7 +61,8 @@ export function offerTemplate(err, text) {
   }
   $('bvh-map').value = JSON.stringify(map, null, 2);
   const joints = fileJoints(text);
-  const shown = joints.slice(0, 300).join(', ') + (joints.length > 300 ? ', …' : '');
+  const quoted = joints.slice(0, 300).map((name) => JSON.stringify(name)); // (a tab: \t)
+  const shown = quoted.join(', ') + (joints.length > 300 ? ', …' : '');
   $('bvh-map-joints').textContent = `The file's joints: ${shown}`;
   $('bvh-map-joints').hidden = false;
   $('bvh-map-box').open = true;
