@@ -6,7 +6,8 @@ along a bone where the skeleton has no joint there). :class:`Anchor` holds that.
 
 :func:`auto_map` tries every naming scheme of :data:`SCHEMES` (names compared without case
 and without a ``namespace:`` prefix such as ``mixamorig:``, and also without a start that
-every joint's name shares, such as HumanIK's ``Character1_``) and keeps the one that resolves
+every joint's name shares, such as HumanIK's ``Character1_``; a closer spelling wins, two
+as close a 422: :mod:`core.map_lookup`) and keeps the one that resolves
 all 21 joints with the most names; an explicit map (canonical -> joint name) always wins
 over it, joint by joint. Then two structural rules apply to every map:
 
@@ -33,6 +34,8 @@ import numpy as np
 import numpy.typing as npt
 
 from core.characters import F64, CharacterError, Skeleton
+from core.map_lookup import Lookup, lookup_of, tie_message
+from core.map_lookup import name_key as _key
 from core.skeleton import JOINT_INDEX, JOINT_NAMES, PARENT_NAMES
 from core.text import clip, quoted
 from core.units import UNITS
@@ -387,10 +390,6 @@ class JointMap:
         return {n: a.label for n, a in zip(JOINT_NAMES, self.anchors, strict=True)}
 
 
-def _key(name: str) -> str:
-    return name.rsplit(":", 1)[-1].lower()
-
-
 def _shared_prefix(keys: list[str]) -> str:
     """The longest start that every name shares and that ends at a separator (``_``,
     space, ``.`` or ``-``): a character's name that a rig puts before each joint's
@@ -410,9 +409,9 @@ def _canonical_key(name: str) -> tuple[str, int]:
     return name, -1
 
 
-def _keys(scheme: Scheme) -> tuple[tuple[tuple[str, tuple[str, ...]], ...], ...]:
+def _keys(scheme: Scheme) -> tuple[tuple[tuple[str, tuple[tuple[str, str], ...]], ...], ...]:
     """Per prefix and side-token pair of ``scheme``: each canonical joint's candidate names,
-    as looked up (:func:`_key`), in the order tried."""
+    as looked up (:func:`_key`) and as written, in the order tried."""
     out = []
     for prefix, sides in ((p, s) for p in scheme.prefixes for s in scheme.sides):
         rows = []
@@ -422,7 +421,7 @@ def _keys(scheme: Scheme) -> tuple[tuple[tuple[str, tuple[str, ...]], ...], ...]
                 c.replace("{s}", sides[side]) if side >= 0 else c
                 for c in scheme.joints.get(base, ())
             )
-            rows.append((canon, tuple(_key(prefix + n) for n in names)))
+            rows.append((canon, tuple((_key(prefix + n), prefix + n) for n in names)))
         out.append(tuple(rows))
     return tuple(out)
 
@@ -431,19 +430,23 @@ def _keys(scheme: Scheme) -> tuple[tuple[tuple[str, tuple[str, ...]], ...], ...]
 _KEYS: Final = {name: _keys(scheme) for name, scheme in SCHEMES.items()}
 
 
-def _resolve_scheme(lookup: dict[str, int], scheme: str) -> tuple[dict[str, int], int]:
+def _resolve_scheme(lookup: Lookup, scheme: str) -> tuple[dict[str, int], int, dict[str, str]]:
     """Best resolution of a scheme over its prefixes and side-token pairs: (canonical ->
-    joint, names hit)."""
-    best: tuple[dict[str, int], int] = ({}, -1)
+    joint, names hit, canonical -> the candidate of a tie: :mod:`core.map_lookup`)."""
+    best: tuple[dict[str, int], int, dict[str, str]] = ({}, -1, {})
     for rows in _KEYS[scheme]:
         found: dict[str, int] = {}
+        tied: dict[str, str] = {}
         for canon, keys in rows:
-            for key in keys:
+            for key, written in keys:
                 if key in lookup:
-                    found[canon] = lookup[key]
+                    found[canon], ties = lookup.find(key, written)
+                    if ties:
+                        tied[canon] = written
+                        lookup.ties[written] = ties
                     break
         if len(found) > best[1]:
-            best = (found, len(found))
+            best = (found, len(found), tied)
     return best
 
 
@@ -506,12 +509,7 @@ def resolve_map(
     skel: Skeleton, explicit: Mapping[str, str] | None = None, *, where: str = "joint_map"
 ) -> JointMap:
     """The joint map of ``skel``: automatic, overridden joint by joint by ``explicit``."""
-    lookup: dict[str, int] = {}
-    for i, name in enumerate(skel.names):
-        lookup.setdefault(_key(name), i)
-    shared = _shared_prefix(list(lookup))
-    for i, name in enumerate(skel.names):  # "Character1_LeftArm" is also "LeftArm"
-        lookup.setdefault(_key(name)[len(shared) :], i)
+    lookup = lookup_of(skel.names, _shared_prefix([_key(n) for n in skel.names]))
     given: dict[str, int] = {}
     slid: dict[str, str] = {}  # a point part-way along a bone, as a map describes it
     for canon, name in (explicit or {}).items():
@@ -533,13 +531,15 @@ def resolve_map(
             _along_a_bone(skel, along, f"{where}.{canon}")
             slid[canon], name = name, along.group(2)
         if name not in skel.index:
-            raise CharacterError(f"{where}.{canon}: the skeleton has no joint {quoted(name)}")
+            raise CharacterError(
+                f"{where}.{canon}: the skeleton has no joint {quoted(name)}{_near(skel, name)}"
+            )
         given[canon] = skel.index[name]
 
-    best_name, best_found, best_hits = "", dict(given), -1
+    best_name, best_found, best_hits, best_tied = "", dict(given), -1, {}
     structural = {"spine1", "spine2"}  # the joints the structural rules may fill
     for scheme_name in SCHEMES:
-        found, hits = _resolve_scheme(lookup, scheme_name)
+        found, hits, tied = _resolve_scheme(lookup, scheme_name)
         hits -= _chest_below_collars(skel, found)
         found.update(given)
         if set(JOINT_NAMES) - found.keys() <= structural:  # else it cannot be complete
@@ -547,7 +547,7 @@ def resolve_map(
         complete = len(found) == len(JOINT_NAMES)
         score = hits + (1000 if complete else 0)
         if score > best_hits:
-            best_name, best_found, best_hits = scheme_name, found, score
+            best_name, best_found, best_hits, best_tied = scheme_name, found, score, tied
     if given:
         best_name = "explicit" if len(given) == len(JOINT_NAMES) else f"{best_name}+explicit"
     missing = [c for c in JOINT_NAMES if c not in best_found]
@@ -560,6 +560,10 @@ def resolve_map(
             "give them in joint_map as {canonical: joint name}; schemes found automatically: "
             + ", ".join(SCHEMES)
         )
+    for canon, written in best_tied.items():  # two joints as good a match: neither taken
+        if canon not in given:
+            names = [skel.names[j] for j in lookup.ties[written]]
+            raise CharacterError(tie_message(where, canon, written, names))
     jmap = _anchors(skel, best_found, best_name, where)
     for canon, label in slid.items():  # as the map itself slides it, or refused
         got = jmap.anchors[JOINT_INDEX[canon]].label
@@ -569,6 +573,14 @@ def resolve_map(
                 f"{quoted(got)}); name a joint of the skeleton"
             )
     return jmap
+
+
+def _near(skel: Skeleton, name: str) -> str:
+    """`` (did you mean 'Left  Hand'?)`` for a joint named as ``name`` is but for case and
+    blanks (names are compared as written: a file's two spaces are two), else nothing."""
+    key = " ".join(name.lower().split())
+    same = (n for n in skel.names if " ".join(n.lower().split()) == key)
+    return next((f" (did you mean {quoted(n)}?)" for n in same), "")
 
 
 #: A point part-way along a bone as :meth:`JointMap.describe` writes it (a joint sliding

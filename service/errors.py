@@ -308,8 +308,9 @@ def _near(value: Any, names: Sequence[str] = JOINT_NAMES) -> str:
 
 
 def name_key(name: str) -> str:
-    """A joint name as a suggestion compares it: no case, ``-`` and blanks as ``_``."""
-    return name.strip().lower().replace("-", "_").replace(" ", "_")
+    """A joint name as a suggestion compares it: no case, ``-`` and each run of blanks
+    (spaces, tabs) as ``_``: a file's ``Left  Hand`` for a client's ``Left Hand``."""
+    return "_".join(name.lower().replace("-", "_").split())
 
 
 def _message(error: Any) -> str:
