@@ -20,7 +20,8 @@ over it, joint by joint. Then two structural rules apply to every map:
   both clavicles on the midline), the chest 0.35 of the way to the neck (ReActIdle has one chest
   joint); so are two collars on one point (CMU ASF and Rigify start both clavicles where
   the neck does). Any other zero-length canonical bone is an error asking for an explicit
-  map.
+  map, or naming the one bone out of proportion that made it (:mod:`core.rest_checks`,
+  which also refuses a rest pose with every joint at one point).
 """
 
 from __future__ import annotations
@@ -36,6 +37,7 @@ import numpy.typing as npt
 from core.characters import F64, CharacterError, Skeleton
 from core.map_lookup import Lookup, lookup_of, tie_message
 from core.map_lookup import name_key as _key
+from core.rest_checks import OffsetAt, default_offset_at, refuse_one_point, refuse_out_of_proportion
 from core.skeleton import JOINT_INDEX, JOINT_NAMES, PARENT_NAMES
 from core.text import clip, quoted
 from core.units import UNITS
@@ -495,6 +497,18 @@ def _structural(skel: Skeleton, found: dict[str, int]) -> None:
                     break
 
 
+def _bones(skel: Skeleton, anchors: Mapping[str, Anchor]) -> list[int]:
+    """The joints whose offsets are the bones between the anchors' joints."""
+    out = []
+    for canon, parent in PARENT_NAMES.items():
+        if parent is not None:
+            top, j = anchors[parent].joint, anchors[canon].joint
+            while j != top and j >= 0:
+                out.append(j)
+                j = skel.parents[j]
+    return out
+
+
 def _local_path(skel: Skeleton, top: int, bottom: int) -> F64:
     """Rest-pose vector from ``top``'s origin to ``bottom``'s, in ``top``'s frame."""
     v = np.zeros(3)
@@ -506,9 +520,15 @@ def _local_path(skel: Skeleton, top: int, bottom: int) -> F64:
 
 
 def resolve_map(
-    skel: Skeleton, explicit: Mapping[str, str] | None = None, *, where: str = "joint_map"
+    skel: Skeleton,
+    explicit: Mapping[str, str] | None = None,
+    *,
+    where: str = "joint_map",
+    offset_at: OffsetAt = default_offset_at,
 ) -> JointMap:
-    """The joint map of ``skel``: automatic, overridden joint by joint by ``explicit``."""
+    """The joint map of ``skel``: automatic, overridden joint by joint by ``explicit``;
+    ``offset_at`` names the fields of its offsets, for a rest pose that cannot be read
+    (:mod:`core.rest_checks`)."""
     lookup = lookup_of(skel.names, _shared_prefix([_key(n) for n in skel.names]))
     given: dict[str, int] = {}
     slid: dict[str, str] = {}  # a point part-way along a bone, as a map describes it
@@ -536,6 +556,7 @@ def resolve_map(
             )
         given[canon] = skel.index[name]
 
+    refuse_one_point(skel, offset_at)
     best_name, best_found, best_hits, best_tied = "", dict(given), -1, {}
     structural = {"spine1", "spine2"}  # the joints the structural rules may fill
     for scheme_name in SCHEMES:
@@ -564,7 +585,7 @@ def resolve_map(
         if canon not in given:
             names = [skel.names[j] for j in lookup.ties[written]]
             raise CharacterError(tie_message(where, canon, written, names))
-    jmap = _anchors(skel, best_found, best_name, where)
+    jmap = _anchors(skel, best_found, best_name, where, offset_at)
     for canon, label in slid.items():  # as the map itself slides it, or refused
         got = jmap.anchors[JOINT_INDEX[canon]].label
         if got != label:
@@ -616,7 +637,9 @@ def _fraction(text: str) -> float | None:
         return None
 
 
-def _anchors(skel: Skeleton, found: dict[str, int], scheme: str, where: str) -> JointMap:
+def _anchors(
+    skel: Skeleton, found: dict[str, int], scheme: str, where: str, offset_at: OffsetAt
+) -> JointMap:
     rest = skel.rest_positions()
     # the body's size: the mapped joints' extent, not the whole skeleton's (a prop, a camera
     # or a second root far from the body must not make a real bone count as zero length)
@@ -654,7 +677,8 @@ def _anchors(skel: Skeleton, found: dict[str, int], scheme: str, where: str) -> 
         if np.linalg.norm(here - there) > 1e-3 * span and not on_twin:
             continue
         child = next((c for c in JOINT_NAMES if PARENT_NAMES[c] == canon), None)
-        if canon not in _SLIDE or child is None:
+        if canon not in _SLIDE or child is None:  # (one bone out of proportion: said so)
+            refuse_out_of_proportion(skel, _bones(skel, anchors), offset_at)
             raise CharacterError(
                 f"{where}: {canon} ({a.label}) sits on {parent} ({pa.label}) in the rest pose; "
                 "map them to distinct points"

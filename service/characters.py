@@ -621,7 +621,7 @@ def character_from_request(req: CharacterSolveRequest, where: str = "") -> Chara
     prefix = f"{where}." if where else ""
     joints = req.character.joints
     try:
-        skel, _ = build_skeleton(
+        skel, order = build_skeleton(
             [j.name for j in joints],
             [j.parent for j in joints],
             [j.offset for j in joints],
@@ -652,7 +652,11 @@ def character_from_request(req: CharacterSolveRequest, where: str = "") -> Chara
         if req.root_position is not None:
             trans[roots[0]] = req.root_position
         pose = Pose(rot, trans)
-        jmap = resolve_map(skel, req.joint_map, where=f"{prefix}joint_map")
+        at = f"{prefix}character.joints"  # (a rest pose not read: its offsets named)
+        jmap = resolve_map(
+            skel, req.joint_map, where=f"{prefix}joint_map",
+            offset_at=lambda j: at if j is None else f"{at}[{order[j]}].offset",
+        )  # fmt: skip
         units, up = req.character.units, req.character.up
         given = req.character.model_fields_set
         where = f"{prefix}character."
@@ -727,7 +731,7 @@ def character_from_bvh(bvh: BVH, req: BVHSolveRequest | BVHInspectRequest) -> Ch
     try:
         skel = skeleton_of(bvh)
         pose = pose_of(bvh, req.frame, root_add=req.root_position == "add")
-        jmap = resolve_map(skel, req.joint_map)
+        jmap = resolve_map(skel, req.joint_map, offset_at=lambda _: "bvh")
         points = "joint_map" if req.joint_map else "bvh"
         return _character(skel, pose, jmap, req.units, req.up, points=points)
     except (CharacterError, BVHError) as exc:

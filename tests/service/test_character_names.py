@@ -12,11 +12,15 @@ character (an audit, 2026-12-06):
 
 from __future__ import annotations
 
+import copy
+import json
+import re
 from pathlib import Path
 from typing import Any
 
 import pytest
 
+from tests.conftest import REPO_ROOT
 from tests.core.test_bvh_names import odd_names
 from tests.service.test_api import assert_problem
 
@@ -144,3 +148,102 @@ def test_two_joints_as_good_a_match_are_refused_naming_both(
     r = _inspect(client, text, joint_map={"left_wrist": hand})
     assert r.status_code == 200, r.text
     assert r.json()["joint_map"]["left_wrist"] == hand
+
+
+def _example(name: str) -> dict[str, Any]:
+    body: dict[str, Any] = json.loads(
+        (REPO_ROOT / "docs" / "examples" / f"{name}.json").read_text()
+    )
+    return body
+
+
+@pytest.mark.parametrize("reverse", [False, True])
+def test_an_offset_out_of_proportion_is_named_at_that_offset(client: Any, reverse: bool) -> None:
+    """D5a: the docs' character with its Neck offset in the wrong units (170 for 0.17) was
+    "joint_map: spine1 (Spine) sits on pelvis (Hips)", located at a joint_map the request
+    had not; now it names the Neck's offset, located at it (the joints listed in any
+    order)."""
+    body = _example("solve_character")
+    bad = copy.deepcopy(body)
+    joints = bad["character"]["joints"]
+    assert joints[3]["name"] == "Neck"
+    joints[3]["offset"] = [0, 170, 0]
+    if reverse:
+        joints.reverse()
+    at = f"character.joints[{len(joints) - 4 if reverse else 3}].offset"
+    problem = assert_problem(
+        client.post("/v1/solve", json=bad),
+        422,
+        f"{at}: the offset of 'Neck' from 'Spine2', [0.0, 170.0, 0.0], is ",
+        "out of proportion",
+    )
+    assert not problem["detail"].startswith("joint_map"), problem
+    assert problem["errors"] == [
+        {"location": at, "message": problem["detail"].removeprefix(f"{at}: ")}
+    ]
+    assert client.post("/v1/solve", json=body).status_code == 200
+
+
+def test_a_bvh_offset_out_of_proportion_is_named(client: Any, dab: str) -> None:
+    """D5a, in a real file: the Neck's OFFSET a thousand times too long."""
+    text, n = re.subn(
+        r"(JOINT Neck\n\s*\{\n\s*OFFSET) (\S+) (\S+) (\S+)",
+        lambda m: f"{m[1]} {m[2]} {float(m[3]) * 1000:g} {float(m[4]) * 1000:g}",
+        dab,
+    )
+    assert n == 1
+    problem = assert_problem(_inspect(client, text), 422, "bvh: the offset of 'Neck' from ")
+    assert "out of proportion" in problem["detail"] and "joint_map" not in problem["detail"]
+    assert problem["errors"][0]["location"] == "bvh"
+
+
+def _bones_in_channels(text: str) -> str:
+    """``text`` with every joint's OFFSET 0 0 0 but the root's, its bone carried by three
+    position channels before its rotations instead, in every frame."""
+    from core.bvh import parse_bvh
+
+    bvh = parse_bvh(text)
+    head, _, motion = text.partition("MOTION")
+    lines = head.split("\n")
+    joint = -1
+    for k, line in enumerate(lines):
+        word = line.split()[:1]
+        if word in (["ROOT"], ["JOINT"], ["End"]):
+            joint += 1
+        elif word == ["OFFSET"] and bvh.joints[joint].parent >= 0:
+            lines[k] = line[: line.index("OFFSET")] + "OFFSET 0 0 0"
+        elif word == ["CHANNELS"] and bvh.joints[joint].parent >= 0:
+            rest = line.split()[2:]
+            pad = line[: line.index("CHANNELS")]
+            lines[k] = f"{pad}CHANNELS {len(rest) + 3} Xposition Yposition Zposition " + " ".join(
+                rest
+            )
+    rows = motion.split("\n")
+    first = next(i for i, r in enumerate(rows) if r.startswith("Frame Time")) + 1
+    for i in range(first, len(rows)):
+        values = rows[i].split()
+        if not values:
+            continue
+        out = []
+        for j in bvh.joints:
+            part = values[j.channel_start : j.channel_start + len(j.channels)]
+            if j.parent >= 0 and j.channels:
+                part = [f"{v:g}" for v in j.offset] + part
+            out += part
+        rows[i] = " ".join(out)
+    return "\n".join(lines) + "MOTION" + "\n".join(rows)
+
+
+@pytest.mark.parametrize("units", [None, "in", "cm"])
+def test_a_rest_pose_with_every_joint_at_one_point_is_refused_as_such(
+    client: Any, dab: str, units: str | None
+) -> None:
+    """D5b: a real file whose bones are in position channels, every OFFSET but the root's
+    0 0 0, was "joint_map: no joint found for ['spine1']" whatever the units; now it says
+    that the rest pose has every joint at one point."""
+    text = _bones_in_channels(dab)
+    r = client.post("/v1/bvh/inspect", json={"bvh": text, "units": units})
+    problem = assert_problem(
+        r, 422, "bvh: the rest pose has every joint at one point", "write them as OFFSETs"
+    )
+    assert problem["errors"][0]["location"] == "bvh"
