@@ -4,8 +4,10 @@
   End Sites) and the motion, numbers in Python's shortest round-trip form, so that
   ``parse_bvh(format_bvh(b))`` has the same hierarchy, offsets, frame time and motion.
 - :func:`splice_frame` keeps the file's own text and rewrites only the changed values of one
-  frame line (every other byte of the file is unchanged); values are written with
-  :data:`DECIMALS` decimals.
+  frame, where they stand (its line, or its values over several lines where the file wraps
+  its frames: every other byte of the file is unchanged); values are written with
+  :data:`DECIMALS` decimals, and :func:`row_of` says which changed: a value within
+  :data:`KEPT` of its old one keeps its text.
 - :func:`skeleton_of`, :func:`pose_of` and :func:`row_of` bridge a BVH frame to a
   :class:`core.characters.Skeleton` / :class:`core.characters.Pose` and back: a joint is
   *rotatable* if it has exactly three rotation channels, *translatable* if it has all three
@@ -24,8 +26,12 @@ from core.characters import F64, Pose, Skeleton, build_skeleton
 from core.euler import euler_angles, euler_matrices, invertible_order
 
 DECIMALS = 6
+#: how far a channel's new value may lie from its old one for the old to be kept (text
+#: and all): half a unit of the last decimal written, the rounding's own error
+KEPT = 0.5 * 10.0**-DECIMALS
 _POS = {"xposition": 0, "yposition": 1, "zposition": 2}
 _ROT = {"xrotation", "yrotation", "zrotation"}
+_WORD_RE = re.compile(r"\S+")
 
 
 def _num(v: float) -> str:
@@ -69,19 +75,25 @@ def _emit(bvh: BVH, kids: dict[int, list[int]], out: list[str], i: int, depth: i
 
 def splice_frame(bvh: BVH, frame: int, row: F64, columns: list[int]) -> str:
     """The file's text with ``columns`` of frame ``frame`` set from ``row`` (whole motion
-    row); every other byte is kept. A file whose frames are not one per line is written
-    whole by :func:`format_bvh` instead."""
+    row); every other byte is kept: the frame's values are found where they stand
+    (:meth:`core.bvh.BVH.frame_span`: its line, or its values across lines where the file
+    wraps its frames), and only those of ``columns`` are written anew. A BVH not read
+    from text (none to keep) is written whole by :func:`format_bvh`."""
     if not 0 <= frame < bvh.num_frames:
         raise IndexError(f"frame {frame} out of range: the file has {bvh.num_frames} frames")
     span = bvh.frame_span(frame)
-    if span is None:
-        bvh.whole()  # (a file read for one frame holds one frame a line: it has its span)
+    if span is None:  # (a file read for one frame has its span: it is one read from text)
+        bvh.whole()
         motion = bvh.motion.copy()
         motion[frame] = row
         return format_bvh(bvh, motion)
     start, end = span
     line = bvh.text[start:end]
-    tokens = list(re.finditer(r"\S+", line))
+    tokens = list(_WORD_RE.finditer(line))
+    if len(tokens) != bvh.num_channels:  # pragma: no cover - the reader found them so
+        raise ValueError(
+            f"{bvh.name}: frame {frame} holds {len(tokens)} values, not {bvh.num_channels}"
+        )
     parts: list[str] = []
     last = 0
     wanted = set(columns)
@@ -164,24 +176,25 @@ def row_of(
 ) -> tuple[F64, list[int]]:
     """The motion row of ``pose`` for the changed ``joints`` (others keep their values), and
     the columns that changed, as they will be written (rounded to :data:`DECIMALS`);
-    ``root_add`` as :func:`pose_of` reads it."""
+    ``root_add`` as :func:`pose_of` reads it. A channel whose old value lies within half
+    a unit of the written precision (:data:`KEPT`) of its new one keeps its value and its
+    text: it already says the new value as well as the rewritten one would (so a value
+    that moved by nothing, ``-9.35e-15`` against ``0``, is not written ``-0.000000``:
+    compared after rounding the new one alone, it always changed)."""
     row = bvh.row(frame).copy()
-    columns: list[int] = []
+    new: dict[int, float] = {}
     for i in sorted(joints):
         j = bvh.joints[i]
         rot_cols = [j.channel_start + k for k, c in enumerate(j.channels) if c.lower() in _ROT]
         if len(rot_cols) == 3 and invertible_order(j.rotation_order):  # else never turned
             angles = _nearest_euler(j.rotation_order, pose.rotations[i], row[rot_cols])
-            written = [float(f"{a:.{DECIMALS}f}") for a in angles.tolist()]
-            if written != row[rot_cols].tolist():  # (turned by less than is written: kept)
-                row[rot_cols] = angles
-                columns += rot_cols
+            new.update(zip(rot_cols, angles.tolist(), strict=True))
         for k, c in enumerate(j.channels):
-            axis = _POS.get(c.lower(), 0)
-            value = float(pose.translations[i, axis]) - _root_shift(j, axis, root_add)
-            if c.lower() in _POS and float(f"{value:.{DECIMALS}f}") != row[j.channel_start + k]:
-                row[j.channel_start + k] = value
-                columns.append(j.channel_start + k)
+            if c.lower() in _POS:
+                axis = _POS[c.lower()]
+                value = float(pose.translations[i, axis]) - _root_shift(j, axis, root_add)
+                new[j.channel_start + k] = value
+    columns = sorted(col for col, value in new.items() if not abs(value - row[col]) <= KEPT)
     for col in columns:  # the values as they will be read back
-        row[col] = float(f"{row[col]:.{DECIMALS}f}")
-    return row, sorted(set(columns))
+        row[col] = float(f"{new[col]:.{DECIMALS}f}")
+    return row, columns

@@ -1,0 +1,146 @@
+"""The BVH writer keeps the user's file: an edited frame's values are written where they
+stand, whatever the layout of the frames (wrapped over lines, CRLF, a byte order mark,
+blank lines), and a value the edit did not move keeps its text (real files; the layouts
+made from them here)."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from core.bvh import BVH, parse_bvh
+from core.bvh_write import DECIMALS, KEPT, pose_of, row_of, splice_frame
+from core.characters import Pose
+from core.euler import euler_matrices
+
+
+def raw(path: Path) -> str:
+    """A file's text as sent (``read_text`` would turn CRLF into LF)."""
+    return path.read_bytes().decode("utf-8")
+
+
+def relaid(text: str, per_line: int, newline: str = "\n", bom: bool = False) -> str:
+    """``text`` with its MOTION block's values ``per_line`` a line (frames wrapped over
+    lines, or several on one), lines ended by ``newline``, a byte order mark if ``bom``."""
+    time_line = re.search(r"Frame Time:[^\n]*\n", text)
+    assert time_line is not None
+    head, words = text[: time_line.end()], text[time_line.end() :].split()
+    lines = [" ".join(words[i : i + per_line]) for i in range(0, len(words), per_line)]
+    out = head.replace("\r\n", "\n") + "\n".join(lines) + "\n"
+    return ("\ufeff" if bom else "") + out.replace("\n", newline)
+
+
+def edited_values(bvh: BVH, frame: int) -> tuple[np.ndarray, list[int]]:
+    """Frame ``frame``'s row with a few channels moved by whole degrees (units)."""
+    row = bvh.row(frame).copy()
+    columns = [0, 4, bvh.num_channels // 2, bvh.num_channels - 1]
+    row[columns] += [1.25, -2.5, 3.0, 0.125]
+    return row, columns
+
+
+def assert_only_values_changed(
+    old: str, new: str, bvh: BVH, frame: int, columns: list[int]
+) -> None:
+    """``new`` is ``old`` with the words of ``columns`` of ``frame`` rewritten, and nothing
+    else: same bytes before the first and after the last, the same words elsewhere."""
+    span = bvh.frame_span(frame)
+    assert span is not None
+    start, end = span
+    grow = len(new) - len(old)
+    assert new[:start] == old[:start] and new[end + grow :] == old[end:]
+    before, after = old[start:end], new[start : end + grow]
+    assert re.split(r"\S+", before) == re.split(r"\S+", after)  # the spacing, line ends too
+    old_words, new_words = before.split(), after.split()
+    assert len(old_words) == len(new_words) == bvh.num_channels
+    assert [
+        k for k, (a, b) in enumerate(zip(old_words, new_words, strict=True)) if a != b
+    ] == columns
+
+
+#: name -> (values a line, 0: two frames; line end; a byte order mark)
+LAYOUTS: dict[str, tuple[int, str, bool]] = {
+    "wrapped-11-crlf-bom": (11, "\r\n", True),
+    "wrapped-7-lf": (7, "\n", False),
+    "two-frames-a-line": (0, "\r\n", False),
+}
+
+
+@pytest.mark.parametrize("layout", list(LAYOUTS))
+@pytest.mark.parametrize("name", ["cmu-daz-salsa", "bandai", "reactidle-6ch"])
+def test_a_frame_not_one_a_line_is_spliced_where_it_stands(
+    bvh_files: dict[str, Path], name: str, layout: str
+) -> None:
+    """An audit (2026-12-06, D4): a file whose frames were not one a line (values wrapped
+    over lines, CRLF, a byte order mark) came back written whole: LF, no BOM, tabs, every
+    OFFSET and every value of every frame in another form. Now only the edited values
+    change, and the frame is read alone (bit for bit as a whole read reads it)."""
+    per_line, newline, bom = LAYOUTS[layout]
+    whole = parse_bvh(raw(bvh_files[name]), name)
+    text = relaid(raw(bvh_files[name]), per_line or 2 * whole.num_channels, newline, bom)
+    frame = whole.num_frames // 2 + 1
+    bvh = parse_bvh(text, name, frames=[frame])
+    assert bvh.read == frozenset({frame})  # (it was read whole)
+    assert bvh.row(frame).tobytes() == whole.row(frame).tobytes()
+    assert bvh.frame_span(frame) == parse_bvh(text, name).frame_span(frame)
+    row, columns = edited_values(bvh, frame)
+    out = splice_frame(bvh, frame, row, columns)
+    assert_only_values_changed(text, out, bvh, frame, columns)
+    assert out.startswith("\ufeff") == text.startswith("\ufeff")
+    assert out.count("\r\n") == text.count("\r\n") and out.count("\n") == text.count("\n")
+    again = parse_bvh(out, name)
+    expect = whole.motion.copy()
+    expect[frame, columns] = np.round(row[columns], DECIMALS)
+    np.testing.assert_array_equal(again.motion, expect)
+
+
+def test_blank_lines_among_frames_keep_their_place(bvh_files: dict[str, Path]) -> None:
+    text = raw(bvh_files["bandai"])
+    at = text.index("Frame Time:")
+    lines = text[at:].split("\n")
+    body = "\n".join(ln if k % 3 else ln + "\n  \t" for k, ln in enumerate(lines))
+    spaced = text[:at] + body
+    bvh = parse_bvh(spaced, "spaced", frames=[10])
+    assert bvh.read == frozenset({10})
+    row, columns = edited_values(bvh, 10)
+    out = splice_frame(bvh, 10, row, columns)
+    assert_only_values_changed(spaced, out, bvh, 10, columns)
+
+
+def test_a_frame_posed_as_it_stands_writes_nothing(bvh_files: dict[str, Path]) -> None:
+    """An audit (2026-12-06, D6): the writer compared the new angles, rounded, with the
+    old unrounded ones, so a value of ``-9.35e-15`` (CMU salsa's) always counted as changed
+    and was written ``-0.000000``. The frame's own pose, every joint said changed, now
+    writes no value, in every real file."""
+    for name, path in bvh_files.items():
+        bvh = parse_bvh(raw(path), name)
+        for frame in (0, 5, bvh.num_frames - 1):
+            row, columns = row_of(bvh, frame, pose_of(bvh, frame), set(range(len(bvh.joints))))
+            assert columns == [], (name, frame, columns)
+            assert row.tobytes() == bvh.row(frame).tobytes()
+            assert splice_frame(bvh, frame, row, columns) == bvh.text
+
+
+def test_a_value_is_written_when_it_moves_by_more_than_the_rounding(
+    bvh_files: dict[str, Path],
+) -> None:
+    """Half a unit of the written precision: within it, the old text says the new value as
+    well as the rewritten one would and is kept; past it, the value is written. A turn of
+    a few millionths of a degree is no less written than a large one."""
+    bvh = parse_bvh(raw(bvh_files["cmu-daz-salsa"]), "salsa")
+    frame = 5
+    j = bvh.index("lForeArm")
+    joint = bvh.joints[j]
+    cols = [joint.channel_start + k for k in range(3)]
+    for shift, written in ((0.4 * KEPT, False), (3 * KEPT, True), (2e-3, True)):
+        angles = bvh.row(frame)[cols] + [shift, 0.0, 0.0]
+        pose = pose_of(bvh, frame)
+        rot = pose.rotations.copy()
+        rot[j] = euler_matrices(joint.rotation_order, np.deg2rad(angles))
+        row, columns = row_of(bvh, frame, Pose(rot, pose.translations), {j})
+        assert columns == (cols[:1] if written else []), (shift, columns)
+        if written:
+            assert row[cols[0]] == float(f"{angles[0]:.{DECIMALS}f}")
+        assert row[cols[1:]].tobytes() == bvh.row(frame)[cols[1:]].tobytes()
