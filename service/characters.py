@@ -12,7 +12,9 @@ bone lengths the character's own) -> rotations (JSON) or the file with that fram
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
+from itertools import islice
 from typing import Annotated, Any, Literal, TypeVar
 
 import numpy as np
@@ -79,6 +81,7 @@ MAX_COORDINATE = 1.0e7  # client units; beyond this a coordinate is nonsense
 #: The shortest quaternion a client may send (normalised here; shorter ones say nothing of
 #: a rotation that float noise does not).
 MIN_QUAT_LENGTH = 1e-6
+NEARER = 1e-6  # metres: how much nearer an answer must bring a target to rewrite a frame
 
 Number = Annotated[float, Field(allow_inf_nan=False, ge=-MAX_COORDINATE, le=MAX_COORDINATE)]
 Vec3 = Annotated[
@@ -308,9 +311,9 @@ class CharacterSolveResponse(_Answer):
 
 
 class BVHSolveResponse(_Answer):
-    bvh: str = Field(description="The same file with that frame edited.")
+    bvh: str = Field(description="The same file, only that frame's changed values rewritten.")
     frame: int
-    changed_joints: list[str]
+    changed_joints: list[str] = Field(description="Joints with a value rewritten (none: as sent).")
 
 
 # --------------------------------------------------------------------------------------
@@ -692,8 +695,7 @@ def character_answer(ch: Character, edit: Edit, given: dict[str, list[float]]) -
 # --------------------------------------------------------------------------------------
 def read_request_bvh(text: str, frame: int | None = None) -> BVH:
     """Parse and check a BVH body: every failure is a 422 naming the line and the reason.
-    ``frame``: only that frame's values are read and checked (where the file holds one
-    frame per line: the rest of the MOTION block is kept as written, unread)."""
+    ``frame``: only that frame's values are read and checked (the rest is kept, unread)."""
     try:
         bvh = parse_bvh(text, "bvh", None if frame is None else (frame,))
     except BVHError as exc:
@@ -703,8 +705,9 @@ def read_request_bvh(text: str, frame: int | None = None) -> BVH:
     if bad.any():
         k, c = (int(v) for v in np.argwhere(bad)[0])
         f = k if rows is None else int(rows[k])
-        span = bvh.frame_span(f)  # (None: frames across lines; the block's first line, then)
-        line = bvh.text[: bvh.motion_offset if span is None else span[0]].count("\n") + 1
+        start, end = bvh.frame_span(f) or (0, 0)  # (a BVH read from text has it)
+        word = next(islice(re.finditer(r"\S+", bvh.text[start:end]), c, None), None)
+        line = bvh.text[: start + (word.start() if word else 0)].count("\n") + 1  # the value's
         joint = next(j for j in reversed(bvh.joints) if j.channel_start <= c and j.channels)
         channel = joint.channels[c - joint.channel_start]
         raise InvalidRequest(
@@ -739,13 +742,18 @@ def character_from_bvh(bvh: BVH, req: BVHSolveRequest | BVHInspectRequest) -> Ch
 
 
 def bvh_answer(bvh: BVH, ch: Character, req: BVHSolveRequest, edit: Edit) -> dict[str, Any]:
-    add = req.root_position == "add"
+    """The file with the frame's changed values written in, measured as written (rounded, read
+    back); one bringing no target nearer (:data:`NEARER`) is the frame as it was."""
+    add, p = req.root_position == "add", edit.problem
     row, columns = row_of(bvh, req.frame, edit.pose, edit.changed, root_add=add)
-    text = splice_frame(bvh, req.frame, row, columns)
-    # the report is measured on the values as written (rounded), read back
     points = canonical_points(ch.skel, pose_of(bvh, req.frame, row, root_add=add), ch.jmap)
+    before = canonical_points(ch.skel, pose_of(bvh, req.frame, root_add=add), ch.jmap)
+    goals, at = p.target_pos[: p.n_targets], p.target_idx[: p.n_targets]
+    old, new = (np.linalg.norm(ch.to_service(q)[at] - goals, axis=1) for q in (before, points))
+    if not (old - new > NEARER).any():  # (what the solve moved is noise: curves churn)
+        row, columns, points = bvh.row(req.frame), [], before
     return {
-        "bvh": text,
+        "bvh": splice_frame(bvh, req.frame, row, columns),
         "frame": req.frame,
         "changed_joints": [ch.skel.names[j] for j in sorted(_written(bvh, columns))],
         **_report(ch, edit, points),

@@ -1,0 +1,119 @@
+"""``/v1/bvh/solve`` gives the user's file back with the edit and nothing else: a file whose
+frames are wrapped over lines keeps every other byte (line ends, byte order mark, the
+hierarchy's text, the other frames), an edit that moves nothing leaves the file as it was,
+and the errors reported are those of the file as written (an independent reader checks)."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from core.bvh import parse_bvh
+from tests.character_files import RefBVH
+from tests.core.test_bvh_write import raw, relaid
+
+
+def one_a_line(text: str, n_channels: int) -> str:
+    """``text`` (its byte order mark dropped) with one frame a line, LF: what the
+    independent reader reads."""
+    text = text.removeprefix("\ufeff").replace("\r\n", "\n")
+    head, _, body = text.partition("Frame Time:")
+    time_line, _, values = body.partition("\n")
+    words = values.split()
+    rows = [" ".join(words[i : i + n_channels]) for i in range(0, len(words), n_channels)]
+    return f"{head}Frame Time:{time_line}\n" + "\n".join(rows) + "\n"
+
+
+def changed_words(old: str, new: str, bvh: Any, frame: int) -> set[str]:
+    """The joints one of whose values of ``frame`` the answer writes anew (by the words
+    of the frame's span: everything else is compared byte for byte by the caller)."""
+    start, end = bvh.frame_span(frame)
+    grow = len(new) - len(old)
+    assert new[:start] == old[:start] and new[end + grow :] == old[end:]
+    a, b = old[start:end].split(), new[start : end + grow].split()
+    return {
+        j.name for j in bvh.joints
+        for c in range(j.channel_start, j.channel_start + len(j.channels)) if a[c] != b[c]
+    }  # fmt: skip
+
+
+def test_a_wrapped_crlf_file_with_a_bom_keeps_every_other_byte(
+    client: Any, bvh_files: dict[str, Path]
+) -> None:
+    """An audit (2026-12-06, D4): such a file came back with LF ends, no byte order mark,
+    tabs and every number of the file rewritten. Now the edited frame's changed values
+    alone differ; the answer is the same bytes run to run, and its reported target error
+    is the independent reader's measure of the file as written."""
+    source = raw(bvh_files["cmu-daz-salsa"])
+    n = parse_bvh(source).num_channels
+    text = relaid(source, 11, "\r\n", bom=True)
+    frame = 300
+    ref = RefBVH(one_a_line(text, n))
+    wrist = ref.positions(frame)["lHand"]
+    goal = (wrist + np.array([8.0, 6.0, -4.0])).tolist()  # cm
+    body = {"bvh": text, "frame": frame, "targets": [{"joint": "lHand", "position": goal}],
+            "options": {"reach": "exact"}}  # fmt: skip
+    answers = [client.post("/v1/bvh/solve", json=body) for _ in range(2)]
+    assert all(r.status_code == 200 for r in answers), answers[0].text
+    out = answers[0].json()
+    assert answers[1].json()["bvh"] == out["bvh"] and out["units"] == "cm"
+    new = out["bvh"]
+    assert new.startswith("\ufeff") and new.count("\r\n") == text.count("\r\n")
+    assert new.count("\n") == text.count("\n")
+    rewritten = changed_words(text, new, parse_bvh(text, "in", frames=[frame]), frame)
+    assert rewritten and set(out["changed_joints"]) == rewritten
+    after = RefBVH(one_a_line(new, n)).positions(frame)["lHand"]
+    error_m = float(np.linalg.norm(after - goal)) * 0.01
+    assert abs(out["targets"][0]["error"] - error_m) < 1e-7
+    assert out["targets"][0]["reached"] is True
+
+
+def test_an_edit_that_moves_nothing_leaves_the_file_as_it_was(
+    client: Any, bvh_files: dict[str, Path]
+) -> None:
+    """An audit (2026-12-06, D6): a target placed where the joint stands rewrote 46 values
+    on 16 joints (the neural path's noise, up to 2.5e-5 degrees a joint) and FABRIK's 6
+    values near zero (``-9.35e-15`` -> ``-0.000000``). Now the file comes back as it was,
+    ``changed_joints`` empty, the error that of the frame as it stands; an edit that brings
+    the target nearer is still written."""
+    text = raw(bvh_files["cmu-daz-salsa"])
+    frame = 5
+    pts = client.post("/v1/bvh/inspect", json={"bvh": text, "frame": frame}).json()["points"]
+    here = pts["left_wrist"]
+    for method in ("neural", "fabrik"):
+        body = {"bvh": text, "frame": frame, "options": {"method": method},
+                "targets": [{"joint": "left_wrist", "position": here}]}  # fmt: skip
+        r = client.post("/v1/bvh/solve", json=body)
+        assert r.status_code == 200, r.text
+        out = r.json()
+        assert out["bvh"] == text, method
+        assert out["changed_joints"] == [], method
+        assert out["targets"][0]["error"] < 1e-9 and out["targets"][0]["reached"], method
+        moved = {
+            **body,
+            "targets": [{"joint": "left_wrist", "position": [here[0] + 0.5, *here[1:]]}],
+        }
+        out = client.post("/v1/bvh/solve", json=moved).json()  # 5 mm (cm units)
+        assert out["bvh"] != text and "lForeArm" in out["changed_joints"], method
+        assert out["targets"][0]["error"] < 0.005 - 1e-6, method  # nearer than it stood
+
+
+def test_a_value_beyond_any_body_in_a_wrapped_frame_names_its_own_line(
+    client: Any, bvh_files: dict[str, Path]
+) -> None:
+    """The frame is read alone now, so the 422 names the line of the value itself (it
+    named the MOTION block's first line for a file whose frames are wrapped)."""
+    text = relaid(raw(bvh_files["bandai"]), 11, "\r\n", bom=True)
+    bvh = parse_bvh(text, "in", frames=[40])
+    span = bvh.frame_span(40)
+    assert span is not None
+    words = [m for m in re.finditer(r"\S+", text[span[0] : span[1]])]
+    at = span[0] + words[30].start()
+    bad = text[:at] + "1e9" + text[at + len(words[30].group()) :]
+    r = client.post("/v1/bvh/solve", json={"bvh": bad, "frame": 40, "targets": [
+        {"joint": "left_wrist", "position": [0, 1, 0]}]})  # fmt: skip
+    line = text[:at].count("\n") + 1
+    assert r.status_code == 422 and f"bvh: line {line}: frame 40, channel " in r.text, r.text
