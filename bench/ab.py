@@ -120,13 +120,8 @@ def bvh_edits(engine: Any, calls: int = 20) -> dict[str, float]:
     in soft reach without its pins (``soft``). None in a tree without them (the table
     then leaves those rows out)."""
     try:
-        from service.characters import (
-            BVHSolveRequest,
-            bvh_answer,
-            character_from_bvh,
-            read_request_bvh,
-            solve_character,
-        )
+        from service.character_bvh import bvh_answer, character_from_bvh, read_request_bvh
+        from service.characters import BVHSolveRequest, solve_character
 
         body = json.loads(Path("docs/examples/bvh_solve.json").read_text())
     except (ImportError, FileNotFoundError):

@@ -35,14 +35,8 @@ def _median_ms(calls: int, step: Callable[[], Any]) -> tuple[float, Any]:
 
 def _row(engine: Any, path: Path, calls: int, frame: int, units: str | None) -> str:
     """One file's table row."""
-    from service.characters import (
-        BVHSolveRequest,
-        bvh_answer,
-        character_from_bvh,
-        character_problem,
-        read_request_bvh,
-        solve_character,
-    )
+    from service.character_bvh import bvh_answer, character_from_bvh, read_request_bvh
+    from service.characters import BVHSolveRequest, character_problem, solve_character
 
     text = path.read_text(encoding="utf-8", errors="replace")
     target: dict[str, Any] = {"joint": "left_wrist", "position": [0.0, 0.0, 0.0]}

@@ -67,7 +67,7 @@ def clip_points(path: Path, units: str | float | None, root: str, frames: int) -
     """The clip's frames (about 30 a second, at most ``frames``) as the service's 21
     points ``[F, 21, 3]``, metres, +Y up, as ``/v1/bvh/solve`` reads them."""
     from bench.characters import file_character, frame_points
-    from service.characters import read_request_bvh
+    from service.character_bvh import read_request_bvh
 
     text = path.read_text(encoding="utf-8", errors="replace")
     bvh = read_request_bvh(text)

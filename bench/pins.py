@@ -133,7 +133,7 @@ def run_characters(models: Path, mocap: Path, seed: int) -> dict[tuple[str, ...]
     import tempfile
 
     from bench.characters import extract, frame_pairs, read_as
-    from service.characters import read_request_bvh
+    from service.character_bvh import read_request_bvh
     from service.engine import Engine
 
     engine = Engine(models, threads=1)
@@ -157,12 +157,8 @@ def _character_frame(
 ) -> None:  # fmt: skip
     """Every pin set, target set, distance and option on one frame of a file, into ``out``."""
     from core.retarget import canonical_points
-    from service.characters import (
-        BVHSolveRequest,
-        character_from_bvh,
-        character_problem,
-        solve_prepared,
-    )  # fmt: skip
+    from service.character_bvh import character_from_bvh
+    from service.characters import BVHSolveRequest, character_problem, solve_prepared
 
     still = [{"joint": "head", "position": [0.0, 0.0, 0.0]}]  # (the character alone)
     ch = character_from_bvh(bvh, BVHSolveRequest.model_validate({**base, "targets": still}))

@@ -12,9 +12,7 @@ bone lengths the character's own) -> rotations (JSON) or the file with that fram
 
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass
-from itertools import islice
 from typing import Annotated, Any, Literal, TypeVar
 
 import numpy as np
@@ -34,8 +32,7 @@ from pydantic import (
 )
 from pydantic_core import InitErrorDetails, PydanticCustomError
 
-from core.bvh import BVH, MAX_JOINTS, MAX_NAME, BVHError, parse_bvh
-from core.bvh_write import pose_of, row_of, skeleton_of, splice_frame
+from core.bvh import MAX_JOINTS, MAX_NAME
 from core.characters import (
     F64,
     CharacterError,
@@ -81,7 +78,6 @@ MAX_COORDINATE = 1.0e7  # client units; beyond this a coordinate is nonsense
 #: The shortest quaternion a client may send (normalised here; shorter ones say nothing of
 #: a rotation that float noise does not).
 MIN_QUAT_LENGTH = 1e-6
-NEARER = 1e-6  # metres: how much nearer an answer must bring a target to rewrite a frame
 
 Number = Annotated[float, Field(allow_inf_nan=False, ge=-MAX_COORDINATE, le=MAX_COORDINATE)]
 Vec3 = Annotated[
@@ -401,7 +397,7 @@ class Character:
         return np.asarray((p / self.scale) @ self.up)
 
 
-def _invalid(exc: Exception) -> InvalidRequest:
+def invalid_request(exc: Exception) -> InvalidRequest:
     detail, where = str(exc), getattr(exc, "location", None)
     if where is None:  # the message's own prefix names the field (service.errors)
         return InvalidRequest(detail)
@@ -415,7 +411,7 @@ def _leg_in(leg: float) -> str:
     return " or ".join(f'"units": "{u}" ({leg * UNITS[u]:.2f} m)' for u in human_units(leg))
 
 
-def _character(
+def make_character(
     skel: Skeleton,
     pose: Pose,
     jmap: JointMap,
@@ -591,7 +587,7 @@ def solve_prepared(engine: Engine, ch: Character, p: SolveProblem) -> Edit:
     return Edit(out.pose, out.changed, p, result, engine.version)
 
 
-def _report(ch: Character, edit: Edit, points: F64) -> dict[str, Any]:
+def edit_report(ch: Character, edit: Edit, points: F64) -> dict[str, Any]:
     """The fields of :class:`_Answer`, targets and pins measured on ``points`` (the 21
     mapped points of the answer, client units)."""
     p, r = edit.problem, edit.result
@@ -664,12 +660,12 @@ def character_from_request(req: CharacterSolveRequest, where: str = "") -> Chara
         given = req.character.model_fields_set
         where = f"{prefix}character."
         points = "joint_map" if req.joint_map else "character.joints"
-        return _character(
+        return make_character(
             skel, pose, jmap, units, up, where, "units" in given, "up" in given, points,
             "character.",
         )  # fmt: skip
     except CharacterError as exc:
-        raise _invalid(exc) from None
+        raise invalid_request(exc) from None
 
 
 def character_answer(ch: Character, edit: Edit, given: dict[str, list[float]]) -> dict[str, Any]:
@@ -686,119 +682,5 @@ def character_answer(ch: Character, edit: Edit, given: dict[str, list[float]]) -
         "rotations": rotations,
         "root_position": edit.pose.translations[root].tolist(),
         "positions": dict(zip(ch.skel.names, g_pos.tolist(), strict=True)),
-        **_report(ch, edit, ch.jmap.points(g_rot, g_pos)),
-    }
-
-
-# --------------------------------------------------------------------------------------
-# BVH
-# --------------------------------------------------------------------------------------
-def read_request_bvh(text: str, frame: int | None = None) -> BVH:
-    """Parse and check a BVH body: every failure is a 422 naming the line and the reason.
-    ``frame``: only that frame's values are read and checked (the rest is kept, unread)."""
-    try:
-        bvh = parse_bvh(text, "bvh", None if frame is None else (frame,))
-    except BVHError as exc:
-        raise _invalid(exc) from None
-    rows = None if bvh.read is None else np.array(sorted(bvh.read), dtype=np.intp)
-    bad = ~(np.abs(bvh.motion if rows is None else bvh.motion[rows]) <= MAX_COORDINATE)  # NaN
-    if bad.any():
-        k, c = (int(v) for v in np.argwhere(bad)[0])
-        f = k if rows is None else int(rows[k])
-        start, end = bvh.frame_span(f) or (0, 0)  # (a BVH read from text has it)
-        word = next(islice(re.finditer(r"\S+", bvh.text[start:end]), c, None), None)
-        line = bvh.text[: start + (word.start() if word else 0)].count("\n") + 1  # the value's
-        joint = next(j for j in reversed(bvh.joints) if j.channel_start <= c and j.channels)
-        channel = joint.channels[c - joint.channel_start]
-        raise InvalidRequest(
-            f"bvh: line {line}: frame {f}, channel {clip(joint.name)}.{channel} is "
-            f"{float(bvh.motion[f, c])!r}: channel values must be finite numbers within "
-            f"±{MAX_COORDINATE:g}"
-        )
-    offsets = np.array([j.offset for j in bvh.joints], dtype=np.float64)
-    far = ~(np.abs(offsets) <= MAX_COORDINATE).all(axis=1)  # NaN too
-    if far.any():
-        j = bvh.joints[int(np.argmax(far))]
-        raise InvalidRequest(
-            f"bvh: OFFSET of {quoted(j.name)} is {list(j.offset)}: offsets must be finite "
-            f"numbers within ±{MAX_COORDINATE:g}"
-        )
-    return bvh
-
-
-def character_from_bvh(bvh: BVH, req: BVHSolveRequest | BVHInspectRequest) -> Character:
-    if req.frame >= bvh.num_frames:
-        n = bvh.num_frames
-        held = f"{n} frames: 0 to {n - 1}" if n > 1 else "1 frame: 0" if n else "no frames"
-        raise InvalidRequest(f"frame: {clip(req.frame)} is out of range: the file has {held}")
-    try:
-        skel = skeleton_of(bvh)
-        pose = pose_of(bvh, req.frame, root_add=req.root_position == "add")
-        jmap = resolve_map(skel, req.joint_map, offset_at=lambda _: "bvh")
-        points = "joint_map" if req.joint_map else "bvh"
-        return _character(skel, pose, jmap, req.units, req.up, points=points)
-    except (CharacterError, BVHError) as exc:
-        raise _invalid(exc) from None
-
-
-def bvh_answer(bvh: BVH, ch: Character, req: BVHSolveRequest, edit: Edit) -> dict[str, Any]:
-    """The file with the frame's changed values written in, measured as written (rounded, read
-    back); one bringing no target nearer (:data:`NEARER`) is the frame as it was."""
-    add, p = req.root_position == "add", edit.problem
-    row, columns = row_of(bvh, req.frame, edit.pose, edit.changed, root_add=add)
-    points = canonical_points(ch.skel, pose_of(bvh, req.frame, row, root_add=add), ch.jmap)
-    before = canonical_points(ch.skel, pose_of(bvh, req.frame, root_add=add), ch.jmap)
-    goals, at = p.target_pos[: p.n_targets], p.target_idx[: p.n_targets]
-    old, new = (np.linalg.norm(ch.to_service(q)[at] - goals, axis=1) for q in (before, points))
-    if not (old - new > NEARER).any():  # (what the solve moved is noise: curves churn)
-        row, columns, points = bvh.row(req.frame), [], before
-    return {
-        "bvh": splice_frame(bvh, req.frame, row, columns),
-        "frame": req.frame,
-        "changed_joints": [ch.skel.names[j] for j in sorted(_written(bvh, columns))],
-        **_report(ch, edit, points),
-    }
-
-
-def _written(bvh: BVH, columns: list[int]) -> set[int]:
-    """The joints of ``bvh`` one of whose channel ``columns`` the answer rewrites."""
-    cols = set(columns)
-    return {
-        i for i, j in enumerate(bvh.joints)
-        if cols.intersection(range(j.channel_start, j.channel_start + len(j.channels)))
-    }  # fmt: skip
-
-
-def bvh_inspect(bvh: BVH, ch: Character, frame: int) -> dict[str, Any]:
-    """What an editor needs to draw and pose the file: its joints and channels, where the 21
-    canonical joints sit on them, units and axes, and one frame's world positions."""
-    g_rot, g_pos = forward_kinematics(ch.skel, ch.pose)
-    points = ch.jmap.points(g_rot, g_pos)
-    names = ch.skel.names
-    return {
-        "joints": [
-            {
-                "name": j.name,
-                "parent": j.parent,
-                "offset": list(j.offset),
-                "channels": list(j.channels),
-                "channel_start": j.channel_start,
-                "end_site": j.end_site,
-            }
-            for j in bvh.joints
-        ],
-        "anchors": {
-            c: {"joint": names[a.joint], "offset": a.offset.tolist(), "label": a.label}
-            for c, a in zip(JOINT_NAMES, ch.jmap.anchors, strict=True)
-        },
-        "joint_map": ch.jmap.describe(),
-        "scheme": ch.jmap.scheme,
-        "units": ch.units,
-        "metres_per_unit": ch.scale,
-        "up": ch.up_name,
-        "frames": bvh.num_frames,
-        "frame_time": bvh.frame_time,
-        "frame": frame,
-        "positions": g_pos.tolist(),
-        "points": dict(zip(JOINT_NAMES, points.tolist(), strict=True)),
+        **edit_report(ch, edit, ch.jmap.points(g_rot, g_pos)),
     }

@@ -15,6 +15,7 @@ from fastapi import APIRouter, Response
 
 from core.bvh import BVH
 from service.body import BodyRoute
+from service.character_bvh import bvh_answer, bvh_inspect, character_from_bvh, read_request_bvh
 from service.characters import (
     BVHInspectRequest,
     BVHInspectResponse,
@@ -24,13 +25,9 @@ from service.characters import (
     CharacterAliasRequest,
     CharacterSolveRequest,
     CharacterSolveResponse,
-    bvh_answer,
-    bvh_inspect,
     character_answer,
-    character_from_bvh,
     character_from_request,
     character_problem,
-    read_request_bvh,
     solve_character,
     solve_prepared,
 )

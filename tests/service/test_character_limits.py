@@ -12,7 +12,8 @@ from typing import Any
 import pytest
 
 from service import characters
-from service.characters import read_request_bvh, solve_character
+from service.character_bvh import read_request_bvh
+from service.characters import solve_character
 from service.routes import characters as routes
 from tests.conftest import REPO_ROOT, make_client
 from tests.service.test_api import assert_problem

@@ -23,14 +23,8 @@ from core.characters_maps import resolve_map
 from core.retarget import canonical_points
 from core.skeleton import JOINT_INDEX
 from core.units import UNITS
-from service.characters import (
-    BVHSolveRequest,
-    bvh_answer,
-    character_from_bvh,
-    character_problem,
-    read_request_bvh,
-    solve_prepared,
-)
+from service.character_bvh import bvh_answer, character_from_bvh, read_request_bvh
+from service.characters import BVHSolveRequest, character_problem, solve_prepared
 from service.engine import Engine
 from tests.character_files import FILES
 

@@ -19,14 +19,8 @@ import pytest
 from core.bvh import parse_bvh
 from core.bvh_write import skeleton_of
 from core.characters_maps import resolve_map
-from service.characters import (
-    BVHSolveRequest,
-    bvh_answer,
-    character_from_bvh,
-    character_problem,
-    read_request_bvh,
-    solve_prepared,
-)
+from service.character_bvh import bvh_answer, character_from_bvh, read_request_bvh
+from service.characters import BVHSolveRequest, character_problem, solve_prepared
 from service.engine import Engine
 from tests.character_files import FILES
 

@@ -398,7 +398,7 @@ def test_a_nan_channel_is_named_as_a_number_not_numpys_repr(client: Any) -> None
 def test_a_bad_value_after_blank_lines_is_named_at_its_own_line(frame: int | None) -> None:
     """A review's find: the line of a NaN was counted from the first frame line as if no
     blank line came before it (line 15 for line 17), in a whole read and one frame's."""
-    from service.characters import read_request_bvh
+    from service.character_bvh import read_request_bvh
     from service.errors import InvalidRequest
 
     head = "HIERARCHY\nROOT Hips\n{\n OFFSET 0 0 0\n CHANNELS 3 Xrotation Yrotation Zrotation\n"
