@@ -322,22 +322,34 @@ def _turn_into(
     step: F64, m: int, p: int, b: int, g_rot: F64, rotations: F64, new_rot: F64
 ) -> None:  # pragma: no cover - compiled
     """Joint ``b``'s new local rotation: the world turn ``step[3m:3m+3]`` (a rotation
-    vector) taken into its parent ``p``'s frame, ``Pᵀ T P R``."""
+    vector) taken into its parent ``p``'s frame, its axis ``Pᵀ a`` made a unit vector, the
+    turn built there (Rodrigues) and applied to ``R``: ``Pᵀ T P R`` for an orthonormal
+    ``P``, but a rotation whatever ``P``'s rounding. Written ``Pᵀ T P`` itself, a product
+    whose ``Pᵀ`` is no exact inverse, the local rotation took up twice its parent's drift
+    from orthonormality at every step, and its children twice theirs: the drift grew with
+    the depth and the steps (a spine of 10 joints from pelvis to chest: matrices 1.5 off a
+    rotation after one polish, their Euler angles as written put pinned wrists 7 mm off)."""
     x, y, z = step[3 * m], step[3 * m + 1], step[3 * m + 2]
     angle = np.sqrt(x * x + y * y + z * z)
+    if not angle > 0.0:
+        new_rot[b] = rotations[b]
+        return
+    x, y, z = x / angle, y / angle, z / angle
+    if p >= 0:  # the axis in the parent's frame: Pᵀ a
+        x, y, z = (
+            g_rot[p, 0, 0] * x + g_rot[p, 1, 0] * y + g_rot[p, 2, 0] * z,
+            g_rot[p, 0, 1] * x + g_rot[p, 1, 1] * y + g_rot[p, 2, 1] * z,
+            g_rot[p, 0, 2] * x + g_rot[p, 1, 2] * y + g_rot[p, 2, 2] * z,
+        )
+        norm = np.sqrt(x * x + y * y + z * z)
+        x, y, z = x / norm, y / norm, z / norm
+    s, c = np.sin(angle), 1.0 - np.cos(angle)
+    kx = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
     turn = np.eye(3)
-    if angle > 0.0:
-        x, y, z = x / angle, y / angle, z / angle
-        s, c = np.sin(angle), 1.0 - np.cos(angle)
-        kx = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
-        for r in range(3):
-            for q in range(3):
-                kk = kx[r, 0] * kx[0, q] + kx[r, 1] * kx[1, q] + kx[r, 2] * kx[2, q]
-                turn[r, q] += s * kx[r, q] + c * kk
-    if p >= 0:  # Pᵀ T P
-        tp = np.empty((3, 3))
-        mul33_into(turn, g_rot[p], tp)
-        mul33_into(g_rot[p].T, tp, turn)
+    for r in range(3):
+        for q in range(3):
+            kk = kx[r, 0] * kx[0, q] + kx[r, 1] * kx[1, q] + kx[r, 2] * kx[2, q]
+            turn[r, q] += s * kx[r, q] + c * kk
     mul33_into(turn, rotations[b], new_rot[b])
 
 
