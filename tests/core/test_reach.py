@@ -160,3 +160,53 @@ def test_polish_canonical_holds_both_wrists_under_a_far_pelvis_with_the_bones_ke
     assert np.linalg.norm(got[pelvis] - goal) < np.linalg.norm(pose[pelvis] - goal) - 0.05
     np.testing.assert_allclose(bone_lengths(got), bone_lengths(pose), rtol=0, atol=1e-9)
     assert polish_canonical(pose, [], wrists, 1e-3, True) is None
+
+
+def test_the_steps_keep_every_local_rotation_a_rotation_down_a_long_chain() -> None:
+    """An audit's find (a character with 7-22 joints from pelvis to chest: pinned wrists
+    5-104 mm off as written): a step took a world turn into its parent's frame as ``Pᵀ T P``,
+    and with ``P`` a product of earlier steps each local rotation took up twice its parent's
+    drift from orthonormal, so the drift grew with the depth and the steps (this chain:
+    31 off a rotation after one phase). The steps measured their misses on those matrices,
+    not on the rotations written back. Now the turn is built about the axis taken into the parent's
+    frame: a rotation to rounding, whatever the depth."""
+    n = 24  # a chain of short bones along y, each turned a few seeded degrees
+    parents = np.arange(-1, n - 1, dtype=np.int64)
+    rng = np.random.default_rng(0)
+    angles = rng.uniform(-0.1, 0.1, (n, 3))
+    rotations = np.ascontiguousarray([_turn(a) for a in angles])
+    translations = np.tile([0.0, 0.05, 0.0], (n, 1))
+    translations[0] = 0.0
+    goals = np.array([[0.9, 0.2, 0.4], [0.0, 0.3, 0.0]])  # the tip out of reach; a pin
+    tips = np.array([n - 1, 6], np.int64)
+    _, g_pos = _chain_fk(parents, rotations, translations)
+    misses = np.linalg.norm(g_pos[tips] - goals, axis=1)
+    movable = np.arange(n, dtype=np.int64)
+    above = np.array([[1.0, 1.0 if m <= 6 else 0.0] for m in range(n)])
+    taken = descend_into(
+        parents, rotations, translations, tips, np.zeros((2, 3)), goals, np.array([1.0, 30.0]),
+        movable, above, -1, 0.1, 1.0, 2, 1, 1e-3, 30, 0.1, 5, 0.01, misses,
+    )  # fmt: skip
+    assert taken > 10
+    drift = np.abs(np.einsum("jab,jcb->jac", rotations, rotations) - np.eye(3)).max()
+    assert drift <= 1e-12, drift
+    # the misses it reports are those of the rotations it returns
+    _, g_pos = _chain_fk(parents, rotations, translations)
+    np.testing.assert_allclose(np.linalg.norm(g_pos[tips] - goals, axis=1), misses, atol=1e-12)
+
+
+def _turn(v: F64) -> F64:
+    """The rotation of rotation vector ``v`` (numpy: Rodrigues)."""
+    angle = float(np.linalg.norm(v))
+    k = np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]]) / angle
+    out: F64 = np.eye(3) + np.sin(angle) * k + (1.0 - np.cos(angle)) * (k @ k)
+    return out
+
+
+def _chain_fk(parents: Any, rotations: F64, translations: F64) -> tuple[F64, F64]:
+    n = len(parents)
+    skel = Skeleton(
+        tuple(f"j{i}" for i in range(n)), tuple(int(p) for p in parents), translations.copy(),
+        (True,) * n, (False,) * n,
+    )  # fmt: skip
+    return forward_kinematics(skel, Pose(rotations, translations))
