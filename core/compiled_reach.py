@@ -18,9 +18,10 @@ edits with a pin over 2 mm off, up to 91.5 mm, before; none after). A step taken
 the damping by 3 (by 10, every other step was refused and the damping put back). A refused
 step counts as a try, not a step: a phase takes up to ``steps`` steps in ``3 x steps`` tries
 (a soft neck edit on ReActIdle ended 0.83 mm off the canonical answer's miss with its budget
-spent on refusals, 0.72 mm now). The turns
-by Rodrigues' formula, forward kinematics
-(:func:`core.compiled_characters.forward_kinematics_into`). Products in source order, no
+spent on refusals, 0.72 mm now). The turns by Rodrigues' formula, each built about its
+axis taken into the parent's frame, so that a local rotation stays a rotation however deep
+(:func:`_turn_into`: ``Pᵀ T P`` drifted, pins 5-104 mm off on a long spine), forward
+kinematics (:func:`core.compiled_characters.forward_kinematics_into`). Products in source order, no
 fused multiply-add: the same request gives the same bits.
 """
 

@@ -22,8 +22,8 @@
    by damped least-squares turns of the joints above them, pins first.
 
 Joints in no aim group (fingers, twist bones, props, spine joints between mapped ones)
-keep their local rotation; every joint keeps its offset, so bone lengths are the
-character's own.
+keep their local rotation but where the polish turns them; every joint keeps its offset,
+so bone lengths are the character's own.
 """
 
 from __future__ import annotations
