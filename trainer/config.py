@@ -243,6 +243,13 @@ class SolverConfig(_Section):
         "bank and the other sets: stay_weight).",
     )
 
+    stay_frames: dict[str, Literal["world", "local", "across"]] = Field(
+        default={},
+        description="stay_frame of single sets of `sets`, by key, as other_weights (the long "
+        "bank and the other sets: stay_frame): the arms' sets can hold a wrist carried by a "
+        "moved elbow where its parent put it while the rest hold the world.",
+    )
+
     _v = field_validator("sets", "long_sets")(_check_joints)
 
     def weight_of(self, joints: list[str], long: bool = False) -> float:
@@ -254,11 +261,15 @@ class SolverConfig(_Section):
         return self.other_weights.get(set_key(joints), self.other_weight)
 
     def unused_weights(self) -> list[str]:
-        """The ``other_weights`` and ``stay_weights`` keys that name no set of ``sets``
-        (ignored, and in no checkpoint tag, so that a config changing the sets inherits
-        them; a typo would train the baseline unsaid: the trainer warns of them)."""
+        """The ``other_weights``, ``stay_weights`` and ``stay_frames`` keys that name no set
+        of ``sets`` (ignored, and in no checkpoint tag, so that a config changing the sets
+        inherits them; a typo would train the baseline unsaid: the trainer warns of them)."""
         trained = {set_key(s) for s in self.sets}
-        own = (("other_weights", self.other_weights), ("stay_weights", self.stay_weights))
+        own = (
+            ("other_weights", self.other_weights),
+            ("stay_weights", self.stay_weights),
+            ("stay_frames", self.stay_frames),
+        )
         return [f"{name}.{key}" for name, weights in own for key in weights if key not in trained]
 
     def stay_of(self, joints: list[str], long: bool = False) -> float:
@@ -268,12 +279,23 @@ class SolverConfig(_Section):
             return self.stay_weight
         return self.stay_weights.get(set_key(joints), self.stay_weight)
 
+    def frame_of(self, joints: list[str], long: bool = False) -> str:
+        """The frame the stay term of the solver of ``joints`` is measured in: a shared
+        set's ``stay_frames`` entry, else ``stay_frame``."""
+        if long:
+            return self.stay_frame
+        return self.stay_frames.get(set_key(joints), self.stay_frame)
+
     @model_validator(mode="after")
     def _apart(self) -> SolverConfig:
         both = {tuple(sorted(j)) for j in self.sets} & {tuple(sorted(j)) for j in self.long_sets}
         if both:
             raise ValueError(f"solver sets in both sets and long_sets: {sorted(both)}")
-        own = (("other_weights", self.other_weights), ("stay_weights", self.stay_weights))
+        own = (
+            ("other_weights", self.other_weights),
+            ("stay_weights", self.stay_weights),
+            ("stay_frames", self.stay_frames),
+        )
         for name, weights in own:
             for key in weights:  # joints sorted, joined by '+': the manifest's key
                 _check_joints([key.split("+")])

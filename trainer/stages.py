@@ -249,6 +249,7 @@ _ADDED_LATER: dict[str, tuple[str, ...]] = {
         "long_other_weight",
         "other_weights",
         "stay_weights",
+        "stay_frames",
     ),
     "augment": ("lift_start", "joint_shift"),
     "completion": ("loss",),
@@ -289,7 +290,7 @@ def config_tag(cfg: TrainConfig, stage: str, *, legacy: bool = False) -> str:
         # them: solver.carry_loss, solver.ends_loss, solver.elbows_loss)
         keep = seen_by_losses(cfg.solver.model_dump())
         serving = tuple(k for k in SERVING_SETTINGS if k not in keep)
-        per_set = ("long_other_weight", "other_weights", "stay_weights")
+        per_set = ("long_other_weight", "other_weights", "stay_weights", "stay_frames")
         solver = _section(cfg, "solver", (*serving, *other, *per_set))
         # the weights trained with (SolverConfig.weight_of), not how they are written; where
         # one is other_weight, absent, as in the tags from before the two options
@@ -302,6 +303,9 @@ def config_tag(cfg: TrainConfig, stage: str, *, legacy: bool = False) -> str:
         stay = {set_key(s): sc.stay_of(s) for s in sc.sets if sc.stay_of(s) != sc.stay_weight}
         if stay and stage == "solvers":
             solver["stay_weights"] = stay
+        frames = {set_key(s): sc.frame_of(s) for s in sc.sets if sc.frame_of(s) != sc.stay_frame}
+        if frames and stage == "solvers":
+            solver["stay_frames"] = frames
         relevant["solver"] = solver
         relevant["augment"] = _section(cfg, "augment")
     if stage.startswith("completion"):  # serving_*: serving only; joint_shift: not read

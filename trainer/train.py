@@ -311,7 +311,7 @@ def solver_losses(
     stay_weight: float | torch.Tensor = 0.0,
     rigid: bool = False,
     distance: bool = False,
-    stay_frame: str = "world",
+    stay_frame: str | list[str] = "world",
     carry: float = 0.0,
     ends: npt.NDArray[np.bool_] | None = None,
 ) -> tuple[torch.Tensor, torch.Tensor]:
@@ -326,7 +326,8 @@ def solver_losses(
     ``distance``: the joint terms are mean per-joint distances instead of MSEs.
     ``stay_frame``: the stay term on each joint's world position ("world"), its offset
     from its parent ("local": the root's position; :func:`trainer.rigid.parent_offsets_t`)
-    or its place relative to the pelvis across ("across": :func:`trainer.rigid.across_pelvis_t`).
+    or its place relative to the pelvis across ("across": :func:`trainer.rigid.across_pelvis_t`);
+    one for every solver, or a list, one each (each solver's term in its own frame).
     ``carry`` (with ``rigid``): the answer also with the service's carry below each
     solver's targets (:func:`trainer.rigid.carry_t`), as served with ``serving.carry``.
     ``ends`` (with ``rigid``): then each solver's targeted joints of the chains it marks
@@ -364,8 +365,15 @@ def solver_losses(
     loss = target_term + other_weight * other_term
     if float(torch.as_tensor(stay_weight).max()) > 0:  # the joints not asked for move as
         # little as the targets allow (``stay_weight``: one for every solver, or ``[S]``)
-        frame = STAY_FRAMES[stay_frame]
-        moved = per_item(frame(answer) - frame(start).unsqueeze(0))
+        def moves(name: str) -> torch.Tensor:
+            frame = STAY_FRAMES[name]
+            return per_item(frame(answer) - frame(start).unsqueeze(0))
+
+        if isinstance(stay_frame, str):
+            moved = moves(stay_frame)
+        else:  # each solver's row from its own frame's moves (each frame computed once)
+            by_frame = {name: moves(name) for name in dict.fromkeys(stay_frame)}
+            moved = torch.stack([by_frame[name][s] for s, name in enumerate(stay_frame)])
         loss = loss + stay_weight * (moved * (1 - tm)).sum(-1) / (1 - tm).sum(-1)
     if bone_weight > 0:
         bone_err = bone_lengths_t(decoded) - start_lengths.unsqueeze(0)
@@ -456,13 +464,15 @@ def train_solvers(
 
     other_weight = per_set([sc.weight_of(s, long) for s in sets])
     stay_weight = per_set([sc.stay_of(s, long) for s in sets])
+    frames = [sc.frame_of(s, long) for s in sets]
+    stay_frame = frames[0] if len(set(frames)) == 1 else frames
 
     def losses(model: nn.Module, start: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
         """:func:`solver_losses` with this config's terms (training and validation alike)."""
         out, _ = solver_losses(
             ae, bank, model, start, goal, other_weight, sc.bone_weight, mode,
             stay_weight, sc.rigid_loss, sc.joint_loss == "distance",
-            sc.stay_frame, sc.carry if sc.carry_loss else 0.0,
+            stay_frame, sc.carry if sc.carry_loss else 0.0,
             active(sc.keep_ends, sc.keep_elbows and sc.elbows_loss) if sc.ends_loss else None,
         )  # fmt: skip
         return out

@@ -590,6 +590,42 @@ def test_per_set_weights_weigh_each_set_of_the_shared_bank_alone(
         load_config(None, {"solver": {per_set: {"right_wrist+left_wrist": 0.3}}})
 
 
+def test_stay_frames_measure_each_set_of_the_shared_bank_alone(
+    trained: tuple[Trained, Path], small_dataset: Path, tmp_path: Path
+) -> None:
+    """``solver.stay_frames``: a set named there trains exactly, bit for bit, as in a bank
+    whose every set's stay term is in that frame, the others as with ``stay_frame``; unset
+    or equal to ``stay_frame`` it is in no tag, set it retrains the shared bank only; a key
+    of no set is warned of, one that is no set's key refused, a frame not known refused."""
+    result, _ = trained
+    d = init_distributed()
+    total = float(reference_lengths(result.splits.train).sum())
+
+    def bank(name: str, **solver: Any) -> list[torch.Tensor]:
+        cfg = tiny_config(small_dataset, tmp_path / name, tmp_path / "models",
+                          solver={"stay_weight": 1.0, **solver})  # fmt: skip
+        trained_bank, _ = train_solvers(cfg, d, result.ae, result.splits, total, fresh=True)
+        return [p.detach() for n, p in trained_bank.named_parameters() if not n.startswith("norm.")]
+
+    world, local = bank("world"), bank("local", stay_frame="local")
+    mixed = bank("mixed", stay_frames={"left_wrist": "local"})  # sets: left_wrist, ankles
+    assert not all(torch.equal(a[0], b[0]) for a, b in zip(world, local, strict=True))
+    for m, w, lo in zip(mixed, world, local, strict=True):
+        assert torch.equal(m[0], lo[0]) and torch.equal(m[1], w[1])
+    base = load_config(None, {})
+    assert "stay_frames" not in _section(base, "solver")
+    own = load_config(None, {"solver": {"stay_frames": {"left_elbow": "local"}}})
+    for stage in ("autoencoder", "solvers", "solvers_long", "completion1"):
+        assert (config_tag(own, stage) != config_tag(base, stage)) == (stage == "solvers")
+    same = load_config(None, {"solver": {"stay_frames": {"left_elbow": "world", "neck": "local"}}})
+    assert config_tag(same, "solvers") == config_tag(base, "solvers")
+    assert same.solver.unused_weights() == ["stay_frames.neck"]
+    with pytest.raises(ValueError, match="stay_frames: 'right_wrist\\+left_wrist' is not a set's"):
+        load_config(None, {"solver": {"stay_frames": {"right_wrist+left_wrist": "local"}}})
+    with pytest.raises(ValueError, match="stay_frames"):
+        load_config(None, {"solver": {"stay_frames": {"left_elbow": "parent"}}})
+
+
 def test_stay_term_in_the_local_frame_measures_offsets_from_parents(
     trained: tuple[Trained, Path],
 ) -> None:
