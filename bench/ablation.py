@@ -316,6 +316,17 @@ VARIANTS: dict[str, str] = {
     "across03_quick": "`across_quick` with the shared bank's stay term at 0.3 "
     "(across03_quick.toml)",
     "captured_across03_quick": "`across03_quick` on the captured edits",
+    "arms_local": "the shipped models with the arms' five sets (wrists, elbows, both wrists) "
+    "trained with the stay term on each joint's offset from its parent (solver.stay_frames "
+    "local, 0.1; arms_local.toml, its 46 graphs equal by sha256 to the assembled row; "
+    "docs/generalisation-3.md item 60)",
+    "arms_local03": "the same at 0.3 (arms_local03.toml)",
+    "arms_local10": "the same at 1.0 (arms_local10.toml)",
+    "arms_across03": "the arms' five sets with the stay term across the pelvis at 0.3 "
+    "(arms_across03.toml)",
+    "elbows_world10": "the two lone elbows' sets with the stay term in the world at 1.0 "
+    "(stay_weights; elbows_world10.toml)",
+    "arms_world10": "the arms' five sets so (arms_world10.toml)",
 }
 COMPLETION = "6-point completion"
 
