@@ -31,15 +31,13 @@ from core.characters import Skeleton, matrix_to_quat
 from core.characters_maps import resolve_map
 from core.retarget import canonical_points
 from core.skeleton import JOINT_INDEX
+from service.character_bvh import bvh_answer, character_from_bvh, read_request_bvh
 from service.characters import (
     BVHSolveRequest,
     CharacterSolveRequest,
-    bvh_answer,
     character_answer,
-    character_from_bvh,
     character_from_request,
     character_problem,
-    read_request_bvh,
     solve_prepared,
 )
 from service.engine import Engine
