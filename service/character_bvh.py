@@ -28,11 +28,9 @@ from service.characters import (
     edit_report,
     invalid_request,
     make_character,
+    moves_a_target,
 )
 from service.errors import InvalidRequest
-
-#: Metres: how much nearer an answer must bring a target for the frame to be rewritten.
-NEARER = 1e-6
 
 
 def read_request_bvh(text: str, frame: int | None = None) -> BVH:
@@ -85,14 +83,13 @@ def character_from_bvh(bvh: BVH, req: BVHSolveRequest | BVHInspectRequest) -> Ch
 
 def bvh_answer(bvh: BVH, ch: Character, req: BVHSolveRequest, edit: Edit) -> dict[str, Any]:
     """The file with the frame's changed values written in, measured as written (rounded, read
-    back); one bringing no target nearer (:data:`NEARER`) is the frame as it was."""
-    add, p = req.root_position == "add", edit.problem
+    back); one bringing no target nearer (:func:`service.characters.moves_a_target`) is the
+    frame as it was."""
+    add = req.root_position == "add"
     row, columns = row_of(bvh, req.frame, edit.pose, edit.changed, root_add=add)
     points = canonical_points(ch.skel, pose_of(bvh, req.frame, row, root_add=add), ch.jmap)
     before = canonical_points(ch.skel, pose_of(bvh, req.frame, root_add=add), ch.jmap)
-    goals, at = p.target_pos[: p.n_targets], p.target_idx[: p.n_targets]
-    old, new = (np.linalg.norm(ch.to_service(q)[at] - goals, axis=1) for q in (before, points))
-    if not (old - new > NEARER).any():  # (what the solve moved is noise: curves churn)
+    if not moves_a_target(ch, edit, before, points):  # (noise: the file's curves churn)
         row, columns, points = bvh.row(req.frame), [], before
     return {
         "bvh": splice_frame(bvh, req.frame, row, columns),

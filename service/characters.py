@@ -587,6 +587,22 @@ def solve_prepared(engine: Engine, ch: Character, p: SolveProblem) -> Edit:
     return Edit(out.pose, out.changed, p, result, engine.version)
 
 
+#: Metres: how much nearer an answer must bring a target to be answered. One that brings
+#: none nearer than the character as sent is answered with it as sent: what the solve moved
+#: is noise (the networks' float32 turns a target placed where its joint stands: up to
+#: 2.5e-5 degrees on 16 joints of CMU salsa), which would churn a user's animation curves.
+NEARER = 1e-6
+
+
+def moves_a_target(ch: Character, edit: Edit, before: F64, after: F64) -> bool:
+    """Whether the answer's mapped points ``after`` bring a target more than :data:`NEARER`
+    nearer than the sent pose's ``before`` (both the 21 points, client units)."""
+    p = edit.problem
+    goals, at = p.target_pos[: p.n_targets], p.target_idx[: p.n_targets]
+    old, new = (np.linalg.norm(ch.to_service(q)[at] - goals, axis=1) for q in (before, after))
+    return bool((old - new > NEARER).any())
+
+
 def edit_report(ch: Character, edit: Edit, points: F64) -> dict[str, Any]:
     """The fields of :class:`_Answer`, targets and pins measured on ``points`` (the 21
     mapped points of the answer, client units)."""
@@ -670,17 +686,24 @@ def character_from_request(req: CharacterSolveRequest, where: str = "") -> Chara
 
 def character_answer(ch: Character, edit: Edit, given: dict[str, list[float]]) -> dict[str, Any]:
     """The answer: untouched joints give back the request's own quaternion (identity if it
-    gave none), changed ones their new rotation with w >= 0."""
-    g_rot, g_pos = forward_kinematics(ch.skel, edit.pose)
-    quats = matrix_to_quat(edit.pose.rotations).tolist()
+    gave none), changed ones their new rotation with w >= 0; one that brings no target
+    nearer (:func:`moves_a_target`) is the character as sent."""
+    pose, changed = edit.pose, edit.changed
+    g_rot, g_pos = forward_kinematics(ch.skel, pose)
+    points = ch.jmap.points(g_rot, g_pos)
+    start_rot, start_pos = forward_kinematics(ch.skel, ch.pose)
+    before = ch.jmap.points(start_rot, start_pos)
+    if not moves_a_target(ch, edit, before, points):
+        pose, changed, g_pos, points = ch.pose, frozenset(), start_pos, before
+    quats = matrix_to_quat(pose.rotations).tolist()
     rotations = {
-        n: quats[j] if j in edit.changed else given.get(n, [0.0, 0.0, 0.0, 1.0])
+        n: quats[j] if j in changed else given.get(n, [0.0, 0.0, 0.0, 1.0])
         for j, n in enumerate(ch.skel.names)
     }
     root = ch.skel.parents.index(-1)
     return {
         "rotations": rotations,
-        "root_position": edit.pose.translations[root].tolist(),
+        "root_position": pose.translations[root].tolist(),
         "positions": dict(zip(ch.skel.names, g_pos.tolist(), strict=True)),
-        **edit_report(ch, edit, ch.jmap.points(g_rot, g_pos)),
+        **edit_report(ch, edit, points),
     }
