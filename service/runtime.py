@@ -12,7 +12,7 @@ import hashlib
 import threading
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, TypeVar
 
 import numpy as np
 import numpy.typing as npt
@@ -22,6 +22,8 @@ from core.manifest import ManifestError, ModelEntry
 
 if TYPE_CHECKING:  # pragma: no cover
     import onnx
+
+T = TypeVar("T")
 
 #: Rows per onnxruntime run: more rows run as blocks of this many, one run each, so that
 #: the networks' activations stay in the CPU's cache (a 4,096-edit 2-target batch in
@@ -142,6 +144,19 @@ def _runner(session: ort.InferenceSession, io: ort.IOBinding) -> Callable[[], No
     return functools.partial(sess.run_with_iobinding, bound, None)
 
 
+def _loaded(make: Callable[[], T], path: Path, entry: ModelEntry, how: str = "") -> T:
+    """``make()``, a model file's session or graph; what it raises (a corrupt file whose
+    manifest entry matches, as after a re-export or with the manifest made anew: protobuf
+    parsing failed) as a :class:`ManifestError` naming the file and its entry. onnxruntime's
+    message named neither, so the ready route and the ``models_not_ready`` line did not say
+    which of some 40 files was bad (an ops audit)."""
+    try:
+        return make()
+    except Exception as exc:
+        what = f"model {entry.name!r}{f' ({how})' if how else ''}"
+        raise ManifestError(path, f"{what}: cannot be loaded: {exc}") from exc
+
+
 class Net:
     """One onnxruntime session with a single input/output signature."""
 
@@ -156,7 +171,7 @@ class Net:
         def make() -> ort.InferenceSession:
             return ort.InferenceSession(data, options, providers=["CPUExecutionProvider"])
 
-        self.session = make()
+        self.session = _loaded(make, path, entry)
         self.inputs = [i.name for i in entry.inputs]
         self.output = entry.outputs[0].name
         got = [i.name for i in self.session.get_inputs()]
@@ -193,7 +208,9 @@ class Fused:
             return
 
         def load(entry: ModelEntry, prefix: str) -> onnx.ModelProto:
-            return onnx.compose.add_prefix(onnx.load(str(models_dir / entry.file)), prefix)
+            path = models_dir / entry.file
+            graph = _loaded(lambda: onnx.load(str(path)), path, entry)
+            return onnx.compose.add_prefix(graph, prefix)
 
         first = onnx.compose.merge_models(
             load(enc, "e_"), load(solver, "s_"),
@@ -208,7 +225,8 @@ class Fused:
         def make() -> ort.InferenceSession:
             return ort.InferenceSession(data, options, providers=["CPUExecutionProvider"])
 
-        self.session = make()
+        self.session = _loaded(make, models_dir / solver.file, solver, "composed with "
+                               f"{enc.file} and {dec.file}")  # fmt: skip
         self.inputs = [f"e_{enc.inputs[0].name}", f"s_{solver.inputs[1].name}"]
         self.output = f"d_{dec.outputs[0].name}"
         self.few = _FewRows(self.session, self.inputs, self.output, make)
