@@ -24,7 +24,8 @@ _PROBLEM_STATUS = {
     "identity, a Transfer-Encoding other than chunked).",
     422: "Invalid request: the detail says which field and why.",
     429: "Too many requests in flight on this worker: retry after Retry-After seconds.",
-    503: "Models not loaded yet, or broken (see /v2/health/ready), or shutting down, or too "
+    503: "Models not loaded yet (`not-ready`), or failed to load (`models-failed`, without "
+    "Retry-After: the service does not retry; see /v2/health/ready), or shutting down, or too "
     "many connections open on the worker (`too-many-connections`, before the request is read).",
     504: "The request needed more than the deadline: send smaller batches.",
 }

@@ -169,7 +169,17 @@ class NotReady(PoseError):
     status = 503
     title = "Models not ready"
     type_ = "not-ready"
-    retry_after = 5
+    retry_after: int | None = 5
+
+
+class ModelsFailed(NotReady):
+    """The models failed to load, verify or warm up: the service does not retry, so no
+    ``Retry-After`` (a client told to retry in 5 s did so for good: an ops audit); an
+    operator fixes the models and restarts the process. The same 503, its own type."""
+
+    title = "Models failed to load"
+    type_ = "models-failed"
+    retry_after = None
 
 
 class ShuttingDown(PoseError):

@@ -10,7 +10,7 @@ import time
 
 from core.manifest import ManifestError, SkeletonSpec, load_manifest
 from service.engine import Engine
-from service.errors import NotReady
+from service.errors import ModelsFailed, NotReady
 from service.settings import Settings
 
 log = logging.getLogger("service")
@@ -31,21 +31,33 @@ class ModelRepository:
         self.engine: Engine | None = None
         self.skeleton: SkeletonSpec | None = None
         self.reason: str = "loading models"
+        #: the load failed: for good, the service never loads again (:meth:`not_ready`)
+        self.failed = False
 
     @property
     def ready(self) -> bool:
         return self.engine is not None
 
+    def not_ready(self) -> NotReady:
+        """Why not ready: still loading (503, ``Retry-After``), or failed for good (503
+        ``models-failed``, no ``Retry-After``: an operator must act)."""
+        if self.failed:
+            return ModelsFailed(
+                f"models failed to load: {self.reason} (the service does not retry: fix the "
+                "models, then restart it)"
+            )
+        return NotReady(f"models not ready: {self.reason}")
+
     def ready_engine(self) -> Engine:
         if self.engine is None:
-            raise NotReady(f"models not ready: {self.reason}")
+            raise self.not_ready()
         return self.engine
 
     def skeleton_spec(self) -> SkeletonSpec:
         """The skeleton, served as soon as the manifest parses (before verification)."""
         spec = self.engine.manifest.skeleton if self.engine else self.skeleton
         if spec is None:
-            raise NotReady(f"models not ready: {self.reason}")
+            raise self.not_ready()
         return spec
 
     def load(self) -> None:
@@ -66,7 +78,7 @@ class ModelRepository:
             )
             engine.warmup()
         except Exception as exc:  # any failure means "not ready", with the reason logged
-            self.reason = _redact(str(exc), s)
+            self.reason, self.failed = _redact(str(exc), s), True
             log.error(
                 json.dumps(
                     {"event": "models_not_ready", "models_dir": str(s.models_dir),

@@ -27,12 +27,15 @@ async def live() -> Health:
 )
 async def ready(response: Response, state: State) -> Health:
     """200 once every model is loaded, verified and a warm-up solve passed; else 503
-    with the reason (file names, never server paths)."""
+    with the reason (file names, never server paths): while they load with
+    ``Retry-After``, once they failed (the service does not retry) without."""
     repo = state.repository
     if not repo.ready:
         response.status_code = 503
-        response.headers["Retry-After"] = "5"
-        return Health(status="not ready", detail=repo.reason)
+        why = repo.not_ready()
+        if why.retry_after is not None:
+            response.headers["Retry-After"] = str(why.retry_after)
+        return Health(status="not ready", detail=why.detail if repo.failed else repo.reason)
     return Health(status="ready")
 
 

@@ -317,7 +317,9 @@ def test_readiness_names_files_not_server_paths(models_dir: Path, tmp_path: Path
         solve = c.post("/v1/solve", json=body())
         for resp in (ready, solve):
             assert "secret-place" not in resp.text and str(tmp_path) not in resp.text
-        assert solve.headers["retry-after"]
+        # a load that failed is for good (the service does not retry): no Retry-After
+        assert "retry-after" not in solve.headers and "retry-after" not in ready.headers
+        assert solve.json()["type"].endswith("/models-failed")
 
 
 def test_solver_metric_labels_are_bounded(client: Any, models_dir: Path) -> None:
