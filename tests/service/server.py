@@ -72,16 +72,18 @@ class Server:
 
 @contextlib.contextmanager
 def serve(
-    models_dir: Path, tmp: Path, ready: bool = True, argv: Sequence[str] = (), **env: str
-) -> Iterator[Server]:
-    """``pose-service`` (with ``argv``) on a free port, once ready (or ``ready`` False:
+    models_dir: Path, tmp: Path, ready: bool = True, argv: Sequence[str] = (),
+    port: int | None = None, wrap: Sequence[str] = (), **env: str,
+) -> Iterator[Server]:  # fmt: skip
+    """``pose-service`` (with ``argv``; run by the command ``wrap`` if given, e.g.
+    ``unshare``) on ``port`` (default: a free one), once ready (or ``ready`` False:
     live); SIGTERM at the end."""
-    port = free_port()
+    port = port or free_port()
     log = tmp / f"server-{port}.log"
     environ = {**os.environ, "POSE_MODELS_DIR": str(models_dir), "POSE_PORT": str(port), **env}
     with log.open("wb") as sink:
         proc = subprocess.Popen(
-            [sys.executable, "-c", f"from service.cli import main; main({list(argv)!r})"],
+            [*wrap, sys.executable, "-c", f"from service.cli import main; main({list(argv)!r})"],
             cwd=REPO, env=environ, stdout=sink, stderr=subprocess.STDOUT,
         )  # fmt: skip
     server = Server(proc, port, log)
