@@ -214,13 +214,22 @@ def test_image_runs_unprivileged_with_a_healthcheck_and_only_the_service(
     engine.run("run", "--rm", "--entrypoint", "/opt/venv/bin/python", image, "-c", script)
 
 
-def test_compiled_kernels_load_from_the_seed_not_compiled(engine: Engine, image: str) -> None:
+@pytest.mark.parametrize(
+    "cache",
+    [[], ["-e", "NUMBA_CACHE_DIR=/tmp"], ["--tmpfs", "/cache", "-e", "NUMBA_CACHE_DIR=/cache"]],
+    ids=["tmp", "NUMBA_CACHE_DIR=/tmp", "NUMBA_CACHE_DIR=emptyDir"],
+)
+def test_compiled_kernels_load_from_the_seed_not_compiled(
+    engine: Engine, image: str, cache: list[str]
+) -> None:
     """The image's numba cache seed matches the installed sources: on a read-only root with
     a fresh /tmp, every kernel is loaded, none compiled (a stale or misnamed seed means a
-    20-40 s JIT compile at every start)."""
+    20-40 s JIT compile at every start). The same with NUMBA_CACHE_DIR at an existing
+    folder, /tmp or a mounted emptyDir (an ops audit: the seed was not copied there, and
+    every start compiled for 47-71 s)."""
     script = "from core import compiled, compiled_fabrik\ncompiled.warm(); compiled_fabrik.warm()\n"
     log = engine.run(
-        "run", "--rm", *SECURITY, "-e", "NUMBA_DEBUG_CACHE=1", "--entrypoint",
+        "run", "--rm", *SECURITY, *cache, "-e", "NUMBA_DEBUG_CACHE=1", "--entrypoint",
         "/opt/venv/bin/python", image, "-P", "-c", script,
     )  # fmt: skip
     assert "data loaded" in log, log[-2000:]
@@ -229,6 +238,20 @@ def test_compiled_kernels_load_from_the_seed_not_compiled(engine: Engine, image:
     index = "import glob; print(open(sorted(glob.glob('/opt/marionette/numba-seed/**/*.nbi', recursive=True))[0], 'rb').read().count(b'generic'))"  # noqa: E501
     count = engine.run("run", "--rm", "--entrypoint", "/opt/venv/bin/python", image, "-c", index)
     assert int(count.strip().splitlines()[-1]) > 0, count
+
+
+def test_an_unwritable_numba_cache_dir_is_a_refused_start(engine: Engine, image: str) -> None:
+    """NUMBA_CACHE_DIR on the read-only root: one start_refused line naming the folder, exit
+    2 (numba kept nothing there and every start compiled for about a minute, silently)."""
+    proc = subprocess.run(
+        [*engine.cmd, "run", "--rm", *SECURITY, "-e", "NUMBA_CACHE_DIR=/opt/marionette/cache",
+         image],
+        env=engine.env, capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    assert proc.returncode == 2, proc.stderr[-2000:]
+    lines = [json.loads(x) for x in proc.stderr.splitlines() if x.startswith("{")]
+    (line,) = lines  # the service's one line (the engine may write its own, not JSON)
+    assert line["event"] == "start_refused" and "/opt/marionette/cache/" in line["detail"]
 
 
 # --------------------------------------------------------------------------- the running service
