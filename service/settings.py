@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import difflib
+import re
 from functools import lru_cache
 from pathlib import Path
 from typing import Annotated, Literal, get_args
 
-from pydantic import BeforeValidator, Field, SecretStr
+from pydantic import BeforeValidator, Field, SecretStr, field_validator, model_validator
 from pydantic_core import PydanticCustomError
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
@@ -40,7 +42,46 @@ def _not_blank(value: object) -> object:
             "blanks or a newline before or after the key (a Secret made from a file that "
             "ends in a newline?): no client sends them; remove them",
         )
+    if isinstance(value, str) and not all(" " <= c <= "~" for c in value):
+        # (an ops audit: 'clé-secrète' was taken, and every /v1 request was a 401: a client
+        # sends a header's value as UTF-8 bytes (curl), the server reads them as Latin-1)
+        raise PydanticCustomError(
+            "non_ascii_api_key",
+            "a character that is not printable ASCII: an HTTP header's value is bytes, a "
+            "client sends other characters as UTF-8 and the server reads Latin-1, so the "
+            "key could never match; use letters, digits and ASCII punctuation only",
+        )
     return value
+
+
+#: An allowed origin as a browser sends it (RFC 6454): scheme and host in lower case,
+#: a port only when it is not the scheme's default, no path, not even "/".
+_ORIGIN = re.compile(r"[a-z][a-z0-9+.-]*://[^/?#@\s]+")
+_DEFAULT_PORTS = {"http": ":80", "https": ":443"}
+
+
+def origin_problem(entry: str) -> str | None:
+    """Why ``entry`` of ``POSE_CORS_ORIGINS`` can never equal a browser's ``Origin`` (the
+    CORS middleware compares them exactly), and its fix; None if it can ("*" allows any)."""
+    if entry == "*":
+        return None
+    if entry == "null":  # (sent by sandboxed frames and file:// pages: by anyone who wants)
+        return "the 'null' origin is sent by any sandboxed page: allowing it allows anyone"
+    if "://" not in entry:
+        return f"no scheme: write it as a browser sends it, e.g. 'https://{entry.strip('/')}'"
+    scheme, _, rest = entry.partition("://")
+    if "/" in rest or "?" in rest or "#" in rest:
+        fixed = f"{scheme}://{re.split(r'[/?#]', rest)[0]}"
+        return f"a path (even a trailing '/') is never part of an Origin: write {fixed!r}"
+    if entry != entry.lower():
+        return f"browsers send the scheme and host in lower case: write {entry.lower()!r}"
+    if not _ORIGIN.fullmatch(entry):
+        return "not an origin (scheme://host[:port], e.g. 'https://editor.example')"
+    default = _DEFAULT_PORTS.get(scheme)
+    if default and rest.endswith(default):
+        fixed = entry[: -len(default)]
+        return f"browsers leave the scheme's default port out: write {fixed!r}"
+    return None
 
 
 class Settings(BaseSettings):
@@ -145,6 +186,40 @@ class Settings(BaseSettings):
         "the networks' work for a deployment that wants speed more than the last tenth of "
         "a millimetre.",
     )
+
+    @field_validator("cors_origins")
+    @classmethod
+    def _origins(cls, origins: list[str]) -> list[str]:
+        """Refuse an entry no browser's ``Origin`` can equal (a trailing slash, no scheme:
+        taken, and every preflight refused with no hint at start; an ops audit)."""
+        for i, entry in enumerate(origins):
+            problem = origin_problem(entry)
+            if problem:
+                raise PydanticCustomError(
+                    "bad_origin",
+                    "entry {index} ({entry}) never matches: {problem}",
+                    {"index": i, "entry": repr(entry), "problem": problem},
+                )
+        return origins
+
+    @model_validator(mode="after")
+    def _bodies_fit_the_budget(self) -> Settings:
+        """A body the size limit admits must fit the in-flight budget of an idle worker:
+        ``POSE_MAX_INFLIGHT_BYTES`` below ``POSE_MAX_BODY_BYTES`` made every chunked body
+        (it reserves the whole body limit) and every declared one above the budget a 429
+        "retry in 1 s" that could never succeed (an ops audit)."""
+        if self.max_inflight_bytes < self.max_body_bytes:
+            raise PydanticCustomError(
+                "budget_below_body_limit",
+                "POSE_MAX_INFLIGHT_BYTES ({inflight}) is below POSE_MAX_BODY_BYTES ({body}): "
+                "a body the size limit admits (any chunked one: it reserves the whole body "
+                "limit) could never be admitted, a 429 on every retry; raise "
+                "POSE_MAX_INFLIGHT_BYTES to at least POSE_MAX_BODY_BYTES (several times it "
+                "lets that many such bodies in at once), or lower POSE_MAX_BODY_BYTES",
+                {"inflight": self.max_inflight_bytes, "body": self.max_body_bytes},
+            )
+        return self
+
     log_level: Annotated[
         Literal["debug", "info", "warning", "error"],
         BeforeValidator(lambda v: v.lower() if isinstance(v, str) else v),  # INFO too
@@ -168,14 +243,79 @@ SECRET_SETTINGS: frozenset[str] = frozenset(
 )
 
 
+#: Variables Kubernetes injects into a pod for every Service of its namespace while the
+#: pod's ``enableServiceLinks`` is on (the default): a Service ``pose-cache`` gives
+#: ``POSE_CACHE_SERVICE_HOST``, ``POSE_CACHE_SERVICE_PORT[_<port name>]``,
+#: ``POSE_CACHE_PORT`` and ``POSE_CACHE_PORT_<n>_TCP[_PROTO|_PORT|_ADDR]``. Never refused
+#: as misspellings (they are no operator's typing, and would break a deploy for a Service
+#: someone else made); a Service named ``pose`` would also set ``POSE_PORT`` itself
+#: (``tcp://<ip>:<port>``), which an explicit ``env`` entry overrides (deploy/k8s sets it).
+_SERVICE_LINK = re.compile(
+    r"POSE(_[A-Z0-9_]+)?_(SERVICE_HOST|SERVICE_PORT(_[A-Z0-9_]+)?"
+    r"|PORT(_[0-9]+_(TCP|UDP|SCTP)(_(PROTO|PORT|ADDR))?)?)"
+)
+
+#: How alike (difflib's ratio, on the names after ``POSE_``) an unknown variable and a
+#: setting must be for the variable to be taken as that setting misspelt (refused):
+#: POSE_APIKEY 0.92, POSE_LOGLEVEL 0.94, POSE_PROT 0.75; POSE_WORKERS (0.44 to
+#: ORT_THREADS) and POSE_TIMEOUT (0.52) are only named in a warning.
+MISSPELT = 0.75
+
+
+def _known() -> list[str]:
+    return [f"POSE_{name.upper()}" for name in Settings.model_fields] + list(OTHER_VARIABLES)
+
+
+def _unknown(environ: dict[str, str]) -> list[str]:
+    known = _known()
+    return sorted(k for k in environ if k.upper().startswith("POSE_") and k.upper() not in known)
+
+
+def _misspelt(key: str, known: list[str]) -> list[str]:
+    """The settings ``key`` (an unknown ``POSE_*`` name) stands for, if it is that close:
+    its name after ``POSE_`` within :data:`MISSPELT` of a setting's (POSE_APIKEY), or a
+    setting's cut at an underscore (POSE_DEADLINE, POSE_KEY, POSE_DIR)
+    or lengthened after one (POSE_API_KEY_FILE: no ``_FILE`` form is read)."""
+    name = key.upper()
+    if _SERVICE_LINK.fullmatch(name):
+        return []
+    tail = name.removeprefix("POSE_")
+    tails = {k.removeprefix("POSE_"): k for k in known}
+    cut = [
+        k
+        for t, k in tails.items()
+        if t.startswith(tail + "_") or t.endswith("_" + tail) or tail.startswith(t + "_")
+    ]
+    if cut:
+        return cut
+    return [tails[t] for t in difflib.get_close_matches(tail, list(tails), n=1, cutoff=MISSPELT)]
+
+
+def misspelt_variables(environ: dict[str, str]) -> dict[str, list[str]]:
+    """Unknown ``POSE_*`` variables of ``environ`` that misspell a setting, each with the
+    settings it may stand for: a start refuses them (``service.cli``). ``POSE_APIKEY=s3cret``
+    started the service with /v1 open, a warning its only sign (an ops audit); a typo'd
+    limit or timeout likewise left the default in force while its operator believed it set.
+    Kubernetes' service-link variables are never counted (:data:`_SERVICE_LINK`)."""
+    known = _known()
+    out = {}
+    for key in _unknown(environ):
+        meant = _misspelt(key, known)
+        if meant:
+            out[key] = meant
+    return out
+
+
 def unknown_variables(environ: dict[str, str]) -> list[str]:
-    """``POSE_*`` variables of ``environ`` that are no setting (a typo is ignored by the
-    settings: ``POSE_DEADLINE=9`` left the deadline at 2 s, an ops audit), each with the
-    setting nearest it."""
-    known = [f"POSE_{name.upper()}" for name in Settings.model_fields] + list(OTHER_VARIABLES)
+    """The other ``POSE_*`` variables of ``environ`` that are no setting (a start names
+    them in a warning: they resemble no setting closely), each with the setting nearest it
+    if any (``POSE_DEADLINE=9`` left the deadline at 2 s without a word, an ops audit)."""
+    known = _known()
     out = []
-    for key in sorted(k for k in environ if k.upper().startswith("POSE_")):
-        if key.upper() not in known:
+    for key in _unknown(environ):
+        if _SERVICE_LINK.fullmatch(key.upper()):
+            out.append(f"{key} (a Kubernetes Service's link variable?)")
+        elif not _misspelt(key, known):
             near = close_match(key.upper(), known)
             out.append(f"{key}" + (f" (did you mean {near}?)" if near else ""))
     return out

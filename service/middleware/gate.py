@@ -116,9 +116,14 @@ class Gate:
         # every body read here is held until its request ends, whatever its route: one sent
         # to a route that takes none (a GET's, a POST to /v2/health/live) was read whole
         # outside this bound (30 such bodies of 8 MiB at once: 687 -> 899 MiB, a /tmp script)
+        # (settings refuse a budget below the body limit, so an idle worker admits any body
+        # the limit does and a 429 here is worth its retry: some are held; "0 body bytes in
+        # flight (limit 4096)", answered to every retry, was an ops audit's)
         if self.held + size > s.max_inflight_bytes:
+            counted = " (a chunked body counts as the whole body limit)" if chunked else ""
             raise TooManyRequests(
-                f"{self.held} body bytes in flight on this worker (limit {s.max_inflight_bytes})"
+                f"{self.held} body bytes in flight on this worker; this request's "
+                f"{size}{counted} would pass the limit ({s.max_inflight_bytes})"
             )
         return size
 

@@ -59,8 +59,13 @@ def test_the_deadline_is_checked_between_reading_and_solving(
 
 
 @pytest.mark.parametrize("route", ROUTES)
-def test_past_the_admission_bound_is_a_429_problem(models_dir: Path, route: str) -> None:
-    with make_client(models_dir, max_inflight_bytes=2048) as c:
+def test_past_the_admission_bound_is_a_429_problem(
+    models_dir: Path, route: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from tests.service.test_hardening import BUDGET, holding
+
+    holding(monkeypatch)  # (an idle worker admits any body the body limit admits)
+    with make_client(models_dir, **BUDGET) as c:
         body = example(route)
         if route == "/v1/character/solve":  # the example is small: pad it past the bound
             body["pad"] = " " * 4096

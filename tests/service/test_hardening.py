@@ -102,20 +102,50 @@ def test_nan_bone_length_and_unknown_bone_are_field_errors(client: Any) -> None:
 
 
 # -- limits ------------------------------------------------------------------------------------
-def test_past_the_inflight_bytes_bound_is_a_429(models_dir: Path) -> None:
-    with make_client(models_dir, max_inflight_bytes=2048) as c:
+#: A budget of bodies in flight, and what other requests hold of it: settings refuse a
+#: budget below the body limit (an idle worker admits any body the limit admits: a 429
+#: for bytes there could never pass, an ops audit), so a 429 needs bytes held.
+BUDGET = {"max_inflight_bytes": 8192, "max_body_bytes": 8192}
+HELD = 6144
+
+
+def holding(monkeypatch: pytest.MonkeyPatch, held: int = HELD) -> None:
+    """Every gate made from here on starts with ``held`` body bytes in flight, as if other
+    requests held them."""
+    from service.middleware.gate import Gate
+
+    init = Gate.__init__
+
+    def held_init(self: Gate, *args: Any, **kwargs: Any) -> None:
+        init(self, *args, **kwargs)
+        self.held = held
+
+    monkeypatch.setattr(Gate, "__init__", held_init)
+
+
+def test_past_the_inflight_bytes_bound_is_a_429(
+    models_dir: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    holding(monkeypatch)
+    with make_client(models_dir, **BUDGET) as c:
         resp = post(c, json.dumps(body()) + " " * 4096)
-        problem = assert_problem(resp, 429, "body bytes in flight")
+        problem = assert_problem(
+            resp, 429, f"{HELD} body bytes in flight on this worker; this request's"
+        )  # (it said "0 ... in flight", an audit)
+        assert problem["detail"].endswith("would pass the limit (8192)"), problem
         assert resp.headers["retry-after"] == "1"
         assert problem["type"].endswith("/too-many-requests")
         assert c.post("/v1/solve", json=body()).status_code == 200
 
 
-def test_a_body_sent_to_a_route_that_takes_none_counts_as_held(models_dir: Path) -> None:
+def test_a_body_sent_to_a_route_that_takes_none_counts_as_held(
+    models_dir: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """The gate reads a body whole before any route sees it; one sent to a route that takes
     none (a GET's, a POST to /v2/health/live) was read outside POSE_MAX_INFLIGHT_BYTES: 30
     of 8 MiB at once took a real server from 687 to 899 MiB. Now every body counts."""
-    with make_client(models_dir, max_inflight_bytes=2048) as c:
+    holding(monkeypatch)
+    with make_client(models_dir, **BUDGET) as c:
         for method, path in (("POST", "/v2/health/live"), ("GET", "/v2/health/live"),
                              ("POST", "/nowhere")):  # fmt: skip
             resp = c.request(method, path, content=b"{}" + b" " * 4096, headers=JSON)
