@@ -64,9 +64,10 @@ def test_every_line_of_a_real_servers_log_is_json(models_dir: Path, tmp_path: Pa
     from service.logs import JSONLines
     from tests.service.server import serve
 
-    # a typo'd variable is named in the log (it was ignored without a word); a level in
-    # capitals is taken (it was a traceback)
-    env = {"POSE_DEADLINE": "9", "POSE_LOG_LEVEL": "INFO"}
+    # an unknown variable is named in the log (it was ignored without a word; one that
+    # misspells a setting, POSE_DEADLINE, now refuses the start: test_start_refused); a
+    # level in capitals is taken (it was a traceback)
+    env = {"POSE_ESTIMATOR_URL": "http://x", "POSE_LOG_LEVEL": "INFO"}
     with serve(models_dir, tmp_path, **env) as s:
         with socket.create_connection(("127.0.0.1", s.port), timeout=5) as sock:
             sock.sendall(b"NOT HTTP AT ALL\r\n\r\n")
@@ -82,7 +83,7 @@ def test_every_line_of_a_real_servers_log_is_json(models_dir: Path, tmp_path: Pa
     assert any(p.get("event") == "models_ready" for p in parsed), lines
     assert any(p.get("event") == "request" for p in parsed), lines
     (unknown,) = [p for p in parsed if p.get("event") == "unknown_setting"]
-    assert unknown["variable"] == "POSE_DEADLINE (did you mean POSE_DEADLINE_SECONDS?)"
+    assert unknown["variable"] == "POSE_ESTIMATOR_URL"
     try:
         raise ValueError("boom")
     except ValueError:
@@ -155,8 +156,8 @@ def test_workers_are_at_least_one_and_the_health_path_is_a_known_variable() -> N
         with pytest.raises(SystemExit):
             parser().parse_args(["--workers", bad])
     assert parser().parse_args(["--workers", "2"]).workers == 2
-    assert unknown_variables({"POSE_HEALTH_PATH": "/x", "POSE_DEADLINE": "9"}) == [
-        "POSE_DEADLINE (did you mean POSE_DEADLINE_SECONDS?)"
+    assert unknown_variables({"POSE_HEALTH_PATH": "/x", "POSE_TIMEOUT": "9"}) == [
+        "POSE_TIMEOUT (did you mean POSE_PORT?)"  # (POSE_DEADLINE: refused, misspelt)
     ]
 
 
