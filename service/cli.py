@@ -21,13 +21,14 @@ from pydantic import ValidationError
 from pydantic_settings import SettingsError
 
 from core import CacheDirError
+from service.logs import event_line  # (logging, time and orjson only: no kernels imported)
 
 
 def refuse(*details: str) -> NoReturn:
     """A start refused: each reason one JSON line on stderr, as every line the service
     writes (docs/deploy.md; a crash loop shows only these), and exit 2."""
     for detail in details:
-        print(json.dumps({"event": "start_refused", "detail": detail}), file=sys.stderr)
+        print(event_line("error", {"event": "start_refused", "detail": detail}), file=sys.stderr)
     raise SystemExit(2)
 
 

@@ -29,6 +29,7 @@ def refused(argv: list[str], env: dict[str, str] | None = None, script: str = ""
     assert proc.returncode == 2, proc.stderr
     lines = [json.loads(line) for line in proc.stderr.splitlines()]  # JSON, every one
     assert len(lines) == 1 and lines[0]["event"] == "start_refused", proc.stderr
+    assert lines[0]["level"] == "error" and lines[0]["time"].endswith("Z"), lines  # as every line
     detail: str = lines[0]["detail"]
     return detail
 
