@@ -17,7 +17,6 @@ equal parts, each new joint turned a few seeded degrees, as a rig with a long sp
 
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
 from typing import Any
 
@@ -25,12 +24,11 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from core.bvh import BVH, BVHJoint, parse_bvh
-from core.bvh_write import format_bvh, pose_of, skeleton_of
-from core.characters import Skeleton, matrix_to_quat
+from bench.spines import PINS, character_body, edits, head_goals, long_spine
+from core.bvh import parse_bvh
+from core.bvh_write import skeleton_of
+from core.characters import Skeleton
 from core.characters_maps import resolve_map
-from core.retarget import canonical_points
-from core.skeleton import JOINT_INDEX
 from service.character_bvh import bvh_answer, character_from_bvh, read_request_bvh
 from service.characters import (
     BVHSolveRequest,
@@ -46,63 +44,14 @@ from tests.character_files import FILES, RefBVH
 TOL = 1e-3  # m, the default tolerance
 NAME = "cmu-daz-salsa"
 EXTRA = 10  # joints spliced in: 12 from pelvis to chest
-PINS = ["left_ankle", "right_ankle", "left_wrist", "right_wrist"]
 GOALS = 12  # seeded head goals, each in exact and soft reach
-
-
-def long_spine(text: str, frame: int, extra: int, degrees: float, seed: int = 0) -> str:
-    """A one-frame BVH of ``text``'s frame ``frame`` with ``extra`` joints (3 rotation
-    channels, the chest's order) between the chest (the map's spine2) and its parent: the
-    chest's offset split into ``extra + 1`` equal parts, each new joint turned up to
-    ``degrees`` about each axis (seeded)."""
-    bvh = parse_bvh(text)
-    chest = resolve_map(skeleton_of(bvh)).anchors[JOINT_INDEX["spine2"]].joint
-    cj = bvh.joints[chest]
-    rot = tuple(c for c in cj.channels if c.lower().endswith("rotation"))
-    part = (cj.offset[0] / (extra + 1), cj.offset[1] / (extra + 1), cj.offset[2] / (extra + 1))
-    joints: list[BVHJoint] = []
-    index: dict[int, int] = {-1: -1}
-    shift = 0
-    for i, j in enumerate(bvh.joints):
-        parent = index[j.parent]
-        if i == chest:
-            for k in range(extra):
-                joints.append(
-                    BVHJoint(f"SpineExtra{k}", parent, part, rot, j.channel_start + shift)
-                )
-                parent = len(joints) - 1
-                shift += len(rot)
-        index[i] = len(joints)
-        offset = part if i == chest else j.offset
-        start = j.channel_start + shift
-        joints.append(dataclasses.replace(j, parent=parent, offset=offset, channel_start=start))
-    row = bvh.row(frame)
-    turns = np.random.default_rng(seed).uniform(-degrees, degrees, extra * len(rot))
-    cut = cj.channel_start
-    motion = np.concatenate([row[:cut], turns, row[cut:]])[None]
-    return format_bvh(BVH(bvh.name, tuple(joints), bvh.frame_time, motion))
 
 
 @pytest.fixture(scope="module")
 def character(bvh_files: dict[str, Path]) -> tuple[str, list[list[float]]]:
-    """The long-spine file (frame 0) and its seeded head goals (file units): the head moved
-    up to about half the pelvis-head distance, so that the polish runs its steps."""
+    """The long-spine file (frame 0) and its seeded head goals (file units, ``bench.spines``)."""
     text = long_spine(bvh_files[NAME].read_text(), FILES[NAME][3], EXTRA, 5.0)
-    bvh = parse_bvh(text)
-    skel = skeleton_of(bvh)
-    pts = canonical_points(skel, pose_of(bvh, 0), resolve_map(skel))
-    head = pts[JOINT_INDEX["head"]]
-    trunk = float(np.linalg.norm(head - pts[JOINT_INDEX["pelvis"]]))
-    rng = np.random.default_rng(7)
-    return text, [(head + rng.normal(0.0, 0.6 * trunk, 3)).tolist() for _ in range(GOALS)]
-
-
-def _edits(goals: list[list[float]]) -> list[dict[str, Any]]:
-    return [
-        {"targets": [{"joint": "head", "position": g}], "pins": PINS, "options": {"reach": r}}
-        for g in goals
-        for r in ("exact", "soft")
-    ]
+    return text, head_goals(text, GOALS)
 
 
 def test_pins_hold_on_a_long_spine_bvh(
@@ -117,7 +66,7 @@ def test_pins_hold_on_a_long_spine_bvh(
     label = resolve_map(skel).describe()
     start = RefBVH(text).positions(0)
     worst = []
-    for body in _edits(goals):
+    for body in edits(goals):
         req = BVHSolveRequest.model_validate({"bvh": text, "frame": 0, **body})
         ch = character_from_bvh(bvh, req)
         out = bvh_answer(bvh, ch, req, solve_prepared(engine, ch, character_problem(ch, req)))
@@ -128,7 +77,7 @@ def test_pins_hold_on_a_long_spine_bvh(
         worst.append(max(misses))
     print(f"\nlong spine, bvh: worst pin {max(worst) * 1e3:.3f} mm")
     assert max(worst) <= TOL, [round(w * 1e3, 2) for w in worst]
-    again = _edits(goals)[0]
+    again = edits(goals)[0]
     req = BVHSolveRequest.model_validate({"bvh": text, "frame": 0, **again})
     ch = character_from_bvh(bvh, req)
     twice = [
@@ -160,21 +109,8 @@ def test_pins_hold_on_a_long_spine_character(
     tolerance by FK of the returned quaternions, and ``positions`` keep every bone's length
     (1e-5 m). Before: pins up to 5 mm off; ``positions`` bones up to centimetres off."""
     text, goals = character
-    bvh = parse_bvh(text)
-    skel = skeleton_of(bvh)
-    pose = pose_of(bvh, 0)
-    root = skel.parents.index(-1)
-    base = {
-        "character": {
-            "joints": [
-                {"name": n, "parent": None if p < 0 else skel.names[p], "offset": list(o)}
-                for n, p, o in zip(skel.names, skel.parents, skel.offsets.tolist(), strict=True)
-            ],
-            "units": "cm",
-        },
-        "rotations": dict(zip(skel.names, matrix_to_quat(pose.rotations).tolist(), strict=True)),
-        "root_position": pose.translations[root].tolist(),
-    }
+    skel = skeleton_of(parse_bvh(text))
+    base = character_body(text)
     label = resolve_map(skel).describe()
     pinned = [skel.index[label[p]] for p in PINS]
     start = _fk(skel, base["rotations"], base["root_position"])
@@ -182,7 +118,7 @@ def test_pins_hold_on_a_long_spine_character(
     parents = np.array([skel.parents[j] for j in kids])
     lengths = np.linalg.norm(skel.offsets[kids], axis=1) / 100
     worst, bones = [], []
-    for body in _edits(goals):
+    for body in edits(goals):
         req = CharacterSolveRequest.model_validate({**base, **body})
         ch = character_from_request(req)
         edit = solve_prepared(engine, ch, character_problem(ch, req))
