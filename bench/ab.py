@@ -14,6 +14,10 @@ targets); and a client's own character, a BVH file's frame edited end to end but
 (``bvh exact``, ``bvh soft``: :func:`bvh_edits`). The table gives each case's p50 per
 round, and the best round of each revision (the least disturbed) with their ratio.
 
+A base whose ``core/`` sources are this tree's gets this tree's compiled kernels
+(:func:`share_kernels`: it compiled them all again, a minute or more); the worktree's
+kernels do not outlive it.
+
 The probe uses only what both trees have (``Engine``, ``bench.edits``; the ``bvh`` rows where
 the base has the character routes); the models are
 each tree's own.
@@ -29,6 +33,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -155,6 +160,40 @@ def _run(
     return got
 
 
+#: Printed by a probe's interpreter in a tree: the folder its compiled kernels go in (the
+#: cache folder ``core.jit`` chose, whose name is the fingerprint of ``core/``'s sources,
+#: and numba's folder for them in it, named after their path).
+_KERNELS = (
+    "import os, core.jit as j; "
+    "print(os.path.join(os.environ['NUMBA_CACHE_DIR'], "
+    "j.numba_subfolder(os.path.dirname(os.path.abspath(j.__file__)))))"
+)
+
+
+def _kernels_dir(tree: Path) -> Path | None:
+    """Where a probe in ``tree`` keeps its compiled kernels (None: a revision that cannot
+    say, from before ``core.jit.numba_subfolder``)."""
+    env = {**os.environ, "PYTHONPATH": str(tree)}
+    done = subprocess.run([sys.executable, "-c", _KERNELS], cwd=tree, env=env,
+                          capture_output=True, text=True, check=False)  # fmt: skip
+    out = done.stdout.strip()
+    return Path(out) if done.returncode == 0 and out else None
+
+
+def share_kernels(tree: Path) -> Path | None:
+    """Give the worktree ``tree`` this tree's compiled kernels where its ``core/`` sources
+    are the same (the fingerprint its cache folder is named after): numba checks a cached
+    kernel against its source's contents but keeps it in a folder named after the source's
+    path, so the base's probe compiled every kernel again (a minute or more) for sources it
+    had already. The folder the worktree's kernels go in (None: it cannot say)."""
+    mine, theirs = _kernels_dir(REPO), _kernels_dir(tree)
+    if theirs is None or mine is None or mine.parent.name != theirs.parent.name:
+        return theirs  # (other sources: the base compiles its own)
+    if mine.is_dir() and not (theirs.is_dir() and any(theirs.iterdir())):  # (asking made it)
+        shutil.copytree(mine, theirs, dirs_exist_ok=True)
+    return theirs
+
+
 def compare(
     base: str | None, dataset: Path, rounds: int, edits: int, seed: int,
     serving: dict[str, Any] | None = None,
@@ -175,9 +214,13 @@ def compare(
             tree = Path(tmp) / "base"
             subprocess.run(["git", "-C", str(REPO), "worktree", "add", "--detach", "-q",
                             str(tree), base], check=True)  # fmt: skip
+            kernels = None
             try:
+                kernels = share_kernels(tree)
                 alternate(tree)
             finally:
+                if kernels is not None and not kernels.is_relative_to(tree):
+                    shutil.rmtree(kernels, ignore_errors=True)  # (in this tree's cache: gone)
                 subprocess.run(["git", "-C", str(REPO), "worktree", "remove", "--force",
                                 str(tree)], check=False)  # fmt: skip
     label = "this tree (models' settings)" if base is None else base

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import os
+import shutil
 import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -60,3 +63,40 @@ def test_a_serving_setting_against_the_models_own(bench_dataset: Path) -> None:
     assert "this tree keep_pelvis=0.0" in text.splitlines()[0]
     with pytest.raises(RuntimeError, match="passes"):
         ab._run(REPO, bench_dataset, 1, 0, {"passes": 0})
+
+
+@pytest.mark.slow
+def test_a_base_with_the_same_kernels_sources_gets_this_trees_compiled_kernels(
+    tmp_path: Path,
+) -> None:
+    """The base's probe compiled every kernel again (a minute or more) when its ``core/``
+    was this tree's: numba names its folder after the sources' path. Now this tree's
+    compiled kernels are copied into the worktree's folder, and numba there loads them
+    (``stats.cache_hits``) instead of compiling."""
+    import numpy as np
+
+    from core.compiled import shortest_bones
+
+    shortest_bones(np.zeros((1, 21, 3)))  # (compiled, or loaded, into this tree's cache)
+    tree = tmp_path / "base"
+    subprocess.run(["git", "-C", str(REPO), "worktree", "add", "--detach", "-q", str(tree),
+                    "HEAD"], check=True)  # fmt: skip
+    kernels = None
+    try:
+        for path in (REPO / "core").glob("*.py"):  # this tree's core/, edits and all
+            (tree / "core" / path.name).write_bytes(path.read_bytes())
+        mine = ab._kernels_dir(REPO)
+        kernels = ab.share_kernels(tree)
+        assert mine is not None and kernels is not None and kernels != mine
+        assert {p.name for p in mine.iterdir()} <= {p.name for p in kernels.iterdir()}
+        code = ("import numpy as np, core.compiled as c; c.shortest_bones(np.zeros((1, 21, 3)));"
+                " print(sum(c.shortest_bones.stats.cache_hits.values()))")  # fmt: skip
+        env = {**os.environ, "PYTHONPATH": str(tree)}
+        done = subprocess.run([sys.executable, "-c", code], cwd=tree, env=env,
+                              capture_output=True, text=True, check=True)  # fmt: skip
+        assert int(done.stdout.split()[-1]) >= 1, done.stdout
+    finally:
+        if kernels is not None and not kernels.is_relative_to(tree):
+            shutil.rmtree(kernels, ignore_errors=True)
+        subprocess.run(["git", "-C", str(REPO), "worktree", "remove", "--force", str(tree)],
+                       check=False)  # fmt: skip
