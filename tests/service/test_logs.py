@@ -147,7 +147,7 @@ def test_a_real_servers_lines_all_carry_level_and_time_and_name_the_bad_file(
     models_dir: Path, tmp_path: Path
 ) -> None:
     broken = _corrupt_but_listed(models_dir, tmp_path / "models")
-    with serve(broken, tmp_path, ready=False, port=19061, POSE_DEADLINE="9") as s:
+    with serve(broken, tmp_path, ready=False, port=19061, POSE_ESTIMATOR_URL="x") as s:
         status, headers, ready = _after(s, "/v2/health/ready", "loading models")
         assert status == 503 and "retry-after" not in headers, (headers, ready)
         assert "encoder.onnx: model 'autoencoder'" in ready["detail"]
