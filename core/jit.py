@@ -16,7 +16,8 @@
   nothing, or fall back to ``core/__pycache__`` without the fingerprint below, without
   a word, and every start would compile.
 * Each of those holds one subfolder per :func:`fingerprint` of the package's sources.
-  Numba checks a cached kernel against its own file's mtime only, but the kernels bake
+  Numba checks a cached kernel against its own file's contents only (a sha256 of the
+  source, numba 0.68; its folder is named after the source's path), but the kernels bake
   in constants read from other modules (the skeleton, the rest pose, the chains of
   :mod:`core.ends`): an edit there must not leave a stale kernel in use.
 * no ``fastmath``, no ``parallel``: IEEE arithmetic in source order (no reassociation,
