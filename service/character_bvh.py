@@ -88,9 +88,9 @@ def bvh_answer(bvh: BVH, ch: Character, req: BVHSolveRequest, edit: Edit) -> dic
     add = req.root_position == "add"
     row, columns = row_of(bvh, req.frame, edit.pose, edit.changed, root_add=add)
     points = canonical_points(ch.skel, pose_of(bvh, req.frame, row, root_add=add), ch.jmap)
-    before = canonical_points(ch.skel, pose_of(bvh, req.frame, root_add=add), ch.jmap)
-    if not moves_a_target(ch, edit, before, points):  # (noise: the file's curves churn)
-        row, columns, points = bvh.row(req.frame), [], before
+    if not moves_a_target(ch, edit, points):  # (noise: the file's curves churn)
+        row, columns = bvh.row(req.frame), []
+        points = canonical_points(ch.skel, ch.pose, ch.jmap)  # (the frame as it is)
     return {
         "bvh": splice_frame(bvh, req.frame, row, columns),
         "frame": req.frame,

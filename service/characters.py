@@ -594,12 +594,14 @@ def solve_prepared(engine: Engine, ch: Character, p: SolveProblem) -> Edit:
 NEARER = 1e-6
 
 
-def moves_a_target(ch: Character, edit: Edit, before: F64, after: F64) -> bool:
-    """Whether the answer's mapped points ``after`` bring a target more than :data:`NEARER`
-    nearer than the sent pose's ``before`` (both the 21 points, client units)."""
+def moves_a_target(ch: Character, edit: Edit, after: F64) -> bool:
+    """Whether the answer's mapped points ``after`` (the 21 points, client units) bring a
+    target more than :data:`NEARER` nearer than the sent pose has it (``edit.problem.pose``:
+    the same points of the pose as sent, in metres)."""
     p = edit.problem
     goals, at = p.target_pos[: p.n_targets], p.target_idx[: p.n_targets]
-    old, new = (np.linalg.norm(ch.to_service(q)[at] - goals, axis=1) for q in (before, after))
+    old = np.linalg.norm(p.pose[at] - goals, axis=1)
+    new = np.linalg.norm(ch.to_service(after)[at] - goals, axis=1)
     return bool((old - new > NEARER).any())
 
 
@@ -691,10 +693,10 @@ def character_answer(ch: Character, edit: Edit, given: dict[str, list[float]]) -
     pose, changed = edit.pose, edit.changed
     g_rot, g_pos = forward_kinematics(ch.skel, pose)
     points = ch.jmap.points(g_rot, g_pos)
-    start_rot, start_pos = forward_kinematics(ch.skel, ch.pose)
-    before = ch.jmap.points(start_rot, start_pos)
-    if not moves_a_target(ch, edit, before, points):
-        pose, changed, g_pos, points = ch.pose, frozenset(), start_pos, before
+    if not moves_a_target(ch, edit, points):  # (the pose as sent: its own positions)
+        pose, changed = ch.pose, frozenset()
+        g_rot, g_pos = forward_kinematics(ch.skel, pose)
+        points = ch.jmap.points(g_rot, g_pos)
     quats = matrix_to_quat(pose.rotations).tolist()
     rotations = {
         n: quats[j] if j in changed else given.get(n, [0.0, 0.0, 0.0, 1.0])
