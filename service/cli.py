@@ -275,9 +275,10 @@ def main(argv: list[str] | None = None) -> None:
     log = logging.getLogger("service")
     for name in unknown_variables(dict(os.environ)):
         log.warning(json.dumps({"event": "unknown_setting", "variable": name, "detail": "ignored"}))
-    if args.workers > _cpus():
+    cpus = _cpus()
+    if args.workers > cpus:
         log.warning(json.dumps({
-            "event": "workers_exceed_cpus", "workers": args.workers, "cpus": _cpus(),
+            "event": "workers_exceed_cpus", "workers": args.workers, "cpus": cpus,
             "detail": "workers past the CPUs share them (no more throughput), and each "
             f"holds every model (~{WORKER_MIB} MiB)",
         }))  # fmt: skip
