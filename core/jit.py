@@ -16,6 +16,10 @@
   nothing, or fall back to ``core/__pycache__`` without the fingerprint below, without
   a word, and every start would compile.
 * Each of those holds one subfolder per :func:`fingerprint` of the package's sources.
+  A start marks its own as used (its mtime) and removes all but the ``KEEP_OTHERS`` most
+  recently used of the others (16-hex-digit names only), so a cache kept across edits or
+  image upgrades (a developer's ``core/__pycache__``, a persistent ``$NUMBA_CACHE_DIR``)
+  does not grow by a folder of kernels per version for ever.
   Numba checks a cached kernel against its own file's contents only (a sha256 of the
   source, numba 0.68; its folder is named after the source's path), but the kernels bake
   in constants read from other modules (the skeleton, the rest pose, the chains of
@@ -45,6 +49,10 @@ from typing import Any, TypeVar, cast
 from core import CacheDirError
 
 _log = logging.getLogger(__name__)
+
+#: Fingerprint folders besides this start's that a cache keeps (the most recently used):
+#: a process still running an older version recompiles into its own if it must.
+KEEP_OTHERS = 3
 
 
 def fingerprint(folder: Path) -> str:
@@ -146,6 +154,24 @@ def _use_seed(seed: Path, folder: Path, subfolder: str) -> None:
     _log.info(json.dumps({"event": event, "seed": str(seed), "folder": str(folder)}))
 
 
+def _prune(folder: Path) -> None:
+    """Mark ``folder`` used now and remove its fingerprint siblings but the ``KEEP_OTHERS``
+    most recently used. Best effort: a folder another process removes first, or one that
+    cannot be removed, is left to the next start."""
+    try:
+        os.utime(folder)
+        others = [
+            (p.stat().st_mtime, p)
+            for p in folder.parent.iterdir()
+            if p != folder and p.is_dir() and len(p.name) == 16
+            and all(c in "0123456789abcdef" for c in p.name)
+        ]  # fmt: skip
+    except OSError:
+        return
+    for _, old in sorted(others, reverse=True)[KEEP_OTHERS:]:
+        shutil.rmtree(old, ignore_errors=True)
+
+
 def _refusal(folder: Path, given: str | None, exc: OSError) -> CacheDirError:
     fix = (
         "set NUMBA_CACHE_DIR to a writable folder (an emptyDir, a tmpfs) or unset it"
@@ -194,6 +220,7 @@ def _cache_dir() -> None:
         _writable(folder / subfolder)  # numba's own (a seed's copy: made by this process)
     except OSError as exc:
         raise _refusal(folder, given, exc) from None
+    _prune(folder)
 
 
 _cache_dir()
