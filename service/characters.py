@@ -566,16 +566,18 @@ def solve_prepared(engine: Engine, ch: Character, p: SolveProblem) -> Edit:
     character: every character solve, single or a batch item, runs exactly this."""
     (result,) = engine.solve([p])
     solved = ch.from_service(np.asarray(result.pose, dtype=np.float64))
-    given = zip(p.target_idx.tolist(), p.target_pos, strict=True)
-    pairs = [(j, ch.from_service(g)) for j, g in given]
-    targets = pairs[: p.n_targets]
+    # in joint order: the answer must not depend on the order the request listed them in
+    given = sorted(range(p.n_targets), key=lambda q: int(p.target_idx[q]))
+    pairs = [(int(j), ch.from_service(g)) for j, g in zip(p.target_idx, p.target_pos, strict=True)]
+    targets = [pairs[q] for q in given]
     # a pin the canonical answer broke (a target it met instead) lies where it put it
-    pins = [
-        (j, g if err <= p.tolerance else solved[j])
-        for (j, g), err in zip(pairs[p.n_targets :], result.pin_errors, strict=True)
-    ]
+    pins = sorted(
+        ((j, g if err <= p.tolerance else solved[j])
+         for (j, g), err in zip(pairs[p.n_targets :], result.pin_errors, strict=True)),
+        key=lambda pin: pin[0],
+    )  # fmt: skip
     if p.reach == "exact":  # the targets the answer met are held as pins are
-        met = result.errors <= p.tolerance
+        met = (result.errors <= p.tolerance)[given]
         held = [t for t, ok in zip(targets, met, strict=True) if ok]
         rest = [t for t, ok in zip(targets, met, strict=True) if not ok]
         out = retarget(ch.skel, ch.pose, ch.jmap, solved, exact=rest, pins=pins, held=held,

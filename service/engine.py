@@ -538,15 +538,21 @@ class Engine:
     ) -> tuple[compiled.F64, npt.NDArray[np.int64], compiled.F64]:  # fmt: skip
         """The compiled FABRIK (``polish``: the exact-reach polish) of canonical ``starts``
         onto ``goals`` for one target set (joints ``idx``, ``weights``, pins ``hold``):
-        poses, iterations and each target's error."""
-        plans = compiled_fabrik.packed_plans(idx, weights, hold)
+        poses, iterations and each target's error. The columns are solved in joint order,
+        so the answer is the set's whatever order a request listed its targets and pins in
+        (the polish's sweeps follow the columns: an API audit, 2026-12-06, saw both ankles
+        pinned as ``[right, left]`` move an unasked wrist 44 cm from ``[left, right]``)."""
+        order = np.argsort(idx, kind="stable")
+        plans = compiled_fabrik.packed_plans(idx[order], weights[order], hold[order])
         pose, its, errs, _ = compiled_fabrik.solve_batch(
             polish, np.ascontiguousarray(starts), np.ascontiguousarray(lengths),
-            np.ascontiguousarray(goals), np.ascontiguousarray(tols), self.fabrik_max_iterations,
-            plans.local_ints, plans.local_floats, plans.has_local, plans.ints, plans.floats,
-            hold, True,
+            np.ascontiguousarray(goals[:, order]), np.ascontiguousarray(tols),
+            self.fabrik_max_iterations, plans.local_ints, plans.local_floats, plans.has_local,
+            plans.ints, plans.floats, np.ascontiguousarray(hold[order]), True,
         )  # fmt: skip
-        return pose, its, errs
+        back = np.empty_like(errs)
+        back[:, order] = errs
+        return pose, its, back
 
     def exact_fallback(
         self, polished: tuple[compiled.F64, npt.NDArray[np.int64], compiled.F64], start: F64,

@@ -43,6 +43,7 @@ def hold_pins(items: _Items, ans: BatchAnswer) -> BatchAnswer:
     for i, b in enumerate(sel.tolist()):
         n_t, cnt, tol = int(items.n_t[b]), int(items.cnt[b]), float(items.tols[b])
         goals = [(int(j), items.tpos[b, q]) for q, j in enumerate(items.tidx[b, :cnt].tolist())]
+        aims, holds = sorted(goals[:n_t], key=_joint), sorted(goals[n_t:], key=_joint)  # (*)
         idx, where = items.tidx[b, :cnt], items.tpos[b, :cnt]
         best, misses, rank = None, errors[i, :cnt], _rank(errors[i, :cnt], n_t, tol)
         # from the answer; then, where pins are still off, from the caller's start, which
@@ -50,7 +51,7 @@ def hold_pins(items: _Items, ans: BatchAnswer) -> BatchAnswer:
         # one past half the tolerance, so the targets come as near as the pins let them
         start = items.poses[b]
         for origin in (pose[i], start):
-            got = polish_canonical(origin, goals[:n_t], goals[n_t:], tol, bool(items.ex[b]))
+            got = polish_canonical(origin, aims, holds, tol, bool(items.ex[b]))
             if got is None and origin is start:
                 got = start  # no polish nearer: the start itself holds the pins
             if got is None:
@@ -73,6 +74,12 @@ def hold_pins(items: _Items, ans: BatchAnswer) -> BatchAnswer:
         paths=tuple((*path, "pin-polish") for path in before.paths),
     ).take(keep)  # fmt: skip
     return ans.with_items(sel[keep], out)
+
+
+def _joint(goal: tuple[int, Any]) -> int:
+    """(*) Goals in joint order: the polish's sums follow them, and the answer must not
+    depend on the order a request listed its targets and pins in."""
+    return goal[0]
 
 
 def _rank(misses: npt.NDArray[Any], n_t: int, tolerance: float) -> tuple[float, float]:
