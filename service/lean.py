@@ -90,7 +90,7 @@ def lean_answer(
     :func:`fabrik_batch` (``sequence`` None: FABRIK) let through."""
     n = items.poses.shape[0]
     if sequence is None:  # FABRIK: no sequence (-1), no suffix
-        world, errors, bone_err, iterations = solve_fabrik(engine, items)
+        world, errors, bone_err, iterations, _ = solve_fabrik(engine, items)
         seq_of, suffix = np.full(n, -1, np.int64), np.zeros(n, np.int64)
     else:  # the general path's suffixes: 1 polish (exact reach, or pins), 2 fallback
         exact = bool(items.ex[0])
@@ -246,9 +246,10 @@ def fabrik_batch(items: _Items) -> bool:
 def solve_fabrik(
     engine: Engine, items: _Items, *, polish: bool = False, lengths: F64 | None = None,
     origin: F64 | None = None,
-) -> Solved:  # fmt: skip
+) -> LeanSolved:  # fmt: skip
     """FABRIK for every item of ``items`` (one target set, its targets then its pins): the
-    canonical frame, the compiled FABRIK, the way back; as :func:`solve_lean` answers.
+    canonical frame, the compiled FABRIK, the way back; as :func:`solve_lean` answers (and
+    which items kept exact reach's fallback: none without ``origin``).
     ``polish``: the exact-reach polish instead (trunk held first); ``lengths`` ``[B, 20]``:
     the bones to keep (default: the poses' own); ``origin`` ``[B, 21, 3]`` (world): the
     callers' starts, from which exact reach's fallback tries plain FABRIK (and the body
@@ -263,12 +264,13 @@ def solve_fabrik(
     idx, w, pins = items.tidx[0, :c], items.w[0, :c], np.arange(c) >= int(items.n_t[0])
     polished = engine._fabrik(polish, canon, lengths, tcan[:, :c], items.tols, idx, w, pins)
     out, iterations = polished[0], polished[1]
+    fell = np.zeros(n, dtype=np.bool_)
     if origin is not None:
         start = engine.origin_in(origin, facing, trans, items.floors)
-        out, iterations, _ = engine.exact_fallback(
+        out, iterations, fell = engine.exact_fallback(
             polished, start, lengths, tcan[:, :c], items.tols, idx, w, pins
         )
     pose, errors, bone_err = compiled.finish(
         out, facing, trans, items.floors, items.tidx, tpos, items.cnt, lengths
     )
-    return pose, errors, bone_err, iterations
+    return pose, errors, bone_err, iterations, fell

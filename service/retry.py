@@ -13,7 +13,7 @@ which straightens the limb, is for that).
 from __future__ import annotations
 
 import dataclasses
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
@@ -28,6 +28,13 @@ if TYPE_CHECKING:  # pragma: no cover
     from service.engine import Engine
 
 F64 = compiled.F64
+
+#: Metres: how much nearer the polish must bring an item's farthest target to be kept; where
+#: the farthest stays where it was (an unreachable target the polish does not move), the
+#: targets' mean decides, by as much. A strict ``<`` on the farthest alone kept or dropped
+#: a polish that brought another target 6 mm nearer by the last bits of an error it did not
+#: change: the same edit 1 nm across answered 5 cm apart (an API audit, 2026-12-06).
+NEARER = 1e-9
 
 
 def last_steps(engine: Engine, items: _Items, ans: BatchAnswer) -> BatchAnswer:
@@ -81,8 +88,9 @@ def polish_short(engine: Engine, items: _Items, ans: BatchAnswer, reach: F64) ->
     reach's fallback from the caller's start (plain FABRIK, the body moved across:
     ``Engine.exact_fallback``) (``serving.retry_polish``, docs/generalisation-serving-2.md
     item 37). Its ``solvers`` end with ``fabrik-polish`` (once: a path that already ends
-    with it is not given it twice). An item the polish would leave no nearer (the
-    iteration cap) keeps its answer."""
+    with it is not given it twice), or ``fabrik-fallback`` where the fallback's answer was
+    kept, as exact reach says it. An item the polish would leave no nearer (the iteration
+    cap; :data:`NEARER`) keeps its answer."""
     sel = short(items, ans, reach)
     if sel.size == 0:
         return ans
@@ -91,16 +99,41 @@ def polish_short(engine: Engine, items: _Items, ans: BatchAnswer, reach: F64) ->
     before = ans.take(sel)
     world, errors = before.pose.copy(), before.errors.copy()
     bone_err, iterations = before.max_bone_error.copy(), before.iterations.copy()
+    fell = np.zeros(sel.size, dtype=np.bool_)
     for g in _groups(few.cnt, few.n_t, few.tidx, few.w):
         m = g.members
-        world[m], errors[m], bone_err[m], its = solve_fabrik(
+        world[m], errors[m], bone_err[m], its, fell[m] = solve_fabrik(
             engine, few.take(m), polish=True, lengths=lengths[m], origin=items.poses[sel[m]]
         )
         iterations[m] += its
-    nearer = np.flatnonzero(few.farthest(errors) < few.farthest(before.errors))
-    polished = BatchAnswer(
-        world, errors, bone_err, iterations,
-        tuple(path if path[-1:] == ("fabrik-polish",) else (*path, "fabrik-polish")
-              for path in before.paths), before.path_of,
-    ).take(nearer)  # fmt: skip
+    nearer = np.flatnonzero(_nearer(few, errors, before.errors))
+    paths, path_of = _polished_paths(before, fell)
+    polished = BatchAnswer(world, errors, bone_err, iterations, paths, path_of).take(nearer)
     return ans.with_items(sel[nearer], polished)
+
+
+def _nearer(
+    items: _Items, errors: npt.NDArray[np.floating[Any]], before: npt.NDArray[np.floating[Any]]
+) -> npt.NDArray[np.bool_]:
+    """Which items ``errors`` brings nearer their targets than ``before`` (:data:`NEARER`):
+    the farthest target, or where that stays, the targets' mean."""
+    far, was = items.farthest(errors), items.farthest(before)
+    gain = np.where(items.targets(), before - errors, 0.0).sum(axis=1)  # n_t times the mean's
+    level = np.abs(far - was) <= NEARER
+    out: npt.NDArray[np.bool_] = (far < was - NEARER) | (level & (gain > NEARER * items.n_t))
+    return out
+
+
+def _polished_paths(
+    before: BatchAnswer, fell: npt.NDArray[np.bool_]
+) -> tuple[tuple[tuple[str, ...], ...], npt.NDArray[np.int64]]:
+    """Each polished item's solver path: its own, then ``fabrik-polish`` (once), or
+    ``fabrik-fallback`` where exact reach's fallback answered (``fell``)."""
+    index: dict[tuple[str, ...], int] = {}
+    path_of = np.empty(fell.size, dtype=np.int64)
+    for i, (p, f) in enumerate(zip(before.path_of.tolist(), fell.tolist(), strict=True)):
+        path = before.paths[p]
+        base = path[:-1] if path[-1:] == ("fabrik-polish",) else path
+        step = "fabrik-fallback" if f else "fabrik-polish"
+        path_of[i] = index.setdefault((*base, step), len(index))
+    return tuple(index), path_of

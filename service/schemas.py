@@ -235,7 +235,9 @@ class SolveResponse(BaseModel):
     max_bone_length_error: float = Field(description="Max relative bone-length error.")
     solvers: list[str] = Field(
         description="Solver sequence used (target-set keys), then the polishes that ran: "
-        "`fabrik-polish`, `fabrik-fallback`, `pin-polish` (pins still off, polished onto them), "
+        "`fabrik-polish` (FABRIK from the networks' answer onto the targets), `fabrik-fallback` "
+        "(FABRIK from the pose as sent instead, where the polish left a target beyond the "
+        "tolerance), `pin-polish` (pins still off, polished onto them), "
         "`fabrik-critic` (FABRIK's answer instead: the manifest's `serving.critic_fabrik`)."
     )
     model: str = Field(description="Manifest version of the models.")
