@@ -198,6 +198,32 @@ def table(rows: Sequence[tuple[str, str, Scores]]) -> list[str]:
     return lines
 
 
+#: The training studios' archives among :data:`DEFAULT_FILES` (scored for reference).
+IN_STUDIO = ("bandai-namco-research-motiondataset.tar.xz", "cmu-dance.tar.xz")
+
+
+def summary(rows: Sequence[tuple[str, str, str, Scores]]) -> list[str]:
+    """Markdown lines: per group of files (``rows``: group, file, set, scores), each set and
+    then every set, the mean over the rows of each method's MPJPE (each row a mean over its
+    edits), and the rows where exact reach is below FABRIK."""
+    head = ["files", "set", "rows", *COLUMNS, "exact < FABRIK"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for group in dict.fromkeys(g for g, _, _, _ in rows):
+        mine = [(name, s) for g, _, name, s in rows if g == group]
+        files = len({f for g, f, _, _ in rows if g == group})
+        for name in [*dict.fromkeys(n for n, _ in mine), "all sets"]:
+            some = [s for n, s in mine if name in (n, "all sets")]
+            means = {m: [float(np.mean(s.mpjpe[m])) for s in some] for m in COLUMNS}
+            below = sum(e < f for e, f in zip(means["exact"], means["FABRIK"], strict=True))
+            cells = [f"{np.mean(means[m]):.3f}" for m in COLUMNS]
+            label = f"{files} {group}"
+            lines.append(
+                "| " + " | ".join([label, name, str(len(some)), *cells, f"{below}/{len(some)}"])
+                + " |"
+            )  # fmt: skip
+    return lines
+
+
 def extract(mocap: Path, out: Path) -> list[tuple[Path, str | float | None, str]]:
     """:data:`DEFAULT_FILES` out of their archives in ``mocap`` into ``out`` (GNU tar)."""
     by_archive: dict[str, list[str]] = {}
@@ -242,17 +268,23 @@ def main(
     given: str | float | None = units
     if units is not None and units.replace(".", "", 1).isdigit():
         given = float(units)  # metres per unit
-    rows: list[tuple[str, str, Scores]] = []
+    rows: list[tuple[str, str, str, Scores]] = []
     with tempfile.TemporaryDirectory() as tmp:
-        todo = [(p, given, root_position) for p in files] if files else extract(mocap, Path(tmp))
-        for path, stated, root in todo:
+        if files:
+            todo = [(p, given, root_position, "given") for p in files]
+        else:
+            groups = ["in-studio" if a in IN_STUDIO else "held-out" for a, *_ in DEFAULT_FILES]
+            todo = [(*f, g) for f, g in zip(extract(mocap, Path(tmp)), groups, strict=True)]
+        for path, stated, root, group in todo:
             with unreadable(path):
                 scored = score_file(engine, path, edits, seed, stated, on_pelvis, root)
-            rows.extend((path.name, name, scores) for name, scores in scored.items())
+            rows.extend((group, path.name, name, scores) for name, scores in scored.items())
     mode = " --on-pelvis" if on_pelvis else ""
     when = datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC")
     print(f"Written by `python -m bench.characters{mode}` ({when}, models {engine.version}).\n")
-    print("\n".join(table(rows)))
+    print("\n".join(table([(f, n, s) for _, f, n, s in rows])))
+    print("\nMean over the rows (MPJPE, cm):\n")
+    print("\n".join(summary(rows)))
 
 
 if __name__ == "__main__":

@@ -12,5 +12,8 @@ def table_of(app: Any, args: list[str]) -> tuple[str, list[str]]:
     (the command must succeed)."""
     result = CliRunner().invoke(app, args)
     assert result.exit_code == 0, result.output
-    header, _, *rows = [ln for ln in result.output.strip().splitlines() if ln.startswith("|")]
+    lines = result.output.strip().splitlines()
+    first = next(i for i, ln in enumerate(lines) if ln.startswith("|"))
+    end = next((i for i in range(first, len(lines)) if not lines[i].startswith("|")), len(lines))
+    header, _, *rows = lines[first:end]  # the first table (a summary may follow)
     return header, rows
