@@ -80,7 +80,13 @@ class Target(_Body):
         default=1.0,
         gt=0.0,
         le=MAX_WEIGHT,
-        description="Relative importance: later in the solver sequence, more pull in FABRIK.",
+        description=(
+            "Relative importance. The networks read no weight: weights order the neural "
+            "solvers, a heavier target's running later in the sequence (its target kept best); "
+            "any difference reorders and equal weights keep the default order, so a tiny change "
+            "can change the answer as much as a large one. FABRIK (the method, and the polish "
+            "of exact reach and pins) pulls by the weight's size."
+        ),
     )
 
 
