@@ -7,7 +7,6 @@ items, the alias); conventions: docs/characters.md."""
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable
 from typing import TypeVar
 
@@ -46,10 +45,8 @@ async def step(budget: Budget, stage: str, work: Callable[[], R]) -> R:
     ``work`` in a worker thread on a compute token taken within the deadline (504 naming
     ``stage``, :meth:`Budget.token`)."""
     await budget.client_gone()
-    t = time.perf_counter()
-    out = await budget.in_thread(work, stage)
-    budget.compute += time.perf_counter() - t
-    return out
+    with budget.timing():
+        return await budget.in_thread(work, stage)
 
 
 Prepared = tuple[Character, SolveProblem]

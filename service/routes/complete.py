@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import time
-
 from fastapi import APIRouter, Response
 
 from service.body import BodyRoute
@@ -20,9 +18,8 @@ async def complete(req: CompleteRequest, engine: ReadyEngine, budget: RequestBud
     """A whole pose from key points alone (at least the six base points)."""
     points = keypoints(req)
     await budget.check()
-    t = time.perf_counter()
-    result = await budget.in_thread(
-        lambda: engine.complete(points, req.bone_lengths, floor=req.floor), "the completion"
-    )
-    budget.compute += time.perf_counter() - t
+    with budget.timing():
+        result = await budget.in_thread(
+            lambda: engine.complete(points, req.bone_lengths, floor=req.floor), "the completion"
+        )
     return json_response(complete_payload(list(points), result, engine.version), budget.compute)

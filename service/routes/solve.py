@@ -5,7 +5,6 @@ the client's own), answered by ``service.routes.characters.answer_character``'s 
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable
 from typing import Annotated, Any, TypeVar
 
@@ -120,9 +119,8 @@ async def solve_one(p: SolveProblem, pinned: bool, engine: Engine, budget: Budge
     (``Budget.due``: a clock read, no await), as the worker path does before each wave."""
     if inline(p, pinned, engine):
         budget.due("the solve")
-        t = time.perf_counter()
-        result = engine.solve_lone(p)
-        budget.compute += time.perf_counter() - t
+        with budget.timing():
+            result = engine.solve_lone(p)
         if result is not None:
             return result
     (result,) = await budget.run(engine.solve, [p], Pricing.of(engine))
