@@ -9,8 +9,8 @@ seeded directions, ``--reps`` times per file and set, each without pins and with
 ankles pinned. Kept: the edits whose canonical answer met every target and pin (as
 ``tests/service/test_character_reach.py -k carry`` keeps them). Printed: how many, the
 distance of the character's pelvis (its canonical point) from the answer's (p50, p90,
-max, mm), its worst pin (mm), and every edit where the character misses a target the
-answer met (``reached: false``), with its miss.
+max, mm; the three farthest), its worst pin (mm), and every edit where the character
+misses a target the answer met (``reached: false``), with its miss.
 
     MARIONETTE_MOCAP=/work/shared/mocap python scripts/figures/pelvis_distance.py [--reps 5]
 """
@@ -83,7 +83,9 @@ def main() -> None:
 
     engine = Engine(args.models, threads=1)
     rng = np.random.default_rng(args.seed)
-    pelvis, pin_worst, missed, total = [], 0.0, [], 0
+    pelvis: list[float] = []
+    names: list[str] = []
+    pin_worst, missed, total = 0.0, [], 0
     with tempfile.TemporaryDirectory() as tmp:
         files = extract_bvh(args.mocap, Path(tmp))
         for name in sorted(files):
@@ -99,6 +101,7 @@ def main() -> None:
                 got = ch.to_service(canonical_points(ch.skel, edit.pose, ch.jmap))
                 miss = np.linalg.norm(got[p.target_idx] - p.target_pos, axis=1)
                 pelvis.append(float(np.linalg.norm(got[PELVIS] - res.pose[PELVIS])))
+                names.append(what)
                 if miss.size > p.n_targets:
                     pin_worst = max(pin_worst, float(miss[p.n_targets :].max()))
                 if (miss[: p.n_targets] > p.tolerance).any():
@@ -109,6 +112,8 @@ def main() -> None:
     p50, p90 = np.percentile(mm, [50, 90])
     print(f"pelvis from the answer's (mm): p50 {p50:.1f}, p90 {p90:.1f}, max {mm.max():.1f}; "
           f"worst pin {pin_worst * 1e3:.3f} mm")  # fmt: skip
+    far = np.argsort(-mm)[:3]
+    print("farthest: " + "; ".join(f"{names[i]} {mm[i]:.1f} mm" for i in far))
     print(f"a target the answer met missed by the character: {len(missed)}")
     for line in missed:
         print(f"  {line}")
