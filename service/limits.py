@@ -14,7 +14,7 @@ poses/s on 2); between waves the request checks its deadline and its client, and
 
 The polish of a soft answer its retry still leaves short (``serving.retry_polish``) is not
 priced: it runs for the few answers the networks leave over ``retry_reach`` (5 mm) short
-(2-10 % of real edits, docs/generalisation-serving-2.md items 37 and 46), each bounded by
+(2-7 % of real edits: docs/service.md, `scripts/figures/polish_share.py`), each bounded by
 the iteration cap (at most ~0.6 ms an item, 5 targets at tolerance 0, both stages at the
 cap: 512 iterations; where the polish leaves a target short, exact reach's fallback runs
 FABRIK twice more, from the caller's start and from the body moved across, each as
