@@ -193,7 +193,7 @@ class DeadlineExceeded(PoseError):
     status = 504
     title = "Deadline exceeded"
     type_ = "deadline-exceeded"
-    retry_after = 1
+    retry_after: int | None = 1  # (none where the request's own work took the time)
 
 
 class ClientDisconnected(PoseError):

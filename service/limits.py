@@ -214,6 +214,10 @@ class ComputeLimiter:
             ready.set()
 
 
+#: The ASGI scope's key for :attr:`Budget.waited`.
+WAITED = "marionette.token_wait"
+
+
 class Budget:
     """One request's deadline and its client; ``compute`` accumulates engine seconds."""
 
@@ -222,8 +226,16 @@ class Budget:
         self.t0: float = request.scope.get(T0, time.perf_counter())
         self.deadline_seconds = deadline_seconds
         self.compute = 0.0
-        self.waited = 0.0  # seconds waited for compute tokens (:meth:`token`)
         self._watch: asyncio.Future[Message] | None = None
+
+    @property
+    def waited(self) -> float:
+        """Seconds the request waited for compute tokens (:meth:`token`), by every budget
+        of it (its body's reading has one of its own): kept in its ASGI scope."""
+        return float(self.request.scope.get(WAITED, 0.0))
+
+    def _waited(self, seconds: float) -> None:
+        self.request.scope[WAITED] = self.waited + seconds
 
     @contextlib.contextmanager
     def timing(self) -> Iterator[None]:
@@ -280,10 +292,28 @@ class Budget:
         ``done`` of ``total`` ``noun`` were done)."""
         await self.client_gone(done, total)
         if self.left <= 0:
-            raise DeadlineExceeded(
-                f"the request needed more than the {self.deadline_seconds:g} s deadline "
-                f"({done} of {total} {noun} done); send smaller batches"
-            )
+            raise self.overrun(done, total, noun)
+
+    def overrun(self, done: int, total: int, noun: str) -> DeadlineExceeded:
+        """The 504 of work the deadline stopped: ``done`` and ``total`` as members too (a
+        client sizing its batches need not parse the detail); ``Retry-After`` unless the
+        request's own compute took half its deadline or more (the same request would need
+        as long again, however idle the server: an API audit, 2026-12-06, saw a batch that
+        needs ~4.5 s told to retry after 1 s at every try). Where the time went to waiting
+        (compute threads, a busy event loop, the body), a retry may fit."""
+        head = f"the request needed more than the {self.deadline_seconds:g} s deadline"
+        own = self.compute >= self.deadline_seconds / 2
+        why = (
+            f"{self.compute:.2f} s of its own compute" if own
+            else f"{self.compute:.2f} s of it compute, the rest waiting: the server is busy"
+        )  # fmt: skip
+        exc = DeadlineExceeded(
+            f"{head} ({done} of {total} {noun} done; {why}); send smaller batches",
+            done=done, total=total,
+        )  # fmt: skip
+        if own:
+            exc.retry_after = None
+        return exc
 
     async def token(self, limiter: ComputeLimiter, borrower: object, stage: str) -> None:
         """Take one of ``limiter``'s compute tokens for ``borrower``, waiting no longer than
@@ -296,7 +326,7 @@ class Budget:
                 try:
                     await limiter.acquire_on_behalf_of(borrower, self.t0)
                 finally:
-                    self.waited += time.perf_counter() - t
+                    self._waited(time.perf_counter() - t)
                 return
         if left <= 0:
             raise self.late(stage)

@@ -325,8 +325,9 @@ def test_columnar_limits(models_dir: Path, synthetic_poses: PosePairs) -> None:
         assert "5 items exceed the limit of 4 per batch" in detail
     with make_client(models_dir, deadline_seconds=1e-9) as late:
         resp = late.post("/v1/solve/batch", json=body)
-        assert resp.status_code == 504 and resp.headers["retry-after"] == "1"
+        assert resp.status_code == 504 and resp.headers["retry-after"] == "1"  # no work done
         assert "0 of 5 items done" in resp.json()["detail"]
+        assert (resp.json()["done"], resp.json()["total"]) == (0, 5)
     with make_client(models_dir) as c:
         assert c.post("/v1/solve/batch", json=body).status_code == 200
         metrics = c.get("/metrics").text
