@@ -248,7 +248,10 @@ class SolveResponse(BaseModel):
     )
     model: str = Field(description="Manifest version of the models.")
     method: Literal["neural", "fabrik"]
-    iterations: int = Field(description="FABRIK iterations used (0 when none ran).")
+    iterations: int = Field(
+        description="FABRIK iterations used: 0 when none ran, or when a polish in `solvers` "
+        "found its targets already met."
+    )
 
 
 class Keypoint(_Body):
