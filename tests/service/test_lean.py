@@ -80,8 +80,8 @@ def test_lean_answers_are_the_general_paths(
         if reach == "exact":  # the polish, or where it misses (a pinned pelvis), plain FABRIK
             assert one.solvers[-1] in ("fabrik-polish", "fabrik-fallback")
             assert one.reached.all() or pins  # a pin may hold a target out of reach
-        elif pins:
-            assert one.solvers[-1] == "fabrik-polish"
+        elif pins:  # the pins' polish, or the retry's (or its fallback from the start)
+            assert one.solvers[-1] in ("fabrik-polish", "fabrik-fallback")
         else:
             assert one.iterations == 0 and "fabrik-polish" not in one.solvers
 
