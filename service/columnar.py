@@ -114,7 +114,11 @@ def _numbers(rows: Any, loc: tuple[Any, ...], width: int, n: int, errs: _Errors,
         errs.add(loc, "list_type", "Input should be a valid list")
         return None
     if len(rows) != n:
-        errs.add(loc, "rows", f"{len(rows)} rows for {n} poses: one row per pose")
+        if rows and not isinstance(rows[0], list):  # one row, as joints and weights may be
+            errs.add(loc, "rows", f"a list of {n} rows (one per pose), not one row of "
+                     f"{len(rows)} numbers: {loc[-1]} are never shared")  # fmt: skip
+        else:
+            errs.add(loc, "rows", f"{len(rows)} rows for {n} poses: one row per pose")
         return None
     arr: np.ndarray[Any, Any] | None = None
     if not suspect:

@@ -245,6 +245,10 @@ def test_columnar_errors_name_item_and_field(client: Any, synthetic_poses: PoseP
         (edited("targets/joints/4/1", SETS[1][0]), "targets.joints[4][1]: duplicate target"),
         (edited("targets/positions/9/5", float("inf")), "targets.positions[9][5]: must be a fin"),
         (edited("targets/positions", good["targets"]["positions"][:3]), "3 rows for 20 poses"),
+        (
+            edited("targets/positions", good["targets"]["positions"][0]),  # one row, as joints
+            "targets.positions: a list of 20 rows (one per pose), not one row of",
+        ),
         (edited("targets/extra", 1), "targets.extra: Extra inputs are not permitted"),
         (edited("pins", ["left_foot", "left_foot"]), "pins[1]: joint 'left_foot' is pinned twice"),
         (edited("options/reach", "close"), "options.reach"),
