@@ -28,7 +28,14 @@ from pydantic import BaseModel, ValidationError
 
 from core.text import clip, quoted
 from service import bounded
-from service.errors import BodyError, BodyInvalid, DeadlineExceeded, MalformedBody, PoseError
+from service.errors import (
+    BodyError,
+    BodyInvalid,
+    DeadlineExceeded,
+    InvalidRequest,
+    MalformedBody,
+    PoseError,
+)
 from service.limits import Budget
 
 NO_BODY = "the request has no body: send a JSON object"
@@ -86,6 +93,9 @@ def parse(
         raise BodyError(exc) from None
     if model is None:
         return data
+    if not isinstance(data, dict):  # (pydantic would name the model's Python class)
+        forms = getattr(model, "BODY_FORMS", "a JSON object")
+        raise BodyError(InvalidRequest(f"body: {forms} is required, not {_json_type(data)}"))
     ctx = bounded.context(settings, limit)
     try:
         return model.model_validate(data, context=ctx)
@@ -93,6 +103,17 @@ def parse(
         raise BodyInvalid(*bounded.errors_of(exc, ctx, data)) from None
     except PoseError as exc:  # a validator's refusal of the whole body
         raise BodyError(exc) from None
+
+
+def _json_type(value: Any) -> str:
+    """What a decoded JSON value is, in JSON's words."""
+    if value is None:
+        return "null"
+    if isinstance(value, bool):
+        return "a boolean"
+    if isinstance(value, int | float):
+        return "a number"
+    return "a string" if isinstance(value, str) else "an array"
 
 
 class _Request(Request):

@@ -6,7 +6,7 @@ the client's own), answered by ``service.routes.characters.answer_character``'s 
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Annotated, Any, TypeVar
+from typing import Annotated, Any, ClassVar, TypeVar
 
 from fastapi import APIRouter, Request, Response
 from pydantic import (
@@ -66,6 +66,11 @@ class BatchBody(
     """A batch in one of two forms: the **item list** (`items`, each in the pose or the
     character form, answered item by item) or the **columnar form** (`poses`, `targets`,
     `pins`, `options`: arrays in, arrays out; docs/limits.md)."""
+
+    #: What a body that is no JSON object is told to send (``service.body.parse``).
+    BODY_FORMS: ClassVar[str] = (
+        'a JSON object, {"items": [...]} or the columnar form {"poses": [...], "targets": {...}},'
+    )
 
     @model_validator(mode="wrap")
     @classmethod

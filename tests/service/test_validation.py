@@ -107,3 +107,17 @@ def test_the_raw_answer_and_the_kept_bones_are_answered_as_before(client: Any) -
         r = client.post(path.get(name, "/v1/bvh/solve" if name == "bvh_solve" else "/v1/solve"),
                         json=body)  # fmt: skip
         assert r.status_code == 200, (name, r.text)
+
+
+@pytest.mark.parametrize("path", ["/v1/solve", "/v1/solve/batch", "/v1/complete", "/v1/bvh/solve"])
+@pytest.mark.parametrize(("raw", "what"), [("null", "null"), ("[]", "an array"),
+                                           ("3", "a number"), ('"x"', "a string")])  # fmt: skip
+def test_a_body_that_is_no_json_object_is_told_so(
+    client: Any, path: str, raw: str, what: str
+) -> None:
+    """Told in JSON's words, not pydantic's Python class names ('a valid dictionary or
+    instance of BatchRequest', which named only the item list: an API audit); a batch
+    is told both of its forms."""
+    resp = client.post(path, content=raw, headers={"content-type": "application/json"})
+    assert_problem(resp, 422, "body: a JSON object", f"is required, not {what}")
+    assert ("columnar form" in resp.json()["detail"]) == (path == "/v1/solve/batch")
