@@ -14,6 +14,7 @@ to paste, then one JSON line. The loopback form, without a container, is
 
     PYTHONPATH=. python scripts/figures/container_bursts.py localhost/marionette:smoke
     PYTHONPATH=. python scripts/figures/container_bursts.py IMAGE --bursts 4 --after 5 30 60
+    PYTHONPATH=. python scripts/figures/container_bursts.py IMAGE --unsetenv MALLOC_ARENA_MAX
 """
 
 from __future__ import annotations
@@ -55,11 +56,20 @@ def main() -> None:
     parser.add_argument("image")
     parser.add_argument("--bursts", type=int, default=10)
     parser.add_argument("--after", type=float, nargs="+", default=[60.0], help="seconds")
+    parser.add_argument(
+        "--unsetenv",
+        action="append",
+        default=[],
+        metavar="NAME",
+        help="unset the image's NAME (MALLOC_ARENA_MAX: glibc's default arenas)",
+    )
     args = parser.parse_args()
     engine, name, p = podman(), f"marionette-figures-{os.getpid()}", port()
     flags = [*SECURITY, "-p", f"127.0.0.1:{p}:8000", "--health-interval", "disable"]
+    flags += [f"--unsetenv={name}" for name in args.unsetenv]
     loads = heavy_loads()
     out: dict[str, object] = {"image": engine.inspect("image", args.image, "{{.Id}}")[:12]}
+    out["unset"] = args.unsetenv
     codes: Counter[int] = Counter()
     after: list[list[int]] = []
     engine.run("run", "-d", "--name", name, *flags, args.image)
@@ -91,7 +101,8 @@ def main() -> None:
     out["codes"] = dict(sorted(codes.items()))
     last = ", ".join("/".join(map(str, reads)) for reads in after)
     print(
-        f"{args.image} ({out['image']}): {out['rss_mib_ready']} MiB once ready; after the "
+        f"{args.image} ({out['image']}{''.join(f', {n} unset' for n in args.unsetenv)}): "
+        f"{out['rss_mib_ready']} MiB once ready; after the "
         f"bursts ({'/'.join(f'{a:g}' for a in args.after)} s) {last} MiB; VmHWM "
         f"{out.get('rss_mib_peak')} MiB"
     )

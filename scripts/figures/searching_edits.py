@@ -6,6 +6,7 @@ not read yet). Each sub-command starts a fresh ``pose-service`` of this tree
     PYTHONPATH=. python scripts/figures/searching_edits.py lone    # one client, 5-target edits
     PYTHONPATH=. python scripts/figures/searching_edits.py mixed   # 5-target and 2-target at once
     PYTHONPATH=. python scripts/figures/searching_edits.py unread  # 64 clients, 18 targets
+    PYTHONPATH=. python scripts/figures/searching_edits.py bare    # uvloop against asyncio
 
 An edit's targets are its joints in ``docs/examples/solve.json``'s pose turned a quarter
 about the vertical through the pelvis (a turn the gate, ``serving.turn_gate``, searches
@@ -17,20 +18,27 @@ solves, ~20 ms of engine time against ~6 with ``turn_search: false``, and keeps 
 ``unread``: each client sends its edits one after another on its own connection; the
 time a request waited unread is the client's time (send to answer) less the server's
 ``X-Total-Time`` (its clock starts when the HTTP protocol has read the request's head).
+
+``bare``: no service, a bare HTTP server on one event loop (uvloop's, then asyncio's, each
+in a process of its own) that blocks its loop ``--step-ms`` for every request, as a
+solve on the loop did; the same clients stamp the send time (``time.time()``) in a
+header, and the server answers with how long after it read the request's head.
 """
 
 from __future__ import annotations
 
 import argparse
+import asyncio
 import http.client
 import json
+import multiprocessing
 import statistics
 import threading
 import time
 from typing import Any
 
 import numpy as np
-from loopback import example, host_load, server
+from loopback import example, host_load, port, server
 
 from core.skeleton import JOINT_NAMES
 from tests.service.server import Server
@@ -162,6 +170,89 @@ def unread(args: argparse.Namespace) -> None:
     )
 
 
+def bare_server(port: int, loop: str, step: float) -> None:
+    """The bare server: each request's head read, ``step`` s of the loop blocked, an
+    answer whose body is the time (s) from the client's stamp to the head's read."""
+
+    async def handle(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        try:
+            while True:
+                head = await reader.readuntil(b"\r\n\r\n")
+                read = time.time()
+                sent = next(float(h.split(b":")[1]) for h in head.split(b"\r\n")
+                            if h.lower().startswith(b"x-sent:"))  # fmt: skip
+                time.sleep(step)  # a solve on the loop
+                body = f"{read - sent:.6f}".encode()
+                writer.write(b"HTTP/1.1 200 OK\r\ncontent-length: %d\r\n\r\n%s" % (len(body), body))
+                await writer.drain()
+        except (asyncio.IncompleteReadError, ConnectionError):
+            writer.close()
+
+    async def serve() -> None:
+        srv = await asyncio.start_server(handle, "127.0.0.1", port, backlog=256)
+        async with srv:
+            await srv.serve_forever()
+
+    if loop == "uvloop":
+        import uvloop
+
+        uvloop.run(serve())
+    else:
+        asyncio.run(serve())
+
+
+def bare_gaps(loop: str, clients: int, each: int, step: float) -> list[float]:
+    """The bare server on ``loop`` in a process of its own, ``clients`` × ``each``
+    requests: each one's time unread (s)."""
+    p = port()
+    proc = multiprocessing.Process(target=bare_server, args=(p, loop, step))
+    proc.start()
+    gaps: list[float] = []
+    try:
+        deadline = time.monotonic() + 30
+        while True:
+            try:
+                probe = http.client.HTTPConnection("127.0.0.1", p, timeout=1)
+                probe.connect()
+                probe.close()
+                break
+            except OSError:
+                if time.monotonic() > deadline:
+                    raise
+                time.sleep(0.1)
+        start = threading.Barrier(clients)
+
+        def run() -> None:
+            conn = http.client.HTTPConnection("127.0.0.1", p, timeout=120)
+            start.wait()
+            for _ in range(each):
+                conn.request("GET", "/", headers={"x-sent": f"{time.time():.6f}"})
+                gaps.append(float(conn.getresponse().read()))
+            conn.close()
+
+        threads = [threading.Thread(target=run) for _ in range(clients)]
+        for th in threads:
+            th.start()
+        for th in threads:
+            th.join()
+    finally:
+        proc.terminate()
+        proc.join()
+    return gaps
+
+
+def bare(args: argparse.Namespace) -> None:
+    """``--clients`` clients × ``--each`` requests against the bare server on each loop:
+    how long requests waited unread (client stamp to the server's read)."""
+    for loop in ("uvloop", "asyncio"):
+        gaps = bare_gaps(loop, args.clients, args.each, args.step_ms / 1000)
+        print(
+            f"bare {loop} server, {args.step_ms:g} ms blocked a request, {args.clients} clients "
+            f"× {args.each}: unread p50 {ms(gaps)}, p99 {np.quantile(gaps, 0.99):.2f} s, "
+            f"max {max(gaps):.2f} s"
+        )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="figure", required=True)
@@ -177,6 +268,11 @@ def main() -> None:
     p.add_argument("--each", type=int, default=4)
     p.add_argument("--passes", type=int, default=4)
     p.set_defaults(run=unread)
+    p = sub.add_parser("bare", help=bare.__doc__)
+    p.add_argument("--clients", type=int, default=64)
+    p.add_argument("--each", type=int, default=4)
+    p.add_argument("--step-ms", type=float, default=20.0)
+    p.set_defaults(run=bare)
     args = parser.parse_args()
     args.run(args)
     print(host_load())
