@@ -44,7 +44,8 @@ def fill(prefix: str, unit: str, suffix: str) -> bytes:
 def unknown_keys(body: Body) -> bytes:
     """``body`` with keys ``k0``, ``k1``, … added up to SIZE."""
     head = json.dumps(body)[:-1] + ","
-    keys, size = [], len(head)
+    keys: list[str] = []
+    size = len(head)
     while size < SIZE - 20:
         key = f'"k{len(keys)}":0'
         keys.append(key)

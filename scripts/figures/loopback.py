@@ -53,7 +53,10 @@ def port() -> int:
 def server(**env: str) -> Iterator[Server]:
     """A fresh ``pose-service`` of this tree on 127.0.0.1, ready, its log in a temp folder;
     ``env`` adds environment variables, e.g. ``POSE_DEADLINE_SECONDS="2"``."""
-    with tempfile.TemporaryDirectory() as tmp, serve(MODELS, Path(tmp), port=port(), **env) as s:
+    with (
+        tempfile.TemporaryDirectory() as tmp,
+        serve(MODELS, Path(tmp), True, (), port(), (), **env) as s,
+    ):
         yield s
 
 

@@ -44,7 +44,7 @@ from core.skeleton import JOINT_NAMES
 from tests.service.server import Server
 
 FIVE = ["head", "left_wrist", "right_wrist", "left_ankle", "right_ankle"]
-EIGHTEEN = JOINT_NAMES[3:]
+EIGHTEEN = list(JOINT_NAMES[3:])
 
 
 def edit(joints: list[str], turn_deg: float, passes: int | None = None) -> bytes:
