@@ -9,7 +9,7 @@ once to a fresh server (``tests/service/server.py``'s ``serve``, this tree, the 
 settings, 127.0.0.1:18750-18799); one Markdown row per case and N: the server's RSS
 before, its peak (VmHWM, reset before the requests) and after, the answers' statuses,
 the wall time and the slowest ``/v2/health/live`` answer meanwhile (a probe every 10 ms).
-A summary follows the table. 32 shapes × 2 sizes: ~15 min on a 2-core host.
+A summary follows the table. 32 shapes × 2 sizes: 5-10 min on a 2-core host.
 
     PYTHONPATH=. python scripts/figures/decode_memory.py               # every case, N = 6 and 8
     PYTHONPATH=. python scripts/figures/decode_memory.py --only bvh 8
