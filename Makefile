@@ -53,8 +53,8 @@ run: $(STAMP)
 	$(BIN)/pose-service --host $(HOST) --port $(PORT)
 
 lint: $(STAMP)
-	$(BIN)/ruff check core service trainer tests bench
-	$(BIN)/ruff format --check core service trainer tests bench
+	$(BIN)/ruff check core service trainer tests bench scripts
+	$(BIN)/ruff format --check core service trainer tests bench scripts
 	$(BIN)/mypy
 
 format: $(STAMP)

@@ -16,10 +16,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from bench.edits import joint_idx, problems, sample_pairs  # noqa: E402
-from bench.heldout import world_pairs  # noqa: E402
-from service.engine import Engine  # noqa: E402
-from trainer.data.dataset import load_dataset  # noqa: E402
+from bench.edits import joint_idx, problems, sample_pairs
+from bench.heldout import world_pairs
+from service.engine import Engine
+from trainer.data.dataset import load_dataset
 
 
 def main() -> None:

@@ -21,11 +21,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from bench.edits import Edits, sample_pairs, solve  # noqa: E402
-from bench.heldout import PELVIS, world_pairs  # noqa: E402
-from core.skeleton import JOINT_INDEX  # noqa: E402
-from service.engine import Engine  # noqa: E402
-from trainer.data.dataset import load_dataset  # noqa: E402
+from bench.edits import Edits, sample_pairs, solve
+from bench.heldout import PELVIS, world_pairs
+from core.skeleton import JOINT_INDEX
+from service.engine import Engine
+from trainer.data.dataset import load_dataset
 
 FEET = [JOINT_INDEX[n] for n in ("left_ankle", "left_foot", "right_ankle", "right_foot")]
 METHODS = ("identity", "fabrik", "neural_bone", "neural_exact")
