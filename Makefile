@@ -58,8 +58,8 @@ lint: $(STAMP)
 	$(BIN)/mypy
 
 format: $(STAMP)
-	$(BIN)/ruff format core service trainer tests bench
-	$(BIN)/ruff check --fix core service trainer tests bench
+	$(BIN)/ruff format core service trainer tests bench scripts
+	$(BIN)/ruff check --fix core service trainer tests bench scripts
 
 test: $(STAMP) lint
 	$(BIN)/pytest
