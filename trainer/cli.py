@@ -66,8 +66,9 @@ def _train_and_export(
 
         try:
             check_replaceable(Path(cfg.out_dir))
-        except FileExistsError as exc:
-            raise typer.BadParameter(str(exc), param_hint="--out") from None
+        except FileExistsError as exc:  # one line: a path in a usage box was broken up
+            typer.echo(f"error: {exc}", err=True)
+            raise typer.Exit(1) from None
     from trainer.data.dataset import DatasetError
 
     t0 = time.perf_counter()

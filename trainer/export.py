@@ -300,7 +300,21 @@ def export_all(
 
 
 def check_replaceable(final: Path) -> None:
-    """Refuse to replace a folder that holds files but is not a models folder."""
+    """Refuse an ``out_dir`` the export must not replace: a file, or a symbolic link (the
+    swap renamed either aside to a hidden ``.<name>.old-<pid>``, where it stayed: the file
+    lost from view, the link's deployment left stale; a studio audit, D2); a folder that
+    holds files but is not a models folder."""
+    if final.is_symlink():
+        raise FileExistsError(
+            f"{final}: a symbolic link (to {os.readlink(final)}), not a folder: the export "
+            "replaces the models folder whole and would leave the link behind, renamed; "
+            "give the folder itself, or a new path, as out_dir / --out"
+        )
+    if final.exists() and not final.is_dir():
+        raise FileExistsError(
+            f"{final}: a file, not a folder: the export would move it aside and replace it; "
+            "give a new or empty folder, or a models folder to replace, as out_dir / --out"
+        )
     if final.is_dir() and any(final.iterdir()) and not (final / "manifest.json").is_file():
         raise FileExistsError(
             f"{final}: the folder holds files but no manifest.json (not a models folder); "

@@ -53,3 +53,30 @@ def test_plot_data_draws_beside_its_dataset_by_default(small_dataset: Path, tmp_
     assert (tmp_path / "studio.png").stat().st_size > 0
     assert f"wrote {tmp_path / 'studio.png'}" in r.output.replace("\n", "")
     assert docs_png.read_bytes() == before
+
+
+def test_an_out_dir_that_is_a_file_or_a_link_is_refused_before_training(
+    small_dataset: Path, tmp_path: Path
+) -> None:
+    """A studio audit (D2): ``out_dir`` / ``--out`` naming an existing file had the file
+    renamed to a hidden ``.name.old-<pid>`` and replaced by the models folder; a symbolic
+    link to a models folder was likewise left behind, renamed, and replaced by a real folder
+    (the deployment it pointed to stale). Both are refused in one line naming the path,
+    before any stage trains."""
+    notes = tmp_path / "notes.txt"
+    notes.write_text("studio notes: DO NOT DELETE\n")
+    real = tmp_path / "models-v3"
+    real.mkdir()
+    (real / "manifest.json").write_text('{"version": "v3"}\n')
+    link = tmp_path / "current"
+    link.symlink_to(real)
+    for out, what in ((notes, "a file, not a folder"), (link, "a symbolic link")):
+        run = tmp_path / f"run-{out.name}"
+        args = ["train", "--dataset", str(small_dataset), "--run-dir", str(run), "--out", str(out)]
+        r = CliRunner().invoke(app, args)
+        assert r.exit_code == 1 and "Traceback" not in r.output, r.output
+        assert str(out) in r.output.replace("\n", "") and what in r.output, r.output
+        assert not run.exists()  # nothing trained
+    assert notes.read_text() == "studio notes: DO NOT DELETE\n"
+    assert link.is_symlink() and (link / "manifest.json").is_file()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["current", "models-v3", "notes.txt"]
