@@ -65,7 +65,7 @@ def _train_and_export(
         from trainer.export import check_replaceable
 
         try:
-            check_replaceable(Path(cfg.out_dir))
+            check_replaceable(Path(cfg.out_dir), Path(cfg.run_dir))
         except FileExistsError as exc:  # one line: a path in a usage box was broken up
             typer.echo(f"error: {exc}", err=True)
             raise typer.Exit(1) from None

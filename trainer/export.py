@@ -287,7 +287,7 @@ def export_all(
     leaves the models that were there (it left new networks beside the old manifest:
     a folder the service refused), and no file of an older export stays behind."""
     final = Path(out_dir or cfg.out_dir)
-    check_replaceable(final)
+    check_replaceable(final, Path(cfg.run_dir))
     out = final.parent / f".{final.name}.partial-{os.getpid()}"
     shutil.rmtree(out, ignore_errors=True)
     out.mkdir(parents=True)
@@ -299,11 +299,13 @@ def export_all(
     return manifest
 
 
-def check_replaceable(final: Path) -> None:
+def check_replaceable(final: Path, run_dir: Path | None = None) -> None:
     """Refuse an ``out_dir`` the export must not replace: a file, or a symbolic link (the
     swap renamed either aside to a hidden ``.<name>.old-<pid>``, where it stayed: the file
     lost from view, the link's deployment left stale; a studio audit, D2); a folder that
-    holds files but is not a models folder."""
+    holds files but is not a models folder; a folder that is, or holds, ``run_dir`` (the
+    checkpoints would be replaced with it: it trained every stage, then the export failed
+    with a traceback, D3). ``out_dir`` inside ``run_dir`` is fine (``train --quick``'s)."""
     if final.is_symlink():
         raise FileExistsError(
             f"{final}: a symbolic link (to {os.readlink(final)}), not a folder: the export "
@@ -315,6 +317,15 @@ def check_replaceable(final: Path) -> None:
             f"{final}: a file, not a folder: the export would move it aside and replace it; "
             "give a new or empty folder, or a models folder to replace, as out_dir / --out"
         )
+    if run_dir is not None:
+        models, run = final.resolve(), run_dir.resolve()
+        if run == models or models in run.parents:
+            where = "is" if run == models else "is inside"
+            raise FileExistsError(
+                f"{final}: the run dir {run_dir} {where} it, and the export replaces this "
+                "folder whole (the checkpoints with it): give run_dir / --run-dir and "
+                "out_dir / --out separate folders"
+            )
     if final.is_dir() and any(final.iterdir()) and not (final / "manifest.json").is_file():
         raise FileExistsError(
             f"{final}: the folder holds files but no manifest.json (not a models folder); "

@@ -80,3 +80,20 @@ def test_an_out_dir_that_is_a_file_or_a_link_is_refused_before_training(
     assert notes.read_text() == "studio notes: DO NOT DELETE\n"
     assert link.is_symlink() and (link / "manifest.json").is_file()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["current", "models-v3", "notes.txt"]
+
+
+def test_a_run_dir_in_the_out_dir_is_refused_before_training(
+    small_dataset: Path, tmp_path: Path
+) -> None:
+    """A studio audit (D3): ``run_dir`` equal to, or inside, ``out_dir`` passed the check
+    before training, trained every stage, then the export died with a traceback (the folder
+    it replaces whole held the checkpoints). Refused up front, naming both; ``out_dir``
+    inside ``run_dir`` (``--quick``'s ``runs/quick/models``) stays allowed."""
+    for run, out in ((tmp_path / "same", tmp_path / "same"), (tmp_path / "nest" / "run",
+                     tmp_path / "nest")):  # fmt: skip
+        args = ["train", "--dataset", str(small_dataset), "--run-dir", str(run), "--out", str(out)]
+        r = CliRunner().invoke(app, args)
+        text = r.output.replace("\n", "")
+        assert r.exit_code == 1 and "Traceback" not in r.output, r.output
+        assert f"the run dir {run}" in text and "separate folders" in text, r.output
+        assert not out.exists() and not run.exists()
