@@ -252,6 +252,18 @@ class SolverConfig(_Section):
 
     _v = field_validator("sets", "long_sets")(_check_joints)
 
+    @field_validator("sets", "long_sets")
+    @classmethod
+    def _once(cls, sets: list[list[str]]) -> list[list[str]]:
+        """Each set once (its joints in any order): a set listed twice trained every stage,
+        then the export failed ("model names must be unique"; a studio audit, D9)."""
+        seen: set[str] = set()
+        for joints in sets:
+            if (key := set_key(joints)) in seen:
+                raise ValueError(f"{joints} listed twice (a set's joints in any order)")
+            seen.add(key)
+        return sets
+
     def weight_of(self, joints: list[str], long: bool = False) -> float:
         """The weight of the goal's other joints the solver of ``joints`` trains with: the
         long bank's (``long``) ``long_other_weight``, a shared set's its ``other_weights``

@@ -70,3 +70,23 @@ def test_finite_numbers_are_read_as_before(tmp_path: Path) -> None:
     got = load_config(cfg)
     assert got.autoencoder.lr == 2.5e-4 and type(got.autoencoder.lr) is float
     assert got.solver.carry == 1.0
+
+
+def test_a_solver_set_listed_twice_is_refused_when_the_config_is_read(tmp_path: Path) -> None:
+    """A studio audit (D9): ``sets = [["head"], ["head"]]`` trained every stage, then the
+    export died with a pydantic traceback ("model names must be unique"). Refused when the
+    config is read, naming the set; the same joints in another order are the same set."""
+    for sets, named in (
+        ('[["head"], ["head"]]', "['head'] listed twice"),
+        ('[["left_wrist", "right_wrist"], ["right_wrist", "left_wrist"]]',
+         "['right_wrist', 'left_wrist'] listed twice"),
+    ):  # fmt: skip
+        cfg = tmp_path / "dup.toml"
+        cfg.write_text(f'extends = "{DEFAULT}"\n[solver]\nsets = {sets}\n')
+        with pytest.raises(ValueError, match="listed twice") as info:
+            load_config(cfg)
+        assert str(info.value).startswith(f"{cfg}: solver.sets: "), info.value
+        assert named in str(info.value), info.value
+    cfg.write_text(f'extends = "{DEFAULT}"\n[solver]\nlong_sets = [["head"], ["head"]]\n')
+    with pytest.raises(ValueError, match=r"solver.long_sets: .*\['head'\] listed twice"):
+        load_config(cfg)
