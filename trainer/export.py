@@ -180,6 +180,9 @@ def _export(
         tmp_path = Path(tmp) / path.name
         program.save(str(tmp_path))
         model = onnx.load(str(tmp_path))
+    written = {o.version for o in model.opset_import if o.domain in ("", "ai.onnx")}
+    if written != {opset}:  # (the manifest names cfg.opset: never one the files lack)
+        raise RuntimeError(f"{path.name}: exported as ONNX opset {written}, not {opset}")
     model.producer_name = "marionette-trainer"
     model.doc_string = ""
     for node in model.graph.node:  # the exporter's notes: source paths and line numbers

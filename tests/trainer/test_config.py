@@ -90,3 +90,30 @@ def test_a_solver_set_listed_twice_is_refused_when_the_config_is_read(tmp_path: 
     cfg.write_text(f'extends = "{DEFAULT}"\n[solver]\nlong_sets = [["head"], ["head"]]\n')
     with pytest.raises(ValueError, match=r"solver.long_sets: .*\['head'\] listed twice"):
         load_config(cfg)
+
+
+@pytest.mark.parametrize(
+    ("line", "says"),
+    [
+        ("opset = 5", "opset: Value error, the export writes ONNX opsets 18 to 25, got 5"),
+        ("opset = 13", "opset: Value error, the export writes ONNX opsets 18 to 25, got 13"),
+        ("opset = 99", "opset: Value error, the export writes ONNX opsets 18 to 25, got 99"),
+    ],
+)
+def test_an_opset_the_export_cannot_write_is_refused_when_read(
+    tmp_path: Path, line: str, says: str
+) -> None:
+    """A studio audit: ``opset = 5`` (D5) was accepted, the export printed ~35 tracebacks,
+    exited 0 and the manifest said opset 5 of files of opset 18; ``max_eval_frames = 0``
+    (D6) crashed at the first validation with a traceback, ``max_train_frames`` took 0 (one
+    whole clip trained, unsaid) and negatives. Refused when the config is read, naming the
+    key and the range."""
+    cfg = tmp_path / "cfg.toml"
+    cfg.write_text(f'extends = "{DEFAULT}"\n{line}\n')
+    with pytest.raises(ValueError) as info:
+        load_config(cfg)
+    assert str(info.value).startswith(f"{cfg}: "), info.value
+    assert says in str(info.value), info.value
+    for ok in ("opset = 18", "opset = 25"):
+        cfg.write_text(f'extends = "{DEFAULT}"\n{ok}\n')
+        load_config(cfg)
