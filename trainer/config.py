@@ -482,10 +482,13 @@ class TrainConfig(_Section):
     )
     max_train_frames: int | None = Field(
         default=None,
+        ge=1,
         description="Cap, for smoke runs: whole clips in a seeded order, the clip that "
-        "crosses the cap kept (so a few long clips may exceed it).",
+        "crosses the cap kept (so a few long clips may exceed it); None: every frame.",
     )
-    max_eval_frames: int = 20000
+    max_eval_frames: int = Field(
+        default=20000, ge=1, description="Cap of the frames and pairs each evaluation reads."
+    )
     autoencoder: AutoencoderConfig = AutoencoderConfig()
     solver: SolverConfig = SolverConfig()
     completion: CompletionConfig = CompletionConfig()

@@ -98,9 +98,13 @@ def test_a_solver_set_listed_twice_is_refused_when_the_config_is_read(tmp_path: 
         ("opset = 5", "opset: Value error, the export writes ONNX opsets 18 to 25, got 5"),
         ("opset = 13", "opset: Value error, the export writes ONNX opsets 18 to 25, got 13"),
         ("opset = 99", "opset: Value error, the export writes ONNX opsets 18 to 25, got 99"),
+        ("max_eval_frames = 0", "max_eval_frames: Input should be greater than or equal to 1"),
+        ("max_eval_frames = -5", "max_eval_frames: Input should be greater than or equal to 1"),
+        ("max_train_frames = 0", "max_train_frames: Input should be greater than or equal to 1"),
+        ("max_train_frames = -1", "max_train_frames: Input should be greater than or equal to"),
     ],
 )
-def test_an_opset_the_export_cannot_write_is_refused_when_read(
+def test_an_opset_or_frame_cap_the_run_cannot_use_is_refused_when_read(
     tmp_path: Path, line: str, says: str
 ) -> None:
     """A studio audit: ``opset = 5`` (D5) was accepted, the export printed ~35 tracebacks,
@@ -114,6 +118,17 @@ def test_an_opset_the_export_cannot_write_is_refused_when_read(
         load_config(cfg)
     assert str(info.value).startswith(f"{cfg}: "), info.value
     assert says in str(info.value), info.value
-    for ok in ("opset = 18", "opset = 25"):
+    for ok in ("opset = 18", "opset = 25", "max_eval_frames = 1", "max_train_frames = 1"):
         cfg.write_text(f'extends = "{DEFAULT}"\n{ok}\n')
         load_config(cfg)
+
+
+def test_train_refuses_max_eval_frames_0_in_one_line_and_trains_nothing(tmp_path: Path) -> None:
+    cfg = tmp_path / "zero.toml"
+    cfg.write_text(f'extends = "{DEFAULT}"\nmax_eval_frames = 0\n')
+    run, out = tmp_path / "run", tmp_path / "models"
+    args = ["train", "--config", str(cfg), "--run-dir", str(run), "--out", str(out)]
+    r = CliRunner().invoke(app, args)
+    assert r.exit_code == 1 and "Traceback" not in r.output, r.output
+    assert f"{cfg}: max_eval_frames: Input should be" in r.output.replace("\n", ""), r.output
+    assert not run.exists() and not out.exists()
