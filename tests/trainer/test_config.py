@@ -114,7 +114,7 @@ def test_an_opset_or_frame_cap_the_run_cannot_use_is_refused_when_read(
     key and the range."""
     cfg = tmp_path / "cfg.toml"
     cfg.write_text(f'extends = "{DEFAULT}"\n{line}\n')
-    with pytest.raises(ValueError) as info:
+    with pytest.raises(ValueError, match=r"opset|frames") as info:
         load_config(cfg)
     assert str(info.value).startswith(f"{cfg}: "), info.value
     assert says in str(info.value), info.value
