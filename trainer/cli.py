@@ -70,11 +70,12 @@ def _train_and_export(
             typer.echo(f"error: {exc}", err=True)
             raise typer.Exit(1) from None
     from trainer.data.dataset import DatasetError
+    from trainer.stages import CheckpointError
 
     t0 = time.perf_counter()
     try:
         trained = train_all(cfg, fresh=fresh)
-    except DatasetError as exc:  # missing, unreadable, or a split without frames
+    except (DatasetError, CheckpointError) as exc:  # missing, unreadable, a split empty
         typer.echo(f"error: {exc}", err=True)
         raise typer.Exit(1) from None
     if int(__import__("os").environ.get("RANK", "0")) != 0 or not export:

@@ -45,6 +45,11 @@ console = Console(stderr=True)
 # --------------------------------------------------------------------------------------
 # Process group
 # --------------------------------------------------------------------------------------
+class CheckpointError(RuntimeError):
+    """A checkpoint in the run dir that cannot be read (truncated by a full disk, a copy
+    cut short): named with what to do, instead of torch's traceback."""
+
+
 @dataclass(frozen=True)
 class Dist:
     rank: int = 0
@@ -213,7 +218,16 @@ def load_checkpoint(
     naming the new file; a checkpoint from before the sha was recorded is resumed)."""
     if not path.exists():
         return StageState()
-    ckpt = torch.load(path, map_location="cpu", weights_only=False)
+    try:  # (a torch traceback: "failed finding central directory", a studio audit, D14)
+        ckpt = torch.load(path, map_location="cpu", weights_only=False)
+        if not isinstance(ckpt, dict):
+            raise TypeError(f"a {type(ckpt).__name__}, not a checkpoint's table")
+    except Exception as exc:  # truncated, not torch's, pickled elsewhere: whatever it is
+        why = (str(exc).strip().splitlines() or [type(exc).__name__])[0][:200]
+        raise CheckpointError(
+            f"{path}: not a readable checkpoint ({why}); delete it (its stage trains anew) "
+            "or train with --fresh (every stage anew)"
+        ) from None
     if ckpt.get("tag") not in tags:
         console.print(f"[yellow]{path.name}: written by another config; starting the stage anew")
         return StageState()

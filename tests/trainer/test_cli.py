@@ -97,3 +97,20 @@ def test_a_run_dir_in_the_out_dir_is_refused_before_training(
         assert r.exit_code == 1 and "Traceback" not in r.output, r.output
         assert f"the run dir {run}" in text and "separate folders" in text, r.output
         assert not out.exists() and not run.exists()
+
+
+def test_a_damaged_checkpoint_is_named_with_what_to_do(small_dataset: Path, tmp_path: Path) -> None:
+    """A studio audit (D14): a checkpoint cut short (a full disk, a run dir copied from
+    another machine) ended training in torch's traceback ("failed finding central
+    directory"). Now one line naming the file and what to do; nothing exported."""
+    run, out = tmp_path / "run", tmp_path / "models"
+    run.mkdir()
+    (run / "autoencoder.pt").write_bytes(b"PK\x03\x04" + bytes(996))  # a zip cut short
+    args = ["train", "--dataset", str(small_dataset), "--run-dir", str(run), "--out", str(out)]
+    r = CliRunner().invoke(app, args)
+    text = r.output.replace("\n", "")
+    assert r.exit_code == 1 and isinstance(r.exception, SystemExit), r.output
+    assert "Traceback" not in r.output, r.output
+    assert f"error: {run / 'autoencoder.pt'}: not a readable checkpoint (" in text, r.output
+    assert "delete it (its stage trains anew) or train with --fresh" in text, r.output
+    assert not out.exists()
