@@ -17,6 +17,13 @@ app = typer.Typer(
 )
 
 
+#: ``--accept-implausible``'s help (``train``, ``export``).
+ACCEPT_HELP = (
+    "Train on a dataset whose poses look implausible for their map (a wrong `unit` or "
+    "`up_axis`?), which is refused otherwise (config: accept_implausible)."
+)
+
+
 def _finite(value: float) -> float:
     """A float option's value, refused unless finite: click reads ``1e999`` as ``inf``, and
     its ranges let ``nan`` through (every comparison with it is false)."""
@@ -33,6 +40,7 @@ def _train_and_export(
     out: Path | None,
     run_dir: Path | None,
     export: bool,
+    accept_implausible: bool = False,
 ) -> None:
     import json
     import time
@@ -46,6 +54,8 @@ def _train_and_export(
         overrides["run_dir"] = str(run_dir)
     elif quick:
         overrides["run_dir"] = "runs/quick"
+    if accept_implausible:
+        overrides["accept_implausible"] = True
     if out is not None:
         overrides["out_dir"] = str(out)
     elif quick:  # a smoke run replaced the config's models (the shipped `models/`) whole
@@ -117,12 +127,13 @@ def train(
     out: Annotated[Optional[Path], typer.Option(help="Override the models directory.")] = None,  # noqa: UP045
     run_dir: Annotated[Optional[Path], typer.Option(help="Checkpoint directory.")] = None,  # noqa: UP045
     export: Annotated[bool, typer.Option(help="Export ONNX + manifest at the end.")] = True,
+    accept_implausible: Annotated[bool, typer.Option(help=ACCEPT_HELP)] = False,
 ) -> None:
     """Train the autoencoder, the solvers and the completion levels, then export.
 
     Resumes from the checkpoints in the run directory. Runs under
     `torchrun --nproc_per_node N` as DDP (gloo); rank 0 writes."""
-    _train_and_export(config, quick, fresh, dataset, out, run_dir, export)
+    _train_and_export(config, quick, fresh, dataset, out, run_dir, export, accept_implausible)
 
 
 @app.command("export")
@@ -134,9 +145,10 @@ def export_cmd(
     dataset: Annotated[Optional[Path], typer.Option(help="Override the dataset path.")] = None,  # noqa: UP045
     out: Annotated[Optional[Path], typer.Option(help="Override the models directory.")] = None,  # noqa: UP045
     run_dir: Annotated[Optional[Path], typer.Option(help="Checkpoint directory.")] = None,  # noqa: UP045
+    accept_implausible: Annotated[bool, typer.Option(help=ACCEPT_HELP)] = False,
 ) -> None:
     """Evaluate and export finished checkpoints (trains whatever stage is unfinished)."""
-    _train_and_export(config, quick, False, dataset, out, run_dir, True)
+    _train_and_export(config, quick, False, dataset, out, run_dir, True, accept_implausible)
 
 
 @app.command()

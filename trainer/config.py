@@ -489,6 +489,12 @@ class TrainConfig(_Section):
     max_eval_frames: int = Field(
         default=20000, ge=1, description="Cap of the frames and pairs each evaluation reads."
     )
+    accept_implausible: bool = Field(
+        default=False,
+        description="Train on a dataset whose poses look implausible for their map (a thigh "
+        "outside 0.2-0.7 m: the `unit`?; the head not over the pelvis: the `up_axis`?; "
+        "trainer.data.checks.implausible), which training otherwise refuses.",
+    )
     autoencoder: AutoencoderConfig = AutoencoderConfig()
     solver: SolverConfig = SolverConfig()
     completion: CompletionConfig = CompletionConfig()

@@ -33,7 +33,7 @@ from trainer.augment import (
 )
 from trainer.augment import mirror as mirror_poses
 from trainer.config import AugmentConfig, TrainConfig
-from trainer.data.checks import BONE_RANGE_TEXT, bad_bones
+from trainer.data.checks import BONE_RANGE_TEXT, bad_bones, implausible
 from trainer.data.dataset import FPS, DatasetError, PoseDataset, load_dataset
 from trainer.models import (
     CompletionNet,
@@ -114,6 +114,14 @@ def load_splits(cfg: TrainConfig) -> Splits:
             ("autoencoder", cfg.autoencoder), ("solver", cfg.solver), ("completion", cfg.completion)
         )
     }  # fmt: skip
+    odd = implausible(data)
+    if odd and not cfg.accept_implausible:  # (it trained and exported: served nonsense)
+        raise DatasetError(
+            f"{cfg.dataset}: its poses are implausible for a human body, likely a wrong key "
+            f"of the map: {'; '.join(odd)}. Fix the map and rebuild the dataset (the dataset "
+            "summary warned of it; docs/data.md), or, if the poses are right, train with "
+            "--accept-implausible (accept_implausible = true in the config)"
+        )
     bad = bad_bones(reference_lengths(splits.train))
     if bad:  # (it trained every stage, then the export failed: "reference bone lengths
         # must be in (0, 2) metres", a pydantic traceback)

@@ -114,3 +114,41 @@ def test_a_damaged_checkpoint_is_named_with_what_to_do(small_dataset: Path, tmp_
     assert f"error: {run / 'autoencoder.pt'}: not a readable checkpoint (" in text, r.output
     assert "delete it (its stage trains anew) or train with --fresh" in text, r.output
     assert not out.exists()
+
+
+def test_a_dataset_of_implausible_bodies_is_refused_unless_accepted(
+    small_dataset: Path, tmp_path: Path
+) -> None:
+    """A studio audit (D4): a map with ``unit = "cm"`` for files in metres (bodies 1/100 of
+    their size, the builder warning "is the `unit` right?") or ``up_axis = "+Z"`` on Y-up
+    files (figures lying down) trained and exported with exit 0; the service then answered
+    nonsense. Training now refuses such a dataset in one line naming the source and the
+    likely key, before any stage, unless ``--accept-implausible`` says the poses are right."""
+    import numpy as np
+
+    from trainer.config import load_config
+    from trainer.train import load_splits
+
+    with np.load(small_dataset, allow_pickle=False) as npz:
+        arrays = {k: npz[k] for k in npz.files}
+    source = str(arrays["clip_source"][0])
+    lying = arrays["positions"][..., [0, 2, 1]] * np.array([1.0, 1.0, -1.0], np.float32)
+    for name, positions, says in (
+        ("cm.npz", arrays["positions"] * np.float32(0.01), "is the `unit` right?"),
+        ("lying.npz", lying, "is the `up_axis` right?"),
+    ):
+        bad = tmp_path / name
+        np.savez(bad, **{**arrays, "positions": positions.astype(np.float32)})
+        run = tmp_path / f"run-{name}"
+        args = ["train", "--dataset", str(bad), "--run-dir", str(run), "--out", str(tmp_path / "m")]
+        r = CliRunner().invoke(app, args)
+        text = r.output.replace("\n", "")
+        assert r.exit_code == 1 and "Traceback" not in r.output, r.output
+        assert f"error: {bad}: its poses are implausible for a human body" in text, r.output
+        assert f"{source}: median" in text and says in text, r.output
+        assert "--accept-implausible" in text, r.output
+        assert not run.exists() and not (tmp_path / "m").exists()
+    # accepted: trains (here the splits load; 1/100 bodies also fail the 1 mm bone check)
+    over = {"dataset": str(tmp_path / "lying.npz"), "accept_implausible": True}
+    assert len(load_splits(load_config(None, over)).train.positions) > 0
+    assert len(load_splits(load_config(None, {"dataset": str(small_dataset)})).val.positions)

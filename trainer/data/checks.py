@@ -343,6 +343,28 @@ def bad_bones(lengths: npt.NDArray[np.float64]) -> list[str]:
     ]
 
 
+def implausible(ds: PoseDataset) -> list[str]:
+    """The warnings of :func:`sanity_warnings` that name a likely wrong map key (`unit`,
+    `up_axis`, `root_position`, `swap_sides`), per source, else per actor: what training
+    refuses unless told to accept it (a studio audit, D4: a cm-for-metres map trained and
+    served 3-m bodies, exit 0)."""
+    out = []
+    source = ds.clip_source[ds.clip]
+    actor = ds.clip_actor[ds.clip]
+    for s in sorted(set(ds.clip_source.tolist())):
+        sel = source == s
+        problem = _problem(_medians(ds.positions[sel][::10].astype(np.float64)))
+        if problem is not None:
+            out.append(f"{s}: {problem}")
+            continue
+        actors = sorted(set(actor[sel].tolist()))
+        for a in actors if len(actors) > 1 else []:
+            p = ds.positions[sel & (actor == a)][::10].astype(np.float64)
+            if (problem := _problem(_medians(p))) is not None:
+                out.append(f"{s}, actor {a!r}: {problem} (the map's, or an [[override]]'s)")
+    return out
+
+
 def sanity_warnings(ds: PoseDataset) -> list[str]:
     """What poses say of their map, where implausible (one warning per source, naming the
     likeliest wrong key; else one per actor, e.g. an [[override]] with a wrong unit); and a
