@@ -38,13 +38,18 @@ on. Sources (frames in the dataset; licence; held out):
 {sources}
 
 **Licence of these weights: {licence}** Weights inherit the terms of the data they were
-trained on. To have weights under terms of your own, train on motion capture you may use
-so: write a joint map for it (a folder of maps, see `docs/data.md`), then
+trained on. These were made so (the paths as the run named them; every setting:
+`manifest.json` → `provenance.config`):
 
 ```
-pose-trainer dataset --mocap /path/to/your/mocap --maps your_maps/ --out data/poses.npz
-pose-trainer train --config trainer/configs/default.toml
+{recipe}
 ```
+
+To have weights under terms of your own, train on motion capture you may use so: write a
+joint map for it (`docs/data.md`, "Adding your own mocap"), and give it a dataset file and
+a models folder of your own (e.g. `--out data/studio.npz`, then `--out models-studio`):
+the repository's `data/poses.npz` and `models/` are the shipped dataset and models, which
+an `--out` naming them replaces.
 
 Archives used (sha256):
 {archives}
@@ -52,10 +57,9 @@ Archives used (sha256):
 ## Intended use and limits
 - Interactive pose editing: drag a few joints of a plausible human pose, get a natural
   full-body pose; key-point completion for blocking out poses.
-- Learned from the motion capture listed above and nothing else; poses far from it (for
-  the shipped data of everyday actions, locomotion, gestures, martial arts and dance: lying,
-  crawling, acrobatics, contact with props) are out of distribution and come back smoothed
-  towards the data.
+- Learned from the motion capture listed above ({source_names}) and nothing else; poses
+  far from it (e.g. lying, crawling, acrobatics, contact with props, where those captures
+  have none) are out of distribution and come back smoothed towards the data.
 - The networks do not know joint limits: the service restores bone lengths exactly and can
   polish targets exactly (FABRIK), but does not enforce anatomical angle limits.
 - Positions only: no joint rotations, no hands or fingers, no toes beyond the foot point.
@@ -119,6 +123,44 @@ def _archive_line(a: dict[str, str]) -> str:
     return f"- `{a['name']}`: `{a['sha256']}`{unverified}"
 
 
+#: The end of the manifest's licence text (``trainer.export.licence_of``), which the card,
+#: being that README, leaves out.
+_SEE_CARD = " See the model card (README.md)."
+
+
+def _recipe(manifest: Manifest) -> str:
+    """The two commands that made these weights, with the run's own paths (the dataset,
+    run and models folders of its config; the folder of its maps): a studio's card told
+    its reader to build into `data/poses.npz` and train with the default config, i.e. to
+    replace the shipped dataset and `models/` (a studio audit, D11)."""
+    cfg = manifest.provenance.config
+    dataset = cfg.get("dataset", "?")
+    names = [str(a.get("name", "?")) for a in manifest.provenance.data]
+    holding = ", ".join(names) or "the sources' archives or folders"
+    maps = manifest.provenance.dataset.get("maps", [])
+    folders = sorted({str(Path(str(m.get("file", "?"))).parent) for m in maps})
+    if folders in ([], ["trainer/maps"]):  # the shipped maps: --maps' default
+        flag = ""
+    elif len(folders) == 1:
+        flag = f" --maps {folders[0]}"
+    else:  # (one folder of maps per build)
+        files = ", ".join(sorted(Path(str(m.get("file", "?"))).name for m in maps))
+        flag = f" --maps <one folder holding {files}>"
+    return (
+        f"pose-trainer dataset --mocap <the folder holding {holding}>{flag} --out {dataset}\n"
+        f"pose-trainer train --config <its config> --dataset {dataset} "
+        f"--run-dir {cfg.get('run_dir', '?')} --out {cfg.get('out_dir', '?')}"
+    )
+
+
+def _trained_on(dataset: dict[str, Any]) -> str:
+    """The sources trained on (those a map holds out whole are not), named."""
+    held: dict[str, list[str]] = dataset.get("holdout", {})
+    names = set(dataset.get("licences", {})) | set(dataset.get("source_frames", {}))
+    trained = [f"`{s}`" for s in sorted(names) if held.get(s) != ["**"]]
+    return ", ".join(trained) or "not recorded"
+
+
 def render(manifest: Manifest) -> str:
     cfg = manifest.provenance.config
     rows = "\n".join(
@@ -136,7 +178,9 @@ def render(manifest: Manifest) -> str:
         seed=manifest.provenance.split_seed,
         fps=manifest.provenance.dataset.get("fps", 30),
         sources=_sources(manifest.provenance.dataset),
-        licence=manifest.licence,
+        licence=manifest.licence.removesuffix(_SEE_CARD),
+        recipe=_recipe(manifest),
+        source_names=_trained_on(manifest.provenance.dataset),
         archives=archives or "- (none recorded)",
         gap=cfg["solver"]["max_gap_seconds"],
         rows=rows,

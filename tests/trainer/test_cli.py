@@ -152,3 +152,46 @@ def test_a_dataset_of_implausible_bodies_is_refused_unless_accepted(
     over = {"dataset": str(tmp_path / "lying.npz"), "accept_implausible": True}
     assert len(load_splits(load_config(None, over)).train.positions) > 0
     assert len(load_splits(load_config(None, {"dataset": str(small_dataset)})).val.positions)
+
+
+def test_a_studio_model_card_names_its_own_paths_and_sources() -> None:
+    """A studio audit (D11): the model card of a studio's own models told its reader to
+    build into ``data/poses.npz`` and train with ``trainer/configs/default.toml`` (whose
+    ``out_dir`` is the shipped ``models/``), ended its licence line "See the model card"
+    inside the model card, and described the shipped data's actions as the models' limits.
+    It now gives the run's own dataset, run and models paths and its maps folder, and names
+    the sources trained on. (The shipped manifest, its provenance made a studio's.)"""
+    from core.manifest import load_manifest
+    from trainer.model_card import render
+
+    shipped = load_manifest(Path(__file__).resolve().parents[2] / "models")
+    prov = shipped.provenance
+    config = {**prov.config, "dataset": "data/studio.npz", "run_dir": "runs/studio",
+              "out_dir": "models-studio"}  # fmt: skip
+    dataset = {**prov.dataset, "licences": {"studio": "internal use only"},
+               "source_frames": {"studio": 27735}, "resampled_frames": {"studio": 34663},
+               "holdout": {}, "maps": [{"file": "/data/studio-maps/studio.toml",
+                                        "source": "studio", "sha256": "0" * 64}]}  # fmt: skip
+    data = [{"name": "studio/", "sha256": "1" * 64, "kind": "folder", "files": "10"}]
+    studio = shipped.model_copy(update={
+        "licence": "these weights inherit the terms of the motion capture they were trained "
+        "on (studio: internal use only). See the model card (README.md).",
+        "provenance": prov.model_copy(update={"config": config, "dataset": dataset, "data": data}),
+    })  # fmt: skip
+    card = render(studio)
+    recipe = (
+        "pose-trainer dataset --mocap <the folder holding studio/> --maps /data/studio-maps "
+        "--out data/studio.npz\npose-trainer train --config <its config> --dataset "
+        "data/studio.npz --run-dir runs/studio --out models-studio\n"
+    )
+    assert recipe in card, card
+    assert "--out data/poses.npz" not in card and "default.toml" not in card
+    assert "See the model card" not in card
+    assert "(studio: internal use only).** Weights" in card.replace("\n", " ")
+    assert "everyday actions" not in card
+    assert "listed above (`studio`) and nothing else" in card.replace("\n  ", " ")
+    shipped_card = render(shipped)  # the shipped models' own: their paths, the shipped maps
+    assert "pose-trainer dataset --mocap <the folder holding bandai-namco-research" in shipped_card
+    assert "--out data/poses.npz\npose-trainer train" in shipped_card
+    assert "--maps" not in shipped_card.split("```")[1]
+    assert "(`bandai-namco`, `cmu-asf`, `cmu-dance`) and" in shipped_card  # not those held out
