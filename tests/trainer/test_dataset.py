@@ -769,3 +769,29 @@ def test_a_clip_losing_many_frames_to_the_drop_rule_is_warned_with_its_bones(
         "studio:takes/p002/idle_01.bvh: 749 of its 1898 frames dropped (749 bone_length; "
         "bones off their median length: left_wrist in 749); see the drop rule in docs/data.md"
     ]
+
+
+def test_symlinked_folders_of_a_folder_source_are_read_once(
+    small_dataset: Path, mocap_clips: Any, tmp_path: Path
+) -> None:
+    """A studio audit (D1): a source folder assembled from links (an actor's folder linked
+    from a NAS) had its linked folders silently not read (a linked *file* was read): the
+    clips under them were missing from the dataset, unsaid. Linked folders are now read; a
+    link to a folder inside the source (read as itself) or back to an ancestor is not read
+    twice, nor walked forever."""
+    from trainer.data.build import build_dataset
+
+    root = tmp_path / "mocap"
+    shutil.copytree(mocap_clips.root, root)
+    nas = tmp_path / "nas"
+    nas.mkdir()
+    data = root / "dataset" / "Bandai-Namco-Research-Motiondataset-2"
+    data.rename(nas / "bn2")
+    data.symlink_to(nas / "bn2", target_is_directory=True)
+    (root / "train_data_bvh" / "again").symlink_to(root / "train_data_bvh" / "salsa")
+    (root / "dataset" / "loop").symlink_to(root, target_is_directory=True)
+    out = tmp_path / "linked.npz"
+    build_dataset(root, out, seed=0, workers=2, progress=False)
+    linked, direct = load_dataset(out), load_dataset(small_dataset)
+    assert sorted(linked.clip_name.tolist()) == sorted(direct.clip_name.tolist())
+    assert len(linked.positions) == len(direct.positions)

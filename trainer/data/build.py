@@ -322,10 +322,27 @@ def read_checksums(mocap_dir: Path) -> dict[str, str]:
     return sums
 
 
-def _all_files(root: Path) -> list[str]:
-    """Every file under ``root``, as sorted '/'-separated relative paths."""
+def _all_files(root: Path, *, follow: bool = False) -> list[str]:
+    """Every file under ``root``, as sorted '/'-separated relative paths; ``follow``: through
+    symbolic links to folders too (an extracted folder assembled from links to a NAS: its
+    linked actor folders were silently not read, a studio audit, D1), each real folder once:
+    a link to a folder inside ``root`` (read as itself) or to one already read is not
+    walked (a link back to an ancestor looped)."""
     out: list[str] = []
-    for dirpath, dirnames, filenames in os.walk(root):
+    inside = os.path.realpath(root)
+    seen: set[str] = set()
+
+    def new(dirpath: str, name: str) -> bool:
+        path = os.path.join(dirpath, name)
+        real = os.path.realpath(path)
+        if os.path.islink(path) and (real == inside or real.startswith(inside + os.sep)):
+            return False
+        return real not in seen
+
+    for dirpath, dirnames, filenames in os.walk(root, followlinks=follow):
+        if follow:
+            seen.add(os.path.realpath(dirpath))
+            dirnames[:] = [d for d in dirnames if new(dirpath, d)]
         dirnames.sort()
         rel_dir = Path(dirpath).relative_to(root).as_posix()
         for name in sorted(filenames):
@@ -387,7 +404,7 @@ def _folder_source(
     for root in roots:
         if not root.is_dir():
             continue
-        files = _all_files(root)
+        files = _all_files(root, follow=True)
         selected = [rel for rel in files if mocap_map.selects(rel)]
         if selected:
             origin: dict[str, Any] = {
@@ -459,7 +476,9 @@ def locate_sources(
         if (src := _folder_source(m, roots, checksums)) is not None:
             located.sources.append(src)
         elif stem is not None and stem.is_dir():
-            located.unmatched.append(no_match_message(m, f"folder {stem}", _all_files(stem)))
+            located.unmatched.append(
+                no_match_message(m, f"folder {stem}", _all_files(stem, follow=True))
+            )
         else:
             taken = {n for o in maps if o is not m for n in (o.archive, o.archive_stem) if n}
             located.missing.append(not_found_message(m, mocap_dir, taken))
