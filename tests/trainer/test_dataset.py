@@ -795,3 +795,35 @@ def test_symlinked_folders_of_a_folder_source_are_read_once(
     linked, direct = load_dataset(out), load_dataset(small_dataset)
     assert sorted(linked.clip_name.tolist()) == sorted(direct.clip_name.tolist())
     assert len(linked.positions) == len(direct.positions)
+
+
+def test_an_archive_beside_its_extracted_folder_is_read_and_the_folder_named(
+    mocap_clips: Any, tmp_path: Path
+) -> None:
+    """A studio audit (D10): with an archive and its extracted folder (more takes added
+    since) both in ``--mocap``, the archive was read and the folder silently not. The
+    archive is still read; a warning names both, the folder's file count, and which was
+    read."""
+    import subprocess
+
+    from trainer.data.build import build_dataset
+
+    mocap = tmp_path / "mocap"
+    folder = mocap / "bandai-namco-research-motiondataset"
+    shutil.copytree(mocap_clips.root / "dataset", folder / "dataset")
+    archive = mocap / "bandai-namco-research-motiondataset.tar.xz"
+    subprocess.run(
+        ["tar", "-cJf", str(archive), "-C", str(folder),
+         "dataset/Bandai-Namco-Research-Motiondataset-1"],
+        check=True,
+    )  # fmt: skip
+    out = tmp_path / "both.npz"
+    build_dataset(mocap, out, seed=0, workers=2, progress=False)
+    data = load_dataset(out)
+    assert {str(n).split("/")[1].split("_")[0] for n in data.clip_name} == {"dataset-1"}
+    files = len(list(folder.rglob("*.bvh")))
+    want = (
+        f"both the archive {archive} and the extracted folder {folder}/ ({files} files the map "
+        f"selects) are in {mocap}: the archive was read, the folder not"
+    )
+    assert any(want in w for w in data.meta["warnings"]), data.meta["warnings"]

@@ -308,6 +308,7 @@ class Located:
     sources: list[SourceInput] = field(default_factory=list)
     missing: list[str] = field(default_factory=list)
     unmatched: list[str] = field(default_factory=list)
+    shadowed: list[str] = field(default_factory=list)
 
 
 def read_checksums(mocap_dir: Path) -> dict[str, str]:
@@ -419,6 +420,18 @@ def _folder_source(
     return None
 
 
+def _shadowed_folder(mocap_map: MocapMap, roots: Sequence[Path]) -> tuple[Path, int] | None:
+    """The extracted folder that :func:`_folder_source` would read if the map's archive
+    were not beside it, with its count of files the map selects (an archive silently won
+    over a same-named folder with more takes: a studio audit, D10)."""
+    for root in roots:
+        if root.is_dir():
+            count = sum(mocap_map.selects(rel) for rel in _all_files(root, follow=True))
+            if count:
+                return root, count
+    return None
+
+
 def _extracted_source(
     mocap_map: MocapMap,
     archive: Path,
@@ -467,12 +480,19 @@ def locate_sources(
     located = Located()
     for m in maps:
         archive = mocap_dir / m.archive if m.archive else None
+        stem = mocap_dir / m.archive_stem if m.archive_stem else None
+        roots = [r for r in (stem, mocap_dir) if r is not None]
         if archive is not None and archive.is_file():
             _refuse_zip(archive, m)
             archives.append((m, archive))
+            if (beside := _shadowed_folder(m, roots)) is not None:
+                located.shadowed.append(
+                    f"map {m.path}: both the archive {archive} and the extracted folder "
+                    f"{beside[0]}/ ({beside[1]} files the map selects) are in {mocap_dir}: the "
+                    "archive was read, the folder not; move the one not to read out of "
+                    "--mocap"
+                )
             continue
-        stem = mocap_dir / m.archive_stem if m.archive_stem else None
-        roots = [r for r in (stem, mocap_dir) if r is not None]
         if (src := _folder_source(m, roots, checksums)) is not None:
             located.sources.append(src)
         elif stem is not None and stem.is_dir():
@@ -581,7 +601,7 @@ def _jobs_of(src: SourceInput, skipped: list[dict[str, str]], say: Any) -> list[
 
 def _source_warnings(located: Located) -> list[str]:
     """Build-time warnings of the sources: not found, unused globs, no licence."""
-    out = [f"not built: {m}" for m in located.missing]
+    out = [f"not built: {m}" for m in located.missing] + located.shadowed
     for src in located.sources:
         out += unused_glob_warnings(src.map, src.selected) + case_warnings(src.map, src.files)
         if (w := licence_warning(src.map)) is not None:
