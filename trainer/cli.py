@@ -45,7 +45,7 @@ def _train_and_export(
     import json
     import time
 
-    from trainer.config import QUICK, load_config
+    from trainer.config import QUICK, load_config, recipe_warning
 
     overrides: dict[str, object] = dict(QUICK) if quick else {}
     if dataset is not None:
@@ -65,6 +65,8 @@ def _train_and_export(
     except (OSError, ValueError) as exc:  # missing file, TOML, a setting wrong (pydantic)
         typer.echo(f"error: {exc}", err=True)
         raise typer.Exit(1) from None
+    if (recipe := recipe_warning(config, cfg.out_dir)) is not None:
+        typer.echo(f"warning: {recipe}", err=True)
 
     from rich.table import Table
 

@@ -574,6 +574,41 @@ def load_config(path: Path | str | None, overrides: dict[str, Any] | None = None
         raise _config_errors(path, exc) from None
 
 
+#: The shipped models' recipe (``extends`` it: the fields' defaults here are the paper's).
+DEFAULT_TOML: Path = Path(__file__).resolve().parent / "configs" / "default.toml"
+
+
+def recipe_warning(path: Path | str | None, out_dir: str = "") -> str | None:
+    """What a run without ``--config``, or with a config that ``extends`` nothing, trains
+    (the fields' built-in defaults: the paper's recipe, 35 settings from the shipped models'
+    ``default.toml``), said (a studio audit, D13: it went without a word); ``out_dir``: the
+    run's, named where it is the shipped ``models``."""
+    shipped = f'extends = "<path>/{DEFAULT_TOML.relative_to(DEFAULT_TOML.parents[2])}"'
+    if path is None:
+        into = (
+            ", exporting into models (the shipped models folder, which the export replaces)"
+            if Path(out_dir) == Path("models")
+            else ""
+        )
+        return (
+            "no --config: training the built-in defaults of trainer/config.py (the paper's "
+            "recipe, not trainer/configs/default.toml's, the shipped models')"
+            f"{into}; give a config of your own that starts with {shipped}"
+        )
+    try:
+        with Path(path).open("rb") as fh:
+            extends = "extends" in tomllib.load(fh, parse_float=toml_float)
+    except (OSError, tomllib.TOMLDecodeError):
+        return None  # (load_config says why)
+    if extends or Path(path).resolve() == DEFAULT_TOML:
+        return None
+    return (
+        f"{path} has no `extends`: the settings it leaves out take the built-in defaults of "
+        "trainer/config.py (the paper's recipe), not trainer/configs/default.toml's (the "
+        f"shipped models'); to train the shipped recipe, start it with {shipped}"
+    )
+
+
 #: Overrides of ``--quick``: a seconds-long smoke run of every stage.
 QUICK: dict[str, Any] = {
     "max_train_frames": 4000,

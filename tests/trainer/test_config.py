@@ -132,3 +132,32 @@ def test_train_refuses_max_eval_frames_0_in_one_line_and_trains_nothing(tmp_path
     assert r.exit_code == 1 and "Traceback" not in r.output, r.output
     assert f"{cfg}: max_eval_frames: Input should be" in r.output.replace("\n", ""), r.output
     assert not run.exists() and not out.exists()
+
+
+def test_a_run_without_the_shipped_recipe_says_so(tmp_path: Path) -> None:
+    """A studio audit (D13): a config without ``extends`` (or no ``--config``) trained the
+    fields' built-in defaults, the paper's recipe (35 settings from ``default.toml``'s, the
+    shipped models'), without a word; with no ``--config`` it also exported into the
+    shipped ``models/``. Both now say so (a warning: the run goes on)."""
+    bare = tmp_path / "bare.toml"
+    bare.write_text('dataset = "missing.npz"\n[autoencoder]\nepochs = 1\n')
+    good = tmp_path / "good.toml"
+    good.write_text(f'extends = "{DEFAULT}"\ndataset = "missing.npz"\n')
+    run = tmp_path / "run"
+    for args, says in (
+        (["--config", str(bare)], f"warning: {bare} has no `extends`: the settings it leaves "
+         "out take the built-in defaults of trainer/config.py (the paper's recipe)"),
+        (["--dataset", "missing.npz"], "warning: no --config: training the built-in defaults "
+         "of trainer/config.py (the paper's recipe, not trainer/configs/default.toml's, the "
+         "shipped models'), exporting into models (the shipped models folder"),
+        (["--config", str(good)], None),
+        (["--config", str(DEFAULT), "--dataset", "missing.npz"], None),
+    ):  # fmt: skip
+        r = CliRunner().invoke(app, ["train", *args, "--run-dir", str(run)])
+        assert r.exit_code == 1 and "missing.npz" in r.output, r.output  # (then: no dataset)
+        text = " ".join(r.output.split())
+        if says is None:
+            assert "warning" not in text, r.output
+        else:
+            assert " ".join(says.split()) in text, r.output
+    assert not run.exists()
