@@ -259,13 +259,19 @@ def serving_cmd(
     settings, without retraining; refuses a setting the losses were trained with."""
     from core.manifest import ManifestError
     from trainer.config import load_config
-    from trainer.serving import set_serving
+    from trainer.serving import not_applied, set_serving
 
     try:  # a config not found or not valid, models not found or tampered with, a refusal
-        manifest, changed = set_serving(load_config(config), models)
+        cfg = load_config(config)
+        manifest, changed = set_serving(cfg, models)
     except (OSError, ValueError, ManifestError) as exc:
         typer.echo(f"error: {exc}", err=True)
         raise typer.Exit(1) from None
+    if ignored := not_applied(cfg, manifest):  # (they were ignored without a word)
+        typer.echo(
+            f"warning: {config}: settings that need retraining, not applied: " + "; ".join(ignored),
+            err=True,
+        )
     if not changed:
         typer.echo(f"{models}: serving already as in {config} ({manifest.version})")
         return

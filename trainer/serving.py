@@ -35,6 +35,36 @@ def locked(trained: dict[str, Any]) -> set[str]:
     return {*TRAINED_SERVING, *seen_by_losses(trained)}
 
 
+#: Settings of a config that ``not_applied`` leaves out: where files are, not how to train.
+_PLACES = frozenset({"dataset", "run_dir", "out_dir", "accept_implausible"})
+
+
+def not_applied(cfg: TrainConfig, manifest: Manifest) -> list[str]:
+    """The settings of ``cfg`` that differ from those the models were trained with (their
+    ``provenance.config``) and are not serving settings, so were not applied, each as
+    ``"autoencoder.epochs 20 (the models': 2)"`` (``pose-trainer serving`` ignored them
+    without a word: a studio audit, D12). Settings the manifest does not record (added
+    since) are left out."""
+    trained = manifest.provenance.config
+    serving = {("solver", k) for k in SERVING_SETTINGS} | {
+        ("completion", "serving_yaws"),
+        ("completion", "serving_mirror"),
+    }
+    out = []
+    for key, value in cfg.model_dump(mode="json").items():
+        if key in _PLACES or key not in trained:
+            continue
+        pairs = (
+            [((key, k), v, trained[key][k]) for k, v in value.items() if k in trained[key]]
+            if isinstance(value, dict) and isinstance(trained[key], dict)
+            else [((key,), value, trained[key])]
+        )
+        for where, want, was in pairs:
+            if want != was and where not in serving:
+                out.append(f"{'.'.join(where)} {want!r} (the models': {was!r})")
+    return out
+
+
 def set_serving(cfg: TrainConfig, models_dir: Path) -> tuple[Manifest, dict[str, Any]]:
     """Write ``models_dir``'s manifest (and model card) with ``cfg``'s serving block; the
     manifest and the changes made (``{}``: already so, nothing written). ``ValueError``

@@ -113,3 +113,30 @@ def test_the_command_refuses_a_serving_value_not_finite_or_in_range(
     assert bad.exit_code == 1 and "Traceback" not in bad.output, bad.output
     assert says in bad.output.replace("\n", ""), bad.output
     assert (models / "manifest.json").read_text() == text
+
+
+def test_settings_that_need_retraining_are_named_as_not_applied(
+    models: Path, tmp_path: Path
+) -> None:
+    """A studio audit (D12): ``pose-trainer serving --config`` with training settings
+    changed (``autoencoder.epochs``, ``solver.hidden``) applied the serving ones and ignored
+    those without a word, as if they had taken effect. A warning now names each, with the
+    models' own value; the serving change is made as before."""
+    cfg = tmp_path / "mixed.toml"
+    cfg.write_text(
+        f'extends = "{DEFAULT}"\nrun_dir = "elsewhere"\n[autoencoder]\nepochs = 50\n'
+        "[solver]\nhidden = [10]\ncarry = 0.5\n"
+    )
+    trained = load_manifest(models).provenance.config
+    r = CliRunner().invoke(app, ["serving", "--config", str(cfg), "--models", str(models)])
+    assert r.exit_code == 0, r.output
+    text = " ".join(r.output.split())
+    assert (
+        f"warning: {cfg}: settings that need retraining, not applied: autoencoder.epochs 50 "
+        f"(the models': {trained['autoencoder']['epochs']}); solver.hidden [10] (the models': "
+        f"{trained['solver']['hidden']})"
+    ) in text, r.output
+    assert "solver.carry" not in text and "run_dir" not in text  # applied; a path
+    assert load_manifest(models).serving.carry == 0.5
+    r = CliRunner().invoke(app, ["serving", "--config", str(DEFAULT), "--models", str(models)])
+    assert r.exit_code == 0 and "warning" not in r.output, r.output
