@@ -675,19 +675,23 @@ def build_dataset(
             )
 
         read: list[ClipResult] = []
+        held: list[str] = []  # files lacking a joint: said once no name is a typo
         task = bar.add_task("reading clips", total=len(jobs)) if bar else None
         for res in _iter_results(jobs, workers):
             read.append(res)
             if res.error is not None:
-                _skip(skipped, say, res.job.label, res.error, res.kind)
+                _skip(skipped, held.append if res.missing else say, res.job.label, res.error,
+                      res.kind)  # fmt: skip
             elif res.positions is None or len(res.positions) == 0:
                 reason = "no frames left after resampling and the drop rule"
                 _skip(skipped, say, res.job.label, reason, "without frames")
             if bar is not None and task is not None:
                 bar.advance(task)
         fatal = missing_joint_errors(read)
-        if fatal:
+        if fatal:  # (each file's own line came first: one per file, a misspelt name's ten)
             raise MapError("\n".join(fatal))
+        for line in held:
+            say(line)
     warnings += lost_files_warnings(totals, skipped) + dropped_frames_warnings(read)
 
     # Deterministic order: by clip name, whatever order the workers finished in.
