@@ -138,6 +138,30 @@ def test_an_export_replaces_a_models_folder_whole_or_not_at_all(
     assert (notes / "README.md").read_text() == "a studio's notes"
 
 
+def test_an_export_removes_what_killed_exports_left_beside_its_folder(
+    trained: tuple[Trained, Path], small_dataset: Path, tmp_path: Path
+) -> None:
+    """A studio audit (D7): an export killed part-way left its hidden
+    ``.<name>.partial-<pid>`` folder beside the models for good (28 MB for full models);
+    the next export of that folder now removes those of processes that are gone (and
+    their ``.old-<pid>`` folders, once the new models are in place), not a running one's."""
+    result, _ = trained
+    gone = subprocess.Popen(["true"])
+    gone.wait()
+    target = tmp_path / "models"
+    stale = [tmp_path / f".models.partial-{gone.pid}", tmp_path / f".models.old-{gone.pid}"]
+    running = tmp_path / f".models.partial-{os.getppid()}"
+    other = tmp_path / f".models-v2.partial-{gone.pid}"  # another folder's
+    for folder in (*stale, running, other):
+        folder.mkdir()
+        (folder / "encoder.onnx").write_bytes(b"half an export")
+    cfg = tiny_config(small_dataset, tmp_path / "run", target)
+    export_all(cfg, result, evaluate(cfg, result))
+    load_manifest(target, verify=True)
+    assert not any(p.exists() for p in stale)
+    assert (running / "encoder.onnx").is_file() and (other / "encoder.onnx").is_file()
+
+
 def test_manifest_is_valid_and_hashes_verify(trained: tuple[Trained, Path]) -> None:
     _, models = trained
     manifest = load_manifest(models, verify=True)
