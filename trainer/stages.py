@@ -186,16 +186,45 @@ def dataset_sha256(path: str | Path) -> str:
     return _sha256_of(str(Path(path).resolve()), st.st_size, st.st_mtime_ns)
 
 
+#: ``meta`` keys a rebuild of the same dataset changes: when and how fast it was built.
+BUILD_TIMES: tuple[str, ...] = ("created_utc", "build_seconds")
+
+
+@functools.cache
+def _content_of(path: str, size: int, mtime_ns: int) -> str:
+    digest = hashlib.sha256()
+    with np.load(path, allow_pickle=False) as npz:
+        for name in sorted(npz.files):
+            array = npz[name]
+            if name == "meta":
+                meta = {k: v for k, v in json.loads(str(array)).items() if k not in BUILD_TIMES}
+                array = np.array(json.dumps(meta, sort_keys=True))
+            digest.update(f"{name} {array.dtype.str} {array.shape}\n".encode())
+            digest.update(np.ascontiguousarray(array).tobytes())
+    return digest.hexdigest()
+
+
+def dataset_content_sha256(path: str | Path) -> str:
+    """A sha256 of the dataset at ``path`` as training reads it: every array and ``meta``
+    but its build times (:data:`BUILD_TIMES`). Rebuilding the same dataset from the same
+    files changes the file's sha256 (the times, the zip's dates), which made every stage
+    retrain, to bit-identical models (a studio audit, D8); this does not change."""
+    st = Path(path).stat()
+    return _content_of(str(Path(path).resolve()), st.st_size, st.st_mtime_ns)
+
+
 def save_checkpoint(
     path: Path, model: nn.Module, optim: torch.optim.Optimizer, state: StageState, tag: str,
-    dataset: str = "",
+    dataset: str = "", content: str = "",
 ) -> None:  # fmt: skip
-    """``dataset``: the sha256 of the dataset trained on (a checkpoint is resumed only on it)."""
+    """``dataset``: the sha256 of the dataset trained on, ``content`` its
+    :func:`dataset_content_sha256` (a checkpoint is resumed only on it)."""
     buf = io.BytesIO()
     torch.save(
         {
             "tag": tag,
             "dataset_sha256": dataset,
+            "dataset_content_sha256": content,
             "epoch": state.epoch,
             "history": state.history,
             "seconds": state.seconds,
@@ -210,12 +239,14 @@ def save_checkpoint(
 
 def load_checkpoint(
     path: Path, model: nn.Module, optim: torch.optim.Optimizer, tags: tuple[str, ...],
-    dataset: str = "",
+    dataset: str = "", content: str = "",
 ) -> StageState:  # fmt: skip
     """The checkpoint at ``path`` if its tag is one of ``tags`` (see :func:`stage_tags`) and
-    it was trained on the dataset whose sha256 is ``dataset`` (the tag names the dataset by
-    its path: a dataset rebuilt at the same path had its old weights resumed, the manifest
-    naming the new file; a checkpoint from before the sha was recorded is resumed)."""
+    it was trained on the dataset whose sha256 is ``dataset``, or whose content is
+    ``content`` (:func:`dataset_content_sha256`: the same dataset rebuilt) (the tag names
+    the dataset by its path: a dataset rebuilt at the same path had its old weights resumed,
+    the manifest naming the new file; a checkpoint from before the sha was recorded is
+    resumed)."""
     if not path.exists():
         return StageState()
     try:  # (a torch traceback: "failed finding central directory", a studio audit, D14)
@@ -232,7 +263,10 @@ def load_checkpoint(
         console.print(f"[yellow]{path.name}: written by another config; starting the stage anew")
         return StageState()
     was = ckpt.get("dataset_sha256") or ""
-    if dataset and was and was != dataset:
+    same = bool(content) and ckpt.get("dataset_content_sha256") == content
+    if dataset and was and was != dataset and same:
+        console.print(f"[cyan]{path.name}: the dataset was rebuilt with the same poses; resumed")
+    elif dataset and was and was != dataset:
         console.print(
             f"[yellow]{path.name}: trained on another dataset (sha256 {was[:12]}, now "
             f"{dataset[:12]}); starting the stage anew"
@@ -364,8 +398,8 @@ def run_stage(
     ckpt = Path(cfg.run_dir) / f"{name}.pt"
     tags = stage_tags(cfg, name)
     tag = tags[0]
-    data = dataset_sha256(cfg.dataset)
-    state = StageState() if fresh else load_checkpoint(ckpt, trainable, optim, tags, data)
+    data, content = dataset_sha256(cfg.dataset), dataset_content_sha256(cfg.dataset)
+    state = StageState() if fresh else load_checkpoint(ckpt, trainable, optim, tags, data, content)
     if d.world > 1:  # every rank starts from rank 0's weights
         for p in trainable.state_dict().values():
             dist.broadcast(p, src=0)
@@ -396,7 +430,7 @@ def run_stage(
                 + ", ".join(f"{k}={v:.5g}" for k, v in row.items() if k != "epoch")
                 + f" ({time.perf_counter() - t0:.1f}s)"
             )
-            save_checkpoint(ckpt, trainable, optim, state, tag, data)
+            save_checkpoint(ckpt, trainable, optim, state, tag, data, content)
         d.barrier()
     if d.main:
         console.print(epoch_table(f"{name}: losses per epoch", state.history))

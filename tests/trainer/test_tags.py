@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import hashlib
 from pathlib import Path
+from typing import Any
 
 import pytest
 import torch
@@ -130,3 +131,36 @@ def test_serving_settings_enter_the_solver_tags_only_where_the_losses_see_them()
         assert tag(stage, keep_ends=False) != tag(stage, keep_ends=True)
         assert tag(stage, ends_loss=False, keep_ends=False) == tag(stage, ends_loss=False)
     assert tag("completion1", keep_elbows=True, elbows_loss=True) == tag("completion1")
+
+
+def test_a_rebuild_of_the_same_dataset_resumes_its_checkpoints(
+    small_dataset: Path, mocap_clips: Any, tmp_path: Path
+) -> None:
+    """A studio audit (D8): rebuilding the dataset from the same files gave a file of
+    another sha256 (its build time, its zip's dates), so every stage was thrown away and
+    retrained, to bit-identical models. A checkpoint now also records the dataset's content
+    (every array, ``meta`` but its build times): a rebuild resumes; other poses do not."""
+    import numpy as np
+
+    from trainer.data.build import build_dataset
+    from trainer.stages import dataset_content_sha256, dataset_sha256
+
+    rebuilt = tmp_path / "poses.npz"
+    build_dataset(mocap_clips.root, rebuilt, seed=0, workers=2, progress=False)
+    assert dataset_sha256(rebuilt) != dataset_sha256(small_dataset)  # (the file's bytes)
+    with np.load(small_dataset, allow_pickle=False) as npz:
+        arrays = {k: npz[k] for k in npz.files}
+    moved = tmp_path / "moved.npz"
+    np.savez(moved, **{**arrays, "positions": arrays["positions"] * np.float32(1.01)})
+    cfg = load_config(None, {})
+    net = torch.nn.Linear(2, 2)
+    optim = torch.optim.Adam(net.parameters())
+    tags = stage_tags(cfg, "solvers")
+    ckpt = tmp_path / "solvers.pt"
+    sha, content = dataset_sha256(small_dataset), dataset_content_sha256(small_dataset)
+    save_checkpoint(ckpt, net, optim, StageState(epoch=4), tags[0], sha, content)
+    for data, epoch in ((rebuilt, 4), (moved, 0), (small_dataset, 4)):
+        got = load_checkpoint(
+            ckpt, net, optim, tags, dataset_sha256(data), dataset_content_sha256(data)
+        )
+        assert got.epoch == epoch, data
