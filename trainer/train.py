@@ -118,7 +118,7 @@ def load_splits(cfg: TrainConfig) -> Splits:
     if odd and not cfg.accept_implausible:  # (it trained and exported: served nonsense)
         raise DatasetError(
             f"{cfg.dataset}: its poses are implausible for a human body, likely a wrong key "
-            f"of the map: {'; '.join(odd)}. Fix the map and rebuild the dataset (the dataset "
+            f"of the map: {'; '.join(odd)}; fix the map and rebuild the dataset (the dataset "
             "summary warned of it; docs/data.md), or, if the poses are right, train with "
             "--accept-implausible (accept_implausible = true in the config)"
         )
