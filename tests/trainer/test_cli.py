@@ -212,3 +212,34 @@ def test_the_export_does_not_say_that_torchvision_is_missing(
     _export(module, (torch.randn(3, 6),), ["pose"], "latent", tmp_path / "m.onnx", 18)
     assert (tmp_path / "m.onnx").stat().st_size > 0
     assert "torchvision" not in capfd.readouterr().err
+
+
+def test_weights_of_sets_not_trained_are_named_in_one_line(
+    small_dataset: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:  # fmt: skip
+    """A studio audit (D12): a config that extends ``default.toml`` and trains fewer solver
+    sets printed one warning per inherited ``solver.other_weights`` / ``stay_weights`` /
+    ``stay_frames`` key (five, of keys the studio never wrote). Now one line names them."""
+    import trainer.train as train
+    from trainer.config import load_config
+
+    class Stop(Exception):
+        pass
+
+    def stop(*_: object) -> None:
+        raise Stop
+
+    monkeypatch.setattr(train, "train_autoencoder", stop)  # (the warnings come before it)
+    default = Path(__file__).resolve().parents[2] / "trainer" / "configs" / "default.toml"
+    over = {"dataset": str(small_dataset), "run_dir": str(tmp_path / "run"),
+            "solver": {"sets": [["head"]]}}  # fmt: skip
+    cfg = load_config(default, over)
+    unused = cfg.solver.unused_weights()
+    assert len(unused) > 1
+    with pytest.raises(Stop):
+        train.train_all(cfg)
+    out = capsys.readouterr().err  # (trainer.stages.console: stderr)
+    text = " ".join(out.split())
+    assert out.count("no set of solver.sets") == 1, out
+    assert ", ".join(f"solver.{k}" for k in unused) + ": no set of solver.sets, ignored" in text
