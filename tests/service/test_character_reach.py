@@ -21,7 +21,7 @@ from core.bvh import parse_bvh
 from core.bvh_write import pose_of, skeleton_of
 from core.characters_maps import resolve_map
 from core.retarget import canonical_points
-from core.skeleton import JOINT_INDEX
+from core.skeleton import JOINT_INDEX, PARENTS
 from core.units import UNITS
 from service.character_bvh import bvh_answer, character_from_bvh, read_request_bvh
 from service.characters import BVHSolveRequest, character_problem, solve_prepared
@@ -250,11 +250,13 @@ def test_targets_the_answer_met_do_not_carry_the_body_across(
     engine: Engine, bvh_files: dict[str, Path]
 ) -> None:
     """Exact reach, a wrist or an elbow moved 10-40 cm (seeded directions, no pins): where
-    the canonical answer meets it, so does the character, with its pelvis where the answer
-    put it. The character's chest is rigid where the answer may swing a collar, so the arm's
-    chain can start out of reach; that used to move the whole body towards the target, held
-    as a pin (at 32857ee the pelvis ended up to 30 cm from the answer's, 13 of 44 edits
-    beyond 5 cm; now 2.9 cm at most); the polish turns the joints above the chain instead."""
+    the canonical answer meets it, so does the character (on these edits: where the answer
+    bent what is rigid on the character, it cannot, the next test), with its pelvis where
+    the answer put it. The character's chest is rigid where the answer may swing a collar,
+    so the arm's chain can start out of reach; that used to move the whole body towards the
+    target, held as a pin (at 32857ee the pelvis ended up to 30 cm from the answer's, 13 of
+    44 edits beyond 5 cm; now 2.9 cm at most); the polish turns the joints above the chain
+    instead."""
     rng = np.random.default_rng(7)
     off = []
     for name, path in bvh_files.items():
@@ -290,6 +292,60 @@ def test_targets_the_answer_met_do_not_carry_the_body_across(
     print(f"\npelvis off the answer's (mm): max {max(off) * 1e3:.1f}, "
           f"{sum(o > 0.05 for o in off)}/{len(off)} beyond 50 mm")  # fmt: skip
     assert max(off) <= 0.05
+
+
+#: fair1's dab.bvh at frame 120, inches: both wrists moved 10-40 cm apart (a seeded edit of
+#: ``scripts/figures/pelvis_distance.py``, 38.7 in from one another)
+_WRISTS_APART = {
+    "LeftHand": [-26.72316336254317, 8.016091081622708, 21.037932163846822],
+    "RightHand": [10.571671287172157, 8.552015399209855, 31.495950483653328],
+}
+
+
+@pytest.mark.parametrize("pins", [[], PINS], ids=["free", "ankles"])
+def test_wrists_the_answer_met_beyond_a_rigid_chest_are_missed_by_no_more_than_they_must(
+    engine: Engine, bvh_files: dict[str, Path], pins: list[str]
+) -> None:
+    """Where the canonical answer meets a target only by bending what is rigid on the
+    character, the character misses it, by the least its own skeleton can. The canonical
+    skeleton's chest is bones that turn apart (``core.kinematics``: bone lengths, no rigid
+    groups): to meet both wrists of this edit, the answer swings its collars from 1.58 to
+    8.9 in apart. The child's collars hang 1.58 in apart from one rigid ``Spine3``, so its
+    wrists are never farther apart than two arms (collar to wrist) and that: the two misses
+    add up to what the targets lie beyond it at least, the farther to half of it (42.0 mm),
+    whatever the retarget does; the character's spine folding there is the polish taking
+    that least. Pins held, ``reached`` false; the miss within 1 mm of that bound."""
+    name = "fair1-child-inches-zup"
+    text = bvh_files[name].read_text()
+    _, _, units, frame = FILES[name]
+    body: dict[str, Any] = {"bvh": text, "frame": frame, "units": units, "pins": pins,
+                            "options": {"reach": "exact"},
+                            "targets": [{"joint": j, "position": p}
+                                        for j, p in _WRISTS_APART.items()]}  # fmt: skip
+    req = BVHSolveRequest.model_validate(body)
+    ch = character_from_bvh(read_request_bvh(text), req)
+    edit = solve_prepared(engine, ch, character_problem(ch, req))
+    p, res = edit.problem, edit.result
+    solved = np.asarray(res.pose)
+    wrists = [JOINT_INDEX[f"{s}_wrist"] for s in ("left", "right")]
+    collars = [JOINT_INDEX[f"{s}_collar"] for s in ("left", "right")]
+    assert (res.errors <= TOL).all() and (res.pin_errors <= TOL).all()  # the answer meets
+    before = ch.to_service(canonical_points(ch.skel, ch.pose, ch.jmap))
+    after = ch.to_service(canonical_points(ch.skel, edit.pose, ch.jmap))
+    span = float(np.linalg.norm(np.subtract(*before[collars])))
+    assert np.linalg.norm(np.subtract(*solved[collars])) > 4 * span  # the answer's collars
+    assert abs(np.linalg.norm(np.subtract(*after[collars])) - span) < 1e-9  # rigid here
+    # an arm's reach: its three bones, collar to wrist (the character's own lengths)
+    bones = [(w, PARENTS[w], PARENTS[PARENTS[w]]) for w in wrists]
+    arm = [sum(float(np.linalg.norm(before[c] - before[PARENTS[c]])) for c in b) for b in bones]
+    apart = float(np.linalg.norm(np.subtract(*p.target_pos[:2])))
+    least = (apart - span - sum(arm)) / 2  # each wrist's least miss, were both missed alike
+    assert least > 0.04  # 42.0 mm: out of the character's reach
+    miss = np.linalg.norm(after[p.target_idx] - p.target_pos, axis=1)
+    assert miss[:2].sum() >= 2 * least - 1e-9  # (no pose does better: a check of the bound)
+    assert miss[:2].max() <= least + TOL, (miss, least)
+    if pins:
+        assert miss[2:].max() <= TOL
 
 
 @pytest.mark.parametrize(
