@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import re
 from collections import Counter, defaultdict
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Final
 
@@ -343,26 +343,34 @@ def bad_bones(lengths: npt.NDArray[np.float64]) -> list[str]:
     ]
 
 
-def implausible(ds: PoseDataset) -> list[str]:
-    """The warnings of :func:`sanity_warnings` that name a likely wrong map key (`unit`,
-    `up_axis`, `root_position`, `swap_sides`), per source, else per actor: what training
-    refuses unless told to accept it (a studio audit, D4: a cm-for-metres map trained and
-    served 3-m bodies, exit 0)."""
-    out = []
+def _map_keys(
+    ds: PoseDataset,
+) -> Iterator[tuple[str, npt.NDArray[np.bool_], str | None, list[str]]]:
+    """Per source: its frames, and the warnings that name a likely wrong map key (`unit`,
+    `up_axis`, `root_position`, `swap_sides`): the source's own, else its actors' (one
+    actor's [[override]] with a wrong unit)."""
     source = ds.clip_source[ds.clip]
     actor = ds.clip_actor[ds.clip]
     for s in sorted(set(ds.clip_source.tolist())):
         sel = source == s
         problem = _problem(_medians(ds.positions[sel][::10].astype(np.float64)))
         if problem is not None:
-            out.append(f"{s}: {problem}")
+            yield s, sel, f"{s}: {problem}", []
             continue
+        found = []
         actors = sorted(set(actor[sel].tolist()))
         for a in actors if len(actors) > 1 else []:
             p = ds.positions[sel & (actor == a)][::10].astype(np.float64)
             if (problem := _problem(_medians(p))) is not None:
-                out.append(f"{s}, actor {a!r}: {problem} (the map's, or an [[override]]'s)")
-    return out
+                found.append(f"{s}, actor {a!r}: {problem} (the map's, or an [[override]]'s)")
+        yield s, sel, None, found
+
+
+def implausible(ds: PoseDataset) -> list[str]:
+    """The warnings of :func:`sanity_warnings` that name a likely wrong map key, per source,
+    else per actor: what training refuses unless told to accept it (a studio audit, D4: a
+    cm-for-metres map trained and served 3-m bodies, exit 0)."""
+    return [w for _, _, own, found in _map_keys(ds) for w in ([own] if own else found)]
 
 
 def sanity_warnings(ds: PoseDataset) -> list[str]:
@@ -370,13 +378,9 @@ def sanity_warnings(ds: PoseDataset) -> list[str]:
     likeliest wrong key; else one per actor, e.g. an [[override]] with a wrong unit); and a
     split the training needs (train, val) without frames."""
     out = []
-    source = ds.clip_source[ds.clip]
-    actor = ds.clip_actor[ds.clip]
-    for s in sorted(set(ds.clip_source.tolist())):
-        sel = source == s
-        problem = _problem(_medians(ds.positions[sel][::10].astype(np.float64)))
-        if problem is not None:
-            out.append(f"{s}: {problem}")
+    for s, sel, own, found in _map_keys(ds):
+        if own is not None:  # the source's own: its bones say no more
+            out.append(own)
             continue
         lengths = np.median(bone_lengths(ds.positions[sel][::10].astype(np.float64)), axis=0)
         if bad := bad_bones(lengths):
@@ -385,11 +389,7 @@ def sanity_warnings(ds: PoseDataset) -> list[str]:
                 "map's two source joints of such a bone coincide (or lie far apart); map one "
                 "of them to another joint (training refuses such a bone)"
             )
-        actors = sorted(set(actor[sel].tolist()))
-        for a in actors if len(actors) > 1 else []:
-            p = ds.positions[sel & (actor == a)][::10].astype(np.float64)
-            if (problem := _problem(_medians(p))) is not None:
-                out.append(f"{s}, actor {a!r}: {problem} (the map's, or an [[override]]'s)")
+        out.extend(found)
     for split in ("train", "val", "test"):
         if not (ds.clip_split == split).any():
             out.append(f"no {split} clips: training refuses this dataset (docs/data.md, splits)")
