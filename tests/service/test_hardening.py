@@ -3,11 +3,13 @@ headers, offline docs, readiness without server paths, bounded metric labels."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import re
 import shutil
 import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -154,6 +156,20 @@ def test_a_body_sent_to_a_route_that_takes_none_counts_as_held(
         assert c.get("/v2/health/live").status_code == 200
 
 
+@contextlib.contextmanager
+def token_held(client: Any, seconds: float) -> Iterator[None]:
+    """The client's app's one compute token held by the test, given back ``seconds`` on."""
+    limiter = client.app.state.compute_limiter
+    holder = object()
+    client.portal.call(limiter.acquire_on_behalf_of, holder)
+    timer = threading.Timer(seconds, client.portal.call, (limiter.release_on_behalf_of, holder))
+    timer.start()
+    try:
+        yield
+    finally:
+        timer.join()
+
+
 def _searching_edits(n: int) -> list[dict[str, Any]]:
     """``n`` edits of the five end effectors turned 90 degrees about the vertical, exact
     reach, 4 passes: each searches the turn (~2-3 ms; 1,024 of them ~2.5 s of compute)."""
@@ -187,16 +203,8 @@ def test_past_the_deadline_is_a_504_that_counts_what_was_done(models_dir: Path) 
         assert (
             'pose_rejections_total{reason="deadline-exceeded",route="/v1/solve/batch"}' in metrics
         )
-        limiter = c.app.state.compute_limiter
-        holder = object()
-        c.portal.call(limiter.acquire_on_behalf_of, holder)
-        # held past the body's reading (~0.3 s): the batch waits for it
-        timer = threading.Timer(0.7, c.portal.call, (limiter.release_on_behalf_of, holder))
-        timer.start()
-        try:
+        with token_held(c, 0.7):  # past the body's reading (~0.3 s): the batch waits for it
             resp = c.post("/v1/solve/batch", json=many)
-        finally:
-            timer.join()
         assert_problem(resp, 504, "deadline", "the rest waiting", "busy")
         assert resp.headers["retry-after"] == "1"
         assert resp.json()["done"] < resp.json()["total"] == 1024
@@ -260,12 +268,7 @@ def test_a_request_waits_for_a_compute_thread_no_longer_than_its_deadline(
         ("/v1/complete", {"keypoints": points}, "before the completion"),
     ]
     with make_client(models_dir, deadline_seconds=0.5, compute_threads=1) as c:
-        limiter = c.app.state.compute_limiter
-        holder = object()
-        c.portal.call(limiter.acquire_on_behalf_of, holder)
-        timer = threading.Timer(6.0, c.portal.call, (limiter.release_on_behalf_of, holder))
-        timer.start()
-        try:
+        with token_held(c, 6.0):
             for path, data, stage in cases:
                 t = time.perf_counter()
                 resp = c.post(path, json=data)
@@ -273,8 +276,6 @@ def test_a_request_waits_for_a_compute_thread_no_longer_than_its_deadline(
                 assert_problem(resp, 504, "0.5 s deadline", stage, "compute thread", "busy")
                 assert resp.headers["retry-after"] == "1"
                 assert took < 3.0, (path, took)
-        finally:
-            timer.join()
         assert c.post("/v1/solve", json=body(options={"reach": "exact"})).status_code == 200
 
 
@@ -290,17 +291,10 @@ def test_compute_time_leaves_out_the_wait_for_a_compute_thread(models_dir: Path)
         ("/v1/bvh/solve", json.loads((examples / "bvh_solve.json").read_text())),
     ]
     with make_client(models_dir, deadline_seconds=10.0, compute_threads=1) as c:
-        limiter = c.app.state.compute_limiter
         for path, data in cases:
             assert c.post(path, json=data).status_code == 200  # warm
-            holder = object()
-            c.portal.call(limiter.acquire_on_behalf_of, holder)
-            timer = threading.Timer(0.6, c.portal.call, (limiter.release_on_behalf_of, holder))
-            timer.start()
-            try:
+            with token_held(c, 0.6):
                 resp = c.post(path, json=data)
-            finally:
-                timer.join()
             assert resp.status_code == 200, (path, resp.text)
             compute, total = (float(resp.headers[f"x-{h}-time"][:-2]) for h in ("compute", "total"))
             assert total >= 550.0 and 0.0 < compute < total - 400.0, (path, compute, total)
