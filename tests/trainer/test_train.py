@@ -105,7 +105,7 @@ def test_an_export_replaces_a_models_folder_whole_or_not_at_all(
     beside the old manifest (models the service refused, the old ones gone); it also
     overwrote a folder of other files, and left an older export's extra files. Now it is
     written beside the folder and swapped in whole; a folder that is not a models folder
-    is refused."""
+    is refused; what killed exports left beside it is cleared."""
     import trainer.export as export
 
     result, models = trained
@@ -127,39 +127,28 @@ def test_an_export_replaces_a_models_folder_whole_or_not_at_all(
     assert (target / "stale_solver.onnx").exists()
     load_manifest(target, verify=True)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["models"]  # no partial folder
+    # what exports killed part-way left, hidden, for good (a studio audit, D7: 28 MB for
+    # full models): the next export removes those of processes gone (their .old-<pid>
+    # folders once the new models are in place), not a running one's, not another folder's
+    gone = subprocess.Popen(["true"])
+    gone.wait()
+    stale = [tmp_path / f".models.partial-{gone.pid}", tmp_path / f".models.old-{gone.pid}"]
+    running, other = f".models.partial-{os.getppid()}", f".models-v2.partial-{gone.pid}"
+    kept = [tmp_path / running, tmp_path / other]
+    for folder in (*stale, *kept):
+        folder.mkdir()
+        (folder / "encoder.onnx").write_bytes(b"half an export")
     export_all(cfg, result, metrics)  # whole: the older export's file gone
     assert not (target / "stale_solver.onnx").exists()
     load_manifest(target, verify=True)
+    assert not any(p.exists() for p in stale)
+    assert all((p / "encoder.onnx").is_file() for p in kept)
     notes = tmp_path / "notes"
     notes.mkdir()
     (notes / "README.md").write_text("a studio's notes")
     with pytest.raises(FileExistsError, match="not a models folder"):
         export_all(tiny_config(small_dataset, tmp_path / "run", notes), result, metrics)
     assert (notes / "README.md").read_text() == "a studio's notes"
-
-
-def test_an_export_removes_what_killed_exports_left_beside_its_folder(
-    trained: tuple[Trained, Path], small_dataset: Path, tmp_path: Path
-) -> None:
-    """A studio audit (D7): an export killed part-way left its hidden
-    ``.<name>.partial-<pid>`` folder beside the models for good (28 MB for full models);
-    the next export of that folder now removes those of processes that are gone (and
-    their ``.old-<pid>`` folders, once the new models are in place), not a running one's."""
-    result, _ = trained
-    gone = subprocess.Popen(["true"])
-    gone.wait()
-    target = tmp_path / "models"
-    stale = [tmp_path / f".models.partial-{gone.pid}", tmp_path / f".models.old-{gone.pid}"]
-    running = tmp_path / f".models.partial-{os.getppid()}"
-    other = tmp_path / f".models-v2.partial-{gone.pid}"  # another folder's
-    for folder in (*stale, running, other):
-        folder.mkdir()
-        (folder / "encoder.onnx").write_bytes(b"half an export")
-    cfg = tiny_config(small_dataset, tmp_path / "run", target)
-    export_all(cfg, result, evaluate(cfg, result))
-    load_manifest(target, verify=True)
-    assert not any(p.exists() for p in stale)
-    assert (running / "encoder.onnx").is_file() and (other / "encoder.onnx").is_file()
 
 
 def test_manifest_is_valid_and_hashes_verify(trained: tuple[Trained, Path]) -> None:
