@@ -29,7 +29,7 @@ from service.characters import (
 )
 from service.deps import ReadyEngine, RequestBudget, ServiceState, State
 from service.engine import Engine
-from service.errors import TooManyItems
+from service.errors import InvalidRequest, TooManyItems, every_item
 from service.limits import (
     CHARACTER_JOINTS,
     FABRIK_PRICE,
@@ -167,8 +167,15 @@ async def solve_batch(body: BatchBody, engine: ReadyEngine, budget: RequestBudge
 
     def prepare() -> list[SolveProblem]:
         arr = poses(items, [f"items[{i}].pose" for i in where])
-        return [solve_problem(item, arr[k], f"items[{i}]") for k, (i, item) in
-                enumerate(zip(where, items, strict=True))]  # fmt: skip
+        out, found = [], []
+        for k, (i, item) in enumerate(zip(where, items, strict=True)):
+            try:
+                out.append(solve_problem(item, arr[k], f"items[{i}]"))
+            except InvalidRequest as exc:  # every item's told, not the first one's alone
+                found.append(exc)
+        if found:
+            raise every_item(found)
+        return out
 
     problems = await off_loop(budget, prepare, len(items), "preparing the items")
     prepared = {i: await read_character(budget, f, f"items[{i}]") for i, f in chars.items()}
