@@ -60,7 +60,7 @@ def recorded_source(origin: dict[str, Any]) -> dict[str, str]:
     """What the manifest says a source was read from (its ``provenance.data`` entry): an
     archive by its name and sha256 (``verified`` "false" where SHA256SUMS did not list
     it); an extracted folder by its name and the sha256 of its files' list
-    (``trainer.data.build.folder_digest``), never by the sum of an archive that was not read
+    (``trainer.data.sources.folder_digest``), never by the sum of an archive that was not read
     (a folder with files taken out was recorded as the whole archive)."""
     if origin.get("kind") == "folder":
         entry = {

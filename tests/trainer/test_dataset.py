@@ -361,7 +361,7 @@ def test_builder_reads_the_multi_body_archives_and_holds_out_what_the_maps_name(
 def test_a_folder_source_is_hashed_as_sha256sum_lists_its_files(tmp_path: Path) -> None:
     import hashlib
 
-    from trainer.data.build import folder_digest
+    from trainer.data.sources import folder_digest
 
     (tmp_path / "b").mkdir()
     (tmp_path / "a.bvh").write_bytes(b"one")

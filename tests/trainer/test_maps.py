@@ -134,7 +134,7 @@ def test_docs_example_map_is_valid(tmp_path: Path) -> None:
 
 def _reader(more_mocap: Path, m: Any, rel: str) -> Any:
     from trainer.data.asf import read_amc, read_asf
-    from trainer.data.build import _all_files, pair_skeleton
+    from trainer.data.sources import _all_files, pair_skeleton
 
     if m.reader == "asf":
         sk = read_asf(more_mocap / pair_skeleton(m, rel, _all_files(more_mocap)))
@@ -148,7 +148,7 @@ def _world(more_mocap: Path, m: Any, rel: str) -> np.ndarray[Any, Any]:
 
     skeleton = None
     if m.reader == "asf":
-        from trainer.data.build import _all_files, pair_skeleton
+        from trainer.data.sources import _all_files, pair_skeleton
 
         skeleton = str(more_mocap / pair_skeleton(m, rel, _all_files(more_mocap)))
     job = ClipJob(str(more_mocap / rel), rel, f"{m.source}:{rel}", m, skeleton)
@@ -179,7 +179,7 @@ def test_every_new_map_maps_all_21_joints_on_its_real_files(more_mocap: Path) ->
 
 
 def test_cmu_asf_pairs_each_amc_with_its_subjects_asf(more_mocap: Path) -> None:
-    from trainer.data.build import _all_files, pair_skeleton
+    from trainer.data.sources import _all_files, pair_skeleton
 
     m = load_map(MAPS / "cmu_asf.toml")
     files = _all_files(more_mocap)
