@@ -24,6 +24,7 @@ ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
+from scripts.rss_bursts import vm_mib as vm_mib  # noqa: E402  (its commands' name too)
 from tests.service.server import Server, serve  # noqa: E402
 
 PORTS = range(18750, 18800)
@@ -58,14 +59,6 @@ def server(**env: str) -> Iterator[Server]:
         serve(MODELS, Path(tmp), True, (), port(), (), **env) as s,
     ):
         yield s
-
-
-def vm_mib(pid: int, field: str) -> float:
-    """``VmRSS``, ``VmHWM``, … of ``/proc/<pid>/status`` in MiB."""
-    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-        if line.startswith(f"{field}:"):
-            return int(line.split()[1]) / 1024
-    raise KeyError(field)
 
 
 def reset_peak(pid: int) -> None:
