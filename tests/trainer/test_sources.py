@@ -1,0 +1,86 @@
+"""Where each map's data is found (``trainer.data.sources``): a folder source's hash, its
+linked folders, an archive beside its extracted folder."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+from typing import Any
+
+from trainer.data.dataset import load_dataset
+
+
+def test_a_folder_source_is_hashed_as_sha256sum_lists_its_files(tmp_path: Path) -> None:
+    import hashlib
+
+    from trainer.data.sources import folder_digest
+
+    (tmp_path / "b").mkdir()
+    (tmp_path / "a.bvh").write_bytes(b"one")
+    (tmp_path / "b" / "c.bvh").write_bytes(b"two")
+    listing = "".join(
+        f"{hashlib.sha256(data).hexdigest()}  {rel}\n"
+        for rel, data in (("a.bvh", b"one"), ("b/c.bvh", b"two"))
+    )
+    want = hashlib.sha256(listing.encode()).hexdigest()
+    assert folder_digest(tmp_path, ["b/c.bvh", "a.bvh"]) == want  # sorted by path
+    (tmp_path / "a.bvh").write_bytes(b"changed")
+    assert folder_digest(tmp_path, ["a.bvh", "b/c.bvh"]) != want
+
+
+def test_symlinked_folders_of_a_folder_source_are_read_once(
+    small_dataset: Path, mocap_clips: Any, tmp_path: Path
+) -> None:
+    """A studio audit (D1): a source folder assembled from links (an actor's folder linked
+    from a NAS) had its linked folders silently not read (a linked *file* was read): the
+    clips under them were missing from the dataset, unsaid. Linked folders are now read; a
+    link to a folder inside the source (read as itself) or back to an ancestor is not read
+    twice, nor walked forever."""
+    from trainer.data.build import build_dataset
+
+    root = tmp_path / "mocap"
+    shutil.copytree(mocap_clips.root, root)
+    nas = tmp_path / "nas"
+    nas.mkdir()
+    data = root / "dataset" / "Bandai-Namco-Research-Motiondataset-2"
+    data.rename(nas / "bn2")
+    data.symlink_to(nas / "bn2", target_is_directory=True)
+    (root / "train_data_bvh" / "again").symlink_to(root / "train_data_bvh" / "salsa")
+    (root / "dataset" / "loop").symlink_to(root, target_is_directory=True)
+    out = tmp_path / "linked.npz"
+    build_dataset(root, out, seed=0, workers=2, progress=False)
+    linked, direct = load_dataset(out), load_dataset(small_dataset)
+    assert sorted(linked.clip_name.tolist()) == sorted(direct.clip_name.tolist())
+    assert len(linked.positions) == len(direct.positions)
+
+
+def test_an_archive_beside_its_extracted_folder_is_read_and_the_folder_named(
+    mocap_clips: Any, tmp_path: Path
+) -> None:
+    """A studio audit (D10): with an archive and its extracted folder (more takes added
+    since) both in ``--mocap``, the archive was read and the folder silently not. The
+    archive is still read; a warning names both, the folder's file count, and which was
+    read."""
+    import subprocess
+
+    from trainer.data.build import build_dataset
+
+    mocap = tmp_path / "mocap"
+    folder = mocap / "bandai-namco-research-motiondataset"
+    shutil.copytree(mocap_clips.root / "dataset", folder / "dataset")
+    archive = mocap / "bandai-namco-research-motiondataset.tar.xz"
+    subprocess.run(
+        ["tar", "-cJf", str(archive), "-C", str(folder),
+         "dataset/Bandai-Namco-Research-Motiondataset-1"],
+        check=True,
+    )  # fmt: skip
+    out = tmp_path / "both.npz"
+    build_dataset(mocap, out, seed=0, workers=2, progress=False)
+    data = load_dataset(out)
+    assert {str(n).split("/")[1].split("_")[0] for n in data.clip_name} == {"dataset-1"}
+    files = len(list(folder.rglob("*.bvh")))
+    want = (
+        f"both the archive {archive} and the extracted folder {folder}/ ({files} files the map "
+        f"selects) are in {mocap}: the archive was read, the folder not"
+    )
+    assert any(want in w for w in data.meta["warnings"]), data.meta["warnings"]
