@@ -407,7 +407,13 @@ class Budget:
             wave = parts[w : w + width]
             await self.check(wave[0].start, total, noun)
             with self.timing():
-                out.extend(await _wave(fn, wave, limiter, self))
+                try:
+                    out.extend(await _wave(fn, wave, limiter, self))
+                except DeadlineExceeded as exc:
+                    # (no token came in time: the 504 counts what was done, as an overrun's)
+                    exc.extra.setdefault("done", wave[0].start)
+                    exc.extra.setdefault("total", total)
+                    raise
         return out
 
 

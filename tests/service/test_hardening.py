@@ -261,21 +261,30 @@ def test_a_request_waits_for_a_compute_thread_no_longer_than_its_deadline(
                                                "positions": [[0.5, 1.2, 0.3]] * 300}}  # fmt: skip
     base = ("pelvis", "head", "left_wrist", "right_wrist", "left_ankle", "right_ankle")
     points = [{"joint": n, "position": rest_pose()[JOINT_NAMES.index(n)].tolist()} for n in base]
-    cases = [
-        ("/v1/solve/batch", {"items": items}, "reading the body"),
-        ("/v1/solve/batch", cols, "reading the body"),
-        ("/v1/solve", body(options={"reach": "exact"}), "before items 0-0"),
-        ("/v1/complete", {"keypoints": points}, "before the completion"),
-    ]
+    small = {"items": items[:40]}  # < 64 KiB, parsed on the loop; > 32 items, prepared off it
+    cases = [  # (a batch past its body counts its items done, as a deadline's overrun does)
+        ("/v1/solve/batch", {"items": items}, "reading the body", None),
+        ("/v1/solve/batch", cols, "reading the body", None),
+        ("/v1/solve/batch", small, "before preparing the items", (0, 40)),
+        ("/v1/solve/batch", {**cols, "poses": [pose] * 3,
+                             "targets": {**cols["targets"], "positions": [[0.5, 1.2, 0.3]] * 3}},
+         "before items 0-2", (0, 3)),
+        ("/v1/solve", body(options={"reach": "exact"}), "before items 0-0", (0, 1)),
+        ("/v1/complete", {"keypoints": points}, "before the completion", None),
+    ]  # fmt: skip
     with make_client(models_dir, deadline_seconds=0.5, compute_threads=1) as c:
         with token_held(c, 6.0):
-            for path, data, stage in cases:
+            for path, data, stage, counts in cases:
                 t = time.perf_counter()
                 resp = c.post(path, json=data)
                 took = time.perf_counter() - t
-                assert_problem(resp, 504, "0.5 s deadline", stage, "compute thread", "busy")
+                problem = assert_problem(
+                    resp, 504, "0.5 s deadline", stage, "compute thread", "busy"
+                )
                 assert resp.headers["retry-after"] == "1"
                 assert took < 3.0, (path, took)
+                got = (problem.get("done"), problem.get("total"))
+                assert got == (counts or (None, None)), (stage, problem)
         assert c.post("/v1/solve", json=body(options={"reach": "exact"})).status_code == 200
 
 
