@@ -390,7 +390,7 @@ def build_dataset(
     with ExitStack() as stack, _progress(progress) as bar:
         workdir = Path(tempfile.mkdtemp(prefix="marionette-mocap-"))
         stack.callback(shutil.rmtree, workdir, True)
-        task = bar.add_task("extracting archives", total=None) if bar else None
+        task = bar.add_task("finding sources", total=None) if bar else None
         located = locate_sources(mocap_dir, maps, workdir, log=say, required=required)
         if bar is not None and task is not None:
             bar.update(task, total=1, completed=1)
