@@ -153,7 +153,7 @@ function wireControls() {
 // Frame loop: render on demand, send at most one solve per frame and one in flight.
 // ------------------------------------------------------------------------------------
 function frame() {
-  if (solver.dirty && !solver.inflight) sendSolve();
+  if (solver.dirty && !solver.inflight && performance.now() >= solver.holdUntil) sendSolve();
   if (ui.needsRender) {
     ui.needsRender = false;
     for (const ring of pinRings.values()) ring.quaternion.copy(camera.quaternion);

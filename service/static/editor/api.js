@@ -7,12 +7,13 @@ import { $, ui } from './state.js';
 // API helper: every call goes through here; failures become ApiError and are shown.
 // ------------------------------------------------------------------------------------
 export class ApiError extends Error {
-  constructor(status, title, detail, requestId = null) {
+  constructor(status, title, detail, requestId = null, retryAfter = null) {
     super(`${title}: ${detail}`);
     this.status = status;
     this.title = title;
     this.detail = detail;
     this.requestId = requestId;
+    this.retryAfter = retryAfter; // seconds (a 429's or 503's Retry-After), or null
   }
 }
 
@@ -20,26 +21,55 @@ function apiKey() {
   return $('api-key').value.trim();
 }
 
-export async function api(method, path, body) {
+// How long a request may go unanswered before it is given up (ms): a solve or a read the
+// server never answers (stalled, or a connection held open by a proxy) held the one solve
+// in flight for good, and every later drag sent nothing, without a word. The service
+// answers within its deadline (2 s by default, POSE_DEADLINE), a file's upload aside.
+export const NO_ANSWER_MS = 60_000;
+const NOT_ANSWERING = 'server not answering';
+const DOWN = ['server unreachable', NOT_ANSWERING];
+
+// ``signal``: the caller's, to give the request up (an ApiError 'Given up', status -1,
+// which says nothing to the user: the caller dropped the answer).
+export async function api(method, path, body, { signal = null } = {}) {
   const headers = { Accept: 'application/json, application/problem+json' };
   if (body !== undefined) headers['Content-Type'] = 'application/json';
   const key = apiKey();
   if (key) headers['X-API-Key'] = key;
   const t0 = performance.now();
+  const controller = new AbortController();
+  let timedOut = false;
+  const timer = setTimeout(() => {
+    timedOut = true;
+    controller.abort();
+  }, NO_ANSWER_MS);
+  const giveUp = () => controller.abort();
+  if (signal) signal.addEventListener('abort', giveUp);
   let res;
+  let text;
   try {
     res = await fetch(path, {
       method,
       headers,
       body: body === undefined ? undefined : JSON.stringify(body),
       cache: 'no-store',
+      signal: controller.signal,
     });
+    text = await res.text();
   } catch (err) {
+    if (timedOut) {
+      $('status').textContent = NOT_ANSWERING;
+      throw new ApiError(0, 'No answer', `${method} /${path}: the server did not answer within `
+        + `${NO_ANSWER_MS / 1000} s; given up (a drag's targets are kept: drag again to retry)`);
+    }
+    if (signal && signal.aborted) throw new ApiError(-1, 'Given up', `${method} /${path}`);
     $('status').textContent = 'server unreachable';
     throw new ApiError(0, 'Server unreachable', `${method} /${path} failed (${err.message})`);
+  } finally {
+    clearTimeout(timer);
+    if (signal) signal.removeEventListener('abort', giveUp);
   }
-  if ($('status').textContent === 'server unreachable') $('status').textContent = 'connected';
-  const text = await res.text();
+  if (DOWN.includes($('status').textContent)) $('status').textContent = 'connected';
   const rtt = performance.now() - t0;
   let data = null;
   try {
@@ -51,7 +81,8 @@ export async function api(method, path, body) {
   if (!res.ok) {
     const title = (data && data.title) || `HTTP ${res.status}`;
     const detail = (data && data.detail) || text.slice(0, 300) || res.statusText;
-    throw new ApiError(res.status, title, detail, requestId);
+    const after = Number.parseInt(res.headers.get('Retry-After') || '', 10); // (seconds; a date: none)
+    throw new ApiError(res.status, title, detail, requestId, Number.isFinite(after) && after > 0 ? after : null);
   }
   if (data === null) {
     throw new ApiError(res.status, 'Bad response', `${method} /${path}: the body is not JSON`, requestId);

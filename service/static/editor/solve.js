@@ -78,6 +78,10 @@ export function pushHistory() {
 
 export function cancelSolves() {
   solver.epoch += 1;
+  // the solve in flight is given up: its answer would be dropped, and waiting for it held
+  // the next solve back (for good, from a server that never answered)
+  if (solver.giveUp) solver.giveUp.abort();
+  solver.giveUp = null;
   solver.dirty = false;
   solver.commitPending = false;
   // the gesture is dropped: what waited for it runs once the action dropping it is done
@@ -312,8 +316,10 @@ export async function sendSolve() {
   const body = solveBody();
   solver.sent += 1;
   $('solve-count').textContent = String(solver.sent);
+  const giveUp = new AbortController(); // (cancelSolves)
+  solver.giveUp = giveUp;
   try {
-    const res = await api('POST', body.bvh === undefined ? 'v1/solve' : 'v1/bvh/solve', body);
+    const res = await api('POST', body.bvh === undefined ? 'v1/solve' : 'v1/bvh/solve', body, { signal: giveUp.signal });
     if (epoch !== solver.epoch) return; // undone / reset / scrubbed meanwhile
     solver.answered += 1;
     if (body.bvh === undefined) {
@@ -353,11 +359,18 @@ export async function sendSolve() {
       doc.shown = doc.text;
       pushHistory();
     }
+    if (err.retryAfter) {
+      // a busy server (429, 503) says when to come back: no solve goes before (capped at
+      // 30 s); the drag's latest targets go then. It was asked again at each pointer move,
+      // each answered 429 at once (with a file, the whole file uploaded each time).
+      solver.holdUntil = performance.now() + Math.min(err.retryAfter, 30) * 1000;
+    }
     showError(err);
     refresh();
     settle = !solver.commitPending;
   } finally {
     solver.inflight = false;
+    if (solver.giveUp === giveUp) solver.giveUp = null;
     if (settle) settled(); // (outside the try: what waited is not a solve that failed)
   }
 }

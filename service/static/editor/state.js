@@ -40,6 +40,8 @@ export const solver = {
   epoch: 0, // bumped by undo/redo/reset/sample: answers of older epochs are dropped
   commitPending: false, // commit the answer to the latest edit (end of a gesture)
   afterCommit: [], // what waits for that commit: a scrub, an export, a units change
+  giveUp: null, // the AbortController of the solve in flight (cancelSolves gives it up)
+  holdUntil: 0, // performance.now() before which no solve is sent (a Retry-After; solve.js)
   sent: 0,
   answered: 0,
   last: null,

@@ -1,0 +1,130 @@
+"""The browser editor through a session's rough edges (real Chromium, the real server): a
+server that never answers a solve, or is busy. Shared parts: ``tests/service/editor_page.py``.
+"""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+import pytest
+
+from tests.service.editor_page import (
+    M,
+    drag_joint,
+    recorded,
+    settle,
+)
+
+# the fixtures `server` (one for the session) and `browser` (one per module)
+pytest_plugins = ("tests.service.editor_page",)
+
+STATUS = "document.getElementById('status').textContent"
+
+
+@pytest.mark.browser
+def test_editor_goes_on_when_a_solve_is_never_answered(server: str, browser: Any) -> None:
+    """A solve the server never answers (a stalled server, a dropped connection a proxy
+    holds open) froze editing until the page was reloaded: one solve in flight at a time,
+    and that one never came back, so every later drag sent nothing, with no word (the status
+    said "connected"). Now a solve is given up after a minute, saying so, and the drag's
+    targets are kept to retry; an undo (or any action dropping the gesture) gives up its
+    solve at once, so the next drag is solved without waiting for it. And a busy server's
+    429 (Retry-After: 2) was asked again at each pointer move; now no solve goes before the
+    Retry-After, and the drag's last one goes then."""
+    context = browser.new_context(viewport={"width": 1280, "height": 800}, device_scale_factor=1)
+    page = context.new_page()
+    page.set_default_timeout(20_000)
+    page.clock.install()  # (time flows; fast_forward jumps it)
+    solves = recorded(page, lambda url: url.endswith("/v1/solve"))
+    held: list[Any] = []
+
+    def hold_one(route: Any) -> None:  # the solves held are never answered
+        if hold["next"] or hold["all"]:
+            hold["next"] = False
+            held.append(route)
+        else:
+            route.continue_()
+
+    hold = {"next": True, "all": False}
+    try:
+        page.goto(server + "/editor")
+        page.wait_for_function(f"() => {M} && {M}.ready()")
+        page.wait_for_function(f"() => {STATUS} === 'connected'")
+        page.route("**/v1/solve", hold_one)
+        xy = page.evaluate(f"{M}.projectJoint('left_wrist')")
+        page.mouse.move(xy["x"], xy["y"])
+        page.mouse.down()
+        page.mouse.move(xy["x"] + 30, xy["y"] - 40, steps=4)
+        page.mouse.up()
+        page.wait_for_function(f"() => {M}.solveCount().inflight")
+        assert len(held) == 1
+        # an undo drops the gesture, and gives up its solve: the next drag goes out
+        page.keyboard.press("Control+z")
+        page.wait_for_function(f"() => !{M}.solveCount().inflight")
+        sent = len(solves)
+        drag_joint(page, "right_wrist", -30, -40)
+        assert len(solves) > sent and "right_wrist" in page.evaluate(f"{M}.targets()")
+        assert page.evaluate(f"{M}.error()") is None
+        # a drag whose last solve never comes back: given up after a minute, said, retried
+        hold["all"] = True
+        before = page.evaluate(f"{M}.committedPose()")
+        xy = page.evaluate(f"{M}.projectJoint('left_knee')")
+        page.mouse.move(xy["x"], xy["y"])
+        page.mouse.down()
+        page.mouse.move(xy["x"] + 20, xy["y"] - 20)
+        page.wait_for_function(f"() => {M}.solveCount().inflight")
+        page.mouse.up()
+        page.clock.fast_forward(61_000)  # the drag's solve given up; its last one sent
+        page.wait_for_function(f"() => {M}.error() !== null")
+        err = page.evaluate(f"{M}.error()")
+        assert err["title"] == "No answer" and "60 s" in err["detail"], err
+        assert "v1/solve" in err["detail"]
+        page.wait_for_function(f"() => {M}.solveCount().inflight")
+        assert len(held) == 3
+        page.clock.fast_forward(61_000)  # and that one too: the pose as it was
+        settle(page)
+        hold["all"] = False
+        assert page.evaluate(f"{M}.pose()") == before  # the pose as it was, targets kept
+        assert "left_knee" in page.evaluate(f"{M}.targets()")
+        assert page.evaluate(STATUS) == "server not answering"
+        drag_joint(page, "left_knee", 10, -10)  # the next drag is solved, the banner clears
+        assert page.evaluate(f"{M}.error()") is None
+        assert page.evaluate(STATUS) == "connected"
+        assert page.evaluate(f"{M}.lastSolve().request.targets")[0]["joint"] in (
+            "right_wrist",
+            "left_knee",
+        )
+        # a busy server (429, Retry-After: 2): no solve before then, the drag's last after
+        busy: list[Any] = []
+
+        def too_many(route: Any) -> None:
+            busy.append(route.request)
+            problem = {"title": "Too many requests", "status": 429, "detail": "busy"}
+            route.fulfill(
+                status=429,
+                content_type="application/problem+json",
+                headers={"Retry-After": "2"},
+                body=json.dumps(problem),
+            )
+
+        page.route("**/v1/solve", too_many)  # (tried before hold_one)
+        xy = page.evaluate(f"{M}.projectJoint('right_knee')")
+        page.mouse.move(xy["x"], xy["y"])
+        page.mouse.down()
+        for i in range(1, 9):
+            page.mouse.move(xy["x"] - 3 * i, xy["y"] - 3 * i)
+            page.wait_for_timeout(40)
+        page.mouse.up()
+        page.wait_for_function(f"() => {M}.error() !== null")
+        page.wait_for_timeout(300)
+        assert len(busy) == 1  # (one per pointer move before)
+        assert page.evaluate(f"{M}.error()")["status"] == 429
+        page.unroute("**/v1/solve", too_many)
+        page.clock.fast_forward(2_100)
+        settle(page)
+        assert page.evaluate(f"{M}.error()") is None  # the drag's last solve went, and landed
+        assert "right_knee" in page.evaluate(f"{M}.targets()")
+        assert page.evaluate(f"{M}.lastSolve().response.targets")[-1]["reached"]
+    finally:
+        context.close()
