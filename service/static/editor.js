@@ -37,7 +37,7 @@ import {
   clearTargets, endDrag, onPointerDown, onPointerMove, onPointerUp, toScreen,
 } from './editor/interaction.js';
 import { exportDocument, exportPose, refresh } from './editor/panel.js';
-import { fileFrame, jumpToFrame, openFile, readAgain, setFrame } from './editor/file.js';
+import { fileFrame, hasEdits, jumpToFrame, openFile, readAgain, setFrame } from './editor/file.js';
 
 // ------------------------------------------------------------------------------------
 // Wiring: pointer, keyboard, panel controls, file picker and drop
@@ -67,6 +67,8 @@ function wireControls() {
     requestSolve(true);
   });
   $('sample').addEventListener('change', (ev) => chooseSample(Number(ev.target.value)));
+  // a button, not a label for the hidden input: a label takes no focus, and no Tab reached it
+  $('bvh-open').addEventListener('click', () => $('bvh-file').click());
   $('bvh-file').addEventListener('change', (ev) => {
     openFile(ev.target.files[0]);
     ev.target.value = ''; // the same file can be opened again
@@ -131,6 +133,14 @@ function wireControls() {
   $('api-key').addEventListener('change', () => {
     if (!ui.connected) loadSkeleton();
     requestSolve(false);
+  });
+  // Closing or reloading the page with work on it (a file's edits, pins, targets; a
+  // sample's) asks, as every other way of dropping it does (file.js hasEdits); it went
+  // without a word.
+  window.addEventListener('beforeunload', (ev) => {
+    if (!hasEdits()) return;
+    ev.preventDefault();
+    ev.returnValue = ''; // (older browsers ask only when it is set)
   });
   window.addEventListener('keydown', (ev) => {
     if (ev.target instanceof HTMLTextAreaElement) return; // the joint map: its own keys

@@ -533,7 +533,7 @@ def pick_file(page: Any, path: Path) -> None:
     """``path`` chosen in the file chooser that "Open BVH…" opens, as a user does (the same
     file chosen again fires no change unless the page emptied the input)."""
     with page.expect_file_chooser() as chooser:
-        page.click("label[for=bvh-file]")
+        page.click("#bvh-open")
     chooser.value.set_files(str(path))
 
 

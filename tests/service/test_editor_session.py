@@ -1,5 +1,7 @@
 """The browser editor through a session's rough edges (real Chromium, the real server): a
-server that never answers a solve, or is busy. Shared parts: ``tests/service/editor_page.py``.
+server that never answers a solve, the page closed or reloaded with work on it, the file
+picker from the keyboard, an empty file, a character that walks away as the frames are
+scrubbed. Shared parts: ``tests/service/editor_page.py``.
 """
 
 from __future__ import annotations
@@ -10,8 +12,11 @@ from typing import Any
 import pytest
 
 from tests.service.editor_page import (
+    REPO_ROOT,
     M,
     drag_joint,
+    give_file,
+    open_editor,
     recorded,
     settle,
 )
@@ -20,6 +25,19 @@ from tests.service.editor_page import (
 pytest_plugins = ("tests.service.editor_page",)
 
 STATUS = "document.getElementById('status').textContent"
+
+
+def walking_file() -> str:
+    """docs/examples' three-frame file, its root 0, 1.5 and 3 m along X (centimetres): a
+    character that walks away from where it was opened."""
+    text: str = json.loads((REPO_ROOT / "docs" / "examples" / "bvh_solve.json").read_text())["bvh"]
+    head, _, motion = text.partition("MOTION")
+    lines = motion.split("\n")
+    for k, i in enumerate(range(3, 6)):  # (the MOTION line's end, Frames:, Frame Time:)
+        values = lines[i].split(" ")
+        values[0] = f"{150.0 * k:.4f}"
+        lines[i] = " ".join(values)
+    return head + "MOTION" + "\n".join(lines)
 
 
 @pytest.mark.browser
@@ -126,5 +144,69 @@ def test_editor_goes_on_when_a_solve_is_never_answered(server: str, browser: Any
         assert page.evaluate(f"{M}.error()") is None  # the drag's last solve went, and landed
         assert "right_knee" in page.evaluate(f"{M}.targets()")
         assert page.evaluate(f"{M}.lastSolve().response.targets")[-1]["reached"]
+    finally:
+        context.close()
+
+
+@pytest.mark.browser
+def test_editor_keyboard_empty_file_scrub_follows_and_unload_asks(
+    server: str, browser: Any
+) -> None:
+    """Four defects of one session: "Open BVH…" was a label no Tab reached (a keyboard user
+    could not open a file); an empty file was sent and refused as "bvh: String should have
+    at least 1 character"; a character that walks (its root 3 m along) left the view as the
+    frames were scrubbed, the camera staying where the file opened; closing or reloading
+    the page dropped a file's edits (and pins, targets) without a word, though every other
+    way of dropping them asks first."""
+    page = open_editor(browser, server)
+    context = page.context
+    try:
+        inspects = recorded(page, lambda url: url.endswith("/v1/bvh/inspect"))
+        # the file picker from the keyboard: Tab reaches "Open BVH…", Enter opens it
+        page.focus("#sample")
+        for _ in range(3):
+            page.keyboard.press("Tab")
+            if page.evaluate("document.activeElement.id") == "bvh-open":
+                break
+        assert page.evaluate("document.activeElement.id") == "bvh-open"
+        page.evaluate(  # (the chooser itself not opened: a headless one came and went)
+            """() => document.getElementById('bvh-file').addEventListener('click', (ev) => {
+                 window.chooserAsked = true;
+                 ev.preventDefault();
+               }, { once: true })"""
+        )
+        page.keyboard.press("Enter")
+        page.wait_for_function("() => window.chooserAsked === true")
+        give_file(page, "", "empty.bvh")
+        # an empty file: said in the page, nothing sent
+        page.wait_for_function(f"() => {M}.error() !== null")
+        err = page.evaluate(f"{M}.error()")
+        assert err["title"] == "Empty file" and "empty.bvh" in err["detail"], err
+        assert inspects == []
+        # a walking character scrubbed: each frame's pelvis in the view
+        give_file(page, walking_file(), "walk.bvh")
+        page.wait_for_function(f"() => {M}.bvh() && {M}.bvh().name === 'walk.bvh'")
+        width = page.evaluate("document.getElementById('viewport').clientWidth")
+        for frame in (1, 2, 0, 2):
+            page.locator("#bvh-frame").fill(str(frame))
+            page.wait_for_function(f"() => {M}.bvh().frame === {frame}")
+            x = page.evaluate(f"{M}.projectJoint('pelvis').x")
+            assert 0.25 * width < x < 0.75 * width, (frame, x, width)
+        # closing the page with a file's edits asks; a pristine one closes unasked
+        dialogs: list[str] = []
+        page.on("dialog", lambda d: (dialogs.append(d.type), d.dismiss()))
+        drag_joint(page, "left_wrist", 30, -40)
+        assert page.evaluate(f"{M}.bvh().edited")
+        with page.expect_event("dialog"):
+            page.close(run_before_unload=True)
+        page.wait_for_timeout(200)
+        assert dialogs == ["beforeunload"]
+        assert not page.is_closed()  # dismissed: the page and its edits stay
+        page.click("#reset")
+        settle(page)
+        assert not page.evaluate(f"{M}.bvh().edited")
+        with page.expect_event("close"):
+            page.close(run_before_unload=True)
+        assert dialogs == ["beforeunload"]  # nothing to lose: closed unasked
     finally:
         context.close()

@@ -211,10 +211,11 @@ function showOpened({ info, text, name, original, encoding, jointMap, settings, 
   const targets = (kept ? kept.targets : []).map(([joint, d]) => [joint, toWorld(points[joint].map((v, i) => v + d[i]))]);
   restore({ pose: filePose(text, at), targets, pins: kept ? kept.pins : [], text, frame: at });
   pushHistory();
-  const pelvis = state.pose.pelvis;
-  controls.target.set(0, pelvis[1], 0);
-  camera.position.set(0.85, pelvis[1] + 0.5, 3.3);
+  const pelvis = state.pose.pelvis; // (of the frame shown: read again, it may be far from 0)
+  controls.target.set(pelvis[0], pelvis[1], pelvis[2]);
+  camera.position.set(pelvis[0] + 0.85, pelvis[1] + 0.5, pelvis[2] + 3.3);
   controls.update();
+  doc.followed = { frame: at, pelvis: [...pelvis] };
   for (const input of [$('bvh-frame'), $('bvh-frame-number')]) {
     input.max = String(Math.max(info.frames - 1, 0));
     input.value = String(at);
@@ -397,6 +398,10 @@ export async function openFile(file) {
     return;
   }
   if (pick !== picked) return; // (a later choice stands)
+  if (bytes.length === 0) { // (the service's 422 said "bvh: String should have at least 1 character")
+    showError(new ApiError(-1, 'Empty file', `${file.name}: the file is empty (0 bytes); nothing was opened`));
+    return;
+  }
   const decoded = decodeFile(bytes);
   // lines ended by CR alone (classic Mac OS): read as LF, as the service reads them (an
   // edit then comes back with LF ends); the page's own reader splits at LF
@@ -470,6 +475,7 @@ export function readAgain() {
 
 export function closeFile() {
   doc.active = false;
+  doc.followed = null;
   doc.info = null;
   doc.jointMap = null;
   showMap(null);
@@ -533,8 +539,25 @@ function showFrame(frame) {
   refresh();
 }
 
+// The view follows the character from frame to frame (its pelvis, along the floor; the
+// orbit and zoom kept): a character that walks left the view as the frames were scrubbed,
+// the camera staying where the file opened. An edit at the frame shown moves no camera.
+function followFrame() {
+  const pelvis = state.committed && state.committed.pelvis;
+  if (!pelvis || !pelvis.every(Number.isFinite)) return; // (a frame cut short: no pose)
+  const was = doc.followed;
+  if (was && was.frame !== doc.frame) {
+    const d = new THREE.Vector3(pelvis[0] - was.pelvis[0], 0, pelvis[2] - was.pelvis[2]);
+    camera.position.add(d);
+    controls.target.add(d);
+    controls.update();
+  }
+  doc.followed = { frame: doc.frame, pelvis: [...pelvis] };
+}
+
 export function refreshFrame() {
   if (!doc.active) return;
+  followFrame();
   $('bvh-frame').value = String(doc.frame);
   const box = $('bvh-frame-number');
   if (!box.dataset.editing) box.value = String(doc.frame); // (not what the user is typing)

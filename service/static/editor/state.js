@@ -67,6 +67,7 @@ export const doc = {
   encoding: 'utf-8', // of the open file's bytes: 'utf-8' or 'latin-1' (written back the same)
   drawn: { text: null, frame: -1 }, // what the character's bones show
   world: [], // world positions of every joint of the file, as drawn
+  followed: null, // {frame, pelvis}: where the view last followed the character to (file.js)
 };
 
 export const history = { stack: [], index: -1 };
