@@ -192,6 +192,24 @@ def test_editor_keyboard_empty_file_scrub_follows_and_unload_asks(
             page.wait_for_function(f"() => {M}.bvh().frame === {frame}")
             x = page.evaluate(f"{M}.projectJoint('pelvis').x")
             assert 0.25 * width < x < 0.75 * width, (frame, x, width)
+        # the same cut short in its last frame: at that frame (no pose to draw) a press on
+        # empty space grabbed a joint whose place is NaN (every distance test failed
+        # open), and the view could not be orbited; now it orbits, grabbing nothing
+        walk = walking_file().rstrip("\n")
+        give_file(page, walk[: walk.rindex(" ", 0, len(walk) - 40)] + "\n", "cut.bvh")
+        page.wait_for_function(f"() => {M}.bvh() && {M}.bvh().name === 'cut.bvh'")
+        page.locator("#bvh-frame").fill("2")
+        page.wait_for_function(f"() => {M}.bvh().frame === 2")
+        view = page.evaluate(f"{M}.projectPoint([0, 1, 0])")
+        page.mouse.move(60, 500)
+        assert page.evaluate("document.getElementById('hud').hidden")
+        page.mouse.down()
+        page.mouse.move(160, 530, steps=5)
+        page.mouse.up()
+        assert page.evaluate(f"{M}.projectPoint([0, 1, 0])") != view  # orbited
+        assert page.evaluate(f"{M}.targets()") == {}
+        page.locator("#bvh-frame").fill("1")
+        page.wait_for_function(f"() => {M}.bvh().frame === 1")
         # closing the page with a file's edits asks; a pristine one closes unasked
         dialogs: list[str] = []
         page.on("dialog", lambda d: (dialogs.append(d.type), d.dismiss()))

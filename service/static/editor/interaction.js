@@ -38,7 +38,9 @@ function pick(clientX, clientY) {
     if (s.depth < -1 || s.depth > 1) return;
     const rim = toScreen([p[0] + camUp.x * radius, p[1] + camUp.y * radius, p[2] + camUp.z * radius]);
     const d = Math.hypot(s.x - clientX, s.y - clientY);
-    if (d > Math.max(PICK_PIXELS, Math.hypot(rim.x - s.x, rim.y - s.y))) return;
+    // (NaN: a frame cut short has no pose; it passed every test, grabbed a press anywhere
+    // and the view could not be orbited)
+    if (!(d <= Math.max(PICK_PIXELS, Math.hypot(rim.x - s.x, rim.y - s.y)))) return;
     const score = d - (kind === 'target' ? TARGET_PREFERENCE : 0);
     if (!best || score < best.score) best = { kind, joint, score };
   };
