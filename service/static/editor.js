@@ -37,7 +37,9 @@ import {
   clearTargets, endDrag, onPointerDown, onPointerMove, onPointerUp, toScreen,
 } from './editor/interaction.js';
 import { exportDocument, exportPose, refresh } from './editor/panel.js';
-import { fileFrame, hasEdits, jumpToFrame, openFile, readAgain, setFrame } from './editor/file.js';
+import {
+  fileFrame, hasEdits, jumpToFrame, openFile, otherUnits, readAgain, setFrame,
+} from './editor/file.js';
 
 // ------------------------------------------------------------------------------------
 // Wiring: pointer, keyboard, panel controls, file picker and drop
@@ -74,7 +76,10 @@ function wireControls() {
     ev.target.value = ''; // the same file can be opened again
   });
   // Units, up or the joint map changed: read again the file last asked for (file.js).
-  for (const id of ['bvh-units', 'bvh-up', 'bvh-root']) $(id).addEventListener('change', readAgain);
+  for (const id of ['bvh-up', 'bvh-root']) $(id).addEventListener('change', readAgain);
+  $('bvh-units').addEventListener('change', (ev) => {
+    if (ev.target.value !== 'other' || otherUnits()) readAgain(); // (other…: asked first)
+  });
   $('bvh-map-apply').addEventListener('click', readAgain);
   $('bvh-map-clear').addEventListener('click', () => {
     $('bvh-map').value = '';

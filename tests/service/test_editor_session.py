@@ -1,12 +1,14 @@
 """The browser editor through a session's rough edges (real Chromium, the real server): a
-server that never answers a solve, the page closed or reloaded with work on it, the file
-picker from the keyboard, an empty file, a character that walks away as the frames are
-scrubbed. Shared parts: ``tests/service/editor_page.py``.
+server that never answers a solve, or is busy; the page closed or reloaded with work on it;
+the file picker from the keyboard; an empty file; a unit the menu does not list; a
+character that walks away as the frames are scrubbed; a frame cut short. Shared parts:
+``tests/service/editor_page.py``.
 """
 
 from __future__ import annotations
 
 import json
+import re
 from typing import Any
 
 import pytest
@@ -152,12 +154,14 @@ def test_editor_goes_on_when_a_solve_is_never_answered(server: str, browser: Any
 def test_editor_keyboard_empty_file_scrub_follows_and_unload_asks(
     server: str, browser: Any
 ) -> None:
-    """Four defects of one session: "Open BVH…" was a label no Tab reached (a keyboard user
+    """Defects of one session: "Open BVH…" was a label no Tab reached (a keyboard user
     could not open a file); an empty file was sent and refused as "bvh: String should have
     at least 1 character"; a character that walks (its root 3 m along) left the view as the
     frames were scrubbed, the camera staying where the file opened; closing or reloading
     the page dropped a file's edits (and pins, targets) without a word, though every other
-    way of dropping them asks first."""
+    way of dropping them asks first. And: a file in a unit the Units menu did not list
+    (decimetres) could not be opened (now "other…" asks for metres per unit); a frame cut
+    short (no pose) grabbed a press anywhere, and the view could not be orbited there."""
     page = open_editor(browser, server)
     context = page.context
     try:
@@ -192,6 +196,31 @@ def test_editor_keyboard_empty_file_scrub_follows_and_unload_asks(
             page.wait_for_function(f"() => {M}.bvh().frame === {frame}")
             x = page.evaluate(f"{M}.projectJoint('pelvis').x")
             assert 0.25 * width < x < 0.75 * width, (frame, x, width)
+        # a file in decimetres: no unit of the menu fits; "other…" asks for metres per unit
+        head, _, motion = walking_file().partition("MOTION")
+        head = re.sub(
+            r"OFFSET\s+(\S+)\s+(\S+)\s+(\S+)",
+            lambda m: "OFFSET " + " ".join(f"{float(v) / 10:.4f}" for v in m.groups()),
+            head,
+        )
+        rows = motion.split("\n")
+        for i in range(3, 6):  # (the root's position: the first three values)
+            values = rows[i].split(" ")
+            values[:3] = [f"{float(v) / 10:.4f}" for v in values[:3]]
+            rows[i] = " ".join(values)
+        give_file(page, head + "MOTION" + "\n".join(rows), "dm.bvh")
+        page.wait_for_function(f"() => {M}.error() !== null && {M}.error().status === 422")
+        assert "state them" in page.evaluate(f"{M}.error()")["detail"]
+        sent = len(inspects)
+        page.once("dialog", lambda d: d.accept("abc"))
+        page.select_option("#bvh-units", "other")
+        assert page.evaluate(f"{M}.error()")["title"] == "Units"
+        assert page.locator("#bvh-units").input_value() == "auto" and len(inspects) == sent
+        page.once("dialog", lambda d: d.accept("0.1"))
+        page.select_option("#bvh-units", "other")
+        page.wait_for_function(f"() => {M}.bvh() && {M}.bvh().name === 'dm.bvh'")
+        assert inspects[-1]["units"] == 0.1 and page.evaluate(f"{M}.bvh().units") == 0.1
+        assert page.locator("#bvh-units").input_value() == "0.1"
         # the same cut short in its last frame: at that frame (no pose to draw) a press on
         # empty space grabbed a joint whose place is NaN (every distance test failed
         # open), and the view could not be orbited; now it orbits, grabbing nothing

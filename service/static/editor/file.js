@@ -430,6 +430,37 @@ function mapFor(name, text) {
   return null;
 }
 
+// "other…" in the Units menu: a number of metres per unit, asked for, listed in the menu
+// and chosen (true), or none (false: the menu back to what it showed). The service takes
+// any number; the menu listed six units, and a file in none of them (decimetres, a game's
+// own scale) could not be opened, though the refusal said "state them ... or a number of
+// metres per unit".
+export function otherUnits() {
+  const menu = $('bvh-units');
+  const was = doc.active ? doc.settings : doc.tried && doc.tried.settings;
+  const back = () => { menu.value = was ? was.units : 'auto'; };
+  const typed = window.prompt('Metres per unit of this file (e.g. 0.1 for decimetres, 0.0254 for inches):', '');
+  if (typed === null || typed.trim() === '') {
+    back();
+    return false;
+  }
+  const value = Number(typed.trim());
+  if (!Number.isFinite(value) || value <= 0) {
+    back();
+    showError(new ApiError(-1, 'Units', `${typed.trim().slice(0, 20)}: not a number of metres per unit (a positive number: 0.1 for decimetres)`));
+    return false;
+  }
+  const key = String(value);
+  if (![...menu.options].some((o) => o.value === key)) {
+    const option = document.createElement('option');
+    option.value = key;
+    option.textContent = `${key} m`;
+    menu.insertBefore(option, menu.querySelector('option[value=other]'));
+  }
+  menu.value = key;
+  return true;
+}
+
 // Units, up axis or joint map changed: read again the file last asked for, with the joint
 // map in the field. If that is the open file, its edits are kept and Reset still returns
 // to it as opened (the undo history starts anew: its poses were in the old units); if its
