@@ -161,11 +161,27 @@ def test_editor_keyboard_empty_file_scrub_follows_and_unload_asks(
     the page dropped a file's edits (and pins, targets) without a word, though every other
     way of dropping them asks first. And: a file in a unit the Units menu did not list
     (decimetres) could not be opened (now "other…" asks for metres per unit); a frame cut
-    short (no pose) grabbed a press anywhere, and the view could not be orbited there."""
+    short (no pose) grabbed a press anywhere, and the view could not be orbited there; a
+    420 px window left the view 120 px wide beside the panel, the figure cut."""
     page = open_editor(browser, server)
     context = page.context
     try:
         inspects = recorded(page, lambda url: url.endswith("/v1/bvh/inspect"))
+        # a narrow window (420 px): the whole figure in the view, the panel clear of it
+        page.set_viewport_size({"width": 420, "height": 800})
+        page.wait_for_timeout(200)  # (the view's ResizeObserver)
+        box = page.locator("#viewport").bounding_box()
+        panel = page.locator("#panel").bounding_box()
+        assert box is not None and panel is not None
+        for joint in page.evaluate(f"{M}.joints()"):
+            xy = page.evaluate(f"{M}.projectJoint('{joint}')")
+            assert box["x"] < xy["x"] < box["x"] + box["width"], (joint, xy, box)
+            assert box["y"] < xy["y"] < box["y"] + box["height"], (joint, xy, box)
+        assert (
+            panel["y"] >= box["y"] + box["height"] - 1 or panel["x"] >= box["x"] + box["width"] - 1
+        )
+        page.set_viewport_size({"width": 1280, "height": 800})
+        page.wait_for_timeout(200)
         # the file picker from the keyboard: Tab reaches "Open BVH…", Enter opens it
         page.focus("#sample")
         for _ in range(3):
