@@ -208,10 +208,16 @@ async function fetchSkeleton() {
       ui.connected = true;
       $('status').textContent = 'connected';
       await showModelDefaults();
-      if (ui.currentError && ui.currentError.status === 503) clearError();
+      // (a 503's, the models loading; a 401's, the key now typed: it stayed, stale)
+      if (ui.currentError && [401, 503].includes(ui.currentError.status)) clearError();
       return;
     } catch (err) {
       showError(err);
+      if (err.status === 401) { // the key's field is shown (api.js), and takes the keys
+        $('status').textContent = 'API key needed';
+        $('api-key').focus();
+        return;
+      }
       $('status').textContent = 'server not ready';
       if (err.status !== 503 && err.status !== 0) return;
       await new Promise((r) => setTimeout(r, 2000)); // models still loading / server restarting

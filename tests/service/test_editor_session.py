@@ -51,7 +51,10 @@ def test_editor_goes_on_when_a_solve_is_never_answered(server: str, browser: Any
     targets are kept to retry; an undo (or any action dropping the gesture) gives up its
     solve at once, so the next drag is solved without waiting for it. And a busy server's
     429 (Retry-After: 2) was asked again at each pointer move; now no solve goes before the
-    Retry-After, and the drag's last one goes then."""
+    Retry-After, and the drag's last one goes then. First, a service run with an API key:
+    its 401 said "send the API key in the X-API-Key header" while the field sat in the
+    closed Connection box, the status said "server not ready", and once the key was typed
+    the 401 banner stayed."""
     context = browser.new_context(viewport={"width": 1280, "height": 800}, device_scale_factor=1)
     page = context.new_page()
     page.set_default_timeout(20_000)
@@ -67,10 +70,31 @@ def test_editor_goes_on_when_a_solve_is_never_answered(server: str, browser: Any
             route.continue_()
 
     hold = {"next": True, "all": False}
+
+    def keyed(route: Any) -> None:  # a service run with POSE_API_KEY=sekrit, as it answers
+        if route.request.headers.get("x-api-key") == "sekrit":
+            route.continue_()
+            return
+        detail = "send the API key in the X-API-Key header (or Authorization: Bearer <key>)"
+        problem = {"title": "Missing or wrong API key", "status": 401, "detail": detail}
+        route.fulfill(status=401, content_type="application/problem+json", body=json.dumps(problem))
+
     try:
+        # a service with an API key: the field (in the closed Connection box) is shown and
+        # focused, the status and banner say where it goes; typed, the page connects
+        page.route("**/v1/**", keyed)
         page.goto(server + "/editor")
         page.wait_for_function(f"() => {M} && {M}.ready()")
+        page.wait_for_function(f"() => {STATUS} === 'API key needed'")
+        assert page.locator("#api-key").is_visible()
+        assert page.evaluate("document.activeElement.id") == "api-key"
+        err = page.evaluate(f"{M}.error()")
+        assert err["status"] == 401 and "under Connection" in err["detail"], err
+        page.keyboard.type("sekrit")
+        page.keyboard.press("Tab")
         page.wait_for_function(f"() => {STATUS} === 'connected'")
+        page.wait_for_function(f"() => {M}.error() === null")  # (it stayed, stale)
+        assert page.locator("#api-key").get_attribute("aria-invalid") != "true"
         page.route("**/v1/solve", hold_one)
         xy = page.evaluate(f"{M}.projectJoint('left_wrist')")
         page.mouse.move(xy["x"], xy["y"])

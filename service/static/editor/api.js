@@ -78,9 +78,12 @@ export async function api(method, path, body, { signal = null } = {}) {
     data = null;
   }
   const requestId = res.headers.get('X-Request-ID');
+  if (res.status === 401) keyNeeded();
+  else if (res.ok) $('api-key').removeAttribute('aria-invalid');
   if (!res.ok) {
     const title = (data && data.title) || `HTTP ${res.status}`;
-    const detail = (data && data.detail) || text.slice(0, 300) || res.statusText;
+    let detail = (data && data.detail) || text.slice(0, 300) || res.statusText;
+    if (res.status === 401) detail += ' (enter the key under Connection, in the panel)';
     const after = Number.parseInt(res.headers.get('Retry-After') || '', 10); // (seconds; a date: none)
     throw new ApiError(res.status, title, detail, requestId, Number.isFinite(after) && after > 0 ? after : null);
   }
@@ -88,6 +91,16 @@ export async function api(method, path, body, { signal = null } = {}) {
     throw new ApiError(res.status, 'Bad response', `${method} /${path}: the body is not JSON`, requestId);
   }
   return { data, rtt, serverTime: res.headers.get('X-Total-Time') || res.headers.get('X-Inference-Time'), requestId };
+}
+
+// A 401: the service runs with an API key (POSE_API_KEY) and none, or another, was sent.
+// The key's field is in the panel's Connection box, closed by default: opened and marked
+// (the banner said only "send the API key in the X-API-Key header", the field out of sight).
+function keyNeeded() {
+  const input = $('api-key');
+  const box = input.closest('details');
+  if (box) box.open = true;
+  input.setAttribute('aria-invalid', 'true');
 }
 
 // ------------------------------------------------------------------------------------
