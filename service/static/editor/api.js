@@ -60,7 +60,7 @@ export async function api(method, path, body, { signal = null } = {}) {
     if (timedOut) {
       $('status').textContent = NOT_ANSWERING;
       throw new ApiError(0, 'No answer', `${method} /${path}: the server did not answer within `
-        + `${NO_ANSWER_MS / 1000} s; given up (a drag's targets are kept: drag again to retry)`);
+        + `${NO_ANSWER_MS / 1000} s; given up`);
     }
     if (signal && signal.aborted) throw new ApiError(-1, 'Given up', `${method} /${path}`);
     $('status').textContent = 'server unreachable';
