@@ -31,7 +31,7 @@ import {
   sendSolve, setUpFields, takeField, undo,
 } from './editor/solve.js';
 import {
-  buildSkeleton, camera, pinRings, renderer, resize, scene, viewport,
+  buildSkeleton, camera, floorCentre, pinRings, renderer, resize, scene, viewport,
 } from './editor/scene.js';
 import {
   clearTargets, endDrag, onPointerDown, onPointerMove, onPointerUp, toScreen,
@@ -292,6 +292,7 @@ window.marionette = Object.freeze({
     return { x: s.x, y: s.y };
   },
   exportDocument: () => exportDocument(),
+  floor: () => floorCentre(), // the floor grid's centre (world): under the character shown
   // the open BVH file (null when none): what it is and what is drawn
   bvh: () => (doc.active ? {
     name: doc.name,

@@ -181,7 +181,8 @@ def test_editor_keyboard_empty_file_scrub_follows_and_unload_asks(
     """Defects of one session: "Open BVH…" was a label no Tab reached (a keyboard user
     could not open a file); an empty file was sent and refused as "bvh: String should have
     at least 1 character"; a character that walks (its root 3 m along) left the view as the
-    frames were scrubbed, the camera staying where the file opened; closing or reloading
+    frames were scrubbed, the camera staying where the file opened (and once it followed,
+    off the floor's 4 m grid, standing on nothing); closing or reloading
     the page dropped a file's edits (and pins, targets) without a word, though every other
     way of dropping them asks first. And: a file in a unit the Units menu did not list
     (decimetres) could not be opened (now "other…" asks for metres per unit); a frame cut
@@ -236,6 +237,12 @@ def test_editor_keyboard_empty_file_scrub_follows_and_unload_asks(
             page.wait_for_function(f"() => {M}.bvh().frame === {frame}")
             x = page.evaluate(f"{M}.projectJoint('pelvis').x")
             assert 0.25 * width < x < 0.75 * width, (frame, x, width)
+            # and the floor (a 4 m grid) under it, its lines where they were (0.25 m cells)
+            pelvis = page.evaluate(f"{M}.pose().pelvis")
+            floor = page.evaluate(f"{M}.floor()")
+            assert abs(floor[0] - pelvis[0]) <= 0.125 + 1e-9, (frame, floor, pelvis)
+            assert abs(floor[2] - pelvis[2]) <= 0.125 + 1e-9, (frame, floor, pelvis)
+            assert all(abs(v / 0.25 - round(v / 0.25)) < 1e-9 for v in floor), floor
         # a file in decimetres: no unit of the menu fits; "other…" asks for metres per unit
         head, _, motion = walking_file().partition("MOTION")
         head = re.sub(

@@ -6,7 +6,7 @@ import { anchorPoints, forwardKinematics, frameValues, parseMotion } from '../bv
 import { $, doc, history, solver, state, ui } from './state.js';
 import { api, ApiError, clearError, showError } from './api.js';
 import { cancelSolves, clonePose, pushHistory, restore, whenCommitted } from './solve.js';
-import { buildCharacterBones, buildSkeleton, camera, controls, UP } from './scene.js';
+import { buildCharacterBones, buildSkeleton, camera, centreFloor, controls, UP } from './scene.js';
 import { endDrag } from './interaction.js';
 import { refresh, refreshPanel } from './panel.js';
 import { offerTemplate, readMap, showMap } from './jointmap.js';
@@ -507,6 +507,7 @@ export function readAgain() {
 export function closeFile() {
   doc.active = false;
   doc.followed = null;
+  centreFloor(0, 0);
   doc.info = null;
   doc.jointMap = null;
   showMap(null);
@@ -584,6 +585,7 @@ function followFrame() {
     controls.update();
   }
   doc.followed = { frame: doc.frame, pelvis: [...pelvis] };
+  centreFloor(pelvis[0], pelvis[2]);
 }
 
 export function refreshFrame() {

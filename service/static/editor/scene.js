@@ -48,11 +48,24 @@ sun.position.set(2, 4, 3);
 scene.add(sun);
 
 // Floor: a 4 m grid of 25 cm squares.
-scene.add(new THREE.GridHelper(4, 16, 0x6b7280, 0x394050));
+const floor = new THREE.GridHelper(4, 16, 0x6b7280, 0x394050);
+scene.add(floor);
 
 // Facing arrow on the floor (+Z, towards the default camera).
 const facing = new THREE.ArrowHelper(new THREE.Vector3(0, 0, 1), new THREE.Vector3(0, 0.003, 0.15), 0.25, 0x6b7280, 0.07, 0.045);
 scene.add(facing);
+
+// The floor (and the facing arrow) under the point (x, z), snapped to its 0.25 m cells so
+// that its lines stay where they were: a file's character followed from frame to frame
+// (file.js followFrame) walked off the 4 m grid and stood on nothing.
+export function centreFloor(x, z) {
+  const cell = 0.25;
+  floor.position.set(Math.round(x / cell) * cell, 0, Math.round(z / cell) * cell);
+  facing.position.set(floor.position.x, 0.003, floor.position.z + 0.15);
+  ui.needsRender = true;
+}
+
+export const floorCentre = () => floor.position.toArray();
 
 export const controls = new OrbitControls(camera, renderer.domElement);
 controls.target.set(0, 0.85, 0);
