@@ -20,7 +20,9 @@ from __future__ import annotations
 
 import asyncio
 import collections
+import gc
 import time
+from typing import Any
 
 import numpy as np
 
@@ -72,6 +74,60 @@ def estimate(body: bytes, orjson: bool = False) -> int:
     return total
 
 
+#: Seconds full collections are deferred at most while big bodies follow each other
+#: without a pause; then one may run (and they are deferred again once it has).
+MAX_DEFERRED = 30.0
+_NEVER = 1 << 30  # a third threshold no count of collections reaches
+
+
+class FullCollections:
+    """The garbage collector's full collections, deferred while a worker holds big bodies
+    decoded (:class:`DecodeBudget`). Once the models are loaded, the process's objects are
+    frozen (``service.app``), so a full collection walks what requests allocated: a body of
+    64 KiB or more decoded holds up to millions of containers, and the collections its
+    decoding set off took the GIL for 45-100 ms each (a 6.5 MiB item list, a real
+    uvicorn: the event loop waited as long). Decoded JSON holds no reference cycles; the
+    young generations are still collected as ever (each walks a few thousand objects); a
+    full collection runs when no big body is held (walking little: they are freed), or
+    once every ``MAX_DEFERRED`` seconds of them. Process-wide; event-loop threads only."""
+
+    def __init__(self) -> None:
+        self.holders = 0
+        self.saved: tuple[int, int, int] | None = None  # the thresholds while deferred
+        self.since = 0.0  # when deferred (time.monotonic)
+        gc.callbacks.append(self._collected)
+
+    def hold(self) -> None:
+        self.holders += 1
+        if self.holders == 1:
+            self._defer()
+        elif self.saved is not None and time.monotonic() - self.since > MAX_DEFERRED:
+            self._allow()  # one may run now (deferred again once it has: _collected)
+
+    def release(self) -> None:
+        self.holders -= 1
+        if self.holders == 0:
+            self._allow()
+
+    def _defer(self) -> None:
+        if self.saved is None:
+            self.saved = gc.get_threshold()
+            gc.set_threshold(self.saved[0], self.saved[1], _NEVER)
+        self.since = time.monotonic()
+
+    def _allow(self) -> None:
+        if self.saved is not None:
+            gc.set_threshold(*self.saved)
+            self.saved = None
+
+    def _collected(self, phase: str, info: dict[str, Any]) -> None:
+        if phase == "stop" and info["generation"] == 2 and self.holders > 0:
+            self._defer()
+
+
+FULL_COLLECTIONS = FullCollections()
+
+
 class DecodeBudget:
     """Bytes of decoded bodies a worker holds at once; reservations are granted in
     arrival order (one that does not fit holds back those after it, so a big body is not
@@ -91,7 +147,7 @@ class DecodeBudget:
             if self.held + size > self.total:
                 return
             self._waiting.popleft()
-            self.held += size
+            self._add(size)
             ready.set_result(True)
 
     def _expire(self, ready: asyncio.Future[bool]) -> None:
@@ -106,7 +162,7 @@ class DecodeBudget:
         out - ends at once and is answered; through ``asyncio.wait_for`` it took loop
         turns the shutdown did not wait for, and its client got no answer.)"""
         if not self._waiting and self.held + size <= self.total:
-            self.held += size
+            self._add(size)
             return True
         loop = asyncio.get_running_loop()
         ready: asyncio.Future[bool] = loop.create_future()
@@ -123,6 +179,13 @@ class DecodeBudget:
         finally:
             timer.cancel()
 
+    def _add(self, size: int) -> None:
+        if self.held == 0 and size > 0:
+            FULL_COLLECTIONS.hold()
+        self.held += size
+
     def release(self, size: int) -> None:
         self.held -= size
+        if self.held == 0 and size > 0:
+            FULL_COLLECTIONS.release()
         self._grant()

@@ -221,6 +221,15 @@ class BodyInvalid(HTTPException):
         self.errors = list(errors)
         self.total = max(total, len(self.errors))  # errors found, listed or not
         self.partial = partial  # the look stopped early: more may follow
+        self._answer: JSONResponse | None = None
+
+    def answer(self) -> JSONResponse:
+        """Its 422 (:func:`validation_problem`), worded once; the errors, which may quote
+        much of the body (an input that is a list of a million numbers), are let go then."""
+        if self._answer is None:
+            self._answer = validation_problem(self.errors, self.total, self.partial)
+            self.errors = []
+        return self._answer
 
 
 #: The schemes a 401 names (the gate takes X-API-Key or Authorization: Bearer).
@@ -403,7 +412,7 @@ def install_handlers(app: FastAPI) -> None:
             return error_response(exc.error)
         if isinstance(exc, BodyInvalid):
             request.scope[REASON] = "invalid-request"
-            return validation_problem(exc.errors, exc.total, exc.partial)
+            return exc.answer()
         title = detail = clip(exc.detail)
         with contextlib.suppress(ValueError):  # a detail of its own (service.files): the
             title = HTTPStatus(exc.status_code).phrase  # status's phrase, as about:blank's

@@ -26,9 +26,9 @@ from starlette.requests import Request
 from starlette.routing import BaseRoute
 
 from service import columnar
-from service.body import INLINE_BYTES, decode
+from service.body import DECODED, INLINE_BYTES, decode, in_worker
 from service.deps import ServiceState
-from service.errors import BodyError, BodyInvalid, PoseError, error_response, validation_problem
+from service.errors import BodyError, BodyInvalid, PoseError, error_response
 from service.limits import Budget
 from service.middleware.types import REASON, ASGIApp, Message, Receive, Scope, Send
 from service.responses import compute_time, solve_payload
@@ -80,6 +80,23 @@ def tokens(body: bytes) -> tuple[int, int]:
     return colons, bools
 
 
+#: Values a valid columnar item holds at most (its pose's 63 numbers, 21 targets'
+#: positions 63 and weights 21, rows of 21 joint names and pins), so commas in a valid body.
+ITEM_VALUES = 192
+
+
+def plausible(body: bytes, max_items: int) -> bool:
+    """Whether ``body`` may be a valid columnar batch, for orjson to read it: orjson holds
+    the GIL for a whole body (6.5 MiB of numbers kept the event loop waiting 0.11-0.15 s,
+    a real uvicorn), so one of ``INLINE_BYTES`` or more holding more values than
+    ``max_items`` valid items could, or an item list (``"items"``), is read by the strict
+    decoder, in steps (``service.stepped``), as the routes read bodies."""
+    if len(body) < INLINE_BYTES:
+        return True
+    commas = int(np.count_nonzero(np.frombuffer(body, dtype=np.uint8) == ord(",")))
+    return commas <= ITEM_VALUES * max_items + 64 and b'"items"' not in body
+
+
 def _columnar_keys(data: Any) -> int:
     """Keys of a columnar body where it has objects (top level, ``targets``, ``options``);
     -1 when it is not the columnar form."""
@@ -90,6 +107,36 @@ def _columnar_keys(data: Any) -> int:
         if isinstance(data.get(key), dict):
             n += len(data[key])
     return n
+
+
+def read_columns(body: bytes, limit: int, scope: Scope) -> columnar.Columns | None:
+    """A columnar batch read and validated (``limit``: items at most), or None: the body
+    is not the columnar form (decoded by the strict decoder, it is left in ``scope`` for
+    the route, ``service.body.DECODED``)."""
+    strict, bools = False, 0
+    data: Any = None
+    if plausible(body, limit):
+        try:
+            data = orjson.loads(body)
+            if not columnar.is_columnar(data):
+                return None  # the item list: the route reads it
+            colons, bools = tokens(body)
+            strict = _columnar_keys(data) == colons  # see pose_form
+        except orjson.JSONDecodeError:  # NaN, or malformed: the strict decoder says
+            pass
+    if not strict:
+        data = None  # (orjson's objects freed before the body is decoded again)
+        try:
+            data = decode(body)
+        except PoseError as exc:
+            raise BodyError(exc) from None
+    if not columnar.is_columnar(data):
+        scope[DECODED] = data  # the route validates it, not decoded twice
+        return None
+    # booleans only where options hold one, else every number's type is checked
+    options = data.get("options")
+    legit = isinstance(options, dict) and type(options.get("preserve_bone_lengths")) is bool
+    return columnar.parse(data, limit, suspect=not strict or bools != int(legit))
 
 
 class FastPath:
@@ -156,35 +203,17 @@ class FastPath:
     async def _columns(self, scope: Scope, receive: Receive, send: Send, state: ServiceState,
                        body: bytes) -> bool:  # fmt: skip
         limit = state.settings.max_batch_items
-
-        def read() -> columnar.Columns | None:
-            strict, bools = False, 0
-            try:
-                data: Any = orjson.loads(body)
-                if not columnar.is_columnar(data):
-                    return None  # the item list: the route reads it
-                colons, bools = tokens(body)
-                strict = _columnar_keys(data) == colons  # see pose_form
-            except orjson.JSONDecodeError:  # NaN, or malformed: the strict decoder says which
-                pass
-            if not strict:
-                data = None  # (orjson's objects freed before the body is decoded again)
-                try:
-                    data = decode(body)
-                except PoseError as exc:
-                    raise BodyError(exc) from None
-            if not columnar.is_columnar(data):
-                return None
-            # booleans only where options hold one, else every number's type is checked
-            options = data.get("options")
-            legit = isinstance(options, dict) and type(options.get("preserve_bone_lengths")) is bool
-            return columnar.parse(data, limit, suspect=not strict or bools != int(legit))
-
         request = Request(scope, receive)
         budget = Budget(request, state.settings.deadline_seconds)
         try:
             small = len(body) < INLINE_BYTES
-            cols = read() if small else await budget.in_thread(read, "reading the body")
+            cols = (
+                read_columns(body, limit, scope)
+                if small
+                else await budget.in_thread(
+                    in_worker(lambda: read_columns(body, limit, scope)), "reading the body"
+                )
+            )
             if cols is None:
                 return False
             engine = state.repository.ready_engine()
@@ -194,7 +223,7 @@ class FastPath:
             return True
         except BodyInvalid as exc:
             scope[REASON] = "invalid-request"
-            await validation_problem(exc.errors, exc.total, exc.partial)(scope, receive, send)
+            await exc.answer()(scope, receive, send)
             return True
         except PoseError as exc:
             await _problem(scope, receive, send, exc)
