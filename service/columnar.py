@@ -208,27 +208,36 @@ def _names(value: Any, loc: tuple[Any, ...], n: int, errs: _Errors, least: int
 
 
 def _repeats(tidx: I64, k: int, shared_t: bool, shared_p: bool) -> None:
-    """A joint targeted twice, pinned twice or both is a 422 naming the first such item."""
+    """A joint targeted twice, pinned twice or both is a 422 naming every such row (its
+    first repeat; the first ``MAX_ERRORS`` rows, the others counted, as the item list's
+    ``service.errors.every_item``); one in joints every item shares, once."""
     s = np.sort(tidx, axis=1)
     rep = (s[:, 1:] == s[:, :-1]).any(axis=1)
     if not rep.any():
         return
-    b = int(np.argmax(rep))
-    row = tidx[b].tolist()
-    for i, j in enumerate(row):
-        if j not in row[:i]:
-            continue
-        name = JOINT_NAMES[j]
+    errs = _Errors()
+    told: set[tuple[int, int]] = set()  # repeats in shared joints, told once
+    for b in np.flatnonzero(rep).tolist():
+        row = tidx[b].tolist()
+        i = next(i for i, j in enumerate(row) if j in row[:i])
+        first = row.index(row[i])
+        name = JOINT_NAMES[row[i]]
         loc: tuple[Any, ...]
         if i < k:
             msg = f"duplicate target for joint {name!r}"
             loc = ("targets", "joints", i) if shared_t else ("targets", "joints", b, i)
         else:
             loc = ("pins", i - k) if shared_p else ("pins", b, i - k)
-            both = j in row[:k]
+            both = first < k
             msg = f"joint {name!r} is both pinned and targeted" if both else (
                 f"joint {name!r} is pinned twice")  # fmt: skip
-        raise BodyInvalid([{"loc": loc, "type": "repeat", "msg": f"{msg} (item {b})"}])
+        if all(shared_t if x < k else shared_p for x in (first, i)):  # every item's
+            if (first, i) not in told:
+                told.add((first, i))
+                errs.add(loc, "repeat", f"{msg} (every item)")
+            continue
+        errs.add(loc, "repeat", f"{msg} (item {b})")
+    errs.raise_any()
 
 
 def parse(data: dict[str, Any], max_items: int, suspect: bool = True) -> Columns:

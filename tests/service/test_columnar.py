@@ -337,3 +337,38 @@ def test_columnar_limits(models_dir: Path, synthetic_poses: PosePairs) -> None:
         metrics = c.get("/metrics").text
         assert 'pose_solves_total{method="neural",solvers="composed"}' in metrics
         assert 'pose_requests_total{route="/v1/solve/batch",status="200"} 1.0' in metrics
+
+
+def test_a_columnar_batch_is_told_every_rows_repeats(
+    client: Any, synthetic_poses: PosePairs
+) -> None:
+    """Rows that repeat a joint (a target twice, a pin on a target): every bad row is named,
+    in order, as the item list names every bad item (only the first row was, and a client
+    fixed one row a round trip); past 20, the count. A repeat in the joints every item
+    shares is one error, named once."""
+    body = columns(synthetic_poses, 30)
+    joints = body["targets"]["joints"]
+    for b in (2, 5, 7):
+        joints[b] = [joints[b][0], joints[b][0]]
+    resp = client.post("/v1/solve/batch", json=body)
+    assert resp.status_code == 422 and resp.headers["content-type"] == PROBLEM
+    errors = resp.json()["errors"]
+    assert [e["location"] for e in errors] == [
+        "targets.joints[2][1]", "targets.joints[5][1]", "targets.joints[7][1]"
+    ]  # fmt: skip
+    assert errors[0]["message"] == f"duplicate target for joint {joints[2][0]!r} (item 2)"
+    body = columns(synthetic_poses, 30)
+    body["pins"] = [[row[0]] for row in body["targets"]["joints"]]  # each on its own target
+    resp = client.post("/v1/solve/batch", json=body)
+    assert len(resp.json()["errors"]) == 20 and resp.json()["detail"].endswith("; and 27 more")
+    assert resp.json()["errors"][19]["location"] == "pins[19][0]"
+    body = columns(synthetic_poses, 30)
+    body["targets"]["joints"] = ["left_wrist", "left_wrist"]
+    body["targets"]["positions"] = [row[:6] for row in body["targets"]["positions"]]
+    resp = client.post("/v1/solve/batch", json=body)
+    assert resp.json()["errors"] == [
+        {
+            "location": "targets.joints[1]",
+            "message": "duplicate target for joint 'left_wrist' (every item)",
+        }
+    ]
