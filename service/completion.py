@@ -54,12 +54,8 @@ def complete(
     bone pass (the given ``given_lengths``, else the network's own proportions) and a
     polish onto the key points to ``tolerance``."""
     levels = engine.manifest.completion_levels()
-    missing = [j for j in levels[0].joints if j not in keypoints]
-    if missing:
-        raise InvalidRequest(
-            f"keypoints: the six base points are required; missing {missing}",
-            missing=missing,
-        )
+    if any(j not in keypoints for j in levels[0].joints):
+        raise below_the_floor([list(level.joints) for level in levels], list(keypoints))
     base = np.stack([keypoints[j] for j in levels[0].joints])
     span = float(np.max(np.linalg.norm(base[:, None] - base[None], axis=-1)))
     if span < MIN_SPAN:
@@ -167,6 +163,33 @@ def implied_bodies(engine: Engine, poses: F64) -> F64:
     x = (poses[:, idx] / scale).reshape(len(poses), -1).astype(np.float32)
     out: F64 = engine.completion[0](x).astype(np.float64).reshape(poses.shape) * scale
     return out
+
+
+def below_the_floor(sets: list[list[str]], given: list[str]) -> InvalidRequest:
+    """The 422 of key points without every base point (``sets``: each completion level's
+    joints, the first the base): the sets a completion takes, and what the nearest set
+    (fewest missing, then fewest points) lacks, in ``missing``, with the sets as
+    ``key_point_sets``."""
+    nearest = min(sets, key=lambda s: (sum(j not in given for j in s), len(s)))
+    missing = [j for j in nearest if j not in given]
+    which = "the 6 base points" if nearest is sets[0] and len(nearest) == 6 else (
+        f"the {len(nearest)} points")  # fmt: skip
+    told = []
+    for n, s in enumerate(sets):
+        before = sets[n - 1] if n else []
+        if n and set(before) <= set(s):  # the one before and more
+            extra = [j for j in s if j not in before]
+            told.append(f"{len(s)} (the {len(before)} and {', '.join(extra)})")
+        else:
+            told.append(f"{len(s)} points ({', '.join(s)})")
+    takes = ", ".join(told[:-1]) + f" or {told[-1]}" if len(told) > 1 else told[0]
+    return InvalidRequest(
+        f"keypoints: the nearest key point set a completion takes, {which}, lacks "
+        f"{', '.join(missing)} (given: {', '.join(given)}); it takes {takes}; any other "
+        "joints besides",
+        missing=missing,
+        key_point_sets=sets,
+    )
 
 
 def complete_level(engine: Engine, level: int, keys: F64) -> F64:

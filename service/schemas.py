@@ -461,7 +461,14 @@ class Problem(BaseModel):
     )
     missing: list[str] = Field(
         default_factory=list,
-        description="Missing base key points (a completion's 422 only; absent otherwise).",
+        description="Missing base key points (a completion's 422 only; absent otherwise): "
+        "those the nearest of `key_point_sets` lacks.",
+        json_schema_extra=_no_default,
+    )
+    key_point_sets: list[list[str]] = Field(
+        default_factory=list,
+        description="The key point sets a completion takes, one per completion level (6, "
+        "11, 16 points; any other joints may be given besides): with `missing` only.",
         json_schema_extra=_no_default,
     )
 

@@ -352,6 +352,37 @@ def test_complete_names_missing_base_points(client: Any) -> None:
     assert out["missing"] == ["left_wrist", "right_wrist", "left_ankle", "right_ankle"]
 
 
+def test_complete_below_the_floor_names_the_sets_it_takes_and_the_nearests_lack(
+    client: Any,
+) -> None:
+    """Key points below the six base points: the 422 names the key point sets a completion
+    takes (6, 11, 16 points: each level's), which of the nearest set are missing, and what
+    was given (it said only "the six base points are required; missing [...]", naming
+    neither the six nor the larger sets)."""
+    six = ["pelvis", "neck", "left_wrist", "right_wrist", "left_ankle", "right_ankle"]
+    eleven = [*six, "head", "left_elbow", "right_elbow", "left_knee", "right_knee"]
+    given = ["pelvis", "neck", "left_wrist", "head", "left_elbow", "spine1"]  # six, not those
+    body = {
+        "keypoints": [{"joint": j, "position": [0, 1 + i / 10, 0]} for i, j in enumerate(given)]
+    }
+    out = assert_problem(client.post("/v1/complete", json=body), 422)
+    assert out["missing"] == ["right_wrist", "left_ankle", "right_ankle"]
+    assert [len(s) for s in out["key_point_sets"]] == [6, 11, 16]
+    assert out["key_point_sets"][:2] == [six, eleven]
+    detail = out["detail"]
+    assert detail.startswith(
+        "keypoints: the nearest key point set a completion takes, the 6 base points, lacks "
+        "right_wrist, left_ankle, right_ankle (given: pelvis, neck, left_wrist, head, "
+        "left_elbow, spine1); it takes 6 points (pelvis, neck, left_wrist, right_wrist, "
+        "left_ankle, right_ankle), 11 (the 6 and head, left_elbow, right_elbow, left_knee, "
+        "right_knee) or 16 (the 11 and "
+    ), detail
+    assert detail.endswith("; any other joints besides"), detail
+    assert out["errors"] == [
+        {"location": "keypoints", "message": detail.removeprefix("keypoints: ")}
+    ]
+
+
 # -- bad input: always a precise problem+json, never a 500 ----------------------------------
 @pytest.mark.parametrize(
     ("mutate", "needle"),
