@@ -39,6 +39,7 @@ from service.errors import (
 from service.limits import Budget
 
 NO_BODY = "the request has no body: send a JSON object"
+BOM = b"\xef\xbb\xbf"  # UTF-8's byte order mark
 INLINE_BYTES = 64 * 1024  # smaller bodies are parsed on the loop (a thread hop costs more)
 #: Errors a body parsed on the loop has counted (~10 ms); one with more is read again in a
 #: worker thread, counted up to ``service.bounded.COUNT_LIMIT`` (64 KiB hold ~40,000).
@@ -60,16 +61,19 @@ def _object(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
 
 def decode(body: bytes) -> Any:
     """Strict JSON: UTF-8, no duplicate keys; every failure a ``MalformedBody`` that says
-    where. (``NaN`` and ``Infinity`` tokens decode; the schemas then reject them by field.)"""
+    where. (``NaN`` and ``Infinity`` tokens decode; the schemas then reject them by field.
+    A UTF-8 byte order mark before the JSON is passed over: Windows tools write one, and
+    it was a 400 telling the client to "decode using utf-8-sig".)"""
     if not body.strip():
         raise MalformedBody(NO_BODY)
-    big = stepped.plan(body)  # (before the text: its arrays freed by then)
+    bom = len(BOM) if body.startswith(BOM) else 0  # (RFC 8259 8.1: a parser may ignore it)
+    view = memoryview(body)[bom:]
+    big = stepped.plan(view)  # (before the text: its arrays freed by then)
     try:
-        text = body.decode("utf-8")
+        text = str(view, "utf-8")
     except UnicodeDecodeError as exc:
-        raise MalformedBody(
-            f"body is not UTF-8: byte 0x{body[exc.start]:02x} at offset {exc.start}"
-        ) from None
+        at = bom + exc.start
+        raise MalformedBody(f"body is not UTF-8: byte 0x{body[at]:02x} at offset {at}") from None
     try:
         return stepped.loads(text, big, _object)  # (in steps: the GIL held briefly)
     except json.JSONDecodeError as exc:  # ("Unterminated string starting at": the place)

@@ -37,7 +37,7 @@ _WS = _PY.WHITESPACE.match
 _C_SCANNER: Any = json.scanner.c_make_scanner  # type: ignore[attr-defined]
 
 
-def plan(body: bytes) -> frozenset[int]:
+def plan(body: bytes | memoryview) -> frozenset[int]:
     """Where (character offsets) the objects and arrays of ``body`` (UTF-8 JSON text) that
     span more than ``STEP`` bytes open, one never closed counting as spanning to the end:
     what :func:`loads` reads member by member. Called before the text is decoded (its
@@ -88,7 +88,7 @@ def _where(mask: npt.NDArray[np.bool_]) -> npt.NDArray[np.int32]:
     return out
 
 
-def _big_containers(body: bytes) -> npt.NDArray[np.int64]:
+def _big_containers(body: bytes | memoryview) -> npt.NDArray[np.int64]:
     """:func:`plan`'s offsets: quotes not escaped pair into strings; brackets outside them
     pair by depth (an open and its close share a level, and alternate within it)."""
     a = np.frombuffer(body, dtype=np.uint8)
