@@ -295,16 +295,18 @@ def _field_error(detail: str) -> dict[str, str]:
     return {"location": where, "message": message}
 
 
-def every_item(found: Sequence[InvalidRequest]) -> InvalidRequest:
+def every_item(found: Sequence[InvalidRequest], total: int = 0) -> InvalidRequest:
     """One 422 of the cross-field errors of many items (a batch's): each item's, the first
     ``MAX_ERRORS`` listed, as field errors are (a batch client fixed one item a round trip
-    when only the first was told: an API audit, 2026-12-06)."""
-    if len(found) == 1:
+    when only the first was told: an API audit, 2026-12-06); ``total``: how many were
+    found, where only the first are in ``found``."""
+    total = max(total, len(found))
+    if total == 1:
         return found[0]
     errors = [_field_error(e.detail) for e in found[:MAX_ERRORS]]
     detail = "; ".join(e.detail for e in found[:3])
-    if len(found) > 3:
-        detail += f"; and {len(found) - 3} more"
+    if total > 3:
+        detail += f"; and {total - 3} more"
     return InvalidRequest(detail, errors=errors)
 
 

@@ -17,7 +17,7 @@ from pydantic import BaseModel, ValidatorFunctionWrapHandler
 from core import compiled
 from core.skeleton import BONES, JOINT_INDEX, JOINT_NAMES, bone_lengths
 from core.text import quoted
-from service.errors import InvalidRequest
+from service.errors import MAX_ERRORS, InvalidRequest, every_item
 from service.problems import SolveProblem
 from service.schemas import CompleteRequest, SolveOptions, SolveRequest
 
@@ -40,20 +40,27 @@ def poses(requests: Sequence[SolveRequest], where: Sequence[str]) -> F64:
 
 
 def check_bones(arr: F64, where: Callable[[int], str]) -> None:
-    """Refuse poses ``[B, 21, 3]`` with a zero-length bone, naming the first such pose
-    (``where(b)``) and its joints."""
+    """Refuse poses ``[B, 21, 3]`` with a zero-length bone, naming every such pose
+    (``where(b)``) and its joints, the first ``MAX_ERRORS`` listed (``every_item``: the
+    first alone was, and a batch client fixed one pose a round trip)."""
     shortest = compiled.shortest_bones(compiled.as_f64(arr))
-    if shortest.size and shortest.min() < MIN_BONE:
-        b = int(np.argmax(shortest < MIN_BONE))
+    if not (shortest.size and shortest.min() < MIN_BONE):
+        return
+    bad = np.flatnonzero(shortest < MIN_BONE)
+    found = []
+    for b in bad[:MAX_ERRORS].tolist():
         short = [
             JOINT_NAMES[c]
             for (c, _), n in zip(BONES, bone_lengths(arr[b]), strict=True)
             if n < MIN_BONE
         ]
-        raise InvalidRequest(
-            f"{where(b)}: degenerate pose: zero-length bones ending at {short} "
-            f"(each joint must be at least {MIN_BONE * 1000:g} mm from its parent)"
+        found.append(
+            InvalidRequest(
+                f"{where(b)}: degenerate pose: zero-length bones ending at {short} "
+                f"(each joint must be at least {MIN_BONE * 1000:g} mm from its parent)"
+            )
         )
+    raise every_item(found, len(bad))
 
 
 def solve_problem(req: SolveRequest, pose: F64, where: str = "") -> SolveProblem:

@@ -566,3 +566,23 @@ def test_a_json_body_with_a_byte_order_mark_is_read(client: Any, path: str) -> N
     bad = _raw(client, path, "\ufeff" + json.dumps(body)[:-1])
     assert_problem(bad, 400, "malformed JSON at line 1")
     assert "utf-8-sig" not in bad.json()["detail"]
+
+
+def test_every_degenerate_pose_of_a_batch_is_named(client: Any) -> None:
+    """A pose with a zero-length bone named only the first such pose of a batch, in either
+    form (as the repeats did): now every one, the first 20 listed, the rest counted."""
+    solve = _example("solve")
+    flat = {j: [0.0, 1.0, 0.0] for j in JOINT_NAMES}
+    items = [solve, {**solve, "pose": flat}, solve, {**solve, "pose": flat}]
+    resp = client.post("/v1/solve/batch", json={"items": items})
+    assert_problem(resp, 422, "items[1].pose: degenerate pose", "items[3].pose: degenerate pose")
+    assert [e["location"] for e in resp.json()["errors"]] == ["items[1].pose", "items[3].pose"]
+    cols = _columns(30)
+    for b in range(1, 30, 2):
+        cols["poses"][b] = [0.0, 1.0, 0.0] * len(JOINT_NAMES)
+    resp = client.post("/v1/solve/batch", json=cols)
+    errors = resp.json()["errors"]
+    assert [e["location"] for e in errors] == [f"poses[{b}]" for b in range(1, 30, 2)]
+    assert errors[0]["message"].startswith("degenerate pose: zero-length bones ending at")
+    resp = client.post("/v1/solve/batch", json={"items": [{**solve, "pose": flat}] * 25})
+    assert len(resp.json()["errors"]) == 20 and resp.json()["detail"].endswith("; and 22 more")
