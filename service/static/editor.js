@@ -19,10 +19,10 @@
 // Tests read the page through `window.marionette` (read-only).
 //
 // Modules (static/editor/): state.js (shared state), api.js (requests, error banner),
-// solve.js (edits, undo history, solving), scene.js (three.js drawing), interaction.js
-// (picking, dragging, pins), panel.js (side panel, export), file.js (BVH files), jointmap.js
-// (a file's joint map). This entry module wires the controls, runs the frame loop, starts up
-// and sets the test hook.
+// solve.js (edits, undo, solving), history.js (the undo history's steps), scene.js (three.js
+// drawing), interaction.js (picking, dragging, pins), panel.js (side panel, export), file.js
+// (BVH files), jointmap.js (a file's joint map). This entry module wires the controls, runs
+// the frame loop, starts up and sets the test hook.
 
 import { $, doc, history, solver, state, ui } from './editor/state.js';
 import { api, ApiError, clearError, showError } from './editor/api.js';
@@ -40,6 +40,7 @@ import { exportDocument, exportPose, refresh } from './editor/panel.js';
 import {
   fileFrame, hasEdits, jumpToFrame, openFile, otherUnits, readAgain, setFrame,
 } from './editor/file.js';
+import { heldSize } from './editor/history.js';
 
 // ------------------------------------------------------------------------------------
 // Wiring: pointer, keyboard, panel controls, file picker and drop
@@ -280,6 +281,9 @@ window.marionette = Object.freeze({
   options: () => options(),
   error: () => (ui.currentError ? { ...ui.currentError } : null),
   history: () => ({ length: history.stack.length, index: history.index }),
+  // what the undo history holds: its steps, the characters of their files' changes, and the
+  // length of the text shown (held once)
+  historySize: () => heldSize(),
   joints: () => [...state.joints],
   projectJoint: (name) => {
     const p = state.pose && state.pose[name];

@@ -6,6 +6,7 @@ import { anchorPoints, forwardKinematics, frameValues, parseMotion } from '../bv
 import { $, doc, history, solver, state, ui } from './state.js';
 import { api, ApiError, clearError, showError } from './api.js';
 import { cancelSolves, clonePose, pushHistory, restore, whenCommitted } from './solve.js';
+import { clearHistory } from './history.js';
 import { buildCharacterBones, buildSkeleton, camera, centreFloor, controls, UP } from './scene.js';
 import { endDrag } from './interaction.js';
 import { refresh, refreshPanel } from './panel.js';
@@ -204,8 +205,7 @@ function showOpened({ info, text, name, original, encoding, jointMap, settings, 
   buildSkeleton();
   buildCharacterBones();
   ui.hovered = null;
-  history.stack = [];
-  history.index = -1;
+  clearHistory();
   const at = Math.min(Math.max(frame, 0), Math.max(info.frames - 1, 0));
   const { points } = fileFrame(text, at);
   const targets = (kept ? kept.targets : []).map(([joint, d]) => [joint, toWorld(points[joint].map((v, i) => v + d[i]))]);
@@ -519,8 +519,7 @@ export function closeFile() {
   $('export').textContent = 'Export JSON';
   $('export').title = 'Download the pose as JSON';
   $('reset').title = 'Back to the sample pose, no targets, no pins';
-  history.stack = [];
-  history.index = -1;
+  clearHistory();
   doc.tried = null; // closed: a units / up change no longer re-opens it
   controls.target.set(0, 0.85, 0);
   camera.position.set(0.75, 1.3, 2.9);

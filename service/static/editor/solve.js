@@ -4,6 +4,7 @@
 import { $, doc, history, solver, state, ui } from './state.js';
 import { api, clearError, showError } from './api.js';
 import { endDrag } from './interaction.js';
+import { currentStep, pushStep, stepBack, stepForward } from './history.js';
 import { refresh, updateButtons } from './panel.js';
 import {
   cancelOpening, closeFile, closingQuestion, filePose, givenUp, hasEdits, named, toFile, unsaved,
@@ -21,7 +22,7 @@ export function snapshot() {
     pins: [...state.pins],
   };
   if (doc.active) {
-    snap.text = doc.text; // shared, not copied: a string is immutable
+    snap.text = doc.text; // (a step keeps only how it differs from the step before: history.js)
     snap.frame = doc.frame;
   } else {
     snap.sample = state.sample; // (its name in the menu and the export, Reset's pose)
@@ -48,12 +49,15 @@ export function restore(snap, frame = snap.frame) {
   }
 }
 
+// A snapshot's or step's state besides its text (a step's keys are not in a snapshot's order).
+const parts = (s) => [s.pose, s.targets, s.pins, s.frame, s.sample];
+
 // The same state (no new undo step): also a step's state scrubbed to another frame (its
 // targets gone with the scrub), so a scrub never becomes a step of its own.
 function sameSnapshot(a, b) {
   if (!a || a.text !== b.text) return false;
   if (a.frame !== b.frame) return b.targets.length === 0 && JSON.stringify(a.pins) === JSON.stringify(b.pins);
-  return JSON.stringify({ ...a, text: null }) === JSON.stringify({ ...b, text: null });
+  return JSON.stringify(parts(a)) === JSON.stringify(parts(b));
 }
 
 // The pose on screen becomes the committed one (solves start from it).
@@ -64,15 +68,11 @@ export function commitShown() {
 
 export function pushHistory() {
   const snap = snapshot();
-  const top = history.stack[history.index];
-  if (sameSnapshot(top, snap)) {
+  if (sameSnapshot(currentStep(), snap)) {
     updateButtons(); // nothing changed (e.g. an option toggled with no targets)
     return;
   }
-  history.stack.length = history.index + 1;
-  history.stack.push(snap);
-  if (history.stack.length > 200) history.stack.shift();
-  history.index = history.stack.length - 1;
+  pushStep(snap);
   updateButtons();
 }
 
@@ -116,7 +116,7 @@ export function undo() {
     // it alone (it also undid the step before); what waited for it goes on
     endDrag(false);
     cancelSolves();
-    restore(history.stack[history.index], doc.active ? doc.frame : undefined); // (the frame shown)
+    restore(currentStep(), doc.active ? doc.frame : undefined); // (the frame shown)
     refresh();
     return;
   }
@@ -124,8 +124,7 @@ export function undo() {
   endDrag(false);
   cancelSolves();
   const frame = history.stack[history.index].frame;
-  history.index -= 1;
-  restore(history.stack[history.index], frame);
+  restore(stepBack(), frame);
   refresh();
 }
 
@@ -133,8 +132,7 @@ export function redo() {
   if (ui.reading || history.index >= history.stack.length - 1) return;
   endDrag(false);
   cancelSolves();
-  history.index += 1;
-  restore(history.stack[history.index]);
+  restore(stepForward());
   refresh();
 }
 

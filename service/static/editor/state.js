@@ -70,7 +70,9 @@ export const doc = {
   followed: null, // {frame, pelvis}: where the view last followed the character to (file.js)
 };
 
-export const history = { stack: [], index: -1 };
+// The undo history (history.js): its steps, the one shown, and the open file's text as that
+// step has it (a step holds only how its text differs from the step before).
+export const history = { stack: [], index: -1, text: null };
 
 // Flags several modules read and write (an importer cannot assign a module's `let`).
 export const ui = {
