@@ -5,7 +5,9 @@ import * as THREE from 'three';
 import { anchorPoints, forwardKinematics, frameValues, parseMotion } from '../bvh.js';
 import { $, doc, history, solver, state, ui } from './state.js';
 import { api, ApiError, clearError, showError } from './api.js';
-import { cancelSolves, clonePose, pushHistory, restore, whenCommitted } from './solve.js';
+import {
+  cancelSolves, clonePose, forgetLastSolve, pushHistory, restore, whenCommitted,
+} from './solve.js';
 import { clearHistory } from './history.js';
 import { buildCharacterBones, buildSkeleton, camera, centreFloor, controls, UP } from './scene.js';
 import { endDrag } from './interaction.js';
@@ -195,6 +197,7 @@ function showOpened({ info, text, name, original, encoding, jointMap, settings, 
   stopReading();
   endDrag(false);
   cancelSolves();
+  if (!kept) forgetLastSolve(); // (a file opened; one read again keeps its last solve)
   motionCache.clear();
   lastRow = { text: null, frame: -1, row: null };
   Object.assign(doc, { active: true, name, original, text, shown: text, info, frame: 0, encoding, jointMap, settings });

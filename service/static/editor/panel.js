@@ -46,7 +46,10 @@ export function refreshPanel() {
   }
   $('no-targets').hidden = state.targets.size > 0;
   $('pins').textContent = state.pins.size ? [...state.pins].join(', ') : 'none';
-  if (last) {
+  if (!last) { // none yet on the file or sample shown (file.js showOpened, solve.js chooseSample)
+    for (const id of ['latency', 'rtt', 'solve-method', 'solvers', 'bone-error']) $(id).textContent = '–';
+    $('latency').title = 'No solve yet on the file or sample shown';
+  } else {
     const med = [...solver.latencies].sort((a, b) => a - b)[Math.floor(solver.latencies.length / 2)];
     $('latency').textContent = `${last.serverMs.toFixed(2)} ms (median ${med.toFixed(2)})`;
     $('latency').title = 'X-Total-Time of the last solve (the server, arrival to answer); median of the last 50';

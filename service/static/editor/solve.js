@@ -145,7 +145,15 @@ export function chooseSample(i) {
     $('sample').value = doc.active ? '' : String(state.sample);
     return;
   }
+  forgetLastSolve();
   loadSample(i);
+}
+
+// The panel's "Last solve" was the state given up's: a sample chosen or a file opened says
+// none yet (it showed the sample's last solve until the file's first edit). A file read
+// again (other units, a joint map) keeps it: the same file, its edits kept.
+export function forgetLastSolve() {
+  solver.last = null;
 }
 
 // A sample's question: what is lost, named (a file's: file.js closingQuestion; a sample's
