@@ -70,15 +70,18 @@ class _FewRows:
     script, same bits), so a batch's blocks or another row count run first no longer slow
     the edit's runs. The first shape takes the network's own session where nothing has run
     on it yet (``used``); a later one of at most ``OWN_ROWS`` rows (a lone edit, and it with
-    its mirror image) a session made on first use (~2 ms, ~1.7 MB for a fused graph), from
-    the graph's bytes read and checked at load (``make``; a file changed or removed under a
-    running server gave a 500 or another network's answers: a review); 3 and 4 rows run on
-    the shared session, so a network holds at most two sessions (the worst case was four:
-    +125 MB an engine, a review's measurement)."""
+    its mirror image) a session made on first use (~2 ms, ~1.7 MB for a fused graph) by
+    ``make``, from the graph's file read again and checked against the manifest's sha256;
+    where the file no longer holds those bytes (changed or removed under a running server:
+    it gave a 500 or another network's answers, a review) ``make`` gives None and the shape
+    runs on the shared session, the same answers. The bytes are not kept from load for
+    it (with onnxruntime's own reference, :func:`_session`, ~27 MiB of a worker's RSS).
+    3 and 4 rows run on the shared session, so a network holds at most two sessions (the
+    worst case was four: +125 MB an engine, a review's measurement)."""
 
     def __init__(
         self, session: ort.InferenceSession, inputs: list[str], output: str,
-        make: Callable[[], ort.InferenceSession] | None = None,
+        make: Callable[[], ort.InferenceSession | None] | None = None,
     ) -> None:  # fmt: skip
         self.session, self.inputs, self.output, self.make = session, inputs, output, make
         self.local = threading.local()
@@ -96,7 +99,8 @@ class _FewRows:
             session = self.sessions.get(shapes)
             if session is None:
                 own = not self.used or shapes[0][0] > OWN_ROWS
-                session = self.session if own else self.make()
+                made = None if own else self.make()
+                session = self.session if made is None else made
                 self.sessions[shapes], self.used = session, True
         return session
 
@@ -157,6 +161,36 @@ def _loaded(make: Callable[[], T], path: Path, entry: ModelEntry, how: str = "")
         raise ManifestError(path, f"{what}: cannot be loaded: {exc}") from exc
 
 
+def _session(data: bytes, options: ort.SessionOptions) -> ort.InferenceSession:
+    """A CPU session of the graph ``data``, which it does not keep. onnxruntime's Python
+    session holds the bytes it is made from for as long as it lives (``_model_bytes``, to
+    make itself anew if a provider fails and it falls back; 1.32's own comment: "This is bad
+    as we're holding the memory indefinitely"): every network's file, ~27 MiB of a worker's
+    RSS from load on, and a copy more for each few-rows shape's own session. A CPU session
+    has no provider to fall back to, so its fallback is disabled and that reference
+    dropped (where a later onnxruntime no longer holds it, nothing to drop)."""
+    session = ort.InferenceSession(data, options, providers=["CPUExecutionProvider"])
+    session.disable_fallback()
+    if getattr(session, "_model_bytes", None) is data:
+        session._model_bytes = None
+    return session
+
+
+def _session_if_unchanged(
+    path: Path, entry: ModelEntry, options: ort.SessionOptions
+) -> ort.InferenceSession | None:
+    """A new session of ``entry``'s network from its file read again, or None where the
+    file cannot be read or no longer holds the bytes the manifest names (sha256): then
+    the caller runs on the session it has, the verified network's."""
+    try:
+        data = path.read_bytes()
+    except OSError:
+        return None
+    if hashlib.sha256(data).hexdigest() != entry.sha256:
+        return None
+    return _session(data, options)
+
+
 class Net:
     """One onnxruntime session with a single input/output signature."""
 
@@ -164,19 +198,18 @@ class Net:
         self, path: Path, entry: ModelEntry, options: ort.SessionOptions, block: int = ROW_BLOCK
     ) -> None:
         self.entry, self.block = entry, block
-        data = path.read_bytes()  # read once, checked: every session is made from these bytes
+        data = path.read_bytes()  # read once, checked: the session is made from these bytes
         if hashlib.sha256(data).hexdigest() != entry.sha256:
             raise ManifestError(path, "sha256 does not match the manifest (changed since read)")
-
-        def make() -> ort.InferenceSession:
-            return ort.InferenceSession(data, options, providers=["CPUExecutionProvider"])
-
-        self.session = _loaded(make, path, entry)
+        self.session = _loaded(functools.partial(_session, data, options), path, entry)
         self.inputs = [i.name for i in entry.inputs]
         self.output = entry.outputs[0].name
         got = [i.name for i in self.session.get_inputs()]
         if got != self.inputs:
             raise ValueError(f"{path.name}: graph inputs {got}, manifest says {self.inputs}")
+        # the bytes are not kept (~27 MiB for all the networks): a few-rows shape's own
+        # session reads the file again, and checks it
+        make = functools.partial(_session_if_unchanged, path, entry, options)
         self.few = _FewRows(self.session, self.inputs, self.output, make)
 
     def __call__(self, *arrays: npt.NDArray[np.float32]) -> npt.NDArray[np.float32]:
@@ -222,8 +255,8 @@ class Fused:
         )  # fmt: skip
         data = graph.SerializeToString()
 
-        def make() -> ort.InferenceSession:
-            return ort.InferenceSession(data, options, providers=["CPUExecutionProvider"])
+        def make() -> ort.InferenceSession:  # (``data`` kept here: no file holds it)
+            return _session(data, options)
 
         self.session = _loaded(make, models_dir / solver.file, solver, "composed with "
                                f"{enc.file} and {dec.file}")  # fmt: skip
