@@ -16,6 +16,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from tests.conftest import untar
+
 _ADA = "animateddrawings_fair_bvh.tar.xz"
 _AD = "animateddrawings_fair_bvh/facebookresearch+AnimatedDrawings@74ee7f0/examples/bvh"
 #: name -> (archive, member, units to state (None: inferred), frame to edit)
@@ -49,7 +51,7 @@ def extract_bvh(mocap: Path, out: Path) -> dict[str, Path]:
             pytest.skip(f"mocap archive {archive} not found in {mocap}")
         by_archive.setdefault(archive, []).append(member)
     procs = [  # the archives in parallel
-        subprocess.Popen([tar, "-xJf", str(mocap / archive), "-C", str(out), *members])
+        subprocess.Popen(untar(tar, mocap / archive, out, members))
         for archive, members in by_archive.items()
     ]
     failed = [proc.args for proc in procs if proc.wait() != 0]  # (every one waited for)

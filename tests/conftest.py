@@ -25,10 +25,11 @@ the rest pose with random bone rotations; use it wherever any valid pose will do
 
 from __future__ import annotations
 
+import functools
 import os
 import shutil
 import subprocess
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -76,6 +77,21 @@ class MocapClips:
         return self.root / member
 
 
+@functools.cache
+def _gnu_tar(tar: str) -> bool:
+    out = subprocess.run([tar, "--version"], capture_output=True, text=True, check=False)
+    return "GNU tar" in out.stdout
+
+
+def untar(tar: str, archive: Path, out: Path, members: Sequence[str]) -> list[str]:
+    """The command that extracts ``members`` of the .tar.xz ``archive`` into ``out``. GNU
+    tar is told to stop once it has them all (``--occurrence``: the archives hold each
+    member once), instead of decompressing the rest of the archive for nothing (the Bandai
+    one: ~6 s of CPU, most of it past the members the tests take)."""
+    first = ["--occurrence=1"] if _gnu_tar(tar) else []
+    return [tar, "-xJf", str(archive), "-C", str(out), *first, *members]
+
+
 @pytest.fixture(scope="session")
 def mocap_dir() -> Path:
     """The mocap archive folder; skips the test when it is absent."""
@@ -98,10 +114,7 @@ def mocap_clips(mocap_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Mo
         pytest.skip("the 'tar' command is needed to extract test clips")
     root = tmp_path_factory.mktemp("mocap")
     procs = [
-        subprocess.Popen(
-            [tar, "-xJf", str(mocap_dir / archive), "-C", str(root), *members],
-            stderr=subprocess.PIPE,
-        )
+        subprocess.Popen(untar(tar, mocap_dir / archive, root, members), stderr=subprocess.PIPE)
         for archive, members in ((BANDAI_ARCHIVE, BANDAI_MEMBERS), (CMU_ARCHIVE, CMU_MEMBERS))
     ]
     for proc in procs:
@@ -158,10 +171,7 @@ def more_mocap(mocap_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Pat
         pytest.skip("the 'tar' command is needed to extract test clips")
     root = tmp_path_factory.mktemp("more_mocap")
     procs = [
-        subprocess.Popen(
-            [tar, "-xJf", str(mocap_dir / archive), "-C", str(root), *members],
-            stderr=subprocess.PIPE,
-        )
+        subprocess.Popen(untar(tar, mocap_dir / archive, root, members), stderr=subprocess.PIPE)
         for archive, members in MORE_MOCAP.items()
     ]
     for proc in procs:

@@ -15,7 +15,7 @@ import pytest
 from core.bvh import read_bvh
 from core.geometry import canonicalise
 from core.skeleton import JOINT_INDEX, bone_lengths
-from tests.conftest import _KAY
+from tests.conftest import _KAY, untar
 from trainer.data.asf import CMU_FPS, ASFError, parse_amc, parse_asf, read_amc, read_asf
 from trainer.data.maps import joint_positions, load_map
 
@@ -163,9 +163,7 @@ def test_convention_matches_cmus_bvh_conversion(
         pytest.skip("the 'tar' command is needed")
     out = tmp_path
     member = "train_data_bvh/martial/06.bvh"
-    subprocess.run(
-        [tar, "-xJf", str(mocap_dir / "cmu-dance.tar.xz"), "-C", str(out), member], check=True
-    )
+    subprocess.run(untar(tar, mocap_dir / "cmu-dance.tar.xz", out, [member]), check=True)
     bvh = read_bvh(out / member)
     sk = read_asf(more_mocap / f"{_KAY}/135-martialArts.asf")
     amc = read_amc(more_mocap / f"{_KAY}/135_06-martialArts.amc", sk)
