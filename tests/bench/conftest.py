@@ -11,7 +11,7 @@ import pytest
 REPO_ROOT = Path(__file__).resolve().parents[2]
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def holdout_dataset(small_dataset: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The small real dataset with its cmu-dance clips relabelled as held-out bodies and
     one Bandai val clip too (two held-out sources), the rest as built."""
@@ -28,9 +28,10 @@ def holdout_dataset(small_dataset: Path, tmp_path_factory: pytest.TempPathFactor
     return path
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def bench_dataset(request: pytest.FixtureRequest) -> Path:
-    """data/poses.npz if it was built (with held-out bodies), else the small one."""
+    """data/poses.npz if it was built (with held-out bodies), else the small one (once per
+    session: reading data/poses.npz to look for held-out bodies took ~3.5 s a module)."""
     path = REPO_ROOT / "data" / "poses.npz"
     if path.is_file():
         from trainer.data.dataset import load_dataset
