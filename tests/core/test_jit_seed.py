@@ -71,17 +71,25 @@ def _seed(tmp_path: Path, src: Path) -> Path:
     return seed
 
 
+@pytest.fixture(scope="module")
+def seeded(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, Path]:
+    """``(src, pkg, seed)``: the package and its seed, made once for the tests that leave
+    the package as it is (each made its own: a numba start and a compile, ~2 s a test)."""
+    root = tmp_path_factory.mktemp("seeded")
+    src = root / "src"
+    pkg = _package(src)
+    return src, pkg, _seed(root, src)
+
+
 @pytest.mark.parametrize("base", ["existing", "with-other-files", "missing"])
 def test_the_seed_fills_the_cache_folder_whatever_folder_it_is_in(
-    tmp_path: Path, base: str
+    seeded: tuple[Path, Path, Path], tmp_path: Path, base: str
 ) -> None:
     """``NUMBA_CACHE_DIR=/tmp`` or an emptyDir: the folder exists (and may hold other
     files); the seed's kernels for these sources are copied into ``<base>/<fingerprint>``
     and numba loads them, none compiled (the seed was copied only when ``<base>`` did not
     exist: the first two cases compiled)."""
-    src = tmp_path / "src"
-    pkg = _package(src)
-    seed = _seed(tmp_path, src)
+    src, pkg, seed = seeded
     cache = tmp_path / "cache"
     if base != "missing":
         cache.mkdir()
@@ -123,12 +131,12 @@ def test_a_start_keeps_its_own_and_the_three_most_recently_used_versions_kernels
     assert {p.name for p in cache.iterdir()} == (kept - {old[2].name}) | {fingerprint(pkg)}
 
 
-def test_workers_starting_together_share_one_copy_of_the_seed(tmp_path: Path) -> None:
+def test_workers_starting_together_share_one_copy_of_the_seed(
+    seeded: tuple[Path, Path, Path], tmp_path: Path
+) -> None:
     """``--workers N``: every worker copies into its own folder and renames it; the first
     rename wins, the others use the winner's copy; each loads the kernel, none compiles."""
-    src = tmp_path / "src"
-    pkg = _package(src)
-    seed = _seed(tmp_path, src)
+    src, pkg, seed = seeded
     cache = tmp_path / "cache"
     cache.mkdir()
     pipe = subprocess.PIPE
@@ -178,14 +186,12 @@ def test_a_seed_of_other_sources_is_not_used_and_a_warning_says_so(tmp_path: Pat
 
 
 def test_a_seed_compiled_at_another_path_is_not_used_and_a_warning_says_so(
-    tmp_path: Path,
+    seeded: tuple[Path, Path, Path], tmp_path: Path
 ) -> None:
     """numba names its cache folder after the sources' absolute path: the same sources
     installed elsewhere do not find the seed's kernels (the image compiles the seed from
     the installed /opt/marionette/app for this reason)."""
-    src = tmp_path / "src"
-    _package(src)
-    seed = _seed(tmp_path, src)
+    src, _, seed = seeded
     elsewhere = tmp_path / "elsewhere"
     shutil.copytree(src, elsewhere, ignore=shutil.ignore_patterns("__pycache__"))
     cache = tmp_path / "cache"
