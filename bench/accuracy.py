@@ -500,13 +500,17 @@ def machine() -> Json:
 
 
 def evaluate_accuracy(
-    models_dir: Path, dataset_path: Path, cfg: EvalConfig | None = None
+    models_dir: Path,
+    dataset_path: Path,
+    cfg: EvalConfig | None = None,
+    data: PoseDataset | None = None,
 ) -> Accuracy:
-    """Run B1-B5, determinism and the composition ablation; returns results + plot data."""
+    """Run B1-B5, determinism and the composition ablation; returns results + plot data.
+    ``data``: ``dataset_path`` already read (read here if not given)."""
     cfg = cfg or EvalConfig()
     t_start = time.perf_counter()
     engine = Engine(models_dir, threads=1)
-    test = test_split(load_dataset(dataset_path))
+    test = test_split(load_dataset(dataset_path) if data is None else data)
     rng = np.random.default_rng(cfg.seed)
     acc = Accuracy(results={})
     res = acc.results
