@@ -10,6 +10,7 @@ import os
 import shutil
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -20,9 +21,12 @@ REPO = Path(__file__).resolve().parents[2]
 
 
 @pytest.mark.slow
-def test_two_revisions_side_by_side(holdout_dataset: Path) -> None:
+def test_two_revisions_side_by_side(
+    holdout_dataset: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """A worktree of HEAD against this tree: every case timed in both, each round, and
-    the worktree gone afterwards."""
+    the worktree gone afterwards (its temporary folder under ``tmp_path``: worktrees that
+    others add to a shared checkout meanwhile are theirs)."""
     if subprocess.run(["git", "-C", str(REPO), "rev-parse", "HEAD"], check=False).returncode:
         pytest.skip("not a git checkout")
 
@@ -32,7 +36,7 @@ def test_two_revisions_side_by_side(holdout_dataset: Path) -> None:
                              capture_output=True, text=True, check=True).stdout  # fmt: skip
         return {line.split(" ", 1)[1] for line in out.splitlines() if line.startswith("worktree ")}
 
-    before = worktrees()
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
     result = ab.compare("HEAD", holdout_dataset, rounds=1, edits=4, seed=0)
     cases = {f"{k} {c}" for k in (1, 2, 5) for c in ("default", "plain", "fabrik", "batch")}
     cases |= {"1 pinned", "2 pinned", "bvh exact", "bvh soft"}
@@ -41,7 +45,8 @@ def test_two_revisions_side_by_side(holdout_dataset: Path) -> None:
         assert all(0 < t < 1e6 for t in result[side][0].values())
     text = ab.table(result)
     assert text.count("\n") == 2 + len(cases) - 1 and "| 2 pinned |" in text
-    assert worktrees() == before  # the base's worktree removed
+    assert list(tmp_path.iterdir()) == []  # the base's worktree made there, and removed
+    assert not {w for w in worktrees() if w.startswith(str(tmp_path))}
 
 
 @pytest.mark.slow
