@@ -58,9 +58,10 @@ def _shown(error: Any) -> str:
 #: ready, up to ~520 MiB at peak under the heaviest loads the default limits admit:
 #: docs/deploy.md), so 32 is already ~8.6 GiB at rest; more is a typo.
 MAX_WORKERS = 32
-#: A worker's memory once ready (MiB; deploy/k8s/deployment.yaml, SMOKE rss_mib_ready: 307
-#: in the container check of 2026-12-06, 267-270 with the models of 2026-12-05).
-WORKER_MIB = 310
+#: A worker's memory once ready (MiB; deploy/k8s/deployment.yaml, SMOKE rss_mib_ready: 281
+#: in the container check of 2026-12-06, 12:55 UTC; 307 before the networks stopped holding
+#: their files' bytes).
+WORKER_MIB = 285
 
 
 def _whole(text: str) -> int:

@@ -123,12 +123,12 @@ def test_an_unreadable_models_folder_is_refused_naming_it(tmp_path: Path) -> Non
 
 
 def test_more_workers_than_the_memory_limit_holds_are_refused() -> None:
-    """Each worker loads every model (~310 MiB once ready): 3 in the manifest's 768 Mi pod
+    """Each worker loads every model (~285 MiB once ready): 3 in the manifest's 768 Mi pod
     are killed for memory (D12). The cgroup's limit is stood in for."""
     script = "import service.cli\nservice.cli._memory_limit = lambda: 768 * 2**20\n"
     detail = refused(["--workers", "3", "--port", PORT], script=script)
-    assert detail.startswith("--workers 3: each worker loads every model (~310 MiB once "
-                             "ready), 930 MiB in all, past this container's memory limit "
+    assert detail.startswith("--workers 3: each worker loads every model (~285 MiB once "
+                             "ready), 855 MiB in all, past this container's memory limit "
                              "(768 MiB)"), detail  # fmt: skip
 
 
