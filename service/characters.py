@@ -299,7 +299,11 @@ class _Answer(BaseModel):
 
 
 class CharacterSolveResponse(_Answer):
-    rotations: dict[str, list[float]] = Field(description="Every joint: [x, y, z, w].")
+    rotations: dict[str, list[float]] = Field(
+        description="Every joint: [x, y, z, w]; unit length with w >= 0 for the joints the "
+        "solve turned, the request's quaternion as sent for the others (not normalised; "
+        "identity for a joint the request left out)."
+    )
     root_position: list[float] = Field(description="The root's position (the client's units).")
     positions: dict[str, list[float]] = Field(
         description="Every joint, by FK of the answer (the client's units)."
