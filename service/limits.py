@@ -250,11 +250,13 @@ class Budget:
     def left(self) -> float:
         return self.t0 + self.deadline_seconds - time.perf_counter()
 
-    def late(self, stage: str) -> DeadlineExceeded:
-        """The 504 of a request whose deadline passed before ``stage`` began."""
+    def late(self, stage: str, **counts: int) -> DeadlineExceeded:
+        """The 504 of a request whose deadline passed before ``stage`` began (``counts``:
+        a batch's ``done`` and ``total``, members as an overrun's)."""
         return DeadlineExceeded(
             f"the request needed more than the {self.deadline_seconds:g} s deadline "
-            f"(before {stage}); retry, or send a smaller request"
+            f"(before {stage}); retry, or send a smaller request",
+            **counts,
         )
 
     def due(self, stage: str) -> None:
@@ -315,9 +317,12 @@ class Budget:
             exc.retry_after = None
         return exc
 
-    async def token(self, limiter: ComputeLimiter, borrower: object, stage: str) -> None:
+    async def token(
+        self, limiter: ComputeLimiter, borrower: object, stage: str, **counts: int
+    ) -> None:
         """Take one of ``limiter``'s compute tokens for ``borrower``, waiting no longer than
-        the deadline leaves: past it, a 504 that names ``stage``. A request queued behind
+        the deadline leaves: past it, a 504 that names ``stage`` (and a batch's ``done``
+        and ``total`` items, ``counts``, as an overrun's). A request queued behind
         busy compute threads thus ends at its deadline, not once its turn comes (64
         1,024-item batches at once: the last 504 came after 25 s before this bound)."""
         t, left = time.perf_counter(), self.left
@@ -329,21 +334,22 @@ class Budget:
                     self._waited(time.perf_counter() - t)
                 return
         if left <= 0:
-            raise self.late(stage)
+            raise self.late(stage, **counts)
         head = f"the request needed more than the {self.deadline_seconds:g} s deadline"
         raise DeadlineExceeded(
             f"{head} (before {stage}, after {time.perf_counter() - t:.2f} s waiting for a "
-            "compute thread): the server is busy; retry later, or send a smaller request"
+            "compute thread): the server is busy; retry later, or send a smaller request",
+            **counts,
         )
 
-    async def in_thread(self, work: Callable[[], R], stage: str) -> R:
+    async def in_thread(self, work: Callable[[], R], stage: str, **counts: int) -> R:
         """``work()`` in a worker thread on one of the app's compute tokens, taken within
-        the deadline (:meth:`token`)."""
+        the deadline (:meth:`token`; ``counts``: a batch's, for its 504)."""
         limiter: ComputeLimiter | None = getattr(self.request.app.state, "compute_limiter", None)
         if limiter is None:
             return await anyio.to_thread.run_sync(work)
         borrower = object()
-        await self.token(limiter, borrower, stage)
+        await self.token(limiter, borrower, stage, **counts)
         try:
             return await anyio.to_thread.run_sync(work)
         except BaseException as exc:
@@ -407,13 +413,7 @@ class Budget:
             wave = parts[w : w + width]
             await self.check(wave[0].start, total, noun)
             with self.timing():
-                try:
-                    out.extend(await _wave(fn, wave, limiter, self))
-                except DeadlineExceeded as exc:
-                    # (no token came in time: the 504 counts what was done, as an overrun's)
-                    exc.extra.setdefault("done", wave[0].start)
-                    exc.extra.setdefault("total", total)
-                    raise
+                out.extend(await _wave(fn, wave, limiter, self, total))
         return out
 
 
@@ -431,7 +431,7 @@ _PARTS = ThreadPoolExecutor(thread_name_prefix="marionette-part")
 
 async def _wave(fn: Callable[[slice], R], wave: Sequence[slice],
                 limiter: ComputeLimiter | None,
-                budget: Budget | None = None) -> list[R]:  # fmt: skip
+                budget: Budget | None = None, total: int = 0) -> list[R]:  # fmt: skip
     """``fn`` over the parts of ``wave``, at once on as many compute tokens as are free;
     the answers in order, the first error (in part order) raised once every part ended.
 
@@ -444,8 +444,9 @@ async def _wave(fn: Callable[[slice], R], wave: Sequence[slice],
     if limiter is None:
         return [await anyio.to_thread.run_sync(fn, part) for part in wave]
     stage = f"items {wave[0].start}-{wave[-1].stop - 1}"
+    counts = {"done": wave[0].start, "total": total}  # (a 504 waiting for a token says them)
     if len(wave) == 1 and budget is not None:
-        return [await budget.in_thread(lambda: fn(wave[0]), stage)]
+        return [await budget.in_thread(lambda: fn(wave[0]), stage, **counts)]
     held: list[object] = []
     try:
         for _ in wave:
@@ -456,7 +457,7 @@ async def _wave(fn: Callable[[slice], R], wave: Sequence[slice],
                 except anyio.WouldBlock:
                     break
             elif budget is not None:
-                await budget.token(limiter, borrower, stage)
+                await budget.token(limiter, borrower, stage, **counts)
             else:  # no deadline (tests of the wave alone)
                 await limiter.acquire_on_behalf_of(borrower)
             held.append(borrower)
