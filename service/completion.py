@@ -172,8 +172,7 @@ def below_the_floor(sets: list[list[str]], given: list[str]) -> InvalidRequest:
     ``key_point_sets``."""
     nearest = min(sets, key=lambda s: (sum(j not in given for j in s), len(s)))
     missing = [j for j in nearest if j not in given]
-    which = "the 6 base points" if nearest is sets[0] and len(nearest) == 6 else (
-        f"the {len(nearest)} points")  # fmt: skip
+    which = f"the {len(nearest)} {'base ' if nearest is sets[0] else ''}points"
     told = []
     for n, s in enumerate(sets):
         before = sets[n - 1] if n else []
