@@ -14,6 +14,16 @@ from trainer.config import load_config
 DEFAULT = Path(__file__).resolve().parents[2] / "trainer" / "configs" / "default.toml"
 
 
+def refused(tmp_path: Path, line: str, match: str) -> str:
+    """The refusal of a config that extends the default with ``line``: it names the file."""
+    cfg = tmp_path / "cfg.toml"
+    cfg.write_text(f'extends = "{DEFAULT}"\n{line}\n')
+    with pytest.raises(ValueError, match=match) as info:
+        load_config(cfg)
+    assert str(info.value).startswith(f"{cfg}: "), info.value
+    return str(info.value)
+
+
 @pytest.mark.parametrize(
     ("line", "says"),
     [
@@ -44,12 +54,7 @@ def test_a_number_that_is_not_finite_is_refused_naming_key_and_value(
     """``lr = 1e999`` loaded as ``lr = inf`` and trained (a rate with no bound above);
     ``nan`` passed every bound but the serving settings' own. Now the schema refuses it
     (``allow_inf_nan``), naming the file, the key and the value as the file writes it."""
-    cfg = tmp_path / "cfg.toml"
-    cfg.write_text(f'extends = "{DEFAULT}"\n{line}\n')
-    with pytest.raises(ValueError, match=r"Input should be") as info:
-        load_config(cfg)
-    assert str(info.value).startswith(f"{cfg}: "), info.value
-    assert says in str(info.value), info.value
+    assert says in refused(tmp_path, line, r"Input should be")
 
 
 @pytest.mark.parametrize(
@@ -122,11 +127,7 @@ def test_an_opset_or_frame_cap_the_run_cannot_use_is_refused_when_read(
     whole clip trained, unsaid) and negatives. Refused when the config is read, naming the
     key and the range."""
     cfg = tmp_path / "cfg.toml"
-    cfg.write_text(f'extends = "{DEFAULT}"\n{line}\n')
-    with pytest.raises(ValueError, match=r"opset|frames") as info:
-        load_config(cfg)
-    assert str(info.value).startswith(f"{cfg}: "), info.value
-    assert says in str(info.value), info.value
+    assert says in refused(tmp_path, line, r"opset|frames")
     for ok in ("opset = 18", "opset = 25", "max_eval_frames = 1", "max_train_frames = 1"):
         cfg.write_text(f'extends = "{DEFAULT}"\n{ok}\n')
         load_config(cfg)
