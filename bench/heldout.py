@@ -48,7 +48,7 @@ from bench.edits import (
     solve,
     solver_joints,
 )
-from bench.metrics import per_item
+from bench.metrics import paired_interval, per_item
 from core.bodies import body_lengths, random_bodies, rebuild
 from core.ends import SOFT_IK_MAX
 from core.io import write_atomic
@@ -280,6 +280,9 @@ class Family:
     by_turn: list[TurnRow]
     recon: Recon | None
     note: str = ""
+    #: set -> method -> [mean, low, high] of its MPJPE minus FABRIK's on the same edits
+    #: (cm; :func:`bench.metrics.paired_interval`, 95 %): whether a set's loss is real
+    vs_fabrik: dict[str, dict[str, list[float]]] = field(default_factory=dict)
 
 
 @dataclass
@@ -434,7 +437,21 @@ def family(
         by_turn=by_turn(items),
         recon=recon,
         note=note,
+        vs_fabrik=versus_fabrik(items),
     )
+
+
+def versus_fabrik(items: dict[str, dict[str, Items]]) -> dict[str, dict[str, list[float]]]:
+    """Each edit set's neural MPJPE minus FABRIK's, edit by edit, with its interval."""
+    return {
+        name: {
+            m: list(paired_interval(block[m].mpjpe, block["fabrik"].mpjpe))
+            for m in ("neural_bone", "neural_exact")
+            if m in block
+        }
+        for name, block in items.items()
+        if name != COMPLETION and "fabrik" in block
+    }
 
 
 # --------------------------------------------------------------------------------------

@@ -196,6 +196,14 @@ def test_quick_heldout_run_has_every_family_set_and_method(
                 assert s["ms_per_edit"] > 0
             if set_name != "pelvis":  # the start already has the target's pelvis
                 assert block["neural_exact"]["reach_mean"] < block["identity"]["reach_mean"]
+            # each neural method's paired difference to FABRIK: the sets' means apart, and
+            # an interval around it
+            for method in ("neural_bone", "neural_exact"):
+                mean, lo, hi = fam["vs_fabrik"][set_name][method]
+                apart = block[method]["mpjpe"] - block["fabrik"]["mpjpe"]
+                assert mean == pytest.approx(apart, abs=1e-9), (fam["name"], set_name)
+                assert lo <= mean <= hi, (fam["name"], set_name, method)
+        assert COMPLETION not in fam["vs_fabrik"]
         assert [r["bucket"] for r in fam["by_turn"]] == ["0–5°", "5–15°", "15–45°", "45–180°"]
     pooled = res["families"][2]["sets"][FIVE]["fabrik"]["n"]
     parts = [f["sets"][FIVE]["fabrik"]["n"] for f in res["families"][:2]]
@@ -378,3 +386,20 @@ def test_the_canonical_view_scores_b1s_construction_per_held_out_source(
         assert soft < start and exact < start and fabrik < start
     bad = CliRunner().invoke(app, [*args, "--split", "nowhere"])
     assert bad.exit_code == 2 and "nowhere" in bad.output and "Traceback" not in bad.output
+
+
+def test_the_paired_interval_tells_a_real_difference_from_the_sample_s_noise() -> None:
+    from bench.metrics import paired_interval
+
+    rng = np.random.default_rng(5)
+    base = rng.gamma(2.0, 3.0, 200)  # per-edit MPJPE, cm
+    noise = rng.normal(0.0, 0.5, 200)
+    mean, lo, hi = paired_interval(base + 0.3 + noise, base)
+    assert lo > 0.0 and lo < mean < hi  # 0.3 cm worse on every edit, give or take 0.5
+    mean, lo, hi = paired_interval(base + noise, base)
+    assert lo < 0.0 < hi  # no difference but noise: the interval holds 0
+    assert paired_interval(base, base) == (0.0, 0.0, 0.0)
+    assert paired_interval(base + noise, base) == (mean, lo, hi)  # seeded
+    # paired, the edits' own spread (sd ~4 cm) cancels: the interval is the noise's
+    # (0.5 / sqrt(200) ~ 0.035 cm a side), not the 1.2 cm a side of two unpaired samples
+    assert hi - lo < 0.2
