@@ -20,8 +20,9 @@
 //
 // Modules (static/editor/): state.js (shared state), api.js (requests, error banner),
 // solve.js (edits, undo, solving), history.js (the undo history's steps), scene.js (three.js
-// drawing), interaction.js (picking, dragging, pins), panel.js (side panel, export), file.js
-// (BVH files), jointmap.js (a file's joint map). This entry module wires the controls, runs
+// drawing), interaction.js (picking, dragging, pins), keys.js (a joint edited from the
+// keyboard and the panel's fields), panel.js (side panel, export), file.js (BVH files),
+// jointmap.js (a file's joint map). This entry module wires the controls, runs
 // the frame loop, starts up and sets the test hook.
 
 import { $, doc, history, solver, state, ui } from './editor/state.js';
@@ -31,7 +32,7 @@ import {
   sendSolve, setUpFields, takeField, undo,
 } from './editor/solve.js';
 import {
-  buildSkeleton, camera, floorCentre, pinRings, renderer, resize, scene, viewport,
+  buildSkeleton, camera, floorCentre, pinRings, renderer, resize, scene, selectionRing, viewport,
 } from './editor/scene.js';
 import {
   clearTargets, endDrag, onPointerDown, onPointerMove, onPointerUp, toScreen,
@@ -41,6 +42,7 @@ import {
   fileFrame, hasEdits, jumpToFrame, openFile, otherUnits, readAgain, setFrame,
 } from './editor/file.js';
 import { heldSize } from './editor/history.js';
+import { wireKeys } from './editor/keys.js';
 
 // ------------------------------------------------------------------------------------
 // Wiring: pointer, keyboard, panel controls, file picker and drop
@@ -49,7 +51,9 @@ function wireControls() {
   viewport.addEventListener('pointerdown', onPointerDown, { capture: true });
   window.addEventListener('pointermove', onPointerMove);
   window.addEventListener('pointerup', onPointerUp);
-  window.addEventListener('pointercancel', () => endDrag(false));
+  window.addEventListener('pointercancel', () => {
+    if (ui.drag && !ui.drag.keys) endDrag(false); // (a nudge burst ends with its keys)
+  });
   renderer.domElement.addEventListener('pointerleave', () => {
     if (!ui.drag) $('hud').hidden = true;
   });
@@ -172,7 +176,7 @@ function frame() {
   if (solver.dirty && !solver.inflight && performance.now() >= solver.holdUntil) sendSolve();
   if (ui.needsRender) {
     ui.needsRender = false;
-    for (const ring of pinRings.values()) ring.quaternion.copy(camera.quaternion);
+    for (const ring of [...pinRings.values(), selectionRing]) ring.quaternion.copy(camera.quaternion);
     renderer.render(scene, camera);
   }
   requestAnimationFrame(frame);
@@ -248,6 +252,7 @@ async function main() {
   resize();
   setUpFields();
   wireControls();
+  wireKeys();
   requestAnimationFrame(frame);
   try {
     state.samples = await loadSamples();
@@ -278,6 +283,7 @@ window.marionette = Object.freeze({
   solveCount: () => ({ sent: solver.sent, answered: solver.answered, inflight: solver.inflight, dirty: solver.dirty }),
   targets: () => Object.fromEntries([...state.targets].map(([j, p]) => [j, [...p]])),
   pins: () => [...state.pins],
+  selected: () => ui.selected, // the joint the keys and the panel's fields edit (keys.js)
   options: () => options(),
   error: () => (ui.currentError ? { ...ui.currentError } : null),
   history: () => ({ length: history.stack.length, index: history.index }),

@@ -1,5 +1,5 @@
 // Pointer interaction: screen-space picking, ray-plane dragging of joints and targets, the
-// hover label, pins and target removal.
+// hover label, pins and target removal. (The keyboard's way: keys.js.)
 
 import * as THREE from 'three';
 import { $, doc, solver, state, ui } from './state.js';
@@ -8,6 +8,7 @@ import {
   camera, controls, drawPose, handleRadius, renderer, TARGET_RADIUS, viewport,
 } from './scene.js';
 import { refresh, refreshPanel } from './panel.js';
+import { select } from './keys.js';
 
 const PICK_PIXELS = 18;
 const TARGET_PREFERENCE = 2;
@@ -74,9 +75,12 @@ export function onPointerDown(ev) {
     return;
   }
   // (preventDefault keeps the focus where it was: a panel field typed in would take the
-  // keys, Ctrl+Z undoing its text and not the drag)
-  if (document.activeElement instanceof HTMLElement) document.activeElement.blur();
+  // keys, Ctrl+Z undoing its text and not the drag). The view takes it instead: the joint
+  // pressed is selected, and the keys nudge it next (keys.js).
+  renderer.domElement.focus({ preventScroll: true });
+  if (ui.drag) endDrag(true); // (a nudge burst under way: committed, keys.js)
   const { joint } = hit;
+  select(joint);
   if (ev.altKey) {
     if (state.targets.has(joint)) removeTarget(joint);
     return;
@@ -100,7 +104,7 @@ export function onPointerDown(ev) {
 }
 
 export function onPointerMove(ev) {
-  if (!ui.drag) {
+  if (!ui.drag || ui.drag.keys) { // (a nudge burst has no plane: keys.js)
     updateHover(ev);
     return;
   }
@@ -120,7 +124,7 @@ export function onPointerMove(ev) {
 }
 
 export function onPointerUp() {
-  if (ui.drag) endDrag(true);
+  if (ui.drag && !ui.drag.keys) endDrag(true); // (a nudge burst ends with its keys)
 }
 
 // End the gesture: commit its last solve, or (cancel) go back to where it started.
@@ -164,7 +168,7 @@ function moveHud(x, y, text) {
   hud.hidden = false;
 }
 
-function togglePin(joint) {
+export function togglePin(joint) {
   if (ui.reading) return; // (editing waits for a file's answer)
   if (state.pins.has(joint)) {
     state.pins.delete(joint);

@@ -5,6 +5,7 @@ import { clonePose, options, whenCommitted } from './solve.js';
 import { drawPose } from './scene.js';
 import { removeTarget } from './interaction.js';
 import { encodeFile, refreshFrame } from './file.js';
+import { refreshJoint } from './keys.js';
 
 // ------------------------------------------------------------------------------------
 // Panel
@@ -63,6 +64,7 @@ export function refreshPanel() {
   }
   $('model').textContent = `model: ${state.model || '–'}`;
   updateButtons();
+  refreshJoint();
 }
 
 export function updateButtons() {

@@ -14,6 +14,7 @@ const COLORS = {
   pin: 0xa855f7,
   target: 0xef4444,
   hover: 0xffffff,
+  selected: 0xfacc15,
 };
 const JOINT_RADIUS = 0.026;
 const BONE_RADIUS = 0.016;
@@ -84,6 +85,14 @@ const materials = {
 const sphereGeometry = new THREE.SphereGeometry(1, 24, 16);
 const boneGeometry = new THREE.CylinderGeometry(BONE_RADIUS, BONE_RADIUS, 1, 16, 1);
 const pinRingGeometry = new THREE.TorusGeometry(0.045, 0.007, 8, 32);
+// The joint selected for the keys and the panel (keys.js): a yellow ring, wider than a pin's,
+// facing the camera (the frame loop turns it with the pin rings).
+export const selectionRing = new THREE.Mesh(
+  new THREE.TorusGeometry(0.068, 0.006, 8, 40),
+  new THREE.MeshBasicMaterial({ color: COLORS.selected }),
+);
+selectionRing.visible = false;
+scene.add(selectionRing);
 
 const skeleton = new THREE.Group();
 scene.add(skeleton);
@@ -172,6 +181,12 @@ export function drawPose() {
     ring.visible = pinned;
     ring.position.copy(mesh.position);
     ring.quaternion.copy(camera.quaternion); // face the camera
+  }
+  const selected = ui.selected && pose[ui.selected];
+  selectionRing.visible = Boolean(selected) && selected.every(Number.isFinite);
+  if (selectionRing.visible) {
+    selectionRing.position.set(selected[0], selected[1], selected[2]);
+    selectionRing.quaternion.copy(camera.quaternion);
   }
   for (const [child, bone] of boneMeshes) {
     bone.visible = !doc.active; // a file shows its own bones instead

@@ -79,7 +79,8 @@ export const ui = {
   currentError: null, // the error on the banner (api.js), or null
   hovered: null, // the joint (or target) under the pointer
   needsRender: true, // the frame loop renders when set
-  drag: null, // the gesture in progress (interaction.js), or null
+  drag: null, // the gesture in progress (interaction.js; a nudge burst's, keys.js), or null
+  selected: null, // the joint selected for the keys and the panel's fields (keys.js), or null
   connected: false, // GET v1/skeleton has answered
   reading: null, // a file being opened or read again (file.js): editing waits for its answer
 };

@@ -1,0 +1,241 @@
+// Editing a joint without the mouse: the joint selected (the panel's picker, [ and ] in the
+// view, or a click on it), its target typed in metres (x, y, z), nudged with the keys, its pin
+// toggled (P) and its target removed (Delete).
+//
+// The view's canvas takes the focus (Tab reaches it first; a joint pressed gives it the
+// focus too), and its keys are read only while it has it: a panel field typed in keeps its
+// own keys. Ctrl+Z / Ctrl+Y and Escape stay the page's (editor.js).
+//
+// A nudge moves the selected joint's target (from where the joint stands when it has none)
+// along a world axis: Left / Right along the floor axis nearest the screen's right, Up /
+// Down along the other floor axis (Up: away from the viewer), PageUp / PageDown along +Y / -Y;
+// by the nudge step, Shift 10 times more, Alt 10 times less. Nudges are a gesture as a drag
+// is (ui.drag, with `keys`): solved as a drag's moves are (throttled, from the committed
+// pose), the pin dropped as a drag drops it, Escape cancelling it. The gesture ends when the
+// last nudge key is released (or the view loses the focus, another joint is selected, the
+// mouse grabs one): one key press is one undo step, a held key's repeats and keys held
+// together included (a press made before the last one's answer came joins its step).
+
+import * as THREE from 'three';
+import { $, state, ui } from './state.js';
+import { requestSolve, snapshot } from './solve.js';
+import { camera, drawPose, renderer } from './scene.js';
+import { endDrag, removeTarget, togglePin } from './interaction.js';
+import { refresh, refreshPanel } from './panel.js';
+
+const AXES = ['x', 'y', 'z'];
+const NUDGE_KEYS = ['ArrowLeft', 'ArrowRight', 'ArrowUp', 'ArrowDown', 'PageUp', 'PageDown'];
+const held = new Set(); // the nudge keys down (the gesture ends when none is)
+
+const fmt = (v) => v.toFixed(3);
+const finite = (p) => Boolean(p) && p.every(Number.isFinite);
+
+// ------------------------------------------------------------------------------------
+// Selection
+// ------------------------------------------------------------------------------------
+// ``joint`` (or null) selected: drawn with its ring, shown in the panel.
+export function select(joint) {
+  if (joint === ui.selected) return;
+  endBurst();
+  ui.selected = joint && state.joints.includes(joint) ? joint : null;
+  drawPose();
+  refreshJoint();
+}
+
+// The next (+1) or previous (-1) joint, in the skeleton's order, round the end.
+function cycle(by) {
+  const n = state.joints.length;
+  const i = state.joints.indexOf(ui.selected);
+  select(state.joints[i < 0 ? (by > 0 ? 0 : n - 1) : (i + by + n) % n]);
+}
+
+// ------------------------------------------------------------------------------------
+// Nudges
+// ------------------------------------------------------------------------------------
+// The world direction of a nudge key, seen from the camera: the floor axes nearest the
+// screen's right and the viewer's forward (the camera never rolls: its right is level).
+function direction(key) {
+  if (key === 'PageUp') return [0, 1, 0];
+  if (key === 'PageDown') return [0, -1, 0];
+  const right = new THREE.Vector3(1, 0, 0).applyQuaternion(camera.quaternion);
+  const onX = Math.abs(right.x) >= Math.abs(right.z);
+  const ahead = camera.getWorldDirection(new THREE.Vector3());
+  if (Math.hypot(ahead.x, ahead.z) < 1e-6) ahead.set(0, 1, 0).applyQuaternion(camera.quaternion); // (from above)
+  const r = onX ? [Math.sign(right.x), 0, 0] : [0, 0, Math.sign(right.z)];
+  const a = onX ? [0, 0, Math.sign(ahead.z) || -1] : [Math.sign(ahead.x) || 1, 0, 0];
+  const d = { ArrowRight: r, ArrowLeft: r.map((v) => -v), ArrowUp: a, ArrowDown: a.map((v) => -v) }[key];
+  return d.map((v) => v + 0); // (no -0)
+}
+
+export function stepSize(ev) {
+  const base = Number($('nudge-step').value);
+  return ev.shiftKey ? base * 10 : ev.altKey ? base / 10 : base;
+}
+
+// Where the selected joint's target is, or the joint itself when it has none.
+const targetOrJoint = (joint) => state.targets.get(joint) || (state.pose && state.pose[joint]);
+
+function nudge(key, ev) {
+  const joint = ui.selected;
+  if (!joint || ui.reading || (ui.drag && !ui.drag.keys)) return; // (a mouse drag: its own)
+  const from = targetOrJoint(joint);
+  if (!finite(from)) return; // (a frame cut short: no pose)
+  if (!ui.drag) {
+    if (ev.repeat) return; // (a key still held after Escape: no new gesture)
+    ui.drag = { joint, keys: true, moved: true, before: snapshot(), hadTarget: state.targets.has(joint) };
+    state.pins.delete(joint); // a nudged joint follows its target, not its pin (as dragged)
+  }
+  const step = stepSize(ev);
+  const d = direction(key);
+  state.targets.set(joint, from.map((v, i) => v + d[i] * step));
+  requestSolve(false);
+  refreshPanel();
+  drawPose();
+}
+
+// The nudge gesture ends: committed (its last answer becomes one undo step).
+export function endBurst() {
+  held.clear();
+  if (ui.drag && ui.drag.keys) endDrag(true);
+}
+
+// ------------------------------------------------------------------------------------
+// The view's keys
+// ------------------------------------------------------------------------------------
+function onKeyDown(ev) {
+  if (ev.ctrlKey || ev.metaKey) return; // (Ctrl+Z, Ctrl+Y: editor.js; the browser's own)
+  const key = ev.key;
+  if (NUDGE_KEYS.includes(key)) {
+    ev.preventDefault(); // (no scrolling; Alt+Left: not the browser's Back)
+    if (!ui.selected) return;
+    held.add(key);
+    nudge(key, ev);
+  } else if (key === ']' || key === '[') {
+    ev.preventDefault();
+    cycle(key === ']' ? 1 : -1);
+  } else if (key === 'p' || key === 'P') {
+    ev.preventDefault();
+    pinSelected();
+  } else if (key === 'Delete' || key === 'Backspace') {
+    ev.preventDefault();
+    unsetSelected();
+  }
+}
+
+function onKeyUp(ev) {
+  if (!held.delete(ev.key)) return;
+  if (held.size === 0) endBurst();
+}
+
+function pinSelected() {
+  const joint = ui.selected;
+  if (!joint || ui.reading) return;
+  endBurst();
+  togglePin(joint);
+}
+
+function unsetSelected() {
+  const joint = ui.selected;
+  if (!joint || ui.reading || !state.targets.has(joint)) return;
+  endBurst();
+  removeTarget(joint);
+}
+
+// ------------------------------------------------------------------------------------
+// The panel's part: the picker, x / y / z, pin and remove
+// ------------------------------------------------------------------------------------
+// A coordinate typed (Enter, or the field left): the target there, its other coordinates
+// kept (the target's, or the joint's where it has none); one edit, one undo step. Not a
+// number: refused (the field marked), nothing sent.
+function typed(axis) {
+  const input = $(`joint-${AXES[axis]}`);
+  delete input.dataset.editing;
+  const joint = ui.selected;
+  const from = joint && targetOrJoint(joint);
+  const value = input.valueAsNumber;
+  const ok = Number.isFinite(value) && Math.abs(value) <= 1e4; // (the service's bound)
+  input.setAttribute('aria-invalid', String(!ok));
+  const note = $('joint-xyz-problem');
+  note.hidden = ok;
+  note.textContent = ok ? '' : `${AXES[axis]}: a number of metres (-10000 to 10000); nothing was sent`;
+  if (!ok || ui.reading || !finite(from)) return;
+  endBurst();
+  const next = [...from];
+  next[axis] = value;
+  state.pins.delete(joint); // (as a drag or a nudge: the joint follows its target)
+  state.targets.set(joint, next);
+  requestSolve(true);
+  refresh();
+}
+
+function stateText(joint) {
+  if (!joint) return 'none selected';
+  const parts = [joint];
+  if (state.pins.has(joint)) parts.push('pinned');
+  if (state.targets.has(joint)) parts.push('target');
+  else parts.push('no target: the fields show where it is');
+  return parts.join(', ');
+}
+
+// The picker, fields and buttons as the state is (panel.js refreshPanel calls it).
+export function refreshJoint() {
+  const pick = $('joint-pick');
+  if (pick.options.length !== state.joints.length + 1) {
+    pick.replaceChildren(new Option('(none)', ''), ...state.joints.map((j) => new Option(j, j)));
+  }
+  for (const option of [...pick.options].slice(1)) {
+    const j = option.value;
+    const marks = [state.targets.has(j) ? 'target' : '', state.pins.has(j) ? 'pinned' : ''].filter(Boolean);
+    const text = marks.length ? `${j} (${marks.join(', ')})` : j;
+    if (option.textContent !== text) option.textContent = text;
+  }
+  pick.value = ui.selected || '';
+  const joint = ui.selected;
+  const text = stateText(joint);
+  if ($('joint-state').textContent !== text) $('joint-state').textContent = text; // (announced once)
+  const at = joint ? targetOrJoint(joint) : null;
+  const editable = Boolean(joint) && !ui.reading && finite(at);
+  $('joint-target').disabled = !editable;
+  $('joint-target').querySelector('legend').textContent = joint && state.targets.has(joint)
+    ? 'Target (m)' : 'Target (m): the joint now';
+  AXES.forEach((a, i) => {
+    const input = $(`joint-${a}`);
+    if (input.dataset.editing && document.activeElement === input) return; // (being typed in)
+    input.value = editable ? fmt(at[i]) : '';
+    input.setAttribute('aria-invalid', 'false');
+  });
+  const pin = $('joint-pin');
+  const pinned = Boolean(joint) && state.pins.has(joint);
+  pin.disabled = !joint || Boolean(ui.reading);
+  pin.setAttribute('aria-pressed', String(pinned));
+  pin.textContent = pinned ? 'Unpin' : 'Pin';
+  $('joint-unset').disabled = !joint || Boolean(ui.reading) || !state.targets.has(joint);
+}
+
+export function wireKeys() {
+  const view = renderer.domElement;
+  view.tabIndex = 0; // (first in the page's Tab order: the view comes before the panel)
+  view.setAttribute('role', 'application'); // (its keys are its own, not a screen reader's)
+  view.setAttribute('aria-roledescription', '3D pose view');
+  view.setAttribute('aria-label', 'Pose view: joints, targets and pins');
+  view.setAttribute('aria-describedby', 'joint-state view-keys');
+  view.setAttribute('aria-keyshortcuts', '[ ] ArrowLeft ArrowRight ArrowUp ArrowDown PageUp PageDown P Delete');
+  view.addEventListener('keydown', onKeyDown);
+  view.addEventListener('keyup', onKeyUp);
+  view.addEventListener('blur', endBurst);
+  $('joint-pick').addEventListener('change', (ev) => select(ev.target.value || null));
+  AXES.forEach((a, i) => {
+    const input = $(`joint-${a}`);
+    input.addEventListener('input', () => { input.dataset.editing = '1'; });
+    input.addEventListener('change', () => typed(i));
+    input.addEventListener('keydown', (ev) => {
+      if (ev.key === 'Escape') { // back to the value shown, nothing sent
+        delete input.dataset.editing;
+        refreshJoint();
+      }
+    });
+  });
+  $('joint-pin').addEventListener('click', pinSelected);
+  $('joint-unset').addEventListener('click', unsetSelected);
+  refreshJoint();
+}
