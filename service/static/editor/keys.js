@@ -7,14 +7,13 @@
 // own keys. Ctrl+Z / Ctrl+Y and Escape stay the page's (editor.js).
 //
 // A nudge moves the selected joint's target (from where the joint stands when it has none)
-// along a world axis: Left / Right along the floor axis nearest the screen's right, Up /
-// Down along the other floor axis (Up: away from the viewer), PageUp / PageDown along +Y / -Y;
-// by the nudge step, Shift 10 times more, Alt 10 times less. Nudges are a gesture as a drag
-// is (ui.drag, with `keys`): solved as a drag's moves are (throttled, from the committed
-// pose), the pin dropped as a drag drops it, Escape cancelling it. The gesture ends when the
-// last nudge key is released (or the view loses the focus, another joint is selected, the
-// mouse grabs one): one key press is one undo step, a held key's repeats and keys held
-// together included (a press made before the last one's answer came joins its step).
+// along a world axis by the nudge step (nudge.js: which axis, which step). Nudges are a
+// gesture as a drag is (ui.drag, with `keys`): solved as a drag's moves are (throttled,
+// from the committed pose), the pin dropped as a drag drops it, Escape cancelling it. The
+// gesture ends when the last nudge key is released (or the view loses the focus, another
+// joint is selected, the mouse grabs one): one key press is one undo step, a held key's
+// repeats and keys held together included (a press made before the last one's answer came
+// joins its step).
 
 import * as THREE from 'three';
 import { $, state, ui } from './state.js';
@@ -22,9 +21,9 @@ import { requestSolve, snapshot } from './solve.js';
 import { camera, drawPose, renderer } from './scene.js';
 import { endDrag, removeTarget, togglePin } from './interaction.js';
 import { refresh, refreshPanel } from './panel.js';
+import { NUDGE_KEYS, nudgeDirection, nudgeStep } from './nudge.js';
 
 const AXES = ['x', 'y', 'z'];
-const NUDGE_KEYS = ['ArrowLeft', 'ArrowRight', 'ArrowUp', 'ArrowDown', 'PageUp', 'PageDown'];
 const held = new Set(); // the nudge keys down (the gesture ends when none is)
 
 const fmt = (v) => v.toFixed(3);
@@ -52,24 +51,11 @@ function cycle(by) {
 // ------------------------------------------------------------------------------------
 // Nudges
 // ------------------------------------------------------------------------------------
-// The world direction of a nudge key, seen from the camera: the floor axes nearest the
-// screen's right and the viewer's forward (the camera never rolls: its right is level).
+// The world direction of a nudge key, seen from the camera (nudge.js).
 function direction(key) {
-  if (key === 'PageUp') return [0, 1, 0];
-  if (key === 'PageDown') return [0, -1, 0];
-  const right = new THREE.Vector3(1, 0, 0).applyQuaternion(camera.quaternion);
-  const onX = Math.abs(right.x) >= Math.abs(right.z);
-  const ahead = camera.getWorldDirection(new THREE.Vector3());
-  if (Math.hypot(ahead.x, ahead.z) < 1e-6) ahead.set(0, 1, 0).applyQuaternion(camera.quaternion); // (from above)
-  const r = onX ? [Math.sign(right.x), 0, 0] : [0, 0, Math.sign(right.z)];
-  const a = onX ? [0, 0, Math.sign(ahead.z) || -1] : [Math.sign(ahead.x) || 1, 0, 0];
-  const d = { ArrowRight: r, ArrowLeft: r.map((v) => -v), ArrowUp: a, ArrowDown: a.map((v) => -v) }[key];
-  return d.map((v) => v + 0); // (no -0)
-}
-
-export function stepSize(ev) {
-  const base = Number($('nudge-step').value);
-  return ev.shiftKey ? base * 10 : ev.altKey ? base / 10 : base;
+  const q = camera.quaternion;
+  const along = (x, y, z) => new THREE.Vector3(x, y, z).applyQuaternion(q).toArray();
+  return nudgeDirection(key, along(1, 0, 0), along(0, 0, -1), along(0, 1, 0));
 }
 
 // Where the selected joint's target is, or the joint itself when it has none.
@@ -85,7 +71,7 @@ function nudge(key, ev) {
     ui.drag = { joint, keys: true, moved: true, before: snapshot(), hadTarget: state.targets.has(joint) };
     state.pins.delete(joint); // a nudged joint follows its target, not its pin (as dragged)
   }
-  const step = stepSize(ev);
+  const step = nudgeStep(Number($('nudge-step').value), ev);
   const d = direction(key);
   state.targets.set(joint, from.map((v, i) => v + d[i] * step));
   requestSolve(false);
@@ -145,20 +131,23 @@ function unsetSelected() {
 // The panel's part: the picker, x / y / z, pin and remove
 // ------------------------------------------------------------------------------------
 // A coordinate typed (Enter, or the field left): the target there, its other coordinates
-// kept (the target's, or the joint's where it has none); one edit, one undo step. Not a
-// number: refused (the field marked), nothing sent.
+// kept exactly (the target's, or the joint's where it has none: not the fields' rounding);
+// one edit, one undo step. Not a number, or out of the service's range: refused (the field
+// marked, its line saying so), nothing sent; the field keeps the text until it is left
+// (Escape: at once), then shows the target again.
 function typed(axis) {
   const input = $(`joint-${AXES[axis]}`);
-  delete input.dataset.editing;
   const joint = ui.selected;
   const from = joint && targetOrJoint(joint);
   const value = input.valueAsNumber;
-  const ok = Number.isFinite(value) && Math.abs(value) <= 1e4; // (the service's bound)
+  const ok = Number.isFinite(value) && Math.abs(value) <= 1e4; // (schemas.py MAX_COORDINATE)
   input.setAttribute('aria-invalid', String(!ok));
   const note = $('joint-xyz-problem');
   note.hidden = ok;
   note.textContent = ok ? '' : `${AXES[axis]}: a number of metres (-10000 to 10000); nothing was sent`;
-  if (!ok || ui.reading || !finite(from)) return;
+  if (!ok) return; // (still being typed: dataset.editing kept)
+  delete input.dataset.editing;
+  if (ui.reading || !finite(from)) return;
   endBurst();
   const next = [...from];
   next[axis] = value;
@@ -198,12 +187,18 @@ export function refreshJoint() {
   $('joint-target').disabled = !editable;
   $('joint-target').querySelector('legend').textContent = joint && state.targets.has(joint)
     ? 'Target (m)' : 'Target (m): the joint now';
+  let marked = false;
   AXES.forEach((a, i) => {
     const input = $(`joint-${a}`);
-    if (input.dataset.editing && document.activeElement === input) return; // (being typed in)
+    if (input.dataset.editing && document.activeElement === input) { // (being typed in)
+      marked ||= input.getAttribute('aria-invalid') === 'true';
+      return;
+    }
+    delete input.dataset.editing;
     input.value = editable ? fmt(at[i]) : '';
     input.setAttribute('aria-invalid', 'false');
   });
+  $('joint-xyz-problem').hidden = !marked;
   const pin = $('joint-pin');
   const pinned = Boolean(joint) && state.pins.has(joint);
   pin.disabled = !joint || Boolean(ui.reading);
@@ -234,6 +229,7 @@ export function wireKeys() {
         refreshJoint();
       }
     });
+    input.addEventListener('blur', () => refreshJoint()); // (a refused value: back, unmarked)
   });
   $('joint-pin').addEventListener('click', pinSelected);
   $('joint-unset').addEventListener('click', unsetSelected);
