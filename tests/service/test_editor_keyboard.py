@@ -20,7 +20,7 @@ import pytest
 
 from core.skeleton import JOINT_NAMES
 from tests.conftest import REPO_ROOT
-from tests.service.editor_page import M, open_editor, recorded, settle, watched_page
+from tests.service.editor_page import M, give_file, open_editor, recorded, settle, watched_page
 
 # the fixtures `server` (one for the session) and `browser` (one per module)
 pytest_plugins = ("tests.service.editor_page",)
@@ -394,5 +394,74 @@ def test_editor_view_keys_do_nothing_while_a_field_is_typed_in(server: str, brow
         page.focus(VIEW)
         press(page, "]")
         assert page.evaluate(f"{M}.selected()") == "right_shoulder"
+    finally:
+        page.context.close()
+
+
+@pytest.mark.browser
+def test_editor_nudges_a_files_joint_and_waits_while_the_file_is_read(
+    server: str, browser: Any
+) -> None:
+    """A BVH file's handle edited from the keyboard, as one dragged: each nudge a
+    ``/v1/bvh/solve``, reached; while the file is read again (other units) the keys and the
+    fields edit nothing, as a drag does not, and selecting still works (it is no edit)."""
+    text = json.loads((REPO_ROOT / "docs" / "examples" / "bvh_solve.json").read_text())["bvh"]
+    page = open_editor(browser, server)
+    bvh_solves = recorded(page, lambda url: url.endswith("/v1/bvh/solve"))
+    try:
+        give_file(page, text, "a.bvh")
+        page.wait_for_function(f"() => {M}.bvh() && {M}.bvh().name === 'a.bvh'")
+        select(page, "left_wrist")
+        wrist = page.evaluate(f"{M}.pose()")["left_wrist"]
+        n0 = steps(page)
+        press(page, "PageUp", then_steps=n0 + 1)
+        assert moved_by(wrist, target(page, "left_wrist"), [0, STEP, 0])
+        assert [t["joint"] for t in bvh_solves[-1]["targets"]] == ["left_wrist"]
+        assert reached(page, "left_wrist") <= TOLERANCE * 1.01
+        assert page.evaluate(f"{M}.lastSolve().response.targets[0].reached")
+        assert page.evaluate(f"{M}.bvhText()") != text  # the file edited
+        press(page, "p")  # a pin on the file (its target dropped)
+        assert page.evaluate(f"{M}.pins()") == ["left_wrist"]
+        press(page, "p")
+        press(page, "ArrowRight", then_steps=n0 + 4)
+
+        # the file read again: editing waits, the keys and the fields with it
+        held: list[Any] = []
+        page.route("**/v1/bvh/inspect", lambda route: held.append(route))
+        page.select_option("#bvh-units", "in")
+        page.wait_for_function(
+            "() => document.getElementById('status').textContent.includes('editing waits')"
+        )
+        page.focus(VIEW)
+        sent = page.evaluate(f"{M}.solveCount().sent")
+        before = (page.evaluate(f"{M}.targets()"), page.evaluate(f"{M}.pins()"), steps(page))
+        for key in ("ArrowRight", "PageUp", "Shift+ArrowUp", "p", "Delete"):
+            page.keyboard.press(key)
+        for control in ("#joint-x", "#joint-y", "#joint-z", "#joint-pin", "#joint-unset"):
+            assert page.is_disabled(control), control
+        assert (
+            page.evaluate(f"{M}.targets()"),
+            page.evaluate(f"{M}.pins()"),
+            steps(page),
+        ) == before
+        assert page.evaluate(f"{M}.solveCount().sent") == sent
+        page.keyboard.press("]")  # selecting is no edit: it goes on
+        assert page.evaluate(f"{M}.selected()") == "right_collar"
+        page.wait_for_function(
+            "() => document.getElementById('joint-pick').value === 'right_collar'"
+        )
+        for route in held:
+            route.continue_()
+        page.unroute("**/v1/bvh/inspect")
+        page.wait_for_function(f"() => {M}.bvh().units === 'in'")
+        page.wait_for_function("() => !document.getElementById('joint-pin').disabled")
+
+        # read: the keys edit again (the target carried with its joint into the new reading)
+        press(page, "[")
+        here = target(page, "left_wrist")
+        assert here is not None
+        press(page, "ArrowLeft")
+        assert moved_by(here, target(page, "left_wrist"), [-STEP, 0, 0])
+        assert page.evaluate(f"{M}.lastSolve().response.targets[0].reached")
     finally:
         page.context.close()
