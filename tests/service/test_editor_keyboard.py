@@ -176,7 +176,10 @@ def test_editor_selects_and_nudges_a_joint_from_the_keyboard(server: str, browse
         assert solves[-1]["pose"] == pose0  # from the committed pose, as a drag's
         assert solves[-1]["options"]["reach"] == "exact"
         assert page.input_value("#joint-x") == f"{start[0] + STEP:.3f}"  # the fields follow
-        assert "(target)" in page.inner_text("#joint-pick option[value=left_wrist]")
+        assert (
+            page.inner_text("#joint-pick option[value=left_wrist]") == "left_wrist (target reached)"
+        )
+        assert page.inner_text("#joint-state") == "left_wrist, target reached"
         after_right = target(page, "left_wrist")
         assert after_right is not None
         press(page, "ArrowUp", then_steps=n0 + 2)  # away from the viewer: -Z from the front
@@ -337,6 +340,18 @@ def test_editor_sets_a_target_typed_pins_and_removes_from_the_keyboard(
         settle(page)
         assert target(page, "right_ankle") is None
         assert page.evaluate(f"{M}.pins()") == ["left_ankle"]
+
+        # a target out of reach (2 m above the wrist): the picker and the line say how far
+        select(page, "right_wrist")
+        page.select_option("#nudge-step", "0.1")
+        page.focus(VIEW)
+        press(page, "Shift+PageUp")
+        press(page, "Shift+PageUp")
+        error = page.evaluate(f"{M}.lastSolve().response.targets")[0]["error"]
+        assert error > 0.5
+        off = f"target {error * 1000:.1f} mm off"
+        assert page.inner_text("#joint-state") == f"right_wrist, {off}"
+        assert page.inner_text("#joint-pick option[value=right_wrist]") == f"right_wrist ({off})"
     finally:
         page.context.close()
 

@@ -16,7 +16,7 @@
 // joins its step).
 
 import * as THREE from 'three';
-import { $, state, ui } from './state.js';
+import { $, solver, state, ui } from './state.js';
 import { requestSolve, snapshot } from './solve.js';
 import { camera, drawPose, renderer } from './scene.js';
 import { endDrag, removeTarget, togglePin } from './interaction.js';
@@ -157,12 +157,20 @@ function typed(axis) {
   refresh();
 }
 
+// A joint's target as the last solve left it: `target reached`, `target 12.3 mm off`, or
+// `target` (not solved yet); '' without one.
+function targetText(joint) {
+  if (!state.targets.has(joint)) return '';
+  const last = solver.last && solver.last.response.targets.find((t) => t.joint === joint);
+  if (!last) return 'target';
+  return last.reached ? 'target reached' : `target ${(last.error * 1000).toFixed(1)} mm off`;
+}
+
 function stateText(joint) {
   if (!joint) return 'none selected';
   const parts = [joint];
   if (state.pins.has(joint)) parts.push('pinned');
-  if (state.targets.has(joint)) parts.push('target');
-  else parts.push('no target: the fields show where it is');
+  parts.push(targetText(joint) || 'no target: the fields show where it is');
   return parts.join(', ');
 }
 
@@ -174,7 +182,7 @@ export function refreshJoint() {
   }
   for (const option of [...pick.options].slice(1)) {
     const j = option.value;
-    const marks = [state.targets.has(j) ? 'target' : '', state.pins.has(j) ? 'pinned' : ''].filter(Boolean);
+    const marks = [targetText(j), state.pins.has(j) ? 'pinned' : ''].filter(Boolean);
     const text = marks.length ? `${j} (${marks.join(', ')})` : j;
     if (option.textContent !== text) option.textContent = text;
   }
