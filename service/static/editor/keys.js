@@ -38,7 +38,7 @@ export function select(joint) {
   endBurst();
   ui.selected = joint && state.joints.includes(joint) ? joint : null;
   drawPose();
-  refreshJoint();
+  refreshPanel(); // (the picker, the fields, the targets table's row)
 }
 
 // The next (+1) or previous (-1) joint, in the skeleton's order, round the end.

@@ -22,6 +22,7 @@ export function refreshPanel() {
   for (const joint of state.targets.keys()) {
     const tr = document.createElement('tr');
     tr.dataset.joint = joint;
+    if (joint === ui.selected) tr.className = 'selected'; // (keys.js)
     const result = byJoint.get(joint);
     const cells = [
       [joint, ''],

@@ -85,12 +85,15 @@ const materials = {
 const sphereGeometry = new THREE.SphereGeometry(1, 24, 16);
 const boneGeometry = new THREE.CylinderGeometry(BONE_RADIUS, BONE_RADIUS, 1, 16, 1);
 const pinRingGeometry = new THREE.TorusGeometry(0.045, 0.007, 8, 32);
-// The joint selected for the keys and the panel (keys.js): a yellow ring, wider than a pin's,
-// facing the camera (the frame loop turns it with the pin rings).
+// The joint selected for the keys and the panel (keys.js): a yellow ring, wider than a pin's
+// and than the joint's handle (a sample's head), facing the camera (the frame loop turns it
+// with the pin rings), drawn over the body (a joint behind it still shows its ring).
+const SELECTION_RADIUS = 0.068;
 export const selectionRing = new THREE.Mesh(
-  new THREE.TorusGeometry(0.068, 0.006, 8, 40),
-  new THREE.MeshBasicMaterial({ color: COLORS.selected }),
+  new THREE.TorusGeometry(SELECTION_RADIUS, 0.006, 8, 40),
+  new THREE.MeshBasicMaterial({ color: COLORS.selected, depthTest: false, transparent: true }),
 );
+selectionRing.renderOrder = 10;
 selectionRing.visible = false;
 scene.add(selectionRing);
 
@@ -186,6 +189,7 @@ export function drawPose() {
   selectionRing.visible = Boolean(selected) && selected.every(Number.isFinite);
   if (selectionRing.visible) {
     selectionRing.position.set(selected[0], selected[1], selected[2]);
+    selectionRing.scale.setScalar(Math.max(1, (handleRadius(ui.selected) + 0.025) / SELECTION_RADIUS));
     selectionRing.quaternion.copy(camera.quaternion);
   }
   for (const [child, bone] of boneMeshes) {
