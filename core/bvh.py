@@ -93,6 +93,20 @@ class BVHJoint:
 
 
 @dataclass(frozen=True)
+class Cut:
+    """Where a MOTION block read for some frames ends before its declared frames are whole
+    (a file cut short): on line ``line``, inside frame ``frame`` after ``values`` of its
+    values (0: before it), of the ``frames`` its ``Frames:`` line declares. The frames
+    before ``frame`` read (and a writer keeps the rest as written); it and those after are
+    lost, and one asked for is refused as the whole read refuses the block."""
+
+    frame: int
+    values: int
+    line: int
+    frames: int
+
+
+@dataclass(frozen=True)
 class BVH:
     """A parsed BVH file: the hierarchy (parents precede children) and the motion."""
 
@@ -108,6 +122,8 @@ class BVH:
     read: frozenset[int] | None = field(default=None, repr=False, compare=False)
     #: (start, end) offsets in ``text`` of the lines of the frames read alone (a writer's)
     spans: dict[int, tuple[int, int]] = field(default_factory=dict, repr=False, compare=False)
+    #: where the block ends before its frames are whole, where it was read for some frames
+    cut: Cut | None = field(default=None, repr=False, compare=False)
     _index: dict[str, int] = field(default_factory=dict, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -503,10 +519,11 @@ def parse_bvh(text: str, name: str = "<string>", frames: Iterable[int] | None = 
         some = _read_frames(name, text, body_offset, first_line, n_frames, columns, frames)
     read: frozenset[int] | None = None
     spans: dict[int, tuple[int, int]] = {}
+    cut = None
     if some is None:
         motion = _read_all(name, text[body_offset:], first_line, n_frames, columns)
     else:
-        motion, read, spans = some
+        motion, read, spans, cut = some
     return BVH(
         name=name,
         joints=tuple(joints),
@@ -516,6 +533,7 @@ def parse_bvh(text: str, name: str = "<string>", frames: Iterable[int] | None = 
         motion_offset=body_offset,
         read=read,
         spans=spans,
+        cut=cut,
     )
 
 
@@ -539,18 +557,24 @@ def _read_frames(
     n_frames: int,
     columns: list[tuple[str, str]],
     frames: Iterable[int],
-) -> tuple[FloatArray, frozenset[int], dict[int, tuple[int, int]]] | None:
-    """The motion ``[F, C]`` with only ``frames``' rows read (the others NaN), the set read
-    and their lines' (start, end) in ``text``, where the block from ``at`` holds
-    ``n_frames`` non-blank lines; None where it does not, or cannot hold the values
-    (frames across lines, a count that does not match, fewer characters than the values
-    need: the whole read explains it, and no table larger than the text allows is made)."""
+) -> tuple[FloatArray, frozenset[int], dict[int, tuple[int, int]], Cut | None] | None:
+    """The motion ``[F, C]`` with only ``frames``' rows read (the others NaN), the set read,
+    their lines' (start, end) in ``text`` and where the block is cut short
+    (:func:`_cut_short`: the frames before the cut are read, one at or past it is not),
+    where the block from ``at`` holds ``n_frames`` non-blank lines; None where it does not,
+    or cannot hold the values (frames across lines, a count that does not match, fewer
+    characters than the values need: the whole read explains it, and no table larger than
+    the text allows is made)."""
     n_channels = len(columns)
     if n_frames * n_channels * 2 > len(text) - at + 1:  # a value and a separator each
         return None
     read = frozenset(f for f in frames if 0 <= f < n_frames)
-    if not one_frame_a_line(text, at, n_frames):  # blank lines, frames across lines
-        return _read_frame_words(name, text, at, first_line, n_frames, columns, read)
+    # a block cut short: the frames before the cut read line by line; one past it is read
+    # as before (line by line where the cut is inside the last line, else whole: refused)
+    plain = one_frame_a_line(text, at, n_frames)
+    cut = _cut_short(text, at, first_line, n_frames, n_channels, plain)
+    if not plain and (cut is None or any(f >= cut.frame for f in read)):  # blank lines,
+        return _read_frame_words(name, text, at, first_line, n_frames, columns, read)  # wrapped
     motion = np.full((n_frames, n_channels), np.nan)
     spans: dict[int, tuple[int, int]] = {}
     line_at, line_frame = at, 0  # the start of a frame line found, and its frame
@@ -566,7 +590,41 @@ def _read_frames(
             got = f"expected {n_channels} values per frame, got {count}"
             raise _error(name, f"line {number}: {got}")
         motion[f] = motion_values(name, line, number, fromstring(line), columns, f)
-    return motion, read, spans
+    return motion, read, spans, cut
+
+
+def _cut_short(
+    text: str, at: int, first_line: int, n_frames: int, n_channels: int, plain: bool
+) -> Cut | None:
+    """Where the MOTION block from ``at`` ends before its ``n_frames`` frames are whole
+    (an interrupted copy), if it holds one frame a line and no blank line among them: its
+    last line holds fewer than ``n_channels`` values, or it has fewer lines than frames
+    (cut at a line's end; its first line holding one frame's values). None where the block
+    is whole, or is not so laid out (read as before: whole, which refuses it). ``plain``:
+    it holds ``n_frames`` lines and no blank line (:func:`one_frame_a_line`): only its last
+    line is looked at (no second pass over a large block)."""
+    if plain:
+        end = text.rfind("\n", at)  # (the last line, or the blank after it)
+        if end < 0 or text[end + 1 :].strip():
+            end = len(text)
+        values = count_words(text[max(at, text.rfind("\n", at, end) + 1) : end])
+        if values >= n_channels or n_frames == 0:
+            return None
+        return Cut(n_frames - 1, values, first_line + n_frames - 1, n_frames)
+    end = max(at, len(text.rstrip()))  # (trailing blank lines are no frame; in C)
+    if end == at or _BLANK_FIRST_RE.match(text, at) or _BLANK_MID_RE.search(text, at, end):
+        return None
+    n_lines = text.count("\n", at, end) + 1
+    last = text.rfind("\n", at, end) + 1
+    values = count_words(text[last:end])
+    if n_lines > n_frames or values > n_channels or (n_lines == n_frames and values == n_channels):
+        return None
+    if n_lines < n_frames:  # one frame a line, not several: its first line says so
+        first = text.find("\n", at, end)
+        if count_words(text[at : end if first < 0 else first]) != n_channels:
+            return None
+    whole = n_lines - (values < n_channels)
+    return Cut(whole, values % n_channels, first_line + n_lines - 1, n_frames)
 
 
 def _read_frame_words(
@@ -577,7 +635,7 @@ def _read_frame_words(
     n_frames: int,
     columns: list[tuple[str, str]],
     read: frozenset[int],
-) -> tuple[FloatArray, frozenset[int], dict[int, tuple[int, int]]] | None:
+) -> tuple[FloatArray, frozenset[int], dict[int, tuple[int, int]], Cut | None] | None:
     """:func:`_read_frames` of a block whose frames are not one a line (wrapped over
     several lines, or blank lines among them): each frame read is its values' words
     (:func:`frame_words`), checked as the whole read checks them; None where the block
@@ -593,7 +651,7 @@ def _read_frame_words(
         line, line_at = line + text.count("\n", line_at, start), start
         words = text[start:end]
         motion[f] = motion_values(name, words, line, fromstring(words), columns, f)
-    return motion, read, spans
+    return motion, read, spans, None
 
 
 def read_bvh(path: str | Path, name: str | None = None) -> BVH:

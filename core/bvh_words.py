@@ -269,9 +269,10 @@ def motion_values(
 
 
 def explain_count(name: str, body: str, first_line: int, n_frames: int, n_channels: int) -> None:
-    """Raise a BVHError pointing at the first MOTION line with the wrong number of values
-    (the lines found one at a time: no list of them all)."""
-    seen, offset, at = 0, 0, 0
+    """Raise a BVHError pointing at the first MOTION line with the wrong number of values,
+    else at the block's last line of values (the line before it where it has none), where
+    it holds fewer frames than declared (the lines found one at a time: no list of them)."""
+    seen, offset, at, last = 0, 0, 0, -1  # (last: the offset of the last line of values)
     while at <= len(body):
         end = body.find("\n", at)
         end = len(body) if end < 0 else end
@@ -288,6 +289,7 @@ def explain_count(name: str, body: str, first_line: int, n_frames: int, n_channe
                 name,
                 f"line {first_line + offset}: expected {n_channels} values per frame, got {count}",
             )
-        seen += count > 0
+        seen, last = (seen + 1, offset) if count else (seen, last)
         offset, at = offset + 1, end + 1
-    raise error(name, f"truncated: 'Frames:' declares {n_frames} frames, found {seen}")
+    ends = f"line {first_line + last}: truncated"  # (where the block ends)
+    raise error(name, f"{ends}: 'Frames:' declares {n_frames} frames, found {seen}")

@@ -66,6 +66,24 @@ def read_request_bvh(text: str, frame: int | None = None) -> BVH:
     return bvh
 
 
+def cut_short(bvh: BVH) -> dict[str, Any] | None:
+    """The answers' ``cut_short`` (:class:`service.characters.BVHCutShort`): where the file
+    ends before its declared frames are whole, else None."""
+    cut = bvh.cut
+    if cut is None:
+        return None
+    inside = f"inside frame {cut.frame} ({cut.values} of its {bvh.num_channels} values)"
+    where = inside if cut.values else f"before frame {cut.frame}"
+    last = cut.frames - 1
+    lost = f"frame {last} is" if cut.frame == last else f"frames {cut.frame} to {last} are"
+    detail = (
+        f"the file is cut short: it ends on line {cut.line}, {where}, of the {cut.frames} "
+        f"frames 'Frames:' declares; {lost} lost: the frames before read and edit"
+    )
+    return {"frame": cut.frame, "values": cut.values, "line": cut.line, "frames": cut.frames,
+            "detail": detail}  # fmt: skip
+
+
 def character_from_bvh(bvh: BVH, req: BVHSolveRequest | BVHInspectRequest) -> Character:
     if req.frame >= bvh.num_frames:
         n = bvh.num_frames
@@ -96,6 +114,7 @@ def bvh_answer(bvh: BVH, ch: Character, req: BVHSolveRequest, edit: Edit) -> dic
         "frame": req.frame,
         "changed_joints": [ch.skel.names[j] for j in sorted(_written(bvh, columns))],
         **edit_report(ch, edit, points),
+        "cut_short": cut_short(bvh),
     }
 
 
@@ -140,4 +159,5 @@ def bvh_inspect(bvh: BVH, ch: Character, frame: int) -> dict[str, Any]:
         "frame": frame,
         "positions": g_pos.tolist(),
         "points": dict(zip(JOINT_NAMES, points.tolist(), strict=True)),
+        "cut_short": cut_short(bvh),
     }

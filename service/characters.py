@@ -266,6 +266,30 @@ class BVHAnchor(BaseModel):
     label: str
 
 
+class BVHCutShort(BaseModel):
+    """Where a file ends before the frames its `Frames:` line declares are whole."""
+
+    frame: int = Field(
+        description="The first frame the file does not hold whole: it and "
+        "those after it are lost; the frames before it read and edit."
+    )
+    values: int = Field(
+        description="How many of that frame's values the file holds (0: "
+        "it ends at the line before)."
+    )
+    line: int = Field(description="The file's last line.")
+    frames: int = Field(description="The frames `Frames:` declares.")
+    detail: str = Field(description="The same in words.")
+
+
+#: the answers' `cut_short`: null for a whole file
+CUT_SHORT = Field(
+    default=None, description="Where the file ends before its declared frames are whole (a "
+    "file cut short, e.g. an interrupted copy): its frames before that read and edit, the "
+    "answer keeps the rest as sent (the cut line too); null for a whole file.",
+)  # fmt: skip
+
+
 class BVHInspectResponse(BaseModel):
     joints: list[BVHJointInfo] = Field(description="File order (parents first).")
     anchors: dict[str, BVHAnchor] = Field(description="canonical joint -> its point.")
@@ -281,6 +305,7 @@ class BVHInspectResponse(BaseModel):
     frame: int
     positions: list[list[float]] = Field(description="World position of every joint (units).")
     points: dict[str, list[float]] = Field(description="The 21 canonical points (units).")
+    cut_short: BVHCutShort | None = CUT_SHORT
 
 
 class _Answer(BaseModel):
@@ -314,6 +339,7 @@ class BVHSolveResponse(_Answer):
     bvh: str = Field(description="The same file, only that frame's changed values rewritten.")
     frame: int
     changed_joints: list[str] = Field(description="Joints with a value rewritten (none: as sent).")
+    cut_short: BVHCutShort | None = CUT_SHORT
 
 
 # --------------------------------------------------------------------------------------

@@ -321,8 +321,8 @@ def test_a_blank_frame_line_holds_no_value() -> None:
     """numpy's reader reads -1 of whitespace alone: a file of one channel whose one frame
     line was blank read as -1 (a fuzz of the number forms found it)."""
     text = _ROOT.replace("\n}\n", "\n}\nMOTION\nFrames: 1\nFrame Time: 0.1\n \n", 1)
-    assert _refusal(text) == "truncated: 'Frames:' declares 1 frames, found 0"
-    assert _refusal(text, (0,)) == "truncated: 'Frames:' declares 1 frames, found 0"
+    assert _refusal(text) == "line 9: truncated: 'Frames:' declares 1 frames, found 0"
+    assert _refusal(text, (0,)) == "line 9: truncated: 'Frames:' declares 1 frames, found 0"
     assert parse_bvh(text.replace(" \n", "-1\n"), "ok").row(0).tolist() == [-1.0]
 
 
@@ -481,7 +481,7 @@ def _first_fault(body: str, first: int, n_frames: int, n_channels: int, some: bo
                 return f"line {first + k}: {at}: not a number: {line.split()[bad[0]]!r} {_NAN}"
         return None
     if len(body.split()) != n_frames * n_channels:
-        seen = 0
+        seen, last = 0, -1
         for k, line in enumerate(lines):
             count = len(line.split())
             if count and seen >= n_frames:
@@ -490,8 +490,9 @@ def _first_fault(body: str, first: int, n_frames: int, n_channels: int, some: bo
                 )
             if count and count != n_channels:
                 return f"line {first + k}: expected {n_channels} values per frame, got {count}"
-            seen += count > 0
-        return f"truncated: 'Frames:' declares {n_frames} frames, found {seen}"
+            seen, last = (seen + 1, k) if count else (seen, last)
+        ends = f"line {first + last}: truncated"
+        return f"{ends}: 'Frames:' declares {n_frames} frames, found {seen}"
     words = 0  # before the line
     for k, line in enumerate(lines):
         bad = [i for i, w in enumerate(line.split()) if not re.fullmatch(NUMBER, w)]

@@ -117,3 +117,40 @@ def test_a_value_beyond_any_body_in_a_wrapped_frame_names_its_own_line(
         {"joint": "left_wrist", "position": [0, 1, 0]}]})  # fmt: skip
     line = text[:at].count("\n") + 1
     assert r.status_code == 422 and f"bvh: line {line}: frame 40, channel " in r.text, r.text
+
+
+def test_a_file_cut_short_edits_its_frames_before_the_cut_and_says_where_it_ends(
+    client: Any, bvh_files: dict[str, Path]
+) -> None:
+    """An audit (2026-12-06): a file cut inside its last line was answered without a word
+    (the editor alone warned), one cut at a line's end (`Frames:` one above its lines) was
+    refused whatever frame was asked. Now both edit the frames before the cut, inspect and
+    solve say where the file ends (`cut_short`), the answer keeps the rest as sent (the
+    cut line too), and the frame at the cut is refused naming its line."""
+    from tests.core.test_bvh_cut import _cuts
+
+    text = raw(bvh_files["bandai"])
+    here = client.post("/v1/bvh/inspect", json={"bvh": text, "frame": 40}).json()
+    assert here["cut_short"] is None
+    goal = [v + d for v, d in zip(here["points"]["left_wrist"], (5.0, 5.0, -5.0), strict=True)]
+    body = {"frame": 40, "targets": [{"joint": "left_wrist", "position": goal}]}
+    whole = client.post("/v1/bvh/solve", json={**body, "bvh": text}).json()
+    assert whole["cut_short"] is None
+    start, end = parse_bvh(text, "walk", frames=[40]).frame_span(40) or (0, 0)
+    line = whole["bvh"][start : whole["bvh"].index("\n", start)]
+    for case, (cut_text, cut) in _cuts(text).items():
+        told = {"frame": cut.frame, "values": cut.values, "line": cut.line, "frames": 195}
+        seen = client.post("/v1/bvh/inspect", json={"bvh": cut_text, "frame": 40}).json()
+        assert {k: seen["cut_short"][k] for k in told} == told, case
+        assert seen["points"] == here["points"], case
+        r = client.post("/v1/bvh/solve", json={**body, "bvh": cut_text})
+        assert r.status_code == 200, r.text
+        out = r.json()
+        assert out["cut_short"] == seen["cut_short"], case
+        detail = out["cut_short"]["detail"]
+        assert detail.startswith(f"the file is cut short: it ends on line {cut.line}, "), detail
+        assert out["bvh"] == cut_text[:start] + line + cut_text[end:], case
+        assert out["changed_joints"] == whole["changed_joints"], case
+        r = client.post("/v1/bvh/solve", json={**body, "bvh": cut_text, "frame": cut.frame})
+        assert r.status_code == 422, r.text
+        assert r.json()["detail"].startswith(f"bvh: line {cut.line}: "), r.text

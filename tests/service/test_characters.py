@@ -232,7 +232,8 @@ def test_bad_bvh_files(client: Any, bvh_files: dict[str, Path]) -> None:
     def post(bvh: str, *needles: str) -> str:
         return _bad(client, "/v1/bvh/solve", {"bvh": bvh, "frame": 0, "targets": target}, *needles)
 
-    post(text[: len(text) // 2], "line")  # truncated mid-frame
+    half = {"bvh": text[: len(text) // 2], "frame": 190, "targets": target}  # cut mid-frame:
+    _bad(client, "/v1/bvh/solve", half, "line")  # a frame past the cut (tests/core/test_bvh_cut)
     post(text[:200], "missing MOTION")  # truncated in the hierarchy
     lines = text.split("\n")
     motion = lines.index("MOTION")
