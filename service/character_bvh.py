@@ -160,4 +160,5 @@ def bvh_inspect(bvh: BVH, ch: Character, frame: int) -> dict[str, Any]:
         "positions": g_pos.tolist(),
         "points": dict(zip(JOINT_NAMES, points.tolist(), strict=True)),
         "cut_short": cut_short(bvh),
+        "units_warning": ch.units_warning,
     }

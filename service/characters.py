@@ -46,6 +46,7 @@ from core.characters import (
     up_rotation,
 )
 from core.characters_maps import (
+    LEG_BANDS,
     NAMED_UNIT_LEG_M,
     JointMap,
     human_units,
@@ -290,6 +291,15 @@ CUT_SHORT = Field(
 )  # fmt: skip
 
 
+#: the answers' `units_warning`
+UNITS_WARNING = Field(
+    default=None, description="Where the named `units` make the rest-pose leg (hip to ankle) "
+    "no person's, 0.3-1.3 m, but not past what a named unit may give (0.1-5 m, else a 422): "
+    "what it is and the units that make it a person's (a file in centimetres sent as "
+    "inches is a body 2.54 times too big); the answer is solved as asked. Null otherwise.",
+)  # fmt: skip
+
+
 class BVHInspectResponse(BaseModel):
     joints: list[BVHJointInfo] = Field(description="File order (parents first).")
     anchors: dict[str, BVHAnchor] = Field(description="canonical joint -> its point.")
@@ -306,6 +316,7 @@ class BVHInspectResponse(BaseModel):
     positions: list[list[float]] = Field(description="World position of every joint (units).")
     points: dict[str, list[float]] = Field(description="The 21 canonical points (units).")
     cut_short: BVHCutShort | None = CUT_SHORT
+    units_warning: str | None = UNITS_WARNING
 
 
 class _Answer(BaseModel):
@@ -317,6 +328,7 @@ class _Answer(BaseModel):
         description="As given, else as inferred (named, or metres per unit)."
     )
     up: str = Field(description="As given, else as inferred.")
+    units_warning: str | None = UNITS_WARNING
     solvers: list[str]
     model: str
     method: Literal["neural", "fabrik"]
@@ -419,6 +431,8 @@ class Character:
     #: what a degenerate pose of its mapped points is put down to: the client's joint map,
     #: else its skeleton (``character.joints``) or its file (``bvh``)
     points: str = "bvh"
+    #: the answers' ``units_warning`` (:func:`_odd_size`), None where the body is a person's
+    units_warning: str | None = None
 
     def to_service(self, p: F64) -> F64:
         return np.asarray(self.scale * (p @ self.up.T))
@@ -473,6 +487,7 @@ def make_character(
                 f"unit may give{reads}; a character of that size: units as metres per unit "
                 "(a number), taken as given"
             )
+    warning = _odd_size(skel, jmap, units, where, stated)
     if units is None:
         name, leg = infer_units(skel, jmap)
         if name is None:
@@ -508,7 +523,29 @@ def make_character(
             )
         up = found
     return Character(
-        skel, pose, jmap, units_scale(units), up_rotation(up), units, up, fields, points
+        skel, pose, jmap, units_scale(units), up_rotation(up), units, up, fields, points, warning
+    )
+
+
+def _odd_size(skel: Skeleton, jmap: JointMap, units: Any, where: str, stated: bool) -> str | None:
+    """What the answers say where a named unit makes the rest-pose leg no person's (a
+    metre band of :data:`core.characters_maps.LEG_BANDS`) but within what a named unit may
+    give (else refused): a file in centimetres sent as inches is a body 2.54 times too big
+    (an 80 cm leg read as 2.03 m), solved as asked; the editor's own test opens one so."""
+    if not (isinstance(units, str) and units in UNITS):
+        return None
+    low, high, _ = LEG_BANDS[0]
+    _, leg = infer_units(skel, jmap)
+    metres = leg * UNITS[units]
+    if low <= metres <= high:
+        return None
+    fits = _leg_in(leg)
+    given = "" if stated else " (the default: no units were given)"
+    return (
+        f"{where}: {quoted(units)}{given} makes the rest-pose leg (hip to ankle, {leg:.4g} "
+        f"file units) {metres:.4g} m long, not a person's {low:g}-{high:g} m"
+        + (f": {fits} would make it one" if fits else "")
+        + "; solved as asked (a character of that size: units as metres per unit, a number)"
     )
 
 
@@ -654,6 +691,7 @@ def edit_report(ch: Character, edit: Edit, points: F64) -> dict[str, Any]:
         "scheme": ch.jmap.scheme,
         "units": ch.units,
         "up": ch.up_name,
+        "units_warning": ch.units_warning,
         "solvers": r.solvers,
         "model": edit.version,
         "method": "fabrik" if p.method == "fabrik" else "neural",

@@ -7,6 +7,7 @@ from __future__ import annotations
 import copy
 import json
 import math
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -141,6 +142,42 @@ def test_a_named_unit_that_makes_no_body_is_refused(client: Any) -> None:
         joint["offset"] = [100.0 * v for v in joint["offset"]]
     _refused(client, "/v1/solve", character, "'m' (the default: no units were given)")
     assert client.post("/v1/solve", json=_example("solve_character")).status_code == 200
+
+
+def test_a_named_unit_that_makes_no_person_is_said_so(
+    client: Any, bvh_files: dict[str, Path]
+) -> None:
+    """An audit (2026-12-06): a file in centimetres sent as inches (CMU salsa: an 82 cm leg
+    read as 2.09 m, a body 2.54 times too big), the inch child as centimetres (a 0.22 m
+    leg) or ReActIdle's metres as feet were solved as asked without a word: within the
+    0.1-5 m leg a named unit may give. Now inspect and solve say so in `units_warning`,
+    naming the units that make the leg a person's; the file's own units say nothing."""
+    slips = {"cmu-daz-salsa": ("in", "cm"), "fair1-child-inches-zup": ("cm", "in"),
+             "reactidle-6ch": ("ft", "m")}  # fmt: skip
+    for name, (wrong, right) in slips.items():
+        text = bvh_files[name].read_bytes().decode("utf-8")
+        root = "add" if name == "reactidle-6ch" else "replace"
+        up = "+Z" if name == "fair1-child-inches-zup" else "+Y"
+        body = {"bvh": text, "frame": 10, "root_position": root, "up": up}
+        for units, said in ((wrong, True), (right, False)):
+            seen = client.post("/v1/bvh/inspect", json={**body, "units": units})
+            assert seen.status_code == 200, seen.text
+            warning = seen.json()["units_warning"]
+            if not said:
+                assert warning is None, (name, warning)
+                continue
+            assert warning.startswith(f"units: '{units}' makes the rest-pose leg"), warning
+            assert f'"units": "{right}" (' in warning and "solved as asked" in warning
+            goal = [v + 0.05 / 0.0254 for v in seen.json()["points"]["left_wrist"]]
+            solve = {**body, "units": units, "targets": [{"joint": "left_wrist",
+                                                         "position": goal}]}  # fmt: skip
+            r = client.post("/v1/bvh/solve", json=solve)
+            assert r.status_code == 200 and r.json()["units_warning"] == warning, r.text
+    character = _example("solve_character")  # the character form (its values are metres)
+    assert client.post("/v1/solve", json=character).json()["units_warning"] is None
+    character["character"]["units"] = "ft"
+    warning = client.post("/v1/solve", json=character).json()["units_warning"]
+    assert warning.startswith("character.units: 'ft' makes"), warning
 
 
 def test_a_target_beyond_the_service_is_named(client: Any) -> None:
