@@ -154,3 +154,24 @@ def test_a_file_cut_short_edits_its_frames_before_the_cut_and_says_where_it_ends
         r = client.post("/v1/bvh/solve", json={**body, "bvh": cut_text, "frame": cut.frame})
         assert r.status_code == 422, r.text
         assert r.json()["detail"].startswith(f"bvh: line {cut.line}: "), r.text
+
+
+def test_a_file_whose_lines_end_in_cr_alone_comes_back_with_its_own_line_ends(
+    client: Any, bvh_files: dict[str, Path]
+) -> None:
+    """An audit (2026-12-06): a classic Mac OS file (CR alone) was read as LF and came back
+    with LF ends, every line end of it changed. Now it comes back with CR ends, the answer
+    that of the same file with LF ends but for them."""
+    lf = raw(bvh_files["bandai"])
+    assert "\r" not in lf
+    pts = client.post("/v1/bvh/inspect", json={"bvh": lf, "frame": 30}).json()["points"]
+    goal = [v + d for v, d in zip(pts["left_wrist"], (6.0, 4.0, -3.0), strict=True)]
+    body = {"frame": 30, "targets": [{"joint": "left_wrist", "position": goal}]}
+    answers = [
+        client.post("/v1/bvh/solve", json={**body, "bvh": text}).json()
+        for text in (lf, lf.replace("\n", "\r"))
+    ]
+    assert answers[0]["changed_joints"] and answers[0]["bvh"] != lf
+    assert "\n" not in answers[1]["bvh"]
+    assert answers[1]["bvh"] == answers[0]["bvh"].replace("\n", "\r")
+    assert answers[1]["targets"] == answers[0]["targets"]
