@@ -11,8 +11,9 @@
 - :func:`skeleton_of`, :func:`pose_of` and :func:`row_of` bridge a BVH frame to a
   :class:`core.characters.Skeleton` / :class:`core.characters.Pose` and back: a joint is
   *rotatable* if it has exactly three rotation channels, *translatable* if it has all three
-  position channels; Euler angles written back are the solution nearest the old angles
-  (same rotation, angles shifted by whole turns or the other branch), so curves stay smooth.
+  position channels, each axis once; Euler angles written back are the solution nearest the
+  old angles (same rotation, angles shifted by whole turns or the other branch), so curves
+  stay smooth.
 """
 
 from __future__ import annotations
@@ -114,12 +115,21 @@ def skeleton_of(bvh: BVH) -> Skeleton:
         [None if j.parent < 0 else bvh.joints[j.parent].name for j in bvh.joints],
         [j.offset for j in bvh.joints],
         rotatable=[invertible_order(j.rotation_order) for j in bvh.joints],
-        translatable=[sum(c.lower() in _POS for c in j.channels) == 3 for j in bvh.joints],
+        translatable=[_position_axes(j) == [0, 1, 2] for j in bvh.joints],
         where=bvh.name,
     )
     if order != list(range(len(bvh.joints))):  # pragma: no cover - the reader keeps file order
         raise BVHError(bvh.name, "joints are not in parents-first order")
     return skel
+
+
+def _position_axes(joint: BVHJoint) -> list[int]:
+    """The axes of ``joint``'s position channels, sorted: a joint moves (is *translatable*)
+    and its position channels are written only where they are the three, each once
+    (``Xposition Yposition Yposition`` cannot write a move along Z: such a joint was taken
+    to move the pelvis, the move lost, and its first ``Yposition`` written the second's
+    value)."""
+    return sorted(_POS[c.lower()] for c in joint.channels if c.lower() in _POS)
 
 
 def _root_shift(joint: BVHJoint, axis: int, root_add: bool) -> float:
@@ -189,8 +199,9 @@ def row_of(
         if len(rot_cols) == 3 and invertible_order(j.rotation_order):  # else never turned
             angles = _nearest_euler(j.rotation_order, pose.rotations[i], row[rot_cols])
             new.update(zip(rot_cols, angles.tolist(), strict=True))
-        for k, c in enumerate(j.channels):
-            if c.lower() in _POS:
+        moves = _position_axes(j) == [0, 1, 2]  # (else its position channels are kept:
+        for k, c in enumerate(j.channels):  # an axis twice was written the last one's value)
+            if c.lower() in _POS and moves:
                 axis = _POS[c.lower()]
                 value = float(pose.translations[i, axis]) - _root_shift(j, axis, root_add)
                 new[j.channel_start + k] = value

@@ -175,3 +175,30 @@ def test_a_file_whose_lines_end_in_cr_alone_comes_back_with_its_own_line_ends(
     assert "\n" not in answers[1]["bvh"]
     assert answers[1]["bvh"] == answers[0]["bvh"].replace("\n", "\r")
     assert answers[1]["targets"] == answers[0]["targets"]
+
+
+def test_a_joint_with_an_axis_twice_among_its_positions_moves_nothing(
+    client: Any, bvh_files: dict[str, Path]
+) -> None:
+    """An audit (2026-12-06): Bandai's `Hips` listing `Xposition Yposition Yposition` (no
+    Z) was taken to move the pelvis, and a pelvis target 10 cm along Z was missed by 10 cm
+    (its move had no channel to go into: the file came back as sent), and where `Hips`
+    turned, its first `Yposition` was written with the second's value. Now the pelvis
+    moves through the joint above it with all three (`joint_Root`), and `Hips` keeps its
+    position values."""
+    text = raw(bvh_files["bandai"]).replace(
+        "OFFSET 0 93.9241 -3\n    CHANNELS 6 Xposition Yposition Zposition",
+        "OFFSET 0 93.9241 -3\n    CHANNELS 6 Xposition Yposition Yposition",
+    )
+    pts = client.post("/v1/bvh/inspect", json={"bvh": text, "frame": 30}).json()["points"]
+    goal = [pts["pelvis"][0], pts["pelvis"][1], pts["pelvis"][2] + 10.0]
+    body = {"bvh": text, "frame": 30, "targets": [{"joint": "pelvis", "position": goal}],
+            "options": {"reach": "exact"}}  # fmt: skip
+    r = client.post("/v1/bvh/solve", json=body)
+    assert r.status_code == 200, r.text
+    out = r.json()
+    assert out["targets"][0]["reached"] and out["targets"][0]["error"] < 1e-6, out["targets"]
+    old, new = (parse_bvh(t, "walk", frames=[30]) for t in (text, out["bvh"]))
+    hips = old.joints[old.index("Hips")].channel_start
+    assert (new.row(30)[hips : hips + 3] == old.row(30)[hips : hips + 3]).all()
+    assert "joint_Root" in out["changed_joints"]
