@@ -611,18 +611,18 @@ def _cut_short(
         if values >= n_channels or n_frames == 0:
             return None
         return Cut(n_frames - 1, values, first_line + n_frames - 1, n_frames)
+    # else (blank lines after it, or fewer lines than frames) only where each line is one
+    # frame (its first says so: a wrapped block is told apart here, before a pass over it)
+    first = text.find("\n", at)
+    if count_words(text[at : len(text) if first < 0 else first]) != n_channels:
+        return None
     end = max(at, len(text.rstrip()))  # (trailing blank lines are no frame; in C)
-    if end == at or _BLANK_FIRST_RE.match(text, at) or _BLANK_MID_RE.search(text, at, end):
+    if _BLANK_MID_RE.search(text, at, end):
         return None
     n_lines = text.count("\n", at, end) + 1
-    last = text.rfind("\n", at, end) + 1
-    values = count_words(text[last:end])
+    values = count_words(text[text.rfind("\n", at, end) + 1 : end])
     if n_lines > n_frames or values > n_channels or (n_lines == n_frames and values == n_channels):
         return None
-    if n_lines < n_frames:  # one frame a line, not several: its first line says so
-        first = text.find("\n", at, end)
-        if count_words(text[at : end if first < 0 else first]) != n_channels:
-            return None
     whole = n_lines - (values < n_channels)
     return Cut(whole, values % n_channels, first_line + n_lines - 1, n_frames)
 
