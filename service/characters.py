@@ -473,21 +473,24 @@ def make_character(
     units and up are, an item's prefix left out (``character.``; none for BVH), and
     ``points``: what a degenerate pose of its mapped points is put down to."""
     where = f"{prefix}units"
+    warning = None
     if isinstance(units, str) and units in UNITS:  # a named unit: a slip is refused
         _, leg = infer_units(skel, jmap)
         metres = leg * UNITS[units]
+        given = "" if stated else " (the default: no units were given)"
+        said = (
+            f"{where}: {quoted(units)}{given} makes the rest-pose leg (hip to ankle, {leg:.4g} "
+            f"file units) {metres:.4g} m long"
+        )
         low, high = NAMED_UNIT_LEG_M
+        fits = _leg_in(leg)
         if not low <= metres <= high:
-            fits = _leg_in(leg)
             reads = f"; a person's leg (0.3-1.3 m) with {fits}" if fits else ""
-            given = "" if stated else " (the default: no units were given)"
             raise InvalidRequest(
-                f"{where}: {quoted(units)}{given} makes the rest-pose leg (hip to ankle, {leg:.4g} "
-                f"file units) {metres:.4g} m long, outside the {low:g}-{high:g} m a named "
-                f"unit may give{reads}; a character of that size: units as metres per unit "
-                "(a number), taken as given"
+                f"{said}, outside the {low:g}-{high:g} m a named unit may give{reads}; a "
+                "character of that size: units as metres per unit (a number), taken as given"
             )
-    warning = _odd_size(skel, jmap, units, where, stated)
+        warning = _odd_size(said, metres, fits)
     if units is None:
         name, leg = infer_units(skel, jmap)
         if name is None:
@@ -527,23 +530,18 @@ def make_character(
     )
 
 
-def _odd_size(skel: Skeleton, jmap: JointMap, units: Any, where: str, stated: bool) -> str | None:
-    """What the answers say where a named unit makes the rest-pose leg no person's (a
-    metre band of :data:`core.characters_maps.LEG_BANDS`) but within what a named unit may
-    give (else refused): a file in centimetres sent as inches is a body 2.54 times too big
-    (an 80 cm leg read as 2.03 m), solved as asked; the editor's own test opens one so."""
-    if not (isinstance(units, str) and units in UNITS):
-        return None
+def _odd_size(said: str, metres: float, fits: str) -> str | None:
+    """The answers' ``units_warning``: ``said`` (what a named unit makes the rest-pose leg,
+    ``metres`` long) where that is no person's (the metre band of
+    :data:`core.characters_maps.LEG_BANDS`) but within what a named unit may give (else
+    refused), with the units that ``fits``: a file in centimetres sent as inches is a body
+    2.54 times too big (an 80 cm leg read as 2.03 m), solved as asked (the editor's own
+    test opens one so)."""
     low, high, _ = LEG_BANDS[0]
-    _, leg = infer_units(skel, jmap)
-    metres = leg * UNITS[units]
     if low <= metres <= high:
         return None
-    fits = _leg_in(leg)
-    given = "" if stated else " (the default: no units were given)"
     return (
-        f"{where}: {quoted(units)}{given} makes the rest-pose leg (hip to ankle, {leg:.4g} "
-        f"file units) {metres:.4g} m long, not a person's {low:g}-{high:g} m"
+        f"{said}, not a person's {low:g}-{high:g} m"
         + (f": {fits} would make it one" if fits else "")
         + "; solved as asked (a character of that size: units as metres per unit, a number)"
     )
