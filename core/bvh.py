@@ -569,12 +569,12 @@ def _read_frames(
     if n_frames * n_channels * 2 > len(text) - at + 1:  # a value and a separator each
         return None
     read = frozenset(f for f in frames if 0 <= f < n_frames)
-    # a block cut short: the frames before the cut read line by line; one past it is read
-    # as before (line by line where the cut is inside the last line, else whole: refused)
+    # a block cut short: the frames before the cut are read line by line; one at or past
+    # it as before (line by line where the cut is inside the last line, else whole: refused)
     plain = one_frame_a_line(text, at, n_frames)
     cut = _cut_short(text, at, first_line, n_frames, n_channels, plain)
-    if not plain and (cut is None or any(f >= cut.frame for f in read)):  # blank lines,
-        return _read_frame_words(name, text, at, first_line, n_frames, columns, read)  # wrapped
+    if not plain and (cut is None or any(f >= cut.frame for f in read)):
+        return _read_frame_words(name, text, at, first_line, n_frames, columns, read)
     motion = np.full((n_frames, n_channels), np.nan)
     spans: dict[int, tuple[int, int]] = {}
     line_at, line_frame = at, 0  # the start of a frame line found, and its frame
@@ -620,7 +620,7 @@ def _cut_short(
     if _BLANK_MID_RE.search(text, at, end):
         return None
     n_lines = text.count("\n", at, end) + 1
-    values = count_words(text[text.rfind("\n", at, end) + 1 : end])
+    values = count_words(text[max(at, text.rfind("\n", at, end) + 1) : end])
     if n_lines > n_frames or values > n_channels or (n_lines == n_frames and values == n_channels):
         return None
     whole = n_lines - (values < n_channels)

@@ -70,3 +70,13 @@ def test_a_block_of_other_shapes_is_no_cut(bvh_files: dict[str, Path]) -> None:
     }.items():
         with pytest.raises(BVHError, match=r"truncated|expected"):
             parse_bvh(bad, case, frames=[1])
+
+
+def test_a_file_of_one_whole_line_cut_at_its_end_is_cut_short_too() -> None:
+    """A block of one line, whole, under `Frames: 5`: its frame 0 reads, the cut is after
+    it (its last line was looked for before the block's start: the whole file's words
+    counted as that line's, and the file refused)."""
+    head = "HIERARCHY\nROOT r\n{\nOFFSET 0 0 0\nCHANNELS 2 Xrotation Yrotation\n}\nMOTION\n"
+    text = f"{head}Frames: 5\nFrame Time: 0.1\n10.000000 20.000000\n"  # (long enough for 5)
+    read = parse_bvh(text, "one", frames=[0])
+    assert read.cut == Cut(1, 0, 10, 5) and read.row(0).tolist() == [10.0, 20.0]
