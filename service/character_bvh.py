@@ -110,7 +110,7 @@ def bvh_answer(bvh: BVH, ch: Character, req: BVHSolveRequest, edit: Edit) -> dic
         row, columns = bvh.row(req.frame), []
         points = canonical_points(ch.skel, ch.pose, ch.jmap)  # (the frame as it is)
     text = splice_frame(bvh, req.frame, row, columns)
-    if "\n" not in req.bvh:  # lines ended by CR alone, read as LF: given back as sent
+    if "\r" in req.bvh and "\n" not in req.bvh:  # CR alone, read as LF: given back so
         text = text.replace("\n", "\r")
     return {
         "bvh": text,
