@@ -47,6 +47,7 @@ export function restore(snap, frame = snap.frame) {
     doc.shown = snap.text;
     doc.frame = frame;
   }
+  forgetAnswerText();
 }
 
 // A snapshot's or step's state besides its text (a step's keys are not in a snapshot's order).
@@ -67,6 +68,7 @@ export function commitShown() {
 }
 
 export function pushHistory() {
+  forgetAnswerText(); // (a gesture given up: its answer's text is not the file's)
   const snap = snapshot();
   if (sameSnapshot(currentStep(), snap)) {
     updateButtons(); // nothing changed (e.g. an option toggled with no targets)
@@ -154,6 +156,24 @@ export function chooseSample(i) {
 // again (other units, a joint map) keeps it: the same file, its edits kept.
 export function forgetLastSolve() {
   solver.last = null;
+}
+
+// The last solve as kept for the panel and the test hook: a file's request without its text
+// (the file before the edit: the history holds how the edit changed it). Kept whole, a
+// 7.5 MB file was held once more on the page's heap for as long as the answer was the last.
+function lastRequest(body) {
+  if (body.bvh === undefined) return body;
+  const { bvh, ...rest } = body;
+  return { ...rest, bvh_chars: bvh.length };
+}
+
+// An answer's text is the file shown while its step is; once undo, redo, Reset or a read
+// shows another text, the last solve keeps no copy of it (a 7.5 MB file held once more).
+function forgetAnswerText() {
+  const response = solver.last && solver.last.response;
+  if (response && typeof response.bvh === 'string' && response.bvh !== doc.text && response.bvh !== doc.shown) {
+    response.bvh = null;
+  }
 }
 
 // A sample's question: what is lost, named (a file's: file.js closingQuestion; a sample's
@@ -339,8 +359,8 @@ export async function sendSolve() {
     solver.latencies.push(server);
     if (solver.latencies.length > 50) solver.latencies.shift();
     solver.last = {
-      request: body,
-      response: res.data,
+      request: lastRequest(body),
+      response: res.data, // (a file's: its bvh is the text shown now, not a copy; forgetAnswerText)
       serverTime: res.serverTime,
       serverMs: server,
       rttMs: res.rtt,
