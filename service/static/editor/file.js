@@ -201,6 +201,9 @@ function showOpened({ info, text, name, original, encoding, jointMap, settings, 
   motionCache.clear();
   lastRow = { text: null, frame: -1, row: null };
   Object.assign(doc, { active: true, name, original, text, shown: text, info, frame: 0, encoding, jointMap, settings });
+  // the yes to replacing what was shown is spent: it held that file's texts (two copies of
+  // a file no longer open, for as long as this one was)
+  if (doc.tried) doc.tried.yes = null;
   showMap(jointMap);
   const frame0 = fileFrame(text, 0);
   doc.toWorld = worldMapping(info, frame0);
