@@ -157,6 +157,39 @@ function typed(axis) {
   refresh();
 }
 
+// A field's own ↑ / ↓: the target stepped to the next mm up or down along its axis, as a
+// nudge is (a gesture: one undo step per press, a held arrow's repeats and all). The field's
+// native step made each repeat a change of its own: a held arrow filled the history with one
+// step per repeat (30 a second). A value not a number yet (being typed): the field's own.
+function fieldArrow(axis, ev) {
+  const input = $(`joint-${AXES[axis]}`);
+  if (ev.ctrlKey || ev.metaKey || ev.altKey || !Number.isFinite(input.valueAsNumber)) return;
+  ev.preventDefault(); // (no native step, no change event)
+  const joint = ui.selected;
+  if (!joint || ui.reading || (ui.drag && !ui.drag.keys)) return; // (a mouse drag: its own)
+  const from = targetOrJoint(joint);
+  if (!finite(from)) return;
+  if (!ui.drag) {
+    if (ev.repeat) return; // (a key still held after Escape: no new gesture)
+    ui.drag = { joint, keys: true, moved: true, before: snapshot(), hadTarget: state.targets.has(joint) };
+    state.pins.delete(joint); // (as a nudge: the joint follows its target)
+  }
+  held.add(ev.key);
+  if (ev.key === 'ArrowUp') input.stepUp();
+  else input.stepDown();
+  delete input.dataset.editing;
+  const value = input.valueAsNumber;
+  if (!Number.isFinite(value) || Math.abs(value) > 1e4) return; // (schemas.py MAX_COORDINATE)
+  input.setAttribute('aria-invalid', 'false');
+  $('joint-xyz-problem').hidden = true;
+  const next = [...from];
+  next[axis] = value;
+  state.targets.set(joint, next);
+  requestSolve(false);
+  refreshPanel();
+  drawPose();
+}
+
 // A joint's target as the last solve left it: `target reached`, `target 12.3 mm off`, or
 // `target` (not solved yet); '' without one.
 function targetText(joint) {
@@ -235,9 +268,15 @@ export function wireKeys() {
       if (ev.key === 'Escape') { // back to the value shown, nothing sent
         delete input.dataset.editing;
         refreshJoint();
+      } else if (ev.key === 'ArrowUp' || ev.key === 'ArrowDown') {
+        fieldArrow(i, ev);
       }
     });
-    input.addEventListener('blur', () => refreshJoint()); // (a refused value: back, unmarked)
+    input.addEventListener('keyup', onKeyUp); // (a held arrow released: its step ends)
+    input.addEventListener('blur', () => { // (a refused value: back, unmarked)
+      endBurst();
+      refreshJoint();
+    });
   });
   $('joint-pin').addEventListener('click', pinSelected);
   $('joint-unset').addEventListener('click', unsetSelected);

@@ -1,0 +1,190 @@
+"""The editor's polish (2026-12-06 review): a held arrow in a Joint field is one undo step,
+the selected joint's aria-live line is said once per gesture, and a target at a sample's
+head is seen and grabbed.
+
+The real server and a real Chromium (``tests/service/editor_page.py``), a sample pose.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import pytest
+
+from tests.service.editor_page import M, open_editor, settle
+
+# the fixtures `server` (one for the session) and `browser` (one per module)
+pytest_plugins = ("tests.service.editor_page",)
+
+VIEW = "#viewport canvas"
+
+
+def steps(page: Any) -> int:
+    """The undo history's steps up to the one shown."""
+    return int(page.evaluate(f"{M}.history().index"))
+
+
+def select(page: Any, joint: str) -> None:
+    page.select_option("#joint-pick", joint)
+    page.wait_for_function(f"() => {M}.selected() === '{joint}'")
+
+
+def wait_steps(page: Any, n: int) -> None:
+    """Wait for the solves, and for the history to hold ``n`` steps (no more)."""
+    settle(page)
+    page.wait_for_function(f"() => {M}.history().index >= {n}", polling=50)
+    assert steps(page) == n
+
+
+def hold(page: Any, key: str, repeats: int, answered: bool = False) -> None:
+    """``key`` held down for ``repeats`` auto-repeats after its press (each, when
+    ``answered``, after the answer to the one before), then released."""
+    page.keyboard.down(key)
+    for _ in range(repeats):
+        if answered:
+            n = page.evaluate(f"{M}.solveCount().answered")
+            page.wait_for_function(f"() => {M}.solveCount().answered > {n}", polling=20)
+        else:
+            page.wait_for_timeout(40)
+        page.keyboard.down(key)  # (again while down: a repeat)
+    page.keyboard.up(key)
+
+
+@pytest.mark.browser
+def test_editor_field_arrows_held_are_one_step(server: str, browser: Any) -> None:
+    """↑ held in the x field: one undo step, the target stepped a mm a repeat; a press: one
+    step; undone press by press. Typed values (Enter, Tab) are still one step each."""
+    page = open_editor(browser, server)
+    try:
+        select(page, "left_wrist")
+        n0 = steps(page)
+        page.focus("#joint-x")
+        x0 = float(page.input_value("#joint-x"))  # (the joint, to the mm: no target yet)
+        hold(page, "ArrowUp", 5)
+        wait_steps(page, n0 + 1)
+        page.wait_for_timeout(200)  # (no late step of a repeat)
+        assert steps(page) == n0 + 1  # (was 6: one a repeat)
+        held = page.evaluate(f"{M}.targets()")["left_wrist"]
+        assert held[0] == pytest.approx(x0 + 0.006, abs=1e-9)
+        assert page.input_value("#joint-x") == f"{x0 + 0.006:.3f}"
+        assert page.evaluate("document.activeElement.id") == "joint-x"
+
+        page.keyboard.press("ArrowDown")  # a press: a step of its own
+        wait_steps(page, n0 + 2)
+        after = page.evaluate(f"{M}.targets()")["left_wrist"]
+        assert after[0] == pytest.approx(x0 + 0.005, abs=1e-9)
+        assert after[1:] == held[1:]  # (the other two kept exactly)
+
+        page.click("#undo")
+        wait_steps(page, n0 + 1)
+        assert page.evaluate(f"{M}.targets()")["left_wrist"] == held
+        page.click("#undo")
+        wait_steps(page, n0)
+        assert "left_wrist" not in page.evaluate(f"{M}.targets()")
+
+        # typed entry as before: Enter, and the field left, one step each
+        page.fill("#joint-x", "0.25")
+        page.press("#joint-x", "Enter")
+        wait_steps(page, n0 + 1)
+        assert page.evaluate(f"{M}.targets()")["left_wrist"][0] == 0.25
+        page.fill("#joint-y", "1.2")
+        page.press("#joint-y", "Tab")
+        wait_steps(page, n0 + 2)
+        assert page.evaluate(f"{M}.targets()")["left_wrist"][:2] == [0.25, 1.2]
+        assert page.evaluate(f"{M}.error()") is None
+    finally:
+        page.context.close()
+
+
+@pytest.mark.browser
+def test_editor_joint_line_is_said_once_a_gesture(server: str, browser: Any) -> None:
+    """Soft reach, a target out of reach: a nudge key held while the answers come changes
+    the aria-live line once, when its step is committed, to the last answer's mm."""
+    page = open_editor(browser, server)
+    try:
+        page.uncheck("#exact")
+        for ankle in ("left_ankle", "right_ankle"):  # (the body stays: the wrist cannot reach)
+            select(page, ankle)
+            page.click("#joint-pin")
+        select(page, "left_wrist")
+        n0 = steps(page)
+        page.fill("#joint-y", "3")
+        page.press("#joint-y", "Enter")
+        wait_steps(page, n0 + 1)
+        line = page.locator("#joint-state")
+        assert "mm off" in line.inner_text()
+        page.evaluate(
+            """() => {
+              window.__said = [];
+              const line = document.getElementById('joint-state');
+              new MutationObserver(() => window.__said.push(line.textContent))
+                .observe(line, { childList: true, characterData: true, subtree: true });
+            }"""
+        )
+        page.focus(VIEW)
+        sent = page.evaluate(f"{M}.solveCount().answered")
+        hold(page, "ArrowRight", 6, answered=True)
+        wait_steps(page, n0 + 2)
+        assert page.evaluate(f"{M}.solveCount().answered") >= sent + 7  # (answers meanwhile)
+        error = page.evaluate(f"{M}.lastSolve().response.targets[0].error")
+        said = page.evaluate("window.__said")
+        assert said == [f"left_wrist, target {error * 1000:.1f} mm off"]  # (was one an answer)
+        # another joint selected: said at once
+        page.keyboard.press("]")
+        page.wait_for_function("() => window.__said.length === 2")
+        assert page.evaluate("window.__said")[1].startswith(page.evaluate(f"{M}.selected()"))
+    finally:
+        page.context.close()
+
+
+#: the colour of the canvas at a page point (the drawing buffer is kept: preserveDrawingBuffer)
+PIXEL = """(xy) => {
+  const c = document.querySelector('#viewport canvas');
+  const r = c.getBoundingClientRect();
+  const t = document.createElement('canvas');
+  t.width = c.width;
+  t.height = c.height;
+  const g = t.getContext('2d');
+  g.drawImage(c, 0, 0);
+  const x = Math.round((xy.x - r.left) * c.width / r.width);
+  const y = Math.round((xy.y - r.top) * c.height / r.height);
+  return [...g.getImageData(x, y, 1, 1).data];
+}"""
+
+
+@pytest.mark.browser
+def test_editor_head_target_is_seen_and_grabbed(server: str, browser: Any) -> None:
+    """A target at a sample's head (0.036 m, inside the head's 0.075 m sphere): drawn red
+    over the head, the pointer over it says `target: head`, and a drag moves it."""
+    page = open_editor(browser, server)
+    try:
+        select(page, "head")
+        n0 = steps(page)
+        head = page.evaluate(f"{M}.pose()")["head"]
+        page.fill("#joint-z", f"{head[2] + 0.01:.3f}")  # (a cm ahead: inside the head)
+        page.press("#joint-z", "Enter")
+        wait_steps(page, n0 + 1)
+        target = page.evaluate(f"{M}.targets()")["head"]
+        page.focus("#sample")  # (the field left; the selection ring is round it, not on it)
+        page.evaluate(
+            "() => new Promise((r) => requestAnimationFrame(() => requestAnimationFrame(r)))"
+        )
+        xy = page.evaluate(f"{M}.projectPoint({target})")
+        r, g, b, _ = page.evaluate(PIXEL, xy)
+        assert r > 1.6 * g and r > 1.6 * b, (r, g, b)  # red: the marker (was the grey head)
+
+        page.mouse.move(xy["x"], xy["y"])
+        page.wait_for_function("() => !document.getElementById('hud').hidden")
+        assert page.inner_text("#hud") == "target: head"
+        page.mouse.down()
+        for i in range(1, 5):
+            page.mouse.move(xy["x"] + 10 * i, xy["y"] - 10 * i)
+            page.wait_for_timeout(16)
+        page.mouse.up()
+        wait_steps(page, n0 + 2)
+        moved = page.evaluate(f"{M}.targets()")["head"]
+        on_screen = page.evaluate(f"{M}.projectPoint({moved})")
+        assert abs(on_screen["x"] - (xy["x"] + 40)) < 2  # the target, under the mouse
+        assert abs(on_screen["y"] - (xy["y"] - 40)) < 2
+    finally:
+        page.context.close()
