@@ -207,6 +207,20 @@ function stateText(joint) {
   return parts.join(', ');
 }
 
+// The state line (aria-live: read out when it changes) as the state is, but once per
+// gesture: while a drag or a nudge burst goes on, and until its last answer is committed,
+// the selected joint's line waits (in soft reach each answer changed its "N mm off", and a
+// held key had a screen reader announce 30 lines a second). Another joint selected is said
+// at once.
+function announce(joint, text) {
+  const line = $('joint-state');
+  if (line.textContent === text) return;
+  const gesture = Boolean(ui.drag) || solver.commitPending;
+  if (gesture && line.dataset.joint === (joint || '')) return;
+  line.textContent = text;
+  line.dataset.joint = joint || '';
+}
+
 // The picker, fields and buttons as the state is (panel.js refreshPanel calls it).
 export function refreshJoint() {
   const pick = $('joint-pick');
@@ -221,8 +235,7 @@ export function refreshJoint() {
   }
   pick.value = ui.selected || '';
   const joint = ui.selected;
-  const text = stateText(joint);
-  if ($('joint-state').textContent !== text) $('joint-state').textContent = text; // (announced once)
+  announce(joint, stateText(joint));
   const at = joint ? targetOrJoint(joint) : null;
   const editable = Boolean(joint) && !ui.reading && finite(at);
   $('joint-target').disabled = !editable;
