@@ -79,7 +79,11 @@ const materials = {
   right: new THREE.MeshStandardMaterial({ color: COLORS.right, roughness: 0.5 }),
   centre: new THREE.MeshStandardMaterial({ color: COLORS.centre, roughness: 0.5 }),
   pin: new THREE.MeshStandardMaterial({ color: COLORS.pin, roughness: 0.4, emissive: 0x3b0764 }),
-  target: new THREE.MeshStandardMaterial({ color: COLORS.target, roughness: 0.4, emissive: 0x450a0a, transparent: true, opacity: 0.85 }),
+  // (drawn over the body, as the selection ring is: a target at or near a joint, a sample's
+  // head's above all, was inside its handle's sphere, neither seen nor found to be grabbed)
+  target: new THREE.MeshStandardMaterial({
+    color: COLORS.target, roughness: 0.4, emissive: 0x450a0a, transparent: true, opacity: 0.85, depthTest: false, depthWrite: false,
+  }),
   hover: new THREE.MeshStandardMaterial({ color: COLORS.hover, roughness: 0.3, emissive: 0x555555 }),
 };
 const sphereGeometry = new THREE.SphereGeometry(1, 24, 16);
@@ -200,8 +204,11 @@ export function drawPose() {
   // Targets: a red marker each, and a thin line to its joint while it is not reached.
   for (const [joint, marker] of targetMarkers) {
     if (!state.targets.has(joint)) {
+      const line = targetLines.get(joint);
       scene.remove(marker);
-      scene.remove(targetLines.get(joint));
+      scene.remove(line);
+      line.geometry.dispose(); // (its own: a target removed kept its line's buffers)
+      line.material.dispose();
       targetMarkers.delete(joint);
       targetLines.delete(joint);
     }
@@ -211,6 +218,7 @@ export function drawPose() {
     if (!marker) {
       marker = new THREE.Mesh(sphereGeometry, materials.target);
       marker.scale.setScalar(TARGET_RADIUS);
+      marker.renderOrder = 5; // (after the body; the selection ring, 10, over it)
       scene.add(marker);
       targetMarkers.set(joint, marker);
       const line = new THREE.Line(
