@@ -17,14 +17,24 @@ import { offerTemplate, readMap, showMap } from './jointmap.js';
 // ------------------------------------------------------------------------------------
 // A file's frames: forward kinematics, the page's world
 // ------------------------------------------------------------------------------------
-const motionCache = new Map(); // text -> MOTION values (the last few texts)
+// text -> MOTION values, of the texts committed and shown only (and the one asked for): a
+// file read whole (its frames not one per line) kept its last six texts, each answer of a
+// drag one, and their values (a 7.5 MB file: 7.5 MB of text and 6 MB of values each, 50 MB
+// of the page's heap after six edits).
+const motionCache = new Map();
+
+function cached(text) {
+  for (const key of motionCache.keys()) {
+    if (key !== doc.text && key !== doc.shown && key !== text) motionCache.delete(key);
+  }
+  return motionCache.get(text);
+}
 
 function motionOf(text) {
-  let values = motionCache.get(text);
+  let values = cached(text);
   if (!values) {
     values = parseMotion(text);
     motionCache.set(text, values);
-    if (motionCache.size > 6) motionCache.delete(motionCache.keys().next().value);
   }
   return values;
 }
@@ -35,11 +45,12 @@ function motionOf(text) {
 let lastRow = { text: null, frame: -1, row: null };
 
 function frameRow(text, frame, n) {
-  const values = motionCache.get(text);
+  const values = cached(text);
   if (values) return values.subarray(frame * n, (frame + 1) * n);
   if (lastRow.text === text && lastRow.frame === frame) return lastRow.row;
-  const row = frameValues(text, frame, doc.info.frames, n) || motionOf(text).subarray(frame * n, (frame + 1) * n);
-  lastRow = { text, frame, row };
+  const row = frameValues(text, frame, doc.info.frames, n);
+  if (!row) return motionOf(text).subarray(frame * n, (frame + 1) * n); // (not kept: motionCache)
+  lastRow = { text, frame, row }; // (a row of the whole file's values kept them, and a text no longer shown)
   return row;
 }
 
@@ -595,6 +606,7 @@ function followFrame() {
 
 export function refreshFrame() {
   if (!doc.active) return;
+  cached(null); // (the texts no longer committed or shown: their values go)
   followFrame();
   $('bvh-frame').value = String(doc.frame);
   const box = $('bvh-frame-number');
