@@ -38,15 +38,14 @@ def wait_steps(page: Any, n: int) -> None:
 
 def hold(page: Any, key: str, repeats: int, answered: bool = False) -> None:
     """``key`` held down for ``repeats`` auto-repeats after its press (each, when
-    ``answered``, after the answer to the one before), then released."""
-    page.keyboard.down(key)
-    for _ in range(repeats):
+    ``answered``, once the nudge before it is answered), then released."""
+    for _ in range(repeats + 1):  # (again while down: a repeat)
+        n = page.evaluate(f"{M}.solveCount().answered")
+        page.keyboard.down(key)
         if answered:
-            n = page.evaluate(f"{M}.solveCount().answered")
             page.wait_for_function(f"() => {M}.solveCount().answered > {n}", polling=20)
         else:
             page.wait_for_timeout(40)
-        page.keyboard.down(key)  # (again while down: a repeat)
     page.keyboard.up(key)
 
 
