@@ -98,7 +98,8 @@ def test_editor_field_arrows_held_are_one_step(server: str, browser: Any) -> Non
 @pytest.mark.browser
 def test_editor_joint_line_is_said_once_a_gesture(server: str, browser: Any) -> None:
     """Soft reach, a target out of reach: a nudge key held while the answers come changes
-    the aria-live line once, when its step is committed, to the last answer's mm."""
+    the aria-live line once, when its step is committed, to the last answer's mm; the line
+    shown follows each answer."""
     page = open_editor(browser, server)
     try:
         page.uncheck("#exact")
@@ -110,28 +111,36 @@ def test_editor_joint_line_is_said_once_a_gesture(server: str, browser: Any) -> 
         page.fill("#joint-y", "3")
         page.press("#joint-y", "Enter")
         wait_steps(page, n0 + 1)
-        line = page.locator("#joint-state")
-        assert "mm off" in line.inner_text()
+        assert "mm off" in page.inner_text("#joint-state")
         page.evaluate(
             """() => {
               window.__said = [];
-              const line = document.getElementById('joint-state');
-              new MutationObserver(() => window.__said.push(line.textContent))
-                .observe(line, { childList: true, characterData: true, subtree: true });
+              window.__shown = [];
+              const lines = [['joint-said', window.__said], ['joint-state', window.__shown]];
+              for (const [id, out] of lines) {
+                const line = document.getElementById(id);
+                new MutationObserver(() => out.push(line.textContent))
+                  .observe(line, { childList: true, characterData: true, subtree: true });
+              }
             }"""
         )
+        assert page.get_attribute("#joint-said", "aria-live") == "polite"
+        assert page.get_attribute("#joint-state", "aria-live") is None
         page.focus(VIEW)
         sent = page.evaluate(f"{M}.solveCount().answered")
         hold(page, "ArrowRight", 6, answered=True)
         wait_steps(page, n0 + 2)
         assert page.evaluate(f"{M}.solveCount().answered") >= sent + 7  # (answers meanwhile)
         error = page.evaluate(f"{M}.lastSolve().response.targets[0].error")
-        said = page.evaluate("window.__said")
-        assert said == [f"left_wrist, target {error * 1000:.1f} mm off"]  # (was one an answer)
+        line = f"left_wrist, target {error * 1000:.1f} mm off"
+        assert page.evaluate("window.__said") == [line]  # (was one an answer)
+        shown = page.evaluate("window.__shown")  # the line shown follows the answers
+        assert len(shown) >= 3 and shown[-1] == line
         # another joint selected: said at once
         page.keyboard.press("]")
         page.wait_for_function("() => window.__said.length === 2")
         assert page.evaluate("window.__said")[1].startswith(page.evaluate(f"{M}.selected()"))
+        assert page.inner_text("#joint-said") == page.inner_text("#joint-state")
     finally:
         page.context.close()
 

@@ -207,18 +207,20 @@ function stateText(joint) {
   return parts.join(', ');
 }
 
-// The state line (aria-live: read out when it changes) as the state is, but once per
-// gesture: while a drag or a nudge burst goes on, and until its last answer is committed,
-// the selected joint's line waits (in soft reach each answer changed its "N mm off", and a
-// held key had a screen reader announce 30 lines a second). Another joint selected is said
-// at once.
+// The state line, shown as the state is, and said (#joint-said, aria-live: read out when
+// it changes) once per gesture: while a drag or a nudge burst goes on, and until its last
+// answer is committed, the selected joint's spoken line waits (in soft reach each answer
+// changed its "N mm off", and a held key had a screen reader announce 30 lines a second).
+// Another joint selected is said at once.
 function announce(joint, text) {
   const line = $('joint-state');
-  if (line.textContent === text) return;
+  if (line.textContent !== text) line.textContent = text;
+  const said = $('joint-said');
+  if (said.textContent === text) return;
   const gesture = Boolean(ui.drag) || solver.commitPending;
-  if (gesture && line.dataset.joint === (joint || '')) return;
-  line.textContent = text;
-  line.dataset.joint = joint || '';
+  if (gesture && said.dataset.joint === (joint || '')) return;
+  said.textContent = text;
+  said.dataset.joint = joint || '';
 }
 
 // The picker, fields and buttons as the state is (panel.js refreshPanel calls it).
