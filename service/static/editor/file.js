@@ -250,20 +250,18 @@ function showOpened({ info, text, name, original, encoding, jointMap, settings, 
   $('status').textContent = ui.connected ? 'connected' : 'server not ready';
   clearError();
   refresh();
-  warnIfCut(text, info);
+  warnOpened(info);
 }
 
-// A file whose last frame line holds fewer values than its channels (cut short: an
-// interrupted copy) opens, but that frame would be drawn as half a body without a word.
-function warnIfCut(text, info) {
-  const n = info.joints.reduce((acc, j) => acc + j.channels.length, 0);
-  const last = info.frames - 1;
-  if (last < 0) return;
-  const row = frameRow(text, last, n);
-  if (row.length === n) return;
-  showError(new ApiError(-1, 'Broken file', `${doc.name}: its last frame (${last}) holds ${row.length} `
-    + `of ${n} values: the file is cut short there. The frames before it open and edit; `
-    + 'Export writes that line as it was.'));
+// What the server found in the file as read (/v1/bvh/inspect): cut short (its frames from
+// the cut on lost: an interrupted copy), or units that make the rest pose's leg no person's
+// (a centimetre file read as inches: drawn as a giant). The file opens either way; without
+// a word, the cut frame was drawn as half a body and the giant as asked.
+function warnOpened(info) {
+  const said = [info.cut_short && info.cut_short.detail, info.units_warning].filter(Boolean);
+  if (!said.length) return;
+  const title = info.cut_short ? 'Broken file' : 'Units';
+  showError(new ApiError(-1, title, `${doc.name}: ${said.join('; ')}`));
 }
 
 // A file's bytes as text, and how to write them back byte for byte: UTF-8 (a byte order
