@@ -136,3 +136,17 @@ class RefBVH:
                 pos.append(pos[j.parent] + rot[j.parent] @ t)
                 rot.append(rot[j.parent] @ r)
         return {j.name: p for j, p in zip(self.joints, pos, strict=True)}
+
+
+def big_file(path: Path, size: int, skip: int = 0) -> str:
+    """The BVH file at ``path`` with its frames repeated (from its frame ``skip``) until it
+    holds ``size`` bytes (the editor's tests of big files)."""
+    head, motion = path.read_text().split("MOTION\n", 1)
+    lines = motion.split("\n")
+    rows = [row for row in lines[2:] if row.strip()]
+    out: list[str] = []
+    total = len(head)
+    while total < size:
+        out.append(rows[(len(out) + skip) % len(rows)])
+        total += len(out[-1]) + 1
+    return f"{head}MOTION\nFrames: {len(out)}\n{lines[1]}\n" + "\n".join(out) + "\n"

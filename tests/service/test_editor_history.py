@@ -22,6 +22,7 @@ from typing import Any
 
 import pytest
 
+from tests.character_files import big_file
 from tests.conftest import REPO_ROOT
 from tests.service.editor_page import M, drag_joint, give_file, open_editor
 
@@ -48,19 +49,6 @@ DIGEST = f"""async () => {{
   return [...sum].map((b) => b.toString(16).padStart(2, '0')).join('');
 }}"""
 STATS = ("latency", "rtt", "solve-method", "solvers", "bone-error")  # the "Last solve" panel
-
-
-def big_file(path: Path, size: int) -> str:
-    """The BVH file at ``path`` with its frames repeated until it holds ``size`` bytes."""
-    head, motion = path.read_text().split("MOTION\n", 1)
-    lines = motion.split("\n")
-    rows = [row for row in lines[2:] if row.strip()]
-    out: list[str] = []
-    total = len(head)
-    while total < size:
-        out.append(rows[len(out) % len(rows)])
-        total += len(out[-1]) + 1
-    return f"{head}MOTION\nFrames: {len(out)}\n{lines[1]}\n" + "\n".join(out) + "\n"
 
 
 def changed(a: str, b: str) -> int:

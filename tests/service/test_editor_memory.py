@@ -25,6 +25,7 @@ from typing import Any
 
 import pytest
 
+from tests.character_files import big_file
 from tests.service.editor_page import M, drag_joint, give_file, open_editor
 
 # the fixtures `server` (one for the session) and `browser` (one per module)
@@ -36,18 +37,23 @@ SIZE = 7_500_000
 PER_EDIT = 400_000
 
 
-def big_file(path: Path, size: int, skip: int = 0) -> str:
-    """The BVH file at ``path`` with its frames repeated (from its frame ``skip``) until it
-    holds ``size`` bytes."""
-    head, motion = path.read_text().split("MOTION\n", 1)
-    lines = motion.split("\n")
-    rows = [row for row in lines[2:] if row.strip()]
-    out: list[str] = []
-    total = len(head)
-    while total < size:
-        out.append(rows[(len(out) + skip) % len(rows)])
-        total += len(out[-1]) + 1
-    return f"{head}MOTION\nFrames: {len(out)}\n{lines[1]}\n" + "\n".join(out) + "\n"
+def say_figures(figures: list[tuple[str, float]], size: int, how: str) -> None:
+    """The heap figures printed, with MARIONETTE_HEAP_FIGURES=1 (docs/editor.md's table)."""
+    if not os.environ.get("MARIONETTE_HEAP_FIGURES"):
+        return
+    print(f"\nJSHeapUsedSize after GC, a {size / 1e6:.2f} MB file{how}:")
+    empty = figures[0][1]
+    for name, value in figures:
+        print(f"{name:>20}: {value / 1e6:6.2f} MB ({(value - empty) / size:+.2f} x the file)")
+
+
+def opened(page: Any, text: str, name: str) -> tuple[Any, list[tuple[str, float]]]:
+    """:func:`heap_of` ``page``, and its figures before and after ``text`` is opened."""
+    heap = heap_of(page)
+    empty = heap()
+    give_file(page, text, name)
+    page.wait_for_function(f"() => {M}.bvh() && {M}.bvh().name === '{name}'")
+    return heap, [("the sample", empty), ("file opened", heap())]
 
 
 def heap_of(page: Any) -> Any:
@@ -84,11 +90,8 @@ def test_editor_heap_with_a_big_file(server: str, browser: Any, bvh_files: dict[
     text = big_file(bvh_files["reactidle-6ch"], SIZE)
     page = open_editor(browser, server)
     try:
-        heap = heap_of(page)
-        empty = heap()
-        give_file(page, text, "big.bvh")
-        page.wait_for_function(f"() => {M}.bvh() && {M}.bvh().name === 'big.bvh'")
-        figures = [("the sample", empty), ("file opened", heap())]
+        heap, figures = opened(page, text, "big.bvh")
+        empty = figures[0][1]
         edits = [
             (0, "left_wrist"),
             (0, "right_ankle"),
@@ -124,11 +127,7 @@ def test_editor_heap_with_a_big_file(server: str, browser: Any, bvh_files: dict[
         figures.append(("other file, edited", heap()))
         # (was twice: the yes to dropping the first file's edits held its text)
         assert figures[-1][1] - empty < 1.5 * len(text), figures
-        if os.environ.get("MARIONETTE_HEAP_FIGURES"):
-            print(f"\nJSHeapUsedSize after GC, a {len(text) / 1e6:.2f} MB file:")
-            for name, value in figures:
-                grown = (value - empty) / len(text)
-                print(f"{name:>20}: {value / 1e6:6.2f} MB ({grown:+.2f} x the file)")
+        say_figures(figures, len(text), "")
     finally:
         page.context.close()
 
@@ -156,11 +155,8 @@ def test_editor_heap_with_a_big_file_read_whole(
     text = split_frames(big_file(bvh_files["reactidle-6ch"], SIZE))
     page = open_editor(browser, server)
     try:
-        heap = heap_of(page)
-        empty = heap()
-        give_file(page, text, "split.bvh")
-        page.wait_for_function(f"() => {M}.bvh() && {M}.bvh().name === 'split.bvh'")
-        figures = [("the sample", empty), ("file opened", heap())]
+        heap, figures = opened(page, text, "split.bvh")
+        empty = figures[0][1]
         for k, (frame, joint) in enumerate(
             [(0, "left_wrist"), (0, "right_wrist"), (100, "left_ankle"), (200, "right_wrist")]
         ):
@@ -169,10 +165,6 @@ def test_editor_heap_with_a_big_file_read_whole(
         assert page.evaluate(f"{M}.bvhText()").count("\n") == text.count("\n")  # (still split)
         assert (figures[-1][1] - figures[3][1]) / 2 < PER_EDIT, figures
         assert figures[-1][1] - empty < 1.5 * len(text), figures
-        if os.environ.get("MARIONETTE_HEAP_FIGURES"):
-            print(f"\nJSHeapUsedSize after GC, a {len(text) / 1e6:.2f} MB file read whole:")
-            for name, value in figures:
-                grown = (value - empty) / len(text)
-                print(f"{name:>20}: {value / 1e6:6.2f} MB ({grown:+.2f} x the file)")
+        say_figures(figures, len(text), " read whole")
     finally:
         page.context.close()
