@@ -7,7 +7,10 @@ skipped, saying so, only when none exists.
 
 The test modules name this module in ``pytest_plugins``, so its fixtures are found: ``server``
 is session-scoped (one server, a subprocess, for every editor test module), ``browser``
-module-scoped (each module's own Chromium, closed with it). It holds no asserts
+module-scoped (each module's own Chromium, closed with it: Playwright's sync API keeps an
+asyncio loop running in the main thread while it is open, so a session's Chromium made every
+later ``asyncio.run``/``anyio.run`` test fail with "cannot be called from a running event
+loop"). It holds no asserts
 (PYTEST_DONT_REWRITE: the tests import it before it becomes their plugin, and pytest would
 warn that it cannot rewrite it).
 """
