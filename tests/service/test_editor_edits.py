@@ -257,10 +257,8 @@ def test_editor_never_drops_an_edit_when_the_file_changes(server: str, browser: 
         # inches chosen for this file do not carry over to the next one
         page.select_option("#bvh-units", "in")
         page.wait_for_function(f"() => {M}.bvh().units === 'in'")
-        # (and said: centimetres read as inches make a leg no person has, a giant)
-        error = page.evaluate(f"{M}.error()")
-        assert error is not None and error["title"] == "Units", error
-        assert error["detail"].startswith("a.bvh: ") and "leg" in error["detail"], error
+        error = page.evaluate(f"{M}.error()")  # (and said: cm read as inches is a giant's leg)
+        assert error and error["title"] == "Units" and "a.bvh: " in error["detail"], error
         page.once("dialog", lambda d: d.accept())
         give_file(page, text, "b.bvh")
         page.wait_for_function(f"() => {M}.bvh().name === 'b.bvh'")
@@ -275,7 +273,6 @@ def test_editor_never_drops_an_edit_when_the_file_changes(server: str, browser: 
         error = page.evaluate(f"{M}.error()")
         assert error is not None and error["title"] == "Broken file", error
         assert error["detail"].startswith("cut.bvh: the file is cut short: "), error
-        assert "inside frame 2 (" in error["detail"], error  # (the server's cut_short)
         assert not errors, errors
     finally:
         page.context.close()
