@@ -3,6 +3,7 @@
 
 import { $, doc, history, solver, state, ui } from './state.js';
 import { api, clearError, showError } from './api.js';
+import { excerptOf } from './excerpt.js';
 import { endDrag } from './interaction.js';
 import { currentStep, pushStep, stepBack, stepForward } from './history.js';
 import { refresh, updateButtons } from './panel.js';
@@ -161,10 +162,26 @@ export function forgetLastSolve() {
 // The last solve as kept for the panel and the test hook: a file's request without its text
 // (the file before the edit: the history holds how the edit changed it). Kept whole, a
 // 7.5 MB file was held once more on the page's heap for as long as the answer was the last.
-function lastRequest(body) {
+function lastRequest(body, sent) {
   if (body.bvh === undefined) return body;
   const { bvh, ...rest } = body;
-  return { ...rest, bvh_chars: bvh.length };
+  // (the real frame; with an excerpt, how many characters went: editor/excerpt.js)
+  return { ...rest, bvh_chars: bvh.length, ...(sent ? { excerpt_chars: sent } : {}) };
+}
+
+// A solve's request and answer: a file's frame as an excerpt where it can be
+// (editor/excerpt.js; the answer spliced back: the whole file's, byte for byte), else the
+// whole file. An answer that is not the excerpt with its frame line rewritten is asked
+// again of the whole file (never so far: a guard, not a path).
+async function post(body, signal) {
+  if (body.bvh === undefined) return api('POST', 'v1/solve', body, { signal });
+  const excerpt = excerptOf(body, doc.info);
+  if (excerpt) {
+    const res = await api('POST', 'v1/bvh/solve', excerpt.body, { signal });
+    const data = excerpt.splice(res.data);
+    if (data) return { ...res, data, sentChars: excerpt.body.bvh.length };
+  }
+  return api('POST', 'v1/bvh/solve', body, { signal });
 }
 
 // An answer's text is the file shown while its step is; once undo, redo, Reset or a read
@@ -345,7 +362,7 @@ export async function sendSolve() {
   const giveUp = new AbortController(); // (cancelSolves)
   solver.giveUp = giveUp;
   try {
-    const res = await api('POST', body.bvh === undefined ? 'v1/solve' : 'v1/bvh/solve', body, { signal: giveUp.signal });
+    const res = await post(body, giveUp.signal);
     if (epoch !== solver.epoch) return; // undone / reset / scrubbed meanwhile
     solver.answered += 1;
     if (body.bvh === undefined) {
@@ -359,7 +376,7 @@ export async function sendSolve() {
     solver.latencies.push(server);
     if (solver.latencies.length > 50) solver.latencies.shift();
     solver.last = {
-      request: lastRequest(body),
+      request: lastRequest(body, res.sentChars),
       response: res.data, // (a file's: its bvh is the text shown now, not a copy; forgetAnswerText)
       serverTime: res.serverTime,
       serverMs: server,

@@ -1,0 +1,109 @@
+// A file's solve sent as an excerpt: the text up to and including its "Frame Time:" line
+// with "Frames:" set to 1, then the one line of the frame edited, as frame 0 (the body's
+// other fields, units, up, root_position and joint_map among them, as for the whole file:
+// the menus' settings and the inspect answer's units and up, explicit, so the server infers
+// nothing anew). The answer's frame line is spliced back into the whole text in place of
+// the frame's line: the same text, byte for byte, as the whole file's answer
+// (tests/service/test_editor_excerpt.py), from ~10-40 kB sent and answered instead of the
+// whole file (7.5 MB each way per solve). Where the excerpt could differ, the whole file
+// goes, as before: see ``layoutOf`` for each case and why.
+//
+// Conventions are the server's reader's (core/bvh.py parse_bvh, _read_frames): the frame
+// lines start after the MOTION line, "Frames:" and "Frame Time:"; a block of one frame a
+// line is read line by line, each frame's line alone.
+
+const MOTION_RE = /^[ \t]*MOTION[ \t]*\r?$/m; // core/bvh.py _MOTION_RE
+const FRAMES_RE = /^([ \t]*Frames:[ \t]*)(\S+)([ \t]*\r?)$/; // core/bvh.py _FRAMES_RE
+// A BVH number both readers read alike (Python's float, numpy's): plain decimals only.
+const NUMBER_RE = /^[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?$/;
+const MAX_VALUE = 1.0e7; // service/characters.py MAX_COORDINATE: past it, a 422
+const WORD_RE = /\S+/g;
+
+// The last text's layout (each answer is a new text: it is worked out once per text).
+let known = { text: null, channels: 0, layout: null };
+
+// Where the frame lines of ``text`` start (``starts[f]``, and the end of each line), or
+// null where an excerpt could be read otherwise than the whole file is.
+function layoutOf(text, frames, channels) {
+  // CR not before LF (classic Mac OS line ends, or mixed): the server reads a CR-only file
+  // as LF and gives the answer back with CR; and JS's /m "$" matches before a lone CR
+  // (or U+2028/9) where Python's does not: the two could find different MOTION lines.
+  if (/\r(?!\n)|[\u2028\u2029]/.test(text)) return null;
+  const m = MOTION_RE.exec(text);
+  if (!m) return null;
+  const ends = [text.indexOf('\n', m.index + m[0].length)];
+  for (let k = 0; k < 2; k += 1) ends.push(ends[k] < 0 ? -1 : text.indexOf('\n', ends[k] + 1));
+  if (ends[2] < 0) return null; // (no frame line: nothing to excerpt)
+  const framesLine = text.slice(ends[0] + 1, ends[1]);
+  if (!FRAMES_RE.test(framesLine)) return null;
+  const at = ends[2] + 1;
+  // Other than printable ASCII, tab, CR, LF in the frames: Python's and JS's white space
+  // differ there (U+FEFF is space to JS's \s, not to str.isspace; \x1c-\x1f the other way):
+  // where a frame's line ends, or what is blank, could be read differently.
+  if (/[^\t\n\r\x20-\x7e]/.test(text.slice(at))) return null;
+  // Fewer characters than the values need: the server reads the whole block (and refuses
+  // it where a line is short), whatever the frame (core/bvh.py _read_frames).
+  if (frames * channels * 2 > text.length - at + 1) return null;
+  // Frames not one a line (wrapped over lines, blank lines among them or after them): the
+  // server finds a frame's values by counting words over the whole block
+  // (core/bvh.py one_frame_a_line, _read_frame_words); one line alone is no such block.
+  if (/^[^\S\n]*(?:\n|$)/.test(text.slice(at, text.indexOf('\n', at) + 1 || text.length))) return null;
+  if (/\n[^\S\n]*\n/.test(text.slice(at))) return null;
+  const starts = [at];
+  for (let i = text.indexOf('\n', at); i >= 0; i = text.indexOf('\n', i + 1)) starts.push(i + 1);
+  const last = text.slice(starts.at(-1));
+  const lines = starts.length - 1 + (last !== '' && /\S/.test(last) ? 1 : 0);
+  if (lines !== frames) return null;
+  // Cut short (its last line holds fewer values than a frame's): every answer of the whole
+  // file says so (``cut_short``), and a frame at or after the cut is not one a line.
+  const lastLine = text.slice(starts[frames - 1], lineEnd(text, starts[frames - 1]));
+  if ((lastLine.match(WORD_RE) || []).length < channels) return null;
+  return { framesLine: [ends[0] + 1, ends[1]], at, starts };
+}
+
+const lineEnd = (text, start) => {
+  const end = text.indexOf('\n', start);
+  return end < 0 ? text.length : end;
+};
+
+function layout(text, frames, channels) {
+  if (known.text !== text || known.channels !== channels) {
+    known = { text, channels, layout: layoutOf(text, frames, channels) };
+  }
+  return known.layout;
+}
+
+// The excerpt of ``body`` (a /v1/bvh/solve request of the whole file), or null where the
+// whole file must go. ``info``: the inspect answer (frames, joints' channels, cut_short).
+export function excerptOf(body, info) {
+  if (!info || info.cut_short) return null; // (cut short: its answers say so; layoutOf too)
+  const channels = info.joints.reduce((n, j) => n + j.channels.length, 0);
+  const text = body.bvh;
+  const frame = body.frame;
+  if (!Number.isInteger(frame) || frame < 0 || frame >= info.frames || channels === 0) return null;
+  const l = layout(text, info.frames, channels);
+  if (!l) return null;
+  const start = l.starts[frame];
+  const end = lineEnd(text, start);
+  const line = text.slice(start, end);
+  // A frame whose values the server would refuse: its 422 names the line and frame of the
+  // whole file (an excerpt's would say frame 0 on another line); so would a wrong count.
+  const words = line.match(WORD_RE) || [];
+  if (words.length !== channels) return null;
+  if (!words.every((w) => NUMBER_RE.test(w) && Math.abs(Number(w)) <= MAX_VALUE)) return null;
+  const [fs, fe] = l.framesLine;
+  const framesLine = text.slice(fs, fe).replace(FRAMES_RE, (_, a, n, b) => `${a}1${b}`);
+  const head = text.slice(0, fs) + framesLine + text.slice(fe, l.at);
+  return {
+    body: { ...body, bvh: `${head}${line}\n`, frame: 0 },
+    // The whole file's answer from the excerpt's: its frame line in place of the frame's,
+    // the real frame; null where the answer is not the excerpt with that line rewritten.
+    splice(data) {
+      const got = data && data.bvh;
+      if (typeof got !== 'string' || !got.startsWith(head) || !got.endsWith('\n')) return null;
+      const edited = got.slice(head.length, -1);
+      if (edited.includes('\n')) return null;
+      return { ...data, bvh: text.slice(0, start) + edited + text.slice(end), frame };
+    },
+  };
+}
