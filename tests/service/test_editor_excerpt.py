@@ -9,6 +9,7 @@ text the whole file's answer would. Shared parts: ``tests/service/editor_page.py
 from __future__ import annotations
 
 import json
+import urllib.request
 from pathlib import Path
 from typing import Any
 
@@ -170,6 +171,8 @@ def test_editor_sends_excerpts_of_a_big_file(
     text = big_file(bvh_files["bandai"], 7_500_000)
     page = open_editor(browser, server)
     sizes: list[int] = []
+    answers: list[int] = []  # (bytes of each solve's answer, as sent: Content-Length)
+    whole_sizes: list[tuple[int, int]] = []  # (the whole file's request and answer, bytes)
     bodies: list[dict[str, Any]] = []
 
     def seen(r: Any) -> None:
@@ -178,6 +181,14 @@ def test_editor_sends_excerpts_of_a_big_file(
             bodies.append(json.loads(r.post_data or "{}"))
 
     page.on("request", seen)
+    page.on(
+        "response",
+        lambda r: (
+            answers.append(int(r.headers.get("content-length", "0")))
+            if r.url.endswith("/v1/bvh/solve")
+            else None
+        ),
+    )
     try:
         give_file(page, text, "big.bvh")
         page.wait_for_function(f"() => {M}.bvh() && {M}.bvh().name === 'big.bvh'")
@@ -192,7 +203,14 @@ def test_editor_sends_excerpts_of_a_big_file(
             assert len(bodies) > n
             last = bodies[-1]
             assert last["frame"] == 0 and last["bvh"].count("\n") < 400
-            whole = post_json(server + "/v1/bvh/solve", {**last, "bvh": before, "frame": frame})
+            asked = json.dumps({**last, "bvh": before, "frame": frame}).encode()
+            req = urllib.request.Request(
+                server + "/v1/bvh/solve", data=asked, headers={"Content-Type": "application/json"}
+            )
+            with urllib.request.urlopen(req, timeout=60) as r:
+                raw = r.read()
+            whole = json.loads(raw)
+            whole_sizes.append((len(asked), len(raw)))
             after = page.evaluate(f"{M}.bvhText()")
             assert after == whole["bvh"]  # byte for byte
             assert after != before
@@ -203,7 +221,11 @@ def test_editor_sends_excerpts_of_a_big_file(
             assert solve["request"]["excerpt_chars"] == len(last["bvh"])
             assert solve["response"]["changed_joints"] == whole["changed_joints"]
         assert max(sizes) < 50_000, sizes
-        print(f"\nbytes per solve, a {len(text) / 1e6:.2f} MB file: {sorted(sizes)}")
+        assert answers and max(answers) < 50_000, answers
+        print(f"\nbytes per solve, a {len(text) / 1e6:.2f} MB file, {len(sizes)} solves:")
+        print(f"  excerpt: up {min(sizes)}-{max(sizes)}, down {min(answers)}-{max(answers)}")
+        ups, downs = zip(*whole_sizes, strict=True)
+        print(f"  whole file: up {min(ups)}-{max(ups)}, down {min(downs)}-{max(downs)}")
     finally:
         page.context.close()
 
