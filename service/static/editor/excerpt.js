@@ -19,7 +19,8 @@ const NUMBER_RE = /^[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?$/;
 const MAX_VALUE = 1.0e7; // service/characters.py MAX_COORDINATE: past it, a 422
 const WORD_RE = /\S+/g;
 
-// The last text's layout (each answer is a new text: it is worked out once per text).
+// The committed text's layout (worked out once per text, ~16 ms for 7.5 MB: a gesture's
+// solves all start from the same text).
 let known = { text: null, channels: 0, layout: null };
 
 // Where the frame lines of ``text`` start (``starts[f]``, and the end of each line), or
@@ -65,6 +66,12 @@ const lineEnd = (text, start) => {
   const end = text.indexOf('\n', start);
   return end < 0 ? text.length : end;
 };
+
+// The layout kept only while its text is the committed one (``text``; null: no file): a
+// text no longer shown is let go (a 7.5 MB file's old text was held until the next solve).
+export function forgetLayout(text) {
+  if (known.text !== text) known = { text: null, channels: 0, layout: null };
+}
 
 function layout(text, frames, channels) {
   if (known.text !== text || known.channels !== channels) {

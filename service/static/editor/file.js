@@ -13,6 +13,7 @@ import { buildCharacterBones, buildSkeleton, camera, centreFloor, controls, UP }
 import { endDrag } from './interaction.js';
 import { refresh, refreshPanel } from './panel.js';
 import { offerTemplate, readMap, showMap } from './jointmap.js';
+import { forgetLayout } from './excerpt.js';
 
 // ------------------------------------------------------------------------------------
 // A file's frames: forward kinematics, the page's world
@@ -603,6 +604,7 @@ function followFrame() {
 }
 
 export function refreshFrame() {
+  forgetLayout(doc.active ? doc.text : null); // (editor/excerpt.js: of the committed text only)
   if (!doc.active) return;
   cached(null); // (the texts no longer committed or shown: their values go)
   followFrame();
