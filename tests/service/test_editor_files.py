@@ -147,13 +147,19 @@ def test_editor_opens_poses_scrubs_and_exports_a_real_bvh_file(
         assert solves, "dragging sent no /v1/bvh/solve"
         assert len(solves) <= 13  # throttled, latest wins
         first = solves[0]
-        assert first["bvh"] == original  # every solve starts from the committed file
-        assert first["frame"] == edited_frame
+        # every solve starts from the committed file: the header and the frame's line of it,
+        # as frame 0 (editor/excerpt.js: the answer's line is spliced back)
+        lines = original.split("\n")
+        at = lines.index("MOTION") + 3  # the first frame's line
+        head = [*lines[: at - 2], "Frames: 1", lines[at - 1]]
+        assert first["bvh"] == "\n".join([*head, lines[at + edited_frame]]) + "\n"
+        assert first["frame"] == 0
         assert first["units"] == units
         assert [t["joint"] for t in first["targets"]] == ["left_wrist"]
         assert first["options"]["reach"] == "exact"
         last = page.evaluate(f"{m}.lastSolve()")
         assert last["response"]["frame"] == edited_frame
+        assert last["request"]["frame"] == edited_frame
         assert last["response"]["targets"][0]["reached"], last["response"]["targets"]
         target = page.evaluate(f"{m}.targets()")["left_wrist"]
         on_screen = page.evaluate(f"{m}.projectPoint({json.dumps(target)})")
