@@ -69,12 +69,18 @@ def test_excerpt_answer_is_the_whole_files(
     and target sets: the whole file and the page's excerpt POSTed to /v1/bvh/solve; the
     excerpt's answer spliced (by the page, and by this test apart) is the whole file's
     ``bvh`` byte for byte, and every other field of the answer is the same but ``frame``
-    (0, the page puts back the real one). Also as CRLF and with a byte order mark."""
+    (0, the page puts back the real one). Also as CRLF, with a byte order mark, and without
+    a final newline (the last frame's line ends the file)."""
     text = bvh_files[name].read_text()
     units = FILES[name][2]
     page = open_editor(browser, server)
     try:
-        variants = {"as is": text, "CRLF": text.replace("\n", "\r\n"), "BOM": "\ufeff" + text}
+        variants = {
+            "as is": text,
+            "CRLF": text.replace("\n", "\r\n"),
+            "BOM": "\ufeff" + text,
+            "no final newline": text.rstrip("\n"),
+        }
         edits = 0
         for how, bvh in variants.items():
             ask = {"bvh": bvh, "frame": 0, **({"units": units} if units is not None else {})}
