@@ -1,8 +1,9 @@
 // A file's solve sent as an excerpt: the text up to and including its "Frame Time:" line
 // with "Frames:" set to 1, then the one line of the frame edited, as frame 0 (the body's
 // other fields, units, up, root_position and joint_map among them, as for the whole file:
-// the menus' settings and the inspect answer's units and up, explicit, so the server infers
-// nothing anew). The answer's frame line is spliced back into the whole text in place of
+// the menus' settings; where they say auto, the server infers units from the hierarchy and
+// the up axis from its rest pose, else from the frame edited: the excerpt's one frame, so
+// the same). The answer's frame line is spliced back into the whole text in place of
 // the frame's line: the same text, byte for byte, as the whole file's answer
 // (tests/service/test_editor_excerpt.py), from ~10-40 kB sent and answered instead of the
 // whole file (7.5 MB each way per solve). Where the excerpt could differ, the whole file
