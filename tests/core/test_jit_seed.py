@@ -55,9 +55,13 @@ def _env(src: Path, cache: Path | str, seed: Path | None = None) -> dict[str, st
 
 
 def _run(src: Path, cache: Path | str, seed: Path | None = None) -> tuple[str, list[str]]:
-    """``import pkg.kern``: its line (answer, cache hits, compiles) and its stderr lines."""
+    """``import pkg.kern``: its line (answer, cache hits, compiles) and its stderr lines.
+    No bytecode written (-B): ``consts.py`` rewritten as ``K = 2`` in the second it was
+    first imported, at its size, passed for the cached ``K = 1``'s source (CPython checks
+    a .pyc by the source's mtime in whole seconds and its size), and the kernel answered 1
+    (CI, once ``make test`` wrote bytecode)."""
     out = subprocess.run(
-        [sys.executable, "-P", "-c", "import pkg.kern"],
+        [sys.executable, "-P", "-B", "-c", "import pkg.kern"],
         env=_env(src, cache, seed), capture_output=True, text=True, timeout=60,
     )  # fmt: skip
     assert out.returncode == 0, out.stderr[-2000:]
