@@ -30,8 +30,9 @@ def _run(root: Path, cache: Path) -> str:
     env = {k: v for k, v in os.environ.items() if not k.startswith(("NUMBA_", "MARIONETTE_"))}
     env |= {"PYTHONPATH": str(root), "NUMBA_CACHE_DIR": str(cache)}
     out = subprocess.run(
-        [sys.executable, "-c", "import pkg.kern"], env=env, capture_output=True, text=True
-    )
+        [sys.executable, "-B", "-c", "import pkg.kern"], env=env, capture_output=True, text=True
+    )  # (-B: no .pyc of consts.py, which CPython would check by mtime in whole seconds and size
+    # only: K = 2 written within the second of K = 1 read the stale one; test_jit_seed.py)
     assert out.returncode == 0, out.stderr[-2000:]
     return out.stdout.strip()
 
