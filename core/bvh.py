@@ -124,6 +124,9 @@ class BVH:
     spans: dict[int, tuple[int, int]] = field(default_factory=dict, repr=False, compare=False)
     #: where the block ends before its frames are whole, where it was read for some frames
     cut: Cut | None = field(default=None, repr=False, compare=False)
+    #: the file's line end where it is CR alone (classic Mac OS): ``text`` holds LF there
+    #: (as read), and a writer gives the file back with its own
+    cr_only: bool = field(default=False, repr=False, compare=False)
     _index: dict[str, int] = field(default_factory=dict, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -465,8 +468,9 @@ def parse_bvh(text: str, name: str = "<string>", frames: Iterable[int] | None = 
     frames' values (those in range), each frame read checked as a whole block is; all are
     read where the block holds fewer or more values than its frames need (the whole read
     says where), or is too short for them."""
-    if "\r" in text and "\n" not in text:  # lines ended by CR alone (classic Mac OS):
-        text = text.replace("\r", "\n")  # read as LF; an edited file comes back so
+    cr_only = "\r" in text and "\n" not in text  # lines ended by CR alone (classic Mac OS):
+    if cr_only:  # read as LF; a writer gives an edited file back with CR (``BVH.cr_only``)
+        text = text.replace("\r", "\n")
     match = _MOTION_RE.search(text)
     if match is None:
         if "HIERARCHY" not in text:
@@ -534,6 +538,7 @@ def parse_bvh(text: str, name: str = "<string>", frames: Iterable[int] | None = 
         read=read,
         spans=spans,
         cut=cut,
+        cr_only=cr_only,
     )
 
 

@@ -78,7 +78,8 @@ def splice_frame(bvh: BVH, frame: int, row: F64, columns: list[int]) -> str:
     """The file's text with ``columns`` of frame ``frame`` set from ``row`` (whole motion
     row); every other byte is kept: the frame's values are found where they stand
     (:meth:`core.bvh.BVH.frame_span`: its line, or its values across lines where the file
-    wraps its frames), and only those of ``columns`` are written anew. A BVH not read
+    wraps its frames), and only those of ``columns`` are written anew; a file of CR line
+    ends comes back with them (``BVH.cr_only``). A BVH not read
     from text (none to keep) is written whole by :func:`format_bvh`."""
     if not 0 <= frame < bvh.num_frames:
         raise IndexError(f"frame {frame} out of range: the file has {bvh.num_frames} frames")
@@ -103,7 +104,8 @@ def splice_frame(bvh: BVH, frame: int, row: F64, columns: list[int]) -> str:
         parts.append(f"{row[k]:.{DECIMALS}f}" if k in wanted else m.group())
         last = m.end()
     parts.append(line[last:])
-    return bvh.text[:start] + "".join(parts) + bvh.text[end:]
+    out = bvh.text[:start] + "".join(parts) + bvh.text[end:]
+    return out.replace("\n", "\r") if bvh.cr_only else out  # (its own line ends)
 
 
 def skeleton_of(bvh: BVH) -> Skeleton:

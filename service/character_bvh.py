@@ -109,11 +109,8 @@ def bvh_answer(bvh: BVH, ch: Character, req: BVHSolveRequest, edit: Edit) -> dic
     if not moves_a_target(ch, edit, points):  # (noise: the file's curves churn)
         row, columns = bvh.row(req.frame), []
         points = canonical_points(ch.skel, ch.pose, ch.jmap)  # (the frame as it is)
-    text = splice_frame(bvh, req.frame, row, columns)
-    if "\r" in req.bvh and "\n" not in req.bvh:  # CR alone, read as LF: given back so
-        text = text.replace("\n", "\r")
     return {
-        "bvh": text,
+        "bvh": splice_frame(bvh, req.frame, row, columns),
         "frame": req.frame,
         "changed_joints": [ch.skel.names[j] for j in sorted(_written(bvh, columns))],
         **edit_report(ch, edit, points),
