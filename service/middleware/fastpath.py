@@ -206,14 +206,12 @@ class FastPath:
         request = Request(scope, receive)
         budget = Budget(request, state.settings.deadline_seconds)
         try:
+
+            def read() -> columnar.Columns | None:
+                return read_columns(body, limit, scope)
+
             small = len(body) < INLINE_BYTES
-            cols = (
-                read_columns(body, limit, scope)
-                if small
-                else await budget.in_thread(
-                    in_worker(lambda: read_columns(body, limit, scope)), "reading the body"
-                )
-            )
+            cols = read() if small else await budget.in_thread(in_worker(read), "reading the body")
             if cols is None:
                 return False
             engine = state.repository.ready_engine()
