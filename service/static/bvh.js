@@ -12,19 +12,28 @@ const POSITION = { xposition: 0, yposition: 1, zposition: 2 };
 const ROTATION = { xrotation: 'X', yrotation: 'Y', zrotation: 'Z' };
 const DEG = Math.PI / 180;
 
-// Where the frame lines start: after the MOTION line, "Frames:" and "Frame Time:".
-function motionStart(text) {
+// The MOTION header's lines: where the "Frames:" line stands ([start, end), its line end
+// left out) and where the frame lines start (``at``: after the MOTION line, "Frames:" and
+// "Frame Time:").
+export function motionHeader(text) {
   const m = MOTION_RE.exec(text);
   if (!m) throw new Error('not a BVH file: no MOTION line');
+  const ends = [];
   let i = m.index + m[0].length;
   for (let k = 0; k < 3; k += 1) {
     // the rest of the MOTION line, then "Frames:" and "Frame Time:"
     i = text.indexOf('\n', i);
     if (i < 0) throw new Error('truncated MOTION header');
+    ends.push(i);
     i += 1;
   }
-  return i;
+  return { frames: [ends[0] + 1, ends[1]], at: i };
 }
+
+const motionStart = (text) => motionHeader(text).at;
+
+// The MOTION values a frame holds: every channel of the inspect answer's joints.
+export const channelCount = (info) => info.joints.reduce((n, j) => n + j.channels.length, 0);
 
 // Every MOTION value of the file, frame after frame (Float64Array).
 export function parseMotion(text) {

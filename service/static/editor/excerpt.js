@@ -13,7 +13,8 @@
 // lines start after the MOTION line, "Frames:" and "Frame Time:"; a block of one frame a
 // line is read line by line, each frame's line alone.
 
-const MOTION_RE = /^[ \t]*MOTION[ \t]*\r?$/m; // core/bvh.py _MOTION_RE
+import { channelCount, motionHeader } from '../bvh.js';
+
 const FRAMES_RE = /^([ \t]*Frames:[ \t]*)(\S+)([ \t]*\r?)$/; // core/bvh.py _FRAMES_RE
 // A BVH number both readers read alike (Python's float, numpy's): plain decimals only.
 const NUMBER_RE = /^[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?$/;
@@ -31,14 +32,14 @@ function layoutOf(text, frames, channels) {
   // as LF and gives the answer back with CR; and JS's /m "$" matches before a lone CR
   // (or U+2028/9) where Python's does not: the two could find different MOTION lines.
   if (/\r(?!\n)|[\u2028\u2029]/.test(text)) return null;
-  const m = MOTION_RE.exec(text);
-  if (!m) return null;
-  const ends = [text.indexOf('\n', m.index + m[0].length)];
-  for (let k = 0; k < 2; k += 1) ends.push(ends[k] < 0 ? -1 : text.indexOf('\n', ends[k] + 1));
-  if (ends[2] < 0) return null; // (no frame line: nothing to excerpt)
-  const framesLine = text.slice(ends[0] + 1, ends[1]);
-  if (!FRAMES_RE.test(framesLine)) return null;
-  const at = ends[2] + 1;
+  let header;
+  try {
+    header = motionHeader(text); // (bvh.js: the MOTION line as core/bvh.py's _MOTION_RE finds it)
+  } catch {
+    return null; // (no MOTION line, or no frame line: nothing to excerpt)
+  }
+  if (!FRAMES_RE.test(text.slice(...header.frames))) return null;
+  const { at } = header;
   // Other than printable ASCII, tab, CR, LF in the frames: Python's and JS's white space
   // differ there (U+FEFF is space to JS's \s, not to str.isspace; \x1c-\x1f the other way):
   // where a frame's line ends, or what is blank, could be read differently.
@@ -60,7 +61,7 @@ function layoutOf(text, frames, channels) {
   // file says so (``cut_short``), and a frame at or after the cut is not one a line.
   const lastLine = text.slice(starts[frames - 1], lineEnd(text, starts[frames - 1]));
   if ((lastLine.match(WORD_RE) || []).length < channels) return null;
-  return { framesLine: [ends[0] + 1, ends[1]], at, starts };
+  return { framesLine: header.frames, at, starts };
 }
 
 const lineEnd = (text, start) => {
@@ -85,7 +86,7 @@ function layout(text, frames, channels) {
 // whole file must go. ``info``: the inspect answer (frames, joints' channels, cut_short).
 export function excerptOf(body, info) {
   if (!info || info.cut_short) return null; // (cut short: its answers say so; layoutOf too)
-  const channels = info.joints.reduce((n, j) => n + j.channels.length, 0);
+  const channels = channelCount(info);
   const text = body.bvh;
   const frame = body.frame;
   if (!Number.isInteger(frame) || frame < 0 || frame >= info.frames || channels === 0) return null;

@@ -2,7 +2,7 @@
 // kinematics), and open (picker or drop), scrub, close.
 
 import * as THREE from 'three';
-import { anchorPoints, forwardKinematics, frameValues, parseMotion } from '../bvh.js';
+import { anchorPoints, channelCount, forwardKinematics, frameValues, parseMotion } from '../bvh.js';
 import { $, doc, history, solver, state, ui } from './state.js';
 import { api, ApiError, clearError, showError } from './api.js';
 import {
@@ -58,8 +58,7 @@ function frameRow(text, frame, n) {
 // Forward kinematics of one frame of a text: every joint, and the canonical points (file units).
 export function fileFrame(text, frame) {
   const joints = doc.info.joints;
-  const n = joints.reduce((acc, j) => acc + j.channels.length, 0);
-  const row = frameRow(text, frame, n);
+  const row = frameRow(text, frame, channelCount(doc.info));
   const fk = forwardKinematics(joints, row, doc.settings && doc.settings.root === 'add');
   return { fk, points: anchorPoints(joints, doc.info.anchors, fk) };
 }
