@@ -24,6 +24,7 @@ import { refresh, refreshPanel } from './panel.js';
 import { NUDGE_KEYS, nudgeDirection, nudgeStep } from './nudge.js';
 
 const AXES = ['x', 'y', 'z'];
+const MAX_METRES = 10000; // a coordinate the service takes at most (schemas.py MAX_COORDINATE)
 const held = new Set(); // the nudge keys down (the gesture ends when none is)
 
 const fmt = (v) => v.toFixed(3);
@@ -61,26 +62,41 @@ function direction(key) {
 // Where the selected joint's target is, or the joint itself when it has none.
 const targetOrJoint = (joint) => state.targets.get(joint) || (state.pose && state.pose[joint]);
 
-function nudge(key, ev) {
+// The selected joint and where its target is, with a key gesture begun (or going on), or
+// null: no joint, a file being read, a mouse drag (its own), a frame cut short (no pose),
+// a key still held after Escape (no new gesture). A nudged joint follows its target, not
+// its pin (as dragged).
+function burst(ev) {
   const joint = ui.selected;
-  if (!joint || ui.reading || (ui.drag && !ui.drag.keys)) return; // (a mouse drag: its own)
+  if (!joint || ui.reading || (ui.drag && !ui.drag.keys)) return null;
   const from = targetOrJoint(joint);
-  if (!finite(from)) return; // (a frame cut short: no pose)
+  if (!finite(from)) return null;
   if (!ui.drag) {
-    if (ev.repeat) return; // (a key still held after Escape: no new gesture)
-    ui.drag = { joint, keys: true, moved: true, before: snapshot(), hadTarget: state.targets.has(joint) };
-    state.pins.delete(joint); // a nudged joint follows its target, not its pin (as dragged)
+    if (ev.repeat) return null;
+    ui.drag = { joint, keys: true, moved: true, before: snapshot() };
+    state.pins.delete(joint);
   }
-  const step = nudgeStep(Number($('nudge-step').value), ev);
-  const d = direction(key);
-  state.targets.set(joint, from.map((v, i) => v + d[i] * step));
+  return { joint, from };
+}
+
+// The gesture's target moved to ``p``: solved (throttled, as a drag's moves) and drawn.
+function moveTarget(joint, p) {
+  state.targets.set(joint, p);
   requestSolve(false);
   refreshPanel();
   drawPose();
 }
 
+function nudge(key, ev) {
+  const at = burst(ev);
+  if (!at) return;
+  const step = nudgeStep(Number($('nudge-step').value), ev);
+  const d = direction(key);
+  moveTarget(at.joint, at.from.map((v, i) => v + d[i] * step));
+}
+
 // The nudge gesture ends: committed (its last answer becomes one undo step).
-export function endBurst() {
+function endBurst() {
   held.clear();
   if (ui.drag && ui.drag.keys) endDrag(true);
 }
@@ -140,11 +156,11 @@ function typed(axis) {
   const joint = ui.selected;
   const from = joint && targetOrJoint(joint);
   const value = input.valueAsNumber;
-  const ok = Number.isFinite(value) && Math.abs(value) <= 1e4; // (schemas.py MAX_COORDINATE)
+  const ok = Number.isFinite(value) && Math.abs(value) <= MAX_METRES;
   input.setAttribute('aria-invalid', String(!ok));
   const note = $('joint-xyz-problem');
   note.hidden = ok;
-  note.textContent = ok ? '' : `${AXES[axis]}: a number of metres (-10000 to 10000); nothing was sent`;
+  note.textContent = ok ? '' : `${AXES[axis]}: a number of metres (-${MAX_METRES} to ${MAX_METRES}); nothing was sent`;
   if (!ok) return; // (still being typed: dataset.editing kept)
   delete input.dataset.editing;
   if (ui.reading || !finite(from)) return;
@@ -165,29 +181,19 @@ function fieldArrow(axis, ev) {
   const input = $(`joint-${AXES[axis]}`);
   if (ev.ctrlKey || ev.metaKey || ev.altKey || !Number.isFinite(input.valueAsNumber)) return;
   ev.preventDefault(); // (no native step, no change event)
-  const joint = ui.selected;
-  if (!joint || ui.reading || (ui.drag && !ui.drag.keys)) return; // (a mouse drag: its own)
-  const from = targetOrJoint(joint);
-  if (!finite(from)) return;
-  if (!ui.drag) {
-    if (ev.repeat) return; // (a key still held after Escape: no new gesture)
-    ui.drag = { joint, keys: true, moved: true, before: snapshot(), hadTarget: state.targets.has(joint) };
-    state.pins.delete(joint); // (as a nudge: the joint follows its target)
-  }
+  const at = burst(ev);
+  if (!at) return;
   held.add(ev.key);
   if (ev.key === 'ArrowUp') input.stepUp();
   else input.stepDown();
   delete input.dataset.editing;
   const value = input.valueAsNumber;
-  if (!Number.isFinite(value) || Math.abs(value) > 1e4) return; // (schemas.py MAX_COORDINATE)
+  if (!Number.isFinite(value) || Math.abs(value) > MAX_METRES) return;
   input.setAttribute('aria-invalid', 'false');
   $('joint-xyz-problem').hidden = true;
-  const next = [...from];
+  const next = [...at.from];
   next[axis] = value;
-  state.targets.set(joint, next);
-  requestSolve(false);
-  refreshPanel();
-  drawPose();
+  moveTarget(at.joint, next);
 }
 
 // A joint's target as the last solve left it: `target reached`, `target 12.3 mm off`, or
