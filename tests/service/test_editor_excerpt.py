@@ -16,7 +16,15 @@ from typing import Any
 import pytest
 
 from tests.character_files import FILES, big_file
-from tests.service.editor_page import M, drag_joint, give_file, open_editor, post_json, settle
+from tests.service.editor_page import (
+    M,
+    drag_joint,
+    give_file,
+    open_editor,
+    post_json,
+    recorded,
+    settle,
+)
 
 # the fixtures `server` (one for the session) and `browser` (one per module)
 pytest_plugins = ("tests.service.editor_page",)
@@ -116,6 +124,17 @@ def test_excerpt_answer_is_the_whole_files(
         page.context.close()
 
 
+def wrapped_file(text: str) -> str:
+    """``text`` with each frame's line cut in two (its frames not one a line)."""
+    head, _, frames = text.partition("Frame Time:")
+    time_line, _, rows = frames.partition("\n")
+    wrapped = []
+    for row in rows.rstrip("\n").split("\n"):
+        words = row.split()
+        wrapped += [" ".join(words[: len(words) // 2]), " ".join(words[len(words) // 2 :])]
+    return f"{head}Frame Time:{time_line}\n" + "\n".join(wrapped) + "\n"
+
+
 def small_file() -> str:
     from tests.conftest import REPO_ROOT
 
@@ -139,16 +158,12 @@ def test_excerpt_falls_back_to_the_whole_file(server: str, browser: Any) -> None
         head, _, frames = text.partition("Frame Time:")
         time_line, _, rows = frames.partition("\n")
         lines = rows.rstrip("\n").split("\n")
-        wrapped = []
-        for row in lines:
-            words = row.split()
-            wrapped += [" ".join(words[: len(words) // 2]), " ".join(words[len(words) // 2 :])]
         start = f"{head}Frame Time:{time_line}\n"
         cut = start + "\n".join(lines[:-1]) + "\n" + " ".join(lines[-1].split()[:5]) + "\n"
         bad = lines.copy()
         bad[1] = " ".join(["1e9", *bad[1].split()[1:]])
         falls_back = {
-            "wrapped": start + "\n".join(wrapped) + "\n",
+            "wrapped": wrapped_file(text),
             "blank line among": start + "\n".join([lines[0], "", *lines[1:]]) + "\n",
             "blank line after": start + "\n".join(lines) + "\n\n",
             "CR alone": text.replace("\n", "\r"),
@@ -241,23 +256,9 @@ def test_editor_sends_a_wrapped_file_whole(server: str, browser: Any) -> None:
     """A file whose frames are wrapped over two lines each: its solves go whole (the
     excerpt of one line is no frame), as before."""
     text = small_file()
-    head, _, frames = text.partition("Frame Time:")
-    time_line, _, rows = frames.partition("\n")
-    wrapped = []
-    for row in rows.rstrip("\n").split("\n"):
-        words = row.split()
-        wrapped += [" ".join(words[: len(words) // 2]), " ".join(words[len(words) // 2 :])]
-    bvh = f"{head}Frame Time:{time_line}\n" + "\n".join(wrapped) + "\n"
+    bvh = wrapped_file(text)
     page = open_editor(browser, server)
-    bodies: list[dict[str, Any]] = []
-    page.on(
-        "request",
-        lambda r: (
-            bodies.append(json.loads(r.post_data or "{}"))
-            if r.url.endswith("/v1/bvh/solve")
-            else None
-        ),
-    )
+    bodies = recorded(page, lambda url: url.endswith("/v1/bvh/solve"))
     try:
         give_file(page, bvh, "wrapped.bvh")
         page.wait_for_function(f"() => {M}.bvh() && {M}.bvh().name === 'wrapped.bvh'")
