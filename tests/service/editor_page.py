@@ -171,6 +171,12 @@ def give_file(page: Any, body: str, name: str) -> None:
     )
 
 
+def open_file(page: Any, body: str, name: str) -> None:
+    """:func:`give_file`, then waited for until the page shows it open."""
+    give_file(page, body, name)
+    page.wait_for_function(f"() => {M}.bvh() && {M}.bvh().name === '{name}'")
+
+
 def held_drag(page: Any, joint: str, dx: float = 30, dy: float = -40) -> list[Any]:
     """Drag ``joint`` by (dx, dy) and release it while the answers are held back: the
     held routes, to continue."""
@@ -242,3 +248,18 @@ def recorded(page: Any, wanted: Any) -> list[dict[str, Any]]:
         lambda r: bodies.append(json.loads(r.post_data or "{}")) if wanted(r.url) else None,
     )
     return bodies
+
+
+#: The 3D view's canvas (the keys' target: editor/keys.js)
+VIEW = "#viewport canvas"
+
+
+def steps(page: Any) -> int:
+    """The undo history's steps up to the one shown."""
+    return int(page.evaluate(f"{M}.history().index"))
+
+
+def pick(page: Any, joint: str) -> None:
+    """``joint`` chosen in the panel's picker (the focus left there)."""
+    page.select_option("#joint-pick", joint)
+    page.wait_for_function(f"() => {M}.selected() === '{joint}'")

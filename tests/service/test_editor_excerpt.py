@@ -19,8 +19,8 @@ from tests.character_files import FILES, big_file
 from tests.service.editor_page import (
     M,
     drag_joint,
-    give_file,
     open_editor,
+    open_file,
     post_json,
     recorded,
     settle,
@@ -211,8 +211,7 @@ def test_editor_sends_excerpts_of_a_big_file(
         ),
     )
     try:
-        give_file(page, text, "big.bvh")
-        page.wait_for_function(f"() => {M}.bvh() && {M}.bvh().name === 'big.bvh'")
+        open_file(page, text, "big.bvh")
         for frame, joint in [(0, "left_wrist"), (3000, "right_wrist"), (3000, "left_ankle")]:
             if page.evaluate(f"{M}.bvh().frame") != frame:
                 page.locator("#bvh-frame").fill(str(frame))
@@ -260,8 +259,7 @@ def test_editor_sends_a_wrapped_file_whole(server: str, browser: Any) -> None:
     page = open_editor(browser, server)
     bodies = recorded(page, lambda url: url.endswith("/v1/bvh/solve"))
     try:
-        give_file(page, bvh, "wrapped.bvh")
-        page.wait_for_function(f"() => {M}.bvh() && {M}.bvh().name === 'wrapped.bvh'")
+        open_file(page, bvh, "wrapped.bvh")
         drag_joint(page, "left_wrist", 30, -40, steps=4)
         assert bodies and all(b["bvh"] == bvh and b["frame"] == 0 for b in bodies)
         solve = page.evaluate(f"{M}.lastSolve()")

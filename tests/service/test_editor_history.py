@@ -24,7 +24,7 @@ import pytest
 
 from tests.character_files import big_file
 from tests.conftest import REPO_ROOT
-from tests.service.editor_page import M, drag_joint, give_file, open_editor
+from tests.service.editor_page import M, drag_joint, open_editor, open_file
 
 # the fixtures `server` (one for the session) and `browser` (one per module)
 pytest_plugins = ("tests.service.editor_page",)
@@ -129,8 +129,7 @@ def test_editor_history_holds_what_the_edits_change(
         assert page.evaluate(f"{M}.lastSolve()") is not None
         assert panel()["latency"].endswith(")") and panel()["solvers"] != "–"
         page.once("dialog", lambda d: d.accept())  # (the sample has a target)
-        give_file(page, text, "big.bvh")
-        page.wait_for_function(f"() => {M}.bvh() && {M}.bvh().name === 'big.bvh'")
+        open_file(page, text, "big.bvh")
         assert page.evaluate(f"{M}.bvh().frames") == frames > 4500
         assert page.evaluate(f"{M}.lastSolve()") is None
         assert panel() == blank

@@ -20,23 +20,27 @@ import pytest
 
 from core.skeleton import JOINT_NAMES
 from tests.conftest import REPO_ROOT
-from tests.service.editor_page import M, give_file, open_editor, recorded, settle, watched_page
+from tests.service.editor_page import (
+    VIEW,
+    M,
+    open_editor,
+    open_file,
+    pick,
+    recorded,
+    settle,
+    steps,
+    watched_page,
+)
 
 # the fixtures `server` (one for the session) and `browser` (one per module)
 pytest_plugins = ("tests.service.editor_page",)
 
 NUDGE_JS = REPO_ROOT / "service" / "static" / "editor" / "nudge.js"
-VIEW = "#viewport canvas"
 STEP = 0.01  # the nudge step the page starts with (1 cm)
 TOLERANCE = 0.001  # the page's default tolerance (m), exact reach on
 
 
 # -- helpers ---------------------------------------------------------------------------------
-def steps(page: Any) -> int:
-    """The undo history's steps up to the one shown."""
-    return int(page.evaluate(f"{M}.history().index"))
-
-
 def press(page: Any, key: str, *, then_steps: int | None = None) -> None:
     """``key`` pressed in the view (which must have the focus); waits for the solves and,
     given ``then_steps``, for the history to reach it (polled, no fixed wait)."""
@@ -67,8 +71,7 @@ def moved_by(before: list[float], after: list[float] | None, by: list[float]) ->
 
 def select(page: Any, joint: str) -> None:
     """``joint`` chosen in the panel's picker, then the focus given back to the view."""
-    page.select_option("#joint-pick", joint)
-    page.wait_for_function(f"() => {M}.selected() === '{joint}'")
+    pick(page, joint)
     page.focus(VIEW)
 
 
@@ -424,8 +427,7 @@ def test_editor_nudges_a_files_joint_and_waits_while_the_file_is_read(
     page = open_editor(browser, server)
     bvh_solves = recorded(page, lambda url: url.endswith("/v1/bvh/solve"))
     try:
-        give_file(page, text, "a.bvh")
-        page.wait_for_function(f"() => {M}.bvh() && {M}.bvh().name === 'a.bvh'")
+        open_file(page, text, "a.bvh")
         select(page, "left_wrist")
         wrist = page.evaluate(f"{M}.pose()")["left_wrist"]
         n0 = steps(page)

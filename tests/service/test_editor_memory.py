@@ -26,7 +26,7 @@ from typing import Any
 import pytest
 
 from tests.character_files import big_file
-from tests.service.editor_page import M, drag_joint, give_file, open_editor
+from tests.service.editor_page import M, drag_joint, open_editor, open_file
 
 # the fixtures `server` (one for the session) and `browser` (one per module)
 pytest_plugins = ("tests.service.editor_page",)
@@ -51,8 +51,7 @@ def opened(page: Any, text: str, name: str) -> tuple[Any, list[tuple[str, float]
     """:func:`heap_of` ``page``, and its figures before and after ``text`` is opened."""
     heap = heap_of(page)
     empty = heap()
-    give_file(page, text, name)
-    page.wait_for_function(f"() => {M}.bvh() && {M}.bvh().name === '{name}'")
+    open_file(page, text, name)
     return heap, [("the sample", empty), ("file opened", heap())]
 
 
@@ -121,8 +120,7 @@ def test_editor_heap_with_a_big_file(server: str, browser: Any, bvh_files: dict[
         # -- another file over the edits: the first one's texts go ----------------------------
         other = big_file(bvh_files["reactidle-6ch"], SIZE, skip=7)
         page.once("dialog", lambda d: d.accept())  # (the edits are dropped)
-        give_file(page, other, "other.bvh")
-        page.wait_for_function(f"() => {M}.bvh() && {M}.bvh().name === 'other.bvh'")
+        open_file(page, other, "other.bvh")
         edit(page, 0, "left_wrist", 2)
         figures.append(("other file, edited", heap()))
         # (was twice: the yes to dropping the first file's edits held its text)

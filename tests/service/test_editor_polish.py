@@ -11,22 +11,10 @@ from typing import Any
 
 import pytest
 
-from tests.service.editor_page import M, open_editor, settle
+from tests.service.editor_page import VIEW, M, open_editor, pick, settle, steps
 
 # the fixtures `server` (one for the session) and `browser` (one per module)
 pytest_plugins = ("tests.service.editor_page",)
-
-VIEW = "#viewport canvas"
-
-
-def steps(page: Any) -> int:
-    """The undo history's steps up to the one shown."""
-    return int(page.evaluate(f"{M}.history().index"))
-
-
-def select(page: Any, joint: str) -> None:
-    page.select_option("#joint-pick", joint)
-    page.wait_for_function(f"() => {M}.selected() === '{joint}'")
 
 
 def wait_steps(page: Any, n: int) -> None:
@@ -55,7 +43,7 @@ def test_editor_field_arrows_held_are_one_step(server: str, browser: Any) -> Non
     step; undone press by press. Typed values (Enter, Tab) are still one step each."""
     page = open_editor(browser, server)
     try:
-        select(page, "left_wrist")
+        pick(page, "left_wrist")
         n0 = steps(page)
         page.focus("#joint-x")
         x0 = float(page.input_value("#joint-x"))  # (the joint, to the mm: no target yet)
@@ -104,9 +92,9 @@ def test_editor_joint_line_is_said_once_a_gesture(server: str, browser: Any) -> 
     try:
         page.uncheck("#exact")
         for ankle in ("left_ankle", "right_ankle"):  # (the body stays: the wrist cannot reach)
-            select(page, ankle)
+            pick(page, ankle)
             page.click("#joint-pin")
-        select(page, "left_wrist")
+        pick(page, "left_wrist")
         n0 = steps(page)
         page.fill("#joint-y", "3")
         page.press("#joint-y", "Enter")
@@ -166,7 +154,7 @@ def test_editor_head_target_is_seen_and_grabbed(server: str, browser: Any) -> No
     over the head, the pointer over it says `target: head`, and a drag moves it."""
     page = open_editor(browser, server)
     try:
-        select(page, "head")
+        pick(page, "head")
         n0 = steps(page)
         head = page.evaluate(f"{M}.pose()")["head"]
         page.fill("#joint-z", f"{head[2] + 0.01:.3f}")  # (a cm ahead: inside the head)
