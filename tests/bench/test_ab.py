@@ -1,7 +1,7 @@
 """``python -m bench.ab``: two revisions' single-edit times side by side in one run.
 
 The probes read the small real dataset (``holdout_dataset``), not data/poses.npz where it
-was built (``holdout_dataset``): what is checked here is the table and the worktree, not the
+was built (``bench_dataset``): what is checked here is the table and the worktree, not the
 figures, and each probe spent ~3 s reading the 131 MB file."""
 
 from __future__ import annotations
