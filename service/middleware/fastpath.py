@@ -27,6 +27,7 @@ from starlette.routing import BaseRoute
 
 from service import columnar
 from service.body import DECODED, INLINE_BYTES, decode, in_worker
+from service.decoded import COUNTED
 from service.deps import ServiceState
 from service.errors import BodyError, BodyInvalid, PoseError, error_response
 from service.limits import Budget
@@ -85,15 +86,17 @@ def tokens(body: bytes) -> tuple[int, int]:
 ITEM_VALUES = 192
 
 
-def plausible(body: bytes, max_items: int) -> bool:
+def plausible(body: bytes, max_items: int, commas: int | None = None) -> bool:
     """Whether ``body`` may be a valid columnar batch, for orjson to read it: orjson holds
     the GIL for a whole body (6.5 MiB of numbers kept the event loop waiting 0.11-0.15 s,
     a real uvicorn), so one of ``INLINE_BYTES`` or more holding more values than
     ``max_items`` valid items could, or an item list (``"items"``), is read by the strict
-    decoder, in steps (``service.stepped``), as the routes read bodies."""
+    decoder, in steps (``service.stepped``), as the routes read bodies. ``commas``: the
+    body's, where the gate counted them (``service.decoded.COUNTED``)."""
     if len(body) < INLINE_BYTES:
         return True
-    commas = int(np.count_nonzero(np.frombuffer(body, dtype=np.uint8) == ord(",")))
+    if commas is None:
+        commas = int(np.count_nonzero(np.frombuffer(body, dtype=np.uint8) == ord(",")))
     return commas <= ITEM_VALUES * max_items + 64 and b'"items"' not in body
 
 
@@ -115,7 +118,7 @@ def read_columns(body: bytes, limit: int, scope: Scope) -> columnar.Columns | No
     the route, ``service.body.DECODED``)."""
     strict, bools = False, 0
     data: Any = None
-    if plausible(body, limit):
+    if plausible(body, limit, scope.get(COUNTED, {}).get(ord(","))):
         try:
             data = orjson.loads(body)
             if not columnar.is_columnar(data):

@@ -23,7 +23,7 @@ import hmac
 import time
 
 from core.text import clip
-from service.decoded import ESTIMATED_FROM, ORJSON_PATHS, DecodeBudget, estimate
+from service.decoded import COUNTED, ESTIMATED_FROM, ORJSON_PATHS, DecodeBudget, estimate
 from service.errors import (
     ClientDisconnected,
     DeadlineExceeded,
@@ -207,7 +207,9 @@ class Gate:
         """Reserve what ``body`` takes decoded (``service.decoded``) for the request's
         life, waiting no longer than its deadline leaves; the bytes reserved. Raises 413
         for a body that needs more than the whole budget, 504 when it is not free in time."""
-        need = estimate(body, orjson=scope["path"] in ORJSON_PATHS)
+        counted: dict[int, int] = {}
+        scope[COUNTED] = counted
+        need = estimate(body, orjson=scope["path"] in ORJSON_PATHS, counted=counted)
         budget = self.decoded.total
         mib = 1024 * 1024
         if need > budget:

@@ -146,6 +146,11 @@ def test_orjson_reads_only_a_body_that_may_be_a_valid_columnar_batch() -> None:
     assert scope[body_module.DECODED] == json.loads(item_list)  # the route's, not read again
     held = min(_held(lambda: read_columns(body, 1024, {})) for _ in range(3))
     assert held < 0.1, held
+    # the gate's count of the body's commas is taken as counted, not counted again
+    counted: dict[int, int] = {}
+    decoded.estimate(body, counted=counted)
+    assert counted[ord(",")] == body.count(b",") > 1024 * 192
+    assert not plausible(body, 1024, counted[ord(",")]) and plausible(body, 1024, 0)
 
 
 # -- full collections wait while a big body is held decoded -----------------------------------
