@@ -176,6 +176,7 @@ class Engine:
         if composition not in ("reencode", "sequential"):
             raise ValueError(f"unknown composition strategy {composition!r}")
         self._plans: dict[tuple[bytes, bytes], tuple[str, ...]] = {}
+        self._covering: dict[tuple[bytes, bytes], tuple[str, ...] | None] = {}  # lean.covering
         self._delta_steps: dict[
             tuple[str, ...], list[tuple[str, npt.NDArray[np.intp], npt.NDArray[np.intp] | None]]
         ] = {}

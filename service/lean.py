@@ -74,12 +74,21 @@ def one_set(items: _Items) -> bool:
 
 
 def covering(engine: Engine, idx: npt.NDArray[np.int64], weights: F64) -> tuple[str, ...] | None:
-    """The solver sequence of one target set if it covers every target, else None."""
-    if idx.size == 0:
-        return None
-    seq = engine._plan_for(np.ascontiguousarray(idx), np.ascontiguousarray(weights))
-    if not seq or uncovered(seq, tuple(idx.tolist())).any():  # FABRIK would place one
-        return None
+    """The solver sequence of one target set if it covers every target, else None;
+    memoised on the set's (joints, weights) bytes (one look-up where the plan's and
+    :func:`uncovered`'s were two and their keys' making: ~1 us of a lone solve)."""
+    key = (idx.tobytes(), weights.tobytes())
+    seq = engine._covering.get(key, ())  # (() not known: a known one is None or not empty)
+    if seq != ():
+        return seq
+    seq = None
+    if idx.size:
+        seq = engine._plan_for(np.ascontiguousarray(idx), np.ascontiguousarray(weights))
+        if not seq or uncovered(seq, tuple(idx.tolist())).any():  # FABRIK would place one
+            seq = None
+    if len(engine._covering) >= 65536:  # bounded: forget everything, start again
+        engine._covering.clear()
+    engine._covering[key] = seq
     return seq
 
 
