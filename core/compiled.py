@@ -296,11 +296,13 @@ def target_motion(
 @jit
 def retry_reaches(
     poses: F64, soft: F64, reach: float, shapes: F64, shape_totals: F64, total_length: bool,
-    reference_total: float,
-) -> tuple[F64, float]:  # pragma: no cover - compiled  # fmt: skip
-    """Each pose's ``[B, 21, 3]`` retry threshold ``[B]``: ``reach`` times its
-    :func:`scale_item` (as :func:`prepare` has it), plus ``soft [B]`` / e; and their least."""
-    out = np.empty(poses.shape[0])
+    reference_total: float, errors: F64, out: F64,
+) -> bool:  # pragma: no cover - compiled  # fmt: skip
+    """Each pose's ``[B, 21, 3]`` retry threshold into ``out [B]``: ``reach`` times its
+    :func:`scale_item` (as :func:`prepare` has it), plus ``soft [B]`` / e; and whether
+    every one of ``errors [B, K]`` is within the least of them (``errors.max() <= least``,
+    NaN as numpy's: no item to retry). Written into ``out``, not returned: a returned
+    array costs numba a boxed one."""
     lengths = np.empty(NUM_JOINTS - 1)
     least = np.inf
     for b in range(poses.shape[0]):
@@ -308,7 +310,7 @@ def retry_reaches(
         s = scale_item(lengths, shapes, shape_totals, total_length, reference_total)
         out[b] = reach * s + soft[b] / np.e
         least = min(least, out[b])
-    return out, least
+    return bool(errors.max() <= least)
 
 
 @jit
@@ -741,7 +743,7 @@ def warm() -> None:
         pose, np.zeros(1), tidx, tpos, counts, np.ones(1, dtype=np.bool_), shapes,
         np.ones(1), True, 1.0,
     )  # fmt: skip
-    retry_reaches(pose, np.zeros(1), 0.005, shapes, np.ones(1), True, 1.0)
+    retry_reaches(pose, np.zeros(1), 0.005, shapes, np.ones(1), True, 1.0, tpos[0], np.empty(1))
     body_scales(pose, shapes, np.ones(1), True, 1.0)
     shortest_bones(pose)
     target_motion(pose, tidx, tpos, counts, np.zeros(1, dtype=np.int64))

@@ -52,8 +52,8 @@ def retry(engine: Engine, items: _Items, ans: BatchAnswer) -> BatchAnswer:
     pass still leaves short is then polished onto its targets (:func:`polish_short`)."""
     if engine.serving.retry_reach <= 0.0 or ans.pose.shape[0] == 0:
         return ans
-    reach, least = reaches(engine, items)
-    if float(ans.errors.max()) <= least:  # the common case: one reduction, one kernel
+    reach, within = reaches(engine, items, ans.errors)
+    if within:  # the common case: one kernel
         return ans
     sel = short(items, ans, reach)
     if sel.size == 0:
@@ -65,12 +65,16 @@ def retry(engine: Engine, items: _Items, ans: BatchAnswer) -> BatchAnswer:
     return polish_short(engine, items, ans, reach) if engine.serving.retry_polish else ans
 
 
-def reaches(engine: Engine, items: _Items) -> tuple[F64, float]:
-    """``[B]``: how far from a target each item's soft answer may end before it is retried,
-    and the least of them (the module's threshold, ``compiled.retry_reaches``)."""
-    return compiled.retry_reaches(
-        items.poses, items.soft_ik, engine.serving.retry_reach, *engine.body_args
-    )
+def reaches(engine: Engine, items: _Items, errors: F64) -> tuple[F64, bool]:
+    """``[B]``: how far from a target each item's soft answer may end before it is retried
+    (the module's threshold, ``compiled.retry_reaches``), and whether ``errors [B, K]``
+    are all within the least of them."""
+    out = np.empty(items.poses.shape[0])
+    within = compiled.retry_reaches(
+        items.poses, items.soft_ik, engine.serving.retry_reach, *engine.body_args,
+        compiled.as_f64(errors), out,
+    )  # fmt: skip
+    return out, within
 
 
 def short(items: _Items, ans: BatchAnswer, reach: F64) -> npt.NDArray[np.intp]:
