@@ -65,7 +65,9 @@ def retry(engine: Engine, items: _Items, ans: BatchAnswer) -> BatchAnswer:
     return polish_short(engine, items, ans, reach) if engine.serving.retry_polish else ans
 
 
-def reaches(engine: Engine, items: _Items, errors: F64) -> tuple[F64, bool]:
+def reaches(
+    engine: Engine, items: _Items, errors: npt.NDArray[np.floating[Any]]
+) -> tuple[F64, bool]:
     """``[B]``: how far from a target each item's soft answer may end before it is retried
     (the module's threshold, ``compiled.retry_reaches``), and whether ``errors [B, K]``
     are all within the least of them."""
