@@ -129,12 +129,27 @@ def searching(engine: Engine, items: _Items) -> npt.NDArray[np.intp]:
     t = engine.turn_search
     if t.yaws <= 1:
         return np.zeros(0, dtype=np.intp)
+    if items.poses.shape[0] == 1:  # one edit (the interactive case): without ufuncs
+        return _searching_one(engine, items)
     ok = items.turn & items.neural_unpinned() & (items.n_t >= t.min_targets)
     sel = np.flatnonzero(ok)
     if t.gate > 0.0 and sel.size:  # only those whose targets say the body turned or moved
         starts = items.poses[sel]
         moved = target_motion(starts, items, sel) / engine.body_scales(starts)
         sel = sel[moved >= t.gate]
+    return sel
+
+
+def _searching_one(engine: Engine, items: _Items) -> npt.NDArray[np.intp]:
+    """:func:`searching` of one item, in scalars: the same tests and the same division
+    (~2.5 us where the batch's ufuncs and gathers took ~7.5: a 5-target edit's check)."""
+    t, n_t = engine.turn_search, int(items.n_t[0])
+    ok = bool(items.turn[0]) and not items.fab[0] and int(items.cnt[0]) == n_t
+    sel = np.zeros(1 if ok and n_t >= t.min_targets else 0, dtype=np.intp)
+    if t.gate > 0.0 and sel.size:
+        starts = compiled.as_f64(items.poses)
+        moved = target_motion(starts, items, sel)[0] / engine.body_scales(starts)[0]
+        return sel if moved >= t.gate else sel[:0]
     return sel
 
 
