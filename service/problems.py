@@ -261,6 +261,10 @@ class _Items:
         out: npt.NDArray[np.bool_] = ~self.fab & (self.cnt == self.n_t)
         return out
 
+    def neural_unpinned_one(self, b: int) -> bool:
+        """:meth:`neural_unpinned` of item ``b`` alone, in scalars (a lone edit's)."""
+        return not self.fab[b] and int(self.cnt[b]) == int(self.n_t[b])
+
     def travelled(self, pelvis: bool, reach: bool, few: int) -> _Items:
         """These items with their starts moved across first, as the serving settings say
         (:func:`core.compiled.travel`; only neural starts with no pins move): onto a pelvis

@@ -144,7 +144,7 @@ def _searching_one(engine: Engine, items: _Items) -> npt.NDArray[np.intp]:
     """:func:`searching` of one item, in scalars: the same tests and the same division
     (3.2 us where the batch's ufuncs and gathers took 7.7: every lone 5-target edit's)."""
     t, n_t = engine.turn_search, int(items.n_t[0])
-    ok = bool(items.turn[0]) and not items.fab[0] and int(items.cnt[0]) == n_t
+    ok = bool(items.turn[0]) and items.neural_unpinned_one(0)
     sel = np.zeros(1 if ok and n_t >= t.min_targets else 0, dtype=np.intp)
     if t.gate > 0.0 and sel.size:
         starts = compiled.as_f64(items.poses)
