@@ -63,7 +63,14 @@ export function frameValues(text, frame, frames, channels) {
     pos = end + 1;
   }
   if (seen !== frames || !line) return null;
-  const tokens = text.slice(line[0], line[1]).split(/\s+/).filter((t) => t);
+  return lineValues(text.slice(line[0], line[1]), channels);
+}
+
+// The values of one frame's line (Float64Array of ``channels``), or null where it holds
+// another number of values: how ``frameValues`` reads the frame's line once it has found it
+// (a spliced answer's line is read so: editor/excerpt.js).
+export function lineValues(line, channels) {
+  const tokens = line.split(/\s+/).filter((t) => t);
   return tokens.length === channels ? Float64Array.from(tokens, Number) : null;
 }
 

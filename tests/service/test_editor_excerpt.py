@@ -33,7 +33,9 @@ EXCERPT = """async ([body, info, data]) => {
   const { excerptOf } = await import('/static/editor/excerpt.js');
   const e = excerptOf(body, info);
   if (!e) return null;
-  return { body: e.body, spliced: data ? e.splice(data) : null };
+  const spliced = data ? e.splice(data) : null;
+  const row = spliced && spliced.row && [...spliced.row];
+  return { body: e.body, spliced: spliced && spliced.data, row };
 }"""
 
 
@@ -110,11 +112,14 @@ def test_excerpt_answer_is_the_whole_files(
                     assert sent["frame"] == 0 and len(sent["bvh"]) < 50_000
                     part = post_json(server + "/v1/bvh/solve", sent)
                     # the page's splice
-                    spliced = excerpt(page, body, info, part)["spliced"]
+                    got = excerpt(page, body, info, part)
+                    spliced = got["spliced"]
                     assert spliced["bvh"] == whole["bvh"], (name, how, frame, joints)
                     assert spliced["frame"] == frame
                     # this test's own: the excerpt answer's last line in place of the frame's
                     line = part["bvh"][:-1].rsplit("\n", 1)[1]
+                    # (and the frame's values, as the page draws them: that line's)
+                    assert got["row"] == [float(v) for v in line.split()]
                     start, end = frame_line(bvh, frame)
                     assert bvh[:start] + line + bvh[end:] == whole["bvh"]
                     assert {**part, "bvh": None, "frame": frame} == {**whole, "bvh": None}

@@ -43,32 +43,48 @@ function motionOf(text) {
 // One frame's values of a text: a text read whole (motionCache) has them; else its frame's
 // line alone is read (each answer of a solve is a new text: reading a 1 MB file whole took
 // 12-30 ms per answer), the file whole only when it does not hold one frame per line.
+// ``known``: the frame's values as the text's maker has them (an excerpt's answer spliced
+// in: editor/excerpt.js), kept as the frame's row without reading the text at all: each
+// answer's new text was walked to the frame's line and looked up in motionCache (a Map: the
+// lookup hashes the whole text), 8-49 ms an answer on a 7.5 MB file (docs/editor.md).
 let lastRow = { text: null, frame: -1, row: null };
 
-function frameRow(text, frame, n) {
-  const values = cached(text);
-  if (values) return values.subarray(frame * n, (frame + 1) * n);
+function frameRow(text, frame, known) {
+  const n = channelCount(doc.info);
+  if (known && known.length === n) {
+    lastRow = { text, frame, row: known };
+    return known;
+  }
   if (lastRow.text === text && lastRow.frame === frame) return lastRow.row;
+  const values = motionCache.size ? cached(text) : undefined; // (none: a file one frame a line)
+  if (values) return values.subarray(frame * n, (frame + 1) * n);
   const row = frameValues(text, frame, doc.info.frames, n);
   if (!row) return motionOf(text).subarray(frame * n, (frame + 1) * n); // (not kept: motionCache)
   lastRow = { text, frame, row }; // (a row of the whole file's values kept them, and a text no longer shown)
   return row;
 }
 
-// Forward kinematics of one frame of a text: every joint, and the canonical points (file units).
-export function fileFrame(text, frame) {
+// One frame's values of a text (the same array while the text and frame are the ones last
+// read: scene.js draws the file's own bones anew only when they change).
+export const fileRow = (text, frame) => frameRow(text, frame, null);
+
+// Forward kinematics of one frame's values: every joint, and the canonical points (file units).
+export function rowFrame(row) {
   const joints = doc.info.joints;
-  const row = frameRow(text, frame, channelCount(doc.info));
   const fk = forwardKinematics(joints, row, doc.settings && doc.settings.root === 'add');
   return { fk, points: anchorPoints(joints, doc.info.anchors, fk) };
 }
 
+// The same of one frame of a text; ``known``: the frame's values, where the text's maker
+// knows them (frameRow).
+export const fileFrame = (text, frame, known = null) => rowFrame(frameRow(text, frame, known));
+
 export const toWorld = (p) => new THREE.Vector3(p[0], p[1], p[2]).applyMatrix4(doc.toWorld).toArray();
 export const toFile = (p) => new THREE.Vector3(p[0], p[1], p[2]).applyMatrix4(doc.fromWorld).toArray();
 
-// The 21 handles (world) of a frame of a text.
-export function filePose(text, frame) {
-  const { points } = fileFrame(text, frame);
+// The 21 handles (world) of a frame of a text (``known``: as fileFrame's).
+export function filePose(text, frame, known = null) {
+  const { points } = fileFrame(text, frame, known);
   return Object.fromEntries(Object.entries(points).map(([k, p]) => [k, toWorld(p)]));
 }
 

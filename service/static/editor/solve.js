@@ -178,8 +178,8 @@ async function post(body, signal) {
   const excerpt = excerptOf(body, doc.info);
   if (excerpt) {
     const res = await api('POST', 'v1/bvh/solve', excerpt.body, { signal });
-    const data = excerpt.splice(res.data);
-    if (data) return { ...res, data, sentChars: excerpt.body.bvh.length };
+    const spliced = excerpt.splice(res.data);
+    if (spliced) return { ...res, data: spliced.data, row: spliced.row, sentChars: excerpt.body.bvh.length };
   }
   return api('POST', 'v1/bvh/solve', body, { signal });
 }
@@ -369,7 +369,7 @@ export async function sendSolve() {
       state.pose = res.data.pose;
     } else {
       doc.shown = res.data.bvh;
-      state.pose = filePose(doc.shown, body.frame);
+      state.pose = filePose(doc.shown, body.frame, res.row); // (the frame's values, where the splice knows them)
     }
     state.model = res.data.model;
     const server = parseFloat(res.serverTime);

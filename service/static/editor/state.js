@@ -65,7 +65,7 @@ export const doc = {
   tried: null,
   jointMap: null, // the open file's joint map ({canonical: the file's joint name}) or null: sent with its solves
   encoding: 'utf-8', // of the open file's bytes: 'utf-8' or 'latin-1' (written back the same)
-  drawn: { text: null, frame: -1 }, // what the character's bones show
+  drawn: { row: null }, // the frame's values the character's bones show (scene.js)
   world: [], // world positions of every joint of the file, as drawn
   followed: null, // {frame, pelvis}: where the view last followed the character to (file.js)
 };
