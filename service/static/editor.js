@@ -25,7 +25,7 @@
 // jointmap.js (a file's joint map). This entry module wires the controls, runs
 // the frame loop, starts up and sets the test hook.
 
-import { $, doc, history, solver, state, ui } from './editor/state.js';
+import { $, doc, history, pointerDrag, solver, state, ui } from './editor/state.js';
 import { api, ApiError, clearError, showError } from './editor/api.js';
 import {
   BOUNDED, checkField, chooseSample, clonePose, loadSample, options, redo, requestSolve, reset,
@@ -52,7 +52,7 @@ function wireControls() {
   window.addEventListener('pointermove', onPointerMove);
   window.addEventListener('pointerup', onPointerUp);
   window.addEventListener('pointercancel', () => {
-    if (ui.drag && !ui.drag.keys) endDrag(false); // (a nudge burst ends with its keys)
+    if (pointerDrag()) endDrag(false);
   });
   renderer.domElement.addEventListener('pointerleave', () => {
     if (!ui.drag) $('hud').hidden = true;

@@ -2,7 +2,7 @@
 // hover label, pins and target removal. (The keyboard's way: keys.js.)
 
 import * as THREE from 'three';
-import { $, doc, solver, state, ui } from './state.js';
+import { $, doc, pointerDrag, solver, state, ui } from './state.js';
 import { cancelSolves, commitShown, requestSolve, restore, snapshot } from './solve.js';
 import {
   camera, controls, drawPose, handleRadius, renderer, TARGET_RADIUS, viewport,
@@ -104,7 +104,7 @@ export function onPointerDown(ev) {
 }
 
 export function onPointerMove(ev) {
-  if (!ui.drag || ui.drag.keys) { // (a nudge burst has no plane: keys.js)
+  if (!pointerDrag()) {
     updateHover(ev);
     return;
   }
@@ -124,7 +124,7 @@ export function onPointerMove(ev) {
 }
 
 export function onPointerUp() {
-  if (ui.drag && !ui.drag.keys) endDrag(true); // (a nudge burst ends with its keys)
+  if (pointerDrag()) endDrag(true);
 }
 
 // End the gesture: commit its last solve, or (cancel) go back to where it started.

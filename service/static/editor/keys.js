@@ -16,7 +16,7 @@
 // joins its step).
 
 import * as THREE from 'three';
-import { $, solver, state, ui } from './state.js';
+import { $, pointerDrag, solver, state, ui } from './state.js';
 import { requestSolve, snapshot } from './solve.js';
 import { camera, drawPose, renderer } from './scene.js';
 import { endDrag, removeTarget, togglePin } from './interaction.js';
@@ -68,7 +68,7 @@ const targetOrJoint = (joint) => state.targets.get(joint) || (state.pose && stat
 // its pin (as dragged).
 function burst(ev) {
   const joint = ui.selected;
-  if (!joint || ui.reading || (ui.drag && !ui.drag.keys)) return null;
+  if (!joint || ui.reading || pointerDrag()) return null;
   const from = targetOrJoint(joint);
   if (!finite(from)) return null;
   if (!ui.drag) {

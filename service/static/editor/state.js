@@ -84,3 +84,8 @@ export const ui = {
   connected: false, // GET v1/skeleton has answered
   reading: null, // a file being opened or read again (file.js): editing waits for its answer
 };
+
+// The gesture in progress is the mouse's (a drag: interaction.js), not a nudge burst's (keys.js:
+// ui.drag with `keys`, no plane, ended with its keys): the pointer's handlers move and end
+// only a drag, and the keys begin no burst during one.
+export const pointerDrag = () => Boolean(ui.drag) && !ui.drag.keys;
