@@ -24,10 +24,11 @@ import { forgetLayout } from './excerpt.js';
 // of the page's heap after six edits).
 const motionCache = new Map();
 
+// A text kept to read frames from: the open file's committed or shown one.
+const inUse = (text) => doc.active && (text === doc.text || text === doc.shown);
+
 function cached(text) {
-  for (const key of motionCache.keys()) {
-    if (key !== doc.text && key !== doc.shown && key !== text) motionCache.delete(key);
-  }
+  for (const key of motionCache.keys()) if (!inUse(key) && key !== text) motionCache.delete(key);
   return motionCache.get(text);
 }
 
@@ -47,7 +48,8 @@ function motionOf(text) {
 // in: editor/excerpt.js), kept as the frame's row without reading the text at all: each
 // answer's new text was walked to the frame's line and looked up in motionCache (a Map: the
 // lookup hashes the whole text), 8-49 ms an answer on a 7.5 MB file (docs/editor.md).
-let lastRow = { text: null, frame: -1, row: null };
+const NO_ROW = Object.freeze({ text: null, frame: -1, row: null });
+let lastRow = NO_ROW;
 
 function frameRow(text, frame, known) {
   const n = channelCount(doc.info);
@@ -67,6 +69,16 @@ function frameRow(text, frame, known) {
 // One frame's values of a text (the same array while the text and frame are the ones last
 // read: scene.js draws the file's own bones anew only when they change).
 export const fileRow = (text, frame) => frameRow(text, frame, null);
+
+// The texts kept to read frames from let go of, but those ``inUse``: the texts read
+// whole and their values, the last frame's row, the committed text's layout
+// (editor/excerpt.js). After each change (refreshFrame), and as a file is opened, read
+// again or closed (the texts before of no use).
+function releaseTexts() {
+  cached(null);
+  if (!inUse(lastRow.text)) lastRow = NO_ROW;
+  forgetLayout(doc.active ? doc.text : null);
+}
 
 // Forward kinematics of one frame's values: every joint, and the canonical points (file units).
 export function rowFrame(row) {
@@ -225,9 +237,8 @@ function showOpened({ info, text, name, original, encoding, jointMap, settings, 
   endDrag(false);
   cancelSolves();
   if (!kept) forgetLastSolve(); // (a file opened; one read again keeps its last solve)
-  motionCache.clear();
-  lastRow = { text: null, frame: -1, row: null };
   Object.assign(doc, { active: true, name, original, text, shown: text, info, frame: 0, encoding, jointMap, settings });
+  releaseTexts(); // (the file's before: its texts, its rows)
   // the yes to replacing what was shown is spent: it held that file's texts (two copies of
   // a file no longer open, for as long as this one was)
   if (doc.tried) doc.tried.yes = null;
@@ -542,8 +553,7 @@ export function closeFile() {
   doc.info = null;
   doc.jointMap = null;
   showMap(null);
-  motionCache.clear();
-  lastRow = { text: null, frame: -1, row: null };
+  releaseTexts(); // (no file: every one)
   buildSkeleton();
   buildCharacterBones();
   $('bvh-loaded').hidden = true;
@@ -619,9 +629,8 @@ function followFrame() {
 }
 
 export function refreshFrame() {
-  forgetLayout(doc.active ? doc.text : null); // (editor/excerpt.js: of the committed text only)
+  releaseTexts(); // (the texts no longer committed or shown)
   if (!doc.active) return;
-  cached(null); // (the texts no longer committed or shown: their values go)
   followFrame();
   $('bvh-frame').value = String(doc.frame);
   const box = $('bvh-frame-number');
