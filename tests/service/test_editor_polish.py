@@ -39,14 +39,16 @@ def hold(page: Any, key: str, repeats: int, answered: bool = False) -> None:
 
 @pytest.mark.browser
 def test_editor_field_arrows_held_are_one_step(server: str, browser: Any) -> None:
-    """↑ held in the x field: one undo step, the target stepped a mm a repeat; a press: one
-    step; undone press by press. Typed values (Enter, Tab) are still one step each."""
+    """↑ held in the x field: one undo step, the target stepped a nudge step (1 mm here) a
+    repeat; a press: one step; undone press by press. Typed values (Enter, Tab) are still
+    one step each."""
     page = open_editor(browser, server)
     try:
         pick(page, "left_wrist")
+        page.select_option("#nudge-step", "0.001")
         n0 = steps(page)
         page.focus("#joint-x")
-        x0 = float(page.input_value("#joint-x"))  # (the joint, to the mm: no target yet)
+        x0 = page.evaluate(f"{M}.pose()")["left_wrist"][0]  # (the joint: no target yet)
         hold(page, "ArrowUp", 5)
         wait_steps(page, n0 + 1)
         page.wait_for_timeout(200)  # (no late step of a repeat)
@@ -78,6 +80,53 @@ def test_editor_field_arrows_held_are_one_step(server: str, browser: Any) -> Non
         page.press("#joint-y", "Tab")
         wait_steps(page, n0 + 2)
         assert page.evaluate(f"{M}.targets()")["left_wrist"][:2] == [0.25, 1.2]
+        assert page.evaluate(f"{M}.error()") is None
+    finally:
+        page.context.close()
+
+
+#: a modifier, and the nudge step it makes of the Nudge step (1 cm: the page's default)
+MODIFIED = {"": 0.01, "Shift+": 0.1, "Alt+": 0.001, "Shift+Alt+": 0.01}
+
+
+@pytest.mark.browser
+def test_editor_field_arrows_take_the_nudge_steps(server: str, browser: Any) -> None:
+    """A Joint field's ↑ / ↓ move the target by the steps the view's keys do: the Nudge step,
+    Shift 10 times more, Alt a tenth, both the step (the field stepped a mm whatever the
+    modifiers were), each exactly the move of the view's PageUp / PageDown with the same
+    modifiers; one undo step a press, the other coordinates kept exactly, the field showing
+    the target and keeping the focus. Another Nudge step: its step."""
+    page = open_editor(browser, server)
+    try:
+        pick(page, "left_wrist")
+        n = steps(page)
+
+        def moved(key: str, where: str) -> list[float]:
+            """The target's move by ``key`` pressed in ``where`` (one step more)."""
+            nonlocal n
+            was = page.evaluate(f"{M}.targets()").get("left_wrist")
+            was = was or page.evaluate(f"{M}.pose()")["left_wrist"]
+            page.focus(where)
+            page.keyboard.press(key)
+            n += 1
+            wait_steps(page, n)
+            now = page.evaluate(f"{M}.targets()")["left_wrist"]
+            if where == "#joint-y":
+                assert page.evaluate("document.activeElement.id") == "joint-y"
+                assert page.input_value("#joint-y") == f"{now[1]:.3f}"
+            return [b - a for a, b in zip(was, now, strict=True)]
+
+        for mods, step in MODIFIED.items():
+            for up, down in (("ArrowUp", "PageUp"), ("ArrowDown", "PageDown")):
+                sign = 1 if up == "ArrowUp" else -1
+                field = moved(mods + up, "#joint-y")
+                view = moved(mods + down, VIEW)
+                assert field[0] == 0 and field[2] == 0, (mods, up)  # (kept exactly)
+                assert field[1] == pytest.approx(sign * step, abs=1e-9), (mods, up)
+                assert field == pytest.approx(view, abs=1e-9), (mods, up)
+        page.select_option("#nudge-step", "0.05")
+        assert moved("ArrowUp", "#joint-y")[1] == pytest.approx(0.05, abs=1e-9)
+        assert moved("Shift+ArrowDown", "#joint-y")[1] == pytest.approx(-0.5, abs=1e-9)
         assert page.evaluate(f"{M}.error()") is None
     finally:
         page.context.close()

@@ -87,10 +87,13 @@ function moveTarget(joint, p) {
   drawPose();
 }
 
+// A nudge's step (m): the Nudge step, Shift 10 times more, Alt a tenth (nudge.js).
+const stepOf = (ev) => nudgeStep(Number($('nudge-step').value), ev);
+
 function nudge(key, ev) {
   const at = burst(ev);
   if (!at) return;
-  const step = nudgeStep(Number($('nudge-step').value), ev);
+  const step = stepOf(ev);
   const d = direction(key);
   moveTarget(at.joint, at.from.map((v, i) => v + d[i] * step));
 }
@@ -173,26 +176,28 @@ function typed(axis) {
   refresh();
 }
 
-// A field's own ↑ / ↓: the target stepped to the next mm up or down along its axis, as a
-// nudge is (a gesture: one undo step per press, a held arrow's repeats and all). The field's
-// native step made each repeat a change of its own: a held arrow filled the history with one
-// step per repeat (30 a second). A value not a number yet (being typed): the field's own.
+// A field's own ↑ / ↓: the target moved up or down its axis by a nudge's step (stepOf: the
+// Nudge step, Shift 10 times more, Alt a tenth, as the view's keys), as a nudge is (a
+// gesture: one undo step per press, a held arrow's repeats and all). The field's native
+// step made each repeat a change of its own (a held arrow filled the history with one step
+// per repeat, 30 a second), and was a mm whatever Shift or Alt said. From the target's
+// coordinate exactly (not the field's mm), or from a value being typed; one not a number
+// yet: the field's own.
 function fieldArrow(axis, ev) {
   const input = $(`joint-${AXES[axis]}`);
-  if (ev.ctrlKey || ev.metaKey || ev.altKey || !Number.isFinite(input.valueAsNumber)) return;
+  if (ev.ctrlKey || ev.metaKey || !Number.isFinite(input.valueAsNumber)) return;
   ev.preventDefault(); // (no native step, no change event)
+  const typing = input.dataset.editing ? input.valueAsNumber : null;
   const at = burst(ev);
   if (!at) return;
   held.add(ev.key);
-  if (ev.key === 'ArrowUp') input.stepUp();
-  else input.stepDown();
+  const step = stepOf(ev) * (ev.key === 'ArrowUp' ? 1 : -1);
+  const next = [...at.from];
+  next[axis] = (typing ?? at.from[axis]) + step;
+  if (Math.abs(next[axis]) > MAX_METRES) return;
   delete input.dataset.editing;
-  const value = input.valueAsNumber;
-  if (!Number.isFinite(value) || Math.abs(value) > MAX_METRES) return;
   input.setAttribute('aria-invalid', 'false');
   $('joint-xyz-problem').hidden = true;
-  const next = [...at.from];
-  next[axis] = value;
   moveTarget(at.joint, next);
 }
 
