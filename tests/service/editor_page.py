@@ -23,12 +23,13 @@ import os
 import shutil
 import subprocess
 import sys
+import tempfile
 import time
 import urllib.error
 import urllib.request
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 import pytest
 
@@ -62,6 +63,16 @@ uvicorn.run(app, host="127.0.0.1", port=int(sys.argv[2]), log_level="warning")
 """
 
 
+#: The ceiling on a page's waits (ms; Playwright's default for each wait, navigation too).
+#: Every wait is on a condition (an answer in, a file open, a step made) and ends as soon as
+#: it holds, so a passing run is no slower; on a loaded machine (two cores, other suites
+#: running) a solve's answer or a file's reading outlasted the 20 s it was.
+WAIT_MS = 90_000
+#: The ceiling on the server's start (s): it is polled for readiness every 0.2 s and used
+#: as soon as it is ready (the models loaded); loaded, the machine took over the 60 s it was.
+START_S = 300
+
+
 def find_chromium() -> str | None:
     env = os.environ.get("MARIONETTE_CHROMIUM")
     if env:
@@ -77,21 +88,33 @@ def find_chromium() -> str | None:
 
 @pytest.fixture(scope="session")
 def server(models_dir: Path) -> Iterator[str]:
-    """The real service on a free loopback port; yields its base URL once it is ready."""
+    """The real service on a free loopback port; yields its base URL once it is ready. Its
+    output goes to a file, not a pipe nobody reads while the tests run: a pipe's 64 kB
+    filled (its warnings: connections a test aborted) would block the server mid-session."""
+    with tempfile.TemporaryFile() as log:
+        yield from served(models_dir, log)
+
+
+def served(models_dir: Path, log: IO[bytes]) -> Iterator[str]:
+    """:func:`server`'s process, its output written to ``log``."""
     port = free_port()
     proc = subprocess.Popen(
         [sys.executable, "-c", SERVER, str(models_dir), str(port)],
         cwd=REPO_ROOT,
-        stdout=subprocess.PIPE,
+        stdout=log,
         stderr=subprocess.STDOUT,
     )
     base = f"http://127.0.0.1:{port}"
+
+    def output() -> str:
+        log.seek(0)
+        return log.read().decode(errors="replace")
+
     try:
-        deadline = time.monotonic() + 60
+        deadline = time.monotonic() + START_S
         while True:
             if proc.poll() is not None:
-                out = proc.stdout.read().decode(errors="replace") if proc.stdout else ""
-                pytest.fail(f"the server exited with {proc.returncode}:\n{out}")
+                pytest.fail(f"the server exited with {proc.returncode}:\n{output()}")
             try:
                 with urllib.request.urlopen(f"{base}/v2/health/ready", timeout=2) as r:
                     if r.status == 200:
@@ -103,7 +126,7 @@ def server(models_dir: Path) -> Iterator[str]:
             except OSError:
                 pass
             if time.monotonic() > deadline:
-                pytest.fail("the server was not ready within 60 s")
+                pytest.fail(f"the server was not ready within {START_S} s:\n{output()}")
             time.sleep(0.2)
         yield base
     finally:
@@ -157,7 +180,7 @@ def open_editor(browser: Any, server: str) -> Any:
     ``context``)."""
     context = browser.new_context(viewport={"width": 1280, "height": 800}, device_scale_factor=1)
     page = context.new_page()
-    page.set_default_timeout(20_000)
+    page.set_default_timeout(WAIT_MS)
     page.goto(server + "/editor")
     page.wait_for_function(f"() => {M} && {M}.ready()")
     page.wait_for_function("() => document.getElementById('status').textContent === 'connected'")
@@ -219,16 +242,16 @@ def drag_joint(page: Any, joint: str, dx: float, dy: float, steps: int = 8) -> N
 
 
 def watched_page(
-    browser: Any, timeout_ms: int, solve_path: str
+    browser: Any, solve_path: str
 ) -> tuple[Any, Any, list[str], list[str], list[str], list[dict[str, Any]]]:
-    """A fresh context and page (1280 x 800, downloads on) recording what a test checks:
-    ``(context, page, console errors, page errors, every URL asked, the bodies POSTed to
-    solve_path)``."""
+    """A fresh context and page (1280 x 800, downloads on, waits up to ``WAIT_MS``)
+    recording what a test checks: ``(context, page, console errors, page errors, every URL
+    asked, the bodies POSTed to solve_path)``."""
     context = browser.new_context(
         viewport={"width": 1280, "height": 800}, device_scale_factor=1, accept_downloads=True
     )
     page = context.new_page()
-    page.set_default_timeout(timeout_ms)
+    page.set_default_timeout(WAIT_MS)
     console_errors: list[str] = []
     page_errors: list[str] = []
     page.on("console", lambda m: console_errors.append(m.text) if m.type == "error" else None)

@@ -120,9 +120,7 @@ def test_sample_poses_are_small_complete_and_from_the_test_split() -> None:
 # -- in the browser -------------------------------------------------------------------------
 @pytest.mark.browser
 def test_editor_drag_solve_fabrik_errors(server: str, browser: Any, tmp_path: Path) -> None:
-    context, page, console_errors, page_errors, urls, solves = watched_page(
-        browser, 15_000, "/v1/solve"
-    )
+    context, page, console_errors, page_errors, urls, solves = watched_page(browser, "/v1/solve")
     m = "window.marionette"
 
     try:
@@ -388,9 +386,7 @@ def test_editor_sends_soft_ik_in_metres_and_re_solves_when_it_changes(
     page sends (a drag's, an option's re-solve, a file's ``/v1/bvh/solve``), absent when 0;
     changing it re-solves the current targets once; FABRIK's solves carry it too (the
     service ignores it there)."""
-    context, page, console_errors, page_errors, _, solves = watched_page(
-        browser, 20_000, "/v1/solve"
-    )
+    context, page, console_errors, page_errors, _, solves = watched_page(browser, "/v1/solve")
     bvh_solves = recorded(page, lambda url: url.endswith("/v1/bvh/solve"))
 
     def set_soft_ik(cm: str) -> None:
@@ -488,9 +484,7 @@ def test_editor_refuses_out_of_range_options_in_the_page(server: str, browser: A
     solve fail with its 422 until mended. Now the page refuses it at once: the field is
     marked invalid and says the range, nothing is sent for it, and the solves (a drag's,
     an option's re-solve) keep the last valid value until the field is mended."""
-    context, page, console_errors, page_errors, _, solves = watched_page(
-        browser, 20_000, "/v1/solve"
-    )
+    context, page, console_errors, page_errors, _, solves = watched_page(browser, "/v1/solve")
 
     def enter(field_id: str, typed: str) -> None:
         page.fill(f"#{field_id}", "")
@@ -563,9 +557,7 @@ def test_editor_checks_option_fields_as_they_are_typed(server: str, browser: Any
     then. Now each keystroke checks it: out of range (or not a number), the field is marked
     with its line at once; back in range, cleared at once; nothing is sent while typing,
     and leaving the field takes the value (refused or re-solved) as before."""
-    context, page, console_errors, page_errors, _, solves = watched_page(
-        browser, 20_000, "/v1/solve"
-    )
+    context, page, console_errors, page_errors, _, solves = watched_page(browser, "/v1/solve")
 
     def typed(field_id: str, key: str) -> None:
         page.keyboard.press(key)

@@ -241,7 +241,7 @@ def test_editor_never_drops_an_edit_when_the_file_changes(server: str, browser: 
         page.unroute("**/v1/bvh/solve")
         page.wait_for_timeout(300)
         page.mouse.up()
-        with page.expect_download(timeout=5_000) as download:
+        with page.expect_download() as download:  # (within the page's WAIT_MS)
             page.click("#export")
         settle(page)
         assert Path(download.value.path()).read_text() == page.evaluate(f"{M}.bvhText()")

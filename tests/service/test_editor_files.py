@@ -18,6 +18,7 @@ import pytest
 from core.skeleton import JOINT_NAMES
 from tests.service.editor_page import (
     REPO_ROOT,
+    WAIT_MS,
     M,
     drag_joint,
     drawn_as_inspected,
@@ -48,7 +49,7 @@ def test_editor_opens_poses_scrubs_and_exports_a_real_bvh_file(
     original = path.read_text()
     units = 0.0564444  # CMU ASF units: the file's leg is ~15 of them, not plain
     context, page, console_errors, page_errors, urls, solves = watched_page(
-        browser, 20_000, "/v1/bvh/solve"
+        browser, "/v1/bvh/solve"
     )
     m = "window.marionette"
 
@@ -250,7 +251,7 @@ def test_editor_writes_a_file_back_in_its_own_bytes(server: str, browser: Any) -
     }
     context = browser.new_context(accept_downloads=True)
     page = context.new_page()
-    page.set_default_timeout(20_000)
+    page.set_default_timeout(WAIT_MS)
     m = "window.marionette"
     try:
         page.goto(server + "/editor")

@@ -137,9 +137,7 @@ def test_nudge_axes_follow_the_view_and_the_modifiers_scale_the_step() -> None:
 # -- in the browser --------------------------------------------------------------------------
 @pytest.mark.browser
 def test_editor_selects_and_nudges_a_joint_from_the_keyboard(server: str, browser: Any) -> None:
-    context, page, console_errors, page_errors, _, solves = watched_page(
-        browser, 20_000, "/v1/solve"
-    )
+    context, page, console_errors, page_errors, _, solves = watched_page(browser, "/v1/solve")
     try:
         page.goto(server + "/editor")
         page.wait_for_function(f"() => {M} && {M}.ready()")

@@ -15,6 +15,7 @@ import pytest
 
 from tests.service.editor_page import (
     REPO_ROOT,
+    WAIT_MS,
     M,
     drag_joint,
     give_file,
@@ -57,7 +58,7 @@ def test_editor_goes_on_when_a_solve_is_never_answered(server: str, browser: Any
     the 401 banner stayed."""
     context = browser.new_context(viewport={"width": 1280, "height": 800}, device_scale_factor=1)
     page = context.new_page()
-    page.set_default_timeout(20_000)
+    page.set_default_timeout(WAIT_MS)
     page.clock.install()  # (time flows; fast_forward jumps it)
     solves = recorded(page, lambda url: url.endswith("/v1/solve"))
     held: list[Any] = []
