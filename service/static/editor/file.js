@@ -24,8 +24,11 @@ import { forgetLayout } from './excerpt.js';
 // of the page's heap after six edits).
 const motionCache = new Map();
 
-// A text kept to read frames from: the open file's committed or shown one.
-const inUse = (text) => doc.active && (text === doc.text || text === doc.shown);
+// A text kept to read frames from: the open file's shown or committed one. (The shown one
+// first: the last row's text is it, the same string, known at once; compared with the
+// committed one first, a new answer's text as long was compared character by character,
+// copied whole first: 3.4 ms an answer on a 7.5 MB file.)
+const inUse = (text) => doc.active && (text === doc.shown || text === doc.text);
 
 function cached(text) {
   for (const key of motionCache.keys()) if (!inUse(key) && key !== text) motionCache.delete(key);
