@@ -32,6 +32,7 @@ from tests.service.editor_page import (
     drawn_as_inspected,
     open_editor,
     open_file,
+    settle,
 )
 
 # the fixtures `server` (one for the session) and `browser` (one per module)
@@ -159,7 +160,8 @@ FIGURES = """async ([frame, reps, batches]) => {
     not os.environ.get("MARIONETTE_ROW_FIGURES"), reason="figures: MARIONETTE_ROW_FIGURES=1"
 )
 def test_answer_row_figures(server: str, browser: Any, bvh_files: dict[str, Path]) -> None:
-    """The figures (median and range, ms per answer) for 1, 2.5 and 7.5 MB files."""
+    """The figures (median and range, ms per answer) for 1, 2.5 and 7.5 MB files; then a
+    real drag's (the 7.5 MB file, its middle frame), from V8's CPU profile."""
     page = open_editor(browser, server)
     try:
         for size in (1_000_000, 2_500_000, 7_500_000):
@@ -173,5 +175,48 @@ def test_answer_row_figures(server: str, browser: Any, bvh_files: dict[str, Path
                     t = sorted(t[1:])  # (the first batch: the JIT warming up)
                     print(f"  frame {frame:>5} {how:>8}: median {t[len(t) // 2]:.3f}, "
                           f"{t[0]:.3f}-{t[-1]:.3f}")  # fmt: skip
+        page.locator("#bvh-frame").fill(str(frames // 2))
+        page.wait_for_function(f"() => {M}.bvh().frame === {frames // 2}")
+        for _ in range(2):
+            answers, spent = profiled_drag(page)
+            print(f"a drag of {answers} answers at frame {frames // 2}, ms an answer (CPU): "
+                  + ", ".join(f"{k} {v / answers:.2f}" for k, v in spent.items()))  # fmt: skip
     finally:
         page.context.close()
+
+
+#: the functions a real drag's profile is summed over: an answer's handling (solve.js, with
+#: its request), its frame's row (file.js), the drawing (scene.js)
+PROFILED = ("sendSolve", "frameRow", "drawPose")
+
+
+def profiled_drag(page: Any) -> tuple[int, dict[str, float]]:
+    """A drag of the left wrist (24 moves, the button held while its answers come), V8's CPU
+    profile taken meanwhile: the answers, and the ms of CPU spent in (and under) each of
+    ``PROFILED``."""
+    cdp = page.context.new_cdp_session(page)
+    cdp.send("Profiler.enable")
+    cdp.send("Profiler.setSamplingInterval", {"interval": 50})  # (µs)
+    n = answered(page)
+    cdp.send("Profiler.start")
+    xy = page.evaluate(f"{M}.projectJoint('left_wrist')")
+    page.mouse.move(xy["x"], xy["y"])
+    page.mouse.down()
+    for i in range(1, 25):
+        page.mouse.move(xy["x"] + i, xy["y"] - i)
+        page.wait_for_timeout(30)
+    settle(page)
+    profile = cdp.send("Profiler.stop")["profile"]
+    page.mouse.up()
+    settle(page)
+    nodes = {node["id"]: node for node in profile["nodes"]}
+    parent = {c: node["id"] for node in profile["nodes"] for c in node.get("children", [])}
+    spent = dict.fromkeys(PROFILED, 0.0)
+    for sample, dt in zip(profile["samples"], profile["timeDeltas"], strict=True):
+        names, at = set(), sample
+        while at is not None:
+            names.add(nodes[at]["callFrame"]["functionName"])
+            at = parent.get(at)
+        for name in names & set(PROFILED):
+            spent[name] += dt / 1000
+    return answered(page) - n, spent
