@@ -127,6 +127,9 @@ def test_editor_field_arrows_take_the_nudge_steps(server: str, browser: Any) -> 
         page.select_option("#nudge-step", "0.05")
         assert moved("ArrowUp", "#joint-y")[1] == pytest.approx(0.05, abs=1e-9)
         assert moved("Shift+ArrowDown", "#joint-y")[1] == pytest.approx(-0.5, abs=1e-9)
+        page.fill("#joint-y", "0.5")  # being typed (not taken): ↑ steps from it
+        moved("ArrowUp", "#joint-y")
+        assert page.evaluate(f"{M}.targets()")["left_wrist"][1] == pytest.approx(0.55, abs=1e-9)
         assert page.evaluate(f"{M}.error()") is None
     finally:
         page.context.close()

@@ -188,13 +188,14 @@ function fieldArrow(axis, ev) {
   if (ev.ctrlKey || ev.metaKey || !Number.isFinite(input.valueAsNumber)) return;
   ev.preventDefault(); // (no native step, no change event)
   const typing = input.dataset.editing ? input.valueAsNumber : null;
+  const from = ui.selected && targetOrJoint(ui.selected);
+  const value = (typing ?? (from ? from[axis] : NaN)) + stepOf(ev) * (ev.key === 'ArrowUp' ? 1 : -1);
+  if (!(Math.abs(value) <= MAX_METRES)) return; // (before a gesture begins: it drops the pin)
   const at = burst(ev);
   if (!at) return;
   held.add(ev.key);
-  const step = stepOf(ev) * (ev.key === 'ArrowUp' ? 1 : -1);
   const next = [...at.from];
-  next[axis] = (typing ?? at.from[axis]) + step;
-  if (Math.abs(next[axis]) > MAX_METRES) return;
+  next[axis] = value;
   delete input.dataset.editing;
   input.setAttribute('aria-invalid', 'false');
   $('joint-xyz-problem').hidden = true;
