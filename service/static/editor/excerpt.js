@@ -21,8 +21,9 @@ const NUMBER_RE = /^[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?$/;
 const MAX_VALUE = 1.0e7; // service/characters.py MAX_COORDINATE: past it, a 422
 const WORD_RE = /\S+/g;
 
-// The committed text's layout (worked out once per text, ~16 ms for 7.5 MB: a gesture's
-// solves all start from the same text).
+// The committed text's layout (a gesture's solves all start from the same text): worked out
+// by reading the text (``layoutOf``, ~10-16 ms for 7.5 MB) where no splice made it, else
+// carried over from the text the splice rewrote (``seedLayout``).
 let known = { text: null, channels: 0, layout: null };
 
 // Where the frame lines of ``text`` start (``starts[f]``, and the end of each line), or
@@ -75,11 +76,66 @@ export function forgetLayout(text) {
   if (known.text !== text) known = { text: null, channels: 0, layout: null };
 }
 
-function layout(text, frames, channels) {
+// The text ``edit.to``, an answer spliced into ``edit.from`` (``splice``), is the committed
+// one now (solve.js, at a gesture's commit): its layout is ``edit.from``'s with the lines
+// after the frame's moved by the line's change of length, where that is what ``layoutOf``
+// would find (``layoutAfter``); else it is worked out when first asked for, as before. Each
+// gesture's first solve read the whole new text to work it out (~10-16 ms, 7.5 MB).
+export function seedLayout(edit) {
+  const l = layoutAfter(edit);
+  if (l) known = { text: edit.to, channels: edit.channels, layout: l };
+}
+
+// ``layoutOf(edit.to)`` without reading it, or null where the line written could change
+// what ``layoutOf`` finds (its tests, each on the one line that differs; the text before
+// the frame's line, the header among it, is the same): a CR not before an LF, a character
+// other than printable ASCII, a blank line (or, the last, too few values), too few
+// characters for the frames' values. Node runs it against ``layoutOf``
+// (tests/service/test_editor_commit_reads.py).
+export function layoutAfter({ to, start, end, after, frame, frames, channels, layout: l, fromLength }) {
+  if (/[^\t\r\x20-\x7e]|\r(?!$)/.test(after) || (after.endsWith('\r') && end === fromLength)) return null;
+  if (frame === frames - 1 ? (after.match(WORD_RE) || []).length < channels : !/\S/.test(after)) return null;
+  if (frames * channels * 2 > to.length - l.at + 1) return null;
+  const delta = after.length - (end - start);
+  const starts = l.starts.slice();
+  for (let i = frame + 1; i < starts.length; i += 1) starts[i] += delta;
+  return { framesLine: l.framesLine, at: l.at, starts };
+}
+
+// (exported for the test above: Node compares it with ``layoutAfter``)
+export const readLayout = layoutOf;
+
+// The committed text's entry (``known``): its layout, and the cut last made of it.
+function entryOf(text, frames, channels) {
   if (known.text !== text || known.channels !== channels) {
     known = { text, channels, layout: layoutOf(text, frames, channels) };
   }
-  return known.layout;
+  return known;
+}
+
+// The excerpt's parts for ``frame`` of the entry's text: the head (the text up to its frame
+// lines, ``Frames: 1``) and the frame's line, or null where its values would be refused.
+// Kept with the entry: a gesture's solves all cut the same frame of the same text (its
+// line's every value was checked, and the head written, for each: 13 us a solve).
+function cutOf(entry, frame, channels) {
+  if (entry.cut && entry.cut.frame === frame) return entry.cut.parts;
+  const { text, layout: l } = entry;
+  const start = l.starts[frame];
+  const end = lineEnd(text, start);
+  const line = text.slice(start, end);
+  // A frame whose values the server would refuse: its 422 names the line and frame of the
+  // whole file (an excerpt's would say frame 0 on another line); so would a wrong count.
+  const words = line.match(WORD_RE) || [];
+  const refused = words.length !== channels
+    || !words.every((w) => NUMBER_RE.test(w) && Math.abs(Number(w)) <= MAX_VALUE);
+  let parts = null;
+  if (!refused) {
+    const [fs, fe] = l.framesLine;
+    const framesLine = text.slice(fs, fe).replace(FRAMES_RE, (_, a, n, b) => `${a}1${b}`);
+    parts = { head: text.slice(0, fs) + framesLine + text.slice(fe, l.at), start, end, line };
+  }
+  entry.cut = { frame, parts };
+  return parts;
 }
 
 // The excerpt of ``body`` (a /v1/bvh/solve request of the whole file), or null where the
@@ -90,19 +146,12 @@ export function excerptOf(body, info) {
   const text = body.bvh;
   const frame = body.frame;
   if (!Number.isInteger(frame) || frame < 0 || frame >= info.frames || channels === 0) return null;
-  const l = layout(text, info.frames, channels);
+  const entry = entryOf(text, info.frames, channels);
+  const l = entry.layout;
   if (!l) return null;
-  const start = l.starts[frame];
-  const end = lineEnd(text, start);
-  const line = text.slice(start, end);
-  // A frame whose values the server would refuse: its 422 names the line and frame of the
-  // whole file (an excerpt's would say frame 0 on another line); so would a wrong count.
-  const words = line.match(WORD_RE) || [];
-  if (words.length !== channels) return null;
-  if (!words.every((w) => NUMBER_RE.test(w) && Math.abs(Number(w)) <= MAX_VALUE)) return null;
-  const [fs, fe] = l.framesLine;
-  const framesLine = text.slice(fs, fe).replace(FRAMES_RE, (_, a, n, b) => `${a}1${b}`);
-  const head = text.slice(0, fs) + framesLine + text.slice(fe, l.at);
+  const parts = cutOf(entry, frame, channels);
+  if (!parts) return null;
+  const { head, start, end, line } = parts;
   return {
     body: { ...body, bvh: `${head}${line}\n`, frame: 0 },
     // The whole file's answer from the excerpt's (``data``: its frame line in place of the
@@ -110,15 +159,22 @@ export function excerptOf(body, info) {
     // (bvh.js lineValues: what frameValues finds walking the new text, whose lines are the
     // layout's; null where the line is no frame's values, and the page walks the text as
     // before): the page drew each answer's frame by reading the whole new text (file.js
-    // frameRow), 0.8-49 ms an answer on 1-7.5 MB files, 0.08 ms from the row. Null where
-    // the answer is not the excerpt with that line rewritten.
+    // frameRow), 0.8-49 ms an answer on 1-7.5 MB files, 0.08 ms from the row. ``edit``:
+    // how the new text differs from ``text`` (its frame's line, ``before``, become
+    // ``after``), for the commit (solve.js): the new text's layout (``seedLayout``) and the
+    // undo step's change (history.js) without reading either text. Null where the answer is
+    // not the excerpt with that line rewritten.
     splice(answer) {
       const got = answer && answer.bvh;
       if (typeof got !== 'string' || !got.startsWith(head) || !got.endsWith('\n')) return null;
       const edited = got.slice(head.length, -1);
       if (edited.includes('\n')) return null;
       const data = { ...answer, bvh: text.slice(0, start) + edited + text.slice(end), frame };
-      return { data, row: lineValues(edited, channels) };
+      const edit = {
+        from: text, to: data.bvh, fromLength: text.length, start, end, before: line, after: edited,
+        frame, frames: info.frames, channels, layout: l,
+      };
+      return { data, row: lineValues(edited, channels), edit };
     },
   };
 }

@@ -6,7 +6,7 @@
 // go to from it, line for line, byte for byte. A sample's steps hold its index, no text.
 
 import { history } from './state.js';
-import { apply, diff } from './textdiff.js';
+import { apply, diff, lineChange } from './textdiff.js';
 
 const MAX_STEPS = 200;
 
@@ -25,11 +25,14 @@ export function currentStep() {
 const withText = ({ change, ...step }) => ({ ...step, text: history.text });
 
 // A snapshot (solve.js snapshot) becomes the newest step (the steps after the one shown go).
-export function pushStep(snap) {
+// ``edit``: how its text was made of the step shown's, where a splice knows it (one frame's
+// line rewritten: editor/excerpt.js): the step's change is that line, without reading the
+// two texts (``diff`` compares them from each end: 3-4 ms a commit on a 7.5 MB file).
+export function pushStep(snap, edit = null) {
   history.stack.length = history.index + 1;
   const { text, ...step } = snap;
   if (text !== undefined) {
-    step.change = history.index >= 0 && history.text !== null ? diff(history.text, text) : null;
+    step.change = history.index >= 0 && history.text !== null ? changeOf(history.text, text, edit) : null;
     history.text = text;
   }
   history.stack.push(step);
@@ -38,6 +41,11 @@ export function pushStep(snap) {
     if ('change' in history.stack[0]) history.stack[0].change = null; // (nothing before it now)
   }
   history.index = history.stack.length - 1;
+}
+
+function changeOf(a, b, edit) {
+  if (!edit || edit.from !== a || edit.to !== b) return diff(a, b);
+  return lineChange(edit.start, edit.fromLength - edit.end, edit.before, edit.after);
 }
 
 // Undo: the step before becomes the one shown (a snapshot, its text rebuilt), or null.

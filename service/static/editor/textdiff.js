@@ -34,6 +34,14 @@ export function diff(a, b) {
   return { head, tail, hunks };
 }
 
+// The change of a text whose one line (``head`` characters before it, ``tail`` after it, no
+// LF in either line) was ``before`` and is ``after``: what ``diff`` finds of the two texts
+// (a hunk as long, the same texts both ways), from the line alone. Null if it is the same.
+export function lineChange(head, tail, before, after) {
+  if (before === after) return null;
+  return { head, tail, hunks: [hunk(0, [before], [after])] };
+}
+
 // A hunk's lines as strings of their own: a slice of a text is a view that keeps the whole
 // text alive (V8), and a step holding one would hold a copy of the file after all.
 const own = (s) => JSON.parse(JSON.stringify(s));
