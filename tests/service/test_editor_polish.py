@@ -1,6 +1,6 @@
 """The editor's polish (2026-12-06 review): a held arrow in a Joint field is one undo step,
-the selected joint's aria-live line is said once per gesture, and a target at a sample's
-head is seen and grabbed.
+the selected joint's aria-live line is said once per gesture, a target at a sample's head
+is seen and grabbed, and a target behind the body is drawn faint, one in front solid.
 
 The real server and a real Chromium (``tests/service/editor_page.py``), a sample pose.
 """
@@ -234,5 +234,72 @@ def test_editor_head_target_is_seen_and_grabbed(server: str, browser: Any) -> No
         on_screen = page.evaluate(f"{M}.projectPoint({moved})")
         assert abs(on_screen["x"] - (xy["x"] + 40)) < 2  # the target, under the mouse
         assert abs(on_screen["y"] - (xy["y"] - 40)) < 2
+    finally:
+        page.context.close()
+
+
+#: the view moved: the camera at ``eye``, looking at ``at`` (orbit controls' target), drawn
+LOOK = """async ([eye, at]) => {
+  const { camera, controls } = await import('/static/editor/scene.js');
+  controls.target.set(...at);
+  camera.position.set(...eye);
+  controls.update();
+  await new Promise((r) => requestAnimationFrame(() => requestAnimationFrame(r)));
+}"""
+#: the target markers' red (scene.js COLORS.target), as the hidden part's flat pass draws it
+RED = (0xEF, 0x44, 0x44)
+
+
+def marker_share(with_marker: list[int], without: list[int]) -> float:
+    """How much of the marker's red a pixel holds over what is drawn there without it: 0
+    none, 1 the red alone (a blend's opacity)."""
+    d = [RED[i] - without[i] for i in range(3)]
+    return sum((with_marker[i] - without[i]) * d[i] for i in range(3)) / sum(x * x for x in d)
+
+
+@pytest.mark.browser
+def test_editor_target_behind_the_body_is_drawn_faint(server: str, browser: Any) -> None:
+    """A target seen through the body (the spine between it and the camera) is drawn faint
+    (a third of its red over the spine), one in front of it solid, and the one behind is
+    still the one the pointer grabs; the page before drew both alike, over the body."""
+    page = open_editor(browser, server)
+    try:
+        pick(page, "left_wrist")
+        wrist = page.evaluate(f"{M}.pose()")["left_wrist"]
+        page.fill("#joint-z", f"{wrist[2] + 0.05:.3f}")
+        page.press("#joint-z", "Enter")
+        wait_steps(page, 1)
+        target = page.evaluate(f"{M}.targets()")["left_wrist"]
+        spine = page.evaluate(f"{M}.pose()")["spine1"]  # (grey, away from the arms)
+        away = [s - t for s, t in zip(spine, target, strict=True)]
+        norm = sum(x * x for x in away) ** 0.5
+        assert norm > 0.2
+        views = {  # the camera 1.2 m off along the line through the target and the spine
+            "behind": ([s + 1.2 * a / norm for s, a in zip(spine, away, strict=True)], target),
+            "front": ([t - 1.2 * a / norm for t, a in zip(target, away, strict=True)], spine),
+        }
+        xy = page.evaluate(f"{M}.projectPoint({target})")
+        seen = {}
+        for name, (eye, at) in views.items():
+            page.evaluate(LOOK, [eye, at])
+            seen[name] = page.evaluate(PIXEL, page.evaluate(f"{M}.projectPoint({target})"))
+            if name == "behind":  # (the spine's centre on the same point: the target grabbed)
+                xy = page.evaluate(f"{M}.projectPoint({target})")
+                page.mouse.move(xy["x"], xy["y"])
+                page.wait_for_function("() => !document.getElementById('hud').hidden")
+                assert page.inner_text("#hud") == "target: left_wrist"
+                page.mouse.move(5, 5)
+        page.click("#joint-unset")  # (the target removed: the pose as it was)
+        wait_steps(page, 2)
+        for name, (eye, at) in views.items():
+            page.evaluate(LOOK, [eye, at])
+            bare = page.evaluate(PIXEL, page.evaluate(f"{M}.projectPoint({target})"))
+            share = marker_share(seen[name], bare)
+            if name == "behind":
+                assert 0.15 < share < 0.5, (seen[name], bare, share)  # faint (was solid)
+            else:  # (lit: its red shaded, not the flat one)
+                r, g, b, _ = seen[name]
+                apart = sum((x - y) ** 2 for x, y in zip(seen[name], bare, strict=True)) ** 0.5
+                assert r > 1.6 * g and r > 1.6 * b and apart > 60, (seen[name], bare)
     finally:
         page.context.close()

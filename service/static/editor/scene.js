@@ -79,9 +79,20 @@ const materials = {
   right: new THREE.MeshStandardMaterial({ color: COLORS.right, roughness: 0.5 }),
   centre: new THREE.MeshStandardMaterial({ color: COLORS.centre, roughness: 0.5 }),
   pin: new THREE.MeshStandardMaterial({ color: COLORS.pin, roughness: 0.4, emissive: 0x3b0764 }),
-  // (drawn over the body, as the selection ring is: a target at or near a joint, a sample's
-  // head's above all, was inside its handle's sphere, neither seen nor found to be grabbed)
+  // A target marker is drawn twice (``targetMarker``): where the body hides it, a faint flat
+  // red (``targetHidden``, over the body), and where it is seen, lit and solid (``target``,
+  // depth-tested). Drawn over the body alone, as it was, a marker behind the body looked
+  // the same as one in front: orbiting, the user could not tell which side it was on.
   target: new THREE.MeshStandardMaterial({
+    color: COLORS.target, roughness: 0.4, emissive: 0x450a0a, transparent: true, opacity: 0.9, depthWrite: false,
+  }),
+  targetHidden: new THREE.MeshBasicMaterial({
+    color: COLORS.target, transparent: true, opacity: 0.3, depthTest: false, depthWrite: false,
+  }),
+  // A marker inside its own joint's handle (a target at a sample's head, whose 0.075 m sphere
+  // holds the 0.036 m marker) is at its joint, not behind the body: drawn solid over it (in
+  // the handle, it was neither seen nor found to be grabbed)
+  targetOver: new THREE.MeshStandardMaterial({
     color: COLORS.target, roughness: 0.4, emissive: 0x450a0a, transparent: true, opacity: 0.85, depthTest: false, depthWrite: false,
   }),
   hover: new THREE.MeshStandardMaterial({ color: COLORS.hover, roughness: 0.3, emissive: 0x555555 }),
@@ -182,6 +193,19 @@ function drawCharacter() {
   doc.drawn = { row };
 }
 
+// A target's marker: its hidden part's faint pass over the body (renderOrder 5, after it),
+// then its seen part, depth-tested, over that (6; the selection ring, 10, over both).
+function targetMarker() {
+  const marker = new THREE.Group();
+  const hidden = new THREE.Mesh(sphereGeometry, materials.targetHidden);
+  hidden.renderOrder = 5;
+  const seen = new THREE.Mesh(sphereGeometry, materials.target);
+  seen.renderOrder = 6;
+  marker.add(hidden, seen);
+  marker.scale.setScalar(TARGET_RADIUS);
+  return marker;
+}
+
 export function drawPose() {
   const pose = state.pose;
   if (!pose) return;
@@ -223,9 +247,7 @@ export function drawPose() {
   for (const [joint, pos] of state.targets) {
     let marker = targetMarkers.get(joint);
     if (!marker) {
-      marker = new THREE.Mesh(sphereGeometry, materials.target);
-      marker.scale.setScalar(TARGET_RADIUS);
-      marker.renderOrder = 5; // (after the body; the selection ring, 10, over it)
+      marker = targetMarker();
       scene.add(marker);
       targetMarkers.set(joint, marker);
       const line = new THREE.Line(
@@ -236,8 +258,10 @@ export function drawPose() {
       targetLines.set(joint, line);
     }
     marker.position.set(pos[0], pos[1], pos[2]);
-    const line = targetLines.get(joint);
     const j = pose[joint];
+    const inside = Math.hypot(pos[0] - j[0], pos[1] - j[1], pos[2] - j[2]) + TARGET_RADIUS <= handleRadius(joint);
+    marker.children[1].material = inside ? materials.targetOver : materials.target;
+    const line = targetLines.get(joint);
     line.geometry.attributes.position.setXYZ(0, pos[0], pos[1], pos[2]);
     line.geometry.attributes.position.setXYZ(1, j[0], j[1], j[2]);
     line.geometry.attributes.position.needsUpdate = true;
