@@ -114,6 +114,27 @@ def test_editor_draws_an_answer_without_walking_its_text(
         page.context.close()
 
 
+@pytest.mark.browser
+def test_editor_scrubs_a_file_without_walking_its_text(
+    server: str, browser: Any, bvh_files: dict[str, Path]
+) -> None:
+    """Frames scrubbed on a 1 MB file are read from their lines by the text's layout
+    (``excerpt.js`` committedRow: worked out once per text), not by walking the text to
+    each (``frameValues``: once a frame before); each drawn as the service reads it."""
+    text = big_file(bvh_files["bandai"], 1_000_000)
+    page = open_editor(browser, server)
+    try:
+        open_file(page, text, "scrub.bvh")
+        walks = walk_counter(page)
+        for frame in (5, 400, 700, 0):
+            page.locator("#bvh-frame").fill(str(frame))
+            page.wait_for_function(f"() => {M}.bvh().frame === {frame}")
+            assert walks() == 0, f"frame {frame} was read by walking the text"
+            drawn_as_served(page, server)
+    finally:
+        page.context.close()
+
+
 # The time an answer's frame takes to be drawn in the page, as sendSolve and the frame loop
 # do it: the excerpt's answer spliced into the whole text, made the text shown, its frame's
 # handles (file.js filePose, with the splice's row: ``spliced``; without it, the page's

@@ -13,7 +13,7 @@ import { buildCharacterBones, buildSkeleton, camera, centreFloor, controls, UP }
 import { endDrag } from './interaction.js';
 import { refresh, refreshPanel } from './panel.js';
 import { offerTemplate, readMap, showMap } from './jointmap.js';
-import { forgetLayout } from './excerpt.js';
+import { committedRow, forgetLayout } from './excerpt.js';
 
 // ------------------------------------------------------------------------------------
 // A file's frames: forward kinematics, the page's world
@@ -608,7 +608,9 @@ function showFrame(frame) {
   doc.frame = frame;
   doc.shown = doc.text;
   state.targets.clear();
-  state.committed = filePose(doc.text, frame);
+  // (the frame's line found by the text's layout, not by walking the text to it)
+  const row = committedRow(doc.text, frame, doc.info.frames, channelCount(doc.info));
+  state.committed = filePose(doc.text, frame, row);
   state.pose = clonePose(state.committed);
   // not an undo step, and no step changes: undo / redo show the frame of their edit
   refresh();
