@@ -32,12 +32,14 @@ from service.deps import ServiceState
 from service.errors import BodyError, BodyInvalid, PoseError, error_response
 from service.limits import Budget
 from service.middleware.types import REASON, ASGIApp, Message, Receive, Scope, Send
+from service.pose_json import plain
 from service.responses import compute_time, solve_payload
 from service.routes.solve import solve_columns, solve_one
 from service.schemas import SolveRequest
-from service.validation import poses, solve_problem
+from service.validation import check_bones, poses, problem_of, solve_problem
 
 SOLVE, BATCH = "/v1/solve", "/v1/solve/batch"
+_POSE = ["pose"].__getitem__  # (a pose's place in check_bones' words)
 
 
 def _keys(req: SolveRequest) -> int:
@@ -186,16 +188,30 @@ class FastPath:
 
     async def _solve(self, scope: Scope, receive: Receive, send: Send, state: ServiceState,
                      body: bytes) -> bool:  # fmt: skip
-        if len(body) >= INLINE_BYTES or (req := pose_form(body)) is None:
+        if len(body) >= INLINE_BYTES:
             return False
         try:
-            p = solve_problem(req, poses([req], ["pose"])[0])
+            form = plain(orjson.loads(body))
+        except orjson.JSONDecodeError:
+            return False
+        try:
+            if form is not None:  # (most bodies: read without the models, service.pose_json)
+                if body.count(b":") != form.keys:  # a repeated key: see pose_form
+                    return False
+                check_bones(form.pose, _POSE)
+                p = problem_of(form.pose[0], form.targets, form.goals, form.weights,
+                               form.pins, form.options)  # fmt: skip
+                pinned = bool(form.pins)
+            elif (req := pose_form(body)) is not None:
+                p, pinned = solve_problem(req, poses([req], ["pose"])[0]), bool(req.pins)
+            else:
+                return False
         except PoseError:
             return False  # the route words it
         engine = state.repository.ready_engine()
         budget = Budget(Request(scope, receive), state.settings.deadline_seconds)
         try:
-            result = await solve_one(p, bool(req.pins), engine, budget)  # the route's own
+            result = await solve_one(p, pinned, engine, budget)  # the route's own
         except PoseError as exc:
             await _problem(scope, receive, send, exc)
             return True

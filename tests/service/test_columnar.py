@@ -165,20 +165,25 @@ def test_shared_joints_weights_and_pins_per_item(client: Any, real_poses: PosePa
 def test_single_hot_path_equals_the_route(
     client: Any, real_poses: PosePairs, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """The pose form answered without the router gives the route's bytes; what the hot
-    path does not take (here: everything) the route answers."""
+    """The pose form answered without the router gives the route's bytes, read without
+    the models (``service.pose_json``) or with them; what the hot path does not take
+    (here: everything) the route answers."""
     bodies = items(columns(real_poses, 6, reach="soft"))
     bodies[1]["pins"] = ["right_foot"]
     bodies[2]["options"] = {"reach": "exact"}
+    bodies[3]["targets"][0]["weight"] = 3
+    del bodies[4]["options"]
     fast = [client.post("/v1/solve", json=b) for b in bodies]
+    monkeypatch.setattr(fastpath, "plain", lambda data: None)
+    models = [client.post("/v1/solve", json=b) for b in bodies]
     monkeypatch.setattr(fastpath, "pose_form", lambda body: None)
     slow = [client.post("/v1/solve", json=b) for b in bodies]
-    for f, s in zip(fast, slow, strict=True):
-        assert f.status_code == s.status_code == 200
-        assert f.content == s.content
+    for f, m, s in zip(fast, models, slow, strict=True):
+        assert f.status_code == m.status_code == s.status_code == 200
+        assert f.content == m.content == s.content
         assert f.headers["content-type"] == s.headers["content-type"] == "application/json"
         for h in ("x-compute-time", "x-total-time", "x-request-id", "content-security-policy"):
-            assert h in f.headers and h in s.headers
+            assert h in f.headers and h in m.headers and h in s.headers
 
 
 @pytest.mark.parametrize(
