@@ -11,6 +11,7 @@ import os
 import shutil
 import tempfile
 from collections.abc import Iterator, Sequence
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -19,6 +20,9 @@ from prometheus_client import CollectorRegistry, Counter, Histogram, generate_la
 from service.problems import trained_solvers
 from service.settings import SHARED_DIR
 from service.transport import CONNECTIONS_CLOSED, SLOW_READERS
+
+#: Solver paths whose counter child :meth:`Metrics.solved` keeps.
+HELD_PATHS = 256
 
 
 @contextlib.contextmanager
@@ -73,6 +77,7 @@ class Metrics:
         )
         self.registry.register(SLOW_READERS)
         self.registry.register(CONNECTIONS_CLOSED)
+        self._solved: dict[tuple[str, ...], Any] = {}  # (method, *path) -> the child
 
     def exposition(self) -> bytes:
         """The text ``/metrics`` answers: this app's collectors, or with several worker
@@ -85,15 +90,25 @@ class Metrics:
         return generate_latest(registry)
 
     def solved(self, method: str, solvers: list[str], n: int = 1) -> None:
-        """Count ``n`` solves under a bounded label (never an open-ended combination)."""
-        neural = trained_solvers(solvers)
-        if method == "fabrik":
-            label = "fabrik"
-        elif not neural:
-            label = "none"
-        else:
-            label = neural[0] if len(neural) == 1 else "composed"
-        self.solves.labels(method, label).inc(n)
+        """Count ``n`` solves under a bounded label (never an open-ended combination).
+        The counter's child is kept by method and solver path (``labels`` looks up and
+        locks each time); at most :data:`HELD_PATHS` paths are kept (a path may name a
+        turn's degrees)."""
+        key = (method, *solvers)
+        child = self._solved.get(key)
+        if child is None:
+            neural = trained_solvers(solvers)
+            if method == "fabrik":
+                label = "fabrik"
+            elif not neural:
+                label = "none"
+            else:
+                label = neural[0] if len(neural) == 1 else "composed"
+            child = self.solves.labels(method, label)
+            if len(self._solved) >= HELD_PATHS:
+                self._solved.clear()
+            self._solved[key] = child
+        child.inc(n)
 
     def solved_paths(
         self, method: str, paths: Sequence[Sequence[str]], path_of: npt.NDArray[np.int64]

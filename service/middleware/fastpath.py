@@ -215,8 +215,11 @@ class FastPath:
         except PoseError as exc:
             await _problem(scope, receive, send, exc)
             return True
-        state.metrics.solved(p.method, result.solvers)
-        await _json(send, orjson.dumps(solve_payload(p, result, engine.version)), budget.compute)
+        try:  # (counted once the answer is handed on: off the client's wait)
+            answer = orjson.dumps(solve_payload(p, result, engine.version))
+            await _json(send, answer, budget.compute)
+        finally:
+            state.metrics.solved(p.method, result.solvers)
         return True
 
     async def _columns(self, scope: Scope, receive: Receive, send: Send, state: ServiceState,

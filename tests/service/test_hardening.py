@@ -458,3 +458,22 @@ def test_solve_metrics_name_the_trained_solver_whatever_steps_follow_it() -> Non
         ("neural", "left_wrist"): 1.0, ("neural", "head"): 1.0, ("neural", "none"): 1.0,
         ("neural", "composed"): 1.0,
     }  # fmt: skip
+
+
+def test_solve_metrics_count_alike_past_the_paths_kept() -> None:
+    """The counter's children are kept by path (``labels`` is a lookup and a lock), at most
+    ``HELD_PATHS`` of them: past that, every solve is still counted under its label."""
+    from service.metrics import HELD_PATHS, Metrics
+
+    metrics = Metrics()
+    for i in range(3 * HELD_PATHS):
+        metrics.solved("neural", ["head", f"turn {i}"])
+        metrics.solved("fabrik", [])
+        metrics.solved("neural", ["head", "turn 5"], n=2)
+    counts = {
+        tuple(s.labels.values()): s.value
+        for m in metrics.registry.collect() if m.name == "pose_solves"
+        for s in m.samples if s.name == "pose_solves_total"
+    }  # fmt: skip
+    n = 3 * HELD_PATHS
+    assert counts == {("neural", "head"): 3.0 * n, ("fabrik", "fabrik"): float(n)}
