@@ -447,6 +447,8 @@ def test_request_id_and_timing_headers(client: Any, synthetic_poses: PosePairs) 
     assert 0 < compute <= total
     generated = client.get("/v2/health/live").headers["x-request-id"]
     assert len(generated) == 32
+    ids = {client.get("/v2/health/live").headers["x-request-id"] for _ in range(300)}
+    assert len(ids) == 300 and all(len(i) == 32 and int(i, 16) >= 0 for i in ids)  # hex
 
 
 def test_health_metrics_skeleton_models(
