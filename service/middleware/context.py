@@ -22,6 +22,7 @@ from service.middleware.types import (
     Scope,
     Send,
     observed,
+    status_of,
 )
 
 access_log = logging.getLogger("service.access")
@@ -40,11 +41,10 @@ class AccessLog:
             await self.app(scope, receive, send)
             return
         t0: float = scope.setdefault(T0, time.perf_counter())
-        status = [500]
         try:
-            await observed(self.app, scope, receive, send, status)
+            await observed(self.app, scope, receive, send)
         finally:
-            log_request(scope, request_id(scope), status[0], t0, self.access_log)
+            log_request(scope, request_id(scope), status_of(scope, 500), t0, self.access_log)
 
 
 class RequestContext:
@@ -57,17 +57,16 @@ class RequestContext:
         if scope["type"] != "http":
             await self.app(scope, receive, send)
             return
-        status = [0]  # (0: no answer started)
         try:
-            await observed(self.app, scope, receive, send, status)
+            await observed(self.app, scope, receive, send)
         except asyncio.CancelledError:  # the shutdown grace period ran out
             scope[REASON] = "shutting-down"
-            if not status[0]:
+            if not status_of(scope, 0):  # (0: no answer started)
                 busy = ShuttingDown("the server is shutting down; retry on another instance")
                 await error_response(busy)(scope, receive, send)
             return  # answered: the cancellation ends here
         except Exception:  # the app's own 500 handler would run outside the middleware
-            if not status[0]:
+            if not status_of(scope, 0):
                 await internal_error(scope["method"], scope["path"])(scope, receive, send)
 
 

@@ -6,14 +6,26 @@ so CORS preflights and the last-resort 500 and 503 answers carry them too):
 - ``X-Total-Time``: the whole request in ms, from arrival to the response's headers (the
   engine's own time is the route's ``X-Compute-Time``);
 - hardening: no MIME sniffing, no framing, no referrer, and a Content Security Policy
-  (HTML pages may load their own scripts and styles only)."""
+  (HTML pages may load their own scripts and styles only).
+
+It also notes the answer's status in the scope for the layers inside (the access log, the
+metrics, the last-resort answers: ``types.observed``), as it sees every answer."""
 
 from __future__ import annotations
 
 import os
 import time
 
-from service.middleware.types import REQUEST_ID, T0, ASGIApp, Message, Receive, Scope, Send
+from service.middleware.types import (
+    REQUEST_ID,
+    STATUS,
+    T0,
+    ASGIApp,
+    Message,
+    Receive,
+    Scope,
+    Send,
+)
 
 #: JSON answers load nothing.
 API_CSP = b"default-src 'none'; frame-ancestors 'none'; base-uri 'none'"
@@ -80,9 +92,12 @@ class AnswerHeaders:
             return
         t0: float = scope.setdefault(T0, time.perf_counter())
         tag = (b"x-request-id", request_id(scope).encode("latin-1", "replace"))
+        status = [0]  # the answer's, for the layers inside (types.observed: no wrapper of theirs)
+        scope[STATUS] = status
 
         async def stamped(message: Message) -> None:
             if message["type"] == "http.response.start":
+                status[0] = int(message["status"])
                 headers = list(message.get("headers", []))
                 names = {k.lower() for k, _ in headers}
                 ms = f"{(time.perf_counter() - t0) * 1000:.3f}ms".encode()

@@ -16,7 +16,16 @@ from typing import Any
 from starlette.routing import BaseRoute, Match
 
 from service.metrics import Metrics
-from service.middleware.types import REASON, T0, ASGIApp, Receive, Scope, Send, observed
+from service.middleware.types import (
+    REASON,
+    T0,
+    ASGIApp,
+    Receive,
+    Scope,
+    Send,
+    observed,
+    status_of,
+)
 
 
 class RequestMetrics:
@@ -47,22 +56,25 @@ class RequestMetrics:
             return
         t0: float = scope.setdefault(T0, time.perf_counter())
         root_path: str = scope.get("root_path", "")
-        status = [500]
+        cancelled = False
         try:
-            await observed(self.app, scope, receive, send, status)
+            await observed(self.app, scope, receive, send)
         except asyncio.CancelledError:  # shutdown: RequestContext answers a 503
-            status[0] = 503 if status[0] == 500 else status[0]
+            cancelled = True
             scope[REASON] = "shutting-down"
             raise
         finally:
+            status = status_of(scope, 500)  # (the answer as this layer saw it)
+            if cancelled and status == 500:
+                status = 503
             route = self.route_of(scope, root_path)
             m = self.metrics
-            key = (route, status[0])
+            key = (route, status)
             children = self.children.get(key)
             if children is None:  # labels() looks up and locks: once per (route, status)
-                children = (m.requests.labels(route, str(status[0])), m.latency.labels(route))
+                children = (m.requests.labels(route, str(status)), m.latency.labels(route))
                 self.children[key] = children
             children[0].inc()
             children[1].observe(time.perf_counter() - t0)
-            if status[0] >= 400:
-                m.rejections.labels(route, str(scope.get(REASON, status[0]))).inc()
+            if status >= 400:
+                m.rejections.labels(route, str(scope.get(REASON, status))).inc()

@@ -8,7 +8,8 @@ from typing import Any
 from service.errors import REASON, T0
 
 __all__ = [
-    "REASON", "REQUEST_ID", "T0", "ASGIApp", "Message", "Receive", "Scope", "Send", "observed",
+    "REASON", "REQUEST_ID", "STATUS", "T0", "ASGIApp", "Message", "Receive", "Scope", "Send",
+    "observed", "status_of",
 ]  # fmt: skip
 
 Scope = MutableMapping[str, Any]
@@ -31,11 +32,21 @@ def header_map(scope: Scope) -> dict[str, str]:
     return out
 
 
-async def observed(
-    app: ASGIApp, scope: Scope, receive: Receive, send: Send, status: list[int]
-) -> None:
-    """Run ``app`` with ``send`` wrapped so that ``status[0]`` holds the answer's status once
-    it starts (left as it was where none started)."""
+#: The scope's record of the answer's status (a list of one int, 0 until an answer
+#: starts), kept by the outermost layer that observes it (:func:`observed`).
+STATUS = "pose.status"
+
+
+async def observed(app: ASGIApp, scope: Scope, receive: Receive, send: Send) -> None:
+    """Run ``app``; :func:`status_of` then says the status of the answer it started. The
+    outermost layer that calls this wraps ``send`` to note the status in the scope; the
+    layers inside it, whose answers all pass through it, hand ``send`` on as it is and
+    read the same note (a wrapper per layer cost every message an extra frame)."""
+    if STATUS in scope:
+        await app(scope, receive, send)
+        return
+    status = [0]
+    scope[STATUS] = status
 
     async def observe(message: Message) -> None:
         if message["type"] == "http.response.start":
@@ -43,3 +54,9 @@ async def observed(
         await send(message)
 
     await app(scope, receive, observe)
+
+
+def status_of(scope: Scope, default: int) -> int:
+    """The status of the answer started by now (:func:`observed`), else ``default``."""
+    status: list[int] | None = scope.get(STATUS)
+    return status[0] if status and status[0] else default
