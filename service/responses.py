@@ -20,16 +20,16 @@ def pose_dict(pose: np.ndarray) -> dict[str, list[float]]:
 
 
 def solve_payload(p: SolveProblem, r: SolveResult, version: str) -> dict[str, Any]:
-    k = p.n_targets
-    names = [JOINT_NAMES[int(j)] for j in p.target_idx]
+    k, tolerance = p.n_targets, p.tolerance
+    names = [JOINT_NAMES[j] for j in p.target_idx.tolist()]
     return {
         "pose": pose_dict(r.pose),
         "targets": [
-            {"joint": n, "error": e, "reached": e <= p.tolerance}
+            {"joint": n, "error": e, "reached": e <= tolerance}
             for n, e in zip(names[:k], r.errors.tolist(), strict=True)
         ],
         "pins": [
-            {"joint": n, "error": e, "reached": e <= p.tolerance}
+            {"joint": n, "error": e, "reached": e <= tolerance}
             for n, e in zip(names[k:], r.pin_errors.tolist(), strict=True)
         ],
         "max_bone_length_error": r.max_bone_error,

@@ -100,8 +100,9 @@ class Coalescing:
     write; ``close`` sends what is held first, ``abort`` drops it (as the transport drops
     its buffer). Everything else is the transport's own."""
 
-    def __init__(self, transport: asyncio.Transport) -> None:
+    def __init__(self, transport: asyncio.Transport, loop: asyncio.AbstractEventLoop) -> None:
         self._transport = transport
+        self._loop = loop
         self._held: bytes | None = None
 
     def __getattr__(self, name: str) -> Any:
@@ -117,7 +118,7 @@ class Coalescing:
             self._transport.write(data)
         elif len(data) < COALESCE_BYTES:
             self._held = bytes(data)
-            asyncio.get_running_loop().call_soon(self._flush)
+            self._loop.call_soon(self._flush)
         else:
             self._transport.write(data)
 
@@ -348,7 +349,7 @@ class PacedHTTPProtocol(AutoHTTPProtocol):  # type: ignore[misc, valid-type]
             self.transport.close()
 
     def connection_made(self, transport: asyncio.Transport) -> None:
-        super().connection_made(Coalescing(transport))
+        super().connection_made(Coalescing(transport, self.loop))
         cls = PacedHTTPProtocol
         if cls.open >= self._max_connections and not self._make_room():
             # refused before anything of it is read
