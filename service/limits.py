@@ -27,13 +27,12 @@ third (42 -> 12 items at 256 units a chunk) and halve a batch's poses/s on 2 thr
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import heapq
 import itertools
 import math
 import time
 import traceback
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor, wait
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol, TypeVar
@@ -218,6 +217,23 @@ class ComputeLimiter:
 WAITED = "marionette.token_wait"
 
 
+class _Timing:
+    """:meth:`Budget.timing`'s block."""
+
+    __slots__ = ("budget", "t", "waited")
+
+    def __init__(self, budget: Budget) -> None:
+        self.budget = budget
+
+    def __enter__(self) -> None:
+        self.t, self.waited = time.perf_counter(), self.budget.waited
+
+    def __exit__(self, kind: object, *exc: object) -> None:
+        if kind is None:  # (a block that raised adds nothing, as before)
+            b = self.budget
+            b.compute += time.perf_counter() - self.t - (b.waited - self.waited)
+
+
 class Budget:
     """One request's deadline and its client; ``compute`` accumulates engine seconds."""
 
@@ -237,14 +253,13 @@ class Budget:
     def _waited(self, seconds: float) -> None:
         self.request.scope[WAITED] = self.waited + seconds
 
-    @contextlib.contextmanager
-    def timing(self) -> Iterator[None]:
+    def timing(self) -> _Timing:
         """Add the block's time to ``compute``, less what it waited for compute tokens:
         ``X-Compute-Time`` is the engine's own work (an API audit, 2026-12-06: a small
-        ``/v1/complete`` behind two batches said 14.6 ms, its wait, against 1.2 ms alone)."""
-        t, waited = time.perf_counter(), self.waited
-        yield
-        self.compute += time.perf_counter() - t - (self.waited - waited)
+        ``/v1/complete`` behind two batches said 14.6 ms, its wait, against 1.2 ms alone).
+        (A class, not a generator's context manager: a third of its cost, and a lone edit
+        on the event loop pays it.)"""
+        return _Timing(self)
 
     @property
     def left(self) -> float:
