@@ -37,6 +37,10 @@ BASE_HEADERS = [
     (b"cross-origin-opener-policy", b"same-origin"),
 ]
 
+#: The hardening headers an answer that sets none of them gets (in the order given).
+_HARDENING = [*BASE_HEADERS, (b"content-security-policy", API_CSP)]
+_STAMPED = frozenset(k for k, _ in _HARDENING)
+
 
 def protocol_headers(t0: float) -> list[tuple[bytes, bytes]]:
     """The headers of an answer the HTTP protocol gives before any app runs (a head too
@@ -102,9 +106,12 @@ class AnswerHeaders:
                 names = {k.lower() for k, _ in headers}
                 ms = f"{(time.perf_counter() - t0) * 1000:.3f}ms".encode()
                 extra = [tag, (b"x-total-time", ms)]
-                extra += [(k, v) for k, v in BASE_HEADERS if k not in names]
-                if b"content-security-policy" not in names:  # pages set their own
-                    extra.append((b"content-security-policy", API_CSP))
+                if names.isdisjoint(_STAMPED):  # (most answers: every one of them added)
+                    extra += _HARDENING
+                else:
+                    extra += [(k, v) for k, v in BASE_HEADERS if k not in names]
+                    if b"content-security-policy" not in names:  # pages set their own
+                        extra.append((b"content-security-policy", API_CSP))
                 message["headers"] = headers + extra
             await send(message)
 
