@@ -24,7 +24,7 @@ import dataclasses
 from collections.abc import Mapping, Sequence
 from functools import lru_cache
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -79,6 +79,9 @@ _TIE = 1e-12
 #: whole, feet too: the price of meeting a trunk target out of reach without pins (pin the
 #: feet to keep them down: the pelvis is then free and the legs take the move).
 LIFT = 0.025
+#: A lone edit that searches its turn (``Engine._lean_single``): its items as asked and
+#: travelled, and the searching ones.
+Searches = tuple[_Items, _Items, npt.NDArray[np.intp]]
 
 
 # --------------------------------------------------------------------------------------
@@ -235,6 +238,8 @@ class Engine:
             lean = self._lean_single(problems[0])
             if isinstance(lean, SolveResult):
                 return [lean]
+            if lean is not None:  # it searches its turn: from the items it was looked at as
+                return [self._result(problems[0], self._searched(problems[0], *lean), 0)]
         ans = self.solve_arrays(
             **stacked(problems),
             passes=np.fromiter((self.passes_of(p) for p in problems), np.int64, n),
@@ -243,10 +248,11 @@ class Engine:
         )
         return [self._result(p, ans, b) for b, p in enumerate(problems)]
 
-    def _lean_single(self, p: SolveProblem) -> SolveResult | Literal["searches"] | None:
+    def _lean_single(self, p: SolveProblem) -> SolveResult | Searches | None:
         """One edit on the lean path (:mod:`service.lean`) straight from its problem, if
         it qualifies: what :meth:`solve_arrays` gives it, without its option arrays;
-        ``"searches"`` if it searches its turn (:mod:`service.turns`), None if it takes the
+        if it searches its turn (:mod:`service.turns`), its items (:meth:`_items_of`) and
+        the searching ones (:meth:`_searched` solves it from them); None if it takes the
         general path for another reason."""
         tidx = compiled.as_i64(p.target_idx)
         weights = compiled.as_f64(p.weights)
@@ -254,11 +260,10 @@ class Engine:
         if p.method != "fabrik":
             pinned = p.n_targets < len(tidx)
             if self.turn_search.searches(p.method, p.n_targets, pinned, p.turn_search):
-                if self.turn_search.gate <= 0.0:
-                    return "searches"
                 look = self._items_of(p)
-                if turns.searching(self, look[1]).size:
-                    return "searches"  # its targets say the body turned
+                sel = turns.searching(self, look[1])
+                if sel.size:  # its targets say the body turned (or no gate: it searches)
+                    return (*look, sel)
             if not p.preserve_bone_lengths:
                 return None  # the bone pass left out: the general path
             passes, seq = self.passes_of(p), covering(self, tidx, weights)
@@ -273,9 +278,34 @@ class Engine:
         routes run those in a worker, the others on the event loop), its targets looked
         at once for both."""
         lean = self._lean_single(p)
-        if lean == "searches":
+        if isinstance(lean, tuple):  # it searches
             return None
         return lean if isinstance(lean, SolveResult) else self.solve([p])[0]
+
+    def _searched(
+        self, p: SolveProblem, asked: _Items, items: _Items, sel: npt.NDArray[np.intp]
+    ) -> BatchAnswer:
+        """:meth:`solve_arrays`' answer to ``p`` alone, which searches its turn: from its
+        items as :meth:`_lean_single` made them (``asked``, ``items`` travelled, ``sel``
+        the searching ones), not made again from :func:`stacked` ``([p])`` (the same
+        arrays: ``_Items.of_problem``)."""
+        reps = np.array([self.passes_of(p)], dtype=np.int64)
+        if int(reps[0]) < 1:
+            raise ValueError(f"passes must be at least 1, got {int(reps[0])}")
+        return self._searched_items(asked, items, reps, sel)
+
+    def _searched_items(
+        self, asked: _Items, items: _Items, reps: npt.NDArray[np.int64],
+        sel: npt.NDArray[np.intp] | None = None,
+    ) -> BatchAnswer:  # fmt: skip
+        """:meth:`solve_arrays` from its normalised items (``asked``, and ``items``
+        travelled) on: the turn search (``sel``: the items that search, if known), the
+        solve, the last steps, the critic's FABRIK."""
+        items, turned, known = turns.search(self, items, reps, self._solve_items, sel)
+        ans = turns.mark(
+            retry.last_steps(self, items, self._solve_rest(items, reps, known)), turned
+        )
+        return prefer_fabrik(self, asked, ans, self._solve_items)
 
     def _items_of(self, p: SolveProblem) -> tuple[_Items, _Items]:
         """One problem as items: as asked, and with its start moved across as the serving
@@ -379,11 +409,7 @@ class Engine:
         items = items.travelled(
             self.serving.pelvis_travel, self.serving.reach_travel, self.turn_search.min_targets
         )
-        items, turned, known = turns.search(self, items, reps, self._solve_items)
-        ans = turns.mark(
-            retry.last_steps(self, items, self._solve_rest(items, reps, known)), turned
-        )
-        return prefer_fabrik(self, asked, ans, self._solve_items)
+        return self._searched_items(asked, items, reps)
 
     def _solve_rest(
         self, items: _Items, reps: npt.NDArray[np.int64], known: turns.Known | None

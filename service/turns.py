@@ -239,19 +239,20 @@ class Turns:
 
 def search(
     engine: Engine, items: _Items, reps: npt.NDArray[np.int64],
-    solve: Solve,
+    solve: Solve, sel: npt.NDArray[np.intp] | None = None,
 ) -> tuple[_Items, Turns, Known | None]:  # fmt: skip
     """``items`` with the start of every searching item turned as the search chose, what
     it did to each (:class:`Turns`), and the answers it already has: a soft
     item's kept candidate was solved as the item asks, so it is not solved again.
-    ``solve(items, reps)`` solves a batch (the engine's own path).
+    ``solve(items, reps)`` solves a batch (the engine's own path); ``sel``: the items
+    that search (:func:`searching`), if the caller knows them.
 
     Scores are never negative and another candidate is kept only if it scores ``margin``
     below the unturned start, so an unturned score within the margin ends the search with
     the answer the full search gives. Many items are solved unturned first and the other
     turns only for the items still open (fewer rows); a lone item solves every turn in one
     batch (fewer runs, whose fixed cost dominates there). Either way the same start is kept."""
-    sel = searching(engine, items)
+    sel = searching(engine, items) if sel is None else sel
     degrees = np.zeros(len(items.poses), dtype=np.int64)
     moved = np.zeros(len(items.poses), dtype=np.bool_)
     if sel.size == 0:
