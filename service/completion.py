@@ -158,7 +158,12 @@ def implied_bodies(engine: Engine, poses: F64) -> F64:
     """The bodies completion level 1 builds from the base key points of ``poses
     [N, 21, 3]`` (pelvis floor point at the origin, as the networks were trained): one
     network run for all, one view (the turn search's critic, :mod:`service.turns`)."""
-    idx = [JOINT_INDEX[j] for j in engine.manifest.completion_levels()[0].joints]
+    idx = engine.base_points
+    if engine.serving.body == "total_length":  # the size read from the points: scale 1
+        # (x / 1 and x * 1 are x: no bone lengths to work out, ~15 us of a turn search)
+        x = poses[:, idx].reshape(len(poses), -1).astype(np.float32)
+        same: F64 = engine.completion[0](x).astype(np.float64).reshape(poses.shape)
+        return same
     scale = completion_scales(engine, bone_lengths(poses))[:, None, None]
     x = (poses[:, idx] / scale).reshape(len(poses), -1).astype(np.float32)
     out: F64 = engine.completion[0](x).astype(np.float64).reshape(poses.shape) * scale

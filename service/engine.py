@@ -132,6 +132,9 @@ class Engine:
             for key, entry in m.mirrors().items()
         }  # fmt: skip
         self.completion = [net(entry) for entry in m.completion_levels()]
+        #: completion level 1's key points (the turn search's critic's input, when it has one)
+        base = m.completion_levels()[0].joints if m.completion_levels() else ()
+        self.base_points = np.asarray([JOINT_INDEX[j] for j in base], dtype=np.intp)
         # each completion level's key points in its input order, and where each one's
         # mirror image sits in that order (the symmetry views of serving.completion_*)
         self.level_mirror = [
@@ -419,6 +422,8 @@ class Engine:
             return self._solve_items(items, reps)
         n = items.poses.shape[0]
         rest = others(n, known[0])
+        if rest.size == 0 and n == 1:  # a lone item's: the answer as it is
+            return known[1]
         if rest.size == 0:
             return BatchAnswer.scatter(n, [known])
         part = self._solve_items(items.take(rest), reps[rest])

@@ -199,6 +199,10 @@ def target_motion(poses: F64, items: _Items, rows: npt.NDArray[np.intp]) -> F64:
     )
 
 
+#: The floor's axes (x, z) of a position.
+_XZ = np.array([0, 2], dtype=np.intp)
+
+
 def fitted(poses: F64, items: _Items, rows: npt.NDArray[np.intp]) -> tuple[F64, F64]:
     """``poses [N, 21, 3]`` (world, +Y up; the starts of ``items[rows]``) each moved by
     the turn about the vertical and the shift across that best carry its targeted joints
@@ -207,8 +211,8 @@ def fitted(poses: F64, items: _Items, rows: npt.NDArray[np.intp]) -> tuple[F64, 
     tidx, tpos = items.tidx[rows], items.tpos[rows]
     own = items.n_t[rows]  # each item's targets: its first columns (no pins: it searches)
     n = own[:, None].astype(np.float64)
-    src = np.take_along_axis(poses, tidx[:, :, None], axis=1)[:, :, [0, 2]]  # [N, K, 2]
-    dst = tpos[:, :, [0, 2]]
+    src = poses[np.arange(len(rows))[:, None, None], tidx[:, :, None], _XZ]  # [N, K, 2]
+    dst = tpos[:, :, _XZ]
     sc = own_sum(src, own) / n  # centroids [N, 2]
     dc = own_sum(dst, own) / n
     a, b = src - sc[:, None], dst - dc[:, None]
@@ -259,14 +263,17 @@ def search(
         return items, Turns(degrees, moved), None
     t = engine.turn_search
     first = np.arange(t.candidates if sel.size == 1 else 1)  # solved for every item
-    scores, found, poses = _candidates(engine, items, reps, sel, first, solve)
+    scores, found, poses, yaws = _candidates(engine, items, reps, sel, first, solve)
     scores[0] -= t.margin
     best = np.argmin(scores, axis=0)  # ties: the first, the unturned start
     open_ = np.flatnonzero(scores[0] > 0.0) if first.size == 1 else np.zeros(0, np.intp)
     if open_.size:
-        more, ans, turned_poses = _candidates(
+        more, ans, turned_poses, open_yaws = _candidates(
             engine, items, reps, sel[open_], np.arange(1, t.candidates), solve
         )
+        if open_yaws is not None:  # (the fitted turns of the open items, by item)
+            yaws = np.zeros(sel.size)
+            yaws[open_] = open_yaws
         pick = np.argmin(np.vstack([scores[0, open_], more]), axis=0)
         turn = np.flatnonzero(pick > 0)
         best[open_[turn]] = pick[turn]
@@ -282,34 +289,37 @@ def search(
     out[sel] = poses[best_rows]
     deg = np.rint(360.0 * best / t.yaws).astype(np.int64)
     fit = np.flatnonzero(best == t.yaws) if t.fit > 0.0 else np.zeros(0, np.intp)
-    if fit.size:  # the fitted start: its own turn
-        yaw = fitted(items.poses[sel[fit]], items, sel[fit])[1]
-        deg[fit] = np.rint(np.degrees(yaw)).astype(np.int64) % 360
+    if fit.size and yaws is not None:  # the fitted start: its own turn
+        deg[fit] = np.rint(np.degrees(yaws[fit])).astype(np.int64) % 360
         moved[sel[fit]] = True
     degrees[sel] = np.where(deg > 180, deg - 360, deg)
     mine = ~items.ex[sel] & items.keep[sel]  # solved as asked: soft, bone lengths kept
     if t.quick:  # candidates in their quick form: solved as asked only if asked so
         mine &= (reps[sel] == 1) & ~items.mirror[sel]
-    known = (sel[mine], found.take(np.flatnonzero(mine))) if mine.any() else None
+    kept = found if mine.all() else found.take(np.flatnonzero(mine))  # (a lone item's: all)
+    known = (sel[mine], kept) if mine.any() else None
     return dataclasses.replace(items, poses=out), Turns(degrees, moved), known
 
 
 def _candidates(
     engine: Engine, items: _Items, reps: npt.NDArray[np.int64], sel: npt.NDArray[np.intp],
     steps: npt.NDArray[np.int64], solve: Solve,
-) -> tuple[F64, BatchAnswer, F64]:  # fmt: skip
+) -> tuple[F64, BatchAnswer, F64, F64 | None]:  # fmt: skip
     """Items ``sel`` solved soft from their starts turned by ``steps`` (of the search's
     ``yaws`` steps; 0 unturned) in one batch (with ``quick``: one pass, no mirror image),
     turn-major: the scores ``[turns, sel]``,
-    the answers and the candidate starts (rows ``turn * len(sel) + item``)."""
+    the answers, the candidate starts (rows ``turn * len(sel) + item``) and the fitted
+    start's turns ``[sel]`` (radians; None if it is not a candidate)."""
     y = engine.turn_search.yaws
     starts = items.poses[sel]
     turns = steps[steps < y]  # the fitted start (TurnSearch.fit), if asked, is step y
     parts = [turned_by(starts, 2.0 * np.pi * turns / y).reshape(-1, *starts.shape[1:])]
     if turns.size and turns[0] == 0:  # the unturned start as it is
         parts[0][: len(sel)] = starts
+    yaws = None
     if turns.size < steps.size:
-        parts.append(fitted(starts, items, sel)[0])
+        moved, yaws = fitted(starts, items, sel)
+        parts.append(moved)
     poses = np.concatenate(parts) if len(parts) > 1 else parts[0]
     rep = np.tile(sel, len(steps))
     soft = dataclasses.replace(items.soft(rep, items.poses), poses=poses)
@@ -321,7 +331,7 @@ def _candidates(
     scale: F64 = np.tile(engine.body_scales(np.ascontiguousarray(starts)), len(steps))
     scores = _score(engine, soft, ans, scale).reshape(len(steps), -1)
     scores[steps == y] += engine.turn_search.fit  # the fitted start's bar (0 if not tried)
-    return scores, ans, poses
+    return scores, ans, poses, yaws
 
 
 def _score(engine: Engine, soft: _Items, ans: BatchAnswer, scale: F64) -> F64:
