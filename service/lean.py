@@ -130,7 +130,9 @@ def solve_lean(
     c = int(items.cnt[0])
     collar, hold = engine.collar_items(items), engine.pelvis_holds(items)
     fell = np.zeros(n, dtype=np.bool_)
-    if n == 1 and not exact and c == int(items.n_t[0]):  # one soft edit, no pins: in place
+    if (
+        (n == 1 or (n <= BOUND_ITEMS and one_view(items))) and not exact and c == int(items.n_t[0])
+    ):  # one soft edit (or a few, as a turn search's candidates), no pins: in place
         one = solve_one(engine, items, passes, sequence, collar, hold)
         if one is not None:  # (one graph answers each pass)
             return (*one, fell)
@@ -179,8 +181,17 @@ def solve_lean(
     return pose, errors, bone_err, iterations, fell
 
 
+#: At most this many soft items without pins are solved as :func:`solve_one` solves one:
+#: one bound run per pass for them all (a lone edit's turn search's 13 candidates: ~60 us
+#: less than the general lean loop's runs and arrays, the same bits: rows are answered alone).
+BOUND_ITEMS = 16
 #: Per thread: :func:`solve_one`'s canonical frame, lengths and scale between its kernels.
 _WORK = threading.local()
+
+
+def one_view(items: _Items) -> bool:
+    """Whether every item of ``items`` asks alike for the mirror image (all or none)."""
+    return bool(items.mirror.all()) or not bool(items.mirror.any())
 
 
 def _workspace() -> tuple[F64, F64, F64, F64, F64]:
@@ -195,12 +206,21 @@ def _workspace() -> tuple[F64, F64, F64, F64, F64]:
     return ws
 
 
+def _workspace_of(n: int) -> tuple[F64, F64, F64, F64, F64]:
+    """:func:`_workspace`'s arrays for ``n`` items, made afresh."""
+    return (
+        np.empty((n, NUM_JOINTS, 3)), np.empty((n, 2)), np.empty((n, 3)),
+        np.empty((n, NUM_JOINTS - 1)), np.empty(n),
+    )  # fmt: skip
+
+
 def solve_one(
     engine: Engine, items: _Items, passes: int, sequence: tuple[str, ...], collar: Bool,
     hold: F64,
 ) -> Solved | None:  # fmt: skip
-    """:func:`solve_lean` of one soft edit without pins (``items`` of one), where each
-    pass is one run of one graph (:func:`service.networks.one_run`); else None. The same
+    """:func:`solve_lean` of one soft edit without pins (``items`` of one; or of a few,
+    :data:`BOUND_ITEMS`, of one target set, all asking alike for the mirror image), where
+    each pass is one run of one graph (:func:`service.networks.one_run`); else None. The same
     kernels in the same order, in three calls and no copies: the canonical inputs go
     straight into onnxruntime's bound input buffers (:func:`core.compiled.prepare_into`),
     each pass but the last ends and the next begins in one call from the bound output
@@ -211,8 +231,9 @@ def solve_one(
     if found is None:
         return None
     few, rows, cols, other, signs = found
-    (x_in, t_in), out, run = few.bound(((rows, 3 * NUM_JOINTS), (rows, cols.shape[0])))
-    canon, facing, trans, lengths, scales = _workspace()
+    n = items.poses.shape[0]
+    (x_in, t_in), out, run = few.bound(((rows * n, 3 * NUM_JOINTS), (rows * n, cols.shape[0])))
+    canon, facing, trans, lengths, scales = _workspace() if n == 1 else _workspace_of(n)
     s = engine.serving
     body = engine.body_args
     compiled.prepare_into(
@@ -239,11 +260,11 @@ def solve_one(
             t_in,
         )
     run()
-    pose, errors, bone_err = np.empty((1, NUM_JOINTS, 3)), np.empty(items.tidx.shape), np.empty(1)
+    pose, errors, bone_err = np.empty((n, NUM_JOINTS, 3)), np.empty(items.tidx.shape), np.empty(n)
     compiled.settle_last(
         out, scales, canon, lengths, facing, trans, *rest, pose, errors, bone_err
     )  # (into arrays made here: a returned one costs numba more)
-    return pose, errors, bone_err, np.zeros(1, dtype=np.int64)
+    return pose, errors, bone_err, np.zeros(n, dtype=np.int64)
 
 
 def fabrik_batch(items: _Items) -> bool:
