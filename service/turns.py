@@ -351,7 +351,8 @@ def _candidates(
         parts.append(moved)
     poses = np.concatenate(parts) if len(parts) > 1 else parts[0]
     rep = np.tile(sel, len(steps))
-    soft = dataclasses.replace(items.soft(rep, items.poses), poses=poses)
+    no = np.zeros(len(rep), dtype=np.bool_)  # (items.soft's, from these starts)
+    soft = dataclasses.replace(items.take(rep), poses=poses, fab=no, keep=~no, ex=no)
     if engine.turn_search.quick:  # one pass, no mirror image
         soft = dataclasses.replace(soft, mirror=np.zeros(len(rep), dtype=np.bool_))
         ans = solve(soft, np.ones(len(rep), dtype=np.int64))
