@@ -338,7 +338,7 @@ def test_search_ends_early_with_the_answers_of_the_full_search(
     assert np.array_equal(known[1].errors, ref.errors[:40])
     got, want = engine.solve_arrays(**args), retry(engine, kept, ref)  # then the retry
     assert np.array_equal(got.pose, want.pose) and np.array_equal(got.errors, want.errors)
-    # a lone item solves its 13 candidates in one batch: the same start, the same answer
+    # a lone item (searched as one, service.turns._search_one): the same start and answer
     for i in (*np.flatnonzero(score[0] > 0)[:3], *np.flatnonzero(score[0] <= 0)[:2], n - 1):
         one = engine.solve_arrays(**{key: v[i : i + 1] for key, v in args.items()})
         assert np.array_equal(one.pose[0], got.pose[i]), i
