@@ -411,7 +411,10 @@ def _scored_below(
     live = np.flatnonzero(~(least >= bar))  # (NaN: scored)
     scores = np.full(len(steps), np.inf)
     if live.size:
-        scores[live] = _score(engine, soft.take(live), ans.take(live), scale[live])
+        scores[live] = _scores(
+            engine, ans.errors[live], ans.pose[live], soft.n_t[live], soft.floors[live],
+            scale[live],
+        )  # fmt: skip
         scores[live[fit[live]]] += t.fit
     return scores[:, None]
 
@@ -424,10 +427,19 @@ def _score(engine: Engine, soft: _Items, ans: BatchAnswer, scale: F64) -> F64:
     same start (a 1.9 m copy of make bench's B5 edits kept others, 65 mm from the reference
     answers, with scores in metres and the critic's completion networks, which read a
     body's size from its key points, asked at the character's own size)."""
-    score: F64 = own_sum(ans.errors, soft.n_t) / soft.n_t / scale  # (its targets first)
+    return _scores(engine, ans.errors, ans.pose, soft.n_t, soft.floors, scale)
+
+
+def _scores(
+    engine: Engine, errors: npt.NDArray[np.floating], pose: npt.NDArray[np.floating],
+    n_t: npt.NDArray[np.int64], floors: F64, scale: F64,
+) -> F64:  # fmt: skip
+    """:func:`_score` of answers' ``errors`` and ``pose`` to items with ``n_t`` targets over
+    ``floors`` (only what it reads: a few rows' without taking every array of theirs)."""
+    score: F64 = own_sum(errors, n_t) / n_t / scale  # (its targets first)
     if engine.turn_search.plausibility > 0:  # how unlike a real body the answer is
-        at = np.asarray(ans.pose) / scale[:, None, None]
-        score += engine.turn_search.plausibility * implausibility(engine, at, soft.floors / scale)
+        at = np.asarray(pose) / scale[:, None, None]
+        score += engine.turn_search.plausibility * implausibility(engine, at, floors / scale)
     return score
 
 
