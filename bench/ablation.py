@@ -427,7 +427,7 @@ def main(
         "other row is a full-budget model scored with `python -m bench.heldout --models DIR "
         "[--serving KEY=VALUE ...] --out reports/ablation/NAME.json` (e.g. `passes=3`)."
         " Rows scored with the numpy engine, before the compiled one, agree with it to "
-        "5e-14 m (docs/benchmarks.md). A row's config that extends trainer/configs/default.toml "
+        "5e-14 m (docs/speed.md). A row's config that extends trainer/configs/default.toml "
         "extends it as it was when the row was trained (`git log` of the row's JSON)."
         "\n\n" + render(rows)
     )

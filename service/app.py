@@ -43,7 +43,7 @@ def create_app(settings: Settings | None = None, *, load_in_background: bool = T
     """The app. Once the models are loaded, everything alive then (modules, sessions,
     schemas) is moved out of the garbage collector's reach (``gc.freeze``): collections
     then walk only what requests allocate (measured: the item-list batch ~1.7x faster,
-    docs/benchmarks.md, "HTTP")."""
+    docs/speed.md, "HTTP")."""
     settings = settings or get_settings()
     state = ServiceState(settings, ModelRepository(settings), Metrics())
 
