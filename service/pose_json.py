@@ -71,7 +71,9 @@ def _options(data: Any) -> SolveOptions | None:
     if type(data) is not dict:
         return None
     try:
-        key = tuple((k, type(v), v) for k, v in data.items())
+        # (a float by its bits: -0.0 == 0.0 and hash alike, and a floor of -0.0 is kept as
+        # the model keeps it; a review found the one served the other's options)
+        key = tuple((k, type(v), v.hex() if type(v) is float else v) for k, v in data.items())
         known = _OPTIONS.get(key)
     except TypeError:  # a value that is a list or an object: not held
         key, known = None, None
