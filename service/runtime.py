@@ -49,8 +49,12 @@ def session_options(threads: int = 1) -> ort.SessionOptions:
 #: A network's bound run (:meth:`_FewRows.bound`): its input buffers, its output, the run.
 Bound = tuple[list[npt.NDArray[np.float32]], npt.NDArray[np.float32], Callable[[], None]]
 
-#: Runs of at most this many rows go through :class:`_FewRows` (an edit alone, and its
-#: mirror image as a second row): the hot path's runs.
+#: Runs of at most this many rows go through :class:`_FewRows` by ``__call__`` (an edit
+#: alone, and its mirror image as a second row): the hot path's runs. Callers that bind
+#: their own buffers (``service.lean.solve_one``, ``service.completion``'s critic) bind
+#: more: up to ``service.lean.BOUND_ITEMS`` items, each and its mirror image, a lone turn
+#: search's candidates; each row count a network is run with keeps its bound buffers per
+#: thread (a few kB), on the network's shared session past ``OWN_ROWS``.
 FEW_ROWS = 4
 #: Runs of at most this many rows may take a session of their own (:class:`_FewRows`).
 OWN_ROWS = 2
@@ -121,7 +125,7 @@ class _FewRows:
         if states is None:
             states = self.local.states = {}
         state: Bound | None = states.get(shapes)
-        if state is None:  # a few shapes per network: rows 1 to FEW_ROWS
+        if state is None:  # a few shapes per network (rows 1 to FEW_ROWS; bound: more)
             zeros = {
                 n: np.zeros(s, dtype=np.float32) for n, s in zip(self.inputs, shapes, strict=True)
             }

@@ -274,6 +274,7 @@ def search(
         more, ans, turned_poses, open_yaws = _candidates(
             engine, items, reps, sel[open_], np.arange(1, t.candidates), solve
         )
+        more = _kept_never_nan(more)
         if open_yaws is not None:  # (the fitted turns of the open items, by item)
             yaws = np.zeros(sel.size)
             yaws[open_] = open_yaws
@@ -310,7 +311,7 @@ def _search_one(
 ) -> tuple[_Items, Turns, Known | None]:  # fmt: skip
     """:func:`search` where one item ``sel [1]`` searches (a lone edit's), as the batch's
     way searches each: its unturned start solved and scored first, and where that score is
-    within the margin the search ends there (57 % of make bench's searching 5-target
+    within the margin the search ends there (57 % of `bench.ab`'s searching 5-target
     edits: one candidate solved and scored, not 13); else the other candidates, the critic
     asked only of those whose targets alone do not already put them at or above the
     unturned score less the margin (a score is its targets' term plus the critic's, never
@@ -324,11 +325,20 @@ def _search_one(
         return _kept_one(engine, items, reps, int(sel[0]), 0, found, poses[0], None)
     steps = np.arange(1, t.candidates)
     more, ans, turned, yaws = _candidates(engine, items, reps, sel, steps, solve, bar)
+    more = _kept_never_nan(more)
     k = int(np.argmin(np.concatenate([[bar], more[:, 0]])))  # ties: the unturned start
     if k == 0:
         return _kept_one(engine, items, reps, int(sel[0]), 0, found, poses[0], None)
     row = np.array([k - 1], dtype=np.intp)
     return _kept_one(engine, items, reps, int(sel[0]), k, ans.take(row), turned[k - 1], yaws)
+
+
+def _kept_never_nan(scores: F64) -> F64:
+    """The turned candidates' ``scores`` with a NaN (a critic answering NaN for a finite
+    pose: never seen) made infinite: such a candidate is never kept, by a batch's search or
+    a lone edit's, which asks the critic only of candidates that may win (argmin would keep
+    the first NaN, and the two ways could keep different ones). Finite scores as they are."""
+    return np.where(np.isnan(scores), np.inf, scores)
 
 
 def _kept_one(

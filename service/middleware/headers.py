@@ -68,6 +68,8 @@ def _fresh_id() -> str:
         _random.extend(os.urandom(16 * IDS_AT_ONCE))
     drawn = _random[-16:]
     del _random[-16:]
+    if len(drawn) != 16:  # (another thread emptied it meanwhile: the event loop's alone now)
+        drawn = bytearray(os.urandom(16))
     return drawn.hex()
 
 

@@ -76,8 +76,16 @@ export const fileRow = (text, frame) => frameRow(text, frame, null);
 // The texts kept to read frames from let go of, but those ``inUse``: the texts read
 // whole and their values, the last frame's row, the committed text's layout
 // (editor/excerpt.js). After each change (refreshFrame), and as a file is opened, read
-// again or closed (the texts before of no use).
-function releaseTexts() {
+// again or closed (the texts before of no use). ``all``: every one let go (a file opened
+// or read again: its text is a new string, and one kept as the same, though another
+// string, would be compared with it whole at each look, a 7.5 MB file's at each excerpt).
+function releaseTexts(all = false) {
+  if (all) {
+    motionCache.clear();
+    lastRow = NO_ROW;
+    forgetLayout(null);
+    return;
+  }
   cached(null);
   if (!inUse(lastRow.text)) lastRow = NO_ROW;
   forgetLayout(doc.active ? doc.text : null);
@@ -241,7 +249,7 @@ function showOpened({ info, text, name, original, encoding, jointMap, settings, 
   cancelSolves();
   if (!kept) forgetLastSolve(); // (a file opened; one read again keeps its last solve)
   Object.assign(doc, { active: true, name, original, text, shown: text, info, frame: 0, encoding, jointMap, settings });
-  releaseTexts(); // (the file's before: its texts, its rows)
+  releaseTexts(true); // (the file's before: its texts, its rows)
   // the yes to replacing what was shown is spent: it held that file's texts (two copies of
   // a file no longer open, for as long as this one was)
   if (doc.tried) doc.tried.yes = null;
