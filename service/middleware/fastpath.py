@@ -33,6 +33,7 @@ from service.errors import BodyError, BodyInvalid, PoseError, error_response
 from service.limits import Budget
 from service.middleware.types import REASON, ASGIApp, Message, Receive, Scope, Send
 from service.pose_json import plain
+from service.problems import SolveProblem
 from service.responses import compute_time, solve_payload
 from service.routes.solve import solve_columns, solve_one
 from service.schemas import SolveRequest
@@ -63,6 +64,29 @@ def pose_form(body: bytes) -> SolveRequest | None:
     except (orjson.JSONDecodeError, ValidationError):
         return None
     return req if body.count(b":") == _keys(req) else None
+
+
+def plain_problem(body: bytes) -> tuple[SolveProblem, bool] | None:
+    """A pose-form body's problem and whether it has pins, where the body is plainly valid
+    (read without the models where ``service.pose_json`` takes it, else by the model,
+    :func:`pose_form`); None for anything else, which the route reads and words."""
+    try:
+        form = plain(orjson.loads(body))
+    except orjson.JSONDecodeError:
+        return None
+    try:
+        if form is not None:  # (most bodies: read without the models)
+            if body.count(b":") != form.keys:  # a repeated key: see pose_form
+                return None
+            check_bones(form.pose, _POSE)
+            p = problem_of(form.pose[0], form.targets, form.goals, form.weights, form.pins,
+                           form.options)  # fmt: skip
+            return p, bool(form.pins)
+        if (req := pose_form(body)) is not None:
+            return solve_problem(req, poses([req], ["pose"])[0]), bool(req.pins)
+    except PoseError:
+        pass  # the route words it
+    return None
 
 
 def tokens(body: bytes) -> tuple[int, int]:
@@ -188,26 +212,9 @@ class FastPath:
 
     async def _solve(self, scope: Scope, receive: Receive, send: Send, state: ServiceState,
                      body: bytes) -> bool:  # fmt: skip
-        if len(body) >= INLINE_BYTES:
+        if len(body) >= INLINE_BYTES or (read := plain_problem(body)) is None:
             return False
-        try:
-            form = plain(orjson.loads(body))
-        except orjson.JSONDecodeError:
-            return False
-        try:
-            if form is not None:  # (most bodies: read without the models, service.pose_json)
-                if body.count(b":") != form.keys:  # a repeated key: see pose_form
-                    return False
-                check_bones(form.pose, _POSE)
-                p = problem_of(form.pose[0], form.targets, form.goals, form.weights,
-                               form.pins, form.options)  # fmt: skip
-                pinned = bool(form.pins)
-            elif (req := pose_form(body)) is not None:
-                p, pinned = solve_problem(req, poses([req], ["pose"])[0]), bool(req.pins)
-            else:
-                return False
-        except PoseError:
-            return False  # the route words it
+        p, pinned = read
         engine = state.repository.ready_engine()
         budget = Budget(Request(scope, receive), state.settings.deadline_seconds)
         try:
