@@ -53,14 +53,15 @@ def _keys(req: SolveRequest) -> int:
 JOINTS = SolveRequest.model_fields["pose"].annotation.model_fields  # type: ignore[union-attr]
 
 
-def pose_form(body: bytes) -> SolveRequest | None:
+def pose_form(body: bytes, data: Any = None) -> SolveRequest | None:
     """The body as a pose-form request when it is plainly valid, else None (the route
-    then reads it and words the error). orjson keeps the last of a repeated key where
+    then reads it and words the error); ``data``: the body already decoded by orjson, if
+    it is. orjson keeps the last of a repeated key where
     the routes' strict decoder refuses the body; a repeated key shows
     as fewer keys parsed than colons in the body (a colon outside strings follows a key;
     one inside a string only makes the count differ, which sends the body to the route)."""
     try:  # (decoded apart: pydantic's JSON mode would hand each model's validator a copy)
-        req = SolveRequest.model_validate(orjson.loads(body))
+        req = SolveRequest.model_validate(orjson.loads(body) if data is None else data)
     except (orjson.JSONDecodeError, ValidationError):
         return None
     return req if body.count(b":") == _keys(req) else None
@@ -71,18 +72,18 @@ def plain_problem(body: bytes) -> tuple[SolveProblem, bool] | None:
     (read without the models where ``service.pose_json`` takes it, else by the model,
     :func:`pose_form`); None for anything else, which the route reads and words."""
     try:
-        form = plain(orjson.loads(body))
+        data = orjson.loads(body)
     except orjson.JSONDecodeError:
         return None
     try:
-        if form is not None:  # (most bodies: read without the models)
+        if (form := plain(data)) is not None:  # (most bodies: read without the models)
             if body.count(b":") != form.keys:  # a repeated key: see pose_form
                 return None
             check_bones(form.pose, _POSE)
             p = problem_of(form.pose[0], form.targets, form.goals, form.weights, form.pins,
                            form.options)  # fmt: skip
             return p, bool(form.pins)
-        if (req := pose_form(body)) is not None:
+        if (req := pose_form(body, data)) is not None:  # (the body decoded once)
             return solve_problem(req, poses([req], ["pose"])[0]), bool(req.pins)
     except PoseError:
         pass  # the route words it

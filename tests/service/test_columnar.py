@@ -176,7 +176,7 @@ def test_single_hot_path_equals_the_route(
     fast = [client.post("/v1/solve", json=b) for b in bodies]
     monkeypatch.setattr(fastpath, "plain", lambda data: None)
     models = [client.post("/v1/solve", json=b) for b in bodies]
-    monkeypatch.setattr(fastpath, "pose_form", lambda body: None)
+    monkeypatch.setattr(fastpath, "pose_form", lambda body, data=None: None)
     slow = [client.post("/v1/solve", json=b) for b in bodies]
     for f, m, s in zip(fast, models, slow, strict=True):
         assert f.status_code == m.status_code == s.status_code == 200
