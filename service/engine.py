@@ -242,7 +242,7 @@ class Engine:
             if isinstance(lean, SolveResult):
                 return [lean]
             if lean is not None:  # it searches its turn: from the items it was looked at as
-                return [self._result(problems[0], self._searched(problems[0], *lean), 0)]
+                return [self.solve_searching(problems[0], lean)]
         ans = self.solve_arrays(
             **stacked(problems),
             passes=np.fromiter((self.passes_of(p) for p in problems), np.int64, n),
@@ -276,14 +276,20 @@ class Engine:
         ans = retry.last_steps(self, items, lean_answer(self, items, passes, seq))
         return self._result(p, prefer_fabrik(self, asked, ans, self._solve_items), 0)
 
-    def solve_lone(self, p: SolveProblem) -> SolveResult | None:
-        """``solve([p])[0]``, or None if ``p`` searches its turn (a dozen solves: the
-        routes run those in a worker, the others on the event loop), its targets looked
-        at once for both."""
+    def solve_lone(self, p: SolveProblem) -> SolveResult | Searches:
+        """``solve([p])[0]``, or, if ``p`` searches its turn (a dozen solves: the routes
+        run those in a worker, the others on the event loop), its items as looked at, for
+        :meth:`solve_searching` to solve (its targets looked at once for both, its items
+        made once)."""
         lean = self._lean_single(p)
-        if isinstance(lean, tuple):  # it searches
-            return None
-        return lean if isinstance(lean, SolveResult) else self.solve([p])[0]
+        if lean is None:  # the general path
+            return self.solve([p])[0]
+        return lean
+
+    def solve_searching(self, p: SolveProblem, searches: Searches) -> SolveResult:
+        """``solve([p])[0]`` of an edit that searches its turn, from its items as
+        :meth:`solve_lone` (or :meth:`solve`) looked at them."""
+        return self._result(p, self._searched(p, *searches), 0)
 
     def _searched(
         self, p: SolveProblem, asked: _Items, items: _Items, sel: npt.NDArray[np.intp]

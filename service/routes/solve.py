@@ -114,7 +114,8 @@ async def solve_one(p: SolveProblem, pinned: bool, engine: Engine, budget: Budge
     compute token within the deadline (FABRIK iterations, pins, exact reach, a turn search
     or extra passes can take milliseconds: the loop stays free). Whether an edit searches
     its turn is known once its targets are looked at (``serving.turn_gate``):
-    ``Engine.solve_lone`` looks, and solves it unless it searches.
+    ``Engine.solve_lone`` looks, and solves it unless it searches; a search is then solved
+    in a worker from the items it was looked at as (``Engine.solve_searching``).
 
     The turn search ran inline too, once (in a worker it shares the GIL with the loop: a
     lone 5-target edit took 6.2 against 5.0 ms over HTTP), but a flood of them starved
@@ -125,9 +126,13 @@ async def solve_one(p: SolveProblem, pinned: bool, engine: Engine, budget: Budge
     if inline(p, pinned, engine):
         budget.due("the solve")
         with budget.timing():
-            result = engine.solve_lone(p)
-        if result is not None:
-            return result
+            lone = engine.solve_lone(p)
+        if isinstance(lone, SolveResult):
+            return lone
+        (result,) = await budget.run(
+            lambda ps: [engine.solve_searching(ps[0], lone)], [p], Pricing.of(engine)
+        )
+        return result
     (result,) = await budget.run(engine.solve, [p], Pricing.of(engine))
     return result
 

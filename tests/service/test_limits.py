@@ -138,10 +138,11 @@ def test_soft_unpinned_edits_run_on_the_loop_and_the_rest_in_a_worker(
     docs/limits.md); pins, exact reach, FABRIK, extra passes and a turn search run in a
     worker thread, so the loop stays free of their work (``service.routes.solve.inline``)."""
     from service.engine import Engine
+    from service.problems import SolveResult
     from tests.service.test_api import solve_body
 
     where: list[int] = []  # the thread of each solve
-    solve, solve_lone = Engine.solve, Engine.solve_lone
+    solve, solve_lone, searching = Engine.solve, Engine.solve_lone, Engine.solve_searching
 
     def spy(self: Engine, problems: Any) -> Any:
         where.append(threading.get_ident())
@@ -150,12 +151,25 @@ def test_soft_unpinned_edits_run_on_the_loop_and_the_rest_in_a_worker(
     def spy_lone(self: Engine, p: Any) -> Any:  # a solve where it answers (not a search)
         n = len(where)
         result = solve_lone(self, p)
-        if result is not None and len(where) == n:
+        if isinstance(result, SolveResult) and len(where) == n:
             where.append(threading.get_ident())
         return result
 
+    def spy_searching(self: Engine, p: Any, searches: Any) -> Any:  # a search's solve
+        where.append(threading.get_ident())
+        return searching(self, p, searches)
+
     monkeypatch.setattr(Engine, "solve", spy)
     monkeypatch.setattr(Engine, "solve_lone", spy_lone)
+    monkeypatch.setattr(Engine, "solve_searching", spy_searching)
+    looks: list[int] = []  # the items each solve makes of its problem
+    items_of = Engine._items_of
+
+    def spy_items(self: Engine, p: Any) -> Any:
+        looks.append(1)
+        return items_of(self, p)
+
+    monkeypatch.setattr(Engine, "_items_of", spy_items)
     five = ["head", "left_wrist", "right_wrist", "left_ankle", "right_ankle"]
     wrists = solve_body(real_poses, 0, ["left_wrist", "right_wrist"])
     pinned = {**wrists, "pins": ["left_ankle"]}
@@ -184,10 +198,13 @@ def test_soft_unpinned_edits_run_on_the_loop_and_the_rest_in_a_worker(
         threads[kind] = []
         for body in group:
             where.clear()
+            looks.clear()
             r = client.post("/v1/solve", json=body)
             assert r.status_code == 200, r.text
             assert len(where) == 1
             threads[kind].append(where[0])
+            if body is turned:  # its items made once, for the look and the search alike
+                assert r.json()["solvers"] and len(looks) == 1
     loop = threads["light"][0]
     assert set(threads["light"]) == {loop}
     assert loop not in threads["worker"]
