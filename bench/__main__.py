@@ -165,6 +165,7 @@ def run(
                 batch_size=32 if quick else 1024,
                 batches=2 if quick else 12,
                 warmup=10 if quick else 200,
+                paced=20 if quick else 400,
                 log=out / "server.log" if quick else None,
             )
         except RuntimeError as exc:  # report what was measured, and why HTTP was not

@@ -265,15 +265,20 @@ def _request_bytes(url: str, body: bytes) -> tuple[str, int, bytes]:
     return host, port, head.encode() + body
 
 
-def _load_one(url: str, payloads: Sequence[bytes], max_requests: int, max_seconds: float) -> Json:
+def _load_one(
+    url: str, payloads: Sequence[bytes], max_requests: int, max_seconds: float, gap: float = 0.0
+) -> Json:
     """One kept-alive connection on a blocking socket (TCP_NODELAY), each request sent
-    when the previous answer is in; also the server's own ``X-Total-Time`` (from the
-    request's arrival in the app to its answer's headers)."""
+    when the previous answer is in and (``gap`` s) no sooner than ``gap`` after the previous
+    one was sent; also the server's own ``X-Total-Time`` (from the request's arrival in the
+    app to its answer's headers) and ``X-Compute-Time`` (the engine's)."""
     requests = [_request_bytes(url, body) for body in payloads]
     host, port = requests[0][0], requests[0][1]
     latencies: list[float] = []
     server: list[float] = []
+    compute: list[float] = []
     errors = 0
+    sent = -gap
     sock = socket.create_connection((host, port), timeout=60.0)
     sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
     buf = b""
@@ -282,7 +287,9 @@ def _load_one(url: str, payloads: Sequence[bytes], max_requests: int, max_second
     try:
         while len(latencies) < max_requests and time.perf_counter() < t_end:
             request = requests[len(latencies) % len(requests)][2]
-            t0 = time.perf_counter()
+            while gap and time.perf_counter() < sent + gap:  # (the pace: sleep, not spin)
+                time.sleep(max(0.0, min(sent + gap - time.perf_counter(), 1e-3)))
+            t0 = sent = time.perf_counter()
             sock.sendall(request)
             while b"\r\n\r\n" not in buf:
                 chunk = sock.recv(1 << 16)
@@ -303,14 +310,17 @@ def _load_one(url: str, payloads: Sequence[bytes], max_requests: int, max_second
             buf = data[length:]
             latencies.append(time.perf_counter() - t0)
             errors += status != 200
-            total = fields.get(b"x-total-time", b"").removesuffix(b"ms")
-            if total:
-                server.append(float(total))
+            for name, got in ((b"x-total-time", server), (b"x-compute-time", compute)):
+                value = fields.get(name, b"").removesuffix(b"ms")
+                if value:
+                    got.append(float(value))
     finally:
         sock.close()
     return {
         **_summary(1, latencies, errors, time.perf_counter() - t_start),
         "server_p50_ms": float(np.percentile(server, 50)) if server else None,
+        "compute_p50_ms": float(np.percentile(compute, 50)) if compute else None,
+        "gap_ms": gap * 1e3,
         "client": "blocking socket",
     }
 
@@ -343,6 +353,8 @@ def _batch_row(b: Json, batch_size: int, request_bytes: int) -> Json:
 #: Issue 14's HTTP goals (loopback, one worker).
 SOLVE_P50_MS = 0.5
 BATCH_POSES_PER_S = 30_000.0
+#: A drag's pace: an editor sends its next edit a display frame (60 Hz) after the last.
+DRAG_GAP_S = 1.0 / 60.0
 
 
 def goal_rows(http: Json | None) -> list[tuple[str, str, str, bool | None]]:
@@ -353,8 +365,13 @@ def goal_rows(http: Json | None) -> list[tuple[str, str, str, bool | None]]:
     one = next((r for r in http.get("solve", []) if r["concurrency"] == 1), None)
     p1, col1 = http.get("solve_passes1"), http.get("batch_columnar_passes1")
     p_m, col_m = http.get("solve_no_mirror"), http.get("batch_columnar_no_mirror")
+    paced = http.get("solve_paced")
     at1 = f"; {p1['p50_ms']:.3f} ms at passes=1" if p1 else ""
     at1 += f"; {p_m['p50_ms']:.3f} ms with mirror: false" if p_m else ""
+    at1 += (
+        f"; {paced['p50_ms']:.3f} ms at a drag's pace, a request every "
+        f"{paced['gap_ms']:.1f} ms" if paced else ""
+    )  # fmt: skip
     rows: list[tuple[str, str, str, bool | None]] = [
         (
             "HTTP /v1/solve p50 at concurrency 1 (loopback, the models' passes)",
@@ -391,12 +408,16 @@ def run_http(
     batches: int = 12,
     batch_seconds: float = 30.0,
     warmup: int = 200,
+    paced: int = 400,
     log: Path | None = None,
 ) -> Json:
     """The whole HTTP measurement; returns a JSON-able dict. /v1/solve at concurrency 1
     and the columnar batch are measured three times: with the models' defaults, with
     ``options.passes = 1`` (``solve_passes1``, ``batch_columnar_passes1``) and with
-    ``options.mirror = false`` (``solve_no_mirror``, ``batch_columnar_no_mirror``)."""
+    ``options.mirror = false`` (``solve_no_mirror``, ``batch_columnar_no_mirror``).
+    ``solve_paced``: ``paced`` requests at concurrency 1 sent at a drag's pace
+    (:data:`DRAG_GAP_S` apart), where the server idles between requests as it does under
+    an editor, and its caches go cold (docs/speed.md)."""
     items = bodies(edits)
     single = [json.dumps(b).encode() for b in items]
     single1 = [json.dumps(b).encode() for b in bodies(edits, passes=1)]
@@ -433,6 +454,9 @@ def run_http(
             out["solve"].append(load(f"{server.url}/v1/solve", single, c, requests, seconds))
         out["solve_passes1"] = load(f"{server.url}/v1/solve", single1, 1, requests, seconds)
         out["solve_no_mirror"] = load(f"{server.url}/v1/solve", single_m, 1, requests, seconds)
+        out["solve_paced"] = _load_one(
+            f"{server.url}/v1/solve", single, paced, paced * DRAG_GAP_S + seconds, DRAG_GAP_S
+        )
         b = load(f"{server.url}/v1/solve/batch", batch_payloads, 1, batches, batch_seconds)
         out["batch"] = _batch_row(b, batch_size, len(batch_payloads[0]))
         col = load(f"{server.url}/v1/solve/batch", columns, 1, 4 * batches, batch_seconds)

@@ -475,6 +475,8 @@ def _speed_sections(results: Json, plots: dict[str, str]) -> list[str]:
         ]
         b = http.get("batch") or {}
         rss = http.get("rss_kb", {})
+        one = next((r for r in http["solve"] if r["concurrency"] == 1), None)
+        paced = http.get("solve_paced")
         md += [
             "### HTTP (uvicorn on loopback)",
             "",
@@ -503,6 +505,18 @@ def _speed_sections(results: Json, plots: dict[str, str]) -> list[str]:
             ),
             "",
         ]
+        if one and paced:
+            md += [
+                f"At concurrency 1 the server's own time (`X-Total-Time`) p50 was "
+                f"{fmt(one['server_p50_ms'], 3)} ms, the engine's (`X-Compute-Time`) "
+                f"{fmt(one['compute_p50_ms'], 3)} ms. The same requests sent at a drag's pace, "
+                f"one every {paced['gap_ms']:.1f} ms as an editor sends them ("
+                f"{paced['requests']} requests): p50 **{fmt(paced['p50_ms'], 3)} ms** (p99 "
+                f"{fmt(paced['p99_ms'], 3)}), server {fmt(paced['server_p50_ms'], 3)} ms, engine "
+                f"{fmt(paced['compute_p50_ms'], 3)} ms: between requests the server idles "
+                "and its caches go cold (docs/speed.md).",
+                "",
+            ]
         if b:
             md += [
                 f"/v1/solve/batch: {b['batches']} batches of {b['batch_size']} items at "

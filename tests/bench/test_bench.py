@@ -162,6 +162,10 @@ def test_quick_bench_writes_a_sane_report(
     # the default passes and passes=1 side by side (issue 14's goals judge the default)
     for row in (http["solve_passes1"], http["batch_columnar_passes1"]):
         assert row["errors"] == 0 and row["p50_ms"] > 0
+    # the same requests at a drag's pace: each sent a display frame after the last
+    paced = http["solve_paced"]
+    assert paced["errors"] == 0 and paced["requests"] == 20 and paced["compute_p50_ms"] > 0
+    assert paced["seconds"] >= 19 / 60 and "at a drag's pace" in report
     i14 = speed["issue14"]
     assert all(r["neural_passes1"]["p50_ms"] > 0 for r in i14["latency"])
     # the shipped mirror graphs beside the numpy way around the fused graphs, 1-5 targets
