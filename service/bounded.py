@@ -16,8 +16,9 @@ keeps pydantic's own errors, in its own order, only where they can be shown:
   count becomes "at least" (the partial count the columnar form gives too).
 
 So a problem names the same first errors, worded as before, and the same total (up to
-``COUNT_LIMIT``); :func:`errors_of` reads them. Without a budget in the context (the
-fast path's own look at a body) a model validates as plain pydantic.
+``COUNT_LIMIT``); :func:`errors_of` reads them. The hot path's own look at a body, which
+only asks whether it is valid, counts up to one error (:func:`look`); without a budget in
+the context a model validates as plain pydantic.
 """
 
 from __future__ import annotations
@@ -62,6 +63,17 @@ def context(settings: Any = None, limit: int | None = None) -> dict[str, Any]:
     errors (default ``COUNT_LIMIT``), and the service's ``settings`` (the batch reads
     them)."""
     return {"settings": settings, BUDGET: ErrorBudget(COUNT_LIMIT if limit is None else limit)}
+
+
+def look() -> dict[str, Any]:
+    """A validation context for a look that only asks whether a body is valid (the hot
+    path's, ``service.pose_json``, ``fastpath.pose_form``): its errors counted up to one,
+    so that the models after a failing one are not entered and an object's unknown keys
+    past the first ``MAX_ERRORS`` are not validated. A valid body validates as without it.
+    (Without it such a look validated every error of a refused body, twice before the
+    route's own bounded read: a pose-form body of 64 kB with 8,567 unknown option keys
+    took the event loop 12.4 against 2.6 ms with the hot path off: an audit, 2026-12-06.)"""
+    return context(limit=1)
 
 
 def _stand_in() -> PydanticCustomError:

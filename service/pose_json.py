@@ -25,6 +25,7 @@ import numpy as np
 from pydantic import ValidationError
 
 from core.skeleton import JOINT_INDEX, JOINT_NAMES
+from service.bounded import look
 from service.schemas import MAX_COORDINATE, MAX_WEIGHT, SolveOptions
 
 _TOP = frozenset({"pose", "targets", "pins", "options"})
@@ -37,6 +38,7 @@ _THREE = frozenset({3})
 #: ``SolveOptions`` validated, by the options' keys, value types and values (bounded).
 _OPTIONS: dict[tuple[tuple[str, type, Any], ...], SolveOptions] = {}
 _OPTIONS_HELD = 64
+_OPTION_KEYS = len(SolveOptions.model_fields)  # (no aliases: each field one key)
 _DEFAULT = SolveOptions()  # (never assigned to: the problem copies its fields)
 
 
@@ -68,7 +70,7 @@ def _rows(rows: list[Any]) -> Any:
 
 
 def _options(data: Any) -> SolveOptions | None:
-    if type(data) is not dict:
+    if type(data) is not dict or len(data) > _OPTION_KEYS:  # (more: unknown keys)
         return None
     try:
         # (a float by its bits: -0.0 == 0.0 and hash alike, and a floor of -0.0 is kept as
@@ -80,7 +82,7 @@ def _options(data: Any) -> SolveOptions | None:
     if known is not None:
         return known
     try:
-        options = SolveOptions.model_validate(data)
+        options = SolveOptions.model_validate(data, context=look())
     except ValidationError:
         return None
     if key is not None:

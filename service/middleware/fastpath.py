@@ -27,6 +27,7 @@ from starlette.routing import BaseRoute
 
 from service import columnar
 from service.body import DECODED, INLINE_BYTES, decode, in_worker
+from service.bounded import look
 from service.decoded import COUNTED
 from service.deps import ServiceState
 from service.errors import BodyError, BodyInvalid, PoseError, error_response
@@ -61,7 +62,9 @@ def pose_form(body: bytes, data: Any = None) -> SolveRequest | None:
     as fewer keys parsed than colons in the body (a colon outside strings follows a key;
     one inside a string only makes the count differ, which sends the body to the route)."""
     try:  # (decoded apart: pydantic's JSON mode would hand each model's validator a copy)
-        req = SolveRequest.model_validate(orjson.loads(body) if data is None else data)
+        req = SolveRequest.model_validate(
+            orjson.loads(body) if data is None else data, context=look()
+        )
     except (orjson.JSONDecodeError, ValidationError):
         return None
     return req if body.count(b":") == _keys(req) else None

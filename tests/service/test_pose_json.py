@@ -195,3 +195,36 @@ def test_options_read_before_do_not_stand_for_others_equal_to_them() -> None:
 def test_a_repeated_key_is_left_to_the_route() -> None:
     body = json.dumps(_base()).encode().replace(b'"options": {', b'"options": {"reach": "exact", ')
     assert by_plain(body) is None and by_models(body) is None
+
+
+@pytest.mark.parametrize("where", ["options", "pose", "target"])
+def test_a_refused_bodys_look_stops_at_its_first_errors(
+    where: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The hot path only asks whether a body is valid, so its look at one the models
+    refuse builds about as many of its errors as a problem shows (``service.bounded.look``):
+    a body of 8,000 unknown keys was validated whole, twice, before the route's own read
+    (an audit: 12.4 against 2.6 ms of the event loop with the hot path off)."""
+    from pydantic import ValidationError
+
+    from service.errors import MAX_ERRORS
+    from service.schemas import SolveOptions, SolveRequest
+
+    body = _base()
+    extra = {f"k{i}": i for i in range(8000)}
+    {"options": body["options"], "pose": body["pose"], "target": body["targets"][0]}[where].update(
+        extra
+    )
+    built: list[int] = []
+    for model in (SolveOptions, SolveRequest):
+
+        def spy(data: Any, *args: Any, _check: Any = model.model_validate, **kw: Any) -> Any:
+            try:
+                return _check(data, *args, **kw)
+            except ValidationError as exc:
+                built.append(exc.error_count())
+                raise
+
+        monkeypatch.setattr(model, "model_validate", spy)
+    assert plain_problem(orjson.dumps(body)) is None
+    assert built and max(built) < 2 * MAX_ERRORS, built  # (8,000 and more before)
