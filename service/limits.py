@@ -267,12 +267,23 @@ class Budget:
 
     def late(self, stage: str, **counts: int) -> DeadlineExceeded:
         """The 504 of a request whose deadline passed before ``stage`` began (``counts``:
-        a batch's ``done`` and ``total``, members as an overrun's)."""
-        return DeadlineExceeded(
-            f"the request needed more than the {self.deadline_seconds:g} s deadline "
-            f"(before {stage}); retry, or send a smaller request",
-            **counts,
-        )
+        a batch's ``done`` and ``total``, in the detail and as members, as an overrun's).
+        ``Retry-After`` as :meth:`overrun` gives it: not where the request's own compute
+        took half its deadline or more (a batch of 600 character items, each solved in
+        its own stage, was told to retry after 1 s at every try, without its counts: a
+        user's audit, 2026-12-06)."""
+        head = f"the request needed more than the {self.deadline_seconds:g} s deadline"
+        own = self.compute >= self.deadline_seconds / 2
+        said = [
+            f"before {stage}",
+            f"{counts['done']} of {counts['total']} items done" if counts else "",
+            f"{self.compute:.2f} s of its own compute" if own else "",
+        ]
+        advice = "send a smaller request" if own else "retry, or send a smaller request"
+        exc = DeadlineExceeded(f"{head} ({'; '.join(w for w in said if w)}); {advice}", **counts)
+        if own:
+            exc.retry_after = None
+        return exc
 
     def due(self, stage: str) -> None:
         """Raise :meth:`late` when the deadline has passed: one clock read and a float

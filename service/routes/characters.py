@@ -40,27 +40,30 @@ router = APIRouter(route_class=BodyRoute, tags=["characters"])
 R = TypeVar("R")
 
 
-async def step(budget: Budget, stage: str, work: Callable[[], R]) -> R:
+async def step(budget: Budget, stage: str, work: Callable[[], R], **counts: int) -> R:
     """One stage of the work, as the solve routes run theirs: first the client (499), then
     ``work`` in a worker thread on a compute token taken within the deadline (504 naming
-    ``stage``, :meth:`Budget.token`)."""
-    await budget.client_gone()
+    ``stage``, :meth:`Budget.token`; ``counts``: a batch's ``done`` and ``total`` items)."""
+    await budget.client_gone(**counts)
     with budget.timing():
-        return await budget.in_thread(work, stage)
+        return await budget.in_thread(work, stage, **counts)
 
 
 Prepared = tuple[Character, SolveProblem]
 
 
-async def read_character(budget: Budget, req: CharacterSolveRequest, where: str = "") -> Prepared:
+async def read_character(
+    budget: Budget, req: CharacterSolveRequest, where: str = "", **counts: int
+) -> Prepared:
     """Stage one of a character solve: the skeleton, its joint map and the canonical problem
-    (every 422 of the request found here, before any solving); errors name ``where``."""
+    (every 422 of the request found here, before any solving); errors name ``where``
+    (``counts``: a batch's, for its 504)."""
 
     def read() -> Prepared:
         ch = character_from_request(req, where)
         return ch, character_problem(ch, req, where)
 
-    return await step(budget, f"reading {where or 'the skeleton'}", read)
+    return await step(budget, f"reading {where or 'the skeleton'}", read, **counts)
 
 
 async def solve_read(
@@ -70,9 +73,11 @@ async def solve_read(
     req: CharacterSolveRequest,
     prepared: Prepared,
     where: str = "",
+    **counts: int,
 ) -> dict[str, object]:
     """Stage two: solve alone, retarget, answer (the same for a single request and a batch
-    item, so both give the same bits); a 504 names ``where`` (a batch's item)."""
+    item, so both give the same bits); a 504 names ``where`` (a batch's item) and
+    ``counts`` (the batch's ``done`` and ``total`` items)."""
     ch, p = prepared
 
     def work() -> dict[str, object]:
@@ -80,7 +85,7 @@ async def solve_read(
         state.metrics.solved(edit.problem.method, edit.result.solvers)
         return character_answer(ch, edit, req.rotations)
 
-    return await step(budget, f"solving {where}" if where else "the solve", work)
+    return await step(budget, f"solving {where}" if where else "the solve", work, **counts)
 
 
 async def answer_character(

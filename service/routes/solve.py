@@ -183,17 +183,23 @@ async def solve_batch(body: BatchBody, engine: ReadyEngine, budget: RequestBudge
         return out
 
     problems = await off_loop(budget, prepare, len(items), "preparing the items")
-    prepared = {i: await read_character(budget, f, f"items[{i}]") for i, f in chars.items()}
+    total = len(forms)  # (a 504's counts: the pose items solve first, then the characters)
+    prepared = {
+        i: await read_character(budget, f, f"items[{i}]", done=0, total=total)
+        for i, f in chars.items()
+    }
     # a mixed batch's pose items run first (a 504 then counts them), its characters after
     noun = f"pose items (then {len(chars)} character items)" if chars else "items"
     results = await budget.run(engine.solve, problems, Pricing.of(engine), noun)
     state.metrics.batch.observe(len(forms))
     for p, r in zip(problems, results, strict=True):
         state.metrics.solved(p.method, r.solvers)
-    solved = {
-        i: await solve_read(budget, engine, state, chars[i], prepared[i], f"items[{i}]")
-        for i in chars
-    }
+    solved = {}
+    for k, i in enumerate(chars):  # (each item's 504 counts what was done before it)
+        at, done = f"items[{i}]", len(problems) + k
+        solved[i] = await solve_read(
+            budget, engine, state, chars[i], prepared[i], at, done=done, total=total
+        )
 
     def answer() -> Response:
         pairs = iter(zip(problems, results, strict=True))

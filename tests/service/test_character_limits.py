@@ -114,3 +114,28 @@ def test_a_mixed_batch_past_its_deadline_says_what_it_counted(models_dir: Path) 
         resp = c.post("/v1/solve/batch", json={"items": items})
         body = assert_problem(resp, 504, "0.5 s deadline")
         assert "of 600 pose items (then 2 character items) done" in body["detail"], body
+
+
+def test_a_character_batch_its_own_work_took_past_the_deadline_counts_and_says_no_retry(
+    models_dir: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A batch of character items, each solved in a stage of its own, its own work past the
+    deadline: the 504 counts the items done, in its detail and as members, and carries no
+    ``Retry-After`` (it said "retry" with ``Retry-After: 1`` and no counts, so a client that
+    obeys it sent the same 600 items again every second: a user's audit, 2026-12-06).
+    Each solve here takes 40 ms more than its own."""
+
+    def slow(*args: Any) -> Any:
+        time.sleep(0.04)
+        return characters.solve_prepared(*args)
+
+    monkeypatch.setattr(routes, "solve_prepared", slow)
+    char = example("/v1/character/solve")
+    char["character"] = char.pop("skeleton")  # (the batch's name of the alias route's key)
+    with make_client(models_dir, deadline_seconds=0.4) as c:
+        resp = c.post("/v1/solve/batch", json={"items": [char] * 30})
+        body = assert_problem(resp, 504, "0.4 s deadline (before solving items[")
+        assert "retry-after" not in resp.headers
+        assert 0 < body["done"] < body["total"] == 30, body
+        assert f"{body['done']} of 30 items done" in body["detail"]
+        assert "s of its own compute); send a smaller request" in body["detail"]
