@@ -200,9 +200,10 @@ def test_tokens_count_as_bytes_count_does(body: bytes, real_poses: PosePairs) ->
     assert fastpath.tokens(body) == (
         body.count(b":"),
         body.count(b"true") + body.count(b"false"),
+        body.count(b'"'),
     )
     real = json.dumps(columns(real_poses, 50, preserve_bone_lengths=True)).encode()
-    assert fastpath.tokens(real) == (real.count(b":"), 1)
+    assert fastpath.tokens(real) == (real.count(b":"), 1, real.count(b'"'))
 
 
 def test_hot_path_leaves_bad_bodies_to_the_route(client: Any, real_poses: PosePairs) -> None:
@@ -377,3 +378,45 @@ def test_a_columnar_batch_is_told_every_rows_repeats(
             "message": "duplicate target for joint 'left_wrist' (every item)",
         }
     ]
+
+
+def test_a_string_among_the_numbers_costs_no_more_than_its_bytes(
+    client: Any, real_poses: PosePairs
+) -> None:
+    """A string where a number goes is named as any bad number is; its rows are never
+    handed to numpy to guess a type for (it built a text array of every row as wide as
+    the string: 4,000 characters in a 653 kB body took a worker to 1.3 GiB, 200,000 were a
+    500; an audit, 2026-12-06). The read of such a body stays within a few MB."""
+    import tracemalloc
+
+    from service.middleware.types import Scope
+
+    body = columns(real_poses, 16)
+    body["poses"][3][7] = "x" * 10_000  # (numpy's guess: 16 x 63 x 40 kB, 40 MB)
+    raw = json.dumps(body).encode()
+    scope: Scope = {}
+    tracemalloc.start()
+    try:
+        with pytest.raises(fastpath.BodyInvalid):
+            fastpath.read_columns(raw, 1024, scope)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 4 * len(raw) + (1 << 20), peak
+    r = client.post("/v1/solve/batch", content=raw, headers={"content-type": "application/json"})
+    assert r.status_code == 422
+    assert r.json()["detail"] == "poses[3][7]: Input should be a valid number"
+
+
+def test_an_integer_past_64_bits_is_named_as_the_routes_name_it(
+    client: Any, real_poses: PosePairs
+) -> None:
+    """orjson reads an integer past 64 bits as a float; a body it refuses is read again as
+    the routes read it, so its problem is theirs (the hot path said a plainly written
+    integer had "a fraction or an exponent")."""
+    body = columns(real_poses, 2)
+    body.setdefault("options", {})["passes"] = "__BIG__"
+    text = json.dumps(body).replace('"__BIG__"', "12345678901234567890123")
+    r = client.post("/v1/solve/batch", content=text, headers={"content-type": "application/json"})
+    assert r.status_code == 422, r.text
+    assert "options.passes: Input should be less than or equal to 4" in r.json()["detail"]

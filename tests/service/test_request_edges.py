@@ -61,10 +61,15 @@ def test_an_integer_beyond_any_float_is_a_422_in_every_form(client: Any) -> None
 
 
 @pytest.mark.parametrize("field", ["joints", "pins"])
-def test_a_joint_name_nested_a_thousand_deep_is_named_not_a_500(client: Any, field: str) -> None:
+@pytest.mark.parametrize("depth", [800, 1000])
+def test_a_joint_name_nested_a_thousand_deep_is_named_not_a_500(
+    client: Any, field: str, depth: int
+) -> None:
     """orjson reads lists up to 1,024 deep; quoting one in the message recursed past
-    Python's stack (a 500 before). Now the value is shown three levels deep."""
-    deep = "[" * 1000 + "1.0" + "]" * 1000
+    Python's stack (a 500 before). Now the value is shown three levels deep; past the
+    depth the routes' strict decoder reads (~990), the body is their 400, as on the route
+    (the hot path answered its own 422: an audit, 2026-12-06)."""
+    deep = "[" * depth + "1.0" + "]" * depth
     cols = _columns(1)
     cols["targets"]["joints"] = ["left_wrist"]
     cols["targets"]["positions"] = [cols["targets"]["positions"][0][:3]]
@@ -74,7 +79,10 @@ def test_a_joint_name_nested_a_thousand_deep_is_named_not_a_500(client: Any, fie
         cols["targets"]["joints"] = ["__DEEP__"]
     text = json.dumps(cols).replace('"__DEEP__"', deep)
     r = _raw(client, "/v1/solve/batch", text)
-    assert_problem(r, 422, "[[[[…]]]]")
+    if depth < 900:
+        assert_problem(r, 422, "[[[[…]]]]")
+    else:
+        assert_problem(r, 400, "JSON nested too deeply")
     for name in EVERY_ANSWER[:2]:
         assert name in r.headers
 
