@@ -99,6 +99,48 @@ def character_from_bvh(bvh: BVH, req: BVHSolveRequest | BVHInspectRequest) -> Ch
         raise invalid_request(exc) from None
 
 
+#: A figure whose lowest joint stands further than this from the floor (m) in the frame
+#: read, where the other reading of its root channels stands it within
+#: :data:`ON_FLOOR_M`, gets a ``root_warning``.
+OFF_FLOOR_M, ON_FLOOR_M = 0.3, 0.1
+
+
+def _lowest(ch: Character, pose: Any) -> float:
+    """The height (m, +Y up) of ``pose``'s lowest joint over the floor the service knows."""
+    _, g_pos = forward_kinematics(ch.skel, pose)
+    return float(ch.to_service(g_pos)[:, 1].min())
+
+
+def root_warning(bvh: BVH, ch: Character, frame: int, root_position: str) -> str | None:
+    """The answers' ``root_warning``: where the frame's figure, its root channels read as
+    ``root_position`` says, stands off the floor by more than :data:`OFF_FLOOR_M` and the
+    other reading stands it on the floor (within :data:`ON_FLOOR_M`): that other reading
+    named, the answer solved as asked; else None. (ReActIdle's files, written as
+    displacements from the root's OFFSET and read as positions, stand 0.65 m under the
+    floor, and a wrist dragged 1.2 m up was left 7.5 cm short without a word: a user's
+    audit, 2026-12-06.)"""
+    add = root_position == "add"
+    asked = _lowest(ch, ch.pose)
+    if abs(asked) <= OFF_FLOOR_M:
+        return None
+    try:
+        other = _lowest(ch, pose_of(bvh, frame, root_add=not add))
+    except (CharacterError, BVHError, ValueError):
+        return None
+    if abs(other) > ON_FLOOR_M:
+        return None
+    side = "under" if asked < 0 else "above"
+    name, reading = (
+        ("replace", "the root channels as its position") if add
+        else ("add", "the root channels as a displacement from its OFFSET")
+    )  # fmt: skip
+    return (
+        f'root_position: read as "{root_position}", frame {frame}\'s lowest joint stands '
+        f'{abs(asked):.2f} m {side} the floor; read as "{name}" ({reading}) it stands '
+        f"on it ({other:+.2f} m): the file may be written so; solved as asked"
+    )
+
+
 def bvh_answer(bvh: BVH, ch: Character, req: BVHSolveRequest, edit: Edit) -> dict[str, Any]:
     """The file with the frame's changed values written in, measured as written (rounded, read
     back); one bringing no target nearer (:func:`service.characters.moves_a_target`) is the
@@ -115,6 +157,7 @@ def bvh_answer(bvh: BVH, ch: Character, req: BVHSolveRequest, edit: Edit) -> dic
         "changed_joints": [ch.skel.names[j] for j in sorted(_written(bvh, columns))],
         **edit_report(ch, edit, points),
         "cut_short": cut_short(bvh),
+        "root_warning": root_warning(bvh, ch, req.frame, req.root_position),
     }
 
 
@@ -127,7 +170,9 @@ def _written(bvh: BVH, columns: list[int]) -> set[int]:
     }  # fmt: skip
 
 
-def bvh_inspect(bvh: BVH, ch: Character, frame: int) -> dict[str, Any]:
+def bvh_inspect(
+    bvh: BVH, ch: Character, frame: int, root_position: str = "replace"
+) -> dict[str, Any]:
     """What an editor needs to draw and pose the file: its joints and channels, where the 21
     canonical joints sit on them, units and axes, and one frame's world positions."""
     g_rot, g_pos = forward_kinematics(ch.skel, ch.pose)
@@ -161,4 +206,5 @@ def bvh_inspect(bvh: BVH, ch: Character, frame: int) -> dict[str, Any]:
         "points": dict(zip(JOINT_NAMES, points.tolist(), strict=True)),
         "cut_short": cut_short(bvh),
         "units_warning": ch.units_warning,
+        "root_warning": root_warning(bvh, ch, frame, root_position),
     }

@@ -300,6 +300,16 @@ UNITS_WARNING = Field(
 )  # fmt: skip
 
 
+#: the BVH answers' `root_warning`
+ROOT_WARNING = Field(
+    default=None, description="Where the frame's figure, its root channels read as "
+    "`root_position` says, stands more than 0.3 m off the floor (y = 0) and the other "
+    "reading stands it on the floor (within 0.1 m): that other reading named (some "
+    "exporters write the root's position channels as a displacement from its OFFSET: "
+    "`\"add\"`); the answer is solved as asked. Null otherwise.",
+)  # fmt: skip
+
+
 class BVHInspectResponse(BaseModel):
     joints: list[BVHJointInfo] = Field(description="File order (parents first).")
     anchors: dict[str, BVHAnchor] = Field(description="canonical joint -> its point.")
@@ -317,6 +327,7 @@ class BVHInspectResponse(BaseModel):
     points: dict[str, list[float]] = Field(description="The 21 canonical points (units).")
     cut_short: BVHCutShort | None = CUT_SHORT
     units_warning: str | None = UNITS_WARNING
+    root_warning: str | None = ROOT_WARNING
 
 
 class _Answer(BaseModel):
@@ -352,6 +363,7 @@ class BVHSolveResponse(_Answer):
     frame: int
     changed_joints: list[str] = Field(description="Joints with a value rewritten (none: as sent).")
     cut_short: BVHCutShort | None = CUT_SHORT
+    root_warning: str | None = ROOT_WARNING
 
 
 # --------------------------------------------------------------------------------------

@@ -135,6 +135,6 @@ async def bvh_inspect_route(req: BVHInspectRequest, budget: RequestBudget) -> Re
 
     def work() -> dict[str, object]:
         bvh = read_request_bvh(req.bvh, req.frame)
-        return bvh_inspect(bvh, character_from_bvh(bvh, req), req.frame)
+        return bvh_inspect(bvh, character_from_bvh(bvh, req), req.frame, req.root_position)
 
     return json_response(await step(budget, "reading the file", work), budget.compute)

@@ -486,11 +486,18 @@ def test_a_root_whose_channels_are_a_displacement_is_read_and_written_so(
     np.testing.assert_allclose(lift, np.broadcast_to(root["offset"], lift.shape), atol=1e-12)
     assert seen["replace"]["points"]["left_ankle"][1] < -0.5
     assert abs(seen["add"]["points"]["left_ankle"][1]) < 0.15
+    # read the BVH way, the answers say which reading stands the figure on the floor
+    said = seen["replace"]["root_warning"]
+    assert said and 'read as "add"' in said and "m under the floor" in said, said
+    assert seen["add"]["root_warning"] is None
     goal = (np.asarray(seen["add"]["points"]["left_wrist"]) + np.asarray([0.1, 0.2, 0.0])).tolist()
     body = {"bvh": text, "frame": frame, "root_position": "add",
             "targets": [{"joint": "left_wrist", "position": goal}]}  # fmt: skip
     r = client.post("/v1/bvh/solve", json=body)
     assert r.status_code == 200 and r.json()["targets"][0]["reached"], r.text
+    assert r.json()["root_warning"] is None
+    as_positions = client.post("/v1/bvh/solve", json={**body, "root_position": "replace"})
+    assert as_positions.json()["root_warning"] == said
     lines_in, lines_out = text.split("\n"), r.json()["bvh"].split("\n")
     motion = lines_in.index("MOTION") + 3 + frame
     assert [a == b for a, b in zip(lines_in, lines_out, strict=True)].count(False) == 1
@@ -520,3 +527,19 @@ def test_a_skeleton_sent_where_only_the_alias_reads_it_is_named(client: Any) -> 
     assert client.post("/v1/character/solve", json=body).status_code == 200
     character = {("character" if k == "skeleton" else k): v for k, v in body.items()}
     assert client.post("/v1/solve", json=character).status_code == 200
+
+
+def test_files_read_as_written_get_no_root_warning(client: Any, bvh_files: dict[str, Path]) -> None:
+    """The root warning names the other reading only where it stands the figure on the
+    floor: none of the other real files (children in inches, CMU, Bandai-Namco, jumping
+    and dancing frames among them) gets one, read as they are written."""
+    from tests.service.test_solve_forms import SKELETONS
+
+    for name, (units, up) in SKELETONS.items():
+        text = bvh_files[name].read_text()
+        frames = parse_bvh(text).num_frames
+        root = "add" if name == "reactidle-6ch" else "replace"
+        for frame in np.linspace(0, frames - 1, 5).astype(int).tolist():
+            body = {"bvh": text, "frame": frame, "units": units, "up": up, "root_position": root}
+            r = client.post("/v1/bvh/inspect", json=body)
+            assert r.status_code == 200 and r.json()["root_warning"] is None, (name, frame)

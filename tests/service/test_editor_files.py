@@ -477,6 +477,8 @@ def test_editor_reads_a_root_whose_channels_are_a_displacement(
         page.wait_for_function(f"() => {M}.bvh() && {M}.bvh().name === 'idle.bvh'")
         assert page.evaluate(f"{M}.bvh()")["root"] == "replace"
         drawn_as_inspected(page, server, {"bvh": text, "frame": 0})
+        said = page.evaluate(f"{M}.error()")  # (the service's root_warning, and the menu)
+        assert said["title"] == "Root channels" and '"add"' in said["detail"], said
         low = page.evaluate(f"{M}.bvhPositions()")[0][1]
         with page.expect_response("**/v1/bvh/inspect"):
             page.select_option("#bvh-root", "add")

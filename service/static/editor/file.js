@@ -292,13 +292,16 @@ function showOpened({ info, text, name, original, encoding, jointMap, settings, 
 }
 
 // What the server found in the file as read (/v1/bvh/inspect): cut short (its frames from
-// the cut on lost: an interrupted copy), or units that make the rest pose's leg no person's
-// (a centimetre file read as inches: drawn as a giant). The file opens either way; without
-// a word, the cut frame was drawn as half a body and the giant as asked.
+// the cut on lost: an interrupted copy), units that make the rest pose's leg no person's
+// (a centimetre file read as inches: drawn as a giant), or root channels whose other
+// reading stands the figure on the floor (ReActIdle's, read the BVH way: 0.7 m under it,
+// drawn with its lowest joint on the grid, so nothing looked wrong). The file opens either
+// way; without a word, the cut frame was drawn as half a body and the giant as asked.
 function warnOpened(info) {
-  const said = [info.cut_short && info.cut_short.detail, info.units_warning].filter(Boolean);
+  const root = info.root_warning && `${info.root_warning} (the Root channels menu)`;
+  const said = [info.cut_short && info.cut_short.detail, info.units_warning, root].filter(Boolean);
   if (!said.length) return;
-  const title = info.cut_short ? 'Broken file' : 'Units';
+  const title = info.cut_short ? 'Broken file' : info.units_warning ? 'Units' : 'Root channels';
   showError(new ApiError(-1, title, `${doc.name}: ${said.join('; ')}`));
 }
 
