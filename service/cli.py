@@ -259,9 +259,8 @@ def main(argv: list[str] | None = None) -> None:
     misspelt = misspelt_variables(dict(os.environ))
     if misspelt:  # (POSE_APIKEY=... served /v1 to anyone, a warning its only sign)
         refuse(*(
-            f"{key}: no such setting; did you mean {' or '.join(meant)}? (a misspelt "
-            "setting leaves its default in force: POSE_APIKEY left /v1 open); rename or "
-            "unset it"
+            f"{key}: no such setting; did you mean {' or '.join(meant)}? Rename or unset "
+            "it (a misspelt setting would leave its default in force)"
             for key, meant in misspelt.items()
         ))  # fmt: skip
     _check_models(settings.models_dir)

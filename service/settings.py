@@ -236,6 +236,14 @@ SHARED_DIR = "PROMETHEUS_MULTIPROC_DIR"
 #: them unknown): the image's health check's route (docker/healthcheck.py).
 OTHER_VARIABLES = ("POSE_HEALTH_PATH",)
 
+#: ``POSE_*`` names an operator may try for what only an option of ``pose-service`` sets:
+#: the worker count is ``--workers`` and no variable (``POSE_WORKERS=2`` started one worker,
+#: its warning offering POSE_PORT, a new-user audit). Named in a warning, never refused.
+OPTION_ONLY = dict.fromkeys(
+    ("POSE_WORKERS", "POSE_WORKER", "POSE_NUM_WORKERS", "POSE_WEB_CONCURRENCY"),
+    "the worker count is the --workers option (`pose-service --workers N`), no variable",
+)
+
 #: Settings whose values are secrets (``SecretStr``): a refused start names them and never
 #: echoes their value (``service.cli``).
 SECRET_SETTINGS: frozenset[str] = frozenset(
@@ -277,7 +285,7 @@ def _misspelt(key: str, known: list[str]) -> list[str]:
     setting's cut at an underscore (POSE_DEADLINE, POSE_KEY, POSE_DIR)
     or lengthened after one (POSE_API_KEY_FILE: no ``_FILE`` form is read)."""
     name = key.upper()
-    if _SERVICE_LINK.fullmatch(name):
+    if _SERVICE_LINK.fullmatch(name) or name in OPTION_ONLY:
         return []
     tail = name.removeprefix("POSE_")
     tails = {k.removeprefix("POSE_"): k for k in known}
@@ -309,12 +317,15 @@ def misspelt_variables(environ: dict[str, str]) -> dict[str, list[str]]:
 def unknown_variables(environ: dict[str, str]) -> list[str]:
     """The other ``POSE_*`` variables of ``environ`` that are no setting (a start names
     them in a warning: they resemble no setting closely), each with the setting nearest it
-    if any (``POSE_DEADLINE=9`` left the deadline at 2 s without a word, an ops audit)."""
+    if any (``POSE_DEADLINE=9`` left the deadline at 2 s without a word, an ops audit), or
+    the option that sets what it names (:data:`OPTION_ONLY`)."""
     known = _known()
     out = []
     for key in _unknown(environ):
         if _SERVICE_LINK.fullmatch(key.upper()):
             out.append(f"{key} (a Kubernetes Service's link variable?)")
+        elif key.upper() in OPTION_ONLY:
+            out.append(f"{key} ({OPTION_ONLY[key.upper()]})")
         elif not _misspelt(key, known):
             near = close_match(key.upper(), known)
             out.append(f"{key}" + (f" (did you mean {near}?)" if near else ""))

@@ -52,6 +52,9 @@ def refused(argv: list[str], env: dict[str, str] | None = None, script: str = ""
          "POSE_API_KEY_FILE: no such setting; did you mean POSE_API_KEY?"),
         ({"POSE_DEADLINE": "9"}, [], "POSE_DEADLINE: no such setting; did you mean "
          "POSE_DEADLINE_SECONDS?"),
+        # (the reason is a general one: it named POSE_APIKEY whatever was misspelt)
+        ({"POSE_PROT": PORT}, [], "POSE_PROT: no such setting; did you mean POSE_PORT? "
+         "Rename or unset it (a misspelt setting would leave its default in force)"),
         # D9: options given are given (0 and "" were taken for "not given")
         ({"POSE_HOST": "127.0.0.1"}, ["--port", "0"],
          "--port (POSE_PORT): Input should be greater than or equal to 1"),
@@ -161,9 +164,25 @@ def test_misspelt_variables_are_told_from_others_and_service_links() -> None:
         "POSE_PROT": ["POSE_PORT"],
     }
     warned = unknown_variables(env)
-    assert "POSE_ESTIMATOR_URL" in warned and any(w.startswith("POSE_WORKERS") for w in warned)
+    assert "POSE_ESTIMATOR_URL" in warned
+    workers = "the worker count is the --workers option (`pose-service --workers N`)"
+    assert f"POSE_WORKERS ({workers}, no variable)" in warned, warned
     links = [w for w in warned if w.endswith("(a Kubernetes Service's link variable?)")]
     assert len(links) == 8, warned
+
+
+def test_a_worker_count_in_a_variable_is_pointed_at_the_option() -> None:
+    """``POSE_WORKERS=2`` started one worker, its warning asking "did you mean POSE_PORT?";
+    POSE_WEB_CONCURRENCY (the name uvicorn's and gunicorn's own variable bears) was
+    refused as POSE_MAX_CONCURRENCY misspelt (a new-user audit). The worker count is the
+    ``--workers`` option: each is named in a warning saying so."""
+    from service.settings import misspelt_variables, unknown_variables
+
+    env = dict.fromkeys(["POSE_WORKERS", "pose_workers", "POSE_WEB_CONCURRENCY"], "2")
+    assert misspelt_variables(env) == {}
+    warned = unknown_variables(env)
+    assert len(warned) == 3 and all("the --workers option" in w for w in warned), warned
+    assert not any("did you mean" in w for w in warned), warned
 
 
 def test_origins_are_checked_as_browsers_send_them() -> None:
