@@ -216,6 +216,34 @@ def test_the_docs_metrics_paragraph_names_every_family(client: Any) -> None:
     assert any(f.endswith("_created") for f in families) and "`_created`" in paragraph
 
 
+@pytest.mark.parametrize("workers", [1, 2])
+def test_the_closes_counter_has_every_reason_before_the_first_close(
+    tmp_path: Path, workers: int
+) -> None:
+    """``pose_connections_closed_total`` had no series until a connection was closed: a
+    dashboard or an alert built by its name found nothing (a new-user audit). Each reason
+    is there at 0 from the start, in one process and in multiprocess mode (several
+    workers, ``PROMETHEUS_MULTIPROC_DIR``: each worker imports the counter afresh)."""
+    import os
+
+    from service.settings import SHARED_DIR
+    from service.transport import CLOSE_REASONS
+
+    reasons = {"head-timeout", "idle-timeout", "body-timeout", "too-many-connections", "evicted"}
+    assert set(CLOSE_REASONS) == reasons  # (as docs/limits.md lists them)
+    env = {k: v for k, v in os.environ.items() if k != SHARED_DIR}
+    if workers > 1:
+        env[SHARED_DIR] = str(tmp_path)
+    code = "from service.metrics import Metrics\nprint(Metrics().exposition().decode())"
+    text = subprocess.run(
+        [sys.executable, "-c", code], cwd=REPO_ROOT, env=env, capture_output=True, text=True,
+        timeout=120, check=True,
+    ).stdout  # fmt: skip
+    for reason in sorted(reasons):
+        assert f'pose_connections_closed_total{{reason="{reason}"}} 0.0' in text, text
+    assert "pose_slow_readers_total 0.0" in text, text
+
+
 def test_the_docs_say_the_idle_timeout_must_outlast_the_proxys() -> None:
     """5 s (uvicorn's keep-alive) under a proxy's 60 s keep-alive is the race of sporadic
     502s: docs/deploy.md did not say so, nor which setting moves it (an ops audit)."""

@@ -60,8 +60,11 @@ def test_metrics_are_the_sum_over_the_workers(models_dir: Path, tmp_path: Path) 
         n = 40
         for _ in range(n):  # a connection each: the kernel hands them to either worker
             assert server.request("POST", "/v1/solve", body)[0] == 200
-        scrapes = [_solves(server.request("GET", "/metrics")[2].decode()) for _ in range(10)]
+        texts = [server.request("GET", "/metrics")[2].decode() for _ in range(10)]
+        scrapes = [_solves(text) for text in texts]
         each = _per_worker(folder)
     assert scrapes == [float(n)] * 10, (scrapes, each)
+    # the closes' series are there at 0 before any close, summed over the workers too
+    assert all('pose_connections_closed_total{reason="evicted"} 0.0' in t for t in texts)
     assert len(each) == 2 and sum(each) == n and min(each) > 0, each  # both answered some
     assert not list(tmp_path.glob("marionette-metrics-*"))  # removed at the end
