@@ -50,6 +50,26 @@ from service.settings import Settings
 
 WATCH_SECONDS = 0.1  # how often the gate looks for body reads past their deadline
 
+#: Routes that take a BVH file's text, which a client may send as an excerpt.
+BVH_PATHS = frozenset({"/v1/bvh/solve", "/v1/bvh/inspect"})
+
+
+def too_large(path: str, limit: int, size: int | None = None) -> PayloadTooLarge:
+    """The 413 of a body over ``max_body_bytes``, saying what the client can do: it gave
+    the sizes alone (a new-user audit). Only the frame asked for is read from a BVH file's
+    frames (docs/characters.md), so its header and that frame's line answer as the whole
+    file does: the editor sends a big file so (docs/editor.md)."""
+    of = f" of {size} bytes" if size is not None else ""
+    said = f"body{of} exceeds the {limit}-byte limit (the server's POSE_MAX_BODY_BYTES)"
+    if path in BVH_PATHS:
+        back = " (the answer's frame line goes back in its place)" if "solve" in path else ""
+        return PayloadTooLarge(
+            f"{said}. Send a big file as an excerpt: its text through the 'Frame Time:' line "
+            f"with 'Frames: 1', then the line of the frame wanted alone, as frame 0{back}"
+        )
+    batch = " (a batch's items in several requests)" if path == "/v1/solve/batch" else ""
+    return PayloadTooLarge(f"{said}: send a smaller body{batch}")
+
 
 def _api_key(headers: dict[str, str]) -> str:
     key = headers.get("x-api-key", "")
@@ -108,7 +128,7 @@ class Gate:
             raise MalformedBody(f"Content-Length is not a number: {length[:40]!r}")
         size = s.max_body_bytes if chunked else int(length or 0)
         if size > s.max_body_bytes:
-            raise PayloadTooLarge(f"body of {size} bytes exceeds the {s.max_body_bytes}-byte limit")
+            raise too_large(path, s.max_body_bytes, size)
         if path.startswith("/v1/") and self.active >= s.max_concurrency:
             raise TooManyRequests(
                 f"{self.active} requests in flight on this worker (limit {s.max_concurrency})"
@@ -270,7 +290,7 @@ class Gate:
             del self._reading[task]
             self._late.discard(task)
         if size > limit:
-            big = PayloadTooLarge(f"body exceeds the {limit}-byte limit")
+            big = too_large(scope["path"], limit)
             scope[REASON] = big.type_
             answer = error_response(big)
             answer.headers["connection"] = "close"  # the rest of the body is not read

@@ -5,6 +5,7 @@ and the errors reported are those of the file as written (an independent reader 
 
 from __future__ import annotations
 
+import json
 import re
 from pathlib import Path
 from typing import Any
@@ -13,7 +14,9 @@ import numpy as np
 
 from core.bvh import parse_bvh
 from tests.character_files import RefBVH
+from tests.conftest import REPO_ROOT, make_client
 from tests.core.test_bvh_write import raw, relaid
+from tests.service.test_api import assert_problem
 
 
 def one_a_line(text: str, n_channels: int) -> str:
@@ -202,3 +205,48 @@ def test_a_joint_with_an_axis_twice_among_its_positions_moves_nothing(
     hips = old.joints[old.index("Hips")].channel_start
     assert (new.row(30)[hips : hips + 3] == old.row(30)[hips : hips + 3]).all()
     assert "joint_Root" in out["changed_joints"]
+
+
+def test_a_file_over_the_body_limit_is_told_to_go_as_an_excerpt(
+    client: Any, models_dir: Path
+) -> None:
+    """A body over the limit was answered "body of N bytes exceeds the M-byte limit",
+    nothing said of what to do (a new-user audit). The 413 names the server's setting and,
+    on the BVH routes, the excerpt the editor sends: made as it says, it is within the
+    limit and its frame is answered as the whole file's (only that frame is read)."""
+    example = json.loads((REPO_ROOT / "docs/examples/bvh_solve.json").read_text())
+    head, _, motion = example["bvh"].partition("Frame Time:")
+    time_line, _, frames = motion.partition("\n")
+    rows = frames.splitlines()
+    big = head.replace("Frames: 3", "Frames: 30") + f"Frame Time:{time_line}\n"
+    big += "\n".join(rows * 10) + "\n"
+    excerpt = f"{head.replace('Frames: 3', 'Frames: 1')}Frame Time:{time_line}\n{rows[1]}\n"
+    whole = {**example, "bvh": big, "frame": 1}
+    with make_client(models_dir, max_body_bytes=8192) as small:
+        for route in ("/v1/bvh/solve", "/v1/bvh/inspect"):
+            r = small.post(route, json=whole)
+            detail = assert_problem(r, 413, "-byte limit (the server's POSE_MAX_BODY_BYTES). "
+                                    "Send a big file as an excerpt: its text through the "
+                                    "'Frame Time:' line with 'Frames: 1', then the line of "
+                                    "the frame wanted alone, as frame 0")["detail"]  # fmt: skip
+            assert ("goes back in its place" in detail) == route.endswith("solve"), detail
+            assert r.json()["type"].endswith("/payload-too-large")
+        r = small.post("/v1/bvh/solve", json={**example, "bvh": excerpt, "frame": 0})
+        assert r.status_code == 200, r.text
+        cut = r.json()
+    full = client.post("/v1/bvh/solve", json=whole).json()
+    assert full["bvh"].splitlines()[-29] == cut["bvh"].splitlines()[-1]  # frame 1 of 30
+    assert full["targets"] == cut["targets"] and full["changed_joints"] == cut["changed_joints"]
+    with make_client(models_dir, max_body_bytes=1024) as small:
+        body = json.dumps({"items": [example] * 4}).encode()
+        for route, said in [
+            ("/v1/solve", "send a smaller body"),
+            ("/v1/solve/batch", "send a smaller body (a batch's items in several requests)"),
+        ]:
+            r = small.post(route, content=body, headers={"content-type": "application/json"})
+            assert_problem(r, 413, f"body of {len(body)} bytes exceeds the 1024-byte limit "
+                           f"(the server's POSE_MAX_BODY_BYTES): {said}")  # fmt: skip
+        chunked = small.post("/v1/solve", content=iter([body[:600], body[600:]]),
+                             headers={"content-type": "application/json"})  # fmt: skip
+        assert_problem(chunked, 413, "body exceeds the 1024-byte limit (the server's "
+                       "POSE_MAX_BODY_BYTES): send a smaller body")  # fmt: skip
