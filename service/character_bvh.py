@@ -135,7 +135,7 @@ def root_warning(bvh: BVH, ch: Character, frame: int, root_position: str) -> str
         else ("add", "the root channels as a displacement from its OFFSET")
     )  # fmt: skip
     return (
-        f'root_position: read as "{root_position}", frame {frame}\'s lowest joint stands '
+        f'root_position: read as "{root_position}", the frame\'s lowest joint stands '
         f'{abs(asked):.2f} m {side} the floor; read as "{name}" ({reading}) it stands '
         f"on it ({other:+.2f} m): the file may be written so; solved as asked"
     )

@@ -502,3 +502,38 @@ def test_editor_reads_a_root_whose_channels_are_a_displacement(
         assert not errors, errors
     finally:
         page.context.close()
+
+
+@pytest.mark.browser
+def test_editor_scrubs_a_file_cut_short_only_as_far_as_its_text(
+    server: str, browser: Any, more_mocap: Path
+) -> None:
+    """A file cut inside a frame (an interrupted copy) opens saying so; the slider and the
+    frame box reach the frame the cut is in, not the declared frames after it, which are
+    not in the text (a file cut inside frame 235 of 339 scrubbed to 338, an empty view
+    each: a user's audit)."""
+    lines = next(more_mocap.rglob("genuine/003_genuine.bvh")).read_text().split("\n")
+    first = lines.index("MOTION") + 3  # (MOTION, Frames:, Frame Time:)
+    row = lines[first + 300].split()
+    text = "\n".join([*lines[: first + 300], " ".join(row[: len(row) // 2])]) + "\n"
+    page = open_editor(browser, server)
+    errors: list[str] = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    try:
+        give_file(page, text, "cut.bvh")
+        page.wait_for_function(f"() => {M}.bvh() && {M}.bvh().name === 'cut.bvh'")
+        assert page.evaluate(f"{M}.error()")["title"] == "Broken file"
+        assert page.locator("#bvh-frame").get_attribute("max") == "300"
+        assert page.locator("#bvh-frame-number").get_attribute("max") == "300"
+        box = page.locator("#bvh-frame-number")
+        box.fill("301")
+        box.press("Enter")
+        page.wait_for_function(f"() => {M}.error() && {M}.error().title === 'No such frame'")
+        assert "frames 0 to 300" in page.evaluate(f"{M}.error()")["detail"]
+        box.fill("299")
+        box.press("Enter")
+        page.wait_for_function(f"() => {M}.bvh().frame === 299")
+        assert page.locator("#bvh-frame-label").inner_text().startswith("/ 300 ")
+        assert not errors, errors
+    finally:
+        page.context.close()

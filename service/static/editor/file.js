@@ -261,7 +261,7 @@ function showOpened({ info, text, name, original, encoding, jointMap, settings, 
   buildCharacterBones();
   ui.hovered = null;
   clearHistory();
-  const at = Math.min(Math.max(frame, 0), Math.max(info.frames - 1, 0));
+  const at = Math.min(Math.max(frame, 0), lastFrame(info));
   const { points } = fileFrame(text, at);
   const targets = (kept ? kept.targets : []).map(([joint, d]) => [joint, toWorld(points[joint].map((v, i) => v + d[i]))]);
   restore({ pose: filePose(text, at), targets, pins: kept ? kept.pins : [], text, frame: at });
@@ -272,7 +272,7 @@ function showOpened({ info, text, name, original, encoding, jointMap, settings, 
   controls.update();
   doc.followed = { frame: at, pelvis: [...pelvis] };
   for (const input of [$('bvh-frame'), $('bvh-frame-number')]) {
-    input.max = String(Math.max(info.frames - 1, 0));
+    input.max = String(lastFrame(info));
     input.value = String(at);
   }
   delete $('bvh-frame-number').dataset.editing;
@@ -289,6 +289,16 @@ function showOpened({ info, text, name, original, encoding, jointMap, settings, 
   clearError();
   refresh();
   warnOpened(info);
+}
+
+// The last frame a file's text holds (0-based): of one cut short, the frame the cut is in,
+// where part of it is there (it has no pose to draw: the banner says why), else the one
+// before it; the frames after it are not in the text at all (a file cut inside frame 235
+// of 339 could be scrubbed to 338, an empty view each: a user's audit).
+export function lastFrame(info) {
+  const cut = info.cut_short;
+  const last = cut ? (cut.values > 0 ? cut.frame : cut.frame - 1) : info.frames - 1;
+  return Math.max(Math.min(last, info.frames - 1), 0);
 }
 
 // What the server found in the file as read (/v1/bvh/inspect): cut short (its frames from
@@ -596,7 +606,7 @@ export function setFrame(frame) {
 export function jumpToFrame(typed) {
   const box = $('bvh-frame-number');
   if (!doc.active) return;
-  const last = doc.info.frames - 1;
+  const last = lastFrame(doc.info);
   const raw = String(typed).trim();
   const frame = Number(raw);
   if (raw === '' || !Number.isInteger(frame) || frame < 0 || frame > last) {
@@ -652,5 +662,5 @@ export function refreshFrame() {
   const box = $('bvh-frame-number');
   if (!box.dataset.editing) box.value = String(doc.frame); // (not what the user is typing)
   const t = doc.frame * doc.info.frame_time;
-  $('bvh-frame-label').textContent = `/ ${doc.info.frames - 1} (${t.toFixed(2)} s)`;
+  $('bvh-frame-label').textContent = `/ ${lastFrame(doc.info)} (${t.toFixed(2)} s)`;
 }
