@@ -212,7 +212,7 @@ export async function openText(text, name, {
     if (same && doc.settings) showSettings(doc.settings); // the open file stays as it was read: say so
     const stays = doc.active && !same ? ` (${doc.name} stays open)` : '';
     showError(err instanceof ApiError
-      ? new ApiError(err.status, err.title, `${name}${stays}: ${err.detail}`, err.requestId)
+      ? new ApiError(err.status, err.title, `${name}${stays}: ${menuHint(err.detail)}`, err.requestId)
       : err);
     if (!(err instanceof ApiError && err.status === 0)) { // (unreachable: api() said so)
       $('status').textContent = ui.connected ? 'connected' : 'server not ready';
@@ -229,6 +229,15 @@ export async function openText(text, name, {
   whenCommitted(() => {
     if (ticket === opening) showOpened({ ...opened, text: doc.text, frame: doc.frame, kept: keptEdits() });
   });
+}
+
+// A refusal of the file's units or up axis tells an API client what to send ("units":
+// "in"); in this page a menu sends it, so the banner names the menu too (a user's audit
+// read JSON advice where the fix was the Units menu).
+function menuHint(detail) {
+  if (/^units: /.test(detail)) return `${detail} (here: pick them in the Units menu)`;
+  if (/^up: /.test(detail)) return `${detail} (here: pick it in the Up axis menu)`;
+  return detail;
 }
 
 // What a file read again keeps besides its text: the pins, and the targets, each carried
