@@ -70,6 +70,7 @@ _BLANK_FIRST_RE = re.compile(r"[^\S\n]*(?:\n|\Z)")  # a blank first line
 _BLANK_MID_RE = re.compile(r"\n[^\S\n]*\n")  # a blank line between two others
 _FRAME_LINE_RE = re.compile(r"^[^\n]*\S[^\n]*", re.MULTILINE)  # a non-blank line
 _FRAMES_RE = re.compile(r"^[ \t]*Frames:[ \t]*(\S+)[ \t]*\r?$")
+_LINE_RE = re.compile(r"^line \d+: ")  # an error's line, where it opens the reason
 _FRAME_TIME_RE = re.compile(r"^[ \t]*Frame Time:[ \t]*(\S+)[ \t]*\r?$")
 
 
@@ -342,6 +343,17 @@ class _Hierarchy:
         self.joints: list[BVHJoint] = []
         self.names: set[str] = set()
         self.n_channels = 0
+        self.open = 0  # the '{' read and not yet closed (a file cut short: one or more)
+
+    def read(self) -> None:
+        """The HIERARCHY keyword and every ROOT's block (not what follows them)."""
+        toks = self.toks
+        toks.expect("HIERARCHY")
+        while toks.peek() == "ROOT":
+            toks.next("ROOT")
+            self.joint(-1, 1)
+        if not self.joints:
+            raise _error(self.file, f"line {toks.line()}: no ROOT joint in HIERARCHY")
 
     def too_many(self, line: int) -> None:
         if len(self.joints) >= MAX_JOINTS:
@@ -364,6 +376,7 @@ class _Hierarchy:
             raise _error(file, f"line {line}: duplicate joint name {quoted(name)}")
         self.names.add(name)
         toks.expect("{")
+        self.open += 1
         toks.expect("OFFSET")
         ox, oy, oz = toks.floats(3, f"OFFSET of {name}")
         channels = self.channels(name)
@@ -375,15 +388,18 @@ class _Hierarchy:
             line = toks.line()
             tok = toks.next("JOINT, End Site or '}'")
             if tok == "}":
+                self.open -= 1
                 return
             if tok == "JOINT":
                 self.joint(index, depth + 1)
             elif tok == "End":
                 toks.expect("Site")
                 toks.expect("{")
+                self.open += 1
                 toks.expect("OFFSET")
                 ex, ey, ez = toks.floats(3, f"End Site OFFSET of {name}")
                 toks.expect("}")
+                self.open -= 1
                 self.too_many(line)
                 end_count += 1
                 end_name = f"{name}_end" if end_count == 1 else f"{name}_end{end_count}"
@@ -432,18 +448,46 @@ class _Hierarchy:
 def _parse_hierarchy(file: str, text: str, end: int | None = None) -> list[BVHJoint]:
     """The joints of the HIERARCHY ``text[:end]`` (read in place: no copy of it is made)."""
     toks = Tokens(file, text, len(text) if end is None else end)
-    toks.expect("HIERARCHY")
     reader = _Hierarchy(toks)
-    while toks.peek() == "ROOT":
-        toks.next("ROOT")
-        reader.joint(-1, 1)
-    if not reader.joints:
-        raise _error(file, f"line {toks.line()}: no ROOT joint in HIERARCHY")
+    reader.read()
     if toks.peek() is not None:
         raise _error(
             file, f"line {toks.line()}: unexpected {quoted(toks.peek())} after the hierarchy"
         )
     return _end_sites_named(reader.joints, reader.names)
+
+
+def _no_motion(file: str, text: str) -> BVHError:
+    """Why ``text``, which has a HIERARCHY keyword and no MOTION line, is refused, naming
+    where it ends (the line of its last word): cut short inside its hierarchy (the words
+    run out, or the last one is wrong, before every joint is closed), a fault of its
+    hierarchy before that (as a whole file's), or a whole hierarchy with no MOTION
+    section after it. It was "missing MOTION section" alone, no line (an audit,
+    2026-12-06: the first 1,500 bytes of a real file)."""
+    toks = Tokens(file, text, len(text))
+    reader = _Hierarchy(toks)
+    try:
+        reader.read()
+    except BVHError as exc:
+        if toks.peek() is not None:  # (a fault before the file's last word)
+            return exc
+        unclosed = f"{reader.open} '{{' not closed, " if reader.open else ""
+        reason = _LINE_RE.sub("", exc.reason)  # (the line is named once)
+        why = "" if reason.startswith("unexpected end") else f": {reason}"
+        return _error(
+            file, f"line {toks.line()}: the file ends inside its HIERARCHY ({unclosed}no "
+            f"MOTION section): it looks cut short{why}",
+        )  # fmt: skip
+    last, after = toks.line(), toks.peek()
+    if after is not None:
+        return _error(
+            file, f"line {last}: missing MOTION section: the HIERARCHY is whole, and "
+            f"{quoted(after)} follows it where a 'MOTION' line should",
+        )  # fmt: skip
+    return _error(
+        file, f"line {last}: missing MOTION section: the file ends after its HIERARCHY, "
+        "which is whole (a file of a skeleton alone has no frames to edit)",
+    )  # fmt: skip
 
 
 def _end_sites_named(joints: list[BVHJoint], taken: set[str]) -> list[BVHJoint]:
@@ -475,7 +519,7 @@ def parse_bvh(text: str, name: str = "<string>", frames: Iterable[int] | None = 
     if match is None:
         if "HIERARCHY" not in text:
             raise _error(name, "not a BVH file (no HIERARCHY keyword)")
-        raise _error(name, "missing MOTION section")
+        raise _no_motion(name, text)
     joints = _parse_hierarchy(name, text, match.start())
     columns = [(j.name, c) for j in joints for c in j.channels]  # (errors name them)
     n_channels = len(columns)

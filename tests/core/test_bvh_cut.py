@@ -80,3 +80,34 @@ def test_a_file_of_one_whole_line_cut_at_its_end_is_cut_short_too() -> None:
     text = f"{head}Frames: 5\nFrame Time: 0.1\n10.000000 20.000000\n"  # (long enough for 5)
     read = parse_bvh(text, "one", frames=[0])
     assert read.cut == Cut(1, 0, 10, 5) and read.row(0).tolist() == [10.0, 20.0]
+
+
+def test_a_file_cut_inside_its_hierarchy_names_where_it_ends(bvh_files: dict[str, Path]) -> None:
+    """A file cut inside its HIERARCHY (no MOTION line) names its last line and says it
+    looks cut short, with the '{' left open; a whole hierarchy with nothing after it, or a
+    word where MOTION should be, says that instead. An audit (2026-12-06): the first 1,500
+    bytes of a real file got "missing MOTION section", no line."""
+    for name in ("bandai", "cmu-daz-salsa"):
+        text = raw(bvh_files[name])
+        head = text[:1500]
+        last = head.rstrip().count("\n") + 1
+        with pytest.raises(BVHError) as cut:
+            parse_bvh(head, name)
+        reason = cut.value.reason
+        assert reason.startswith(f"line {last}: the file ends inside its HIERARCHY ("), reason
+        assert "'{' not closed, no MOTION section): it looks cut short" in reason, reason
+        with pytest.raises(BVHError) as some:  # (the service reads one frame: the same)
+            parse_bvh(head, name, frames=[0])
+        assert some.value.reason == reason
+        hierarchy = text[: text.index("MOTION")]
+        end = hierarchy.rstrip().count("\n") + 1  # (its last '}')
+        with pytest.raises(BVHError, match=rf"line {end}: missing MOTION section: the file "
+                           "ends after its HIERARCHY, which is whole"):  # fmt: skip
+            parse_bvh(hierarchy, name)
+        with pytest.raises(BVHError, match=rf"line {end + 1}: missing MOTION section: the "
+                           "HIERARCHY is whole, and 'MOTON' follows it"):  # fmt: skip
+            parse_bvh(text.replace("MOTION", "MOTON", 1), name)
+    # a fault of the hierarchy before the cut is named as in a whole file
+    head = raw(bvh_files["bandai"])[:1500].replace("JOINT Spine", "JOINT Hips", 1)
+    with pytest.raises(BVHError, match=r"line \d+: duplicate joint name 'Hips'"):
+        parse_bvh(head, "bandai")

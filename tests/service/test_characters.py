@@ -234,7 +234,9 @@ def test_bad_bvh_files(client: Any, bvh_files: dict[str, Path]) -> None:
 
     half = {"bvh": text[: len(text) // 2], "frame": 190, "targets": target}  # cut mid-frame:
     _bad(client, "/v1/bvh/solve", half, "line")  # a frame past the cut (tests/core/test_bvh_cut)
-    post(text[:200], "missing MOTION")  # truncated in the hierarchy
+    # cut inside the hierarchy: where the file ends, and why (was "missing MOTION section")
+    last = text[:1500].rstrip().count("\n") + 1
+    post(text[:1500], f"line {last}: the file ends inside its HIERARCHY", "cut short")
     lines = text.split("\n")
     motion = lines.index("MOTION")
     row = lines[motion + 5].split(" ")
