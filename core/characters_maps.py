@@ -35,7 +35,7 @@ import numpy as np
 import numpy.typing as npt
 
 from core.characters import F64, CharacterError, Skeleton
-from core.map_lookup import Lookup, lookup_of, tie_message
+from core.map_lookup import Lookup, lookup_of, missing_message, tie_message
 from core.map_lookup import name_key as _key
 from core.rest_checks import OffsetAt, default_offset_at, refuse_one_point, refuse_out_of_proportion
 from core.skeleton import JOINT_INDEX, JOINT_NAMES, PARENT_NAMES
@@ -349,6 +349,8 @@ SCHEMES: Final[dict[str, Scheme]] = {
     ),
 }
 
+_ALL: Final = ", ".join(SCHEMES)
+
 #: Fraction of its own bone by which a canonical joint sitting on its parent is moved: the
 #: chest where the training data has it (spine1 -> spine2 is 0.35 of spine1 -> neck in the
 #: Bandai-Namco, CMU dance and CMU ASF bodies), the collar a quarter of the clavicle. The
@@ -559,8 +561,10 @@ def resolve_map(
     refuse_one_point(skel, offset_at)
     best_name, best_found, best_hits, best_tied = "", dict(given), -1, {}
     structural = {"spine1", "spine2"}  # the joints the structural rules may fill
+    matched = False  # whether any scheme's name is a joint's
     for scheme_name in SCHEMES:
         found, hits, tied = _resolve_scheme(lookup, scheme_name)
+        matched = matched or hits > 0
         hits -= _chest_below_collars(skel, found)
         found.update(given)
         if set(JOINT_NAMES) - found.keys() <= structural:  # else it cannot be complete
@@ -576,11 +580,8 @@ def resolve_map(
         _structural(skel, best_found)
         missing = [c for c in JOINT_NAMES if c not in best_found]
     if missing:
-        raise CharacterError(
-            f"{where}: no joint found for {missing} (closest naming scheme: {best_name}); "
-            "give them in joint_map as {canonical: joint name}; schemes found automatically: "
-            + ", ".join(SCHEMES)
-        )
+        closest = best_name if matched else None
+        raise CharacterError(missing_message(where, missing, closest, skel.names, _ALL))
     for canon, written in best_tied.items():  # two joints as good a match: neither taken
         if canon not in given:
             names = [skel.names[j] for j in lookup.ties[written]]

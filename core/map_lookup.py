@@ -11,9 +11,15 @@ and pin moved the socket, and the answer said it was reached; an audit, 2026-12-
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 from core.text import quoted
+
+#: the most of a skeleton's joint names a refusal of a map lists, and the characters they
+#: may take (quoted, each at most core.text.QUOTE): then how many more
+LISTED_NAMES = 40
+LISTED_CHARS = 1500
 
 
 def name_key(name: str) -> str:
@@ -79,4 +85,30 @@ def tie_message(where: str, canon: str, written: str, names: list[str]) -> str:
         f"{'both' if len(names) == 2 else 'all'} read as {quoted(written)} "
         "(names are compared without case, a namespace: prefix or a start every name shares); "
         f'give "joint_map": {{"{canon}": "<the joint>"}} to choose one, or rename the other'
+    )
+
+
+def missing_message(
+    where: str, missing: list[str], closest: str | None, names: Sequence[str], schemes: str
+) -> str:
+    """A refusal of a map that finds no joint for the canonical joints ``missing``: the
+    scheme that came closest (None: no joint name matched any scheme's), and the
+    skeleton's joints ``names`` in file order (the first :data:`LISTED_NAMES`, within
+    :data:`LISTED_CHARS`, then how many more), for a client to write ``joint_map`` with.
+    Was the scheme alone, "closest" too where no name matched any (a new-user audit,
+    2026-12-06: a rig renamed `root_jnt`, `hand_lf`, ... got "closest naming scheme:
+    bandai-namco", and no joint name to write the map with)."""
+    listed: list[str] = []
+    size = 0
+    for name in names[:LISTED_NAMES]:
+        size += len(shown := quoted(name)) + 2
+        if size > LISTED_CHARS:
+            break
+        listed.append(shown)
+    more = f" and {len(names) - len(listed)} more" if len(names) > len(listed) else ""
+    why = f"closest naming scheme: {closest}" if closest else "no joint name matched a scheme's"
+    return (
+        f"{where}: no joint found for {missing} ({why}); give them in joint_map as "
+        f"{{canonical: joint name}}, naming one of the skeleton's {len(names)} joints: "
+        f"{', '.join(listed)}{more}; schemes found automatically: {schemes}"
     )
