@@ -81,13 +81,28 @@ def quoted(value: object) -> str:
     return clip(shown(value))
 
 
-def close_match(name: str, candidates: Iterable[str]) -> str | None:
+def close_match(name: str, candidates: Iterable[str], cutoff: float = 0.6) -> str | None:
     """The candidate ``name`` was probably meant to be: the same but for case, else the
-    closest by :func:`difflib.get_close_matches` (cutoff 0.6); ``None`` if none is close
+    closest by :func:`difflib.get_close_matches` (``cutoff``); ``None`` if none is close
     (a map's joint, a setting's variable: "did you mean ...?")."""
     names = list(dict.fromkeys(candidates))
+    folded = name.casefold()
     for c in names:
-        if c.casefold() == name.casefold():
+        if c.casefold() == folded:
             return c
-    found = difflib.get_close_matches(name, names, n=1, cutoff=0.6)
+    found = difflib.get_close_matches(name, names, n=1, cutoff=cutoff)
     return found[0] if found else None
+
+
+def did_you_mean(name: str, candidates: Iterable[str]) -> str:
+    """`` (did you mean 'Hips'?)`` for a name that is a candidate's but for case, or a slip
+    of one (:func:`close_match`, cutoff 0.85: a typo, not a neighbour such as 'left_hand'
+    for 'right_hand'), else ''. A name longer than :data:`QUOTE` characters is matched
+    for case alone (difflib's cost grows with the lengths); a short one costs up to ~6 ms
+    on 2,000 candidates of like names."""
+    if len(name) > QUOTE:
+        folded = name.casefold()
+        near = next((c for c in candidates if c.casefold() == folded), None)
+    else:
+        near = close_match(name, candidates, cutoff=0.85)
+    return f" (did you mean {quoted(near)}?)" if near is not None else ""

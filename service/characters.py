@@ -57,7 +57,7 @@ from core.characters_maps import (
 )
 from core.retarget import canonical_points, retarget
 from core.skeleton import BONES, JOINT_NAMES
-from core.text import clip, quoted
+from core.text import clip, did_you_mean, quoted
 from core.units import UNITS
 from service.bounded import Bounded, at_most
 from service.engine import Engine
@@ -726,8 +726,8 @@ def character_from_request(req: CharacterSolveRequest, where: str = "") -> Chara
         )
         unknown = sorted(set(req.rotations) - set(skel.names))
         if unknown:
-            names = ", ".join(quoted(n) for n in unknown[:8])  # then how many more, as
-            more = f"; and {len(unknown) - 8} more" if len(unknown) > 8 else ""  # errors do
+            names = ", ".join(quoted(n) + did_you_mean(n, skel.names) for n in unknown[:8])
+            more = f"; and {len(unknown) - 8} more" if len(unknown) > 8 else ""  # (as others)
             raise CharacterError(f"{prefix}rotations: unknown joints {names}{more}")
         rot = np.broadcast_to(np.eye(3), (skel.size, 3, 3)).copy()
         for name, q in req.rotations.items():

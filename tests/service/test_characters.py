@@ -212,6 +212,29 @@ def test_character_rotations(client: Any, bvh_files: dict[str, Path]) -> None:
     assert moved.magnitude() > 0.05  # the arm did move
 
 
+def test_a_rotation_key_off_by_case_or_a_slip_is_suggested(
+    client: Any, bvh_files: dict[str, Path]
+) -> None:
+    """A ``rotations`` key that is a joint's name but for case (``hips`` for Bandai's
+    ``Hips``), or a slip of one (``UpperArm_LL``), says which joint it may mean; one like
+    no joint (``tail``) names none, a neighbour (``Foot_X`` beside ``Foot_L``) none either
+    (was "unknown joints 'hips'" alone: a new-user audit, 2026-12-06)."""
+    body, _, _ = _character_body(bvh_files["bandai"].read_text(), 30)
+    body["targets"] = [{"joint": "Hand_L", "position": [0.0, 100.0, 0.0]}]
+    rot = body["rotations"]
+    rot["hips"], rot["UpperArm_LL"] = rot.pop("Hips"), rot.pop("UpperArm_L")
+    rot["tail"] = rot["Foot_X"] = [0.0, 0.0, 0.0, 1.0]
+    detail = _bad(client, "/v1/character/solve", body)
+    assert detail == (
+        "rotations: unknown joints 'Foot_X', 'UpperArm_LL' (did you mean 'UpperArm_L'?), "
+        "'hips' (did you mean 'Hips'?), 'tail'"
+    ), detail
+    many = {f"hip{'s' * k}".upper(): [0.0, 0.0, 0.0, 1.0] for k in range(1, 1500)}
+    body["rotations"] = {**rot, **many}  # (8 named, each with its suggestion at most)
+    detail = _bad(client, "/v1/character/solve", body, "; and 1495 more")
+    assert detail.count("(did you mean") <= 8 and len(detail) < 2000, detail
+
+
 # --------------------------------------------------------------------------------------
 # Bad files and skeletons: a 422 problem that says what, never a 500
 # --------------------------------------------------------------------------------------
