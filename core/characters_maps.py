@@ -562,10 +562,15 @@ def resolve_map(
     best_name, best_found, best_hits, best_tied = "", dict(given), -1, {}
     structural = {"spine1", "spine2"}  # the joints the structural rules may fill
     matched = False  # whether any scheme's name is a joint's
+    as_close: list[str] = []  # the schemes after the best one that score as well (its tie)
     for scheme_name in SCHEMES:
         found, hits, tied = _resolve_scheme(lookup, scheme_name)
         matched = matched or hits > 0
-        hits -= _chest_below_collars(skel, found)
+        _chest_below_collars(skel, found)
+        # the names it finds, but spine1 and spine2's: the structural rules find them for
+        # every scheme, so a scheme that names them is no closer for it (Rokoko's Spine1 and
+        # Spine2 are a Mixamo rig's too: one with its legs renamed was read as Rokoko's)
+        hits = len(found.keys() - structural)
         found.update(given)
         if set(JOINT_NAMES) - found.keys() <= structural:  # else it cannot be complete
             _structural(skel, found)
@@ -573,6 +578,9 @@ def resolve_map(
         score = hits + (1000 if complete else 0)
         if score > best_hits:
             best_name, best_found, best_hits, best_tied = scheme_name, found, score, tied
+            as_close = []
+        elif score == best_hits:  # (the first of SCHEMES wins: the more common)
+            as_close.append(scheme_name)
     if given:
         best_name = "explicit" if len(given) == len(JOINT_NAMES) else f"{best_name}+explicit"
     missing = [c for c in JOINT_NAMES if c not in best_found]
@@ -580,7 +588,9 @@ def resolve_map(
         _structural(skel, best_found)
         missing = [c for c in JOINT_NAMES if c not in best_found]
     if missing:
-        closest = best_name if matched else None
+        more = f" and {len(as_close) - 3} more" if len(as_close) > 3 else ""
+        tie = f" ({', '.join(as_close[:3])}{more} as close)" if as_close else ""
+        closest = f"{best_name}{tie}" if matched else None
         raise CharacterError(missing_message(where, missing, closest, skel.names, _ALL))
     for canon, written in best_tied.items():  # two joints as good a match: neither taken
         if canon not in given:

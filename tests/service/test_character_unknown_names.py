@@ -47,3 +47,27 @@ def test_a_rig_no_scheme_knows_is_told_so_with_its_joint_names(
         assert len(detail) <= MAX_DETAIL
         details.add(detail)
     assert len(details) == 1
+
+
+def test_a_mixamo_rig_with_its_legs_renamed_stays_mixamo(
+    client: Any, bvh_files: dict[str, Path]
+) -> None:
+    """A real Mixamo-named file (AnimatedDrawings fair1) with its thighs and shins renamed:
+    Rokoko's scheme shares its names, and names Spine1 and Spine3 too, which the structural
+    rules find for every scheme: it was "closest naming scheme: rokoko", and with the legs
+    given, "rokoko+explicit" with spine1 on Spine1 where the whole file has it on Spine.
+    Now the map is Mixamo's, the file's own but for the legs, and the tie is named."""
+    text = bvh_files["fair1-child-inches-zup"].read_text()
+    legs = {"LeftUpLeg": "thigh_lf", "LeftLeg": "shin_lf", "RightUpLeg": "thigh_rt",
+            "RightLeg": "shin_rt"}  # fmt: skip
+    renamed = _JOINT.sub(lambda m: f"{m.group(1)}{legs.get(m.group(2), m.group(2))}", text)
+    body = {"bvh": renamed, "frame": 0, "units": "in"}
+    refused = assert_problem(client.post("/v1/bvh/inspect", json=body), 422)
+    assert "(closest naming scheme: mixamo (rokoko as close))" in refused["detail"], refused
+    given = {"left_hip": "thigh_lf", "left_knee": "shin_lf", "right_hip": "thigh_rt",
+             "right_knee": "shin_rt"}  # fmt: skip
+    r = client.post("/v1/bvh/inspect", json={**body, "joint_map": given})
+    assert r.status_code == 200, r.text
+    whole = client.post("/v1/bvh/inspect", json={**body, "bvh": text}).json()
+    assert (whole["scheme"], r.json()["scheme"]) == ("mixamo", "mixamo+explicit")
+    assert r.json()["joint_map"] == {**whole["joint_map"], **given}
