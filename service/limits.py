@@ -511,16 +511,20 @@ def fan_out(fn: Callable[[slice], R], wave: Sequence[slice], width: int) -> list
 
 
 #: A character item of a batch (its own solve, joint map, retargeting and answer, in
-#: Python: measured ~10 ms for a 57-joint skeleton, ~46 ms for 557 joints, about twice
-#: that with exact reach) costs FABRIK_PRICE plus one unit per CHARACTER_JOINTS joints,
-#: doubled when its solve runs FABRIK. Its neural passes are not counted: at well under
-#: 0.1 ms each they are lost in the Python around them (even 4 passes, < 1 ms, are less
-#: than one unit's worth of the ~10 ms of a character item).
-CHARACTER_JOINTS = 8
+#: Python) in the units above, which are ~6.4 us of a pose item's work (1,024 of the
+#: costliest, 25 units each, took 165 ms, 1,024 plain 2-target ones, 6 units each, 39 ms:
+#: in process on one compute thread, a /tmp script, 2026-12-06): CHARACTER_PRICE, plus 8
+#: units per 5 joints, plus CHARACTER_PRICE more when its solve runs FABRIK (exact reach,
+#: pins, the fabrik method). Measured so: a 22-joint skeleton 2.8 ms soft, 5.3 ms exact
+#: with two pins (436 / 836 units); 522 joints 7.6 / 9.4 ms; 1,022 joints 13.1 / 13.3 ms.
+#: It was 16 units plus 1 per 8 joints, doubled (38 for the 22-joint exact item, ~0.24 ms
+#: of pose items): the 413 admitted 600 such items, 3.2 s of work, which no deadline of
+#: 2 s could finish (a user's audit).
+CHARACTER_PRICE = 400
 
 
 def character_price(joints: int, slow: bool) -> int:
-    return (FABRIK_PRICE + -(-joints // CHARACTER_JOINTS)) * (2 if slow else 1)
+    return CHARACTER_PRICE * (2 if slow else 1) + -(-joints * 8 // 5)
 
 
 def max_item_price(pricing: Pricing) -> int:
@@ -534,6 +538,8 @@ def max_item_price(pricing: Pricing) -> int:
 
 
 def batch_price_limit(max_items: int, pricing: Pricing) -> int:
-    """The most one batch may cost: ``max_items`` of the costliest pose items (a batch of
-    pose items is bounded by its item count alone; character items also by their joints)."""
+    """The most one batch of more than one item may cost: ``max_items`` of the costliest
+    pose items (a batch of pose items is bounded by its item count alone; character items
+    also by their joints; one item alone is never refused for its price, as a single
+    request of it is not)."""
     return max_items * max_item_price(pricing)

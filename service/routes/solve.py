@@ -31,8 +31,7 @@ from service.deps import ReadyEngine, RequestBudget, ServiceState, State
 from service.engine import Engine
 from service.errors import InvalidRequest, TooManyItems, every_item
 from service.limits import (
-    CHARACTER_JOINTS,
-    FABRIK_PRICE,
+    CHARACTER_PRICE,
     Budget,
     Pricing,
     batch_price_limit,
@@ -212,9 +211,10 @@ async def solve_batch(body: BatchBody, engine: ReadyEngine, budget: RequestBudge
 
 def check_price(forms: list[SolveRequest | CharacterSolveRequest], max_items: int,
                 pricing: Pricing) -> None:  # fmt: skip
-    """Refuse (413) a batch that costs more than ``max_items`` of the costliest pose items:
-    a character item costs by its joints (``service.limits.character_price``), a pose
-    item as ``service.limits.price`` (``pricing``: the engine's)."""
+    """Refuse (413) a batch of more than one item that costs more than ``max_items`` of
+    the costliest pose items: a character item costs by its joints
+    (``service.limits.character_price``), a pose item as ``service.limits.price``
+    (``pricing``: the engine's)."""
     prices = [
         character_price(len(f.character.joints), _slow(f))
         if isinstance(f, CharacterSolveRequest)
@@ -222,16 +222,16 @@ def check_price(forms: list[SolveRequest | CharacterSolveRequest], max_items: in
         for f in forms
     ]
     total, cap = sum(prices), batch_price_limit(max_items, pricing)
-    if total > cap:
+    if total > cap and len(forms) > 1:
         i = max(range(len(prices)), key=prices.__getitem__)
         big = forms[i]
         joints = len(big.character.joints) if isinstance(big, CharacterSolveRequest) else 21
         raise TooManyItems(
             f"items: the batch costs {total} work units, beyond the limit of {cap} "
             f"({max_items} items of at most {max_item_price(pricing)} units); a character item "
-            f"costs {FABRIK_PRICE} + 1 per {CHARACTER_JOINTS} joints, doubled for exact reach, "
-            "pins or FABRIK "
-            f"(items[{i}], {joints} joints: {prices[i]}); send smaller batches"
+            f"costs {CHARACTER_PRICE} + 8 per 5 joints, {CHARACTER_PRICE} more for exact "
+            f"reach, pins or FABRIK (items[{i}], {joints} joints: {prices[i]}); send smaller "
+            "batches"
         )
 
 

@@ -351,26 +351,31 @@ def test_oversized_character_batch_is_refused(
     pose = pose_body(bvh_files["bandai"], "bandai")
     exact_pose = {**pose, "options": {"reach": "exact"}}
     with make_client(models_dir, max_batch_items=4) as small:
-        # 4 of the costliest pose items fit; so do 2 small characters; 3 big ones do not
-        assert small.post("/v1/solve/batch", json={"items": [exact_pose] * 4}).status_code == 200
         # the limit is 4 of the costliest pose items: a pinned soft one at 4 passes and the
-        # retry's 1, twice with its mirror image, and the polish's 15 units (it was 4 x 16,
-        # refusing this mixed batch of 23 + 23 + 24 + 10 = 80 units)
+        # retry's 1, twice with its mirror image, and the polish's 15 units (100 units)
+        assert small.post("/v1/solve/batch", json={"items": [exact_pose] * 4}).status_code == 200
         dearest = {**pose, "options": {"reach": "exact", "passes": 4}}
         four = {**pose, "options": {"passes": 4}}
-        soft = {**char, "pins": [], "options": {}}  # 16 + 1 per 8 of its 57 joints
-        mixed = {"items": [dearest, dearest, soft, four]}
+        mixed = {"items": [dearest, dearest, four, pose]}
         assert small.post("/v1/solve/batch", json=mixed).status_code == 200
-        assert small.post("/v1/solve/batch", json={"items": [soft, pose]}).status_code == 200
+        # a character item costs what its work does in those units: 400 + 8 per 5 of its
+        # 57 joints soft (492: ~3 ms, against ~0.16 ms for the dearest pose item); one
+        # item alone is never refused for its price, as a single request of it is not
+        soft = {**char, "pins": [], "options": {}}
+        assert small.post("/v1/solve/batch", json={"items": [soft]}).status_code == 200
         read.clear()
+        r = small.post("/v1/solve/batch", json={"items": [soft, pose]})
+        assert_problem(r, 413, "work units", "items[0], 57 joints: 492")
         r = small.post("/v1/solve/batch", json={"items": [pose, char, char]})
         body = assert_problem(r, 413, "work units", "items[1]", "joints")
         assert body["type"].endswith("/too-many-items")
         assert not read  # refused before any skeleton was read
-    # the default limit: 540 items (within the 1024 item limit) of a 57-joint skeleton
-    # with exact reach cost 540 x 48 units, beyond 1024 x 25 (a pinned soft item at 4
-    # passes and the retry's pass, twice with its mirror image, and the polish's 15)
+    # the default limit, 1024 x 25 units: 28 items of a 57-joint skeleton with exact reach
+    # and a pin (892 units each, ~5 ms) fit, 29 do not (600 such items were admitted, ~3 s
+    # of work past any 2 s deadline: a user's audit)
     with make_client(models_dir) as c:
-        r = c.post("/v1/solve/batch", json={"items": [char] * 540})
-        assert_problem(r, 413, "items[0], 57 joints")
+        assert c.post("/v1/solve/batch", json={"items": [char] * 28}).status_code == 200
+        read.clear()
+        r = c.post("/v1/solve/batch", json={"items": [char] * 29})
+        assert_problem(r, 413, "items[0], 57 joints: 892")
     assert not read
