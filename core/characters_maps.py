@@ -565,12 +565,12 @@ def resolve_map(
     as_close: list[str] = []  # the schemes after the best one that score as well (its tie)
     for scheme_name in SCHEMES:
         found, hits, tied = _resolve_scheme(lookup, scheme_name)
-        matched = matched or hits > 0
         _chest_below_collars(skel, found)
         # the names it finds, but spine1 and spine2's: the structural rules find them for
         # every scheme, so a scheme that names them is no closer for it (Rokoko's Spine1 and
         # Spine2 are a Mixamo rig's too: one with its legs renamed was read as Rokoko's)
         hits = len(found.keys() - structural)
+        matched = matched or hits > 0
         found.update(given)
         if set(JOINT_NAMES) - found.keys() <= structural:  # else it cannot be complete
             _structural(skel, found)

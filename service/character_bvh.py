@@ -116,7 +116,7 @@ def root_warning(bvh: BVH, ch: Character, frame: int, root_position: str) -> str
     ``root_position`` says, stands off the floor by more than :data:`OFF_FLOOR_M` and the
     other reading stands it on the floor (within :data:`ON_FLOOR_M`): that other reading
     named, the answer solved as asked; else None. (ReActIdle's files, written as
-    displacements from the root's OFFSET and read as positions, stand 0.65 m under the
+    displacements from the root's OFFSET and read as positions, stand ~0.7 m under the
     floor, and a wrist dragged 1.2 m up was left 7.5 cm short without a word: a user's
     audit, 2026-12-06.)"""
     add = root_position == "add"

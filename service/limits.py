@@ -359,7 +359,7 @@ class Budget:
                 finally:
                     self._waited(time.perf_counter() - t)
                 return
-        if left <= 0:
+        if left <= 0 or self.compute >= self.deadline_seconds / 2:  # (its own work's: late)
             raise self.late(stage, **counts)
         head = f"the request needed more than the {self.deadline_seconds:g} s deadline"
         raise DeadlineExceeded(
@@ -513,7 +513,8 @@ def fan_out(fn: Callable[[slice], R], wave: Sequence[slice], width: int) -> list
 #: A character item of a batch (its own solve, joint map, retargeting and answer, in
 #: Python) in the units above, which are ~6.4 us of a pose item's work (1,024 of the
 #: costliest, 25 units each, took 165 ms, 1,024 plain 2-target ones, 6 units each, 39 ms:
-#: in process on one compute thread, a /tmp script, 2026-12-06): CHARACTER_PRICE, plus 8
+#: in process on one compute thread, `python scripts/figures/character_price.py`,
+#: 2026-12-06): CHARACTER_PRICE, plus 8
 #: units per 5 joints, plus CHARACTER_PRICE more when its solve runs FABRIK (exact reach,
 #: pins, the fabrik method). Measured so: a 22-joint skeleton 2.8 ms soft, 5.3 ms exact
 #: with two pins (436 / 836 units); 522 joints 7.6 / 9.4 ms; 1,022 joints 13.1 / 13.3 ms.
@@ -521,10 +522,13 @@ def fan_out(fn: Callable[[slice], R], wave: Sequence[slice], width: int) -> list
 #: of pose items): the 413 admitted 600 such items, 3.2 s of work, which no deadline of
 #: 2 s could finish (a user's audit).
 CHARACTER_PRICE = 400
+#: ... and CHARACTER_JOINT_UNITS units for every CHARACTER_PER_JOINTS of its joints
+CHARACTER_JOINT_UNITS, CHARACTER_PER_JOINTS = 8, 5
 
 
 def character_price(joints: int, slow: bool) -> int:
-    return CHARACTER_PRICE * (2 if slow else 1) + -(-joints * 8 // 5)
+    per_joints = -(-joints * CHARACTER_JOINT_UNITS // CHARACTER_PER_JOINTS)
+    return CHARACTER_PRICE * (2 if slow else 1) + per_joints
 
 
 def max_item_price(pricing: Pricing) -> int:

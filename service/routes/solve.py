@@ -31,6 +31,8 @@ from service.deps import ReadyEngine, RequestBudget, ServiceState, State
 from service.engine import Engine
 from service.errors import InvalidRequest, TooManyItems, every_item
 from service.limits import (
+    CHARACTER_JOINT_UNITS,
+    CHARACTER_PER_JOINTS,
     CHARACTER_PRICE,
     Budget,
     Pricing,
@@ -229,7 +231,8 @@ def check_price(forms: list[SolveRequest | CharacterSolveRequest], max_items: in
         raise TooManyItems(
             f"items: the batch costs {total} work units, beyond the limit of {cap} "
             f"({max_items} items of at most {max_item_price(pricing)} units); a character item "
-            f"costs {CHARACTER_PRICE} + 8 per 5 joints, {CHARACTER_PRICE} more for exact "
+            f"costs {CHARACTER_PRICE} + {CHARACTER_JOINT_UNITS} per {CHARACTER_PER_JOINTS} "
+            f"joints, {CHARACTER_PRICE} more for exact "
             f"reach, pins or FABRIK (items[{i}], {joints} joints: {prices[i]}); send smaller "
             "batches"
         )
