@@ -265,6 +265,17 @@ class Budget:
     def left(self) -> float:
         return self.t0 + self.deadline_seconds - time.perf_counter()
 
+    @property
+    def _over(self) -> str:
+        """The start of every 504 of this budget's deadline."""
+        return f"the request needed more than the {self.deadline_seconds:g} s deadline"
+
+    @property
+    def _own_work(self) -> bool:
+        """Whether the request's own compute took half its deadline or more: the same
+        request would need as long again, so a 504 says no ``Retry-After``."""
+        return self.compute >= self.deadline_seconds / 2
+
     def late(self, stage: str, **counts: int) -> DeadlineExceeded:
         """The 504 of a request whose deadline passed before ``stage`` began (``counts``:
         a batch's ``done`` and ``total``, in the detail and as members, as an overrun's).
@@ -272,15 +283,16 @@ class Budget:
         took half its deadline or more (a batch of 600 character items, each solved in
         its own stage, was told to retry after 1 s at every try, without its counts: a
         user's audit, 2026-12-06)."""
-        head = f"the request needed more than the {self.deadline_seconds:g} s deadline"
-        own = self.compute >= self.deadline_seconds / 2
+        own = self._own_work
         said = [
             f"before {stage}",
             f"{counts['done']} of {counts['total']} items done" if counts else "",
             f"{self.compute:.2f} s of its own compute" if own else "",
         ]
         advice = "send a smaller request" if own else "retry, or send a smaller request"
-        exc = DeadlineExceeded(f"{head} ({'; '.join(w for w in said if w)}); {advice}", **counts)
+        exc = DeadlineExceeded(
+            f"{self._over} ({'; '.join(w for w in said if w)}); {advice}", **counts
+        )
         if own:
             exc.retry_after = None
         return exc
@@ -329,14 +341,13 @@ class Budget:
         as long again, however idle the server: an API audit, 2026-12-06, saw a batch that
         needs ~4.5 s told to retry after 1 s at every try). Where the time went to waiting
         (compute threads, a busy event loop, the body), a retry may fit."""
-        head = f"the request needed more than the {self.deadline_seconds:g} s deadline"
-        own = self.compute >= self.deadline_seconds / 2
+        own = self._own_work
         why = (
             f"{self.compute:.2f} s of its own compute" if own
             else f"{self.compute:.2f} s of it compute, the rest waiting: the server is busy"
         )  # fmt: skip
         exc = DeadlineExceeded(
-            f"{head} ({done} of {total} {noun} done; {why}); send smaller batches",
+            f"{self._over} ({done} of {total} {noun} done; {why}); send smaller batches",
             done=done, total=total,
         )  # fmt: skip
         if own:
@@ -359,11 +370,10 @@ class Budget:
                 finally:
                     self._waited(time.perf_counter() - t)
                 return
-        if left <= 0 or self.compute >= self.deadline_seconds / 2:  # (its own work's: late)
+        if left <= 0 or self._own_work:  # (its own work's: late)
             raise self.late(stage, **counts)
-        head = f"the request needed more than the {self.deadline_seconds:g} s deadline"
         raise DeadlineExceeded(
-            f"{head} (before {stage}, after {time.perf_counter() - t:.2f} s waiting for a "
+            f"{self._over} (before {stage}, after {time.perf_counter() - t:.2f} s waiting for a "
             "compute thread): the server is busy; retry later, or send a smaller request",
             **counts,
         )
