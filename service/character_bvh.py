@@ -105,22 +105,26 @@ def character_from_bvh(bvh: BVH, req: BVHSolveRequest | BVHInspectRequest) -> Ch
 OFF_FLOOR_M, ON_FLOOR_M = 0.3, 0.1
 
 
-def _lowest(ch: Character, pose: Any) -> float:
-    """The height (m, +Y up) of ``pose``'s lowest joint over the floor the service knows."""
-    _, g_pos = forward_kinematics(ch.skel, pose)
+def _lowest(ch: Character, pose: Any, g_pos: Any = None) -> float:
+    """The height (m, +Y up) of ``pose``'s lowest joint over the floor the service knows
+    (``g_pos``: its joints' world positions, where they are known)."""
+    if g_pos is None:
+        _, g_pos = forward_kinematics(ch.skel, pose)
     return float(ch.to_service(g_pos)[:, 1].min())
 
 
-def root_warning(bvh: BVH, ch: Character, frame: int, root_position: str) -> str | None:
+def root_warning(
+    bvh: BVH, ch: Character, frame: int, root_position: str, g_pos: Any = None
+) -> str | None:
     """The answers' ``root_warning``: where the frame's figure, its root channels read as
     ``root_position`` says, stands off the floor by more than :data:`OFF_FLOOR_M` and the
     other reading stands it on the floor (within :data:`ON_FLOOR_M`): that other reading
     named, the answer solved as asked; else None. (ReActIdle's files, written as
     displacements from the root's OFFSET and read as positions, stand ~0.7 m under the
     floor, and a wrist dragged 1.2 m up was left 7.5 cm short without a word: a user's
-    audit, 2026-12-06.)"""
+    audit, 2026-12-06.) ``g_pos``: the frame's joints' world positions, where known."""
     add = root_position == "add"
-    asked = _lowest(ch, ch.pose)
+    asked = _lowest(ch, ch.pose, g_pos)
     if abs(asked) <= OFF_FLOOR_M:
         return None
     try:
@@ -206,5 +210,5 @@ def bvh_inspect(
         "points": dict(zip(JOINT_NAMES, points.tolist(), strict=True)),
         "cut_short": cut_short(bvh),
         "units_warning": ch.units_warning,
-        "root_warning": root_warning(bvh, ch, frame, root_position),
+        "root_warning": root_warning(bvh, ch, frame, root_position, g_pos),
     }
