@@ -48,7 +48,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 import numpy.typing as npt
@@ -297,9 +297,7 @@ def search(
         deg[fit] = np.rint(np.degrees(yaws[fit])).astype(np.int64) % 360
         moved[sel[fit]] = True
     degrees[sel] = np.where(deg > 180, deg - 360, deg)
-    mine = ~items.ex[sel] & items.keep[sel]  # solved as asked: soft, bone lengths kept
-    if t.quick:  # candidates in their quick form: solved as asked only if asked so
-        mine &= (reps[sel] == 1) & ~items.mirror[sel]
+    mine = _as_asked(t, items, reps, sel)
     kept = found if mine.all() else found.take(np.flatnonzero(mine))  # (a lone item's: all)
     known = (sel[mine], kept) if mine.any() else None
     return dataclasses.replace(items, poses=out), Turns(degrees, moved), known
@@ -333,6 +331,16 @@ def _search_one(
     return _kept_one(engine, items, reps, int(sel[0]), k, ans.take(row), turned[k - 1], yaws)
 
 
+def _as_asked(t: TurnSearch, items: _Items, reps: npt.NDArray[np.int64], rows: Any) -> Any:
+    """Whether the kept candidates of ``items[rows]`` (indices, or one index) were solved as
+    the items ask, so that their answers stand: soft, bone lengths kept; in the quick form
+    (one pass, no mirror image) only where the item asks so."""
+    mine = ~items.ex[rows] & items.keep[rows]
+    if t.quick:
+        mine = mine & (reps[rows] == 1) & ~items.mirror[rows]
+    return mine
+
+
 def _kept_never_nan(scores: F64) -> F64:
     """The turned candidates' ``scores`` with a NaN (a critic answering NaN for a finite
     pose: never seen) made infinite: such a candidate is never kept, by a batch's search or
@@ -357,9 +365,7 @@ def _kept_one(
         deg = int(np.rint(np.degrees(yaws)).astype(np.int64)[0]) % 360
         moved[b] = True
     degrees[b] = deg - 360 if deg > 180 else deg
-    mine = not items.ex[b] and bool(items.keep[b])  # solved as asked: soft, bones kept
-    if t.quick:  # candidates in their quick form: solved as asked only if asked so
-        mine = mine and int(reps[b]) == 1 and not items.mirror[b]
+    mine = bool(_as_asked(t, items, reps, b))
     known = (np.array([b], dtype=np.intp), found) if mine else None
     return dataclasses.replace(items, poses=out), Turns(degrees, moved), known
 
