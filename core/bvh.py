@@ -129,6 +129,8 @@ class BVH:
     #: (as read), and a writer gives the file back with its own
     cr_only: bool = field(default=False, repr=False, compare=False)
     _index: dict[str, int] = field(default_factory=dict, repr=False, compare=False)
+    #: what readers work out once per file (``core.bvh_write``'s channel layout)
+    memo: dict[str, object] = field(default_factory=dict, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         self._index.update({j.name: i for i, j in enumerate(self.joints)})
@@ -151,16 +153,32 @@ class BVH:
         block holds one frame a line and no blank line, else from its first value to the
         end of its last (over several lines where the file wraps its frames). None for a
         BVH not read from text."""
-        if frame in self.spans:  # found by the reader that read that frame alone
-            return self.spans[frame]
-        if not self.text or not 0 <= frame < self.num_frames:
+        if not 0 <= frame < self.num_frames:
             return None
+        return (self.frame_spans([frame]) or {}).get(frame)
+
+    def frame_spans(self, frames: Iterable[int]) -> dict[int, tuple[int, int]] | None:
+        """:meth:`frame_span` of each of ``frames`` (in range), found in one pass over the
+        block for those the reader did not find: a clip's edits spliced in together. None
+        for a BVH not read from text."""
+        picks = sorted(set(frames))
+        if not self.text:
+            return None
+        missing = [f for f in picks if f not in self.spans]
+        found = {f: self.spans[f] for f in picks if f in self.spans}
+        if not missing:
+            return found
         if one_frame_a_line(self.text, self.motion_offset, self.num_frames):
-            return frame_line(self.text, self.motion_offset, frame)
-        spans = frame_words(
-            self.text, self.motion_offset, self.num_frames, self.num_channels, [frame]
+            lines = _FRAME_LINE_RE.finditer(self.text, self.motion_offset)
+            at = 0
+            for f in missing:  # (ascending: the lines are stepped over once)
+                line = next(islice(lines, f - at, None))
+                found[f], at = (line.start(), line.end()), f + 1
+            return found
+        words = frame_words(
+            self.text, self.motion_offset, self.num_frames, self.num_channels, missing
         )
-        return None if spans is None else spans[frame]
+        return None if words is None else {**found, **words}
 
     def row(self, frame: int) -> FloatArray:
         """Frame ``frame``'s channel values ``[C]``; ``ValueError`` for a frame the reader
@@ -225,14 +243,6 @@ def count_frame_lines(text: str, at: int) -> int:
     by their newline, so the search skips along; each blank line is one match)."""
     blank = sum(1 for _ in _BLANK_RE.finditer(text, at))
     return text.count("\n", at) + 1 - blank - (_BLANK_FIRST_RE.match(text, at) is not None)
-
-
-def frame_line(text: str, at: int, frame: int) -> tuple[int, int]:
-    """(start, end) offsets of the ``frame``-th non-blank line of ``text`` from ``at`` (a
-    line's start; the caller has counted them: it exists), its newline left out. The regex
-    engine steps over the lines before it (no Python step per line)."""
-    found = next(islice(_FRAME_LINE_RE.finditer(text, at), frame, None))
-    return found.start(), found.end()
 
 
 def one_frame_a_line(text: str, at: int, n_frames: int) -> bool:

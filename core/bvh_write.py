@@ -1,11 +1,12 @@
-"""BVH writer: a whole file from a parsed :class:`core.bvh.BVH`, or one frame spliced in.
+"""BVH writer: a whole file from a parsed :class:`core.bvh.BVH`, or edited frames spliced in.
 
 - :func:`format_bvh` writes the hierarchy (same joints, offsets, channel names and order,
   End Sites) and the motion, numbers in Python's shortest round-trip form, so that
   ``parse_bvh(format_bvh(b))`` has the same hierarchy, offsets, frame time and motion.
-- :func:`splice_frame` keeps the file's own text and rewrites only the changed values of one
-  frame, where they stand (its line, or its values over several lines where the file wraps
-  its frames: every other byte of the file is unchanged); values are written with
+- :func:`splice_frames` (:func:`splice_frame`: one) keeps the file's own text and rewrites
+  only the changed values of the frames edited, where they stand (a frame's line, or its
+  values over several lines where the file wraps its frames: every other byte of the file
+  is unchanged); values are written with
   :data:`DECIMALS` decimals, and :func:`row_of` says which changed: a value within
   :data:`KEPT` of its old one keeps its text.
 - :func:`skeleton_of`, :func:`pose_of` and :func:`row_of` bridge a BVH frame to a
@@ -19,8 +20,11 @@
 from __future__ import annotations
 
 import re
+from collections.abc import Mapping
+from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from core.bvh import BVH, BVHError, BVHJoint
 from core.characters import F64, Pose, Skeleton, build_skeleton
@@ -76,36 +80,57 @@ def _emit(bvh: BVH, kids: dict[int, list[int]], out: list[str], i: int, depth: i
 
 def splice_frame(bvh: BVH, frame: int, row: F64, columns: list[int]) -> str:
     """The file's text with ``columns`` of frame ``frame`` set from ``row`` (whole motion
-    row); every other byte is kept: the frame's values are found where they stand
-    (:meth:`core.bvh.BVH.frame_span`: its line, or its values across lines where the file
-    wraps its frames), and only those of ``columns`` are written anew; a file of CR line
-    ends comes back with them (``BVH.cr_only``). A BVH not read
-    from text (none to keep) is written whole by :func:`format_bvh`."""
-    if not 0 <= frame < bvh.num_frames:
-        raise IndexError(f"frame {frame} out of range: the file has {bvh.num_frames} frames")
-    span = bvh.frame_span(frame)
-    if span is None:  # (a file read for one frame has its span: it is one read from text)
+    row); every other byte is kept: :func:`splice_frames` of that one frame."""
+    return splice_frames(bvh, {frame: (row, columns)})
+
+
+def splice_frames(bvh: BVH, edits: Mapping[int, tuple[F64, list[int]]]) -> str:
+    """The file's text with, for each ``frame: (row, columns)`` of ``edits``, ``columns``
+    of that frame set from ``row`` (whole motion row); every other byte is kept: each
+    frame's values are found where they stand (:meth:`core.bvh.BVH.frame_spans`: its line,
+    or its values across lines where the file wraps its frames, all in one pass), and only
+    those of its ``columns`` are written anew; a file of CR line ends comes back with them
+    (``BVH.cr_only``). A BVH not read from text (none to keep) is written whole by
+    :func:`format_bvh`."""
+    for frame in edits:
+        if not 0 <= frame < bvh.num_frames:
+            raise IndexError(f"frame {frame} out of range: the file has {bvh.num_frames} frames")
+    frames = sorted(f for f, (_, columns) in edits.items() if columns)
+    spans = bvh.frame_spans(frames)
+    if spans is None:  # (a file read for some frames has their spans: it is read from text)
         bvh.whole()
         motion = bvh.motion.copy()
-        motion[frame] = row
+        for frame, (row, _) in edits.items():
+            motion[frame] = row
         return format_bvh(bvh, motion)
-    start, end = span
-    line = bvh.text[start:end]
-    tokens = list(_WORD_RE.finditer(line))
+    parts: list[str] = []
+    last = 0
+    for frame in frames:
+        start, end = spans[frame]
+        row, columns = edits[frame]
+        parts.append(bvh.text[last:start])
+        parts.append(_spliced(bvh, frame, bvh.text[start:end], row, set(columns)))
+        last = end
+    parts.append(bvh.text[last:])
+    out = "".join(parts)
+    return out.replace("\n", "\r") if bvh.cr_only else out  # (its own line ends)
+
+
+def _spliced(bvh: BVH, frame: int, text: str, row: F64, wanted: set[int]) -> str:
+    """``text``, frame ``frame``'s values, with those numbered ``wanted`` set from ``row``."""
+    tokens = list(_WORD_RE.finditer(text))
     if len(tokens) != bvh.num_channels:  # pragma: no cover - the reader found them so
         raise ValueError(
             f"{bvh.name}: frame {frame} holds {len(tokens)} values, not {bvh.num_channels}"
         )
     parts: list[str] = []
     last = 0
-    wanted = set(columns)
     for k, m in enumerate(tokens):
-        parts.append(line[last : m.start()])
+        parts.append(text[last : m.start()])
         parts.append(f"{row[k]:.{DECIMALS}f}" if k in wanted else m.group())
         last = m.end()
-    parts.append(line[last:])
-    out = bvh.text[:start] + "".join(parts) + bvh.text[end:]
-    return out.replace("\n", "\r") if bvh.cr_only else out  # (its own line ends)
+    parts.append(text[last:])
+    return "".join(parts)
 
 
 def skeleton_of(bvh: BVH) -> Skeleton:
@@ -140,47 +165,83 @@ def _root_shift(joint: BVHJoint, axis: int, root_add: bool) -> float:
     return joint.offset[axis] if root_add and joint.parent < 0 else 0.0
 
 
-def pose_of(bvh: BVH, frame: int, row: F64 | None = None, *, root_add: bool = False) -> Pose:
-    """Local rotations and translations of one frame (of ``row`` instead, when given).
-    ``root_add``: a root's position channels are a displacement from its OFFSET (some
-    exporters, ReActIdle's), not its position (the BVH convention)."""
-    row = bvh.row(frame) if row is None else row
-    n = len(bvh.joints)
-    rot = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()
-    trans = np.array([j.offset for j in bvh.joints], dtype=np.float64)
-    orders: dict[str, tuple[list[int], list[list[int]]]] = {}  # one product per order
+@dataclass(frozen=True)
+class _Layout:
+    """Where a file's channels go (worked out once per file, :func:`_layout`): the rotation
+    columns ``[m, 3]`` of the joints of each Euler order, and each position channel's
+    joint, axis and column (the last of a joint's channels on one axis: it is the one read)."""
+
+    orders: dict[str, tuple[npt.NDArray[np.intp], npt.NDArray[np.intp]]]
+    offsets: F64
+    pos: npt.NDArray[np.intp]  # [P, 3]: joint, axis, column
+    root: npt.NDArray[np.bool_]  # [P]: a root's channel (``root_add`` shifts it)
+
+
+def _layout(bvh: BVH) -> _Layout:
+    found = bvh.memo.get("layout")
+    if isinstance(found, _Layout):
+        return found
+    orders: dict[str, tuple[list[int], list[list[int]]]] = {}
+    pos: dict[tuple[int, int], int] = {}
     for i, j in enumerate(bvh.joints):
-        seq = j.rotation_order
-        if seq:
+        if seq := j.rotation_order:
             cols = [j.channel_start + k for k, c in enumerate(j.channels) if c.lower() in _ROT]
             joints, columns = orders.setdefault(seq, ([], []))
             joints.append(i)
             columns.append(cols)
         for k, c in enumerate(j.channels):
             if c.lower() in _POS:
-                axis = _POS[c.lower()]
-                trans[i, axis] = row[j.channel_start + k] + _root_shift(j, axis, root_add)
-    for seq, (joints, columns) in orders.items():
-        rot[joints] = euler_matrices(seq, np.deg2rad(row[np.array(columns)]))
+                pos[(i, _POS[c.lower()])] = j.channel_start + k
+    table = np.array([(i, a, c) for (i, a), c in pos.items()], dtype=np.intp).reshape(-1, 3)
+    out = _Layout(
+        {seq: (np.array(js, dtype=np.intp), np.array(cs, dtype=np.intp))
+         for seq, (js, cs) in orders.items()},
+        np.array([j.offset for j in bvh.joints], dtype=np.float64),
+        table,
+        np.array([bvh.joints[i].parent < 0 for i in table[:, 0]], dtype=bool),
+    )  # fmt: skip
+    bvh.memo["layout"] = out
+    return out
+
+
+def pose_of(bvh: BVH, frame: int, row: F64 | None = None, *, root_add: bool = False) -> Pose:
+    """Local rotations and translations of one frame (of ``row`` instead, when given).
+    ``root_add``: a root's position channels are a displacement from its OFFSET (some
+    exporters, ReActIdle's), not its position (the BVH convention)."""
+    row = bvh.row(frame) if row is None else row
+    lay = _layout(bvh)
+    rot = np.broadcast_to(np.eye(3), (len(bvh.joints), 3, 3)).copy()
+    trans = lay.offsets.copy()
+    joint, axis, col = lay.pos.T
+    shift = np.where(lay.root, lay.offsets[joint, axis], 0.0) if root_add else 0.0
+    trans[joint, axis] = row[col] + shift
+    for seq, (joints, columns) in lay.orders.items():
+        rot[joints] = euler_matrices(seq, np.deg2rad(row[columns]))
     return Pose(rot, trans)
 
 
 def _nearest_euler(seq: str, matrix: F64, old: F64) -> F64:
-    """Euler angles (degrees, intrinsic ``seq``) of ``matrix`` nearest to ``old``."""
+    """Euler angles (degrees, intrinsic ``seq``) of ``matrix [..., 3, 3]`` nearest to
+    ``old [..., 3]``, joint by joint (one product for all): each of the two
+    solutions turned by whole turns towards the old angles and checked to give the matrix
+    back (``np.allclose``'s tolerances), the one whose largest change is least kept (the
+    first on a tie; the first where neither checks)."""
     first = np.rad2deg(euler_angles(seq, matrix))
-    a, b, c = first
+    a, b, c = first[..., 0], first[..., 1], first[..., 2]
     proper = seq[0] == seq[2]
-    other = np.array([a + 180.0, -b if proper else 180.0 - b, c + 180.0])
-    best, best_cost = first, np.inf
-    cands = old + (np.stack([first, other]) - old + 180.0) % 360.0 - 180.0  # turns to old
-    backs = euler_matrices(seq, np.deg2rad(cands))  # both checked in one product
-    for cand, back in zip(cands, backs, strict=True):
-        if not (np.abs(back - matrix) <= 1e-9 + 1e-5 * np.abs(matrix)).all():  # np.allclose
-            continue
-        cost = float(np.abs(cand - old).max())
-        if cost < best_cost:
-            best, best_cost = cand, cost
-    return np.asarray(best, dtype=np.float64)
+    other = np.stack([a + 180.0, -b if proper else 180.0 - b, c + 180.0], axis=-1)
+    both = np.stack([first, other], axis=-2)  # [..., 2, 3]
+    cands = old[..., None, :] + (both - old[..., None, :] + 180.0) % 360.0 - 180.0  # turns
+    backs = euler_matrices(seq, np.deg2rad(cands))  # [..., 2, 3, 3], all in one product
+    want = matrix[..., None, :, :]
+    ok: npt.NDArray[np.bool_] = np.asarray(
+        (np.abs(backs - want) <= 1e-9 + 1e-5 * np.abs(want)).all(axis=(-2, -1))
+    )  # (np.allclose's test)
+    cost = np.where(ok, np.abs(cands - old[..., None, :]).max(axis=-1), np.inf)
+    second = np.asarray(ok[..., 1] & (cost[..., 1] < cost[..., 0]))
+    best = np.where(second[..., None], cands[..., 1, :], cands[..., 0, :])
+    some: npt.NDArray[np.bool_] = np.asarray(ok.any(axis=-1))  # (neither checks: the first)
+    return np.asarray(np.where(some[..., None], best, first), dtype=np.float64)
 
 
 def row_of(
@@ -195,18 +256,23 @@ def row_of(
     compared after rounding the new one alone, it always changed)."""
     row = bvh.row(frame).copy()
     new: dict[int, float] = {}
+    turned: dict[str, tuple[list[int], list[list[int]]]] = {}  # order -> joints, columns
     for i in sorted(joints):
         j = bvh.joints[i]
         rot_cols = [j.channel_start + k for k, c in enumerate(j.channels) if c.lower() in _ROT]
         if len(rot_cols) == 3 and invertible_order(j.rotation_order):  # else never turned
-            angles = _nearest_euler(j.rotation_order, pose.rotations[i], row[rot_cols])
-            new.update(zip(rot_cols, angles.tolist(), strict=True))
+            ids, cols = turned.setdefault(j.rotation_order, ([], []))
+            ids.append(i)
+            cols.append(rot_cols)
         moves = _position_axes(j) == [0, 1, 2]  # (else its position channels are kept:
         for k, c in enumerate(j.channels):  # an axis twice was written the last one's value)
             if c.lower() in _POS and moves:
                 axis = _POS[c.lower()]
                 value = float(pose.translations[i, axis]) - _root_shift(j, axis, root_add)
                 new[j.channel_start + k] = value
+    for seq, (ids, cols) in turned.items():  # (one product per order, as pose_of reads)
+        angles = _nearest_euler(seq, pose.rotations[ids], row[np.array(cols)])
+        new.update(zip(np.ravel(cols).tolist(), angles.ravel().tolist(), strict=True))
     columns = sorted(col for col, value in new.items() if not abs(value - row[col]) <= KEPT)
     for col in columns:  # the values as they will be read back
         row[col] = float(f"{new[col]:.{DECIMALS}f}")

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from core.bvh import BVH, parse_bvh
-from core.bvh_write import DECIMALS, KEPT, pose_of, row_of, splice_frame
+from core.bvh_write import DECIMALS, KEPT, pose_of, row_of, splice_frame, splice_frames
 from core.characters import Pose
 from core.euler import euler_matrices
 
@@ -94,6 +94,38 @@ def test_a_frame_not_one_a_line_is_spliced_where_it_stands(
     expect = whole.motion.copy()
     expect[frame, columns] = np.round(row[columns], DECIMALS)
     np.testing.assert_array_equal(again.motion, expect)
+
+
+@pytest.mark.parametrize("layout", ["one-a-line", *LAYOUTS])
+@pytest.mark.parametrize("name", ["cmu-daz-salsa", "reactidle-6ch"])
+def test_frames_spliced_together_are_frames_spliced_one_by_one(
+    bvh_files: dict[str, Path], name: str, layout: str
+) -> None:
+    """A clip's edits (``/v1/bvh/solve/batch``) are written in one pass over the file, by
+    frame spans found in one pass, whether the reader read those frames alone or the whole
+    block: the same text as splicing them in one after another, in any order; a frame
+    edited by no value is left as it stands."""
+    text = raw(bvh_files[name])
+    if layout != "one-a-line":
+        per_line, newline, bom = LAYOUTS[layout]
+        n = parse_bvh(text, name).num_channels
+        text = relaid(text, per_line or 2 * n, newline, bom)
+    frames = [7, 0, 3, 8, 1]  # (out of order; neighbours, the first)
+    alone = parse_bvh(text, name, frames=frames)
+    whole = parse_bvh(text, name)
+    edits = {f: edited_values(whole, f) for f in frames}
+    edits[3] = (whole.row(3), [])  # (nothing to write)
+    one_by_one = text
+    for f in frames:
+        one_by_one = splice_frame(parse_bvh(one_by_one, name, frames=[f]), f, *edits[f])
+    assert splice_frames(alone, edits) == one_by_one
+    assert splice_frames(whole, edits) == one_by_one
+    assert whole.frame_spans(frames) == alone.frame_spans(frames)
+    again = parse_bvh(one_by_one, name).motion
+    changed = sorted({f for f, (_, cols) in edits.items() if cols})
+    assert sorted(set(np.flatnonzero((again != whole.motion).any(axis=1)))) == changed
+    with pytest.raises(IndexError, match="frame 99999 out of range"):
+        splice_frames(whole, {**edits, 99999: edits[0]})
 
 
 def test_blank_lines_among_frames_keep_their_place(bvh_files: dict[str, Path]) -> None:
