@@ -125,8 +125,9 @@ def bvh_edits(engine: Any, calls: int = 20) -> dict[str, float]:
     in soft reach without its pins (``soft``). None in a tree without them (the table
     then leaves those rows out)."""
     try:
+        from service.bvh_models import BVHSolveRequest
         from service.character_bvh import bvh_answer, character_from_bvh, read_request_bvh
-        from service.characters import BVHSolveRequest, solve_character
+        from service.characters import solve_character
 
         body = json.loads(Path("docs/examples/bvh_solve.json").read_text())
     except (ImportError, FileNotFoundError):
@@ -139,7 +140,7 @@ def bvh_edits(engine: Any, calls: int = 20) -> dict[str, float]:
         for i in range(calls + 3):  # three to warm
             t0 = time.thread_time_ns()
             bvh = read_request_bvh(req.bvh, req.frame)
-            ch = character_from_bvh(bvh, req)
+            ch = character_from_bvh(bvh, req, req.frame)
             bvh_answer(bvh, ch, req, solve_character(engine, ch, req))
             if i >= 3:
                 ns.append(time.thread_time_ns() - t0)

@@ -62,8 +62,9 @@ def reshaped(text: str, frames: int | None = None, wrap: int | None = None) -> s
 
 def _row(engine: Any, path: Path, calls: int, frame: int, units: str | None, text: str) -> str:
     """One file's table row (``text``: the file's, as sent)."""
+    from service.bvh_models import BVHSolveRequest
     from service.character_bvh import bvh_answer, character_from_bvh, read_request_bvh
-    from service.characters import BVHSolveRequest, character_problem, solve_character
+    from service.characters import character_problem, solve_character
 
     target: dict[str, Any] = {"joint": "left_wrist", "position": [0.0, 0.0, 0.0]}
     body: dict[str, Any] = {"bvh": text, "frame": frame, "targets": [target],
@@ -73,13 +74,13 @@ def _row(engine: Any, path: Path, calls: int, frame: int, units: str | None, tex
     req = BVHSolveRequest.model_validate(body)
     whole, bvh = _median_ms(calls, lambda: read_request_bvh(text))
     one, bvh = _median_ms(calls, lambda: read_request_bvh(text, frame))
-    ch = character_from_bvh(bvh, req)
+    ch = character_from_bvh(bvh, req, req.frame)
     pts = character_problem(ch, req).pose
     wrist = pts[JOINT_INDEX["left_wrist"]].copy()
     wrist[1] += 0.1 * float(pts[:, 1].max() - pts[:, 1].min())
     target["position"] = ch.from_service(wrist[None])[0].tolist()
     req = BVHSolveRequest.model_validate(body)
-    made, ch = _median_ms(calls, lambda: character_from_bvh(bvh, req))
+    made, ch = _median_ms(calls, lambda: character_from_bvh(bvh, req, req.frame))
     solved, edit = _median_ms(calls, lambda: solve_character(engine, ch, req))
     answered, _ = _median_ms(calls, lambda: bvh_answer(bvh, ch, req, edit))
     return (f"| {path.name} | {len(text) / 1e6:.2f} | {bvh.num_frames} | {whole:.1f} | "

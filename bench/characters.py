@@ -103,8 +103,9 @@ def score_file(
 ) -> dict[str, Scores]:
     """Every set's scores on one file (see the module docstring)."""
     from core.retarget import canonical_points
+    from service.bvh_models import BVHSolveRequest
     from service.character_bvh import read_request_bvh
-    from service.characters import BVHSolveRequest, character_problem, solve_prepared
+    from service.characters import character_problem, solve_prepared
 
     text = path.read_text(encoding="utf-8", errors="replace")
     bvh = read_request_bvh(text)
@@ -151,12 +152,12 @@ def file_character(
     """The character of ``frame`` of a file (``bvh``, parsed from ``text``) as
     ``/v1/bvh/solve`` reads it (:func:`read_as`), and the request fields that read it so
     (their one target a placeholder)."""
+    from service.bvh_models import BVHSolveRequest
     from service.character_bvh import character_from_bvh
-    from service.characters import BVHSolveRequest
 
     head = {"joint": "head", "position": [0.0, 0.0, 0.0]}  # (the character alone)
     base = {"bvh": text, "frame": frame, "targets": [head], **read_as(units, root_position)}
-    return character_from_bvh(bvh, BVHSolveRequest.model_validate(base)), base
+    return character_from_bvh(bvh, BVHSolveRequest.model_validate(base), frame), base
 
 
 def frame_points(ch: Character, bvh: BVH, frame: int, root_position: str) -> np.ndarray:

@@ -157,11 +157,13 @@ def _character_frame(
 ) -> None:  # fmt: skip
     """Every pin set, target set, distance and option on one frame of a file, into ``out``."""
     from core.retarget import canonical_points
+    from service.bvh_models import BVHSolveRequest
     from service.character_bvh import character_from_bvh
-    from service.characters import BVHSolveRequest, character_problem, solve_prepared
+    from service.characters import character_problem, solve_prepared
 
     still = [{"joint": "head", "position": [0.0, 0.0, 0.0]}]  # (the character alone)
-    ch = character_from_bvh(bvh, BVHSolveRequest.model_validate({**base, "targets": still}))
+    req = BVHSolveRequest.model_validate({**base, "targets": still})
+    ch = character_from_bvh(bvh, req, req.frame)
     here = canonical_points(ch.skel, ch.pose, ch.jmap)
     label, metres = ch.jmap.describe(), ch.scale  # (metres per unit of the file)
     cases = itertools.product(CHARACTER_PINS, CHARACTER_TARGETS, (0.5, 1.5), CHARACTER_OPTIONS)

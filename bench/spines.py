@@ -115,9 +115,9 @@ def character_body(text: str) -> dict[str, Any]:
 
 def worst_pins(text: str, goals: list[list[float]], models: Path) -> dict[str, list[float]]:
     """Per form (``bvh``, ``json``) each edit's worst pin (m), as its answer reports it."""
+    from service.bvh_models import BVHSolveRequest
     from service.character_bvh import bvh_answer, character_from_bvh, read_request_bvh
     from service.characters import (
-        BVHSolveRequest,
         CharacterSolveRequest,
         character_answer,
         character_from_request,
@@ -132,7 +132,7 @@ def worst_pins(text: str, goals: list[list[float]], models: Path) -> dict[str, l
     out: dict[str, list[float]] = {"bvh": [], "json": []}
     for body in edits(goals):
         req = BVHSolveRequest.model_validate({"bvh": text, "frame": 0, **body})
-        ch = character_from_bvh(bvh, req)
+        ch = character_from_bvh(bvh, req, req.frame)
         answer = bvh_answer(bvh, ch, req, solve_prepared(engine, ch, character_problem(ch, req)))
         out["bvh"].append(max(p["error"] for p in answer["pins"]))
         jreq = CharacterSolveRequest.model_validate({**base, **body})

@@ -42,6 +42,24 @@ echo "\$ curl -s $URL/v1/bvh/solve -H 'content-type: application/json' -d @docs/
 curl -s "$URL/v1/bvh/solve" -H 'content-type: application/json' -d @docs/examples/bvh_solve.json \
   | python3 -c 'import json, sys; a = json.load(sys.stdin); rows = a.pop("bvh").splitlines(); a["bvh"] = ["...", rows[-2][:60] + " ...", "..."]; a.pop("joint_map"); print(json.dumps(a, indent=1))' | abridge
 echo
+# a clip: three frames of the same file edited in one call (each edit's report abridged)
+echo "\$ curl -s $URL/v1/bvh/solve/batch -H 'content-type: application/json' -d @docs/examples/bvh_solve_batch.json"
+curl -s "$URL/v1/bvh/solve/batch" -H 'content-type: application/json' -d @docs/examples/bvh_solve_batch.json \
+  | python3 -c '
+import json, sys
+a = json.load(sys.stdin)
+rows, edits = a.pop("bvh").splitlines(), a.pop("edits")
+a.pop("joint_map")
+said = lambda rs: ", ".join("%s %.3g %s" % (r["joint"], r["error"], "reached" if r["reached"] else "short") for r in rs)
+print("{\n \"edits\": [")
+for e in edits:  # one line an edit: its frame, the joints rewritten, its targets and pins
+    print("  {\"frame\": %d, \"changed_joints\": \"%d joints\", \"targets\": \"%s\", \"pins\": \"%s\"}," % (e["frame"], len(e["changed_joints"]), said(e["targets"]), said(e["pins"])))
+print(" ],")
+for k, v in a.items():
+    print(" %s: %s," % (json.dumps(k), json.dumps(v)))
+print(" \"bvh\": [\"...\", %s]\n}" % ", ".join(json.dumps(r[:40] + " ...") for r in rows[-3:]))
+'
+echo
 echo "\$ curl -s $URL/v1/solve -H 'content-type: application/json' -d @docs/examples/solve_character.json"
 curl -s "$URL/v1/solve" -H 'content-type: application/json' -d @docs/examples/solve_character.json \
   | python3 -c 'import json, sys; a = json.load(sys.stdin); a.pop("joint_map"); [a[k].__setitem__("...", f"{len(a[k]) - 3} more joints") or [a[k].pop(n) for n in list(a[k])[3:-1]] for k in ("rotations", "positions")]; print(json.dumps(a, indent=1))' | abridge

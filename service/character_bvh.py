@@ -7,37 +7,47 @@ and the answer: the same file with only that frame's changed values written in
 from __future__ import annotations
 
 import re
+from collections.abc import Sequence
+from dataclasses import dataclass
 from itertools import islice
 from typing import Any
 
 import numpy as np
 
 from core.bvh import BVH, BVHError, parse_bvh
-from core.bvh_write import pose_of, row_of, skeleton_of, splice_frame
-from core.characters import CharacterError, forward_kinematics
-from core.characters_maps import resolve_map
+from core.bvh_write import pose_of, row_of, skeleton_of, splice_frames
+from core.characters import F64, CharacterError, Skeleton, forward_kinematics
+from core.characters_maps import JointMap, resolve_map
 from core.retarget import canonical_points
 from core.skeleton import JOINT_NAMES
 from core.text import clip, quoted
+from service.bvh_models import (
+    BVHBatchRequest,
+    BVHBatchResponse,
+    BVHFrameAnswer,
+    BVHSolveRequest,
+    _File,
+)
 from service.characters import (
     MAX_COORDINATE,
-    BVHInspectRequest,
-    BVHSolveRequest,
     Character,
     Edit,
+    character_problem,
     edit_report,
     invalid_request,
     make_character,
     moves_a_target,
 )
-from service.errors import InvalidRequest
+from service.errors import InvalidRequest, every_item
+from service.problems import SolveProblem
 
 
-def read_request_bvh(text: str, frame: int | None = None) -> BVH:
+def read_request_bvh(text: str, frames: int | Sequence[int] | None = None) -> BVH:
     """Parse and check a BVH body: every failure is a 422 naming the line and the reason.
-    ``frame``: only that frame's values are read and checked (the rest is kept, unread)."""
+    ``frames``: only that frame's (those frames') values are read and checked (the rest is
+    kept, unread)."""
     try:
-        bvh = parse_bvh(text, "bvh", None if frame is None else (frame,))
+        bvh = parse_bvh(text, "bvh", (frames,) if isinstance(frames, int) else frames)
     except BVHError as exc:
         raise invalid_request(exc) from None
     rows = None if bvh.read is None else np.array(sorted(bvh.read), dtype=np.intp)
@@ -84,15 +94,35 @@ def cut_short(bvh: BVH) -> dict[str, Any] | None:
             "detail": detail}  # fmt: skip
 
 
-def character_from_bvh(bvh: BVH, req: BVHSolveRequest | BVHInspectRequest) -> Character:
-    if req.frame >= bvh.num_frames:
-        n = bvh.num_frames
-        held = f"{n} frames: 0 to {n - 1}" if n > 1 else "1 frame: 0" if n else "no frames"
-        raise InvalidRequest(f"frame: {clip(req.frame)} is out of range: the file has {held}")
+def out_of_range(bvh: BVH, frame: int, where: str = "frame") -> InvalidRequest | None:
+    """The 422 of a ``frame`` (the field ``where``) the file does not hold, else None."""
+    if frame < bvh.num_frames:
+        return None
+    n = bvh.num_frames
+    held = f"{n} frames: 0 to {n - 1}" if n > 1 else "1 frame: 0" if n else "no frames"
+    return InvalidRequest(f"{where}: {clip(frame)} is out of range: the file has {held}")
+
+
+Rig = tuple[Skeleton, JointMap]
+
+
+def rig_of(bvh: BVH, req: _File) -> Rig:
+    """The file's skeleton and joint map (the same for each of its frames)."""
     try:
         skel = skeleton_of(bvh)
-        pose = pose_of(bvh, req.frame, root_add=req.root_position == "add")
-        jmap = resolve_map(skel, req.joint_map, offset_at=lambda _: "bvh")
+        return skel, resolve_map(skel, req.joint_map, offset_at=lambda _: "bvh")
+    except (CharacterError, BVHError) as exc:
+        raise invalid_request(exc) from None
+
+
+def character_from_bvh(bvh: BVH, req: _File, frame: int, rig: Rig | None = None) -> Character:
+    """The character of the file's frame ``frame`` (``rig``: :func:`rig_of` the file, where
+    it is made already: a clip's frames share it)."""
+    if (far := out_of_range(bvh, frame)) is not None:
+        raise far
+    skel, jmap = rig_of(bvh, req) if rig is None else rig
+    try:
+        pose = pose_of(bvh, frame, root_add=req.root_position == "add")
         points = "joint_map" if req.joint_map else "bvh"
         return make_character(skel, pose, jmap, req.units, req.up, points=points)
     except (CharacterError, BVHError) as exc:
@@ -145,23 +175,95 @@ def root_warning(
     )
 
 
-def bvh_answer(bvh: BVH, ch: Character, req: BVHSolveRequest, edit: Edit) -> dict[str, Any]:
-    """The file with the frame's changed values written in, measured as written (rounded, read
-    back); one bringing no target nearer (:func:`service.characters.moves_a_target`) is the
-    frame as it was."""
-    add = req.root_position == "add"
-    row, columns = row_of(bvh, req.frame, edit.pose, edit.changed, root_add=add)
-    points = canonical_points(ch.skel, pose_of(bvh, req.frame, row, root_add=add), ch.jmap)
+@dataclass(frozen=True)
+class FrameAnswer:
+    """One frame's edit as the file will hold it: its motion row, the columns rewritten
+    (none: the frame as sent) and what the answer says of it."""
+
+    frame: int
+    row: F64
+    columns: list[int]
+    report: dict[str, Any]
+
+
+def frame_answer(bvh: BVH, ch: Character, frame: int, root: str, edit: Edit) -> FrameAnswer:
+    """The frame's changed values as they will be written (rounded, read back) and the
+    edit measured on them (``root``: the request's ``root_position``); one bringing no
+    target nearer (:func:`service.characters.moves_a_target`) is the frame as it was."""
+    add = root == "add"
+    row, columns = row_of(bvh, frame, edit.pose, edit.changed, root_add=add)
+    points = canonical_points(ch.skel, pose_of(bvh, frame, row, root_add=add), ch.jmap)
     if not moves_a_target(ch, edit, points):  # (noise: the file's curves churn)
-        row, columns = bvh.row(req.frame), []
+        row, columns = bvh.row(frame), []
         points = canonical_points(ch.skel, ch.pose, ch.jmap)  # (the frame as it is)
-    return {
-        "bvh": splice_frame(bvh, req.frame, row, columns),
-        "frame": req.frame,
+    report = {
+        "frame": frame,
         "changed_joints": [ch.skel.names[j] for j in sorted(_written(bvh, columns))],
         **edit_report(ch, edit, points),
+        "root_warning": root_warning(bvh, ch, frame, root),
+    }
+    return FrameAnswer(frame, row, columns, report)
+
+
+def bvh_answer(bvh: BVH, ch: Character, req: BVHSolveRequest, edit: Edit) -> dict[str, Any]:
+    """The file with the frame's changed values written in (:func:`frame_answer`)."""
+    done = frame_answer(bvh, ch, req.frame, req.root_position, edit)
+    return {
+        "bvh": splice_frames(bvh, {req.frame: (done.row, done.columns)}),
+        **done.report,
         "cut_short": cut_short(bvh),
-        "root_warning": root_warning(bvh, ch, req.frame, req.root_position),
+    }
+
+
+def clip_edits(bvh: BVH, req: BVHBatchRequest) -> list[tuple[Character, SolveProblem]]:
+    """Each edit's character and canonical problem, made as ``/v1/bvh/solve`` makes its
+    frame's (so each is solved to the same bits). Every edit's own errors are told, as a
+    batch's items' are (a frame edited twice, one the file does not hold, targets and
+    pins); a character not made stops there: the first edit's in the words of
+    ``/v1/bvh/solve`` (the file's units, up axis), a later one's naming its edit."""
+    rig = rig_of(bvh, req)
+    seen: dict[int, int] = {}
+    found: list[InvalidRequest] = []
+    out: list[tuple[Character, SolveProblem]] = []
+    tried = False  # (a character made, or tried, for an edit before)
+    for i, e in enumerate(req.edits):
+        where = f"edits[{i}]"
+        if e.frame in seen:
+            found.append(InvalidRequest(
+                f"{where}.frame: frame {e.frame} is edited by edits[{seen[e.frame]}] too: "
+                "each frame at most once"
+            ))  # fmt: skip
+            continue
+        seen[e.frame] = i
+        if (far := out_of_range(bvh, e.frame, f"{where}.frame")) is not None:
+            found.append(far)
+            continue
+        try:
+            first, tried = not tried, True
+            ch = character_from_bvh(bvh, req, e.frame, rig)
+        except InvalidRequest as exc:
+            if first:
+                raise
+            raise InvalidRequest(f"{where}.frame: frame {e.frame}: {exc.detail}") from None
+        try:
+            out.append((ch, character_problem(ch, e, where)))
+        except InvalidRequest as exc:
+            found.append(exc)
+    if found:
+        raise every_item(found)
+    return out
+
+
+def clip_answer(bvh: BVH, done: list[FrameAnswer]) -> dict[str, Any]:
+    """``/v1/bvh/solve/batch``'s answer: the file with every edited frame's changed values
+    written in, one pass; each edit's report, and how the file was read, once."""
+    solved = set(BVHFrameAnswer.model_fields)
+    first = done[0].report
+    return {
+        "bvh": splice_frames(bvh, {d.frame: (d.row, d.columns) for d in done}),
+        "edits": [{k: v for k, v in d.report.items() if k in solved} for d in done],
+        **{k: first[k] for k in BVHBatchResponse.model_fields if k in first},
+        "cut_short": cut_short(bvh),
     }
 
 

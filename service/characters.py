@@ -67,7 +67,6 @@ from service.problems import SolveProblem, SolveResult
 from service.schemas import MAX_COORDINATE as MAX_METRES
 from service.schemas import (
     MAX_WEIGHT,
-    WHOLE,
     SolveOptions,
     SolveRequest,
     SolveResponse,
@@ -134,7 +133,9 @@ class CharacterTarget(_Body):
     weight: float = Field(default=1.0, gt=0.0, le=MAX_WEIGHT, allow_inf_nan=False)
 
 
-class _Frame(_Body):
+class _Edit(_Body):
+    """What one frame's edit asks: targets, pins, options."""
+
     targets: list[CharacterTarget] = Field(min_length=1, max_length=21)
     pins: list[str] = Field(
         default_factory=list,
@@ -144,6 +145,9 @@ class _Frame(_Body):
         "canonical ones, as targets take (each once; not a target too).",
     )
     options: SolveOptions = Field(default_factory=SolveOptions)
+
+
+class _Frame(_Edit):
     joint_map: JointKeyed[str] | None = Field(
         default=None, description="canonical joint -> the client's joint name; wins over the "
         "automatic map joint by joint.",
@@ -218,79 +222,6 @@ class CharacterAliasRequest(CharacterSolveRequest):
         return data
 
 
-#: How a file's root position channels are read (and an edit written back).
-RootPosition = Annotated[
-    Literal["replace", "add"],
-    Field(
-        description="How the root's position channels are read: as its position "
-        "(`replace`, the BVH convention) or as a displacement from its OFFSET (`add`: some "
-        "exporters write that, ReActIdle's among them); an edit is written back the same way."
-    ),
-]
-
-
-class BVHSolveRequest(_Frame):
-    bvh: str = Field(min_length=1, description="The whole BVH file.")
-    frame: Annotated[int, Field(ge=0), WHOLE] = Field(
-        description="Index of the frame to edit (0 = first)."
-    )
-    units: Units | None = Field(default=None, description="Default: inferred from the file.")
-    up: Literal["+Y", "+Z"] | None = Field(default=None, description="Default: inferred.")
-    root_position: RootPosition = "replace"
-
-
-class BVHInspectRequest(_Body):
-    bvh: str = Field(min_length=1, description="The whole BVH file.")
-    frame: Annotated[int, Field(ge=0), WHOLE] = Field(
-        default=0, description="Frame whose positions are answered."
-    )
-    units: Units | None = Field(default=None, description="Default: inferred from the file.")
-    up: Literal["+Y", "+Z"] | None = Field(default=None, description="Default: inferred.")
-    root_position: RootPosition = "replace"
-    joint_map: JointKeyed[str] | None = Field(
-        default=None, description="canonical joint -> the file's joint name (as in solve)."
-    )
-
-
-class BVHJointInfo(BaseModel):
-    name: str
-    parent: int = Field(description="Index in `joints` (-1 for a root).")
-    offset: list[float]
-    channels: list[str] = Field(description="As written in the file ([] for an End Site).")
-    channel_start: int = Field(description="Column of the first channel in a MOTION row.")
-    end_site: bool
-
-
-class BVHAnchor(BaseModel):
-    joint: str = Field(description="The file's joint the point is fixed to.")
-    offset: list[float] = Field(description="From that joint's origin, in its frame (units).")
-    label: str
-
-
-class BVHCutShort(BaseModel):
-    """Where a file ends before the frames its `Frames:` line declares are whole."""
-
-    frame: int = Field(
-        description="The first frame the file does not hold whole: it and "
-        "those after it are lost; the frames before it read and edit."
-    )
-    values: int = Field(
-        description="How many of that frame's values the file holds (0: "
-        "it ends at the line before)."
-    )
-    line: int = Field(description="The file's last line.")
-    frames: int = Field(description="The frames `Frames:` declares.")
-    detail: str = Field(description="The same in words.")
-
-
-#: the answers' `cut_short`: null for a whole file
-CUT_SHORT = Field(
-    default=None, description="Where the file ends before its declared frames are whole (a "
-    "file cut short, e.g. an interrupted copy): its frames before that read and edit, the "
-    "answer keeps the rest as sent (the cut line too); null for a whole file.",
-)  # fmt: skip
-
-
 #: the answers' `units_warning`
 UNITS_WARNING = Field(
     default=None, description="Where the named `units` make the rest-pose leg (hip to ankle) "
@@ -300,39 +231,9 @@ UNITS_WARNING = Field(
 )  # fmt: skip
 
 
-#: the BVH answers' `root_warning`
-ROOT_WARNING = Field(
-    default=None, description="Where the frame's figure, its root channels read as "
-    "`root_position` says, stands more than 0.3 m off the floor (y = 0) and the other "
-    "reading stands it on the floor (within 0.1 m): that other reading named (some "
-    "exporters write the root's position channels as a displacement from its OFFSET: "
-    "`\"add\"`); the answer is solved as asked. Null otherwise.",
-)  # fmt: skip
+class _Mapped(BaseModel):
+    """How the character was read: its joint map, units, up axis; the models."""
 
-
-class BVHInspectResponse(BaseModel):
-    joints: list[BVHJointInfo] = Field(description="File order (parents first).")
-    anchors: dict[str, BVHAnchor] = Field(description="canonical joint -> its point.")
-    joint_map: dict[str, str]
-    scheme: str
-    units: str | float = Field(
-        description="As given, else as inferred (named, or metres per unit)."
-    )
-    metres_per_unit: float
-    up: str = Field(description="As given, else as inferred.")
-    frames: int = Field(description="Frames in the file.")
-    frame_time: float = Field(description="Seconds per frame, as the file states it.")
-    frame: int
-    positions: list[list[float]] = Field(description="World position of every joint (units).")
-    points: dict[str, list[float]] = Field(description="The 21 canonical points (units).")
-    cut_short: BVHCutShort | None = CUT_SHORT
-    units_warning: str | None = UNITS_WARNING
-    root_warning: str | None = ROOT_WARNING
-
-
-class _Answer(BaseModel):
-    targets: list[TargetResult]
-    pins: list[TargetResult]
     joint_map: dict[str, str] = Field(description="canonical joint -> the point it was mapped to")
     scheme: str = Field(description="Naming scheme of the automatic map, or 'explicit'.")
     units: str | float = Field(
@@ -340,10 +241,21 @@ class _Answer(BaseModel):
     )
     up: str = Field(description="As given, else as inferred.")
     units_warning: str | None = UNITS_WARNING
-    solvers: list[str]
     model: str
+
+
+class _Solved(BaseModel):
+    """What one frame's solve did: targets and pins as measured on the answer."""
+
+    targets: list[TargetResult]
+    pins: list[TargetResult]
+    solvers: list[str]
     method: Literal["neural", "fabrik"]
     iterations: int
+
+
+class _Answer(_Solved, _Mapped):
+    pass
 
 
 class CharacterSolveResponse(_Answer):
@@ -356,14 +268,6 @@ class CharacterSolveResponse(_Answer):
     positions: dict[str, list[float]] = Field(
         description="Every joint, by FK of the answer (the client's units)."
     )
-
-
-class BVHSolveResponse(_Answer):
-    bvh: str = Field(description="The same file, only that frame's changed values rewritten.")
-    frame: int
-    changed_joints: list[str] = Field(description="Joints with a value rewritten (none: as sent).")
-    cut_short: BVHCutShort | None = CUT_SHORT
-    root_warning: str | None = ROOT_WARNING
 
 
 # --------------------------------------------------------------------------------------
@@ -579,7 +483,7 @@ def _within_reach_of_metres(points: F64, where: str, what: str, ch: Character) -
         )
 
 
-def character_problem(ch: Character, req: _Frame, where: str = "") -> SolveProblem:
+def character_problem(ch: Character, req: _Edit, where: str = "") -> SolveProblem:
     """The canonical solve problem of one frame, in metres and +Y up; errors name their
     field under ``where`` (e.g. ``items[3]``)."""
     prefix = f"{where}." if where else ""
@@ -633,7 +537,7 @@ class Edit:
     version: str
 
 
-def solve_character(engine: Engine, ch: Character, req: _Frame) -> Edit:
+def solve_character(engine: Engine, ch: Character, req: _Edit) -> Edit:
     """Solve one frame of a character: the new pose and what it took."""
     return solve_prepared(engine, ch, character_problem(ch, req))
 

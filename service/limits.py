@@ -41,7 +41,7 @@ import anyio
 import anyio.to_thread
 from fastapi import Request
 
-from service.errors import ClientDisconnected, DeadlineExceeded
+from service.errors import ClientDisconnected, DeadlineExceeded, TooManyItems
 from service.middleware.types import T0, Message
 from service.problems import SolveProblem
 from service.schemas import MAX_PASSES
@@ -539,6 +539,32 @@ CHARACTER_JOINT_UNITS, CHARACTER_PER_JOINTS = 8, 5
 def character_price(joints: int, slow: bool) -> int:
     per_joints = -(-joints * CHARACTER_JOINT_UNITS // CHARACTER_PER_JOINTS)
     return CHARACTER_PRICE * (2 if slow else 1) + per_joints
+
+
+def edit_price(joints: int, o: Priced, pinned: bool) -> int:
+    """:func:`character_price` of one character edit of ``joints`` joints asking ``o``
+    (slow where its solve runs FABRIK: exact reach, pins, the fabrik method)."""
+    return character_price(joints, o.method == "fabrik" or o.reach == "exact" or pinned)
+
+
+def refuse_price(prices: Sequence[int], joints: int | Sequence[int], max_items: int,
+                 pricing: Pricing, field: str = "items") -> None:  # fmt: skip
+    """Refuse (413) a batch of more than one item (``field``: ``items``, a clip's
+    ``edits``) whose ``prices`` add up past :func:`batch_price_limit` (``joints``: each
+    item's character's joints, or the clip's), naming the costliest."""
+    total, cap = sum(prices), batch_price_limit(max_items, pricing)
+    if total <= cap or len(prices) <= 1:
+        return
+    i = max(range(len(prices)), key=prices.__getitem__)
+    many = joints if isinstance(joints, int) else joints[i]
+    noun = "an edit" if field == "edits" else "a character item"
+    raise TooManyItems(
+        f"{field}: the batch costs {total} work units, beyond the limit of {cap} "
+        f"({max_items} items of at most {max_item_price(pricing)} units); {noun} costs "
+        f"{CHARACTER_PRICE} + {CHARACTER_JOINT_UNITS} per {CHARACTER_PER_JOINTS} joints, "
+        f"{CHARACTER_PRICE} more for exact reach, pins or FABRIK ({field}[{i}], {many} "
+        f"joints: {prices[i]}); send smaller batches"
+    )
 
 
 def max_item_price(pricing: Pricing) -> int:

@@ -71,7 +71,7 @@ class Metrics:
         )
         self.batch = Histogram(
             "pose_batch_items",
-            "Items per /v1/solve/batch request",
+            "Items per batch request (/v1/solve/batch items, /v1/bvh/solve/batch edits)",
             buckets=(1, 2, 4, 8, 16, 32, 64, 128, 256, 512, 1024, 4096),
             registry=self.registry,
         )

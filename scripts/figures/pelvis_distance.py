@@ -34,14 +34,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 from core.characters import Pose
 from core.retarget import canonical_points
 from core.skeleton import JOINT_INDEX
+from service.bvh_models import BVHSolveRequest
 from service.character_bvh import character_from_bvh, read_request_bvh
-from service.characters import (
-    BVHSolveRequest,
-    Character,
-    Edit,
-    character_problem,
-    solve_prepared,
-)
+from service.characters import Character, Edit, character_problem, solve_prepared
 from service.engine import Engine
 from tests.character_files import FILES, extract_bvh
 
@@ -63,7 +58,7 @@ def edits(path: Path, name: str, reps: int, rng: np.random.Generator) -> list[di
                             "targets": [{"joint": "head", "position": [0, 0, 0]}]}  # fmt: skip
     if units is not None:
         base["units"] = units
-    ch = character_from_bvh(read_request_bvh(text), BVHSolveRequest.model_validate(base))
+    ch = character_from_bvh(read_request_bvh(text), BVHSolveRequest.model_validate(base), frame)
     pts = canonical_points(ch.skel, ch.pose, ch.jmap)
     label = ch.jmap.describe()
     out = []
@@ -162,7 +157,7 @@ def main() -> None:
                 total += 1
                 what = body.pop("_what")
                 req = BVHSolveRequest.model_validate(body)
-                ch = character_from_bvh(read_request_bvh(body["bvh"]), req)
+                ch = character_from_bvh(read_request_bvh(body["bvh"]), req, req.frame)
                 edit = solve_prepared(engine, ch, character_problem(ch, req))
                 res, p = edit.result, edit.problem
                 if (res.errors > p.tolerance).any() or (res.pin_errors > p.tolerance).any():

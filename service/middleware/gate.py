@@ -52,6 +52,8 @@ WATCH_SECONDS = 0.1  # how often the gate looks for body reads past their deadli
 
 #: Routes that take a BVH file's text, which a client may send as an excerpt.
 BVH_PATHS = frozenset({"/v1/bvh/solve", "/v1/bvh/inspect"})
+#: The route that edits many frames of a BVH file (its excerpt holds the frames edited).
+CLIP_PATH = "/v1/bvh/solve/batch"
 
 
 def too_large(path: str, limit: int, size: int | None = None) -> PayloadTooLarge:
@@ -66,6 +68,13 @@ def too_large(path: str, limit: int, size: int | None = None) -> PayloadTooLarge
         return PayloadTooLarge(
             f"{said}. Send a big file as an excerpt: its text through the 'Frame Time:' line "
             f"with 'Frames: 1', then the line of the frame wanted alone, as frame 0{back}"
+        )
+    if path == CLIP_PATH:
+        return PayloadTooLarge(
+            f"{said}. Send a big file as an excerpt: its text through the 'Frame Time:' line "
+            "with 'Frames:' the count of frames edited, then their lines alone, each edit's "
+            "frame numbered by its line from 0 (the answer's lines go back in their places); "
+            "or the edits in several requests"
         )
     batch = " (a batch's items in several requests)" if path == "/v1/solve/batch" else ""
     return PayloadTooLarge(f"{said}: send a smaller body{batch}")

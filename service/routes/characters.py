@@ -1,6 +1,7 @@
 """``POST /v1/character/solve`` (an alias of the character form of ``POST /v1/solve``: a
 skeleton of the client's own, local rotations in and out), ``POST /v1/bvh/solve`` (a BVH
-file in, the same file with one frame edited out) and ``POST /v1/bvh/inspect`` (read-only:
+file in, the same file with one frame edited out), ``POST /v1/bvh/solve/batch`` (many
+frames of one file edited in one call) and ``POST /v1/bvh/inspect`` (read-only:
 the file's joints, joint map, units, axes, one frame). The work is ``service.characters``;
 :func:`answer_character` is the one path of every character solve (``/v1/solve``, its batch
 items, the alias); conventions: docs/characters.md."""
@@ -14,12 +15,25 @@ from fastapi import APIRouter, Response
 
 from core.bvh import BVH
 from service.body import BodyRoute
-from service.character_bvh import bvh_answer, bvh_inspect, character_from_bvh, read_request_bvh
-from service.characters import (
+from service.bvh_models import (
+    BVHBatchRequest,
+    BVHBatchResponse,
     BVHInspectRequest,
     BVHInspectResponse,
     BVHSolveRequest,
     BVHSolveResponse,
+)
+from service.character_bvh import (
+    FrameAnswer,
+    bvh_answer,
+    bvh_inspect,
+    character_from_bvh,
+    clip_answer,
+    clip_edits,
+    frame_answer,
+    read_request_bvh,
+)
+from service.characters import (
     Character,
     CharacterAliasRequest,
     CharacterSolveRequest,
@@ -32,7 +46,7 @@ from service.characters import (
 )
 from service.deps import ReadyEngine, RequestBudget, ServiceState, State
 from service.engine import Engine
-from service.limits import Budget
+from service.limits import Budget, Pricing, edit_price, refuse_price
 from service.problems import SolveProblem
 from service.responses import json_response
 
@@ -115,7 +129,7 @@ async def bvh_solve(
 
     def read() -> tuple[BVH, Character]:
         bvh = read_request_bvh(req.bvh, req.frame)
-        return bvh, character_from_bvh(bvh, req)
+        return bvh, character_from_bvh(bvh, req, req.frame)
 
     bvh, ch = await step(budget, "reading the file", read)
 
@@ -127,6 +141,36 @@ async def bvh_solve(
     return json_response(await step(budget, "the solve", work), budget.compute)
 
 
+@router.post("/v1/bvh/solve/batch", response_model=BVHBatchResponse)
+async def bvh_solve_batch(
+    req: BVHBatchRequest, engine: ReadyEngine, budget: RequestBudget, state: State
+) -> Response:
+    """Edit many frames of one BVH file in one call (a clip cleaned: a foot held through a
+    contact, a hand kept on a prop): each edit names its frame, targets, pins and options,
+    and is solved exactly as `POST /v1/bvh/solve` solves that frame alone; the file comes
+    back once, with every edited frame's changed values rewritten, and each edit's report
+    in request order. Priced by the file's joints per edit (413 past the batch's limit)."""
+    frames = [e.frame for e in req.edits]
+    bvh = await step(budget, "reading the file", lambda: read_request_bvh(req.bvh, frames))
+    prices = [edit_price(len(bvh.joints), e.options, bool(e.pins)) for e in req.edits]
+    refuse_price(prices, len(bvh.joints), state.settings.max_batch_items, Pricing.of(engine),
+                 "edits")  # fmt: skip
+    total = len(req.edits)
+    edits = await step(budget, "reading the edits", lambda: clip_edits(bvh, req), total=total)
+    done: list[FrameAnswer] = []
+    for k, ((ch, p), e) in enumerate(zip(edits, req.edits, strict=True)):
+
+        def work(ch: Character = ch, p: SolveProblem = p, frame: int = e.frame) -> FrameAnswer:
+            edit = solve_prepared(engine, ch, p)
+            state.metrics.solved(edit.problem.method, edit.result.solvers)
+            return frame_answer(bvh, ch, frame, req.root_position, edit)
+
+        done.append(await step(budget, f"solving edits[{k}]", work, done=k, total=total))
+    state.metrics.batch.observe(total)
+    answer = await budget.answer_in_thread(lambda: clip_answer(bvh, done), total)
+    return json_response(answer, budget.compute)
+
+
 @router.post("/v1/bvh/inspect", response_model=BVHInspectResponse)
 async def bvh_inspect_route(req: BVHInspectRequest, budget: RequestBudget) -> Response:
     """Read a BVH file without solving: its joints and channels, the joint map (where each
@@ -135,6 +179,7 @@ async def bvh_inspect_route(req: BVHInspectRequest, budget: RequestBudget) -> Re
 
     def work() -> dict[str, object]:
         bvh = read_request_bvh(req.bvh, req.frame)
-        return bvh_inspect(bvh, character_from_bvh(bvh, req), req.frame, req.root_position)
+        ch = character_from_bvh(bvh, req, req.frame)
+        return bvh_inspect(bvh, ch, req.frame, req.root_position)
 
     return json_response(await step(budget, "reading the file", work), budget.compute)

@@ -30,17 +30,7 @@ from service.characters import (
 from service.deps import ReadyEngine, RequestBudget, ServiceState, State
 from service.engine import Engine
 from service.errors import InvalidRequest, TooManyItems, every_item
-from service.limits import (
-    CHARACTER_JOINT_UNITS,
-    CHARACTER_PER_JOINTS,
-    CHARACTER_PRICE,
-    Budget,
-    Pricing,
-    batch_price_limit,
-    character_price,
-    max_item_price,
-    price_of,
-)
+from service.limits import Budget, Pricing, edit_price, price_of, refuse_price
 from service.problems import SolveProblem, SolveResult
 from service.responses import json_response, raw_response, solve_payload
 from service.routes.characters import answer_character, read_character, solve_read
@@ -218,29 +208,14 @@ def check_price(forms: list[SolveRequest | CharacterSolveRequest], max_items: in
     (``service.limits.character_price``), a pose item as ``service.limits.price``
     (``pricing``: the engine's)."""
     prices = [
-        character_price(len(f.character.joints), _slow(f))
+        edit_price(len(f.character.joints), f.options, bool(f.pins))
         if isinstance(f, CharacterSolveRequest)
         else price_of(f.options, bool(f.pins), pricing)
         for f in forms
     ]
-    total, cap = sum(prices), batch_price_limit(max_items, pricing)
-    if total > cap and len(forms) > 1:
-        i = max(range(len(prices)), key=prices.__getitem__)
-        big = forms[i]
-        joints = len(big.character.joints) if isinstance(big, CharacterSolveRequest) else 21
-        raise TooManyItems(
-            f"items: the batch costs {total} work units, beyond the limit of {cap} "
-            f"({max_items} items of at most {max_item_price(pricing)} units); a character item "
-            f"costs {CHARACTER_PRICE} + {CHARACTER_JOINT_UNITS} per {CHARACTER_PER_JOINTS} "
-            f"joints, {CHARACTER_PRICE} more for exact "
-            f"reach, pins or FABRIK (items[{i}], {joints} joints: {prices[i]}); send smaller "
-            "batches"
-        )
-
-
-def _slow(form: SolveRequest | CharacterSolveRequest) -> bool:
-    o = form.options
-    return o.method == "fabrik" or o.reach == "exact" or bool(form.pins)
+    joints = [len(f.character.joints) if isinstance(f, CharacterSolveRequest) else 21
+              for f in forms]  # fmt: skip
+    refuse_price(prices, joints, max_items, pricing)
 
 
 async def off_loop(budget: Budget, work: Callable[[], R], items: int, stage: str) -> R:

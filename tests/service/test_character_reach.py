@@ -23,8 +23,9 @@ from core.characters_maps import resolve_map
 from core.retarget import canonical_points
 from core.skeleton import JOINT_INDEX, PARENTS
 from core.units import UNITS
+from service.bvh_models import BVHSolveRequest
 from service.character_bvh import bvh_answer, character_from_bvh, read_request_bvh
-from service.characters import BVHSolveRequest, character_problem, solve_prepared
+from service.characters import character_problem, solve_prepared
 from service.engine import Engine
 from tests.character_files import FILES
 
@@ -102,7 +103,7 @@ def test_soft_reach_lays_targets_where_the_canonical_answer_put_them(
         bvh = read_request_bvh(text)
         for joint, way, amount in EDITS:
             req = BVHSolveRequest.model_validate(_body(text, name, joint, way, amount, "soft"))
-            ch = character_from_bvh(bvh, req)
+            ch = character_from_bvh(bvh, req, req.frame)
             edit = solve_prepared(engine, ch, character_problem(ch, req))
             got = canonical_points(ch.skel, edit.pose, ch.jmap)
             p = edit.problem
@@ -122,7 +123,7 @@ def _answer(engine: Engine, text: str, name: str, body: dict[str, Any]) -> tuple
         body["units"] = units
     req = BVHSolveRequest.model_validate(body)
     bvh = read_request_bvh(text)
-    ch = character_from_bvh(bvh, req)
+    ch = character_from_bvh(bvh, req, req.frame)
     edit = solve_prepared(engine, ch, character_problem(ch, req))
     return edit.result, bvh_answer(bvh, ch, req, edit)
 
@@ -269,7 +270,7 @@ def test_targets_the_answer_met_do_not_carry_the_body_across(
                                     "options": {"reach": "exact"}}  # fmt: skip
             if units is not None:
                 body["units"] = units
-            ch = character_from_bvh(bvh, BVHSolveRequest.model_validate(body))
+            ch = character_from_bvh(bvh, BVHSolveRequest.model_validate(body), body["frame"])
             pts = canonical_points(ch.skel, ch.pose, ch.jmap)
             label = ch.jmap.describe()
             body["targets"] = []
@@ -323,7 +324,7 @@ def test_wrists_the_answer_met_beyond_a_rigid_chest_are_missed_by_no_more_than_t
                             "targets": [{"joint": j, "position": p}
                                         for j, p in _WRISTS_APART.items()]}  # fmt: skip
     req = BVHSolveRequest.model_validate(body)
-    ch = character_from_bvh(read_request_bvh(text), req)
+    ch = character_from_bvh(read_request_bvh(text), req, req.frame)
     edit = solve_prepared(engine, ch, character_problem(ch, req))
     p, res = edit.problem, edit.result
     solved = np.asarray(res.pose)

@@ -19,8 +19,9 @@ import pytest
 from core.bvh import parse_bvh
 from core.bvh_write import skeleton_of
 from core.characters_maps import resolve_map
+from service.bvh_models import BVHSolveRequest
 from service.character_bvh import bvh_answer, character_from_bvh, read_request_bvh
-from service.characters import BVHSolveRequest, character_problem, solve_prepared
+from service.characters import character_problem, solve_prepared
 from service.engine import Engine
 from tests.character_files import FILES
 
@@ -95,7 +96,7 @@ def _edit(engine: Engine, text: str, names: dict[str, str]) -> Any:
             "pins": ["left_ankle", "right_ankle"], "options": {"reach": "soft"}}  # fmt: skip
     bvh = read_request_bvh(text)
     req = BVHSolveRequest.model_validate(body)
-    ch = character_from_bvh(bvh, req)
+    ch = character_from_bvh(bvh, req, req.frame)
     start = character_problem(ch, req)
     head = ch.from_service(start.pose[start.target_idx[0]][None])[0]
     target["position"] = [float(head[0]), float(head[1]) - 8.0, float(head[2]) + 8.0]

@@ -29,9 +29,9 @@ from core.bvh import parse_bvh
 from core.bvh_write import skeleton_of
 from core.characters import Skeleton
 from core.characters_maps import resolve_map
+from service.bvh_models import BVHSolveRequest
 from service.character_bvh import bvh_answer, character_from_bvh, read_request_bvh
 from service.characters import (
-    BVHSolveRequest,
     CharacterSolveRequest,
     character_answer,
     character_from_request,
@@ -68,7 +68,7 @@ def test_pins_hold_on_a_long_spine_bvh(
     worst = []
     for body in edits(goals):
         req = BVHSolveRequest.model_validate({"bvh": text, "frame": 0, **body})
-        ch = character_from_bvh(bvh, req)
+        ch = character_from_bvh(bvh, req, req.frame)
         out = bvh_answer(bvh, ch, req, solve_prepared(engine, ch, character_problem(ch, req)))
         assert out["units"] == "cm"
         now = RefBVH(out["bvh"]).positions(0)
@@ -79,7 +79,7 @@ def test_pins_hold_on_a_long_spine_bvh(
     assert max(worst) <= TOL, [round(w * 1e3, 2) for w in worst]
     again = edits(goals)[0]
     req = BVHSolveRequest.model_validate({"bvh": text, "frame": 0, **again})
-    ch = character_from_bvh(bvh, req)
+    ch = character_from_bvh(bvh, req, req.frame)
     twice = [
         bvh_answer(bvh, ch, req, solve_prepared(engine, ch, character_problem(ch, req)))["bvh"]
         for _ in range(2)

@@ -406,7 +406,8 @@ def test_unit_and_up_axis_names_in_the_contract_are_the_core_ones() -> None:
     from typing import get_args
 
     from core.units import UP_AXES
-    from service.characters import BVHInspectRequest, BVHSolveRequest, CharacterSkeleton, Units
+    from service.bvh_models import BVHInspectRequest, BVHSolveRequest
+    from service.characters import CharacterSkeleton, Units
 
     def literals(tp: object) -> set[str]:
         return {a for a in get_args(tp) if isinstance(a, str)} | {

@@ -20,6 +20,7 @@ ROUTES: dict[str, tuple[str, int]] = {
     "complete.json": ("/v1/complete", 200),
     "batch.json": ("/v1/solve/batch", 200),
     "bvh_solve.json": ("/v1/bvh/solve", 200),
+    "bvh_solve_batch.json": ("/v1/bvh/solve/batch", 200),
     "bad.json": ("/v1/solve", 422),
 }
 

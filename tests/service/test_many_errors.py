@@ -19,7 +19,8 @@ from pydantic import BaseModel, ValidationError
 
 from service import body as body_module
 from service import bounded, errors
-from service.characters import BVHSolveRequest, CharacterAliasRequest
+from service.bvh_models import BVHSolveRequest
+from service.characters import CharacterAliasRequest
 from service.errors import MAX_ERRORS, validation_problem
 from service.routes.solve import BatchBody, SolveBody
 from service.schemas import CompleteRequest

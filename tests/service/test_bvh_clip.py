@@ -1,0 +1,195 @@
+"""``POST /v1/bvh/solve/batch``: many frames of one file edited in one call. Each edit is
+solved as ``/v1/bvh/solve`` solves its frame alone (the same report, bit for bit), the
+file comes back as those edits applied one after another would leave it, and the clip is
+bounded as a batch is: its edits counted before they are validated, priced by the file's
+joints, every edit's own errors told in one 422, the deadline checked between edits."""
+
+from __future__ import annotations
+
+import json
+import re
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from core.retarget import canonical_points
+from core.skeleton import JOINT_INDEX
+from service.bvh_models import BVHSolveRequest
+from service.character_bvh import character_from_bvh, read_request_bvh
+from service.routes import characters as routes
+from tests.character_files import FILES
+from tests.conftest import make_client
+from tests.service.test_api import assert_problem
+
+#: (canonical joint, move in metres, reach, pins) of the edits, in turn
+EDITS = [
+    ("left_wrist", [0.10, 0.12, 0.05], "soft", []),
+    ("right_wrist", [-0.08, 0.15, 0.0], "exact", ["left_ankle", "right_ankle"]),
+    ("head", [0.0, 0.0, 0.0], "soft", []),  # (where it stands: the frame as sent)
+    ("left_ankle", [0.05, 0.10, 0.05], "exact", ["right_ankle"]),
+    ("pelvis", [0.0, -0.08, 0.0], "soft", []),
+]
+
+
+def clip_of(text: str, name: str, frames: list[int]) -> dict[str, Any]:
+    """A clip body of ``text``: an edit of :data:`EDITS` on each of ``frames``, its target
+    its joint's own point moved (in the file's units and axes)."""
+    _, _, units, _ = FILES[name]
+    read = {"units": units} if units is not None else {}
+    bvh = read_request_bvh(text)
+    edits = []
+    for k, f in enumerate(frames):
+        joint, move, reach, pins = EDITS[k % len(EDITS)]
+        ask = BVHSolveRequest.model_validate(
+            {"bvh": text, "frame": f, "targets": [{"joint": joint, "position": [0, 0, 0]}], **read}
+        )
+        ch = character_from_bvh(bvh, ask, f)
+        at = canonical_points(ch.skel, ch.pose, ch.jmap)[JOINT_INDEX[joint]]
+        goal = at + ch.from_service(np.asarray(move))  # (a move: no offset to take off)
+        edits.append({"frame": f, "targets": [{"joint": joint, "position": goal.tolist()}],
+                      "pins": pins, "options": {"reach": reach}})  # fmt: skip
+    return {"bvh": text, **read, "edits": edits}
+
+
+@pytest.mark.parametrize("name", ["bandai", "reactidle-6ch", "fair1-child-inches-zup"])
+def test_a_clip_is_its_frames_edited_one_by_one(
+    client: Any, bvh_files: dict[str, Path], name: str
+) -> None:
+    """Three studios' files (a walk, an idle whose root channels are read as sent, a child
+    in inches and +Z up): the clip's file is the file each edit's ``/v1/bvh/solve`` leaves
+    when run one after another, in any order; each edit's report is that route's, field for
+    field; the clip twice is the same bytes."""
+    text = bvh_files[name].read_text()
+    n = read_request_bvh(text).num_frames
+    frames = [n // 2, 3, n - 1, n // 2 + 1, 0, n // 3]  # (out of order, neighbours, ends)
+    body = clip_of(text, name, frames)
+    answers = [client.post("/v1/bvh/solve/batch", json=body) for _ in range(2)]
+    assert all(r.status_code == 200 for r in answers), answers[0].text
+    assert answers[0].content == answers[1].content
+    clip = answers[0].json()
+    assert [e["frame"] for e in clip["edits"]] == frames
+    one_by_one = text
+    head = {k: v for k, v in body.items() if k not in ("bvh", "edits")}
+    for edit, got in zip(body["edits"], clip["edits"], strict=True):
+        alone = client.post("/v1/bvh/solve", json={"bvh": text, **head, **edit}).json()
+        assert got == {k: alone[k] for k in got}, edit["frame"]
+        assert {k: clip[k] for k in clip if k not in ("bvh", "edits")} == {
+            k: alone[k] for k in clip if k not in ("bvh", "edits")
+        }
+        after = client.post("/v1/bvh/solve", json={"bvh": one_by_one, **head, **edit})
+        one_by_one = after.json()["bvh"]
+    assert clip["bvh"] == one_by_one
+    assert sum(bool(e["changed_joints"]) for e in clip["edits"]) >= len(frames) - 1
+    assert not clip["edits"][2]["changed_joints"]  # the head where it stands: as sent
+
+
+def test_every_edit_s_own_errors_are_told_at_once(client: Any, bvh_files: dict[str, Path]) -> None:
+    """A frame edited twice, a frame the file does not hold, a joint the file does not
+    have, a pin on a target: one 422, each error at its edit's field."""
+    text = bvh_files["bandai"].read_text()
+    body = clip_of(text, "bandai", [10, 11, 12])
+    edits = body["edits"]
+    edits.append({**edits[0]})  # frame 10 again
+    edits.append({**edits[1], "frame": 10**6})
+    edits[1] = {**edits[1], "targets": [{"joint": "Tail", "position": [0, 0, 0]}]}
+    edits[2] = {**edits[2], "pins": [edits[2]["targets"][0]["joint"]]}
+    resp = client.post("/v1/bvh/solve/batch", json=body)
+    problem = assert_problem(resp, 422, "edits[3].frame: frame 10 is edited by edits[0] too")
+    where = [e["location"] for e in problem["errors"]]
+    assert where == ["edits[1].targets[0].joint", "edits[2].pins[0]", "edits[3].frame",
+                     "edits[4].frame"], problem  # fmt: skip
+    assert problem["errors"][3]["message"].startswith("1000000 is out of range: the file has")
+
+
+def test_a_file_s_own_error_is_told_once_in_the_single_route_s_words(
+    client: Any, bvh_files: dict[str, Path]
+) -> None:
+    """Units the file does not make plain (the child in inches, none stated) are the
+    file's, not each edit's: the clip's 422 is ``/v1/bvh/solve``'s, once."""
+    text = bvh_files["fair1-child-inches-zup"].read_text()
+    body = clip_of(text, "fair1-child-inches-zup", [5, 6, 7])
+    del body["units"]
+    clip = client.post("/v1/bvh/solve/batch", json=body)
+    alone = client.post("/v1/bvh/solve", json={"bvh": text, **body["edits"][0]})
+    problem = assert_problem(clip, 422, "units: not plain from the rest pose")
+    assert problem["detail"] == assert_problem(alone, 422)["detail"]
+    assert "edits[" not in problem["detail"]
+
+
+def test_a_clip_is_bounded_as_a_batch_is(models_dir: Path, bvh_files: dict[str, Path]) -> None:
+    """More edits than a batch may hold items: a 413 before any edit is validated (each of
+    these would be a 422); within the count, past the batch's work limit (two exact edits
+    of a 27-joint file cost more than four of the costliest pose items): a 413 naming the
+    costliest edit and the price of one."""
+    text = bvh_files["bandai"].read_text()
+    with make_client(models_dir, max_batch_items=4) as c:
+        many = {"bvh": text, "edits": [{"frame": -1, "targets": []}] * 5}
+        assert_problem(
+            c.post("/v1/bvh/solve/batch", json=many), 413, "edits: 5 exceed the limit of 4"
+        )
+        body = clip_of(text, "bandai", [1, 2])
+        resp = c.post("/v1/bvh/solve/batch", json=body)
+        assert_problem(resp, 413, "edits: the batch costs", "(edits[1], 27 joints: 844)",
+                       "an edit costs 400 + 8 per 5 joints")  # fmt: skip
+        one = {**body, "edits": body["edits"][1:]}  # one edit alone is never refused for it
+        assert c.post("/v1/bvh/solve/batch", json=one).status_code == 200
+
+
+def test_the_deadline_is_checked_between_edits(
+    models_dir: Path, bvh_files: dict[str, Path], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Each edit is solved in its own stage: past the deadline the clip stops with a 504
+    that counts the edits done, and solves no more."""
+    solved: list[int] = []
+    solve = routes.solve_prepared
+
+    def slow(*args: Any) -> Any:
+        solved.append(1)
+        time.sleep(0.3)
+        return solve(*args)
+
+    text = bvh_files["bandai"].read_text()
+    body = clip_of(text, "bandai", list(range(20, 30)))
+    body["edits"] = [{**e, "pins": [], "options": {"reach": "soft"}} for e in body["edits"]]
+    with make_client(models_dir, deadline_seconds=1.0) as c:
+        monkeypatch.setattr(routes, "solve_prepared", slow)
+        resp = c.post("/v1/bvh/solve/batch", content=json.dumps(body),
+                      headers={"content-type": "application/json"})  # fmt: skip
+        problem = assert_problem(resp, 504, "1 s deadline", "solving edits[")
+    assert "of 10 items done" in problem["detail"], problem
+    assert 2 <= len(solved) < 10
+
+
+def test_a_clip_over_the_body_limit_is_told_to_go_as_an_excerpt_of_its_frames(
+    client: Any, models_dir: Path, bvh_files: dict[str, Path]
+) -> None:
+    """The 413 of a clip too big to send says how to cut it: the file through its
+    'Frame Time:' line with 'Frames:' the frames edited, their lines alone, each edit's
+    frame renumbered from 0. Cut so, it is answered as the whole file's frames are."""
+    text = bvh_files["bandai"].read_text()
+    frames = [40, 41, 42, 90]
+    body = clip_of(text, "bandai", frames)
+    head, _, motion = text.partition("Frame Time:")
+    time_line, _, block = motion.partition("\n")
+    rows = block.splitlines()
+    n = len(rows)
+    excerpt = re.sub(r"Frames:\s*\d+", f"Frames: {len(frames)}", head)
+    excerpt += f"Frame Time:{time_line}\n"
+    excerpt += "\n".join(rows[f] for f in frames) + "\n"
+    cut = {**body, "bvh": excerpt,
+           "edits": [{**e, "frame": k} for k, e in enumerate(body["edits"])]}  # fmt: skip
+    with make_client(models_dir, max_body_bytes=len(json.dumps(cut)) + 512) as small:
+        resp = small.post("/v1/bvh/solve/batch", json=body)
+        assert_problem(resp, 413, "(the server's POSE_MAX_BODY_BYTES). Send a big file as an "
+                       "excerpt: its text through the 'Frame Time:' line with 'Frames:' the "
+                       "count of frames edited, then their lines alone")  # fmt: skip
+        part = small.post("/v1/bvh/solve/batch", json=cut)
+        assert part.status_code == 200, part.text
+    whole = client.post("/v1/bvh/solve/batch", json=body).json()
+    got = part.json()
+    assert [e["targets"] for e in got["edits"]] == [e["targets"] for e in whole["edits"]]
+    back = whole["bvh"].splitlines()
+    assert [back[len(back) - n + f] for f in frames] == got["bvh"].splitlines()[-len(frames) :]
