@@ -11,6 +11,7 @@ from pydantic import BaseModel, Field, ValidationInfo, model_validator
 
 from service.characters import (
     UNITS_WARNING,
+    UP_WARNING,
     JointKeyed,
     Units,
     _Answer,
@@ -125,6 +126,7 @@ class BVHInspectResponse(BaseModel):
     points: dict[str, list[float]] = Field(description="The 21 canonical points (units).")
     cut_short: BVHCutShort | None = CUT_SHORT
     units_warning: str | None = UNITS_WARNING
+    up_warning: str | None = UP_WARNING
     root_warning: str | None = ROOT_WARNING
 
 

@@ -312,5 +312,6 @@ def bvh_inspect(
         "points": dict(zip(JOINT_NAMES, points.tolist(), strict=True)),
         "cut_short": cut_short(bvh),
         "units_warning": ch.units_warning,
+        "up_warning": ch.up_warning,
         "root_warning": root_warning(bvh, ch, frame, root_position, g_pos),
     }

@@ -231,6 +231,16 @@ UNITS_WARNING = Field(
 )  # fmt: skip
 
 
+#: the answers' `up_warning`
+UP_WARNING = Field(
+    default=None, description="Where `up` was inferred (not given) from the rest pose and "
+    "the frame edited stands up along the other axis (ankles to head; its root turns the "
+    "rest pose so: a rig exported with its root turned a quarter turn, or a body lying down "
+    "in a frame): both named, with the `up` that reads the frame upright; the answer used "
+    "the rest pose's axis. Null otherwise.",
+)  # fmt: skip
+
+
 class _Mapped(BaseModel):
     """How the character was read: its joint map, units, up axis; the models."""
 
@@ -252,6 +262,7 @@ class _Solved(BaseModel):
     solvers: list[str]
     method: Literal["neural", "fabrik"]
     iterations: int
+    up_warning: str | None = UP_WARNING
 
 
 class _Answer(_Solved, _Mapped):
@@ -349,6 +360,8 @@ class Character:
     points: str = "bvh"
     #: the answers' ``units_warning`` (:func:`_odd_size`), None where the body is a person's
     units_warning: str | None = None
+    #: the answers' ``up_warning`` (:func:`_up_inferred`), None where the frame agrees
+    up_warning: str | None = None
 
     def to_service(self, p: F64) -> F64:
         return np.asarray(self.scale * (p @ self.up.T))
@@ -433,8 +446,13 @@ def make_character(
                 f"{rest_up} (ankles to head) and this frame not along {up}; give "
                 f'"up": "{rest_up}", or null to infer it'
             )
+    up_warning = None
     if up is None:
-        found = infer_up(skel, jmap, canonical_points(skel, pose, jmap))
+        frame_up = up_of(canonical_points(skel, pose, jmap))
+        found = infer_up(skel, jmap)
+        if found is not None and frame_up not in (None, found):
+            up_warning = _up_inferred(f"{prefix}up", found, frame_up)
+        found = found or frame_up
         if found is None:
             raise InvalidRequest(
                 f"{prefix}up: neither the rest pose nor this frame stands up along +Y or +Z; "
@@ -442,7 +460,21 @@ def make_character(
             )
         up = found
     return Character(
-        skel, pose, jmap, units_scale(units), up_rotation(up), units, up, fields, points, warning
+        skel, pose, jmap, units_scale(units), up_rotation(up), units, up, fields, points,
+        warning, up_warning,
+    )  # fmt: skip
+
+
+def _up_inferred(where: str, rest: str, frame: str) -> str:
+    """The answers' ``up_warning``: ``up`` inferred as ``rest`` from the rest pose, where
+    the frame edited stands up along ``frame`` (an audit, 2026-12-06: a rig whose Z-up
+    offsets its root turns upright along +Y was solved lying down without a word, its
+    answer up to 7.6 cm from the upright one's)."""
+    return (
+        f"{where}: inferred {quoted(rest)} from the rest pose (ankles to head), but this "
+        f"frame stands up along {frame} (its root turns the rest pose so): give "
+        f'"up": "{frame}" if the file\'s world is {frame} up; {quoted(rest)} is right for a '
+        "body lying down in this frame"
     )
 
 
@@ -610,6 +642,7 @@ def edit_report(ch: Character, edit: Edit, points: F64) -> dict[str, Any]:
         "model": edit.version,
         "method": "fabrik" if p.method == "fabrik" else "neural",
         "iterations": r.iterations,
+        "up_warning": ch.up_warning,
     }
 
 

@@ -538,3 +538,38 @@ def test_editor_scrubs_a_file_cut_short_only_as_far_as_its_text(
         assert not errors, errors
     finally:
         page.context.close()
+
+
+@pytest.mark.browser
+def test_editor_says_when_a_file_s_root_stands_it_up_along_the_other_axis(
+    server: str, browser: Any, bvh_files: dict[str, Path]
+) -> None:
+    """The Z-up child with its first frame turned upright along +Y by its root (a rig
+    exported with its root turned a quarter turn): read as the rest pose says (+Z), it
+    opens with the service's ``up_warning`` in an "Up axis" banner naming the menu; +Y
+    picked there reads it again, upright, with no banner."""
+    from tests.service.test_up_warning import turned_frame
+
+    text = turned_frame(bvh_files["fair1-child-inches-zup"].read_text(), 0)
+    page = open_editor(browser, server)
+    errors: list[str] = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    try:
+        give_file(page, text, "turned.bvh")  # (inches, which are not plain from the file)
+        page.wait_for_function(f"() => ({M}.error() || {{}}).detail?.includes('units')")
+        page.click("#error-close")
+        with page.expect_response("**/v1/bvh/inspect"):
+            page.select_option("#bvh-units", "in")
+        page.wait_for_function(f"() => {M}.bvh() && {M}.bvh().name === 'turned.bvh'")
+        assert page.evaluate(f"{M}.bvh()")["up"] == "+Z"
+        said = page.evaluate(f"{M}.error()")
+        assert said["title"] == "Up axis", said
+        assert 'give "up": "+Y"' in said["detail"] and "(the Up axis menu)" in said["detail"]
+        with page.expect_response("**/v1/bvh/inspect"):
+            page.select_option("#bvh-up", "+Y")
+        page.wait_for_function(f"() => {M}.bvh().up === '+Y'")
+        assert page.evaluate(f"{M}.error()") is None
+        drawn_as_inspected(page, server, {"bvh": text, "frame": 0, "units": "in", "up": "+Y"})
+        assert not errors, errors
+    finally:
+        page.context.close()
