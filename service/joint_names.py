@@ -6,16 +6,21 @@ A name that is both, a joint of the skeleton and a canonical name that joint is 
 to (a finger renamed ``left_wrist`` while canonical ``left_wrist`` is the hand; DAZ Genesis
 9's ``spine2``, whose canonical ``spine2`` is its ``spine4``), is ambiguous: it is refused,
 naming the joint and both readings (was: read as the canonical joint, and the answer said it
-reached its target while the client's own joint of that name ended elsewhere)."""
+reached its target while the client's own joint of that name ended elsewhere).
+
+A joint of the skeleton that the map puts no canonical joint on (Mixamo's ``Spine1`` where
+canonical spine1 is its ``Spine``) is refused saying so, with the ``joint_map`` entry that
+makes it one (was: "did you mean 'spine1'?", and following it moved ``Spine``)."""
 
 from __future__ import annotations
 
+import json
 from typing import NoReturn
 
 from core.characters import Skeleton
 from core.characters_maps import JointMap
 from core.skeleton import JOINT_INDEX, JOINT_NAMES
-from core.text import quoted
+from core.text import QUOTE, printable, quoted
 from service.errors import InvalidRequest, name_key
 
 
@@ -33,6 +38,8 @@ def resolve_joint(skel: Skeleton, jmap: JointMap, name: str, where: str) -> int:
         if a.joint == own and not a.offset.any():
             return k
     mapped = ", ".join(f"{n} ({lbl})" for n, lbl in jmap.describe().items())
+    if own is not None:
+        _unmapped(jmap, name, where, mapped)
     known = [*(skel.names[a.joint] for a in jmap.anchors if not a.offset.any()), *JOINT_INDEX]
     same = [k for k in known if name_key(k) == name_key(name)]  # maps ignore case; not here
     near = f" (did you mean {quoted(same[0])}?)" if same else ""
@@ -56,4 +63,21 @@ def _ambiguous(jmap: JointMap, name: str, own: int, canon: int, where: str) -> N
         f"{where}: {quoted(name)} is ambiguous: it is this skeleton's joint {quoted(name)} "
         f"({theirs}) and the canonical joint {name}, which the map puts on "
         f"{quoted(point.label)}; {fix}, or rename the joint"
+    )
+
+
+def _unmapped(jmap: JointMap, name: str, where: str, mapped: str) -> NoReturn:
+    """Refuse ``name``, a joint of the skeleton that no canonical joint is mapped to, with
+    the ``joint_map`` entry that maps one onto it: never a "did you mean" the canonical
+    joint named like it (``spine1`` for ``Spine1``), which stands for another joint."""
+    like = [c for c in JOINT_NAMES if name_key(c) == name_key(name)]
+    canon = like[0] if like else "<canonical joint>"
+    elsewhere = jmap.anchors[JOINT_INDEX[canon]].label if like else ""
+    there = f"; the map puts the canonical joint {canon} on {quoted(elsewhere)}" if like else ""
+    value = json.dumps(name, ensure_ascii=False) if len(name) <= QUOTE else "<its name>"
+    fix = printable(f'give "joint_map": {{"{canon}": {value}}}')
+    raise InvalidRequest(
+        f"{where}: {quoted(name)} is a joint of this skeleton that no canonical joint is "
+        f"mapped to{there}; {fix} to map {canon if like else 'one'} onto this joint and "
+        f"target it; mapped: {mapped}"
     )

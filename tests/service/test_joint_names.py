@@ -2,16 +2,21 @@
 routes on the docs' character: the client's mapped joints and the canonical names as
 before; a name that is both a joint of the skeleton and a canonical name that joint is not
 mapped to is a 422 naming it (was: read as the canonical joint, reported reached while the
-client's own joint of that name ended 8 cm away: an audit, 2026-12-06)."""
+client's own joint of that name ended 8 cm away: an audit, 2026-12-06); a joint of the
+skeleton that no canonical joint is mapped to is a 422 saying so, with the ``joint_map``
+entry that makes it one (was: "did you mean 'spine1'?" for Mixamo's ``Spine1``, and the
+hint moved ``Spine``: an audit, 2026-12-06)."""
 
 from __future__ import annotations
 
 import copy
 import json
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from core.text import quoted
 from tests.conftest import REPO_ROOT
 from tests.service.test_api import assert_problem
 
@@ -120,3 +125,89 @@ def test_mapped_and_canonical_names_resolve_as_before(client: Any) -> None:
     assert got["targets"] == want["targets"] and got["pins"] == want["pins"]
     for name, xyz in want["positions"].items():
         np.testing.assert_allclose(got["positions"][names.get(name, name)], xyz, atol=1e-12)
+
+
+def _unmapped(r: Any, where: str, name: str, canon: str, on: str) -> None:
+    """A 422 at ``where``: ``name`` is the skeleton's joint, no canonical joint is on it,
+    ``canon`` (named like it) is on ``on``; the ``joint_map`` entry to give; no "did you
+    mean" (it offered ``canon``, which stands for ``on``)."""
+    body = assert_problem(r, 422)
+    (error,) = body["errors"]
+    assert error["location"] == where, body
+    assert error["message"].startswith(
+        f"{quoted(name)} is a joint of this skeleton that no canonical joint is mapped to; "
+        f"the map puts the canonical joint {canon} on {quoted(on)}; "
+        f'give "joint_map": {{"{canon}": "{name}"}} to map {canon} onto this joint and '
+        "target it; mapped: pelvis (Hips), "
+    ), error["message"]
+    assert "did you mean" not in body["detail"], body["detail"]
+
+
+def test_an_unmapped_joint_of_a_file_is_refused_with_the_map_entry_that_targets_it(
+    client: Any, bvh_files: dict[str, Path]
+) -> None:
+    """The animated-drawings child (Mixamo names): ``Spine1`` and ``Spine2`` are its joints,
+    canonical spine1 is on ``Spine`` and spine2 on ``Spine3``. A target or pin naming them
+    is refused saying so (single, batch); with the ``joint_map`` the refusal gives, the file's
+    ``Spine1`` reaches the target and ``Spine`` is not moved onto it."""
+    text = bvh_files["fair1-child-inches-zup"].read_text()
+    file = {"bvh": text, "units": "in"}
+    seen = client.post("/v1/bvh/inspect", json={**file, "frame": 5}).json()
+    names = [jt["name"] for jt in seen["joints"]]
+    before = dict(zip(names, seen["positions"], strict=True))
+    goal = np.add(before["Spine1"], [0.0, 0.0, -1.0]).tolist()  # an inch lower (+Z up)
+    edit = {"frame": 5, "targets": [{"joint": "Spine1", "position": goal}]}
+    r = client.post("/v1/bvh/solve", json={**file, **edit})
+    _unmapped(r, "targets[0].joint", "Spine1", "spine1", "Spine")
+    two = {**edit, "targets": [{"joint": "Spine2", "position": goal}]}
+    r = client.post("/v1/bvh/solve", json={**file, **two})
+    _unmapped(r, "targets[0].joint", "Spine2", "spine2", "Spine3")
+    pinned = {"frame": 6, "targets": [{"joint": "LeftHand", "position": goal}], "pins": ["Spine1"]}
+    r = client.post("/v1/bvh/solve/batch", json={**file, "edits": [edit, pinned]})
+    problem = assert_problem(r, 422)
+    assert [e["location"] for e in problem["errors"]] == [
+        "edits[0].targets[0].joint",
+        "edits[1].pins[0]",
+    ], problem
+    assert 'give "joint_map": {"spine1": "Spine1"}' in problem["errors"][1]["message"]
+    # the advice followed: the file's Spine1 is the joint that reaches the target
+    r = client.post("/v1/bvh/solve", json={**file, **edit, "joint_map": {"spine1": "Spine1"}})
+    assert r.status_code == 200, r.text
+    out = r.json()
+    assert out["joint_map"]["spine1"] == "Spine1" and out["targets"][0]["reached"], out
+    seen = client.post("/v1/bvh/inspect", json={**file, "bvh": out["bvh"], "frame": 5}).json()
+    after = dict(zip(names, seen["positions"], strict=True))
+    assert float(np.linalg.norm(np.subtract(after["Spine1"], goal))) <= 0.01  # inches
+    assert float(np.linalg.norm(np.subtract(after["Spine"], goal))) > 2.0
+
+
+def test_an_unmapped_joint_of_a_json_skeleton_is_refused_with_the_map_entry(
+    client: Any,
+) -> None:
+    """The docs' character with a ``Spine1`` between ``Spine`` (canonical spine1) and
+    ``Spine2``: as a target and as a pin it is refused naming where spine1 is; a misspelt
+    name that is no joint keeps its "did you mean"; mapped as the refusal says, ``Spine1``
+    reaches the target and, pinned, stays where it was."""
+    body = _character()
+    joints = body["character"]["joints"]
+    joints.insert(2, {"name": "Spine1", "parent": "Spine", "offset": [0.0, 0.12, 0.0]})
+    joints[3].update(parent="Spine1", offset=[0.0, 0.13, 0.0])  # Spine2
+    goal = [0.05, 1.2, 0.0]
+    aimed = {**body, "pins": [], "targets": [{"joint": "Spine1", "position": goal}]}
+    r = client.post("/v1/solve", json=aimed)
+    _unmapped(r, "targets[0].joint", "Spine1", "spine1", "Spine")
+    pinned = {**body, "pins": ["Spine1"]}
+    _unmapped(client.post("/v1/character/solve", json=pinned), "pins[0]", "Spine1", "spine1",
+              "Spine")  # fmt: skip
+    slip = {**aimed, "targets": [{"joint": "LEFTHAND", "position": goal}]}
+    assert_problem(client.post("/v1/solve", json=slip), 422, "(did you mean 'LeftHand'?)")
+    r = client.post("/v1/solve", json={**aimed, "joint_map": {"spine1": "Spine1"}})
+    assert r.status_code == 200, r.text
+    out = r.json()
+    assert out["joint_map"]["spine1"] == "Spine1" and out["targets"][0]["reached"], out
+    assert float(np.linalg.norm(np.subtract(out["positions"]["Spine1"], goal))) <= 1e-3
+    assert float(np.linalg.norm(np.subtract(out["positions"]["Spine"], goal))) > 0.05
+    r = client.post("/v1/solve", json={**pinned, "joint_map": {"spine1": "Spine1"}})
+    assert r.status_code == 200, r.text
+    (pin, *_) = r.json()["pins"]  # the pinned Spine1 (canonical spine1) kept where it was
+    assert pin["joint"] == "spine1" and pin["reached"] and pin["error"] <= 1e-3, pin
