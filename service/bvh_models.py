@@ -1,7 +1,7 @@
 """The bodies and answers of the BVH routes: ``/v1/bvh/solve`` (one frame of a file
 edited), ``/v1/bvh/solve/batch`` (many frames of one file, a clip's edits, in one call) and
 ``/v1/bvh/inspect`` (read only). Their work: ``service.character_bvh``; conventions:
-docs/characters.md."""
+docs/bvh.md."""
 
 from __future__ import annotations
 

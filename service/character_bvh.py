@@ -1,7 +1,8 @@
-"""A character given as a BVH file (``/v1/bvh/solve``, ``/v1/bvh/inspect``): the file read
-and checked (a 422 naming the line), the character made of it (``service.characters``),
-and the answer: the same file with only that frame's changed values written in
-(``core.bvh_write``), or what an editor needs to draw it. Conventions: docs/characters.md.
+"""A character given as a BVH file (``/v1/bvh/solve``, ``/v1/bvh/solve/batch``,
+``/v1/bvh/inspect``): the file read and checked (a 422 naming the line), the character made
+of it (``service.characters``), and the answer: the same file with only the edited frames'
+changed values written in (``core.bvh_write``), or what an editor needs to draw it.
+Conventions: docs/characters.md, docs/bvh.md.
 """
 
 from __future__ import annotations

@@ -59,7 +59,7 @@ CLIP_PATH = "/v1/bvh/solve/batch"
 def too_large(path: str, limit: int, size: int | None = None) -> PayloadTooLarge:
     """The 413 of a body over ``max_body_bytes``, saying what the client can do: it gave
     the sizes alone (a new-user audit). Only the frame asked for is read from a BVH file's
-    frames (docs/characters.md), so its header and that frame's line answer as the whole
+    frames (docs/bvh.md), so its header and that frame's line answer as the whole
     file does: the editor sends a big file so (docs/editor.md)."""
     of = f" of {size} bytes" if size is not None else ""
     said = f"body{of} exceeds the {limit}-byte limit (the server's POSE_MAX_BODY_BYTES)"
