@@ -105,7 +105,7 @@ ROOT_WARNING = Field(
     "`root_position` says, stands more than 0.3 m off the floor (y = 0) and the other "
     "reading stands it on the floor (within 0.1 m): that other reading named (some "
     "exporters write the root's position channels as a displacement from its OFFSET: "
-    "`\"add\"`); the answer is solved as asked. Null otherwise.",
+    "`\"add\"`); the answer is solved (`/v1/bvh/inspect`: read) as asked. Null otherwise.",
 )  # fmt: skip
 
 

@@ -145,15 +145,21 @@ def _lowest(ch: Character, pose: Any, g_pos: Any = None) -> float:
 
 
 def root_warning(
-    bvh: BVH, ch: Character, frame: int, root_position: str, g_pos: Any = None
+    bvh: BVH,
+    ch: Character,
+    frame: int,
+    root_position: str,
+    g_pos: Any = None,
+    done: str = "solved",
 ) -> str | None:
     """The answers' ``root_warning``: where the frame's figure, its root channels read as
     ``root_position`` says, stands off the floor by more than :data:`OFF_FLOOR_M` and the
     other reading stands it on the floor (within :data:`ON_FLOOR_M`): that other reading
-    named, the answer solved as asked; else None. (ReActIdle's files, written as
-    displacements from the root's OFFSET and read as positions, stand ~0.7 m under the
-    floor, and a wrist dragged 1.2 m up was left 7.5 cm short without a word: a user's
-    audit, 2026-12-06.) ``g_pos``: the frame's joints' world positions, where known."""
+    named, the answer ``done`` as asked ("read" on ``/v1/bvh/inspect``); else None.
+    (ReActIdle's files, written as displacements from the root's OFFSET and read as
+    positions, stand ~0.7 m under the floor, and a wrist dragged 1.2 m up was left 7.5 cm
+    short without a word: a user's audit, 2026-12-06.) ``g_pos``: the frame's joints'
+    world positions, where known."""
     add = root_position == "add"
     asked = _lowest(ch, ch.pose, g_pos)
     if abs(asked) <= OFF_FLOOR_M:
@@ -172,7 +178,7 @@ def root_warning(
     return (
         f'root_position: read as "{root_position}", the frame\'s lowest joint stands '
         f'{abs(asked):.2f} m {side} the floor; read as "{name}" ({reading}) it stands '
-        f"on it ({other:+.2f} m): the file may be written so; solved as asked"
+        f"on it ({other:+.2f} m): the file may be written so; {done} as asked"
     )
 
 
@@ -312,7 +318,7 @@ def bvh_inspect(
         "positions": g_pos.tolist(),
         "points": dict(zip(JOINT_NAMES, points.tolist(), strict=True)),
         "cut_short": cut_short(bvh),
-        "units_warning": ch.units_warning,
+        "units_warning": ch.units_warning("read"),
         "up_warning": ch.up_warning,
-        "root_warning": root_warning(bvh, ch, frame, root_position, g_pos),
+        "root_warning": root_warning(bvh, ch, frame, root_position, g_pos, "read"),
     }

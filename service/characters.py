@@ -227,7 +227,8 @@ UNITS_WARNING = Field(
     default=None, description="Where the named `units` make the rest-pose leg (hip to ankle) "
     "no person's, 0.3-1.3 m, but not past what a named unit may give (0.1-5 m, else a 422): "
     "what it is and the units that make it a person's (a file in centimetres sent as "
-    "inches is a body 2.54 times too big); the answer is solved as asked. Null otherwise.",
+    "inches is a body 2.54 times too big); the answer is solved (`/v1/bvh/inspect`: read) "
+    "as asked. Null otherwise.",
 )  # fmt: skip
 
 
@@ -358,10 +359,19 @@ class Character:
     #: what a degenerate pose of its mapped points is put down to: the client's joint map,
     #: else its skeleton (``character.joints``) or its file (``bvh``)
     points: str = "bvh"
-    #: the answers' ``units_warning`` (:func:`_odd_size`), None where the body is a person's
-    units_warning: str | None = None
+    #: what the named units make the body where it is no person's (:func:`_odd_size`),
+    #: None where it is a person's; the answers say it with :meth:`units_warning`
+    odd_size: str | None = None
     #: the answers' ``up_warning`` (:func:`_up_inferred`), None where the frame agrees
     up_warning: str | None = None
+
+    def units_warning(self, done: str = "solved") -> str | None:
+        """The answers' ``units_warning``: the body's odd size and what was done with it,
+        as asked: ``done`` is "solved" on the solve routes, "read" on ``/v1/bvh/inspect``
+        (which solves nothing)."""
+        if self.odd_size is None:
+            return None
+        return f"{self.odd_size}; {done} as asked ({OWN_SIZE})"
 
     def to_service(self, p: F64) -> F64:
         return np.asarray(self.scale * (p @ self.up.T))
@@ -483,16 +493,18 @@ def _odd_size(said: str, metres: float, fits: str) -> str | None:
     ``metres`` long) where that is no person's (the metre band of
     :data:`core.characters_maps.LEG_BANDS`) but within what a named unit may give (else
     refused), with the units that ``fits``: a file in centimetres sent as inches is a body
-    2.54 times too big (an 80 cm leg read as 2.03 m), solved as asked (the editor's own
-    test opens one so)."""
+    2.54 times too big (an 80 cm leg read as 2.03 m), solved (or read) as asked: the
+    answers add it (:meth:`Character.units_warning`; the editor's own test opens one so)."""
     low, high, _ = LEG_BANDS[0]
     if low <= metres <= high:
         return None
-    return (
-        f"{said}, not a person's {low:g}-{high:g} m"
-        + (f": {fits} would make it one" if fits else "")
-        + "; solved as asked (a character of that size: units as metres per unit, a number)"
+    return f"{said}, not a person's {low:g}-{high:g} m" + (
+        f": {fits} would make it one" if fits else ""
     )
+
+
+#: how a character really of an odd size is given (the end of a ``units_warning``)
+OWN_SIZE = "a character of that size: units as metres per unit, a number"
 
 
 def _refused(where: str, message: str) -> InvalidRequest:
@@ -637,7 +649,7 @@ def edit_report(ch: Character, edit: Edit, points: F64) -> dict[str, Any]:
         "scheme": ch.jmap.scheme,
         "units": ch.units,
         "up": ch.up_name,
-        "units_warning": ch.units_warning,
+        "units_warning": ch.units_warning(),
         "solvers": r.solvers,
         "model": edit.version,
         "method": "fabrik" if p.method == "fabrik" else "neural",

@@ -151,7 +151,9 @@ def test_a_named_unit_that_makes_no_person_is_said_so(
     read as 2.09 m, a body 2.54 times too big), the inch child as centimetres (a 0.22 m
     leg) or ReActIdle's metres as feet were solved as asked without a word: within the
     0.1-5 m leg a named unit may give. Now inspect and solve say so in `units_warning`,
-    naming the units that make the leg a person's; the file's own units say nothing."""
+    naming the units that make the leg a person's; the file's own units say nothing.
+    Inspect, which solves nothing, says the file was read as asked (an audit, 2026-12-06:
+    its warning said "solved as asked"); the solve routes that it was solved so."""
     slips = {"cmu-daz-salsa": ("in", "cm"), "fair1-child-inches-zup": ("cm", "in"),
              "reactidle-6ch": ("ft", "m")}  # fmt: skip
     for name, (wrong, right) in slips.items():
@@ -167,17 +169,20 @@ def test_a_named_unit_that_makes_no_person_is_said_so(
                 assert warning is None, (name, warning)
                 continue
             assert warning.startswith(f"units: '{units}' makes the rest-pose leg"), warning
-            assert f'"units": "{right}" (' in warning and "solved as asked" in warning
+            assert f'"units": "{right}" (' in warning and "; read as asked (" in warning
+            assert "solved" not in warning, warning
             goal = [v + 0.05 / 0.0254 for v in seen.json()["points"]["left_wrist"]]
             solve = {**body, "units": units, "targets": [{"joint": "left_wrist",
                                                          "position": goal}]}  # fmt: skip
             r = client.post("/v1/bvh/solve", json=solve)
-            assert r.status_code == 200 and r.json()["units_warning"] == warning, r.text
+            solved = warning.replace("; read as asked (", "; solved as asked (")
+            assert r.status_code == 200 and r.json()["units_warning"] == solved, r.text
     character = _example("solve_character")  # the character form (its values are metres)
     assert client.post("/v1/solve", json=character).json()["units_warning"] is None
     character["character"]["units"] = "ft"
     warning = client.post("/v1/solve", json=character).json()["units_warning"]
     assert warning.startswith("character.units: 'ft' makes"), warning
+    assert "; solved as asked (" in warning, warning
 
 
 def test_a_target_beyond_the_service_is_named(client: Any) -> None:
