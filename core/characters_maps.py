@@ -26,7 +26,6 @@ over it, joint by joint. Then two structural rules apply to every map:
 
 from __future__ import annotations
 
-import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Final
@@ -35,8 +34,9 @@ import numpy as np
 import numpy.typing as npt
 
 from core.characters import F64, CharacterError, Skeleton
-from core.map_lookup import Lookup, lookup_of, missing_message, tie_message
+from core.map_lookup import Lookup, lookup_of, missing_message, near, tie_message
 from core.map_lookup import name_key as _key
+from core.map_points import along_a_bone, fraction, not_made, slid_point
 from core.rest_checks import OffsetAt, default_offset_at, refuse_one_point, refuse_out_of_proportion
 from core.skeleton import JOINT_INDEX, JOINT_NAMES, PARENT_NAMES
 from core.text import clip, quoted
@@ -530,7 +530,46 @@ def resolve_map(
 ) -> JointMap:
     """The joint map of ``skel``: automatic, overridden joint by joint by ``explicit``;
     ``offset_at`` names the fields of its offsets, for a rest pose that cannot be read
-    (:mod:`core.rest_checks`)."""
+    (:mod:`core.rest_checks`). A map refused as a whole (at ``where``) that is made
+    without the points along a bone ``explicit`` gives is refused at the first of them it
+    does not make (:func:`_point_to_blame`)."""
+    try:
+        return _resolve_map(skel, explicit, where, offset_at)
+    except CharacterError as exc:
+        if not str(exc).startswith(f"{where}: "):
+            raise
+        blamed = _point_to_blame(skel, explicit or {}, where, offset_at)
+        if blamed is None:
+            raise
+        raise blamed from None
+
+
+def _point_to_blame(
+    skel: Skeleton, explicit: Mapping[str, str], where: str, offset_at: OffsetAt
+) -> CharacterError | None:
+    """The refusal of the first point along a bone of ``explicit`` that the map made
+    without them does not make, where that map is made (the point broke it); else None.
+    (``{"spine2": "0.35 of spine->neck"}`` on ReActIdle, whose neck hangs from spine.001,
+    was a 422 at `joint_map` naming a joint the client did not touch: "no joint found for
+    ['spine1']"; an audit, 2026-12-06.)"""
+    points = {c: n for c, n in explicit.items() if slid_point(skel, n) is not None}
+    if not points:
+        return None
+    try:
+        rest = {c: n for c, n in explicit.items() if c not in points}
+        jmap = _resolve_map(skel, rest, where, offset_at)
+    except CharacterError:
+        return None
+    for canon, point in points.items():
+        made = jmap.anchors[JOINT_INDEX[canon]].label
+        if made != point:
+            return CharacterError(not_made(skel, f"{where}.{canon}", point, made))
+    return None
+
+
+def _resolve_map(
+    skel: Skeleton, explicit: Mapping[str, str] | None, where: str, offset_at: OffsetAt
+) -> JointMap:
     lookup = lookup_of(skel.names, _shared_prefix([_key(n) for n in skel.names]))
     given: dict[str, int] = {}
     slid: dict[str, str] = {}  # a point part-way along a bone, as a map describes it
@@ -542,19 +581,19 @@ def resolve_map(
                 f"joints are {', '.join(JOINT_NAMES)}",
                 at,
             )
-        along = _SLID.fullmatch(name) if name not in skel.index else None
-        if along is not None and along.group(2) in skel.index:  # "0.5 of Spine1->Neck"
-            if _SLIDE.get(canon) != _fraction(along.group(1)):
+        along = slid_point(skel, name)
+        if along is not None:  # "0.5 of Spine1->Neck"
+            if _SLIDE.get(canon) != fraction(along.group(1)):
                 raise CharacterError(
                     f"{where}.{canon}: {quoted(name)} is not a point a map makes (only "
                     + ", ".join(f"{k} slides {v:g} of its bone" for k, v in _SLIDE.items())
                     + "); name a joint of the skeleton"
                 )
-            _along_a_bone(skel, along, f"{where}.{canon}")
+            along_a_bone(skel, along, f"{where}.{canon}")
             slid[canon], name = name, along.group(2)
         if name not in skel.index:
             raise CharacterError(
-                f"{where}.{canon}: the skeleton has no joint {quoted(name)}{_near(skel, name)}"
+                f"{where}.{canon}: the skeleton has no joint {quoted(name)}{near(skel.names, name)}"
             )
         given[canon] = skel.index[name]
 
@@ -600,52 +639,8 @@ def resolve_map(
     for canon, label in slid.items():  # as the map itself slides it, or refused
         got = jmap.anchors[JOINT_INDEX[canon]].label
         if got != label:
-            raise CharacterError(
-                f"{where}.{canon}: {quoted(label)} is not a point this map makes (it makes "
-                f"{quoted(got)}); name a joint of the skeleton"
-            )
+            raise CharacterError(not_made(skel, f"{where}.{canon}", label, got))
     return jmap
-
-
-def _near(skel: Skeleton, name: str) -> str:
-    """`` (did you mean 'Left  Hand'?)`` for a joint named as ``name`` is but for case and
-    blanks (names are compared as written: a file's two spaces are two), else nothing."""
-    key = " ".join(name.lower().split())
-    same = (n for n in skel.names if " ".join(n.lower().split()) == key)
-    return next((f" (did you mean {quoted(n)}?)" for n in same), "")
-
-
-#: A point part-way along a bone as :meth:`JointMap.describe` writes it (a joint sliding
-#: along its bone, where it would sit on its parent): accepted back in a ``joint_map``.
-_SLID = re.compile(r"([0-9.]+) of (.+)->(.+)")
-
-
-def _along_a_bone(skel: Skeleton, along: re.Match[str], where: str) -> None:
-    """Refuse a point ``<fraction> of <joint>-><joint below it>`` whose bone is not one:
-    an end the skeleton has not, or the two joints reversed (was: read as the first joint,
-    and refused by the map's hierarchy, the point itself not named)."""
-    point, top, bottom = along.group(0), along.group(2), along.group(3)
-    if bottom not in skel.index:
-        raise CharacterError(
-            f"{where}: {quoted(point)}: the skeleton has no joint {quoted(bottom)}"
-        )
-    t, b = skel.index[top], skel.index[bottom]
-    if t == b or not skel.is_ancestor(t, b):
-        hint = (
-            f" (reversed: {quoted(top)} is below it)" if t != b and skel.is_ancestor(b, t) else ""
-        )
-        raise CharacterError(
-            f"{where}: {quoted(point)} is no point along a bone: {quoted(bottom)} is not below "
-            f"{quoted(top)} in the skeleton{hint}; a point reads '<fraction> of "
-            "<joint>-><a joint below it>', as an answer's joint_map writes it"
-        )
-
-
-def _fraction(text: str) -> float | None:
-    try:
-        return float(text)
-    except ValueError:
-        return None
 
 
 def _anchors(

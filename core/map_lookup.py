@@ -112,3 +112,12 @@ def missing_message(
         f"{{canonical: joint name}}, naming one of the skeleton's {len(names)} joints: "
         f"{', '.join(listed)}{more}; schemes found automatically: {schemes}"
     )
+
+
+def near(names: Sequence[str], name: str) -> str:
+    """`` (did you mean 'Left  Hand'?)`` for a joint named as ``name`` is but for case and
+    blanks among a skeleton's ``names`` (names are compared as written: a file's two spaces
+    are two), else nothing."""
+    key = " ".join(name.lower().split())
+    same = (n for n in names if " ".join(n.lower().split()) == key)
+    return next((f" (did you mean {quoted(n)}?)" for n in same), "")

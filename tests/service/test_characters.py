@@ -455,6 +455,35 @@ def test_the_joint_map_an_answer_gives_can_be_sent_back(
     assert slid > 0  # some file's map slides a point along a bone
 
 
+def test_a_point_along_joints_not_parent_and_child_is_named(
+    client: Any, bvh_files: dict[str, Path]
+) -> None:
+    """On ReActIdle (neck hangs from spine.001), ``{"spine2": "0.35 of spine->neck"}`` was
+    a 422 at `joint_map` saying "no joint found for ['spine1']": a joint the client did not
+    touch, the point itself not named (an audit, 2026-12-06). Now it is refused at
+    `joint_map.spine2`, saying its two joints are not parent and child, as is its
+    neighbouring mistake ``0.35 of spine.001->face``; the map's own point is taken back."""
+    base = {"bvh": bvh_files["reactidle-6ch"].read_text(), "frame": 5, "root_position": "add"}
+    for point, parent in (
+        ("0.35 of spine->neck", "spine.001"),
+        ("0.35 of spine.001->face", "neck"),
+    ):
+        r = client.post("/v1/bvh/inspect", json={**base, "joint_map": {"spine2": point}})
+        assert r.status_code == 422, r.text
+        (error,) = r.json()["errors"]
+        assert error["location"] == "joint_map.spine2", error
+        top, bottom = point.removeprefix("0.35 of ").split("->")
+        for needle in (
+            f"'{point}' is not a point this map makes (it makes '0.35 of spine.001->neck')",
+            f"'{top}' and '{bottom}' are not parent and child",
+            f"(the parent of '{bottom}' is '{parent}')",
+        ):
+            assert needle in error["message"], error["message"]
+        assert "spine1" not in error["message"], error["message"]
+    good = {"spine2": "0.35 of spine.001->neck"}
+    assert client.post("/v1/bvh/inspect", json={**base, "joint_map": good}).status_code == 200
+
+
 def test_changed_joints_are_the_joints_whose_values_the_answer_rewrites(
     client: Any, bvh_files: dict[str, Path]
 ) -> None:
