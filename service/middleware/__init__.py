@@ -38,7 +38,7 @@ def install(
 
     app.add_middleware(FastPath, app_routes=routes)
     app.add_middleware(HeadAsGet)  # the routes see GET; the layers outside, HEAD
-    app.add_middleware(Gate, settings=settings)
+    app.add_middleware(Gate, settings=settings, app_routes=routes)
     app.add_middleware(RequestMetrics, metrics=metrics, app_routes=routes)
     app.add_middleware(RequestContext)
     if settings.cors_origins:  # outside the gate and the 500s: their answers carry CORS too

@@ -3,7 +3,10 @@
 - ``/v1/*``: the API key when one is set (``X-API-Key`` or ``Authorization: Bearer``,
   scheme in any case, compared in constant time);
 - a body must be ``application/json``, uncompressed (a ``Content-Encoding`` other than
-  ``identity`` is a 415, not a body read as if it were plain), and within
+  ``identity`` is a 415, not a body read as if it were plain), unless no route takes the
+  request (its path, with its method): the app's 404 or 405 says so first (a mistyped
+  ``/v1/bvh/slove`` sent with curl's default form content type was a 415, the client told
+  to fix a header before learning the path was wrong; an audit, 2026-12-06); and within
   ``max_body_bytes`` (declared length checked up front, a chunked body counted while it is
   read);
 - admission, per worker: at most ``max_concurrency`` ``/v1`` POSTs in flight and at most
@@ -21,6 +24,9 @@ from __future__ import annotations
 import asyncio
 import hmac
 import time
+from collections.abc import Sequence
+
+from starlette.routing import BaseRoute, Match
 
 from core.text import clip
 from service.decoded import COUNTED, ESTIMATED_FROM, ORJSON_PATHS, DecodeBudget, estimate
@@ -89,9 +95,14 @@ def _api_key(headers: dict[str, str]) -> str:
 
 
 class Gate:
-    def __init__(self, app: ASGIApp, settings: Settings) -> None:
+    def __init__(
+        self, app: ASGIApp, settings: Settings, app_routes: Sequence[BaseRoute] | None = None
+    ) -> None:
         self.app = app
         self.settings = settings
+        #: the app's routes, for a body's 415 to wait for a route's 404 or 405 (None: every
+        #: request is taken to have a route)
+        self.routes = app_routes
         self.active = 0  # admitted /v1 POSTs in flight
         self.held = 0  # body bytes reserved by them
         #: tasks reading a body -> when their deadline passes (perf_counter seconds)
@@ -132,7 +143,11 @@ class Gate:
         if length in (None, "0") and not chunked:
             return 0
         if method in ("POST", "PUT", "PATCH"):
-            self._check_type(headers)
+            try:
+                self._check_type(headers)
+            except UnsupportedMediaType:
+                if self._routed(scope):
+                    raise  # (else the app answers its 404 or 405, the body unread)
         if length is not None and not length.isdigit():
             raise MalformedBody(f"Content-Length is not a number: {length[:40]!r}")
         size = s.max_body_bytes if chunked else int(length or 0)
@@ -155,6 +170,13 @@ class Gate:
                 f"{size}{counted} would pass the limit ({s.max_inflight_bytes})"
             )
         return size
+
+    def _routed(self, scope: Scope) -> bool:
+        """Whether a route of the app takes the request, its path with its method (only
+        asked of a body refused for its type: a route's matching costs microseconds)."""
+        if self.routes is None:
+            return True
+        return any(route.matches(scope)[0] is Match.FULL for route in self.routes)
 
     @staticmethod
     def _check_type(headers: dict[str, str]) -> None:

@@ -236,6 +236,31 @@ def test_a_charset_other_than_utf8_is_a_415(client: Any) -> None:
         assert client.post("/v1/solve", content=plain, headers={"content-type": ctype}).is_success
 
 
+def test_a_mistyped_route_is_a_404_whatever_its_content_type(
+    client: Any, bvh_files: dict[str, Path]
+) -> None:
+    """An audit (2026-12-06): ``curl -s .../v1/bvh/slove -d '{}'`` (curl's default form
+    content type) was a 415 "content type must be application/json": the client fixed the
+    header, then learnt the path was wrong. The route is checked first: no route is a 404
+    (a method the route does not take a 405); a route's own body of the wrong type, a 415."""
+    form = {"content-type": "application/x-www-form-urlencoded"}
+    edit = json.dumps({"bvh": bvh_files["cmu-daz-salsa"].read_text(), "frame": 5})
+    for content in ("{}", edit):
+        r = client.post("/v1/bvh/slove", content=content, headers=form)
+        assert_problem(r, 404)
+        r = client.post("/v1/bvh/solve/", content=content, headers=form)
+        assert_problem(r, 404, "/v1/bvh/solve")  # (the route without the slash)
+        assert_problem(client.post("/v1/bvh/solve", content=content, headers=form), 415)
+        assert_problem(client.post("/v2/health/live", content=content, headers=form), 405)
+    r = client.post(
+        "/v1/bvh/slove", content=gzip.compress(edit.encode()),
+        headers={"content-type": "application/json", "content-encoding": "gzip"},
+    )  # fmt: skip
+    assert_problem(r, 404)
+    for path in ("/v1/bvh/inspect", "/v1/bvh/solve/batch", "/v1/solve"):
+        assert_problem(client.post(path, content="{}", headers=form), 415, "application/json")
+
+
 def test_a_compressed_transfer_coding_is_a_415(client: Any) -> None:
     """``Transfer-Encoding: gzip, chunked`` was read as a plain body (and solved)."""
     plain = json.dumps(_example("solve")).encode()
