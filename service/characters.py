@@ -64,14 +64,15 @@ from service.engine import Engine
 from service.errors import InvalidRequest
 from service.joint_names import resolve_joint
 from service.problems import SolveProblem, SolveResult
-from service.schemas import MAX_COORDINATE as MAX_METRES
 from service.schemas import (
+    ITERATIONS,
     MAX_WEIGHT,
     SolveOptions,
     SolveRequest,
     SolveResponse,
     TargetResult,
 )
+from service.schemas import MAX_COORDINATE as MAX_METRES
 from service.validation import MIN_BONE, problem_of, validate_as
 
 MAX_COORDINATE = 1.0e7  # client units; beyond this a coordinate is nonsense
@@ -262,7 +263,7 @@ class _Solved(BaseModel):
     pins: list[TargetResult]
     solvers: list[str]
     method: Literal["neural", "fabrik"]
-    iterations: int
+    iterations: int = Field(description=ITERATIONS)  # (as the pose form's)
     up_warning: str | None = UP_WARNING
 
 

@@ -232,6 +232,14 @@ class TargetResult(BaseModel):
     reached: bool = Field(description="error <= tolerance.")
 
 
+#: What an answer's ``iterations`` counts: the pose form's, the character form's and the
+#: BVH answers' (``service.characters._Solved``) alike.
+ITERATIONS = (
+    "FABRIK iterations used: 0 when none ran, or when a polish in `solvers` found its "
+    "targets already met."
+)
+
+
 class SolveResponse(BaseModel):
     pose: PoseOut
     targets: list[TargetResult]
@@ -248,10 +256,7 @@ class SolveResponse(BaseModel):
     )
     model: str = Field(description="Manifest version of the models.")
     method: Literal["neural", "fabrik"]
-    iterations: int = Field(
-        description="FABRIK iterations used: 0 when none ran, or when a polish in `solvers` "
-        "found its targets already met."
-    )
+    iterations: int = Field(description=ITERATIONS)
 
 
 class Keypoint(_Body):

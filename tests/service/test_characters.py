@@ -484,6 +484,32 @@ def test_a_point_along_joints_not_parent_and_child_is_named(
     assert client.post("/v1/bvh/inspect", json={**base, "joint_map": good}).status_code == 200
 
 
+def test_iterations_mean_the_same_in_every_answer(client: Any, bvh_files: dict[str, Path]) -> None:
+    """`iterations` had no description in the character and BVH answers, only in the pose
+    form's (an audit, 2026-12-06: the README's BVH example shows 0 next to `fabrik-polish`,
+    the pose example's polish 1). Every answer's schema now carries the pose form's one
+    description, and it holds on a real file's edits: 0 where no FABRIK ran or its
+    targets were met already, the iterations run where it moved the wrist."""
+    from service.openapi import app_schema
+
+    schemas = app_schema()["components"]["schemas"]
+    said = schemas["SolveResponse"]["properties"]["iterations"]["description"]
+    assert said.startswith("FABRIK iterations used: 0 when none ran")
+    for name in ("CharacterSolveResponse", "BVHSolveResponse", "BVHFrameAnswer"):
+        assert schemas[name]["properties"]["iterations"].get("description") == said, name
+    base = {"bvh": bvh_files["cmu-daz-salsa"].read_text(), "frame": 5}
+    wrist = client.post("/v1/bvh/inspect", json=base).json()["points"]["left_wrist"]
+    for moved, fabrik in ((0.0, False), (0.0, True), (10.0, True)):
+        goal = [wrist[0] + moved, wrist[1], wrist[2]]
+        edit = {**base, "targets": [{"joint": "left_wrist", "position": goal}]}
+        if fabrik:
+            edit["options"] = {"method": "fabrik"}
+        r = client.post("/v1/bvh/solve", json=edit)
+        assert r.status_code == 200 and r.json()["targets"][0]["reached"], r.text
+        ran = any(s.startswith("fabrik") for s in r.json()["solvers"])
+        assert (r.json()["iterations"] > 0) == (ran and moved > 0), r.json()
+
+
 def test_changed_joints_are_the_joints_whose_values_the_answer_rewrites(
     client: Any, bvh_files: dict[str, Path]
 ) -> None:
