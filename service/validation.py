@@ -29,26 +29,39 @@ _JOINTS = attrgetter(*JOINT_NAMES)  # a Pose's 21 [x, y, z], in joint order
 def poses(requests: Sequence[SolveRequest], where: Sequence[str]) -> F64:
     """The start poses ``[B, 21, 3]`` (joint order) of validated requests; a pose with a
     zero-length bone is refused, naming the pose and the joints."""
+    arr = start_poses(requests)
+    check_bones(arr, where.__getitem__)
+    return arr
+
+
+def start_poses(requests: Sequence[SolveRequest]) -> F64:
+    """The start poses ``[B, 21, 3]`` (joint order) of validated requests, unchecked."""
     flat = itertools.chain.from_iterable
-    arr = np.fromiter(
+    return np.fromiter(
         flat(flat(_JOINTS(r.pose) for r in requests)),
         np.float64,
         3 * len(JOINT_NAMES) * len(requests),
     ).reshape(len(requests), len(JOINT_NAMES), 3)
-    check_bones(arr, where.__getitem__)
-    return arr
 
 
 def check_bones(arr: F64, where: Callable[[int], str]) -> None:
     """Refuse poses ``[B, 21, 3]`` with a zero-length bone, naming every such pose
     (``where(b)``) and its joints, the first ``MAX_ERRORS`` listed (``every_item``: the
     first alone was, and a batch client fixed one pose a round trip)."""
+    bad, found = degenerate(arr, where)
+    if bad:
+        raise every_item(found, len(bad))
+
+
+def degenerate(arr: F64, where: Callable[[int], str]) -> tuple[list[int], list[InvalidRequest]]:
+    """The poses ``[B, 21, 3]`` with a zero-length bone (every one's index) and the errors
+    of the first ``MAX_ERRORS`` of them (``where(b)`` names pose ``b``, and its joints)."""
     shortest = compiled.shortest_bones(compiled.as_f64(arr))
     if not (shortest.size and shortest.min() < MIN_BONE):
-        return
-    bad = np.flatnonzero(shortest < MIN_BONE)
+        return [], []
+    bad: list[int] = np.flatnonzero(shortest < MIN_BONE).tolist()
     found = []
-    for b in bad[:MAX_ERRORS].tolist():
+    for b in bad[:MAX_ERRORS]:
         short = [
             JOINT_NAMES[c]
             for (c, _), n in zip(BONES, bone_lengths(arr[b]), strict=True)
@@ -60,7 +73,7 @@ def check_bones(arr: F64, where: Callable[[int], str]) -> None:
                 f"(each joint must be at least {MIN_BONE * 1000:g} mm from its parent)"
             )
         )
-    raise every_item(found, len(bad))
+    return bad, found
 
 
 def solve_problem(req: SolveRequest, pose: F64, where: str = "") -> SolveProblem:
