@@ -35,7 +35,7 @@ from service.problems import SolveProblem, SolveResult
 from service.responses import json_response, raw_response, solve_payload
 from service.routes.characters import answer_character, read_character, solve_read
 from service.schemas import ColumnarBatch, ColumnarResponse, SolveRequest, SolveResponse
-from service.validation import poses, solve_problem, validate_as
+from service.validation import degenerate, poses, solve_problem, start_poses, validate_as
 
 router = APIRouter(route_class=BodyRoute, tags=["solve"])
 INLINE_ITEMS = 32  # bigger batches are prepared and answered in a worker thread
@@ -161,24 +161,33 @@ async def solve_batch(body: BatchBody, engine: ReadyEngine, budget: RequestBudge
     where = [i for i, f in enumerate(forms) if i not in chars]
     items = [f for f in forms if isinstance(f, SolveRequest)]  # the pose form, in order
 
-    def prepare() -> list[SolveProblem]:
-        arr = poses(items, [f"items[{i}].pose" for i in where])
-        out, found = [], []
+    def prepare() -> tuple[list[SolveProblem], dict[int, InvalidRequest], int]:
+        """The pose items' problems, each bad item's error (its index: a degenerate pose's
+        alone) and how many degenerate ones are past those listed (``degenerate``)."""
+        arr = start_poses(items)
+        bad, found = degenerate(arr, lambda k: f"items[{where[k]}].pose")
+        told = {where[k]: exc for k, exc in zip(bad, found, strict=False)}
+        skip = set(bad)
+        out = []
         for k, (i, item) in enumerate(zip(where, items, strict=True)):
+            if k in skip:
+                continue
             try:
                 out.append(solve_problem(item, arr[k], f"items[{i}]"))
             except InvalidRequest as exc:  # every item's told, not the first one's alone
-                found.append(exc)
-        if found:
-            raise every_item(found)
-        return out
+                told[i] = exc
+        return out, told, len(bad) - len(found)
 
-    problems = await off_loop(budget, prepare, len(items), "preparing the items")
+    problems, told, unlisted = await off_loop(budget, prepare, len(items), "preparing the items")
     total = len(forms)  # (a 504's counts: the pose items solve first, then the characters)
-    prepared = {
-        i: await read_character(budget, f, f"items[{i}]", done=0, total=total)
-        for i, f in chars.items()
-    }
+    prepared = {}
+    for i, f in chars.items():  # every one read (each priced): a bad one stops none
+        try:
+            prepared[i] = await read_character(budget, f, f"items[{i}]", done=0, total=total)
+        except InvalidRequest as exc:
+            told[i] = exc
+    if told:  # one 422 of every bad item's errors, pose and character, in item order
+        raise every_item([told[i] for i in sorted(told)], len(told) + unlisted)
     # a mixed batch's pose items run first (a 504 then counts them), its characters after
     noun = f"pose items (then {len(chars)} character items)" if chars else "items"
     results = await budget.run(engine.solve, problems, Pricing.of(engine), noun)
