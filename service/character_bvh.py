@@ -226,13 +226,15 @@ def clip_edits(bvh: BVH, req: BVHBatchRequest) -> list[tuple[Character, SolvePro
     """Each edit's character and canonical problem, made as ``/v1/bvh/solve`` makes its
     frame's (so each is solved to the same bits). Every edit's own errors are told, as a
     batch's items' are (a frame edited twice, one the file does not hold, targets and
-    pins); a character not made stops there: the first edit's in the words of
-    ``/v1/bvh/solve`` (the file's units, up axis), a later one's naming its edit."""
+    pins, a frame that cannot be read as asked); an error every edit's frame gives alike
+    (the file's units, say) once, in the words of ``/v1/bvh/solve``. ``up`` is the
+    file's: where it is left to the service and the rest pose stands along neither axis,
+    frames that stand up along different ones are refused (state it)."""
     rig = rig_of(bvh, req)
     seen: dict[int, int] = {}
     found: list[InvalidRequest] = []
+    unread: list[tuple[str, InvalidRequest]] = []  # (the edit, a frame not read as asked)
     out: list[tuple[Character, SolveProblem]] = []
-    tried = False  # (a character made, or tried, for an edit before)
     for i, e in enumerate(req.edits):
         where = f"edits[{i}]"
         if e.frame in seen:
@@ -246,19 +248,47 @@ def clip_edits(bvh: BVH, req: BVHBatchRequest) -> list[tuple[Character, SolvePro
             found.append(far)
             continue
         try:
-            first, tried = not tried, True
             ch = character_from_bvh(bvh, req, e.frame, rig)
         except InvalidRequest as exc:
-            if first:
-                raise
-            raise InvalidRequest(f"{where}.frame: frame {e.frame}: {exc.detail}") from None
+            unread.append((f"{where} (frame {e.frame})", exc))
+            found.append(exc)
+            continue
         try:
             out.append((ch, character_problem(ch, e, where)))
         except InvalidRequest as exc:
             found.append(exc)
+    if unread and len({exc.detail for _, exc in unread}) == 1 and not out:
+        raise unread[0][1]  # (every frame alike: the file's own error, told once)
+    if unread:  # (each named: its edit and frame, at the field it names)
+        named = {id(exc): _named(at, exc) for at, exc in unread}
+        found = [named.get(id(exc), exc) for exc in found]
     if found:
         raise every_item(found)
+    ups: dict[str, int] = {}  # each axis: the first edit read along it
+    for i, (ch, _) in enumerate(out):
+        ups.setdefault(ch.up_name, i)
+    if len(ups) > 1:  # (given, up is one; inferred from the rest pose, one too)
+        said = ", ".join(f"{up} (edits[{i}], frame {req.edits[i].frame})" for up, i in ups.items())
+        raise InvalidRequest(
+            f"up: not given, and the rest pose stands up along neither +Y nor +Z: the frames "
+            f"edited stand up along different axes, {said}; state it, e.g. "
+            f'"up": "{next(iter(ups))}"'
+        )
     return out
+
+
+def _named(at: str, exc: InvalidRequest) -> InvalidRequest:
+    """``exc`` (a frame not read as asked) told as ``at``'s: its edit and frame before its
+    message, at the field its message names (``up``, ``units``)."""
+    own = exc.extra.get("errors")
+    where, _, message = exc.detail.partition(": ")
+    if isinstance(own, list) and len(own) == 1:
+        where, message = own[0]["location"], own[0]["message"]
+    elif " " in where:  # (its message names no field)
+        where, message = "body", exc.detail
+    return InvalidRequest(
+        f"{at}: {exc.detail}", errors=[{"location": where, "message": f"{at}: {message}"}]
+    )
 
 
 def clip_answer(bvh: BVH, done: list[FrameAnswer]) -> dict[str, Any]:

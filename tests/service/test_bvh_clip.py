@@ -21,7 +21,7 @@ from service.bvh_models import BVHSolveRequest
 from service.character_bvh import character_from_bvh, read_request_bvh
 from service.routes import characters as routes
 from tests.character_files import FILES
-from tests.conftest import make_client
+from tests.conftest import REPO_ROOT, make_client
 from tests.service.test_api import assert_problem
 
 #: (canonical joint, move in metres, reach, pins) of the edits, in turn
@@ -82,6 +82,11 @@ def test_a_clip_is_its_frames_edited_one_by_one(
         after = client.post("/v1/bvh/solve", json={"bvh": one_by_one, **head, **edit})
         one_by_one = after.json()["bvh"]
     assert clip["bvh"] == one_by_one
+    backwards = text
+    for edit in reversed(body["edits"]):  # (in another order: the same file)
+        after = client.post("/v1/bvh/solve", json={"bvh": backwards, **head, **edit})
+        backwards = after.json()["bvh"]
+    assert backwards == one_by_one
     assert sum(bool(e["changed_joints"]) for e in clip["edits"]) >= len(frames) - 1
     assert not clip["edits"][2]["changed_joints"]  # the head where it stands: as sent
 
@@ -193,3 +198,56 @@ def test_a_clip_over_the_body_limit_is_told_to_go_as_an_excerpt_of_its_frames(
     assert [e["targets"] for e in got["edits"]] == [e["targets"] for e in whole["edits"]]
     back = whole["bvh"].splitlines()
     assert [back[len(back) - n + f] for f in frames] == got["bvh"].splitlines()[-len(frames) :]
+
+
+def test_a_frame_not_read_as_asked_is_told_per_edit_and_the_file_s_error_once(
+    client: Any, bvh_files: dict[str, Path]
+) -> None:
+    """The Z-up child with only frame 40 turned upright along +Y, sent with ``"up": "+Y"``:
+    the frames not turned are refused (the rest pose stands along +Z, they do not stand
+    along +Y), each edit told with its frame at ``up``, in one 422; a clip of such frames
+    alone is told once, in ``/v1/bvh/solve``'s words."""
+    from tests.service.test_up_warning import turned_frame
+
+    text = turned_frame(bvh_files["fair1-child-inches-zup"].read_text(), 40)
+    head = {"joint": "Head", "position": [0.0, 0.0, 30.0]}
+    edits = [{"frame": f, "targets": [head]} for f in (40, 41, 42)]
+    body = {"bvh": text, "units": "in", "up": "+Y", "edits": edits}
+    problem = assert_problem(client.post("/v1/bvh/solve/batch", json=body), 422)
+    assert [e["location"] for e in problem["errors"]] == ["up", "up"], problem
+    assert problem["errors"][0]["message"].startswith("edits[1] (frame 41): '+Y'"), problem
+    assert problem["errors"][1]["message"].startswith("edits[2] (frame 42): '+Y'"), problem
+    alone_body = {k: v for k, v in {**body, **edits[1]}.items() if k != "edits"}
+    alone = client.post("/v1/bvh/solve", json=alone_body)
+    said = assert_problem(alone, 422)["detail"]
+    assert problem["detail"].startswith(f"edits[1] (frame 41): {said}")
+    both = {**body, "edits": edits[1:]}
+    assert assert_problem(client.post("/v1/bvh/solve/batch", json=both), 422)["detail"] == said
+
+
+def test_a_clip_s_frames_standing_along_different_axes_ask_for_up(client: Any) -> None:
+    """A rest pose that stands along neither axis (the docs' file, every OFFSET turned to
+    lie along +X) leaves ``up`` to each frame: a clip whose frames stand along +Y and +Z is
+    refused at ``up`` naming both (one file has one up axis), and answered once it is
+    given."""
+    example = json.loads((REPO_ROOT / "docs/examples/bvh_solve_batch.json").read_text())
+    lines = example["bvh"].split("\n")
+    for k, line in enumerate(lines):
+        if line.strip().startswith("OFFSET"):
+            x, y, z = (float(v) for v in line.split()[1:])
+            lines[k] = line.split("OFFSET")[0] + f"OFFSET {y:.2f} {-x:.2f} {z:.2f}"
+    first = next(k for k, line in enumerate(lines) if line.startswith("Frame Time")) + 1
+    for f, turn in enumerate(([90, 0, 0], [0, 0, -90], [90, 0, 0])):  # Z X Y: +X to +Y, +Z
+        row = lines[first + f].split()
+        row[3:6] = [f"{a:.6f}" for a in turn]
+        lines[first + f] = " ".join(row)
+    edits = [{"frame": f, "targets": [{"joint": "Head", "position": [0.0, 0.0, 0.0]}]}
+             for f in range(3)]  # fmt: skip
+    body = {"bvh": "\n".join(lines), "units": "cm", "edits": edits}
+    resp = client.post("/v1/bvh/solve/batch", json=body)
+    said = "+Y (edits[0], frame 0), +Z (edits[1], frame 1)"
+    problem = assert_problem(resp, 422, "up: not given, and the rest pose stands up along "
+                             "neither +Y nor +Z", said)  # fmt: skip
+    assert problem["errors"][0]["location"] == "up"
+    answered = client.post("/v1/bvh/solve/batch", json={**body, "up": "+Y"})
+    assert answered.status_code == 200, answered.text
