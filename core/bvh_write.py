@@ -3,7 +3,7 @@
 - :func:`format_bvh` writes the hierarchy (same joints, offsets, channel names and order,
   End Sites) and the motion, numbers in Python's shortest round-trip form, so that
   ``parse_bvh(format_bvh(b))`` has the same hierarchy, offsets, frame time and motion.
-- :func:`splice_frames` (:func:`splice_frame`: one) keeps the file's own text and rewrites
+- :func:`splice_frames` keeps the file's own text and rewrites
   only the changed values of the frames edited, where they stand (a frame's line, or its
   values over several lines where the file wraps its frames: every other byte of the file
   is unchanged); values are written with
@@ -76,12 +76,6 @@ def _emit(bvh: BVH, kids: dict[int, list[int]], out: list[str], i: int, depth: i
     for k in kids.get(i, []):
         _emit(bvh, kids, out, k, depth + 1)
     out.append(f"{pad}}}")
-
-
-def splice_frame(bvh: BVH, frame: int, row: F64, columns: list[int]) -> str:
-    """The file's text with ``columns`` of frame ``frame`` set from ``row`` (whole motion
-    row); every other byte is kept: :func:`splice_frames` of that one frame."""
-    return splice_frames(bvh, {frame: (row, columns)})
 
 
 def splice_frames(bvh: BVH, edits: Mapping[int, tuple[F64, list[int]]]) -> str:
@@ -224,7 +218,7 @@ def _nearest_euler(seq: str, matrix: F64, old: F64) -> F64:
     """Euler angles (degrees, intrinsic ``seq``) of ``matrix [..., 3, 3]`` nearest to
     ``old [..., 3]``, joint by joint (one product for all): each of the two
     solutions turned by whole turns towards the old angles and checked to give the matrix
-    back (``np.allclose``'s tolerances), the one whose largest change is least kept (the
+    back (to 1e-5 of each entry, plus 1e-9), the one whose largest change is least kept (the
     first on a tie; the first where neither checks)."""
     first = np.rad2deg(euler_angles(seq, matrix))
     a, b, c = first[..., 0], first[..., 1], first[..., 2]
@@ -236,7 +230,7 @@ def _nearest_euler(seq: str, matrix: F64, old: F64) -> F64:
     want = matrix[..., None, :, :]
     ok: npt.NDArray[np.bool_] = np.asarray(
         (np.abs(backs - want) <= 1e-9 + 1e-5 * np.abs(want)).all(axis=(-2, -1))
-    )  # (np.allclose's test)
+    )  # (np.allclose's test, its absolute tolerance 1e-9)
     cost = np.where(ok, np.abs(cands - old[..., None, :]).max(axis=-1), np.inf)
     second = np.asarray(ok[..., 1] & (cost[..., 1] < cost[..., 0]))
     best = np.where(second[..., None], cands[..., 1, :], cands[..., 0, :])

@@ -745,14 +745,10 @@ def infer_units(skel: Skeleton, jmap: JointMap) -> tuple[str | None, float]:
     return None, leg
 
 
-def infer_up(skel: Skeleton, jmap: JointMap, frame_points: F64 | None = None) -> str | None:
-    """ "+Y" or "+Z" when the rest pose's ankles-to-head vector lies within ~37 degrees of
-    that axis (its component along it at least 0.8 of its length); failing that, the same
-    test on ``frame_points`` (the 21 points of the frame being edited); else None."""
-    found = up_of(rest_points(skel, jmap))
-    if found is None and frame_points is not None:
-        found = up_of(frame_points)
-    return found
+def infer_up(skel: Skeleton, jmap: JointMap) -> str | None:
+    """ "+Y" or "+Z" where the rest pose's ankles-to-head vector lies within ~37 degrees of
+    that axis (:func:`up_of`), else None (the service then looks at the frame edited)."""
+    return up_of(rest_points(skel, jmap))
 
 
 def up_of(pts: F64) -> str | None:

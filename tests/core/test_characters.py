@@ -10,7 +10,7 @@ import pytest
 
 from core import compiled_characters
 from core.bvh import parse_bvh, read_bvh
-from core.bvh_write import format_bvh, pose_of, row_of, skeleton_of, splice_frame
+from core.bvh_write import format_bvh, pose_of, row_of, skeleton_of, splice_frames
 from core.characters import (
     CharacterError,
     Pose,
@@ -33,7 +33,7 @@ def test_writer_round_trip(bvh_files: dict[str, Path]) -> None:
         assert again.frame_time == bvh.frame_time
         np.testing.assert_array_equal(again.motion, bvh.motion)
         # splicing an unchanged frame with no columns gives the file back byte for byte
-        assert splice_frame(bvh, 3, bvh.motion[3], []) == bvh.text
+        assert splice_frames(bvh, {3: (bvh.motion[3], [])}) == bvh.text
 
 
 def test_real_files_map_automatically(bvh_files: dict[str, Path]) -> None:
