@@ -10,6 +10,7 @@ from typing import Annotated, Any, Literal
 from pydantic import BaseModel, Field, ValidationInfo, model_validator
 
 from service.characters import (
+    JOINT_MAP,
     UNITS_WARNING,
     UP_WARNING,
     JointKeyed,
@@ -42,10 +43,7 @@ class _File(_Body):
     units: Units | None = Field(default=None, description="Default: inferred from the file.")
     up: Literal["+Y", "+Z"] | None = Field(default=None, description="Default: inferred.")
     root_position: RootPosition = "replace"
-    joint_map: JointKeyed[str] | None = Field(
-        default=None, description="canonical joint -> the file's joint name; wins over the "
-        "automatic map joint by joint.",
-    )  # fmt: skip
+    joint_map: JointKeyed[str] | None = JOINT_MAP
 
 
 class BVHSolveRequest(_Frame, _File):

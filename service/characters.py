@@ -134,6 +134,14 @@ class CharacterTarget(_Body):
     weight: float = Field(default=1.0, gt=0.0, le=MAX_WEIGHT, allow_inf_nan=False)
 
 
+#: the requests' `joint_map` (the character form's, a BVH file's)
+JOINT_MAP = Field(
+    default=None, description="canonical joint -> the client's joint name (a BVH file's "
+    "joint, or a point along one of its bones: docs/characters.md); wins over the automatic "
+    "map joint by joint.",
+)  # fmt: skip
+
+
 class _Edit(_Body):
     """What one frame's edit asks: targets, pins, options."""
 
@@ -149,10 +157,7 @@ class _Edit(_Body):
 
 
 class _Frame(_Edit):
-    joint_map: JointKeyed[str] | None = Field(
-        default=None, description="canonical joint -> the client's joint name; wins over the "
-        "automatic map joint by joint.",
-    )  # fmt: skip
+    joint_map: JointKeyed[str] | None = JOINT_MAP
 
 
 class JointSpec(_Body):
