@@ -243,6 +243,8 @@ class Budget:
         self.deadline_seconds = deadline_seconds
         self.compute = 0.0
         self._watch: asyncio.Future[Message] | None = None
+        #: what a 504's counts count (a clip's route says "edits")
+        self.noun = "items"
 
     @property
     def waited(self) -> float:
@@ -286,7 +288,7 @@ class Budget:
         own = self._own_work
         said = [
             f"before {stage}",
-            f"{counts['done']} of {counts['total']} items done" if counts else "",
+            f"{counts['done']} of {counts['total']} {self.noun} done" if counts else "",
             f"{self.compute:.2f} s of its own compute" if own else "",
         ]
         advice = "send a smaller request" if own else "retry, or send a smaller request"

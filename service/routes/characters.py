@@ -150,6 +150,7 @@ async def bvh_solve_batch(
     and is solved exactly as `POST /v1/bvh/solve` solves that frame alone; the file comes
     back once, with every edited frame's changed values rewritten, and each edit's report
     in request order. Priced by the file's joints per edit (413 past the batch's limit)."""
+    budget.noun = "edits"  # (a 504 counts the edits done)
     frames = [e.frame for e in req.edits]
     bvh = await step(budget, "reading the file", lambda: read_request_bvh(req.bvh, frames))
     prices = [edit_price(len(bvh.joints), e.options, bool(e.pins)) for e in req.edits]

@@ -164,7 +164,7 @@ def test_the_deadline_is_checked_between_edits(
         resp = c.post("/v1/bvh/solve/batch", content=json.dumps(body),
                       headers={"content-type": "application/json"})  # fmt: skip
         problem = assert_problem(resp, 504, "1 s deadline", "solving edits[")
-    assert "of 10 items done" in problem["detail"], problem
+    assert "of 10 edits done" in problem["detail"], problem
     assert 2 <= len(solved) < 10
 
 
