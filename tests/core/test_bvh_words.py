@@ -57,3 +57,26 @@ def test_a_bvh_error_raised_in_a_worker_process_reaches_the_caller(
     with ProcessPoolExecutor(1, mp_context=ctx) as pool, pytest.raises(BVHError) as there:
         pool.submit(read_bvh, cut).result(timeout=120)
     _same(there.value, here.value)
+
+
+def test_the_k_th_newline_is_found_wherever_it_lies() -> None:
+    """``_after_newlines`` (a frame's line found by counting newlines: spans doubling from
+    where the last frame read stands, a bisection, then steps) lands where stepping over
+    ``k`` newlines one at a time lands: near and far, on lines short and long, from the
+    text's start or a line's, with and without a final newline."""
+    import random
+
+    from core.bvh import _after_newlines
+
+    rng = random.Random(1)
+    for _ in range(2000):
+        lines = ["x" * rng.choice([0, 3, 80, 900, 2500]) for _ in range(rng.randint(0, 300))]
+        text = "\n".join(lines) + ("\n" if rng.random() < 0.5 else "")
+        at = 0
+        for _ in range(rng.randint(0, text.count("\n"))):
+            at = text.find("\n", at) + 1
+        k = rng.randint(0, text.count("\n", at))
+        want = at
+        for _ in range(k):
+            want = text.find("\n", want) + 1
+        assert _after_newlines(text, at, k) == want, (len(text), at, k)
