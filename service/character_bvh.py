@@ -39,7 +39,7 @@ from service.characters import (
     make_character,
     moves_a_target,
 )
-from service.errors import InvalidRequest, every_item
+from service.errors import MAX_ERRORS, InvalidRequest, every_item
 from service.problems import SolveProblem
 
 
@@ -53,19 +53,11 @@ def read_request_bvh(text: str, frames: int | Sequence[int] | None = None) -> BV
         raise invalid_request(exc) from None
     rows = None if bvh.read is None else np.array(sorted(bvh.read), dtype=np.intp)
     bad = ~(np.abs(bvh.motion if rows is None else bvh.motion[rows]) <= MAX_COORDINATE)  # NaN
-    if bad.any():
-        k, c = (int(v) for v in np.argwhere(bad)[0])
-        f = k if rows is None else int(rows[k])
-        start, end = bvh.frame_span(f) or (0, 0)  # (a BVH read from text has it)
-        word = next(islice(re.finditer(r"\S+", bvh.text[start:end]), c, None), None)
-        line = bvh.text[: start + (word.start() if word else 0)].count("\n") + 1  # the value's
-        joint = next(j for j in reversed(bvh.joints) if j.channel_start <= c and j.channels)
-        channel = joint.channels[c - joint.channel_start]
-        raise InvalidRequest(
-            f"bvh: line {line}: frame {f}, channel {clip(joint.name)}.{channel} is "
-            f"{float(bvh.motion[f, c])!r}: channel values must be finite numbers within "
-            f"±{MAX_COORDINATE:g}"
-        )
+    if bad.any():  # each frame's first bad value told (a clip's frames), the first few named
+        ks = np.flatnonzero(bad.any(axis=1))
+        found = [_bad_value(bvh, int(k if rows is None else rows[k]), int(np.argmax(bad[k])))
+                 for k in ks[:MAX_ERRORS]]  # fmt: skip
+        raise every_item(found, len(ks))
     offsets = np.array([j.offset for j in bvh.joints], dtype=np.float64)
     far = ~(np.abs(offsets) <= MAX_COORDINATE).all(axis=1)  # NaN too
     if far.any():
@@ -75,6 +67,20 @@ def read_request_bvh(text: str, frames: int | Sequence[int] | None = None) -> BV
             f"numbers within ±{MAX_COORDINATE:g}"
         )
     return bvh
+
+
+def _bad_value(bvh: BVH, f: int, c: int) -> InvalidRequest:
+    """The 422 of frame ``f``'s channel ``c``, no finite number within the bound: its line."""
+    start, end = bvh.frame_span(f) or (0, 0)  # (a BVH read from text has it)
+    word = next(islice(re.finditer(r"\S+", bvh.text[start:end]), c, None), None)
+    line = bvh.text[: start + (word.start() if word else 0)].count("\n") + 1  # the value's
+    joint = next(j for j in reversed(bvh.joints) if j.channel_start <= c and j.channels)
+    channel = joint.channels[c - joint.channel_start]
+    return InvalidRequest(
+        f"bvh: line {line}: frame {f}, channel {clip(joint.name)}.{channel} is "
+        f"{float(bvh.motion[f, c])!r}: channel values must be finite numbers within "
+        f"±{MAX_COORDINATE:g}"
+    )
 
 
 def cut_short(bvh: BVH) -> dict[str, Any] | None:
@@ -231,21 +237,14 @@ def clip_edits(bvh: BVH, req: BVHBatchRequest) -> list[tuple[Character, SolvePro
     file's: where it is left to the service and the rest pose stands along neither axis,
     frames that stand up along different ones are refused (state it)."""
     rig = rig_of(bvh, req)
-    seen: dict[int, int] = {}
+    framed = clip_frames(bvh, req)
     found: list[InvalidRequest] = []
     unread: list[tuple[str, InvalidRequest]] = []  # (the edit, a frame not read as asked)
     out: list[tuple[Character, SolveProblem]] = []
     for i, e in enumerate(req.edits):
         where = f"edits[{i}]"
-        if e.frame in seen:
-            found.append(InvalidRequest(
-                f"{where}.frame: frame {e.frame} is edited by edits[{seen[e.frame]}] too: "
-                "each frame at most once"
-            ))  # fmt: skip
-            continue
-        seen[e.frame] = i
-        if (far := out_of_range(bvh, e.frame, f"{where}.frame")) is not None:
-            found.append(far)
+        if i in framed:
+            found.append(framed[i])
             continue
         try:
             ch = character_from_bvh(bvh, req, e.frame, rig)
@@ -274,6 +273,25 @@ def clip_edits(bvh: BVH, req: BVHBatchRequest) -> list[tuple[Character, SolvePro
             f"edited stand up along different axes, {said}; state it, e.g. "
             f'"up": "{next(iter(ups))}"'
         )
+    return out
+
+
+def clip_frames(bvh: BVH, req: BVHBatchRequest) -> dict[int, InvalidRequest]:
+    """The edits whose ``frame`` is refused (edited by an edit before, or not in the file),
+    each with its 422: found before the clip is priced (they cost nothing to tell)."""
+    seen: dict[int, int] = {}
+    out: dict[int, InvalidRequest] = {}
+    for i, e in enumerate(req.edits):
+        where = f"edits[{i}].frame"
+        if e.frame in seen:
+            out[i] = InvalidRequest(
+                f"{where}: frame {e.frame} is edited by edits[{seen[e.frame]}] too: each "
+                "frame at most once"
+            )
+        elif (far := out_of_range(bvh, e.frame, where)) is not None:
+            out[i] = far
+        else:
+            seen[e.frame] = i
     return out
 
 

@@ -561,12 +561,18 @@ def refuse_price(prices: Sequence[int], joints: int | Sequence[int], max_items: 
     many = joints if isinstance(joints, int) else joints[i]
     noun = "an edit" if field == "edits" else "a character item"
     raise TooManyItems(
-        f"{field}: the batch costs {total} work units, beyond the limit of {cap} "
-        f"({max_items} items of at most {max_item_price(pricing)} units); {noun} costs "
-        f"{CHARACTER_PRICE} + {CHARACTER_JOINT_UNITS} per {CHARACTER_PER_JOINTS} joints, "
-        f"{CHARACTER_PRICE} more for exact reach, pins or FABRIK ({field}[{i}], {many} "
-        f"joints: {prices[i]}); send smaller batches"
+        f"{field}: the batch costs {total} work units, beyond the limit of {cap} (what "
+        f"{max_items} of the costliest pose items cost, {max_item_price(pricing)} units "
+        f"each); {noun} costs {CHARACTER_PRICE} + {CHARACTER_JOINT_UNITS} per "
+        f"{CHARACTER_PER_JOINTS} joints, {CHARACTER_PRICE} more for exact reach, pins or "
+        f"FABRIK ({field}[{i}], {many} joints: {prices[i]}; {_fit(cap // prices[i])}); send "
+        "smaller batches"
     )
+
+
+def _fit(n: int) -> str:
+    """How many of the costliest item fit a batch's price limit, said (one alone always)."""
+    return f"{n} such fit a batch" if n > 1 else "one such is taken alone, never in a batch"
 
 
 def max_item_price(pricing: Pricing) -> int:

@@ -30,6 +30,7 @@ from service.character_bvh import (
     character_from_bvh,
     clip_answer,
     clip_edits,
+    clip_frames,
     frame_answer,
     read_request_bvh,
 )
@@ -46,6 +47,7 @@ from service.characters import (
 )
 from service.deps import ReadyEngine, RequestBudget, ServiceState, State
 from service.engine import Engine
+from service.errors import TooManyItems, every_item
 from service.limits import Budget, Pricing, edit_price, refuse_price
 from service.problems import SolveProblem
 from service.responses import json_response
@@ -154,10 +156,17 @@ async def bvh_solve_batch(
     frames = [e.frame for e in req.edits]
     bvh = await step(budget, "reading the file", lambda: read_request_bvh(req.bvh, frames))
     prices = [edit_price(len(bvh.joints), e.options, bool(e.pins)) for e in req.edits]
-    refuse_price(prices, len(bvh.joints), state.settings.max_batch_items, Pricing.of(engine),
-                 "edits")  # fmt: skip
+    try:
+        refuse_price(prices, len(bvh.joints), state.settings.max_batch_items,
+                     Pricing.of(engine), "edits")  # fmt: skip
+    except TooManyItems:  # (edits refused for their frames: told first, they cost nothing)
+        if framed := clip_frames(bvh, req):
+            raise every_item(list(framed.values())) from None
+        raise
     total = len(req.edits)
-    edits = await step(budget, "reading the edits", lambda: clip_edits(bvh, req), total=total)
+    edits = await step(
+        budget, "reading the edits", lambda: clip_edits(bvh, req), done=0, total=total
+    )
     done: list[FrameAnswer] = []
     for k, ((ch, p), e) in enumerate(zip(edits, req.edits, strict=True)):
 

@@ -137,7 +137,8 @@ def test_a_clip_is_bounded_as_a_batch_is(models_dir: Path, bvh_files: dict[str, 
         )
         body = clip_of(text, "bandai", [1, 2])
         resp = c.post("/v1/bvh/solve/batch", json=body)
-        assert_problem(resp, 413, "edits: the batch costs", "(edits[1], 27 joints: 844)",
+        said = "(edits[1], 27 joints: 844; one such is taken alone"
+        assert_problem(resp, 413, "edits: the batch costs", said,
                        "an edit costs 400 + 8 per 5 joints")  # fmt: skip
         one = {**body, "edits": body["edits"][1:]}  # one edit alone is never refused for it
         assert c.post("/v1/bvh/solve/batch", json=one).status_code == 200
@@ -251,3 +252,53 @@ def test_a_clip_s_frames_standing_along_different_axes_ask_for_up(client: Any) -
     assert problem["errors"][0]["location"] == "up"
     answered = client.post("/v1/bvh/solve/batch", json={**body, "up": "+Y"})
     assert answered.status_code == 200, answered.text
+
+
+def test_the_deadline_before_the_edits_are_read_is_a_504_counting_none(
+    models_dir: Path, bvh_files: dict[str, Path], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The file read past the deadline: a 504 before the edits are read, counting none
+    done (an audit, 2026-12-06: it was a 500, its counts missing ``done``)."""
+    read = routes.read_request_bvh
+
+    def slow(*args: Any) -> Any:
+        time.sleep(0.6)
+        return read(*args)
+
+    body = clip_of(bvh_files["bandai"].read_text(), "bandai", [20, 21, 22])
+    monkeypatch.setattr(routes, "read_request_bvh", slow)
+    with make_client(models_dir, deadline_seconds=0.5) as c:
+        resp = c.post("/v1/bvh/solve/batch", json=body)
+        problem = assert_problem(resp, 504, "before reading the edits", "0 of 3 edits done")
+    assert (problem["done"], problem["total"]) == (0, 3)
+
+
+def test_every_edited_frame_s_bad_value_is_told_and_frames_before_the_price(
+    models_dir: Path, bvh_files: dict[str, Path]
+) -> None:
+    """Two edited frames holding values past the bound of a channel's: both told,
+    each at its line; and a clip past its work limit whose edits are refused for their
+    frames (edited twice, not in the file) is told those (a 422), not to send smaller
+    batches of edits that would be refused anyway (an audit, 2026-12-06)."""
+    text = bvh_files["bandai"].read_text()
+    lines = text.split("\n")
+    first = next(k for k, line in enumerate(lines) if line.startswith("Frame Time")) + 1
+    for f, word in ((30, "1e9"), (31, "-2e8")):
+        row = lines[first + f].split()
+        row[7] = word
+        lines[first + f] = " ".join(row)
+    body = clip_of(text, "bandai", [30, 31, 32])
+    body["bvh"] = "\n".join(lines)
+    problem = assert_problem(client_post(models_dir, body), 422, "frame 30", "frame 31")
+    assert [e["location"] for e in problem["errors"]] == ["bvh", "bvh"]
+    clip = clip_of(text, "bandai", [1, 2])
+    clip["edits"] += [clip["edits"][0], {**clip["edits"][1], "frame": 10**6}]
+    with make_client(models_dir, max_batch_items=4) as c:
+        resp = c.post("/v1/bvh/solve/batch", json=clip)
+        problem = assert_problem(resp, 422, "edits[2].frame: frame 1 is edited by edits[0]")
+        assert [e["location"] for e in problem["errors"]] == ["edits[2].frame", "edits[3].frame"]
+
+
+def client_post(models_dir: Path, body: dict[str, Any]) -> Any:
+    with make_client(models_dir) as c:
+        return c.post("/v1/bvh/solve/batch", json=body)
