@@ -39,7 +39,7 @@ from service.characters import (
     make_character,
     moves_a_target,
 )
-from service.errors import MAX_ERRORS, InvalidRequest, every_item
+from service.errors import MAX_ERRORS, InvalidRequest, every_item, field_error
 from service.problems import SolveProblem
 
 
@@ -228,41 +228,40 @@ def bvh_answer(bvh: BVH, ch: Character, req: BVHSolveRequest, edit: Edit) -> dic
     }
 
 
-def clip_edits(bvh: BVH, req: BVHBatchRequest) -> list[tuple[Character, SolveProblem]]:
+def clip_edits(
+    bvh: BVH, req: BVHBatchRequest, framed: dict[int, InvalidRequest] | None = None
+) -> list[tuple[Character, SolveProblem]]:
     """Each edit's character and canonical problem, made as ``/v1/bvh/solve`` makes its
     frame's (so each is solved to the same bits). Every edit's own errors are told, as a
     batch's items' are (a frame edited twice, one the file does not hold, targets and
     pins, a frame that cannot be read as asked); an error every edit's frame gives alike
     (the file's units, say) once, in the words of ``/v1/bvh/solve``. ``up`` is the
     file's: where it is left to the service and the rest pose stands along neither axis,
-    frames that stand up along different ones are refused (state it)."""
+    frames that stand up along different ones are refused (state it). ``framed``:
+    :func:`clip_frames` of the clip, where found already."""
     rig = rig_of(bvh, req)
-    framed = clip_frames(bvh, req)
-    found: list[InvalidRequest] = []
-    unread: list[tuple[str, InvalidRequest]] = []  # (the edit, a frame not read as asked)
+    framed = clip_frames(bvh, req) if framed is None else framed
+    found: list[tuple[str, InvalidRequest]] = []  # (a frame not read as asked: its edit)
     out: list[tuple[Character, SolveProblem]] = []
     for i, e in enumerate(req.edits):
         where = f"edits[{i}]"
         if i in framed:
-            found.append(framed[i])
+            found.append(("", framed[i]))
             continue
         try:
             ch = character_from_bvh(bvh, req, e.frame, rig)
         except InvalidRequest as exc:
-            unread.append((f"{where} (frame {e.frame})", exc))
-            found.append(exc)
+            found.append((f"{where} (frame {e.frame})", exc))
             continue
         try:
             out.append((ch, character_problem(ch, e, where)))
         except InvalidRequest as exc:
-            found.append(exc)
-    if unread and len({exc.detail for _, exc in unread}) == 1 and not out:
-        raise unread[0][1]  # (every frame alike: the file's own error, told once)
-    if unread:  # (each named: its edit and frame, at the field it names)
-        named = {id(exc): _named(at, exc) for at, exc in unread}
-        found = [named.get(id(exc), exc) for exc in found]
-    if found:
-        raise every_item(found)
+            found.append(("", exc))
+    unread = [exc for at, exc in found if at]
+    if unread and not out and len({exc.detail for exc in unread}) == 1:
+        raise unread[0]  # (every frame alike: the file's own error, told once)
+    if found:  # (a frame not read as asked named: its edit and frame, at its field)
+        raise every_item([_named(at, exc) if at else exc for at, exc in found])
     ups: dict[str, int] = {}  # each axis: the first edit read along it
     for i, (ch, _) in enumerate(out):
         ups.setdefault(ch.up_name, i)
@@ -298,14 +297,10 @@ def clip_frames(bvh: BVH, req: BVHBatchRequest) -> dict[int, InvalidRequest]:
 def _named(at: str, exc: InvalidRequest) -> InvalidRequest:
     """``exc`` (a frame not read as asked) told as ``at``'s: its edit and frame before its
     message, at the field its message names (``up``, ``units``)."""
-    own = exc.extra.get("errors")
-    where, _, message = exc.detail.partition(": ")
-    if isinstance(own, list) and len(own) == 1:
-        where, message = own[0]["location"], own[0]["message"]
-    elif " " in where:  # (its message names no field)
-        where, message = "body", exc.detail
+    own = field_error(exc)
     return InvalidRequest(
-        f"{at}: {exc.detail}", errors=[{"location": where, "message": f"{at}: {message}"}]
+        f"{at}: {exc.detail}",
+        errors=[{"location": own["location"], "message": f"{at}: {own['message']}"}],
     )
 
 

@@ -303,14 +303,14 @@ def every_item(found: Sequence[InvalidRequest], total: int = 0) -> InvalidReques
     total = max(total, len(found))
     if total == 1:
         return found[0]
-    errors = [_own_error(e) for e in found[:MAX_ERRORS]]
+    errors = [field_error(e) for e in found[:MAX_ERRORS]]
     detail = "; ".join(e.detail for e in found[:3])
     if total > 3:
         detail += f"; and {total - 3} more"
     return InvalidRequest(detail, errors=errors)
 
 
-def _own_error(exc: PoseError) -> dict[str, str]:
+def field_error(exc: PoseError) -> dict[str, str]:
     """``exc``'s one field error: its own where it says it (a location holding a client's
     joint name, ``service.characters``), else read from its detail."""
     own = exc.extra.get("errors")

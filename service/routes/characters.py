@@ -156,16 +156,17 @@ async def bvh_solve_batch(
     frames = [e.frame for e in req.edits]
     bvh = await step(budget, "reading the file", lambda: read_request_bvh(req.bvh, frames))
     prices = [edit_price(len(bvh.joints), e.options, bool(e.pins)) for e in req.edits]
+    framed = clip_frames(bvh, req)  # (edits refused for their frames: they cost nothing)
     try:
         refuse_price(prices, len(bvh.joints), state.settings.max_batch_items,
                      Pricing.of(engine), "edits")  # fmt: skip
-    except TooManyItems:  # (edits refused for their frames: told first, they cost nothing)
-        if framed := clip_frames(bvh, req):
+    except TooManyItems:  # (told those first)
+        if framed:
             raise every_item(list(framed.values())) from None
         raise
     total = len(req.edits)
     edits = await step(
-        budget, "reading the edits", lambda: clip_edits(bvh, req), done=0, total=total
+        budget, "reading the edits", lambda: clip_edits(bvh, req, framed), done=0, total=total
     )
     done: list[FrameAnswer] = []
     for k, ((ch, p), e) in enumerate(zip(edits, req.edits, strict=True)):
