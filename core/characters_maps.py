@@ -464,17 +464,15 @@ def _lca(skel: Skeleton, a: int, b: int) -> int:
     return b
 
 
-def _chest_below_collars(skel: Skeleton, found: dict[str, int]) -> int:
+def _chest_below_collars(skel: Skeleton, found: dict[str, int]) -> None:
     """Drop a named chest (spine2) that is not above both collars (a chest named by one of
     several spine names, ``Chest4|Chest3|Chest2``, where the collars hang lower), so that
-    the structural rule puts it where they meet; 1 if dropped."""
+    the structural rule puts it where they meet."""
     chest, collars = found.get("spine2"), [found.get(c) for c in ("left_collar", "right_collar")]
     if chest is None or None in collars:
-        return 0  # (a collar not found: the map is incomplete anyway)
-    if all(skel.is_ancestor(chest, c) for c in collars if c is not None):
-        return 0
-    del found["spine2"]
-    return 1
+        return  # (a collar not found: the map is incomplete anyway)
+    if not all(skel.is_ancestor(chest, c) for c in collars if c is not None):
+        del found["spine2"]
 
 
 def _structural(skel: Skeleton, found: dict[str, int]) -> None:
