@@ -24,6 +24,7 @@ from tests.service.editor_page import (
     drawn_as_inspected,
     give_file,
     open_editor,
+    open_file,
     post_json,
     recorded,
     settle,
@@ -474,8 +475,7 @@ def test_editor_reads_a_root_whose_channels_are_a_displacement(
     page.on("pageerror", lambda e: errors.append(str(e)))
     sent = recorded(page, lambda url: "/v1/bvh/" in url)
     try:
-        give_file(page, text, "idle.bvh")
-        page.wait_for_function(f"() => {M}.bvh() && {M}.bvh().name === 'idle.bvh'")
+        open_file(page, text, "idle.bvh")
         assert page.evaluate(f"{M}.bvh()")["root"] == "replace"
         drawn_as_inspected(page, server, {"bvh": text, "frame": 0})
         said = page.evaluate(f"{M}.error()")  # (the service's root_warning, and the menu)
@@ -496,8 +496,7 @@ def test_editor_reads_a_root_whose_channels_are_a_displacement(
         assert page.evaluate(f"{M}.error()") is None
         # another file starts where BVH does
         page.once("dialog", lambda d: d.accept())  # (the edited file: asked before closing)
-        give_file(page, text, "again.bvh")
-        page.wait_for_function(f"() => {M}.bvh() && {M}.bvh().name === 'again.bvh'")
+        open_file(page, text, "again.bvh")
         assert page.evaluate(f"{M}.bvh()")["root"] == "replace"
         assert page.locator("#bvh-root").input_value() == "replace"
         assert not errors, errors
@@ -521,8 +520,7 @@ def test_editor_scrubs_a_file_cut_short_only_as_far_as_its_text(
     errors: list[str] = []
     page.on("pageerror", lambda e: errors.append(str(e)))
     try:
-        give_file(page, text, "cut.bvh")
-        page.wait_for_function(f"() => {M}.bvh() && {M}.bvh().name === 'cut.bvh'")
+        open_file(page, text, "cut.bvh")
         assert page.evaluate(f"{M}.error()")["title"] == "Broken file"
         assert page.locator("#bvh-frame").get_attribute("max") == "300"
         assert page.locator("#bvh-frame-number").get_attribute("max") == "300"
