@@ -38,7 +38,7 @@ from core.map_lookup import Lookup, lookup_of, missing_message, near, tie_messag
 from core.map_lookup import name_key as _key
 from core.map_points import along_a_bone, fraction, not_made, slid_point
 from core.rest_checks import OffsetAt, default_offset_at, refuse_one_point, refuse_out_of_proportion
-from core.skeleton import JOINT_INDEX, JOINT_NAMES, PARENT_NAMES
+from core.skeleton import JOINT_INDEX, JOINT_NAMES, MIRROR, PARENT_NAMES
 from core.text import clip, quoted
 from core.units import UNITS
 
@@ -392,6 +392,11 @@ class JointMap:
 
     def describe(self) -> dict[str, str]:
         return {n: a.label for n, a in zip(JOINT_NAMES, self.anchors, strict=True)}
+
+    def swapped(self) -> JointMap:
+        """The map with each left canonical joint on its right one's point and back
+        (a rig whose sides are named the other way round: :mod:`core.sides`)."""
+        return JointMap(tuple(self.anchors[m] for m in MIRROR), self.scheme)
 
 
 def _shared_prefix(keys: list[str]) -> str:

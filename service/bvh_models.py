@@ -11,6 +11,7 @@ from pydantic import BaseModel, Field, ValidationInfo, model_validator
 
 from service.characters import (
     JOINT_MAP,
+    SIDES_WARNING,
     UNITS_WARNING,
     UP_WARNING,
     JointKeyed,
@@ -125,6 +126,7 @@ class BVHInspectResponse(BaseModel):
     cut_short: BVHCutShort | None = CUT_SHORT
     units_warning: str | None = UNITS_WARNING
     up_warning: str | None = UP_WARNING
+    sides_warning: str | None = SIDES_WARNING
     root_warning: str | None = ROOT_WARNING
 
 

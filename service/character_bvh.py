@@ -363,5 +363,6 @@ def bvh_inspect(
         "cut_short": cut_short(bvh),
         "units_warning": ch.units_warning("read"),
         "up_warning": ch.up_warning,
+        "sides_warning": ch.sides_warning,
         "root_warning": root_warning(bvh, ch, frame, root_position, g_pos, "read"),
     }

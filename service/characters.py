@@ -53,9 +53,11 @@ from core.characters_maps import (
     infer_units,
     infer_up,
     resolve_map,
+    rest_points,
     up_of,
 )
 from core.retarget import canonical_points, retarget
+from core.sides import read_sides
 from core.skeleton import BONES, JOINT_NAMES
 from core.text import clip, did_you_mean, quoted
 from core.units import UNITS
@@ -248,6 +250,17 @@ UP_WARNING = Field(
 )  # fmt: skip
 
 
+#: the answers' `sides_warning`
+SIDES_WARNING = Field(
+    default=None, description="Where the body's left and right joints look named for the "
+    "other side (read as named, its toes and bent knees point backwards from the way its "
+    "hips and shoulders face it, in its rest pose and the frame): an automatic joint map is "
+    "swapped, so the body is solved as the body it is (its joints keep their names; "
+    "`joint_map` shows the map used), and a joint map given is kept; either is said here. "
+    "Null otherwise.",
+)  # fmt: skip
+
+
 class _Mapped(BaseModel):
     """How the character was read: its joint map, units, up axis; the models."""
 
@@ -270,6 +283,7 @@ class _Solved(BaseModel):
     method: Literal["neural", "fabrik"]
     iterations: int = Field(description=ITERATIONS)  # (as the pose form's)
     up_warning: str | None = UP_WARNING
+    sides_warning: str | None = SIDES_WARNING
 
 
 class _Answer(_Solved, _Mapped):
@@ -370,6 +384,9 @@ class Character:
     odd_size: str | None = None
     #: the answers' ``up_warning`` (:func:`_up_inferred`), None where the frame agrees
     up_warning: str | None = None
+    #: the answers' ``sides_warning`` (:func:`core.sides.read_sides`), None where the
+    #: body's sides are as named
+    sides_warning: str | None = None
 
     def units_warning(self, done: str = "solved") -> str | None:
         """The answers' ``units_warning``: the body's odd size and what was done with it,
@@ -475,9 +492,13 @@ def make_character(
                 'state it, e.g. "up": "+Z"'
             )
         up = found
+    turn = up_rotation(up)
+    jmap, sides_warning = read_sides(
+        rest_points(skel, jmap) @ turn.T, canonical_points(skel, pose, jmap) @ turn.T, jmap
+    )
     return Character(
-        skel, pose, jmap, units_scale(units), up_rotation(up), units, up, fields, points,
-        warning, up_warning,
+        skel, pose, jmap, units_scale(units), turn, units, up, fields, points, warning,
+        up_warning, sides_warning,
     )  # fmt: skip
 
 
@@ -661,6 +682,7 @@ def edit_report(ch: Character, edit: Edit, points: F64) -> dict[str, Any]:
         "method": "fabrik" if p.method == "fabrik" else "neural",
         "iterations": r.iterations,
         "up_warning": ch.up_warning,
+        "sides_warning": ch.sides_warning,
     }
 
 

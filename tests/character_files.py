@@ -7,6 +7,7 @@ Euler rotations), written apart from ``core.bvh`` so that it checks it.
 
 from __future__ import annotations
 
+import re
 import shutil
 import subprocess
 from dataclasses import dataclass
@@ -150,3 +151,32 @@ def big_file(path: Path, size: int, skip: int = 0) -> str:
         out.append(rows[(len(out) + skip) % len(rows)])
         total += len(out[-1]) + 1
     return f"{head}MOTION\nFrames: {len(out)}\n{lines[1]}\n" + "\n".join(out) + "\n"
+
+
+#: a joint's side the other way (:func:`other_side`)
+_WORD = re.compile(r"Left|Right|left|right")
+_PAIRS = {"Left": "Right", "Right": "Left", "left": "right", "right": "left"}
+_SIDE = {"L": "R", "R": "L", "l": "r", "r": "l"}
+
+
+def other_side(name: str) -> str:
+    """``name`` with its side the other way: LeftHand, lShldr, LHipJoint, lhand, Hand_L,
+    hand.L (the files' schemes); a centre joint as it is."""
+    if _WORD.search(name):
+        return _WORD.sub(lambda m: _PAIRS[m.group()], name)
+    if m := re.fullmatch(r"([lLrR])([A-Z].*|hand)", name):
+        return _SIDE[m.group(1)] + m.group(2)
+    if m := re.fullmatch(r"(.*[._])([LR])(_end)?", name):  # (an End Site's label: _end)
+        return m.group(1) + _SIDE[m.group(2)] + (m.group(3) or "")
+    return name
+
+
+def other_label(label: str) -> str:
+    """A joint map's label (a joint, an End Site, "0.25 of A->B") with each name in it
+    :func:`other_side`."""
+    return re.sub(r"[\w.]+", lambda m: other_side(m[0]), label)
+
+
+def swapped_file(text: str) -> str:
+    """A BVH file with every joint named for the other side; its numbers as they are."""
+    return re.sub(r"(?m)^(\s*(?:ROOT|JOINT)\s+)(\S+)", lambda m: m[1] + other_side(m[2]), text)

@@ -571,3 +571,30 @@ def test_editor_says_when_a_file_s_root_stands_it_up_along_the_other_axis(
         assert not errors, errors
     finally:
         page.context.close()
+
+
+@pytest.mark.browser
+def test_editor_says_when_a_file_s_sides_are_named_the_other_way(
+    server: str, browser: Any, bvh_files: dict[str, Path]
+) -> None:
+    """A Bandai-Namco walk with every joint named for the other side opens with the
+    service's ``sides_warning`` in a "Sides" banner; the file as it is opens without one."""
+    from tests.character_files import swapped_file
+
+    text = bvh_files["bandai"].read_text()
+    page = open_editor(browser, server)
+    errors: list[str] = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    try:
+        give_file(page, swapped_file(text), "swapped.bvh")
+        page.wait_for_function(f"() => {M}.bvh() && {M}.bvh().name === 'swapped.bvh'")
+        said = page.evaluate(f"{M}.error()")
+        assert said["title"] == "Sides", said
+        assert "named for the other side" in said["detail"], said
+        page.click("#error-close")
+        give_file(page, text, "plain.bvh")
+        page.wait_for_function(f"() => {M}.bvh() && {M}.bvh().name === 'plain.bvh'")
+        assert page.evaluate(f"{M}.error()") is None
+        assert not errors, errors
+    finally:
+        page.context.close()

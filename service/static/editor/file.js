@@ -313,17 +313,19 @@ export function lastFrame(info) {
 // What the server found in the file as read (/v1/bvh/inspect): cut short (its frames from
 // the cut on lost: an interrupted copy), units that make the rest pose's leg no person's
 // (a centimetre file read as inches: drawn as a giant), an up axis read from a rest pose
-// that the frame's root turns upright along the other one (drawn lying down), or root
-// channels whose other reading stands the figure on the floor (ReActIdle's, read the BVH way: 0.7 m under it,
-// drawn with its lowest joint on the grid, so nothing looked wrong). The file opens either
-// way; without a word, the cut frame was drawn as half a body and the giant as asked.
+// that the frame's root turns upright along the other one (drawn lying down), root
+// channels whose other reading stands the figure on the floor (ReActIdle's, read the BVH
+// way: 0.7 m under it, drawn with its lowest joint on the grid, so nothing looked wrong), or
+// left and right joints named for the other side (solved as the body it is). The file opens
+// either way; without a word, the cut frame was drawn as half a body and the giant as asked.
 function warnOpened(info) {
   const root = info.root_warning && `${info.root_warning} (the Root channels menu)`;
   const up = info.up_warning && `${info.up_warning} (the Up axis menu)`;
-  const said = [info.cut_short && info.cut_short.detail, info.units_warning, up, root].filter(Boolean);
+  const said = [info.cut_short && info.cut_short.detail, info.units_warning, up, root,
+    info.sides_warning].filter(Boolean);
   if (!said.length) return;
   const title = info.cut_short ? 'Broken file' : info.units_warning ? 'Units'
-    : info.up_warning ? 'Up axis' : 'Root channels';
+    : info.up_warning ? 'Up axis' : info.root_warning ? 'Root channels' : 'Sides';
   showError(new ApiError(-1, title, `${doc.name}: ${said.join('; ')}`));
 }
 
