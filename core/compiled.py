@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
-from core.compiled_limbs import carry_item, ends_item, unit_into
+from core.compiled_limbs import carry_item, ends_item, floor_group, floor_item, unit_into
 from core.ends import CHAINS as _CHAINS
 from core.jit import jit
 from core.rest import REST_DIRS
@@ -486,6 +486,7 @@ def unscale(
     pairs: bool,
     side: float,
     soft: F64,
+    feet: bool,
 ) -> F64:  # pragma: no cover - compiled
     """Network answers ``[M, 63]`` (float32, at the networks' size) back to the body's
     size (float64), with the bone pass (reference: the start pose) where ``bone``, and
@@ -494,7 +495,8 @@ def unscale(
     item's targets ``tidx[b, :counts[b]]`` by that weight, then :func:`ends_item` of the
     chains ``chains`` marks (the limb ends back where the network put them; a limb the
     networks drew too straight bent towards ``core.ends.PREFER`` by ``side``; easing into
-    full stretch over ``soft[b]`` m: ``core.ends.soft_reach``).
+    full stretch over ``soft[b]`` m: ``core.ends.soft_reach``), then with ``feet``
+    :func:`core.compiled_limbs.floor_item` (legs sunk below the floor raised back).
     Where ``hold[b]`` > 0 the bone pass starts from a pelvis held near the start's
     (:func:`hold_pelvis`)."""
     m = decoded.shape[0]
@@ -524,6 +526,8 @@ def unscale(
             if ends:
                 ends_item(out[b], pose, tidx[b], counts[b], chains, flags, vecs, ease, collar[b],
                           side, soft[b])  # fmt: skip
+            if feet:
+                floor_item(out[b], canon[b], tidx[b], counts[b], flags, vecs)
         else:
             out[b] = pose
     return out
@@ -595,13 +599,14 @@ def settle(
     pairs: bool,
     side: float,
     soft: F64,
+    feet: bool,
 ) -> tuple[F64, F64, F64]:  # pragma: no cover - compiled
     """:func:`unscale` with the bone pass for every item, then :func:`finish`, in one call
     (the lean path of ``service.lean``): the same arithmetic in the same order."""
     bone = np.ones(decoded.shape[0], dtype=np.bool_)
     out = unscale(
         decoded, scales, canon, lengths, bone, tidx, counts, carry, chains, ease, collar, hold,
-        pairs, side, soft,
+        pairs, side, soft, feet,
     )  # fmt: skip
     return finish(out, facing, trans, floors, tidx, tpos, counts, lengths)
 
@@ -686,7 +691,7 @@ def _views(decoded: F32, n: int) -> F32:  # pragma: no cover - compiled
 def settle_prepare(
     decoded: F32, scales: F64, canon: F64, lengths: F64, facing: F64, trans: F64,
     floors: F64, tidx: I64, tpos: F64, counts: I64, carry: F64, chains: Bool, ease: float,
-    collar: Bool, hold: F64, pairs: bool, side: float, soft: F64, shapes: F64,
+    collar: Bool, hold: F64, pairs: bool, side: float, soft: F64, feet: bool, shapes: F64,
     shape_totals: F64, total_length: bool, reference_total: float, cols: I64, other: I64,
     signs: F32, x_in: F32, t_in: F32,
 ) -> None:  # pragma: no cover - compiled  # fmt: skip
@@ -696,6 +701,7 @@ def settle_prepare(
     pose, _errors, _bone = settle(
         _views(decoded, scales.shape[0]), scales, canon, lengths, facing, trans, floors, tidx,
         _floor_off(tpos, floors), counts, carry, chains, ease, collar, hold, pairs, side, soft,
+        feet,
     )  # fmt: skip
     prepare_into(
         pose, floors, tidx, tpos, counts, shapes, shape_totals, total_length, reference_total,
@@ -707,8 +713,8 @@ def settle_prepare(
 def settle_last(
     decoded: F32, scales: F64, canon: F64, lengths: F64, facing: F64, trans: F64,
     floors: F64, tidx: I64, tpos: F64, counts: I64, carry: F64, chains: Bool, ease: float,
-    collar: Bool, hold: F64, pairs: bool, side: float, soft: F64, world: F64, errors: F64,
-    bone_err: F64,
+    collar: Bool, hold: F64, pairs: bool, side: float, soft: F64, feet: bool, world: F64,
+    errors: F64, bone_err: F64,
 ) -> None:  # pragma: no cover - compiled  # fmt: skip
     """:func:`settle` with ``tpos`` in the world (the floor taken off here; ``decoded``
     as :func:`settle_prepare` takes it), its answer written into ``world [B, 21, 3]``,
@@ -716,6 +722,7 @@ def settle_last(
     w, e, b = settle(
         _views(decoded, scales.shape[0]), scales, canon, lengths, facing, trans, floors, tidx,
         _floor_off(tpos, floors), counts, carry, chains, ease, collar, hold, pairs, side, soft,
+        feet,
     )  # fmt: skip
     world[:] = w
     errors[:] = e
@@ -750,18 +757,20 @@ def warm() -> None:
     unscale(
         out[6], out[4], out[0], out[3], np.ones(1, dtype=np.bool_), tidx, counts, np.full(1, 0.5),
         chains, 0.0, np.ones(1, dtype=np.bool_), np.full(1, 0.02), True, 0.5, np.full(1, 0.01),
+        True,
     )  # fmt: skip
     finish(out[0], out[1], out[2], np.zeros(1), tidx, tpos, counts, out[3])
+    floor_group(pose.copy(), pose, tidx[0])
     one = np.ones(1, dtype=np.bool_)
     travel(pose, tidx, tpos, counts, counts, ~one, True, True, 5)
     settle(
         out[6], out[4], out[0], out[3], out[1], out[2], np.zeros(1), tidx, tpos, counts,
-        np.full(1, 0.5), chains, 0.0, one, np.full(1, 0.02), True, 0.5, np.full(1, 0.01),
+        np.full(1, 0.5), chains, 0.0, one, np.full(1, 0.02), True, 0.5, np.full(1, 0.01), True,
     )  # fmt: skip
     cols, signs = np.arange(3, dtype=np.int64), np.ones(3, np.float32)
     state = (out[0].copy(), out[1].copy(), out[2].copy(), out[3].copy(), out[4].copy())
     rest = (np.zeros(1), tidx, tpos, counts, np.full(1, 0.5), chains, 0.0, one,
-            np.full(1, 0.02), True, 0.5, np.full(1, 0.01))  # fmt: skip
+            np.full(1, 0.02), True, 0.5, np.full(1, 0.01), True)  # fmt: skip
     for rows in (1, 2):  # one view, both views
         x_in = np.empty((rows, 3 * NUM_JOINTS), np.float32)
         t_in = np.empty((rows, 3), np.float32)

@@ -280,3 +280,98 @@ def _collar_turn(
             for i in range(3):
                 out[j, i] = out[j, i] + shift[i]
     return True
+
+
+#: the legs' chains (rows of ``core.ends.CHAINS``: hip, knee, ankle)
+_LEG_CHAINS = np.asarray(
+    [
+        c
+        for c, end in enumerate(_CHAINS[:, 2])
+        if end in (JOINT_INDEX["left_ankle"], JOINT_INDEX["right_ankle"])
+    ],
+    dtype=np.int64,
+)
+
+
+@jit
+def floor_item(
+    out: F64, start: F64, tidx: I64, count: int, flags: I64, vecs: F64
+) -> None:  # pragma: no cover - compiled
+    """Feet kept over the floor, for one canonical pose ``out [21, 3]`` (the floor at y 0)
+    of the start ``start [21, 3]``, in place (``serving.keep_feet``): a leg none of whose
+    hip, knee, ankle and foot is among the targets and pins ``tidx[:count]``, whose ankle
+    or foot ends below the floor (or below the lower of the two in the start, where that
+    is lower), has its ankle and foot raised by what the lower sank, the hip where it is
+    and the knee bent to fit in the plane it bends in (towards ``core.ends.PREFER`` where
+    the leg is straight); as far as the leg folds. A pelvis dragged down crouches the body
+    instead of sinking its feet (an audit, 2026-12-07: the docs' pose with its pelvis
+    dragged from 0.93 m to 0.6 m had its ankles 8 cm under the floor). ``flags [21]``
+    (int64) and ``vecs [5, 3]`` are scratch."""
+    for j in range(NUM_JOINTS):
+        flags[j] = 0
+    for q in range(count):
+        flags[tidx[q]] = 1
+    s, w0, u, v = vecs[0], vecs[1], vecs[2], vecs[3]
+    for c in _LEG_CHAINS:
+        top, mid, end = _CHAINS[c, 0], _CHAINS[c, 1], _CHAINS[c, 2]
+        asked = flags[top] + flags[mid] + flags[end]
+        low, was = out[end, 1], start[end, 1]
+        for j in range(NUM_JOINTS):
+            if _ENDS_BELOW[c, j]:
+                asked += flags[j]
+                low, was = min(low, out[j, 1]), min(was, start[j, 1])
+        lift = min(0.0, was) - low
+        if asked != 0 or not lift > 0.0:
+            continue
+        for i in range(3):
+            s[i], w0[i] = out[top, i], out[end, i]
+            u[i] = w0[i] - s[i]
+        u[1] += lift
+        a = np.sqrt(
+            (out[mid, 0] - s[0]) ** 2 + (out[mid, 1] - s[1]) ** 2 + (out[mid, 2] - s[2]) ** 2
+        )
+        b = np.sqrt(
+            (w0[0] - out[mid, 0]) ** 2 + (w0[1] - out[mid, 1]) ** 2 + (w0[2] - out[mid, 2]) ** 2
+        )
+        d0 = np.sqrt(u[0] ** 2 + u[1] ** 2 + u[2] ** 2)
+        if not (d0 > _ENDS_TINY and a > _ENDS_TINY and b > _ENDS_TINY):
+            continue
+        for i in range(3):
+            u[i] = u[i] / d0
+        d = min(max(d0, abs(a - b)), a + b)
+        along = (
+            (out[mid, 0] - s[0]) * u[0] + (out[mid, 1] - s[1]) * u[1] + (out[mid, 2] - s[2]) * u[2]
+        )
+        for i in range(3):
+            v[i] = (out[mid, i] - s[i]) - along * u[i]
+        nb = np.sqrt(v[0] ** 2 + v[1] ** 2 + v[2] ** 2)
+        if not nb > 1e-6 * a:  # a straight leg: the side knees bend to
+            for i in range(3):
+                v[i] = (u[0] * _PREFER[c, 0, i] + u[1] * _PREFER[c, 1, i]
+                        + u[2] * _PREFER[c, 2, i]) + _PREFER[c, 3, i]  # fmt: skip
+            pa = v[0] * u[0] + v[1] * u[1] + v[2] * u[2]
+            for i in range(3):
+                v[i] = v[i] - pa * u[i]
+            nb = np.sqrt(v[0] ** 2 + v[1] ** 2 + v[2] ** 2)
+            if not nb > _ENDS_TINY:
+                continue
+        for i in range(3):
+            v[i] = v[i] / nb
+        cos = min(max((a * a + d * d - b * b) / (2.0 * a * d), -1.0), 1.0)
+        sin = np.sqrt(max(0.0, 1.0 - cos * cos))
+        for i in range(3):
+            shift = (s[i] + d * u[i]) - w0[i]
+            out[mid, i] = s[i] + a * (cos * u[i] + sin * v[i])
+            out[end, i] = w0[i] + shift
+            for j in range(NUM_JOINTS):
+                if _ENDS_BELOW[c, j]:
+                    out[j, i] += shift
+
+
+@jit
+def floor_group(out: F64, start: F64, idx: I64) -> None:  # pragma: no cover - compiled
+    """:func:`floor_item` of every pose of ``out [M, 21, 3]`` (of the starts ``start``),
+    in place, their targets and pins the joints ``idx [K]`` (one target set)."""
+    flags, vecs = np.empty(NUM_JOINTS, np.int64), np.empty((5, 3))
+    for b in range(out.shape[0]):
+        floor_item(out[b], start[b], idx, idx.shape[0], flags, vecs)

@@ -197,6 +197,15 @@ class Serving(_Strict):
         "pose (the body's width between them kept), facing as the networks put them, the "
         "legs and arms moved with them (core.rigid).",
     )
+    keep_feet: bool = Field(
+        default=False,
+        description="With the bone pass: a leg none of whose hip, knee, ankle and foot is a "
+        "target or pin, whose ankle or foot the answer puts below the floor (or below the "
+        "lower of the two in the start, where that is lower), has its ankle and foot raised "
+        "back by what the lower sank, the hip where it is and the knee bent to fit, as far "
+        "as the leg folds: a pelvis dragged down crouches the body instead of sinking its "
+        "feet (core.compiled_limbs.floor_item).",
+    )
     keep_collar: bool = Field(
         default=False,
         description="With keep_ends, in answers asked in soft reach with fewer than "

@@ -3,12 +3,10 @@
 A solve, for each item (world space in, world space out):
 
 1. canonicalise the start pose like the dataset (pelvis floor projection to the origin,
-   yaw to face +Z) and scale it to the size of the training skeleton whose proportions
-   it matches best, so the networks see a body they know;
+   yaw to face +Z) and scale it to the size the networks know (``serving.body``);
 2. ``method=neural``: encode, run the solver sequence that covers the target set
-   (re-encoding with the solved targets pasted between solvers), decode; targets on
-   joints that no trained
-   solver covers are then placed by a FABRIK polish that holds the solved targets;
+   (re-encoding with the solved targets pasted between solvers), decode; targets on joints
+   no trained solver covers are then placed by a FABRIK polish holding the solved targets;
    ``method=fabrik``: full-body FABRIK from the start pose, no learned prior;
 3. scale back, restore the INPUT pose's bone lengths (root outwards), optionally polish
    onto the targets exactly (``reach=exact``), and transform back to the world.
@@ -30,6 +28,7 @@ import numpy as np
 import numpy.typing as npt
 
 from core import compiled, compiled_fabrik
+from core.compiled_limbs import floor_group
 from core.ends import active as active_chains
 from core.geometry import canonical_transform, facing_transform
 from core.manifest import Manifest, ModelEntry, Serving, load_manifest, serving_with
@@ -341,14 +340,11 @@ class Engine:
     def _result(p: SolveProblem, ans: BatchAnswer, b: int) -> SolveResult:
         e = ans.errors[b, : p.n_targets]
         return SolveResult(
-            pose=ans.pose[b],
-            errors=e,
-            reached=e <= p.tolerance,
+            pose=ans.pose[b], errors=e, reached=e <= p.tolerance,
             pin_errors=ans.errors[b, p.n_targets : len(p.target_idx)],
             max_bone_error=float(ans.max_bone_error[b]),
-            solvers=list(ans.paths[ans.path_of[b]]),
-            iterations=int(ans.iterations[b]),
-        )
+            solvers=list(ans.paths[ans.path_of[b]]), iterations=int(ans.iterations[b]),
+        )  # fmt: skip
 
     def solve_arrays(
         self,
@@ -525,7 +521,7 @@ class Engine:
                 out = compiled.unscale(
                     decoded, scales, canon, lengths, bone, tidx, cnt, batch.carry, self.chain_mask,
                     self.serving.keep_ease, collar, hold, self.serving.keep_pairs,
-                    self.serving.bend_side, batch.soft_ik,
+                    self.serving.bend_side, batch.soft_ik, self.serving.keep_feet,
                 )  # fmt: skip
             else:
                 items = np.flatnonzero(neural)
@@ -541,6 +537,7 @@ class Engine:
                     tidx[items], cnt[items], batch.carry[items], self.chain_mask,
                     self.serving.keep_ease, collar[items], hold[items],
                     self.serving.keep_pairs, self.serving.bend_side, batch.soft_ik[items],
+                    self.serving.keep_feet,
                 )  # fmt: skip
         start = canon
         if origin is not None and moved is not None and moved.any():
@@ -707,6 +704,8 @@ class Engine:
                 run(True, sel, out[sel], goal), canon[sel], lengths[sel], goal, tols[sel],
                 g.idx, g.weights, pinned,
             )  # fmt: skip
+            if self.serving.keep_feet:  # the polish knows no floor: legs it sank raised back
+                floor_group(pose, compiled.as_f64(out[sel]), g.idx)
             suffix[sel] = np.where(fell, 2, 1)
             out[sel], iterations[sel] = pose, its
         sel = neural[~ex[neural]]
@@ -779,14 +778,17 @@ def _keep_nearer(
 @lru_cache(maxsize=4096)
 def _cover(joints: frozenset[str], available: frozenset[str]) -> tuple[str, ...]:
     """Trained sets covering ``joints``: the exact set if trained, else greedily the
-    largest trained subsets of the target set (ties by name) until no trained set adds a
-    joint. Joints no trained set contains stay uncovered (placed by FABRIK)."""
+    largest trained subsets of the target set (ties by name, sides left out first, so that
+    an edit and its mirror image run mirror-image sequences: ``pelvis`` then ``right_knee``
+    against ``left_knee`` then ``pelvis`` answered mirror images 28 cm apart, an audit,
+    2026-12-07) until no trained set adds a joint. Joints no trained set contains stay
+    uncovered (placed by FABRIK)."""
     key = set_key(joints)
     if key in available:
         return (key,)
     candidates = sorted(
         (k for k in available if set(k.split("+")) <= joints),
-        key=lambda k: (-len(k.split("+")), k),
+        key=lambda k: (-len(k.split("+")), k.replace("left_", "").replace("right_", ""), k),
     )
     chosen: list[str] = []
     covered: set[str] = set()

@@ -22,6 +22,7 @@ import numpy as np
 import numpy.typing as npt
 
 from core import compiled
+from core.compiled_limbs import floor_group
 from core.skeleton import JOINT_NAMES, NUM_JOINTS
 from service import networks
 from service.problems import BatchAnswer, _Items, solver_path, solver_paths
@@ -155,12 +156,13 @@ def solve_lean(
                 decoded, scales, canon, lengths, facing, trans, floors, tidx, tpos, counts,
                 items.carry, engine.chain_mask, engine.serving.keep_ease, collar, hold,
                 engine.serving.keep_pairs, engine.serving.bend_side, items.soft_ik,
+                engine.serving.keep_feet,
             )  # fmt: skip
             continue
         out = compiled.unscale(
             decoded, scales, canon, lengths, every, tidx, counts, items.carry, engine.chain_mask,
             engine.serving.keep_ease, collar, hold, engine.serving.keep_pairs,
-            engine.serving.bend_side, items.soft_ik,
+            engine.serving.bend_side, items.soft_ik, engine.serving.keep_feet,
         )  # fmt: skip
         # exact: every column onto its goal; soft: the pins, the solved targets held
         goal = (
@@ -169,12 +171,14 @@ def solve_lean(
         polished = engine._fabrik(
             True, out, lengths, goal, items.tols, tidx[0, :c], items.w[0, :c], pins
         )
-        out, iterations = polished[0], polished[1]
+        before, (out, iterations) = out, polished[:2]
         if last:  # from the caller's start: this pass's own where it is the first
             start = canon if k == 0 else engine.origin_in(items.poses, facing, trans, floors)
             out, iterations, fell = engine.exact_fallback(
                 polished, start, lengths, goal, items.tols, tidx[0, :c], items.w[0, :c], pins
             )
+            if engine.serving.keep_feet:  # the polish knows no floor: legs it sank raised back
+                floor_group(out, before, tidx[0, :c])
         pose, errors, bone_err = compiled.finish(
             out, facing, trans, floors, tidx, tpos, counts, lengths
         )
@@ -241,7 +245,8 @@ def solve_one(
         x_in, t_in, canon, facing, trans, lengths, scales,
     )  # fmt: skip
     rest = (items.floors, items.tidx, items.tpos, items.cnt, items.carry, engine.chain_mask,
-            s.keep_ease, collar, hold, s.keep_pairs, s.bend_side, items.soft_ik)  # fmt: skip
+            s.keep_ease, collar, hold, s.keep_pairs, s.bend_side, items.soft_ik,
+            s.keep_feet)  # fmt: skip
     for _ in range(passes - 1):
         run()
         compiled.settle_prepare(

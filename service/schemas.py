@@ -406,6 +406,11 @@ class ModelsResponse(BaseModel):
         "limb the networks drew too straight bends towards the side elbows and knees bend "
         "to (0: the networks' plane alone; the manifest's `serving.bend_side`)."
     )
+    keep_feet: bool = Field(
+        description="Whether a leg no target or pin names that the answer sinks below the "
+        "floor (or below where the start had it) is raised back, its knee bent to fit (the "
+        "manifest's `serving.keep_feet`)."
+    )
     keep_collar: bool = Field(
         description="Whether a soft answer's kept wrist beyond the arm's reach turns its "
         "shoulder about the collar first (the manifest's `serving.keep_collar`)."

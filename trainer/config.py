@@ -167,6 +167,7 @@ class SolverConfig(_Section):
     keep_ease: float = _serving("keep_ease")
     bend_side: float = _serving("bend_side")
     keep_collar: bool = _serving("keep_collar")
+    keep_feet: bool = _serving("keep_feet")
     critic_fabrik: float = _serving("critic_fabrik")
     keep_pairs: bool = _serving("keep_pairs")
     keep_pelvis: float = _serving("keep_pelvis")
@@ -323,6 +324,7 @@ SERVING_SETTINGS: tuple[str, ...] = (
     "turn_critic", "turn_fit", "turn_quick", "turn_gate", "retry_reach", "retry_polish",
     "keep_ends", "keep_elbows", "keep_ease", "bend_side", "keep_collar", "keep_pairs",
     "keep_pelvis", "pelvis_travel", "reach_travel", "solve_mirror", "critic_fabrik",
+    "keep_feet",
 )  # fmt: skip
 if not set(SERVING_SETTINGS) <= set(SolverConfig.model_fields) & set(Serving.model_fields):
     raise RuntimeError("SERVING_SETTINGS must name fields of SolverConfig and of Serving")

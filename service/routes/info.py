@@ -53,6 +53,7 @@ async def models(engine: ReadyEngine) -> ModelsResponse:
         keep_ease=engine.serving.keep_ease,
         bend_side=engine.serving.bend_side,
         keep_collar=engine.serving.keep_collar,
+        keep_feet=engine.serving.keep_feet,
         critic_fabrik=engine.serving.critic_fabrik,
         keep_pairs=engine.serving.keep_pairs,
         keep_pelvis=engine.serving.keep_pelvis,

@@ -140,13 +140,19 @@ def test_composed_views_step_together_as_they_run_apart(
     np.testing.assert_array_equal(networks.answer(engine, x, canvas, sequence, views), want)
 
 
-@pytest.mark.parametrize("names", [("left_wrist",), ("left_elbow",), WRISTS])
+@pytest.mark.parametrize(
+    "names",
+    [("left_wrist",), ("left_elbow",), WRISTS, ("pelvis", "right_knee"), ("head", "left_elbow"),
+     ("left_wrist", "right_knee", "spine2")],
+)  # fmt: skip
 def test_an_edit_and_its_mirror_image_answer_alike(
     engines: tuple[Engine, Engine], real_poses: PosePairs, names: tuple[str, ...]
 ) -> None:
     """Solved with the mirror image, a drag and the same drag on the mirror-image body
     (the other side's joint) give mirror-image answers, to float rounding; the left and
-    right solvers alone answer them differently (millimetres and more)."""
+    right solvers alone answer them differently (millimetres and more). Composed edits too:
+    their solvers run in mirror-image order (was: by name, ``pelvis`` before ``right_knee``
+    but ``left_knee`` before ``pelvis``, mirror images 28 cm apart; an audit, 2026-12-07)."""
     from core.skeleton import JOINT_NAMES, MIRROR
 
     other = tuple(sorted(JOINT_NAMES[MIRROR[JOINT_NAMES.index(n)]] for n in names))

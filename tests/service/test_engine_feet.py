@@ -1,0 +1,102 @@
+"""Feet kept over the floor (``serving.keep_feet``, core.compiled_limbs.floor_item): a leg
+no target or pin names that the answer sinks below the floor is raised back, its knee bent
+to fit. An audit (2026-12-07) dragged the docs' pose's pelvis from 0.93 m to 0.6 m: its
+ankles ended 8 cm under the floor, in soft and exact reach, the answer saying reached."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from core.skeleton import JOINT_INDEX, JOINT_NAMES, bone_lengths
+from service.engine import Engine
+from service.schemas import SolveOptions
+from service.validation import problem_of
+from tests.conftest import REPO_ROOT
+
+J = JOINT_INDEX
+LEGS = [J[f"{s}_{j}"] for s in ("left", "right") for j in ("knee", "ankle", "foot")]
+POSE = np.asarray(
+    [
+        json.loads((REPO_ROOT / "docs/examples/solve.json").read_text())["pose"][n]
+        for n in JOINT_NAMES
+    ]
+)
+
+
+@pytest.fixture(scope="module")
+def engines(models_dir: Path) -> tuple[Engine, Engine]:
+    return Engine(models_dir, serving={"keep_feet": False}), Engine(models_dir)
+
+
+def solve(engine: Engine, pose: Any, joints: list[str], goals: Any, reach: str, floor: float = 0.0,
+          pins: tuple[str, ...] = ()) -> Any:  # fmt: skip
+    p = problem_of(np.asarray(pose, dtype=np.float64), [J[j] for j in joints],
+                   np.asarray(goals, dtype=np.float64), [1.0] * len(joints),
+                   [J[j] for j in pins], SolveOptions(reach=reach, floor=floor))  # fmt: skip
+    return engine.solve([p])[0]
+
+
+@pytest.mark.parametrize("reach", ["soft", "exact"])
+def test_a_pelvis_dragged_down_crouches_instead_of_sinking_the_feet(
+    engines: tuple[Engine, Engine], client: Any, reach: str
+) -> None:
+    """The docs' pose, its pelvis dragged down to 0.75, 0.6 and 0.4 m: without keep_feet
+    its feet sink up to 18 cm under the floor; with it (the shipped models) no joint of a
+    leg is under the floor, the knees lower than the start's, the pelvis reached as before,
+    every bone its own length."""
+    off, on = engines
+    assert on.serving.keep_feet and client.get("/v1/models").json()["keep_feet"] is True
+    lengths = bone_lengths(POSE)
+    for height in (0.75, 0.6, 0.4):
+        goal = [[POSE[0, 0], height, POSE[0, 2]]]
+        sunk, kept = (solve(e, POSE, ["pelvis"], goal, reach) for e in (off, on))
+        assert np.asarray(sunk.pose)[LEGS, 1].min() < -0.025, height
+        legs = np.asarray(kept.pose)[LEGS]
+        assert legs[:, 1].min() > -1e-9, (height, legs[:, 1])
+        assert (legs[[0, 3], 1] < POSE[[J["left_knee"], J["right_knee"]], 1] - 0.05).all()
+        assert kept.errors[0] <= max(sunk.errors[0], 1e-3 if reach == "exact" else 0.01)
+        assert np.abs(bone_lengths(np.asarray(kept.pose)) / lengths - 1).max() < 1e-9
+
+
+def test_the_floor_is_where_the_request_says_and_asked_legs_go_where_asked(
+    engines: tuple[Engine, Engine],
+) -> None:
+    """On a 1 m box (``floor`` 1.0, the pose 1 m up) the answer is the floor's answer 1 m up;
+    a leg a target names goes where the target asks, under the floor or not (its other leg
+    kept over it); a start whose feet were already under the floor is not lowered further
+    but not lifted either."""
+    on = engines[1]
+    goal = np.array([[POSE[0, 0], 0.5, POSE[0, 2]]])
+    ground = np.asarray(solve(on, POSE, ["pelvis"], goal, "soft").pose)
+    up = np.array([0.0, 1.0, 0.0])
+    box = np.asarray(solve(on, POSE + up, ["pelvis"], goal + up, "soft", 1.0).pose)
+    assert np.abs(box - up - ground).max() < 1e-9
+    ankle = POSE[J["left_ankle"]] + [0.05, -0.1, 0.05]  # 10 cm down: through the floor
+    asked = solve(on, POSE, ["pelvis", "left_ankle"], np.vstack([goal, ankle]), "exact")
+    out = np.asarray(asked.pose)
+    assert asked.reached.all() and out[J["left_ankle"], 1] < 0.02
+    assert out[[J["right_knee"], J["right_ankle"], J["right_foot"]], 1].min() > -1e-9
+    low = POSE - 0.05 * up  # the feet already 5 cm under the floor
+    was = low[LEGS, 1].reshape(2, 3).min(axis=1)
+    out = np.asarray(solve(on, low, ["pelvis"], goal - 0.05 * up, "soft").pose)
+    now = out[LEGS, 1].reshape(2, 3).min(axis=1)
+    assert (now > was - 1e-9).all() and (now < 1e-9).all(), (was, now)
+
+
+def test_a_batch_keeps_the_feet_as_a_single_solve_does(client: Any) -> None:
+    """The same pelvis drags one request each and as a batch's items: the same bits."""
+    body = json.loads((REPO_ROOT / "docs/examples/solve.json").read_text())
+    items = []
+    for height, reach in ((0.6, "soft"), (0.45, "exact"), (0.7, "soft")):
+        goal = [body["pose"]["pelvis"][0], height, body["pose"]["pelvis"][2]]
+        items.append({"pose": body["pose"], "targets": [{"joint": "pelvis", "position": goal}],
+                      "options": {"reach": reach}})  # fmt: skip
+    alone = [client.post("/v1/solve", json=item).json()["pose"] for item in items]
+    batch = client.post("/v1/solve/batch", json={"items": items}).json()["items"]
+    assert [b["pose"] for b in batch] == alone
+    assert min(p[j][1] for p in alone for j in ("left_foot", "right_foot")) > -1e-9
