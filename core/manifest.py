@@ -24,8 +24,9 @@ Schema version 1. Kinds:
 
 from __future__ import annotations
 
+import hashlib
 import json
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any, Literal
 
@@ -539,6 +540,26 @@ def verify_entry(models_dir: Path, entry: ModelEntry) -> None:
     digest = sha256_file(file)
     if digest != entry.sha256:
         raise ManifestError(file, f"sha256 {digest[:12]}… does not match the manifest")
+
+
+def model_version(entries: Sequence[ModelEntry], serving: Serving) -> str:
+    """The models' version: a hash of every file's sha256 and of the serving section as the
+    manifest holds it (:func:`serving_json`: a setting added after it was written is left
+    out), which changes answers as much as a file does (models exported before completion
+    views hashed the files alone: :func:`edited_version` takes either)."""
+    text = "".join(e.sha256 for e in entries) + serving.model_dump_json(exclude_unset=True)
+    return "mx1-" + hashlib.sha256(text.encode()).hexdigest()[:12]
+
+
+def edited_version(manifest: Manifest) -> str | None:
+    """The version of what ``manifest`` holds (:func:`model_version`) where its own
+    ``version`` is neither that nor its files' alone (the older hash): its serving block or
+    a model entry edited by hand, its answers no longer the ones that version names (an
+    audit, 2026-12-07: ``passes`` 2 -> 3 served as before under the same ``model``); else
+    None. ``pose-trainer serving`` sets the serving block with a new version."""
+    now = model_version(manifest.models, manifest.serving)
+    files = "mx1-" + hashlib.sha256("".join(e.sha256 for e in manifest.models).encode()).hexdigest()
+    return None if manifest.version in (now, files[:16]) else now
 
 
 def serving_json(serving: Serving) -> dict[str, Any]:

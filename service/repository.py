@@ -8,7 +8,7 @@ import json
 import logging
 import time
 
-from core.manifest import ManifestError, SkeletonSpec, load_manifest
+from core.manifest import ManifestError, SkeletonSpec, edited_version, load_manifest
 from service.engine import Engine
 from service.errors import ModelsFailed, NotReady
 from service.settings import Settings
@@ -64,6 +64,13 @@ class ModelRepository:
         """Load, verify and warm up the models; record why not when anything fails."""
         s = self.settings
         t0 = time.perf_counter()
+        log.info(
+            json.dumps(
+                {"event": "models_loading", "models_dir": str(s.models_dir),
+                 "detail": "loading, verifying and warming up the models; the first start "
+                 "after an install or a code change also compiles the kernels (~1 min)"}
+            )
+        )  # fmt: skip
         with contextlib.suppress(ManifestError):
             self.skeleton = load_manifest(s.models_dir, verify=False).skeleton
         try:
@@ -88,6 +95,16 @@ class ModelRepository:
             return
         self.engine = engine
         self.reason = ""
+        if (content := edited_version(engine.manifest)) is not None:
+            log.warning(
+                json.dumps(
+                    {"event": "manifest_edited", "version": engine.version,
+                     "content_version": content, "detail": "manifest.json's serving block or "
+                     "a model entry was edited by hand: its answers are not the ones its "
+                     "version names; set serving settings with `pose-trainer serving`, which "
+                     "gives the models a version of their own"}
+                )
+            )  # fmt: skip
         inert, why = engine.inert_settings()
         if inert:  # set, but nothing here for them to change
             log.warning(

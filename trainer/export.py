@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import hashlib
 import logging
 import os
 import platform
@@ -30,6 +29,7 @@ from core.manifest import (
     Serving,
     SkeletonSpec,
     TensorSpec,
+    model_version,
     write_manifest,
 )
 from core.skeleton import BONES, FRAME, JOINT_NAMES, NUM_JOINTS, PARENT_NAMES, bone_lengths
@@ -264,15 +264,6 @@ def git_commit_of(out: Path) -> str:
         return head + ("-dirty" if dirty else "")
     except (OSError, subprocess.CalledProcessError):
         return "unknown"
-
-
-def model_version(entries: list[ModelEntry], serving: Serving) -> str:
-    """The models' version: a hash of every file's sha256 and of the serving section as the
-    manifest holds it (``core.manifest.serving_json``: a setting added after it was written
-    is left out), which changes answers as much as a file does (models exported before
-    completion views hashed the files alone)."""
-    text = "".join(e.sha256 for e in entries) + serving.model_dump_json(exclude_unset=True)
-    return "mx1-" + hashlib.sha256(text.encode()).hexdigest()[:12]
 
 
 def serving_of(cfg: TrainConfig) -> Serving:

@@ -183,7 +183,7 @@ def mirror_entries(models_dir: Path, fused: dict[str, ModelEntry]) -> list[Model
 def add_mirror_graphs(models_dir: Path) -> Manifest:
     """(Re)write ``models_dir``'s mirror graphs from its fused graphs and its manifest with
     their entries: a new version (it hashes every file), networks and serving unchanged."""
-    from trainer.export import model_version
+    from core.manifest import model_version
     from trainer.model_card import write_model_card
 
     manifest = load_manifest(models_dir, verify=True)

@@ -21,10 +21,11 @@ from core.manifest import (
     Serving,
     load_manifest,
     manifest_json,
+    model_version,
     write_manifest,
 )
 from trainer.config import SERVING_SETTINGS, TrainConfig, seen_by_losses
-from trainer.export import git_commit_of, model_version, serving_of
+from trainer.export import git_commit_of, serving_of
 from trainer.model_card import write_model_card
 
 

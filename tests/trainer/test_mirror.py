@@ -11,9 +11,8 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from core.manifest import ManifestError, Serving, load_manifest, write_manifest
+from core.manifest import ManifestError, Serving, load_manifest, model_version, write_manifest
 from trainer.cli import app
-from trainer.export import model_version
 
 
 @pytest.fixture

@@ -19,12 +19,12 @@ import pytest
 import torch
 
 from core.io import sha256_file
-from core.manifest import ManifestError, load_manifest
+from core.manifest import ManifestError, load_manifest, model_version
 from core.skeleton import JOINT_INDEX
 from trainer import stages
 from trainer.config import QUICK, TrainConfig, load_config
 from trainer.data.dataset import load_dataset
-from trainer.export import evaluate, export_all, model_version
+from trainer.export import evaluate, export_all
 from trainer.fused import FusedGraph, LeanFusedGraph
 from trainer.models import (
     Normaliser,
