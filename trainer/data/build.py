@@ -48,8 +48,10 @@ from core.skeleton import BONE_CHILDREN, JOINT_NAMES, bone_lengths
 from core.text import close_match
 from trainer.data.asf import AMC, ASFError, read_amc, read_asf
 from trainer.data.checks import (
+    TAKE_FILES,
     case_warnings,
     dropped_frames_warnings,
+    implausible_takes,
     licence_warning,
     lost_files_warnings,
     missing_joint_errors,
@@ -567,7 +569,10 @@ def build_dataset(
         meta=meta,
     )
     # what the poses say of their maps (a wrong unit, up axis, sides; a split without
-    # frames): kept with the others, so the dataset, the manifest and training say it too
+    # frames): kept with the others, so the dataset, the manifest and training say it too;
+    # the files of the takes found implausible alone, so that each is named by its file
+    if takes := implausible_takes(dataset):
+        meta[TAKE_FILES] = {clip_infos[c].name: kept[c].job.label for c in takes}
     meta["warnings"] = [*warnings, *sanity_warnings(dataset)]
     meta["build_seconds"] = round(time.perf_counter() - t0, 1)
     out = save_dataset(out, dataset)

@@ -3,9 +3,10 @@
 - maps against the mocap they read: a source not found, include globs that select no file
   of an archive, a source joint name in none of a map's files (a build failure), files a map
   lost, override / holdout globs that match nothing, a map without a licence;
-- poses against plausible bodies (:func:`sanity_warnings`): per source and per actor, the
-  thigh's length (the unit), the head over the pelvis (the up axis), the floor and the
-  pelvis height (the root position), the toes ahead of the ankles (the sides).
+- poses against plausible bodies (:func:`sanity_warnings`): per source, per actor and per
+  take (one file), the thigh's length (the unit), the head over the pelvis (the up axis),
+  the floor and the pelvis height (the root position), the toes ahead of the ankles (the
+  sides); the train split's mean bone lengths (training's own test).
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from __future__ import annotations
 import re
 from collections import Counter, defaultdict
 from collections.abc import Iterable, Iterator, Sequence
+from itertools import pairwise
 from pathlib import Path
 from typing import TYPE_CHECKING, Final
 
@@ -295,9 +297,10 @@ def _outside(key: str, value: float) -> bool:
     return not lo <= value <= hi
 
 
-def _problem(v: dict[str, float]) -> str | None:
+def _problem(v: dict[str, float], toes_slack: float = 0.0) -> str | None:
     """The likeliest wrong key of a group's medians, or None: the unit first (a wrong scale
-    upsets every other measure), then the up axis, the root position, the sides."""
+    upsets every other measure), then the up axis, the root position, the sides (the toes
+    ``toes_slack`` m further behind the ankles allowed: :data:`TAKE_TOES_SLACK`)."""
     if _outside("thigh", v["thigh"]):
         return f"median thigh length {v['thigh']:.3f} m (plausible 0.2-0.7): is the `unit` right?"
     if _outside("head", v["head"]):
@@ -311,7 +314,7 @@ def _problem(v: dict[str, float]) -> str | None:
             "(the floor is y = 0; plausible -0.15-0.2 and 0.3-1.4): is `root_position` right "
             '("add" when the root\'s position channels are a displacement from its OFFSET)?'
         )
-    if v["toes"] < PLAUSIBLE["toes"][0]:
+    if v["toes"] < PLAUSIBLE["toes"][0] - toes_slack:
         return (
             f"median toes {-v['toes']:.3f} m behind the ankles (facing +Z): are left and "
             "right swapped (`swap_sides`)?"
@@ -343,53 +346,140 @@ def bad_bones(lengths: npt.NDArray[np.float64]) -> list[str]:
     ]
 
 
+#: A take's (one file's) median toes may sit this much (m) further behind its ankles than a
+#: source's before its sides are blamed: the shipped data's short runs and dashes (70
+#: frames) have theirs up to 1.5 cm behind; swapped sides put them about 9 cm behind.
+TAKE_TOES_SLACK: Final = 0.05
+#: Implausible takes of a source named one by one; more are counted in one line.
+TAKES_NAMED: Final = 10
+#: ``meta`` key of a built dataset: the file of each take the checks found implausible
+#: (clip name -> ``"<source>:<path>"``), so that training names the file too.
+TAKE_FILES: Final = "take_files"
+
+#: Per source: the implausible takes of its actors found plausible, (clip, problem) each.
+_Takes = list[tuple[int, str]]
+
+
+def _clip_frames(ds: PoseDataset) -> list[npt.NDArray[np.intp]]:
+    """Each clip's frame indices, in the clip table's order."""
+    order = np.argsort(ds.clip, kind="stable")
+    bounds = np.searchsorted(ds.clip[order], np.arange(ds.num_clips + 1))
+    return [order[a:b] for a, b in pairwise(bounds.tolist())]
+
+
+def _takes(ds: PoseDataset, clips: Iterable[int], frames: list[npt.NDArray[np.intp]]) -> _Takes:
+    """The ``clips`` (one per file) whose own medians are implausible, each with its
+    problem: one take in inches, or turned +Z up, among plausible ones moves no median of
+    its source or actor (a studio audit, 2026-12-07: served bodies 4x too big)."""
+    out = []
+    for c in clips:
+        if len(frames[c]):
+            v = _medians(ds.positions[frames[c]].astype(np.float64))
+            if (problem := _problem(v, TAKE_TOES_SLACK)) is not None:
+                out.append((int(c), problem))
+    return out
+
+
 def _map_keys(
     ds: PoseDataset,
-) -> Iterator[tuple[str, npt.NDArray[np.bool_], str | None, list[str]]]:
+) -> Iterator[tuple[str, npt.NDArray[np.bool_], str | None, list[str], _Takes]]:
     """Per source: its frames, and the warnings that name a likely wrong map key (`unit`,
     `up_axis`, `root_position`, `swap_sides`): the source's own, else its actors' (one
-    actor's [[override]] with a wrong unit)."""
+    actor's [[override]] with a wrong unit), and the takes of its other actors (one file
+    exported in another unit or up axis)."""
     source = ds.clip_source[ds.clip]
     actor = ds.clip_actor[ds.clip]
+    frames: list[npt.NDArray[np.intp]] | None = None
     for s in sorted(set(ds.clip_source.tolist())):
         sel = source == s
         problem = _problem(_medians(ds.positions[sel][::10].astype(np.float64)))
         if problem is not None:
-            yield s, sel, f"{s}: {problem}", []
+            yield s, sel, f"{s}: {problem}", [], []
             continue
-        found = []
+        found, flagged = [], set()
         actors = sorted(set(actor[sel].tolist()))
         for a in actors if len(actors) > 1 else []:
             p = ds.positions[sel & (actor == a)][::10].astype(np.float64)
             if (problem := _problem(_medians(p))) is not None:
                 found.append(f"{s}, actor {a!r}: {problem} (the map's, or an [[override]]'s)")
-        yield s, sel, None, found
+                flagged.add(a)
+        frames = _clip_frames(ds) if frames is None else frames
+        clips = np.flatnonzero((ds.clip_source == s) & ~np.isin(ds.clip_actor, list(flagged)))
+        yield s, sel, None, found, _takes(ds, clips.tolist(), frames)
+
+
+def _take_warnings(ds: PoseDataset, source: str, takes: _Takes) -> list[str]:
+    """One warning per implausible take (up to :data:`TAKES_NAMED`, the rest in one),
+    naming its file where the build recorded it (``meta[TAKE_FILES]``), else its clip."""
+    files: dict[str, str] = ds.meta.get(TAKE_FILES, {})
+    out = []
+    for c, problem in takes[:TAKES_NAMED]:
+        name = str(ds.clip_name[c])
+        file = files.get(name)
+        where = f"{file} (clip {name!r})" if file else f"{source}, clip {name!r}"
+        glob = f"glob = {file.split(':', 1)[-1]!r}" if file else "glob matching its file"
+        out.append(
+            f"{where}: {problem} (this take alone of its source: re-export it like the "
+            f"others, or set that key for its file with an [[override]] {glob})"
+        )
+    if len(takes) > TAKES_NAMED:
+        rest = [repr(str(ds.clip_name[c])) for c, _ in takes[TAKES_NAMED:]]
+        out.append(
+            f"{source}: {len(rest)} more takes implausible likewise: "
+            f"{', '.join(rest[:EXAMPLES])}{', ...' if len(rest) > EXAMPLES else ''}"
+        )
+    return out
+
+
+def implausible_takes(ds: PoseDataset) -> list[int]:
+    """The clips (takes) :func:`implausible` names one by one (the build records their
+    files: ``meta[TAKE_FILES]``)."""
+    return [c for _, _, _, _, takes in _map_keys(ds) for c, _ in takes]
 
 
 def implausible(ds: PoseDataset) -> list[str]:
     """The warnings of :func:`sanity_warnings` that name a likely wrong map key, per source,
-    else per actor: what training refuses unless told to accept it (a studio audit, D4: a
-    cm-for-metres map trained and served 3-m bodies, exit 0)."""
-    return [w for _, _, own, found in _map_keys(ds) for w in ([own] if own else found)]
+    else per actor, and per take: what training refuses unless told to accept it (a studio
+    audit, D4: a cm-for-metres map trained and served 3-m bodies, exit 0; 2026-12-07: one
+    take in inches among 16, served bodies 4x too big)."""
+    out = []
+    for s, _, own, found, takes in _map_keys(ds):
+        out += [own] if own else [*found, *_take_warnings(ds, s, takes)]
+    return out
 
 
 def sanity_warnings(ds: PoseDataset) -> list[str]:
     """What poses say of their map, where implausible (one warning per source, naming the
-    likeliest wrong key; else one per actor, e.g. an [[override]] with a wrong unit); and a
-    split the training needs (train, val) without frames."""
-    out = []
-    for s, sel, own, found in _map_keys(ds):
+    likeliest wrong key; else one per actor, e.g. an [[override]] with a wrong unit, and one
+    per take, e.g. one file exported in inches); the train split's mean bone lengths,
+    which training refuses outside :data:`BONE_RANGE_M`; and a split the training needs
+    (train, val) without frames."""
+    out, said = [], False  # said: a finding that explains bones far off (training's test)
+    for s, sel, own, found, takes in _map_keys(ds):
         if own is not None:  # the source's own: its bones say no more
             out.append(own)
+            said = True
             continue
         lengths = np.median(bone_lengths(ds.positions[sel][::10].astype(np.float64)), axis=0)
         if bad := bad_bones(lengths):
+            said = True
             out.append(
                 f"{s}: median bone length outside {BONE_RANGE_TEXT}: {', '.join(bad)}: the "
                 "map's two source joints of such a bone coincide (or lie far apart); map one "
                 "of them to another joint (training refuses such a bone)"
             )
         out.extend(found)
+        out.extend(_take_warnings(ds, s, takes))
+        said = said or bool(found or takes)
+    train = ds.split_mask("train")
+    if train.any() and not said:  # (training's own test: the mean, which a take far off moves)
+        mean = bone_lengths(ds.positions[train]).mean(axis=0, dtype=np.float64)
+        if bad := bad_bones(mean):
+            out.append(
+                f"the train split's mean bone length is outside {BONE_RANGE_TEXT} for "
+                f"{', '.join(bad)}: training refuses this dataset (a few frames far off "
+                "their size move the mean)"
+            )
     for split in ("train", "val", "test"):
         if not (ds.clip_split == split).any():
             out.append(f"no {split} clips: training refuses this dataset (docs/data.md, splits)")
