@@ -32,6 +32,35 @@ def _finite(value: float) -> float:
     return value
 
 
+def _check_writable(folder: Path, option: str, path: Path) -> None:
+    """Refuse, before any work, an output ``path`` (of ``option``) whose ``folder`` cannot
+    be made or written: its nearest existing folder must be a folder in which a file can be
+    made (one is made and removed). One line, exit 2 (a bad option's code); ``train --out
+    /proc/models`` trained every stage, then failed on its ``.partial`` folder with a
+    traceback, and ``dataset --out /proc/x.npz`` after the whole build."""
+    import os
+    import tempfile
+
+    there = folder
+    while not there.exists() and not there.is_symlink() and there != there.parent:
+        there = there.parent
+    why = None
+    if not there.is_dir():
+        why = f"{there} is {'a file' if there.is_file() else 'no folder'}" + (
+            "" if there == folder else f", so {folder} cannot be made"
+        )
+    else:
+        try:
+            fd, probe = tempfile.mkstemp(dir=there, prefix=".marionette-probe-")
+            os.close(fd)
+            os.unlink(probe)
+        except OSError as exc:
+            why = f"cannot write in {there} ({exc.strerror or exc})"
+    if why is not None:
+        typer.echo(f"error: invalid value for {option}: {path}: {why}", err=True)
+        raise typer.Exit(2)
+
+
 def _train_and_export(
     config: Path | None,
     quick: bool,
@@ -67,6 +96,10 @@ def _train_and_export(
         raise typer.Exit(1) from None
     if (recipe := recipe_warning(config, cfg.out_dir)) is not None:
         typer.echo(f"warning: {recipe}", err=True)
+    run_path, out_path = Path(cfg.run_dir), Path(cfg.out_dir)
+    _check_writable(run_path, "--run-dir" if run_dir is not None else "run_dir", run_path)
+    if export:  # (the export makes its folder beside out_dir, then renames it)
+        _check_writable(out_path.parent, "--out" if out is not None else "out_dir", out_path)
 
     from rich.table import Table
 
@@ -180,6 +213,7 @@ def dataset(
             f"{out} is a folder: give the dataset file's name (e.g. {out / 'poses.npz'})",
             param_hint="--out",
         )
+    _check_writable(out.parent, "--out", out)
     try:
         report = build_dataset(
             mocap, out, maps_dir=maps, seed=seed, workers=workers, log=console.print

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import pytest
 from typer.testing import CliRunner
@@ -243,3 +244,48 @@ def test_weights_of_sets_not_trained_are_named_in_one_line(
     text = " ".join(out.split())
     assert out.count("no set of solver.sets") == 1, out
     assert ", ".join(f"solver.{k}" for k in unused) + ": no set of solver.sets, ignored" in text
+
+
+def _refused(args: list[str], option: str, path: Path) -> str:
+    """``pose-trainer <args>``: exit 2 and one line naming ``option`` and ``path``."""
+    r = CliRunner().invoke(app, args)
+    assert r.exit_code == 2 and "Traceback" not in r.output, r.output
+    (line,) = [line for line in r.output.splitlines() if line.startswith("error:")]
+    assert line.startswith(f"error: invalid value for {option}: {path}: "), r.output
+    return line
+
+
+def test_an_unwritable_out_or_run_dir_is_refused_before_training(
+    small_dataset: Path, tmp_path: Path
+) -> None:
+    """A studio audit (2026-12-07): ``train --out /proc/models-x`` trained every stage, then
+    died with a traceback (FileNotFoundError on its ``.partial`` folder), exit 1; likewise
+    ``--run-dir /proc/runs``. Each is now checked before any work (a file is made and
+    removed where it goes): one line naming the option, exit 2. (Tests run as root: a path
+    under a regular file is one no one can write.)"""
+    afile = tmp_path / "afile"
+    afile.write_text("not a folder\n")
+    run, out = tmp_path / "run", tmp_path / "models"
+    base = ["train", "--dataset", str(small_dataset)]
+    line = _refused([*base, "--run-dir", str(run), "--out", str(afile / "out")], "--out",
+                    afile / "out")  # fmt: skip
+    assert line.endswith(f"{afile} is a file"), line
+    assert not run.exists()  # nothing trained
+    _refused([*base, "--run-dir", str(afile / "runs"), "--out", str(out)], "--run-dir",
+             afile / "runs")  # fmt: skip
+    _refused([*base, "--run-dir", str(afile / "a" / "runs"), "--out", str(out)], "--run-dir",
+             afile / "a" / "runs")  # fmt: skip
+    assert not out.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["afile"]  # no probe file left
+
+
+def test_an_unwritable_dataset_out_is_refused_before_the_build(
+    mocap_clips: Any, tmp_path: Path
+) -> None:
+    """``dataset --out /proc/x.npz`` built the whole dataset, then failed to write it."""
+    afile = tmp_path / "afile"
+    afile.write_text("not a folder\n")
+    out = afile / "data" / "x.npz"
+    args = ["dataset", "--mocap", str(mocap_clips.root), "--out", str(out)]
+    line = _refused(args, "--out", out)
+    assert line.endswith(f"{afile} is a file, so {afile / 'data'} cannot be made"), line
