@@ -197,3 +197,17 @@ def test_bones_far_off_in_the_train_split_s_mean_alone_are_warned(small_dataset:
     from trainer.train import reference_lengths  # (training's own test agrees)
 
     assert bad_bones(reference_lengths(odd.subset(odd.split_mask("train"))))
+
+
+def test_more_takes_than_named_are_counted_in_one_line(small_dataset: Path) -> None:
+    from trainer.data.checks import TAKES_NAMED, _take_warnings
+
+    ds = load_dataset(small_dataset)
+    n = ds.num_clips
+    assert n > TAKES_NAMED
+    lines = _take_warnings(ds, "acme", [(c, "a problem") for c in range(n)])
+    assert len(lines) == TAKES_NAMED + 1
+    assert all(line.startswith("acme, clip ") for line in lines[:-1])
+    rest = n - TAKES_NAMED
+    assert lines[-1].startswith(f"acme: {rest} more takes implausible likewise: "), lines[-1]
+    assert repr(str(ds.clip_name[TAKES_NAMED])) in lines[-1]
