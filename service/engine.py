@@ -778,17 +778,17 @@ def _keep_nearer(
 @lru_cache(maxsize=4096)
 def _cover(joints: frozenset[str], available: frozenset[str]) -> tuple[str, ...]:
     """Trained sets covering ``joints``: the exact set if trained, else greedily the
-    largest trained subsets of the target set (ties by name, sides left out first, so that
-    an edit and its mirror image run mirror-image sequences: ``pelvis`` then ``right_knee``
-    against ``left_knee`` then ``pelvis`` answered mirror images 28 cm apart, an audit,
-    2026-12-07) until no trained set adds a joint. Joints no trained set contains stay
-    uncovered (placed by FABRIK)."""
+    largest trained subsets of the target set (ties by name, a right joint's read as its
+    left one's first, so that an edit and its mirror image run mirror-image sequences:
+    ``pelvis`` then ``right_knee`` against ``left_knee`` then ``pelvis`` answered mirror
+    images 28 cm apart, an audit, 2026-12-07) until no trained set adds a joint. Joints no
+    trained set contains stay uncovered (placed by FABRIK)."""
     key = set_key(joints)
     if key in available:
         return (key,)
     candidates = sorted(
         (k for k in available if set(k.split("+")) <= joints),
-        key=lambda k: (-len(k.split("+")), k.replace("left_", "").replace("right_", ""), k),
+        key=lambda k: (-len(k.split("+")), k.replace("right_", "left_"), k),
     )
     chosen: list[str] = []
     covered: set[str] = set()
