@@ -394,6 +394,15 @@ def test_complete_below_the_floor_names_the_sets_it_takes_and_the_nearests_lack(
         (lambda b: b["targets"][0].update(joint="nose"), "unknown joint 'nose'"),
         (lambda b: b.update(pins=["left_wrist"]), "both pinned and targeted"),
         (lambda b: b.update(pins=["elbow"]), "unknown joint 'elbow'"),
+        (
+            lambda b: b.update(pins=[1]),
+            "pins[0]: a joint's name (a string) is needed, not a number",
+        ),
+        (lambda b: b["targets"][0].update(joint=None), "is needed, not null"),
+        (
+            lambda b: b.update(pins=[{"joint": "left_ankle", "position": [0, 0, 0]}]),
+            "a pin holds a joint where it is: a joint to move is a target",
+        ),
         (lambda b: b["targets"][0].update(position=[1, 2, 3, 4]), "targets[0].position"),
         (lambda b: b["pose"].update(left_knee=b["pose"]["left_hip"]), "zero-length bones"),
         (lambda b: b["options"].update(method="magic"), "options.method"),
