@@ -539,7 +539,9 @@ def verify_entry(models_dir: Path, entry: ModelEntry) -> None:
         raise ManifestError(file, f"size {size} bytes, manifest says {entry.bytes}")
     digest = sha256_file(file)
     if digest != entry.sha256:
-        raise ManifestError(file, f"sha256 {digest[:12]}… does not match the manifest")
+        raise ManifestError(
+            file, f"sha256 {digest[:12]}… does not match the manifest's {entry.sha256[:12]}…"
+        )
 
 
 def model_version(entries: Sequence[ModelEntry], serving: Serving) -> str:

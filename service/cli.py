@@ -11,6 +11,7 @@ import json
 import logging
 import logging.config
 import os
+import re
 import socket
 import sys
 import tempfile
@@ -138,7 +139,9 @@ def _settings(given: set[str]) -> Settings:
             for e in exc.errors(include_url=False)
         ))  # fmt: skip
     except SettingsError as exc:  # a list setting that is not JSON (POSE_CORS_ORIGINS)
-        refuse(f"{exc}: a list setting is JSON, e.g. POSE_CORS_ORIGINS='[\"http://x\"]'")
+        field = re.search(r'field "(\w+)"', str(exc))  # (its name first, as every refusal)
+        name = f"POSE_{field.group(1).upper()}: " if field else ""
+        refuse(f"{name}{exc}: a list setting is JSON, e.g. POSE_CORS_ORIGINS='[\"http://x\"]'")
 
 
 def _check_models(folder: Path) -> None:

@@ -327,9 +327,21 @@ def unknown_variables(environ: dict[str, str]) -> list[str]:
         elif key.upper() in OPTION_ONLY:
             out.append(f"{key} ({OPTION_ONLY[key.upper()]})")
         elif not _misspelt(key, known):
-            near = close_match(key.upper(), known)
-            out.append(f"{key}" + (f" (did you mean {near}?)" if near else ""))
+            near = _sharing(key, known) or [n for n in [close_match(key.upper(), known)] if n]
+            out.append(f"{key}" + (f" (did you mean {' or '.join(near)}?)" if near else ""))
     return out
+
+
+#: Words too common among the settings' names to say which one a variable meant.
+_GENERIC = frozenset({"POSE", "MAX", "SECONDS", "BYTES", ""})
+
+
+def _sharing(key: str, known: list[str]) -> list[str]:
+    """The settings (up to 3) whose names share a word with ``key``'s, past the generic
+    ones: ``POSE_TIMEOUT`` -> the idle and head timeouts (difflib offered ``POSE_PORT``,
+    ``POSE_GRACE`` ``POSE_ACCESS_LOG``: an ops audit, 2026-12-07)."""
+    words = set(key.upper().split("_")) - _GENERIC
+    return [k for k in known if words & set(k.split("_"))][:3]
 
 
 @lru_cache(maxsize=1)

@@ -31,3 +31,25 @@ def test_a_manifest_error_survives_pickling(models_dir: Path, tmp_path: Path) ->
         back = pickle.loads(pickle.dumps(err))
         assert type(back) is ManifestError and str(back) == str(err) and back.args == err.args
         assert (back.path, back.reason) == (err.path, err.reason) and vars(back) == vars(err)
+
+
+def test_a_file_that_is_not_the_manifest_s_names_both_hashes(
+    models_dir: Path, tmp_path: Path
+) -> None:
+    """A model file of the right size but other bytes is refused with its own sha256 and
+    the manifest's (an ops audit, 2026-12-07: only the file's was shown)."""
+    import hashlib
+    import shutil
+
+    copy = tmp_path / "models"
+    shutil.copytree(models_dir, copy)
+    entry = load_manifest(copy, verify=False).models[0]
+    data = bytearray((copy / entry.file).read_bytes())
+    data[-1] ^= 0xFF
+    (copy / entry.file).write_bytes(bytes(data))
+    with pytest.raises(ManifestError) as err:
+        load_manifest(copy)
+    own = hashlib.sha256(bytes(data)).hexdigest()
+    assert (
+        err.value.reason == f"sha256 {own[:12]}… does not match the manifest's {entry.sha256[:12]}…"
+    )
