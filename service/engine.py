@@ -114,10 +114,8 @@ class Engine:
         self.encoder = net(m.autoencoder("encoder"))
         self.decoder = net(m.autoencoder("decoder"))
         self.solvers = {key: net(entry) for key, entry in m.solvers().items()}
-        self.solver_joints = {
-            key: np.asarray([JOINT_INDEX[j] for j in entry.joints], dtype=np.intp)
-            for key, entry in m.solvers().items()
-        }
+        self.solver_joints = {key: np.asarray([JOINT_INDEX[j] for j in entry.joints], dtype=np.intp)
+                              for key, entry in m.solvers().items()}  # fmt: skip
         #: each solver's targets as flat canvas columns ``[3k]`` (its fused graph's input)
         self.solver_columns = {key: flat_columns(j) for key, j in self.solver_joints.items()}
         #: how each solver's edit is asked of its mirror image (``serving.solve_mirror``),
@@ -592,14 +590,16 @@ class Engine:
     def exact_fallback(
         self, polished: tuple[compiled.F64, npt.NDArray[np.int64], compiled.F64], start: F64,
         lengths: F64, goal: F64, tols: F64, idx: npt.NDArray[np.int64], weights: F64,
-        pins: npt.NDArray[np.bool_],
+        pins: npt.NDArray[np.bool_], before: compiled.F64,
     ) -> tuple[compiled.F64, npt.NDArray[np.int64], npt.NDArray[np.bool_]]:  # fmt: skip
         """Exact reach's last word on a batch of one target set: ``polished`` (poses,
         iterations, errors of the FABRIK polish from the networks' answer), and for every
         item it left beyond its tolerance, plain FABRIK from its ``start`` (the caller's
         start, canonical), kept where it ends nearer. Ties (equal to rounding: e.g. both
         at the stretch a pin allows) keep the polish, whose pose is nearer the network's.
-        Returns poses, iterations (FABRIK's added where kept) and which kept it."""
+        Returns poses, iterations (FABRIK's added where kept) and which kept it; with
+        ``serving.keep_feet`` the legs they sank below the floor raised back (the polish knows
+        none), against ``before``, the poses polished (``core.compiled_limbs.floor_group``)."""
         pose, its, errs = polished
         fell = np.zeros(len(pose), dtype=np.bool_)
         missed = np.flatnonzero(np.any(errs > tols[:, None], axis=1))
@@ -612,6 +612,8 @@ class Engine:
             if not pins.any():
                 self._shifted_fallback(pose, its, errs, fell, lengths, goal, tols, idx, weights,
                                        pins)  # fmt: skip
+        if self.serving.keep_feet:
+            floor_group(pose, before, idx)
         return pose, its, fell
 
     def _shifted_fallback(
@@ -702,10 +704,8 @@ class Engine:
             goal = tcan[sel, :k]
             pose, its, fell = self.exact_fallback(
                 run(True, sel, out[sel], goal), canon[sel], lengths[sel], goal, tols[sel],
-                g.idx, g.weights, pinned,
+                g.idx, g.weights, pinned, compiled.as_f64(out[sel]),
             )  # fmt: skip
-            if self.serving.keep_feet:  # the polish knows no floor: legs it sank raised back
-                floor_group(pose, compiled.as_f64(out[sel]), g.idx)
             suffix[sel] = np.where(fell, 2, 1)
             out[sel], iterations[sel] = pose, its
         sel = neural[~ex[neural]]
@@ -778,23 +778,23 @@ def _keep_nearer(
 @lru_cache(maxsize=4096)
 def _cover(joints: frozenset[str], available: frozenset[str]) -> tuple[str, ...]:
     """Trained sets covering ``joints``: the exact set if trained, else greedily the
-    largest trained subsets of the target set (ties by name, a right joint's read as its
-    left one's first, so that an edit and its mirror image run mirror-image sequences:
-    ``pelvis`` then ``right_knee`` against ``left_knee`` then ``pelvis`` answered mirror
-    images 28 cm apart, an audit, 2026-12-07) until no trained set adds a joint. Joints no
-    trained set contains stay uncovered (placed by FABRIK)."""
+    largest trained subsets of the target set until no trained set adds a joint (ties: sets
+    of centre joints first, then by name with a right joint read as its left one, so that
+    an edit and its mirror image run mirror-image sequences: by name alone, ``pelvis`` then
+    ``right_knee`` against ``left_knee`` then ``pelvis`` answered mirror images 28 cm apart,
+    an audit, 2026-12-07). Joints no trained set contains stay uncovered (FABRIK's)."""
     key = set_key(joints)
     if key in available:
         return (key,)
+    left = {k: set_key([j.replace("right_", "left_") for j in k.split("+")]) for k in available}
     candidates = sorted(
         (k for k in available if set(k.split("+")) <= joints),
-        key=lambda k: (-len(k.split("+")), k.replace("right_", "left_"), k),
+        key=lambda k: (-len(k.split("+")), "_" in k, left[k], k),
     )
     chosen: list[str] = []
     covered: set[str] = set()
     for k in candidates:
-        members = set(k.split("+"))
-        if members - covered:
+        if set(k.split("+")) - covered:
             chosen.append(k)
-            covered |= members
+            covered |= set(k.split("+"))
     return tuple(chosen)

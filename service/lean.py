@@ -22,7 +22,6 @@ import numpy as np
 import numpy.typing as npt
 
 from core import compiled
-from core.compiled_limbs import floor_group
 from core.skeleton import JOINT_NAMES, NUM_JOINTS
 from service import networks
 from service.problems import BatchAnswer, _Items, solver_path, solver_paths
@@ -175,10 +174,16 @@ def solve_lean(
         if last:  # from the caller's start: this pass's own where it is the first
             start = canon if k == 0 else engine.origin_in(items.poses, facing, trans, floors)
             out, iterations, fell = engine.exact_fallback(
-                polished, start, lengths, goal, items.tols, tidx[0, :c], items.w[0, :c], pins
+                polished,
+                start,
+                lengths,
+                goal,
+                items.tols,
+                tidx[0, :c],
+                items.w[0, :c],
+                pins,
+                before,
             )
-            if engine.serving.keep_feet:  # the polish knows no floor: legs it sank raised back
-                floor_group(out, before, tidx[0, :c])
         pose, errors, bone_err = compiled.finish(
             out, facing, trans, floors, tidx, tpos, counts, lengths
         )
@@ -303,7 +308,7 @@ def solve_fabrik(
     if origin is not None:
         start = engine.origin_in(origin, facing, trans, items.floors)
         out, iterations, fell = engine.exact_fallback(
-            polished, start, lengths, tcan[:, :c], items.tols, idx, w, pins
+            polished, start, lengths, tcan[:, :c], items.tols, idx, w, pins, canon
         )
     pose, errors, bone_err = compiled.finish(
         out, facing, trans, items.floors, items.tidx, tpos, items.cnt, lengths

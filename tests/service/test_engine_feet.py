@@ -100,3 +100,15 @@ def test_a_batch_keeps_the_feet_as_a_single_solve_does(client: Any) -> None:
     batch = client.post("/v1/solve/batch", json={"items": items}).json()["items"]
     assert [b["pose"] for b in batch] == alone
     assert min(p[j][1] for p in alone for j in ("left_foot", "right_foot")) > -1e-9
+
+
+def test_a_polish_for_pins_sinks_no_leg(engines: tuple[Engine, Engine]) -> None:
+    """A review's edit (2026-12-07): pelvis and left elbow dragged, the right arm pinned,
+    soft reach: the polish the pins take left the right foot 2.5 cm under the floor
+    without keep_feet; with it every leg joint is over the floor, the pins held."""
+    goals = [[2.08859706085619, 0.747912792917952, -0.799988985216796],
+             [2.258162035588512, 1.7437777580344733, -0.6060809719773537]]  # fmt: skip
+    off, on = (solve(e, POSE, ["pelvis", "left_elbow"], goals, "soft", 0.0,
+                     ("right_wrist", "right_elbow")) for e in engines)  # fmt: skip
+    assert np.asarray(off.pose)[LEGS, 1].min() < -0.02
+    assert np.asarray(on.pose)[LEGS, 1].min() > -1e-9 and on.pin_errors.max() < 1e-3
