@@ -61,13 +61,20 @@ def facing_transform(fx: FloatArray, fz: FloatArray, translation: FloatArray) ->
     return RigidTransform(rotation=_rotation_from_forward(fx, fz), translation=translation)
 
 
+def across(positions: FloatArray) -> FloatArray:
+    """A pose's left minus right ``[..., 3]``, summed over the hips and the shoulders: its
+    facing is this turned a quarter about +Y (:func:`canonical_transform`)."""
+    out: FloatArray = (positions[..., _LEFT, :] - positions[..., _RIGHT, :]).sum(axis=-2)
+    return out
+
+
 def canonical_transform(positions: FloatArray) -> RigidTransform:
     """The transform that maps the canonical pose back to the given world pose.
 
     The facing is the floor direction of (left - right summed over hips and shoulders) x up;
     a pose with no horizontal left-right extent (lying on its side) keeps yaw 0."""
-    across = (positions[..., _LEFT, :] - positions[..., _RIGHT, :]).sum(axis=-2)
-    fx, fz = -across[..., 2], across[..., 0]
+    side = across(positions)
+    fx, fz = -side[..., 2], side[..., 0]
     norm = np.hypot(fx, fz)
     flat = norm < 1e-12
     safe = np.where(flat, 1.0, norm)

@@ -131,7 +131,9 @@ def character_from_bvh(bvh: BVH, req: _File, frame: int, rig: Rig | None = None)
     try:
         pose = pose_of(bvh, frame, root_add=req.root_position == "add")
         points = "joint_map" if req.joint_map else "bvh"
-        return make_character(skel, pose, jmap, req.units, req.up, points=points)
+        return make_character(
+            skel, pose, jmap, req.units, req.up, points=points, map_keys=list(req.joint_map or ())
+        )
     except (CharacterError, BVHError) as exc:
         raise invalid_request(exc) from None
 
@@ -271,6 +273,16 @@ def clip_edits(
             f"up: not given, and the rest pose stands up along neither +Y nor +Z: the frames "
             f"edited stand up along different axes, {said}; state it, e.g. "
             f'"up": "{next(iter(ups))}"'
+        )
+    sides: dict[str, int] = {}  # each left hip read: the first edit read so (core.sides)
+    for i, (ch, _) in enumerate(out):
+        sides.setdefault(ch.jmap.describe()["left_hip"], i)
+    if len(sides) > 1:  # (a rest pose that says which side is which decides every frame)
+        said = ", ".join(f"edits[{i}] (frame {req.edits[i].frame}) with {quoted(hip)} as the "
+                         "left hip" for hip, i in sides.items())  # fmt: skip
+        raise InvalidRequest(
+            f"joint_map: the rest pose says nothing of which side is which, and the frames "
+            f"edited read it differently, {said}; give joint_map its left_ and right_ entries"
         )
     return out
 

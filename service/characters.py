@@ -12,6 +12,7 @@ bone lengths the character's own) -> rotations (JSON) or the file with that fram
 
 from __future__ import annotations
 
+from collections.abc import Collection
 from dataclasses import dataclass
 from typing import Annotated, Any, Literal, TypeVar
 
@@ -69,10 +70,10 @@ from service.problems import SolveProblem, SolveResult
 from service.schemas import (
     ITERATIONS,
     MAX_WEIGHT,
+    NamedTargetResult,
     SolveOptions,
     SolveRequest,
     SolveResponse,
-    TargetResult,
 )
 from service.schemas import MAX_COORDINATE as MAX_METRES
 from service.validation import MIN_BONE, problem_of, validate_as
@@ -254,10 +255,11 @@ UP_WARNING = Field(
 SIDES_WARNING = Field(
     default=None, description="Where the body's left and right joints look named for the "
     "other side (read as named, its toes and bent knees point backwards from the way its "
-    "hips and shoulders face it, in its rest pose and the frame): an automatic joint map is "
-    "swapped, so the body is solved as the body it is (its joints keep their names; "
-    "`joint_map` shows the map used), and a joint map given is kept; either is said here. "
-    "Null otherwise.",
+    "hips and shoulders face it, in its rest pose, or in the frame where the rest pose says "
+    "nothing): the joint map is swapped, so the body is solved as the body it is (its joints "
+    "keep their names; `joint_map` shows the map used), but kept where the request's "
+    "`joint_map` names a side joint or the rig's joints carry the canonical names; either "
+    "is said here. Null otherwise.",
 )  # fmt: skip
 
 
@@ -277,8 +279,8 @@ class _Mapped(BaseModel):
 class _Solved(BaseModel):
     """What one frame's solve did: targets and pins as measured on the answer."""
 
-    targets: list[TargetResult]
-    pins: list[TargetResult]
+    targets: list[NamedTargetResult]
+    pins: list[NamedTargetResult]
     solvers: list[str]
     method: Literal["neural", "fabrik"]
     iterations: int = Field(description=ITERATIONS)  # (as the pose form's)
@@ -428,12 +430,14 @@ def make_character(
     up_stated: bool = True,
     points: str = "bvh",
     fields: str = "",
+    map_keys: Collection[str] = (),
 ) -> Character:
     """The character of a pose; ``units`` and ``up`` as the client gave them (None: read
     from the rest pose; ``stated`` / ``up_stated`` False: the character form's default),
     errors naming the fields ``<prefix>units`` and ``<prefix>up``; ``fields``: where its
-    units and up are, an item's prefix left out (``character.``; none for BVH), and
-    ``points``: what a degenerate pose of its mapped points is put down to."""
+    units and up are, an item's prefix left out (``character.``; none for BVH),
+    ``points``: what a degenerate pose of its mapped points is put down to, and ``map_keys``:
+    the canonical joints the client's ``joint_map`` names (``core.sides.read_sides``)."""
     where = f"{prefix}units"
     warning = None
     if isinstance(units, str) and units in UNITS:  # a named unit: a slip is refused
@@ -494,7 +498,10 @@ def make_character(
         up = found
     turn = up_rotation(up)
     jmap, sides_warning = read_sides(
-        rest_points(skel, jmap) @ turn.T, canonical_points(skel, pose, jmap) @ turn.T, jmap
+        rest_points(skel, jmap) @ turn.T,
+        canonical_points(skel, pose, jmap) @ turn.T,
+        jmap,
+        map_keys,
     )
     return Character(
         skel, pose, jmap, units_scale(units), turn, units, up, fields, points, warning,
@@ -665,9 +672,10 @@ def edit_report(ch: Character, edit: Edit, points: F64) -> dict[str, Any]:
     p, r = edit.problem, edit.result
     got = ch.to_service(points)[p.target_idx]
     errors = np.linalg.norm(got - p.target_pos, axis=1).tolist()
+    names = p.names or [JOINT_NAMES[int(j)] for j in p.target_idx]
     rows = [
-        {"joint": JOINT_NAMES[int(j)], "error": e, "reached": e <= p.tolerance}
-        for j, e in zip(p.target_idx, errors, strict=True)
+        {"joint": JOINT_NAMES[int(j)], "name": n, "error": e, "reached": e <= p.tolerance}
+        for j, n, e in zip(p.target_idx, names, errors, strict=True)
     ]
     return {
         "targets": rows[: p.n_targets],
@@ -737,7 +745,7 @@ def character_from_request(req: CharacterSolveRequest, where: str = "") -> Chara
         points = "joint_map" if req.joint_map else "character.joints"
         return make_character(
             skel, pose, jmap, units, up, where, "units" in given, "up" in given, points,
-            "character.",
+            "character.", list(req.joint_map or ()),
         )  # fmt: skip
     except CharacterError as exc:
         raise invalid_request(exc) from None

@@ -43,6 +43,9 @@ class SolveProblem:
     turn_search: bool | None = None  # search the turn (service.turns; None: if the models do)
     mirror: bool | None = None  # also solve the mirror image (None: if the models do)
     soft_ik: float = 0.0  # kept limbs ease into full stretch over this many m (core.ends)
+    #: the names the client gave the targets, then the pins (a character's own), where
+    #: they are not the canonical ones: the character answers report them beside
+    names: tuple[str, ...] | None = None
 
 
 #: (:class:`SolveResult`, :class:`BatchAnswer` and :class:`_Items` are made afresh per solve,

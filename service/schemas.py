@@ -226,10 +226,21 @@ class SolveRequest(_Body):
 class TargetResult(BaseModel):
     joint: str = Field(
         description="The canonical joint (`left_wrist`), in the character and BVH forms too "
-        "(whatever name the request gave: its `joint_map` maps one to the other)."
+        "(whatever name the request gave: its `joint_map` maps one to the other; `name` "
+        "says which it gave)."
     )
     error: float = Field(description="Distance (m) from the joint to its target.")
     reached: bool = Field(description="error <= tolerance.")
+
+
+class NamedTargetResult(TargetResult):
+    """A character's target or pin: the canonical joint and the name the request gave."""
+
+    name: str = Field(
+        description="The joint as the request named it (the character's own name, or a "
+        "canonical one): with a rig's sides swapped (`sides_warning`), `LeftHand` is "
+        "reported as the body's `right_wrist`."
+    )
 
 
 #: What an answer's ``iterations`` counts: the pose form's, the character form's and the

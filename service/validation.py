@@ -174,6 +174,7 @@ def problem_of(
         turn_search=o.turn_search,
         mirror=o.mirror,
         soft_ik=o.soft_ik,
+        names=None if given is None else (*given[0], *given[1]),
     )
 
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from core.sides import SWAPPED_BELOW, facing_score, mirrored
+from core.sides import REST_DECIDES, SWAPPED_BELOW, facing_score, mirrored
 from core.skeleton import JOINT_INDEX as J
 from core.skeleton import MIRROR
 from tests.conftest import PosePairs
@@ -17,8 +17,8 @@ def test_real_poses_score_as_bodies_and_their_swapped_sides_as_the_opposite(
 ) -> None:
     """The real poses (Bandai-Namco and CMU dance, metres), each under a seeded yaw and a
     scale: a swapped pose scores minus its own (to rounding); no pose alone is called
-    swapped, every swapped one is with a rest that says nothing (0), and the two agree
-    pose for pose with :func:`mirrored`."""
+    swapped, every swapped one is with a rest that says nothing (0); a rest that says which
+    side is which decides every frame, whatever the frame says."""
     rng = np.random.default_rng(0)
     poses = real_poses.poses
     turn = Rotation.from_euler("y", rng.uniform(-np.pi, np.pi, (len(poses), 1))).as_matrix()
@@ -28,8 +28,14 @@ def test_real_poses_score_as_bodies_and_their_swapped_sides_as_the_opposite(
     assert np.median(own) > 1.0 and own.min() > SWAPPED_BELOW, np.sort(own)[:5]
     blank = np.zeros((21, 3))  # a rest pose with no extent: no facing, scores 0
     assert facing_score(blank) == 0.0
+    rest, swapped = turned[0], turned[0, list(MIRROR)]  # a real pose as a rest: +1 or more
+    assert facing_score(rest) > REST_DECIDES
     for k in range(0, len(poses), 97):
-        assert not mirrored(blank, turned[k]) and mirrored(blank, turned[k, list(MIRROR)])
+        assert mirrored(blank, turned[k]) is None
+        said = mirrored(blank, turned[k, list(MIRROR)])
+        assert said == "this frame, its rest pose saying nothing"
+        assert mirrored(rest, turned[k, list(MIRROR)]) is None  # the rest decides
+        assert mirrored(swapped, turned[k]) == "its rest pose"
 
 
 def test_legs_that_say_nothing_score_nothing() -> None:

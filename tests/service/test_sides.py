@@ -54,13 +54,19 @@ def test_a_file_with_its_sides_named_the_other_way_is_solved_as_the_body_it_is(
     assert re.fullmatch(
         "joint_map: this body's left and right joints are named for the other side: .*; solved "
         f"as the body it is, '{hips[0]}' its right hip and '{hips[1]}' its left, .* To "
-        "solve its sides as named, give joint_map", b["sides_warning"],
+        "solve its sides as named, give joint_map its left_ and right_ entries",
+        b["sides_warning"],
     ), b["sides_warning"]  # fmt: skip
     assert b["joint_map"] == {k: other_label(v) for k, v in a["joint_map"].items()}
     assert b["bvh"].split("MOTION")[1] == a["bvh"].split("MOTION")[1]
     assert [t["error"] for t in b["targets"] + b["pins"]] == [
         t["error"] for t in a["targets"] + a["pins"]]  # fmt: skip
     assert b["changed_joints"] == [other_side(j) for j in a["changed_joints"]]
+    # each report names the body's own joint and the name sent (LeftHand: the body's right)
+    assert [(t["joint"], t["name"]) for t in a["targets"] + a["pins"]] == [
+        ("left_wrist", hand), ("right_ankle", foot)]  # fmt: skip
+    assert [(t["joint"], t["name"]) for t in b["targets"] + b["pins"]] == [
+        ("left_wrist", other_side(hand)), ("right_ankle", other_side(foot))]  # fmt: skip
     inspected = client.post("/v1/bvh/inspect", json={"bvh": other, "frame": frame, **read})
     assert inspected.json()["sides_warning"] == b["sides_warning"]
     edits = [{"frame": frame, "targets": targets}]
@@ -71,6 +77,14 @@ def test_a_file_with_its_sides_named_the_other_way_is_solved_as_the_body_it_is(
         **ask, "bvh": other, "targets": targets, "joint_map": given}).json()  # fmt: skip
     assert kept["joint_map"] == given, kept
     assert kept["sides_warning"].startswith("joint_map: this body's left and right look swapped")
+    assert "solved as the joint_map given says" in kept["sides_warning"]
+    centre = {"head": a["joint_map"]["head"]}  # a map of centre joints alone: still swapped
+    partial = client.post("/v1/bvh/solve", json={
+        **ask, "bvh": other, "targets": targets, "joint_map": centre}).json()  # fmt: skip
+    assert partial["joint_map"] == b["joint_map"] and partial["sides_warning"], partial
+    # every frame of the file read alike (its rest pose decides where it says, else each
+    # frame; frames read differently in one clip are refused, naming them)
+    assert "(in its rest pose)" in b["sides_warning"] or "(in this frame" in b["sides_warning"]
 
 
 def test_a_json_rig_with_its_sides_named_the_other_way_is_solved_as_the_body_it_is(
@@ -92,3 +106,57 @@ def test_a_json_rig_with_its_sides_named_the_other_way_is_solved_as_the_body_it_
         "joint_map: this body's left and right joints are named for the other side"), b  # fmt: skip
     assert b["positions"] == {other_side(k): v for k, v in a["positions"].items()}
     assert b["rotations"] == {other_side(k): v for k, v in a["rotations"].items()}
+
+
+def test_a_rig_named_with_the_canonical_names_is_kept_and_told(client: Any) -> None:
+    """The docs' JSON rig renamed to the canonical names (``left_wrist``, ...), sides
+    swapped: swapped, each name would read two ways (the review: every side target a 422,
+    "ambiguous"); kept as named and told so."""
+    from core.characters_maps import resolve_map  # noqa: F401  (the map the names give)
+
+    body = json.loads((REPO_ROOT / "docs/examples/solve_character.json").read_text())
+    auto = client.post("/v1/solve", json=body).json()["joint_map"]
+    canon = {
+        own: c for c, own in auto.items() if own in {j["name"] for j in body["character"]["joints"]}
+    }
+    flip = {n: other_side(canon[n]) if n in canon else n for n in canon}
+    named = {n: flip.get(n, n) for n in [j["name"] for j in body["character"]["joints"]]}
+    other = json.loads(json.dumps(body))
+    for j in other["character"]["joints"]:
+        j["name"], j["parent"] = named[j["name"]], j["parent"] and named[j["parent"]]
+    other["rotations"] = {named[k]: q for k, q in body["rotations"].items()}
+    other["targets"] = [{**t, "joint": named[t["joint"]]} for t in body["targets"]]
+    other["pins"] = [named[p] for p in body.get("pins", [])]
+    said = client.post("/v1/solve", json=other)
+    assert said.status_code == 200, said.text
+    out = said.json()
+    assert out["sides_warning"].startswith("joint_map: this body's left and right look swapped")
+    assert "solved as its names say" in out["sides_warning"], out["sides_warning"]
+    assert out["joint_map"]["left_wrist"] == "left_wrist"
+
+
+def test_a_clip_whose_frames_read_their_sides_differently_is_refused(
+    client: Any, bvh_files: dict[str, Path], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Where the rest pose says nothing (Bandai-Namco's splayed feet) each frame says, and
+    one clip's frames that say differently get a 422 naming them (its top-level joint_map
+    would be one frame's); frames that agree are solved. (No real frame of the file reads
+    swapped: the frame's reading is made to, by ``core.sides.mirrored``.)"""
+    import core.sides
+
+    text = bvh_files["bandai"].read_text()
+    seen = core.sides.mirrored
+
+    def odd(rest: Any, frame: Any) -> str | None:  # frame 40's pelvis reads swapped
+        return "this frame" if abs(frame[0, 0] - odd.at) < 1e-9 else seen(rest, frame)
+
+    looked = client.post("/v1/bvh/inspect", json={"bvh": text, "frame": 40}).json()
+    odd.at = looked["points"]["pelvis"][0]  # type: ignore[attr-defined]  # (file units, +Y up)
+    monkeypatch.setattr(core.sides, "mirrored", odd)
+    goal = looked["points"]["left_wrist"]
+    edits = [{"frame": f, "targets": [{"joint": "left_wrist", "position": goal}]} for f in (20, 40)]
+    r = client.post("/v1/bvh/solve/batch", json={"bvh": text, "edits": edits})
+    assert r.status_code == 422, r.text
+    assert "the frames edited read it differently, edits[0] (frame 20) with" in r.text, r.text
+    alone = client.post("/v1/bvh/solve/batch", json={"bvh": text, "edits": edits[1:]})
+    assert alone.status_code == 200 and alone.json()["edits"][0]["sides_warning"], alone.text
