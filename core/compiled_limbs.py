@@ -234,13 +234,25 @@ def ends_item(
             continue
         for i in range(3):
             v[i] = v[i] / nb
-        for i in range(3):
-            shift = (s[i] + d * u[i]) - w0[i]
-            out[mid, i] = s[i] + a * (cos * u[i] + sin * v[i])
-            out[end, i] = w0[i] + shift
-            for j in range(NUM_JOINTS):
-                if _ENDS_BELOW[c, j]:
-                    out[j, i] += shift
+        place_limb(out, c, s, u, v, a, d, cos, sin, w0)
+
+
+@jit
+def place_limb(
+    out: F64, c: int, s: F64, u: F64, v: F64, a: float, d: float, cos: float, sin: float,
+    w0: F64,
+) -> None:  # pragma: no cover - compiled  # fmt: skip
+    """Chain ``c``'s two-bone answer in place: its middle joint ``a`` from its top ``s``,
+    at the angle (``cos``, ``sin``) from the unit line ``u`` towards the unit side ``v``;
+    its end ``d`` along ``u`` (from where it was, ``w0``), the joints below moved with it."""
+    mid, end = _CHAINS[c, 1], _CHAINS[c, 2]
+    for i in range(3):
+        shift = (s[i] + d * u[i]) - w0[i]
+        out[mid, i] = s[i] + a * (cos * u[i] + sin * v[i])
+        out[end, i] = w0[i] + shift
+        for j in range(NUM_JOINTS):
+            if _ENDS_BELOW[c, j]:
+                out[j, i] += shift
 
 
 @jit
@@ -358,14 +370,7 @@ def floor_item(
         for i in range(3):
             v[i] = v[i] / nb
         cos = min(max((a * a + d * d - b * b) / (2.0 * a * d), -1.0), 1.0)
-        sin = np.sqrt(max(0.0, 1.0 - cos * cos))
-        for i in range(3):
-            shift = (s[i] + d * u[i]) - w0[i]
-            out[mid, i] = s[i] + a * (cos * u[i] + sin * v[i])
-            out[end, i] = w0[i] + shift
-            for j in range(NUM_JOINTS):
-                if _ENDS_BELOW[c, j]:
-                    out[j, i] += shift
+        place_limb(out, c, s, u, v, a, d, cos, np.sqrt(max(0.0, 1.0 - cos * cos)), w0)
 
 
 @jit

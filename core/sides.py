@@ -85,31 +85,37 @@ def _unit(v: F64, length: F64) -> F64:
     return out
 
 
-def mirrored(rest: F64, frame: F64) -> str | None:
+def mirrored(rest: F64, frame: F64, upright: tuple[bool, bool] = (True, True)) -> str | None:
     """Where a character's sides are swapped, what says so: "its rest pose", whose score
     decides alone beyond :data:`REST_DECIDES` either way (one rig, one answer for all its
     frames: frames alone called a correctly named CMU dance file swapped in 17 of its 2,314
     frames, a review, 2026-12-07), else "this frame, ..." below :data:`SWAPPED_BELOW` (a rest
     with its feet splayed, Bandai-Namco's); None where they are as named (each ``[21, 3]``,
-    +Y up)."""
+    +Y up). ``upright``: whether the rest pose and the frame stand up along +Y as read; one
+    that does not (an up axis not its own: a body lying down) says nothing (a Z-up rig's
+    rest read +Y up was called swapped)."""
     own, now = facing_score(np.stack([rest, frame])).tolist()
-    if abs(own) > REST_DECIDES:
+    if upright[0] and abs(own) > REST_DECIDES:
         return "its rest pose" if own < 0.0 else None
-    return "this frame, its rest pose saying nothing" if now < SWAPPED_BELOW else None
+    if upright[1] and now < SWAPPED_BELOW:
+        return "this frame, its rest pose saying nothing"
+    return None
 
 
 def read_sides(
-    rest: F64, frame: F64, jmap: JointMap, given: Collection[str] = ()
-) -> tuple[JointMap, str | None]:
+    rest: F64, frame: F64, jmap: JointMap, given: Collection[str] = (),
+    upright: tuple[bool, bool] = (True, True),
+) -> tuple[JointMap, str | None]:  # fmt: skip
     """The map to solve with, and the answers' ``sides_warning``, of a character whose
     rest pose and frame map to ``rest`` and ``frame`` (each ``[21, 3]``, +Y up) by ``jmap``
-    (``given``: the canonical joints the client's ``joint_map`` names): where they are
+    (``given``: the canonical joints the client's ``joint_map`` names; ``upright``:
+    :func:`mirrored`'s): where they are
     :func:`mirrored`, the map swapped (:meth:`JointMap.swapped`: every joint keeps its name,
     the body is solved as the body it is; entries the client gave for centre joints are
     their own mirror images), each saying so; kept where the client named a side joint in
     its map, or where the rig's own joints carry the canonical side names (``left_wrist``:
     swapped, every such name would read two ways), saying that; else ``jmap`` and None."""
-    if (why := mirrored(rest, frame)) is None:
+    if (why := mirrored(rest, frame, upright)) is None:
         return jmap, None
     named = jmap.describe()
     left, right = quoted(named["left_hip"]), quoted(named["right_hip"])

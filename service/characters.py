@@ -497,12 +497,9 @@ def make_character(
             )
         up = found
     turn = up_rotation(up)
-    jmap, sides_warning = read_sides(
-        rest_points(skel, jmap) @ turn.T,
-        canonical_points(skel, pose, jmap) @ turn.T,
-        jmap,
-        map_keys,
-    )
+    rest, frame = rest_points(skel, jmap), canonical_points(skel, pose, jmap)
+    upright = (up_of(rest) == up, up_of(frame) == up)  # (each says nothing lying down)
+    jmap, sides_warning = read_sides(rest @ turn.T, frame @ turn.T, jmap, map_keys, upright)
     return Character(
         skel, pose, jmap, units_scale(units), turn, units, up, fields, points, warning,
         up_warning, sides_warning,

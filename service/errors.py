@@ -368,17 +368,14 @@ def _message(error: Any) -> str:
     if kind == "literal_error" and "'spine1'" in str(ctx.get("expected", "")):
         if not isinstance(value, str):  # no name at all (was: "unknown joint 1")
             kinds = {dict: "an object", list: "a list", bool: "true or false", type(None): "null"}
+            got = f"{kinds.get(type(value), 'a number')} ({quoted(value)})"  # (deep lists cut)
             held = isinstance(value, dict) and "pins" in error.get("loc", ())
-            return (
-                f"a joint's name (a string) is needed, not {kinds.get(type(value), 'a number')}"
-                + (
-                    "; a pin holds a joint where it is: a joint to move is a target, "
-                    '{"joint": ..., "position": [x, y, z]}'
-                    if held
-                    else ""
-                )
-                + f"; joints are {', '.join(JOINT_NAMES)}"
-            )
+            hint = (
+                '; a pin holds a joint where it is: a joint to move is a target, {"joint": ..., '
+                '"position": [x, y, z]}' if held else ""
+            )  # fmt: skip
+            names = ", ".join(JOINT_NAMES)
+            return f"a joint's name (a string) is needed, not {got}{hint}; joints are {names}"
         if "[key]" in error.get("loc", ()):  # a bone, named by its child joint
             bones = JOINT_NAMES[1:]  # (the root ends none)
             root = " (the root: no bone ends at it)" if value == JOINT_NAMES[0] else ""

@@ -106,7 +106,13 @@ def test_mapped_and_canonical_names_resolve_as_before(client: Any) -> None:
     canonical = copy.deepcopy(body)
     canonical["targets"][0]["joint"] = "left_wrist"
     canonical["pins"] = ["left_ankle", "right_ankle"]
-    assert client.post("/v1/solve", json=canonical).content == own.content
+    said = client.post("/v1/solve", json=canonical).json()  # the same but the names sent
+    assert [t.pop("name") for t in said["targets"] + said["pins"]] == [
+        "left_wrist", "left_ankle", "right_ankle"]  # fmt: skip
+    mine = own.json()
+    assert [t.pop("name") for t in mine["targets"] + mine["pins"]] == [
+        "LeftHand", "LeftFoot", "RightFoot"]  # fmt: skip
+    assert said == mine
     names = {
         "Hips": "pelvis", "Spine": "spine1", "Spine2": "spine2", "Neck": "neck",
         "Head": "head",
@@ -120,8 +126,10 @@ def test_mapped_and_canonical_names_resolve_as_before(client: Any) -> None:
         }  # fmt: skip
     r = client.post("/v1/solve", json=_renamed(body, names))
     assert r.status_code == 200, r.text
-    got, want = r.json(), own.json()
+    got, want = r.json(), mine
     assert got["joint_map"] == {c: c for c in want["joint_map"]}
+    for t in got["targets"] + got["pins"]:
+        assert t.pop("name") == t["joint"]  # (its own names are the canonical ones)
     assert got["targets"] == want["targets"] and got["pins"] == want["pins"]
     for name, xyz in want["positions"].items():
         np.testing.assert_allclose(got["positions"][names.get(name, name)], xyz, atol=1e-12)

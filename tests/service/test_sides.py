@@ -147,8 +147,8 @@ def test_a_clip_whose_frames_read_their_sides_differently_is_refused(
     text = bvh_files["bandai"].read_text()
     seen = core.sides.mirrored
 
-    def odd(rest: Any, frame: Any) -> str | None:  # frame 40's pelvis reads swapped
-        return "this frame" if abs(frame[0, 0] - odd.at) < 1e-9 else seen(rest, frame)
+    def odd(rest: Any, frame: Any, upright: Any) -> str | None:  # frame 40 reads swapped
+        return "this frame" if abs(frame[0, 0] - odd.at) < 1e-9 else seen(rest, frame, upright)
 
     looked = client.post("/v1/bvh/inspect", json={"bvh": text, "frame": 40}).json()
     odd.at = looked["points"]["pelvis"][0]  # type: ignore[attr-defined]  # (file units, +Y up)
