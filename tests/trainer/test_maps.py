@@ -364,3 +364,22 @@ def test_two_canonical_joints_from_one_source_joint_is_a_map_error(tmp_path: Pat
     swap = over.replace("\n\n[metadata]", '\njoints.head = "Neck"\n\n[metadata]')
     bad.write_text(text.replace("[metadata]", swap, 1))
     load_map(bad)
+
+
+def test_an_asf_map_without_a_frame_rate_is_warned_of(tmp_path: Path) -> None:
+    """AMC files carry no frame rate: a map that sets none for them has them read at
+    CMU's 120 Hz, now said (a studio audit, 2026-12-07: a studio's own AMC was read at 120
+    without a word); the shipped CMU map sets it, and a BVH map has nothing to set."""
+    from trainer.data.checks import amc_rate_warning
+
+    shipped = Path(__file__).resolve().parents[2] / "trainer/maps/cmu_asf.toml"
+    files = ["subjects/07/07_01.amc", "subjects/07/07.asf"]
+    assert amc_rate_warning(load_map(shipped), files) is None
+    text = shipped.read_text().replace('[[override]]\nglob = "**"\nfps = 120\n', "")
+    assert text != shipped.read_text()
+    (tmp_path / "studio.toml").write_text(text)
+    said = amc_rate_warning(load_map(tmp_path / "studio.toml"), files)
+    assert said is not None and "1 AMC file(s) read at 120 Hz" in said, said
+    assert "subjects/07/07_01.amc" in said and "[[override]]" in said
+    bvh = load_map(Path(__file__).resolve().parents[2] / "trainer/maps/fair.toml")
+    assert amc_rate_warning(bvh, ["a.bvh"]) is None

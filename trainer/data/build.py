@@ -49,6 +49,7 @@ from core.text import close_match
 from trainer.data.asf import AMC, ASFError, read_amc, read_asf
 from trainer.data.checks import (
     TAKE_FILES,
+    amc_rate_warning,
     case_warnings,
     dropped_frames_warnings,
     implausible_takes,
@@ -360,12 +361,14 @@ def _jobs_of(src: SourceInput, skipped: list[dict[str, str]], say: Any) -> list[
 
 
 def _source_warnings(located: Located) -> list[str]:
-    """Build-time warnings of the sources: not found, unused globs, no licence."""
+    """Build-time warnings of the sources: not found, unused globs, no licence, AMC files
+    read at CMU's rate for want of one."""
     out = [f"not built: {m}" for m in located.missing] + located.shadowed
     for src in located.sources:
         out += unused_glob_warnings(src.map, src.selected) + case_warnings(src.map, src.files)
-        if (w := licence_warning(src.map)) is not None:
-            out.append(w)
+        for w in (licence_warning(src.map), amc_rate_warning(src.map, src.selected)):
+            if w is not None:
+                out.append(w)
     return out
 
 

@@ -23,6 +23,7 @@ import numpy.typing as npt
 
 from core.skeleton import BONE_CHILDREN, BONE_PARENTS, JOINT_INDEX, JOINT_NAMES, bone_lengths
 from core.text import close_match
+from trainer.data.asf import CMU_FPS
 from trainer.data.dataset import PoseDataset
 from trainer.data.maps import MocapMap, did_you_mean, glob_to_regex
 
@@ -177,6 +178,22 @@ def licence_warning(m: MocapMap) -> str | None:
     return (
         f"map {m.path}: no `licence` for source {m.source!r}: the data's licence becomes a "
         'term of the models trained on it (their manifest lists it); add licence = "..."'
+    )
+
+
+def amc_rate_warning(m: MocapMap, selected: Sequence[str]) -> str | None:
+    """An ASF/AMC map that leaves the frame rate of some of the AMC files it selects to
+    CMU's 120 Hz: AMC files carry none, and a studio's own at another rate was read at 120
+    without a word (a studio audit, 2026-12-07)."""
+    if m.reader != "asf":
+        return None
+    unset = [f for f in selected if f.lower().endswith(".amc") and m.fps_for(f, -1.0) < 0]
+    if not unset:
+        return None
+    return (
+        f"map {m.path}: {len(unset)} AMC file(s) read at {CMU_FPS:g} Hz, CMU's rate, as no "
+        f"`fps` is set for them (AMC files carry no frame rate; the first: {unset[0]}): set "
+        'yours with an [[override]], e.g. glob = "**", fps = 60'
     )
 
 
