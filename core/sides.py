@@ -42,6 +42,8 @@ SWAPPED_BELOW: Final[float] = -0.5
 #: a rest pose's score beyond which (either way) it alone says which side is which
 REST_DECIDES: Final[float] = 0.5
 
+#: the canonical joints of a side
+_SIDED = tuple(c for c in JOINT_INDEX if c.startswith(("left_", "right_")))
 #: the legs' joints: hips, knees, ankles, feet, each [left, right]
 _LEGS = tuple([JOINT_INDEX[f"{side}_{j}"] for side in ("left", "right")]
               for j in ("hip", "knee", "ankle", "foot"))  # fmt: skip
@@ -123,9 +125,9 @@ def read_sides(
         "read as its joints' names say, its toes and bent knees point backwards from the way "
         f"its hips and shoulders face it (in {why})"
     )
-    sided = [c for c in JOINT_INDEX if c.startswith(("left_", "right_"))]
-    if any(c in given for c in sided) or any(named[c] in JOINT_INDEX for c in sided):
-        by = "the joint_map given says" if any(c in given for c in sided) else "its names say"
+    told = any(c in given for c in _SIDED)
+    if told or any(named[c] in JOINT_INDEX for c in _SIDED):
+        by = "the joint_map given says" if told else "its names say"
         return jmap, (
             f"joint_map: this body's left and right look swapped: {seen}; solved as {by}, "
             "which the networks read as a body seen from behind: swap the "

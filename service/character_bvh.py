@@ -8,7 +8,7 @@ Conventions: docs/characters.md, docs/bvh.md.
 from __future__ import annotations
 
 import re
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from itertools import islice
 from typing import Any
@@ -20,7 +20,7 @@ from core.bvh_write import pose_of, row_of, skeleton_of, splice_frames
 from core.characters import F64, CharacterError, Skeleton, forward_kinematics
 from core.characters_maps import JointMap, resolve_map
 from core.retarget import canonical_points
-from core.skeleton import JOINT_NAMES
+from core.skeleton import JOINT_INDEX, JOINT_NAMES
 from core.text import clip, quoted
 from service.bvh_models import (
     BVHBatchRequest,
@@ -264,9 +264,7 @@ def clip_edits(
         raise unread[0]  # (every frame alike: the file's own error, told once)
     if found:  # (a frame not read as asked named: its edit and frame, at its field)
         raise every_item([_named(at, exc) if at else exc for at, exc in found])
-    ups: dict[str, int] = {}  # each axis: the first edit read along it
-    for i, (ch, _) in enumerate(out):
-        ups.setdefault(ch.up_name, i)
+    ups = _first_read(out, lambda ch: ch.up_name)
     if len(ups) > 1:  # (given, up is one; inferred from the rest pose, one too)
         said = ", ".join(f"{up} (edits[{i}], frame {req.edits[i].frame})" for up, i in ups.items())
         raise InvalidRequest(
@@ -274,9 +272,7 @@ def clip_edits(
             f"edited stand up along different axes, {said}; state it, e.g. "
             f'"up": "{next(iter(ups))}"'
         )
-    sides: dict[str, int] = {}  # each left hip read: the first edit read so (core.sides)
-    for i, (ch, _) in enumerate(out):
-        sides.setdefault(ch.jmap.describe()["left_hip"], i)
+    sides = _first_read(out, lambda ch: ch.jmap.anchors[JOINT_INDEX["left_hip"]].label)
     if len(sides) > 1:  # (a rest pose that says which side is which decides every frame)
         said = ", ".join(f"edits[{i}] (frame {req.edits[i].frame}) with {quoted(hip)} as the "
                          "left hip" for hip, i in sides.items())  # fmt: skip
@@ -285,6 +281,17 @@ def clip_edits(
             f"edited read it differently, {said}; give joint_map its left_ and right_ entries"
         )
     return out
+
+
+def _first_read(
+    out: list[tuple[Character, SolveProblem]], read: Callable[[Character], str]
+) -> dict[str, int]:
+    """Each way the clip's frames are read (``read``: their up axis, their left hip), with
+    the first edit read so: one clip is read one way (its answer names it once)."""
+    first: dict[str, int] = {}
+    for i, (ch, _) in enumerate(out):
+        first.setdefault(read(ch), i)
+    return first
 
 
 def clip_frames(bvh: BVH, req: BVHBatchRequest) -> dict[int, InvalidRequest]:

@@ -52,7 +52,6 @@ from core.characters_maps import (
     JointMap,
     human_units,
     infer_units,
-    infer_up,
     resolve_map,
     rest_points,
     up_of,
@@ -440,6 +439,8 @@ def make_character(
     the canonical joints the client's ``joint_map`` names (``core.sides.read_sides``)."""
     where = f"{prefix}units"
     warning = None
+    rest, frame = rest_points(skel, jmap), canonical_points(skel, pose, jmap)  # (once each)
+    rest_up, frame_up = up_of(rest), up_of(frame)
     if isinstance(units, str) and units in UNITS:  # a named unit: a slip is refused
         _, leg = infer_units(skel, jmap)
         metres = leg * UNITS[units]
@@ -467,26 +468,20 @@ def make_character(
                 f'{fits}, or a number of metres per unit ("units": 0.0564444 for CMU ASF)'
             )
         units = name
-    if up is not None:  # given (or the default) against the body: refused where the rest
-        # pose stands up along the other axis and the frame does not stand along this one
-        # (a rig whose rest is Z-up but whose root turns it to stand up along +Y is right in
-        # +Y; the Z-up child, upright or bent, is not)
-        rest_up = infer_up(skel, jmap)
-        if (
-            rest_up is not None
-            and rest_up != up
-            and up_of(canonical_points(skel, pose, jmap)) != up
-        ):
-            given = "" if up_stated else " (the default: no up was given)"
-            raise InvalidRequest(
-                f"{prefix}up: {quoted(up)}{given}, but the rest pose stands up along "
-                f"{rest_up} (ankles to head) and this frame not along {up}; give "
-                f'"up": "{rest_up}", or null to infer it'
-            )
+    # up given (or the default) against the body: refused where the rest pose stands up
+    # along the other axis and the frame does not stand along this one (a rig whose rest is
+    # Z-up but whose root turns it to stand up along +Y is right in +Y; the Z-up child,
+    # upright or bent, is not)
+    if up is not None and rest_up is not None and rest_up != up and frame_up != up:
+        given = "" if up_stated else " (the default: no up was given)"
+        raise InvalidRequest(
+            f"{prefix}up: {quoted(up)}{given}, but the rest pose stands up along "
+            f"{rest_up} (ankles to head) and this frame not along {up}; give "
+            f'"up": "{rest_up}", or null to infer it'
+        )
     up_warning = None
     if up is None:
-        frame_up = up_of(canonical_points(skel, pose, jmap))
-        found = infer_up(skel, jmap)
+        found = rest_up
         if found is not None and frame_up not in (None, found):
             up_warning = _up_inferred(f"{prefix}up", found, frame_up)
         found = found or frame_up
@@ -497,8 +492,7 @@ def make_character(
             )
         up = found
     turn = up_rotation(up)
-    rest, frame = rest_points(skel, jmap), canonical_points(skel, pose, jmap)
-    upright = (up_of(rest) == up, up_of(frame) == up)  # (each says nothing lying down)
+    upright = (rest_up == up, frame_up == up)  # (each says nothing lying down)
     jmap, sides_warning = read_sides(rest @ turn.T, frame @ turn.T, jmap, map_keys, upright)
     return Character(
         skel, pose, jmap, units_scale(units), turn, units, up, fields, points, warning,

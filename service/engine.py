@@ -794,7 +794,7 @@ def _cover(joints: frozenset[str], available: frozenset[str]) -> tuple[str, ...]
     chosen: list[str] = []
     covered: set[str] = set()
     for k in candidates:
-        if set(k.split("+")) - covered:
+        if (members := set(k.split("+"))) - covered:
             chosen.append(k)
-            covered |= set(k.split("+"))
+            covered |= members
     return tuple(chosen)

@@ -174,16 +174,9 @@ def solve_lean(
         if last:  # from the caller's start: this pass's own where it is the first
             start = canon if k == 0 else engine.origin_in(items.poses, facing, trans, floors)
             out, iterations, fell = engine.exact_fallback(
-                polished,
-                start,
-                lengths,
-                goal,
-                items.tols,
-                tidx[0, :c],
-                items.w[0, :c],
-                pins,
+                polished, start, lengths, goal, items.tols, tidx[0, :c], items.w[0, :c], pins,
                 before,
-            )
+            )  # fmt: skip
         pose, errors, bone_err = compiled.finish(
             out, facing, trans, floors, tidx, tpos, counts, lengths
         )
