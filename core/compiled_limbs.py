@@ -307,7 +307,7 @@ _LEG_CHAINS = np.asarray(
 
 @jit
 def floor_item(
-    out: F64, start: F64, tidx: I64, count: int, flags: I64, vecs: F64
+    out: F64, start: F64, tidx: I64, count: int, flags: I64, vecs: F64, plant: bool = False
 ) -> None:  # pragma: no cover - compiled
     """Feet kept over the floor, for one canonical pose ``out [21, 3]`` (the floor at y 0)
     of the start ``start [21, 3]``, in place (``serving.keep_feet``): a leg none of whose
@@ -317,8 +317,12 @@ def floor_item(
     and the knee bent to fit in the plane it bends in (towards ``core.ends.PREFER`` where
     the leg is straight); as far as the leg folds. A pelvis dragged down crouches the body
     instead of sinking its feet (an audit, 2026-12-07: the docs' pose with its pelvis
-    dragged from 0.93 m to 0.6 m had its ankles 8 cm under the floor). ``flags [21]``
-    (int64) and ``vecs [5, 3]`` are scratch."""
+    dragged from 0.93 m to 0.6 m had its ankles 8 cm under the floor). With ``plant``
+    (``out`` a polish of ``start``, the networks' answer) such a leg's lowest joint goes back
+    to the height it had in ``start``, raised or lowered, as far as the leg stretches: a
+    polish that lifts the trunk to hold a pin does not lift the feet with it (the docs'
+    pose, its pelvis dragged down with its head pinned, ended crouched with its feet 0.55 m
+    in the air). ``flags [21]`` (int64) and ``vecs [5, 3]`` are scratch."""
     for j in range(NUM_JOINTS):
         flags[j] = 0
     for q in range(count):
@@ -332,8 +336,8 @@ def floor_item(
             if _ENDS_BELOW[c, j]:
                 asked += flags[j]
                 low, was = min(low, out[j, 1]), min(was, start[j, 1])
-        lift = min(0.0, was) - low
-        if asked != 0 or not lift > 0.0:
+        lift = was - low if plant else min(0.0, was) - low
+        if asked != 0 or not (lift > 0.0 or (plant and lift < -_ENDS_TINY)):
             continue
         for i in range(3):
             s[i], w0[i] = out[top, i], out[end, i]
@@ -374,9 +378,11 @@ def floor_item(
 
 
 @jit
-def floor_group(out: F64, start: F64, idx: I64) -> None:  # pragma: no cover - compiled
+def floor_group(
+    out: F64, start: F64, idx: I64, plant: bool = False
+) -> None:  # pragma: no cover - compiled
     """:func:`floor_item` of every pose of ``out [M, 21, 3]`` (of the starts ``start``),
     in place, their targets and pins the joints ``idx [K]`` (one target set)."""
     flags, vecs = np.empty(NUM_JOINTS, np.int64), np.empty((5, 3))
     for b in range(out.shape[0]):
-        floor_item(out[b], start[b], idx, idx.shape[0], flags, vecs)
+        floor_item(out[b], start[b], idx, idx.shape[0], flags, vecs, plant)

@@ -46,14 +46,7 @@ from core.skeleton import (
 )
 from service import completion, networks, retry, turns
 from service.fallback import prefer_fabrik
-from service.lean import (
-    covering,
-    fabrik_batch,
-    lean_answer,
-    lean_sequence,
-    solve_lean,
-    uncovered,
-)
+from service.lean import covering, fabrik_batch, lean_answer, lean_sequence, solve_lean, uncovered
 from service.problems import (
     PELVIS,
     BatchAnswer,
@@ -83,9 +76,6 @@ LIFT = 0.025
 Searches = tuple[_Items, _Items, npt.NDArray[np.intp]]
 
 
-# --------------------------------------------------------------------------------------
-# Engine
-# --------------------------------------------------------------------------------------
 class Engine:
     """Loaded models and the solve / complete logic (stateless between calls)."""
 
@@ -597,9 +587,8 @@ class Engine:
         item it left beyond its tolerance, plain FABRIK from its ``start`` (the caller's
         start, canonical), kept where it ends nearer. Ties (equal to rounding: e.g. both
         at the stretch a pin allows) keep the polish, whose pose is nearer the network's.
-        Returns poses, iterations (FABRIK's added where kept) and which kept it; with
-        ``serving.keep_feet`` the legs they sank below the floor raised back (the polish knows
-        none), against ``before``, the poses polished (``core.compiled_limbs.floor_group``)."""
+        Returns poses (:meth:`planted` from ``before``, the poses polished), iterations
+        (FABRIK's added where kept) and which kept it."""
         pose, its, errs = polished
         fell = np.zeros(len(pose), dtype=np.bool_)
         missed = np.flatnonzero(np.any(errs > tols[:, None], axis=1))
@@ -612,9 +601,18 @@ class Engine:
             if not pins.any():
                 self._shifted_fallback(pose, its, errs, fell, lengths, goal, tols, idx, weights,
                                        pins)  # fmt: skip
+        return self.planted(pose, before, idx), its, fell
+
+    def planted(
+        self, pose: compiled.F64, before: compiled.F64, idx: npt.NDArray[np.int64]
+    ) -> compiled.F64:
+        """``pose [M, 21, 3]``, a FABRIK polish of ``before`` (one target set, joints ``idx``),
+        with ``serving.keep_feet`` its legs no target names put back at the height they had
+        there, in place, as far as they stretch (``core.compiled_limbs.floor_item``'s
+        ``plant``)."""
         if self.serving.keep_feet:
-            floor_group(pose, before, idx)
-        return pose, its, fell
+            floor_group(pose, before, idx, True)
+        return pose
 
     def _shifted_fallback(
         self, pose: F64, its: npt.NDArray[np.int64], errs: F64, fell: npt.NDArray[np.bool_],
@@ -717,8 +715,8 @@ class Engine:
             # polish that holds the neurally solved targets where they are
             place = (free | pinned)[None, :, None]
             goal = np.where(place, tcan[sel, :k], out[sel][:, g.idx])
-            out[sel], iterations[sel], _ = run(True, sel, out[sel], goal)
-            suffix[sel] = 1
+            pose, iterations[sel], _ = run(True, sel, out[sel], goal)
+            out[sel], suffix[sel] = self.planted(pose, compiled.as_f64(out[sel]), g.idx), 1
 
     def reconstruct(self, world: F64) -> F64:
         """The autoencoder's round trip of world poses ``[B, 21, 3]`` through the same body

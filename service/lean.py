@@ -171,6 +171,8 @@ def solve_lean(
             True, out, lengths, goal, items.tols, tidx[0, :c], items.w[0, :c], pins
         )
         before, (out, iterations) = out, polished[:2]
+        if not last:  # the legs the polish for the pins raised or sank put back
+            out = engine.planted(out, before, tidx[0, :c])
         if last:  # from the caller's start: this pass's own where it is the first
             start = canon if k == 0 else engine.origin_in(items.poses, facing, trans, floors)
             out, iterations, fell = engine.exact_fallback(

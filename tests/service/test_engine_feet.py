@@ -112,3 +112,27 @@ def test_a_polish_for_pins_sinks_no_leg(engines: tuple[Engine, Engine]) -> None:
                      ("right_wrist", "right_elbow")) for e in engines)  # fmt: skip
     assert np.asarray(off.pose)[LEGS, 1].min() < -0.02
     assert np.asarray(on.pose)[LEGS, 1].min() > -1e-9 and on.pin_errors.max() < 1e-3
+
+
+@pytest.mark.parametrize("reach", ["soft", "exact"])
+def test_a_polish_that_lifts_the_trunk_leaves_the_feet_down(
+    engines: tuple[Engine, Engine], reach: str
+) -> None:
+    """The docs' pose, its pelvis dragged down to 0.6 m with its head pinned (the spine
+    cannot stretch that far: the pelvis stays): the networks crouch, then the polish that
+    holds the head lifts the crouched body, which without keep_feet ended with its feet
+    35-55 cm in the air. With it each leg reaches down again, its lowest joint back near
+    the floor or the leg at full stretch; the head held, every bone its own length."""
+    goal = [[POSE[0, 0], 0.6, POSE[0, 2]]]
+    off, on = (solve(e, POSE, ["pelvis"], goal, reach, 0.0, ("head",)) for e in engines)
+    lengths = bone_lengths(POSE)
+    lifted = np.asarray(off.pose)[LEGS, 1].reshape(2, 3).min(axis=1)
+    out = np.asarray(on.pose)
+    down = out[LEGS, 1].reshape(2, 3).min(axis=1)
+    assert (lifted > 0.3).all() and (down < lifted - 0.05).all(), (lifted, down)
+    for side, low in zip(("left", "right"), down, strict=True):
+        hip, knee, ankle = (out[J[f"{side}_{j}"]] for j in ("hip", "knee", "ankle"))
+        stretch = np.linalg.norm(hip - knee) + np.linalg.norm(knee - ankle)
+        assert low < POSE[LEGS, 1].min() + 1e-3 or np.linalg.norm(hip - ankle) > stretch - 1e-6
+    assert on.pin_errors.max() < 1e-3 and on.errors[0] > 0.2  # the pelvis out of reach
+    assert np.abs(bone_lengths(out) / lengths - 1).max() < 1e-9
