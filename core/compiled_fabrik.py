@@ -39,6 +39,7 @@ I64 = npt.NDArray[np.int64]
 #: it now runs this compiled polish: 0.59 ms per completion, the same poses to 2e-15 m.
 MAX_ITERATIONS = 256
 Bool = npt.NDArray[np.bool_]
+_RIGID: Bool = kinematics._RIGID
 
 _NB = NUM_JOINTS - 1
 # header slots of a packed plan (ints)
@@ -275,7 +276,7 @@ def _hold_targets(
 @jit
 def _iterate(
     x: F64, proposal: F64, y: F64, lens: F64, pi: I64, pf: F64, clamp: bool, start: F64,
-    tpos: F64, radii: F64, inner: F64, anchors: Bool, safe: bool, frozen: bool,
+    tpos: F64, radii: F64, inner: F64, anchors: Bool, rigid: Bool, safe: bool, frozen: bool,
 ) -> bool:  # pragma: no cover - compiled  # fmt: skip
     """One FABRIK iteration (``kinematics._iterate``) into ``y``; False if not finite."""
     v, f1, f2, u = np.empty(3), np.empty(3), np.empty(3), np.empty(3)
@@ -307,6 +308,10 @@ def _iterate(
                 q0 = proposal[kid, 0] + v[0] * f
                 q1 = proposal[kid, 1] + v[1] * f
                 q2 = proposal[kid, 2] + v[2] * f
+            if rigid[kid]:  # kinematics._iterate: a rigid hip, the root where it puts it
+                q0 = proposal[kid, 0] - (x[kid, 0] - x[0, 0])
+                q1 = proposal[kid, 1] - (x[kid, 1] - x[0, 1])
+                q2 = proposal[kid, 2] - (x[kid, 2] - x[0, 2])
             if mixed:
                 w = fww[i]
                 proposal[par, 0] += w * q0
@@ -338,6 +343,9 @@ def _iterate(
                 f = ln / np.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
                 for c in range(3):
                     y[kid, c] = y[par, c] + v[c] * f
+            if rigid[kid]:  # kinematics._iterate: a rigid hip, moved with the root
+                for c in range(3):
+                    y[kid, c] = y[0, c] + (x[kid, c] - x[0, c])
             for c in range(3):
                 ok = ok and np.isfinite(y[kid, c])
     return ok and np.isfinite(y[0, 0]) and np.isfinite(y[0, 1]) and np.isfinite(y[0, 2])
@@ -381,18 +389,30 @@ def _errors(x: F64, tpos: F64, pi: I64, out: F64) -> None:  # pragma: no cover -
 @jit
 def _solve(
     x0: F64, lens: F64, tpos: F64, pi: I64, pf: F64, tol: float, max_it: int,
-    hold: Bool, hold_any: bool, kts: I64, below: Bool, x: F64, errors: F64,
+    hold: Bool, hold_any: bool, kts: I64, below: Bool, x: F64, errors: F64, rigid_hips: bool,
 ) -> tuple[int, bool]:  # pragma: no cover - compiled  # fmt: skip
     """``kinematics._solve`` for one item (rank order); ``x``/``errors`` receive the answer.
     ``hold_any``: some target is pinned (``hold``); ``kts``, ``below``: the plan's targets
-    above pins (:func:`_above_pins`, the same for every item of a batch)."""
+    above pins (:func:`_above_pins`, the same for every item of a batch); ``rigid_hips``:
+    ``kinematics._make_plan``'s."""
     k_n, t_n = pi[_K], pi[_T]
     stall = tol * 1e-3
     radii, inner, anchors = np.empty(k_n), np.empty(k_n), np.zeros(k_n, dtype=np.bool_)
-    start, path = x0[0].copy(), pf[pi[_O_PATH] :]
+    start, path = x0[0].copy(), pf[pi[_O_PATH] :].copy()
+    targeted = pi[pi[_O_TGT] :]
+    rigid = _RIGID & rigid_hips  # kinematics._Plan.rigid
+    for t in range(pi[_T]):
+        rigid[targeted[t]] = False
+    centres = tpos.copy()  # kinematics._Plan.shell_top, shell_path: the shells' centres
+    for k in range(k_n):
+        for r in range(1, NUM_JOINTS):
+            if rigid[r] and path[k * _NB + r - 1] > 0:
+                path[k * _NB + r - 1] = 0.0
+                for c in range(3):
+                    centres[k, c] = tpos[k, c] - (x0[r, c] - x0[0, c])
     if hold_any and pi[_ROOT_MOVES] == 0:  # shells.onto_pins, x0 moved in place
-        _shells(x0, lens, tpos, path, hold, True, errors, tol, radii, inner, anchors)
-        _project_root(start, tpos, radii, inner, anchors)
+        _shells(x0, lens, centres, path, hold, True, errors, tol, radii, inner, anchors)
+        _project_root(start, centres, radii, inner, anchors)
         shift = start - x0[0]
         for r in range(NUM_JOINTS):
             for c in range(3):
@@ -405,7 +425,7 @@ def _solve(
         done = done and errors[k] <= tol
     converged = done
     proposal = x0.copy()
-    targeted, jt = pi[pi[_O_TGT] :], pf[pi[_O_JT] :]
+    jt = pf[pi[_O_JT] :]
     for t in range(t_n):
         for c in range(3):
             s = 0.0
@@ -417,7 +437,7 @@ def _solve(
         aim[t, :] = proposal[targeted[t], :]
     clamp = pi[_ROOT_FREE] == 1 or (hold_any and pi[_ROOT_MOVES] == 1)
     if clamp:
-        _shells(x0, lens, tpos, path, hold, hold_any, errors, tol, radii, inner, anchors)
+        _shells(x0, lens, centres, path, hold, hold_any, errors, tol, radii, inner, anchors)
     new_errors = np.empty(k_n)
     y = np.empty_like(x)
     holding = bool((kts >= 0).any())
@@ -426,7 +446,7 @@ def _solve(
         its += 1
         if holding:  # kinematics._solve: a target above a pin, as far as the pin allows
             _hold_targets(proposal, aim, pi, pf, lens, tpos, x[0], kts, below)
-        args = (x, proposal, y, lens, pi, pf, clamp, start, tpos, radii, inner, anchors)
+        args = (x, proposal, y, lens, pi, pf, clamp, start, centres, radii, inner, anchors, rigid)
         if not _iterate(*args, False, frozen):
             _iterate(*args, True, frozen)
         x[:, :] = y
@@ -460,8 +480,10 @@ def _solve(
 def solve_batch(
     polish: bool, starts: F64, lengths: F64, goals: F64, tols: F64, max_it: int,
     li: I64, lf: F64, has_local: bool, gi: I64, gf: F64, hold: Bool, has_hold: bool,
+    rigid_hips: bool = False,
 ) -> tuple[F64, I64, F64, Bool]:  # pragma: no cover - compiled  # fmt: skip
-    """``kinematics.fabrik`` (``polish`` False) or ``kinematics.polish`` of every item:
+    """``kinematics.fabrik`` (``polish`` False) or ``kinematics.polish`` of every item
+    (``rigid_hips`` as there):
     ``starts [M, 21, 3]``, ``lengths [M, 20]``, ``goals [M, K, 3]``, ``tols [M]``; one
     target set (its packed plans) and pin mask ``hold [K]`` for all. Returns poses
     ``[M, 21, 3]``, iterations ``[M]``, errors ``[M, K]``, converged ``[M]``."""
@@ -489,7 +511,7 @@ def solve_batch(
         solved = False
         if polish and has_local:
             n_it, c = _solve(x0, lens, tp, li, lf, tol, max_it, hold, False, l_kts, l_below, x,
-                             errs[b])  # fmt: skip
+                             errs[b], False)  # fmt: skip
             solved = True
             for k in range(k_n):
                 solved = solved and errs[b, k] <= tol
@@ -498,7 +520,7 @@ def solve_batch(
                 x0[:, :] = x
         if not solved:
             g_it, c = _solve(x0, lens, tp, gi, gf, tol, max_it, hold, hold_any, g_kts, g_below,
-                             x, errs[b])  # fmt: skip
+                             x, errs[b], rigid_hips)  # fmt: skip
             n_it += g_it
             conv[b] = c
         its[b] = n_it

@@ -29,11 +29,12 @@ import numpy as np
 import numpy.typing as npt
 
 from core.rest import REST_DIRS
+from core.rigid import PAIRS
 from core.shells import TINY as _TINY
-from core.shells import Shells, above_pins, clamp_root, hold_targets, onto_pins, shells
+from core.shells import Shells, above_pins, clamp_root, hold_targets, onto_pins, pin_mask, shells
 from core.shells import dot3 as _dot3
 from core.shells import norm3 as _norm3
-from core.skeleton import BONE_CHILDREN, DEPTH, NUM_JOINTS, PARENTS
+from core.skeleton import BONE_CHILDREN, DEPTH, NUM_JOINTS, PARENTS, TRUNK
 
 F64 = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.intp]
@@ -66,6 +67,10 @@ _LEN_ORDER: IntArray = np.asarray([_BONE_OF[int(j)] for j in _ORDER[1:]], dtype=
 _PARENT_RANK: IntArray = np.asarray(
     [-1 if PARENTS[int(j)] < 0 else int(_RANK[PARENTS[int(j)]]) for j in _ORDER], dtype=np.intp
 )
+
+#: Ranks of the hips (``core.rigid.PAIRS``), children of the root: with ``rigid_hips`` the
+#: ones no target is on move with the pelvis, translated (``_Plan.rigid``; docs/kinematics.md).
+_RIGID: BoolArray = np.isin(np.arange(NUM_JOINTS), _RANK[PAIRS[0, 1:]])
 
 
 def _depth_slices() -> tuple[tuple[int, int, IntArray], ...]:
@@ -305,6 +310,9 @@ class _Plan:
     carried_joints: IntArray  # ranks the iteration leaves alone
     carried_anchors: IntArray  # the moving rank each one's branch hangs from (or 0)
     path: F64  # [K, 20] bones (rank - 1) between the root and each target
+    rigid: BoolArray  # [21] with rigid_hips, the ranks of _RIGID no target or pin is on
+    shell_top: IntArray  # [K] the rigid hip on each target's chain, or 0; its shell's chain:
+    shell_path: F64  # [K, 20] ``path`` less that hip's bone (centred the hip's offset off)
 
 
 def _make_plan(
@@ -313,6 +321,7 @@ def _make_plan(
     locked: frozenset[int],
     free_root: bool,
     pinned: BoolArray | None = None,
+    rigid_hips: bool = False,
 ) -> _Plan:
     """``locked`` joints are held in place; callers lock whole ancestor lines only.
 
@@ -400,9 +409,17 @@ def _make_plan(
         if not active[r]:
             anchor[r] = p if (active[p] or p == 0) else anchor[p]
     still = [r for r in range(1, NUM_JOINTS) if not active[r]]
+    rigid = _RIGID & ~np.isin(np.arange(NUM_JOINTS), targeted) & rigid_hips
+    tops = np.flatnonzero(rigid)
+    on = path[:, tops - 1] > 0  # [K, len(tops)]: the target hangs from that rigid hip
+    shell_path = path.copy()
+    shell_path[:, tops - 1] = 0.0
     return _Plan(
         target_ranks=ranks,
         targeted=targeted,
+        rigid=rigid,
+        shell_top=(on * tops).sum(axis=1).astype(np.intp),
+        shell_path=shell_path,
         joint_targets=joint_targets,
         root_moves=root_targeted or root_free,
         root_free=root_free,
@@ -455,6 +472,9 @@ def _iterate(
             q = pc + u * length
         else:
             q = pc + toward * (length / _norm3(toward)[:, None])
+        rigid = plan.rigid[fw.kids]
+        if rigid.any():  # a rigid hip: the root where its offset puts it
+            q[rigid] = proposal[fw.kids[rigid]] - (x[fw.kids[rigid]] - x[0])
         if fw.mix is None:
             proposal[fw.parents] = q
         else:
@@ -475,6 +495,9 @@ def _iterate(
             y[where] = par + u * length
         else:
             y[where] = par + toward * (length / _norm3(toward)[:, None])
+        rigid = plan.rigid[kids]
+        if rigid.any():  # a rigid hip: moved with the root
+            y[kids[rigid]] = y[0] + (x[kids[rigid]] - x[0])
     return y
 
 
@@ -515,8 +538,9 @@ def _solve(
     hold = pinned if pinned is not None and bool(np.any(pinned)) else None
     # the pins wherever the start put them (chains of any length)
     pins = None if hold is None else hold[:, None] & (plan.path @ lens > 0)
+    centres = tpos - (x0[plan.shell_top] - x0[0][None])  # less a rigid hip's offset
     if pins is not None and not plan.root_moves:
-        x0 = onto_pins(x0, shells(plan.path, lens, x0[0], tpos, pins, True))
+        x0 = onto_pins(x0, shells(plan.shell_path, lens, x0[0], centres, pins, True))
     x = x0
     errors = _norm3(x.take(plan.target_ranks, axis=0) - tpos)
     done = np.all(errors <= tolerance, axis=0)
@@ -529,7 +553,7 @@ def _solve(
     clamp = None
     if plan.root_free or (pins is not None and plan.root_moves):
         anchors = errors <= tolerance if pins is None else pins
-        clamp = shells(plan.path, lens, x0[0], tpos, anchors, pins is not None)
+        clamp = shells(plan.shell_path, lens, x0[0], centres, anchors, pins is not None)
 
     level_lengths = _level_lengths(lens, plan)
     strikes = np.zeros(x0.shape[-1], dtype=np.intp)
@@ -675,6 +699,7 @@ def fabrik(
     max_iterations: int = 100,
     free_root: bool = True,
     pinned: Sequence[bool] | npt.ArrayLike | None = None,
+    rigid_hips: bool = False,
 ) -> FabrikResult:
     """Full-body multi-end-effector FABRIK (Aristidou & Lasenby 2011, 2016).
 
@@ -706,37 +731,22 @@ def fabrik(
     any start, a fixed one first moves the start whole into their reach if it has left
     it, and a sub-base with a pin below it follows its pinned chains alone, so a target
     beyond reach is approached only as far as the pins allow.
+    ``rigid_hips``: the hips no target is on move with the pelvis, translated: they cannot
+    fold onto one side of it, at the price of reach (docs/kinematics.md).
     """
     pb = _prepare(positions, lengths, target_idx, target_pos, weights)
     if len(pb.idx) == 0:
         return _result(pb, _no_targets(pb), tolerance, 0)
-    pins = _pinned(pinned, len(pb.idx))
-    plan = _make_plan(pb.idx, pb.weights, frozenset(), free_root, pins)
+    pins = pin_mask(pinned, len(pb.idx))
+    plan = _make_plan(pb.idx, pb.weights, frozenset(), free_root, pins, rigid_hips)
     solved = _solve(pb.x0, pb.lens, pb.tpos, plan, tolerance, max_iterations, pins)
     return _result(pb, solved, tolerance, solved.iterations)
 
 
-def _pinned(pinned: Sequence[bool] | npt.ArrayLike | None, k: int) -> BoolArray | None:
-    mask = None if pinned is None else np.asarray(pinned, dtype=bool).reshape(-1)
-    if mask is not None and mask.shape != (k,):
-        raise ValueError(f"pinned must be {k} booleans (one per target), got {mask.shape}")
-    return mask
-
-
 def _trunk_locks(idx: IntArray) -> frozenset[int] | None:
-    """Sub-bases (joints with several children) and all their ancestors: the trunk the
-    local stage of :func:`polish` holds. ``None`` when one of them is targeted."""
-    n_children = np.bincount([p for p in PARENTS if p >= 0], minlength=NUM_JOINTS)
-    locked: set[int] = set()
-    for joint in range(NUM_JOINTS):
-        if n_children[joint] >= 2:
-            j = joint
-            while j >= 0:
-                locked.add(j)
-                j = PARENTS[j]
-    if locked & set(idx.tolist()):
-        return None
-    return frozenset(locked)
+    """:data:`core.skeleton.TRUNK`, which the local stage of :func:`polish` holds; ``None``
+    when one of its joints is targeted."""
+    return None if TRUNK & set(idx.tolist()) else TRUNK
 
 
 def polish(
@@ -750,6 +760,7 @@ def polish(
     max_iterations: int = 100,
     free_root: bool = True,
     pinned: Sequence[bool] | npt.ArrayLike | None = None,
+    rigid_hips: bool = False,
 ) -> FabrikResult:
     """Exact reach from a good pose: targeted joints onto their targets, the rest still.
 
@@ -767,12 +778,13 @@ def polish(
 
     Untargeted branches are carried rigidly, so they do not wander. Unreachable targets
     end at the closest feasible stretch with ``reached`` False. ``iterations`` counts
-    both stages. ``pinned`` as in :func:`fabrik` (also when the start has left the pins).
+    both stages. ``pinned`` and ``rigid_hips`` as in :func:`fabrik` (also when the start
+    has left the pins).
     """
     pb = _prepare(positions, lengths, target_idx, target_pos, weights)
     if len(pb.idx) == 0:
         return _result(pb, _no_targets(pb), tolerance, 0)
-    pins = _pinned(pinned, len(pb.idx))
+    pins = pin_mask(pinned, len(pb.idx))
     x0, iterations = pb.x0, 0
     locks = _trunk_locks(pb.idx)
     if locks is not None:
@@ -781,6 +793,6 @@ def polish(
         if bool(np.all(local.errors <= tolerance)):
             return _result(pb, local, tolerance, local.iterations)
         x0, iterations = local.x, local.iterations
-    plan = _make_plan(pb.idx, pb.weights, frozenset(), free_root, pins)
+    plan = _make_plan(pb.idx, pb.weights, frozenset(), free_root, pins, rigid_hips)
     solved = _solve(x0, pb.lens, pb.tpos, plan, tolerance, max_iterations, pins)
     return _result(pb, solved, tolerance, iterations + solved.iterations)

@@ -26,6 +26,14 @@ BoolArray = npt.NDArray[np.bool_]
 TINY = 1e-300
 
 
+def pin_mask(pinned: object, k: int) -> BoolArray | None:
+    """``pinned`` (K booleans, or None) as an array; ``ValueError`` if not K of them."""
+    mask = None if pinned is None else np.asarray(pinned, dtype=bool).reshape(-1)
+    if mask is not None and mask.shape != (k,):
+        raise ValueError(f"pinned must be {k} booleans (one per target), got {mask.shape}")
+    return mask
+
+
 def norm3(v: F64) -> F64:
     """Euclidean norm over axis 1 of ``[k, 3, N]`` -> ``[k, N]``."""
     out: F64 = np.sqrt(np.add.reduce(v * v, axis=1))

@@ -230,3 +230,18 @@ def mirror_target_columns(
     ``[3k]`` that take them there (x negated)."""
     other = np.asarray(MIRROR, dtype=np.intp)[np.asarray(theirs, dtype=np.intp)]
     return flat_columns(joints), flat_columns(other), MIRROR_SIGNS[: 3 * len(other)].copy()
+
+
+def _trunk() -> frozenset[int]:
+    kids = np.bincount([p for p in PARENTS if p >= 0], minlength=NUM_JOINTS)
+    out: set[int] = set()
+    for joint in np.flatnonzero(kids >= 2).tolist():
+        while joint >= 0:
+            out.add(joint)
+            joint = PARENTS[joint]
+    return frozenset(out)
+
+
+#: The trunk: every joint with several children (a sub-base) and all its ancestors
+#: (the pelvis, the spine up to the chest).
+TRUNK: frozenset[int] = _trunk()

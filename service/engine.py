@@ -45,6 +45,7 @@ from core.skeleton import (
     set_key,
 )
 from service import completion, networks, retry, turns
+from service.fabrik_set import fabrik_set
 from service.fallback import prefer_fabrik
 from service.lean import covering, fabrik_batch, lean_answer, lean_sequence, solve_lean, uncovered
 from service.problems import (
@@ -559,23 +560,9 @@ class Engine:
         self, polish: bool, starts: F64, lengths: F64, goals: F64, tols: F64,
         idx: npt.NDArray[np.int64], weights: F64, hold: npt.NDArray[np.bool_],
     ) -> tuple[compiled.F64, npt.NDArray[np.int64], compiled.F64]:  # fmt: skip
-        """The compiled FABRIK (``polish``: the exact-reach polish) of canonical ``starts``
-        onto ``goals`` for one target set (joints ``idx``, ``weights``, pins ``hold``):
-        poses, iterations and each target's error. The columns are solved in joint order,
-        so the answer is the set's whatever order a request listed its targets and pins in
-        (the polish's sweeps follow the columns: an API audit, 2026-12-06, saw both ankles
-        pinned as ``[right, left]`` move an unasked wrist 44 cm from ``[left, right]``)."""
-        order = np.argsort(idx, kind="stable")
-        plans = compiled_fabrik.packed_plans(idx[order], weights[order], hold[order])
-        pose, its, errs, _ = compiled_fabrik.solve_batch(
-            polish, np.ascontiguousarray(starts), np.ascontiguousarray(lengths),
-            np.ascontiguousarray(goals[:, order]), np.ascontiguousarray(tols),
-            self.fabrik_max_iterations, plans.local_ints, plans.local_floats, plans.has_local,
-            plans.ints, plans.floats, np.ascontiguousarray(hold[order]), True,
-        )  # fmt: skip
-        back = np.empty_like(errs)
-        back[:, order] = errs
-        return pose, its, back
+        """:func:`service.fabrik_set.fabrik_set` at this engine's iteration cap."""
+        return fabrik_set(polish, starts, lengths, goals, tols, idx, weights, hold,
+                          self.fabrik_max_iterations)  # fmt: skip
 
     def exact_fallback(
         self, polished: tuple[compiled.F64, npt.NDArray[np.int64], compiled.F64], start: F64,

@@ -118,7 +118,7 @@ def test_pins_off_the_legs_match_numpy(
 
 def _against_numpy(
     polish: bool, starts: np.ndarray, lens: np.ndarray, goals: np.ndarray, idx: np.ndarray,
-    pinned: np.ndarray, tol: float = 1e-3, max_it: int = 256,
+    pinned: np.ndarray, tol: float = 1e-3, max_it: int = 256, rigid_hips: bool = False,
 ) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
     """The compiled FABRIK (``polish``: the polish) of every item, pins ``pinned``, against
     numpy's item by item (1e-12, the same iterations); its poses and errors ``[B, K]``."""
@@ -127,12 +127,12 @@ def _against_numpy(
     pose, its, errs, _ = compiled_fabrik.solve_batch(
         polish, np.ascontiguousarray(starts), lens, np.ascontiguousarray(goals),
         np.full(len(starts), tol), max_it, plans.local_ints, plans.local_floats,
-        plans.has_local, plans.ints, plans.floats, pinned, True,
+        plans.has_local, plans.ints, plans.floats, pinned, True, rigid_hips,
     )  # fmt: skip
     fn = kinematics.polish if polish else kinematics.fabrik
     for b in range(len(starts)):
         ref = fn(starts[b], lens[b], idx, goals[b], tolerance=tol, max_iterations=max_it,
-                 pinned=pinned)  # fmt: skip
+                 pinned=pinned, rigid_hips=rigid_hips)  # fmt: skip
         assert np.abs(ref.positions - pose[b]).max() < 1e-12
         assert ref.iterations == its[b]
         assert np.abs(ref.errors - errs[b]).max() < 1e-12
@@ -166,3 +166,32 @@ def test_a_root_held_for_its_pins_matches_numpy(
     _, errs = _against_numpy(False, starts, bone_lengths(poses), goals, idx, pinned)
     assert errs[:, 1:].max() <= 1e-3
     assert any(held)  # the case arose
+
+
+@pytest.mark.parametrize("polish", [False, True])
+def test_rigid_hips_keep_the_hips_apart_and_match_numpy(
+    real_poses: PosePairs, polish: bool
+) -> None:
+    """The pelvis dragged 8-15 cm, both ankles pinned, on real poses: FABRIK as the textbook
+    has it turns each hip bone towards its own leg and folds the hips onto one side of the
+    pelvis in most answers (an audit, 2026-12-07); with ``rigid_hips`` the hips keep their
+    distance to 1e-9 (moved with the pelvis), compiled as in numpy, every pin held."""
+    idx = _idx(("pelvis", "left_ankle", "right_ankle"))
+    pinned = np.asarray([False, True, True])
+    rng = np.random.default_rng(7)
+    poses = real_poses.poses[real_poses.starts][:30]
+    goals = poses[:, idx].copy()
+    d = rng.normal(size=(len(poses), 3)) * [1.0, 0.2, 1.0]
+    far = rng.uniform(0.08, 0.15, (len(d), 1))
+    goals[:, 0] += d / np.linalg.norm(d, axis=1, keepdims=True) * far
+    hips = [JOINT_INDEX["left_hip"], JOINT_INDEX["right_hip"]]
+
+    def width(p: np.ndarray) -> np.ndarray:
+        return np.asarray(np.linalg.norm(p[:, hips[0]] - p[:, hips[1]], axis=-1))
+
+    free, _ = _against_numpy(polish, poses, bone_lengths(poses), goals, idx, pinned)
+    rigid, errs = _against_numpy(polish, poses, bone_lengths(poses), goals, idx, pinned,
+                                 rigid_hips=True)  # fmt: skip
+    assert (width(free) < 0.8 * width(poses)).sum() >= 10
+    assert np.abs(width(rigid) - width(poses)).max() < 1e-9
+    assert errs[:, 1:].max() <= 1e-3

@@ -3,10 +3,13 @@ and array API vs problems; the same answers as the numpy reference path."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from core import kinematics
 from core.skeleton import JOINT_INDEX, bone_lengths
+from service import fabrik_set
 from service.engine import Engine
 from service.problems import SolveProblem
 from tests.conftest import PosePairs
@@ -60,12 +63,29 @@ def test_array_api_is_the_problems_api(engine: Engine, real_poses: PosePairs) ->
 
 
 def test_fabrik_method_is_the_numpy_fabrik(engine: Engine, real_poses: PosePairs) -> None:
+    """``method: "fabrik"`` is numpy's textbook FABRIK, or where that folds the hips (nearer
+    than ``FOLDED`` of the start's), its ``rigid_hips`` run where that reaches as well
+    (``service.fabrik_set``): both arise among these 5-target edits."""
     probs = _problems(real_poses, FIVE, method="fabrik")
+    hips = [JOINT_INDEX["left_hip"], JOINT_INDEX["right_hip"]]
+    retried = kept = 0
     for p, r in zip(probs, engine.solve(probs), strict=True):
         start = p.pose - np.array([1.5, 0.2, -3.0])  # canonical already: yaw 0 here
         ref = kinematics.fabrik(
             start, bone_lengths(start), p.target_idx, p.target_pos - np.array([1.5, 0.2, -3.0]),
             tolerance=p.tolerance, max_iterations=engine.fabrik_max_iterations,
         )  # fmt: skip
+        width = [np.linalg.norm(np.subtract(*q[hips])) for q in (start, ref.positions)]
+        if width[1] < fabrik_set.FOLDED * width[0]:
+            retried += 1
+            rigid = kinematics.fabrik(
+                start, bone_lengths(start), p.target_idx,
+                p.target_pos - np.array([1.5, 0.2, -3.0]), tolerance=p.tolerance,
+                max_iterations=engine.fabrik_max_iterations, rigid_hips=True,
+            )  # fmt: skip
+            if r.iterations != ref.iterations:
+                kept += 1
+                ref = dataclasses.replace(rigid, iterations=ref.iterations + rigid.iterations)
         assert r.iterations == ref.iterations
         assert np.abs(r.pose - np.array([1.5, 0.2, -3.0]) - ref.positions).max() < 1e-9
+    assert retried >= kept > 0

@@ -180,3 +180,45 @@ def test_a_target_out_of_reach_moves_the_start_across(
     mixed = far[:4] + near[:4]
     for p, r in zip(mixed, on.solve(mixed), strict=True):
         assert np.array_equal(on.solve([p])[0].pose, r.pose)
+
+
+@pytest.mark.parametrize("reach", ["soft", "exact"])
+def test_a_pelvis_dragged_over_pinned_feet_keeps_the_hips_apart(
+    models_dir: Path, real_poses: PosePairs, monkeypatch: pytest.MonkeyPatch, reach: str
+) -> None:
+    """An audit (2026-12-07): the pelvis dragged 10 cm sideways with both ankles pinned
+    came back with both hips on one side of it (their distance 0.129 -> 0.028 m, a
+    character's hips turned 93 degrees), every target "reached". On 30 real poses, pelvis
+    drags of 5-20 cm over pinned ankles or feet: without the rigid retry (``FOLDED`` 0)
+    and ``keep_pairs`` most answers fold the hips below 80 % of their distance; the shipped
+    engine few, every pin held and no target left farther than without them."""
+    from service import fabrik_set
+    from service.schemas import SolveOptions
+    from service.validation import problem_of
+
+    hips = [JOINT_INDEX["left_hip"], JOINT_INDEX["right_hip"]]
+    rng = np.random.default_rng(3)
+    poses = real_poses.poses[real_poses.starts][:30]
+    problems = []
+    for i, pose in enumerate(poses):
+        d = rng.normal(size=3) * [1.0, 0.3, 1.0]
+        d[1] = -abs(d[1])
+        pins = [JOINT_INDEX[f"{s}_{'ankle' if i % 2 else 'foot'}"] for s in ("left", "right")]
+        goal = pose[PELVIS] + d / np.linalg.norm(d) * rng.uniform(0.05, 0.2)
+        options = SolveOptions(reach=reach)
+        problems.append(problem_of(pose, [PELVIS], goal[None], [1.0], pins, options))
+
+    def folds(engine: Engine) -> tuple[int, np.ndarray, np.ndarray]:
+        out = [engine.solve([p])[0] for p in problems]
+        width = [np.linalg.norm(np.subtract(*np.asarray(r.pose)[hips])) for r in out]
+        start = np.linalg.norm(poses[:, hips[0]] - poses[:, hips[1]], axis=-1)
+        n = int((np.asarray(width) < 0.8 * start).sum())
+        errors = np.array([r.errors.max() for r in out])
+        return n, errors, np.array([r.pin_errors.max() for r in out])
+
+    shipped = Engine(models_dir, serving={"keep_pairs": True})
+    ours, errors, pins = folds(shipped)
+    monkeypatch.setattr(fabrik_set, "FOLDED", 0.0)
+    theirs, before, _ = folds(Engine(models_dir, serving={"keep_pairs": False}))
+    assert theirs >= 15 and ours <= 6, (theirs, ours)
+    assert pins.max() <= 1e-3 and (errors <= np.maximum(before, 1e-3) + 0.01).all()
