@@ -81,8 +81,8 @@ def test_a_degenerate_pair_is_left_as_it_is(moved: tuple[np.ndarray, np.ndarray]
 def test_the_engine_keeps_a_new_body_width(models_dir: Path, real_poses: PosePairs) -> None:
     """``serving.keep_pairs``: every soft answer (no pins) on bodies the models never saw
     has the start's hip and collar widths, but those the retry's FABRIK polish finished
-    (it turns each hip on its own: docs/generalisation-serving-2.md item 45); off (the
-    shipped default), the networks'."""
+    (it turns each hip on its own: docs/generalisation-serving-2.md item 45); on for the
+    shipped models since mx1-cf785d658788 (docs/generalisation-3.md item 65)."""
     starts, goals = on_random_bodies(real_poses, 11)
     idx = np.asarray([JOINT_INDEX["head"], JOINT_INDEX["left_wrist"]], dtype=np.intp)
     problems = [
@@ -90,7 +90,7 @@ def test_the_engine_keeps_a_new_body_width(models_dir: Path, real_poses: PosePai
         for s, g in zip(starts, goals, strict=True)
     ]
     kept = Engine(models_dir, serving={"keep_pairs": True})
-    assert not Engine(models_dir).serving.keep_pairs
+    assert Engine(models_dir).serving.keep_pairs
     results = kept.solve(problems)
     answers = np.stack([r.pose for r in results])
     plain = np.asarray(["fabrik-polish" not in r.solvers for r in results])

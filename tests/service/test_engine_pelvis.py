@@ -216,7 +216,8 @@ def test_a_pelvis_dragged_over_pinned_feet_keeps_the_hips_apart(
         errors = np.array([r.errors.max() for r in out])
         return n, errors, np.array([r.pin_errors.max() for r in out])
 
-    shipped = Engine(models_dir, serving={"keep_pairs": True})
+    shipped = Engine(models_dir)
+    assert shipped.serving.keep_pairs
     ours, errors, pins = folds(shipped)
     monkeypatch.setattr(fabrik_set, "FOLDED", 0.0)
     theirs, before, _ = folds(Engine(models_dir, serving={"keep_pairs": False}))
