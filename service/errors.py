@@ -28,6 +28,8 @@ from core.text import QUOTE, clip, printable, quoted
 PROBLEM_JSON = "application/problem+json"
 PROBLEM_BASE = "https://marionette.dev/problems/"
 REASON = "pose.reason"  # scope key: why a request was refused (a problem type), for metrics
+#: scope key: the setting whose limit refused a request (a 413's, a 429's), for the access log
+LIMIT = "pose.limit"
 #: scope key: perf_counter() when the request arrived (its head read: the HTTP protocol,
 #: ``service.transport``; else when the app first saw it); its deadline counts from it
 T0 = "pose.t0"
@@ -44,11 +46,24 @@ class PoseError(Exception):
     type_ = "invalid-request"
     retry_after: int | None = None
     headers: dict[str, str] | None = None  # an answer's own headers (a 416's Content-Range)
+    #: the setting whose limit this refusal enforces (``POSE_MAX_BODY_BYTES``), if any: the
+    #: access log's ``limit`` (a 413 or 429 did not say which limit it was)
+    limit: str | None = None
 
     def __init__(self, detail: str, **extra: Any) -> None:
         super().__init__(detail)
         self.detail = detail
+        if extra.get("limit") is not None:  # (a setting's name: never a field of the problem)
+            self.limit = str(extra.pop("limit"))
         self.extra = extra
+
+
+def refused(scope: Any, exc: PoseError) -> None:
+    """Note in ``scope`` why the request was refused: ``exc``'s problem type (the metrics'
+    reason, the access log's ``outcome``) and the limit it enforces, if any."""
+    scope[REASON] = exc.type_
+    if exc.limit is not None:
+        scope[LIMIT] = exc.limit
 
 
 class InvalidRequest(PoseError):
@@ -130,12 +145,14 @@ class TooManyItems(PoseError):
     status = 413
     title = "Too many items"
     type_ = "too-many-items"
+    limit = "POSE_MAX_BATCH_ITEMS"
 
 
 class PayloadTooLarge(PoseError):
     status = 413
     title = "Request body too large"
     type_ = "payload-too-large"
+    limit = "POSE_MAX_BODY_BYTES"
 
 
 class UnsupportedMediaType(PoseError):
@@ -416,7 +433,7 @@ def validation_problem(raw: Sequence[Any], total: int = 0, partial: bool = False
 def install_handlers(app: FastAPI) -> None:
     @app.exception_handler(PoseError)
     async def _pose_error(request: Request, exc: PoseError) -> JSONResponse:
-        request.scope[REASON] = exc.type_
+        refused(request.scope, exc)
         return error_response(exc)
 
     @app.exception_handler(RequestValidationError)
@@ -427,7 +444,7 @@ def install_handlers(app: FastAPI) -> None:
     @app.exception_handler(StarletteHTTPException)
     async def _http(request: Request, exc: StarletteHTTPException) -> JSONResponse:
         if isinstance(exc, BodyError):
-            request.scope[REASON] = exc.error.type_
+            refused(request.scope, exc.error)
             return error_response(exc.error)
         if isinstance(exc, BodyInvalid):
             request.scope[REASON] = "invalid-request"

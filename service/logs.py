@@ -76,6 +76,20 @@ def _own(message: str) -> dict[str, Any] | None:
     return fields
 
 
+#: uvicorn's line for bytes its parser refuses, one per refusal (a client looping garbage
+#: for 3 s wrote 7,482 of them, an ops audit): dropped, as the protocol logs each refusal
+#: itself, with its status, client and request id, a line a second at most
+#: (``service.transport``: ``connection_closed``, ``malformed-http``).
+PARSER_REFUSED = "Invalid HTTP request received."
+
+
+class DropParserRefusals(logging.Filter):
+    """Drops uvicorn's :data:`PARSER_REFUSED` lines (``service.transport`` logs them)."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return record.msg != PARSER_REFUSED
+
+
 def log_config(level: str) -> dict[str, Any]:
     """The ``logging.config.dictConfig`` of the service and of uvicorn (its loggers kept,
     their lines as JSON), at ``level``."""
@@ -84,6 +98,7 @@ def log_config(level: str) -> dict[str, Any]:
         "version": 1,
         "disable_existing_loggers": False,
         "formatters": {"json": {"()": JSONLines}},
+        "filters": {"parser_refusals": {"()": DropParserRefusals}},
         "handlers": {
             "stderr": {
                 "class": "logging.StreamHandler",
@@ -92,8 +107,12 @@ def log_config(level: str) -> dict[str, Any]:
             }
         },
         "loggers": {
-            name: {"handlers": ["stderr"], "level": level, "propagate": False}
-            for name in ("uvicorn", "uvicorn.error", "uvicorn.access")
+            name: {"handlers": ["stderr"], "level": level, "propagate": False, **more}
+            for name, more in (
+                ("uvicorn", {}),
+                ("uvicorn.error", {"filters": ["parser_refusals"]}),
+                ("uvicorn.access", {}),
+            )
         },
         "root": {"handlers": ["stderr"], "level": level},
     }

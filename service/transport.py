@@ -52,6 +52,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import sys
 import time
 from typing import Any, ClassVar, Literal, get_args
 
@@ -156,19 +157,22 @@ SLOW_READERS = Counter(
 )
 
 
-#: Connections closed for their pace or refused for their number, by reason
+#: Connections closed for their pace, refused for their number, or closed on a refusal of
+#: the HTTP parser's (bytes that are not HTTP, a head too large), by reason
 #: (``pose_connections_closed_total``; the process's, as :data:`SLOW_READERS`).
 CONNECTIONS_CLOSED = Counter(
     "pose_connections_closed",
-    "Connections closed for their pace or refused for their number, by reason",
+    "Connections closed for their pace, refused for their number, or closed on a request "
+    "the HTTP parser refused (malformed-http, head-too-large), by reason",
     ["reason"],
     registry=None,
 )
 
 #: Every reason a connection is closed for (:func:`closed`).
 CloseReason = Literal[
-    "head-timeout", "idle-timeout", "body-timeout", "too-many-connections", "evicted"
-]
+    "head-timeout", "idle-timeout", "body-timeout", "too-many-connections", "evicted",
+    "malformed-http", "head-too-large",
+]  # fmt: skip
 CLOSE_REASONS: tuple[str, ...] = get_args(CloseReason)
 for _reason in CLOSE_REASONS:  # each series at 0 from the start, a worker's too (it imports
     # this afresh, into its own multiprocess file): each appeared at its reason's first
@@ -232,6 +236,7 @@ class PacedHTTPProtocol(AutoHTTPProtocol):  # type: ignore[misc, valid-type]
         self._too_long = False  # a whole head over the bound: the parse stopped on it
         self._t0 = time.perf_counter()  # when the last head began (a refusal's total time)
         self._fields = 0  # bytes of the head's header lines so far, as sent
+        self._why = ""  # the parser's words for a refusal of its (for the log)
 
     def data_received(self, data: bytes) -> None:
         if self._refused:  # read and dropped until the close (see refuse)
@@ -289,10 +294,12 @@ class PacedHTTPProtocol(AutoHTTPProtocol):  # type: ignore[misc, valid-type]
         super().on_message_complete()
 
     def send_400_response(self, msg: str) -> None:
-        """The parser's refusal (uvicorn's plain text) as a problem."""
+        """The parser's refusal (uvicorn's plain text) as a problem; the parser's own words
+        (uvicorn calls this inside its ``except``) go to the log line (:meth:`refuse`)."""
         if self._too_long:
             self.refuse(_head_too_large())
             return
+        self._why = str(sys.exc_info()[1] or "")[:200]
         self.refuse(MalformedHTTP(f"{msg.rstrip('.')}: the bytes sent are not an HTTP/1.1 request"))
 
     def refuse(self, exc: PoseError) -> None:
@@ -319,7 +326,18 @@ class PacedHTTPProtocol(AutoHTTPProtocol):  # type: ignore[misc, valid-type]
             cycle.message_event.set()
         from service.middleware.headers import protocol_headers  # (its package imports this)
 
-        self._refusal = raw_answer(exc, protocol_headers(self._t0))
+        headers = protocol_headers(self._t0)
+        if isinstance(exc, MalformedHTTP | HeadTooLarge):  # (others: logged where decided)
+            # counted and logged as the other closes (a line a second at most): uvicorn's
+            # own "Invalid HTTP request received." (service.logs drops it) said neither the
+            # status, nor the client, nor the id the client got, and a client looping
+            # garbage for 3 s wrote 7,482 of them (an ops audit)
+            malformed = isinstance(exc, MalformedHTTP)
+            reason: CloseReason = "malformed-http" if malformed else "head-too-large"
+            closed(reason, logging.WARNING, status=exc.status, client=self._client(),
+                   request_id=dict(headers)[b"x-request-id"].decode(),
+                   why=self._why or exc.detail[:200])  # fmt: skip
+        self._refusal = raw_answer(exc, headers)
         if not self._answers_due():
             self._send_refusal()
 

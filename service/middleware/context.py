@@ -12,7 +12,7 @@ import time
 
 import orjson
 
-from service.errors import ShuttingDown, error_response, internal_error
+from service.errors import LIMIT, ShuttingDown, error_response, internal_error
 from service.middleware.headers import request_id
 from service.middleware.types import (
     REASON,
@@ -26,6 +26,7 @@ from service.middleware.types import (
 )
 
 access_log = logging.getLogger("service.access")
+#: A failed request's ``outcome`` when no layer noted why (the problem type: REASON)
 _OUTCOME = {499: "client_disconnected", 503: "unavailable", 504: "deadline_exceeded"}
 
 
@@ -74,14 +75,25 @@ def log_request(scope: Scope, request_id: str, status: int, t0: float, enabled: 
     """The access-log line of a request answered (``enabled``: the setting)."""
     if not enabled or not access_log.isEnabledFor(logging.INFO):
         return  # not even built when nobody reads it
+    client = scope.get("client")
     line = {
         "event": "request",
         "request_id": request_id,
+        "client": f"{client[0]}:{client[1]}" if client else None,
         "method": scope["method"],
         "path": scope["path"][:200],
         "status": status,
         "ms": round((time.perf_counter() - t0) * 1000, 3),
     }
+    # why a request failed: 499, 503 and 504 by their names of old (dashboards read them),
+    # any other refusal by the problem type its answer carried (a 413 ``payload-too-large``
+    # or ``too-many-items``, a 429 ``too-many-requests``), with the setting whose limit
+    # refused it (a 413 or 429 said neither: only 499, 503 and 504 had an outcome, an ops
+    # audit)
     if status in _OUTCOME:
         line["outcome"] = _OUTCOME[status]
+    elif status >= 400 and REASON in scope:
+        line["outcome"] = str(scope[REASON])
+    if status >= 400 and LIMIT in scope:
+        line["limit"] = scope[LIMIT]
     access_log.info(orjson.dumps(line).decode())

@@ -30,7 +30,7 @@ from service.body import DECODED, INLINE_BYTES, decode, in_worker
 from service.bounded import look
 from service.decoded import COUNTED
 from service.deps import ServiceState
-from service.errors import BodyError, BodyInvalid, PoseError, error_response
+from service.errors import BodyError, BodyInvalid, PoseError, error_response, refused
 from service.limits import Budget
 from service.middleware.types import REASON, ASGIApp, Message, Receive, Scope, Send
 from service.pose_json import plain
@@ -329,7 +329,7 @@ class FastPath:
 
 
 async def _problem(scope: Scope, receive: Receive, send: Send, exc: PoseError) -> None:
-    scope[REASON] = exc.type_
+    refused(scope, exc)
     await error_response(exc)(scope, receive, send)
 
 

@@ -41,6 +41,7 @@ from service.errors import (
     Unauthorized,
     UnsupportedMediaType,
     error_response,
+    refused,
 )
 from service.middleware.types import (
     REASON,
@@ -155,7 +156,8 @@ class Gate:
             raise too_large(path, s.max_body_bytes, size)
         if path.startswith("/v1/") and self.active >= s.max_concurrency:
             raise TooManyRequests(
-                f"{self.active} requests in flight on this worker (limit {s.max_concurrency})"
+                f"{self.active} requests in flight on this worker (limit {s.max_concurrency})",
+                limit="POSE_MAX_CONCURRENCY",
             )
         # every body read here is held until its request ends, whatever its route: one sent
         # to a route that takes none (a GET's, a POST to /v2/health/live) was read whole
@@ -167,7 +169,8 @@ class Gate:
             counted = " (a chunked body counts as the whole body limit)" if chunked else ""
             raise TooManyRequests(
                 f"{self.held} body bytes in flight on this worker; this request's "
-                f"{size}{counted} would pass the limit ({s.max_inflight_bytes})"
+                f"{size}{counted} would pass the limit ({s.max_inflight_bytes})",
+                limit="POSE_MAX_INFLIGHT_BYTES",
             )
         return size
 
@@ -220,7 +223,7 @@ class Gate:
         try:
             reserved = self._check(scope, headers)
         except PoseError as exc:
-            scope[REASON] = exc.type_
+            refused(scope, exc)
             answer = error_response(exc)
             if isinstance(exc, PayloadTooLarge):  # its body is not worth taking: no keep-alive
                 answer.headers["connection"] = "close"
@@ -245,7 +248,7 @@ class Gate:
                     try:
                         decoded = await self._reserve_decoded(scope, body)
                     except PoseError as exc:
-                        scope[REASON] = exc.type_
+                        refused(scope, exc)
                         await error_response(exc)(scope, receive, send)
                         return
                 # not held here while the app runs: the app reads it from ``receive`` and
@@ -274,7 +277,8 @@ class Gate:
                 f"this body would take about {need // mib} MiB of memory decoded (its "
                 f"{len(body)} bytes hold that many values, objects and arrays), more than "
                 f"a worker decodes at once ({budget // mib} MiB): send fewer values, or "
-                "split the request"
+                "split the request",
+                limit="POSE_DECODE_MEMORY_BYTES",
             )
         t0 = scope.get(T0, time.perf_counter())
         waited = time.perf_counter()
@@ -322,7 +326,7 @@ class Gate:
             self._late.discard(task)
         if size > limit:
             big = too_large(scope["path"], limit)
-            scope[REASON] = big.type_
+            refused(scope, big)
             answer = error_response(big)
             answer.headers["connection"] = "close"  # the rest of the body is not read
             await answer(scope, receive, send)

@@ -229,7 +229,8 @@ def test_the_closes_counter_has_every_reason_before_the_first_close(
     from service.settings import SHARED_DIR
     from service.transport import CLOSE_REASONS
 
-    reasons = {"head-timeout", "idle-timeout", "body-timeout", "too-many-connections", "evicted"}
+    reasons = {"head-timeout", "idle-timeout", "body-timeout", "too-many-connections", "evicted",
+               "malformed-http", "head-too-large"}  # fmt: skip
     assert set(CLOSE_REASONS) == reasons  # (as docs/limits.md lists them)
     env = {k: v for k, v in os.environ.items() if k != SHARED_DIR}
     if workers > 1:
