@@ -283,7 +283,10 @@ def _misspelt(key: str, known: list[str]) -> list[str]:
     """The settings ``key`` (an unknown ``POSE_*`` name) stands for, if it is that close:
     its name after ``POSE_`` within :data:`MISSPELT` of a setting's (POSE_APIKEY), or a
     setting's cut at an underscore (POSE_DEADLINE, POSE_KEY, POSE_DIR)
-    or lengthened after one (POSE_API_KEY_FILE: no ``_FILE`` form is read)."""
+    or lengthened after one (POSE_API_KEY_FILE: no ``_FILE`` form is read), or a name
+    sharing a word with a setting's, past the generic ones (:func:`_sharing`:
+    POSE_MAX_BODY_SIZE, POSE_DEADLINE_MS, POSE_BATCH_SIZE were only warned of, "did you
+    mean POSE_MAX_BODY_BYTES?", and the default stayed in force; an ops audit)."""
     name = key.upper()
     if _SERVICE_LINK.fullmatch(name) or name in OPTION_ONLY:
         return []
@@ -296,7 +299,8 @@ def _misspelt(key: str, known: list[str]) -> list[str]:
     ]
     if cut:
         return cut
-    return [tails[t] for t in difflib.get_close_matches(tail, list(tails), n=1, cutoff=MISSPELT)]
+    close = difflib.get_close_matches(tail, list(tails), n=1, cutoff=MISSPELT)
+    return [tails[t] for t in close] or _sharing(name, known)
 
 
 def misspelt_variables(environ: dict[str, str]) -> dict[str, list[str]]:
@@ -316,9 +320,9 @@ def misspelt_variables(environ: dict[str, str]) -> dict[str, list[str]]:
 
 def unknown_variables(environ: dict[str, str]) -> list[str]:
     """The other ``POSE_*`` variables of ``environ`` that are no setting (a start names
-    them in a warning: they resemble no setting closely), each with the setting nearest it
-    if any (``POSE_DEADLINE=9`` left the deadline at 2 s without a word, an ops audit), or
-    the option that sets what it names (:data:`OPTION_ONLY`)."""
+    them in a warning: they resemble no setting closely, and share no word with one), each
+    with the setting nearest it by spelling if any, or the option that sets what it names
+    (:data:`OPTION_ONLY`)."""
     known = _known()
     out = []
     for key in _unknown(environ):
@@ -327,13 +331,13 @@ def unknown_variables(environ: dict[str, str]) -> list[str]:
         elif key.upper() in OPTION_ONLY:
             out.append(f"{key} ({OPTION_ONLY[key.upper()]})")
         elif not _misspelt(key, known):
-            near = _sharing(key, known) or [n for n in [close_match(key.upper(), known)] if n]
+            near = [n for n in [close_match(key.upper(), known)] if n]
             out.append(f"{key}" + (f" (did you mean {' or '.join(near)}?)" if near else ""))
     return out
 
 
 #: Words too common among the settings' names to say which one a variable meant.
-_GENERIC = frozenset({"POSE", "MAX", "SECONDS", "BYTES", ""})
+_GENERIC = frozenset({"POSE", "MAX", "SECONDS", "BYTES", "DIR", ""})
 
 
 def _sharing(key: str, known: list[str]) -> list[str]:

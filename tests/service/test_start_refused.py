@@ -63,6 +63,18 @@ def refused(argv: list[str], env: dict[str, str] | None = None, script: str = ""
         # D10: a key no client can send
         ({"POSE_API_KEY": "clé-secrète"}, [], "POSE_API_KEY: a character that is not "
          "printable ASCII: an HTTP header's value is bytes"),
+        # a near miss that shares a word with a setting: warned of, and the default kept
+        # (an ops audit, 2026-12-07), while other misspellings (POSE_CONCURRENCY) refused
+        ({"POSE_MAX_BODY_SIZE": "100"}, [], "POSE_MAX_BODY_SIZE: no such setting; did you "
+         "mean POSE_MAX_BODY_BYTES? Rename or unset it"),
+        ({"POSE_DEADLINE_MS": "500"}, [], "POSE_DEADLINE_MS: no such setting; did you mean "
+         "POSE_DEADLINE_SECONDS?"),
+        ({"POSE_BATCH_SIZE": "10"}, [], "POSE_BATCH_SIZE: no such setting; did you mean "
+         "POSE_MAX_BATCH_ITEMS?"),
+        ({"POSE_CONCURRENCY": "8"}, [], "POSE_CONCURRENCY: no such setting; did you mean "
+         "POSE_MAX_CONCURRENCY?"),
+        ({"POSE_TIMEOUT": "30"}, [], "POSE_TIMEOUT: no such setting; did you mean "
+         "POSE_IDLE_TIMEOUT_SECONDS or POSE_HEAD_TIMEOUT_SECONDS?"),
         # D11: usage errors (plain-text argparse usage; `_workers` leaked)
         ({}, ["--port", "abc"], "pose-service: argument --port: 'abc' is not a whole number"),
         ({}, ["--workers", "abc"], "argument --workers: 'abc' is not a whole number"),
@@ -153,6 +165,7 @@ def test_misspelt_variables_are_told_from_others_and_service_links() -> None:
     env = dict.fromkeys(
         ["POSE_APIKEY", "POSE_LOGLEVEL", "POSE_PROT", "POSE_KEY", "POSE_WORKERS",
          "POSE_ESTIMATOR_URL", "POSE_HEALTH_PATH", "pose_api_key", "POSE_SERVICE_HOST",
+         "POSE_MAX_BODY_SIZE", "POSE_CACHE_DIR",
          "POSE_SERVICE_PORT", "POSE_SERVICE_PORT_HTTP", "POSE_PORT_80_TCP",
          "POSE_PORT_80_TCP_ADDR", "POSE_API_SERVICE_HOST", "POSE_API_PORT",
          "POSE_API_PORT_8000_TCP_PORT"], "x",
@@ -162,9 +175,11 @@ def test_misspelt_variables_are_told_from_others_and_service_links() -> None:
         "POSE_KEY": ["POSE_API_KEY"],
         "POSE_LOGLEVEL": ["POSE_LOG_LEVEL"],
         "POSE_PROT": ["POSE_PORT"],
+        "POSE_MAX_BODY_SIZE": ["POSE_MAX_BODY_BYTES"],  # (a word shared: BODY)
     }
     warned = unknown_variables(env)
     assert "POSE_ESTIMATOR_URL" in warned
+    assert any(w.startswith("POSE_CACHE_DIR") for w in warned), warned  # ("DIR": generic)
     workers = "the worker count is the --workers option (`pose-service --workers N`)"
     assert f"POSE_WORKERS ({workers}, no variable)" in warned, warned
     links = [w for w in warned if w.endswith("(a Kubernetes Service's link variable?)")]
