@@ -15,6 +15,15 @@ from pydantic_settings import BaseSettings, SettingsConfigDict
 from core.compiled_fabrik import MAX_ITERATIONS
 from core.text import close_match
 
+#: The shortest ``POSE_DEADLINE_SECONDS``: the deadline also bounds a body's arrival (a
+#: 408 past it) and the rest of one answered unread, so below ~0.1 s an ordinary upload
+#: over a network fails; ``1e-9`` was taken, and every request was a 504 (an ops audit).
+MIN_DEADLINE_SECONDS = 0.1
+#: The most ``POSE_MAX_BATCH_ITEMS`` (``100000000`` was taken, an ops audit): 65,536
+#: columnar poses are ~2.4 s of work at the ~27,000 poses/s a worker solves (docs/deploy.md)
+#: and a body of ~40 MB; more is several requests.
+MAX_BATCH_ITEMS = 65536
+
 #: The models shipped with the repository (``<repo>/models``).
 BUNDLED_MODELS = Path(__file__).resolve().parent.parent / "models"
 
@@ -94,7 +103,12 @@ class Settings(BaseSettings):
     port: int = Field(default=8000, ge=1, le=65535)
     models_dir: Path = BUNDLED_MODELS
     ort_threads: int = Field(default=1, ge=1, le=64, description="onnxruntime intra-op threads.")
-    max_batch_items: int = Field(default=1024, ge=1)
+    max_batch_items: int = Field(
+        default=1024,
+        ge=1,
+        le=MAX_BATCH_ITEMS,
+        description="Items (edits) a batch may hold; 413 past it.",
+    )
     max_body_bytes: int = Field(default=8 * 1024 * 1024, ge=1024)
     max_concurrency: int = Field(
         default=64,
@@ -116,8 +130,9 @@ class Settings(BaseSettings):
     )
     deadline_seconds: float = Field(
         default=2.0,
-        gt=0,
+        ge=MIN_DEADLINE_SECONDS,
         le=600,
+        allow_inf_nan=False,
         description="Wall time one request's work may take; 504 past it (a batch whose "
         "items are all done is answered).",
     )
@@ -136,6 +151,7 @@ class Settings(BaseSettings):
     idle_timeout_seconds: float = Field(
         default=5.0,
         gt=0,
+        allow_inf_nan=False,
         le=3600,
         description="A connection with no request under way is closed after this long: "
         "before its first byte, and between requests (uvicorn's keep-alive timeout).",
@@ -143,6 +159,7 @@ class Settings(BaseSettings):
     head_timeout_seconds: float = Field(
         default=5.0,
         gt=0,
+        allow_inf_nan=False,
         le=600,
         description="Time a request's line and headers may take from their first byte; "
         "past it, 408 (head-timeout) and the connection is closed.",
@@ -221,7 +238,7 @@ class Settings(BaseSettings):
         return self
 
     log_level: Annotated[
-        Literal["debug", "info", "warning", "error"],
+        Literal["debug", "info", "warning", "error", "critical"],
         BeforeValidator(lambda v: v.lower() if isinstance(v, str) else v),  # INFO too
     ] = "info"
     access_log: bool = True

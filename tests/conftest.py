@@ -420,13 +420,16 @@ def traced(work: Any, settle: float = 0.0, below: int = 0) -> tuple[Any, float, 
     return got, took, held, peak
 
 
-def make_client(models_dir: Path, **settings: Any) -> Any:
+def make_client(models_dir: Path, unchecked: dict[str, Any] | None = None, **settings: Any) -> Any:
+    """A test client of an app with ``settings``, and ``unchecked`` set past their bounds
+    (a deadline of 1e-6 s, to see a 504 before any work: no deployment may set it)."""
     from fastapi.testclient import TestClient
 
     from service.app import create_app
     from service.settings import Settings
 
-    app = create_app(Settings(models_dir=models_dir, **settings), load_in_background=False)
+    chosen = Settings(models_dir=models_dir, **settings).model_copy(update=unchecked or {})
+    app = create_app(chosen, load_in_background=False)
     return TestClient(app, raise_server_exceptions=False)
 
 

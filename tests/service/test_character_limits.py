@@ -34,7 +34,7 @@ def example(route: str) -> dict[str, Any]:
 
 @pytest.mark.parametrize("route", ROUTES)
 def test_past_the_deadline_is_a_504_problem(models_dir: Path, route: str) -> None:
-    with make_client(models_dir, deadline_seconds=0.001) as c:
+    with make_client(models_dir, unchecked={"deadline_seconds": 0.001}) as c:
         resp = c.post(route, json=example(route))
         assert_problem(resp, 504, "0.001 s deadline", "before ")
         assert resp.headers["retry-after"] == "1"

@@ -333,7 +333,7 @@ def test_columnar_limits(models_dir: Path, synthetic_poses: PosePairs) -> None:
     with make_client(models_dir, max_batch_items=4) as small:
         detail = _problem(small, body, 413)
         assert "5 items exceed the limit of 4 per batch" in detail
-    with make_client(models_dir, deadline_seconds=1e-9) as late:
+    with make_client(models_dir, unchecked={"deadline_seconds": 1e-9}) as late:
         resp = late.post("/v1/solve/batch", json=body)
         assert resp.status_code == 504 and resp.headers["retry-after"] == "1"  # no work done
         assert "0 of 5 items done" in resp.json()["detail"]

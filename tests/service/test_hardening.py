@@ -239,7 +239,7 @@ def test_a_lone_soft_edit_past_its_deadline_is_a_504_not_a_solve(
     monkeypatch.setattr(Engine, "solve_lone", spy_lone)
     if way == "route":
         monkeypatch.setattr(FastPath, "_solve", decline)
-    with make_client(models_dir, deadline_seconds=1e-6) as c:
+    with make_client(models_dir, unchecked={"deadline_seconds": 1e-6}) as c:
         solved.clear()  # (the warm-up's)
         resp = post(c, json.dumps(body()))
         assert_problem(resp, 504, "the 1e-06 s deadline (before the solve); retry")

@@ -75,6 +75,17 @@ def refused(argv: list[str], env: dict[str, str] | None = None, script: str = ""
          "POSE_MAX_CONCURRENCY?"),
         ({"POSE_TIMEOUT": "30"}, [], "POSE_TIMEOUT: no such setting; did you mean "
          "POSE_IDLE_TIMEOUT_SECONDS or POSE_HEAD_TIMEOUT_SECONDS?"),
+        # bounds an audit found open, and nan's message (2026-12-07)
+        ({"POSE_DEADLINE_SECONDS": "1e-9"}, [],
+         "POSE_DEADLINE_SECONDS: Input should be greater than or equal to 0.1 (got '1e-9')"),
+        ({"POSE_DEADLINE_SECONDS": "nan"}, [],
+         "POSE_DEADLINE_SECONDS: Input should be a finite number (got 'nan')"),
+        ({"POSE_HEAD_TIMEOUT_SECONDS": "inf"}, [],
+         "POSE_HEAD_TIMEOUT_SECONDS: Input should be a finite number (got 'inf')"),
+        ({"POSE_MAX_BATCH_ITEMS": "100000000"}, [],
+         "POSE_MAX_BATCH_ITEMS: Input should be less than or equal to 65536"),
+        ({"POSE_LOG_LEVEL": "trace"}, [], "POSE_LOG_LEVEL: Input should be 'debug', 'info', "
+         "'warning', 'error' or 'critical' (got 'trace')"),
         # D11: usage errors (plain-text argparse usage; `_workers` leaked)
         ({}, ["--port", "abc"], "pose-service: argument --port: 'abc' is not a whole number"),
         ({}, ["--workers", "abc"], "argument --workers: 'abc' is not a whole number"),
@@ -216,3 +227,24 @@ def test_origins_are_checked_as_browsers_send_them() -> None:
     ]:
         problem = origin_problem(bad)
         assert problem and fix in problem, (bad, problem)
+
+
+def test_every_level_the_docs_list_is_taken() -> None:
+    """docs/deploy.md lists ``critical`` among the log's levels, and POSE_LOG_LEVEL=critical
+    was refused (an ops audit): each level listed is taken, in any case, and uvicorn runs at
+    it (its level names: ``uvicorn.config.LOG_LEVELS``)."""
+    from typing import get_args
+
+    from uvicorn.config import LOG_LEVELS
+
+    from service.logs import log_config
+    from service.settings import Settings
+
+    docs = (REPO_ROOT / "docs/deploy.md").read_text()
+    said = docs.split("`POSE_LOG_LEVEL` takes any case:", 1)[1].split(" (the", 1)[0]
+    levels = get_args(Settings.model_fields["log_level"].annotation)
+    assert len(levels) == 5 and "critical" in levels, levels
+    assert all(f"`{level}`" in said for level in levels), (said, levels)
+    for level in levels:
+        assert Settings(log_level=level.upper()).log_level == level
+        assert level in LOG_LEVELS and log_config(level)["root"]["level"] == level.upper()
