@@ -15,7 +15,17 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-from prometheus_client import CollectorRegistry, Counter, Histogram, generate_latest, multiprocess
+from prometheus_client import (
+    GC_COLLECTOR,
+    PLATFORM_COLLECTOR,
+    CollectorRegistry,
+    Counter,
+    Gauge,
+    Histogram,
+    ProcessCollector,
+    generate_latest,
+    multiprocess,
+)
 
 from service.problems import trained_solvers
 from service.settings import SHARED_DIR
@@ -23,6 +33,22 @@ from service.transport import CONNECTIONS_CLOSED, SLOW_READERS
 
 #: Solver paths whose counter child :meth:`Metrics.solved` keeps.
 HELD_PATHS = 256
+#: ``pose_request_seconds``'s buckets: from 0.5 ms to ``POSE_DEADLINE_SECONDS``'s most (600
+#: s); they stopped at 5 s, so every request past it, a 504 at a deadline of 30 s, was +Inf.
+LATENCY_BUCKETS = (
+    0.0005, 0.001, 0.002, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 1.0, 2.5, 5.0,
+    10.0, 30.0, 60.0, 120.0, 300.0, 600.0,
+)  # fmt: skip
+
+
+def _this_process(registry: CollectorRegistry) -> None:
+    """The process's own series in ``registry``: ``process_*`` (resident and virtual
+    memory, CPU seconds, open and most file descriptors, start time: Linux's /proc),
+    ``python_info`` and ``python_gc_*`` (prometheus_client's collectors; the app's own
+    registry had none of them, an ops audit)."""
+    ProcessCollector(registry=registry)
+    registry.register(PLATFORM_COLLECTOR)
+    registry.register(GC_COLLECTOR)
 
 
 @contextlib.contextmanager
@@ -54,7 +80,21 @@ class Metrics:
             "pose_request_seconds",
             "HTTP request latency",
             ["route"],
-            buckets=(0.0005, 0.001, 0.002, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 1.0, 5.0),
+            buckets=LATENCY_BUCKETS,
+            registry=self.registry,
+        )
+        self.in_flight = Gauge(
+            "pose_requests_in_flight",
+            "HTTP requests under way (read, worked on or answered), by this worker or, "
+            "with several, all of them",
+            registry=self.registry,
+            multiprocess_mode="livesum",  # (the live workers' sum; a dead one's left out)
+        )
+        self.preflights = Counter(
+            "pose_cors_preflights_total",
+            "CORS preflights answered by the CORS layer (outside the other metrics), by "
+            "result: allowed (200) or refused (400, cors-rejected)",
+            ["result"],
             registry=self.registry,
         )
         self.rejections = Counter(
@@ -77,6 +117,7 @@ class Metrics:
         )
         self.registry.register(SLOW_READERS)
         self.registry.register(CONNECTIONS_CLOSED)
+        _this_process(self.registry)
         self._solved: dict[tuple[str, ...], Any] = {}  # (method, *path) -> the child
 
     def exposition(self) -> bytes:
@@ -87,6 +128,8 @@ class Metrics:
             return generate_latest(self.registry)
         registry = CollectorRegistry()
         multiprocess.MultiProcessCollector(registry, path=folder)  # type: ignore[no-untyped-call]
+        # (the workers' files hold no process series: these are the worker answering)
+        _this_process(registry)
         return generate_latest(registry)
 
     def solved(self, method: str, solvers: list[str], n: int = 1) -> None:

@@ -44,6 +44,7 @@ def install(
     if settings.cors_origins:  # outside the gate and the 500s: their answers carry CORS too
         app.add_middleware(
             ProblemCORS,
+            preflights=metrics.preflights,
             allow_origins=settings.cors_origins,
             allow_methods=["GET", "POST", "OPTIONS"],
             allow_headers=["Content-Type", "X-API-Key", "X-Request-ID", "Authorization"],

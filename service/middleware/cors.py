@@ -8,9 +8,13 @@ by ``POSE_CORS_ORIGINS``; the methods and request headers are the service's own
 
 from __future__ import annotations
 
+from collections.abc import Collection
+from typing import Any
+
 from starlette.datastructures import Headers
 from starlette.middleware.cors import CORSMiddleware
 from starlette.responses import Response
+from starlette.types import ASGIApp
 
 from core.text import quoted
 from service.errors import CorsRejected, error_response
@@ -20,8 +24,31 @@ _FIXED = "the service's own, no setting"
 
 
 class ProblemCORS(CORSMiddleware):
+    """Starlette's CORS, its refusals problems; each preflight counted in ``preflights``
+    (``pose_cors_preflights_total{result}``: answered here, outside the request metrics,
+    they were in no count)."""
+
+    def __init__(
+        self,
+        app: ASGIApp,
+        allow_origins: Collection[str] = (),
+        allow_methods: Collection[str] = ("GET",),
+        allow_headers: Collection[str] = (),
+        expose_headers: Collection[str] = (),
+        preflights: Any = None,
+    ) -> None:
+        super().__init__(app, allow_origins=allow_origins, allow_methods=allow_methods,
+                         allow_headers=allow_headers, expose_headers=expose_headers)  # fmt: skip
+        self._counted = (
+            (preflights.labels("allowed"), preflights.labels("refused"))
+            if preflights is not None
+            else None
+        )
+
     def preflight_response(self, request_headers: Headers) -> Response:
         response = super().preflight_response(request_headers)
+        if self._counted is not None:
+            self._counted[response.status_code >= 400].inc()
         if response.status_code < 400:
             return response
         detail = "; ".join(self.refusals(request_headers))

@@ -34,6 +34,7 @@ class RequestMetrics:
         self.metrics = metrics
         self.routes = app_routes
         self.children: dict[tuple[str, int], tuple[Any, Any]] = {}  # bounded: routes x statuses
+        self.in_flight = metrics.in_flight
 
     def route_of(self, scope: Scope, root_path: str = "") -> str:
         """The label of a request whose scope is now ``scope`` and whose ``root_path`` was
@@ -57,6 +58,7 @@ class RequestMetrics:
         t0: float = scope.setdefault(T0, time.perf_counter())
         root_path: str = scope.get("root_path", "")
         cancelled = False
+        self.in_flight.inc()
         try:
             await observed(self.app, scope, receive, send)
         except asyncio.CancelledError:  # shutdown: RequestContext answers a 503
@@ -64,6 +66,7 @@ class RequestMetrics:
             scope[REASON] = "shutting-down"
             raise
         finally:
+            self.in_flight.dec()
             status = status_of(scope, 500)  # (the answer as this layer saw it)
             if cancelled and status == 500:
                 status = 503

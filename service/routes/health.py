@@ -3,11 +3,12 @@ Prometheus ``/metrics``. None of them reads a body or touches the engine."""
 
 from __future__ import annotations
 
-from fastapi import APIRouter, Response
+from fastapi import APIRouter, Request, Response
 from fastapi.responses import RedirectResponse
 from prometheus_client import CONTENT_TYPE_LATEST
 
 from service.deps import State
+from service.errors import refused
 from service.schemas import Health
 
 router = APIRouter(tags=["health"])
@@ -25,7 +26,7 @@ async def live() -> Health:
     response_model=Health,
     responses={503: {"model": Health, "description": "Models not loaded or broken."}},
 )
-async def ready(response: Response, state: State) -> Health:
+async def ready(request: Request, response: Response, state: State) -> Health:
     """200 once every model is loaded, verified and a warm-up solve passed; else 503
     with the reason (file names, never server paths): while they load with
     ``Retry-After``, once they failed (the service does not retry) without."""
@@ -33,6 +34,9 @@ async def ready(response: Response, state: State) -> Health:
     if not repo.ready:
         response.status_code = 503
         why = repo.not_ready()
+        # its problem type, as /v1's refusal for the same reason (pose_rejections_total,
+        # the access log): it was reason="503" here, "not-ready" there (an ops audit)
+        refused(request.scope, why)
         if why.retry_after is not None:
             response.headers["Retry-After"] = str(why.retry_after)
         return Health(status="not ready", detail=why.detail if repo.failed else repo.reason)

@@ -66,5 +66,15 @@ def test_metrics_are_the_sum_over_the_workers(models_dir: Path, tmp_path: Path) 
     assert scrapes == [float(n)] * 10, (scrapes, each)
     # the closes' series are there at 0 before any close, summed over the workers too
     assert all('pose_connections_closed_total{reason="evicted"} 0.0' in t for t in texts)
+    # the process's series (the worker that took the scrape: the workers' files hold none)
+    # and the requests under way, summed over the live workers: the scrape itself, and the
+    # request before it if its worker had not yet counted it out when the other worker read
+    # the files (an ops audit, 2026-12-07: neither series was there)
+    for text in texts:
+        lines = text.splitlines()
+        rss = [x for x in lines if x.startswith("process_resident_memory_bytes ")]
+        assert len(rss) == 1 and float(rss[0].split()[1]) > 50 * 2**20, rss
+        (busy,) = [x for x in lines if x.startswith("pose_requests_in_flight ")]
+        assert busy in ("pose_requests_in_flight 1.0", "pose_requests_in_flight 2.0"), busy
     assert len(each) == 2 and sum(each) == n and min(each) > 0, each  # both answered some
     assert not list(tmp_path.glob("marionette-metrics-*"))  # removed at the end
