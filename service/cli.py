@@ -12,6 +12,7 @@ import logging
 import logging.config
 import os
 import re
+import signal
 import socket
 import sys
 import tempfile
@@ -290,8 +291,29 @@ def main(argv: list[str] | None = None) -> None:
         _run(settings, config, args.workers)
 
 
+#: What a single worker does on SIGHUP (``signal_ignored``): uvicorn handles SIGINT and
+#: SIGTERM only, so SIGHUP's default action killed it at once (exit 129, requests in
+#: flight lost, no line: an ops audit), while with ``--workers N`` uvicorn's supervisor
+#: replaces the workers gracefully. One process cannot replace itself without going
+#: unready for its models' load, and it reads its settings only at start: there is nothing
+#: to reload, so it goes on serving (docs/deploy.md).
+HANGUP = (
+    "ignored: one worker reads its settings and models only at start, so there is nothing "
+    "to reload; restart the service to apply new ones (SIGTERM stops it gracefully)"
+)
+
+
+def _hangup(signum: int, frame: Any) -> None:
+    logging.getLogger("service").warning(
+        json.dumps({"event": "signal_ignored", "signal": "SIGHUP", "detail": HANGUP})
+    )
+
+
 def _run(settings: Settings, config: dict[str, Any], workers: int) -> None:
     import uvicorn
+
+    if workers == 1:  # (with several, uvicorn's supervisor restarts them on SIGHUP)
+        signal.signal(signal.SIGHUP, _hangup)
 
     uvicorn.run(
         "service.app:create_app",
