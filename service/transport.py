@@ -22,7 +22,9 @@ parser keeps whatever a client sends before the blank line that ends them, so fo
 connections each sending an unfinished 50 MB header took a worker from 340 to 620 MB (an
 audit's script on loopback); past the bound the connection gets a 431 problem+json and is
 closed. The parser's own refusals (bytes that are not HTTP) are problem+json too, not
-uvicorn's plain text (:func:`service.errors.raw_answer`).
+uvicorn's plain text (:func:`service.errors.raw_answer`); each of these refusals, 400 or
+431, is counted and logged as the closes below are (``malformed-http``,
+``head-too-large``), with its status and the request id the client got.
 
 A connection's time and number are bounded too, as ops expect of a server facing clients
 it does not know (a slowloris: an audit held a head unfinished for 60 s and more, 1,000

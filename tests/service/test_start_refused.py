@@ -77,7 +77,7 @@ def refused(argv: list[str], env: dict[str, str] | None = None, script: str = ""
          "POSE_IDLE_TIMEOUT_SECONDS or POSE_HEAD_TIMEOUT_SECONDS?"),
         # bounds an audit found open, and nan's message (2026-12-07)
         ({"POSE_DEADLINE_SECONDS": "1e-9"}, [],
-         "POSE_DEADLINE_SECONDS: Input should be greater than or equal to 0.1 (got '1e-9')"),
+         "POSE_DEADLINE_SECONDS: Input should be greater than or equal to 0.01 (got '1e-9')"),
         ({"POSE_DEADLINE_SECONDS": "nan"}, [],
          "POSE_DEADLINE_SECONDS: Input should be a finite number (got 'nan')"),
         ({"POSE_HEAD_TIMEOUT_SECONDS": "inf"}, [],
