@@ -51,6 +51,7 @@ from trainer.data.checks import (
     TAKE_FILES,
     amc_rate_warning,
     case_warnings,
+    crossed_limb_errors,
     dropped_frames_warnings,
     implausible_takes,
     licence_warning,
@@ -462,6 +463,8 @@ def build_dataset(
     kept = [r for r in results if r.positions is not None and len(r.positions)]
     if not kept:
         raise BuildError(f"no frames survived: {len(skipped)} files skipped (listed above)")
+    if crossed := crossed_limb_errors(kept):  # (one limb's sides: trained bones 0.26 m feet)
+        raise MapError("\n".join(crossed))
     clip_infos = [infos[r.job.path] for r in kept]
     positions = np.concatenate([r.positions for r in kept if r.positions is not None])
     frames = np.concatenate([r.frames for r in kept if r.frames is not None])

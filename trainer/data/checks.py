@@ -3,6 +3,8 @@
 - maps against the mocap they read: a source not found, include globs that select no file
   of an archive, a source joint name in none of a map's files (a build failure), files a map
   lost, override / holdout globs that match nothing, a map without a licence;
+- one limb's left and right joints crossed by a map (:func:`crossed_limb_errors`, a build
+  failure);
 - poses against plausible bodies (:func:`sanity_warnings`): per source, per actor and per
   take (one file), the thigh's length (the unit), the head over the pelvis (the up axis),
   the floor and the pelvis height (the root position), the toes ahead of the ankles (the
@@ -21,7 +23,14 @@ from typing import TYPE_CHECKING, Final
 import numpy as np
 import numpy.typing as npt
 
-from core.skeleton import BONE_CHILDREN, BONE_PARENTS, JOINT_INDEX, JOINT_NAMES, bone_lengths
+from core.skeleton import (
+    BONE_CHILDREN,
+    BONE_PARENTS,
+    JOINT_INDEX,
+    JOINT_NAMES,
+    MIRROR,
+    bone_lengths,
+)
 from core.text import close_match
 from trainer.data.asf import CMU_FPS
 from trainer.data.dataset import PoseDataset
@@ -273,6 +282,104 @@ def dropped_frames_warnings(results: Sequence[ClipResult]) -> list[str]:
         out.append(
             f"{r.job.label}: {lost} of its {r.resampled_frames} frames dropped ({why}); "
             "see the drop rule in docs/data.md"
+        )
+    return out
+
+
+# --------------------------------------------------------------------------- crossed limbs
+
+#: The links of a limb whose two joints are both on one side (parent, child), left side:
+#: a map crossing one limb's sides below the torso (``left_foot = "foot.R_end"``,
+#: ``right_foot = "foot.L_end"``) joins a left parent to a right child there.
+SIDE_LINKS: Final = tuple(
+    (int(p), int(c))
+    for p, c in zip(BONE_PARENTS, BONE_CHILDREN, strict=True)
+    if JOINT_NAMES[p].startswith("left_") and JOINT_NAMES[c].startswith("left_")
+)
+#: A link is crossed when, on both sides, the bone as mapped changes its length this many
+#: times more (relative spread over a file's frames) than the bone joining the parent to
+#: the other side's child: a rigid bone keeps its length, so the crossed pairing is the
+#: rigid one. The shipped sources' bones have ratios under 0.4, crossed feet and wrists of
+#: ReActIdle over 190 (a studio audit, 2026-12-07).
+CROSSED_RATIO: Final = 10.0
+#: ... and the bone as mapped changes its length by at least this (relative spread).
+CROSSED_SPREAD: Final = 0.002
+#: Hips and shoulders whose left-right axes point apart (dot < 0) in more than this
+#: fraction of a file's frames: one whole limb's (or both legs' / arms') sides crossed.
+ACROSS_FRACTION: Final = 0.5
+
+
+def _spread(lengths: npt.NDArray[np.float64]) -> float:
+    return float(np.std(lengths) / max(float(np.median(lengths)), 1e-6))
+
+
+def _length(a: npt.NDArray[np.float64], b: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    return np.asarray(np.linalg.norm(a - b, axis=1), dtype=np.float64)
+
+
+def crossed_links(positions: npt.NDArray[np.floating]) -> list[tuple[int, float, float]]:
+    """The left-side links (child joint index, the mapped bone's relative spread, the
+    crossed pairing's) whose sides look crossed in these ``[n, 21, 3]`` poses of one file,
+    and ``(-1, fraction, 0)`` when the hips' and shoulders' left-right axes point apart in
+    most of them (a whole limb crossed)."""
+    p = np.asarray(positions, dtype=np.float64)
+    if len(p) < 2:
+        return []
+    out = []
+    for parent, child in SIDE_LINKS:
+        lp, lc, rp, rc = p[:, parent], p[:, child], p[:, MIRROR[parent]], p[:, MIRROR[child]]
+        mapped = (_spread(_length(lc, lp)), _spread(_length(rc, rp)))
+        crossed = (_spread(_length(rc, lp)), _spread(_length(lc, rp)))
+        if all(
+            m >= CROSSED_SPREAD and m > CROSSED_RATIO * max(c, 1e-4)
+            for m, c in zip(mapped, crossed, strict=True)
+        ):
+            out.append((child, max(mapped), max(crossed)))
+    j = JOINT_INDEX
+    hips = p[:, j["left_hip"]] - p[:, j["right_hip"]]
+    shoulders = p[:, j["left_shoulder"]] - p[:, j["right_shoulder"]]
+    apart = float(((hips * shoulders).sum(axis=1) < 0).mean())
+    if apart > ACROSS_FRACTION:
+        out.append((-1, apart, 0.0))
+    return out
+
+
+def crossed_limb_errors(results: Sequence[ClipResult]) -> list[str]:
+    """A map that crosses one limb's left and right joints (not the whole body's sides:
+    ``swap_sides``, :func:`_problem`): one message per map and crossed link, naming the
+    joints as the map writes them, the first file and how many files show it; [] if none.
+    The build refuses such a map: the crossed bone's frames are dropped, the rest trained
+    with feet 0.26 m long (a studio audit, 2026-12-07)."""
+    found: dict[tuple[str, int], list[tuple[ClipResult, float, float]]] = defaultdict(list)
+    for r in results:
+        if r.error is None and r.positions is not None:
+            for child, mapped, crossed in crossed_links(r.positions):
+                found[(r.job.map.path, child)].append((r, mapped, crossed))
+    out = []
+    for (path, child), hits in sorted(found.items(), key=lambda kv: (kv[0][0], kv[0][1])):
+        r, mapped, crossed = hits[0]
+        joints = r.job.map.joints_for(r.job.relpath)
+        more = f" (and {len(hits) - 1} more files)" if len(hits) > 1 else ""
+        if child < 0:
+            out.append(
+                f"map {path}: the hips' and the shoulders' left-right axes point apart in "
+                f"{mapped:.0%} of the frames of {r.job.label}{more}: one limb's left and right "
+                "joints are crossed from its first joint on (left_hip/right_hip = "
+                f"{str(joints[JOINT_INDEX['left_hip']])!r}/"
+                f"{str(joints[JOINT_INDEX['right_hip']])!r}, left_shoulder/right_shoulder = "
+                f"{str(joints[JOINT_INDEX['left_shoulder']])!r}/"
+                f"{str(joints[JOINT_INDEX['right_shoulder']])!r}): swap that limb's sides"
+            )
+            continue
+        left, right = JOINT_NAMES[child], JOINT_NAMES[MIRROR[child]]
+        parent = JOINT_NAMES[dict((c, p) for p, c in SIDE_LINKS)[child]]
+        out.append(
+            f"map {path}: {left} = {str(joints[child])!r} and {right} = "
+            f"{str(joints[MIRROR[child]])!r} look crossed: the bone {parent} -> {left} changes "
+            f"its length (spread {mapped:.1%} over the kept frames of {r.job.label}{more}; "
+            f"frames further off dropped), while {parent} -> {right} keeps its length "
+            f"({crossed:.1%}): swap the two joints' "
+            "source names (whole-body sides: `swap_sides`)"
         )
     return out
 
