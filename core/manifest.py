@@ -20,6 +20,11 @@ Schema version 1. Kinds:
   a fused graph's answer and its mirror set's fused answer to the mirrored pose and
   targets, taken back (``serving.solve_mirror`` in one run; ``trainer.mirror``). Each
   needs its set's fused graph and its mirror set's.
+
+:func:`write_manifest` records the sha256 of the content it writes (``content_sha256``);
+:func:`load_manifest` serves a manifest whose content differs (edited by hand) under a
+version of its content (:func:`served_version`), so that answers that changed are not named
+by the version of the models as written.
 """
 
 from __future__ import annotations
@@ -30,7 +35,14 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    PrivateAttr,
+    ValidationError,
+    model_validator,
+)
 
 from core.io import sha256_file, write_atomic
 from core.skeleton import (
@@ -440,6 +452,17 @@ class Manifest(_Strict):
     serving: Serving = Serving()
     models: list[ModelEntry]
     provenance: Provenance
+    content_sha256: str | None = Field(
+        default=None,
+        pattern=r"^[0-9a-f]{64}$",
+        description="sha256 of the manifest as written (:func:`content_sha256`: every key "
+        "but this one), set by `write_manifest`; a manifest whose content differs from it "
+        "was edited by hand and is served under a version of its content "
+        "(:func:`load_manifest`).",
+    )
+    #: the ``version`` the file holds, where :func:`load_manifest` serves another (a hand
+    #: edit: :func:`served_version`); else None
+    _written_version: str | None = PrivateAttr(default=None)
 
     @model_validator(mode="after")
     def _complete(self) -> Manifest:
@@ -526,6 +549,11 @@ def load_manifest(models_dir: Path | str, *, verify: bool = True) -> Manifest:
     if verify:
         for entry in manifest.models:
             verify_entry(models_dir, entry)
+    served = served_version(raw, manifest)
+    if served != manifest.version:  # edited by hand: served under its content's version
+        written = manifest.version
+        manifest = manifest.model_copy(update={"version": served})
+        manifest._written_version = written
     return manifest
 
 
@@ -553,15 +581,47 @@ def model_version(entries: Sequence[ModelEntry], serving: Serving) -> str:
     return "mx1-" + hashlib.sha256(text.encode()).hexdigest()[:12]
 
 
-def edited_version(manifest: Manifest) -> str | None:
-    """The version of what ``manifest`` holds (:func:`model_version`) where its own
-    ``version`` is neither that nor its files' alone (the older hash): its serving block or
-    a model entry edited by hand, its answers no longer the ones that version names (an
-    audit, 2026-12-07: ``passes`` 2 -> 3 served as before under the same ``model``); else
-    None. ``pose-trainer serving`` sets the serving block with a new version."""
+def content_sha256(raw: Mapping[str, Any]) -> str:
+    """sha256 of a manifest's content as its file holds it (the parsed JSON ``raw``), every
+    key but ``content_sha256`` itself, as canonical JSON (sorted keys, no spaces): what
+    :func:`write_manifest` records and :func:`load_manifest` compares."""
+    body = {k: v for k, v in raw.items() if k != "content_sha256"}
+    text = json.dumps(body, sort_keys=True, separators=(",", ":"), ensure_ascii=False)
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+
+def served_version(raw: Mapping[str, Any], manifest: Manifest) -> str:
+    """The version ``manifest`` (parsed from ``raw``) is served under: its own ``version``
+    where its content is as written, else one of its content (an audit, 2026-12-07: a
+    hand-edited skeleton, joint order or ``serving.passes`` served other answers under the
+    old ``model``). A manifest that records its content's sha256 (``content_sha256``,
+    written by :func:`write_manifest`) is edited when any key differs: then
+    ``"mx1-" + sha256(version + content sha256)[:12]``. An older one (no such key) is
+    edited when its ``version`` is neither :func:`model_version` of its files and serving
+    block nor its files' alone (the older hash): then :func:`model_version`."""
+    recorded = raw.get("content_sha256")
+    if recorded is not None:
+        digest = content_sha256(raw)
+        if digest == recorded:
+            return manifest.version
+        return "mx1-" + hashlib.sha256(f"{manifest.version} {digest}".encode()).hexdigest()[:12]
     now = model_version(manifest.models, manifest.serving)
     files = "mx1-" + hashlib.sha256("".join(e.sha256 for e in manifest.models).encode()).hexdigest()
-    return None if manifest.version in (now, files[:16]) else now
+    return manifest.version if manifest.version in (now, files[:16]) else now
+
+
+def written_version(manifest: Manifest) -> str | None:
+    """The version ``manifest``'s file holds where :func:`load_manifest` serves it under
+    another (edited by hand: :func:`served_version`); else None."""
+    return manifest._written_version
+
+
+def edited_version(manifest: Manifest) -> str | None:
+    """The version a hand-edited ``manifest`` is served under (:func:`served_version`,
+    which :func:`load_manifest` made its ``version``), else None: its answers are no longer
+    the ones its written version names. ``pose-trainer serving`` sets the serving block
+    with a new version and content sha256."""
+    return manifest.version if manifest._written_version is not None else None
 
 
 def serving_json(serving: Serving) -> dict[str, Any]:
@@ -577,8 +637,18 @@ def manifest_json(manifest: Manifest) -> dict[str, Any]:
     return {**manifest.model_dump(mode="json"), "serving": serving_json(manifest.serving)}
 
 
+def stamped(manifest: Manifest) -> Manifest:
+    """``manifest`` with its content's sha256 (``content_sha256``: :func:`content_sha256`
+    of :func:`manifest_json` as a reader parses it): what :func:`write_manifest` writes."""
+    body = {k: v for k, v in manifest_json(manifest).items() if k != "content_sha256"}
+    digest = content_sha256(json.loads(json.dumps(body)))
+    return manifest.model_copy(update={"content_sha256": digest})
+
+
 def write_manifest(models_dir: Path, manifest: Manifest) -> Path:
+    """Write ``manifest`` (:func:`stamped`: with its content's sha256, so that a hand edit
+    is told at load) as ``models_dir/manifest.json``."""
     path = Path(models_dir) / MANIFEST_NAME
-    text = json.dumps(manifest_json(manifest), indent=2, sort_keys=False) + "\n"
+    text = json.dumps(manifest_json(stamped(manifest)), indent=2) + "\n"
     write_atomic(path, text.encode("utf-8"))
     return path

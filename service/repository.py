@@ -8,7 +8,13 @@ import json
 import logging
 import time
 
-from core.manifest import ManifestError, SkeletonSpec, edited_version, load_manifest
+from core.manifest import (
+    ManifestError,
+    SkeletonSpec,
+    edited_version,
+    load_manifest,
+    written_version,
+)
 from service.engine import Engine
 from service.errors import ModelsFailed, NotReady
 from service.settings import Settings
@@ -99,10 +105,13 @@ class ModelRepository:
             log.warning(
                 json.dumps(
                     {"event": "manifest_edited", "version": engine.version,
-                     "content_version": content, "detail": "manifest.json's serving block or "
-                     "a model entry was edited by hand: its answers are not the ones its "
-                     "version names; set serving settings with `pose-trainer serving`, which "
-                     "gives the models a version of their own"}
+                     "content_version": content,
+                     "written_version": written_version(engine.manifest),
+                     "detail": "manifest.json was edited by hand (its content is not what "
+                     "its content_sha256, or its version, says was written): its answers are "
+                     "not the ones its written version names, so it is served under the "
+                     "version of its content; set serving settings with `pose-trainer "
+                     "serving`, which gives the models a version of their own"}
                 )
             )  # fmt: skip
         inert, why = engine.inert_settings()

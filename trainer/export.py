@@ -30,6 +30,7 @@ from core.manifest import (
     SkeletonSpec,
     TensorSpec,
     model_version,
+    stamped,
     write_manifest,
 )
 from core.skeleton import BONES, FRAME, JOINT_NAMES, NUM_JOINTS, PARENT_NAMES, bone_lengths
@@ -561,6 +562,7 @@ def _export_into(
             training_hosts={k: s.hosts for k, s in trained.states.items()},
         ),
     )
+    manifest = stamped(manifest)
     write_manifest(out, manifest)
     write_model_card(out, manifest)
     assert sample.shape[1] == NUM_JOINTS * 3

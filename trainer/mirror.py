@@ -26,7 +26,14 @@ import onnxruntime as ort
 from onnx import TensorProto, helper, numpy_helper
 
 from core.io import sha256_file, write_atomic
-from core.manifest import Manifest, ModelEntry, load_manifest, manifest_json, write_manifest
+from core.manifest import (
+    Manifest,
+    ModelEntry,
+    load_manifest,
+    manifest_json,
+    stamped,
+    write_manifest,
+)
 from core.skeleton import (
     JOINT_INDEX,
     MIRROR_COLUMNS,
@@ -192,7 +199,7 @@ def add_mirror_graphs(models_dir: Path) -> Manifest:
     out = manifest.model_copy(
         update={"models": entries, "version": model_version(entries, manifest.serving)}
     )
-    out = Manifest.model_validate(manifest_json(out))
+    out = stamped(Manifest.model_validate(manifest_json(out)))
     write_manifest(models_dir, out)
     write_model_card(models_dir, out)
     return out

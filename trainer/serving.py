@@ -22,6 +22,7 @@ from core.manifest import (
     load_manifest,
     manifest_json,
     model_version,
+    stamped,
     write_manifest,
 )
 from trainer.config import SERVING_SETTINGS, TrainConfig, seen_by_losses
@@ -102,7 +103,7 @@ def set_serving(cfg: TrainConfig, models_dir: Path) -> tuple[Manifest, dict[str,
             "provenance": provenance,
         }
     )
-    out = Manifest.model_validate(manifest_json(out))
+    out = stamped(Manifest.model_validate(manifest_json(out)))
     write_manifest(models_dir, out)
     write_model_card(models_dir, out)
     return out, changed

@@ -660,13 +660,17 @@ def test_degenerate_completion_inputs_are_rejected(client: Any, synthetic_poses:
 
 
 def test_a_manifest_edited_by_hand_is_named_at_load(
-    models_dir: Path, tmp_path: Path, caplog: pytest.LogCaptureFixture
+    models_dir: Path,
+    tmp_path: Path,
+    caplog: pytest.LogCaptureFixture,
+    synthetic_poses: PosePairs,
 ) -> None:
     """A serving block edited by hand (``passes`` 2 -> 3: other answers under the same
-    ``model``; an audit, 2026-12-07) is named in a ``manifest_edited`` warning with the
-    version its content has; the shipped folder, and one set with ``pose-trainer serving``
-    (its version recomputed: here by ``core.manifest.model_version``), are not."""
-    from core.manifest import load_manifest, model_version
+    ``model``; an audit, 2026-12-07) is named in a ``manifest_edited`` warning and served,
+    in ``/v1/models`` and in answers, under the version of its content; the shipped folder,
+    and one set with ``pose-trainer serving`` (``write_manifest``: a version and content
+    sha256 of its own), are not."""
+    from core.manifest import load_manifest, write_manifest
 
     edited = tmp_path / "models"
     shutil.copytree(models_dir, edited)
@@ -674,19 +678,21 @@ def test_a_manifest_edited_by_hand_is_named_at_load(
     manifest["serving"]["passes"] = 3
     (edited / "manifest.json").write_text(json.dumps(manifest))
     as_set = load_manifest(edited, verify=False)
+    assert as_set.version != manifest["version"]
+    body = solve_body(synthetic_poses, 0, ["left_wrist"])
     with caplog.at_level(logging.WARNING, logger="service"), make_client(edited) as c:
-        assert c.get("/v1/models").json()["version"] == manifest["version"]
+        assert c.get("/v1/models").json()["version"] == as_set.version
+        assert c.post("/v1/solve", json=body).json()["model"] == as_set.version
     (line,) = [
         json.loads(r.getMessage()) for r in caplog.records if "manifest_edited" in r.getMessage()
     ]
-    assert line["version"] == manifest["version"]
-    assert line["content_version"] == model_version(as_set.models, as_set.serving)
-    assert line["content_version"] != manifest["version"]
-    manifest["version"] = line["content_version"]  # as pose-trainer serving writes it
-    (edited / "manifest.json").write_text(json.dumps(manifest))
+    assert line["version"] == line["content_version"] == as_set.version
+    assert line["written_version"] == manifest["version"]
+    write_manifest(edited, as_set)  # as pose-trainer serving writes it (a version of its own)
     caplog.clear()
     with caplog.at_level(logging.WARNING, logger="service"), make_client(edited) as c:
         assert c.get("/v2/health/ready").status_code == 200
     with caplog.at_level(logging.WARNING, logger="service"), make_client(models_dir) as c:
         assert c.get("/v2/health/ready").status_code == 200
+        assert c.get("/v1/models").json()["version"] == manifest["version"]
     assert not [r for r in caplog.records if "manifest_edited" in r.getMessage()]
