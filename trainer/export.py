@@ -60,9 +60,10 @@ PARITY_TOLERANCE = 1e-5
 def recorded_source(origin: dict[str, Any]) -> dict[str, str]:
     """What the manifest says a source was read from (its ``provenance.data`` entry): an
     archive by its name and sha256 (``verified`` "false" where SHA256SUMS did not list
-    it); an extracted folder by its name and the sha256 of its files' list
-    (``trainer.data.sources.folder_digest``), never by the sum of an archive that was not read
-    (a folder with files taken out was recorded as the whole archive)."""
+    it; ``sha256sums`` "absent" too where there was no SHA256SUMS); an extracted folder by
+    its name and the sha256 of its files' list (``trainer.data.sources.folder_digest``),
+    never by the sum of an archive that was not read (a folder with files taken out was
+    recorded as the whole archive)."""
     if origin.get("kind") == "folder":
         entry = {
             "name": Path(str(origin.get("path", "?"))).name + "/",
@@ -76,6 +77,8 @@ def recorded_source(origin: dict[str, Any]) -> dict[str, str]:
     entry = {"name": str(origin.get("file")), "sha256": str(origin.get("sha256", "not recorded"))}
     if origin.get("verified") is False:
         entry["verified"] = "false"
+        if origin.get("sha256sums") == "absent":  # no SHA256SUMS beside it at all
+            entry["sha256sums"] = "absent"
     return entry
 
 

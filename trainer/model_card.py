@@ -119,7 +119,11 @@ def _archive_line(a: dict[str, str]) -> str:
         return (
             f"- `{a['name']}` (a folder of {files} files{of}): `{a['sha256']}` (of its files' list)"
         )
-    unverified = " (not listed in SHA256SUMS: not verified)" if a.get("verified") == "false" else ""
+    unverified = ""
+    if a.get("sha256sums") == "absent":
+        unverified = " (no SHA256SUMS beside it: not verified)"
+    elif a.get("verified") == "false":
+        unverified = " (not listed in SHA256SUMS: not verified)"
     return f"- `{a['name']}`: `{a['sha256']}`{unverified}"
 
 

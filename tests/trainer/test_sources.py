@@ -84,3 +84,47 @@ def test_an_archive_beside_its_extracted_folder_is_read_and_the_folder_named(
         f"selects) are in {mocap}: the archive was read, the folder not"
     )
     assert any(want in w for w in data.meta["warnings"]), data.meta["warnings"]
+
+
+def test_an_archive_in_a_folder_without_sha256sums_says_so(
+    mocap_clips: Any, tmp_path: Path
+) -> None:
+    """A studio audit (2026-12-07): a mocap folder with no SHA256SUMS at all said
+    ``X.tar.xz: not listed in SHA256SUMS, checksum not verified``, of a file that is not
+    there (and the model card likewise). It now says there is none; with a SHA256SUMS that
+    does not list the archive, as before. The origin, the manifest's entry and the card
+    line say which."""
+    import subprocess
+
+    from trainer.data.build import build_dataset
+    from trainer.export import recorded_source
+    from trainer.model_card import _archive_line
+
+    mocap = tmp_path / "mocap"
+    mocap.mkdir()
+    archive = mocap / "bandai-namco-research-motiondataset.tar.xz"
+    subprocess.run(
+        ["tar", "-cJf", str(archive), "-C", str(mocap_clips.root),
+         "dataset/Bandai-Namco-Research-Motiondataset-1"],
+        check=True,
+    )  # fmt: skip
+    for sums, said, card in (
+        (None, f"no SHA256SUMS in {mocap}: checksum of {archive.name} not verified",
+         "(no SHA256SUMS beside it: not verified)"),
+        ("0" * 64 + "  other.tar.xz\n",
+         f"{archive.name}: not listed in SHA256SUMS, checksum not verified",
+         "(not listed in SHA256SUMS: not verified)"),
+    ):  # fmt: skip
+        if sums is not None:
+            (mocap / "SHA256SUMS").write_text(sums)
+        lines: list[str] = []
+        report = build_dataset(
+            mocap, tmp_path / "d.npz", seed=0, workers=1, progress=False, log=lines.append
+        )
+        assert any(said in line for line in lines), lines
+        assert not any("not listed" in line for line in lines) or sums is not None, lines
+        (origin,) = [a for a in report.meta["archives"] if a["file"] == archive.name]
+        entry = recorded_source(origin)
+        assert entry["verified"] == "false"
+        assert (entry.get("sha256sums") == "absent") is (sums is None), entry
+        assert _archive_line(entry).endswith(card), _archive_line(entry)

@@ -182,10 +182,15 @@ def _extracted_source(
             f"{archive}: sha256 {digest} does not match SHA256SUMS ({expected}); "
             "the archive is corrupt or not the documented one"
         )
+    sums = archive.parent / "SHA256SUMS"
     if expected is None and log is not None:
         from rich.markup import escape
 
-        log(f"[yellow]{escape(archive.name)}: not listed in SHA256SUMS, checksum not verified")
+        if sums.is_file():
+            log(f"[yellow]{escape(archive.name)}: not listed in SHA256SUMS, checksum not verified")
+        else:  # (it said "not listed in SHA256SUMS" of a file that is not there)
+            log(f"[yellow]no SHA256SUMS in {escape(str(archive.parent))}: checksum of "
+                f"{escape(archive.name)} not verified")  # fmt: skip
     if proc is None:
         with tarfile.open(archive) as tf:
             tf.extractall(dest, filter="data")
@@ -194,7 +199,9 @@ def _extracted_source(
         if proc.returncode != 0:
             first = err.decode(errors="replace").strip().splitlines()[:1]
             raise BuildError(f"{archive}: tar failed: {' '.join(first)}")
-    origin = {"kind": "archive", "file": archive.name, "sha256": digest}
+    origin: dict[str, Any] = {"kind": "archive", "file": archive.name, "sha256": digest}
+    if expected is None and not sums.is_file():
+        origin["sha256sums"] = "absent"  # (the card: no SHA256SUMS, not "not listed")
     return SourceInput(
         mocap_map, dest, dict(origin, verified=expected is not None), _all_files(dest)
     )
