@@ -204,7 +204,7 @@ def dataset(
 
     from rich.console import Console
 
-    from trainer.data.build import BuildError, build_dataset, print_summary
+    from trainer.data.build import BuildError, build_dataset, out_problem, print_summary
     from trainer.data.maps import MapError
 
     console = Console() if sys.stdout.isatty() else Console(width=100)
@@ -213,6 +213,9 @@ def dataset(
             f"{out} is a folder: give the dataset file's name (e.g. {out / 'poses.npz'})",
             param_hint="--out",
         )
+    if (problem := out_problem(out, mocap)) is not None:  # (overwritten, or in the mocap)
+        typer.echo(f"error: invalid value for --out: {problem}", err=True)
+        raise typer.Exit(2)
     _check_writable(out.parent, "--out", out)
     try:
         report = build_dataset(

@@ -289,3 +289,33 @@ def test_an_unwritable_dataset_out_is_refused_before_the_build(
     args = ["dataset", "--mocap", str(mocap_clips.root), "--out", str(out)]
     line = _refused(args, "--out", out)
     assert line.endswith(f"{afile} is a file, so {afile / 'data'} cannot be made"), line
+
+
+def test_a_dataset_out_that_is_another_file_or_in_the_mocap_is_refused(
+    mocap_clips: Any, small_dataset: Path, models_dir: Path, tmp_path: Path
+) -> None:
+    """A studio audit (2026-12-07): ``dataset --out models/manifest.json`` overwrote the
+    manifest with a zip, without a word; ``--out <mocap>/x.npz`` wrote into the folder the
+    build reads (its digest changed next build). Both are refused before the build, naming
+    the path, the file left as it was; a dataset file there is rebuilt (``make dataset``)."""
+    import shutil
+
+    victim = tmp_path / "manifest.json"
+    shutil.copy(models_dir / "manifest.json", victim)
+    before = victim.read_bytes()
+    args = ["dataset", "--mocap", str(mocap_clips.root), "--out", str(victim)]
+    line = _refused(args, "--out", victim)
+    assert "exists and is not a dataset file `pose-trainer dataset` wrote" in line, line
+    assert victim.read_bytes() == before
+
+    inside = mocap_clips.root / "poses.npz"
+    args = ["dataset", "--mocap", str(mocap_clips.root), "--out", str(inside)]
+    line = _refused(args, "--out", inside)
+    assert f"is inside the mocap folder {mocap_clips.root}" in line, line
+    assert not inside.exists()
+
+    again = tmp_path / "poses.npz"
+    shutil.copy(small_dataset, again)
+    args = ["dataset", "--mocap", str(mocap_clips.root), "--out", str(again), "--workers", "1"]
+    r = CliRunner().invoke(app, args)
+    assert r.exit_code == 0, r.output

@@ -61,7 +61,13 @@ from trainer.data.checks import (
     unused_glob_warnings,
 )
 from trainer.data.checks import sanity_warnings as sanity_warnings
-from trainer.data.dataset import FORMAT_VERSION, FPS, PoseDataset, save_dataset
+from trainer.data.dataset import (
+    FORMAT_VERSION,
+    FPS,
+    PoseDataset,
+    is_dataset_file,
+    save_dataset,
+)
 from trainer.data.maps import (
     MapError,
     MocapMap,
@@ -388,6 +394,8 @@ def build_dataset(
     mocap_dir = Path(mocap_dir)
     if not mocap_dir.is_dir():
         raise BuildError(f"{mocap_dir}: mocap folder not found")
+    if (problem := out_problem(Path(out), mocap_dir)) is not None:
+        raise BuildError(f"--out {problem}")
     required = maps_dir is not None  # --maps: the user's own sources, each one needed
     maps_dir = Path(maps_dir) if maps_dir is not None else Path(__file__).parent.parent / "maps"
     maps = load_maps(maps_dir)
@@ -583,6 +591,27 @@ def build_dataset(
     meta["build_seconds"] = round(time.perf_counter() - t0, 1)
     out = save_dataset(out, dataset)
     return BuildReport(meta=meta, dataset=dataset, out=out)
+
+
+def out_problem(out: Path, mocap_dir: Path) -> str | None:
+    """Why ``out`` may not be written by a build reading ``mocap_dir``, or None: a file
+    there that is not a dataset this tool wrote (a studio audit, 2026-12-07: a
+    ``manifest.json`` became a zip without a word), or a path inside the mocap folder (the
+    build reads it: the dataset written there changed that folder's digest next build).
+    A dataset file there is rebuilt (overwritten), as ``make dataset`` does."""
+    if (out.exists() or out.is_symlink()) and not is_dataset_file(out):
+        return (
+            f"{out}: exists and is not a dataset file `pose-trainer dataset` wrote (not "
+            "overwritten): give another --out, or move that file away first"
+        )
+    try:
+        out.resolve().relative_to(mocap_dir.resolve())
+    except ValueError:
+        return None
+    return (
+        f"{out}: is inside the mocap folder {mocap_dir} (the build reads it: a dataset "
+        "written there changes that folder's sources): write it elsewhere, e.g. data/"
+    )
 
 
 def _group_by_actor(

@@ -203,6 +203,23 @@ def save_dataset(path: str | Path, dataset: PoseDataset) -> Path:
     return path
 
 
+def is_dataset_file(path: str | Path) -> bool:
+    """Whether ``path`` is a dataset file `pose-trainer dataset` wrote (any format version:
+    a zip whose ``meta`` is a JSON object with ``format_version`` and ``joints``); only
+    ``meta`` is read."""
+    path = Path(path)
+    if not path.is_file() or not zipfile.is_zipfile(path):
+        return False
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            if "meta" not in npz.files:
+                return False
+            meta = json.loads(str(npz["meta"][()]))
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError):
+        return False
+    return isinstance(meta, dict) and "format_version" in meta and "joints" in meta
+
+
 def load_dataset(path: str | Path) -> PoseDataset:
     """Load and validate a dataset file (``DatasetError`` with a clear reason)."""
     path = Path(path)
