@@ -145,11 +145,9 @@ def _recipe(manifest: Manifest) -> str:
     folders = sorted({str(Path(str(m.get("file", "?"))).parent) for m in maps})
     if folders in ([], ["trainer/maps"]):  # the shipped maps: --maps' default
         flag = ""
-    elif len(folders) == 1:
-        flag = f" --maps {folders[0]}"
-    else:  # (one folder of maps per build)
+    else:  # (named by file name: trainer.data.build.map_name; one folder of maps a build)
         files = ", ".join(sorted(Path(str(m.get("file", "?"))).name for m in maps))
-        flag = f" --maps <one folder holding {files}>"
+        flag = f" --maps <the folder holding {files}>"
     return (
         f"pose-trainer dataset --mocap <the folder holding {holding}>{flag} --out {dataset}\n"
         f"pose-trainer train --config <its config> --dataset {dataset} "

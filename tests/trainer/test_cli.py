@@ -171,7 +171,7 @@ def test_a_studio_model_card_names_its_own_paths_and_sources() -> None:
               "out_dir": "models-studio"}  # fmt: skip
     dataset = {**prov.dataset, "licences": {"studio": "internal use only"},
                "source_frames": {"studio": 27735}, "resampled_frames": {"studio": 34663},
-               "holdout": {}, "maps": [{"file": "/data/studio-maps/studio.toml",
+               "holdout": {}, "maps": [{"file": "studio.toml",
                                         "source": "studio", "sha256": "0" * 64}]}  # fmt: skip
     data = [{"name": "studio/", "sha256": "1" * 64, "kind": "folder", "files": "10"}]
     studio = shipped.model_copy(update={
@@ -181,9 +181,9 @@ def test_a_studio_model_card_names_its_own_paths_and_sources() -> None:
     })  # fmt: skip
     card = render(studio)
     recipe = (
-        "pose-trainer dataset --mocap <the folder holding studio/> --maps /data/studio-maps "
-        "--out data/studio.npz\npose-trainer train --config <its config> --dataset "
-        "data/studio.npz --run-dir runs/studio --out models-studio\n"
+        "pose-trainer dataset --mocap <the folder holding studio/> --maps <the folder "
+        "holding studio.toml> --out data/studio.npz\npose-trainer train --config <its config> "
+        "--dataset data/studio.npz --run-dir runs/studio --out models-studio\n"
     )
     assert recipe in card, card
     assert "--out data/poses.npz" not in card and "default.toml" not in card

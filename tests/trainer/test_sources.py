@@ -3,6 +3,7 @@ linked folders, an archive beside its extracted folder."""
 
 from __future__ import annotations
 
+import json
 import shutil
 from pathlib import Path
 from typing import Any
@@ -128,3 +129,28 @@ def test_an_archive_in_a_folder_without_sha256sums_says_so(
         assert entry["verified"] == "false"
         assert (entry.get("sha256sums") == "absent") is (sums is None), entry
         assert _archive_line(entry).endswith(card), _archive_line(entry)
+
+
+def test_a_map_is_recorded_by_its_name_not_a_local_path(mocap_clips: Any, tmp_path: Path) -> None:
+    """A studio audit (2026-12-07): ``meta["maps"][].file`` (the models'
+    ``provenance.dataset.maps``) kept a map's absolute local path, though sources are named
+    by name. A map of one's own is now named by its file name, with its sha256; a shipped
+    one by its place in the repository."""
+    import hashlib
+
+    from trainer.data.build import build_dataset
+
+    shipped = Path(__file__).resolve().parents[2] / "trainer" / "maps" / "bandai_namco.toml"
+    maps = tmp_path / "my maps"
+    maps.mkdir()
+    shutil.copy(shipped, maps / "studio_bandai.toml")
+    mocap = tmp_path / "mocap"
+    shutil.copytree(mocap_clips.root / "dataset", mocap / "dataset")
+    want = hashlib.sha256(shipped.read_bytes()).hexdigest()
+    for folder, name in ((maps, "studio_bandai.toml"), (None, "trainer/maps/bandai_namco.toml")):
+        report = build_dataset(
+            mocap, tmp_path / "d.npz", maps_dir=folder, workers=1, progress=False
+        )
+        (entry,) = [m for m in report.meta["maps"] if m["source"] == "bandai-namco"]
+        assert entry == {"source": "bandai-namco", "file": name, "sha256": want}, entry
+        assert str(tmp_path) not in json.dumps(report.meta["maps"])

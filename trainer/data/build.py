@@ -537,7 +537,7 @@ def build_dataset(
         "joints": list(JOINT_NAMES),
         "archives": [dict(s.origin, source=s.map.source) for s in sources],
         "maps": [
-            {"source": s.map.source, "file": _display_path(s.map.path), "sha256": s.map.sha256}
+            {"source": s.map.source, "file": map_name(s.map.path), "sha256": s.map.sha256}
             for s in sources
         ],
         "licences": {s.map.source: s.map.licence for s in sources},
@@ -623,11 +623,19 @@ def _group_by_actor(
     return dict(sorted(groups.items()))
 
 
-def _display_path(path: str) -> str:
-    try:
-        return str(Path(path).resolve().relative_to(Path.cwd().resolve()))
-    except ValueError:
-        return str(path)
+#: The shipped maps' folder, as the provenance names it (``trainer/maps/<file>``).
+SHIPPED_MAPS = Path(__file__).resolve().parent.parent / "maps"
+
+
+def map_name(path: str) -> str:
+    """How the dataset (and the models' provenance) names a map file: a shipped map by its
+    place in the repository (``trainer/maps/reactidle.toml``), any other by its file name
+    (``studio.toml``; with its sha256 beside it), never a local path (a studio's
+    ``/home/<user>/maps/studio.toml`` was recorded, a studio audit, 2026-12-07)."""
+    resolved = Path(path).resolve()
+    if resolved.parent == SHIPPED_MAPS:
+        return f"trainer/maps/{resolved.name}"
+    return resolved.name
 
 
 # --------------------------------------------------------------------------- summary
