@@ -267,6 +267,30 @@ def test_reactidle_floor_spine2_and_collars(more_mocap: Path) -> None:
             "metres per unit (a finite number > 0), got 1e999",
         ),
         (lambda t: t.replace('split = "train"', 'split = "holdout"'), "split must be one of"),
+        # a studio audit (2026-12-07): the value received, the key meant
+        (
+            lambda t: t.replace('up_axis = "+Y"', 'up_axis = "-Z"'),
+            "'up_axis' must be one of ['+Y', '+Z'], got '-Z'",
+        ),
+        (
+            lambda t: t.replace('up_axis = "+Y"', 'up_axis = "+z"'),
+            "got '+z'; did you mean '+Z'?",
+        ),
+        (
+            lambda t: t.replace('up_axis = "+Y"', 'up_axis = "+Y"\nframe_rate = 60'),
+            "unknown keys ['frame_rate']; known: ['archive', 'description', 'exclude', "
+            "'format', 'holdout', 'include', 'joints', 'licence', 'metadata', 'override', "
+            "'reader', 'root_position', 'skeleton', 'source', 'swap_sides', 'unit', 'up_axis']; "
+            "'frame_rate': did you mean 'fps'? it is set per file, in an [[override]] (for "
+            'every file: glob = "**", fps = ...)',
+        ),
+        (
+            lambda t: t.replace("licence =", "license ="),
+            "unknown keys ['license']; known: ['archive', 'description', 'exclude', 'format', "
+            "'holdout', 'include', 'joints', 'licence', 'metadata', 'override', 'reader', "
+            "'root_position', 'skeleton', 'source', 'swap_sides', 'unit', 'up_axis']; "
+            "'license': did you mean 'licence'?",
+        ),
     ],
 )
 def test_bad_new_map_keys_are_named(tmp_path: Path, edit: Any, message: str) -> None:

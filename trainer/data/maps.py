@@ -19,7 +19,7 @@ import tomllib
 from collections.abc import Collection, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any, Final, Protocol
 
 import numpy as np
 import numpy.typing as npt
@@ -444,6 +444,47 @@ def _check_distinct(joints: dict[str, JointSource], where: str, changed: Collect
             )
 
 
+def _up_axis_error(where: str, value: Any) -> str:
+    """The message of an ``up_axis`` not one of :data:`UP_AXES`, with the value received
+    (``"-Z"`` was refused without it: a studio audit, 2026-12-07)."""
+    return (
+        f"{where}: 'up_axis' must be one of {sorted(UP_AXES)}, got {clip(repr(value), QUOTE)}"
+        + did_you_mean(str(value), UP_AXES)
+    )
+
+
+#: Names of a map key someone may write for it, which no spelling match finds.
+_KEY_ALIASES: Final = {
+    "frame_rate": "fps",
+    "framerate": "fps",
+    "frames_per_second": "fps",
+    "rate": "fps",
+    "frame_time": "fps",
+    "up": "up_axis",
+    "units": "unit",
+    "scale": "unit",
+    "license": "licence",
+    "mirror": "swap_sides",
+    "overrides": "override",
+}
+
+
+def _key_hint(name: str) -> str:
+    """For an unknown top-level key: ``"; 'frame_rate': did you mean 'fps'? ..."`` where a
+    known key resembles it (by spelling or :data:`_KEY_ALIASES`; an override's, as ``fps``,
+    with how to set it), else '' (a studio audit, 2026-12-07: ``frame_rate`` suggested
+    nothing)."""
+    key = _KEY_ALIASES.get(name.casefold()) or close_match(name, _TOP_KEYS | _OVERRIDE_KEYS)
+    if key is None:
+        return ""
+    if key in _TOP_KEYS:
+        return f"; {name!r}: did you mean {key!r}?"
+    how = "it is set per file, in an [[override]]" + (
+        f' (for every file: glob = "**", {key} = ...)' if key != "glob" else ""
+    )
+    return f"; {name!r}: {how}" if key == name else f"; {name!r}: did you mean {key!r}? {how}"
+
+
 def _parse_override(item: Any, index: int, file: str, reader: str) -> Override:
     where = f"{file}: [[override]] #{index + 1}"
     if not isinstance(item, dict) or not isinstance(item.get("glob"), str):
@@ -469,7 +510,7 @@ def _parse_override(item: Any, index: int, file: str, reader: str) -> Override:
             values[key] = value
         elif key == "up_axis":
             if value not in UP_AXES:
-                raise MapError(f"{where}: 'up_axis' must be one of {sorted(UP_AXES)}")
+                raise MapError(_up_axis_error(where, value))
             values[key] = value
         elif key == "joints":
             values[key] = _parse_joints(value, f"{where} joints", complete=False)
@@ -548,7 +589,8 @@ def load_map(path: str | Path) -> MocapMap:
         )
     unknown = sorted(set(data) - _TOP_KEYS)
     if unknown:
-        raise MapError(f"{file}: unknown keys {unknown}; known: {sorted(_TOP_KEYS)}")
+        hints = "".join(_key_hint(k) for k in unknown)
+        raise MapError(f"{file}: unknown keys {unknown}; known: {sorted(_TOP_KEYS)}{hints}")
     source = data.get("source")
     if not isinstance(source, str) or not re.fullmatch(r"[a-z0-9][a-z0-9._-]*", source):
         raise MapError(f"{file}: 'source' must be a lower-case slug like 'my-studio'")
@@ -564,7 +606,7 @@ def load_map(path: str | Path) -> MocapMap:
     scale, unit_name = _parse_unit(data.get("unit", "m"), file, reader)
     up_axis = data.get("up_axis", "+Y")
     if up_axis not in UP_AXES:
-        raise MapError(f"{file}: 'up_axis' must be one of {sorted(UP_AXES)}")
+        raise MapError(_up_axis_error(file, up_axis))
     root_position = data.get("root_position", "replace")
     if root_position not in ROOT_POSITIONS or (root_position == "add" and reader != "bvh"):
         raise MapError(f"{file}: 'root_position' must be one of {list(ROOT_POSITIONS)} (BVH)")
