@@ -17,6 +17,13 @@ app = typer.Typer(
 )
 
 
+#: What an interrupted ``train`` / ``export`` says after "interrupted; " (Ctrl-C, SIGINT;
+#: exit 130): every stage checkpoints each epoch (written whole: ``core.io.write_atomic``)
+#: and resumes from there; the export writes a folder beside ``out_dir`` and renames it.
+INTERRUPTED = (
+    "re-run the same command to resume: each stage resumes from its last epoch's "
+    "checkpoint in {run_dir} (--fresh starts every stage anew)"
+)
 #: ``--accept-implausible``'s help (``train``, ``export``).
 ACCEPT_HELP = (
     "Train on a dataset whose poses look implausible for their map (a wrong `unit` or "
@@ -120,15 +127,18 @@ def _train_and_export(
     t0 = time.perf_counter()
     try:
         trained = train_all(cfg, fresh=fresh)
+        if int(__import__("os").environ.get("RANK", "0")) != 0 or not export:
+            return
+        from trainer.export import evaluate, export_all
+
+        metrics = evaluate(cfg, trained)
+        manifest = export_all(cfg, trained, metrics)
     except (DatasetError, CheckpointError) as exc:  # missing, unreadable, a split empty
         typer.echo(f"error: {exc}", err=True)
         raise typer.Exit(1) from None
-    if int(__import__("os").environ.get("RANK", "0")) != 0 or not export:
-        return
-    from trainer.export import evaluate, export_all
-
-    metrics = evaluate(cfg, trained)
-    manifest = export_all(cfg, trained, metrics)
+    except KeyboardInterrupt:  # (exit 130 without a word: a studio audit, 2026-12-07)
+        typer.echo(f"interrupted; {INTERRUPTED.format(run_dir=cfg.run_dir)}", err=True)
+        raise typer.Exit(130) from None
     seconds = time.perf_counter() - t0
     table = Table(title=f"models in {cfg.out_dir} (manifest {manifest.version})")
     for col in ("model", "params", "bytes", "val", "test"):

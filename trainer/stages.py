@@ -19,6 +19,7 @@ import json
 import math
 import os
 import platform
+import re
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
@@ -237,6 +238,20 @@ def save_checkpoint(
     write_atomic(path, buf.getvalue())
 
 
+def whole_sentences(text: str, limit: int = 200) -> str:
+    """The first line of ``text`` cut after its last whole sentence within ``limit``
+    characters (a first sentence longer than that cut at a word, with "…"): torch's
+    "...there is a high likelihood that your checkpoint file is" was cut mid-sentence at
+    200 characters (a studio audit, 2026-12-07)."""
+    line = (text.strip().splitlines() or [""])[0].strip()
+    if len(line) <= limit:
+        return line
+    ends = [m.end() for m in re.finditer(r"[.!?](?=\s|$)", line) if m.end() <= limit]
+    if ends:
+        return line[: ends[-1]]
+    return line[: limit - 1].rsplit(" ", 1)[0] + "…"
+
+
 def load_checkpoint(
     path: Path, model: nn.Module, optim: torch.optim.Optimizer, tags: tuple[str, ...],
     dataset: str = "", content: str = "",
@@ -254,7 +269,7 @@ def load_checkpoint(
         if not isinstance(ckpt, dict):
             raise TypeError(f"a {type(ckpt).__name__}, not a checkpoint's table")
     except Exception as exc:  # truncated, not torch's, pickled elsewhere: whatever it is
-        why = (str(exc).strip().splitlines() or [type(exc).__name__])[0][:200]
+        why = whole_sentences(str(exc)) or type(exc).__name__
         raise CheckpointError(
             f"{path}: not a readable checkpoint ({why}); delete it (its stage trains anew) "
             "or train with --fresh (every stage anew)"

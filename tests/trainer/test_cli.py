@@ -114,7 +114,62 @@ def test_a_damaged_checkpoint_is_named_with_what_to_do(small_dataset: Path, tmp_
     assert "Traceback" not in r.output, r.output
     assert f"error: {run / 'autoencoder.pt'}: not a readable checkpoint (" in text, r.output
     assert "delete it (its stage trains anew) or train with --fresh" in text, r.output
+    why = text.split("not a readable checkpoint (", 1)[1].split("); delete it", 1)[0]
+    assert why.endswith((".", "…")), why  # (torch's was cut mid-sentence: "...file is")
     assert not out.exists()
+
+
+def test_whole_sentences_cuts_a_reason_after_a_sentence() -> None:
+    from trainer.stages import whole_sentences
+
+    torch_says = (
+        "PytorchStreamReader failed reading zip archive: failed finding central directory. "
+        "This is an internal miniz error. If you are seeing this error, there is a high "
+        "likelihood that your checkpoint file is corrupted. This can happen if the "
+        "checkpoint was not saved properly.\nsecond line"
+    )
+    assert whole_sentences(torch_says) == (
+        "PytorchStreamReader failed reading zip archive: failed finding central directory. "
+        "This is an internal miniz error."
+    )
+    assert whole_sentences("short reason") == "short reason"
+    cut = whole_sentences("word " * 60)
+    assert len(cut) <= 200 and cut.endswith(" word…"), cut
+
+
+def test_an_interrupted_training_says_how_to_resume(small_dataset: Path, tmp_path: Path) -> None:
+    """A studio audit (2026-12-07): Ctrl-C (SIGINT) during training exited 130 without a
+    word. It now says it was interrupted and that re-running resumes (each stage
+    checkpoints every epoch), exit 130; the checkpoint is there."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    run, out = tmp_path / "run", tmp_path / "models"
+    cmd = [sys.executable, "-m", "trainer.cli", "train", "--quick", "--dataset",
+           str(small_dataset), "--run-dir", str(run), "--out", str(out)]  # fmt: skip
+    env = {**os.environ, "PYTHONUNBUFFERED": "1", "COLUMNS": "200"}
+    proc = subprocess.Popen(
+        cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+        cwd=Path(__file__).resolve().parents[2],
+    )  # fmt: skip
+    assert proc.stderr is not None
+    deadline = time.monotonic() + 120
+    said = []
+    for line in proc.stderr:  # two epochs said: the first one's checkpoint written
+        said.append(line)
+        if sum(" epoch " in s for s in said) >= 2 or time.monotonic() > deadline:
+            break
+    proc.send_signal(signal.SIGINT)
+    rest, err = proc.communicate(timeout=120)
+    err = "".join(said) + err
+    assert proc.returncode == 130, (rest, err)
+    assert "interrupted; re-run the same command to resume" in err, err
+    assert str(run) in " ".join(err.split()), err
+    assert "Traceback" not in err, err
+    assert list(run.glob("*.pt")), list(run.iterdir())
 
 
 def test_a_dataset_of_implausible_bodies_is_refused_unless_accepted(
