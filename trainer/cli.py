@@ -163,8 +163,9 @@ def train(
     quick: Annotated[
         bool,
         typer.Option(
-            help="Seconds-long smoke run of every stage: checkpoints in runs/quick, models in "
-            "<run dir>/models (unless --run-dir / --out)."
+            help="Smoke run of every stage and the export (about a minute: the training a few "
+            "seconds, the evaluation and export the rest): checkpoints in runs/quick, models "
+            "in <run dir>/models (unless --run-dir / --out)."
         ),
     ] = False,
     fresh: Annotated[bool, typer.Option(help="Ignore checkpoints; start anew.")] = False,
