@@ -12,13 +12,13 @@ had the hips closer than 80 % of the body's width, down to 26 %). A character's 
 skeleton cannot follow that (its pelvis is one joint), so its answer then moved far from
 the canonical one.
 
-:func:`keep_pairs` turns each pair, after the bone pass, to the angle the two bones make
-in the start pose, as one rigid part: the pair's frame (across: from the right joint to
-the left; up: their bisector without its across part) goes where the answer's frame is,
-so the pair faces as the networks put it. Bone lengths are the answer's (the bone pass's);
-every joint below a moved hip or collar moves with it, so the legs and arms keep their
-bones and directions. A pair whose directions are degenerate (a zero-length bone, the two
-parallel) is left as it is.
+:func:`keep_pairs` turns each pair the answer squeezed (:data:`SQUEEZED`), after the bone
+pass, to the angle the two bones make in the start pose, as one rigid part: the pair's
+frame (across: from the right joint to the left; up: their bisector without its across
+part) goes where the answer's frame is, so the pair faces as the networks put it. Bone
+lengths are the answer's (the bone pass's); every joint below a moved hip or collar moves
+with it, so the legs and arms keep their bones and directions. A pair whose directions are
+degenerate (a zero-length bone, the two parallel) is left as it is.
 
 Batched numpy over ``[..., 21, 3]``: the reference the compiled kernel
 (:func:`keep_pairs_item`, in ``core.compiled.unscale``) is held to in tests.
@@ -45,6 +45,11 @@ PAIRS: npt.NDArray[np.int64] = np.array(
 )
 #: A direction or frame axis this short is undefined (the pair is left as it is).
 TINY = 1e-12
+#: A pair whose two joints lie nearer each other than this share of their distance in the
+#: start is squeezed: only such a pair is turned back (a turn of every pair, item 65 of
+#: docs/generalisation-3.md, moved the arms and legs hung from it with every small change
+#: of the networks' pair: jumps between frames of cleaned clips 65 -> 93 in exact reach).
+SQUEEZED = 0.8
 
 
 def _frames(a: F64, b: F64) -> tuple[F64, Bool]:
@@ -62,8 +67,9 @@ def _frames(a: F64, b: F64) -> tuple[F64, Bool]:
 
 
 def keep_pairs(positions: npt.ArrayLike, reference: npt.ArrayLike) -> F64:
-    """``positions`` ``[..., 21, 3]`` with each pair of :data:`PAIRS` turned to the angle
-    it makes in ``reference`` (broadcastable; the start pose), subtrees carried."""
+    """``positions`` ``[..., 21, 3]`` with each pair of :data:`PAIRS` :data:`SQUEEZED`
+    turned to the angle it makes in ``reference`` (broadcastable; the start pose), subtrees
+    carried."""
     out = np.array(positions, dtype=np.float64)
     ref = np.asarray(reference, dtype=np.float64)
     for top, left, right in PAIRS:
@@ -74,6 +80,7 @@ def keep_pairs(positions: npt.ArrayLike, reference: npt.ArrayLike) -> F64:
         lc = np.linalg.norm(c, axis=-1, keepdims=True)
         ld = np.linalg.norm(d, axis=-1, keepdims=True)
         lens_ok = ((la > TINY) & (lb > TINY) & (lc > TINY) & (ld > TINY))[..., 0]
+        lens_ok &= np.linalg.norm(c - d, axis=-1) < SQUEEZED * np.linalg.norm(a - b, axis=-1)
         a, b = a / np.where(la > TINY, la, 1.0), b / np.where(lb > TINY, lb, 1.0)
         c, d = c / np.where(lc > TINY, lc, 1.0), d / np.where(ld > TINY, ld, 1.0)
         f_ref, ok_ref = _frames(a, b)
@@ -132,6 +139,12 @@ def keep_pairs_item(out: F64, ref: F64) -> None:  # pragma: no cover - compiled
         la, lb = _unit3(ref, left, top, a), _unit3(ref, right, top, b)
         lc, ld = _unit3(out, left, top, c), _unit3(out, right, top, d)
         if la == 0.0 or lb == 0.0 or lc == 0.0 or ld == 0.0:
+            continue
+        w_ref = w_out = 0.0
+        for i in range(3):
+            w_ref += (ref[left, i] - ref[right, i]) ** 2
+            w_out += (out[left, i] - out[right, i]) ** 2
+        if not np.sqrt(w_out) < SQUEEZED * np.sqrt(w_ref):
             continue
         if not (_frame_into(a, b, f_ref) and _frame_into(c, d, f_out)):
             continue

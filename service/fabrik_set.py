@@ -19,12 +19,13 @@ import numpy as np
 import numpy.typing as npt
 
 from core import compiled_fabrik
+from core.rigid import SQUEEZED
 from core.skeleton import JOINT_INDEX
 
 F64 = npt.NDArray[np.floating[Any]]
 #: An answer whose hips are nearer each other than this share of the start's distance has
-#: folded them onto one side of the pelvis.
-FOLDED = 0.8
+#: folded them onto one side of the pelvis (as ``serving.keep_pairs`` calls a pair squeezed).
+FOLDED = SQUEEZED
 #: The rigid answer is kept where it reaches every target the folded one reached and the
 #: others no more than this farther (metres, canonical): a valid body before a few mm.
 SLACK = 0.01

@@ -221,5 +221,5 @@ def test_a_pelvis_dragged_over_pinned_feet_keeps_the_hips_apart(
     ours, errors, pins = folds(shipped)
     monkeypatch.setattr(fabrik_set, "FOLDED", 0.0)
     theirs, before, _ = folds(Engine(models_dir, serving={"keep_pairs": False}))
-    assert theirs >= 15 and ours <= 6, (theirs, ours)
+    assert theirs >= 15 and ours <= 8, (theirs, ours)
     assert pins.max() <= 1e-3 and (errors <= np.maximum(before, 1e-3) + 0.01).all()
