@@ -206,9 +206,10 @@ class Serving(_Strict):
     keep_pairs: bool = Field(
         default=False,
         description="After the bone pass, the two hips on the pelvis and the two collars on "
-        "the chest turn, each pair as one rigid part, to the angle they make in the start "
-        "pose (the body's width between them kept), facing as the networks put them, the "
-        "legs and arms moved with them (core.rigid).",
+        "the chest, where the networks put them nearer each other than 80 % of their "
+        "distance in the start, turn, each pair as one rigid part, to the angle they make in "
+        "the start pose (the body's width between them kept), facing as the networks put "
+        "them, the legs and arms moved with them (core.rigid).",
     )
     keep_feet: bool = Field(
         default=False,
