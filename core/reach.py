@@ -11,7 +11,8 @@ pelvis placed by a weighted fit was 0.4-1.5 mm off, and in soft reach a lowered 
 ended 3-6 cm from where the canonical answer had put it.
 
 :func:`polish` closes what is left on the character itself: every rotatable joint above a
-met point (targets and pins) turns, and the root moves, by damped least-squares steps
+met point (targets and pins) turns but those above the pelvis's joint (:func:`_over_pelvis`:
+a ground root over the hips is left as it was), and the root moves, by damped least-squares steps
 (Levenberg-Marquardt, at most :data:`_MAX_TURN` a step) in the character's own bone
 lengths. Pins weigh :data:`_PIN_WEIGHT` targets and no step takes one farther than half
 the tolerance (:data:`_HOLD`; at least 0.5 mm on a 1 m reach, :data:`_SLACK`, brought
@@ -66,6 +67,33 @@ def _ancestry(skel: Skeleton) -> npt.NDArray[np.bool_]:
     return out
 
 
+def _over_pelvis(
+    skel: Skeleton, tree: npt.NDArray[np.bool_], pelvis: int, hang: npt.NDArray[np.bool_]
+) -> npt.NDArray[np.bool_]:
+    """``[J]``: True for the joints above the pelvis's joint ``pelvis`` that the polish leaves
+    as they are (a ground root over the hips: Bandai-Namco's ``joint_Root``, UE's
+    ``Reference``). The pelvis's joint turns the whole body, and it or the joint whose
+    translation the polish moves carries it, so a turn of a joint above only swings the body
+    about another point (a 2-11 degree turn of a root that is the identity in every frame
+    of the clip). Kept movable: one that a met point (``tree``: ancestry ``[J, J]``;
+    ``hang``: which met points hang from which joint, ``[J, n]``) hangs from other than
+    through the pelvis's joint (a prop on the root), and, where the pelvis's joint cannot
+    turn, the nearest rotatable joint above it (nothing below can turn the body)."""
+    out = tree[:, pelvis].copy()
+    out[pelvis] = False
+    through = hang[pelvis]
+    for j in np.flatnonzero(out):
+        if (hang[j] & ~through).any():
+            out[j] = False
+    if not skel.rotatable[pelvis]:
+        b = skel.parents[pelvis]
+        while b >= 0 and not skel.rotatable[b]:
+            b = skel.parents[b]
+        if b >= 0:
+            out[b] = False
+    return out
+
+
 def polish(
     skel: Skeleton,
     pose: Pose,
@@ -97,8 +125,12 @@ def polish(
     if float(start[:n].max()) <= tolerance * 0.1:
         return set()
     anchors = np.array([int(jmap.joints[j]) for j in met + free], dtype=np.intp)
-    below = _ancestry(skel)[:, anchors]  # [J, K]: the point hangs from the joint
-    movable = [b for b in range(skel.size) if skel.rotatable[b] and below[b, :n].any()]
+    tree = _ancestry(skel)
+    below = tree[:, anchors]  # [J, K]: the point hangs from the joint
+    over = _over_pelvis(skel, tree, int(jmap.joints[_PELVIS]), below[:, :n])
+    movable = [
+        b for b in range(skel.size) if skel.rotatable[b] and below[b, :n].any() and not over[b]
+    ]
     moves = root is not None and bool(below[root, :n].any())
     if not movable and not moves:
         return set()

@@ -210,3 +210,73 @@ def _chain_fk(parents: Any, rotations: F64, translations: F64) -> tuple[F64, F64
         (True,) * n, (False,) * n,
     )  # fmt: skip
     return forward_kinematics(skel, Pose(rotations, translations))
+
+
+#: a polish's edits of the Bandai-Namco frame: (canonical joint, move in units of the
+#: trunk along x, y, z, both ankles pinned?)
+_GROUND_EDITS = [
+    ("pelvis", (0.1, -0.15, 0.05), True),
+    ("pelvis", (-0.1, 0.0, 0.1), False),
+    ("head", (0.15, -0.05, 0.1), True),
+    ("right_wrist", (0.1, 0.1, -0.15), False),
+    ("left_wrist", (-0.2, 0.1, 0.1), True),
+]
+
+
+def _ground_edits(
+    skel: Skeleton, pose: Pose, jmap: JointMap, root: int
+) -> list[tuple[Pose, set[int], float]]:
+    """Each of :data:`_GROUND_EDITS` polished from ``pose`` (the root's translation
+    ``root``): the new pose, the joints changed and the target's miss."""
+    out = []
+    for joint, move, pinned in _GROUND_EDITS:
+        new, pts, tol, pins = _edit((skel, pose, jmap))
+        trunk = float(np.linalg.norm(pts[JOINT_INDEX["head"]] - pts[0]))
+        goal = pts[JOINT_INDEX[joint]] + trunk * np.array(move)
+        target = [(JOINT_INDEX[joint], goal)]
+        changed = polish(skel, new, jmap, target, pins if pinned else [], tol, root)
+        miss = float(np.linalg.norm(_points(skel, new, jmap)[JOINT_INDEX[joint]] - goal))
+        out.append((new, changed, miss))
+    return out
+
+
+def test_a_ground_root_above_the_hips_is_left_as_it_was(
+    bandai: tuple[Skeleton, Pose, JointMap],
+) -> None:
+    """Bandai-Namco's ``joint_Root`` sits on the floor above ``Hips`` and is the identity in
+    every frame; the hips carry their own position channels. An audit found 14 of 24
+    ordinary edits turning it, by up to 10.9 degrees (the polish turned every joint above
+    a target or pin). The pelvis's joint turns and carries the body, so the root is left
+    bit for bit and the targets are still met: the same edits with the hips unable to turn
+    (nothing below can turn the body) do turn it."""
+    skel, pose, jmap = bandai
+    ground, hips = skel.names.index("joint_Root"), skel.names.index("Hips")
+    assert jmap.joints[0] == hips and skel.parents[hips] == ground and skel.translatable[hips]
+    tol = _edit(bandai)[2]
+    for new, changed, miss in _ground_edits(skel, pose, jmap, hips):
+        assert changed and ground not in changed and miss <= tol
+        assert new.rotations[ground].tobytes() == pose.rotations[ground].tobytes()
+        assert new.translations[ground].tobytes() == pose.translations[ground].tobytes()
+    # a rig whose hips cannot turn: the root's turn is what turns the body
+    stiff = dataclasses.replace(skel, rotatable=tuple(j != hips for j in range(skel.size)))
+    turned = [ground in changed for _, changed, _ in _ground_edits(stiff, pose, jmap, hips)]
+    assert any(turned), turned
+
+
+def test_a_reference_root_carrying_the_body_moves_but_does_not_turn(
+    bandai: tuple[Skeleton, Pose, JointMap],
+) -> None:
+    """A UE-style rig: the root at the floor carries the position channels and the hips
+    only turn (the Bandai skeleton read so). The root's translation moves the pelvis; its
+    rotation is left bit for bit (an audit's UE-style rig turned 2.8 degrees on a pinned
+    pelvis drag), every target still met."""
+    skel, pose, jmap = bandai
+    ground = skel.names.index("joint_Root")
+    rig = dataclasses.replace(skel, translatable=tuple(j == ground for j in range(skel.size)))
+    tol = _edit(bandai)[2]
+    moved = False
+    for new, changed, miss in _ground_edits(rig, pose, jmap, ground):
+        assert miss <= tol
+        assert new.rotations[ground].tobytes() == pose.rotations[ground].tobytes()
+        moved |= ground in changed
+    assert moved
