@@ -20,9 +20,12 @@
    (one the solve met) only where the answer misses it otherwise.
 4. **Polish** (:func:`core.reach.polish`): what the targets and pins still miss is closed
    by damped least-squares turns of the joints above them, pins first.
+5. **Hinges** (:func:`core.hinges.keep_hinges`): an elbow or knee the frame bends as a
+   hinge bends about the same axis, the upper bone twisted to suit; no point moves.
 
 Joints in no aim group (fingers, twist bones, props, spine joints between mapped ones)
-keep their local rotation but where the polish turns them; every joint keeps its offset,
+keep their local rotation but where the polish turns them (and a hinge's children, step 5,
+their world rotation); every joint keeps its offset,
 so bone lengths are the character's own.
 """
 
@@ -37,6 +40,7 @@ import numpy.typing as npt
 from core import compiled_characters
 from core.characters import F64, Pose, Skeleton, best_rotation, forward_kinematics, swing
 from core.characters_maps import JointMap
+from core.hinges import keep_hinges
 from core.reach import polish
 from core.skeleton import JOINT_INDEX, PARENTS
 
@@ -491,5 +495,6 @@ def _fit(
         changed |= polish(skel, new, jmap, [*exact, *held], pins, tolerance, root)
     else:
         changed |= polish(skel, new, jmap, soft or exact, kept, tolerance, root, finish=not soft)
+    changed |= keep_hinges(skel, pose, new, jmap, changed)  # the points stay where they are
     g_rot, g_pos = forward_kinematics(skel, new)
     return Retargeted(new, jmap.points(g_rot, g_pos), frozenset(changed))
