@@ -98,6 +98,16 @@ CUT_SHORT = Field(
 )  # fmt: skip
 
 
+#: the BVH answers' `rows_warning`
+ROWS_WARNING = Field(
+    default=None, description="The first MOTION row, of the frames not read (only those "
+    "edited or inspected are), that holds another count of values than the file's channels "
+    "or a value no number is (`nan`, `1,5`): its line, frame and what it holds. The answer "
+    "keeps it as sent; a reader of the whole file may refuse the file. Null where none is "
+    "found, for a file read whole, and for a file cut short (`cut_short`).",
+)  # fmt: skip
+
+
 #: the BVH answers' `root_warning`
 ROOT_WARNING = Field(
     default=None, description="Where the frame's figure, its root channels read as "
@@ -124,6 +134,7 @@ class BVHInspectResponse(BaseModel):
     positions: list[list[float]] = Field(description="World position of every joint (units).")
     points: dict[str, list[float]] = Field(description="The 21 canonical points (units).")
     cut_short: BVHCutShort | None = CUT_SHORT
+    rows_warning: str | None = ROWS_WARNING
     units_warning: str | None = UNITS_WARNING
     up_warning: str | None = UP_WARNING
     sides_warning: str | None = SIDES_WARNING
@@ -139,6 +150,7 @@ class _FrameEdited(BaseModel):
 class BVHSolveResponse(_FrameEdited, _Answer):
     bvh: str = Field(description="The same file, only that frame's changed values rewritten.")
     cut_short: BVHCutShort | None = CUT_SHORT
+    rows_warning: str | None = ROWS_WARNING
 
 
 class BVHFrameEdit(_Edit):
@@ -184,3 +196,4 @@ class BVHBatchResponse(_Mapped):
     bvh: str = Field(description="The same file, only the edited frames' changed values rewritten.")
     edits: list[BVHFrameAnswer] = Field(description="In request order.")
     cut_short: BVHCutShort | None = CUT_SHORT
+    rows_warning: str | None = ROWS_WARNING

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from core.bvh import BVH, BVHError, parse_bvh
+from core.bvh_rows import odd_row
 from core.bvh_write import pose_of, row_of, skeleton_of, splice_frames
 from core.characters import F64, CharacterError, Skeleton, forward_kinematics
 from core.characters_maps import JointMap, resolve_map
@@ -99,6 +100,24 @@ def cut_short(bvh: BVH) -> dict[str, Any] | None:
     )
     return {"frame": cut.frame, "values": cut.values, "line": cut.line, "frames": cut.frames,
             "detail": detail}  # fmt: skip
+
+
+def rows_warning(bvh: BVH) -> str | None:
+    """The answers' ``rows_warning``: the first MOTION row the partial read left unread
+    that holds other than the file's count of values or a value no number is
+    (:func:`core.bvh_rows.odd_row`; a file cut short says so in ``cut_short`` instead),
+    else None. A file read whole has had every row read."""
+    if bvh.read is None:
+        return None
+    first_line = bvh.text.count("\n", 0, bvh.motion_offset) + 1
+    odd = odd_row(bvh.text, bvh.motion_offset, first_line, bvh.num_frames, bvh.num_channels)
+    if odd is None or (bvh.cut is not None and odd.frame >= bvh.cut.frame):
+        return None
+    return (
+        f"bvh: line {odd.line}: frame {odd.frame} holds {odd.detail} (the first such "
+        "row): only the frames edited are read, so the answer keeps it as sent, but a "
+        "reader of the whole file may refuse the file"
+    )
 
 
 def out_of_range(bvh: BVH, frame: int, where: str = "frame") -> InvalidRequest | None:
@@ -227,6 +246,7 @@ def bvh_answer(bvh: BVH, ch: Character, req: BVHSolveRequest, edit: Edit) -> dic
         "bvh": splice_frames(bvh, {req.frame: (done.row, done.columns)}),
         **done.report,
         "cut_short": cut_short(bvh),
+        "rows_warning": rows_warning(bvh),
     }
 
 
@@ -333,6 +353,7 @@ def clip_answer(bvh: BVH, done: list[FrameAnswer]) -> dict[str, Any]:
         "edits": [{k: v for k, v in d.report.items() if k in solved} for d in done],
         **{k: first[k] for k in BVHBatchResponse.model_fields if k in first},
         "cut_short": cut_short(bvh),
+        "rows_warning": rows_warning(bvh),
     }
 
 
@@ -380,6 +401,7 @@ def bvh_inspect(
         "positions": g_pos.tolist(),
         "points": dict(zip(JOINT_NAMES, points.tolist(), strict=True)),
         "cut_short": cut_short(bvh),
+        "rows_warning": rows_warning(bvh),
         "units_warning": ch.units_warning("read"),
         "up_warning": ch.up_warning,
         "sides_warning": ch.sides_warning,
