@@ -14,7 +14,8 @@
   *rotatable* if it has exactly three rotation channels, *translatable* if it has all three
   position channels, each axis once; Euler angles written back are the solution nearest the
   old angles (same rotation, angles shifted by whole turns or the other branch), so curves
-  stay smooth.
+  stay smooth; a joint at gimbal lock turned by less than :data:`STILL_TURN` keeps its
+  old angles (:func:`_locked`).
 """
 
 from __future__ import annotations
@@ -35,6 +36,13 @@ DECIMALS = 6
 #: and all): half a unit of the last decimal written, the rounding's own error
 KEPT = 0.5 * 10.0**-DECIMALS
 _POS = {"xposition": 0, "yposition": 1, "zposition": 2}
+#: degrees: a joint turned by less than this whose nearest angles change by more than
+#: :data:`LOCKED` (a joint at gimbal lock: its middle angle near ±90, where a turn of
+#: 0.002 degrees moved the outer two by 84) keeps its angles as they were; the answer is
+#: measured on the file as written (``service.character_bvh.frame_answer``), and such a
+#: turn moves a point 1 m away by 0.09 mm at most
+STILL_TURN = 0.005
+LOCKED = 1.0
 _ROT = {"xrotation", "yrotation", "zrotation"}
 _WORD_RE = re.compile(r"\S+")
 
@@ -238,6 +246,16 @@ def _nearest_euler(seq: str, matrix: F64, old: F64) -> F64:
     return np.asarray(np.where(some[..., None], best, first), dtype=np.float64)
 
 
+def _locked(seq: str, matrix: F64, old: F64, angles: F64) -> npt.NDArray[np.bool_]:
+    """``[J]``: the joints whose rotation ``matrix`` turns less than :data:`STILL_TURN`
+    from their ``old`` angles while its nearest ``angles`` move more than :data:`LOCKED`
+    (gimbal lock: the outer angles are ill-determined)."""
+    # (the turn's angle from the chord: |R - R0| = 2 sqrt(2) sin(angle / 2))
+    chord = np.linalg.norm(matrix - euler_matrices(seq, np.deg2rad(old)), axis=(-2, -1))
+    turn = np.rad2deg(2.0 * np.arcsin(np.minimum(chord / (2.0 * np.sqrt(2.0)), 1.0)))
+    return np.asarray((turn < STILL_TURN) & (np.abs(angles - old).max(axis=-1) > LOCKED))
+
+
 def row_of(
     bvh: BVH, frame: int, pose: Pose, joints: set[int] | frozenset[int], *, root_add: bool = False
 ) -> tuple[F64, list[int]]:
@@ -265,7 +283,9 @@ def row_of(
                 value = float(pose.translations[i, axis]) - _root_shift(j, axis, root_add)
                 new[j.channel_start + k] = value
     for seq, (ids, cols) in turned.items():  # (one product per order, as pose_of reads)
-        angles = _nearest_euler(seq, pose.rotations[ids], row[np.array(cols)])
+        old = row[np.array(cols)]
+        angles = _nearest_euler(seq, pose.rotations[ids], old)
+        angles = np.where(_locked(seq, pose.rotations[ids], old, angles)[:, None], old, angles)
         new.update(zip(np.ravel(cols).tolist(), angles.ravel().tolist(), strict=True))
     columns = sorted(col for col, value in new.items() if not abs(value - row[col]) <= KEPT)
     for col in columns:  # the values as they will be read back
