@@ -54,10 +54,16 @@ def _turn(axis: F64, angle: float) -> F64:
     return np.asarray(np.eye(3) + np.sin(angle) * k + (1.0 - np.cos(angle)) * (k @ k))
 
 
+def _cross(a: F64, b: F64) -> F64:
+    """``np.cross`` of two 3-vectors, without its overhead."""
+    x, y, z = a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]
+    return np.array([x, y, z])
+
+
 def _angle(axis: F64, a: F64, b: F64) -> float:
     """The signed angle about unit ``axis`` from ``a`` to ``b`` (both projected across it)."""
     pa, pb = a - (a @ axis) * axis, b - (b @ axis) * axis
-    return float(np.arctan2(axis @ np.cross(pa, pb), pa @ pb))
+    return float(np.arctan2(axis @ _cross(pa, pb), pa @ pb))
 
 
 def _hinge(axis: F64, v: F64, bone: F64, want: F64) -> tuple[float, float] | None:
@@ -76,7 +82,7 @@ def _hinge(axis: F64, v: F64, bone: F64, want: F64) -> tuple[float, float] | Non
     rest = float(v @ v) - float(base @ base)
     if rest < 0.0:
         return None
-    n = np.cross(axis, bone)
+    n = _cross(axis, bone)
     gamma = np.sqrt(rest / s2)
     best = None
     for x in (base + gamma * n, base - gamma * n):
@@ -95,17 +101,20 @@ def keep_hinges(
     docstring); ``changed``: the joints the answer changed (a limb none of whose two
     joints is among them is left). Returns the joints whose local rotation it changed."""
     out: set[int] = set()
-    for top, mid, end in LIMBS:
+    limbs = [(top, mid, end) for top, mid, end in LIMBS
+             if _applies(skel, jmap, jmap.anchors[top].joint, jmap.anchors[mid].joint, top, mid,
+                         changed)]  # fmt: skip
+    if not limbs:
+        return out
+    quats = matrix_to_quat(before.rotations[[jmap.anchors[mid].joint for _, mid, _ in limbs]])
+    g_rot, g_pos = forward_kinematics(skel, pose)  # (kept up to date as limbs turn)
+    points = jmap.points(g_rot, g_pos)
+    for (top, mid, end), q in zip(limbs, quats, strict=True):
         upper, hinge = jmap.anchors[top].joint, jmap.anchors[mid].joint
-        if not _applies(skel, jmap, upper, hinge, top, mid, changed):
-            continue
-        q = matrix_to_quat(before.rotations[hinge])
         bend = 2.0 * float(np.arctan2(np.linalg.norm(q[:3]), q[3]))
         if bend < MIN_BEND:
             continue
         axis = q[:3] / np.linalg.norm(q[:3])
-        g_rot, g_pos = forward_kinematics(skel, pose)
-        points = jmap.points(g_rot, g_pos)
         top_at, at = g_pos[upper], g_pos[hinge]
         length = float(np.linalg.norm(at - top_at))
         if length <= 0.0:
@@ -125,11 +134,12 @@ def keep_hinges(
             continue
         trial = _bent(skel, jmap, pose, g_rot, upper, hinge, (at - top_at) / length, axis, *got)
         g2_rot, g2_pos = forward_kinematics(skel, trial)
-        moved = float(np.abs(jmap.points(g2_rot, g2_pos) - points).max())
-        if moved > _STILL * (length + float(np.linalg.norm(lower))):
+        points2 = jmap.points(g2_rot, g2_pos)
+        if float(np.abs(points2 - points).max()) > _STILL * (length + float(np.linalg.norm(lower))):
             continue
         turned = {j for j in range(skel.size) if (trial.rotations[j] != pose.rotations[j]).any()}
         pose.rotations = trial.rotations
+        g_rot, g_pos, points = g2_rot, g2_pos, points2
         out |= turned
     return out
 
