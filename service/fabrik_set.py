@@ -20,7 +20,7 @@ import numpy.typing as npt
 
 from core import compiled_fabrik
 from core.rigid import SQUEEZED
-from core.skeleton import JOINT_INDEX
+from core.skeleton import JOINT_INDEX, SUBTREE
 
 F64 = npt.NDArray[np.floating[Any]]
 #: An answer whose hips are nearer each other than this share of the start's distance has
@@ -30,6 +30,8 @@ FOLDED = SQUEEZED
 #: others no more than this farther (metres, canonical): a valid body before a few mm.
 SLACK = 0.01
 _HIPS = (JOINT_INDEX["left_hip"], JOINT_INDEX["right_hip"])
+#: The joints of the legs: only a target or pin on one moves a hip (the others carry them)
+_LEGS = SUBTREE[_HIPS[0]] | SUBTREE[_HIPS[1]]
 
 
 def fabrik_set(
@@ -55,7 +57,10 @@ def fabrik_set(
         )  # fmt: skip
 
     pose, its, errs, _ = run(slice(None), False)
-    folded = np.flatnonzero(width2(pose) < FOLDED * FOLDED * width2(starts))
+    if not _LEGS[idx].any():  # no hip moved: none folded
+        folded = np.empty(0, dtype=np.intp)
+    else:
+        folded = np.flatnonzero(width2(pose) < FOLDED * FOLDED * width2(starts))
     if folded.size:  # again with the hips rigid, kept where it reaches as well
         r_pose, r_its, r_errs, _ = run(folded, True)
         was, tol = errs[folded], tols[folded, None]
