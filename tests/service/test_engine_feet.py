@@ -121,7 +121,7 @@ def test_a_polish_that_lifts_the_trunk_leaves_the_feet_down(
     """The docs' pose, its pelvis dragged down to 0.6 m with its head pinned (the spine
     cannot stretch that far: the pelvis stays): the networks crouch, then the polish that
     holds the head lifts the crouched body, which without keep_feet ended with its feet
-    35-55 cm in the air. With it each leg reaches down again, its lowest joint back near
+    30-55 cm in the air. With it each leg reaches down again, its lowest joint back near
     the floor or the leg at full stretch; the head held, every bone its own length."""
     goal = [[POSE[0, 0], 0.6, POSE[0, 2]]]
     off, on = (solve(e, POSE, ["pelvis"], goal, reach, 0.0, ("head",)) for e in engines)
@@ -129,7 +129,7 @@ def test_a_polish_that_lifts_the_trunk_leaves_the_feet_down(
     lifted = np.asarray(off.pose)[LEGS, 1].reshape(2, 3).min(axis=1)
     out = np.asarray(on.pose)
     down = out[LEGS, 1].reshape(2, 3).min(axis=1)
-    assert (lifted > 0.3).all() and (down < lifted - 0.05).all(), (lifted, down)
+    assert (lifted > 0.25).all() and (down < lifted - 0.05).all(), (lifted, down)
     for side, low in zip(("left", "right"), down, strict=True):
         hip, knee, ankle = (out[J[f"{side}_{j}"]] for j in ("hip", "knee", "ankle"))
         stretch = np.linalg.norm(hip - knee) + np.linalg.norm(knee - ankle)
