@@ -511,7 +511,7 @@ def solve_batch(
         solved = False
         if polish and has_local:
             n_it, c = _solve(x0, lens, tp, li, lf, tol, max_it, hold, False, l_kts, l_below, x,
-                             errs[b], False)  # fmt: skip
+                             errs[b], rigid_hips)  # fmt: skip
             solved = True
             for k in range(k_n):
                 solved = solved and errs[b, k] <= tol

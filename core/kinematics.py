@@ -788,7 +788,7 @@ def polish(
     x0, iterations = pb.x0, 0
     locks = _trunk_locks(pb.idx)
     if locks is not None:
-        plan = _make_plan(pb.idx, pb.weights, locks, False)
+        plan = _make_plan(pb.idx, pb.weights, locks, False, None, rigid_hips)
         local = _solve(x0, pb.lens, pb.tpos, plan, tolerance, max_iterations)
         if bool(np.all(local.errors <= tolerance)):
             return _result(pb, local, tolerance, local.iterations)

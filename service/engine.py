@@ -574,7 +574,8 @@ class Engine:
         item it left beyond its tolerance, plain FABRIK from its ``start`` (the caller's
         start, canonical), kept where it ends nearer. Ties (equal to rounding: e.g. both
         at the stretch a pin allows) keep the polish, whose pose is nearer the network's.
-        Returns poses (:meth:`planted` from ``before``, the poses polished), iterations
+        Returns poses (:meth:`planted` from ``before``, the poses polished, where the polish
+        was kept; where the fallback's was, only legs sunk below the floor raised), iterations
         (FABRIK's added where kept) and which kept it."""
         pose, its, errs = polished
         fell = np.zeros(len(pose), dtype=np.bool_)
@@ -588,7 +589,13 @@ class Engine:
             if not pins.any():
                 self._shifted_fallback(pose, its, errs, fell, lengths, goal, tols, idx, weights,
                                        pins)  # fmt: skip
-        return self.planted(pose, before, idx), its, fell
+        if self.serving.keep_feet:  # (where the fallback's answer was kept, no plant:
+            for sel, plant in ((~fell, True), (fell, False)):  # it did not polish before)
+                if sel.any():
+                    part = compiled.as_f64(pose[sel])
+                    floor_group(part, compiled.as_f64(before[sel]), idx, plant)
+                    pose[sel] = part
+        return pose, its, fell
 
     def planted(
         self, pose: compiled.F64, before: compiled.F64, idx: npt.NDArray[np.int64]

@@ -8,7 +8,9 @@ a real pose's pelvis 10 cm sideways over pinned ankles and got the hips 0.028 m 
 (0.129 in the start; a character's hips turned 93 degrees), every target "reached". FABRIK
 with rigid hips everywhere cannot turn the pelvis and loses reach (docs/kinematics.md), so
 an answer whose hips ended nearer each other than :data:`FOLDED` of the start's is solved
-again with ``rigid_hips`` and kept where that reaches as well (:data:`SLACK`).
+again with ``rigid_hips`` and kept where that reaches as well (:data:`SLACK`). A drag the
+translated pelvis cannot follow (a pelvis target beyond the pinned legs' reach without
+turning it) keeps the folded answer: the retry cannot improve on it.
 """
 
 from __future__ import annotations

@@ -284,7 +284,8 @@ _SERVICE_LINK = re.compile(
 #: How alike (difflib's ratio, on the names after ``POSE_``) an unknown variable and a
 #: setting must be for the variable to be taken as that setting misspelt (refused):
 #: POSE_APIKEY 0.92, POSE_LOGLEVEL 0.94, POSE_PROT 0.75; POSE_WORKERS (0.44 to
-#: ORT_THREADS) and POSE_TIMEOUT (0.52) are only named in a warning.
+#: ORT_THREADS) is only named in a warning, POSE_TIMEOUT (0.52) is refused for the word it
+#: shares with settings (``_sharing``).
 MISSPELT = 0.75
 
 

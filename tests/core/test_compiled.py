@@ -9,6 +9,7 @@ import pytest
 
 from core import compiled, compiled_fabrik, kinematics
 from core.geometry import canonical_transform
+from core.rest import rest_lengths, rest_pose
 from core.skeleton import JOINT_INDEX, bone_lengths
 from tests.conftest import PosePairs
 
@@ -195,3 +196,25 @@ def test_rigid_hips_keep_the_hips_apart_and_match_numpy(
     assert (width(free) < 0.8 * width(poses)).sum() >= 10
     assert np.abs(width(rigid) - width(poses)).max() < 1e-9
     assert errs[:, 1:].max() <= 1e-3
+
+
+def test_rigid_hips_hold_in_the_polish_first_stage() -> None:
+    """A review's case (2026-12-07): the rest pose, its left knee dragged 37 cm across with
+    the right ankle pinned. The polish's first stage (the trunk held) reached it by swinging
+    the left hip about the pelvis, the hips at 0.23 of their distance, with ``rigid_hips``
+    as without; now the hips stay apart there too, compiled as in numpy."""
+    pose = rest_pose()
+    idx = _idx(("left_knee", "right_ankle"))
+    pinned = np.asarray([False, True])
+    goals = pose[idx].copy()
+    goals[0] += [-0.37, 0.028, -0.042]
+    hips = [JOINT_INDEX["left_hip"], JOINT_INDEX["right_hip"]]
+
+    def width(p: np.ndarray) -> float:
+        return float(np.linalg.norm(p[..., hips[0], :] - p[..., hips[1], :]))
+
+    free = kinematics.polish(pose, rest_lengths(), idx, goals, pinned=pinned, max_iterations=256)
+    assert width(free.positions) < 0.5 * width(pose)
+    rigid, _ = _against_numpy(True, pose[None], rest_lengths()[None], goals[None], idx, pinned,
+                              rigid_hips=True)  # fmt: skip
+    assert abs(width(rigid[0]) - width(pose)) < 1e-9
