@@ -760,7 +760,7 @@ def warm() -> None:
         True,
     )  # fmt: skip
     finish(out[0], out[1], out[2], np.zeros(1), tidx, tpos, counts, out[3])
-    floor_group(pose.copy(), pose, tidx[0])
+    floor_group(pose.copy(), pose, tidx[0], True)  # (plant as the engine gives it)
     one = np.ones(1, dtype=np.bool_)
     travel(pose, tidx, tpos, counts, counts, ~one, True, True, 5)
     settle(

@@ -539,8 +539,8 @@ def warm() -> None:
     plans = packed_plans(idx, np.ones(2))
     goals = pose[:, idx] + 0.05
     hold = np.asarray([False, True])
-    for polish in (False, True):
-        solve_batch(
+    for polish in (False, True):  # (rigid_hips given as the engine gives it: an omitted
+        solve_batch(  # argument is another signature, compiled at the first solve)
             polish, pose, lens, goals, np.full(1, 1e-3), 8, plans.local_ints,
-            plans.local_floats, plans.has_local, plans.ints, plans.floats, hold, True,
+            plans.local_floats, plans.has_local, plans.ints, plans.floats, hold, True, False,
         )  # fmt: skip
