@@ -398,18 +398,20 @@ def _solve(
     k_n, t_n = pi[_K], pi[_T]
     stall = tol * 1e-3
     radii, inner, anchors = np.empty(k_n), np.empty(k_n), np.zeros(k_n, dtype=np.bool_)
-    start, path = x0[0].copy(), pf[pi[_O_PATH] :].copy()
+    start, path, centres = x0[0].copy(), pf[pi[_O_PATH] :], tpos
     targeted = pi[pi[_O_TGT] :]
-    rigid = _RIGID & rigid_hips  # kinematics._Plan.rigid
-    for t in range(pi[_T]):
-        rigid[targeted[t]] = False
-    centres = tpos.copy()  # kinematics._Plan.shell_top, shell_path: the shells' centres
-    for k in range(k_n):
-        for r in range(1, NUM_JOINTS):
-            if rigid[r] and path[k * _NB + r - 1] > 0:
-                path[k * _NB + r - 1] = 0.0
-                for c in range(3):
-                    centres[k, c] = tpos[k, c] - (x0[r, c] - x0[0, c])
+    rigid = np.zeros(NUM_JOINTS, dtype=np.bool_)  # kinematics._Plan.rigid
+    if rigid_hips:  # (kinematics._Plan.shell_top, shell_path: the shells' centres)
+        rigid[:] = _RIGID
+        for t in range(pi[_T]):
+            rigid[targeted[t]] = False
+        path, centres = path.copy(), tpos.copy()
+        for k in range(k_n):
+            for r in range(1, NUM_JOINTS):
+                if rigid[r] and path[k * _NB + r - 1] > 0:
+                    path[k * _NB + r - 1] = 0.0
+                    for c in range(3):
+                        centres[k, c] = tpos[k, c] - (x0[r, c] - x0[0, c])
     if hold_any and pi[_ROOT_MOVES] == 0:  # shells.onto_pins, x0 moved in place
         _shells(x0, lens, centres, path, hold, True, errors, tol, radii, inner, anchors)
         _project_root(start, centres, radii, inner, anchors)
