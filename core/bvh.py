@@ -39,6 +39,7 @@ from __future__ import annotations
 import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field, replace
+from functools import lru_cache
 from itertools import islice
 from pathlib import Path
 
@@ -49,6 +50,7 @@ from core.bvh_words import MAX_NAME as MAX_NAME
 from core.bvh_words import (
     WHOLE_RE,
     Tokens,
+    after_newlines,
     as_number,
     count_words,
     explain_count,
@@ -61,6 +63,7 @@ from core.euler import euler_matrices
 from core.text import quoted
 
 FloatArray = npt.NDArray[np.float64]
+Memo = dict[str, object]
 
 _POSITION_CHANNELS = {"xposition": 0, "yposition": 1, "zposition": 2}
 _ROTATION_CHANNELS = {"xrotation": "X", "yrotation": "Y", "zrotation": "Z"}
@@ -129,8 +132,9 @@ class BVH:
     #: (as read), and a writer gives the file back with its own
     cr_only: bool = field(default=False, repr=False, compare=False)
     _index: dict[str, int] = field(default_factory=dict, repr=False, compare=False)
-    #: what readers work out once per file (``core.bvh_write``'s channel layout)
-    memo: dict[str, object] = field(default_factory=dict, repr=False, compare=False)
+    #: what readers work out once per hierarchy, of its joints alone (``core.bvh_write``'s
+    #: channel layout, the service's rig), shared by the files read with it: read-only
+    memo: Memo = field(default_factory=dict, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         self._index.update({j.name: i for i, j in enumerate(self.joints)})
@@ -304,30 +308,6 @@ def frame_words(
     return spans
 
 
-def _after_newlines(text: str, at: int, k: int) -> int:
-    """The offset just after the ``k``-th newline of ``text`` from ``at`` (it holds at least
-    ``k``; ``at`` itself for 0): spans doubling from ``at`` until one holds it, then a
-    bisection on ``str.count`` (in C) and ``str.find`` steps over the last few hundred
-    characters (a bisection over all the rest took a clip ~1 ms a frame of 3.6 MB)."""
-    lo, lo_n, span = at, 0, 256
-    while True:  # the k-th newline: in text[lo:hi]
-        hi = min(len(text), lo + span)
-        n = text.count("\n", lo, hi)
-        if lo_n + n >= k or hi == len(text):
-            break
-        lo, lo_n, span = hi, lo_n + n, 2 * span
-    while hi - lo > 256 and lo_n < k:
-        mid = (lo + hi) // 2
-        n = lo_n + text.count("\n", lo, mid)
-        if n < k:
-            lo, lo_n = mid, n
-        else:
-            hi = mid
-    for _ in range(k - lo_n):
-        lo = text.find("\n", lo) + 1
-    return lo
-
-
 #: the deepest nesting of joints read (a real rig's fingers or hair are tens deep; the
 #: reader recurses once per level, and Python's stack holds about a thousand)
 MAX_DEPTH = 256
@@ -458,16 +438,32 @@ class _Hierarchy:
         return tuple(channels)
 
 
-def _parse_hierarchy(file: str, text: str, end: int | None = None) -> list[BVHJoint]:
+#: hierarchies shared: the last :data:`SHARED` read (their text before MOTION, at most
+#: :data:`SHARED_TEXT` characters) are parsed once, and each file that has one shares its
+#: joints and :attr:`BVH.memo` (an editor sends one file's hierarchy with every edit)
+SHARED, SHARED_TEXT = 8, 1 << 17
+
+
+def _parse_hierarchy(file: str, text: str, end: int) -> tuple[tuple[BVHJoint, ...], Memo]:
+    """The joints of the HIERARCHY ``text[:end]`` and their memo (shared: above)."""
+    return _shared(file, text[:end]) if end <= SHARED_TEXT else (_joints(file, text, end), {})
+
+
+@lru_cache(maxsize=SHARED)
+def _shared(file: str, text: str) -> tuple[tuple[BVHJoint, ...], Memo]:
+    return _joints(file, text, len(text)), {}
+
+
+def _joints(file: str, text: str, end: int) -> tuple[BVHJoint, ...]:
     """The joints of the HIERARCHY ``text[:end]`` (read in place: no copy of it is made)."""
-    toks = Tokens(file, text, len(text) if end is None else end)
+    toks = Tokens(file, text, end)
     reader = _Hierarchy(toks)
     reader.read()
     if toks.peek() is not None:
         raise _error(
             file, f"line {toks.line()}: unexpected {quoted(toks.peek())} after the hierarchy"
         )
-    return _end_sites_named(reader.joints, reader.names)
+    return tuple(_end_sites_named(reader.joints, reader.names))
 
 
 def _no_motion(file: str, text: str) -> BVHError:
@@ -533,7 +529,7 @@ def parse_bvh(text: str, name: str = "<string>", frames: Iterable[int] | None = 
         if "HIERARCHY" not in text:
             raise _error(name, "not a BVH file (no HIERARCHY keyword)")
         raise _no_motion(name, text)
-    joints = _parse_hierarchy(name, text, match.start())
+    joints, memo = _parse_hierarchy(name, text, match.start())
     columns = [(j.name, c) for j in joints for c in j.channels]  # (errors name them)
     n_channels = len(columns)
     if n_channels == 0:
@@ -587,7 +583,7 @@ def parse_bvh(text: str, name: str = "<string>", frames: Iterable[int] | None = 
         motion, read, spans, cut = some
     return BVH(
         name=name,
-        joints=tuple(joints),
+        joints=joints,
         frame_time=frame_time,
         motion=motion,
         text=text,
@@ -596,6 +592,7 @@ def parse_bvh(text: str, name: str = "<string>", frames: Iterable[int] | None = 
         spans=spans,
         cut=cut,
         cr_only=cr_only,
+        memo=memo,
     )
 
 
@@ -641,7 +638,7 @@ def _read_frames(
     spans: dict[int, tuple[int, int]] = {}
     line_at, line_frame = at, 0  # the start of a frame line found, and its frame
     for f in sorted(read):
-        start = _after_newlines(text, line_at, f - line_frame)
+        start = after_newlines(text, line_at, f - line_frame)
         end = text.find("\n", start)
         end = len(text) if end < 0 else end
         spans[f] = (start, end)

@@ -293,3 +293,27 @@ def explain_count(name: str, body: str, first_line: int, n_frames: int, n_channe
         offset, at = offset + 1, end + 1
     ends = f"line {first_line + last}: truncated"  # (where the block ends)
     raise error(name, f"{ends}: 'Frames:' declares {n_frames} frames, found {seen}")
+
+
+def after_newlines(text: str, at: int, k: int) -> int:
+    """The offset just after the ``k``-th newline of ``text`` from ``at`` (it holds at least
+    ``k``; ``at`` itself for 0): spans doubling from ``at`` until one holds it, then a
+    bisection on ``str.count`` (in C) and ``str.find`` steps over the last few hundred
+    characters (a bisection over all the rest took a clip ~1 ms a frame of 3.6 MB)."""
+    lo, lo_n, span = at, 0, 256
+    while True:  # the k-th newline: in text[lo:hi]
+        hi = min(len(text), lo + span)
+        n = text.count("\n", lo, hi)
+        if lo_n + n >= k or hi == len(text):
+            break
+        lo, lo_n, span = hi, lo_n + n, 2 * span
+    while hi - lo > 256 and lo_n < k:
+        mid = (lo + hi) // 2
+        n = lo_n + text.count("\n", lo, mid)
+        if n < k:
+            lo, lo_n = mid, n
+        else:
+            hi = mid
+    for _ in range(k - lo_n):
+        lo = text.find("\n", lo) + 1
+    return lo

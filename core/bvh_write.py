@@ -202,6 +202,8 @@ def _layout(bvh: BVH) -> _Layout:
         table,
         np.array([bvh.joints[i].parent < 0 for i in table[:, 0]], dtype=bool),
     )  # fmt: skip
+    for a in (out.offsets, out.pos, out.root, *(x for pair in out.orders.values() for x in pair)):
+        a.setflags(write=False)  # (shared by the files of one hierarchy: ``BVH.memo``)
     bvh.memo["layout"] = out
     return out
 

@@ -137,7 +137,8 @@ def keep_hinges(
         points2 = jmap.points(g2_rot, g2_pos)
         if float(np.abs(points2 - points).max()) > _STILL * (length + float(np.linalg.norm(lower))):
             continue
-        turned = {j for j in range(skel.size) if (trial.rotations[j] != pose.rotations[j]).any()}
+        moved = (trial.rotations != pose.rotations).any(axis=(1, 2))
+        turned = {int(j) for j in np.flatnonzero(moved)}
         pose.rotations = trial.rotations
         g_rot, g_pos, points = g2_rot, g2_pos, points2
         out |= turned

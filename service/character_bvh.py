@@ -11,7 +11,7 @@ import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from itertools import islice
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -132,13 +132,36 @@ def out_of_range(bvh: BVH, frame: int, where: str = "frame") -> InvalidRequest |
 Rig = tuple[Skeleton, JointMap]
 
 
+#: the most joint maps whose rigs one hierarchy's memo keeps (``BVH.memo``: a file's
+#: hierarchy is parsed once for the next edits of it, and its rigs made once with it)
+RIGS_PER_HIERARCHY = 4
+
+
 def rig_of(bvh: BVH, req: _File) -> Rig:
-    """The file's skeleton and joint map (the same for each of its frames)."""
+    """The file's skeleton and joint map (the same for each of its frames, and for every
+    file of its hierarchy: kept in ``bvh.memo``, read-only, the skeleton once and the maps
+    of up to :data:`RIGS_PER_HIERARCHY` requests' ``joint_map``)."""
+    memo = bvh.memo
+    key = f"rig {list((req.joint_map or {}).items())!r}"
+    if (found := memo.get(key)) is not None:
+        return cast(Rig, found)
     try:
-        skel = skeleton_of(bvh)
-        return skel, resolve_map(skel, req.joint_map, offset_at=lambda _: "bvh")
+        skel = cast(Skeleton | None, memo.get("skeleton")) or skeleton_of(bvh)
+        jmap = resolve_map(skel, req.joint_map, offset_at=lambda _: "bvh")
     except (CharacterError, BVHError) as exc:
         raise invalid_request(exc) from None
+    if "skeleton" not in memo:
+        _read_only(skel.offsets, skel.parent_array)
+        memo["skeleton"] = skel
+    if sum(k.startswith("rig ") for k in list(memo)) < RIGS_PER_HIERARCHY:
+        _read_only(jmap.joints, jmap.offsets, *(anchor.offset for anchor in jmap.anchors))
+        memo[key] = skel, jmap
+    return skel, jmap
+
+
+def _read_only(*arrays: np.ndarray[Any, Any]) -> None:
+    for a in arrays:
+        a.setflags(write=False)
 
 
 def character_from_bvh(bvh: BVH, req: _File, frame: int, rig: Rig | None = None) -> Character:

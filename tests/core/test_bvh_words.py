@@ -60,13 +60,13 @@ def test_a_bvh_error_raised_in_a_worker_process_reaches_the_caller(
 
 
 def test_the_k_th_newline_is_found_wherever_it_lies() -> None:
-    """``_after_newlines`` (a frame's line found by counting newlines: spans doubling from
+    """``after_newlines`` (a frame's line found by counting newlines: spans doubling from
     where the last frame read stands, a bisection, then steps) lands where stepping over
     ``k`` newlines one at a time lands: near and far, on lines short and long, from the
     text's start or a line's, with and without a final newline."""
     import random
 
-    from core.bvh import _after_newlines
+    from core.bvh_words import after_newlines
 
     rng = random.Random(1)
     for _ in range(2000):
@@ -79,4 +79,4 @@ def test_the_k_th_newline_is_found_wherever_it_lies() -> None:
         want = at
         for _ in range(k):
             want = text.find("\n", want) + 1
-        assert _after_newlines(text, at, k) == want, (len(text), at, k)
+        assert after_newlines(text, at, k) == want, (len(text), at, k)
