@@ -136,3 +136,26 @@ def test_a_polish_that_lifts_the_trunk_leaves_the_feet_down(
         assert low < POSE[LEGS, 1].min() + 1e-3 or np.linalg.norm(hip - ankle) > stretch - 1e-6
     assert on.pin_errors.max() < 1e-3 and on.errors[0] > 0.2  # the pelvis out of reach
     assert np.abs(bone_lengths(out) / lengths - 1).max() < 1e-9
+
+
+def test_exact_reachs_fallback_keeps_its_own_legs(engines: tuple[Engine, Engine]) -> None:
+    """Where exact reach keeps plain FABRIK's answer (its polish of the networks' answer
+    missed), the legs are FABRIK's: they are put back at the heights they had in the
+    networks' answer only where the polish was kept (a review, 2026-12-07: the fallback's
+    legs were planted against the answer it had replaced). Here the networks' answer is
+    the start, its wrist unmoved, with both legs drawn 6 cm higher."""
+    on = engines[1]
+    wrist = J["left_wrist"]
+    start = np.ascontiguousarray(POSE[None], dtype=np.float64)
+    goal = (POSE[wrist] + [0.08, 0.1, 0.05])[None, None]
+    before = start.copy()
+    before[0, LEGS, 1] += 0.06
+    polished = (before.copy(), np.zeros(1, np.int64), np.array([[0.15]]))
+    lengths = bone_lengths(POSE)[None]
+    idx, weights, pins = np.array([wrist], np.int64), np.ones(1), np.zeros(1, np.bool_)
+    pose, _, fell = on.exact_fallback(
+        polished, start, lengths, goal, np.array([1e-4]), idx, weights, pins, before
+    )
+    assert fell.tolist() == [True]
+    assert np.linalg.norm(pose[0, wrist] - goal[0, 0]) <= 1e-4
+    assert np.abs(pose[0, LEGS] - POSE[LEGS]).max() < 1e-4  # FABRIK's, not the answer's 6 cm up
