@@ -2,13 +2,17 @@
 
 The service parses only the frames it edits (``core.bvh.parse_bvh(frames=...)``): a
 malformed row elsewhere (83 of 84 values, 85, a ``nan``) was answered 200 without a word,
-and written back as sent. :func:`odd_row` finds the first such row without parsing a
+and written back as sent. :func:`odd_row` finds the first such row without parsing every
 number: each line's count of values and the first character no number or space holds
-(numpy, a chunk of lines at a time: ~1.5 ms a MB).
+(numpy, a chunk of lines at a time: ~1.5 ms a MB); only a word that may be beyond the
+bound (an exponent not negative, ``1e400``, or eight digits before its point) is read as a
+number. A block of frames wrapped over several lines (or with blank lines among them) has
+its words looked at alike, each word's frame its index over the channels.
 """
 
 from __future__ import annotations
 
+import math
 import re
 from dataclasses import dataclass
 
@@ -18,6 +22,7 @@ from core.bvh import one_frame_a_line
 
 #: a character no decimal number (nor a separator) holds: ``nan``, ``inf``, ``1,5``, ``x``
 _NOT_NUMBER_RE = re.compile(r"[^0-9eE+\-.\s]")
+_WORD_RE = re.compile(r"\S+")
 _CHUNK = 1 << 20  # characters looked at a time (whole lines)
 #: ASCII spaces as ``str.split()`` has them (a chunk with others is split by Python)
 _SPACE = np.zeros(256, dtype=bool)
@@ -26,6 +31,18 @@ _SPACE[[9, 10, 11, 12, 13, 28, 29, 30, 31, 32]] = True
 _NUMBER = _SPACE.copy()
 _NUMBER[list(b"0123456789eE+-.")] = True
 _ALLOWED = bytes(np.flatnonzero(_NUMBER).tolist())
+_EXPONENT = np.zeros(256, dtype=bool)
+_EXPONENT[list(b"eE")] = True
+_UP = np.zeros(256, dtype=bool)  # what follows the ``e`` of an exponent not negative
+_UP[list(b"0123456789+")] = True
+_LONG = 8  # digits before a point from which a number may be past a bound of 1e7
+#: digits and ``+`` to ``0``, ``E`` to ``e``, ``-`` and spaces to `` ``: an exponent not
+#: negative is ``b"e0"``, a run of :data:`_LONG` digits not after a point ``b" 00000000"``
+#: (found by ``bytes.find``, in C: no array a character)
+_FLAT = bytes(
+    48 if c in b"0123456789+" else 101 if c == 69 else 32 if c <= 32 or c == 45 else c
+    for c in range(256)
+)
 
 
 @dataclass(frozen=True)
@@ -35,58 +52,138 @@ class OddRow:
     detail: str  # what is wrong with it, in words
 
 
-def odd_row(text: str, at: int, first_line: int, n_frames: int, n_channels: int) -> OddRow | None:
-    """The first of the ``n_frames`` rows of the MOTION block from ``at`` (one frame a
-    line, the first on line ``first_line``) that holds a value no decimal number is, or
-    other than ``n_channels`` values; None where every row looks whole, or where the block
-    is not one frame a line (wrapped frames, blank lines, fewer lines than frames: the
-    partial read tells those apart itself)."""
-    if n_frames == 0 or n_channels == 0 or not one_frame_a_line(text, at, n_frames):
+def odd_row(
+    text: str, at: int, first_line: int, n_frames: int, n_channels: int, bound: float = math.inf
+) -> OddRow | None:
+    """The first of the ``n_frames`` frames of the MOTION block from ``at`` (the block on
+    line ``first_line`` on) that holds a value no decimal number is, one beyond ``bound``
+    (``1e400``: no finite number), or, one frame a line, other than ``n_channels`` values;
+    None where every frame looks whole. A block that is not one frame a line (wrapped
+    frames, blank lines) is taken to hold its frames' values (the partial read counts
+    them): its words are looked at, not its lines' counts."""
+    if n_frames == 0 or n_channels == 0:
         return None
-    lo, line = at, 0
+    rows = one_frame_a_line(text, at, n_frames)
+    lo, line, words = at, 0, 0
     while lo <= len(text):
         hi = len(text) if lo + _CHUNK >= len(text) else text.rfind("\n", lo, lo + _CHUNK)
         if hi < lo:  # a line longer than a chunk
             hi = text.find("\n", lo + _CHUNK)
             hi = len(text) if hi < 0 else hi
-        index, detail = _odd_in(text[lo:hi], n_channels)
+        index, word, detail = _odd_in(text[lo:hi], n_channels, bound, rows)
         if detail:
-            frame = line + index
-            return None if frame >= n_frames else OddRow(frame, first_line + frame, detail)
+            frame = line + index if rows else (words + word) // n_channels
+            if frame >= n_frames:
+                return None
+            return OddRow(frame, first_line + line + index, detail)
         line += index
+        words += word
         lo = hi + 1
     return None
 
 
-def _odd_in(chunk: str, n: int) -> tuple[int, str]:
-    """The first line of ``chunk`` (its index) with a word no number is or other than
-    ``n`` words, and what is wrong with it; else the count of its lines and ``""``."""
+def _beyond(word: str, bound: float) -> str:
+    """What is wrong with ``word`` read as a number ("" where it is one within ``bound``)."""
+    try:
+        value = float(word)
+    except ValueError:
+        return f"{word[:20]!r}, not a number"
+    if abs(value) <= bound:
+        return ""
+    if math.isinf(value):
+        return f"{word[:20]!r}, out of range (no finite number)"
+    return f"{word[:20]!r}, beyond ±{bound:g}"
+
+
+def _may_be_beyond(word: str) -> bool:
+    """Whether ``word`` may be past a bound of 1e7 (or any float): an exponent not negative,
+    or :data:`_LONG` digits before its point."""
+    i = max(word.find("e"), word.find("E"))
+    if i >= 0 and word[i + 1 : i + 2] not in ("-", ""):
+        return True
+    return sum(c.isdigit() for c in word.split(".")[0]) >= _LONG
+
+
+def _odd_in(chunk: str, n: int, bound: float, rows: bool) -> tuple[int, int, str]:
+    """The first line of ``chunk`` (its index) with a word no number is, one beyond
+    ``bound``, or (``rows``) other than ``n`` words; the index of that word (of the chunk's)
+    and what is wrong; else the count of its lines and of its words, and ``""``."""
     if not chunk.isascii():  # (rare: a space or a letter past ASCII) line by line
+        count = 0
         for i, ln in enumerate(chunk.split("\n")):
-            words = ln.split()
-            bad = next((w for w in words if _NOT_NUMBER_RE.search(w)), None)
-            if bad is not None:
-                return i, f"{bad[:20]!r}, not a number"
-            if len(words) != n:
-                return i, f"{len(words)} values, not {n}"
-        return chunk.count("\n") + 1, ""
+            values = ln.split()
+            for k, w in enumerate(values):
+                said = (
+                    f"{w[:20]!r}, not a number" if _NOT_NUMBER_RE.search(w)
+                    else _beyond(w, bound) if _may_be_beyond(w) else ""
+                )  # fmt: skip
+                if said:
+                    return i, count + k, said
+            if rows and len(values) != n:
+                return i, count, f"{len(values)} values, not {n}"
+            count += len(values)
+        return chunk.count("\n") + 1, count, ""
     raw = chunk.encode("ascii")
     codes = np.frombuffer(raw, dtype=np.uint8)
-    # (with no other character, every one up to a space's code is a space)
-    wrong = np.flatnonzero(~_NUMBER[codes]) if raw.translate(None, _ALLOWED) else None
-    space = codes <= 32
+    space = codes <= 32  # (with no other character, every one up to a space's code is a space)
     starts = np.empty(codes.size, dtype=bool)
     starts[:1] = ~space[:1]
     np.greater(space[:-1], space[1:], out=starts[1:])
     newlines = np.flatnonzero(codes == 10)
-    counts = np.add.reduceat(starts, np.r_[0, newlines], dtype=np.int32) if codes.size else [0]
-    odd = np.flatnonzero(np.asarray(counts) != n)
-    if wrong is not None:
-        at = int(wrong[0])
-        bad_line = int(np.searchsorted(newlines, at))
-        if not odd.size or bad_line <= odd[0]:
-            start = max(chunk.rfind(c, 0, at) for c in " \t\n\r") + 1
-            return bad_line, f"{chunk[start : start + 20].split()[0]!r}, not a number"
-    if odd.size:
-        return int(odd[0]), f"{int(counts[odd[0]])} values, not {n}"
-    return newlines.size + 1, ""
+    n_words = int(np.count_nonzero(starts))
+    big = _may_hold_big(raw)
+    wrong = bool(raw.translate(None, _ALLOWED))
+    if rows:
+        counts = np.add.reduceat(starts, np.r_[0, newlines], dtype=np.int32) if codes.size else [0]
+        odd = np.flatnonzero(np.asarray(counts) != n)
+    if not (big or wrong or (rows and odd.size)):
+        return newlines.size + 1, n_words, ""
+    first = np.flatnonzero(starts)  # each word's first character
+    found: list[tuple[int, int, str]] = []  # (line, word, detail) of a word no number is
+    if wrong:
+        at = int(np.flatnonzero(~_NUMBER[codes])[0])
+        k = int(np.searchsorted(first, at, side="right")) - 1
+        word = _WORD_RE.match(chunk, int(first[k])) if k >= 0 else None
+        said = f"{(word.group() if word else chunk[at])[:20]!r}, not a number"
+        found.append((int(np.searchsorted(newlines, at)), max(k, 0), said))
+    for k in _suspects(codes, first) if big else []:
+        said = _beyond(_WORD_RE.match(chunk, int(first[k])).group(), bound)  # type: ignore[union-attr]
+        if said:
+            found.append((int(np.searchsorted(newlines, first[k])), int(k), said))
+            break
+    if rows and odd.size:
+        i = int(odd[0])
+        k = int(np.searchsorted(first, newlines[i - 1] if i else -1, side="right"))
+        found.append((i, k, f"{int(counts[i])} values, not {n}"))
+    if found:
+        return min(found, key=lambda f: f[0])  # (a word's wrong first, on one line)
+    return newlines.size + 1, n_words, ""
+
+
+def _may_hold_big(raw: bytes) -> bool:
+    """Whether ``raw`` may hold a number past a bound of 1e7: an exponent not negative, or
+    :data:`_LONG` digits in a row not after a point (by ``bytes`` methods, in C: a chunk of a
+    writer's file, ``-9.35e-15`` and all, is passed over in a fraction of a millisecond)."""
+    flat, run = raw.translate(_FLAT), b"0" * _LONG
+    return b"e0" in flat or flat.startswith(run) or b" " + run in flat
+
+
+def _suspects(codes: np.ndarray, first: np.ndarray) -> list[int]:
+    """The indices (ascending) of the words that may be beyond a bound of 1e7: an
+    exponent not negative, or :data:`_LONG` characters or more before the point (or the
+    word's end) past a sign (none of them read here: they are rare in writers' files)."""
+    at = np.flatnonzero(_EXPONENT[codes])
+    at = at[at + 1 < codes.size]
+    words = np.searchsorted(first, at[_UP[codes[at + 1]]], side="right") - 1
+    if first.size:  # each word's length before its point (its end, with none)
+        space = np.flatnonzero(codes <= 32)
+        after = np.minimum(np.searchsorted(space, first), max(space.size - 1, 0))
+        end = space[after] if space.size else first
+        end = np.where(end > first, end, codes.size)  # (the last word, at the chunk's end)
+        dots = np.flatnonzero(codes == 46)
+        if dots.size:
+            dot = dots[np.minimum(np.searchsorted(dots, first), dots.size - 1)]
+            end = np.where(dot > first, np.minimum(dot, end), end)
+        signed = (codes[first] == 43) | (codes[first] == 45)
+        words = np.union1d(words, np.flatnonzero(end - first - signed >= _LONG))
+    return sorted({int(k) for k in words})

@@ -102,8 +102,9 @@ CUT_SHORT = Field(
 ROWS_WARNING = Field(
     default=None, description="The first MOTION row, of the frames not read (only those "
     "edited or inspected are), that holds another count of values than the file's channels "
-    "or a value no number is (`nan`, `1,5`): its line, frame and what it holds. The answer "
-    "keeps it as sent; a reader of the whole file may refuse the file. Null where none is "
+    "or a value no number is (`nan`, `1,5`) or one past ±1e7 (`1e400`; a block of frames "
+    "wrapped over lines: its first such value): its line, frame and what it holds. The "
+    "answer keeps it as sent; a reader of the whole file may refuse the file. Null where none is "
     "found, for a file read whole, and for a file cut short (`cut_short`).",
 )  # fmt: skip
 

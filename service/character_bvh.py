@@ -104,19 +104,22 @@ def cut_short(bvh: BVH) -> dict[str, Any] | None:
 
 def rows_warning(bvh: BVH) -> str | None:
     """The answers' ``rows_warning``: the first MOTION row the partial read left unread
-    that holds other than the file's count of values or a value no number is
+    that holds other than the file's count of values, a value no number is, or one past
+    ±:data:`MAX_COORDINATE` (``1e400``), the frames of a wrapped block too
     (:func:`core.bvh_rows.odd_row`; a file cut short says so in ``cut_short`` instead),
     else None. A file read whole has had every row read."""
     if bvh.read is None:
         return None
     first_line = bvh.text.count("\n", 0, bvh.motion_offset) + 1
-    odd = odd_row(bvh.text, bvh.motion_offset, first_line, bvh.num_frames, bvh.num_channels)
+    odd = odd_row(
+        bvh.text, bvh.motion_offset, first_line, bvh.num_frames, bvh.num_channels, MAX_COORDINATE
+    )
     if odd is None or (bvh.cut is not None and odd.frame >= bvh.cut.frame):
         return None
     return (
         f"bvh: line {odd.line}: frame {odd.frame} holds {odd.detail} (the first such "
-        "row): only the frames edited are read, so the answer keeps it as sent, but a "
-        "reader of the whole file may refuse the file"
+        "frame): only the frames edited are read, so the answer keeps it as sent, but a "
+        "reader of the whole file may refuse the file (an edit of that frame is refused)"
     )
 
 

@@ -118,3 +118,96 @@ def test_odd_row_costs_milliseconds_a_megabyte(bvh_files: dict[str, Path]) -> No
         assert odd_row(bvh.text, bvh.motion_offset, 1, bvh.num_frames, bvh.num_channels) is None
         best = min(best, time.perf_counter() - t0)
     assert best < 0.05, best
+
+
+def _spoilt_word(text: str, frame: int, column: int, word: str) -> str:
+    """``text`` (one frame a line) with frame ``frame``'s value ``column`` written ``word``."""
+    lines = text.split("\n")
+    at = lines.index("MOTION") + 3 + frame
+    values = lines[at].split()
+    values[column] = word
+    lines[at] = " ".join(values)
+    return "\n".join(lines)
+
+
+@pytest.mark.parametrize(
+    ("word", "said"),
+    [
+        ("1e400", "'1e400', out of range (no finite number)"),
+        ("-1E+400", "'-1E+400', out of range (no finite number)"),
+        ("2.5e7", "'2.5e7', beyond ±1e+07"),
+        ("-123456789.5", "'-123456789.5', beyond ±1e+07"),
+    ],
+)
+def test_a_number_out_of_range_elsewhere_is_named(
+    client: Any, bvh_files: dict[str, Path], word: str, said: str
+) -> None:
+    """An API audit (2026-12-07): a value past any float (``1e400``) or past the ±1e7 a
+    frame read is refused beyond, in a frame not read, was answered without a word; an edit
+    of that frame is a 422. Values within it (``1e7``, ``-9.35e-15``) are no warning."""
+    text = raw(bvh_files["bandai"])
+    first = text.split("\n").index("MOTION") + 4  # frame 0's line, 1-based
+    body = {"frame": 0, "targets": [{"joint": "Hand_L", "position": [30.0, 100.0, 20.0]}]}
+    spoilt = _spoilt_word(text, 9, 20, word)
+    out = client.post("/v1/bvh/solve", json={**body, "bvh": spoilt}).json()
+    assert out["rows_warning"].startswith(f"bvh: line {first + 9}: frame 9 holds {said}"), out
+    assert out["bvh"].split("\n")[first + 8] == spoilt.split("\n")[first + 8]  # kept
+    seen = client.post("/v1/bvh/inspect", json={"bvh": spoilt, "frame": 0}).json()
+    assert seen["rows_warning"] == out["rows_warning"]
+    r = client.post("/v1/bvh/solve", json={**body, "bvh": spoilt, "frame": 9})
+    assert r.status_code == 422 and f"line {first + 9}" in r.json()["detail"], r.text
+    for fine in ("1e7", "-10000000", "-9.35e-15", "0.123456789012"):
+        seen = client.post(
+            "/v1/bvh/inspect", json={"bvh": _spoilt_word(text, 9, 20, fine), "frame": 0}
+        ).json()  # fmt: skip
+        assert seen["rows_warning"] is None, (fine, seen["rows_warning"])
+
+
+@pytest.mark.parametrize("word", ["nan", "1,5", "1e400"])
+def test_a_bad_value_in_a_wrapped_block_is_named(
+    client: Any, bvh_files: dict[str, Path], word: str
+) -> None:
+    """A block of frames wrapped over lines (11 values a line, CRLF) was not looked at: a
+    ``nan`` in a frame not read was answered without a word. Now its frame (its word's index
+    over the channels) and its line are named, as in a block of one frame a line."""
+    from tests.core.test_bvh_write import relaid
+
+    text = relaid(raw(bvh_files["bandai"]), 11, "\r\n")
+    bvh = parse_bvh(text, frames=[0])
+    c = bvh.num_channels
+    head = text[: bvh.motion_offset]
+    words = text[bvh.motion_offset :].split()
+    words[7 * c + 30] = word  # frame 7's value 30
+    block = "\r\n".join(" ".join(words[i : i + 11]) for i in range(0, len(words), 11))
+    spoilt = head + block + "\r\n"
+    line = head.count("\n") + 1 + (7 * c + 30) // 11  # the word's line, 1-based
+    body = {"frame": 0, "targets": [{"joint": "Hand_L", "position": [30.0, 100.0, 20.0]}]}
+    out = client.post("/v1/bvh/solve", json={**body, "bvh": spoilt})
+    assert out.status_code == 200, out.text
+    warning = out.json()["rows_warning"]
+    assert warning is not None and warning.startswith(f"bvh: line {line}: frame 7 holds '{word}'")
+    assert out.json()["bvh"].endswith(block[block.index(word) :] + "\r\n")  # kept as sent
+    clean = client.post("/v1/bvh/inspect", json={"bvh": text, "frame": 3}).json()
+    assert clean["rows_warning"] is None
+
+
+@pytest.mark.parametrize("chunk", [64, 1000, 1 << 20])
+def test_a_wrapped_block_s_frames_are_counted_over_chunks(
+    bvh_files: dict[str, Path], chunk: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A wrapped block's words are counted across chunks: the frame named is the bad
+    word's index over the channels, whatever the chunks."""
+    from tests.core.test_bvh_write import relaid
+
+    monkeypatch.setattr(core.bvh_rows, "_CHUNK", chunk)
+    text = relaid(raw(bvh_files["bandai"]), 7)
+    bvh = parse_bvh(text, frames=[0])
+    head, words = text[: bvh.motion_offset], text[bvh.motion_offset :].split()
+    first = head.count("\n") + 1
+    for at in (0, 5, bvh.num_channels * 100 + 3, len(words) - 1):
+        spoilt = list(words)
+        spoilt[at] = "1e999"
+        t = head + "\n".join(" ".join(spoilt[i : i + 7]) for i in range(0, len(words), 7))
+        got = odd_row(t, bvh.motion_offset, first, bvh.num_frames, bvh.num_channels, 1e7)
+        assert got is not None and got.frame == at // bvh.num_channels, (at, got)
+        assert got.line == first + at // 7 and got.detail.startswith("'1e999'"), (at, got)
