@@ -40,14 +40,18 @@ from service.characters import (
     make_character,
     moves_a_target,
 )
-from service.errors import MAX_ERRORS, InvalidRequest, every_item, field_error
+from service.errors import EMPTY_BVH, MAX_ERRORS, InvalidRequest, every_item, field_error
 from service.problems import SolveProblem
 
 
 def read_request_bvh(text: str, frames: int | Sequence[int] | None = None) -> BVH:
     """Parse and check a BVH body: every failure is a 422 naming the line and the reason.
     ``frames``: only that frame's (those frames') values are read and checked (the rest is
-    kept, unread)."""
+    kept, unread). A file of blanks alone (a byte order mark, spaces, line ends) is said
+    to be empty (it was "not a BVH file (no HIERARCHY keyword)")."""
+    body = text[1:] if text.startswith("\ufeff") else text
+    if not body or body.isspace():
+        raise InvalidRequest("bvh: " + EMPTY_BVH.format(size="blanks alone"))
     try:
         bvh = parse_bvh(text, "bvh", (frames,) if isinstance(frames, int) else frames)
     except BVHError as exc:

@@ -377,6 +377,10 @@ def name_key(name: str) -> str:
     return "_".join(name.lower().replace("-", "_").split())
 
 
+#: a BVH body with nothing in it (``bvh: ""``, or blanks alone): what a 0-byte file sends
+EMPTY_BVH = "the file is empty ({size}): send a BVH file's text, HIERARCHY first"
+
+
 def _message(error: Any) -> str:
     """pydantic's message, made specific where it is vague and never echoing much input."""
     kind = error.get("type", "")
@@ -406,6 +410,8 @@ def _message(error: Any) -> str:
             f"the {what} {quoted(value)} holds a lone surrogate (a \\ud800-\\udfff escape "
             "not in a pair), which no UTF-8 encodes"
         )
+    if kind == "string_too_short" and tuple(error.get("loc", ()))[-1:] == ("bvh",):
+        return EMPTY_BVH.format(size="0 bytes")
     if kind == "finite_number":
         return "must be a finite number (NaN and infinities are not)"
     if kind == "float_type" and type(value) is int:  # JSON allows any integer; a float not

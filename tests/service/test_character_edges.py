@@ -373,3 +373,17 @@ def test_unknown_rotation_keys_are_listed_up_to_8_then_counted(client: Any, n: i
     batch = {"items": [_example("solve"), body]}
     r = client.post("/v1/solve/batch", json=batch)
     assert r.json()["detail"] == f"items[1].rotations: unknown joints {shown}{more}", r.text
+
+
+@pytest.mark.parametrize("text", ["", "\ufeff", "  \r\n\r\n\t", "\ufeff\n"])
+def test_an_empty_file_is_said_to_be_empty(client: Any, text: str) -> None:
+    """A 0-byte file (or one of blanks alone, a byte order mark) was "not a BVH file (no
+    HIERARCHY keyword)", or pydantic's "String should have at least 1 character" (an API
+    audit, 2026-12-07): the file is said to be empty, on every BVH route."""
+    solve = {**_example("bvh_solve"), "bvh": text}
+    batch = {**_example("bvh_solve_batch"), "bvh": text}
+    for path, body in (("/v1/bvh/solve", solve), ("/v1/bvh/solve/batch", batch),
+                       ("/v1/bvh/inspect", {"bvh": text})):  # fmt: skip
+        detail = _refused(client, path, body, "bvh: the file is empty")
+        assert "HIERARCHY keyword" not in detail, detail
+        assert "at least 1 character" not in detail, detail
