@@ -115,12 +115,14 @@ def complete(
     # a bone whose two ends are key points has the length they fix (within what a bone
     # may be: the answer is a pose /v1/solve takes), unless bone_lengths names it (the
     # network's estimate missed them by up to 11 mm, at levels 2 and 3)
+    fixed_by_points: set[str] = set()
     for b, (c, p) in enumerate(BONES):
         child, parent = JOINT_NAMES[c], JOINT_NAMES[p]
         if child in keypoints and parent in keypoints and child not in (given_lengths or {}):
             fixed = float(np.linalg.norm(keypoints[child] - keypoints[parent]))
             if BONE_M[0] <= fixed <= BONE_M[1]:
                 lengths[b] = fixed
+                fixed_by_points.add(child)
     idx = np.asarray([JOINT_INDEX[j] for j in keypoints], dtype=np.intp)
     goal = np.stack([given[j] * scale for j in keypoints])
     # the compiled exact-reach polish (core.compiled_fabrik), as a solve's exact reach runs:
@@ -132,9 +134,53 @@ def complete(
     )  # fmt: skip
     world = polished[0] + origin
     errors = np.linalg.norm(world[idx] - np.stack(list(keypoints.values())), axis=-1)
+    told = [
+        *_scaled_bones(engine, given_lengths or {}, fixed_by_points, lengths),
+        *_scaled_points(engine, torso),
+    ]
     return CompleteResult(
-        pose=world, errors=errors, reached=errors <= tolerance, levels=run, floor=float(origin[1])
-    )
+        pose=world, errors=errors, reached=errors <= tolerance, levels=run,
+        floor=float(origin[1]), scale_warning="; ".join(told) or None,
+    )  # fmt: skip
+
+
+def _scaled_bones(
+    engine: Engine, given: dict[str, float], fixed: set[str], lengths: F64
+) -> list[str]:
+    """The answer's ``scale_warning`` of ``bone_lengths`` naming some bones, not all: the
+    others (but those two key points fix) take the reference lengths times the named
+    ones' median ratio, a body the request never gave (``{"left_wrist": 2.0}``: bones
+    totalling 34 m, every key point reached). Said, with that ratio and the body's size."""
+    scaled = [JOINT_NAMES[c] for c, _ in BONES if JOINT_NAMES[c] not in {*given, *fixed}]
+    if not given or not scaled:
+        return []
+    ref = engine.reference_lengths
+    ratio = float(np.median([given[j] / ref[_BONE[j]] for j in given]))
+    named = ", ".join(sorted(given)[:4]) + (", ..." if len(given) > 4 else "")
+    return [
+        f"bone_lengths names {len(given)} of the {len(BONES)} bones ({named}): the other "
+        f"{len(scaled)} take the reference skeleton's lengths times {ratio:.3g} (the named "
+        f"ones' median ratio to it), a body whose bones total {float(np.sum(lengths)):.3g} m "
+        f"(the reference's {float(np.sum(ref)):.3g} m); name every bone (or none: the "
+        "networks' estimate from the key points) to keep the character's proportions"
+    ]
+
+
+def _scaled_points(engine: Engine, torso: float) -> list[str]:
+    """The answer's ``scale_warning`` of key points of a body outside :data:`TORSO_BAND`:
+    completed scaled into it and answered back at their size (centimetres sent as metres:
+    a body 100 times larger, its bones totalling hundreds of metres)."""
+    band = _out_of_band(engine, torso)
+    if band == 1.0:
+        return []
+    spine = sum(float(engine.reference_lengths[_BONE[j]]) for j in ("spine1", "spine2", "neck"))
+    lo, hi = TORSO_BAND
+    return [
+        f"keypoints: the pelvis and the neck lie {torso:.3g} m apart, {torso / spine:.3g} "
+        f"times the reference skeleton's spine ({spine:.3g} m), outside the {lo:g}-{hi:g} "
+        f"times the networks know: completed scaled by {1 / band:.3g} into it and answered "
+        "back at the key points' size; key points are metres"
+    ]
 
 
 def _out_of_band(engine: Engine, torso: float) -> float:

@@ -391,3 +391,4 @@ class CompleteResult:
     reached: npt.NDArray[np.bool_]
     levels: list[int]
     floor: float  # the floor the networks saw (the request's, or where it was clamped)
+    scale_warning: str | None = None  # the body's size not the request's (``scale_warning``)

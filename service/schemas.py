@@ -323,6 +323,15 @@ class CompleteResponse(BaseModel):
         "of the training data stood higher)."
     )
     model: str
+    scale_warning: str | None = Field(
+        default=None,
+        description="Null unless the body answered is not the size the request gave: "
+        "`bone_lengths` naming some bones but not all (the others take the reference "
+        "skeleton's lengths times the named ones' median ratio: `{\"left_wrist\": 2.0}` "
+        "made a body whose bones total 34 m), or key points of a body outside the sizes "
+        "the networks know (completed scaled into them and answered back: centimetres "
+        "sent as metres). Says by how much.",
+    )
 
 
 class SkeletonResponse(BaseModel):

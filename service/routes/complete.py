@@ -22,4 +22,6 @@ async def complete(req: CompleteRequest, engine: ReadyEngine, budget: RequestBud
         result = await budget.in_thread(
             lambda: engine.complete(points, req.bone_lengths, floor=req.floor), "the completion"
         )
-    return json_response(complete_payload(list(points), result, engine.version), budget.compute)
+    payload = complete_payload(list(points), result, engine.version)
+    payload["scale_warning"] = result.scale_warning
+    return json_response(payload, budget.compute)

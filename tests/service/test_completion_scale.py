@@ -1,0 +1,54 @@
+"""``/v1/complete`` says when the body it answers is not the size the request gave
+(``scale_warning``): an API audit (2026-12-07) sent real key points with ``bone_lengths``
+naming one bone, ``{"left_wrist": 2.0}``, and got a body whose bones total 34 m (3.8 m
+without), every key point reached, and no word; and key points in centimetres, a body
+whose bones total 365 m, no word either."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from core.skeleton import BONES, JOINT_INDEX, JOINT_NAMES, bone_lengths
+from tests.conftest import PosePairs
+from tests.service.test_api import BASE, as_array
+
+
+def _body(pose: np.ndarray, scale: float = 1.0, joints: list[str] = BASE) -> dict[str, Any]:
+    return {"keypoints": [{"joint": j, "position": (pose[JOINT_INDEX[j]] * scale).tolist()}
+                          for j in joints]}  # fmt: skip
+
+
+def test_bone_lengths_naming_some_bones_say_the_others_were_scaled(
+    client: Any, real_poses: PosePairs
+) -> None:
+    pose = real_poses.poses[real_poses.goals[0]]
+    plain = client.post("/v1/complete", json=_body(pose)).json()
+    assert plain["scale_warning"] is None
+    out = client.post(
+        "/v1/complete", json={**_body(pose), "bone_lengths": {"left_wrist": 2.0}}
+    ).json()  # fmt: skip
+    total = float(np.sum(bone_lengths(as_array(out["pose"]))))
+    assert total > 5 * float(np.sum(bone_lengths(as_array(plain["pose"])))), total
+    warning = out["scale_warning"]
+    assert warning.startswith(f"bone_lengths names 1 of the {len(BONES)} bones (left_wrist)")
+    assert f"the other {len(BONES) - 1} take the reference skeleton's lengths times" in warning
+    assert f"bones total {total:.3g} m" in warning, (warning, total)
+    # every bone named: the character's own proportions, nothing scaled
+    names = [JOINT_NAMES[c] for c, _ in BONES]
+    every = dict(zip(names, bone_lengths(pose).tolist(), strict=True))
+    whole = client.post("/v1/complete", json={**_body(pose), "bone_lengths": every}).json()
+    assert whole["scale_warning"] is None
+
+
+def test_key_points_of_a_body_out_of_band_are_said_to_be_scaled(
+    client: Any, real_poses: PosePairs
+) -> None:
+    pose = real_poses.poses[real_poses.goals[1]]
+    out = client.post("/v1/complete", json=_body(pose, 100.0)).json()  # centimetres
+    warning = out["scale_warning"]
+    assert warning is not None and warning.startswith("keypoints: the pelvis and the neck lie")
+    assert "key points are metres" in warning
+    for k in (0.8, 1.0, 1.2):  # bodies the networks know: no word
+        assert client.post("/v1/complete", json=_body(pose, k)).json()["scale_warning"] is None
