@@ -51,8 +51,9 @@ from service.errors import TooManyItems, every_item
 from service.limits import Budget, Pricing, edit_price, refuse_price
 from service.problems import SolveProblem
 from service.responses import json_response
+from service.routes import ROUTE_PROBLEMS
 
-router = APIRouter(route_class=BodyRoute, tags=["characters"])
+router = APIRouter(route_class=BodyRoute, tags=["characters"], responses=ROUTE_PROBLEMS)
 R = TypeVar("R")
 
 

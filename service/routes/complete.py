@@ -7,10 +7,11 @@ from fastapi import APIRouter, Response
 from service.body import BodyRoute
 from service.deps import ReadyEngine, RequestBudget
 from service.responses import complete_payload, json_response
+from service.routes import ROUTE_PROBLEMS
 from service.schemas import CompleteRequest, CompleteResponse
 from service.validation import keypoints
 
-router = APIRouter(route_class=BodyRoute, tags=["complete"])
+router = APIRouter(route_class=BodyRoute, tags=["complete"], responses=ROUTE_PROBLEMS)
 
 
 @router.post("/v1/complete", response_model=CompleteResponse)

@@ -9,9 +9,10 @@ from prometheus_client import CONTENT_TYPE_LATEST
 
 from service.deps import State
 from service.errors import refused
+from service.routes import ROUTE_PROBLEMS
 from service.schemas import Health
 
-router = APIRouter(tags=["health"])
+router = APIRouter(tags=["health"], responses=ROUTE_PROBLEMS)
 
 
 # load balancers probe with HEAD: answered as GET (service.middleware.head)

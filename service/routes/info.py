@@ -6,9 +6,10 @@ from fastapi import APIRouter
 
 from core.skeleton import FRAME, JOINT_NAMES, PARENT_NAMES
 from service.deps import ReadyEngine, State
+from service.routes import ROUTE_PROBLEMS
 from service.schemas import ModelInfo, ModelsResponse, SkeletonResponse
 
-router = APIRouter(tags=["info"])
+router = APIRouter(tags=["info"], responses=ROUTE_PROBLEMS)
 #: Where the served models' card is: theirs, not the project's (a studio's retrained models
 #: pointed at the shipped ones' card).
 MODEL_CARD = "README.md beside manifest.json in the models folder served (pose-trainer model-card)"

@@ -33,11 +33,12 @@ from service.errors import InvalidRequest, TooManyItems, every_item
 from service.limits import Budget, Pricing, edit_price, price_of, refuse_price
 from service.problems import SolveProblem, SolveResult
 from service.responses import json_response, raw_response, solve_payload
+from service.routes import ROUTE_PROBLEMS
 from service.routes.characters import answer_character, read_character, solve_read
 from service.schemas import ColumnarBatch, ColumnarResponse, SolveRequest, SolveResponse
 from service.validation import degenerate, poses, solve_problem, start_poses, validate_as
 
-router = APIRouter(route_class=BodyRoute, tags=["solve"])
+router = APIRouter(route_class=BodyRoute, tags=["solve"], responses=ROUTE_PROBLEMS)
 INLINE_ITEMS = 32  # bigger batches are prepared and answered in a worker thread
 R = TypeVar("R")
 

@@ -84,6 +84,30 @@ def test_the_contract_says_what_a_generated_client_needs(models_dir: Path) -> No
         assert late.status_code == 422 and "options.passes" in late.text
 
 
+def test_the_contract_declares_the_404_and_405_any_path_may_answer(models_dir: Path) -> None:
+    """An API audit (2026-12-07): a path mistyped (or with a trailing slash) is a 404, a
+    method its route does not take a 405 with ``Allow``, both problem+json, and neither was
+    in openapi.yaml: a generated client had no type for their bodies. Every operation now
+    declares both, as the app answers them."""
+    spec = yaml.safe_load(CONTRACT.read_text(encoding="utf-8"))
+    problem = {"application/problem+json": {"schema": {"$ref": "#/components/schemas/Problem"}}}
+    for path, ops in spec["paths"].items():
+        for method, op in ops.items():
+            for code in ("404", "405"):
+                assert op["responses"][code]["content"] == problem, (method, path, code)
+            assert "Allow" in op["responses"]["405"]["headers"], (method, path)
+    required = spec["components"]["schemas"]["Problem"]["required"]
+    with make_client(models_dir) as c:
+        answers = [(c.get("/v1/solve"), 405), (c.delete("/v1/models"), 405),
+                   (c.post("/v1/slove", json={}), 404), (c.get("/v1/models/"), 404)]  # fmt: skip
+        for r, code in answers:
+            assert r.status_code == code, r.text
+            assert r.headers["content-type"] == "application/problem+json"
+            assert set(required) <= set(r.json()), r.json()
+            if code == 405:
+                assert r.headers["allow"], r.headers
+
+
 def test_openapi_yaml_matches_the_app() -> None:
     committed = CONTRACT.read_text(encoding="utf-8")
     assert committed == render(app_schema()), (
