@@ -144,6 +144,9 @@ class Tokens:
 
     def next(self, what: str) -> str:
         if self.pos >= self._long and not self._ready():
+            if self.pos == 0:  # (was "unexpected end of HIERARCHY, expected 'HIERARCHY'")
+                raise error(self.file, "not a BVH file (no HIERARCHY keyword): nothing comes "
+                            f"before its MOTION line, expected {what}")  # fmt: skip
             raise error(self.file, f"unexpected end of HIERARCHY, expected {what}")
         word, self._last = self.items[self.pos]
         self.pos += 1

@@ -80,3 +80,17 @@ def test_the_k_th_newline_is_found_wherever_it_lies() -> None:
         for _ in range(k):
             want = text.find("\n", want) + 1
         assert after_newlines(text, at, k) == want, (len(text), at, k)
+
+
+@pytest.mark.parametrize("head", ["", "\ufeff", "\n\n  \n"])
+def test_a_file_with_nothing_before_motion_is_no_bvh_file(
+    bvh_files: dict[str, Path], head: str
+) -> None:
+    """A file whose MOTION section comes first (its HIERARCHY lost) was "unexpected end of
+    HIERARCHY, expected 'HIERARCHY'" (an API audit, 2026-12-07): it has none."""
+    text = bvh_files["bandai"].read_text()
+    with pytest.raises(BVHError) as caught:
+        parse_bvh(head + text[text.index("MOTION") :], "walk.bvh")
+    said = str(caught.value)
+    assert said.startswith("walk.bvh: not a BVH file (no HIERARCHY keyword)"), said
+    assert "unexpected end" not in said, said
