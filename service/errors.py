@@ -381,6 +381,20 @@ def name_key(name: str) -> str:
 EMPTY_BVH = "the file is empty ({size}): send a BVH file's text, HIERARCHY first"
 
 
+def _not_a_name(error: Any) -> str:
+    """A joint's name given as no string: what was given, and for a pin given as an
+    object, what a pin and a target are."""
+    value = error.get("input")
+    kinds = {dict: "an object", list: "a list", bool: "true or false", type(None): "null"}
+    got = f"{kinds.get(type(value), 'a number')} ({quoted(value)})"  # (deep lists cut)
+    held = isinstance(value, dict) and "pins" in error.get("loc", ())
+    hint = (
+        '; a pin holds a joint where it is: a joint to move is a target, {"joint": ..., '
+        '"position": [x, y, z]}' if held else ""
+    )  # fmt: skip
+    return f"a joint's name (a string) is needed, not {got}{hint}"
+
+
 def _message(error: Any) -> str:
     """pydantic's message, made specific where it is vague and never echoing much input."""
     kind = error.get("type", "")
@@ -388,21 +402,16 @@ def _message(error: Any) -> str:
     value = error.get("input")
     if kind == "literal_error" and "'spine1'" in str(ctx.get("expected", "")):
         if not isinstance(value, str):  # no name at all (was: "unknown joint 1")
-            kinds = {dict: "an object", list: "a list", bool: "true or false", type(None): "null"}
-            got = f"{kinds.get(type(value), 'a number')} ({quoted(value)})"  # (deep lists cut)
-            held = isinstance(value, dict) and "pins" in error.get("loc", ())
-            hint = (
-                '; a pin holds a joint where it is: a joint to move is a target, {"joint": ..., '
-                '"position": [x, y, z]}' if held else ""
-            )  # fmt: skip
-            names = ", ".join(JOINT_NAMES)
-            return f"a joint's name (a string) is needed, not {got}{hint}; joints are {names}"
+            return f"{_not_a_name(error)}; joints are {', '.join(JOINT_NAMES)}"
         if "[key]" in error.get("loc", ()):  # a bone, named by its child joint
             bones = JOINT_NAMES[1:]  # (the root ends none)
             root = " (the root: no bone ends at it)" if value == JOINT_NAMES[0] else ""
             near = "" if root else _near(value, bones)
             return f"no bone ends at {quoted(value)}{root}{near}; bones end at {', '.join(bones)}"
         return f"unknown joint {quoted(value)}{_near(value)}; joints are {', '.join(JOINT_NAMES)}"
+    loc = tuple(error.get("loc", ()))
+    if kind == "string_type" and ("pins" in loc[-2:] or loc[-1:] == ("joint",)):
+        return _not_a_name(error)  # a character's joint (was "Input should be a valid string")
     if kind == "string_unicode" and isinstance(value, str):  # a lone surrogate's escape
         known = ctx.get("key")  # service.bounded.keyed: a key, a value, or not known
         what = "key or string" if known is None else "key" if known else "string"

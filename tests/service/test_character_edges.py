@@ -387,3 +387,17 @@ def test_an_empty_file_is_said_to_be_empty(client: Any, text: str) -> None:
         detail = _refused(client, path, body, "bvh: the file is empty")
         assert "HIERARCHY keyword" not in detail, detail
         assert "at least 1 character" not in detail, detail
+
+
+def test_a_character_s_pin_given_as_an_object_is_told_what_a_pin_is(client: Any) -> None:
+    """A character's pin sent as the answers write pins, ``{"joint": "LeftFoot"}``, was
+    pydantic's "Input should be a valid string" (an API audit, 2026-12-07), where the
+    canonical form's says what a pin and a target are: now both do, on every route."""
+    for path, name in (("solve_character", "/v1/solve"), ("bvh_solve", "/v1/bvh/solve"),
+                       ("character_solve", "/v1/character/solve")):  # fmt: skip
+        body = {**_example(path), "pins": [{"joint": "LeftFoot"}]}
+        detail = _refused(client, name, body, "pins[0]: a joint's name (a string) is needed,")
+        assert "not an object" in detail and "a joint to move is a target" in detail, detail
+    body = _example("solve_character")
+    body["targets"][0]["joint"] = 7
+    _refused(client, "/v1/solve", body, "targets[0].joint: a joint's name (a string) is needed")
