@@ -4,10 +4,11 @@ The service parses only the frames it edits (``core.bvh.parse_bvh(frames=...)``)
 malformed row elsewhere (83 of 84 values, 85, a ``nan``) was answered 200 without a word,
 and written back as sent. :func:`odd_row` finds the first such row without parsing every
 number: each line's count of values and the first character no number or space holds
-(numpy, a chunk of lines at a time: ~1.5 ms a MB); only a word that may be beyond the
-bound (an exponent not negative, ``1e400``, or eight digits before its point) is read as a
-number. A block of frames wrapped over several lines (or with blank lines among them) has
-its words looked at alike, each word's frame its index over the channels.
+(numpy, a chunk of lines at a time: ~1.5 ms a MB); only a chunk that may hold a number
+beyond the bound (an exponent not negative, ``1e400``, or eight digits before a point)
+has its numbers read, by numpy. A block of frames wrapped over several lines (or with
+blank lines among them) has its words looked at alike, each word's frame its index over
+the channels.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from core.bvh import one_frame_a_line
+from core.bvh_words import fromstring
 
 #: a character no decimal number (nor a separator) holds: ``nan``, ``inf``, ``1,5``, ``x``
 _NOT_NUMBER_RE = re.compile(r"[^0-9eE+\-.\s]")
@@ -31,10 +33,6 @@ _SPACE[[9, 10, 11, 12, 13, 28, 29, 30, 31, 32]] = True
 _NUMBER = _SPACE.copy()
 _NUMBER[list(b"0123456789eE+-.")] = True
 _ALLOWED = bytes(np.flatnonzero(_NUMBER).tolist())
-_EXPONENT = np.zeros(256, dtype=bool)
-_EXPONENT[list(b"eE")] = True
-_UP = np.zeros(256, dtype=bool)  # what follows the ``e`` of an exponent not negative
-_UP[list(b"0123456789+")] = True
 _LONG = 8  # digits before a point from which a number may be past a bound of 1e7
 #: digits and ``+`` to ``0``, ``E`` to ``e``, ``-`` and spaces to `` ``: an exponent not
 #: negative is ``b"e0"``, a run of :data:`_LONG` digits not after a point ``b" 00000000"``
@@ -146,11 +144,10 @@ def _odd_in(chunk: str, n: int, bound: float, rows: bool) -> tuple[int, int, str
         word = _WORD_RE.match(chunk, int(first[k])) if k >= 0 else None
         said = f"{(word.group() if word else chunk[at])[:20]!r}, not a number"
         found.append((int(np.searchsorted(newlines, at)), max(k, 0), said))
-    for k in _suspects(codes, first) if big else []:
+    k = _first_beyond(chunk, bound) if big else -1
+    if k >= 0:
         said = _beyond(_WORD_RE.match(chunk, int(first[k])).group(), bound)  # type: ignore[union-attr]
-        if said:
-            found.append((int(np.searchsorted(newlines, first[k])), int(k), said))
-            break
+        found.append((int(np.searchsorted(newlines, first[k])), k, said))
     if rows and odd.size:
         i = int(odd[0])
         k = int(np.searchsorted(first, newlines[i - 1] if i else -1, side="right"))
@@ -168,22 +165,23 @@ def _may_hold_big(raw: bytes) -> bool:
     return b"e0" in flat or flat.startswith(run) or b" " + run in flat
 
 
-def _suspects(codes: np.ndarray, first: np.ndarray) -> list[int]:
-    """The indices (ascending) of the words that may be beyond a bound of 1e7: an
-    exponent not negative, or :data:`_LONG` characters or more before the point (or the
-    word's end) past a sign (none of them read here: they are rare in writers' files)."""
-    at = np.flatnonzero(_EXPONENT[codes])
-    at = at[at + 1 < codes.size]
-    words = np.searchsorted(first, at[_UP[codes[at + 1]]], side="right") - 1
-    if first.size:  # each word's length before its point (its end, with none)
-        space = np.flatnonzero(codes <= 32)
-        after = np.minimum(np.searchsorted(space, first), max(space.size - 1, 0))
-        end = space[after] if space.size else first
-        end = np.where(end > first, end, codes.size)  # (the last word, at the chunk's end)
-        dots = np.flatnonzero(codes == 46)
-        if dots.size:
-            dot = dots[np.minimum(np.searchsorted(dots, first), dots.size - 1)]
-            end = np.where(dot > first, np.minimum(dot, end), end)
-        signed = (codes[first] == 43) | (codes[first] == 45)
-        words = np.union1d(words, np.flatnonzero(end - first - signed >= _LONG))
-    return sorted({int(k) for k in words})
+def _first_beyond(chunk: str, bound: float) -> int:
+    """The index of the first word of ``chunk`` past ``bound`` (``1e400``: infinity), -1
+    for none: numpy reads the chunk's numbers (in C: ~20 ms a MB at worst, where a chunk
+    holds an exponent not negative; a word a Python ``float`` each took seconds for 8 MB
+    of ``1e+01``); where it does not read every word (``1.2.3``), line by line."""
+    values = fromstring(chunk)
+    if values is not None:
+        far = np.flatnonzero(~(np.abs(values) <= bound))
+        return int(far[0]) if far.size else -1
+    k = 0
+    for line in chunk.split("\n"):
+        values = fromstring(line)
+        if values is None:  # (a word no number is, made of a number's characters: not told)
+            k += len(line.split())
+            continue
+        far = np.flatnonzero(~(np.abs(values) <= bound))
+        if far.size:
+            return k + int(far[0])
+        k += values.size
+    return -1
