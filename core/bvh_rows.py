@@ -56,7 +56,8 @@ def odd_row(
     """The first of the ``n_frames`` frames of the MOTION block from ``at`` (the block on
     line ``first_line`` on) that holds a value no decimal number is, one beyond ``bound``
     (``1e400``: no finite number), or, one frame a line, other than ``n_channels`` values;
-    None where every frame looks whole. A block that is not one frame a line (wrapped
+    None where every frame looks whole (``bound`` at least 1e7: a number within it is
+    read only where the chunk may hold one past it). A block that is not one frame a line (wrapped
     frames, blank lines) is taken to hold its frames' values (the partial read counts
     them): its words are looked at, not its lines' counts."""
     if n_frames == 0 or n_channels == 0:
