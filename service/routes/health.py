@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from fastapi import APIRouter, Request, Response
 from fastapi.responses import RedirectResponse
-from prometheus_client import CONTENT_TYPE_LATEST
+from prometheus_client.exposition import CONTENT_TYPE_PLAIN_0_0_4
 
 from service.deps import State
 from service.errors import refused
@@ -47,7 +47,9 @@ async def ready(request: Request, response: Response, state: State) -> Health:
 @router.get("/metrics", response_class=Response)
 async def metrics(state: State) -> Response:
     """Prometheus metrics (with several worker processes, the sum of all of them)."""
-    return Response(state.metrics.exposition(), media_type=CONTENT_TYPE_LATEST)
+    # the text format 0.0.4 generate_latest writes and openapi.yaml declares (it was
+    # CONTENT_TYPE_LATEST, version=1.0.0 since prometheus_client 0.22: an API audit)
+    return Response(state.metrics.exposition(), media_type=CONTENT_TYPE_PLAIN_0_0_4)
 
 
 @router.get("/", include_in_schema=False)

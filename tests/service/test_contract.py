@@ -108,6 +108,23 @@ def test_the_contract_declares_the_404_and_405_any_path_may_answer(models_dir: P
                 assert r.headers["allow"], r.headers
 
 
+def test_the_get_routes_answer_the_media_types_the_contract_declares(models_dir: Path) -> None:
+    """``/metrics`` answered ``text/plain; version=1.0.0`` (prometheus_client's
+    ``CONTENT_TYPE_LATEST`` since 0.22) where openapi.yaml declares ``version=0.0.4``, the
+    format its body is written in (an API audit, 2026-12-07)."""
+    spec = yaml.safe_load(CONTRACT.read_text(encoding="utf-8"))
+    with make_client(models_dir) as c:
+        for path, ops in spec["paths"].items():
+            if "get" not in ops or "{" in path:
+                continue
+            declared = set(ops["get"]["responses"]["200"].get("content", {}))
+            got = c.get(path)
+            assert got.status_code == 200, (path, got.text)
+            params = [p.strip() for p in got.headers["content-type"].split(";")]
+            said = "; ".join(p for p in params if not p.startswith("charset="))
+            assert said in declared, (path, got.headers["content-type"], declared)
+
+
 def test_openapi_yaml_matches_the_app() -> None:
     committed = CONTRACT.read_text(encoding="utf-8")
     assert committed == render(app_schema()), (
