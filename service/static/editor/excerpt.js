@@ -105,6 +105,33 @@ export function layoutAfter({ to, start, end, after, frame, frames, channels, la
 // (exported for the test above: Node compares it with ``layoutAfter``)
 export const readLayout = layoutOf;
 
+// A file too big for one request (the service's 413, POSE_MAX_BODY_BYTES) read from its
+// first frame, as its solves are sent (the limit's detail says so): the inspection's
+// excerpt, frame 0's line after the head with "Frames: 1", and the frames the file declares
+// (``frames``) and where its frames start (``at``); null where no excerpt can be cut (no MOTION header, "Frames:" no count,
+// lines ended by a CR alone, frame 0's line blank). Whether the whole file is read as
+// the excerpts are, one frame a line, whole, is known only with its channels (the
+// inspection's): ``layoutOf`` then (file.js). A file over 8 MiB could not be opened at all,
+// its 413 telling the user what an API client sends.
+export function firstFrame(text) {
+  if (/\r(?!\n)|[\u2028\u2029]/.test(text)) return null;
+  let header;
+  try {
+    header = motionHeader(text);
+  } catch {
+    return null;
+  }
+  const [fs, fe] = header.frames;
+  const m = FRAMES_RE.exec(text.slice(fs, fe));
+  const frames = m ? Number(m[2]) : NaN;
+  if (!Number.isInteger(frames) || frames < 1) return null;
+  const { at } = header;
+  const line = text.slice(at, lineEnd(text, at));
+  if (!/\S/.test(line)) return null;
+  const framesLine = text.slice(fs, fe).replace(FRAMES_RE, (_, a, n, b) => `${a}1${b}`);
+  return { bvh: `${text.slice(0, fs)}${framesLine}${text.slice(fe, at)}${line}\n`, frames, at };
+}
+
 // The committed text's entry (``known``): its layout, and the cut last made of it.
 function entryOf(text, frames, channels) {
   if (known.text !== text || known.channels !== channels) {

@@ -13,7 +13,7 @@ import { buildCharacterBones, buildSkeleton, camera, centreFloor, controls, UP }
 import { endDrag } from './interaction.js';
 import { refresh, refreshPanel } from './panel.js';
 import { offerTemplate, readMap, showMap } from './jointmap.js';
-import { committedRow, forgetLayout } from './excerpt.js';
+import { committedRow, firstFrame, forgetLayout, readLayout } from './excerpt.js';
 
 // ------------------------------------------------------------------------------------
 // A file's frames: forward kinematics, the page's world
@@ -202,7 +202,7 @@ export async function openText(text, name, {
   let res;
   try {
     const map = jointMap ? { joint_map: jointMap } : {};
-    res = await api('POST', 'v1/bvh/inspect', { bvh: text, frame: 0, ...fileSettings(settings), ...map });
+    res = await inspect(text, { frame: 0, ...fileSettings(settings), ...map });
     if (ticket !== opening) return;
   } catch (err) {
     if (ticket !== opening) return;
@@ -229,6 +229,37 @@ export async function openText(text, name, {
   whenCommitted(() => {
     if (ticket === opening) showOpened({ ...opened, text: doc.text, frame: doc.frame, kept: keptEdits() });
   });
+}
+
+// ``POST v1/bvh/inspect`` of ``text`` (the other fields: ``fields``). A file the service
+// refuses as too big (413: over its POSE_MAX_BODY_BYTES, 8 MiB by default) is read from its
+// first frame (``firstFrame``), as its solves are sent, where the whole file is read as
+// those excerpts are (``readLayout``: one frame a line, as many as "Frames:" says, the last
+// whole): the answer is the whole file's, its frames the file's count. Else the 413 says
+// why the page cannot send it a frame at a time. (A 14 MB file could not be opened: the
+// banner told the user to send "an excerpt", which only the page can.)
+async function inspect(text, fields) {
+  try {
+    return await api('POST', 'v1/bvh/inspect', { bvh: text, ...fields });
+  } catch (err) {
+    if (!(err instanceof ApiError && err.status === 413)) throw err;
+    const first = firstFrame(text);
+    const mb = `${(text.length / 1e6).toFixed(1)} MB`;
+    const limit = err.detail.split(/\.\s/)[0]; // (the rest tells an API client what to send)
+    const notOne = (why) => new ApiError(413, err.title, `the file (${mb}) is over the server's `
+      + `limit for one request (${limit}), and the editor sends a big file a frame at a time `
+      + `only where it holds one frame a line, as many as its Frames: line says, the last one `
+      + `whole; ${why}`, err.requestId);
+    if (!first) throw notOne('this one has no such frames (no Frames: count, or lines ended by CR alone)');
+    // (its channels as its CHANNELS lines declare them, checked against the answer's)
+    const channels = [...text.slice(0, first.at).matchAll(/^[ \t]*CHANNELS[ \t]+(\d+)/gim)]
+      .reduce((n, m) => n + Number(m[1]), 0);
+    const not = `this one does not (${first.frames} frames of ${channels} values each declared)`;
+    if (!readLayout(text, first.frames, channels)) throw notOne(not);
+    const res = await api('POST', 'v1/bvh/inspect', { ...fields, bvh: first.bvh, frame: 0 });
+    if (res.data.cut_short || channelCount(res.data) !== channels) throw notOne(not);
+    return { ...res, data: { ...res.data, frames: first.frames, frame: fields.frame } };
+  }
 }
 
 // A refusal of the file's units or up axis tells an API client what to send ("units":

@@ -1,0 +1,122 @@
+"""A BVH file over the service's body limit (``POSE_MAX_BODY_BYTES``, 8 MiB) opened in the
+editor: the service refuses the whole file with a 413 whose detail tells an API client to
+send an excerpt, which the page already does for every solve but did not for the file's
+inspection, so a 9.5 MB file could not be opened at all, the banner telling the user what
+to send (an audit, 2026-12-07). The page now reads such a file from its first frame
+(``editor/excerpt.js`` ``firstFrame``, ``editor/file.js`` ``inspect``) where the whole file is
+read as its excerpts are; else the banner says why it cannot.
+
+The real server and a real Chromium (``tests/service/editor_page.py``); a real ReActIdle file
+(``tests/character_files.py``) made big by repeating its frames.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from tests.character_files import big_file
+from tests.service.editor_page import M, drag_joint, open_editor, recorded
+
+# the fixtures `server` (one for the session) and `browser` (one per module)
+pytest_plugins = ("tests.service.editor_page",)
+
+SIZE = 9_500_000  # over the 8 MiB (8,388,608 bytes) the service takes in one body
+
+
+def give(page: Any, text: str, name: str) -> None:
+    page.set_input_files(
+        "#bvh-file", files=[{"name": name, "mimeType": "text/plain", "buffer": text.encode()}]
+    )
+
+
+def frame_to(page: Any, frame: int) -> None:
+    page.locator("#bvh-frame-number").fill(str(frame))
+    page.keyboard.press("Enter")
+    page.wait_for_function(f"() => {M}.bvh().frame === {frame}")
+
+
+@pytest.mark.browser
+def test_a_file_over_the_body_limit_opens_edits_and_exports(
+    server: str, browser: Any, bvh_files: dict[str, Path]
+) -> None:
+    """A 9.5 MB file: refused whole (413), opened from its first frame (an excerpt of a few
+    kB), with every frame it declares; read again with other root channels; its last frame
+    dragged (the wrist under the pointer); the export is the file with that frame's line
+    alone rewritten."""
+    text = big_file(bvh_files["reactidle-6ch"], SIZE)
+    assert len(text) > 8 * 1024 * 1024
+    frames = int(text.split("Frames: ", 1)[1].split("\n", 1)[0])
+    page = open_editor(browser, server)
+    inspected = recorded(page, lambda url: url.endswith("/v1/bvh/inspect"))
+    statuses: list[int] = []
+    page.on("response", lambda r: statuses.append(r.status) if "bvh/inspect" in r.url else None)
+    try:
+        give(page, text, "big.bvh")
+        page.wait_for_function(f"() => {M}.bvh() || ({M}.error() && {M}.error().status > 0)")
+        assert page.evaluate(f"{M}.bvh()") is not None, page.evaluate(f"{M}.error()")
+        info = page.evaluate(f"{M}.bvh()")
+        assert info["frames"] == frames and info["units"] == "m"
+        assert statuses == [413, 200]
+        assert len(inspected[0]["bvh"]) == len(text) and len(inspected[1]["bvh"]) < 10_000
+        assert "Frames: 1\n" in inspected[1]["bvh"] and inspected[1]["frame"] == 0
+        label = page.locator("#bvh-frame-label").text_content() or ""
+        assert label.startswith(f"/ {frames - 1} ")
+        # ReActIdle's root channels: read again as a displacement (the same way in)
+        page.select_option("#bvh-root", "add")
+        page.wait_for_function(f"() => {M}.bvh().root === 'add' && !{M}.error()")
+        assert statuses[2:] == [413, 200] and page.evaluate(f"{M}.bvh()")["frames"] == frames
+
+        frame_to(page, frames - 1)
+        at = page.evaluate(f"{M}.projectJoint('left_wrist')")
+        drag_joint(page, "left_wrist", 30, -40)
+        assert page.evaluate(f"{M}.error()") is None
+        now = page.evaluate(f"{M}.projectJoint('left_wrist')")
+        assert abs(now["x"] - at["x"] - 30) < 1 and abs(now["y"] - at["y"] + 40) < 1
+        solved = page.evaluate(f"{M}.lastSolve()")["request"]
+        assert solved["frame"] == frames - 1 and solved["excerpt_chars"] < 10_000
+
+        with page.expect_download() as download:
+            page.click("#export")
+        out = Path(download.value.path()).read_bytes().decode()
+        was, got = text.split("\n"), out.split("\n")
+        assert len(was) == len(got)
+        changed = [i for i, (a, b) in enumerate(zip(was, got, strict=True)) if a != b]
+        assert changed == [len(was) - 2]  # the last frame's line (the text ends with an LF)
+    finally:
+        page.context.close()
+
+
+@pytest.mark.browser
+def test_a_file_over_the_body_limit_it_cannot_excerpt_is_said(
+    server: str, browser: Any, bvh_files: dict[str, Path]
+) -> None:
+    """The same file with each frame over two lines: no frame's line alone is the frame, so
+    nothing is sent but the whole file (413); the banner says why the editor cannot send it
+    a frame at a time, not what an API client should send."""
+    text = big_file(bvh_files["reactidle-6ch"], SIZE)
+    head, rows = text.split("Frame Time:", 1)
+    time, rows = rows.split("\n", 1)
+    wrapped = [
+        " ".join(r.split(" ")[:6]) + "\n" + " ".join(r.split(" ")[6:]) if r else r
+        for r in rows.split("\n")
+    ]
+    text = f"{head}Frame Time:{time}\n" + "\n".join(wrapped)
+    page = open_editor(browser, server)
+    inspected = recorded(page, lambda url: url.endswith("/v1/bvh/inspect"))
+    try:
+        give(page, text, "wrapped.bvh")
+        page.wait_for_function(f"() => {M}.error() && {M}.error().status === 413")
+        err = page.evaluate(f"{M}.error()")
+        assert err["detail"].startswith("wrapped.bvh: the file (")
+        assert (
+            "the editor sends a big file a frame at a time only where it holds one frame a"
+            in err["detail"]
+        )
+        assert "POSE_MAX_BODY_BYTES" in err["detail"] and "Send a big file" not in err["detail"]
+        assert page.evaluate(f"{M}.bvh()") is None
+        assert len(inspected) == 1  # (the whole file alone)
+    finally:
+        page.context.close()
