@@ -116,7 +116,10 @@ export function filePose(text, frame, known = null) {
 // ------------------------------------------------------------------------------------
 // How a file is read: the menus' settings, as a file opened from the picker starts them
 // (units and up axis found anew: a choice made for the file before, inches say, drew a
-// centimetre file as a giant; the root's channels as BVH has them).
+// centimetre file as a giant; the root's channels as BVH has them), unless no file is open
+// or tried: then the menus hold what the user chose for the next file (an inches, +Z up
+// file was refused for its units, "pick them in the Units menu", though picked there just
+// before, the menu back at auto). A file closed (a Sample) puts them back to the defaults.
 const MENUS = { units: 'bvh-units', up: 'bvh-up', root: 'bvh-root' };
 const DEFAULT_SETTINGS = { units: 'auto', up: 'auto', root: 'replace' };
 
@@ -179,6 +182,7 @@ function stopReading() {
 export function cancelOpening() {
   opening += 1; // (an answer on its way finds its ticket stale and is dropped)
   picked += 1; // (as does a file whose bytes are still being read)
+  if (doc.tried) showSettings(DEFAULT_SETTINGS); // (no file tried: the menus are for the next)
   doc.tried = null; // (nor does a units / up change re-open it)
   if (ui.reading) {
     stopReading();
@@ -527,7 +531,7 @@ export async function openFile(file) {
   }
   if (!givenUp() && !retried(file.name, text) && !mayReplace(file.name)) return;
   const yes = replaceable(); // (re-trying the file after a refusal asks only about newer edits)
-  showSettings(DEFAULT_SETTINGS); // each file read anew (MENUS, above)
+  if (doc.active || doc.tried) showSettings(DEFAULT_SETTINGS); // each file read anew (MENUS, above)
   showMap(jointMap);
   await openText(text, file.name, { encoding: decoded.encoding, jointMap, yes });
 }
@@ -631,6 +635,7 @@ export function closeFile() {
   $('reset').title = 'Back to the sample pose, no targets, no pins';
   clearHistory();
   doc.tried = null; // closed: a units / up change no longer re-opens it
+  showSettings(DEFAULT_SETTINGS); // (they said how the file closed was read)
   controls.target.set(0, 0.85, 0);
   camera.position.set(0.75, 1.3, 2.9);
   controls.update();
