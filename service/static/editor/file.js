@@ -242,28 +242,41 @@ export async function openText(text, name, {
 // whole): the answer is the whole file's, its frames the file's count. Else the 413 says
 // why the page cannot send it a frame at a time. (A 14 MB file could not be opened: the
 // banner told the user to send "an excerpt", which only the page can.)
+let bodyLimit = Infinity; // (bytes: the last 413's; a file over it goes as an excerpt at once)
+
 async function inspect(text, fields) {
+  let err;
   try {
+    if (text.length > bodyLimit) { // (a 413 again: not uploaded again, a few MB for nothing)
+      throw new ApiError(413, 'Request body too large', `body of ${text.length} bytes or more `
+        + `exceeds the ${bodyLimit}-byte limit (the server's POSE_MAX_BODY_BYTES)`);
+    }
     return await api('POST', 'v1/bvh/inspect', { bvh: text, ...fields });
-  } catch (err) {
-    if (!(err instanceof ApiError && err.status === 413)) throw err;
-    const first = firstFrame(text);
-    const mb = `${(text.length / 1e6).toFixed(1)} MB`;
-    const limit = err.detail.split(/\.\s/)[0]; // (the rest tells an API client what to send)
-    const notOne = (why) => new ApiError(413, err.title, `the file (${mb}) is over the server's `
-      + `limit for one request (${limit}), and the editor sends a big file a frame at a time `
-      + `only where it holds one frame a line, as many as its Frames: line says, the last one `
-      + `whole; ${why}`, err.requestId);
-    if (!first) throw notOne('this one has no such frames (no Frames: count, or lines ended by CR alone)');
-    // (its channels as its CHANNELS lines declare them, checked against the answer's)
-    const channels = [...text.slice(0, first.at).matchAll(/^[ \t]*CHANNELS[ \t]+(\d+)/gim)]
-      .reduce((n, m) => n + Number(m[1]), 0);
-    const not = `this one does not (${first.frames} frames of ${channels} values each declared)`;
-    if (!readLayout(text, first.frames, channels)) throw notOne(not);
-    const res = await api('POST', 'v1/bvh/inspect', { ...fields, bvh: first.bvh, frame: 0 });
-    if (res.data.cut_short || channelCount(res.data) !== channels) throw notOne(not);
-    return { ...res, data: { ...res.data, frames: first.frames, frame: fields.frame } };
+  } catch (refused) {
+    if (!(refused instanceof ApiError && refused.status === 413)) throw refused;
+    err = refused;
   }
+  const said = /(\d+)-byte limit/.exec(err.detail);
+  if (said) bodyLimit = Number(said[1]);
+  const mb = `${(text.length / 1e6).toFixed(1)} MB`;
+  if (!/HIERARCHY/i.test(text.slice(0, 65536))) { // (binary junk: said so, as a small one is)
+    throw new ApiError(422, 'Not a BVH file', `no HIERARCHY keyword (${mb}, over the server's limit for one request)`);
+  }
+  const limit = err.detail.split(/\.\s/)[0]; // (the rest tells an API client what to send)
+  const notOne = (why) => new ApiError(413, err.title, `the file (${mb}) is over the server's `
+    + `limit for one request (${limit}), and the editor sends a big file a frame at a time `
+    + `only where it holds one frame a line, as many as its Frames: line says, the last one `
+    + `whole; ${why}`, err.requestId);
+  const first = firstFrame(text);
+  if (!first) throw notOne('this one has no such frames (no Frames: count, or lines ended by CR alone)');
+  // (its channels as its CHANNELS lines declare them, checked against the answer's)
+  const channels = [...text.slice(0, first.at).matchAll(/^[ \t]*CHANNELS[ \t]+(\d+)/gim)]
+    .reduce((n, m) => n + Number(m[1]), 0);
+  const not = `this one does not (${first.frames} frames of ${channels} values each declared)`;
+  if (!readLayout(text, first.frames, channels)) throw notOne(not);
+  const res = await api('POST', 'v1/bvh/inspect', { ...fields, bvh: first.bvh, frame: 0 });
+  if (res.data.cut_short || channelCount(res.data) !== channels) throw notOne(not);
+  return { ...res, data: { ...res.data, frames: first.frames, frame: fields.frame } };
 }
 
 // A refusal of the file's units or up axis tells an API client what to send ("units":
