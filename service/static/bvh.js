@@ -48,6 +48,13 @@ export function parseMotion(text) {
 // file: ~0.5 ms, not parseMotion's 12-30 ms); null unless the file holds one frame per
 // line, ``frames`` lines less the blank ones (the service's rule for splicing a frame).
 export function frameValues(text, frame, frames, channels) {
+  const line = frameLine(text, frame, frames);
+  return line && lineValues(text.slice(line[0], line[1]), channels);
+}
+
+// Where the line of ``frame`` stands ([start, end), its LF left out), or null unless the file
+// holds one frame per line, ``frames`` lines less the blank ones (``frameValues``).
+export function frameLine(text, frame, frames) {
   const blank = /[^\S\n]*(?:\n|$)/y;
   let pos = motionStart(text);
   let seen = 0;
@@ -62,8 +69,7 @@ export function frameValues(text, frame, frames, channels) {
     }
     pos = end + 1;
   }
-  if (seen !== frames || !line) return null;
-  return lineValues(text.slice(line[0], line[1]), channels);
+  return seen === frames ? line : null;
 }
 
 // The values of one frame's line (Float64Array of ``channels``), or null where it holds

@@ -2,7 +2,9 @@
 // kinematics), and open (picker or drop), scrub, close.
 
 import * as THREE from 'three';
-import { anchorPoints, channelCount, forwardKinematics, frameValues, parseMotion } from '../bvh.js';
+import {
+  anchorPoints, channelCount, forwardKinematics, frameLine, frameValues, parseMotion,
+} from '../bvh.js';
 import { $, doc, history, solver, state, ui } from './state.js';
 import { api, ApiError, clearError, showError } from './api.js';
 import {
@@ -57,16 +59,40 @@ let lastRow = NO_ROW;
 function frameRow(text, frame, known) {
   const n = channelCount(doc.info);
   if (known && known.length === n) {
-    lastRow = { text, frame, row: known };
-    return known;
+    const row = known.every(Number.isFinite) ? known : new Float64Array(n).fill(NaN);
+    lastRow = { text, frame, row };
+    return row;
   }
   if (lastRow.text === text && lastRow.frame === frame) return lastRow.row;
   const values = motionCache.size ? cached(text) : undefined; // (none: a file one frame a line)
   if (values) return values.subarray(frame * n, (frame + 1) * n);
-  const row = frameValues(text, frame, doc.info.frames, n);
+  let row = frameValues(text, frame, doc.info.frames, n);
+  // A frame's line of a file one frame a line that holds another count of values, or one
+  // that is no number (the service's rows_warning): that frame has no pose (nothing drawn,
+  // nothing grabbed; showFrame says why). It was read from the whole file's values, every
+  // value after the line's shifted: another pose drawn, a limb lost, without a word.
+  if (!row && frameLine(text, frame, doc.info.frames)) row = new Float64Array(n).fill(NaN);
   if (!row) return motionOf(text).subarray(frame * n, (frame + 1) * n); // (not kept: motionCache)
+  if (!row.every(Number.isFinite)) row = new Float64Array(n).fill(NaN);
   lastRow = { text, frame, row }; // (a row of the whole file's values kept them, and a text no longer shown)
   return row;
+}
+
+// Why frame ``frame`` of ``text`` has no pose, where its line holds another count of
+// values than the file's channels, or a value that is no number; else null.
+function brokenRow(text, frame) {
+  const at = frameLine(text, frame, doc.info.frames);
+  if (!at) return null;
+  const words = text.slice(at[0], at[1]).match(/\S+/g) || [];
+  const n = channelCount(doc.info);
+  const bad = words.find((w) => !Number.isFinite(Number(w)));
+  if (words.length === n && bad === undefined) return null;
+  let line = 1;
+  for (let i = text.indexOf('\n'); i >= 0 && i < at[0]; i = text.indexOf('\n', i + 1)) line += 1;
+  const holds = words.length !== n ? `${words.length} values, not ${n}`
+    : `a value that is no number ('${bad.slice(0, 20)}')`;
+  return `${doc.name}: line ${line}: frame ${frame} holds ${holds}: it has no pose to draw or `
+    + 'edit (the other frames have; Export writes this line as it is)';
 }
 
 // One frame's values of a text (the same array while the text and frame are the ones last
@@ -369,10 +395,10 @@ export function lastFrame(info) {
 function warnOpened(info) {
   const root = info.root_warning && `${info.root_warning} (the Root channels menu)`;
   const up = info.up_warning && `${info.up_warning} (the Up axis menu)`;
-  const said = [info.cut_short && info.cut_short.detail, info.units_warning, up, root,
-    info.sides_warning].filter(Boolean);
+  const said = [info.cut_short && info.cut_short.detail, info.rows_warning, info.units_warning, up,
+    root, info.sides_warning].filter(Boolean);
   if (!said.length) return;
-  const title = info.cut_short ? 'Broken file' : info.units_warning ? 'Units'
+  const title = info.cut_short || info.rows_warning ? 'Broken file' : info.units_warning ? 'Units'
     : info.up_warning ? 'Up axis' : info.root_warning ? 'Root channels' : 'Sides';
   showError(new ApiError(-1, title, `${doc.name}: ${said.join('; ')}`));
 }
@@ -698,6 +724,9 @@ function showFrame(frame) {
   state.pose = clonePose(state.committed);
   // not an undo step, and no step changes: undo / redo show the frame of their edit
   refresh();
+  const broken = state.committed.pelvis.every(Number.isFinite) ? null : brokenRow(doc.text, frame);
+  if (broken) showError(new ApiError(-1, 'Broken frame', broken));
+  else if (ui.currentError && ui.currentError.title === 'Broken frame') clearError();
 }
 
 // The view follows the character from frame to frame (its pelvis, along the floor; the
