@@ -406,8 +406,16 @@ function warnOpened(info) {
 // A file's bytes as text, and how to write them back byte for byte: UTF-8 (a byte order
 // mark kept as the text's first character), else ISO-8859-1, one character per byte (an
 // exporter's Latin-1 joint name 'abdom\xe9n'; file.text() turned it into U+FFFD, and the
-// export wrote that instead of the byte).
+// export wrote that instead of the byte). UTF-16 with its byte order mark (Windows tools'
+// "Unicode"), written back so: read as Latin-1, it was refused as "not a BVH file".
 export function decodeFile(bytes) {
+  const le = bytes[0] === 0xff && bytes[1] === 0xfe;
+  if ((le || (bytes[0] === 0xfe && bytes[1] === 0xff)) && bytes.length % 2 === 0) {
+    const encoding = le ? 'utf-16le' : 'utf-16be';
+    try {
+      return { text: new TextDecoder(encoding, { fatal: true, ignoreBOM: true }).decode(bytes), encoding };
+    } catch { /* (not UTF-16 after all: below) */ }
+  }
   try {
     return { text: new TextDecoder('utf-8', { fatal: true, ignoreBOM: true }).decode(bytes), encoding: 'utf-8' };
   } catch {
@@ -421,6 +429,11 @@ export function decodeFile(bytes) {
 
 // The bytes of ``text`` in ``encoding`` (``decodeFile``'s inverse).
 export function encodeFile(text, encoding) {
+  if (encoding === 'utf-16le' || encoding === 'utf-16be') { // (the mark: the text's first character)
+    const out = new DataView(new ArrayBuffer(text.length * 2));
+    for (let i = 0; i < text.length; i += 1) out.setUint16(2 * i, text.charCodeAt(i), encoding === 'utf-16le');
+    return new Uint8Array(out.buffer);
+  }
   if (encoding !== 'latin-1') return new TextEncoder().encode(text);
   return Uint8Array.from(text, (c) => c.charCodeAt(0)); // edits write ASCII digits only
 }

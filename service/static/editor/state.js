@@ -64,7 +64,7 @@ export const doc = {
   // units / up change; yes: file.js replaceable; settings: the menus it was sent with)
   tried: null,
   jointMap: null, // the open file's joint map ({canonical: the file's joint name}) or null: sent with its solves
-  encoding: 'utf-8', // of the open file's bytes: 'utf-8' or 'latin-1' (written back the same)
+  encoding: 'utf-8', // of the open file's bytes: 'utf-8', 'latin-1', 'utf-16le' or 'utf-16be' (written back the same)
   drawn: { row: null }, // the frame's values the character's bones show (scene.js)
   world: [], // world positions of every joint of the file, as drawn
   followed: null, // {frame, pelvis}: where the view last followed the character to (file.js)
