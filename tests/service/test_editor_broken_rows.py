@@ -95,3 +95,28 @@ def test_a_broken_frame_line_is_said_and_not_drawn_as_another_pose(
         assert changed == [167 + 6]  # frame 6's line alone; the broken ones as they were
     finally:
         page.context.close()
+
+
+@pytest.mark.browser
+def test_frames_read_as_words_are_drawn_as_the_service_reads_them(
+    server: str, browser: Any, more_mocap: Path
+) -> None:
+    """A blank line among the frames: the service reads the frames as words over the block,
+    whatever a line holds, so a line a value short beside one a value long is no broken
+    frame: each is drawn as the service reads it, no banner."""
+    head, motion = next(more_mocap.rglob("fair1/dab.bvh")).read_text().split("MOTION\n", 1)
+    lines = motion.split("\n")
+    rows = [row for row in lines[2:] if row.strip()][:6]
+    rows[2], rows[3] = " ".join(rows[2].split()[:-1]), rows[3] + " " + rows[2].split()[-1]
+    blocks = "\n".join(rows[:2]) + "\n\n" + "\n".join(rows[2:])
+    text = f"{head}MOTION\nFrames: 6\n{lines[1]}\n{blocks}\n"
+    page = open_editor(browser, server)
+    try:
+        page.select_option("#bvh-units", "in")
+        open_file(page, text, "words.bvh")
+        for frame in (1, 2, 3, 4):
+            show(page, frame)
+            drawn_as_inspected(page, server, {"bvh": text, "frame": frame, "units": "in"})
+            assert page.evaluate(f"{M}.error()") is None
+    finally:
+        page.context.close()

@@ -140,6 +140,11 @@ function entryOf(text, frames, channels) {
   return known;
 }
 
+// Whether ``text`` holds one frame a line as the server reads it (``layoutOf``: no blank
+// line among or after the frames, as many lines as frames, the last whole, printable ASCII):
+// a frame's line is then the frame, whatever it holds (file.js frameRow: a broken line).
+export const oneFrameALine = (text, frames, channels) => Boolean(entryOf(text, frames, channels).layout);
+
 // The values of ``frame`` of the committed text ``text`` (a Float64Array of ``channels``),
 // read from its line where the text's layout is (worked out once per text, and kept for
 // its excerpts), or null where it has none: a scrub walked the text to the frame's line

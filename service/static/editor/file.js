@@ -15,7 +15,9 @@ import { buildCharacterBones, buildSkeleton, camera, centreFloor, controls, UP }
 import { endDrag } from './interaction.js';
 import { refresh, refreshPanel } from './panel.js';
 import { offerTemplate, readMap, showMap } from './jointmap.js';
-import { committedRow, firstFrame, forgetLayout, readLayout } from './excerpt.js';
+import {
+  committedRow, firstFrame, forgetLayout, oneFrameALine, readLayout,
+} from './excerpt.js';
 
 // ------------------------------------------------------------------------------------
 // A file's frames: forward kinematics, the page's world
@@ -67,11 +69,12 @@ function frameRow(text, frame, known) {
   const values = motionCache.size ? cached(text) : undefined; // (none: a file one frame a line)
   if (values) return values.subarray(frame * n, (frame + 1) * n);
   let row = frameValues(text, frame, doc.info.frames, n);
-  // A frame's line of a file one frame a line that holds another count of values, or one
-  // that is no number (the service's rows_warning): that frame has no pose (nothing drawn,
+  // A frame's line of a file one frame a line (as the server reads it: a file with a blank
+  // line among its frames is read as words, whatever a line holds) that holds another count
+  // of values, or one that is no number (the service's rows_warning): that frame has no pose (nothing drawn,
   // nothing grabbed; showFrame says why). It was read from the whole file's values, every
   // value after the line's shifted: another pose drawn, a limb lost, without a word.
-  if (!row && frameLine(text, frame, doc.info.frames)) row = new Float64Array(n).fill(NaN);
+  if (!row && oneFrameALine(text, doc.info.frames, n)) row = new Float64Array(n).fill(NaN);
   if (!row) return motionOf(text).subarray(frame * n, (frame + 1) * n); // (not kept: motionCache)
   if (!row.every(Number.isFinite)) row = new Float64Array(n).fill(NaN);
   lastRow = { text, frame, row }; // (a row of the whole file's values kept them, and a text no longer shown)
@@ -81,10 +84,10 @@ function frameRow(text, frame, known) {
 // Why frame ``frame`` of ``text`` has no pose, where its line holds another count of
 // values than the file's channels, or a value that is no number; else null.
 function brokenRow(text, frame) {
-  const at = frameLine(text, frame, doc.info.frames);
+  const n = channelCount(doc.info);
+  const at = oneFrameALine(text, doc.info.frames, n) && frameLine(text, frame, doc.info.frames);
   if (!at) return null;
   const words = text.slice(at[0], at[1]).match(/\S+/g) || [];
-  const n = channelCount(doc.info);
   const bad = words.find((w) => !Number.isFinite(Number(w)));
   if (words.length === n && bad === undefined) return null;
   let line = 1;
