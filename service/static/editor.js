@@ -35,7 +35,7 @@ import {
   buildSkeleton, camera, floorCentre, pinRings, renderer, resize, scene, selectionRing, viewport,
 } from './editor/scene.js';
 import {
-  clearTargets, endDrag, onPointerDown, onPointerMove, onPointerUp, toScreen,
+  clearTargets, endDrag, onPointerDown, onPointerMove, onPointerUp, pointerLeft, toScreen,
 } from './editor/interaction.js';
 import { exportDocument, exportPose, refresh } from './editor/panel.js';
 import {
@@ -54,9 +54,7 @@ function wireControls() {
   window.addEventListener('pointercancel', () => {
     if (pointerDrag()) endDrag(false);
   });
-  renderer.domElement.addEventListener('pointerleave', () => {
-    if (!ui.drag) $('hud').hidden = true;
-  });
+  renderer.domElement.addEventListener('pointerleave', pointerLeft);
   for (const input of document.querySelectorAll('input[name=method], #exact, #preserve, #turn-search')) {
     input.addEventListener('change', () => requestSolve(true));
   }

@@ -104,8 +104,9 @@ export function onPointerDown(ev) {
 }
 
 export function onPointerMove(ev) {
+  pointer = ev.target === renderer.domElement ? { x: ev.clientX, y: ev.clientY } : null;
   if (!pointerDrag()) {
-    updateHover(ev);
+    hoverAt(pointer);
     return;
   }
   const ray = pointerRay(ev.clientX, ev.clientY);
@@ -147,16 +148,35 @@ export function endDrag(commit) {
   }
 }
 
-function updateHover(ev) {
-  const hit = ev.target === renderer.domElement ? pick(ev.clientX, ev.clientY) : null;
+// Where the pointer last was over the view (null once it left): the hover label and the
+// joint lit are found again there when the pose moves under a still pointer (rehover).
+let pointer = null; // (onPointerMove)
+
+function hoverAt(at) {
+  camera.updateMatrixWorld(); // (moved since the last render: a frame followed, a file opened)
+  const hit = at ? pick(at.x, at.y) : null;
   const name = hit ? hit.joint : null;
   viewport.style.cursor = hit ? (ui.reading ? 'progress' : 'grab') : '';
   if (name !== ui.hovered) {
     ui.hovered = name;
     drawPose();
   }
-  if (hit) moveHud(ev.clientX, ev.clientY, hit.kind === 'target' ? `target: ${name}` : name);
+  if (hit) moveHud(at.x, at.y, hit.kind === 'target' ? `target: ${name}` : name);
   else $('hud').hidden = true;
+}
+
+// The pose, targets or file changed under a still pointer (another frame, an undo, a file
+// opened, an answer): the label and the joint lit are those under it now. They stayed the
+// joint's that was there, over empty space (its label the file's before: "left_wrist
+// (LeftHand)" over another file's body).
+export function rehover() {
+  if (!ui.drag) hoverAt(pointer);
+}
+
+// The pointer left the view: no label (a drag's stays, at the pointer).
+export function pointerLeft() {
+  pointer = null;
+  if (!ui.drag) $('hud').hidden = true;
 }
 
 function moveHud(x, y, text) {

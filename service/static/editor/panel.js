@@ -3,7 +3,7 @@
 import { $, doc, history, solver, state, ui } from './state.js';
 import { clonePose, options, whenCommitted } from './solve.js';
 import { drawPose } from './scene.js';
-import { removeTarget } from './interaction.js';
+import { rehover, removeTarget } from './interaction.js';
 import { encodeFile, refreshFrame } from './file.js';
 import { refreshJoint } from './keys.js';
 
@@ -80,6 +80,7 @@ export function refresh() {
   drawPose();
   refreshPanel();
   refreshFrame();
+  rehover(); // (the hover label: the joint under a still pointer now)
 }
 
 export function exportDocument() {
