@@ -93,6 +93,14 @@ def test_a_broken_frame_line_is_said_and_not_drawn_as_another_pose(
         was, got = text.split("\n"), out.split("\n")
         changed = [i for i, (a, b) in enumerate(zip(was, got, strict=True)) if a != b]
         assert changed == [167 + 6]  # frame 6's line alone; the broken ones as they were
+
+        # an undo from a broken frame shows the edit's frame: the banner goes with the frame
+        show(page, 8)
+        assert page.evaluate(f"{M}.error()")["title"] == "Broken frame"
+        page.click("#undo")
+        page.wait_for_function(f"() => {M}.history().index === 0")
+        assert page.evaluate(f"{M}.bvh()")["frame"] == 6
+        assert page.evaluate(f"{M}.error()") is None
     finally:
         page.context.close()
 

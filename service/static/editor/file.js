@@ -741,8 +741,7 @@ function showFrame(frame) {
   // not an undo step, and no step changes: undo / redo show the frame of their edit
   refresh();
   const broken = state.committed.pelvis.every(Number.isFinite) ? null : brokenRow(doc.text, frame);
-  if (broken) showError(new ApiError(-1, 'Broken frame', broken));
-  else if (ui.currentError && ui.currentError.title === 'Broken frame') clearError();
+  if (broken) showError(new ApiError(-1, 'Broken frame', broken)); // (refreshFrame clears it)
 }
 
 // The view follows the character from frame to frame (its pelvis, along the floor; the
@@ -771,4 +770,7 @@ export function refreshFrame() {
   if (!box.dataset.editing) box.value = String(doc.frame); // (not what the user is typing)
   const t = doc.frame * doc.info.frame_time;
   $('bvh-frame-label').textContent = `/ ${lastFrame(doc.info)} (${t.toFixed(2)} s)`;
+  // a broken frame's banner goes with it (an undo or redo showing another frame too)
+  const e = ui.currentError;
+  if (e && e.title === 'Broken frame' && !e.detail.includes(`: frame ${doc.frame} holds`)) clearError();
 }
