@@ -96,7 +96,16 @@ function wireControls() {
     if (box.dataset.editing) jumpToFrame(box.value);
   });
   box.addEventListener('keydown', (ev) => {
-    if (ev.key === 'Enter') {
+    const key = ev.key.toLowerCase();
+    if ((ev.ctrlKey || ev.metaKey) && (key === 'z' || key === 'y')) {
+      // Ctrl+Z here is the page's undo (a frame typed is no edit), or, while a frame is
+      // being typed, the typing undone: the browser's own undo put back the text typed
+      // before, a frame not shown, which the box then jumped to when left.
+      ev.preventDefault();
+      if (box.dataset.editing) jumpToFrame('');
+      else if (key === 'y' || ev.shiftKey) redo();
+      else undo();
+    } else if (ev.key === 'Enter') {
       ev.preventDefault();
       jumpToFrame(box.value);
     } else if (ev.key === 'Escape') {

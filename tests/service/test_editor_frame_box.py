@@ -1,0 +1,74 @@
+"""Ctrl+Z in the frame box. An animator types a frame, presses Enter, and undoes the last
+edit with Ctrl+Z, the focus still in the box: the browser's own undo put back the text
+typed before (a frame not shown: the box said 30, the view showed 100), the edit stayed,
+and leaving the box jumped to that frame (an audit, 2026-12-07). It is the page's undo
+(Ctrl+Shift+Z, Ctrl+Y: redo); while a frame is being typed, it undoes the typing: the box
+shows the frame shown again, and nothing jumps.
+
+The real server and a real Chromium (``tests/service/editor_page.py``); a real
+AnimatedDrawings file (``fair1/dab.bvh``: inches, +Z up) from the mocap archives.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from tests.service.editor_page import M, drag_joint, open_editor, open_file
+
+# the fixtures `server` (one for the session) and `browser` (one per module)
+pytest_plugins = ("tests.service.editor_page",)
+
+BOX = "#bvh-frame-number"
+
+
+def box(page: Any) -> str:
+    return str(page.locator(BOX).input_value())
+
+
+@pytest.mark.browser
+def test_ctrl_z_in_the_frame_box_undoes_the_edit(
+    server: str, browser: Any, more_mocap: Path
+) -> None:
+    text = next(more_mocap.rglob("fair1/dab.bvh")).read_text()
+    page = open_editor(browser, server)
+    try:
+        page.select_option("#bvh-units", "in")
+        open_file(page, text, "dab.bvh")
+        page.locator(BOX).fill("30")
+        page.keyboard.press("Enter")
+        page.wait_for_function(f"() => {M}.bvh().frame === 30")
+        drag_joint(page, "left_wrist", 30, -40)
+        edited = page.evaluate(f"{M}.bvhText()")
+        assert edited != text
+
+        page.locator(BOX).click()
+        page.keyboard.press("Control+a")
+        page.keyboard.type("100")
+        page.keyboard.press("Enter")
+        page.wait_for_function(f"() => {M}.bvh().frame === 100")
+        page.keyboard.press("Control+z")  # (the focus in the box)
+        page.wait_for_function(f"() => {M}.history().index === 0")
+        assert page.evaluate(f"{M}.bvhText()") == text
+        assert (page.evaluate(f"{M}.bvh()")["frame"], box(page)) == (30, "30")  # (the edit's)
+        page.keyboard.press("Control+Shift+z")
+        page.wait_for_function(f"() => {M}.history().index === 1")
+        assert page.evaluate(f"{M}.bvhText()") == edited
+        page.keyboard.press("Control+z")
+        page.wait_for_function(f"() => {M}.history().index === 0")
+        page.keyboard.press("Control+y")
+        page.wait_for_function(f"() => {M}.history().index === 1")
+
+        # a frame being typed: Ctrl+Z undoes the typing, nothing else
+        page.keyboard.press("Control+a")
+        page.keyboard.type("7")
+        page.keyboard.press("Control+z")
+        assert box(page) == "30" and page.evaluate(f"{M}.history().index") == 1
+        page.keyboard.press("Tab")  # (left: no jump to a frame typed before)
+        page.wait_for_timeout(200)
+        assert page.evaluate(f"{M}.bvh()")["frame"] == 30 and box(page) == "30"
+        assert page.evaluate(f"{M}.bvhText()") == edited
+    finally:
+        page.context.close()
