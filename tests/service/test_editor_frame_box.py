@@ -16,7 +16,7 @@ from typing import Any
 
 import pytest
 
-from tests.service.editor_page import M, drag_joint, open_editor, open_file
+from tests.service.editor_page import M, drag_joint, open_editor, open_file, settle
 
 # the fixtures `server` (one for the session) and `browser` (one per module)
 pytest_plugins = ("tests.service.editor_page",)
@@ -70,5 +70,61 @@ def test_ctrl_z_in_the_frame_box_undoes_the_edit(
         page.wait_for_timeout(200)
         assert page.evaluate(f"{M}.bvh()")["frame"] == 30 and box(page) == "30"
         assert page.evaluate(f"{M}.bvhText()") == edited
+    finally:
+        page.context.close()
+
+
+def press_and_drag(page: Any, x: float, y: float, dx: float, dy: float) -> None:
+    page.mouse.move(x, y)
+    page.mouse.down()
+    for i in range(1, 9):
+        page.mouse.move(x + dx * i / 8, y + dy * i / 8)
+        page.wait_for_timeout(16)
+    page.mouse.up()
+    settle(page)
+
+
+@pytest.mark.browser
+def test_a_press_that_takes_a_frame_typed_grabs_only_what_is_under_it(
+    server: str, browser: Any, more_mocap: Path
+) -> None:
+    """A frame typed in the box (no Enter), then a joint of the frame shown pressed and
+    dragged: the press takes the frame typed (the box left), and grabs what is under the
+    pointer on that frame. The wrist picked on the frame before was grabbed on the new one,
+    140 px away, and dragged: an edit of frame 200 the user never saw, the wrist not under
+    the pointer (exact reach)."""
+    text = next(more_mocap.rglob("fair1/dab.bvh")).read_text()
+    page = open_editor(browser, server)
+    try:
+        page.select_option("#bvh-units", "in")
+        open_file(page, text, "dab.bvh")
+        at = page.evaluate(f"{M}.projectJoint('left_wrist')")
+        page.locator(BOX).click()
+        page.keyboard.press("Control+a")
+        page.keyboard.type("200")  # (no Enter)
+        press_and_drag(page, at["x"], at["y"], 40, -40)
+        assert page.evaluate(f"{M}.bvh()")["frame"] == 200
+        moved = page.evaluate(f"{M}.projectJoint('left_wrist')")
+        assert abs(moved["x"] - at["x"]) + abs(moved["y"] - at["y"]) > 60  # (not under it)
+        assert page.evaluate(f"{M}.targets()") == {}
+        assert page.evaluate(f"{M}.history().index") == 0
+        assert page.evaluate(f"{M}.bvhText()") == text
+
+        # a frame whose wrist is still under the pointer: grabbed there, and dragged under it
+        page.locator(BOX).fill("0")
+        page.keyboard.press("Enter")
+        page.wait_for_function(f"() => {M}.bvh().frame === 0")
+        at = page.evaluate(f"{M}.projectJoint('left_wrist')")
+        page.locator(BOX).click()
+        page.keyboard.press("Control+a")
+        page.keyboard.type("1")
+        press_and_drag(page, at["x"], at["y"], 40, -40)
+        assert page.evaluate(f"{M}.bvh()")["frame"] == 1
+        assert set(page.evaluate(f"{M}.targets()")) == {"left_wrist"}
+        end = page.evaluate(f"{M}.projectJoint('left_wrist')")
+        grab = page.evaluate(f"{M}.history()")["index"]
+        assert grab == 1 and page.evaluate(f"{M}.error()") is None
+        # under the pointer but for the grab's offset (the wrist at frame 1 under the press)
+        assert abs(end["x"] - at["x"] - 40) < 20 and abs(end["y"] - at["y"] + 40) < 20
     finally:
         page.context.close()

@@ -66,7 +66,7 @@ function pointerRay(clientX, clientY) {
 
 export function onPointerDown(ev) {
   if (ev.button !== 0 || !state.pose) return;
-  const hit = pick(ev.clientX, ev.clientY);
+  let hit = pick(ev.clientX, ev.clientY);
   if (!hit) return; // empty space: OrbitControls gets the event
   ev.stopPropagation();
   ev.preventDefault();
@@ -77,7 +77,18 @@ export function onPointerDown(ev) {
   // (preventDefault keeps the focus where it was: a panel field typed in would take the
   // keys, Ctrl+Z undoing its text and not the drag). The view takes it instead: the joint
   // pressed is selected, and the keys nudge it next (keys.js).
+  const shown = state.pose;
   renderer.domElement.focus({ preventScroll: true });
+  // The field left may have shown another pose (a frame typed in the frame box, taken as
+  // it loses the focus): what is under the pointer is picked on the pose shown now, or
+  // nothing is (the press took the frame). The joint picked on the frame before was
+  // grabbed on the new one, away from the pointer, and dragged there: an edit the user
+  // never saw, the joint not under the cursor.
+  if (state.pose !== shown) {
+    camera.updateMatrixWorld(); // (the view followed the character)
+    hit = pick(ev.clientX, ev.clientY);
+    if (!hit) return;
+  }
   if (ui.drag) endDrag(true); // (a nudge burst under way: committed, keys.js)
   const { joint } = hit;
   select(joint);
