@@ -11,15 +11,14 @@ import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from itertools import islice
-from typing import Any, cast
+from typing import Any
 
 import numpy as np
 
 from core.bvh import BVH, BVHError, parse_bvh
 from core.bvh_rows import odd_row
-from core.bvh_write import pose_of, row_of, skeleton_of, splice_frames
-from core.characters import F64, CharacterError, Skeleton, forward_kinematics
-from core.characters_maps import JointMap, resolve_map
+from core.bvh_write import pose_of, row_of, splice_frames
+from core.characters import F64, CharacterError, forward_kinematics
 from core.retarget import canonical_points
 from core.skeleton import JOINT_INDEX, JOINT_NAMES
 from core.text import clip, quoted
@@ -42,6 +41,7 @@ from service.characters import (
 )
 from service.errors import EMPTY_BVH, MAX_ERRORS, InvalidRequest, every_item, field_error
 from service.problems import SolveProblem
+from service.rigs import Rig, bvh_rig
 
 
 def read_request_bvh(text: str, frames: int | Sequence[int] | None = None) -> BVH:
@@ -136,39 +136,13 @@ def out_of_range(bvh: BVH, frame: int, where: str = "frame") -> InvalidRequest |
     return InvalidRequest(f"{where}: {clip(frame)} is out of range: the file has {held}")
 
 
-Rig = tuple[Skeleton, JointMap]
-
-
-#: the most joint maps whose rigs one hierarchy's memo keeps (``BVH.memo``: a file's
-#: hierarchy is parsed once for the next edits of it, and its rigs made once with it)
-RIGS_PER_HIERARCHY = 4
-
-
 def rig_of(bvh: BVH, req: _File) -> Rig:
-    """The file's skeleton and joint map (the same for each of its frames, and for every
-    file of its hierarchy: kept in ``bvh.memo``, read-only, the skeleton once and the maps
-    of up to :data:`RIGS_PER_HIERARCHY` requests' ``joint_map``)."""
-    memo = bvh.memo
-    key = f"rig {list((req.joint_map or {}).items())!r}"
-    if (found := memo.get(key)) is not None:
-        return cast(Rig, found)
+    """The file's skeleton and joint map (:func:`service.rigs.bvh_rig`: made once for the
+    files of its hierarchy)."""
     try:
-        skel = cast(Skeleton | None, memo.get("skeleton")) or skeleton_of(bvh)
-        jmap = resolve_map(skel, req.joint_map, offset_at=lambda _: "bvh")
+        return bvh_rig(bvh, req.joint_map)
     except (CharacterError, BVHError) as exc:
         raise invalid_request(exc) from None
-    if "skeleton" not in memo:
-        _read_only(skel.offsets, skel.parent_array)
-        memo["skeleton"] = skel
-    if sum(k.startswith("rig ") for k in list(memo)) < RIGS_PER_HIERARCHY:
-        _read_only(jmap.joints, jmap.offsets, *(anchor.offset for anchor in jmap.anchors))
-        memo[key] = skel, jmap
-    return skel, jmap
-
-
-def _read_only(*arrays: np.ndarray[Any, Any]) -> None:
-    for a in arrays:
-        a.setflags(write=False)
 
 
 def character_from_bvh(bvh: BVH, req: _File, frame: int, rig: Rig | None = None) -> Character:

@@ -39,7 +39,6 @@ from core.characters import (
     CharacterError,
     Pose,
     Skeleton,
-    build_skeleton,
     forward_kinematics,
     matrix_to_quat,
     quat_to_matrix,
@@ -52,7 +51,6 @@ from core.characters_maps import (
     JointMap,
     human_units,
     infer_units,
-    resolve_map,
     rest_points,
     up_of,
 )
@@ -66,6 +64,7 @@ from service.engine import Engine
 from service.errors import InvalidRequest
 from service.joint_names import resolve_joint
 from service.problems import SolveProblem, SolveResult
+from service.rigs import json_map, json_skeleton
 from service.schemas import (
     ITERATIONS,
     MAX_WEIGHT,
@@ -694,11 +693,9 @@ def character_from_request(req: CharacterSolveRequest, where: str = "") -> Chara
     prefix = f"{where}." if where else ""
     joints = req.character.joints
     try:
-        skel, order = build_skeleton(
-            [j.name for j in joints],
-            [j.parent for j in joints],
-            [j.offset for j in joints],
-            where=f"{prefix}character.joints",
+        skel, order, digest = json_skeleton(
+            ([j.name for j in joints], [j.parent for j in joints], [j.offset for j in joints]),
+            f"{prefix}character.joints",
         )
         unknown = sorted(set(req.rotations) - set(skel.names))
         if unknown:
@@ -726,9 +723,9 @@ def character_from_request(req: CharacterSolveRequest, where: str = "") -> Chara
             trans[roots[0]] = req.root_position
         pose = Pose(rot, trans)
         at = f"{prefix}character.joints"  # (a rest pose not read: its offsets named)
-        jmap = resolve_map(
-            skel, req.joint_map, where=f"{prefix}joint_map",
-            offset_at=lambda j: at if j is None else f"{at}[{order[j]}].offset",
+        jmap = json_map(
+            skel, digest, req.joint_map, f"{prefix}joint_map",
+            lambda j: at if j is None else f"{at}[{order[j]}].offset",
         )  # fmt: skip
         units, up = req.character.units, req.character.up
         given = req.character.model_fields_set
