@@ -12,8 +12,9 @@ one pass without the mirror image (``plain``: the paper's configuration), FABRIK
 (``fabrik``), and with both ankles pinned where the start has them (``pinned``, 1 and 2
 targets); and a client's own character, a BVH file's frame edited end to end but for HTTP
 (``bvh exact``, ``bvh soft``; ``bvh soft cold``: each call a file whose hierarchy is new to
-the probe; :func:`bvh_edits`). The table gives each case's p50 per round, and the best
-round of each revision (the least disturbed) with their ratio.
+the probe; :func:`bvh_edits`) or its joints in JSON (``character``). The table gives each
+case's p50 per round, and the best round of each revision (the least disturbed) with their
+ratio.
 
 A base whose ``core/`` sources are this tree's gets this tree's compiled kernels
 (:func:`share_kernels`: it compiled them all again, a minute or more); the worktree's
@@ -118,6 +119,7 @@ def probe(
             whole.append((time.thread_time_ns() - t0) / len(neural))
         out[f"{k} batch"] = float(np.median(whole)) / 1e3
     out.update(bvh_edits(engine))
+    out.update(character_edits(engine))
     return out
 
 
@@ -161,6 +163,29 @@ def bvh_edits(engine: Any, calls: int = 20) -> dict[str, float]:
                 ns.append(time.thread_time_ns() - t0)
         out[f"bvh {name}"] = float(np.median(ns)) / 1e3
     return out
+
+
+def character_edits(engine: Any, calls: int = 20) -> dict[str, float]:
+    """The p50 in µs of a whole character ``POST /v1/solve`` minus HTTP (read the joints,
+    map them, solve, retarget, answer the rotations) over ``calls`` calls of
+    ``docs/examples/character_solve.json`` (22 joints, both feet pinned, soft reach) as
+    given (``character``); None in a tree without ``character_from_request``."""
+    try:
+        from service import characters as ch
+
+        body = json.loads(Path("docs/examples/character_solve.json").read_text())
+        req = ch.CharacterAliasRequest.model_validate(body)
+        read, prepared = ch.character_from_request, ch.solve_prepared
+    except (ImportError, AttributeError, FileNotFoundError):
+        return {}
+    ns = []
+    for i in range(calls + 3):  # three to warm
+        t0 = time.thread_time_ns()
+        c = read(req)
+        ch.character_answer(c, prepared(engine, c, ch.character_problem(c, req)), req.rotations)
+        if i >= 3:
+            ns.append(time.thread_time_ns() - t0)
+    return {"character": float(np.median(ns)) / 1e3}
 
 
 def _run(
