@@ -1,7 +1,7 @@
 """A character's rig, its skeleton and joint map, made once for the requests that send the
 same character again: an editor sends one file's hierarchy with every edit, and a tool its
 character's joints. Both are kept read-only and bounded, and an answer from a kept rig is
-the first answer byte for byte (``tests/service/test_bvh_rigs.py``; docs/speed.md).
+the first answer byte for byte (``tests/service/test_rigs.py``; docs/speed.md).
 
 - A BVH file's (:func:`bvh_rig`): in its hierarchy's ``BVH.memo``, which the files of that
   hierarchy share (``core.bvh.SHARED``): the skeleton once, and the maps of up to
