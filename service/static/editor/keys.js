@@ -132,16 +132,19 @@ function onKeyUp(ev) {
   if (held.size === 0) endBurst();
 }
 
+// P and Delete do nothing while the mouse drags (the drag is the joint's edit until it is
+// released): the drag went on after them, P's pin on a joint it targeted again (pinned and
+// targeted at once), Delete's removed target back at the next move, a step of its own.
 function pinSelected() {
   const joint = ui.selected;
-  if (!joint || ui.reading) return;
+  if (!joint || ui.reading || pointerDrag()) return;
   endBurst();
   togglePin(joint);
 }
 
 function unsetSelected() {
   const joint = ui.selected;
-  if (!joint || ui.reading || !state.targets.has(joint)) return;
+  if (!joint || ui.reading || pointerDrag() || !state.targets.has(joint)) return;
   endBurst();
   removeTarget(joint);
 }
