@@ -698,7 +698,9 @@ export function closeFile() {
 
 // Show another frame of the file: its targets go (they were for the other frame), pins stay.
 // (after the gesture's last answer, where one is on its way: a scrub dropped it)
+// A "No such frame" banner goes with it (the slider's, the box's keys'; it stayed up).
 export function setFrame(frame) {
+  if (ui.currentError && ui.currentError.title === 'No such frame') clearError();
   $('bvh-frame').value = String(frame); // both controls show the frame asked for meanwhile
   const box = $('bvh-frame-number');
   delete box.dataset.editing;
@@ -718,14 +720,15 @@ export function jumpToFrame(typed) {
     delete box.dataset.editing;
     box.value = $('bvh-frame').value;
     if (raw !== '') {
+      refusedAt = doc.frame;
       showError(new ApiError(-1, 'No such frame', `${doc.name}: frame ${raw.slice(0, 20)}: `
         + `it has frames 0 to ${last} (0-based, as the API's frame)`));
     }
     return;
   }
-  if (ui.currentError && ui.currentError.title === 'No such frame') clearError();
   setFrame(frame);
 }
+let refusedAt = -1; // the frame shown when a frame typed was refused (refreshFrame)
 
 function showFrame(frame) {
   if (!doc.active || frame === doc.frame) return;
@@ -773,4 +776,5 @@ export function refreshFrame() {
   // a broken frame's banner goes with it (an undo or redo showing another frame too)
   const e = ui.currentError;
   if (e && e.title === 'Broken frame' && !e.detail.includes(`: frame ${doc.frame} holds`)) clearError();
+  if (e && e.title === 'No such frame' && doc.frame !== refusedAt) clearError(); // (an undo's frame)
 }
