@@ -72,12 +72,19 @@ export function frameLine(text, frame, frames) {
   return seen === frames ? line : null;
 }
 
-// The values of one frame's line (Float64Array of ``channels``), or null where it holds
-// another number of values: how ``frameValues`` reads the frame's line once it has found it
-// (a spliced answer's line is read so: editor/excerpt.js).
+// A number as the service's reader reads one (core/bvh_words.py NUMBER): ASCII decimals, a
+// sign, a point, an exponent. JavaScript's Number also reads 0x10, 0b11, 0o7 and Infinity,
+// which the service refuses: such a frame was drawn, and its drag got the service's 422.
+export const NUMBER_RE = /^[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?$/;
+export const bvhNumber = (word) => (NUMBER_RE.test(word) ? Number(word) : NaN);
+
+// The values of one frame's line (Float64Array of ``channels``; NaN for a word that is no
+// number, ``bvhNumber``), or null where it holds another number of values: how
+// ``frameValues`` reads the frame's line once it has found it (a spliced answer's line is
+// read so: editor/excerpt.js).
 export function lineValues(line, channels) {
   const tokens = line.split(/\s+/).filter((t) => t);
-  return tokens.length === channels ? Float64Array.from(tokens, Number) : null;
+  return tokens.length === channels ? Float64Array.from(tokens, bvhNumber) : null;
 }
 
 // 3x3 matrices as row-major arrays of 9.

@@ -1,6 +1,10 @@
 """A frame's banners, as the frame shown is. A "No such frame" banner (a frame typed that the
 file does not have) stayed up after the slider showed a frame that exists (an audit,
-2026-12-07): it goes when a frame is shown.
+2026-12-07): it goes when a frame is shown. A frame's line holding a value the service does
+not read as a number but JavaScript's ``Number`` does (``0x10``, ``0b11``) was drawn, and
+the service's 422 named the line only when it was dragged: the page reads numbers as the
+service does (ASCII decimals: sign, digits, point, exponent; ``core/bvh_words.py``
+``NUMBER``), and shows that frame as broken.
 
 The real server and a real Chromium (``tests/service/editor_page.py``); a real
 AnimatedDrawings file (``fair1/dab.bvh``: inches, +Z up) from the mocap archives.
@@ -8,12 +12,13 @@ AnimatedDrawings file (``fair1/dab.bvh``: inches, +Z up) from the mocap archives
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Any
 
 import pytest
 
-from tests.service.editor_page import M, drag_joint, open_editor, open_file
+from tests.service.editor_page import M, drag_joint, drawn_as_inspected, open_editor, open_file
 
 # the fixtures `server` (one for the session) and `browser` (one per module)
 pytest_plugins = ("tests.service.editor_page",)
@@ -64,5 +69,43 @@ def test_no_such_frame_goes_when_a_frame_is_shown(
         page.keyboard.press("Control+z")
         page.wait_for_function(f"() => {M}.history().index === 0")
         assert page.evaluate(f"{M}.bvh()")["frame"] == 2 and title(page) is None
+    finally:
+        page.context.close()
+
+
+def js_numbers_file(path: Path) -> str:
+    """The file's first 12 frames, frame 4's line with '0x10', frame 7's with '0b11' (both
+    numbers to JavaScript's ``Number``, neither to the service)."""
+    head, motion = path.read_text().split("MOTION\n", 1)
+    lines = motion.split("\n")
+    rows = [row for row in lines[2:] if row.strip()][:12]
+    for frame, word in ((4, "0x10"), (7, "0b11")):
+        words = rows[frame].split()
+        words[10] = word
+        rows[frame] = " ".join(words)
+    return f"{head}MOTION\nFrames: 12\n{lines[1]}\n" + "\n".join(rows) + "\n"
+
+
+@pytest.mark.browser
+def test_a_value_the_service_reads_as_no_number_is_a_broken_frame(
+    server: str, browser: Any, more_mocap: Path
+) -> None:
+    text = js_numbers_file(next(more_mocap.rglob("fair1/dab.bvh")))
+    page = open_editor(browser, server)
+    try:
+        page.select_option("#bvh-units", "in")
+        open_file(page, text, "hex.bvh")
+        err = page.evaluate(f"{M}.error()")
+        assert err["title"] == "Broken file" and "0x10" in err["detail"], err
+        for frame, word in ((4, "0x10"), (7, "0b11")):
+            show(page, frame)
+            assert all(math.isnan(v) for p in page.evaluate(f"{M}.bvhPositions()") for v in p)
+            err = page.evaluate(f"{M}.error()")
+            assert err["title"] == "Broken frame", err
+            assert err["detail"].startswith(f"hex.bvh: line {168 + frame}: frame {frame} holds")
+            assert f"a value that is no number ('{word}')" in err["detail"]
+        show(page, 5)
+        drawn_as_inspected(page, server, {"bvh": text, "frame": 5, "units": "in"})
+        assert title(page) is None
     finally:
         page.context.close()

@@ -3,7 +3,7 @@
 
 import * as THREE from 'three';
 import {
-  anchorPoints, channelCount, forwardKinematics, frameLine, frameValues, parseMotion,
+  anchorPoints, bvhNumber, channelCount, forwardKinematics, frameLine, frameValues, parseMotion,
 } from '../bvh.js';
 import { $, doc, history, solver, state, ui } from './state.js';
 import { api, ApiError, clearError, showError } from './api.js';
@@ -88,7 +88,7 @@ function brokenRow(text, frame) {
   const at = oneFrameALine(text, doc.info.frames, n) && frameLine(text, frame, doc.info.frames);
   if (!at) return null;
   const words = text.slice(at[0], at[1]).match(/\S+/g) || [];
-  const bad = words.find((w) => !Number.isFinite(Number(w)));
+  const bad = words.find((w) => !Number.isFinite(bvhNumber(w))); // (as the service reads it)
   if (words.length === n && bad === undefined) return null;
   let line = 1;
   for (let i = text.indexOf('\n'); i >= 0 && i < at[0]; i = text.indexOf('\n', i + 1)) line += 1;
