@@ -79,9 +79,11 @@ function wireControls() {
     ev.target.value = ''; // the same file can be opened again
   });
   // Units, up or the joint map changed: read again the file last asked for (file.js).
-  for (const id of ['bvh-up', 'bvh-root']) $(id).addEventListener('change', readAgain);
-  $('bvh-units').addEventListener('change', (ev) => {
-    if (ev.target.value !== 'other' || otherUnits()) readAgain(); // (other…: asked first)
+  for (const id of ['bvh-up', 'bvh-root']) chosen($(id), readAgain);
+  chosen($('bvh-units'), (menu, how, from) => {
+    if (menu.value !== 'other') readAgain();
+    else if (how === 'left') menu.value = from; // (no prompt as the focus goes)
+    else if (otherUnits()) readAgain(); // (other…: asked first)
   });
   $('bvh-map-apply').addEventListener('click', readAgain);
   $('bvh-map-clear').addEventListener('click', () => {
@@ -173,6 +175,43 @@ function wireControls() {
       ev.preventDefault();
       redo();
     }
+  });
+}
+
+// A file's menu (units, up, root) chosen: ``take(menu, how, from)``. Arrowed through from the
+// keyboard (a closed menu changes, and says so, at each arrow or letter), the choice is
+// taken on Enter or when the menu is left, and only if it differs from the value before
+// the arrows, ``from`` (``how``: 'enter' or 'left'; a mouse's or a picker's choice at once, null):
+// each option passed read the file again, and "other…" reached popped its prompt.
+const MENU_KEYS = new Set(['ArrowUp', 'ArrowDown', 'ArrowLeft', 'ArrowRight', 'Home', 'End', 'PageUp', 'PageDown']);
+
+function chosen(menu, take) {
+  let keyed = false;
+  let from = null; // the value before the arrows, while a keyed choice waits
+  const settle = (how) => {
+    const was = from;
+    from = null;
+    if (menu.value !== was) take(menu, how, was);
+  };
+  menu.addEventListener('keydown', (ev) => {
+    const mod = ev.altKey || ev.ctrlKey || ev.metaKey;
+    if (ev.key === 'Enter' && from !== null) {
+      ev.preventDefault();
+      keyed = false;
+      settle('enter');
+      return;
+    }
+    keyed = !mod && (MENU_KEYS.has(ev.key) || (ev.key.length === 1 && ev.key !== ' '));
+    if (keyed && from === null) from = menu.value;
+  });
+  menu.addEventListener('pointerdown', () => { keyed = false; });
+  menu.addEventListener('change', () => {
+    if (keyed) return; // (waits: Enter, or the menu left)
+    from = null;
+    take(menu, null);
+  });
+  menu.addEventListener('blur', () => {
+    if (from !== null) settle('left');
   });
 }
 
