@@ -286,3 +286,10 @@ def pick(page: Any, joint: str) -> None:
     """``joint`` chosen in the panel's picker (the focus left there)."""
     page.select_option("#joint-pick", joint)
     page.wait_for_function(f"() => {M}.selected() === '{joint}'")
+
+
+def show_frame(page: Any, frame: int) -> None:
+    """Frame ``frame`` shown, typed in the frame box and Enter pressed."""
+    page.locator("#bvh-frame-number").fill(str(frame))
+    page.keyboard.press("Enter")
+    page.wait_for_function(f"() => {M}.bvh().frame === {frame}")

@@ -19,7 +19,7 @@ from typing import Any
 import pytest
 
 from tests.character_files import big_file
-from tests.service.editor_page import M, drag_joint, open_editor, recorded
+from tests.service.editor_page import M, drag_joint, open_editor, recorded, show_frame
 
 # the fixtures `server` (one for the session) and `browser` (one per module)
 pytest_plugins = ("tests.service.editor_page",)
@@ -31,12 +31,6 @@ def give(page: Any, text: str, name: str) -> None:
     page.set_input_files(
         "#bvh-file", files=[{"name": name, "mimeType": "text/plain", "buffer": text.encode()}]
     )
-
-
-def frame_to(page: Any, frame: int) -> None:
-    page.locator("#bvh-frame-number").fill(str(frame))
-    page.keyboard.press("Enter")
-    page.wait_for_function(f"() => {M}.bvh().frame === {frame}")
 
 
 @pytest.mark.browser
@@ -72,7 +66,7 @@ def test_a_file_over_the_body_limit_opens_edits_and_exports(
         assert statuses[2:] == [200] and len(inspected[2]["bvh"]) < 10_000
         assert page.evaluate(f"{M}.bvh()")["frames"] == frames
 
-        frame_to(page, frames - 1)
+        show_frame(page, frames - 1)
         at = page.evaluate(f"{M}.projectJoint('left_wrist')")
         drag_joint(page, "left_wrist", 30, -40)
         assert page.evaluate(f"{M}.error()") is None

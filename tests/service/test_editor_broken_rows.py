@@ -20,7 +20,14 @@ from typing import Any
 
 import pytest
 
-from tests.service.editor_page import M, drag_joint, drawn_as_inspected, open_editor, open_file
+from tests.service.editor_page import (
+    M,
+    drag_joint,
+    drawn_as_inspected,
+    open_editor,
+    open_file,
+    show_frame,
+)
 
 # the fixtures `server` (one for the session) and `browser` (one per module)
 pytest_plugins = ("tests.service.editor_page",)
@@ -36,12 +43,6 @@ def broken_file(path: Path) -> str:
     words[10] = "abc"
     rows[8] = " ".join(words)
     return f"{head}MOTION\nFrames: 20\n{lines[1]}\n" + "\n".join(rows) + "\n"
-
-
-def show(page: Any, frame: int) -> None:
-    page.locator("#bvh-frame-number").fill(str(frame))
-    page.keyboard.press("Enter")
-    page.wait_for_function(f"() => {M}.bvh().frame === {frame}")
 
 
 @pytest.mark.browser
@@ -62,10 +63,10 @@ def test_a_broken_frame_line_is_said_and_not_drawn_as_another_pose(
             body = {"bvh": text, "frame": frame, "units": "in"}
             drawn_as_inspected(page, server, body)
 
-        show(page, 4)
+        show_frame(page, 4)
         inspected(4)
         for frame, holds in ((5, "83 values, not 84"), (8, "a value that is no number ('abc')")):
-            show(page, frame)
+            show_frame(page, frame)
             # no pose: not the whole file's values read shifted (another pose, half a body)
             assert all(math.isnan(v) for p in page.evaluate(f"{M}.bvhPositions()") for v in p)
             err = page.evaluate(f"{M}.error()")
@@ -73,15 +74,15 @@ def test_a_broken_frame_line_is_said_and_not_drawn_as_another_pose(
             assert err["detail"].startswith(f"bad.bvh: line {line_of[frame]}: frame {frame} holds")
             assert holds in err["detail"]
             # nothing there to grab: a press where the pelvis was orbits
-            show(page, frame - 1)
+            show_frame(page, frame - 1)
             xy = page.evaluate(f"{M}.projectJoint('pelvis')")
-            show(page, frame)
+            show_frame(page, frame)
             page.mouse.move(xy["x"], xy["y"])
             page.mouse.down()
             page.mouse.move(xy["x"] + 30, xy["y"] - 30, steps=4)
             page.mouse.up()
             assert page.evaluate(f"{M}.targets()") == {}
-        show(page, 6)
+        show_frame(page, 6)
         inspected(6)
         assert page.evaluate(f"{M}.error()") is None  # (the frame's banner gone with it)
 
@@ -95,7 +96,7 @@ def test_a_broken_frame_line_is_said_and_not_drawn_as_another_pose(
         assert changed == [167 + 6]  # frame 6's line alone; the broken ones as they were
 
         # an undo from a broken frame shows the edit's frame: the banner goes with the frame
-        show(page, 8)
+        show_frame(page, 8)
         assert page.evaluate(f"{M}.error()")["title"] == "Broken frame"
         page.click("#undo")
         page.wait_for_function(f"() => {M}.history().index === 0")
@@ -123,7 +124,7 @@ def test_frames_read_as_words_are_drawn_as_the_service_reads_them(
         page.select_option("#bvh-units", "in")
         open_file(page, text, "words.bvh")
         for frame in (1, 2, 3, 4):
-            show(page, frame)
+            show_frame(page, frame)
             drawn_as_inspected(page, server, {"bvh": text, "frame": frame, "units": "in"})
             assert page.evaluate(f"{M}.error()") is None
     finally:

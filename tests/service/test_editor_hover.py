@@ -16,7 +16,7 @@ from typing import Any
 
 import pytest
 
-from tests.service.editor_page import M, open_editor, open_file, settle
+from tests.service.editor_page import M, open_editor, open_file, settle, show_frame
 
 # the fixtures `server` (one for the session) and `browser` (one per module)
 pytest_plugins = ("tests.service.editor_page",)
@@ -35,12 +35,6 @@ def nearest(page: Any, x: float, y: float) -> tuple[str, float]:
     page.wait_for_timeout(100)  # (a frame rendered: the camera as drawn)
     at = {j: page.evaluate(f"{M}.projectJoint('{j}')") for j in page.evaluate(f"{M}.joints()")}
     return min(((j, math.hypot(p["x"] - x, p["y"] - y)) for j, p in at.items()), key=lambda t: t[1])
-
-
-def show(page: Any, frame: int) -> None:
-    page.locator("#bvh-frame-number").fill(str(frame))
-    page.keyboard.press("Enter")
-    page.wait_for_function(f"() => {M}.bvh().frame === {frame}")
 
 
 def consistent(page: Any, x: float, y: float) -> str | None:
@@ -71,10 +65,10 @@ def test_the_hover_label_follows_the_pose_under_a_still_pointer(
         assert label(page) == "left_wrist (LeftHand)"
 
         # another frame typed (the pointer still): the wrist has gone from under it
-        show(page, 200)
+        show_frame(page, 200)
         assert nearest(page, x, y)[1] > FAR  # (the case this test is about)
         assert consistent(page, x, y) is None
-        show(page, 0)  # back under the pointer: said again, the pointer not moved
+        show_frame(page, 0)  # back under the pointer: said again, the pointer not moved
         assert label(page) == "left_wrist (LeftHand)"
 
         # a drag, then undone: the wrist goes back from under the pointer

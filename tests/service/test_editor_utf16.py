@@ -15,7 +15,7 @@ from typing import Any
 
 import pytest
 
-from tests.service.editor_page import M, drag_joint, open_editor
+from tests.service.editor_page import M, drag_joint, open_editor, show_frame
 
 # the fixtures `server` (one for the session) and `browser` (one per module)
 pytest_plugins = ("tests.service.editor_page",)
@@ -40,9 +40,7 @@ def test_a_utf16_file_opens_edits_and_exports_in_its_own_bytes(
         assert (info["frames"], info["joints"][0]) == (339, "Hips")
         assert page.evaluate(f"{M}.bvhText()") == "\ufeff" + text
 
-        page.locator("#bvh-frame-number").fill("3")
-        page.keyboard.press("Enter")
-        page.wait_for_function(f"() => {M}.bvh().frame === 3")
+        show_frame(page, 3)
         drag_joint(page, "left_wrist", 30, -40)
         assert page.evaluate(f"{M}.error()") is None and page.evaluate(f"{M}.bvh()")["edited"]
         with page.expect_download() as download:
