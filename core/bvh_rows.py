@@ -96,7 +96,7 @@ def _narrowed(chunk: str) -> str:
     """``chunk`` with each character past ASCII a space where ``str.split`` splits there
     (U+3000 too), else ``x`` (no number's): the same words at the same places, looked at
     as any chunk is, by numpy (line by line in Python, 8 MB with one such a line took 2 s)."""
-    wide = np.frombuffer(chunk.encode("utf-32-le"), dtype=np.uint32)
+    wide = np.frombuffer(chunk.encode("utf-32-le", "surrogatepass"), dtype=np.uint32)
     space = _SPACES[np.minimum(wide, _SPACES.size - 1)]
     narrow = np.where(wide < 128, wide, np.where(space, 32, 120)).astype(np.uint8)
     return narrow.tobytes().decode("ascii")
@@ -138,8 +138,9 @@ def _odd_in(chunk: str, n: int, bound: float, rows: bool) -> tuple[int, int, str
         i = int(odd[0])
         k = int(np.searchsorted(first, newlines[i - 1] if i else -1, side="right"))
         found.append((i, k, f"{int(counts[i])} values, not {n}"))
-    if found:
-        return min(found, key=lambda f: f[0])  # (a word's wrong first, on one line)
+    if found:  # one frame a line: the first line (a word's wrong first, on one line);
+        # else the first word, whatever its line holds (frames wrapped, or several a line)
+        return min(found, key=(lambda f: f[0]) if rows else (lambda f: f[1]))
     return newlines.size + 1, n_words, ""
 
 

@@ -8,8 +8,9 @@ the first answer byte for byte (``tests/service/test_rigs.py``; docs/speed.md).
   :data:`MAPS_PER_SKELETON` requests' ``joint_map``.
 - A JSON character's (:func:`json_skeleton`, :func:`json_map`): the last
   :data:`SKELETONS` skeletons sent, keyed by a digest of their joints' names, parents and
-  offsets, and up to :data:`MAPS_PER_SKELETON` maps each. Their errors are made again
-  with the field of the request that sent them (a batch's item names its own).
+  offsets, and the last ``SKELETONS * MAPS_PER_SKELETON`` joint maps made for them. Their
+  errors are made again with the field of the request that sent them (a batch's item
+  names its own).
 """
 
 from __future__ import annotations
@@ -45,8 +46,8 @@ def bvh_rig(bvh: BVH, joint_map: Mapping[str, str] | None) -> Rig:
         return cast(Rig, found)
     skel = cast(Skeleton | None, memo.get("skeleton")) or skeleton_of(bvh)
     jmap = resolve_map(skel, joint_map, offset_at=lambda _: "bvh")
-    if "skeleton" not in memo:
-        memo["skeleton"] = _read_only_skeleton(skel)
+    # (read-only before either is kept: two threads may each make one; both are the same)
+    memo.setdefault("skeleton", _read_only_skeleton(skel))
     if sum(k.startswith("rig ") for k in list(memo)) < MAPS_PER_SKELETON:
         memo[key] = skel, _read_only_map(jmap)
     return skel, jmap

@@ -204,6 +204,17 @@ def test_a_bad_value_in_a_wrapped_block_is_named(
     assert clean["rows_warning"] is None
 
 
+def test_a_line_of_several_frames_names_the_first_frames_fault() -> None:
+    """Frames wrapped (here two on a line): of two faults on one line, the first word's
+    frame is named, whatever the fault (a review found frame 1's ``nan`` named before frame
+    0's ``1e400``, not-a-number faults being told first on a line)."""
+    text = "X\n1 1e400 3 4 5 nan\n1 2 3 4 5 6\n"
+    got = odd_row(text, 2, 10, 4, 3, 1e7)
+    assert got == core.bvh_rows.OddRow(0, 10, "'1e400', out of range (no finite number)")
+    got = odd_row("X\n1 2 nan 4 1e400 6\n1 2 3 4 5 6\n", 2, 10, 4, 3, 1e7)
+    assert got == core.bvh_rows.OddRow(0, 10, "'nan', not a number")
+
+
 @pytest.mark.parametrize("chunk", [64, 1000, 1 << 20])
 def test_a_wrapped_block_s_frames_are_counted_over_chunks(
     bvh_files: dict[str, Path], chunk: int, monkeypatch: pytest.MonkeyPatch
