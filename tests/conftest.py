@@ -29,8 +29,9 @@ import functools
 import os
 import shutil
 import subprocess
+import sys
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -92,11 +93,112 @@ def untar(tar: str, archive: Path, out: Path, members: Sequence[str]) -> list[st
     return [tar, "-xJf", str(archive), "-C", str(out), *first, *members]
 
 
+# --------------------------------------------------------------------------------------
+# Work started when the session starts, while the tests are collected (one core does that:
+# the other was idle), and waited for where it is needed
+# --------------------------------------------------------------------------------------
+#: Each fills part of numba's cache (``core.jit``) with the kernels the engine compiles at
+#: its first load, in a process of its own: two halves of about the same CPU time (each
+#: ~27 s alone on this 2-core host, the whole ~60 s in one process). ``compiled.warm`` warms
+#: the reach kernels first: here the other process compiles them (no kernel twice at once).
+_KERNEL_WARMS = (
+    "from core import compiled_fabrik, compiled_reach\n"
+    "compiled_fabrik.warm()\n"
+    "compiled_reach.warm()\n",
+    "from core import compiled, compiled_characters, compiled_reach\n"
+    "compiled_characters.warm()\n"
+    "compiled_reach.warm = lambda: None  # (the other process's)\n"
+    "compiled.warm()\n",
+)
+
+
+@dataclass
+class _Prefetch:
+    """What :func:`pytest_sessionstart` started: the ``mocap_clips`` extraction (into
+    ``clips_root``, from the archives in ``clips_from``; taken over by the fixture) and the
+    kernels' compile (waited for once the tests are collected, before the first runs)."""
+
+    clips: list[subprocess.Popen[bytes]] = field(default_factory=list)
+    clips_root: Path = Path()
+    clips_from: Path | None = None
+    kernels: list[subprocess.Popen[bytes]] = field(default_factory=list)
+
+
+_PREFETCH = _Prefetch()
+
+
+def _kernels_cached() -> bool:
+    """Whether numba's cache folder for this tree's ``core/`` holds compiled kernels (the
+    folder ``core.jit`` chose, as ``bench.ab`` finds it)."""
+    import core.jit
+
+    here = os.path.dirname(os.path.abspath(core.jit.__file__))
+    folder = Path(os.environ["NUMBA_CACHE_DIR"]) / core.jit.numba_subfolder(here)
+    return any(folder.glob("*.nbi"))
+
+
+def pytest_sessionstart(session: pytest.Session) -> None:
+    """Start what most sessions wait for first, so that it runs while the tests are
+    collected (~7 s of one core): the kernels' compile, when numba's cache holds none for
+    these sources (a fresh checkout, as CI's, or ``core/`` edited: the suite's first engine
+    compiled them all in one process, ~45-60 s), in two processes; and the ``mocap_clips``
+    extraction (~6 s of xz). Neither changes what a test sees: the kernels are numba's own,
+    compiled as an engine compiles them; the clips are extracted by the same command. Only
+    for a folder of tests (``make test``'s ``tests``): a file or a test given alone may need
+    neither (``docker/smoke.sh``'s container check)."""
+    config = session.config
+    folders = [Path(str(arg).split("::")[0]).is_dir() for arg in config.args]
+    if config.option.collectonly or not any(folders):
+        return
+    if not _kernels_cached():
+        _PREFETCH.kernels = [
+            subprocess.Popen(
+                [sys.executable, "-c", code],
+                cwd=REPO_ROOT,
+                stdout=subprocess.DEVNULL,
+                stderr=subprocess.PIPE,
+            )
+            for code in _KERNEL_WARMS
+        ]
+    mocap, tar = _mocap_path(), shutil.which("tar")
+    if tar and all((mocap / a).is_file() for a in (BANDAI_ARCHIVE, CMU_ARCHIVE)):
+        factory: pytest.TempPathFactory = config._tmp_path_factory  # type: ignore[attr-defined]
+        _PREFETCH.clips_root = factory.mktemp("mocap")
+        _PREFETCH.clips_from = mocap
+        _PREFETCH.clips = _untar_clips(tar, mocap, _PREFETCH.clips_root)
+
+
+def pytest_collection_finish(session: pytest.Session) -> None:
+    """The kernels compiled, before the first test (a test that compiled one meanwhile would
+    compile it a second time). A compile that failed is only reported: the tests that use
+    the kernel compile it again and fail with the error."""
+    procs, _PREFETCH.kernels = _PREFETCH.kernels, []
+    for proc in procs:
+        _, err = proc.communicate()
+        if proc.returncode:
+            reporter = session.config.pluginmanager.get_plugin("terminalreporter")
+            if reporter is not None:
+                reporter.write_line(f"kernel warm-up failed: {err.decode(errors='replace')}")
+
+
+def pytest_sessionfinish(session: pytest.Session) -> None:
+    """Stop what was started and never waited for (an interrupted collection, a session
+    that used no clips)."""
+    for proc in (*_PREFETCH.kernels, *_PREFETCH.clips):
+        if proc.poll() is None:
+            proc.kill()
+        proc.communicate()
+
+
+def _mocap_path() -> Path:
+    env = os.environ.get("MARIONETTE_MOCAP")
+    return Path(env) if env else REPO_ROOT.parent / "shared" / "mocap"
+
+
 @pytest.fixture(scope="session")
 def mocap_dir() -> Path:
     """The mocap archive folder; skips the test when it is absent."""
-    env = os.environ.get("MARIONETTE_MOCAP")
-    path = Path(env) if env else REPO_ROOT.parent / "shared" / "mocap"
+    path = _mocap_path()
     missing = [a for a in (BANDAI_ARCHIVE, CMU_ARCHIVE) if not (path / a).is_file()]
     if missing:
         pytest.skip(
@@ -106,17 +208,27 @@ def mocap_dir() -> Path:
     return path
 
 
+def _untar_clips(tar: str, mocap: Path, root: Path) -> list[subprocess.Popen[bytes]]:
+    """Both archives' clips extracted into ``root``, in parallel (the processes, running)."""
+    return [
+        subprocess.Popen(untar(tar, mocap / archive, root, members), stderr=subprocess.PIPE)
+        for archive, members in ((BANDAI_ARCHIVE, BANDAI_MEMBERS), (CMU_ARCHIVE, CMU_MEMBERS))
+    ]
+
+
 @pytest.fixture(scope="session")
 def mocap_clips(mocap_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> MocapClips:
-    """Extract a few real clips from both archives (once per session, both in parallel)."""
+    """Extract a few real clips from both archives (once per session, both in parallel;
+    started when the session starts, :func:`pytest_sessionstart`, when it could be)."""
     tar = shutil.which("tar")
     if tar is None:
         pytest.skip("the 'tar' command is needed to extract test clips")
-    root = tmp_path_factory.mktemp("mocap")
-    procs = [
-        subprocess.Popen(untar(tar, mocap_dir / archive, root, members), stderr=subprocess.PIPE)
-        for archive, members in ((BANDAI_ARCHIVE, BANDAI_MEMBERS), (CMU_ARCHIVE, CMU_MEMBERS))
-    ]
+    if _PREFETCH.clips and _PREFETCH.clips_from == mocap_dir:
+        root, procs = _PREFETCH.clips_root, _PREFETCH.clips
+        _PREFETCH.clips = []  # (waited for here, from now on)
+    else:
+        root = tmp_path_factory.mktemp("mocap")
+        procs = _untar_clips(tar, mocap_dir, root)
     for proc in procs:
         _, err = proc.communicate()
         assert proc.returncode == 0, f"tar failed: {err.decode(errors='replace')}"
