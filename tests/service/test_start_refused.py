@@ -9,6 +9,8 @@ import os
 import socket
 import subprocess
 import sys
+from collections.abc import Iterator
+from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 
 import pytest
@@ -18,14 +20,20 @@ from tests.conftest import REPO_ROOT
 PORT = "19031"  # (nothing listens there: a start that got past every check would)
 
 
-def refused(argv: list[str], env: dict[str, str] | None = None, script: str = "") -> str:
-    """The one ``start_refused`` line's detail of ``main(argv)`` (after ``script``)."""
+def start(
+    argv: list[str], env: dict[str, str] | None = None, script: str = ""
+) -> subprocess.CompletedProcess[str]:
+    """``main(argv)`` (after ``script``) run to its end in a new interpreter."""
     code = f"{script}\nfrom service.cli import main\nmain({argv!r})"
     environ = {k: v for k, v in os.environ.items() if not k.upper().startswith("POSE_")}
-    proc = subprocess.run(
+    return subprocess.run(
         [sys.executable, "-c", code], cwd=REPO_ROOT, env={**environ, **(env or {})},
         capture_output=True, text=True, timeout=120,
     )  # fmt: skip
+
+
+def detail_of(proc: subprocess.CompletedProcess[str]) -> str:
+    """The one ``start_refused`` line's detail of a start that ended."""
     assert proc.returncode == 2, proc.stderr
     lines = [json.loads(line) for line in proc.stderr.splitlines()]  # JSON, every one
     assert len(lines) == 1 and lines[0]["event"] == "start_refused", proc.stderr
@@ -34,85 +42,101 @@ def refused(argv: list[str], env: dict[str, str] | None = None, script: str = ""
     return detail
 
 
-@pytest.mark.parametrize(
-    ("env", "argv", "said"),
-    [
-        # D3: a budget below the body limit (every chunked body a 429 forever)
-        ({"POSE_MAX_INFLIGHT_BYTES": "4096"}, [],
-         "POSE_MAX_INFLIGHT_BYTES (4096) is below POSE_MAX_BODY_BYTES (8388608)"),
-        ({"POSE_MAX_BODY_BYTES": str(100 << 20)}, [],
-         f"POSE_MAX_INFLIGHT_BYTES ({64 << 20}) is below POSE_MAX_BODY_BYTES ({100 << 20})"),
-        # D5: a metrics folder that exists but takes no file
-        ({"PROMETHEUS_MULTIPROC_DIR": "/proc"}, [], "PROMETHEUS_MULTIPROC_DIR='/proc' is not "
-         "writable"),
-        # D6: a setting misspelt (/v1 open with POSE_APIKEY)
-        ({"POSE_APIKEY": "s3cret"}, [],
-         "POSE_APIKEY: no such setting; did you mean POSE_API_KEY?"),
-        ({"POSE_API_KEY_FILE": "/run/secrets/key"}, [],
-         "POSE_API_KEY_FILE: no such setting; did you mean POSE_API_KEY?"),
-        ({"POSE_DEADLINE": "9"}, [], "POSE_DEADLINE: no such setting; did you mean "
-         "POSE_DEADLINE_SECONDS?"),
-        # (the reason is a general one: it named POSE_APIKEY whatever was misspelt)
-        ({"POSE_PROT": PORT}, [], "POSE_PROT: no such setting; did you mean POSE_PORT? "
-         "Rename or unset it (a misspelt setting would leave its default in force)"),
-        # D9: options given are given (0 and "" were taken for "not given")
-        ({"POSE_HOST": "127.0.0.1"}, ["--port", "0"],
-         "--port (POSE_PORT): Input should be greater than or equal to 1"),
-        ({}, ["--host", "", "--port", PORT],
-         "--host (POSE_HOST): String should have at least 1 character"),
-        # D10: a key no client can send
-        ({"POSE_API_KEY": "clé-secrète"}, [], "POSE_API_KEY: a character that is not "
-         "printable ASCII: an HTTP header's value is bytes"),
-        # a near miss that shares a word with a setting: warned of, and the default kept
-        # (an ops audit, 2026-12-07), while other misspellings (POSE_CONCURRENCY) refused
-        ({"POSE_MAX_BODY_SIZE": "100"}, [], "POSE_MAX_BODY_SIZE: no such setting; did you "
-         "mean POSE_MAX_BODY_BYTES? Rename or unset it"),
-        ({"POSE_DEADLINE_MS": "500"}, [], "POSE_DEADLINE_MS: no such setting; did you mean "
-         "POSE_DEADLINE_SECONDS?"),
-        ({"POSE_BATCH_SIZE": "10"}, [], "POSE_BATCH_SIZE: no such setting; did you mean "
-         "POSE_MAX_BATCH_ITEMS?"),
-        ({"POSE_CONCURRENCY": "8"}, [], "POSE_CONCURRENCY: no such setting; did you mean "
-         "POSE_MAX_CONCURRENCY?"),
-        ({"POSE_TIMEOUT": "30"}, [], "POSE_TIMEOUT: no such setting; did you mean "
-         "POSE_IDLE_TIMEOUT_SECONDS or POSE_HEAD_TIMEOUT_SECONDS?"),
-        # bounds an audit found open, and nan's message (2026-12-07)
-        ({"POSE_DEADLINE_SECONDS": "1e-9"}, [],
-         "POSE_DEADLINE_SECONDS: Input should be greater than or equal to 0.01 (got '1e-9')"),
-        ({"POSE_DEADLINE_SECONDS": "nan"}, [],
-         "POSE_DEADLINE_SECONDS: Input should be a finite number (got 'nan')"),
-        ({"POSE_HEAD_TIMEOUT_SECONDS": "inf"}, [],
-         "POSE_HEAD_TIMEOUT_SECONDS: Input should be a finite number (got 'inf')"),
-        ({"POSE_MAX_BATCH_ITEMS": "100000000"}, [],
-         "POSE_MAX_BATCH_ITEMS: Input should be less than or equal to 65536"),
-        ({"POSE_LOG_LEVEL": "trace"}, [], "POSE_LOG_LEVEL: Input should be 'debug', 'info', "
-         "'warning', 'error' or 'critical' (got 'trace')"),
-        # D11: usage errors (plain-text argparse usage; `_workers` leaked)
-        ({}, ["--port", "abc"], "pose-service: argument --port: 'abc' is not a whole number"),
-        ({}, ["--workers", "abc"], "argument --workers: 'abc' is not a whole number"),
-        ({}, ["--workers", "0"], "argument --workers: 0: at least 1"),
-        ({}, ["--bogus"], "pose-service: unrecognized arguments: --bogus"),
-        # D12: absurd worker counts
-        ({}, ["--workers", "99"], "argument --workers: 99: at most 32 (each worker loads"),
-        # D14: a host that does not resolve, named
-        ({}, ["--host", "no.such.host.invalid", "--port", PORT],
-         f"cannot listen on no.such.host.invalid:{PORT}: the host 'no.such.host.invalid' "
-         "does not resolve"),
-        # D15: origins no browser sends; an entry named by its real variable
-        ({"POSE_CORS_ORIGINS": '["http://editor.example/"]'}, [],
-         "POSE_CORS_ORIGINS: entry 0 ('http://editor.example/') never matches: a path (even "
-         "a trailing '/') is never part of an Origin: write 'http://editor.example'"),
-        ({"POSE_CORS_ORIGINS": '["http://a.example", "editor.example"]'}, [],
-         "POSE_CORS_ORIGINS: entry 1 ('editor.example') never matches: no scheme"),
-        ({"POSE_CORS_ORIGINS": '["http://a.example", 3]'}, [],
-         "POSE_CORS_ORIGINS[1]: Input should be a valid string"),
-    ],
-)  # fmt: skip
+def refused(argv: list[str], env: dict[str, str] | None = None, script: str = "") -> str:
+    """The one ``start_refused`` line's detail of ``main(argv)`` (after ``script``)."""
+    return detail_of(start(argv, env, script))
+
+
+#: (environment, argv, what the refusal says)
+CASES: list[tuple[dict[str, str], list[str], str]] = [
+    # D3: a budget below the body limit (every chunked body a 429 forever)
+    ({"POSE_MAX_INFLIGHT_BYTES": "4096"}, [],
+     "POSE_MAX_INFLIGHT_BYTES (4096) is below POSE_MAX_BODY_BYTES (8388608)"),
+    ({"POSE_MAX_BODY_BYTES": str(100 << 20)}, [],
+     f"POSE_MAX_INFLIGHT_BYTES ({64 << 20}) is below POSE_MAX_BODY_BYTES ({100 << 20})"),
+    # D5: a metrics folder that exists but takes no file
+    ({"PROMETHEUS_MULTIPROC_DIR": "/proc"}, [], "PROMETHEUS_MULTIPROC_DIR='/proc' is not "
+     "writable"),
+    # D6: a setting misspelt (/v1 open with POSE_APIKEY)
+    ({"POSE_APIKEY": "s3cret"}, [],
+     "POSE_APIKEY: no such setting; did you mean POSE_API_KEY?"),
+    ({"POSE_API_KEY_FILE": "/run/secrets/key"}, [],
+     "POSE_API_KEY_FILE: no such setting; did you mean POSE_API_KEY?"),
+    ({"POSE_DEADLINE": "9"}, [], "POSE_DEADLINE: no such setting; did you mean "
+     "POSE_DEADLINE_SECONDS?"),
+    # (the reason is a general one: it named POSE_APIKEY whatever was misspelt)
+    ({"POSE_PROT": PORT}, [], "POSE_PROT: no such setting; did you mean POSE_PORT? "
+     "Rename or unset it (a misspelt setting would leave its default in force)"),
+    # D9: options given are given (0 and "" were taken for "not given")
+    ({"POSE_HOST": "127.0.0.1"}, ["--port", "0"],
+     "--port (POSE_PORT): Input should be greater than or equal to 1"),
+    ({}, ["--host", "", "--port", PORT],
+     "--host (POSE_HOST): String should have at least 1 character"),
+    # D10: a key no client can send
+    ({"POSE_API_KEY": "clé-secrète"}, [], "POSE_API_KEY: a character that is not "
+     "printable ASCII: an HTTP header's value is bytes"),
+    # a near miss that shares a word with a setting: warned of, and the default kept
+    # (an ops audit, 2026-12-07), while other misspellings (POSE_CONCURRENCY) refused
+    ({"POSE_MAX_BODY_SIZE": "100"}, [], "POSE_MAX_BODY_SIZE: no such setting; did you "
+     "mean POSE_MAX_BODY_BYTES? Rename or unset it"),
+    ({"POSE_DEADLINE_MS": "500"}, [], "POSE_DEADLINE_MS: no such setting; did you mean "
+     "POSE_DEADLINE_SECONDS?"),
+    ({"POSE_BATCH_SIZE": "10"}, [], "POSE_BATCH_SIZE: no such setting; did you mean "
+     "POSE_MAX_BATCH_ITEMS?"),
+    ({"POSE_CONCURRENCY": "8"}, [], "POSE_CONCURRENCY: no such setting; did you mean "
+     "POSE_MAX_CONCURRENCY?"),
+    ({"POSE_TIMEOUT": "30"}, [], "POSE_TIMEOUT: no such setting; did you mean "
+     "POSE_IDLE_TIMEOUT_SECONDS or POSE_HEAD_TIMEOUT_SECONDS?"),
+    # bounds an audit found open, and nan's message (2026-12-07)
+    ({"POSE_DEADLINE_SECONDS": "1e-9"}, [],
+     "POSE_DEADLINE_SECONDS: Input should be greater than or equal to 0.01 (got '1e-9')"),
+    ({"POSE_DEADLINE_SECONDS": "nan"}, [],
+     "POSE_DEADLINE_SECONDS: Input should be a finite number (got 'nan')"),
+    ({"POSE_HEAD_TIMEOUT_SECONDS": "inf"}, [],
+     "POSE_HEAD_TIMEOUT_SECONDS: Input should be a finite number (got 'inf')"),
+    ({"POSE_MAX_BATCH_ITEMS": "100000000"}, [],
+     "POSE_MAX_BATCH_ITEMS: Input should be less than or equal to 65536"),
+    ({"POSE_LOG_LEVEL": "trace"}, [], "POSE_LOG_LEVEL: Input should be 'debug', 'info', "
+     "'warning', 'error' or 'critical' (got 'trace')"),
+    # D11: usage errors (plain-text argparse usage; `_workers` leaked)
+    ({}, ["--port", "abc"], "pose-service: argument --port: 'abc' is not a whole number"),
+    ({}, ["--workers", "abc"], "argument --workers: 'abc' is not a whole number"),
+    ({}, ["--workers", "0"], "argument --workers: 0: at least 1"),
+    ({}, ["--bogus"], "pose-service: unrecognized arguments: --bogus"),
+    # D12: absurd worker counts
+    ({}, ["--workers", "99"], "argument --workers: 99: at most 32 (each worker loads"),
+    # D14: a host that does not resolve, named
+    ({}, ["--host", "no.such.host.invalid", "--port", PORT],
+     f"cannot listen on no.such.host.invalid:{PORT}: the host 'no.such.host.invalid' "
+     "does not resolve"),
+    # D15: origins no browser sends; an entry named by its real variable
+    ({"POSE_CORS_ORIGINS": '["http://editor.example/"]'}, [],
+     "POSE_CORS_ORIGINS: entry 0 ('http://editor.example/') never matches: a path (even "
+     "a trailing '/') is never part of an Origin: write 'http://editor.example'"),
+    ({"POSE_CORS_ORIGINS": '["http://a.example", "editor.example"]'}, [],
+     "POSE_CORS_ORIGINS: entry 1 ('editor.example') never matches: no scheme"),
+    ({"POSE_CORS_ORIGINS": '["http://a.example", 3]'}, [],
+     "POSE_CORS_ORIGINS[1]: Input should be a valid string"),
+]  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def starts() -> Iterator[list[Future[subprocess.CompletedProcess[str]]]]:
+    """Each case's start (:data:`CASES`, in order), all begun at once, as many at a time
+    as there are cores: each is a new interpreter of its own, alone on its port, and its
+    test waits for its own (one after another, the 30 starts took 20-40 s, a core idle)."""
+    with ThreadPoolExecutor(os.cpu_count() or 1) as pool:
+        yield [pool.submit(start, argv, {"POSE_PORT": PORT, **env}) for env, argv, _ in CASES]
+
+
+@pytest.mark.parametrize(("env", "argv", "said"), CASES)
 def test_a_refused_start_is_one_json_line_naming_what_is_wrong(
-    env: dict[str, str], argv: list[str], said: str
-) -> None:
+    env: dict[str, str], argv: list[str], said: str,
+    starts: list[Future[subprocess.CompletedProcess[str]]],
+) -> None:  # fmt: skip
     """Each of these started the service (D3, D6, D9, D10, D15: an ops audit, 2026-12-06),
     or was a traceback (D5), plain-text usage (D11) or uvicorn's exit 3 (D14)."""
-    detail = refused(argv, {"POSE_PORT": PORT, **env})
+    detail = detail_of(starts[CASES.index((env, argv, said))].result())
     assert said in detail, detail
     assert "_workers" not in detail and "clé" not in detail and "s3cret" not in detail
 
