@@ -96,7 +96,7 @@ def serve(
                     break
             assert proc.poll() is None, log.read_text()
             assert time.monotonic() < deadline, "server did not start"
-            time.sleep(0.2)
+            time.sleep(0.05)  # (0.2 s: ~0.1 s late a start on average, ~50 starts a suite)
         yield server
     finally:
         if proc.poll() is None:
