@@ -77,14 +77,21 @@ export function frameLine(text, frame, frames) {
 // which the service refuses: such a frame was drawn, and its drag got the service's 422.
 export const NUMBER_RE = /^[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?$/;
 export const bvhNumber = (word) => (NUMBER_RE.test(word) ? Number(word) : NaN);
+// The most a channel value may be (service/characters.py MAX_COORDINATE): the service refuses
+// to edit a frame holding one past it, so such a frame is read as broken (NaN), as 0x10 is.
+export const MAX_VALUE = 1.0e7;
+export const bvhValue = (word) => {
+  const v = bvhNumber(word);
+  return Math.abs(v) <= MAX_VALUE ? v : NaN;
+};
 
 // The values of one frame's line (Float64Array of ``channels``; NaN for a word that is no
-// number, ``bvhNumber``), or null where it holds another number of values: how
+// number within the bound, ``bvhValue``), or null where it holds another number of values: how
 // ``frameValues`` reads the frame's line once it has found it (a spliced answer's line is
 // read so: editor/excerpt.js).
 export function lineValues(line, channels) {
   const tokens = line.split(/\s+/).filter((t) => t);
-  return tokens.length === channels ? Float64Array.from(tokens, bvhNumber) : null;
+  return tokens.length === channels ? Float64Array.from(tokens, bvhValue) : null;
 }
 
 // 3x3 matrices as row-major arrays of 9.

@@ -13,12 +13,11 @@
 // lines start after the MOTION line, "Frames:" and "Frame Time:"; a block of one frame a
 // line is read line by line, each frame's line alone.
 
-import { channelCount, lineValues, motionHeader } from '../bvh.js';
+import {
+  MAX_VALUE, NUMBER_RE, channelCount, lineValues, motionHeader,
+} from '../bvh.js';
 
 const FRAMES_RE = /^([ \t]*Frames:[ \t]*)(\S+)([ \t]*\r?)$/; // core/bvh.py _FRAMES_RE
-// A BVH number both readers read alike (Python's float, numpy's): plain decimals only.
-const NUMBER_RE = /^[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?$/;
-const MAX_VALUE = 1.0e7; // service/characters.py MAX_COORDINATE: past it, a 422
 const WORD_RE = /\S+/g;
 
 // The committed text's layout (a gesture's solves all start from the same text): worked out

@@ -3,7 +3,8 @@
 
 import * as THREE from 'three';
 import {
-  anchorPoints, bvhNumber, channelCount, forwardKinematics, frameLine, frameValues, parseMotion,
+  anchorPoints, bvhNumber, bvhValue, channelCount, forwardKinematics, frameLine, frameValues,
+  MAX_VALUE, parseMotion,
 } from '../bvh.js';
 import { $, doc, history, solver, state, ui } from './state.js';
 import { api, ApiError, clearError, showError } from './api.js';
@@ -88,12 +89,13 @@ function brokenRow(text, frame) {
   const at = oneFrameALine(text, doc.info.frames, n) && frameLine(text, frame, doc.info.frames);
   if (!at) return null;
   const words = text.slice(at[0], at[1]).match(/\S+/g) || [];
-  const bad = words.find((w) => !Number.isFinite(bvhNumber(w))); // (as the service reads it)
+  const bad = words.find((w) => !Number.isFinite(bvhValue(w))); // (as the service reads it)
   if (words.length === n && bad === undefined) return null;
   let line = 1;
   for (let i = text.indexOf('\n'); i >= 0 && i < at[0]; i = text.indexOf('\n', i + 1)) line += 1;
   const holds = words.length !== n ? `${words.length} values, not ${n}`
-    : `a value that is no number ('${bad.slice(0, 20)}')`;
+    : Number.isFinite(bvhNumber(bad)) ? `a value past ±${String(MAX_VALUE.toExponential())
+      .replace('+', '')} ('${bad.slice(0, 20)}')` : `a value that is no number ('${bad.slice(0, 20)}')`;
   return `${doc.name}: line ${line}: frame ${frame} holds ${holds}: it has no pose to draw or `
     + 'edit (the other frames have; Export writes this line as it is)';
 }
