@@ -45,7 +45,7 @@ def test_two_revisions_side_by_side(
         assert set(ab._run(REPO, holdout_dataset, 4, 0)) >= {"1 default", "bvh soft"}
     result = ab.compare("HEAD", holdout_dataset, rounds=1, edits=4, seed=0)
     cases = {f"{k} {c}" for k in (1, 2, 5) for c in ("default", "plain", "fabrik", "batch")}
-    cases |= {"1 pinned", "2 pinned", "bvh exact", "bvh soft"}
+    cases |= {"1 pinned", "2 pinned", "bvh exact", "bvh soft", "bvh soft cold", "character"}
     for side in ("base", "this"):
         assert len(result[side]) == 1 and set(result[side][0]) == cases
         assert all(0 < t < 1e6 for t in result[side][0].values())
