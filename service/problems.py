@@ -392,3 +392,4 @@ class CompleteResult:
     levels: list[int]
     floor: float  # the floor the networks saw (the request's, or where it was clamped)
     scale_warning: str | None = None  # the body's size not the request's (``scale_warning``)
+    up_warning: str | None = None  # key points not upright along +Y (``up_warning``)

@@ -332,6 +332,13 @@ class CompleteResponse(BaseModel):
         "the networks know (completed scaled into them and answered back: centimetres "
         "sent as metres). Says by how much.",
     )
+    up_warning: str | None = Field(
+        default=None,
+        description="Null unless the pelvis-to-neck line of the key points leans more than "
+        "60 degrees from +Y, the up axis key points are read with: the body was completed "
+        "lying down (as asked, if it lies down; key points captured with +Z up must be "
+        "turned to +Y up first). Says along which axis the line runs.",
+    )
 
 
 class SkeletonResponse(BaseModel):

@@ -25,4 +25,5 @@ async def complete(req: CompleteRequest, engine: ReadyEngine, budget: RequestBud
         )
     payload = complete_payload(list(points), result, engine.version)
     payload["scale_warning"] = result.scale_warning
+    payload["up_warning"] = result.up_warning
     return json_response(payload, budget.compute)

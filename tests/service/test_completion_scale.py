@@ -52,3 +52,23 @@ def test_key_points_of_a_body_out_of_band_are_said_to_be_scaled(
     assert "key points are metres" in warning
     for k in (0.8, 1.0, 1.2):  # bodies the networks know: no word
         assert client.post("/v1/complete", json=_body(pose, k)).json()["scale_warning"] is None
+
+
+def test_key_points_not_upright_along_y_are_said_to_be_read_lying_down(
+    client: Any, real_poses: PosePairs
+) -> None:
+    """Key points captured with +Z up (a quarter turn about X of real ones), sent as they
+    are, were completed as a body lying down with only the clamped ``floor`` to show it
+    (an API audit, 2026-12-07): ``up_warning`` says how they were read."""
+    pose = real_poses.poses[real_poses.goals[2]]
+    upright = client.post("/v1/complete", json=_body(pose)).json()
+    assert upright["up_warning"] is None
+    z_up = pose @ np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])  # y -> z
+    out = client.post("/v1/complete", json=_body(z_up)).json()
+    trunk = z_up[JOINT_INDEX["neck"]] - z_up[JOINT_INDEX["pelvis"]]
+    assert trunk[2] > 0.8 * np.linalg.norm(trunk)  # (upright along +Z)
+    warning = out["up_warning"]
+    assert warning is not None and "(it runs along +Z)" in warning, warning
+    assert warning.startswith("keypoints: the pelvis-to-neck line leans ")
+    # a body lying down is completed as asked: the same key points upright, no word
+    assert upright["up_warning"] is None and len(out["pose"]) == len(upright["pose"])
