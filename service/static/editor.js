@@ -83,7 +83,7 @@ function wireControls() {
   chosen($('bvh-units'), (menu, how, from) => {
     if (menu.value !== 'other') readAgain();
     else if (how === 'left') menu.value = from; // (no prompt as the focus goes)
-    else if (otherUnits()) readAgain(); // (other…: asked first)
+    else if (otherUnits(from)) readAgain(); // (other…: asked first)
   });
   $('bvh-map-apply').addEventListener('click', readAgain);
   $('bvh-map-clear').addEventListener('click', () => {
@@ -178,20 +178,26 @@ function wireControls() {
   });
 }
 
-// A file's menu (units, up, root) chosen: ``take(menu, how, from)``. Arrowed through from the
-// keyboard (a closed menu changes, and says so, at each arrow or letter), the choice is
-// taken on Enter or when the menu is left, and only if it differs from the value before
-// the arrows, ``from`` (``how``: 'enter' or 'left'; a mouse's or a picker's choice at once, null):
-// each option passed read the file again, and "other…" reached popped its prompt.
+// A file's menu (units, up, root) chosen: ``take(menu, how, from)``, ``from`` the value it
+// had before. Arrowed through from the keyboard (a closed menu changes, and says so, at each
+// arrow or letter), the choice is taken on Enter or when the menu is left, and only if it
+// differs from the value before the arrows (``how``: 'enter' or 'left'; a mouse's or a
+// picker's choice at once, null): each option passed read the file again, and "other…"
+// reached popped its prompt.
 const MENU_KEYS = new Set(['ArrowUp', 'ArrowDown', 'ArrowLeft', 'ArrowRight', 'Home', 'End', 'PageUp', 'PageDown']);
 
 function chosen(menu, take) {
   let keyed = false;
   let from = null; // the value before the arrows, while a keyed choice waits
+  let last = menu.value; // the value the last choice left (a cancelled other… goes back to it)
+  const taken = (how, was) => {
+    take(menu, how, was);
+    last = menu.value;
+  };
   const settle = (how) => {
     const was = from;
     from = null;
-    if (menu.value !== was) take(menu, how, was);
+    if (menu.value !== was) taken(how, was);
   };
   menu.addEventListener('keydown', (ev) => {
     const mod = ev.altKey || ev.ctrlKey || ev.metaKey;
@@ -204,13 +210,16 @@ function chosen(menu, take) {
     keyed = !mod && (MENU_KEYS.has(ev.key) || (ev.key.length === 1 && ev.key !== ' '));
     if (keyed && from === null) from = menu.value;
   });
-  menu.addEventListener('pointerdown', () => { keyed = false; });
+  const seen = () => { last = menu.value; }; // (a value set by the page since: a Sample's reset)
+  menu.addEventListener('focus', seen);
+  menu.addEventListener('pointerdown', () => { keyed = false; seen(); });
   menu.addEventListener('change', () => {
     if (keyed) return; // (waits: Enter, or the menu left)
     from = null;
-    take(menu, null);
+    taken(null, last);
   });
   menu.addEventListener('blur', () => {
+    keyed = false; // (a change after it, with no key or pointer first, is taken at once)
     if (from !== null) settle('left');
   });
 }

@@ -607,10 +607,11 @@ function mapFor(name, text) {
 // any number; the menu listed six units, and a file in none of them (decimetres, a game's
 // own scale) could not be opened, though the refusal said "state them ... or a number of
 // metres per unit".
-export function otherUnits() {
+export function otherUnits(before = 'auto') {
   const menu = $('bvh-units');
   const was = doc.active ? doc.settings : doc.tried && doc.tried.settings;
-  const back = () => { menu.value = was ? was.units : 'auto'; };
+  // (cancelled: the file's units, or with no file the choice before, kept for the next one)
+  const back = () => { menu.value = was ? was.units : before; };
   const typed = window.prompt('Metres per unit of this file (e.g. 0.1 for decimetres, 0.0254 for inches):', '');
   if (typed === null || typed.trim() === '') {
     back();
