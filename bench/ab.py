@@ -150,19 +150,29 @@ def bvh_edits(engine: Any, calls: int = 20) -> dict[str, float]:
     out: dict[str, float] = {}
     for name, ask in asks.items():
         req = BVHSolveRequest.model_validate(ask)
-        ns = []
-        for i in range(calls + 3):  # three to warm
-            if name.endswith("cold") and forget is not None:
-                forget.cache_clear()
-            t0 = time.thread_time_ns()
+
+        def edit(req: Any = req) -> None:
             bvh = read_request_bvh(req.bvh, req.frame)
-            args = (bvh, req, req.frame) if framed else (bvh, req)
-            ch = character_from_bvh(*args)
+            ch = character_from_bvh(*((bvh, req, req.frame) if framed else (bvh, req)))
             bvh_answer(bvh, ch, req, solve_character(engine, ch, req))
-            if i >= 3:
-                ns.append(time.thread_time_ns() - t0)
-        out[f"bvh {name}"] = float(np.median(ns)) / 1e3
+
+        cold = forget.cache_clear if name.endswith("cold") and forget is not None else None
+        out[f"bvh {name}"] = _p50_us(edit, calls, cold)
     return out
+
+
+def _p50_us(call: Any, calls: int, before: Any = None) -> float:
+    """The median CPU time of the thread (µs) of ``calls`` calls of ``call`` after three to
+    warm, ``before`` (untimed) ahead of each."""
+    ns = []
+    for i in range(calls + 3):
+        if before is not None:
+            before()
+        t0 = time.thread_time_ns()
+        call()
+        if i >= 3:
+            ns.append(time.thread_time_ns() - t0)
+    return float(np.median(ns)) / 1e3
 
 
 def character_edits(engine: Any, calls: int = 20) -> dict[str, float]:
@@ -178,14 +188,12 @@ def character_edits(engine: Any, calls: int = 20) -> dict[str, float]:
         read, prepared = ch.character_from_request, ch.solve_prepared
     except (ImportError, AttributeError, FileNotFoundError):
         return {}
-    ns = []
-    for i in range(calls + 3):  # three to warm
-        t0 = time.thread_time_ns()
+
+    def edit() -> None:
         c = read(req)
         ch.character_answer(c, prepared(engine, c, ch.character_problem(c, req)), req.rotations)
-        if i >= 3:
-            ns.append(time.thread_time_ns() - t0)
-    return {"character": float(np.median(ns)) / 1e3}
+
+    return {"character": _p50_us(edit, calls)}
 
 
 def _run(

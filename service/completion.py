@@ -196,7 +196,7 @@ def _scaled_points(engine: Engine, torso: float) -> list[str]:
     band = _out_of_band(engine, torso)
     if band == 1.0:
         return []
-    spine = sum(float(engine.reference_lengths[_BONE[j]]) for j in ("spine1", "spine2", "neck"))
+    spine = _spine(engine)
     lo, hi = TORSO_BAND
     return [
         f"keypoints: the pelvis and the neck lie {torso:.3g} m apart, {torso / spine:.3g} "
@@ -209,9 +209,13 @@ def _scaled_points(engine: Engine, torso: float) -> list[str]:
 def _out_of_band(engine: Engine, torso: float) -> float:
     """How much the key points are scaled down (below 1: up) to bring a body whose
     pelvis-to-neck distance is ``torso`` into :data:`TORSO_BAND`; 1 inside it."""
-    spine = sum(float(engine.reference_lengths[_BONE[j]]) for j in ("spine1", "spine2", "neck"))
-    ratio = torso / spine
+    ratio = torso / _spine(engine)
     return ratio / min(max(ratio, TORSO_BAND[0]), TORSO_BAND[1])
+
+
+def _spine(engine: Engine) -> float:
+    """The reference skeleton's pelvis-to-neck length along its spine (m)."""
+    return sum(float(engine.reference_lengths[_BONE[j]]) for j in ("spine1", "spine2", "neck"))
 
 
 def completion_scales(engine: Engine, lengths: F64) -> F64:

@@ -50,6 +50,8 @@ def complete_payload(joints: list[str], r: CompleteResult, version: str) -> dict
         "levels": list(r.levels),
         "floor": r.floor,
         "model": version,
+        "scale_warning": r.scale_warning,
+        "up_warning": r.up_warning,
     }
 
 

@@ -23,7 +23,4 @@ async def complete(req: CompleteRequest, engine: ReadyEngine, budget: RequestBud
         result = await budget.in_thread(
             lambda: engine.complete(points, req.bone_lengths, floor=req.floor), "the completion"
         )
-    payload = complete_payload(list(points), result, engine.version)
-    payload["scale_warning"] = result.scale_warning
-    payload["up_warning"] = result.up_warning
-    return json_response(payload, budget.compute)
+    return json_response(complete_payload(list(points), result, engine.version), budget.compute)
