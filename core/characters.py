@@ -271,12 +271,9 @@ def swing(a: F64, b: F64) -> F64:
 
 
 def best_rotation(v: F64, u: F64, weights: F64 | None = None) -> F64:
-    """The rotation ``R`` minimising ``sum w |R v_k - u_k|^2`` (Kabsch / Wahba), ``[K, 3]``."""
-    w = np.ones(len(v)) if weights is None else weights
-    h = (v * w[:, None]).T @ u
-    uu, _, vt = np.linalg.svd(h)
-    d = np.sign(np.linalg.det(vt.T @ uu.T)) or 1.0
-    return np.asarray(vt.T @ np.diag([1.0, 1.0, d]) @ uu.T)
+    """The rotation ``R`` minimising ``sum w |R v_k - u_k|^2`` (Kabsch / Wahba), ``[K, 3]``
+    (compiled: :func:`core.compiled_characters.best_rotation_into`)."""
+    return compiled_characters.best_rotation(v, u, np.ones(len(v)) if weights is None else weights)
 
 
 def twist_angle(delta: F64, axis: F64) -> float:

@@ -10,12 +10,14 @@ order (no BLAS, no fused multiply-add), so an answer is the same on every run; t
 from numpy's ``@`` (BLAS) by rounding only (6e-17 on the docs' BVH example;
 tests/core/test_characters.py holds them to 1e-12 on real files).
 
-The aim pass itself is compiled too (:func:`aim_singles_into`): every group that aims one
-child (an arm's, a leg's, the neck's joints) is turned here by its swing, one call for a
-run of such groups; a group that aims two children or more (a chest, a pelvis) goes back
-to numpy for its least-squares turn (an SVD: numba's needs SciPy, which the service does
-not install). The docs' BVH edit, read to written back: 25.2 -> 8.5 ms CPU p50
-(``python -m bench.ab``'s ``bvh exact`` row, docs/characters.md).
+The aim pass itself is compiled too (:func:`aim_pass_into`): a group that aims one child
+(an arm's, a leg's, the neck's joints) is turned by its swing, a group that aims two or
+more (a chest, a pelvis) by their weighted least-squares turn (:func:`best_rotation_into`:
+Horn's quaternion, the top eigenvector of a 4 x 4 symmetric matrix by Jacobi's sweeps,
+since numba's SVD needs SciPy, which the service does not install), one call for the
+whole pass. The docs' BVH edit, read to written back: 25.2 -> 8.5 ms CPU p50 with the
+single-child groups compiled (``python -m bench.ab``'s ``bvh exact`` row,
+docs/characters.md).
 """
 
 from __future__ import annotations
@@ -129,7 +131,89 @@ def swing_matrix_into(a: F64, b: F64, out: F64) -> None:  # pragma: no cover - c
 
 
 @jit
-def aim_singles_into(
+def best_rotation_into(v: F64, u: F64, w: F64, n: int, out: F64) -> None:  # pragma: no cover
+    """``out [3, 3]``: the rotation ``R`` minimising ``sum_k w_k |R v_k - u_k|^2`` over the
+    first ``n`` rows of ``v`` and ``u`` ``[K, 3]`` (Kabsch / Wahba), by Horn's quaternion:
+    the eigenvector of the largest eigenvalue of the 4 x 4 symmetric matrix of the weighted
+    cross-covariance, found by cyclic Jacobi rotations (each sweep in a fixed order, so the
+    answer is the same on every run)."""
+    s = np.zeros((3, 3))
+    for k in range(n):
+        for r in range(3):
+            for c in range(3):
+                s[r, c] += w[k] * v[k, r] * u[k, c]
+    a = np.empty((4, 4))
+    a[0, 0] = s[0, 0] + s[1, 1] + s[2, 2]
+    a[1, 1] = s[0, 0] - s[1, 1] - s[2, 2]
+    a[2, 2] = -s[0, 0] + s[1, 1] - s[2, 2]
+    a[3, 3] = -s[0, 0] - s[1, 1] + s[2, 2]
+    a[0, 1] = a[1, 0] = s[1, 2] - s[2, 1]
+    a[0, 2] = a[2, 0] = s[2, 0] - s[0, 2]
+    a[0, 3] = a[3, 0] = s[0, 1] - s[1, 0]
+    a[1, 2] = a[2, 1] = s[0, 1] + s[1, 0]
+    a[1, 3] = a[3, 1] = s[2, 0] + s[0, 2]
+    a[2, 3] = a[3, 2] = s[1, 2] + s[2, 1]
+    e = np.zeros((4, 4))
+    for r in range(4):
+        e[r, r] = 1.0
+    scale = 0.0
+    for r in range(4):
+        for c in range(4):
+            scale = max(scale, abs(a[r, c]))
+    for _ in range(_SWEEPS):
+        off = 0.0
+        for p in range(3):
+            for q in range(p + 1, 4):
+                off = max(off, abs(a[p, q]))
+        if off <= 1e-300 or off <= 1e-17 * scale:
+            break
+        for p in range(3):
+            for q in range(p + 1, 4):
+                if a[p, q] == 0.0:
+                    continue
+                theta = (a[q, q] - a[p, p]) / (2.0 * a[p, q])
+                t = 1.0 / (abs(theta) + np.sqrt(theta * theta + 1.0))
+                if theta < 0.0:
+                    t = -t
+                c = 1.0 / np.sqrt(t * t + 1.0)
+                sn = t * c
+                for k in range(4):  # columns p and q of a J
+                    akp, akq = a[k, p], a[k, q]
+                    a[k, p] = c * akp - sn * akq
+                    a[k, q] = sn * akp + c * akq
+                for k in range(4):  # rows p and q of J^T (a J)
+                    apk, aqk = a[p, k], a[q, k]
+                    a[p, k] = c * apk - sn * aqk
+                    a[q, k] = sn * apk + c * aqk
+                for k in range(4):
+                    ekp, ekq = e[k, p], e[k, q]
+                    e[k, p] = c * ekp - sn * ekq
+                    e[k, q] = sn * ekp + c * ekq
+    top = 0
+    for r in range(1, 4):
+        if a[r, r] > a[top, top]:
+            top = r
+    q0, q1, q2, q3 = e[0, top], e[1, top], e[2, top], e[3, top]
+    norm = np.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
+    q0, q1, q2, q3 = q0 / norm, q1 / norm, q2 / norm, q3 / norm
+    out[0, 0] = q0 * q0 + q1 * q1 - q2 * q2 - q3 * q3
+    out[1, 1] = q0 * q0 - q1 * q1 + q2 * q2 - q3 * q3
+    out[2, 2] = q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3
+    out[0, 1] = 2.0 * (q1 * q2 - q0 * q3)
+    out[1, 0] = 2.0 * (q1 * q2 + q0 * q3)
+    out[0, 2] = 2.0 * (q1 * q3 + q0 * q2)
+    out[2, 0] = 2.0 * (q1 * q3 - q0 * q2)
+    out[1, 2] = 2.0 * (q2 * q3 - q0 * q1)
+    out[2, 1] = 2.0 * (q2 * q3 + q0 * q1)
+
+
+#: Jacobi sweeps at most (a 4 x 4 matrix takes 3-5 to rounding; more only where the
+#: largest eigenvalues tie, and then any of their eigenvectors is a best turn)
+_SWEEPS = 32
+
+
+@jit
+def aim_pass_into(
     parents: I64,
     rotations: F64,
     translations: F64,
@@ -140,27 +224,30 @@ def aim_singles_into(
     anchor_joints: I64,
     anchor_offsets: F64,
     goal: F64,
-    start: int,
     skip: int,
+    weigh: F64,
     g_rot: F64,
     g_pos: F64,
     changed: npt.NDArray[np.uint8],
-) -> int:  # pragma: no cover - compiled
-    """The aim pass of ``core.retarget`` from group ``start`` on, groups in order: group
-    ``i`` turns joint ``aims[i]`` (from its ``original`` local rotation) so its canonical
+) -> None:  # pragma: no cover - compiled
+    """The aim pass of ``core.retarget``, groups in order: group ``i`` turns joint
+    ``aims[i]`` (from its ``original`` local rotation; not ``skip``) so its canonical
     children ``kids[kid_start[i]:kid_start[i + 1]]`` (anchored at ``anchor_joints`` /
-    ``anchor_offsets``) point at ``goal``, by the swing of the one child that can aim;
-    ``changed[i]`` set where the rotation changed. Returns the first group with two
-    children or more that can aim (their least-squares turn is numpy's SVD, left to the
-    caller), or ``len(aims)`` once all are done. ``g_rot`` / ``g_pos`` are work space."""
+    ``anchor_offsets``) point at ``goal``: by the swing of the one child that can aim, or
+    by the least-squares turn of those that can (:func:`best_rotation_into`), each child
+    weighing its length times ``weigh [21]`` (a pinned one's more); ``changed[i]`` set
+    where the rotation changed. ``g_rot`` / ``g_pos`` are work space."""
     v = np.empty((kids.shape[0], 3))
     u = np.empty((kids.shape[0], 3))
     nv = np.empty(kids.shape[0])
     nu = np.empty(kids.shape[0])
+    sv = np.empty((kids.shape[0], 3))
+    su = np.empty((kids.shape[0], 3))
+    sw = np.empty(kids.shape[0])
     turn = np.empty((3, 3))
     new = np.empty((3, 3))
     local = np.empty((3, 3))
-    for i in range(start, aims.shape[0]):
+    for i in range(aims.shape[0]):
         b = aims[i]
         if b == skip:
             continue
@@ -192,9 +279,21 @@ def aim_singles_into(
                     one = m
         if count == 0:
             continue
-        if count > 1:
-            return i
-        swing_matrix_into(v[one], u[one], turn)
+        if count == 1:
+            swing_matrix_into(v[one], u[one], turn)
+        else:  # the aimable children's unit directions, weighted by length (and pins)
+            n, total = 0, 0.0
+            for m in range(lo, hi):
+                if nv[m] > 1e-9 * max(1.0, top) and nu[m] > 1e-12:
+                    for r in range(3):
+                        sv[n, r] = v[m, r] / nv[m]
+                        su[n, r] = u[m, r] / nu[m]
+                    sw[n] = nv[m] * weigh[kids[m]]
+                    total += sw[n]
+                    n += 1
+            for m in range(n):
+                sw[m] = sw[m] / total
+            best_rotation_into(sv, su, sw, n, turn)
         p = parents[b]
         mul33_into(turn, g_rot[b], new)
         if p >= 0:
@@ -211,7 +310,17 @@ def aim_singles_into(
             for r in range(3):
                 for c in range(3):
                     rotations[b, r, c] = local[r, c]
-    return int(aims.shape[0])
+
+
+def best_rotation(v: F64, u: F64, weights: F64) -> F64:
+    """:func:`best_rotation_into` of ``v``, ``u`` ``[K, 3]`` and ``weights`` ``[K]`` into a new
+    ``[3, 3]``."""
+    out = np.empty((3, 3))
+    best_rotation_into(
+        np.require(v, np.float64, ["C", "W"]), np.require(u, np.float64, ["C", "W"]),
+        np.require(weights, np.float64, ["C", "W"]), len(v), out,
+    )  # fmt: skip
+    return out
 
 
 def warm() -> None:
@@ -222,8 +331,9 @@ def warm() -> None:
     translations = np.array([[0.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
     forward_kinematics(parents, rotations, translations)
     ints = np.array([0], dtype=np.int64)
-    aim_singles_into(
+    aim_pass_into(
         parents, rotations.copy(), translations, rotations, ints, np.array([0, 1], np.int64),
-        ints, np.array([1], np.int64), np.zeros((1, 3)), np.array([[1.0, 0.0, 0.0]]), 0, -1,
-        np.empty((2, 3, 3)), np.empty((2, 3)), np.zeros(1, np.uint8),
+        ints, np.array([1], np.int64), np.zeros((1, 3)), np.array([[1.0, 0.0, 0.0]]), -1,
+        np.ones(1), np.empty((2, 3, 3)), np.empty((2, 3)), np.zeros(1, np.uint8),
     )  # fmt: skip
+    best_rotation(np.eye(3), np.eye(3), np.ones(3))

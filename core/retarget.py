@@ -100,41 +100,6 @@ def _plan(skel: Skeleton, jmap: JointMap) -> _Plan:
     )
 
 
-def _aim_group(
-    skel: Skeleton, pose: Pose, jmap: JointMap, b: int, kids: list[int], goal: F64, original: Pose,
-    heavy: frozenset[int],
-) -> bool:  # fmt: skip
-    """Aim one group, joint ``b``; True if its rotation changed (numpy: the groups the
-    compiled pass leaves, those with two children or more to aim). Children in ``heavy``
-    (pins and held goals, and their parents) weigh :data:`HEAVY` times the others in the
-    least-squares turn, so a chest turns a pinned neck (or a pinned head's neck) where the
-    solve put it and lets the collars follow."""
-    pose.rotations[b] = original.rotations[b]
-    g_rot, g_pos = forward_kinematics(skel, pose)
-    pivot = g_pos[b]
-    v = jmap.points(g_rot, g_pos)[kids] - pivot
-    u = goal[kids] - pivot
-    nv, nu = np.linalg.norm(v, axis=1), np.linalg.norm(u, axis=1)
-    ok = (nv > 1e-9 * max(1.0, float(nv.max()))) & (nu > 1e-12)
-    if not ok.any():
-        return False
-    if ok.sum() == 1:
-        k = int(np.argmax(ok))
-        turn = swing(v[k], u[k])
-    else:
-        w = nv * np.asarray([HEAVY if c in heavy else 1.0 for c in kids])
-        turn = best_rotation(
-            v[ok] / nv[ok, None], u[ok] / nu[ok, None], weights=w[ok] / w[ok].sum()
-        )
-    new_global = turn @ g_rot[b]
-    parent = skel.parents[b]
-    local = new_global if parent < 0 else g_rot[parent].T @ new_global
-    if (np.abs(local - original.rotations[b]) <= 1e-15).all():  # np.allclose, rtol 0
-        return False
-    pose.rotations[b] = local
-    return True
-
-
 def _aim_pass(
     skel: Skeleton,
     pose: Pose,
@@ -143,33 +108,37 @@ def _aim_pass(
     goal: F64,
     skip: int | None,
     original: Pose,
-    heavy: frozenset[int] = frozenset(),
+    weigh: F64 | None = None,
 ) -> set[int]:
-    """Aim every group (parents first). Each turn starts from the joint's *original* local
-    rotation, so a joint aimed again (exact reach) still differs from the input by one
-    swing, never by a twist. Compiled (:func:`core.compiled_characters.aim_singles_into`),
-    but for the groups that aim two children or more (a chest, a pelvis: their
-    least-squares turn is numpy's SVD), aimed here."""
+    """Aim every group (parents first), in one compiled call
+    (:func:`core.compiled_characters.aim_pass_into`). Each turn starts from the joint's
+    *original* local rotation, so a joint aimed again (exact reach) still differs from the
+    input by one swing, never by a twist. A group that aims two children or more (a
+    chest, a pelvis) takes their least-squares turn, each child weighing its length times
+    ``weigh [21]`` (:func:`_weights`: pins and held goals, and their parents, weigh
+    :data:`HEAVY` times the others, so a chest turns a pinned neck, or a pinned head's
+    neck, where the solve put it and lets the collars follow)."""
     rotations = np.require(pose.rotations, np.float64, ["C", "W"])
     pose.rotations = rotations
     translations = np.require(pose.translations, np.float64, ["C", "W"])
     first = np.require(original.rotations, np.float64, ["C", "W"])
     goal = np.require(goal, np.float64, ["C", "W"])
-    n = len(plan.aims)
     g_rot, g_pos = np.empty((skel.size, 3, 3)), np.empty((skel.size, 3))
-    changed = np.zeros(n, dtype=np.uint8)
-    i = 0
-    while i < n:
-        i = compiled_characters.aim_singles_into(
-            plan.parents, rotations, translations, first, plan.aims, plan.kid_start, plan.kids,
-            plan.anchor_joints, plan.anchor_offsets, goal, i, -1 if skip is None else skip,
-            g_rot, g_pos, changed,
-        )  # fmt: skip
-        if i < n:
-            b = int(plan.aims[i])
-            changed[i] = _aim_group(skel, pose, jmap, b, plan.groups[b], goal, original, heavy)
-            i += 1
+    changed = np.zeros(len(plan.aims), dtype=np.uint8)
+    compiled_characters.aim_pass_into(
+        plan.parents, rotations, translations, first, plan.aims, plan.kid_start, plan.kids,
+        plan.anchor_joints, plan.anchor_offsets, goal, -1 if skip is None else skip,
+        _weights(frozenset()) if weigh is None else weigh, g_rot, g_pos, changed,
+    )  # fmt: skip
     return {int(b) for b in plan.aims[changed.astype(bool)]}
+
+
+def _weights(heavy: frozenset[int]) -> F64:
+    """Each canonical joint's weight ``[21]`` in a least-squares aim: :data:`HEAVY` for
+    those in ``heavy``, else 1."""
+    out = np.ones(len(PARENTS))
+    out[sorted(heavy)] = HEAVY
+    return out
 
 
 def _place_pelvis(
@@ -359,7 +328,7 @@ def _attempt(
     exact: Sequence[tuple[int, F64]],
     tolerance: float,
     shifts: Sequence[bool],
-    heavy: frozenset[int],
+    weigh: F64,
 ) -> tuple[Pose, set[int], F64 | None, int | None]:
     """One retarget onto ``goal``; the shift of the pelvis that would bring the exact
     targets out of reach of their chains within reach (None if none is needed), and the
@@ -371,7 +340,7 @@ def _attempt(
     root, turned = _place_pelvis(skel, new, jmap, plan, goal, pelvis_weight)
     if turned is not None:
         changed.add(turned)
-    changed |= _aim_pass(skel, new, jmap, plan, goal, turned, pose, heavy)
+    changed |= _aim_pass(skel, new, jmap, plan, goal, turned, pose, weigh)
     moves = []
     for (joint, target), may_shift in zip(exact, shifts, strict=True):
         chain = _chain(plan, jmap, joint)
@@ -390,11 +359,11 @@ def _attempt(
         bend = None if kid is None else pts[kid] - pts[joint]
         done = _fabrik(line, np.asarray(target, dtype=np.float64), tolerance * 0.01, bend=bend)
         goal[chain[1:]] = done[1:]
-        changed |= _aim_pass(skel, new, jmap, plan, goal, turned, pose, heavy)
+        changed |= _aim_pass(skel, new, jmap, plan, goal, turned, pose, weigh)
         wider = _widened(skel, new, jmap, plan, goal, chain, target, exact, tolerance, bend, turned)
         if wider is not None:
             rotations, aimed = new.rotations.copy(), set(changed)
-            aimed |= _aim_pass(skel, new, jmap, plan, wider, turned, pose, heavy)
+            aimed |= _aim_pass(skel, new, jmap, plan, wider, turned, pose, weigh)
             if _nearer(skel, new, jmap, exact, rotations):  # only ever a better answer
                 goal, changed = wider, aimed
             else:
@@ -482,10 +451,10 @@ def _fit(
     body = [_PELVIS, *plan.groups.get(jmap.anchors[_PELVIS].joint, [])]
     kept = [*pins, *held]  # held as pins are while the body is laid out
     # the pins and held goals and their parents (a pinned head: its neck, a chest's child)
-    heavy = frozenset({j for j, _ in kept} | {PARENTS[j] for j, _ in kept})
+    weigh = _weights(frozenset({j for j, _ in kept} | {PARENTS[j] for j, _ in kept}))
     for _ in range(_ROUNDS):
         new, changed, shift, root = _attempt(
-            skel, pose, jmap, plan, goal, [*exact, *kept], tolerance, shifts, heavy
+            skel, pose, jmap, plan, goal, [*exact, *kept], tolerance, shifts, weigh
         )
         if shift is None:
             break

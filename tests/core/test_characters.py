@@ -22,7 +22,7 @@ from core.characters import (
 )
 from core.characters_maps import resolve_map, rest_points
 from core.rest import rest_pose
-from core.retarget import _aim_group, _aim_pass, _plan, canonical_points, retarget
+from core.retarget import HEAVY, _aim_pass, _plan, _weights, canonical_points, retarget
 from core.skeleton import JOINT_INDEX, JOINT_NAMES, PARENTS
 
 
@@ -396,38 +396,106 @@ def test_compiled_swing_is_the_numpy_swing() -> None:
         np.testing.assert_allclose(out @ ua, ub, rtol=0, atol=1e-12)
 
 
+def _svd_rotation(v: np.ndarray, u: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """The reference weighted Kabsch: numpy's SVD, the reflection taken out."""
+    uu, _, vt = np.linalg.svd((v * w[:, None]).T @ u)
+    d = np.sign(np.linalg.det(vt.T @ uu.T)) or 1.0
+    return np.asarray(vt.T @ np.diag([1.0, 1.0, d]) @ uu.T)
+
+
+def test_compiled_best_rotation_is_the_svd_kabsch() -> None:
+    """core.compiled_characters.best_rotation (Horn's quaternion by Jacobi sweeps) against
+    numpy's SVD Kabsch: random rotations of 2-6 unit directions with noise and uneven
+    weights (one child 100 times the others, as a pin weighs), the exact turn where there
+    is no noise, a proper rotation always, the same bytes on a second call."""
+    from scipy.spatial.transform import Rotation
+
+    rng = np.random.default_rng(11)
+    turns = Rotation.random(300, random_state=5).as_matrix()
+    for i, turn in enumerate(turns):
+        k = 2 + i % 5
+        v = rng.normal(size=(k, 3))
+        v /= np.linalg.norm(v, axis=1, keepdims=True)
+        noise = 0.0 if i % 3 == 0 else rng.uniform(0.0, 0.3)
+        u = v @ turn.T + noise * rng.normal(size=(k, 3))
+        w = rng.uniform(0.2, 1.0, k)
+        if i % 4 == 1:
+            w[0] *= HEAVY
+        w /= w.sum()
+        got = compiled_characters.best_rotation(v, u, w)
+        np.testing.assert_allclose(got, _svd_rotation(v, u, w), rtol=0, atol=1e-12)
+        np.testing.assert_allclose(got @ got.T, np.eye(3), rtol=0, atol=1e-14)
+        assert np.linalg.det(got) > 0
+        if noise == 0.0:
+            np.testing.assert_allclose(got, turn, rtol=0, atol=1e-13)
+        assert compiled_characters.best_rotation(v, u, w).tobytes() == got.tobytes()
+
+
+def _numpy_aim(skel, pose, jmap, b, kids, goal, original, weigh) -> bool:  # type: ignore[no-untyped-def]
+    """The reference aim of one group (numpy, the SVD): joint ``b`` from its ``original``
+    rotation turned so its canonical children ``kids`` point at ``goal``; True where its
+    rotation changed."""
+    pose.rotations[b] = original.rotations[b]
+    g_rot, g_pos = forward_kinematics(skel, pose)
+    pivot = g_pos[b]
+    v = jmap.points(g_rot, g_pos)[kids] - pivot
+    u = goal[kids] - pivot
+    nv, nu = np.linalg.norm(v, axis=1), np.linalg.norm(u, axis=1)
+    ok = (nv > 1e-9 * max(1.0, float(nv.max()))) & (nu > 1e-12)
+    if not ok.any():
+        return False
+    if ok.sum() == 1:
+        k = int(np.argmax(ok))
+        turn = swing(v[k], u[k])
+    else:
+        w = nv * weigh[kids]
+        turn = _svd_rotation(v[ok] / nv[ok, None], u[ok] / nu[ok, None], w[ok] / w[ok].sum())
+    new_global = turn @ g_rot[b]
+    parent = skel.parents[b]
+    local = new_global if parent < 0 else g_rot[parent].T @ new_global
+    if (np.abs(local - original.rotations[b]) <= 1e-15).all():
+        return False
+    pose.rotations[b] = local
+    return True
+
+
 def test_compiled_aim_pass_is_the_numpy_aim_of_each_group(bvh_files: dict[str, Path]) -> None:
-    """The aim pass (``core.retarget._aim_pass``: the single-child groups compiled, the
-    others numpy) against the numpy aim of every group in turn (``_aim_group``), on every
-    file's skeleton, two frames each, goals the start's points moved by up to a tenth of
-    the body's size (one run skipping the first group, as a turned pelvis is): rotations
-    to 1e-12, the same joints changed, the same bytes on a second run."""
+    """The compiled aim pass (``core.retarget._aim_pass``) against the numpy aim of every
+    group in turn (:func:`_numpy_aim`: swings and numpy's SVD), on every file's skeleton,
+    two frames each, goals the start's points moved by up to a tenth of the body's size
+    (one run skipping the first group, as a turned pelvis is; one with a pinned neck's
+    weights): rotations to 1e-12, the same joints changed, the same bytes on a second run."""
     rng = np.random.default_rng(7)
+    pinned = _weights(frozenset({JOINT_INDEX["neck"], JOINT_INDEX["spine2"]}))
     for name, path in bvh_files.items():
         bvh = read_bvh(path)
         skel = skeleton_of(bvh)
         jmap = resolve_map(skel, None)
         plan = _plan(skel, jmap)
-        for frame, skip in ((0, None), (bvh.num_frames // 2, int(plan.aims[0]))):
+        several = [b for b in plan.groups if len(plan.groups[b]) > 1]
+        assert several, name  # a chest or a pelvis: the least-squares turn is exercised
+        for frame, skip, weigh in (
+            (0, None, _weights(frozenset())),
+            (bvh.num_frames // 2, int(plan.aims[0]), pinned),
+        ):
             pose = pose_of(bvh, frame)
             start = canonical_points(skel, pose, jmap)
             goal = start + rng.normal(0.0, 0.1 * float(np.ptp(start, axis=0).max()), start.shape)
             got = pose.copy()
-            changed = _aim_pass(skel, got, jmap, plan, goal, skip, pose)
+            changed = _aim_pass(skel, got, jmap, plan, goal, skip, pose, weigh)
             want, want_changed = pose.copy(), set()
             for b in sorted(plan.groups):
-                if b != skip and _aim_group(
-                    skel, want, jmap, b, plan.groups[b], goal, pose, frozenset()
-                ):
+                if b != skip and _numpy_aim(skel, want, jmap, b, plan.groups[b], goal, pose, weigh):
                     want_changed.add(b)
             np.testing.assert_allclose(got.rotations, want.rotations, rtol=0, atol=1e-12)
             assert changed == want_changed and len(changed) > len(plan.groups) // 2, name
+            assert set(several) - {skip} <= changed, name
             again = pose.copy()
-            assert _aim_pass(skel, again, jmap, plan, goal, skip, pose) == changed
+            assert _aim_pass(skel, again, jmap, plan, goal, skip, pose, weigh) == changed
             assert again.rotations.tobytes() == got.rotations.tobytes(), name
             # the pose turned in place, its own original: the same turns, the same report
             alias = pose.copy()
-            assert _aim_pass(skel, alias, jmap, plan, goal, skip, alias) == changed, name
+            assert _aim_pass(skel, alias, jmap, plan, goal, skip, alias, weigh) == changed, name
             np.testing.assert_allclose(alias.rotations, got.rotations, rtol=0, atol=1e-12)
 
 
