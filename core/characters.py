@@ -203,41 +203,11 @@ def quat_to_matrix(q: npt.ArrayLike) -> F64:
 
 
 def matrix_to_quat(m: F64) -> F64:
-    """``[..., 3, 3]`` rotation matrices -> unit quaternions ``[x, y, z, w]`` with w >= 0."""
-    flat = np.asarray(m, dtype=np.float64).reshape(-1, 3, 3)
-    # The nearest rotation first (SVD), so a slightly non-orthonormal input (a product of
-    # many rotations) gives the quaternion of its best rotation, not of its drift.
-    u, _, vt = np.linalg.svd(flat)
-    u[:, :, 2] *= np.sign(np.linalg.det(u @ vt))[:, None]
-    flat = u @ vt
-    n = len(flat)
-    rows = np.arange(n)
-    diag = np.einsum("nii->ni", flat)
-    trace = diag.sum(axis=1)
-    # Markley's method: build q from the largest of (m00, m11, m22, trace), the best
-    # conditioned of the four formulas.
-    choice = np.argmax(np.concatenate([diag, trace[:, None]], axis=1), axis=1)
-    q = np.empty((n, 4))
-    i = choice.clip(max=2)
-    j, k = (i + 1) % 3, (i + 2) % 3
-    q[rows, i] = 1.0 - trace + 2.0 * flat[rows, i, i]
-    q[rows, j] = flat[rows, j, i] + flat[rows, i, j]
-    q[rows, k] = flat[rows, k, i] + flat[rows, i, k]
-    q[:, 3] = flat[rows, k, j] - flat[rows, j, k]
-    by_trace = choice == 3
-    f = flat[by_trace]
-    q[by_trace] = np.stack(
-        [
-            f[:, 2, 1] - f[:, 1, 2],
-            f[:, 0, 2] - f[:, 2, 0],
-            f[:, 1, 0] - f[:, 0, 1],
-            1.0 + trace[by_trace],
-        ],
-        axis=1,
-    )
-    q /= np.linalg.norm(q, axis=1, keepdims=True)
-    q = np.where(q[:, 3:4] < 0, -q, q)
-    return q.reshape(*np.shape(m)[:-2], 4)
+    """``[..., 3, 3]`` rotation matrices -> unit quaternions ``[x, y, z, w]`` with w >= 0:
+    each of the rotation nearest its matrix, so a slightly non-orthonormal input (a
+    product of many rotations) gives the quaternion of its best rotation, not of its drift
+    (compiled: :func:`core.compiled_characters.matrix_quats_into`)."""
+    return compiled_characters.matrix_quats(np.asarray(m, dtype=np.float64))
 
 
 def _cross(a: F64, b: F64) -> F64:

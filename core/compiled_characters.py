@@ -131,17 +131,11 @@ def swing_matrix_into(a: F64, b: F64, out: F64) -> None:  # pragma: no cover - c
 
 
 @jit
-def best_rotation_into(v: F64, u: F64, w: F64, n: int, out: F64) -> None:  # pragma: no cover
-    """``out [3, 3]``: the rotation ``R`` minimising ``sum_k w_k |R v_k - u_k|^2`` over the
-    first ``n`` rows of ``v`` and ``u`` ``[K, 3]`` (Kabsch / Wahba), by Horn's quaternion:
-    the eigenvector of the largest eigenvalue of the 4 x 4 symmetric matrix of the weighted
-    cross-covariance, found by cyclic Jacobi rotations (each sweep in a fixed order, so the
-    answer is the same on every run)."""
-    s = np.zeros((3, 3))
-    for k in range(n):
-        for r in range(3):
-            for c in range(3):
-                s[r, c] += w[k] * v[k, r] * u[k, c]
+def _horn_quaternion(s: F64, q: F64) -> None:  # pragma: no cover - compiled
+    """``q [4]`` (w, x, y, z), a unit quaternion: the rotation ``R`` that maximises
+    ``trace(R s)`` for a 3 x 3 ``s`` (Horn 1987): the eigenvector of the largest eigenvalue
+    of the 4 x 4 symmetric matrix made of ``s``, by cyclic Jacobi rotations (each sweep in
+    a fixed order, so the answer is the same on every run); its sign as it comes."""
     a = np.empty((4, 4))
     a[0, 0] = s[0, 0] + s[1, 1] + s[2, 2]
     a[1, 1] = s[0, 0] - s[1, 1] - s[2, 2]
@@ -163,39 +157,54 @@ def best_rotation_into(v: F64, u: F64, w: F64, n: int, out: F64) -> None:  # pra
     for _ in range(_SWEEPS):
         off = 0.0
         for p in range(3):
-            for q in range(p + 1, 4):
-                off = max(off, abs(a[p, q]))
+            for k in range(p + 1, 4):
+                off = max(off, abs(a[p, k]))
         if off <= 1e-300 or off <= 1e-17 * scale:
             break
         for p in range(3):
-            for q in range(p + 1, 4):
-                if a[p, q] == 0.0:
+            for k in range(p + 1, 4):
+                if a[p, k] == 0.0:
                     continue
-                theta = (a[q, q] - a[p, p]) / (2.0 * a[p, q])
+                theta = (a[k, k] - a[p, p]) / (2.0 * a[p, k])
                 t = 1.0 / (abs(theta) + np.sqrt(theta * theta + 1.0))
                 if theta < 0.0:
                     t = -t
                 c = 1.0 / np.sqrt(t * t + 1.0)
                 sn = t * c
-                for k in range(4):  # columns p and q of a J
-                    akp, akq = a[k, p], a[k, q]
-                    a[k, p] = c * akp - sn * akq
-                    a[k, q] = sn * akp + c * akq
-                for k in range(4):  # rows p and q of J^T (a J)
-                    apk, aqk = a[p, k], a[q, k]
-                    a[p, k] = c * apk - sn * aqk
-                    a[q, k] = sn * apk + c * aqk
-                for k in range(4):
-                    ekp, ekq = e[k, p], e[k, q]
-                    e[k, p] = c * ekp - sn * ekq
-                    e[k, q] = sn * ekp + c * ekq
+                for m in range(4):  # columns p and k of a J
+                    amp, amk = a[m, p], a[m, k]
+                    a[m, p] = c * amp - sn * amk
+                    a[m, k] = sn * amp + c * amk
+                for m in range(4):  # rows p and k of J^T (a J)
+                    apm, akm = a[p, m], a[k, m]
+                    a[p, m] = c * apm - sn * akm
+                    a[k, m] = sn * apm + c * akm
+                for m in range(4):
+                    emp, emk = e[m, p], e[m, k]
+                    e[m, p] = c * emp - sn * emk
+                    e[m, k] = sn * emp + c * emk
     top = 0
     for r in range(1, 4):
         if a[r, r] > a[top, top]:
             top = r
-    q0, q1, q2, q3 = e[0, top], e[1, top], e[2, top], e[3, top]
-    norm = np.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
-    q0, q1, q2, q3 = q0 / norm, q1 / norm, q2 / norm, q3 / norm
+    norm = np.sqrt(e[0, top] ** 2 + e[1, top] ** 2 + e[2, top] ** 2 + e[3, top] ** 2)
+    for r in range(4):
+        q[r] = e[r, top] / norm
+
+
+@jit
+def best_rotation_into(v: F64, u: F64, w: F64, n: int, out: F64) -> None:  # pragma: no cover
+    """``out [3, 3]``: the rotation ``R`` minimising ``sum_k w_k |R v_k - u_k|^2`` over the
+    first ``n`` rows of ``v`` and ``u`` ``[K, 3]`` (Kabsch / Wahba): the one maximising
+    ``trace(R S)``, ``S`` the weighted cross-covariance (:func:`_horn_quaternion`)."""
+    s = np.zeros((3, 3))
+    for k in range(n):
+        for r in range(3):
+            for c in range(3):
+                s[r, c] += w[k] * v[k, r] * u[k, c]
+    q = np.empty(4)
+    _horn_quaternion(s, q)
+    q0, q1, q2, q3 = q[0], q[1], q[2], q[3]
     out[0, 0] = q0 * q0 + q1 * q1 - q2 * q2 - q3 * q3
     out[1, 1] = q0 * q0 - q1 * q1 + q2 * q2 - q3 * q3
     out[2, 2] = q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3
@@ -205,6 +214,28 @@ def best_rotation_into(v: F64, u: F64, w: F64, n: int, out: F64) -> None:  # pra
     out[2, 0] = 2.0 * (q1 * q3 - q0 * q2)
     out[1, 2] = 2.0 * (q2 * q3 - q0 * q1)
     out[2, 1] = 2.0 * (q2 * q3 + q0 * q1)
+
+
+@jit
+def matrix_quats_into(m: F64, out: F64) -> None:  # pragma: no cover - compiled
+    """``out [N, 4]`` (x, y, z, w): the unit quaternion of the rotation nearest each of
+    ``m [N, 3, 3]`` (the one maximising ``trace(R m^T)``, :func:`_horn_quaternion`: a
+    product of many rotations gives its best rotation's, not its drift's), w >= 0, and
+    where w is 0 (a half turn) the largest of x, y, z positive."""
+    s = np.empty((3, 3))
+    q = np.empty(4)
+    for i in range(m.shape[0]):
+        for r in range(3):
+            for c in range(3):
+                s[r, c] = m[i, c, r]
+        _horn_quaternion(s, q)
+        big = 1
+        for r in range(2, 4):
+            if abs(q[r]) > abs(q[big]):
+                big = r
+        sign = -1.0 if q[0] < 0.0 or (q[0] == 0.0 and q[big] < 0.0) else 1.0
+        out[i, 0], out[i, 1], out[i, 2] = sign * q[1], sign * q[2], sign * q[3]
+        out[i, 3] = sign * q[0]
 
 
 #: Jacobi sweeps at most (a 4 x 4 matrix takes 3-5 to rounding; more only where the
@@ -312,6 +343,14 @@ def aim_pass_into(
                     rotations[b, r, c] = local[r, c]
 
 
+def matrix_quats(m: F64) -> F64:
+    """:func:`matrix_quats_into` of ``m [..., 3, 3]`` into a new ``[..., 4]``."""
+    flat = np.require(np.reshape(m, (-1, 3, 3)), np.float64, ["C", "W"])
+    out = np.empty((flat.shape[0], 4))
+    matrix_quats_into(flat, out)
+    return out.reshape(*np.shape(m)[:-2], 4)
+
+
 def best_rotation(v: F64, u: F64, weights: F64) -> F64:
     """:func:`best_rotation_into` of ``v``, ``u`` ``[K, 3]`` and ``weights`` ``[K]`` into a new
     ``[3, 3]``."""
@@ -337,3 +376,4 @@ def warm() -> None:
         np.ones(1), np.empty((2, 3, 3)), np.empty((2, 3)), np.zeros(1, np.uint8),
     )  # fmt: skip
     best_rotation(np.eye(3), np.eye(3), np.ones(3))
+    matrix_quats(np.eye(3)[None])
