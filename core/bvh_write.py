@@ -258,6 +258,36 @@ def _locked(seq: str, matrix: F64, old: F64, angles: F64) -> npt.NDArray[np.bool
     return np.asarray((turn < STILL_TURN) & (np.abs(angles - old).max(axis=-1) > LOCKED))
 
 
+def _writable(
+    bvh: BVH,
+) -> tuple[tuple[tuple[str, tuple[int, ...]] | None, ...], tuple[tuple[tuple[int, int], ...], ...]]:
+    """Per joint, what :func:`row_of` may write (worked out once per hierarchy,
+    ``BVH.memo``): its Euler order and rotation columns where it has three rotation
+    channels whose angles can be written back (else None: never turned), and its position
+    channels' (column, axis) where they are the three axes, each once (else none: an axis
+    twice was written the last one's value)."""
+    found = bvh.memo.get("writable")
+    if isinstance(found, tuple):
+        return found
+    rot_of: list[tuple[str, tuple[int, ...]] | None] = []
+    pos_of: list[tuple[tuple[int, int], ...]] = []
+    for j in bvh.joints:
+        cols = tuple(j.channel_start + k for k, c in enumerate(j.channels) if c.lower() in _ROT)
+        seq = j.rotation_order
+        rot_of.append((seq, cols) if len(cols) == 3 and invertible_order(seq) else None)
+        moves = _position_axes(j) == [0, 1, 2]
+        pos_of.append(
+            tuple(
+                (j.channel_start + k, _POS[c.lower()])
+                for k, c in enumerate(j.channels)
+                if c.lower() in _POS and moves
+            )
+        )
+    out = (tuple(rot_of), tuple(pos_of))
+    bvh.memo["writable"] = out
+    return out
+
+
 def row_of(
     bvh: BVH, frame: int, pose: Pose, joints: set[int] | frozenset[int], *, root_add: bool = False
 ) -> tuple[F64, list[int]]:
@@ -270,20 +300,16 @@ def row_of(
     compared after rounding the new one alone, it always changed)."""
     row = bvh.row(frame).copy()
     new: dict[int, float] = {}
-    turned: dict[str, tuple[list[int], list[list[int]]]] = {}  # order -> joints, columns
+    turned: dict[str, tuple[list[int], list[tuple[int, ...]]]] = {}  # order -> joints, columns
+    rot_of, pos_of = _writable(bvh)
     for i in sorted(joints):
-        j = bvh.joints[i]
-        rot_cols = [j.channel_start + k for k, c in enumerate(j.channels) if c.lower() in _ROT]
-        if len(rot_cols) == 3 and invertible_order(j.rotation_order):  # else never turned
-            ids, cols = turned.setdefault(j.rotation_order, ([], []))
+        if (found := rot_of[i]) is not None:  # else never turned
+            ids, cols = turned.setdefault(found[0], ([], []))
             ids.append(i)
-            cols.append(rot_cols)
-        moves = _position_axes(j) == [0, 1, 2]  # (else its position channels are kept:
-        for k, c in enumerate(j.channels):  # an axis twice was written the last one's value)
-            if c.lower() in _POS and moves:
-                axis = _POS[c.lower()]
-                value = float(pose.translations[i, axis]) - _root_shift(j, axis, root_add)
-                new[j.channel_start + k] = value
+            cols.append(found[1])
+        for col, axis in pos_of[i]:
+            shift = _root_shift(bvh.joints[i], axis, root_add)
+            new[col] = float(pose.translations[i, axis]) - shift
     for seq, (ids, cols) in turned.items():  # (one product per order, as pose_of reads)
         old = row[np.array(cols)]
         angles = _nearest_euler(seq, pose.rotations[ids], old)
