@@ -731,12 +731,13 @@ def settle_last(
 
 def warm() -> None:
     """Compile (or load from the cache) every kernel of this module on tiny inputs, and of
-    :mod:`core.compiled_characters`, :mod:`core.compiled_hinges` and
-    :mod:`core.compiled_reach`."""
-    from core import compiled_characters, compiled_hinges, compiled_reach
+    :mod:`core.compiled_characters`, :mod:`core.compiled_chain`, :mod:`core.compiled_hinges`
+    and :mod:`core.compiled_reach`."""
+    from core import compiled_chain, compiled_characters, compiled_hinges, compiled_reach
     from core.rest import rest_pose
 
     compiled_characters.warm()
+    compiled_chain.warm()
     compiled_hinges.warm()
     compiled_reach.warm()
     pose = rest_pose()[None].astype(np.float64)

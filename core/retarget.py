@@ -40,6 +40,7 @@ import numpy.typing as npt
 from core import compiled_characters
 from core.characters import F64, Pose, Skeleton, best_rotation, forward_kinematics, swing
 from core.characters_maps import JointMap
+from core.compiled_chain import chain_fabrik
 from core.hinges import keep_hinges
 from core.reach import polish
 from core.skeleton import JOINT_INDEX, PARENTS
@@ -200,63 +201,6 @@ def _chain(plan: _Plan, jmap: JointMap, target: int) -> list[int]:
     return chain
 
 
-def _two_bone(points: F64, goal: F64, lengths: F64, bend: F64 | None = None) -> F64 | None:
-    """A two-bone chain ``[3, 3]`` onto ``goal`` in closed form (law of cosines), its middle
-    joint kept in the plane through the base, the middle joint and the goal, on the middle
-    joint's side; where the middle joint is on the line to the goal (a straight leg), on the
-    side of ``bend`` (e.g. where the foot points, so a knee bends forward). None where no
-    side is known or the goal is nearer than the bones allow. FABRIK crawls near full
-    stretch (2 mm short after 64 rounds, a standing leg) and cannot bend a straight chain."""
-    a, b = float(lengths[0]), float(lengths[1])
-    base, mid = points[0], points[1]
-    to_goal = goal - base
-    d = float(np.linalg.norm(to_goal))
-    if d <= abs(a - b) or d <= 1e-12 or d > a + b:
-        return None
-    u = to_goal / d
-    side = (mid - base) - float((mid - base) @ u) * u
-    n = float(np.linalg.norm(side))
-    if n <= 1e-9 * a and bend is not None:
-        side = bend - float(bend @ u) * u
-        n = float(np.linalg.norm(side))
-    if n <= 1e-9 * a:
-        return None
-    x = (a * a - b * b + d * d) / (2.0 * d)
-    h = np.sqrt(max(a * a - x * x, 0.0))
-    return np.stack([base, base + x * u + h * (side / n), np.asarray(goal, dtype=np.float64)])
-
-
-def _fabrik(
-    points: F64, goal: F64, tol: float, iterations: int = 64, bend: F64 | None = None
-) -> F64:
-    """Single-chain FABRIK, first point fixed; points ``[n, 3]`` (two bones: in closed
-    form, :func:`_two_bone`, where it applies)."""
-    p = points.copy()
-    lengths = np.linalg.norm(np.diff(p, axis=0), axis=1)
-    base = p[0].copy()
-    if np.linalg.norm(goal - base) >= lengths.sum():  # out of reach: straighten towards it
-        d = (goal - base) / max(np.linalg.norm(goal - base), 1e-300)
-        for i in range(1, len(p)):
-            p[i] = p[i - 1] + d * lengths[i - 1]
-        return p
-    if np.linalg.norm(p[-1] - goal) <= tol:
-        return p  # already there (an untouched pin stays bit for bit)
-    if len(p) == 3 and (closed := _two_bone(p, goal, lengths, bend)) is not None:
-        return closed
-    for _ in range(iterations):
-        if np.linalg.norm(p[-1] - goal) <= tol:
-            break
-        p[-1] = goal
-        for i in range(len(p) - 2, -1, -1):
-            d = p[i] - p[i + 1]
-            p[i] = p[i + 1] + d * (lengths[i] / max(np.linalg.norm(d), 1e-300))
-        p[0] = base
-        for i in range(1, len(p)):
-            d = p[i] - p[i - 1]
-            p[i] = p[i - 1] + d * (lengths[i - 1] / max(np.linalg.norm(d), 1e-300))
-    return p
-
-
 _ROUNDS = 8
 
 
@@ -310,7 +254,7 @@ def _widened(
         return None
     origin, top = g_pos[aim], g_pos[jmap.anchors[chain[0]].joint]
     line = np.concatenate([origin[None], top[None], pts[chain[1:]]])
-    done = _fabrik(line, goal_t, tolerance * 0.01, bend=bend)
+    done = chain_fabrik(line, goal_t, tolerance * 0.01, bend=bend)
     turn = swing(top - origin, done[1] - origin)
     wider = goal.copy()
     for c in plan.groups[aim]:
@@ -357,7 +301,7 @@ def _attempt(
             moves.append(gap / np.linalg.norm(gap) * (far + tolerance * 0.5))
         kid = _FIRST_CHILD.get(joint)  # e.g. the foot of an ankle: where a knee bends to
         bend = None if kid is None else pts[kid] - pts[joint]
-        done = _fabrik(line, np.asarray(target, dtype=np.float64), tolerance * 0.01, bend=bend)
+        done = chain_fabrik(line, np.asarray(target, dtype=np.float64), tolerance * 0.01, bend=bend)
         goal[chain[1:]] = done[1:]
         changed |= _aim_pass(skel, new, jmap, plan, goal, turned, pose, weigh)
         wider = _widened(skel, new, jmap, plan, goal, chain, target, exact, tolerance, bend, turned)
