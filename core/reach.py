@@ -128,24 +128,23 @@ def polish(
     tree = _ancestry(skel)
     below = tree[:, anchors]  # [J, K]: the point hangs from the joint
     over = _over_pelvis(skel, tree, int(jmap.joints[_PELVIS]), below[:, :n])
-    movable = [
-        b for b in range(skel.size) if skel.rotatable[b] and below[b, :n].any() and not over[b]
-    ]
+    turns = np.asarray(skel.rotatable, dtype=np.bool_) & below[:, :n].any(axis=1) & ~over
+    movable = np.flatnonzero(turns).tolist()
     moves = root is not None and bool(below[root, :n].any())
     if not movable and not moves:
         return set()
     above = np.ascontiguousarray(below[movable], dtype=np.float64)
     scale = _MOVE_PRICE * max(float(np.linalg.norm(every - every[_PELVIS], axis=1).max()), 1e-9)
-    fixed = np.r_[np.ones(k), np.full(n - k, _PIN_WEIGHT)]
+    fixed = np.concatenate([np.ones(k), np.full(n - k, _PIN_WEIGHT)])
     # no pin farther than this in the steps (the last phase brings them back)
     hold = max(float(start[k:n].max(initial=0.0)), tolerance * _HOLD, scale * _SLACK)
     state = (pose.rotations.copy(), pose.translations.copy(), start.copy())
     phases = [(fixed, _FOLLOW), (fixed, 0.0)] if finish else [(fixed, _FOLLOW)]
-    phases.append((np.r_[np.full(k, 0.1), fixed[k:]], _FOLLOW))  # the pins first, last
+    phases.append((np.concatenate([np.full(k, 0.1), fixed[k:]]), _FOLLOW))  # pins first, last
     for i, (front, follow) in enumerate(phases):
         if i == len(phases) - 1 and float(state[2][k:n].max(initial=0.0)) <= tolerance * 0.1:
             break  # (needed only where a target out of reach pulled a pin off)
-        weight = np.r_[front, np.full(len(free), follow)]
+        weight = np.concatenate([front, np.full(len(free), follow)])
         state = _descend(skel, jmap, met + free, goals, weight, state, movable, above,
                          root if moves else None, scale, hold, n, k, tolerance)  # fmt: skip
     rotations, translations, misses = state
