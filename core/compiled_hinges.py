@@ -13,6 +13,7 @@ import numpy as np
 import numpy.typing as npt
 
 from core.compiled_characters import forward_kinematics_into, mul33_into
+from core.compiled_reach import points_into
 from core.jit import jit
 
 F64 = npt.NDArray[np.float64]
@@ -87,21 +88,6 @@ def _hinge(axis: F64, v: F64, bone: F64, want: F64, got: F64) -> bool:  # pragma
 
 
 @jit
-def _points_into(
-    g_rot: F64, g_pos: F64, anchor_joints: I64, anchor_offsets: F64, out: F64
-) -> None:  # pragma: no cover - compiled
-    """The canonical points ``out [21, 3]`` of a world pose (``JointMap.points``)."""
-    for k in range(anchor_joints.shape[0]):
-        j = anchor_joints[k]
-        for r in range(3):
-            out[k, r] = g_pos[j, r] + (
-                g_rot[j, r, 0] * anchor_offsets[k, 0]
-                + g_rot[j, r, 1] * anchor_offsets[k, 1]
-                + g_rot[j, r, 2] * anchor_offsets[k, 2]
-            )
-
-
-@jit
 def _mul_t_vec(m: F64, a: F64, out: F64) -> None:  # pragma: no cover - compiled
     """``out [3] = m.T a``."""
     for r in range(3):
@@ -143,7 +129,7 @@ def keep_hinges_into(
     twist, turn, bent = np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3))
     tmp, held_rot = np.empty((3, 3)), np.empty((3, 3))
     forward_kinematics_into(parents, rotations, translations, g_rot, g_pos)
-    _points_into(g_rot, g_pos, anchor_joints, anchor_offsets, points)
+    points_into(g_rot, g_pos, anchor_joints, anchor_offsets, points)
     for i in range(limbs.shape[0]):
         upper, hinge, end = limbs[i, 0], limbs[i, 1], limbs[i, 2]
         q = quats[i]
@@ -189,7 +175,7 @@ def keep_hinges_into(
             mul33_into(held_rot.T, g_rot[c], bent)
             trial[c] = bent
         forward_kinematics_into(parents, trial, translations, g2_rot, g2_pos)
-        _points_into(g2_rot, g2_pos, anchor_joints, anchor_offsets, points2)
+        points_into(g2_rot, g2_pos, anchor_joints, anchor_offsets, points2)
         worst = 0.0
         for k in range(points.shape[0]):
             for r in range(3):

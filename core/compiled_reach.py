@@ -38,7 +38,7 @@ _TRIES = 3
 
 
 @jit
-def _points_into(
+def points_into(
     g_rot: F64, g_pos: F64, anchor: I64, offset: F64, out: F64
 ) -> None:  # pragma: no cover - compiled
     """The canonical points ``out [K, 3]``: joint ``anchor[i]``'s origin plus its rotation
@@ -169,7 +169,7 @@ def descend_into(
     a_grot, a_gpos, a_pts, a_now = (np.empty((nj, 3, 3)), np.empty((nj, 3)),
                                     np.empty((npts, 3)), np.empty(npts))  # fmt: skip
     forward_kinematics_into(parents, rotations, translations, g_rot, g_pos)
-    _points_into(g_rot, g_pos, anchor, offset, pts)
+    points_into(g_rot, g_pos, anchor, offset, pts)
     cost = _cost(misses, weight)
     damping = 0.01 * scale * scale
     seen = np.empty(steps + 1)
@@ -309,7 +309,7 @@ def _scored(
                 )
             new_tr[root, r] = translations[root, r] + shift
     forward_kinematics_into(parents, new_rot, new_tr, n_rot, n_pos)
-    _points_into(n_rot, n_pos, anchor, offset, n_pts)
+    points_into(n_rot, n_pos, anchor, offset, n_pts)
     _misses_into(n_pts, goals, now)
     cost = _cost(now, weight)
     for i in range(k, n):
