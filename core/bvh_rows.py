@@ -23,6 +23,8 @@ from core.bvh import _SPACES, one_frame_a_line
 from core.bvh_words import fromstring
 
 _WORD_RE = re.compile(r"\S+")
+#: a word that is no decimal number as ``float`` (and numpy) reads one: ``1.2.3``, ``1-2``
+_NOT_A_NUMBER_RE = re.compile(r"(?<!\S)(?![-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?(?!\S))\S+")
 _CHUNK = 1 << 20  # characters looked at a time (whole lines)
 #: ASCII spaces as ``str.split()`` has them (a chunk with others is split by Python)
 _SPACE = np.zeros(256, dtype=bool)
@@ -156,8 +158,14 @@ def _first_beyond(chunk: str, bound: float) -> int:
     """The index of the first word of ``chunk`` past ``bound`` (``1e400``: infinity), -1
     for none: numpy reads the chunk's numbers (in C: ~20 ms a MB at worst, where a chunk
     holds an exponent not negative; a word a Python ``float`` each took seconds for 8 MB
-    of ``1e+01``); where it does not read every word (``1.2.3``), line by line."""
+    of ``1e+01``). Where it does not read every word (``1.2.3``), each word no decimal
+    number is stands as ``0`` (one word for one: the same indices) and numpy reads the
+    rest: read line by line, a line holding ``1.2.3`` was passed over whole, and a
+    ``1e400`` beside it with it (an audit); line by line only where that still fails."""
     values = fromstring(chunk)
+    if values is None:
+        chunk = _NOT_A_NUMBER_RE.sub("0", chunk)
+        values = fromstring(chunk)
     if values is not None:
         far = np.flatnonzero(~(np.abs(values) <= bound))
         return int(far[0]) if far.size else -1

@@ -176,6 +176,32 @@ def test_a_number_out_of_range_elsewhere_is_named(
         assert seen["rows_warning"] is None, (fine, seen["rows_warning"])
 
 
+@pytest.mark.parametrize("beside", ["1.2.3", "1-2", "."])
+def test_a_number_out_of_range_beside_a_word_no_number_is_still_named(
+    client: Any, bvh_files: dict[str, Path], beside: str
+) -> None:
+    """An API audit: a ``1e400`` was named alone on its line, but not beside a word made of
+    a number's characters that is none (``1.2.3``, which numpy does not read): the line was
+    passed over whole. Now it is named the same way, before or after that word, and in a
+    block of wrapped frames too."""
+    from tests.core.test_bvh_write import relaid
+
+    text = raw(bvh_files["bandai"])
+    first = text.split("\n").index("MOTION") + 4  # frame 0's line, 1-based
+    said = "'1e400', out of range (no finite number)"
+    for column in (19, 21):  # the other word before and after it
+        spoilt = _spoilt_word(_spoilt_word(text, 9, column, beside), 9, 20, "1e400")
+        seen = client.post("/v1/bvh/inspect", json={"bvh": spoilt, "frame": 0}).json()
+        warning = seen["rows_warning"]
+        assert warning is not None and warning.startswith(
+            f"bvh: line {first + 9}: frame 9 holds {said}"
+        ), (column, warning)
+        wrapped = relaid(spoilt, 11)
+        bvh = parse_bvh(wrapped, frames=[0])
+        got = odd_row(wrapped, bvh.motion_offset, 1, bvh.num_frames, bvh.num_channels, 1e7)
+        assert got is not None and (got.frame, got.detail) == (9, said), (column, got)
+
+
 @pytest.mark.parametrize("word", ["nan", "1,5", "1e400"])
 def test_a_bad_value_in_a_wrapped_block_is_named(
     client: Any, bvh_files: dict[str, Path], word: str
