@@ -27,6 +27,7 @@ from service.errors import MAX_ERRORS, BodyInvalid, TooManyItems
 from service.limits import Pricing, chunks_of, searched_price
 from service.problems import BatchAnswer
 from service.schemas import MAX_COORDINATE, MAX_WEIGHT, SolveOptions
+from service.upright import pose_warnings
 from service.validation import check_bones, check_options
 
 F64 = npt.NDArray[np.float64]
@@ -380,6 +381,7 @@ def answer(cols: Columns, part: Part, version: str) -> bytes:
         "solver_of": np.ascontiguousarray(ans.path_of, dtype=np.int64),
         "model": version,
         "method": "fabrik" if cols.options.method == "fabrik" else "neural",
+        "up_warning": pose_warnings(cols.poses),
     }
     rest = orjson.dumps(body, option=orjson.OPT_SERIALIZE_NUMPY)
     return b'{"poses":' + part.poses + b"," + rest[1:]

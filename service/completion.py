@@ -14,6 +14,7 @@ from service.errors import InvalidRequest
 from service.lean import BOUND_ITEMS
 from service.problems import CompleteResult
 from service.schemas import BONE_M
+from service.upright import keypoints_warning
 
 if TYPE_CHECKING:
     from service.engine import Engine
@@ -141,30 +142,8 @@ def complete(
     return CompleteResult(
         pose=world, errors=errors, reached=errors <= tolerance, levels=run,
         floor=float(origin[1]), scale_warning="; ".join(told) or None,
-        up_warning=_leaning(keypoints["neck"] - keypoints["pelvis"]),
+        up_warning=keypoints_warning(keypoints["pelvis"], keypoints["neck"]),
     )  # fmt: skip
-
-
-#: degrees: how far the pelvis-to-neck line may lean from +Y before the answer says so
-LEAN = 60.0
-
-
-def _leaning(trunk: F64) -> str | None:
-    """The answer's ``up_warning``: key points whose pelvis-to-neck line ``trunk`` leans
-    more than :data:`LEAN` degrees from +Y, the up axis key points are read with (a capture
-    with +Z up sent as it is completes as a body lying down: an API audit, 2026-12-07, saw
-    only the clamped ``floor`` say so); else None. A body lying down is completed as
-    asked: this only says how it was read."""
-    lean = float(np.degrees(np.arccos(np.clip(trunk[1] / np.linalg.norm(trunk), -1.0, 1.0))))
-    if lean <= LEAN:
-        return None
-    axis = int(np.argmax(np.abs(trunk)))
-    along = f"{'+' if trunk[axis] > 0 else '-'}{'XYZ'[axis]}"
-    return (
-        f"keypoints: the pelvis-to-neck line leans {lean:.0f} degrees from +Y (it runs along "
-        f"{along}): key points are read with +Y up, so this body was completed lying down; "
-        "key points captured with another axis up must be turned to +Y up first"
-    )
 
 
 def _scaled_bones(

@@ -19,7 +19,11 @@ def pose_dict(pose: np.ndarray) -> dict[str, list[float]]:
     return dict(zip(JOINT_NAMES, pose.tolist(), strict=True))
 
 
-def solve_payload(p: SolveProblem, r: SolveResult, version: str) -> dict[str, Any]:
+def solve_payload(
+    p: SolveProblem, r: SolveResult, version: str, up_warning: str | None
+) -> dict[str, Any]:
+    """The pose form's answer; ``up_warning`` its start pose's
+    (:func:`service.upright.pose_warning`, a batch's all at once)."""
     k, tolerance = p.n_targets, p.tolerance
     names = [JOINT_NAMES[j] for j in p.target_idx.tolist()]
     return {
@@ -37,6 +41,7 @@ def solve_payload(p: SolveProblem, r: SolveResult, version: str) -> dict[str, An
         "model": version,
         "method": "fabrik" if p.method == "fabrik" else "neural",
         "iterations": r.iterations,
+        "up_warning": up_warning,
     }
 
 

@@ -268,6 +268,14 @@ class SolveResponse(BaseModel):
     model: str = Field(description="Manifest version of the models.")
     method: Literal["neural", "fabrik"]
     iterations: int = Field(description=ITERATIONS)
+    up_warning: str | None = Field(
+        default=None,
+        description="Null unless the start pose's pelvis-to-neck line leans more than 60 "
+        "degrees from +Y, the up axis a pose is read with: the body was solved lying down "
+        "(as asked, if it lies down; a pose captured with +Z up must be turned to +Y up "
+        "first, or sent in the character form with its `up`). Says along which axis the "
+        "line runs, as `/v1/complete`'s `up_warning` says of key points.",
+    )
 
 
 class Keypoint(_Body):
@@ -586,3 +594,7 @@ class ColumnarResponse(BaseModel):
     solver_of: list[int] = Field(description="Per item: its index into `solvers`.")
     model: str
     method: Literal["neural", "fabrik"]
+    up_warning: list[str | None] = Field(
+        description="Per item: its start pose's `up_warning`, as the item list's answers "
+        "say it (null where its pelvis-to-neck line leans 60 degrees or less from +Y)."
+    )

@@ -38,6 +38,7 @@ from service.problems import SolveProblem
 from service.responses import compute_time, solve_payload
 from service.routes.solve import solve_columns, solve_one
 from service.schemas import SolveRequest
+from service.upright import pose_warning
 from service.validation import check_bones, poses, problem_of, solve_problem
 
 SOLVE, BATCH = "/v1/solve", "/v1/solve/batch"
@@ -292,7 +293,7 @@ class FastPath:
             await _problem(scope, receive, send, exc)
             return True
         try:  # (counted once the answer is handed on: off the client's wait)
-            answer = orjson.dumps(solve_payload(p, result, engine.version))
+            answer = orjson.dumps(solve_payload(p, result, engine.version, pose_warning(p.pose)))
             await _json(send, answer, budget.compute)
         finally:
             state.metrics.solved(p.method, result.solvers)

@@ -8,6 +8,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Annotated, Any, ClassVar, TypeVar
 
+import numpy as np
 from fastapi import APIRouter, Request, Response
 from pydantic import (
     Discriminator,
@@ -36,6 +37,7 @@ from service.responses import json_response, raw_response, solve_payload
 from service.routes import ROUTE_PROBLEMS
 from service.routes.characters import answer_character, read_character, solve_read
 from service.schemas import ColumnarBatch, ColumnarResponse, SolveRequest, SolveResponse
+from service.upright import pose_warning, pose_warnings
 from service.validation import degenerate, poses, solve_problem, start_poses, validate_as
 
 router = APIRouter(route_class=BodyRoute, tags=["solve"], responses=ROUTE_PROBLEMS)
@@ -97,7 +99,8 @@ async def solve(body: SolveBody, engine: ReadyEngine, budget: RequestBudget,
     p = solve_problem(req, poses([req], ["pose"])[0])
     result = await solve_one(p, bool(req.pins), engine, budget)
     state.metrics.solved(p.method, result.solvers)
-    return json_response(solve_payload(p, result, engine.version), budget.compute)
+    answer = solve_payload(p, result, engine.version, pose_warning(p.pose))
+    return json_response(answer, budget.compute)
 
 
 async def solve_one(p: SolveProblem, pinned: bool, engine: Engine, budget: Budget) -> SolveResult:
@@ -203,8 +206,9 @@ async def solve_batch(body: BatchBody, engine: ReadyEngine, budget: RequestBudge
         )
 
     def answer() -> Response:
+        ups = iter(pose_warnings(np.stack([p.pose for p in problems])) if problems else [])
         pairs = iter(zip(problems, results, strict=True))
-        out = [solved[i] if i in solved else solve_payload(*next(pairs), engine.version)
+        out = [solved[i] if i in solved else solve_payload(*next(pairs), engine.version, next(ups))
                for i in range(len(forms))]  # fmt: skip
         return json_response({"items": out}, budget.compute)
 

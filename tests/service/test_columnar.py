@@ -69,6 +69,7 @@ def assert_same(col: dict[str, Any], answers: list[dict[str, Any]]) -> None:
         assert col["max_bone_length_error"][b] == a["max_bone_length_error"], b
         assert col["iterations"][b] == a["iterations"], b
         assert col["solvers"][col["solver_of"][b]] == a["solvers"], b
+        assert col["up_warning"][b] == a["up_warning"], b
         assert col["method"] == a["method"] and col["model"] == a["model"]
 
 
@@ -128,6 +129,7 @@ def test_answer_written_in_parts_is_the_whole_answer_written_at_once(
             "solver_of": ans.path_of,
             "model": engine.version,
             "method": "neural",
+            "up_warning": [None] * 7,  # (real poses, upright)
         },
         option=orjson.OPT_SERIALIZE_NUMPY,
     )

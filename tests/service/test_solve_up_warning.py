@@ -1,0 +1,74 @@
+"""``/v1/solve``'s pose form says when its start pose is not upright along +Y
+(``up_warning``), as ``/v1/complete`` says it of key points: an API audit (2026-12-07) sent
+the docs' example pose captured with +Z up and got it solved lying down without a word.
+The single answer (the hot path and the route), each item of a batch and each row of the
+columnar form say it alike, from one definition (``service.upright``)."""
+
+from __future__ import annotations
+
+import json
+import re
+from typing import Any
+
+import numpy as np
+import pytest
+
+from core.skeleton import JOINT_NAMES
+from service.middleware import fastpath
+from tests.conftest import REPO_ROOT
+from tests.service.test_api import BASE
+
+#: +Y up -> +Z up: y -> z, z -> -y (a quarter turn about X)
+Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
+
+
+def _turned(body: dict[str, Any]) -> dict[str, Any]:
+    """``body`` (the pose form) with its pose and targets captured with +Z up."""
+    out = json.loads(json.dumps(body))
+    out["pose"] = {n: (np.array(p) @ Z_UP).tolist() for n, p in body["pose"].items()}
+    for t in out["targets"]:
+        t["position"] = (np.array(t["position"]) @ Z_UP).tolist()
+    return out
+
+
+def test_a_start_pose_captured_z_up_is_said_to_be_solved_lying_down(
+    client: Any, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    example = json.loads((REPO_ROOT / "docs/examples/solve.json").read_text())
+    soft = {"pose": example["pose"], "targets": example["targets"]}  # (the hot path's)
+    for body in (example, soft):
+        upright = client.post("/v1/solve", json=body).json()
+        assert upright["up_warning"] is None
+        out = client.post("/v1/solve", json=_turned(body))
+        assert out.status_code == 200, out.text
+        warning = out.json()["up_warning"]
+        assert warning is not None and warning.startswith("pose: the pelvis-to-neck line leans "), (
+            warning
+        )
+        assert "(it runs along +Z)" in warning and "solved lying down" in warning, warning
+    # the same words as /v1/complete's of the same body's key points (one definition)
+    turned = _turned(soft)["pose"]
+    keypoints = [{"joint": j, "position": turned[j]} for j in BASE]
+    done = client.post("/v1/complete", json={"keypoints": keypoints}).json()["up_warning"]
+    lean = re.compile(r"leans (\d+) degrees from \+Y \(it runs along ([+-][XYZ])\)")
+    said, was = lean.search(warning), lean.search(done)
+    assert said is not None and was is not None and said.groups() == was.groups()
+    # each item of a batch, and each row of the columnar form, as the single answer says
+    bodies = [soft, _turned(soft), example, _turned(example)]
+    listed = client.post("/v1/solve/batch", json={"items": bodies}).json()["items"]
+    singles = [client.post("/v1/solve", json=b).json() for b in bodies]
+    assert listed == singles
+    assert [a["up_warning"] is None for a in listed] == [True, False, True, False]
+    rows = [[v for n in JOINT_NAMES for v in b["pose"][n]] for b in bodies[:2]]
+    goals = [b["targets"][0]["position"] for b in bodies[:2]]
+    col = client.post(
+        "/v1/solve/batch",
+        json={"poses": rows, "targets": {"joints": ["left_wrist"], "positions": goals}},
+    )  # fmt: skip
+    assert col.status_code == 200, col.text
+    assert col.json()["up_warning"] == [a["up_warning"] for a in listed[:2]]
+    # the route (a body the hot path leaves to it) answers the hot path's bytes
+    fast = [client.post("/v1/solve", json=b).content for b in bodies]
+    monkeypatch.setattr(fastpath, "pose_form", lambda body, data=None: None)
+    monkeypatch.setattr(fastpath, "plain", lambda data: None)
+    assert [client.post("/v1/solve", json=b).content for b in bodies] == fast
