@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import difflib
 import itertools
+import json
 import math
 from collections.abc import Iterable
 
@@ -35,8 +36,10 @@ def clip(text: object, limit: int = QUOTE) -> str:
 
 
 def shown(value: object, depth: int = _DEPTH) -> str:
-    """A value from a client's JSON as JSON writes it (``null``, ``true``, ``[1, 2]``, ``1e300``),
-    bounded: strings clipped, lists and objects cut after a few elements and a few levels,
+    """A value from a client's JSON as JSON writes it (``null``, ``true``, ``[1, 2]``, ``1e300``,
+    ``{"x": [null, "a"]}``; its strings in JSON's double quotes, where Python's ``repr``
+    wrote ``{'x': [None, 'a']}``: an API audit, 2026-12-07), bounded: strings clipped,
+    lists and objects cut after a few elements and a few levels,
     huge integers by their digit count. Never recursive beyond ``depth``: a list nested a
     thousand deep costs three levels (Python's own ``repr`` of it exhausts the stack)."""
     if value is None:
@@ -55,8 +58,9 @@ def shown(value: object, depth: int = _DEPTH) -> str:
         if math.isnan(value) or math.isinf(value):
             return "NaN" if math.isnan(value) else ("-" if value < 0 else "") + "Infinity"
         return repr(value).replace("e+", "e")
-    if isinstance(value, str):
-        return repr(value if len(value) <= QUOTE else value[: QUOTE - 1] + "…")
+    if isinstance(value, str):  # (JSON's quotes and escapes: ``{"x": 1}``, not ``{'x': 1}``)
+        text = value if len(value) <= QUOTE else value[: QUOTE - 1] + "…"
+        return json.dumps(text, ensure_ascii=False)
     if isinstance(value, list | tuple | dict):
         opening, closing = ("{", "}") if isinstance(value, dict) else ("[", "]")
         if not value:

@@ -57,7 +57,7 @@ from core.characters_maps import (
 from core.retarget import canonical_points, retarget
 from core.sides import read_sides
 from core.skeleton import BONES, JOINT_NAMES
-from core.text import clip, did_you_mean, quoted
+from core.text import clip, did_you_mean, quoted, shown
 from core.units import UNITS
 from service.bounded import Bounded, at_most
 from service.engine import Engine
@@ -575,8 +575,8 @@ def character_problem(ch: Character, req: _Edit, where: str = "") -> SolveProble
             )
         raise _refused(
             f"{prefix}{ch.points}",
-            f"the mapped points make zero-length bones ending at {short} (each canonical "
-            f"joint must be at least {MIN_BONE * 1000:g} mm from its parent)",
+            f"the mapped points make zero-length bones ending at {', '.join(short)} (each "
+            f"canonical joint must be at least {MIN_BONE * 1000:g} mm from its parent)",
         )
     return problem_of(
         pts,
@@ -717,7 +717,7 @@ def character_from_request(req: CharacterSolveRequest, where: str = "") -> Chara
         if len(roots) != 1:
             raise CharacterError(
                 f"{prefix}character.joints: {len(roots)} roots "
-                f"{[skel.names[r] for r in roots][:8]}; one is needed"
+                f"{shown([skel.names[r] for r in roots])}; one is needed"
             )
         if req.root_position is not None:
             trans[roots[0]] = req.root_position

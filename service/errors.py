@@ -3,8 +3,10 @@
 Everything a client can get wrong or run into is a ``PoseError`` (or, for the body
 reader, ``BodyError``); ``install_handlers`` turns those, FastAPI's request validation
 errors and anything unexpected into ``application/problem+json``. Details quote at most
-``QUOTE`` characters of any one value of the client's input (``core.text.quoted``), and
-are at most ``MAX_DETAIL`` characters.
+``QUOTE`` characters of any one value of the client's input (``core.text.quoted``; an
+object, a list or a literal as JSON writes it, ``{"x": [null, true]}``, by
+``core.text.shown``, the one writer every detail quotes such a value with), and are at
+most ``MAX_DETAIL`` characters.
 """
 
 from __future__ import annotations

@@ -69,7 +69,7 @@ def degenerate(arr: F64, where: Callable[[int], str]) -> tuple[list[int], list[I
         ]
         found.append(
             InvalidRequest(
-                f"{where(b)}: degenerate pose: zero-length bones ending at {short} "
+                f"{where(b)}: degenerate pose: zero-length bones ending at {', '.join(short)} "
                 f"(each joint must be at least {MIN_BONE * 1000:g} mm from its parent)"
             )
         )
