@@ -47,10 +47,12 @@ def bvh_rig(bvh: BVH, joint_map: Mapping[str, str] | None) -> Rig:
     skel = cast(Skeleton | None, memo.get("skeleton")) or skeleton_of(bvh)
     jmap = resolve_map(skel, joint_map, offset_at=lambda _: "bvh")
     # (read-only before either is kept: two threads may each make one; both are the same)
-    memo.setdefault("skeleton", _read_only_skeleton(skel))
-    if sum(k.startswith("rig ") for k in list(memo)) < MAPS_PER_SKELETON:
-        memo[key] = skel, _read_only_map(jmap)
-    return skel, jmap
+    rig = _read_only_skeleton(skel), _read_only_map(jmap)
+    with _LOCK:  # the count and the keeping at once: two threads each saw 3 and kept 5
+        memo.setdefault("skeleton", skel)
+        if key not in memo and sum(k.startswith("rig ") for k in memo) < MAPS_PER_SKELETON:
+            memo[key] = rig
+    return rig
 
 
 Joints = tuple[Sequence[str], Sequence[str | None], Sequence[Sequence[float]]]

@@ -70,6 +70,45 @@ def test_a_rig_is_kept_per_joint_map_read_only_and_bounded() -> None:
     )
 
 
+def test_two_threads_keep_no_more_rigs_than_the_bound(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Two threads each making a rig when the memo held 3 both saw room for one and both
+    kept theirs: 5 rigs past the bound of 4. Here both are held, with real threads, just
+    before keeping (the map made read-only) until both have made theirs; the bound holds,
+    and each thread answers its own map's rig."""
+    import threading
+
+    bvh_module._shared.cache_clear()
+    req = _request()
+    bvh = read_request_bvh(req.bvh, req.frame)
+    named = rig_of(bvh, req)[1].describe()
+    for joint in ("neck", "pelvis"):  # 3 rigs kept: the plain map's and these two
+        rig_of(bvh, _request(joint_map={joint: named[joint]}))
+    assert sum(k.startswith("rig ") for k in bvh.memo) == MAPS_PER_SKELETON - 1
+    both = threading.Barrier(2, timeout=10)
+    made = rigs._read_only_map
+
+    def held(jmap: Any) -> Any:
+        both.wait()  # (each thread has made its rig, neither has kept it)
+        return made(jmap)
+
+    monkeypatch.setattr(rigs, "_read_only_map", held)
+    answers: dict[str, Any] = {}
+
+    def edit(joint: str) -> None:
+        answers[joint] = rig_of(read_request_bvh(req.bvh, req.frame),
+                                _request(joint_map={joint: named[joint]}))  # fmt: skip
+
+    threads = [threading.Thread(target=edit, args=(j,)) for j in ("left_ankle", "right_ankle")]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(30)
+    assert sorted(answers) == ["left_ankle", "right_ankle"]
+    assert sum(k.startswith("rig ") for k in bvh.memo) == MAPS_PER_SKELETON
+    for joint, (_, jmap) in answers.items():
+        assert jmap.describe()[joint] == named[joint]
+
+
 def _forget() -> None:
     rigs._SKELETONS.clear()
     rigs._MAPS.clear()
