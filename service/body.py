@@ -35,6 +35,7 @@ from service.errors import (
     InvalidRequest,
     MalformedBody,
     PoseError,
+    json_type,
 )
 from service.limits import Budget
 
@@ -111,7 +112,7 @@ def validate(
         return data
     if not isinstance(data, dict):  # (pydantic would name the model's Python class)
         forms = getattr(model, "BODY_FORMS", "a JSON object")
-        raise BodyError(InvalidRequest(f"body: {forms} is required, not {_json_type(data)}"))
+        raise BodyError(InvalidRequest(f"body: {forms} is required, not {json_type(data)}"))
     ctx = bounded.context(settings, limit)
     try:
         return model.model_validate(data, context=ctx)
@@ -140,17 +141,6 @@ def in_worker(work: Callable[[], T]) -> Callable[[], T]:
             raise exc from None
 
     return run
-
-
-def _json_type(value: Any) -> str:
-    """What a decoded JSON value is, in JSON's words."""
-    if value is None:
-        return "null"
-    if isinstance(value, bool):
-        return "a boolean"
-    if isinstance(value, int | float):
-        return "a number"
-    return "a string" if isinstance(value, str) else "an array"
 
 
 class _Request(Request):

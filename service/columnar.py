@@ -268,6 +268,7 @@ def parse(data: dict[str, Any], max_items: int, suspect: bool = True) -> Columns
             ("targets",),
             "model_type",  # pydantic's words, as the other forms have them
             "Input should be a valid dictionary or instance of ColumnarTargets",
+            input=targets,  # (service.errors words it: a JSON object is required, not ...)
         )
         errs.raise_any()
         raise AssertionError  # unreachable

@@ -25,7 +25,7 @@ from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from core.skeleton import JOINT_NAMES
-from core.text import QUOTE, clip, printable, quoted
+from core.text import QUOTE, clip, printable, quoted, shown
 
 PROBLEM_JSON = "application/problem+json"
 PROBLEM_BASE = "https://marionette.dev/problems/"
@@ -423,6 +423,8 @@ def _message(error: Any) -> str:
         )
     if kind == "string_too_short" and tuple(error.get("loc", ()))[-1:] == ("bvh",):
         return EMPTY_BVH.format(size="0 bytes")
+    if kind in ("model_type", "dict_type"):  # (was "a valid dictionary or instance of Pose")
+        return f"a JSON object is required, not {json_type(value)} ({clip(shown(value))})"
     if kind == "finite_number":
         return "must be a finite number (NaN and infinities are not)"
     if kind == "float_type" and type(value) is int:  # JSON allows any integer; a float not
@@ -435,11 +437,24 @@ def _message(error: Any) -> str:
     return clip(error.get("msg", "invalid"), 2 * QUOTE)
 
 
+def json_type(value: Any) -> str:
+    """What a decoded JSON value is, in JSON's words."""
+    if value is None:
+        return "null"
+    if isinstance(value, bool):
+        return "a boolean"
+    if isinstance(value, int | float):
+        return "a number"
+    if isinstance(value, dict):
+        return "an object"
+    return "a string" if isinstance(value, str) else "an array"
+
+
 def validation_problem(raw: Sequence[Any], total: int = 0, partial: bool = False) -> JSONResponse:
     """The 422 of field errors; ``total``: how many were found where only the first few
     are in ``raw`` (``partial``: the look stopped there, so there may be more)."""
-    shown = raw[:MAX_ERRORS]  # worded only where shown (a suggestion is a fuzzy search)
-    errors = [{"location": _location(e.get("loc", ())), "message": _message(e)} for e in shown]
+    listed = raw[:MAX_ERRORS]  # worded only where shown (a suggestion is a fuzzy search)
+    errors = [{"location": _location(e.get("loc", ())), "message": _message(e)} for e in listed]
     detail = "; ".join(f"{e['location']}: {e['message']}" for e in errors[:3])
     total = max(total, len(raw))
     if total > 3 or partial:

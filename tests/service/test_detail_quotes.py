@@ -60,3 +60,24 @@ def test_a_detail_quotes_an_object_or_a_list_as_json(client: Any) -> None:
     name = character["character"]["joints"][1]["name"]
     root = character["character"]["joints"][0]["name"]
     assert f"2 roots {json.dumps([root, name])}; one is needed" in detail, detail
+
+
+def test_a_field_that_is_no_object_is_told_in_json_s_words(client: Any) -> None:
+    """A field that must be an object and is not was told in pydantic's Python words,
+    naming the service's own classes (``pose: Input should be a valid dictionary or
+    instance of Pose``; ``instance of ColumnarTargets``: an API audit, 2026-12-07)."""
+    solve = _example("solve.json")
+    target = solve["targets"][0]
+    cases = [
+        ("/v1/solve", _with(solve, ("pose",), 5), "pose", "a number (5)"),
+        ("/v1/solve", _with(solve, ("pose",), ["a"]), "pose", 'an array (["a"])'),
+        ("/v1/solve", _with(solve, ("options",), None), "options", "null (null)"),
+        ("/v1/solve/batch", {"poses": [[0.0] * 63], "targets": [target]}, "targets",
+         f"an array ({json.dumps([target])})"),
+        ("/v1/complete", {"keypoints": ["pelvis"]}, "keypoints[0]", 'a string ("pelvis")'),
+    ]  # fmt: skip
+    for route, body, where, what in cases:
+        problem = client.post(route, json=body).json()
+        said = f"{where}: a JSON object is required, not {what}"
+        assert problem["detail"].startswith(said), (route, problem["detail"])
+        assert "instance of" not in json.dumps(problem), problem
