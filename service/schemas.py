@@ -271,10 +271,10 @@ class SolveResponse(BaseModel):
     up_warning: str | None = Field(
         default=None,
         description="Null unless the start pose's pelvis-to-neck line leans more than 60 "
-        "degrees from +Y, the up axis a pose is read with: the body was solved lying down "
-        "(as asked, if it lies down; a pose captured with +Z up must be turned to +Y up "
-        "first, or sent in the character form with its `up`). Says along which axis the "
-        "line runs, as `/v1/complete`'s `up_warning` says of key points.",
+        "degrees from +Y, the up axis a pose is read with: the body was solved lying down, "
+        "or upside down along -Y (as asked, if it lies so; a pose captured with +Z up must "
+        "be turned to +Y up first, or sent in the character form with its `up`). Says along "
+        "which axis the line runs, as `/v1/complete`'s `up_warning` says of key points.",
     )
 
 
@@ -344,8 +344,8 @@ class CompleteResponse(BaseModel):
         default=None,
         description="Null unless the pelvis-to-neck line of the key points leans more than "
         "60 degrees from +Y, the up axis key points are read with: the body was completed "
-        "lying down (as asked, if it lies down; key points captured with +Z up must be "
-        "turned to +Y up first). Says along which axis the line runs.",
+        "lying down, or upside down along -Y (as asked, if it lies so; key points captured "
+        "with +Z up must be turned to +Y up first). Says along which axis the line runs.",
     )
 
 

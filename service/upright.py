@@ -26,11 +26,11 @@ _PELVIS, _NECK = JOINT_INDEX["pelvis"], JOINT_INDEX["neck"]
 #: what each input is, how it was answered, as the warning says it (the field first)
 _READ = {
     "keypoints": (
-        "key points are read with +Y up, so this body was completed lying down; key points "
+        "key points are read with +Y up, so this body was completed {how}; key points "
         "captured with another axis up must be turned to +Y up first"
     ),
     "pose": (
-        "a pose is read with +Y up, so this body was solved lying down; a pose captured "
+        "a pose is read with +Y up, so this body was solved {how}; a pose captured "
         "with another axis up must be turned to +Y up first (or sent in the character "
         'form, which takes its "up")'
     ),
@@ -46,14 +46,15 @@ def leans(trunks: F64) -> F64:
 def leaning(field: str, trunk: F64, lean: float) -> str | None:
     """``up_warning`` of the input ``field`` (``keypoints`` or ``pose``) whose
     pelvis-to-neck line ``trunk`` leans ``lean`` degrees (:func:`leans`) from +Y: None
-    within :data:`LEAN`, else how far and along which axis it runs."""
+    within :data:`LEAN`, else how far and along which axis it runs: a body lying down, or
+    upside down where that is -Y (it said "lying down" of a body upside down too)."""
     if not lean > LEAN:
         return None
     axis = int(np.argmax(np.abs(trunk)))
     along = f"{'+' if trunk[axis] > 0 else '-'}{'XYZ'[axis]}"
     return (
         f"{field}: the pelvis-to-neck line leans {lean:.0f} degrees from +Y (it runs along "
-        f"{along}): {_READ[field]}"
+        f"{along}): {_READ[field].format(how='upside down' if along == '-Y' else 'lying down')}"
     )
 
 

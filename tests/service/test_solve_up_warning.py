@@ -72,3 +72,20 @@ def test_a_start_pose_captured_z_up_is_said_to_be_solved_lying_down(
     monkeypatch.setattr(fastpath, "pose_form", lambda body, data=None: None)
     monkeypatch.setattr(fastpath, "plain", lambda data: None)
     assert [client.post("/v1/solve", json=b).content for b in bodies] == fast
+
+
+def test_a_body_upside_down_is_said_to_be_upside_down(client: Any) -> None:
+    """A pose (or key points) turned half a turn about X, head below the pelvis, was said
+    to be answered "lying down" (an audit); it is said to be upside down."""
+    example = json.loads((REPO_ROOT / "docs/examples/solve.json").read_text())
+    flip = np.diag([1.0, -1.0, -1.0])  # (a half turn about X)
+    pose = {n: (np.array(p) @ flip).tolist() for n, p in example["pose"].items()}
+    targets = [{"joint": "left_wrist", "position": pose["left_wrist"]}]
+    keypoints = [{"joint": j, "position": pose[j]} for j in BASE]
+    said = [
+        client.post("/v1/solve", json={"pose": pose, "targets": targets}).json()["up_warning"],
+        client.post("/v1/complete", json={"keypoints": keypoints}).json()["up_warning"],
+    ]
+    for warning, done in zip(said, ("solved", "completed"), strict=True):
+        assert warning is not None and "(it runs along -Y)" in warning, warning
+        assert f"this body was {done} upside down;" in warning and "lying" not in warning
