@@ -24,7 +24,11 @@ from core.bvh_words import fromstring
 
 _WORD_RE = re.compile(r"\S+")
 #: a word that is no decimal number as ``float`` (and numpy) reads one: ``1.2.3``, ``1-2``
-_NOT_A_NUMBER_RE = re.compile(r"(?<!\S)(?![-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?(?!\S))\S+")
+#: (possessive: ``\d+\.?\d*`` backtracked over a long run of digits, quadratic: a word of
+#: 16,000 digits and an ``x`` took 5 s)
+_NOT_A_NUMBER_RE = re.compile(
+    r"(?<!\S)(?![-+]?+(?:\d++(?:\.\d*+)?+|\.\d++)(?:[eE][-+]?+\d++)?+(?!\S))\S+"
+)
 _CHUNK = 1 << 20  # characters looked at a time (whole lines)
 #: ASCII spaces as ``str.split()`` has them (a chunk with others is split by Python)
 _SPACE = np.zeros(256, dtype=bool)

@@ -306,3 +306,29 @@ def test_a_block_with_spaces_past_ascii_is_looked_at_by_numpy(
     # each chunk of ~1 MB narrowed by numpy and looked at as a whole
     chunks = len(spoilt) // (1 << 20) + 1
     assert read == {"_narrowed": chunks, "_odd_in": chunks}, read
+
+
+@pytest.mark.parametrize("tail", ["x", ".1.1", "1e400"])
+def test_a_long_word_of_digits_is_looked_at_in_linear_time(
+    bvh_files: dict[str, Path], tail: str
+) -> None:
+    """A word no number is, read where numpy cannot read its chunk, is found by a pattern
+    that backtracked over a run of digits: 16,000 digits and an ``x`` took 5 s, a word of
+    a megabyte hours (a review of the fix above). Now a frame's value of 40,000 digits
+    and ``tail`` (40-50 s before) is looked at in well under a second, and named where it
+    is no number; a number of 40,000 digits is infinity."""
+    import time
+
+    text = raw(bvh_files["bandai"])
+    spoilt = _spoilt_word(text, 9, 20, "1" * 40_000 + tail)
+    bvh = parse_bvh(spoilt, frames=[0])
+    first = spoilt.split("\n").index("MOTION") + 4
+    t0 = time.perf_counter()
+    got = odd_row(spoilt, bvh.motion_offset, first, bvh.num_frames, bvh.num_channels, 1e7)
+    assert time.perf_counter() - t0 < 1.0
+    if tail == "x":  # (not a number's character: named as such)
+        assert got is not None and got.frame == 9 and got.detail.endswith("not a number")
+    elif tail == "1e400":  # 1111...11e400: a number, past any float
+        assert got is not None and got.frame == 9 and "out of range" in got.detail
+    else:  # (a word of a number's characters that is none: not looked for)
+        assert got is None
