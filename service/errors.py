@@ -397,6 +397,16 @@ def _not_a_name(error: Any) -> str:
     return f"a joint's name (a string) is needed, not {got}{hint}"
 
 
+def _not_canonical(name: str) -> str:
+    """A key of the pose form's ``pose`` that is no canonical joint (a rig's own name,
+    ``Head``, ``LeftHand``): what the form takes, and where a rig of one's own goes."""
+    return (
+        f"unknown joint {quoted(name)}{_near(name)}: the pose form takes the 21 canonical "
+        f"joints ({', '.join(JOINT_NAMES)}); a skeleton of your own, with its own joint "
+        "names, is sent in the character form (`character`, docs/characters.md)"
+    )
+
+
 def _message(error: Any) -> str:
     """pydantic's message, made specific where it is vague and never echoing much input."""
     kind = error.get("type", "")
@@ -412,6 +422,8 @@ def _message(error: Any) -> str:
             return f"no bone ends at {quoted(value)}{root}{near}; bones end at {', '.join(bones)}"
         return f"unknown joint {quoted(value)}{_near(value)}; joints are {', '.join(JOINT_NAMES)}"
     loc = tuple(error.get("loc", ()))
+    if kind == "extra_forbidden" and loc[-2:-1] == ("pose",) and isinstance(loc[-1], str):
+        return _not_canonical(loc[-1])  # (was "Extra inputs are not permitted")
     if kind == "string_type" and ("pins" in loc[-2:] or loc[-1:] == ("joint",)):
         return _not_a_name(error)  # a character's joint (was "Input should be a valid string")
     if kind == "string_unicode" and isinstance(value, str):  # a lone surrogate's escape

@@ -387,7 +387,7 @@ def test_complete_below_the_floor_names_the_sets_it_takes_and_the_nearests_lack(
 @pytest.mark.parametrize(
     ("mutate", "needle"),
     [
-        (lambda b: b["pose"].update(tail=[0, 0, 0]), "pose.tail: Extra inputs"),
+        (lambda b: b["pose"].update(tail=[0, 0, 0]), "pose.tail: unknown joint 'tail': the pose"),
         (lambda b: b["pose"].pop("left_knee"), "pose.left_knee: Field required"),
         (lambda b: b["pose"].update(head=[0.0, 1.0]), "pose.head"),
         (lambda b: b["targets"].append(dict(b["targets"][0])), "duplicate target"),

@@ -81,3 +81,24 @@ def test_a_field_that_is_no_object_is_told_in_json_s_words(client: Any) -> None:
         said = f"{where}: a JSON object is required, not {what}"
         assert problem["detail"].startswith(said), (route, problem["detail"])
         assert "instance of" not in json.dumps(problem), problem
+
+
+def test_a_pose_keyed_by_a_rigs_own_names_is_told_the_pose_form_s_joints(client: Any) -> None:
+    """A game tool's pose keyed by its rig's names (``Head``, ``LeftHand``) was told
+    ``pose.Head: Extra inputs are not permitted``, no word of what the form takes (an API
+    audit, 2026-12-07); it is told the canonical joints, the one it may mean, and the form
+    a rig of its own goes in, in both forms of a batch's item."""
+    solve = _example("solve.json")
+    pose = dict(solve["pose"])
+    pose["Head"] = pose.pop("head")
+    pose["LeftHand"] = pose.pop("left_wrist")
+    body = {"pose": pose, "targets": solve["targets"]}
+    for route, sent, at in (("/v1/solve", body, ""), ("/v1/solve/batch", {"items": [body]},
+                                                      "items[0].")):  # fmt: skip
+        errors = {
+            e["location"]: e["message"] for e in client.post(route, json=sent).json()["errors"]
+        }
+        head, hand = errors[f"{at}pose.Head"], errors[f"{at}pose.LeftHand"]
+        assert head.startswith("unknown joint 'Head' (did you mean 'head'?): the pose form takes")
+        assert hand.startswith("unknown joint 'LeftHand': the pose form takes the 21 canonical")
+        assert "character form" in hand and errors[f"{at}pose.head"] == "Field required"
