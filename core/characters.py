@@ -23,7 +23,7 @@ import numpy as np
 import numpy.typing as npt
 
 from core import compiled_characters
-from core.text import quoted
+from core.text import quoted, shown
 from core.units import UNITS, UP_AXES
 
 F64 = npt.NDArray[np.float64]
@@ -153,7 +153,7 @@ def build_skeleton(
     if len(order) != n:
         stuck = sorted(set(range(n)) - set(order))
         raise CharacterError(
-            f"{where}: parent cycle through joints {[names[i] for i in stuck][:8]} "
+            f"{where}: parent cycle through joints {shown([names[i] for i in stuck])} "
             "(they never reach a root)"
         )
     rank = {j: r for r, j in enumerate(order)}

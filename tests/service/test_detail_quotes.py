@@ -60,6 +60,13 @@ def test_a_detail_quotes_an_object_or_a_list_as_json(client: Any) -> None:
     name = character["character"]["joints"][1]["name"]
     root = character["character"]["joints"][0]["name"]
     assert f"2 roots {json.dumps([root, name])}; one is needed" in detail, detail
+    cycle = _with(character, ("character", "joints", 2, "parent"), name)  # 1 <-> 2
+    cycle = _with(
+        cycle, ("character", "joints", 1, "parent"), cycle["character"]["joints"][2]["name"]
+    )
+    detail = client.post("/v1/solve", json=cycle).json()["detail"]
+    two = [j["name"] for j in cycle["character"]["joints"][1:3]]
+    assert f"parent cycle through joints {json.dumps(two)[:-1]}, " in detail, detail
 
 
 def test_a_field_that_is_no_object_is_told_in_json_s_words(client: Any) -> None:
