@@ -35,13 +35,12 @@ const motionStart = (text) => motionHeader(text).at;
 // The MOTION values a frame holds: every channel of the inspect answer's joints.
 export const channelCount = (info) => info.joints.reduce((n, j) => n + j.channels.length, 0);
 
-// Every MOTION value of the file, frame after frame (Float64Array).
+// Every MOTION value of the file, frame after frame (Float64Array), each word read as the
+// service reads it (``bvhValue``: NaN for one it refuses). A file whose frames are not one a
+// line (wrapped over lines) is read so: its words were read by JavaScript's Number, which
+// reads 0x10 as 16, so such a frame was drawn, and its drag got the service's 422.
 export function parseMotion(text) {
-  const tokens = text.slice(motionStart(text)).split(/\s+/);
-  const out = new Float64Array(tokens.length);
-  let n = 0;
-  for (const t of tokens) if (t) out[n++] = Number(t);
-  return out.subarray(0, n);
+  return Float64Array.from(words(text.slice(motionStart(text))), bvhValue);
 }
 
 // The values of one frame (Float64Array of ``channels``) read from its line alone (a 1 MB
@@ -55,7 +54,7 @@ export function frameValues(text, frame, frames, channels) {
 // Where the line of ``frame`` stands ([start, end), its LF left out), or null unless the file
 // holds one frame per line, ``frames`` lines less the blank ones (``frameValues``).
 export function frameLine(text, frame, frames) {
-  const blank = /[^\S\n]*(?:\n|$)/y;
+  const blank = new RegExp(`(?:(?!\\n)[${SPACE}])*(?:\\n|$)`, 'y');
   let pos = motionStart(text);
   let seen = 0;
   let line = null;
@@ -71,6 +70,14 @@ export function frameLine(text, frame, frames) {
   }
   return seen === frames ? line : null;
 }
+
+// The white space the service's reader splits words at (Python's str.split()): JavaScript's
+// \s leaves out \x1c-\x1f and \x85 and takes U+FEFF. A frame whose values were parted by
+// \x1f was read by the service and drawn by the page as no pose, its view set up from NaN.
+export const SPACE = '\\t-\\r\\x1c-\\x20\\x85\\xa0\\u1680\\u2000-\\u200a\\u2028\\u2029\\u202f\\u205f\\u3000';
+const WORD_RE = new RegExp(`[^${SPACE}]+`, 'g');
+// The words of ``text``, as the service's reader parts them.
+export const words = (text) => text.match(WORD_RE) || [];
 
 // A number as the service's reader reads one (core/bvh_words.py NUMBER): ASCII decimals, a
 // sign, a point, an exponent. JavaScript's Number also reads 0x10, 0b11, 0o7 and Infinity,
@@ -90,7 +97,7 @@ export const bvhValue = (word) => {
 // ``frameValues`` reads the frame's line once it has found it (a spliced answer's line is
 // read so: editor/excerpt.js).
 export function lineValues(line, channels) {
-  const tokens = line.split(/\s+/).filter((t) => t);
+  const tokens = words(line);
   return tokens.length === channels ? Float64Array.from(tokens, bvhValue) : null;
 }
 

@@ -22,6 +22,7 @@ from tests.service.editor_page import (
     M,
     drag_joint,
     drawn_as_inspected,
+    give_file,
     open_editor,
     open_file,
     show_frame,
@@ -88,6 +89,21 @@ def js_numbers_file(path: Path) -> str:
     return f"{head}MOTION\nFrames: 12\n{lines[1]}\n" + "\n".join(rows) + "\n"
 
 
+def wrapped(text: str) -> str:
+    """The file with each frame over two lines (its first 40 values, then the rest), frame 2's
+    first values parted by '\\x1f' (white space to the service's reader, ``str.split``, not to
+    JavaScript's ``\\s``): the service reads such frames as words over the block."""
+    head, motion = text.split("MOTION\n", 1)
+    lines = motion.split("\n")
+    rows = [row.split() for row in lines[2:] if row.strip()]
+    rows[2][:4] = ["\x1f".join(rows[2][:4])]
+    cut = [37 if i == 2 else 40 for i in range(len(rows))]  # (frame 2: 3 words fewer)
+    body = "\n".join(
+        " ".join(r[: cut[i]]) + "\n" + " ".join(r[cut[i] :]) for i, r in enumerate(rows)
+    )
+    return f"{head}MOTION\n{lines[0]}\n{lines[1]}\n{body}\n"
+
+
 @pytest.mark.browser
 def test_a_value_the_service_reads_as_no_number_is_a_broken_frame(
     server: str, browser: Any, more_mocap: Path
@@ -111,5 +127,24 @@ def test_a_value_the_service_reads_as_no_number_is_a_broken_frame(
         show_frame(page, 5)
         drawn_as_inspected(page, server, {"bvh": text, "frame": 5, "units": "in"})
         assert title(page) is None
+
+        # its frames wrapped over two lines: each read as words, as the service reads them
+        # (by JavaScript's Number they were: 0x10 drawn as 16, its drag refused)
+        text = wrapped(text)
+        give_file(page, text, "wrapped.bvh")  # (read anew: its units refused, then picked)
+        page.wait_for_function(f"() => {M}.error() && {M}.error().detail.startsWith('wrapped')")
+        page.select_option("#bvh-units", "in")
+        page.wait_for_function(f"() => {M}.bvh().name === 'wrapped.bvh'")
+        for frame, holds in said.items():
+            show_frame(page, frame)
+            assert all(math.isnan(v) for p in page.evaluate(f"{M}.bvhPositions()") for v in p)
+            err = page.evaluate(f"{M}.error()")
+            assert err["title"] == "Broken frame", err
+            assert err["detail"].startswith(f"wrapped.bvh: line {168 + 2 * frame}: frame {frame}")
+            assert holds in err["detail"], err
+        for frame in (2, 5):  # (2: its values parted by \x1f, as the service parts them)
+            show_frame(page, frame)
+            drawn_as_inspected(page, server, {"bvh": text, "frame": frame, "units": "in"})
+            assert title(page) is None
     finally:
         page.context.close()

@@ -13,9 +13,7 @@
 // lines start after the MOTION line, "Frames:" and "Frame Time:"; a block of one frame a
 // line is read line by line, each frame's line alone.
 
-import {
-  MAX_VALUE, NUMBER_RE, channelCount, lineValues, motionHeader,
-} from '../bvh.js';
+import { bvhValue, channelCount, lineValues, motionHeader } from '../bvh.js';
 
 const FRAMES_RE = /^([ \t]*Frames:[ \t]*)(\S+)([ \t]*\r?)$/; // core/bvh.py _FRAMES_RE
 const WORD_RE = /\S+/g;
@@ -169,7 +167,7 @@ function cutOf(entry, frame, channels) {
   // whole file (an excerpt's would say frame 0 on another line); so would a wrong count.
   const words = line.match(WORD_RE) || [];
   const refused = words.length !== channels
-    || !words.every((w) => NUMBER_RE.test(w) && Math.abs(Number(w)) <= MAX_VALUE);
+    || !words.every((w) => Number.isFinite(bvhValue(w))); // (bvh.js: as every frame is read)
   let parts = null;
   if (!refused) {
     const [fs, fe] = l.framesLine;

@@ -2,10 +2,7 @@
 // kinematics), and open (picker or drop), scrub, close.
 
 import * as THREE from 'three';
-import {
-  anchorPoints, bvhNumber, bvhValue, channelCount, forwardKinematics, frameLine, frameValues,
-  MAX_VALUE, parseMotion,
-} from '../bvh.js';
+import { anchorPoints, channelCount, forwardKinematics } from '../bvh.js';
 import { $, doc, history, solver, state, ui } from './state.js';
 import { api, ApiError, clearError, showError } from './api.js';
 import {
@@ -16,112 +13,12 @@ import { buildCharacterBones, buildSkeleton, camera, centreFloor, controls, UP }
 import { endDrag } from './interaction.js';
 import { refresh, refreshPanel } from './panel.js';
 import { offerTemplate, readMap, showMap } from './jointmap.js';
-import {
-  committedRow, firstFrame, forgetLayout, oneFrameALine, readLayout,
-} from './excerpt.js';
+import { committedRow, firstFrame, readLayout } from './excerpt.js';
+import { brokenRow, frameRow, releaseTexts } from './rows.js';
 
 // ------------------------------------------------------------------------------------
 // A file's frames: forward kinematics, the page's world
 // ------------------------------------------------------------------------------------
-// text -> MOTION values, of the texts committed and shown only (and the one asked for): a
-// file read whole (its frames not one per line) kept its last six texts, each answer of a
-// drag one, and their values (a 7.5 MB file: 7.5 MB of text and 6 MB of values each, 50 MB
-// of the page's heap after six edits).
-const motionCache = new Map();
-
-// A text kept to read frames from: the open file's shown or committed one. (The shown one
-// first: the last row's text is it, the same string, known at once; compared with the
-// committed one first, a new answer's text as long was compared character by character,
-// copied whole first: 3.4 ms an answer on a 7.5 MB file.)
-const inUse = (text) => doc.active && (text === doc.shown || text === doc.text);
-
-function cached(text) {
-  for (const key of motionCache.keys()) if (!inUse(key) && key !== text) motionCache.delete(key);
-  return motionCache.get(text);
-}
-
-function motionOf(text) {
-  let values = cached(text);
-  if (!values) {
-    values = parseMotion(text);
-    motionCache.set(text, values);
-  }
-  return values;
-}
-
-// One frame's values of a text: a text read whole (motionCache) has them; else its frame's
-// line alone is read (each answer of a solve is a new text: reading a 1 MB file whole took
-// 12-30 ms per answer), the file whole only when it does not hold one frame per line.
-// ``known``: the frame's values as the text's maker has them (an excerpt's answer spliced
-// in: editor/excerpt.js), kept as the frame's row without reading the text at all: each
-// answer's new text was walked to the frame's line and looked up in motionCache (a Map: the
-// lookup hashes the whole text), 8-49 ms an answer on a 7.5 MB file (docs/editor.md).
-const NO_ROW = Object.freeze({ text: null, frame: -1, row: null });
-let lastRow = NO_ROW;
-
-function frameRow(text, frame, known) {
-  const n = channelCount(doc.info);
-  if (known && known.length === n) {
-    const row = known.every(Number.isFinite) ? known : new Float64Array(n).fill(NaN);
-    lastRow = { text, frame, row };
-    return row;
-  }
-  if (lastRow.text === text && lastRow.frame === frame) return lastRow.row;
-  const values = motionCache.size ? cached(text) : undefined; // (none: a file one frame a line)
-  if (values) return values.subarray(frame * n, (frame + 1) * n);
-  let row = frameValues(text, frame, doc.info.frames, n);
-  // A frame's line of a file one frame a line (as the server reads it: a file with a blank
-  // line among its frames is read as words, whatever a line holds) that holds another count
-  // of values, or one that is no number (the service's rows_warning): that frame has no pose (nothing drawn,
-  // nothing grabbed; showFrame says why). It was read from the whole file's values, every
-  // value after the line's shifted: another pose drawn, a limb lost, without a word.
-  if (!row && oneFrameALine(text, doc.info.frames, n)) row = new Float64Array(n).fill(NaN);
-  if (!row) return motionOf(text).subarray(frame * n, (frame + 1) * n); // (not kept: motionCache)
-  if (!row.every(Number.isFinite)) row = new Float64Array(n).fill(NaN);
-  lastRow = { text, frame, row }; // (a row of the whole file's values kept them, and a text no longer shown)
-  return row;
-}
-
-// Why frame ``frame`` of ``text`` has no pose, where its line holds another count of
-// values than the file's channels, or a value that is no number; else null.
-function brokenRow(text, frame) {
-  const n = channelCount(doc.info);
-  const at = oneFrameALine(text, doc.info.frames, n) && frameLine(text, frame, doc.info.frames);
-  if (!at) return null;
-  const words = text.slice(at[0], at[1]).match(/\S+/g) || [];
-  const bad = words.find((w) => !Number.isFinite(bvhValue(w))); // (as the service reads it)
-  if (words.length === n && bad === undefined) return null;
-  let line = 1;
-  for (let i = text.indexOf('\n'); i >= 0 && i < at[0]; i = text.indexOf('\n', i + 1)) line += 1;
-  const holds = words.length !== n ? `${words.length} values, not ${n}`
-    : Number.isFinite(bvhNumber(bad)) ? `a value past ±${String(MAX_VALUE.toExponential())
-      .replace('+', '')} ('${bad.slice(0, 20)}')` : `a value that is no number ('${bad.slice(0, 20)}')`;
-  return `${doc.name}: line ${line}: frame ${frame} holds ${holds}: it has no pose to draw or `
-    + 'edit (the other frames have; Export writes this line as it is)';
-}
-
-// One frame's values of a text (the same array while the text and frame are the ones last
-// read: scene.js draws the file's own bones anew only when they change).
-export const fileRow = (text, frame) => frameRow(text, frame, null);
-
-// The texts kept to read frames from let go of, but those ``inUse``: the texts read
-// whole and their values, the last frame's row, the committed text's layout
-// (editor/excerpt.js). After each change (refreshFrame), and as a file is opened, read
-// again or closed (the texts before of no use). ``all``: every one let go (a file opened
-// or read again: its text is a new string, and one kept as the same, though another
-// string, would be compared with it whole at each look, a 7.5 MB file's at each excerpt).
-function releaseTexts(all = false) {
-  if (all) {
-    motionCache.clear();
-    lastRow = NO_ROW;
-    forgetLayout(null);
-    return;
-  }
-  cached(null);
-  if (!inUse(lastRow.text)) lastRow = NO_ROW;
-  forgetLayout(doc.active ? doc.text : null);
-}
-
 // Forward kinematics of one frame's values: every joint, and the canonical points (file units).
 export function rowFrame(row) {
   const joints = doc.info.joints;

@@ -5,7 +5,8 @@ import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
 import { $, doc, state, ui } from './state.js';
 import { ApiError, showError } from './api.js';
-import { fileRow, rowFrame, toWorld } from './file.js';
+import { rowFrame, toWorld } from './file.js';
+import { fileRow } from './rows.js';
 
 const COLORS = {
   left: 0x3b82f6,
