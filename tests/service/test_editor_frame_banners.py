@@ -25,6 +25,7 @@ from tests.service.editor_page import (
     give_file,
     open_editor,
     open_file,
+    recorded,
     show_frame,
 )
 
@@ -146,5 +147,40 @@ def test_a_value_the_service_reads_as_no_number_is_a_broken_frame(
             show_frame(page, frame)
             drawn_as_inspected(page, server, {"bvh": text, "frame": frame, "units": "in"})
             assert title(page) is None
+    finally:
+        page.context.close()
+
+
+@pytest.mark.browser
+def test_a_file_whose_frame_0_is_broken_opens_at_its_first_whole_frame(
+    server: str, browser: Any, more_mocap: Path
+) -> None:
+    """Frame 0's line holding '0x10': the page asked for frame 0 and the service refused the
+    whole file (422), though its other frames read; a frame 0 the page read as no pose set
+    the view up from NaN. Now the file opens, inspected at its first whole frame (1), the
+    view set up from it, frame 0 shown as any broken frame is."""
+    head, motion = next(more_mocap.rglob("fair1/dab.bvh")).read_text().split("MOTION\n", 1)
+    lines = motion.split("\n")
+    rows = [row for row in lines[2:] if row.strip()][:6]
+    rows[0] = rows[0].replace(" ", " 0x10 ", 1).rsplit(" ", 1)[0]
+    text = f"{head}MOTION\nFrames: 6\n{lines[1]}\n" + "\n".join(rows) + "\n"
+    page = open_editor(browser, server)
+    inspected = recorded(page, lambda url: url.endswith("/v1/bvh/inspect"))
+    try:
+        page.select_option("#bvh-units", "in")
+        open_file(page, text, "zero.bvh")
+        assert [body["frame"] for body in inspected] == [1]
+        err = page.evaluate(f"{M}.error()")
+        assert err["title"] == "Broken frame", err
+        assert err["detail"].startswith("zero.bvh: line 168: frame 0 holds a value that is no ")
+        assert page.evaluate(f"{M}.bvh().frame") == 0
+        assert all(math.isnan(v) for p in page.evaluate(f"{M}.bvhPositions()") for v in p)
+        at = page.evaluate(f"{M}.projectPoint([0, 0.8, 0])")  # (the view: no NaN)
+        assert math.isfinite(at["x"]) and math.isfinite(at["y"]), at
+        show_frame(page, 1)
+        drawn_as_inspected(page, server, {"bvh": text, "frame": 1, "units": "in"})
+        assert title(page) is None
+        pelvis = page.evaluate(f"{M}.projectJoint('pelvis')")
+        assert 0 < pelvis["x"] < 1280 and 0 < pelvis["y"] < 800, pelvis  # (framed in view)
     finally:
         page.context.close()

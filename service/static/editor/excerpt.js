@@ -126,7 +126,7 @@ export function firstFrame(text) {
   const line = text.slice(at, lineEnd(text, at));
   if (!/\S/.test(line)) return null;
   const framesLine = text.slice(fs, fe).replace(FRAMES_RE, (_, a, n, b) => `${a}1${b}`);
-  return { bvh: `${text.slice(0, fs)}${framesLine}${text.slice(fe, at)}${line}\n`, frames, at };
+  return { bvh: `${text.slice(0, fs)}${framesLine}${text.slice(fe, at)}${line}\n`, frames, at, line };
 }
 
 // The committed text's entry (``known``): its layout, and the cut last made of it.

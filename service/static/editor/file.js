@@ -13,8 +13,9 @@ import { buildCharacterBones, buildSkeleton, camera, centreFloor, controls, UP }
 import { endDrag } from './interaction.js';
 import { refresh, refreshPanel } from './panel.js';
 import { offerTemplate, readMap, showMap } from './jointmap.js';
-import { committedRow, firstFrame, readLayout } from './excerpt.js';
-import { brokenRow, frameRow, releaseTexts } from './rows.js';
+import { committedRow } from './excerpt.js';
+import { inspect } from './inspect.js';
+import { brokenRow, firstWholeFrame, frameRow, releaseTexts } from './rows.js';
 
 // ------------------------------------------------------------------------------------
 // A file's frames: forward kinematics, the page's world
@@ -134,7 +135,9 @@ export async function openText(text, name, {
   let res;
   try {
     const map = jointMap ? { joint_map: jointMap } : {};
-    res = await inspect(text, { frame: 0, ...fileSettings(settings), ...map });
+    // (read at its first frame the page reads whole: frame 0 where it is, as nearly always)
+    const frame = Math.max(firstWholeFrame(text), 0);
+    res = await inspect(text, { frame, ...fileSettings(settings), ...map });
     if (ticket !== opening) return;
   } catch (err) {
     if (ticket !== opening) return;
@@ -161,50 +164,6 @@ export async function openText(text, name, {
   whenCommitted(() => {
     if (ticket === opening) showOpened({ ...opened, text: doc.text, frame: doc.frame, kept: keptEdits() });
   });
-}
-
-// ``POST v1/bvh/inspect`` of ``text`` (the other fields: ``fields``). A file the service
-// refuses as too big (413: over its POSE_MAX_BODY_BYTES, 8 MiB by default) is read from its
-// first frame (``firstFrame``), as its solves are sent, where the whole file is read as
-// those excerpts are (``readLayout``: one frame a line, as many as "Frames:" says, the last
-// whole): the answer is the whole file's, its frames the file's count. Else the 413 says
-// why the page cannot send it a frame at a time. (A 14 MB file could not be opened: the
-// banner told the user to send "an excerpt", which only the page can.)
-let bodyLimit = Infinity; // (bytes: the last 413's; a file over it goes as an excerpt at once)
-
-async function inspect(text, fields) {
-  let err;
-  try {
-    if (text.length > bodyLimit) { // (a 413 again: not uploaded again, a few MB for nothing)
-      throw new ApiError(413, 'Request body too large', `body of ${text.length} bytes or more `
-        + `exceeds the ${bodyLimit}-byte limit (the server's POSE_MAX_BODY_BYTES)`);
-    }
-    return await api('POST', 'v1/bvh/inspect', { bvh: text, ...fields });
-  } catch (refused) {
-    if (!(refused instanceof ApiError && refused.status === 413)) throw refused;
-    err = refused;
-  }
-  const said = /(\d+)-byte limit/.exec(err.detail);
-  if (said) bodyLimit = Number(said[1]);
-  const mb = `${(text.length / 1e6).toFixed(1)} MB`;
-  if (!/HIERARCHY/i.test(text.slice(0, 65536))) { // (binary junk: said so, as a small one is)
-    throw new ApiError(422, 'Not a BVH file', `no HIERARCHY keyword (${mb}, over the server's limit for one request)`);
-  }
-  const limit = err.detail.split(/\.\s/)[0]; // (the rest tells an API client what to send)
-  const notOne = (why) => new ApiError(413, err.title, `the file (${mb}) is over the server's `
-    + `limit for one request (${limit}), and the editor sends a big file a frame at a time `
-    + `only where it holds one frame a line, as many as its Frames: line says, the last one `
-    + `whole; ${why}`, err.requestId);
-  const first = firstFrame(text);
-  if (!first) throw notOne('this one has no such frames (no Frames: count, or lines ended by CR alone)');
-  // (its channels as its CHANNELS lines declare them, checked against the answer's)
-  const channels = [...text.slice(0, first.at).matchAll(/^[ \t]*CHANNELS[ \t]+(\d+)/gim)]
-    .reduce((n, m) => n + Number(m[1]), 0);
-  const not = `this one does not (${first.frames} frames of ${channels} values each declared)`;
-  if (!readLayout(text, first.frames, channels)) throw notOne(not);
-  const res = await api('POST', 'v1/bvh/inspect', { ...fields, bvh: first.bvh, frame: 0 });
-  if (res.data.cut_short || channelCount(res.data) !== channels) throw notOne(not);
-  return { ...res, data: { ...res.data, frames: first.frames, frame: fields.frame } };
 }
 
 // A refusal of the file's units or up axis tells an API client what to send ("units":
@@ -239,8 +198,13 @@ function showOpened({ info, text, name, original, encoding, jointMap, settings, 
   // a file no longer open, for as long as this one was)
   if (doc.tried) doc.tried.yes = null;
   showMap(jointMap);
+  // the view set up from frame 0, or, where the page has no pose for it (a broken line),
+  // from the frame the service read (the answer's joints: a file whose frame 0 is broken is
+  // inspected at its first whole one; it was set up from NaN, the view blank)
   const frame0 = fileFrame(text, 0);
-  doc.toWorld = worldMapping(info, frame0);
+  const drawn = frame0.fk.pos.every((p) => p.every(Number.isFinite));
+  const read = { points: info.points, fk: { pos: info.positions } };
+  doc.toWorld = worldMapping(info, drawn ? frame0 : read);
   doc.fromWorld = doc.toWorld.clone().invert();
   buildSkeleton();
   buildCharacterBones();
@@ -248,14 +212,18 @@ function showOpened({ info, text, name, original, encoding, jointMap, settings, 
   clearHistory();
   const at = Math.min(Math.max(frame, 0), lastFrame(info));
   const { points } = fileFrame(text, at);
-  const targets = (kept ? kept.targets : []).map(([joint, d]) => [joint, toWorld(points[joint].map((v, i) => v + d[i]))]);
+  const targets = (kept ? kept.targets : []).map(([joint, d]) => [joint, toWorld(points[joint].map((v, i) => v + d[i]))])
+    .filter(([, p]) => p.every(Number.isFinite)); // (none on a broken frame)
   restore({ pose: filePose(text, at), targets, pins: kept ? kept.pins : [], text, frame: at });
   pushHistory();
-  const pelvis = state.pose.pelvis; // (of the frame shown: read again, it may be far from 0)
+  // (the frame shown's pelvis: read again, it may be far from 0; a broken frame's, the
+  // frame the service read)
+  const posed = state.pose.pelvis.every(Number.isFinite);
+  const pelvis = posed ? state.pose.pelvis : toWorld(info.points.pelvis);
   controls.target.set(pelvis[0], pelvis[1], pelvis[2]);
   camera.position.set(pelvis[0] + 0.85, pelvis[1] + 0.5, pelvis[2] + 3.3);
   controls.update();
-  doc.followed = { frame: at, pelvis: [...pelvis] };
+  doc.followed = { frame: posed ? at : info.frame, pelvis: [...pelvis] };
   for (const input of [$('bvh-frame'), $('bvh-frame-number')]) {
     input.max = String(lastFrame(info));
     input.value = String(at);
@@ -273,7 +241,7 @@ function showOpened({ info, text, name, original, encoding, jointMap, settings, 
   $('status').textContent = ui.connected ? 'connected' : 'server not ready';
   clearError();
   refresh();
-  warnOpened(info);
+  warnOpened(info, posed ? null : brokenRow(text, at));
 }
 
 // The last frame a file's text holds (0-based): of one cut short, the frame the cut is in,
@@ -294,11 +262,17 @@ export function lastFrame(info) {
 // way: 0.7 m under it, drawn with its lowest joint on the grid, so nothing looked wrong), or
 // left and right joints named for the other side (solved as the body it is). The file opens
 // either way; without a word, the cut frame was drawn as half a body and the giant as asked.
-function warnOpened(info) {
+// ``broken``: why the frame shown has no pose (brokenRow), said first as a "Broken frame"
+// (a file whose frame 0 is broken: the rows_warning names the same line).
+function warnOpened(info, broken = null) {
   const root = info.root_warning && `${info.root_warning} (the Root channels menu)`;
   const up = info.up_warning && `${info.up_warning} (the Up axis menu)`;
-  const said = [info.cut_short && info.cut_short.detail, info.rows_warning, info.units_warning, up,
-    root, info.sides_warning].filter(Boolean);
+  const said = [info.cut_short && info.cut_short.detail, !broken && info.rows_warning,
+    info.units_warning, up, root, info.sides_warning].filter(Boolean);
+  if (broken) {
+    showError(new ApiError(-1, 'Broken frame', [broken, ...said].join('; ')));
+    return;
+  }
   if (!said.length) return;
   const title = info.cut_short || info.rows_warning ? 'Broken file' : info.units_warning ? 'Units'
     : info.up_warning ? 'Up axis' : info.root_warning ? 'Root channels' : 'Sides';

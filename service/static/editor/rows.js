@@ -5,7 +5,7 @@
 import { doc } from './state.js';
 import {
   bvhNumber, bvhValue, channelCount, frameLine, frameValues, MAX_VALUE, motionHeader, parseMotion,
-  SPACE,
+  SPACE, words,
 } from '../bvh.js';
 import { forgetLayout, oneFrameALine } from './excerpt.js';
 
@@ -142,3 +142,50 @@ export function releaseTexts(all = false) {
   forgetLayout(doc.active ? doc.text : null);
 }
 
+
+// The first frame of ``text`` the page reads whole (as many values as its CHANNELS lines
+// declare, each a number the service reads), before its inspection tells its channels: 0
+// for nearly every file (its first line is such a frame), -1 where none is (or it has no
+// MOTION header). A file whose frame 0 is broken is inspected at this frame (file.js
+// openText): inspected at frame 0, the service refused the whole file for that frame alone,
+// and a frame 0 the page could not read (values parted by \x1f, read as one word) set the
+// view up from NaN.
+export function firstWholeFrame(text) {
+  let header;
+  try {
+    header = motionHeader(text);
+  } catch {
+    return -1;
+  }
+  const frames = Number((/^[ \t]*Frames:[ \t]*(\S+)/.exec(text.slice(...header.frames)) || [])[1]);
+  const channels = [...text.slice(0, header.at).matchAll(/^[ \t]*CHANNELS[ \t]+(\d+)/gim)]
+    .reduce((n, m) => n + Number(m[1]), 0);
+  if (!Number.isInteger(frames) || frames < 1 || channels < 1) return -1;
+  const whole = (found) => found.length === channels && found.every((w) => Number.isFinite(bvhValue(w)));
+  const end = lineEnd(text, header.at);
+  if (whole(words(text.slice(header.at, end)))) return 0; // (frame 0 a line, or the first words)
+  const re = new RegExp(`[^${SPACE}]+`, 'g');
+  re.lastIndex = header.at;
+  if (frameLine(text, 0, frames)) { // one frame a line: line by line (blank lines are none)
+    for (let f = 0, at = header.at; at <= text.length && f < frames; at = lineEnd(text, at) + 1) {
+      const found = words(text.slice(at, lineEnd(text, at)));
+      if (found.length && whole(found)) return f;
+      if (found.length) f += 1;
+    }
+    return -1;
+  }
+  const found = []; // else word by word, as the service reads such a block
+  for (let f = 0, m = re.exec(text); m && f < frames; m = re.exec(text)) {
+    found.push(m[0]);
+    if (found.length < channels) continue;
+    if (whole(found)) return f;
+    found.length = 0;
+    f += 1;
+  }
+  return -1;
+}
+
+const lineEnd = (text, start) => {
+  const end = text.indexOf('\n', start);
+  return end < 0 ? text.length : end;
+};
