@@ -32,7 +32,8 @@ import {
   sendSolve, setUpFields, takeField, undo,
 } from './editor/solve.js';
 import {
-  buildSkeleton, camera, floorCentre, pinRings, renderer, resize, scene, selectionRing, viewport,
+  buildSkeleton, camera, floorCentre, followRatio, pinRings, renderer, resize, scene, selectionRing,
+  viewport,
 } from './editor/scene.js';
 import {
   clearTargets, endDrag, onPointerDown, onPointerMove, onPointerUp, pointerLeft, toScreen,
@@ -228,6 +229,7 @@ function chosen(menu, take) {
 // Frame loop: render on demand, send at most one solve per frame and one in flight.
 // ------------------------------------------------------------------------------------
 function frame() {
+  followRatio();
   if (solver.dirty && !solver.inflight && performance.now() >= solver.holdUntil) sendSolve();
   if (ui.needsRender) {
     ui.needsRender = false;

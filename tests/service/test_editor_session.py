@@ -188,7 +188,8 @@ def test_editor_keyboard_empty_file_scrub_follows_and_unload_asks(
     way of dropping them asks first. And: a file in a unit the Units menu did not list
     (decimetres) could not be opened (now "other…" asks for metres per unit); a frame cut
     short (no pose) grabbed a press anywhere, and the view could not be orbited there; a
-    420 px window left the view 120 px wide beside the panel, the figure cut."""
+    420 px window left the view 120 px wide beside the panel, the figure cut; a change of
+    the screen's pixel density (a zoom) left the view drawn at the ratio it started with."""
     page = open_editor(browser, server)
     context = page.context
     try:
@@ -208,6 +209,16 @@ def test_editor_keyboard_empty_file_scrub_follows_and_unload_asks(
         )
         page.set_viewport_size({"width": 1280, "height": 800})
         page.wait_for_timeout(200)
+        # the screen's density changed (the browser zoomed, the window moved to a HiDPI
+        # screen): the view drawn at the new ratio (it kept the first: stretched, blurred)
+        cdp = context.new_cdp_session(page)
+        metrics = {"width": 1280, "height": 800, "mobile": False}
+        cdp.send("Emulation.setDeviceMetricsOverride", {**metrics, "deviceScaleFactor": 2})
+        scaled = "r => (c => c.width === r * c.clientWidth && c.height === r * c.clientHeight)"
+        scaled += "(document.querySelector('#viewport canvas'))"
+        page.wait_for_function(scaled, arg=2)
+        cdp.send("Emulation.setDeviceMetricsOverride", {**metrics, "deviceScaleFactor": 1})
+        page.wait_for_function(scaled, arg=1)
         # the file picker from the keyboard: Tab reaches "Open BVH…", Enter opens it
         page.focus("#sample")
         for _ in range(3):

@@ -271,9 +271,15 @@ export function drawPose() {
   ui.needsRender = true;
 }
 
+// The view's size, and its pixels as the screen's: the device pixel ratio is read anew each
+// time and followed as it changes (the browser zoomed, the window moved to a screen of
+// another density: ``followRatio``). It was read once, at start: zoomed
+// in, or on a HiDPI screen after, the view was drawn at the old ratio and stretched, blurred.
 export function resize() {
   const w = viewport.clientWidth || 1;
   const h = viewport.clientHeight || 1;
+  const ratio = Math.min(window.devicePixelRatio, 2);
+  if (renderer.getPixelRatio() !== ratio) renderer.setPixelRatio(ratio);
   renderer.setSize(w, h, false);
   renderer.domElement.style.width = `${w}px`;
   renderer.domElement.style.height = `${h}px`;
@@ -282,6 +288,11 @@ export function resize() {
   ui.needsRender = true;
 }
 new ResizeObserver(resize).observe(viewport);
+// (each animation frame, editor.js: a ratio changed with no change of size fires no
+// ResizeObserver, and Chromium's matchMedia on the ratio did not fire either)
+export function followRatio() {
+  if (renderer.getPixelRatio() !== Math.min(window.devicePixelRatio, 2)) resize();
+}
 controls.addEventListener('change', () => {
   ui.needsRender = true;
 });
