@@ -267,9 +267,11 @@ async function fetchSkeleton() {
         buildSkeleton();
         refresh();
       }
+      // connected once the models answer too: the skeleton answers while they load, and
+      // the status went "connected", then "server not ready" at the models' 503, each retry
+      await showModelDefaults();
       ui.connected = true;
       $('status').textContent = 'connected';
-      await showModelDefaults();
       // (a 503's, the models loading; a 401's, the key now typed: it stayed, stale)
       if (ui.currentError && [401, 503].includes(ui.currentError.status)) clearError();
       return;

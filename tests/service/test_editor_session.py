@@ -316,3 +316,36 @@ def test_editor_keyboard_empty_file_scrub_follows_and_unload_asks(
         assert dialogs == ["beforeunload"]  # nothing to lose: closed unasked
     finally:
         context.close()
+
+
+@pytest.mark.browser
+def test_editor_says_connected_once_the_models_answer(server: str, browser: Any) -> None:
+    """The models loading (``GET v1/models``: 503), the skeleton answering: the status said
+    "connected", then "server not ready" at the models' 503, at each retry. Now "connected"
+    only once the models answer too."""
+    context = browser.new_context(viewport={"width": 1280, "height": 800})
+    page = context.new_page()
+    page.set_default_timeout(WAIT_MS)
+    loading = [True]  # (the first answer: 503)
+
+    def models(route: Any) -> None:
+        if not loading:
+            route.continue_()
+            return
+        loading.clear()
+        problem = {"title": "Service Unavailable", "status": 503, "detail": "loading models"}
+        route.fulfill(status=503, content_type="application/problem+json", body=json.dumps(problem))
+
+    try:
+        page.route("**/v1/models", models)
+        page.add_init_script(
+            "window.said = []; new MutationObserver(() => { const s = document.getElementById"
+            "('status'); if (s && s.textContent !== said.at(-1)) said.push(s.textContent); })"
+            ".observe(document, { subtree: true, childList: true, characterData: true });"
+        )
+        page.goto(server + "/editor")
+        page.wait_for_function(f"() => {STATUS} === 'connected'")
+        said = page.evaluate("said")
+        assert said[-2:] == ["server not ready", "connected"] and said.count("connected") == 1, said
+    finally:
+        context.close()
