@@ -72,7 +72,13 @@ function wireControls() {
     $('carry-label').textContent = ev.target.valueAsNumber.toFixed(2);
     requestSolve(true);
   });
-  $('sample').addEventListener('change', (ev) => chooseSample(Number(ev.target.value)));
+  // (arrowed through: taken on Enter, as the file's menus below; left, the menu goes back:
+  // a sample replaces the file open. Each arrow loaded its sample, the first closing the
+  // file, unasked where it had no edits, no undo bringing it back)
+  chosen($('sample'), (menu, how, from) => {
+    if (how === 'left') menu.value = from;
+    else chooseSample(Number(menu.value));
+  });
   // a button, not a label for the hidden input: a label takes no focus, and no Tab reached it
   $('bvh-open').addEventListener('click', () => $('bvh-file').click());
   $('bvh-file').addEventListener('change', (ev) => {
@@ -179,7 +185,7 @@ function wireControls() {
   });
 }
 
-// A file's menu (units, up, root) chosen: ``take(menu, how, from)``, ``from`` the value it
+// A menu (a file's units, up, root; the Sample pose) chosen: ``take(menu, how, from)``, ``from`` the value it
 // had before. Arrowed through from the keyboard (a closed menu changes, and says so, at each
 // arrow or letter), the choice is taken on Enter or when the menu is left, and only if it
 // differs from the value before the arrows (``how``: 'enter' or 'left'; a mouse's or a

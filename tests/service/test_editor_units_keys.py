@@ -97,3 +97,38 @@ def test_arrowing_through_the_units_menu_reads_nothing_until_chosen(
         assert len(reads) == 5 and len(dialogs) == 1
     finally:
         page.context.close()
+
+
+@pytest.mark.browser
+def test_arrowing_through_the_sample_menu_loads_nothing_until_chosen(
+    server: str, browser: Any, more_mocap: Path
+) -> None:
+    """The Sample pose menu arrowed through with a file open: its first arrow closed the file
+    (unasked: it had no edits; no undo brings it back), each further one loaded a sample.
+    Now, as the file's menus, a choice is taken on Enter; left, the menu goes back."""
+    text = next(more_mocap.rglob("fair1/dab.bvh")).read_text()
+    page = open_editor(browser, server)
+    try:
+        page.select_option(UNITS, "in")
+        open_file(page, text, "dab.bvh")
+        page.focus("#sample")
+        page.keyboard.press("ArrowDown")
+        page.keyboard.press("ArrowDown")
+        page.keyboard.press("ArrowUp")
+        page.keyboard.press("ArrowUp")
+        page.wait_for_timeout(300)
+        assert page.evaluate(f"{M}.bvh()") is not None
+        page.keyboard.press("Tab")  # left: nothing taken, the menu back (no sample shown)
+        page.wait_for_timeout(300)
+        assert page.evaluate(f"{M}.bvh()") is not None
+        assert page.locator("#sample").input_value() == ""
+        page.focus("#sample")
+        page.keyboard.press("ArrowDown")
+        page.keyboard.press("ArrowDown")
+        page.wait_for_timeout(300)
+        assert page.evaluate(f"{M}.bvh()") is not None
+        page.keyboard.press("Enter")  # the sample arrowed to, taken
+        page.wait_for_function(f"() => {M}.bvh() === null")
+        assert page.locator("#sample").input_value() == "1"
+    finally:
+        page.context.close()
