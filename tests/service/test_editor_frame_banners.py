@@ -12,12 +12,16 @@ AnimatedDrawings file (``fair1/dab.bvh``: inches, +Z up) from the mocap archives
 
 from __future__ import annotations
 
+import json
 import math
+import shutil
+import subprocess
 from pathlib import Path
 from typing import Any
 
 import pytest
 
+from tests.conftest import REPO_ROOT
 from tests.service.editor_page import (
     M,
     drag_joint,
@@ -184,3 +188,34 @@ def test_a_file_whose_frame_0_is_broken_opens_at_its_first_whole_frame(
         assert 0 < pelvis["x"] < 1280 and 0 < pelvis["y"] < 800, pelvis  # (framed in view)
     finally:
         page.context.close()
+
+
+def test_the_page_reads_words_as_the_service_does() -> None:
+    """bvh.js ``bvhValue`` (Number first, the regex only where Number may read more) against
+    the service's own reader (``core.bvh_words.as_number`` and the ±1e7 bound) on tricky
+    words, and ``words`` against ``str.split`` (Python's white space, not JavaScript's)."""
+    node = shutil.which("node")
+    if node is None:
+        pytest.skip("node is needed to run the page's module")
+    from core.bvh_words import as_number
+
+    tricky = ["0x10", "0X1f", "0b11", "0o7", "1e5", "1E+5", "-0", "+.5", "5.", ".", "1e", "e1"]
+    tricky += ["Infinity", "-Infinity", "nan", "1_0", "\ufeff1", "1\ufeff", "2.5e7", "-1e7", "0.b"]
+    text = "1\x1f2\x853\xa04\ufeff5\u30006\t7\x0b8\x1c9"
+    run = (
+        "const m = await import(process.argv[1]); const [ws, t] = JSON.parse(process.argv[2]);"
+        "console.log(JSON.stringify([ws.map((w) => { const v = m.bvhValue(w);"
+        " return Number.isNaN(v) ? null : v; }), m.words(t)]));"
+    )
+    bvh_js = REPO_ROOT / "service" / "static" / "bvh.js"
+    arg = json.dumps([tricky, text])
+    done = subprocess.run(
+        [node, "--input-type=module", "-e", run, bvh_js.as_uri(), arg],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    values, split = json.loads(done.stdout)
+    want = [v if v is not None and abs(v) <= 1e7 else None for v in map(as_number, tricky)]
+    assert values == want
+    assert split == text.split()
