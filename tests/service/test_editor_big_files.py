@@ -3,8 +3,9 @@ editor: the service refuses the whole file with a 413 whose detail tells an API 
 send an excerpt, which the page already does for every solve but did not for the file's
 inspection, so a 9.5 MB file could not be opened at all, the banner telling the user what
 to send (an audit, 2026-12-07). The page now reads such a file from its first frame
-(``editor/excerpt.js`` ``firstFrame``, ``editor/file.js`` ``inspect``) where the whole file is
-read as its excerpts are; else the banner says why it cannot.
+(``editor/excerpt.js`` ``firstFrame``, ``editor/inspect.js`` ``inspect``) where the whole file
+is read as its excerpts are; else the banner says why it cannot. Over the service's default
+limit it goes so at once (it was uploaded whole first, for a 413).
 
 The real server and a real Chromium (``tests/service/editor_page.py``); a real ReActIdle file
 (``tests/character_files.py``) made big by repeating its frames.

@@ -108,7 +108,7 @@ export const readLayout = layoutOf;
 // (``frames``) and where its frames start (``at``); null where no excerpt can be cut (no MOTION header, "Frames:" no count,
 // lines ended by a CR alone, frame 0's line blank). Whether the whole file is read as
 // the excerpts are, one frame a line, whole, is known only with its channels (the
-// inspection's): ``layoutOf`` then (file.js). A file over 8 MiB could not be opened at all,
+// inspection's): ``layoutOf`` then (inspect.js). A file over 8 MiB could not be opened at all,
 // its 413 telling the user what an API client sends.
 export function firstFrame(text) {
   if (/\r(?!\n)|[\u2028\u2029]/.test(text)) return null;
@@ -139,7 +139,7 @@ function entryOf(text, frames, channels) {
 
 // Whether ``text`` holds one frame a line as the server reads it (``layoutOf``: no blank
 // line among or after the frames, as many lines as frames, the last whole, printable ASCII):
-// a frame's line is then the frame, whatever it holds (file.js frameRow: a broken line).
+// a frame's line is then the frame, whatever it holds (rows.js frameRow: a broken line).
 export const oneFrameALine = (text, frames, channels) => Boolean(entryOf(text, frames, channels).layout);
 
 // The values of ``frame`` of the committed text ``text`` (a Float64Array of ``channels``),
@@ -198,7 +198,7 @@ export function excerptOf(body, info) {
     // frame's, the real frame), and ``row``, the frame's values as that line holds them
     // (bvh.js lineValues: what frameValues finds walking the new text, whose lines are the
     // layout's; null where the line is no frame's values, and the page walks the text as
-    // before): the page drew each answer's frame by reading the whole new text (file.js
+    // before): the page drew each answer's frame by reading the whole new text (rows.js
     // frameRow), 0.8-49 ms an answer on 1-7.5 MB files, 0.08 ms from the row. ``edit``:
     // how the new text differs from ``text`` (its frame's line, ``before``, become
     // ``after``), for the commit (solve.js): the new text's layout (``seedLayout``) and the
