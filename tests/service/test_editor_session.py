@@ -132,7 +132,9 @@ def test_editor_goes_on_when_a_solve_is_never_answered(server: str, browser: Any
         hold["all"] = False
         assert page.evaluate(f"{M}.pose()") == before  # the pose as it was, targets kept
         assert "left_knee" in page.evaluate(f"{M}.targets()")
-        assert page.evaluate(STATUS) == "server not answering"
+        # ("server not answering" said, then "connected" once the server's liveness answers
+        # (api.js watch): it is up, only these solves were held)
+        page.wait_for_function(f"() => {STATUS} === 'connected'")
         drag_joint(page, "left_knee", 10, -10)  # the next drag is solved, the banner clears
         assert page.evaluate(f"{M}.error()") is None
         assert page.evaluate(STATUS) == "connected"
@@ -171,6 +173,71 @@ def test_editor_goes_on_when_a_solve_is_never_answered(server: str, browser: Any
         assert page.evaluate(f"{M}.error()") is None  # the drag's last solve went, and landed
         assert "right_knee" in page.evaluate(f"{M}.targets()")
         assert page.evaluate(f"{M}.lastSolve().response.targets")[-1]["reached"]
+        # the drag's last solve refused again after its wait: it snapped back, the targets
+        # kept, and nothing was sent again; now it is sent again once the wait is over
+        refused = [2]  # (a solve of the drag's, then its last one, after the wait)
+
+        def busy_for(route: Any) -> None:
+            if refused[0] <= 0:
+                route.continue_()
+                return
+            refused[0] -= 1
+            too_many(route)
+
+        page.route("**/v1/solve", busy_for)
+        detail = f"{M}.error() && {M}.error().detail"
+        before = page.evaluate(f"{M}.committedPose()")
+        xy = page.evaluate(f"{M}.projectJoint('left_elbow')")
+        page.mouse.move(xy["x"], xy["y"])
+        page.mouse.down()
+        page.mouse.move(xy["x"] + 25, xy["y"] - 25)
+        page.wait_for_function(f"() => {M}.error() !== null")  # (a solve of the drag's)
+        page.mouse.up()
+        page.clock.fast_forward(2_100)
+        page.wait_for_function(f"() => ({detail} || '').includes('sent again in 2 s (try 2 of 4)')")
+        assert page.evaluate(f"{M}.solveCount().dirty")  # (waiting to be sent again)
+        page.clock.fast_forward(2_100)
+        page.wait_for_function(f"() => {M}.error() === null")
+        settle(page)
+        assert page.evaluate(f"{M}.lastSolve().request.targets")[-1]["joint"] == "left_elbow"
+        assert page.evaluate(f"{M}.committedPose()") != before  # the edit landed
+        assert page.evaluate(f"{M}.pose()") == page.evaluate(f"{M}.committedPose()")
+        # a server busy for good: the last solve sent 4 times, then given up, said plainly
+        refused[0] = 1_000
+        before = page.evaluate(f"{M}.committedPose()")
+        steps = page.evaluate(f"{M}.history()")
+        xy = page.evaluate(f"{M}.projectJoint('right_elbow')")
+        page.mouse.move(xy["x"], xy["y"])
+        page.mouse.down()
+        page.mouse.move(xy["x"] - 25, xy["y"] - 25)
+        page.wait_for_function(f"() => {M}.error() !== null")
+        page.mouse.up()
+        for k in (2, 3, 4):
+            page.clock.fast_forward(2_100)
+            page.wait_for_function(f"() => ({detail} || '').includes('(try {k} of 4)')")
+        page.clock.fast_forward(2_100)
+        page.wait_for_function(f"() => ({detail} || '').includes('still busy after 4 tries')")
+        sent = refused[0]
+        page.clock.fast_forward(5_000)
+        page.wait_for_timeout(300)
+        assert refused[0] == sent  # (no more)
+        assert page.evaluate(f"{M}.pose()") == before  # as before the drag, its target kept
+        assert "right_elbow" in page.evaluate(f"{M}.targets()")
+        assert "drag again to retry" in page.evaluate(detail)
+        # the banner belongs to that edit: undone, it goes (it stayed over the state before)
+        page.keyboard.press("Control+z")
+        page.wait_for_function(f"() => {M}.history().index === {steps['index']}")
+        assert "right_elbow" not in page.evaluate(f"{M}.targets()")
+        assert page.evaluate(f"{M}.error()") is None
+        page.unroute("**/v1/solve", busy_for)
+        # a server gone, then back: the status said "server unreachable" until the next
+        # request; now the page asks the server's liveness meanwhile, and says it is back
+        page.route("**/v1/solve", lambda route: route.abort())
+        drag_joint(page, "left_knee", 10, 10)
+        assert page.evaluate(STATUS) == "server unreachable"
+        page.unroute("**/v1/solve")
+        page.clock.fast_forward(3_100)
+        page.wait_for_function(f"() => {STATUS} === 'connected'")
     finally:
         context.close()
 

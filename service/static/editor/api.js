@@ -29,6 +29,35 @@ export const NO_ANSWER_MS = 60_000;
 const NOT_ANSWERING = 'server not answering';
 const DOWN = ['server unreachable', NOT_ANSWERING];
 
+// The status says the server is down (unreachable, not answering): it said so until the
+// page's next request, a restarted server's too. While it says so, the server's liveness
+// (GET v2/health/live: no body, no model, no key) is asked every WATCH_MS, and the status
+// says "connected" once it answers.
+export const WATCH_MS = 3000;
+let watching = false;
+
+function down(text) {
+  $('status').textContent = text;
+  if (watching) return;
+  watching = true;
+  setTimeout(watch, WATCH_MS);
+}
+
+async function watch() {
+  if (!DOWN.includes($('status').textContent)) {
+    watching = false; // (an answer came meanwhile)
+    return;
+  }
+  try {
+    await fetch('v2/health/live', { cache: 'no-store', signal: AbortSignal.timeout(WATCH_MS) });
+  } catch {
+    setTimeout(watch, WATCH_MS);
+    return;
+  }
+  watching = false;
+  if (DOWN.includes($('status').textContent)) $('status').textContent = 'connected';
+}
+
 // ``signal``: the caller's, to give the request up (an ApiError 'Given up', status -1,
 // which says nothing to the user: the caller dropped the answer).
 export async function api(method, path, body, { signal = null } = {}) {
@@ -58,12 +87,12 @@ export async function api(method, path, body, { signal = null } = {}) {
     text = await res.text();
   } catch (err) {
     if (timedOut) {
-      $('status').textContent = NOT_ANSWERING;
+      down(NOT_ANSWERING);
       throw new ApiError(0, 'No answer', `${method} /${path}: the server did not answer within `
         + `${NO_ANSWER_MS / 1000} s; given up`);
     }
     if (signal && signal.aborted) throw new ApiError(-1, 'Given up', `${method} /${path}`);
-    $('status').textContent = 'server unreachable';
+    down('server unreachable');
     throw new ApiError(0, 'Server unreachable', `${method} /${path} failed (${err.message})`);
   } finally {
     clearTimeout(timer);
@@ -106,7 +135,8 @@ function keyNeeded() {
 // ------------------------------------------------------------------------------------
 // Error banner
 // ------------------------------------------------------------------------------------
-export function showError(err) {
+// ``owner``: the edit a failed solve's banner belongs to (solve.js: undone, the banner goes).
+export function showError(err, owner = null) {
   const e = err instanceof ApiError ? err : new ApiError(-1, 'Editor error', String(err && err.message || err));
   ui.currentError = {
     status: e.status,
@@ -118,9 +148,11 @@ export function showError(err) {
   $('error-detail').textContent = e.detail;
   $('error-meta').textContent = e.requestId ? `request id ${e.requestId}` : '';
   $('error').hidden = false;
+  ui.errorOwner = owner;
 }
 
 export function clearError() {
   ui.currentError = null;
+  ui.errorOwner = null;
   $('error').hidden = true;
 }

@@ -2,7 +2,7 @@
 // undo / redo / reset / sample, and the solve requests (editor.js's frame loop sends them).
 
 import { $, doc, history, solver, state, ui } from './state.js';
-import { api, clearError, showError } from './api.js';
+import { api, ApiError, clearError, showError } from './api.js';
 import { excerptOf, seedLayout } from './excerpt.js';
 import { endDrag } from './interaction.js';
 import { currentStep, pushStep, stepBack, stepForward } from './history.js';
@@ -98,6 +98,7 @@ export function cancelSolves() {
   solver.giveUp = null;
   solver.dirty = false;
   solver.commitPending = false;
+  solver.busyTries = 0;
   // the gesture is dropped: what waited for it runs once the action dropping it is done
   const waiting = solver.afterCommit.splice(0);
   if (waiting.length) queueMicrotask(() => waiting.forEach((fn) => fn()));
@@ -130,6 +131,7 @@ export function undo() {
     // it alone (it also undid the step before); what waited for it goes on
     endDrag(false);
     cancelSolves();
+    undoneError(null);
     restore(currentStep(), doc.active ? doc.frame : undefined); // (the frame shown)
     refresh();
     return;
@@ -137,10 +139,26 @@ export function undo() {
   if (history.index <= 0) return;
   endDrag(false);
   cancelSolves();
-  const frame = history.stack[history.index].frame;
-  restore(stepBack(), frame);
+  const undone = history.stack[history.index];
+  undoneError(undone);
+  restore(stepBack(), undone.frame);
   refresh();
 }
+
+// A failed solve's banner (a 422, a busy server's 429) goes with the edit it belongs to once
+// that is undone: ``step``, the step undone, or null for a gesture dropped before it became
+// one. It stayed over the state before the edit, naming a solve of a state no longer shown.
+function undoneError(step) {
+  const owner = ui.errorOwner;
+  if (owner && (step === null ? owner.pending : owner.step === step)) clearError();
+}
+
+// The edit a failed solve belongs to (for its banner: undoneError): the gesture still on
+// its way, or the step shown (a gesture's last solve failed: its targets, kept, are a step).
+const solveOwner = () => ({
+  step: history.stack[history.index] || null,
+  pending: solver.commitPending || Boolean(ui.drag),
+});
 
 export function redo() {
   if (ui.reading || history.index >= history.stack.length - 1) return;
@@ -364,6 +382,12 @@ export function requestSolve(commit) {
   solver.dirty = true;
 }
 
+// How many times a gesture's last solve is sent to a busy server (429 or 503 with
+// Retry-After, each waited for) before it is given up: at most 4 x 30 s.
+export const BUSY_TRIES = 4;
+
+const withNote = (err, note) => new ApiError(err.status, err.title, `${err.detail}; ${note}`, err.requestId, err.retryAfter);
+
 export async function sendSolve() {
   solver.dirty = false;
   solver.inflight = true;
@@ -379,6 +403,7 @@ export async function sendSolve() {
     const res = await post(body, giveUp.signal);
     if (epoch !== solver.epoch) return; // undone / reset / scrubbed meanwhile
     solver.answered += 1;
+    solver.busyTries = 0;
     if (body.bvh === undefined) {
       state.pose = res.data.pose;
     } else {
@@ -411,7 +436,22 @@ export async function sendSolve() {
     settle = !solver.commitPending;
   } catch (err) {
     if (epoch !== solver.epoch) return;
-    if (commit && !solver.dirty) {
+    let said = err;
+    const wait = err.retryAfter ? Math.min(err.retryAfter, 30) : 0;
+    if (wait) {
+      // a busy server (429, 503) says when to come back: no solve goes before (capped at
+      // 30 s); the drag's latest targets go then. It was asked again at each pointer move,
+      // each answered 429 at once (with a file, the whole file uploaded each time).
+      solver.holdUntil = performance.now() + wait * 1000;
+    }
+    if (commit && !solver.dirty && wait && solver.busyTries < BUSY_TRIES - 1) {
+      // The gesture's final solve refused by a busy server: sent again once its Retry-After
+      // is over (the gesture still on its way: what waits for it waits on), BUSY_TRIES
+      // times in all. It snapped back, the targets kept, and nothing was sent again.
+      solver.busyTries += 1;
+      solver.dirty = true;
+      said = withNote(err, `the edit is sent again in ${wait} s (try ${solver.busyTries + 1} of ${BUSY_TRIES})`);
+    } else if (commit && !solver.dirty) {
       // The gesture's final solve failed: keep its targets (so it can be retried) but not
       // a pose the server never produced, nor one of the drag's answers: the screen shows
       // the pose as it was, the one Export writes and the next solve starts from.
@@ -419,14 +459,13 @@ export async function sendSolve() {
       state.pose = clonePose(state.committed);
       doc.shown = doc.text;
       pushHistory();
+      if (wait) {
+        said = withNote(err, `still busy after ${BUSY_TRIES} tries: the edit is not applied (the `
+          + 'pose is as before it, its targets kept: drag again to retry)');
+      }
+      solver.busyTries = 0;
     }
-    if (err.retryAfter) {
-      // a busy server (429, 503) says when to come back: no solve goes before (capped at
-      // 30 s); the drag's latest targets go then. It was asked again at each pointer move,
-      // each answered 429 at once (with a file, the whole file uploaded each time).
-      solver.holdUntil = performance.now() + Math.min(err.retryAfter, 30) * 1000;
-    }
-    showError(err);
+    showError(said, solveOwner());
     refresh();
     settle = !solver.commitPending;
   } finally {

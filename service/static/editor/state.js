@@ -42,6 +42,7 @@ export const solver = {
   afterCommit: [], // what waits for that commit: a scrub, an export, a units change
   giveUp: null, // the AbortController of the solve in flight (cancelSolves gives it up)
   holdUntil: 0, // performance.now() before which no solve is sent (a Retry-After; solve.js)
+  busyTries: 0, // a gesture's last solve refused by a busy server, so many times in a row (solve.js)
   sent: 0,
   answered: 0,
   last: null,
@@ -77,6 +78,7 @@ export const history = { stack: [], index: -1, text: null };
 // Flags several modules read and write (an importer cannot assign a module's `let`).
 export const ui = {
   currentError: null, // the error on the banner (api.js), or null
+  errorOwner: null, // a failed solve's banner: {step, pending}, the edit it belongs to (solve.js)
   hovered: null, // the joint (or target) under the pointer
   needsRender: true, // the frame loop renders when set
   drag: null, // the gesture in progress (interaction.js; a nudge burst's, keys.js), or null
