@@ -307,6 +307,20 @@ def test_editor_keyboard_empty_file_scrub_follows_and_unload_asks(
         err = page.evaluate(f"{M}.error()")
         assert err["title"] == "Empty file" and "empty.bvh" in err["detail"], err
         assert inspects == []
+        # an Acclaim ASF or AMC file (by its name, or by its first keyword): said plainly that
+        # the editor reads BVH only, and how to convert it (it was sent, and refused as "not a
+        # BVH file (no HIERARCHY keyword)"); nothing sent
+        asf = "# AST/ASF file generated using VICON BodyLanguage\n:version 1.10\n:name VICON\n"
+        amc = "#!OML:ASF F:\\VICON\\USERDATA\\07.asf\n:FULLY-SPECIFIED\n:DEGREES\n1\n"
+        for body, name in ((asf, "07.asf"), (amc, "07_01.txt"), ("1\nroot 0 0 0\n", "07_01.AMC")):
+            page.evaluate(f"{M}.error() && document.getElementById('error-close').click()")
+            give_file(page, body, name)
+            page.wait_for_function(f"() => {M}.error() !== null")
+            err = page.evaluate(f"{M}.error()")
+            assert err["title"] == "Not a BVH file" and err["detail"].startswith(name), err
+            assert "ASF/AMC file" in err["detail"] and "reads BVH only" in err["detail"], err
+            assert "Convert the pair to one BVH file" in err["detail"], err
+        assert inspects == []
         # a walking character scrubbed: each frame's pelvis in the view
         give_file(page, walking_file(), "walk.bvh")
         page.wait_for_function(f"() => {M}.bvh() && {M}.bvh().name === 'walk.bvh'")

@@ -450,6 +450,11 @@ export async function openFile(file) {
   // edit then comes back with LF ends); the page's own reader splits at LF
   const crOnly = decoded.text.includes('\r') && !decoded.text.includes('\n');
   const text = crOnly ? decoded.text.replaceAll('\r', '\n') : decoded.text;
+  const acclaim = acclaimFile(file.name, text);
+  if (acclaim) { // (the service refused it as "not a BVH file (no HIERARCHY keyword)")
+    showError(new ApiError(-1, 'Not a BVH file', `${file.name}: ${acclaim}; nothing was opened`));
+    return;
+  }
   let jointMap;
   try {
     jointMap = mapFor(file.name, text);
@@ -462,6 +467,20 @@ export async function openFile(file) {
   if (doc.active || doc.tried) showSettings(DEFAULT_SETTINGS); // each file read anew (MENUS, above)
   showMap(jointMap);
   await openText(text, file.name, { encoding: decoded.encoding, jointMap, yes });
+}
+
+// An Acclaim ASF (skeleton) or AMC (motion) file, by its name or its first keyword, and no
+// BVH: why the editor does not open it and what to do instead, or null.
+const ACCLAIM = /^(?:#[^\n]*\n|\s)*:(version|name|units|documentation|root|bonedata|fully-specified|degrees)\b/i;
+
+function acclaimFile(name, text) {
+  if (/HIERARCHY/i.test(text.slice(0, 65536))) return null;
+  const kind = /\.(asf|amc)$/i.exec(name) || ACCLAIM.exec(text.slice(0, 4096));
+  if (!kind) return null;
+  return 'an Acclaim ASF/AMC file (a skeleton .asf, its motion .amc): the editor reads BVH '
+    + 'only. Convert the pair to one BVH file with a motion-capture tool (an ASF/AMC import, '
+    + 'then a BVH export: e.g. Blender with an ASF/AMC import add-on, then File > Export > '
+    + 'Motion Capture (.bvh)) and open that';
 }
 
 // The joint map a file opened from the picker (or a drop) is read with: the field's, for the
