@@ -33,10 +33,25 @@ def test_ctrl_z_in_the_frame_box_undoes_the_edit(
     server: str, browser: Any, more_mocap: Path
 ) -> None:
     text = next(more_mocap.rglob("fair1/dab.bvh")).read_text()
+    assert "Frame Time:\t0.0333333\n" in text
+    text = text.replace("Frame Time:\t0.0333333\n", "Frame Time:\t0.041667\n")  # (24 fps)
     page = open_editor(browser, server)
     try:
         page.select_option("#bvh-units", "in")
         open_file(page, text, "dab.bvh")
+        # the rate to 2 decimals: it said "23.9998 fps" of 0.041667 s
+        assert " @ 24 fps; " in page.locator("#bvh-meta").inner_text()
+        # plain whole numbers only: the box took 1e1 for frame 10 (JavaScript's Number; the
+        # number input keeps 1e1 and 1.0, and lets no x in: 0x10 typed is 010)
+        for typed in ("1e1", "1.0"):
+            page.locator(BOX).click()
+            page.keyboard.press("Control+a")
+            page.keyboard.type(typed)
+            page.keyboard.press("Enter")
+            page.wait_for_timeout(100)
+            shown = (page.evaluate(f"{M}.bvh()")["frame"], box(page))
+            assert shown == (0, "0"), (typed, shown)
+        page.locator("#error-close").click()
         page.locator(BOX).fill("30")
         page.keyboard.press("Enter")
         page.wait_for_function(f"() => {M}.bvh().frame === 30")

@@ -231,7 +231,8 @@ function showOpened({ info, text, name, original, encoding, jointMap, settings, 
   delete $('bvh-frame-number').dataset.editing;
   $('bvh-loaded').hidden = false;
   $('bvh-name').textContent = name;
-  const fps = info.frame_time > 0 ? ` @ ${(1 / info.frame_time).toFixed(4).replace(/\.?0+$/, '')} fps` : '';
+  // (to 2 decimals: a Frame Time of 0.041667 s is 24 fps, not 23.9998; 0.0417083 s, 23.98)
+  const fps = info.frame_time > 0 ? ` @ ${(1 / info.frame_time).toFixed(2).replace(/\.?0+$/, '')} fps` : '';
   $('bvh-meta').textContent = `${info.joints.length} joints, ${info.frames} frames${fps}; `
     + `${info.scheme} map, units ${info.units}, up ${info.up}`;
   $('export').textContent = 'Export BVH';
@@ -608,7 +609,9 @@ export function jumpToFrame(typed) {
   if (!doc.active) return;
   const last = lastFrame(doc.info);
   const raw = String(typed).trim();
-  const frame = Number(raw);
+  // plain whole numbers only, as the rest of the editor reads them (the box took 1e1 for
+  // frame 10: JavaScript's Number, and the number input lets e through)
+  const frame = /^\d+$/.test(raw) ? Number(raw) : NaN;
   if (raw === '' || !Number.isInteger(frame) || frame < 0 || frame > last) {
     delete box.dataset.editing;
     box.value = $('bvh-frame').value;
