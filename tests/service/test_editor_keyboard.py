@@ -135,6 +135,18 @@ def test_nudge_axes_follow_the_view_and_the_modifiers_scale_the_step() -> None:
 
 
 # -- in the browser --------------------------------------------------------------------------
+# The width of ``text`` in the joint menu's font, and the room the closed menu has for it
+# (its width less its padding, border and arrow: 20 px).
+FITS = """(text) => {
+  const menu = document.getElementById('joint-pick');
+  const style = getComputedStyle(menu);
+  const c = document.createElement('canvas').getContext('2d');
+  c.font = `${style.fontSize} ${style.fontFamily}`;
+  const padding = parseFloat(style.paddingLeft) + parseFloat(style.paddingRight);
+  return [c.measureText(text).width, menu.clientWidth - padding - 20];
+}"""
+
+
 @pytest.mark.browser
 def test_editor_selects_and_nudges_a_joint_from_the_keyboard(server: str, browser: Any) -> None:
     context, page, console_errors, page_errors, _, solves = watched_page(browser, "/v1/solve")
@@ -180,6 +192,10 @@ def test_editor_selects_and_nudges_a_joint_from_the_keyboard(server: str, browse
         assert (
             page.inner_text("#joint-pick option[value=left_wrist]") == "left_wrist (target reached)"
         )
+        # the menu shows it whole, and a longer joint's pinned, too (cut at 170 px before)
+        for text in ("left_wrist (target reached)", "right_shoulder (target reached, pinned)"):
+            width, room = page.evaluate(FITS, text)
+            assert width <= room, (text, width, room)
         assert page.inner_text("#joint-state") == "left_wrist, target reached"
         after_right = target(page, "left_wrist")
         assert after_right is not None
