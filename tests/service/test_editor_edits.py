@@ -136,6 +136,8 @@ def test_editor_keeps_screen_file_and_history_in_step(server: str, browser: Any)
         settle(page)
         assert not shown_is_committed()  # a mid-drag answer on screen
         page.route("**/v1/bvh/solve", lambda route: route.abort())
+        # (the liveness watch unreachable too: else the status may recover before it is read)
+        page.route("**/v2/health/live", lambda route: route.abort())
         page.mouse.up()
         page.wait_for_function(f"() => {M}.error() !== null")
         settle(page)
@@ -143,6 +145,7 @@ def test_editor_keeps_screen_file_and_history_in_step(server: str, browser: Any)
         assert shown_is_committed() and page.evaluate(f"{M}.bvhText()") == before
         assert page.locator("#status").inner_text() == "server unreachable"
         page.unroute("**/v1/bvh/solve")
+        page.unroute("**/v2/health/live")
 
         # Ctrl+Z while a drag's answer is on its way drops that drag alone
         steps = page.evaluate(f"{M}.history()")
@@ -437,6 +440,7 @@ def test_editor_status_stays_unreachable_after_a_file_refused_for_it(
     page = open_editor(browser, server)
     try:
         page.route("**/v1/bvh/inspect", lambda route: route.abort())
+        page.route("**/v2/health/live", lambda route: route.abort())  # (no recovery meanwhile)
         give_file(page, text, "idle.bvh")
         page.wait_for_function(f"() => {M}.error() !== null")
         assert page.evaluate(f"{M}.error()")["status"] == 0
