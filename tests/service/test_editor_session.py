@@ -234,9 +234,11 @@ def test_editor_goes_on_when_a_solve_is_never_answered(server: str, browser: Any
         # a server gone, then back: the status said "server unreachable" until the next
         # request; now the page asks the server's liveness meanwhile, and says it is back
         page.route("**/v1/solve", lambda route: route.abort())
+        page.route("**/v2/health/live", lambda route: route.abort())  # (gone until read)
         drag_joint(page, "left_knee", 10, 10)
         assert page.evaluate(STATUS) == "server unreachable"
         page.unroute("**/v1/solve")
+        page.unroute("**/v2/health/live")
         page.clock.fast_forward(3_100)
         page.wait_for_function(f"() => {STATUS} === 'connected'")
     finally:
