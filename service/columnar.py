@@ -24,6 +24,7 @@ from core.skeleton import JOINT_INDEX, JOINT_NAMES, NUM_JOINTS
 from service.bounded import context, errors_of
 from service.engine import Engine
 from service.errors import MAX_ERRORS, BodyInvalid, TooManyItems
+from service.floors import floor_warnings
 from service.limits import Pricing, chunks_of, searched_price
 from service.problems import BatchAnswer
 from service.schemas import MAX_COORDINATE, MAX_WEIGHT, SolveOptions
@@ -382,7 +383,9 @@ def answer(cols: Columns, part: Part, version: str) -> bytes:
         "solver_of": np.ascontiguousarray(ans.path_of, dtype=np.int64),
         "model": version,
         "method": "fabrik" if cols.options.method == "fabrik" else "neural",
+        "floor": cols.options.floor,
         "up_warning": pose_warnings(cols.poses),
+        "floor_warning": floor_warnings(cols.poses, cols.options.floor),
     }
     rest = orjson.dumps(body, option=orjson.OPT_SERIALIZE_NUMPY)
     return b'{"poses":' + part.poses + b"," + rest[1:]

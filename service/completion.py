@@ -11,6 +11,7 @@ import numpy.typing as npt
 from core.geometry import symmetry_views, unview
 from core.skeleton import BONES, JOINT_INDEX, JOINT_NAMES, MIRROR, NUM_JOINTS, bone_lengths
 from service.errors import InvalidRequest
+from service.floors import FLOOR_REACH
 from service.lean import BOUND_ITEMS
 from service.problems import CompleteResult
 from service.schemas import BONE_M
@@ -25,14 +26,6 @@ F64 = npt.NDArray[np.floating[Any]]
 #: The base points must span at least this much (m): the networks read a body's size from
 #: them, and six points at one spot have none (a 422, as a degenerate pose is for a solve).
 MIN_SPAN = 0.01
-#: The floor the networks see lies at most this many pelvis-to-neck distances below the
-#: pelvis. No body of the training data stood higher above its floor (at most 3.5: a jump;
-#: 2.2 standing), so a floor farther below says nothing but a size the networks never saw:
-#: 50 m below the key points, the answer's bones came out up to 7 m long, 10 km below,
-#: 1.4 km (reviewed 2026-12-04). Nor is it above the pelvis: a pelvis on the floor (a body
-#: lying or sitting there) is as low as the training data went; 9 m above the key points,
-#: the floor made bones up to 1.25 m long.
-FLOOR_REACH = 4.0
 #: The sizes the completion networks know, as pelvis-to-neck distances over the reference
 #: skeleton's spine (its three bones): they were trained on the recorded bodies (0.93-1.29,
 #: 1st-99th percentile of the training split; held-out bodies 0.86-1.45) at x0.6-1.2

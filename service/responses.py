@@ -20,10 +20,15 @@ def pose_dict(pose: np.ndarray) -> dict[str, list[float]]:
 
 
 def solve_payload(
-    p: SolveProblem, r: SolveResult, version: str, up_warning: str | None
+    p: SolveProblem,
+    r: SolveResult,
+    version: str,
+    up_warning: str | None,
+    floor_warning: str | None,
 ) -> dict[str, Any]:
-    """The pose form's answer; ``up_warning`` its start pose's
-    (:func:`service.upright.pose_warning`, a batch's all at once)."""
+    """The pose form's answer; ``up_warning`` and ``floor_warning`` its start pose's
+    (:func:`service.upright.pose_warning`, :func:`service.floors.floor_warning`, a
+    batch's all at once)."""
     k, tolerance = p.n_targets, p.tolerance
     names = [JOINT_NAMES[j] for j in p.target_idx.tolist()]
     return {
@@ -41,7 +46,9 @@ def solve_payload(
         "model": version,
         "method": "fabrik" if p.method == "fabrik" else "neural",
         "iterations": r.iterations,
+        "floor": p.floor,
         "up_warning": up_warning,
+        "floor_warning": floor_warning,
     }
 
 

@@ -251,6 +251,17 @@ ITERATIONS = (
 )
 
 
+#: ``floor_warning``'s description (``service.floors``)
+FLOOR_WARNING = (
+    "Null unless `options.floor` lies above the start pose's pelvis, or below it by more "
+    "than 4 times its pelvis-to-neck distance (no body the networks learned stood higher: "
+    "3.5 mid-jump, 2.2 standing): the body was solved over that floor as asked, a body "
+    "under its ground or far above it (`/v1/complete` takes such a floor into that band and "
+    "answers the floor it used). Says where the floor lies; the floor is the world height "
+    "of the ground the character stands on."
+)
+
+
 class SolveResponse(BaseModel):
     pose: PoseOut
     targets: list[TargetResult]
@@ -268,6 +279,11 @@ class SolveResponse(BaseModel):
     model: str = Field(description="Manifest version of the models.")
     method: Literal["neural", "fabrik"]
     iterations: int = Field(description=ITERATIONS)
+    floor: float = Field(
+        description="Height (m, world y) of the ground the solve used: the request's "
+        "`options.floor` (0 if none), taken as given (`floor_warning` says where it lies "
+        "far from the body)."
+    )
     up_warning: str | None = Field(
         default=None,
         description="Null unless the start pose's pelvis-to-neck line leans more than 60 "
@@ -275,6 +291,10 @@ class SolveResponse(BaseModel):
         "or upside down along -Y (as asked, if it lies so; a pose captured with +Z up must "
         "be turned to +Y up first, or sent in the character form with its `up`). Says along "
         "which axis the line runs, as `/v1/complete`'s `up_warning` says of key points.",
+    )
+    floor_warning: str | None = Field(
+        default=None,
+        description=FLOOR_WARNING,
     )
 
 
@@ -594,7 +614,16 @@ class ColumnarResponse(BaseModel):
     solver_of: list[int] = Field(description="Per item: its index into `solvers`.")
     model: str
     method: Literal["neural", "fabrik"]
+    floor: float = Field(
+        description="Height (m, world y) of the ground every item was solved over: "
+        "`options.floor` (0 if none), as given."
+    )
     up_warning: list[str | None] = Field(
         description="Per item: its start pose's `up_warning`, as the item list's answers "
         "say it (null where its pelvis-to-neck line leans 60 degrees or less from +Y)."
+    )
+    floor_warning: list[str | None] = Field(
+        description="Per item: its start pose's `floor_warning`, as the item list's answers "
+        "say it (null where the floor lies below its pelvis by at most 4 pelvis-to-neck "
+        "distances)."
     )

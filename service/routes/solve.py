@@ -31,6 +31,7 @@ from service.characters import (
 from service.deps import ReadyEngine, RequestBudget, ServiceState, State
 from service.engine import Engine
 from service.errors import InvalidRequest, TooManyItems, every_item
+from service.floors import floor_warning, floor_warnings
 from service.limits import Budget, Pricing, edit_price, price_of, refuse_price
 from service.problems import SolveProblem, SolveResult
 from service.responses import json_response, raw_response, solve_payload
@@ -99,7 +100,8 @@ async def solve(body: SolveBody, engine: ReadyEngine, budget: RequestBudget,
     p = solve_problem(req, poses([req], ["pose"])[0])
     result = await solve_one(p, bool(req.pins), engine, budget)
     state.metrics.solved(p.method, result.solvers)
-    answer = solve_payload(p, result, engine.version, pose_warning(p.pose))
+    said = pose_warning(p.pose), floor_warning(p.pose, p.floor)
+    answer = solve_payload(p, result, engine.version, *said)
     return json_response(answer, budget.compute)
 
 
@@ -206,9 +208,12 @@ async def solve_batch(body: BatchBody, engine: ReadyEngine, budget: RequestBudge
         )
 
     def answer() -> Response:
-        ups = iter(pose_warnings(np.stack([p.pose for p in problems])) if problems else [])
+        starts = np.stack([p.pose for p in problems]) if problems else np.zeros((0, 21, 3))
+        floors = np.array([p.floor for p in problems], dtype=np.float64)
+        said = iter(zip(pose_warnings(starts), floor_warnings(starts, floors), strict=True))
         pairs = iter(zip(problems, results, strict=True))
-        out = [solved[i] if i in solved else solve_payload(*next(pairs), engine.version, next(ups))
+        out = [solved[i] if i in solved
+               else solve_payload(*next(pairs), engine.version, *next(said))
                for i in range(len(forms))]  # fmt: skip
         return json_response({"items": out}, budget.compute)
 

@@ -129,7 +129,9 @@ def test_answer_written_in_parts_is_the_whole_answer_written_at_once(
             "solver_of": ans.path_of,
             "model": engine.version,
             "method": "neural",
+            "floor": 0.0,
             "up_warning": [None] * 7,  # (real poses, upright)
+            "floor_warning": [None] * 7,  # (over their own floor)
         },
         option=orjson.OPT_SERIALIZE_NUMPY,
     )

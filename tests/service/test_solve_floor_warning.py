@@ -1,0 +1,103 @@
+"""``/v1/solve``'s pose form says which floor it used (``floor``) and where that floor
+lies far from the start pose (``floor_warning``): an API audit (2026-12-07) sent the docs'
+example with ``options.floor`` 5 m above the standing body and got no word, where
+``/v1/complete`` takes such a floor into the band the networks know and answers the floor
+it used. The single answer (the hot path and the route), each item of a batch and each row
+of the columnar form say it alike, from one definition (``service.floors``), the band
+``/v1/complete`` clamps its floor to. The poses answered do not change."""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+import numpy as np
+import pytest
+
+from core.skeleton import JOINT_NAMES
+from service.floors import FLOOR_REACH, floor_warnings
+from service.middleware import fastpath
+from tests.conftest import REPO_ROOT
+from tests.service.test_api import BASE
+
+
+def _with_floor(body: dict[str, Any], floor: float) -> dict[str, Any]:
+    return {**body, "options": {**body.get("options", {}), "floor": floor}}
+
+
+def test_a_floor_far_from_the_body_is_said_and_the_floor_used_is_answered(
+    client: Any, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    example = json.loads((REPO_ROOT / "docs/examples/solve.json").read_text())
+    soft = {"pose": example["pose"], "targets": example["targets"]}  # (the hot path's)
+    pelvis = example["pose"]["pelvis"][1]  # 0.93 m: the body stands on y = 0
+    torso = float(np.linalg.norm(np.subtract(example["pose"]["neck"], example["pose"]["pelvis"])))
+    for body in (example, soft):
+        near = client.post("/v1/solve", json=body).json()
+        assert near["floor"] == 0.0 and near["floor_warning"] is None, near["floor_warning"]
+        # a floor under the feet, or one the body stands well above, is no word
+        for floor in (-0.05, pelvis - 0.01, pelvis - 3.5 * torso):
+            ok = client.post("/v1/solve", json=_with_floor(body, floor)).json()
+            assert ok["floor"] == floor and ok["floor_warning"] is None, (floor, ok)
+        above = client.post("/v1/solve", json=_with_floor(body, 5.0))
+        assert above.status_code == 200, above.text
+        said = above.json()
+        assert said["floor"] == 5.0
+        warning = said["floor_warning"]
+        assert warning is not None and warning.startswith("options.floor: the floor (y = 5 m)"), (
+            warning
+        )
+        assert "4.07 m above the start pose's pelvis" in warning, warning
+        # solved as asked: the pose is the one a floor of 5 gives without the warning
+        assert said["pose"] == client.post("/v1/solve", json=_with_floor(body, 5.0)).json()["pose"]
+        below = client.post("/v1/solve", json=_with_floor(body, -50.0)).json()["floor_warning"]
+        assert below is not None and "50.9 m below the start pose's pelvis" in below, below
+        assert f"stood more than {FLOOR_REACH:g} times higher" in below, below
+    # each item of a batch, and each row of the columnar form, as the single answer says
+    bodies = [soft, _with_floor(soft, 5.0), example, _with_floor(example, -50.0)]
+    listed = client.post("/v1/solve/batch", json={"items": bodies}).json()["items"]
+    singles = [client.post("/v1/solve", json=b).json() for b in bodies]
+    assert listed == singles
+    assert [a["floor_warning"] is None for a in listed] == [True, False, True, False]
+    row = [v for n in JOINT_NAMES for v in soft["pose"][n]]
+    goal = soft["targets"][0]["position"]
+    for floor, item in ((0.0, listed[0]), (5.0, listed[1])):
+        col = client.post(
+            "/v1/solve/batch",
+            json={"poses": [row, row], "targets": {"joints": ["left_wrist"],
+                  "positions": [goal, goal]}, "options": {"floor": floor}},
+        )  # fmt: skip
+        assert col.status_code == 200, col.text
+        assert col.json()["floor"] == floor
+        assert col.json()["floor_warning"] == [item["floor_warning"]] * 2
+    # the route (a body the hot path leaves to it) answers the hot path's bytes
+    fast = [client.post("/v1/solve", json=b).content for b in bodies]
+    monkeypatch.setattr(fastpath, "pose_form", lambda body, data=None: None)
+    monkeypatch.setattr(fastpath, "plain", lambda data: None)
+    assert [client.post("/v1/solve", json=b).content for b in bodies] == fast
+
+
+def test_the_solve_warns_where_the_completion_clamps(client: Any) -> None:
+    """One band: a floor ``/v1/complete`` takes as given gets no ``floor_warning`` from a
+    solve of the same body, and one it moves does."""
+    example = json.loads((REPO_ROOT / "docs/examples/solve.json").read_text())
+    pose = np.array([example["pose"][n] for n in JOINT_NAMES])
+    keypoints = [{"joint": j, "position": example["pose"][j]} for j in BASE]
+    for floor in (-5.0, -1.0, -0.5, 0.0, 0.5, 0.92, 0.94, 2.0):
+        done = client.post("/v1/complete", json={"keypoints": keypoints, "floor": floor}).json()
+        (warning,) = floor_warnings(pose[None], np.array([floor]))
+        assert (warning is None) == (done["floor"] == floor), (floor, done["floor"], warning)
+
+
+def test_no_real_pose_over_its_own_floor_is_warned() -> None:
+    """The TEST split's and the held-out bodies' real poses (every frame over its own
+    floor, y = 0): no warning (their pelvis stands 0.45-3.5 pelvis-to-neck distances up)."""
+    dataset = REPO_ROOT / "data/poses.npz"
+    if not dataset.is_file():
+        pytest.skip("data/poses.npz not built (make dataset)")
+    data = np.load(dataset)
+    split = data["clip_split"][data["clip"]]
+    for name in ("test", "holdout"):
+        poses = data["positions"][split == name].astype(np.float64)
+        assert len(poses) > 1000, name
+        assert floor_warnings(poses, 0.0) == [None] * len(poses), name
