@@ -9,7 +9,15 @@ import numpy as np
 import numpy.typing as npt
 
 from core.geometry import symmetry_views, unview
-from core.skeleton import BONES, JOINT_INDEX, JOINT_NAMES, MIRROR, NUM_JOINTS, bone_lengths
+from core.skeleton import (
+    BONES,
+    JOINT_INDEX,
+    JOINT_NAMES,
+    MIRROR,
+    NUM_JOINTS,
+    PARENTS,
+    bone_lengths,
+)
 from service.errors import InvalidRequest
 from service.floors import FLOOR_REACH
 from service.lean import BOUND_ITEMS
@@ -33,6 +41,12 @@ MIN_SPAN = 0.01
 #: the answer back: at x3 a key point was missed by 15 % of the body's size, bones came out
 #: 30 % off (reviewed 2026-12-05). Inside, nothing changes.
 TORSO_BAND = (0.55, 1.55)
+#: The sizes ``bone_lengths`` may give a body, as their total over the body the key points
+#: imply (the networks' estimate from them), before the answer says so: real bodies' own
+#: bones total REAL_BODIES times it (6 key points of 150 TEST and 150 held-out poses, the
+#: shipped models, 2026-12-07), every bone at 1 mm 0.005 times, at 2 m 10.
+BONES_BAND = (0.5, 2.0)
+REAL_BODIES = (0.97, 1.23)
 #: Each bone's index, by its child joint's name.
 _BONE = {JOINT_NAMES[c]: b for b, (c, _) in enumerate(BONES)}
 
@@ -128,10 +142,11 @@ def complete(
     )  # fmt: skip
     world = polished[0] + origin
     errors = np.linalg.norm(world[idx] - np.stack(list(keypoints.values())), axis=-1)
-    told = [
-        *_scaled_bones(engine, given_lengths or {}, fixed_by_points, lengths),
-        *_scaled_points(engine, torso),
-    ]
+    told = _scaled_bones(engine, given_lengths or {}, fixed_by_points, lengths)
+    if given_lengths:  # (the networks' own estimate: its known limit, docs/service.md)
+        implied = float(np.sum(bone_lengths(pred))) * scale
+        told += _implausible_bones(keypoints, lengths, implied, tolerance, bool(told))
+    told += _scaled_points(engine, torso)
     return CompleteResult(
         pose=world, errors=errors, reached=errors <= tolerance, levels=run,
         floor=float(origin[1]), scale_warning="; ".join(told) or None,
@@ -159,6 +174,51 @@ def _scaled_bones(
         f"(the reference's {float(np.sum(ref)):.3g} m); name every bone (or none: the "
         "networks' estimate from the key points) to keep the character's proportions"
     ]
+
+
+def _implausible_bones(
+    keypoints: dict[str, F64], lengths: F64, implied: float, tolerance: float, scaled: bool
+) -> list[str]:
+    """The answer's ``scale_warning`` of ``bone_lengths`` the key points' body does not
+    have (each bone within :data:`service.schemas.BONE_M`, so not refused): where the body
+    they give (``lengths`` ``[20]``) totals outside :data:`BONES_BAND` times the body the
+    key points imply (``implied``: the networks' estimate from them, m; unless
+    :func:`_scaled_bones` said its size: ``scaled``), and where key
+    points lie farther from their nearest key point up the skeleton than the bones between
+    them reach at full stretch (beyond ``tolerance``): the answer misses them. Every bone
+    at 1 mm was answered 200 with key points 0.66 m off and no word (an API audit,
+    2026-12-07); bodies of 2 m bones (40 m in all) reached every key point folded up."""
+    told = []
+    total = float(np.sum(lengths))
+    lo, hi = BONES_BAND
+    if not scaled and implied > 0 and not lo <= total / implied <= hi:
+        told.append(
+            f"bone_lengths: the bones total {total:.3g} m, {total / implied:.3g} times the "
+            f"body the key points imply ({implied:.3g} m, the networks' estimate from them; "
+            f"real bodies' bones total {REAL_BODIES[0]:g}-{REAL_BODIES[1]:g} times it): "
+            "bone lengths are metres, the body's own"
+        )
+    short = []
+    for j, at in keypoints.items():
+        chain, k = 0.0, JOINT_INDEX[j]
+        while k > 0 and (k == JOINT_INDEX[j] or JOINT_NAMES[k] not in keypoints):
+            chain += float(lengths[_BONE[JOINT_NAMES[k]]])
+            k = PARENTS[k]
+        if k < 0 or k == JOINT_INDEX[j] or JOINT_NAMES[k] not in keypoints:
+            continue
+        gap = float(np.linalg.norm(at - keypoints[JOINT_NAMES[k]]))
+        if gap > chain + tolerance:
+            short.append(
+                f"{j} lies {gap:.3g} m from {JOINT_NAMES[k]}, the bones between them reach "
+                f"{chain:.3g} m"
+            )
+    if short:
+        more = f" (and {len(short) - 3} more)" if len(short) > 3 else ""
+        told.append(
+            f"bone_lengths: these bones cannot reach the key points: {'; '.join(short[:3])}"
+            f"{more}; the answer misses them by as much (keypoints' error)"
+        )
+    return told
 
 
 def _scaled_points(engine: Engine, torso: float) -> list[str]:

@@ -358,7 +358,10 @@ class CompleteResponse(BaseModel):
         "skeleton's lengths times the named ones' median ratio: `{\"left_wrist\": 2.0}` "
         "made a body whose bones total 34 m), or key points of a body outside the sizes "
         "the networks know (completed scaled into them and answered back: centimetres "
-        "sent as metres). Says by how much.",
+        "sent as metres), or `bone_lengths` of a body the key points do not have: bones "
+        "totalling under half or over twice the body the key points imply (every bone at "
+        "1 mm, or at 2 m), or too short to reach a key point from the next one up the "
+        "skeleton (the answer misses it). Says by how much.",
     )
     up_warning: str | None = Field(
         default=None,

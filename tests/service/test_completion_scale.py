@@ -72,3 +72,40 @@ def test_key_points_not_upright_along_y_are_said_to_be_read_lying_down(
     assert warning.startswith("keypoints: the pelvis-to-neck line leans ")
     # a body lying down is completed as asked: the same key points upright, no word
     assert upright["up_warning"] is None and len(out["pose"]) == len(upright["pose"])
+
+
+def test_bone_lengths_the_key_points_body_does_not_have_are_said(
+    client: Any, real_poses: PosePairs
+) -> None:
+    """Every bone at 1 mm (each within the 1 mm-2 m a bone may be, so no 422) was answered
+    200 with key points up to 0.66 m off and no word; at 2 m, a body whose bones total 40 m
+    reached every key point folded up, no word either (an API audit, 2026-12-07). The
+    answer's ``scale_warning`` says so: the bones' total against the body the key points
+    imply, and the key points the bones cannot reach. A body's own bones, at any size the
+    networks know and any key point set, get no word."""
+    names = [JOINT_NAMES[c] for c, _ in BONES]
+    pose = real_poses.poses[real_poses.goals[2]]
+    tiny = client.post(
+        "/v1/complete", json={**_body(pose), "bone_lengths": dict.fromkeys(names, 0.001)}
+    )  # fmt: skip
+    assert tiny.status_code == 200, tiny.text
+    out = tiny.json()
+    assert max(k["error"] for k in out["keypoints"]) > 0.3  # (as answered before: missed)
+    warning = out["scale_warning"]
+    assert warning is not None and warning.startswith("bone_lengths: the bones total 0.02 m, ")
+    assert "times the body the key points imply" in warning, warning
+    assert "bone_lengths: these bones cannot reach the key points: neck lies " in warning
+    big = client.post(
+        "/v1/complete", json={**_body(pose), "bone_lengths": dict.fromkeys(names, 2.0)}
+    ).json()  # fmt: skip
+    said = big["scale_warning"]
+    assert said is not None and said.startswith("bone_lengths: the bones total 40 m, "), said
+    assert "cannot reach" not in said  # (every key point reached, folded up)
+    for n in (0, 3, 5):
+        own = real_poses.poses[real_poses.goals[n]]
+        for k in (0.8, 1.0, 1.2):
+            every = dict(zip(names, (bone_lengths(own) * k).tolist(), strict=True))
+            for joints in (BASE, list(JOINT_NAMES)):
+                body = {**_body(own, k, joints), "bone_lengths": every}
+                got = client.post("/v1/complete", json=body).json()
+                assert got["scale_warning"] is None, (n, k, len(joints), got["scale_warning"])
