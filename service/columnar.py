@@ -35,7 +35,8 @@ F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]
 WIDTH = 3 * NUM_JOINTS  # numbers per pose row
 _FLOAT_MAX = int(np.finfo(np.float64).max)  # a JSON integer beyond it is no float
-_TOP = ("poses", "targets", "pins", "options")
+#: The columnar form's keys (a body with these and ``items`` is in both forms: a 422).
+TOP = ("poses", "targets", "pins", "options")
 _TARGETS = ("joints", "positions", "weights")
 
 
@@ -107,6 +108,11 @@ def _shared(row: list[Any], loc: tuple[Any, ...], width: int, n: int, errs: _Err
     return None if got is None else np.repeat(got, n, axis=0)
 
 
+def _n(count: int, noun: str) -> str:
+    """``count`` ``noun`` s, in words: ``1 pose``, ``2 poses``, ``0 rows``."""
+    return f"{count} {noun}{'' if count == 1 else 's'}"
+
+
 def _numbers(rows: Any, loc: tuple[Any, ...], width: int, n: int, errs: _Errors,
              suspect: bool, bound: float | None = MAX_COORDINATE) -> F64 | None:  # fmt: skip
     """``rows`` (a list of ``n`` lists of ``width`` numbers) as a ``[n, width]`` array, or
@@ -117,10 +123,10 @@ def _numbers(rows: Any, loc: tuple[Any, ...], width: int, n: int, errs: _Errors,
         return None
     if len(rows) != n:
         if rows and not isinstance(rows[0], list):  # one row, as joints and weights may be
-            errs.add(loc, "rows", f"a list of {n} rows (one per pose), not one row of "
-                     f"{len(rows)} numbers: {loc[-1]} are never shared")  # fmt: skip
+            errs.add(loc, "rows", f"a list of {_n(n, 'row')} (one per pose), not one row of "
+                     f"{_n(len(rows), 'number')}: {loc[-1]} are never shared")  # fmt: skip
         else:
-            errs.add(loc, "rows", f"{len(rows)} rows for {n} poses: one row per pose")
+            errs.add(loc, "rows", f"{_n(len(rows), 'row')} for {_n(n, 'pose')}: one row per pose")
         return None
     arr: np.ndarray[Any, Any] | None = None
     if not suspect:
@@ -183,7 +189,7 @@ def _names(value: Any, loc: tuple[Any, ...], n: int, errs: _Errors, least: int
     shared = not value or not isinstance(value[0], list)
     rows = [value] if shared else value
     if not shared and len(rows) != n:
-        errs.add(loc, "rows", f"{len(rows)} rows for {n} poses: one row per pose")
+        errs.add(loc, "rows", f"{_n(len(rows), 'row')} for {_n(n, 'pose')}: one row per pose")
         return None
     k = len(rows[0])
     if not all(isinstance(r, list) and len(r) == k for r in rows):
@@ -247,7 +253,7 @@ def parse(data: dict[str, Any], max_items: int, suspect: bool = True) -> Columns
     (422, field errors), ``TooManyItems`` (413) or ``InvalidRequest`` (422)."""
     errs = _Errors()
     for key in data:
-        if key not in _TOP:
+        if key not in TOP:
             errs.add((key,), "extra_forbidden", "Extra inputs are not permitted")
     targets = data.get("targets")
     for key in ("poses", "targets"):

@@ -502,7 +502,11 @@ def install_handlers(app: FastAPI) -> None:
         headers = dict(exc.headers or {})
         allow = [m.strip() for m in headers.get("Allow", "").split(",") if m.strip()]
         if "GET" in allow and "HEAD" not in allow:  # every GET route answers HEAD too
-            headers["Allow"] = ", ".join([*allow, "HEAD"])
+            allow.append("HEAD")
+            headers["Allow"] = ", ".join(allow)
+        if exc.status_code == 405 and allow and detail == title:  # (was the phrase alone)
+            takes = " and ".join([", ".join(allow[:-1]), allow[-1]] if len(allow) > 1 else allow)
+            detail = f"{clip(request.method)} is not allowed on {clip(path)}: it takes {takes}"
         return problem(exc.status_code, title, detail, headers=headers)
 
     @app.exception_handler(Exception)

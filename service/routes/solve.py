@@ -27,6 +27,7 @@ from service.characters import (
     CharacterSolveRequest,
     CharacterSolveResponse,
     SolveBody,
+    _field_error,
 )
 from service.deps import ReadyEngine, RequestBudget, ServiceState, State
 from service.engine import Engine
@@ -71,6 +72,10 @@ class BatchBody(
     @classmethod
     def _form(cls, data: Any, handler: ValidatorFunctionWrapHandler, info: ValidationInfo) -> Any:
         settings = (info.context or {}).get("settings")
+        if isinstance(data, dict) and "items" in data:
+            both = [key for key in columnar.TOP if key in data]
+            if both:  # (was "poses: Extra inputs are not permitted")
+                raise _field_error(cls.__name__, (both[0],), BOTH_FORMS, data)
         items = data.get("items") if isinstance(data, dict) else None
         if settings is not None and isinstance(items, list):  # counted before validated
             too_many(len(items), settings.max_batch_items)
@@ -80,6 +85,13 @@ class BatchBody(
             lambda d: ColumnarBatch if _batch_form(d) == "columns" else BatchRequest,
             info.context,
         )
+
+
+#: A batch body with ``items`` and a columnar key (at most 200 characters: a message's).
+BOTH_FORMS = (
+    "a batch takes one form, not both: the item list (`items`) or the columnar form "
+    "(`poses`, `targets`, `pins`, `options`); each item of a list carries its own options"
+)
 
 
 def too_many(n: int, limit: int) -> None:
