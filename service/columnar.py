@@ -25,6 +25,7 @@ from service.bounded import context, errors_of
 from service.engine import Engine
 from service.errors import MAX_ERRORS, BodyInvalid, TooManyItems
 from service.floors import floor_warnings
+from service.handed import handedness_warnings
 from service.limits import Pricing, chunks_of, searched_price
 from service.problems import BatchAnswer
 from service.schemas import MAX_COORDINATE, MAX_WEIGHT, SolveOptions
@@ -392,6 +393,7 @@ def answer(cols: Columns, part: Part, version: str) -> bytes:
         "floor": cols.options.floor,
         "up_warning": pose_warnings(cols.poses),
         "floor_warning": floor_warnings(cols.poses, cols.options.floor),
+        "handedness_warning": handedness_warnings(cols.poses),
     }
     rest = orjson.dumps(body, option=orjson.OPT_SERIALIZE_NUMPY)
     return b'{"poses":' + part.poses + b"," + rest[1:]

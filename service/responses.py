@@ -25,9 +25,11 @@ def solve_payload(
     version: str,
     up_warning: str | None,
     floor_warning: str | None,
+    handedness_warning: str | None,
 ) -> dict[str, Any]:
-    """The pose form's answer; ``up_warning`` and ``floor_warning`` its start pose's
-    (:func:`service.upright.pose_warning`, :func:`service.floors.floor_warning`, a
+    """The pose form's answer; ``up_warning``, ``floor_warning`` and ``handedness_warning``
+    its start pose's (:func:`service.upright.pose_warning`,
+    :func:`service.floors.floor_warning`, :func:`service.handed.handedness_warning`, a
     batch's all at once)."""
     k, tolerance = p.n_targets, p.tolerance
     names = [JOINT_NAMES[j] for j in p.target_idx.tolist()]
@@ -49,6 +51,7 @@ def solve_payload(
         "floor": p.floor,
         "up_warning": up_warning,
         "floor_warning": floor_warning,
+        "handedness_warning": handedness_warning,
     }
 
 

@@ -296,6 +296,14 @@ class SolveResponse(BaseModel):
         default=None,
         description=FLOOR_WARNING,
     )
+    handedness_warning: str | None = Field(
+        default=None,
+        description="Null unless the start pose's left and right look mirrored: its toes "
+        "and bent knees point backwards from the way its hips and shoulders face it (a pose "
+        "in left-handed coordinates, x mirrored as Unity's, or its sides swapped), which the "
+        "networks read as a body seen from behind; solved as asked. Said of upright poses "
+        "only, as the character form's `sides_warning` is.",
+    )
 
 
 class Keypoint(_Body):
@@ -629,4 +637,8 @@ class ColumnarResponse(BaseModel):
         description="Per item: its start pose's `floor_warning`, as the item list's answers "
         "say it (null where the floor lies below its pelvis by at most 4 pelvis-to-neck "
         "distances)."
+    )
+    handedness_warning: list[str | None] = Field(
+        description="Per item: its start pose's `handedness_warning`, as the item list's "
+        "answers say it."
     )

@@ -32,6 +32,7 @@ from service.decoded import COUNTED
 from service.deps import ServiceState
 from service.errors import BodyError, BodyInvalid, PoseError, error_response, refused
 from service.floors import floor_warning
+from service.handed import handedness_warning
 from service.limits import Budget
 from service.middleware.types import REASON, ASGIApp, Message, Receive, Scope, Send
 from service.pose_json import plain
@@ -294,7 +295,8 @@ class FastPath:
             await _problem(scope, receive, send, exc)
             return True
         try:  # (counted once the answer is handed on: off the client's wait)
-            said = pose_warning(p.pose), floor_warning(p.pose, p.floor)
+            said = (pose_warning(p.pose), floor_warning(p.pose, p.floor),
+                    handedness_warning(p.pose))  # fmt: skip
             answer = orjson.dumps(solve_payload(p, result, engine.version, *said))
             await _json(send, answer, budget.compute)
         finally:

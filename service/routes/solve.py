@@ -33,6 +33,7 @@ from service.deps import ReadyEngine, RequestBudget, ServiceState, State
 from service.engine import Engine
 from service.errors import InvalidRequest, TooManyItems, every_item
 from service.floors import floor_warning, floor_warnings
+from service.handed import handedness_warning, handedness_warnings
 from service.limits import Budget, Pricing, edit_price, price_of, refuse_price
 from service.problems import SolveProblem, SolveResult
 from service.responses import json_response, raw_response, solve_payload
@@ -112,7 +113,7 @@ async def solve(body: SolveBody, engine: ReadyEngine, budget: RequestBudget,
     p = solve_problem(req, poses([req], ["pose"])[0])
     result = await solve_one(p, bool(req.pins), engine, budget)
     state.metrics.solved(p.method, result.solvers)
-    said = pose_warning(p.pose), floor_warning(p.pose, p.floor)
+    said = pose_warning(p.pose), floor_warning(p.pose, p.floor), handedness_warning(p.pose)
     answer = solve_payload(p, result, engine.version, *said)
     return json_response(answer, budget.compute)
 
@@ -222,7 +223,8 @@ async def solve_batch(body: BatchBody, engine: ReadyEngine, budget: RequestBudge
     def answer() -> Response:
         starts = np.stack([p.pose for p in problems]) if problems else np.zeros((0, 21, 3))
         floors = np.array([p.floor for p in problems], dtype=np.float64)
-        said = iter(zip(pose_warnings(starts), floor_warnings(starts, floors), strict=True))
+        said = iter(zip(pose_warnings(starts), floor_warnings(starts, floors),
+                        handedness_warnings(starts), strict=True))  # fmt: skip
         pairs = iter(zip(problems, results, strict=True))
         out = [solved[i] if i in solved
                else solve_payload(*next(pairs), engine.version, *next(said))

@@ -132,6 +132,7 @@ def test_answer_written_in_parts_is_the_whole_answer_written_at_once(
             "floor": 0.0,
             "up_warning": [None] * 7,  # (real poses, upright)
             "floor_warning": [None] * 7,  # (over their own floor)
+            "handedness_warning": [None] * 7,  # (right-handed)
         },
         option=orjson.OPT_SERIALIZE_NUMPY,
     )
