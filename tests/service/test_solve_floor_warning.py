@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from core.skeleton import JOINT_NAMES
-from service.floors import FLOOR_REACH, floor_warnings
+from service.floors import FLOOR_REACH, floor_warning, floor_warnings
 from service.middleware import fastpath
 from tests.conftest import REPO_ROOT
 from tests.service.test_api import BASE
@@ -101,3 +101,42 @@ def test_no_real_pose_over_its_own_floor_is_warned() -> None:
         poses = data["positions"][split == name].astype(np.float64)
         assert len(poses) > 1000, name
         assert floor_warnings(poses, 0.0) == [None] * len(poses), name
+
+
+def test_a_lone_pose_is_told_as_a_batch_is() -> None:
+    """The hot path's lone-pose checks (Python floats) say what the batch's numpy passes
+    say, word for word: real TEST poses over floors at, near and past both ends of the
+    band, and turned to lean at, near and past the up warning's bound (each of the three
+    warnings of ``service.floors``, ``service.upright`` and ``service.handed``)."""
+    from scipy.spatial.transform import Rotation
+
+    from service.handed import handedness_warning, handedness_warnings
+    from service.upright import LEAN, pose_warning, pose_warnings
+
+    dataset = REPO_ROOT / "data/poses.npz"
+    if not dataset.is_file():
+        pytest.skip("data/poses.npz not built (make dataset)")
+    data = np.load(dataset)
+    split = data["clip_split"][data["clip"]]
+    rng = np.random.default_rng(4)
+    poses = data["positions"][split == "test"][rng.choice(int((split == "test").sum()), 200)]
+    poses = poses.astype(np.float64)
+    pelvis, neck = JOINT_NAMES.index("pelvis"), JOINT_NAMES.index("neck")
+    torso = np.linalg.norm(poses[:, neck] - poses[:, pelvis], axis=1)
+    told = 0
+    for b, pose in enumerate(poses):
+        py = float(pose[pelvis, 1])
+        for floor in (0.0, py, py + 1e-12, py - FLOOR_REACH * float(torso[b]), py - 5 * torso[b]):
+            want = floor_warnings(pose[None], float(floor))[0]
+            assert floor_warning(pose, float(floor)) == want
+            told += want is not None
+        # turned about +X so its trunk leans near the bound (and past it, and upside down)
+        trunk = pose[neck] - pose[pelvis]
+        now = np.degrees(np.arctan2(np.hypot(trunk[0], trunk[2]), trunk[1]))
+        for lean in (LEAN - 1e-6, LEAN + 1e-6, LEAN + 20.0, 175.0):
+            turned = (pose - pose[pelvis]) @ Rotation.from_euler(
+                "x", lean - now, degrees=True
+            ).as_matrix().T
+            assert pose_warning(turned) == pose_warnings(turned[None])[0]
+            assert handedness_warning(turned) == handedness_warnings(turned[None])[0]
+    assert told == 2 * len(poses)  # past both ends of the band: said; at them: not
