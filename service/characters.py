@@ -190,7 +190,7 @@ class CharacterSolveRequest(_Frame):
     root_position: Vec3 | None = Field(default=None, description="Default: the root's offset.")
 
 
-def _field_error(title: str, loc: tuple[str, ...], message: str, data: Any) -> ValidationError:
+def field_error(title: str, loc: tuple[str, ...], message: str, data: Any) -> ValidationError:
     """A validation error at ``loc`` (relative to the model being validated: nested in a
     batch it becomes ``items[i].<loc>``)."""
     error = InitErrorDetails(type=PydanticCustomError("request_form", message), loc=loc, input=data)
@@ -224,7 +224,7 @@ class CharacterAliasRequest(CharacterSolveRequest):
         if isinstance(data, dict) and "skeleton" in data:
             if "character" in data:
                 message = "give `character` or its earlier name `skeleton`, not both"
-                raise _field_error(cls.__name__, ("skeleton",), message, data)
+                raise field_error(cls.__name__, ("skeleton",), message, data)
             data = {("character" if k == "skeleton" else k): v for k, v in data.items()}
         return data
 
@@ -344,11 +344,11 @@ class SolveBody(
     def _form(cls, data: Any, handler: ValidatorFunctionWrapHandler, info: ValidationInfo) -> Any:
         if isinstance(data, dict):
             if "character" in data and "pose" in data:
-                raise _field_error(cls.__name__, ("character",), f"{FORMS}, not both", data)
+                raise field_error(cls.__name__, ("character",), f"{FORMS}, not both", data)
             if "character" not in data and "pose" not in data:
                 if "skeleton" in data:  # the alias route's earlier name of `character`
-                    raise _field_error(cls.__name__, ("skeleton",), SKELETON_HERE, data)
-                raise _field_error(cls.__name__, ("pose",), f"Field required: {FORMS}", data)
+                    raise field_error(cls.__name__, ("skeleton",), SKELETON_HERE, data)
+                raise field_error(cls.__name__, ("pose",), f"Field required: {FORMS}", data)
         return validate_as(
             data,
             handler,

@@ -27,7 +27,7 @@ from service.characters import (
     CharacterSolveRequest,
     CharacterSolveResponse,
     SolveBody,
-    _field_error,
+    field_error,
 )
 from service.deps import ReadyEngine, RequestBudget, ServiceState, State
 from service.engine import Engine
@@ -76,7 +76,7 @@ class BatchBody(
         if isinstance(data, dict) and "items" in data:
             both = [key for key in columnar.TOP if key in data]
             if both:  # (was "poses: Extra inputs are not permitted")
-                raise _field_error(cls.__name__, (both[0],), BOTH_FORMS, data)
+                raise field_error(cls.__name__, (both[0],), BOTH_FORMS, data)
         items = data.get("items") if isinstance(data, dict) else None
         if settings is not None and isinstance(items, list):  # counted before validated
             too_many(len(items), settings.max_batch_items)
