@@ -16,9 +16,9 @@ import pytest
 
 from core.skeleton import JOINT_NAMES
 from service.floors import FLOOR_REACH, floor_warning, floor_warnings
-from service.middleware import fastpath
 from tests.conftest import REPO_ROOT
 from tests.service.test_api import BASE
+from tests.service.warned import columns, real_poses, said_alike
 
 
 def _with_floor(body: dict[str, Any], floor: float) -> dict[str, Any]:
@@ -55,26 +55,13 @@ def test_a_floor_far_from_the_body_is_said_and_the_floor_used_is_answered(
         assert f"stood more than {FLOOR_REACH:g} times higher" in below, below
     # each item of a batch, and each row of the columnar form, as the single answer says
     bodies = [soft, _with_floor(soft, 5.0), example, _with_floor(example, -50.0)]
-    listed = client.post("/v1/solve/batch", json={"items": bodies}).json()["items"]
-    singles = [client.post("/v1/solve", json=b).json() for b in bodies]
-    assert listed == singles
+    listed = said_alike(client, monkeypatch, bodies)
     assert [a["floor_warning"] is None for a in listed] == [True, False, True, False]
-    row = [v for n in JOINT_NAMES for v in soft["pose"][n]]
-    goal = soft["targets"][0]["position"]
     for floor, item in ((0.0, listed[0]), (5.0, listed[1])):
-        col = client.post(
-            "/v1/solve/batch",
-            json={"poses": [row, row], "targets": {"joints": ["left_wrist"],
-                  "positions": [goal, goal]}, "options": {"floor": floor}},
-        )  # fmt: skip
+        col = client.post("/v1/solve/batch", json=columns([soft, soft], floor=floor))
         assert col.status_code == 200, col.text
         assert col.json()["floor"] == floor
         assert col.json()["floor_warning"] == [item["floor_warning"]] * 2
-    # the route (a body the hot path leaves to it) answers the hot path's bytes
-    fast = [client.post("/v1/solve", json=b).content for b in bodies]
-    monkeypatch.setattr(fastpath, "pose_form", lambda body, data=None: None)
-    monkeypatch.setattr(fastpath, "plain", lambda data: None)
-    assert [client.post("/v1/solve", json=b).content for b in bodies] == fast
 
 
 def test_the_solve_warns_where_the_completion_clamps(client: Any) -> None:
@@ -92,14 +79,8 @@ def test_the_solve_warns_where_the_completion_clamps(client: Any) -> None:
 def test_no_real_pose_over_its_own_floor_is_warned() -> None:
     """The TEST split's and the held-out bodies' real poses (every frame over its own
     floor, y = 0): no warning (their pelvis stands 0.45-3.5 pelvis-to-neck distances up)."""
-    dataset = REPO_ROOT / "data/poses.npz"
-    if not dataset.is_file():
-        pytest.skip("data/poses.npz not built (make dataset)")
-    data = np.load(dataset)
-    split = data["clip_split"][data["clip"]]
     for name in ("test", "holdout"):
-        poses = data["positions"][split == name].astype(np.float64)
-        assert len(poses) > 1000, name
+        poses = real_poses(name)
         assert floor_warnings(poses, 0.0) == [None] * len(poses), name
 
 
@@ -113,14 +94,8 @@ def test_a_lone_pose_is_told_as_a_batch_is() -> None:
     from service.handed import handedness_warning, handedness_warnings
     from service.upright import LEAN, pose_warning, pose_warnings
 
-    dataset = REPO_ROOT / "data/poses.npz"
-    if not dataset.is_file():
-        pytest.skip("data/poses.npz not built (make dataset)")
-    data = np.load(dataset)
-    split = data["clip_split"][data["clip"]]
-    rng = np.random.default_rng(4)
-    poses = data["positions"][split == "test"][rng.choice(int((split == "test").sum()), 200)]
-    poses = poses.astype(np.float64)
+    every = real_poses("test")
+    poses = every[np.random.default_rng(4).choice(len(every), 200)]
     pelvis, neck = JOINT_NAMES.index("pelvis"), JOINT_NAMES.index("neck")
     torso = np.linalg.norm(poses[:, neck] - poses[:, pelvis], axis=1)
     told = 0

@@ -16,8 +16,8 @@ import pytest
 from core.sides import SWAPPED_BELOW, facing_score
 from core.skeleton import JOINT_NAMES
 from service.handed import _score_one, handedness_warning, handedness_warnings
-from service.middleware import fastpath
 from tests.conftest import REPO_ROOT
+from tests.service.warned import columns, real_poses, said_alike
 
 MIRROR_X = np.array([-1.0, 1.0, 1.0])
 
@@ -44,21 +44,11 @@ def test_a_pose_in_left_handed_coordinates_is_said_to_look_mirrored(
         assert warning is not None and warning.startswith("pose: its left and right look "), warning
         assert "left-handed coordinates" in warning, warning
     bodies = [soft, _mirrored(soft), example, _mirrored(example)]
-    listed = client.post("/v1/solve/batch", json={"items": bodies}).json()["items"]
-    assert listed == [client.post("/v1/solve", json=b).json() for b in bodies]
+    listed = said_alike(client, monkeypatch, bodies)
     assert [a["handedness_warning"] is None for a in listed] == [True, False, True, False]
-    rows = [[v for n in JOINT_NAMES for v in b["pose"][n]] for b in bodies[:2]]
-    goals = [b["targets"][0]["position"] for b in bodies[:2]]
-    col = client.post(
-        "/v1/solve/batch",
-        json={"poses": rows, "targets": {"joints": ["left_wrist"], "positions": goals}},
-    )  # fmt: skip
+    col = client.post("/v1/solve/batch", json=columns(bodies[:2]))
     assert col.status_code == 200, col.text
     assert col.json()["handedness_warning"] == [a["handedness_warning"] for a in listed[:2]]
-    fast = [client.post("/v1/solve", json=b).content for b in bodies]
-    monkeypatch.setattr(fastpath, "pose_form", lambda body, data=None: None)
-    monkeypatch.setattr(fastpath, "plain", lambda data: None)
-    assert [client.post("/v1/solve", json=b).content for b in bodies] == fast
 
 
 def test_real_poses_are_not_warned_and_their_mirror_images_are() -> None:
@@ -66,14 +56,8 @@ def test_real_poses_are_not_warned_and_their_mirror_images_are() -> None:
     images: a warning but for 65 of 26,458 and 18 of 86,635 (feet and legs that say
     nothing, bodies lying down). A lone
     pose's score is ``facing_score``'s (the fast path of the hot path)."""
-    dataset = REPO_ROOT / "data/poses.npz"
-    if not dataset.is_file():
-        pytest.skip("data/poses.npz not built (make dataset)")
-    data = np.load(dataset)
-    split = data["clip_split"][data["clip"]]
     for name in ("test", "holdout"):
-        poses = data["positions"][split == name].astype(np.float64)
-        assert len(poses) > 1000, name
+        poses = real_poses(name)
         assert handedness_warnings(poses) == [None] * len(poses), name
         said = handedness_warnings(poses * MIRROR_X)
         assert sum(w is None for w in said) < 0.005 * len(poses), name

@@ -13,10 +13,9 @@ from typing import Any
 import numpy as np
 import pytest
 
-from core.skeleton import JOINT_NAMES
-from service.middleware import fastpath
 from tests.conftest import REPO_ROOT
 from tests.service.test_api import BASE
+from tests.service.warned import columns, said_alike
 
 #: +Y up -> +Z up: y -> z, z -> -y (a quarter turn about X)
 Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
@@ -55,23 +54,11 @@ def test_a_start_pose_captured_z_up_is_said_to_be_solved_lying_down(
     assert said is not None and was is not None and said.groups() == was.groups()
     # each item of a batch, and each row of the columnar form, as the single answer says
     bodies = [soft, _turned(soft), example, _turned(example)]
-    listed = client.post("/v1/solve/batch", json={"items": bodies}).json()["items"]
-    singles = [client.post("/v1/solve", json=b).json() for b in bodies]
-    assert listed == singles
+    listed = said_alike(client, monkeypatch, bodies)
     assert [a["up_warning"] is None for a in listed] == [True, False, True, False]
-    rows = [[v for n in JOINT_NAMES for v in b["pose"][n]] for b in bodies[:2]]
-    goals = [b["targets"][0]["position"] for b in bodies[:2]]
-    col = client.post(
-        "/v1/solve/batch",
-        json={"poses": rows, "targets": {"joints": ["left_wrist"], "positions": goals}},
-    )  # fmt: skip
+    col = client.post("/v1/solve/batch", json=columns(bodies[:2]))
     assert col.status_code == 200, col.text
     assert col.json()["up_warning"] == [a["up_warning"] for a in listed[:2]]
-    # the route (a body the hot path leaves to it) answers the hot path's bytes
-    fast = [client.post("/v1/solve", json=b).content for b in bodies]
-    monkeypatch.setattr(fastpath, "pose_form", lambda body, data=None: None)
-    monkeypatch.setattr(fastpath, "plain", lambda data: None)
-    assert [client.post("/v1/solve", json=b).content for b in bodies] == fast
 
 
 def test_a_body_upside_down_is_said_to_be_upside_down(client: Any) -> None:

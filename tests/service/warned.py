@@ -1,0 +1,55 @@
+"""What the start-pose warnings' tests share (``up_warning``, ``floor_warning``,
+``handedness_warning``): every form of ``/v1/solve`` says one warning alike, and the
+real poses they are measured on."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pytest
+
+from core.skeleton import JOINT_NAMES
+from service.middleware import fastpath
+from tests.conftest import REPO_ROOT
+
+
+def said_alike(client: Any, monkeypatch: pytest.MonkeyPatch, bodies: list[dict[str, Any]]
+               ) -> list[dict[str, Any]]:  # fmt: skip
+    """The answers to ``bodies`` (the pose form) as one batch's items, checked equal to
+    each single answer, and each single answer's bytes the same from the route as from
+    the hot path (a body the hot path leaves to the route)."""
+    listed: list[dict[str, Any]] = client.post("/v1/solve/batch", json={"items": bodies}).json()[
+        "items"
+    ]
+    assert listed == [client.post("/v1/solve", json=b).json() for b in bodies]
+    fast = [client.post("/v1/solve", json=b).content for b in bodies]
+    with monkeypatch.context() as m:
+        m.setattr(fastpath, "pose_form", lambda body, data=None: None)
+        m.setattr(fastpath, "plain", lambda data: None)
+        assert [client.post("/v1/solve", json=b).content for b in bodies] == fast
+    return listed
+
+
+def columns(bodies: list[dict[str, Any]], **options: Any) -> dict[str, Any]:
+    """The columnar form of one-target ``bodies`` (the pose form)."""
+    out: dict[str, Any] = {
+        "poses": [[v for n in JOINT_NAMES for v in b["pose"][n]] for b in bodies],
+        "targets": {
+            "joints": [bodies[0]["targets"][0]["joint"]],
+            "positions": [b["targets"][0]["position"] for b in bodies],
+        },
+    }
+    return {**out, "options": options} if options else out
+
+
+def real_poses(split: str) -> np.ndarray:
+    """Every pose ``[N, 21, 3]`` of ``split`` (``test``, ``holdout``) of data/poses.npz
+    (skipped where it is not built)."""
+    dataset = REPO_ROOT / "data/poses.npz"
+    if not dataset.is_file():
+        pytest.skip("data/poses.npz not built (make dataset)")
+    data = np.load(dataset)
+    poses = data["positions"][data["clip_split"][data["clip"]] == split].astype(np.float64)
+    assert len(poses) > 1000, split
+    return poses
