@@ -68,9 +68,9 @@ def test_errors_quote_at_most_about_100_characters(client: Any) -> None:
     assert_problem(resp, 422, "unknown joint 'xxxx")
     assert len(resp.content) < 3000, len(resp.content)
     b = body()
-    b["pose"]["y" * 1_000_000] = [0, 0, 0]
+    b["pose"]["y" * 1_000_000] = [0, 0, 0]  # (a key no canonical joint: named, clipped)
     resp = client.post("/v1/solve", json=b)
-    assert_problem(resp, 422, "Extra inputs")
+    assert_problem(resp, 422, "unknown joint 'yyyy", "the pose form takes the 21 canonical")
     assert len(resp.content) < 3000, len(resp.content)
 
 
