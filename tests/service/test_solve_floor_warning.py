@@ -9,6 +9,7 @@ of the columnar form say it alike, from one definition (``service.floors``), the
 from __future__ import annotations
 
 import json
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -76,15 +77,15 @@ def test_the_solve_warns_where_the_completion_clamps(client: Any) -> None:
         assert (warning is None) == (done["floor"] == floor), (floor, done["floor"], warning)
 
 
-def test_no_real_pose_over_its_own_floor_is_warned() -> None:
+def test_no_real_pose_over_its_own_floor_is_warned(small_dataset: Path) -> None:
     """The TEST split's and the held-out bodies' real poses (every frame over its own
     floor, y = 0): no warning (their pelvis stands 0.45-3.5 pelvis-to-neck distances up)."""
     for name in ("test", "holdout"):
-        poses = real_poses(name)
+        poses = real_poses(name, small_dataset)
         assert floor_warnings(poses, 0.0) == [None] * len(poses), name
 
 
-def test_a_lone_pose_is_told_as_a_batch_is() -> None:
+def test_a_lone_pose_is_told_as_a_batch_is(small_dataset: Path) -> None:
     """The hot path's lone-pose checks (Python floats) say what the batch's numpy passes
     say, word for word: real TEST poses over floors at, near and past both ends of the
     band, and turned to lean at, near and past the up warning's bound (each of the three
@@ -94,7 +95,7 @@ def test_a_lone_pose_is_told_as_a_batch_is() -> None:
     from service.handed import handedness_warning, handedness_warnings
     from service.upright import LEAN, pose_warning, pose_warnings
 
-    every = real_poses("test")
+    every = real_poses("test", small_dataset)
     poses = every[np.random.default_rng(4).choice(len(every), 200)]
     pelvis, neck = JOINT_NAMES.index("pelvis"), JOINT_NAMES.index("neck")
     torso = np.linalg.norm(poses[:, neck] - poses[:, pelvis], axis=1)

@@ -8,6 +8,7 @@ one definition (``service.handed``: ``core.sides.facing_score``)."""
 from __future__ import annotations
 
 import json
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -51,13 +52,13 @@ def test_a_pose_in_left_handed_coordinates_is_said_to_look_mirrored(
     assert col.json()["handedness_warning"] == [a["handedness_warning"] for a in listed[:2]]
 
 
-def test_real_poses_are_not_warned_and_their_mirror_images_are() -> None:
+def test_real_poses_are_not_warned_and_their_mirror_images_are(small_dataset: Path) -> None:
     """The TEST split's and the held-out bodies' real poses: no warning; their x-mirrored
     images: a warning but for 65 of 26,458 and 18 of 86,635 (feet and legs that say
     nothing, bodies lying down). A lone
     pose's score is ``facing_score``'s (the fast path of the hot path)."""
     for name in ("test", "holdout"):
-        poses = real_poses(name)
+        poses = real_poses(name, small_dataset)
         assert handedness_warnings(poses) == [None] * len(poses), name
         said = handedness_warnings(poses * MIRROR_X)
         assert sum(w is None for w in said) < 0.005 * len(poses), name
