@@ -24,12 +24,10 @@ from core.skeleton import JOINT_INDEX, JOINT_NAMES, NUM_JOINTS
 from service.bounded import context, errors_of
 from service.engine import Engine
 from service.errors import MAX_ERRORS, BodyInvalid, TooManyItems
-from service.floors import floor_warnings
-from service.handed import handedness_warnings
 from service.limits import Pricing, chunks_of, searched_price
 from service.problems import BatchAnswer
+from service.responses import starts_warnings
 from service.schemas import MAX_COORDINATE, MAX_WEIGHT, SolveOptions
-from service.upright import pose_warnings
 from service.validation import check_bones, check_options
 
 F64 = npt.NDArray[np.float64]
@@ -380,6 +378,7 @@ def answer(cols: Columns, part: Part, version: str) -> bytes:
     ans = part.ans
     k, p = cols.n_targets, cols.n_pins
     errors = np.ascontiguousarray(ans.errors[:, :k], dtype=np.float64)
+    said = starts_warnings(cols.poses, cols.options.floor)  # each row's start pose's
     body = {
         "errors": errors,
         "reached": errors <= cols.options.tolerance,
@@ -391,9 +390,9 @@ def answer(cols: Columns, part: Part, version: str) -> bytes:
         "model": version,
         "method": "fabrik" if cols.options.method == "fabrik" else "neural",
         "floor": cols.options.floor,
-        "up_warning": pose_warnings(cols.poses),
-        "floor_warning": floor_warnings(cols.poses, cols.options.floor),
-        "handedness_warning": handedness_warnings(cols.poses),
+        "up_warning": [w[0] for w in said],
+        "floor_warning": [w[1] for w in said],
+        "handedness_warning": [w[2] for w in said],
     }
     rest = orjson.dumps(body, option=orjson.OPT_SERIALIZE_NUMPY)
     return b'{"poses":' + part.poses + b"," + rest[1:]

@@ -11,7 +11,10 @@ import orjson
 from fastapi import Response
 
 from core.skeleton import JOINT_NAMES
+from service.floors import floor_warning, floor_warnings
+from service.handed import handedness_warning, handedness_warnings
 from service.problems import CompleteResult, SolveProblem, SolveResult
+from service.upright import pose_warning, pose_warnings
 
 
 def pose_dict(pose: np.ndarray) -> dict[str, list[float]]:
@@ -19,18 +22,33 @@ def pose_dict(pose: np.ndarray) -> dict[str, list[float]]:
     return dict(zip(JOINT_NAMES, pose.tolist(), strict=True))
 
 
+#: A start pose's warnings, as the pose form answers them: ``up_warning``,
+#: ``floor_warning``, ``handedness_warning``
+Warnings = tuple[str | None, str | None, str | None]
+
+
+def start_warnings(pose: np.ndarray, floor: float) -> Warnings:
+    """The warnings of one start pose ``[21, 3]`` over ``floor`` (the hot path's, in
+    Python floats: :func:`service.upright.pose_warning`, :func:`service.floors.floor_warning`,
+    :func:`service.handed.handedness_warning`)."""
+    return pose_warning(pose), floor_warning(pose, floor), handedness_warning(pose)
+
+
+def starts_warnings(poses: np.ndarray, floors: float | np.ndarray) -> list[Warnings]:
+    """:func:`start_warnings` of each of ``poses`` ``[B, 21, 3]`` (a batch's items, the
+    columnar form's rows) in numpy passes, word for word the lone pose's."""
+    return list(zip(pose_warnings(poses), floor_warnings(poses, floors),
+                    handedness_warnings(poses), strict=True))  # fmt: skip
+
+
 def solve_payload(
-    p: SolveProblem,
-    r: SolveResult,
-    version: str,
-    up_warning: str | None,
-    floor_warning: str | None,
-    handedness_warning: str | None,
+    p: SolveProblem, r: SolveResult, version: str, said: Warnings | None = None
 ) -> dict[str, Any]:
-    """The pose form's answer; ``up_warning``, ``floor_warning`` and ``handedness_warning``
-    its start pose's (:func:`service.upright.pose_warning`,
-    :func:`service.floors.floor_warning`, :func:`service.handed.handedness_warning`, a
-    batch's all at once)."""
+    """The pose form's answer; ``said``: its start pose's warnings where a batch's are
+    made at once (:func:`starts_warnings`), else made here (:func:`start_warnings`)."""
+    up_warning, floor_warning, handedness_warning = (
+        start_warnings(p.pose, p.floor) if said is None else said
+    )
     k, tolerance = p.n_targets, p.tolerance
     names = [JOINT_NAMES[j] for j in p.target_idx.tolist()]
     return {

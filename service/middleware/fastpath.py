@@ -31,8 +31,6 @@ from service.bounded import look
 from service.decoded import COUNTED
 from service.deps import ServiceState
 from service.errors import BodyError, BodyInvalid, PoseError, error_response, refused
-from service.floors import floor_warning
-from service.handed import handedness_warning
 from service.limits import Budget
 from service.middleware.types import REASON, ASGIApp, Message, Receive, Scope, Send
 from service.pose_json import plain
@@ -40,7 +38,6 @@ from service.problems import SolveProblem
 from service.responses import compute_time, solve_payload
 from service.routes.solve import solve_columns, solve_one
 from service.schemas import SolveRequest
-from service.upright import pose_warning
 from service.validation import check_bones, poses, problem_of, solve_problem
 
 SOLVE, BATCH = "/v1/solve", "/v1/solve/batch"
@@ -295,9 +292,7 @@ class FastPath:
             await _problem(scope, receive, send, exc)
             return True
         try:  # (counted once the answer is handed on: off the client's wait)
-            said = (pose_warning(p.pose), floor_warning(p.pose, p.floor),
-                    handedness_warning(p.pose))  # fmt: skip
-            answer = orjson.dumps(solve_payload(p, result, engine.version, *said))
+            answer = orjson.dumps(solve_payload(p, result, engine.version))
             await _json(send, answer, budget.compute)
         finally:
             state.metrics.solved(p.method, result.solvers)

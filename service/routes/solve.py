@@ -32,15 +32,12 @@ from service.characters import (
 from service.deps import ReadyEngine, RequestBudget, ServiceState, State
 from service.engine import Engine
 from service.errors import InvalidRequest, TooManyItems, every_item
-from service.floors import floor_warning, floor_warnings
-from service.handed import handedness_warning, handedness_warnings
 from service.limits import Budget, Pricing, edit_price, price_of, refuse_price
 from service.problems import SolveProblem, SolveResult
-from service.responses import json_response, raw_response, solve_payload
+from service.responses import json_response, raw_response, solve_payload, starts_warnings
 from service.routes import ROUTE_PROBLEMS
 from service.routes.characters import answer_character, read_character, solve_read
 from service.schemas import ColumnarBatch, ColumnarResponse, SolveRequest, SolveResponse
-from service.upright import pose_warning, pose_warnings
 from service.validation import degenerate, poses, solve_problem, start_poses, validate_as
 
 router = APIRouter(route_class=BodyRoute, tags=["solve"], responses=ROUTE_PROBLEMS)
@@ -113,9 +110,7 @@ async def solve(body: SolveBody, engine: ReadyEngine, budget: RequestBudget,
     p = solve_problem(req, poses([req], ["pose"])[0])
     result = await solve_one(p, bool(req.pins), engine, budget)
     state.metrics.solved(p.method, result.solvers)
-    said = pose_warning(p.pose), floor_warning(p.pose, p.floor), handedness_warning(p.pose)
-    answer = solve_payload(p, result, engine.version, *said)
-    return json_response(answer, budget.compute)
+    return json_response(solve_payload(p, result, engine.version), budget.compute)
 
 
 async def solve_one(p: SolveProblem, pinned: bool, engine: Engine, budget: Budget) -> SolveResult:
@@ -223,11 +218,10 @@ async def solve_batch(body: BatchBody, engine: ReadyEngine, budget: RequestBudge
     def answer() -> Response:
         starts = np.stack([p.pose for p in problems]) if problems else np.zeros((0, 21, 3))
         floors = np.array([p.floor for p in problems], dtype=np.float64)
-        said = iter(zip(pose_warnings(starts), floor_warnings(starts, floors),
-                        handedness_warnings(starts), strict=True))  # fmt: skip
+        said = iter(starts_warnings(starts, floors))
         pairs = iter(zip(problems, results, strict=True))
         out = [solved[i] if i in solved
-               else solve_payload(*next(pairs), engine.version, *next(said))
+               else solve_payload(*next(pairs), engine.version, next(said))
                for i in range(len(forms))]  # fmt: skip
         return json_response({"items": out}, budget.compute)
 
