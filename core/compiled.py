@@ -107,7 +107,8 @@ def _sum_pairwise(a: F64) -> float:  # pragma: no cover - compiled
 
 
 @jit
-def _norm(x: float, y: float, z: float) -> float:  # pragma: no cover - compiled
+def norm3(x: float, y: float, z: float) -> float:  # pragma: no cover - compiled
+    """The length of the vector (x, y, z)."""
     return float(np.sqrt(x * x + y * y + z * z))
 
 
@@ -126,7 +127,7 @@ def bone_lengths_item(pose: F64, out: F64) -> None:  # pragma: no cover - compil
     """``out[20]`` = lengths of ``pose [21, 3]`` in ``BONES`` order."""
     for b in range(_CHILDREN.shape[0]):
         c, p = _CHILDREN[b], _PARENTS[b]
-        out[b] = _norm(pose[c, 0] - pose[p, 0], pose[c, 1] - pose[p, 1], pose[c, 2] - pose[p, 2])
+        out[b] = norm3(pose[c, 0] - pose[p, 0], pose[c, 1] - pose[p, 1], pose[c, 2] - pose[p, 2])
 
 
 @jit
@@ -395,7 +396,7 @@ def prepare(
             ox = tcan[b, q, 0] - canon[b, _PELVIS, 0]
             oy = tcan[b, q, 1] - canon[b, _PELVIS, 1]
             oz = tcan[b, q, 2] - canon[b, _PELVIS, 2]
-            dist = _norm(ox, oy, oz)
+            dist = norm3(ox, oy, oz)
             f = min(1.0, radius / max(dist, 1e-12))
             canvas[b, j, 0] = np.float32((canon[b, _PELVIS, 0] + ox * f) / s)
             canvas[b, j, 1] = np.float32((canon[b, _PELVIS, 1] + oy * f) / s)
@@ -562,7 +563,7 @@ def finish(
             world[b, j, 2] = (-fx * c[j, 0] + 0.0 * c[j, 1] + fz * c[j, 2]) + tz
         for q in range(counts[b]):
             j = tidx[b, q]
-            errors[b, q] = _norm(
+            errors[b, q] = norm3(
                 world[b, j, 0] - tpos[b, q, 0],
                 world[b, j, 1] - tpos[b, q, 1],
                 world[b, j, 2] - tpos[b, q, 2],

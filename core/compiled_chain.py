@@ -15,14 +15,10 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
+from core.compiled import norm3
 from core.jit import jit
 
 F64 = npt.NDArray[np.float64]
-
-
-@jit
-def _norm(x: float, y: float, z: float) -> float:  # pragma: no cover - compiled
-    return float(np.sqrt(x * x + y * y + z * z))
 
 
 @jit
@@ -36,18 +32,18 @@ def _two_bone_into(
     forward). False, ``p`` untouched, where no side is known or the goal is nearer than the
     bones allow, or beyond them."""
     tx, ty, tz = goal[0] - p[0, 0], goal[1] - p[0, 1], goal[2] - p[0, 2]
-    d = _norm(tx, ty, tz)
+    d = norm3(tx, ty, tz)
     if d <= abs(a - b) or d <= 1e-12 or d > a + b:
         return False
     ux, uy, uz = tx / d, ty / d, tz / d
     mx, my, mz = p[1, 0] - p[0, 0], p[1, 1] - p[0, 1], p[1, 2] - p[0, 2]
     along = mx * ux + my * uy + mz * uz
     sx, sy, sz = mx - along * ux, my - along * uy, mz - along * uz
-    n = _norm(sx, sy, sz)
+    n = norm3(sx, sy, sz)
     if n <= 1e-9 * a and has_bend:
         along = bend[0] * ux + bend[1] * uy + bend[2] * uz
         sx, sy, sz = bend[0] - along * ux, bend[1] - along * uy, bend[2] - along * uz
-        n = _norm(sx, sy, sz)
+        n = norm3(sx, sy, sz)
     if n <= 1e-9 * a:
         return False
     x = (a * a - b * b + d * d) / (2.0 * d)
@@ -72,10 +68,10 @@ def chain_fabrik_into(
     lengths = np.empty(n - 1)
     total = 0.0
     for i in range(n - 1):
-        lengths[i] = _norm(p[i + 1, 0] - p[i, 0], p[i + 1, 1] - p[i, 1], p[i + 1, 2] - p[i, 2])
+        lengths[i] = norm3(p[i + 1, 0] - p[i, 0], p[i + 1, 1] - p[i, 1], p[i + 1, 2] - p[i, 2])
         total += lengths[i]
     b0, b1, b2 = p[0, 0], p[0, 1], p[0, 2]
-    reach = _norm(goal[0] - b0, goal[1] - b1, goal[2] - b2)
+    reach = norm3(goal[0] - b0, goal[1] - b1, goal[2] - b2)
     if reach >= total:  # out of reach: straighten towards it
         scale = max(reach, 1e-300)
         dx, dy, dz = (goal[0] - b0) / scale, (goal[1] - b1) / scale, (goal[2] - b2) / scale
@@ -84,25 +80,25 @@ def chain_fabrik_into(
             p[i, 1] = p[i - 1, 1] + dy * lengths[i - 1]
             p[i, 2] = p[i - 1, 2] + dz * lengths[i - 1]
         return
-    if _norm(p[n - 1, 0] - goal[0], p[n - 1, 1] - goal[1], p[n - 1, 2] - goal[2]) <= tol:
+    if norm3(p[n - 1, 0] - goal[0], p[n - 1, 1] - goal[1], p[n - 1, 2] - goal[2]) <= tol:
         return  # already there (an untouched pin stays bit for bit)
     if n == 3 and _two_bone_into(p, goal, lengths[0], lengths[1], bend, has_bend):
         return
     for _ in range(iterations):
-        if _norm(p[n - 1, 0] - goal[0], p[n - 1, 1] - goal[1], p[n - 1, 2] - goal[2]) <= tol:
+        if norm3(p[n - 1, 0] - goal[0], p[n - 1, 1] - goal[1], p[n - 1, 2] - goal[2]) <= tol:
             break
         for r in range(3):
             p[n - 1, r] = goal[r]
         for i in range(n - 2, -1, -1):
             dx, dy, dz = p[i, 0] - p[i + 1, 0], p[i, 1] - p[i + 1, 1], p[i, 2] - p[i + 1, 2]
-            s = lengths[i] / max(_norm(dx, dy, dz), 1e-300)
+            s = lengths[i] / max(norm3(dx, dy, dz), 1e-300)
             p[i, 0] = p[i + 1, 0] + dx * s
             p[i, 1] = p[i + 1, 1] + dy * s
             p[i, 2] = p[i + 1, 2] + dz * s
         p[0, 0], p[0, 1], p[0, 2] = b0, b1, b2
         for i in range(1, n):
             dx, dy, dz = p[i, 0] - p[i - 1, 0], p[i, 1] - p[i - 1, 1], p[i, 2] - p[i - 1, 2]
-            s = lengths[i - 1] / max(_norm(dx, dy, dz), 1e-300)
+            s = lengths[i - 1] / max(norm3(dx, dy, dz), 1e-300)
             p[i, 0] = p[i - 1, 0] + dx * s
             p[i, 1] = p[i - 1, 1] + dy * s
             p[i, 2] = p[i - 1, 2] + dz * s
