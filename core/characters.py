@@ -240,12 +240,6 @@ def swing(a: F64, b: F64) -> F64:
     return np.asarray(np.eye(3) + s * kx + (1.0 - c) * (kx @ kx))
 
 
-def best_rotation(v: F64, u: F64, weights: F64 | None = None) -> F64:
-    """The rotation ``R`` minimising ``sum w |R v_k - u_k|^2`` (Kabsch / Wahba), ``[K, 3]``
-    (compiled: :func:`core.compiled_characters.best_rotation_into`)."""
-    return compiled_characters.best_rotation(v, u, np.ones(len(v)) if weights is None else weights)
-
-
 def twist_angle(delta: F64, axis: F64) -> float:
     """Angle (radians) of the twist of rotation ``delta`` about ``axis`` (swing-twist split)."""
     q = matrix_to_quat(delta)

@@ -38,7 +38,7 @@ import numpy as np
 import numpy.typing as npt
 
 from core import compiled_characters
-from core.characters import F64, Pose, Skeleton, best_rotation, forward_kinematics, swing
+from core.characters import F64, Pose, Skeleton, forward_kinematics, swing
 from core.characters_maps import JointMap
 from core.compiled_chain import chain_fabrik
 from core.hinges import keep_hinges
@@ -109,7 +109,7 @@ def _aim_pass(
     goal: F64,
     skip: int | None,
     original: Pose,
-    weigh: F64 | None = None,
+    weigh: F64,
 ) -> set[int]:
     """Aim every group (parents first), in one compiled call
     (:func:`core.compiled_characters.aim_pass_into`). Each turn starts from the joint's
@@ -129,7 +129,7 @@ def _aim_pass(
     compiled_characters.aim_pass_into(
         plan.parents, rotations, translations, first, plan.aims, plan.kid_start, plan.kids,
         plan.anchor_joints, plan.anchor_offsets, goal, -1 if skip is None else skip,
-        _weights(frozenset()) if weigh is None else weigh, g_rot, g_pos, changed,
+        weigh, g_rot, g_pos, changed,
     )  # fmt: skip
     return {int(b) for b in plan.aims[changed.astype(bool)]}
 
@@ -165,7 +165,7 @@ def _place_pelvis(
     c_now, c_want = w @ now, w @ want
     turn = np.eye(3)
     if kids and skel.rotatable[b]:
-        turn = best_rotation(now - c_now, want - c_want, weights=w)
+        turn = compiled_characters.best_rotation(now - c_now, want - c_want, w)
     origin = turn @ (g_pos[b] - c_now) + c_want
     delta = origin - g_pos[b]
     parent = skel.parents[t]
