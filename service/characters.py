@@ -62,10 +62,12 @@ from core.units import UNITS
 from service.bounded import Bounded, at_most
 from service.engine import Engine
 from service.errors import InvalidRequest
+from service.floors import floor_warning
 from service.joint_names import resolve_joint
 from service.problems import SolveProblem, SolveResult
 from service.rigs import json_map, json_skeleton
 from service.schemas import (
+    FLOOR_WARNING,
     ITERATIONS,
     MAX_WEIGHT,
     NamedTargetResult,
@@ -282,7 +284,13 @@ class _Solved(BaseModel):
     solvers: list[str]
     method: Literal["neural", "fabrik"]
     iterations: int = Field(description=ITERATIONS)  # (as the pose form's)
+    floor: float = Field(
+        description="Height (m, along the character's up axis) of the ground the solve used: "
+        "`options.floor` (0 if none), taken as given (`floor_warning` says where it lies far "
+        "from the body)."
+    )
     up_warning: str | None = UP_WARNING
+    floor_warning: str | None = Field(default=None, description=FLOOR_WARNING)
     sides_warning: str | None = SIDES_WARNING
 
 
@@ -679,7 +687,9 @@ def edit_report(ch: Character, edit: Edit, points: F64) -> dict[str, Any]:
         "model": edit.version,
         "method": "fabrik" if p.method == "fabrik" else "neural",
         "iterations": r.iterations,
+        "floor": p.floor,
         "up_warning": ch.up_warning,
+        "floor_warning": floor_warning(p.pose, p.floor, ch.up_name[-1].lower()),
         "sides_warning": ch.sides_warning,
     }
 

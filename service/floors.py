@@ -50,33 +50,35 @@ def floor_warnings(poses: F64, floors: float | F64) -> list[str | None]:
     return out
 
 
-def floor_warning(pose: F64, floor: float) -> str | None:
+def floor_warning(pose: F64, floor: float, height: str = "y") -> str | None:
     """The ``floor_warning`` of one start pose (``[21, 3]``, world) over ``floor``: as
     :func:`floor_warnings` says it (the same operations, in Python floats: ~1 us, a lone
-    edit's hot path; numpy's passes cost ~5)."""
+    edit's hot path; numpy's passes cost ~5). ``height`` names the up axis in the words:
+    the pose form's world y, a character's own up axis (``"z"`` for ``+Z``, its
+    coordinates in metres)."""
     (px, py, pz), (nx, ny, nz) = pose[[_PELVIS, _NECK]].tolist()
     tx, ty, tz = nx - px, ny - py, nz - pz
     torso = math.sqrt(tx * tx + ty * ty + tz * tz)
     if floor > py or floor < py - FLOOR_REACH * torso:
-        return _words(float(floor), py, torso)
+        return _words(float(floor), py, torso, height)
     return None
 
 
-def _words(floor: float, pelvis: float, torso: float) -> str:
+def _words(floor: float, pelvis: float, torso: float, height: str = "y") -> str:
     """The warning of a floor at world y ``floor`` under (over) a pelvis at ``pelvis``,
-    ``torso`` its pelvis-to-neck distance."""
+    ``torso`` its pelvis-to-neck distance; ``height``: the up axis's name in the words."""
     if floor > pelvis:
-        where = f"{floor - pelvis:.3g} m above the start pose's pelvis (y = {pelvis:.3g} m)"
+        where = f"{floor - pelvis:.3g} m above the start pose's pelvis ({height} = {pelvis:.3g} m)"
         read = "so this body was solved standing under its ground"
     else:
         times = (pelvis - floor) / torso if torso > 0 else float("inf")
         where = (
-            f"{pelvis - floor:.3g} m below the start pose's pelvis (y = {pelvis:.3g} m), "
+            f"{pelvis - floor:.3g} m below the start pose's pelvis ({height} = {pelvis:.3g} m), "
             f"{times:.3g} times its pelvis-to-neck distance"
         )
         read = f"no body the networks learned stood more than {FLOOR_REACH:g} times higher"
     return (
-        f"options.floor: the floor (y = {floor:.3g} m) lies {where}: {read}; the floor is the "
-        "world height of the ground the character stands on (0 for the ground at y = 0, "
-        "1.0 for a character on a 1 m box)"
+        f"options.floor: the floor ({height} = {floor:.3g} m) lies {where}: {read}; the floor "
+        "is the world height of the ground the character stands on (0 for the ground at "
+        f"{height} = 0, 1.0 for a character on a 1 m box)"
     )
