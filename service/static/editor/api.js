@@ -32,7 +32,7 @@ const DOWN = ['server unreachable', NOT_ANSWERING];
 // The status says the server is down (unreachable, not answering): it said so until the
 // page's next request, a restarted server's too. While it says so, the server's liveness
 // (GET v2/health/live: no body, no model, no key) is asked every WATCH_MS, and the status
-// says "connected" once it answers.
+// says "connected" once it answers (``back``).
 export const WATCH_MS = 3000;
 let watching = false;
 
@@ -55,7 +55,17 @@ async function watch() {
     return;
   }
   watching = false;
+  back();
+}
+
+// The server answered (a request's answer, or its liveness): the status says "connected"
+// where it said it was down, and the banner that said so goes (a request's that could not
+// reach the server, or that it did not answer: status 0). It stayed up, under "connected",
+// until the next solve landed or it was dismissed. Nothing else is undone or sent: a
+// drag's targets whose solve failed are kept (drag again to solve them).
+function back() {
   if (DOWN.includes($('status').textContent)) $('status').textContent = 'connected';
+  if (ui.currentError && ui.currentError.status === 0) clearError();
 }
 
 // ``signal``: the caller's, to give the request up (an ApiError 'Given up', status -1,
@@ -98,7 +108,7 @@ export async function api(method, path, body, { signal = null } = {}) {
     clearTimeout(timer);
     if (signal) signal.removeEventListener('abort', giveUp);
   }
-  if (DOWN.includes($('status').textContent)) $('status').textContent = 'connected';
+  back();
   const rtt = performance.now() - t0;
   let data = null;
   try {
