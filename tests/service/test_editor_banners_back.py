@@ -1,7 +1,12 @@
-"""The editor's banner once the server it said was unreachable is back (an editor review,
-2026-12-07; real Chromium, a real server of the test's own, stopped and restarted;
-``docs/editor-recovery.md``): the status said "connected" again (the page asks its liveness
-every 3 s) while the "Server unreachable" banner stayed up until the next solve landed.
+"""The editor's banner once what it said no longer holds (an editor review, 2026-12-07;
+real Chromium, a real server of the test's own where it is stopped, restarted or kept
+busy; ``docs/editor-recovery.md``):
+
+- a server gone and back: the status said "connected" again (the page asks its liveness
+  every 3 s) while the "Server unreachable" banner stayed up until the next solve landed;
+- Reset, or a sample chosen: a busy server's 429 banner stayed over the pose that replaced
+  the edit it was about, and a file's "Broken file" banner over the sample that closed it
+  (an undo already took a failed solve's banner).
 
 Shared parts: ``tests/service/editor_page.py``.
 """
@@ -9,12 +14,15 @@ Shared parts: ``tests/service/editor_page.py``.
 from __future__ import annotations
 
 import contextlib
+import json
+import socket
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import pytest
 
-from tests.service.editor_page import M, drag_joint, open_editor
+from tests.service.editor_page import REPO_ROOT, M, drag_joint, open_editor, open_file, settle
 from tests.service.server import free_port, serve
 
 # the fixtures `server` (one for the session) and `browser` (one per module)
@@ -76,3 +84,85 @@ def test_the_unreachable_banner_goes_once_the_server_is_back(
             assert page.evaluate(STATUS) == "connected"
     finally:
         page.context.close()
+
+
+def stalled(port: int) -> socket.socket:
+    """An upload that sends its head and one byte of its body, then nothing: it holds one of
+    the server's admission slots (its 429s are real, with Retry-After) until closed."""
+    sock = socket.create_connection(("127.0.0.1", port))
+    sock.sendall(
+        b"POST /v1/solve HTTP/1.1\r\nhost: x\r\ncontent-type: application/json\r\n"
+        b"content-length: 1000\r\n\r\n{"
+    )
+    return sock
+
+
+@contextlib.contextmanager
+def busy(port: int) -> Iterator[None]:
+    sock = stalled(port)
+    try:
+        yield
+    finally:
+        sock.close()
+
+
+def refused_drag(page: Any) -> None:
+    """A drag the busy server refuses: its 429 banner."""
+    xy = page.evaluate(f"{M}.projectJoint('left_wrist')")
+    page.mouse.move(xy["x"], xy["y"])
+    page.mouse.down()
+    page.mouse.move(xy["x"] + 30, xy["y"] - 30, steps=4)
+    page.mouse.up()
+    page.wait_for_function(f"() => {M}.error() !== null && {M}.error().status === 429")
+
+
+def cut_file() -> str:
+    """docs/examples' three-frame file cut inside its last frame: a "Broken file" banner."""
+    text: str = json.loads((REPO_ROOT / "docs" / "examples" / "bvh_solve.json").read_text())["bvh"]
+    body = text.rstrip("\n")
+    return body[: body.rfind(" ", 0, len(body) - 200)] + "\n"
+
+
+@pytest.mark.browser
+def test_reset_and_a_sample_take_the_banner_of_the_pose_they_replace(
+    browser: Any, models_dir: Path, tmp_path: Path
+) -> None:
+    port = free_port()
+    env = {"POSE_MAX_CONCURRENCY": "1", "POSE_DEADLINE_SECONDS": "30"}
+    with serve(models_dir, tmp_path, port=port, **env):
+        page = open_editor(browser, f"http://127.0.0.1:{port}")
+        try:
+            page.on("dialog", lambda d: d.accept())  # (a sample over edits asks first)
+            with busy(port):
+                refused_drag(page)
+                page.click("#reset")
+                page.wait_for_function(f"() => {M}.error() === null")
+                assert page.locator("#error").is_hidden()
+                assert page.evaluate(f"{M}.targets()") == {}
+                refused_drag(page)
+                page.select_option("#sample", "2")
+                page.wait_for_function(f"() => {M}.error() === null")
+                assert page.evaluate("document.getElementById('sample').value") == "2"
+            settle(page)
+            drag_joint(page, "left_wrist", 20, -20)  # (free again: solved, no banner)
+            assert page.evaluate(f"{M}.error()") is None
+            # a file's warning: Reset shows the file as opened, of which it still holds;
+            # a sample closes the file, and the banner goes with it
+            open_file(page, cut_file(), "cut.bvh")
+            assert page.evaluate(f"{M}.error()")["title"] == "Broken file"
+            drag_joint(page, "left_wrist", 20, -20)
+            assert page.evaluate(f"{M}.error()") is None  # (a solve landed: as before)
+            open_file(page, cut_file(), "cut2.bvh")
+            page.click("#reset")
+            assert page.evaluate(f"{M}.error()")["title"] == "Broken file"
+            with busy(port):  # a failed solve's banner on the file: Reset takes it
+                refused_drag(page)
+                page.click("#reset")
+                page.wait_for_function(f"() => {M}.error() === null")
+            open_file(page, cut_file(), "cut3.bvh")
+            assert page.evaluate(f"{M}.error()")["title"] == "Broken file"
+            page.select_option("#sample", "1")
+            page.wait_for_function(f"() => {M}.bvh() === null")
+            assert page.evaluate(f"{M}.error()") is None
+        finally:
+            page.context.close()

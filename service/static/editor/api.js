@@ -68,6 +68,15 @@ function back() {
   if (ui.currentError && ui.currentError.status === 0) clearError();
 }
 
+// Whether the banner is about the server or the page rather than the pose shown: the server
+// down (while the status says so), an API key needed, the models loading (not connected
+// yet), a 3D view that cannot start. Reset and a sample chosen leave such a banner up
+// (solve.js replacedError).
+export function aboutServer(e) {
+  return (e.status === 0 && DOWN.includes($('status').textContent)) || e.status === 401
+    || (e.status === 503 && !ui.connected) || e.title === 'WebGL unavailable';
+}
+
 // ``signal``: the caller's, to give the request up (an ApiError 'Given up', status -1,
 // which says nothing to the user: the caller dropped the answer).
 export async function api(method, path, body, { signal = null } = {}) {

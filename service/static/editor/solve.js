@@ -2,7 +2,7 @@
 // undo / redo / reset / sample, and the solve requests (editor.js's frame loop sends them).
 
 import { $, doc, history, solver, state, ui } from './state.js';
-import { api, ApiError, clearError, showError } from './api.js';
+import { aboutServer, api, ApiError, clearError, showError } from './api.js';
 import { excerptOf, seedLayout } from './excerpt.js';
 import { endDrag } from './interaction.js';
 import { currentStep, pushStep, stepBack, stepForward } from './history.js';
@@ -245,6 +245,7 @@ export function loadSample(i) {
   ui.hovered = null;
   $('hud').hidden = true;
   const pose = state.samples[i].pose;
+  replacedError(false);
   restore({ pose, targets: [], pins: [], sample: i });
   pushHistory();
   refresh();
@@ -258,10 +259,24 @@ export function reset() {
   }
   endDrag(false);
   cancelSolves();
+  replacedError(true);
   doc.text = doc.original;
   restore({ pose: filePose(doc.original, doc.frame), targets: [], pins: [], text: doc.original, frame: doc.frame });
   pushHistory();
   refresh();
+}
+
+// Reset or a sample loaded replaces the pose shown, and the banner goes with what it was
+// about (a failed solve's, a busy server's, a file's closed by the sample, an action's
+// refused): it stayed, naming a solve or a file no longer shown (Undo took a failed solve's
+// already). A banner about the server or the page stays (api.js aboutServer: the server
+// still down, a key needed). ``fileKept``: the open file's Reset, the file as opened shown
+// again: what was said of it (cut short, its units, a broken frame) still holds, and stays;
+// a failed solve's banner goes.
+function replacedError(fileKept) {
+  const e = ui.currentError;
+  if (!e || aboutServer(e) || (fileKept && !ui.errorOwner)) return;
+  clearError();
 }
 
 // ------------------------------------------------------------------------------------
