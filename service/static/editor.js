@@ -38,7 +38,7 @@ import {
 import {
   clearTargets, endDrag, onPointerDown, onPointerMove, onPointerUp, pointerLeft, toScreen,
 } from './editor/interaction.js';
-import { exportDocument, exportPose, refresh } from './editor/panel.js';
+import { exportDocument, exportPose, refresh, titleMenu } from './editor/panel.js';
 import {
   fileFrame, hasEdits, jumpToFrame, openFile, otherUnits, readAgain, setFrame,
 } from './editor/file.js';
@@ -72,6 +72,10 @@ function wireControls() {
     $('carry-label').textContent = ev.target.valueAsNumber.toFixed(2);
     requestSolve(true);
   });
+  // a menu's tooltip names the choice shown, whole (panel.js titleMenu), arrowed to or picked
+  for (const menu of document.querySelectorAll('#panel select')) {
+    for (const type of ['input', 'change']) menu.addEventListener(type, () => titleMenu(menu));
+  }
   // (arrowed through: taken on Enter, as the file's menus below; left, the menu goes back:
   // a sample replaces the file open. Each arrow loaded its sample, the first closing the
   // file, unasked where it had no edits, no undo bringing it back)

@@ -1,12 +1,13 @@
-"""The editor's banner once what it said no longer holds (an editor review, 2026-12-07;
-real Chromium, a real server of the test's own where it is stopped, restarted or kept
-busy; ``docs/editor-recovery.md``):
+"""The editor's banner once what it said no longer holds, and its menus' long choices (an
+editor review, 2026-12-07; real Chromium, a real server of the test's own where it is
+stopped, restarted or kept busy; ``docs/editor-recovery.md``):
 
 - a server gone and back: the status said "connected" again (the page asks its liveness
   every 3 s) while the "Server unreachable" banner stayed up until the next solve landed;
 - Reset, or a sample chosen: a busy server's 429 banner stayed over the pose that replaced
   the edit it was about, and a file's "Broken file" banner over the sample that closed it
-  (an undo already took a failed solve's banner).
+  (an undo already took a failed solve's banner);
+- a sample's name longer than its menu (170 px) was cut mid-word, with no tooltip.
 
 Shared parts: ``tests/service/editor_page.py``.
 """
@@ -166,3 +167,47 @@ def test_reset_and_a_sample_take_the_banner_of_the_pose_they_replace(
             assert page.evaluate(f"{M}.error()") is None
         finally:
             page.context.close()
+
+
+# the shown option's text against the room the menu gives it (its box less padding and
+# the arrow's 20 px), in the menu's font
+FITS = """(id) => {
+  const menu = document.getElementById(id);
+  const css = getComputedStyle(menu);
+  const ctx = document.createElement('canvas').getContext('2d');
+  ctx.font = css.font;
+  const room = menu.clientWidth - parseFloat(css.paddingLeft) - parseFloat(css.paddingRight) - 20;
+  return ctx.measureText(menu.selectedOptions[0].textContent).width <= room;
+}"""
+
+
+@pytest.mark.browser
+def test_a_menus_long_choice_is_readable_whole(server: str, browser: Any) -> None:
+    samples = json.loads((REPO_ROOT / "service" / "static" / "samples.json").read_text())
+    page = open_editor(browser, server)
+    try:
+        for i, sample in enumerate(samples["samples"]):
+            page.select_option("#sample", str(i))  # (no edits: unasked)
+            page.wait_for_function(f"() => {M}.pose() !== null")
+            assert page.evaluate(FITS, "sample"), sample["name"]  # shown whole
+            title = page.get_attribute("#sample", "title") or ""
+            assert title.startswith(f"{sample['name']}: {sample['clip']}, frame {sample['frame']}")
+        # a choice longer than any menu's room ends in an ellipsis, and the tooltip names it
+        menus = "[...document.querySelectorAll('#panel select')]"
+        assert set(page.evaluate(f"{menus}.map(s => getComputedStyle(s).textOverflow)")) == {
+            "ellipsis"
+        }
+        drag_joint(page, "right_shoulder", 20, -20)
+        page.select_option("#joint-pick", "right_shoulder")
+        shown = page.evaluate(
+            "document.getElementById('joint-pick').selectedOptions[0].textContent"
+        )
+        assert shown.startswith("right_shoulder (target")
+        assert (page.get_attribute("#joint-pick", "title") or "").startswith(shown + "\n")
+        # arrowed to from the keyboard (taken only on Enter), the tooltip names it already
+        page.focus("#sample")
+        page.keyboard.press("ArrowUp")
+        name = samples["samples"][len(samples["samples"]) - 2]["name"]
+        assert (page.get_attribute("#sample", "title") or "").startswith(name + ": ")
+    finally:
+        page.context.close()

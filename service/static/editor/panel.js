@@ -66,6 +66,19 @@ export function refreshPanel() {
   $('model').textContent = `model: ${state.model || '–'}`;
   updateButtons();
   refreshJoint();
+  for (const menu of document.querySelectorAll('#panel select')) titleMenu(menu);
+}
+
+// A menu's tooltip: the choice shown, whole (one longer than the menu is cut there, with an
+// ellipsis: editor.css), with the option's own note (a sample's clip and frame), then what
+// the menu is for (its title in the page). A sample's name was cut at the menu's 170 px with
+// no way to read it but opening the menu. (editor.js calls it as a menu changes, too.)
+export function titleMenu(menu) {
+  if (menu.dataset.about === undefined) menu.dataset.about = menu.title;
+  const shown = menu.selectedOptions[0];
+  const choice = shown ? [shown.textContent, shown.title].filter(Boolean).join(': ') : '';
+  const title = [choice, menu.dataset.about].filter(Boolean).join('\n');
+  if (menu.title !== title) menu.title = title;
 }
 
 export function updateButtons() {
