@@ -49,6 +49,19 @@ BONES_BAND = (0.5, 2.0)
 REAL_BODIES = (0.97, 1.23)
 #: Each bone's index, by its child joint's name.
 _BONE = {JOINT_NAMES[c]: b for b, (c, _) in enumerate(BONES)}
+#: How far a real body's base key point lies from where its limb starts (a wrist from the
+#: neck, an ankle from the pelvis), in pelvis-to-neck distances: at most 2.08 and 2.91 over
+#: every frame of the dataset, the held-out bodies the farthest (the train split's 1.59 and
+#: 2.70; ``tests/service/test_completion_reach.py`` measures it). Key points farther than
+#: :data:`LIMB_MARGIN` times that (arms or legs 20 % longer and a trunk 20 % shorter than
+#: the farthest-reaching body recorded) make a limb no person has: without ``bone_lengths``
+#: the networks stretch it to reach them (a wrist moved 1.5 m out: an arm of 1.44 m from
+#: collar to wrist against 0.67, every key point reached and no word; an API audit,
+#: 2026-12-07), and the answer says so (with ``bone_lengths``, the bones' own reach says
+#: it: :func:`_implausible_bones`).
+LIMB_REACH = {"wrist": ("neck", 2.1), "ankle": ("pelvis", 3.0)}
+LIMB_MARGIN = 1.5
+_TRUNK = {JOINT_INDEX[j] for j in ("pelvis", "spine1", "spine2", "neck")}
 
 
 def complete(
@@ -146,6 +159,8 @@ def complete(
     if given_lengths:  # (the networks' own estimate: its known limit, docs/service.md)
         implied = float(np.sum(bone_lengths(pred))) * scale
         told += _implausible_bones(keypoints, lengths, implied, tolerance, bool(told))
+    else:
+        told += _stretched_limbs(keypoints, world, torso)
     told += _scaled_points(engine, torso)
     return CompleteResult(
         pose=world, errors=errors, reached=errors <= tolerance, levels=run,
@@ -219,6 +234,44 @@ def _implausible_bones(
             f"{more}; the answer misses them by as much (keypoints' error)"
         )
     return told
+
+
+def limb_reaches(keypoints: dict[str, F64]) -> dict[str, float]:
+    """How far each base wrist and ankle of ``keypoints`` lies from where its limb starts,
+    in pelvis-to-neck distances (:data:`LIMB_REACH`)."""
+    torso = float(np.linalg.norm(keypoints["neck"] - keypoints["pelvis"]))
+    return {
+        j: float(np.linalg.norm(keypoints[j] - keypoints[LIMB_REACH[j[j.index("_") + 1 :]][0]]))
+        / torso
+        for j in ("left_wrist", "right_wrist", "left_ankle", "right_ankle")
+    }
+
+
+def _stretched_limbs(keypoints: dict[str, F64], world: F64, torso: float) -> list[str]:
+    """The answer's ``scale_warning`` of key points no person's limb reaches
+    (:data:`LIMB_REACH` times :data:`LIMB_MARGIN`), without ``bone_lengths``: the limb
+    the answer drew to reach each (``world``: the answer, ``[21, 3]``)."""
+    told = []
+    for j, reach in limb_reaches(keypoints).items():
+        root, most = LIMB_REACH[j[j.index("_") + 1 :]]
+        if reach <= LIMB_MARGIN * most:
+            continue
+        k, drawn = JOINT_INDEX[j], 0.0
+        while k not in _TRUNK:  # up to the collar's or the hip's bone, both included
+            drawn += float(np.linalg.norm(world[k] - world[PARENTS[k]]))
+            k = PARENTS[k]
+        limb = "arm (collar to wrist)" if root == "neck" else "leg (hip to ankle)"
+        told.append(
+            f"{j} lies {reach * torso:.3g} m from the {root}, {reach:.3g} times the pelvis-to-"
+            f"neck distance ({torso:.3g} m; no person's reaches farther than {most:g} times): "
+            f"the answer's {limb} is {drawn:.3g} m"
+        )
+    if not told:
+        return []
+    return [
+        f"keypoints: {'; '.join(told)}; check the key points, or give bone_lengths (the "
+        "body's own bones: the answer keeps them and says which key points they cannot reach)"
+    ]
 
 
 def _scaled_points(engine: Engine, torso: float) -> list[str]:

@@ -369,7 +369,10 @@ class CompleteResponse(BaseModel):
         "sent as metres), or `bone_lengths` of a body the key points do not have: bones "
         "totalling under half or over twice the body the key points imply (every bone at "
         "1 mm, or at 2 m), or too short to reach a key point from the next one up the "
-        "skeleton (the answer misses it). Says by how much.",
+        "skeleton (the answer misses it); or, without `bone_lengths`, a wrist or an ankle "
+        "farther from the neck or the pelvis than 1.5 times any person's reaches (3.2 and 4.5 "
+        "pelvis-to-neck distances), which the answer reaches with a limb stretched to it. "
+        "Says by how much.",
     )
     up_warning: str | None = Field(
         default=None,
