@@ -523,24 +523,27 @@ def fan_out(fn: Callable[[slice], R], wave: Sequence[slice], width: int) -> list
 
 
 #: A character item of a batch (its own solve, joint map, retargeting and answer, in
-#: Python) in the units above, which are ~6.4 us of a pose item's work (1,024 of the
-#: costliest, 25 units each, took 165 ms, 1,024 plain 2-target ones, 6 units each, 39 ms:
-#: in process on one compute thread, `python scripts/figures/character_price.py`,
-#: 2026-12-06): CHARACTER_PRICE, plus 8
-#: units per 5 joints, plus CHARACTER_PRICE more when its solve runs FABRIK (exact reach,
-#: pins, the fabrik method). Measured so: a 22-joint skeleton 2.8 ms soft, 5.3 ms exact
-#: with two pins (436 / 836 units); 522 joints 7.6 / 9.4 ms; 1,022 joints 13.1 / 13.3 ms.
-#: It was 16 units plus 1 per 8 joints, doubled (38 for the 22-joint exact item, ~0.24 ms
-#: of pose items): the 413 admitted 600 such items, 3.2 s of work, which no deadline of
-#: 2 s could finish (a user's audit).
-CHARACTER_PRICE = 400
+#: Python) in the units above, which are ~6.3 us of a pose item's work (1,024 of the
+#: costliest, 25 units each, took 156 ms, 1,024 plain 2-target ones, 6 units each, 45 ms:
+#: in process on one compute thread, `python scripts/figures/character_price.py --rounds
+#: 5`, 2026-12-07): CHARACTER_PRICE, plus CHARACTER_SLOW_PRICE when its solve runs FABRIK
+#: (exact reach, pins, the fabrik method), plus 3 units per 5 joints. Measured so: a
+#: 22-joint skeleton 1.76 ms soft, 2.57 ms exact with two pins (294 / 434 units: 1.84 /
+#: 2.71 ms); 522 joints 3.10 / 4.25 ms (594 / 734); 1,022 joints 5.47 / 5.41 ms (894 /
+#: 1,034). It was 400, 400 more slow and 8 per 5 joints, priced before the character path
+#: was compiled (2.8 / 5.3 ms for 22 joints, 13.1 / 13.3 for 1,022): twice its work and
+#: more since, so a batch of them was refused at half the size it could take. Before that
+#: it was 16 units plus 1 per 8 joints, doubled (38 for the 22-joint exact item): the 413
+#: admitted 600 such items, 3.2 s of work, which no deadline of 2 s could finish (a user's
+#: audit).
+CHARACTER_PRICE, CHARACTER_SLOW_PRICE = 280, 140
 #: ... and CHARACTER_JOINT_UNITS units for every CHARACTER_PER_JOINTS of its joints
-CHARACTER_JOINT_UNITS, CHARACTER_PER_JOINTS = 8, 5
+CHARACTER_JOINT_UNITS, CHARACTER_PER_JOINTS = 3, 5
 
 
 def character_price(joints: int, slow: bool) -> int:
     per_joints = -(-joints * CHARACTER_JOINT_UNITS // CHARACTER_PER_JOINTS)
-    return CHARACTER_PRICE * (2 if slow else 1) + per_joints
+    return CHARACTER_PRICE + (CHARACTER_SLOW_PRICE if slow else 0) + per_joints
 
 
 def edit_price(joints: int, o: Priced, pinned: bool) -> int:
@@ -564,7 +567,7 @@ def refuse_price(prices: Sequence[int], joints: int | Sequence[int], max_items: 
         f"{field}: the batch costs {total} work units, beyond the limit of {cap} (what "
         f"{max_items} of the costliest pose items cost, {max_item_price(pricing)} units "
         f"each); {noun} costs {CHARACTER_PRICE} + {CHARACTER_JOINT_UNITS} per "
-        f"{CHARACTER_PER_JOINTS} joints, {CHARACTER_PRICE} more for exact reach, pins or "
+        f"{CHARACTER_PER_JOINTS} joints, {CHARACTER_SLOW_PRICE} more for exact reach, pins or "
         f"FABRIK ({field}[{i}], {many} joints: {prices[i]}; {_fit(cap // prices[i])}); send "
         "smaller batches"
     )

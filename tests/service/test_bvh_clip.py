@@ -137,9 +137,9 @@ def test_a_clip_is_bounded_as_a_batch_is(models_dir: Path, bvh_files: dict[str, 
         )
         body = clip_of(text, "bandai", [1, 2])
         resp = c.post("/v1/bvh/solve/batch", json=body)
-        said = "(edits[1], 27 joints: 844; one such is taken alone"
+        said = "(edits[1], 27 joints: 437; one such is taken alone"
         assert_problem(resp, 413, "edits: the batch costs", said,
-                       "an edit costs 400 + 8 per 5 joints")  # fmt: skip
+                       "an edit costs 280 + 3 per 5 joints, 140 more for exact reach")  # fmt: skip
         one = {**body, "edits": body["edits"][1:]}  # one edit alone is never refused for it
         assert c.post("/v1/bvh/solve/batch", json=one).status_code == 200
 

@@ -358,24 +358,25 @@ def test_oversized_character_batch_is_refused(
         four = {**pose, "options": {"passes": 4}}
         mixed = {"items": [dearest, dearest, four, pose]}
         assert small.post("/v1/solve/batch", json=mixed).status_code == 200
-        # a character item costs what its work does in those units: 400 + 8 per 5 of its
-        # 57 joints soft (492: ~3 ms, against ~0.16 ms for the dearest pose item); one
+        # a character item costs what its work does in those units: 280 + 3 per 5 of its
+        # 57 joints soft (315: ~2 ms, against ~0.16 ms for the dearest pose item); one
         # item alone is never refused for its price, as a single request of it is not
         soft = {**char, "pins": [], "options": {}}
         assert small.post("/v1/solve/batch", json={"items": [soft]}).status_code == 200
         read.clear()
         r = small.post("/v1/solve/batch", json={"items": [soft, pose]})
-        assert_problem(r, 413, "work units", "items[0], 57 joints: 492")
+        assert_problem(r, 413, "work units", "items[0], 57 joints: 315")
         r = small.post("/v1/solve/batch", json={"items": [pose, char, char]})
         body = assert_problem(r, 413, "work units", "items[1]", "joints")
         assert body["type"].endswith("/too-many-items")
         assert not read  # refused before any skeleton was read
-    # the default limit, 1024 x 25 units: 28 items of a 57-joint skeleton with exact reach
-    # and a pin (892 units each, ~5 ms) fit, 29 do not (600 such items were admitted, ~3 s
-    # of work past any 2 s deadline: a user's audit)
+    # the default limit, 1024 x 25 units: 56 items of a 57-joint skeleton with exact reach
+    # and a pin (455 units each, ~3 ms) fit, 57 do not (600 such items were admitted, ~3 s
+    # of work past any 2 s deadline: a user's audit; priced at 892 before the character
+    # path was compiled, 28 fit)
     with make_client(models_dir) as c:
-        assert c.post("/v1/solve/batch", json={"items": [char] * 28}).status_code == 200
+        assert c.post("/v1/solve/batch", json={"items": [char] * 56}).status_code == 200
         read.clear()
-        r = c.post("/v1/solve/batch", json={"items": [char] * 29})
-        assert_problem(r, 413, "items[0], 57 joints: 892")
+        r = c.post("/v1/solve/batch", json={"items": [char] * 57})
+        assert_problem(r, 413, "items[0], 57 joints: 455")
     assert not read
