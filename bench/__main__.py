@@ -181,7 +181,8 @@ def run(
                 f"  c=1 at passes=1: p50 {h['solve_passes1']['p50_ms']:.2f} ms;"
                 f" batch: {h['batch']['poses_per_s']:.0f} poses/s (item list),"
                 f" columnar {h['batch_columnar']['poses_per_s']:.0f},"
-                f" columnar at passes=1 {h['batch_columnar_passes1']['poses_per_s']:.0f}"
+                f" columnar at passes=1 {h['batch_columnar_passes1']['poses_per_s']:.0f},"
+                f" columnar packed {h['batch_columnar_packed']['poses_per_s']:.0f}"
             )
         seconds["http"] = round(time.perf_counter() - t0, 1)
     if "speed" in results:

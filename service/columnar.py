@@ -11,6 +11,8 @@ notation and with the messages of the pydantic field errors (``service.errors``)
 
 from __future__ import annotations
 
+import base64
+import binascii
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -36,6 +38,11 @@ WIDTH = 3 * NUM_JOINTS  # numbers per pose row
 _FLOAT_MAX = int(np.finfo(np.float64).max)  # a JSON integer beyond it is no float
 #: The columnar form's keys (a body with these and ``items`` is in both forms: a 422).
 TOP = ("poses", "targets", "pins", "options")
+#: A packed column (``poses``, ``targets.positions``): its numbers as one base64 string
+#: (RFC 4648, padded) of little-endian float64, row after row; a batch sent with packed
+#: ``poses`` is answered with packed ``poses`` (docs/limits.md, "The columnar batch").
+PACKED = np.dtype("<f8")
+_ROW_BYTES = WIDTH * PACKED.itemsize  # 504: a pose's, a multiple of 3 (no base64 padding)
 _TARGETS = ("joints", "positions", "weights")
 
 
@@ -81,6 +88,7 @@ class Columns:
     n_targets: int
     n_pins: int
     options: SolveOptions
+    packed: bool = False  # poses sent packed (:data:`PACKED`): answered packed
 
     @property
     def size(self) -> int:
@@ -117,6 +125,9 @@ def _numbers(rows: Any, loc: tuple[Any, ...], width: int, n: int, errs: _Errors,
     """``rows`` (a list of ``n`` lists of ``width`` numbers) as a ``[n, width]`` array, or
     None with the errors added. ``suspect``: the body may hold booleans among numbers
     (numpy would take ``true`` for 1.0), so every element's type is checked."""
+    if isinstance(rows, str):
+        got = _unpack(rows, loc, width, n, errs)
+        return None if got is None else _checked(got, loc, errs, bound)
     if not isinstance(rows, list):
         errs.add(loc, "list_type", "Input should be a valid list")
         return None
@@ -156,7 +167,43 @@ def _numbers(rows: Any, loc: tuple[Any, ...], width: int, n: int, errs: _Errors,
         if errs.raw:
             return None
         arr = np.array(rows, dtype=np.float64)
-    out = np.ascontiguousarray(arr, dtype=np.float64)
+    return _checked(np.ascontiguousarray(arr, dtype=np.float64), loc, errs, bound)
+
+
+def _packed_rows(value: str, width: int) -> int:
+    """How many rows of ``width`` numbers a packed column's base64 text holds, read off
+    its length (a 413 is said before it is decoded)."""
+    return (len(value) * 3 // 4) // (width * PACKED.itemsize)
+
+
+def _unpack(value: str, loc: tuple[Any, ...], width: int, n: int | None, errs: _Errors
+            ) -> F64 | None:  # fmt: skip
+    """A packed column (:data:`PACKED`) of ``n`` rows of ``width`` numbers (None: as many
+    as it holds, ``poses``) as a ``[n, width]`` array, or None with the error added."""
+    try:
+        raw = base64.b64decode(value, validate=True)
+    except (binascii.Error, ValueError):  # (ValueError: a character beyond ASCII)
+        errs.add(loc, "packed", "a packed column is base64 (RFC 4648, padded, no line breaks) "
+                 "of little-endian float64 numbers, row after row")  # fmt: skip
+        return None
+    row = width * PACKED.itemsize
+    if n is None:
+        if len(raw) % row:
+            errs.add(loc, "rows", f"{_n(len(raw), 'byte')} packed: not whole rows of "
+                     f"{_n(width, 'float64 number')} ({row} bytes each)")  # fmt: skip
+            return None
+        n = len(raw) // row
+    elif len(raw) != n * row:
+        numbers = _n(width, "float64 number")
+        errs.add(loc, "rows", f"{_n(len(raw), 'byte')} packed for {_n(n, 'pose')}: one row "
+                 f"of {numbers} ({row} bytes) per pose, {n * row} bytes")  # fmt: skip
+        return None
+    return np.frombuffer(raw, dtype=PACKED).astype(np.float64).reshape(n, width)
+
+
+def _checked(out: F64, loc: tuple[Any, ...], errs: _Errors, bound: float | None) -> F64 | None:
+    """``out`` where every number is finite and within ``bound``, else None with the errors
+    added, naming each (``poses[17][4]``)."""
     bad = ~np.isfinite(out)
     if bad.any():
         errs.add_all(
@@ -260,15 +307,25 @@ def parse(data: dict[str, Any], max_items: int, suspect: bool = True) -> Columns
             errs.add((key,), "missing", "Field required")
     errs.raise_any()
     rows = data["poses"]
-    n = len(rows) if isinstance(rows, list) else 0
-    if n > max_items:
+    packed = isinstance(rows, str)
+    n = len(rows) if isinstance(rows, list) else _packed_rows(rows, WIDTH) if packed else 0
+    if n > max_items:  # (a packed column's count read off its length, before decoding)
         raise TooManyItems(f"{n} items exceed the limit of {max_items} per batch")
     if isinstance(rows, list) and n == 0:
         errs.add(
             ("poses",), "too_short", "List should have at least 1 item after validation, not 0"
         )  # pydantic's
     errs.raise_any()
-    poses = _numbers(rows, ("poses",), WIDTH, n, errs, suspect)
+    if packed:
+        got = _unpack(rows, ("poses",), WIDTH, None, errs)
+        n = 0 if got is None else len(got)
+        if got is not None and n == 0:
+            errs.add(("poses",), "too_short", f"at least one pose packed: {_ROW_BYTES} bytes, "
+                     f"{_ROW_BYTES * 4 // 3} base64 characters")  # fmt: skip
+        errs.raise_any()
+        poses = _checked(got, ("poses",), errs, MAX_COORDINATE) if got is not None else None
+    else:
+        poses = _numbers(rows, ("poses",), WIDTH, n, errs, suspect)
     if not isinstance(targets, dict):
         errs.add(
             ("targets",),
@@ -334,7 +391,7 @@ def parse(data: dict[str, Any], max_items: int, suspect: bool = True) -> Columns
     check_bones(pose3, lambda b: f"poses[{b}]")
     tpos = np.concatenate([goals.reshape(n, k, 3), np.take_along_axis(pose3, pj[:, :, None], 1)],
                           axis=1)  # fmt: skip
-    return Columns(pose3, tidx, tpos, weights, k, p, options)
+    return Columns(pose3, tidx, tpos, weights, k, p, options, packed)
 
 
 @dataclass(frozen=True)
@@ -358,6 +415,8 @@ def solve(engine: Engine, cols: Columns, part: slice) -> Part:
         turn_search=o.turn_search is not False, mirror=o.mirror, soft_ik=o.soft_ik,
     )  # fmt: skip
     rows = np.ascontiguousarray(ans.pose, dtype=np.float64).reshape(len(ans.pose), WIDTH)
+    if cols.packed:  # (a part's base64 is whole: 504 bytes a row, no padding to join)
+        return Part(ans, b'"' + base64.b64encode(rows.astype(PACKED, copy=False).tobytes()) + b'"')
     return Part(ans, orjson.dumps(rows, option=orjson.OPT_SERIALIZE_NUMPY))
 
 
@@ -368,6 +427,8 @@ def merge(parts: Sequence[Part]) -> Part:
     ends = np.cumsum([len(p.ans.pose) for p in parts])
     rows = [np.arange(e - len(p.ans.pose), e) for p, e in zip(parts, ends, strict=True)]
     ans = BatchAnswer.scatter(int(ends[-1]), [(r, p.ans) for r, p in zip(rows, parts, strict=True)])
+    if parts[0].poses[:1] == b'"':  # packed: the parts' base64 joined (each whole)
+        return Part(ans, b'"' + b"".join(p.poses[1:-1] for p in parts) + b'"')
     poses = b"[" + b",".join(p.poses[1:-1] for p in parts if len(p.ans.pose)) + b"]"
     return Part(ans, poses)
 

@@ -569,6 +569,19 @@ PoseRow = Annotated[
     ),
 ]
 Weight = Annotated[float, Field(allow_inf_nan=False, gt=0.0, le=MAX_WEIGHT)]
+#: A packed column (``service.columnar.PACKED``): the same numbers, row after row, as one
+#: base64 string of little-endian float64
+Packed = Annotated[
+    str,
+    Field(
+        min_length=1,
+        pattern=r"^[A-Za-z0-9+/]*={0,2}$",
+        description="The same numbers packed: row after row, little-endian float64 (8 bytes "
+        "each), as one base64 string (RFC 4648, padded, no line breaks); a pose row is 504 "
+        "bytes. Numpy: `base64.b64encode(rows.astype('<f8').tobytes())`; JavaScript: a "
+        "Float64Array's bytes. Exact, and parsed ~5 times faster than JSON numbers.",
+    ),
+]
 JointRow = Annotated[list[Joint], Field(min_length=1, max_length=21)]
 
 
@@ -577,8 +590,9 @@ class ColumnarTargets(_Body):
         description="K joint names shared by every item, or one row of K names per item "
         "(every row the same length K).",
     )
-    positions: list[list[Coordinate]] = Field(
-        description="One row per item: the K targets' x, y, z in the order of `joints`."
+    positions: list[list[Coordinate]] | Packed = Field(
+        description="One row per item: the K targets' x, y, z in the order of `joints`; or "
+        "packed (3K float64 numbers a row)."
     )
     weights: list[Weight] | list[list[Weight]] | None = Field(
         default=None, description="K weights shared by every item, or one row per item."
@@ -605,7 +619,10 @@ class ColumnarBatch(_Body):
         },
     )
 
-    poses: list[PoseRow] = Field(min_length=1, description="One row of 63 numbers per item.")
+    poses: Annotated[list[PoseRow], Field(min_length=1)] | Packed = Field(
+        description="One row of 63 numbers per item; or packed (the answer's `poses` then "
+        "come back packed alike)."
+    )
     targets: ColumnarTargets
     pins: list[Joint] | list[list[Joint]] = Field(
         default_factory=list,
@@ -618,7 +635,10 @@ class ColumnarBatch(_Body):
 class ColumnarResponse(BaseModel):
     """The answer to a columnar batch: arrays, row b for item b."""
 
-    poses: list[list[float]] = Field(description="One row of 63 numbers per item.")
+    poses: list[list[float]] | str = Field(
+        description="One row of 63 numbers per item; packed (one base64 string of "
+        "little-endian float64, 504 bytes a row) where the request's `poses` were."
+    )
     errors: list[list[float]] = Field(description="Distance (m) of each target, [B][K].")
     reached: list[list[bool]] = Field(description="errors <= tolerance, [B][K].")
     pin_errors: list[list[float]] = Field(description="How far each pin moved (m), [B][P].")

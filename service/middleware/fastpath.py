@@ -157,8 +157,11 @@ def _named(data: dict[str, Any]) -> int:
     as wide as it: a 653 kB body took a worker to 1.3 GiB, a bigger one was a 500; an
     audit, 2026-12-06)."""
     targets = data.get("targets")
-    joints = targets.get("joints") if isinstance(targets, dict) else None
-    return _strings(joints) + _strings(data.get("pins")) + _strings(data.get("options"), 1)
+    joints, positions = (targets.get("joints"), targets.get("positions")) if isinstance(
+        targets, dict) else (None, None)  # fmt: skip
+    packed = (type(data.get("poses")) is str) + (type(positions) is str)  # (base64 columns)
+    return (_strings(joints) + _strings(data.get("pins")) + _strings(data.get("options"), 1)
+            + packed)  # fmt: skip
 
 
 #: Values a valid columnar item holds at most (its pose's 63 numbers, 21 targets'

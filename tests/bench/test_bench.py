@@ -162,6 +162,11 @@ def test_quick_bench_writes_a_sane_report(
     # the default passes and passes=1 side by side (issue 14's goals judge the default)
     for row in (http["solve_passes1"], http["batch_columnar_passes1"]):
         assert row["errors"] == 0 and row["p50_ms"] > 0
+    # the columnar form with packed columns (base64 float64) beside JSON numbers
+    packed, numbers = http["batch_columnar_packed"], http["batch_columnar"]
+    assert packed["errors"] == 0 and packed["poses_per_s"] > 0
+    assert packed["request_bytes"] < 0.7 * numbers["request_bytes"]
+    assert "packed columns (base64 float64)" in report
     # the same requests at a drag's pace: each sent a display frame after the last
     paced = http["solve_paced"]
     assert paced["errors"] == 0 and paced["requests"] == 20 and paced["compute_p50_ms"] > 0
