@@ -59,7 +59,10 @@ _BONE = {JOINT_NAMES[c]: b for b, (c, _) in enumerate(BONES)}
 #: collar to wrist against 0.67, every key point reached and no word; an API audit,
 #: 2026-12-07), and the answer says so (with ``bone_lengths``, the bones' own reach says
 #: it: :func:`_implausible_bones`).
-LIMB_REACH = {"wrist": ("neck", 2.1), "ankle": ("pelvis", 3.0)}
+LIMB_REACH = {
+    **dict.fromkeys(("left_wrist", "right_wrist"), ("neck", 2.1)),
+    **dict.fromkeys(("left_ankle", "right_ankle"), ("pelvis", 3.0)),
+}
 LIMB_MARGIN = 1.5
 _TRUNK = {JOINT_INDEX[j] for j in ("pelvis", "spine1", "spine2", "neck")}
 
@@ -241,9 +244,8 @@ def limb_reaches(keypoints: dict[str, F64]) -> dict[str, float]:
     in pelvis-to-neck distances (:data:`LIMB_REACH`)."""
     torso = float(np.linalg.norm(keypoints["neck"] - keypoints["pelvis"]))
     return {
-        j: float(np.linalg.norm(keypoints[j] - keypoints[LIMB_REACH[j[j.index("_") + 1 :]][0]]))
-        / torso
-        for j in ("left_wrist", "right_wrist", "left_ankle", "right_ankle")
+        j: float(np.linalg.norm(keypoints[j] - keypoints[root])) / torso
+        for j, (root, _) in LIMB_REACH.items()
     }
 
 
@@ -253,7 +255,7 @@ def _stretched_limbs(keypoints: dict[str, F64], world: F64, torso: float) -> lis
     the answer drew to reach each (``world``: the answer, ``[21, 3]``)."""
     told = []
     for j, reach in limb_reaches(keypoints).items():
-        root, most = LIMB_REACH[j[j.index("_") + 1 :]]
+        root, most = LIMB_REACH[j]
         if reach <= LIMB_MARGIN * most:
             continue
         k, drawn = JOINT_INDEX[j], 0.0
