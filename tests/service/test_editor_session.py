@@ -127,14 +127,20 @@ def test_editor_goes_on_when_a_solve_is_never_answered(server: str, browser: Any
         assert "v1/solve" in err["detail"]
         page.wait_for_function(f"() => {M}.solveCount().inflight")
         assert len(held) == 3
+        page.route("**/v2/health/live", lambda route: route.abort())  # (not found back yet)
         page.clock.fast_forward(61_000)  # and that one too: the pose as it was
         settle(page)
-        hold["all"] = False
         assert page.evaluate(f"{M}.pose()") == before  # the pose as it was, targets kept
         assert "left_knee" in page.evaluate(f"{M}.targets()")
+        assert "sent again once the server is back" in page.evaluate(f"{M}.error().detail")
         # ("server not answering" said, then "connected" once the server's liveness answers
-        # (api.js watch): it is up, only these solves were held)
+        # (api.js watch): it is up, only these solves were held; and the drag's edit, sent
+        # again then, lands: test_editor_resend.py)
+        hold["all"] = False
+        page.unroute("**/v2/health/live")
         page.wait_for_function(f"() => {STATUS} === 'connected'")
+        settle(page)
+        assert page.evaluate(f"{M}.committedPose()") != before
         drag_joint(page, "left_knee", 10, -10)  # the next drag is solved, the banner clears
         assert page.evaluate(f"{M}.error()") is None
         assert page.evaluate(STATUS) == "connected"

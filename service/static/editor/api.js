@@ -61,11 +61,22 @@ async function watch() {
 // The server answered (a request's answer, or its liveness): the status says "connected"
 // where it said it was down, and the banner that said so goes (a request's that could not
 // reach the server, or that it did not answer: status 0). It stayed up, under "connected",
-// until the next solve landed or it was dismissed. Nothing else is undone or sent: a
-// drag's targets whose solve failed are kept (drag again to solve them).
+// until the next solve landed or it was dismissed. Then, where it said it was down, what
+// waits for the server runs (``onBack``: solve.js sends again the edit the outage
+// interrupted).
+const whenBack = [];
+export const serverDown = () => DOWN.includes($('status').textContent);
+
 function back() {
-  if (DOWN.includes($('status').textContent)) $('status').textContent = 'connected';
+  const wasDown = serverDown();
+  if (wasDown) $('status').textContent = 'connected';
   if (ui.currentError && ui.currentError.status === 0) clearError();
+  if (wasDown) whenBack.forEach((fn) => fn());
+}
+
+// ``fn`` runs each time the server is found back after the status said it was down.
+export function onBack(fn) {
+  whenBack.push(fn);
 }
 
 // Whether the banner is about the server or the page rather than the pose shown: the server

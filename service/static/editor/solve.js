@@ -2,7 +2,9 @@
 // undo / redo / reset / sample, and the solve requests (editor.js's frame loop sends them).
 
 import { $, doc, history, solver, state, ui } from './state.js';
-import { aboutServer, api, ApiError, clearError, showError } from './api.js';
+import {
+  aboutServer, api, ApiError, clearError, onBack, serverDown, showError,
+} from './api.js';
 import { excerptOf, seedLayout } from './excerpt.js';
 import { endDrag } from './interaction.js';
 import { currentStep, pushStep, stepBack, stepForward } from './history.js';
@@ -99,6 +101,8 @@ export function cancelSolves() {
   solver.dirty = false;
   solver.commitPending = false;
   solver.busyTries = 0;
+  solver.interrupted = null; // (what an outage interrupted is not shown now: not sent again)
+  solver.again = null;
   // the gesture is dropped: what waited for it runs once the action dropping it is done
   const waiting = solver.afterCommit.splice(0);
   if (waiting.length) queueMicrotask(() => waiting.forEach((fn) => fn()));
@@ -380,6 +384,7 @@ function solveBody() {
 
 // An edit happened: solve it on the next frame (commit = it ends a gesture).
 export function requestSolve(commit) {
+  solver.again = null; // (a new edit: its answer is committed as its own step)
   if (commit) solver.commitPending = true;
   if (state.targets.size === 0) {
     // Nothing to reach: the committed pose stands.
@@ -401,6 +406,24 @@ export function requestSolve(commit) {
 // Retry-After, each waited for) before it is given up: at most 4 x 30 s.
 export const BUSY_TRIES = 4;
 
+// A gesture's last solve that found no server (unreachable, not answering: status 0) keeps
+// its targets, the pose as before it (below); once the server is back (api.js onBack), that
+// edit is sent again, once, and its answer committed as the gesture's would have been: in
+// place of the step its kept targets made. Not when anything has changed since: an undo,
+// Reset, a sample, a file opened or a frame scrubbed (cancelSolves), a drag or another edit
+// on its way, a file being read. The kept targets stayed unsolved, the user to drag again.
+function sendAgain() {
+  const kept = solver.interrupted;
+  solver.interrupted = null;
+  if (!kept || kept.epoch !== solver.epoch || history.stack[history.index] !== kept.step) return;
+  if (ui.drag || ui.reading || solver.commitPending || solver.dirty || solver.inflight) return;
+  if (state.targets.size === 0) return;
+  solver.again = kept;
+  solver.commitPending = true;
+  solver.dirty = true; // (editor.js's frame loop sends it)
+}
+onBack(sendAgain);
+
 const withNote = (err, note) => new ApiError(err.status, err.title, `${err.detail}; ${note}`, err.requestId, err.retryAfter);
 
 export async function sendSolve() {
@@ -408,6 +431,7 @@ export async function sendSolve() {
   solver.inflight = true;
   const epoch = solver.epoch;
   const commit = solver.commitPending;
+  const again = commit ? solver.again : null; // (sendAgain: the edit an outage interrupted)
   let settle = false; // the gesture's answer is in: run what waited for it
   const body = solveBody();
   solver.sent += 1;
@@ -444,7 +468,10 @@ export async function sendSolve() {
       const edit = res.edit && res.edit.from === doc.text ? res.edit : null;
       commitShown();
       solver.commitPending = false;
+      solver.again = null;
       if (edit) seedLayout(edit);
+      // the edit sent again: its answer takes the place of the step its kept targets made
+      if (again && again.replace && history.stack[history.index] === again.step) stepBack();
       pushHistory(edit);
     }
     refresh();
@@ -459,7 +486,14 @@ export async function sendSolve() {
       // each answered 429 at once (with a file, the whole file uploaded each time).
       solver.holdUntil = performance.now() + wait * 1000;
     }
-    if (commit && !solver.dirty && wait && solver.busyTries < BUSY_TRIES - 1) {
+    // (the edit sent again to a server back but still loading its models, 503 and
+    // Retry-After, as each start answers until ready: it waits for them, its tries not
+    // counted; models that fail to load answer without Retry-After, and it is given up)
+    const loading = again && wait && err.status === 503 && err.title === 'Models not ready';
+    if (commit && !solver.dirty && loading) {
+      solver.dirty = true;
+      said = withNote(err, `the edit is sent again in ${wait} s`);
+    } else if (commit && !solver.dirty && wait && solver.busyTries < BUSY_TRIES - 1) {
       // The gesture's final solve refused by a busy server: sent again once its Retry-After
       // is over (the gesture still on its way: what waits for it waits on), BUSY_TRIES
       // times in all. It snapped back, the targets kept, and nothing was sent again.
@@ -473,10 +507,24 @@ export async function sendSolve() {
       solver.commitPending = false;
       state.pose = clonePose(state.committed);
       doc.shown = doc.text;
+      const shown = history.stack[history.index];
       pushHistory();
+      const step = history.stack[history.index];
+      solver.again = null;
       if (wait) {
         said = withNote(err, `still busy after ${BUSY_TRIES} tries: the edit is not applied (the `
           + 'pose is as before it, its targets kept: drag again to retry)');
+      } else if (again && err.status === 0) {
+        said = withNote(err, 'the edit, sent again once the server was back, failed again: it is not '
+          + 'applied (the pose is as before it, its targets kept: drag again to retry)');
+      } else if (err.status === 0) {
+        // (the same step kept again, an option changed meanwhile: still the step to replace)
+        const before = solver.interrupted;
+        const replace = step !== shown
+          || Boolean(before && before.epoch === solver.epoch && before.step === step && before.replace);
+        solver.interrupted = { epoch: solver.epoch, step, replace };
+        said = withNote(err, 'the edit is sent again once the server is back');
+        if (!serverDown()) queueMicrotask(sendAgain); // (an answer came meanwhile)
       }
       solver.busyTries = 0;
     }

@@ -43,6 +43,8 @@ export const solver = {
   giveUp: null, // the AbortController of the solve in flight (cancelSolves gives it up)
   holdUntil: 0, // performance.now() before which no solve is sent (a Retry-After; solve.js)
   busyTries: 0, // a gesture's last solve refused by a busy server, so many times in a row (solve.js)
+  interrupted: null, // a gesture's last solve that found no server: {epoch, step, replace} (solve.js)
+  again: null, // that edit, being sent again now the server is back (solve.js)
   sent: 0,
   answered: 0,
   last: null,

@@ -1,0 +1,250 @@
+"""The edit a server's outage interrupted, sent again once it is back (real Chromium, a real
+server of the test's own stopped and started again on its port; ``docs/editor-recovery.md``).
+
+A drag whose last solve could not reach the server kept its targets, the pose as before the
+drag. Once the server was back the status said "connected" and the banner went, but the kept
+targets were never solved: the screen showed targets the pose did not meet, and the user had
+to drag again. Now that edit is sent again by itself, once, and lands as a late answer would
+(the drag one undo step); not when the user has changed things since (undo, Reset, a
+sample), and not a second time when it fails again.
+
+Shared parts: ``tests/service/editor_page.py``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from tests.service.editor_page import (
+    REPO_ROOT,
+    M,
+    drag_joint,
+    open_editor,
+    open_file,
+    recorded,
+    settle,
+)
+from tests.service.server import free_port, serve
+
+# the fixtures `server` (one for the session) and `browser` (one per module)
+pytest_plugins = ("tests.service.editor_page",)
+
+STATUS = "document.getElementById('status').textContent"
+#: Longer than the page's liveness period (api.js WATCH_MS, 3 s): what was to be sent is.
+QUIET_MS = 4_500
+
+
+def work(page: Any) -> dict[str, Any]:
+    """What the user made: the pose as committed and shown, targets, pins, the undo history."""
+    return {
+        "committed": page.evaluate(f"{M}.committedPose()"),
+        "pose": page.evaluate(f"{M}.pose()"),
+        "targets": page.evaluate(f"{M}.targets()"),
+        "pins": page.evaluate(f"{M}.pins()"),
+        "history": page.evaluate(f"{M}.history()"),
+    }
+
+
+def sent(page: Any) -> int:
+    return int(page.evaluate(f"{M}.solveCount().sent"))
+
+
+def unreachable(page: Any, joint: str, dx: float = 10, dy: float = 10) -> None:
+    """A drag whose solves find no server: its banner and status say so."""
+    drag_joint(page, joint, dx, dy)
+    err = page.evaluate(f"{M}.error()")
+    assert err is not None and err["title"] == "Server unreachable", err
+    assert page.evaluate(STATUS) == "server unreachable"
+
+
+def back(page: Any) -> None:
+    """The server found back (the page's liveness check), and whatever that sent settled."""
+    page.wait_for_function(f"() => {STATUS} === 'connected'")
+    settle(page)
+
+
+class Outages:
+    """The test's own server on a port of its own, started and stopped at will."""
+
+    def __init__(self, models_dir: Path, tmp: Path) -> None:
+        self.models_dir, self.tmp, self.port = models_dir, tmp, free_port()
+        self.base = f"http://127.0.0.1:{self.port}"
+
+    def up(self) -> Any:
+        return serve(self.models_dir, self.tmp, port=self.port)
+
+    @contextlib.contextmanager
+    def ready(self, page: Any) -> Iterator[None]:
+        """Up, and found by the page only once its models are loaded (a start answers its
+        liveness before: a solve then is a 503 with Retry-After, the edit sent again after)."""
+        page.route("**/v2/health/live", lambda route: route.abort())
+        with self.up():
+            page.unroute("**/v2/health/live")
+            yield
+
+
+@pytest.fixture
+def outages(models_dir: Path, tmp_path: Path) -> Outages:
+    return Outages(models_dir, tmp_path)
+
+
+@pytest.mark.browser
+def test_the_edit_an_outage_interrupted_is_sent_again_once_it_is_back(
+    browser: Any, outages: Outages
+) -> None:
+    with outages.up():
+        page = open_editor(browser, outages.base)
+        drag_joint(page, "right_wrist", 30, -40)  # an edit, solved
+    try:  # (the server stopped)
+        start = work(page)
+        unreachable(page, "left_knee")
+        made = work(page)
+        assert made["committed"] == start["committed"] and made["pose"] == start["pose"]
+        assert "left_knee" in made["targets"]
+        assert "sent again once the server is back" in page.evaluate(f"{M}.error().detail")
+        count = sent(page)
+        with outages.ready(page):
+            back(page)  # (no click, no drag)
+            now = work(page)
+            assert page.evaluate(f"{M}.error()") is None
+            assert now["committed"] != start["committed"]  # the edit landed
+            assert now["pose"] == now["committed"]
+            assert now["targets"] == made["targets"] and now["pins"] == made["pins"]
+            assert now["history"] == made["history"]  # (the drag one step, as a late answer)
+            assert sent(page) == count + 1
+            last = page.evaluate(f"{M}.lastSolve()")
+            assert {t["joint"] for t in last["request"]["targets"]} == set(made["targets"])
+            page.wait_for_timeout(QUIET_MS)
+            assert sent(page) == count + 1  # once
+            # one undo takes the drag, as for any drag
+            page.keyboard.press("Control+z")
+            page.wait_for_function(f"() => {M}.history().index === {start['history']['index']}")
+            assert work(page)["committed"] == start["committed"]
+            assert "left_knee" not in page.evaluate(f"{M}.targets()")
+            page.keyboard.press("Control+y")  # (redo: the drag as solved)
+            page.wait_for_function(f"() => {M}.history().index === {made['history']['index']}")
+            assert work(page)["committed"] == now["committed"]
+        # two drags while it is gone: the state shown (both) is sent; found as it starts,
+        # still loading its models (503, Retry-After: 5), it is sent again until they are
+        unreachable(page, "left_elbow", 15, 15)
+        unreachable(page, "right_knee", -10, 10)
+        made = work(page)
+        bodies = recorded(page, lambda url: url.endswith("/v1/solve"))
+        with outages.up():
+            page.wait_for_function(f"() => {STATUS} === 'connected'")
+            moved = f"p => {M}.committedPose().left_elbow.some((v, i) => v !== p[i])"
+            page.wait_for_function(moved, arg=made["committed"]["left_elbow"])
+            settle(page)
+            assert bodies and all(b == bodies[0] for b in bodies)  # the one edit
+            assert {t["joint"] for t in bodies[0]["targets"]} == set(made["targets"])
+            now = work(page)
+            assert page.evaluate(f"{M}.error()") is None
+            assert now["committed"] != made["committed"] and now["history"] == made["history"]
+            assert {"left_elbow", "right_knee"} <= set(now["targets"])
+    finally:
+        page.context.close()
+
+
+@pytest.mark.browser
+def test_nothing_stale_is_sent_once_it_is_back(browser: Any, outages: Outages) -> None:
+    with outages.up():
+        page = open_editor(browser, outages.base)
+        page.on("dialog", lambda d: d.accept())  # (a sample over edits asks first)
+        drag_joint(page, "right_wrist", 30, -40)
+    try:
+        for change in ("undo", "reset", "sample"):
+            unreachable(page, "left_knee")
+            if change == "undo":
+                page.keyboard.press("Control+z")
+                page.wait_for_function(f"() => !('left_knee' in {M}.targets())")
+            elif change == "reset":
+                page.click("#reset")
+                page.wait_for_function(f"() => Object.keys({M}.targets()).length === 0")
+            else:
+                page.select_option("#sample", "2")
+                page.wait_for_function("document.getElementById('sample').value === '2'")
+            made, count = work(page), sent(page)
+            with outages.up():
+                back(page)
+                page.wait_for_timeout(QUIET_MS)
+                assert sent(page) == count, change  # nothing sent
+                assert work(page) == made, change
+                assert page.evaluate(f"{M}.error()") is None
+                drag_joint(page, "right_wrist", 10, -10)  # (a step to undo, next time)
+        # a drag made once it is back, before the page's liveness check finds it (that drag's
+        # answer does): its own solves go, and nothing else
+        unreachable(page, "left_knee")
+        page.route("**/v2/health/live", lambda route: route.abort())
+        with outages.up():
+            steps = page.evaluate(f"{M}.history().index")
+            drag_joint(page, "left_wrist", 20, -20)
+            assert page.evaluate(STATUS) == "connected"
+            count = sent(page)
+            page.unroute("**/v2/health/live")
+            page.wait_for_timeout(QUIET_MS)
+            assert sent(page) == count
+            assert page.evaluate(f"{M}.history().index") == steps + 1
+            joints = {t["joint"] for t in page.evaluate(f"{M}.lastSolve().request.targets")}
+            assert {"left_knee", "left_wrist"} <= joints  # (the drag's solve had both)
+    finally:
+        page.context.close()
+
+
+@pytest.mark.browser
+def test_an_edit_sent_again_that_fails_again_is_said_and_not_sent_a_third_time(
+    browser: Any, outages: Outages
+) -> None:
+    with outages.up():
+        page = open_editor(browser, outages.base)
+    try:
+        start = work(page)
+        unreachable(page, "left_knee")
+        count = sent(page)
+        page.route("**/v1/solve", lambda route: route.abort())  # (the server back, its solves not)
+        with outages.up():
+            detail = f"({M}.error() && {M}.error().detail || '')"
+            page.wait_for_function(f"() => {detail}.includes('failed again')")
+            assert sent(page) == count + 1
+            assert work(page)["committed"] == start["committed"]
+            assert "left_knee" in page.evaluate(f"{M}.targets()")
+            page.wait_for_function(f"() => {STATUS} === 'connected'")
+            page.wait_for_timeout(QUIET_MS)
+            assert sent(page) == count + 1  # (not a third time)
+    finally:
+        page.context.close()
+
+
+def example_file() -> str:
+    text: str = json.loads((REPO_ROOT / "docs" / "examples" / "bvh_solve.json").read_text())["bvh"]
+    return text
+
+
+@pytest.mark.browser
+def test_a_files_edit_an_outage_interrupted_is_sent_again(browser: Any, outages: Outages) -> None:
+    with outages.up():
+        page = open_editor(browser, outages.base)
+        open_file(page, example_file(), "walk.bvh")
+        drag_joint(page, "left_wrist", 20, -20)
+        text = page.evaluate(f"{M}.bvhText()")
+    try:
+        unreachable(page, "right_wrist", -20, -20)
+        made = work(page)
+        assert page.evaluate(f"{M}.bvhText()") == text  # (the file as before the drag)
+        with outages.up():
+            back(page)
+            now = work(page)
+            assert page.evaluate(f"{M}.error()") is None
+            assert now["committed"] != made["committed"] and now["history"] == made["history"]
+            assert page.evaluate(f"{M}.bvhText()") != text  # the file's frame rewritten
+            assert page.evaluate(f"{M}.lastSolve().request.frame") == 0
+            page.keyboard.press("Control+z")
+            page.wait_for_function(f"() => {M}.bvhText() === {json.dumps(text)}")
+            assert "right_wrist" not in page.evaluate(f"{M}.targets()")
+    finally:
+        page.context.close()
