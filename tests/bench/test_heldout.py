@@ -294,7 +294,9 @@ def test_the_command_refuses_a_dataset_without_the_split_in_one_line(
 
     app = typer.Typer()
     app.command()(main)
-    runner = CliRunner()
+    # a wide terminal: the refusals name a temp path, whose length varies (a pytest-xdist
+    # worker's is longer) and which rich wrapped, mid-phrase, at 80 columns
+    runner = CliRunner(env={"COLUMNS": "200"})
     base = ["--models", str(models_dir), "--dataset", str(small_dataset), "--quick"]
     r = runner.invoke(app, base)
     assert r.exit_code == 2 and "no 'holdout' frames" in r.output, r.output

@@ -277,7 +277,9 @@ def test_cli_dataset_and_plot(mocap_clips: Any, small_dataset: Path, tmp_path: P
 
     from trainer.cli import app
 
-    runner = CliRunner()
+    # a wide terminal: the refusals name a temp path, whose length varies (a pytest-xdist
+    # worker's is longer) and which rich wrapped, mid-phrase, at 80 columns
+    runner = CliRunner(env={"COLUMNS": "200"})
     png = tmp_path / "poses.png"
     result = runner.invoke(
         app, ["plot-data", "--dataset", str(small_dataset), "--out", str(png), "--per-source", "3"]
