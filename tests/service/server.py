@@ -7,6 +7,7 @@ import contextlib
 import http.client
 import json
 import os
+import random
 import signal
 import socket
 import subprocess
@@ -27,6 +28,16 @@ REPO = Path(__file__).resolve().parents[2]
 
 
 def free_port() -> int:
+    """A loopback port free now. Under pytest-xdist (``make test``) each worker draws from a
+    block of its own below the kernel's ephemeral range (where ``bind(0)`` and connections
+    draw theirs): a port one worker checked is never another's before its server binds it."""
+    worker = os.environ.get("PYTEST_XDIST_WORKER", "")
+    if worker.startswith("gw") and worker[2:].isdigit():
+        low = 20_000 + 1000 * (int(worker[2:]) % 12)
+        for port in random.sample(range(low, low + 1000), 1000):
+            with socket.socket() as s, contextlib.suppress(OSError):
+                s.bind(("127.0.0.1", port))
+                return port
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port: int = s.getsockname()[1]
