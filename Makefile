@@ -66,12 +66,15 @@ format: $(STAMP)
 # subprocesses the suite starts compile every module anew (~25 s of CPU a run).
 # __pycache__ is ignored by git and by the image build (.dockerignore).
 PYTEST := env -u PYTHONDONTWRITEBYTECODE $(BIN)/pytest
+# Two processes (pytest-xdist), one per core; a module whose tests must not run apart is
+# one xdist_group (--dist loadgroup). `make test XDIST=` runs in one process.
+XDIST := -n 2 --dist loadgroup
 
 test: $(STAMP) lint
-	$(PYTEST)
+	$(PYTEST) $(XDIST)
 
 test-fast: $(STAMP)
-	$(PYTEST) -m "not slow"
+	$(PYTEST) $(XDIST) -m "not slow"
 
 dataset: $(STAMP)
 	$(BIN)/pose-trainer dataset --mocap $(MOCAP_DIR) --out $(DATASET)

@@ -158,7 +158,10 @@ def pytest_sessionstart(session: pytest.Session) -> None:
     folders = [Path(str(arg).split("::")[0]).is_dir() for arg in config.args]
     if config.option.collectonly or not any(folders):
         return
-    if not _kernels_cached():
+    # Under pytest-xdist (``make test``: ``-n 2``) the controller compiles the kernels (its
+    # workers would each compile them, at once) and runs no test: the workers extract clips.
+    worker = hasattr(config, "workerinput")
+    if not worker and not _kernels_cached():
         _PREFETCH.kernels = [
             subprocess.Popen(
                 [sys.executable, "-c", code],
@@ -168,6 +171,8 @@ def pytest_sessionstart(session: pytest.Session) -> None:
             )
             for code in _KERNEL_WARMS
         ]
+    if config.pluginmanager.has_plugin("dsession"):  # the xdist controller
+        return
     mocap, tar = _mocap_path(), shutil.which("tar")
     if tar and all((mocap / a).is_file() for a in (BANDAI_ARCHIVE, CMU_ARCHIVE)):
         factory: pytest.TempPathFactory = config._tmp_path_factory  # type: ignore[attr-defined]
@@ -180,11 +185,22 @@ def pytest_collection_finish(session: pytest.Session) -> None:
     """The kernels compiled, before the first test (a test that compiled one meanwhile would
     compile it a second time). A compile that failed is only reported: the tests that use
     the kernel compile it again and fail with the error."""
+    _wait_for_kernels(session.config)
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_node_collection_finished(node: Any, ids: list[str]) -> None:
+    """Under xdist: the controller's compile waited for before it hands out the first tests
+    (as each worker reports its collection; only the first call waits)."""
+    _wait_for_kernels(node.config)
+
+
+def _wait_for_kernels(config: pytest.Config) -> None:
     procs, _PREFETCH.kernels = _PREFETCH.kernels, []
     for proc in procs:
         _, err = proc.communicate()
         if proc.returncode:
-            reporter = session.config.pluginmanager.get_plugin("terminalreporter")
+            reporter = config.pluginmanager.get_plugin("terminalreporter")
             if reporter is not None:
                 reporter.write_line(f"kernel warm-up failed: {err.decode(errors='replace')}")
 
@@ -196,6 +212,23 @@ def pytest_sessionfinish(session: pytest.Session) -> None:
         if proc.poll() is None:
             proc.kill()
         proc.communicate()
+
+
+#: The container check's figures (tests/deploy/conftest.py), as its tests' reports bring them.
+_SMOKE_FIGURES: dict[str, str] = {}
+
+
+def pytest_runtest_logreport(report: pytest.TestReport) -> None:
+    for name, value in report.user_properties:
+        if name == "smoke_figures":
+            _SMOKE_FIGURES.update(value)
+
+
+def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:
+    if _SMOKE_FIGURES:
+        terminalreporter.section("container figures")
+        for name, value in _SMOKE_FIGURES.items():
+            terminalreporter.write_line(f"SMOKE {name}={value}")
 
 
 def _mocap_path() -> Path:
@@ -316,11 +349,24 @@ MOCAP_FIXTURES = frozenset(
 )
 
 
+@pytest.hookimpl(tryfirst=True)  # (before xdist's own, which reads the groups)
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Mark every test that (transitively) uses a mocap fixture with ``mocap``."""
+    """Mark every test that (transitively) uses a mocap fixture with ``mocap``. Under
+    pytest-xdist (``make test``: ``--dist loadgroup``), a test that uses a module-scoped
+    fixture (a trained model, a server, a browser) joins its module's ``xdist_group``: one
+    worker sets that fixture up, once, as a run in one process does."""
+    grouped = hasattr(config, "workerinput")
     for item in items:
         if MOCAP_FIXTURES.intersection(getattr(item, "fixturenames", ())):
             item.add_marker(pytest.mark.mocap)
+        if grouped and _uses_a_module_fixture(item) and not item.get_closest_marker("xdist_group"):
+            item.add_marker(pytest.mark.xdist_group(item.nodeid.split("::")[0]))
+
+
+def _uses_a_module_fixture(item: pytest.Item) -> bool:
+    info = getattr(item, "_fixtureinfo", None)
+    defs = info.name2fixturedefs.values() if info is not None else ()
+    return any(d and d[-1].scope in ("module", "class", "package") for d in defs)
 
 
 # --------------------------------------------------------------------------------------

@@ -1,4 +1,5 @@
-"""Figures of the container check, printed after the run as ``SMOKE name=value`` lines."""
+"""Figures of the container check, printed after the run as ``SMOKE name=value`` lines
+(by tests/conftest.py)."""
 
 from __future__ import annotations
 
@@ -17,11 +18,15 @@ def figures() -> dict[str, str]:
     return FIGURES
 
 
-def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]) -> Any:
+    """Each report of a test here carries the figures so far (``smoke_figures``): under
+    pytest-xdist the process that prints the summary (tests/conftest.py) is not the one
+    that ran the test."""
+    report = yield
     if FIGURES:
-        terminalreporter.section("container figures")
-        for name, value in FIGURES.items():
-            terminalreporter.write_line(f"SMOKE {name}={value}")
+        report.user_properties.append(("smoke_figures", dict(FIGURES)))
+    return report
 
 
 @pytest.fixture(scope="session")

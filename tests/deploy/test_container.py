@@ -37,7 +37,9 @@ from tests.service.test_api import as_array, assert_problem
 
 httpx = pytest.importorskip("httpx")
 
-pytestmark = [pytest.mark.slow, pytest.mark.timeout(1800)]
+# One worker runs the whole module under pytest-xdist (``make test``): its image is built
+# once, and two builds or containers of the one tag never run at once.
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(1800), pytest.mark.xdist_group("container")]
 
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLES = ROOT / "docs" / "examples"
