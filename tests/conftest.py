@@ -349,24 +349,11 @@ MOCAP_FIXTURES = frozenset(
 )
 
 
-@pytest.hookimpl(tryfirst=True)  # (before xdist's own, which reads the groups)
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Mark every test that (transitively) uses a mocap fixture with ``mocap``. Under
-    pytest-xdist (``make test``: ``--dist loadgroup``), a test that uses a module-scoped
-    fixture (a trained model, a server, a browser) joins its module's ``xdist_group``: one
-    worker sets that fixture up, once, as a run in one process does."""
-    grouped = hasattr(config, "workerinput")
+    """Mark every test that (transitively) uses a mocap fixture with ``mocap``."""
     for item in items:
         if MOCAP_FIXTURES.intersection(getattr(item, "fixturenames", ())):
             item.add_marker(pytest.mark.mocap)
-        if grouped and _uses_a_module_fixture(item) and not item.get_closest_marker("xdist_group"):
-            item.add_marker(pytest.mark.xdist_group(item.nodeid.split("::")[0]))
-
-
-def _uses_a_module_fixture(item: pytest.Item) -> bool:
-    info = getattr(item, "_fixtureinfo", None)
-    defs = info.name2fixturedefs.values() if info is not None else ()
-    return any(d and d[-1].scope in ("module", "class", "package") for d in defs)
 
 
 # --------------------------------------------------------------------------------------

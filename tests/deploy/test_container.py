@@ -37,9 +37,7 @@ from tests.service.test_api import as_array, assert_problem
 
 httpx = pytest.importorskip("httpx")
 
-# One worker runs the whole module under pytest-xdist (``make test``): its image is built
-# once, and two builds or containers of the one tag never run at once.
-pytestmark = [pytest.mark.slow, pytest.mark.timeout(1800), pytest.mark.xdist_group("container")]
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(1800)]
 
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLES = ROOT / "docs" / "examples"

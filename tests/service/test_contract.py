@@ -169,9 +169,6 @@ def api(models_dir: Path) -> Any:
 
 
 SENT: list[int] = []  # status of every generated request, for the volume check below
-# The cases and the volume check in one process under pytest-xdist (``make test``), in file
-# order: the check reads what the cases sent.
-pytestmark = pytest.mark.xdist_group("contract")
 
 
 @pytest.mark.slow
