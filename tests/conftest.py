@@ -350,10 +350,25 @@ MOCAP_FIXTURES = frozenset(
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Mark every test that (transitively) uses a mocap fixture with ``mocap``."""
+    """Mark every test that (transitively) uses a mocap fixture with ``mocap``; give each
+    schemathesis case its own id (:func:`_own_id`)."""
     for item in items:
         if MOCAP_FIXTURES.intersection(getattr(item, "fixturenames", ())):
             item.add_marker(pytest.mark.mocap)
+        _own_id(item)
+
+
+def _own_id(item: pytest.Item) -> None:
+    """pytest 9.2 builds a test's id from its function's name and its parametrize ids, so
+    schemathesis 4.32's cases (one per API operation, ``test_schemathesis[POST /v1/solve]``
+    by name) all had the one id ``test_contract.py::test_schemathesis``. One process ran
+    them all; pytest-xdist, which hands tests out by id, ran the first alone (10 requests,
+    test_contract's volume check failed). The name's bracket becomes the id's."""
+    node_id, original = getattr(item, "_id", None), getattr(item, "originalname", None)
+    if node_id is None or original is None or getattr(node_id, "params", "") is not None:
+        return
+    if item.name.startswith(f"{original}[") and item.name.endswith("]"):
+        item._id = node_id.with_params(item.name[len(original) + 1 : -1])  # type: ignore[attr-defined]
 
 
 # --------------------------------------------------------------------------------------
