@@ -21,7 +21,9 @@ archive-free part; CI runs everything.
 A session of a folder of tests (``make test``) starts two things as it starts, while the
 tests are collected: the kernels' compile when numba's cache holds none for these sources
 (two processes; waited for before the first test) and the ``mocap_clips`` extraction
-(:func:`pytest_sessionstart`).
+(:func:`pytest_sessionstart`). Under pytest-xdist (``make test``: two workers, whole files
+each) the controller compiles, before it hands out the first test, and each worker extracts
+its own clips (session fixtures are set up once per worker).
 
 Synthetic (no mocap): ``synthetic_poses`` has the same shape as ``real_poses``, built from
 the rest pose with random bone rotations; use it wherever any valid pose will do, and keep
