@@ -165,6 +165,20 @@ def post_json(url: str, body: dict[str, Any]) -> Any:
 
 # -- the review's defects: each found by a test run against the page before its fix ------------
 M = "window.marionette"
+#: The page's status line (``connected``, ``server unreachable``, ...), as a JS expression.
+STATUS = "document.getElementById('status').textContent"
+
+
+def work(page: Any, shown: bool = False) -> dict[str, Any]:
+    """What the user made: the pose as committed (and as shown, ``shown``), the targets,
+    pins and undo history."""
+    made = {
+        "committed": page.evaluate(f"{M}.committedPose()"),
+        "targets": page.evaluate(f"{M}.targets()"),
+        "pins": page.evaluate(f"{M}.pins()"),
+        "history": page.evaluate(f"{M}.history()"),
+    }
+    return {**made, "pose": page.evaluate(f"{M}.pose()")} if shown else made
 
 
 def drawn_as_inspected(page: Any, server: str, body: dict[str, Any]) -> None:

@@ -23,23 +23,20 @@ from typing import Any
 
 import pytest
 
-from tests.service.editor_page import REPO_ROOT, M, drag_joint, open_editor, open_file, settle
+from tests.service.editor_page import (
+    REPO_ROOT,
+    STATUS,
+    M,
+    drag_joint,
+    open_editor,
+    open_file,
+    settle,
+    work,
+)
 from tests.service.server import free_port, serve
 
 # the fixtures `server` (one for the session) and `browser` (one per module)
 pytest_plugins = ("tests.service.editor_page",)
-
-STATUS = "document.getElementById('status').textContent"
-
-
-def work(page: Any) -> dict[str, Any]:
-    """What the user made: the pose as committed, targets, pins, the undo history."""
-    return {
-        "committed": page.evaluate(f"{M}.committedPose()"),
-        "targets": page.evaluate(f"{M}.targets()"),
-        "pins": page.evaluate(f"{M}.pins()"),
-        "history": page.evaluate(f"{M}.history()"),
-    }
 
 
 def unreachable(page: Any) -> None:

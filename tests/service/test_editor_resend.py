@@ -23,32 +23,22 @@ import pytest
 
 from tests.service.editor_page import (
     REPO_ROOT,
+    STATUS,
     M,
     drag_joint,
     open_editor,
     open_file,
     recorded,
     settle,
+    work,
 )
 from tests.service.server import free_port, serve
 
 # the fixtures `server` (one for the session) and `browser` (one per module)
 pytest_plugins = ("tests.service.editor_page",)
 
-STATUS = "document.getElementById('status').textContent"
 #: Longer than the page's liveness period (api.js WATCH_MS, 3 s): what was to be sent is.
 QUIET_MS = 4_500
-
-
-def work(page: Any) -> dict[str, Any]:
-    """What the user made: the pose as committed and shown, targets, pins, the undo history."""
-    return {
-        "committed": page.evaluate(f"{M}.committedPose()"),
-        "pose": page.evaluate(f"{M}.pose()"),
-        "targets": page.evaluate(f"{M}.targets()"),
-        "pins": page.evaluate(f"{M}.pins()"),
-        "history": page.evaluate(f"{M}.history()"),
-    }
 
 
 def sent(page: Any) -> int:
@@ -102,16 +92,16 @@ def test_the_edit_an_outage_interrupted_is_sent_again_once_it_is_back(
         page = open_editor(browser, outages.base)
         drag_joint(page, "right_wrist", 30, -40)  # an edit, solved
     try:  # (the server stopped)
-        start = work(page)
+        start = work(page, shown=True)
         unreachable(page, "left_knee")
-        made = work(page)
+        made = work(page, shown=True)
         assert made["committed"] == start["committed"] and made["pose"] == start["pose"]
         assert "left_knee" in made["targets"]
         assert "sent again once the server is back" in page.evaluate(f"{M}.error().detail")
         count = sent(page)
         with outages.ready(page):
             back(page)  # (no click, no drag)
-            now = work(page)
+            now = work(page, shown=True)
             assert page.evaluate(f"{M}.error()") is None
             assert now["committed"] != start["committed"]  # the edit landed
             assert now["pose"] == now["committed"]
@@ -125,16 +115,16 @@ def test_the_edit_an_outage_interrupted_is_sent_again_once_it_is_back(
             # one undo takes the drag, as for any drag
             page.keyboard.press("Control+z")
             page.wait_for_function(f"() => {M}.history().index === {start['history']['index']}")
-            assert work(page)["committed"] == start["committed"]
+            assert work(page, shown=True)["committed"] == start["committed"]
             assert "left_knee" not in page.evaluate(f"{M}.targets()")
             page.keyboard.press("Control+y")  # (redo: the drag as solved)
             page.wait_for_function(f"() => {M}.history().index === {made['history']['index']}")
-            assert work(page)["committed"] == now["committed"]
+            assert work(page, shown=True)["committed"] == now["committed"]
         # two drags while it is gone: the state shown (both) is sent; found as it starts,
         # still loading its models (503, Retry-After: 5), it is sent again until they are
         unreachable(page, "left_elbow", 15, 15)
         unreachable(page, "right_knee", -10, 10)
-        made = work(page)
+        made = work(page, shown=True)
         bodies = recorded(page, lambda url: url.endswith("/v1/solve"))
         with outages.up():
             page.wait_for_function(f"() => {STATUS} === 'connected'")
@@ -143,7 +133,7 @@ def test_the_edit_an_outage_interrupted_is_sent_again_once_it_is_back(
             settle(page)
             assert bodies and all(b == bodies[0] for b in bodies)  # the one edit
             assert {t["joint"] for t in bodies[0]["targets"]} == set(made["targets"])
-            now = work(page)
+            now = work(page, shown=True)
             assert page.evaluate(f"{M}.error()") is None
             assert now["committed"] != made["committed"] and now["history"] == made["history"]
             assert {"left_elbow", "right_knee"} <= set(now["targets"])
@@ -169,12 +159,12 @@ def test_nothing_stale_is_sent_once_it_is_back(browser: Any, outages: Outages) -
             else:
                 page.select_option("#sample", "2")
                 page.wait_for_function("document.getElementById('sample').value === '2'")
-            made, count = work(page), sent(page)
+            made, count = work(page, shown=True), sent(page)
             with outages.up():
                 back(page)
                 page.wait_for_timeout(QUIET_MS)
                 assert sent(page) == count, change  # nothing sent
-                assert work(page) == made, change
+                assert work(page, shown=True) == made, change
                 assert page.evaluate(f"{M}.error()") is None
                 drag_joint(page, "right_wrist", 10, -10)  # (a step to undo, next time)
         # a drag made once it is back, before the page's liveness check finds it (that drag's
@@ -203,7 +193,7 @@ def test_an_edit_sent_again_that_fails_again_is_said_and_not_sent_a_third_time(
     with outages.up():
         page = open_editor(browser, outages.base)
     try:
-        start = work(page)
+        start = work(page, shown=True)
         unreachable(page, "left_knee")
         count = sent(page)
         page.route("**/v1/solve", lambda route: route.abort())  # (the server back, its solves not)
@@ -211,7 +201,7 @@ def test_an_edit_sent_again_that_fails_again_is_said_and_not_sent_a_third_time(
             detail = f"({M}.error() && {M}.error().detail || '')"
             page.wait_for_function(f"() => {detail}.includes('failed again')")
             assert sent(page) == count + 1
-            assert work(page)["committed"] == start["committed"]
+            assert work(page, shown=True)["committed"] == start["committed"]
             assert "left_knee" in page.evaluate(f"{M}.targets()")
             page.wait_for_function(f"() => {STATUS} === 'connected'")
             page.wait_for_timeout(QUIET_MS)
@@ -234,11 +224,11 @@ def test_a_files_edit_an_outage_interrupted_is_sent_again(browser: Any, outages:
         text = page.evaluate(f"{M}.bvhText()")
     try:
         unreachable(page, "right_wrist", -20, -20)
-        made = work(page)
+        made = work(page, shown=True)
         assert page.evaluate(f"{M}.bvhText()") == text  # (the file as before the drag)
         with outages.up():
             back(page)
-            now = work(page)
+            now = work(page, shown=True)
             assert page.evaluate(f"{M}.error()") is None
             assert now["committed"] != made["committed"] and now["history"] == made["history"]
             assert page.evaluate(f"{M}.bvhText()") != text  # the file's frame rewritten

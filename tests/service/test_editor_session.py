@@ -15,6 +15,7 @@ import pytest
 
 from tests.service.editor_page import (
     REPO_ROOT,
+    STATUS,
     WAIT_MS,
     M,
     drag_joint,
@@ -26,8 +27,6 @@ from tests.service.editor_page import (
 
 # the fixtures `server` (one for the session) and `browser` (one per module)
 pytest_plugins = ("tests.service.editor_page",)
-
-STATUS = "document.getElementById('status').textContent"
 
 
 def walking_file() -> str:
