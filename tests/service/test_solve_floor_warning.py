@@ -19,7 +19,7 @@ from core.skeleton import JOINT_NAMES
 from service.floors import FLOOR_REACH, floor_warning, floor_warnings
 from tests.conftest import REPO_ROOT
 from tests.service.test_api import BASE
-from tests.service.warned import columns, real_poses, said_alike
+from tests.service.warned import columns, examples, real_poses, said_alike
 
 
 def _with_floor(body: dict[str, Any], floor: float) -> dict[str, Any]:
@@ -29,8 +29,7 @@ def _with_floor(body: dict[str, Any], floor: float) -> dict[str, Any]:
 def test_a_floor_far_from_the_body_is_said_and_the_floor_used_is_answered(
     client: Any, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    example = json.loads((REPO_ROOT / "docs/examples/solve.json").read_text())
-    soft = {"pose": example["pose"], "targets": example["targets"]}  # (the hot path's)
+    example, soft = examples()
     pelvis = example["pose"]["pelvis"][1]  # 0.93 m: the body stands on y = 0
     torso = float(np.linalg.norm(np.subtract(example["pose"]["neck"], example["pose"]["pelvis"])))
     for body in (example, soft):

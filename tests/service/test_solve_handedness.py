@@ -18,25 +18,20 @@ from core.sides import SWAPPED_BELOW, facing_score
 from core.skeleton import JOINT_NAMES
 from service.handed import _score_one, handedness_warning, handedness_warnings
 from tests.conftest import REPO_ROOT
-from tests.service.warned import columns, real_poses, said_alike
+from tests.service.warned import columns, examples, moved, real_poses, said_alike
 
 MIRROR_X = np.array([-1.0, 1.0, 1.0])
 
 
 def _mirrored(body: dict[str, Any]) -> dict[str, Any]:
     """``body`` (the pose form) in left-handed coordinates: every x negated."""
-    out = json.loads(json.dumps(body))
-    out["pose"] = {n: (np.array(p) * MIRROR_X).tolist() for n, p in body["pose"].items()}
-    for t in out["targets"]:
-        t["position"] = (np.array(t["position"]) * MIRROR_X).tolist()
-    return out
+    return moved(body, lambda p: p * MIRROR_X)
 
 
 def test_a_pose_in_left_handed_coordinates_is_said_to_look_mirrored(
     client: Any, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    example = json.loads((REPO_ROOT / "docs/examples/solve.json").read_text())
-    soft = {"pose": example["pose"], "targets": example["targets"]}  # (the hot path's)
+    example, soft = examples()
     for body in (example, soft):
         assert client.post("/v1/solve", json=body).json()["handedness_warning"] is None
         out = client.post("/v1/solve", json=_mirrored(body))

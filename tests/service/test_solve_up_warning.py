@@ -15,7 +15,7 @@ import pytest
 
 from tests.conftest import REPO_ROOT
 from tests.service.test_api import BASE
-from tests.service.warned import columns, said_alike
+from tests.service.warned import columns, examples, moved, said_alike
 
 #: +Y up -> +Z up: y -> z, z -> -y (a quarter turn about X)
 Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
@@ -23,18 +23,13 @@ Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
 
 def _turned(body: dict[str, Any]) -> dict[str, Any]:
     """``body`` (the pose form) with its pose and targets captured with +Z up."""
-    out = json.loads(json.dumps(body))
-    out["pose"] = {n: (np.array(p) @ Z_UP).tolist() for n, p in body["pose"].items()}
-    for t in out["targets"]:
-        t["position"] = (np.array(t["position"]) @ Z_UP).tolist()
-    return out
+    return moved(body, lambda p: p @ Z_UP)
 
 
 def test_a_start_pose_captured_z_up_is_said_to_be_solved_lying_down(
     client: Any, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    example = json.loads((REPO_ROOT / "docs/examples/solve.json").read_text())
-    soft = {"pose": example["pose"], "targets": example["targets"]}  # (the hot path's)
+    example, soft = examples()
     for body in (example, soft):
         upright = client.post("/v1/solve", json=body).json()
         assert upright["up_warning"] is None

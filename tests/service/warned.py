@@ -4,6 +4,8 @@ real poses they are measured on."""
 
 from __future__ import annotations
 
+import json
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -13,6 +15,23 @@ import pytest
 from core.skeleton import JOINT_NAMES
 from service.middleware import fastpath
 from tests.conftest import REPO_ROOT
+
+
+def examples() -> tuple[dict[str, Any], dict[str, Any]]:
+    """The docs' solve example (exact reach, pins: the route), and its pose and targets
+    alone (soft: the hot path's)."""
+    example = json.loads((REPO_ROOT / "docs/examples/solve.json").read_text())
+    return example, {"pose": example["pose"], "targets": example["targets"]}
+
+
+def moved(body: dict[str, Any], fn: Callable[[np.ndarray], np.ndarray]) -> dict[str, Any]:
+    """``body`` (the pose form) with ``fn`` applied to each point of its pose and targets
+    (``[3]`` arrays)."""
+    out = json.loads(json.dumps(body))
+    out["pose"] = {n: fn(np.array(p)).tolist() for n, p in body["pose"].items()}
+    for t in out["targets"]:
+        t["position"] = fn(np.array(t["position"])).tolist()
+    return out
 
 
 def said_alike(client: Any, monkeypatch: pytest.MonkeyPatch, bodies: list[dict[str, Any]]
