@@ -181,6 +181,15 @@ def work(page: Any, shown: bool = False) -> dict[str, Any]:
     return {**made, "pose": page.evaluate(f"{M}.pose()")} if shown else made
 
 
+def unreachable(page: Any, joint: str = "left_knee", dx: float = 10, dy: float = 10) -> None:
+    """A drag of ``joint`` whose solves find no server (the test's own, stopped): its banner
+    and the status say so."""
+    drag_joint(page, joint, dx, dy)
+    err = page.evaluate(f"{M}.error()")
+    assert err is not None and err["title"] == "Server unreachable", err
+    assert page.evaluate(STATUS) == "server unreachable"
+
+
 def drawn_as_inspected(page: Any, server: str, body: dict[str, Any]) -> None:
     """The page draws the BVH frame as ``/v1/bvh/inspect`` lays out ``body`` (its text,
     frame, map), to 1e-6: the page's forward kinematics are the service's."""

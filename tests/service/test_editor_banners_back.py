@@ -31,20 +31,13 @@ from tests.service.editor_page import (
     open_editor,
     open_file,
     settle,
+    unreachable,
     work,
 )
 from tests.service.server import free_port, serve
 
 # the fixtures `server` (one for the session) and `browser` (one per module)
 pytest_plugins = ("tests.service.editor_page",)
-
-
-def unreachable(page: Any) -> None:
-    """A drag whose solves find no server: its banner and status say so."""
-    drag_joint(page, "left_knee", 10, 10)
-    err = page.evaluate(f"{M}.error()")
-    assert err is not None and err["title"] == "Server unreachable", err
-    assert page.evaluate(STATUS) == "server unreachable"
 
 
 @pytest.mark.browser

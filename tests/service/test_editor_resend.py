@@ -30,6 +30,7 @@ from tests.service.editor_page import (
     open_file,
     recorded,
     settle,
+    unreachable,
     work,
 )
 from tests.service.server import free_port, serve
@@ -43,14 +44,6 @@ QUIET_MS = 4_500
 
 def sent(page: Any) -> int:
     return int(page.evaluate(f"{M}.solveCount().sent"))
-
-
-def unreachable(page: Any, joint: str, dx: float = 10, dy: float = 10) -> None:
-    """A drag whose solves find no server: its banner and status say so."""
-    drag_joint(page, joint, dx, dy)
-    err = page.evaluate(f"{M}.error()")
-    assert err is not None and err["title"] == "Server unreachable", err
-    assert page.evaluate(STATUS) == "server unreachable"
 
 
 def back(page: Any) -> None:
