@@ -152,7 +152,7 @@ def _numbers(rows: Any, loc: tuple[Any, ...], width: int, n: int, errs: _Errors,
                 errs.add(
                     (*loc, b),
                     "row_length",
-                    f"must hold {width} number{'s' if width != 1 else ''}, got {len(row)}",
+                    f"must hold {_n(width, 'number')}, got {len(row)}",
                 )
             else:
                 for i, v in enumerate(row):
