@@ -23,7 +23,8 @@ tests are collected: the kernels' compile when numba's cache holds none for thes
 (two processes; waited for before the first test) and the ``mocap_clips`` extraction
 (:func:`pytest_sessionstart`). Under pytest-xdist (``make test``: two workers, whole files
 each) the controller compiles, before it hands out the first test, and each worker extracts
-its own clips (session fixtures are set up once per worker).
+its own clips (session fixtures are set up once per worker). A test marked ``alone`` (it
+bounds wall time) runs while the other worker runs nothing (``tests/alone.py``).
 
 Synthetic (no mocap): ``synthetic_poses`` has the same shape as ``real_poses``, built from
 the rest pose with random bone rotations; use it wherever any valid pose will do, and keep
@@ -43,6 +44,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import pytest
+
+from tests.alone import _alone_or_shared  # noqa: F401  (autouse: tests marked ``alone``)
 
 if TYPE_CHECKING:
     from service.engine import Engine

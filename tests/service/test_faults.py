@@ -133,6 +133,7 @@ def _stall(port: int, declared: int) -> socket.socket:
     return sock
 
 
+@pytest.mark.alone
 def test_stalled_uploads_end_at_the_deadline_and_free_their_slots(
     models_dir: Path, tmp_path: Path
 ) -> None:
@@ -177,6 +178,7 @@ def _abandon(port: int, body: bytes, after: float) -> None:
         time.sleep(after)
 
 
+@pytest.mark.alone
 def test_abandoned_batches_stop_and_say_so(models_dir: Path, tmp_path: Path) -> None:
     body = heavy_batch()
     with serve(models_dir, tmp_path, POSE_DEADLINE_SECONDS="120") as s:
@@ -297,6 +299,7 @@ def test_liveness_answers_while_big_bodies_are_parsed(models_dir: Path, tmp_path
         assert max(latencies) < 1.0
 
 
+@pytest.mark.alone
 def test_huge_bvh_hierarchies_are_refused_fast_and_leave_no_memory(
     models_dir: Path, tmp_path: Path
 ) -> None:
@@ -356,6 +359,7 @@ def test_sigterm_under_load_answers_problems_not_text(models_dir: Path, tmp_path
         assert "Traceback" not in s.log.read_text()
 
 
+@pytest.mark.alone
 def test_sigterm_while_the_models_load_exits_at_once(models_dir: Path, tmp_path: Path) -> None:
     """An ops audit's find: a stop during the load (here a cold numba cache, as on a node
     whose CPU the image's seed was not compiled for: ~20-50 s of compiling) waited for the

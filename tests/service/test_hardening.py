@@ -252,6 +252,7 @@ def test_a_lone_soft_edit_past_its_deadline_is_a_504_not_a_solve(
         assert 'pose_rejections_total{reason="deadline-exceeded",route="/v1/solve"}' in metrics
 
 
+@pytest.mark.alone
 def test_a_request_waits_for_a_compute_thread_no_longer_than_its_deadline(
     models_dir: Path,
 ) -> None:

@@ -268,6 +268,7 @@ def test_a_cancelled_waiter_gives_up_its_place_or_the_token_it_was_handed() -> N
     assert limiter.borrowed_tokens == 0
 
 
+@pytest.mark.alone
 def test_under_overload_the_first_requests_finish_first(
     tmp_path: Path, real_poses: PosePairs
 ) -> None:

@@ -125,6 +125,7 @@ def test_a_big_body_decodes_as_before() -> None:
         decode(bad)
 
 
+@pytest.mark.alone
 @pytest.mark.parametrize("body", [_numbers("pose"), _strings("pose")], ids=["numbers", "strings"])
 def test_decoding_a_big_body_holds_the_gil_briefly(body: bytes) -> None:
     """Before: 0.26-0.48 s at once (numbers), 0.12-0.17 s (strings); the least of three
@@ -133,6 +134,7 @@ def test_decoding_a_big_body_holds_the_gil_briefly(body: bytes) -> None:
     assert held < 0.1, held  # (~0.015 s on a quiet host; 0.07 at a load of 7 on 2 cores)
 
 
+@pytest.mark.alone
 def test_orjson_reads_only_a_body_that_may_be_a_valid_columnar_batch() -> None:
     """orjson holds the GIL for a whole body: 0.11-0.28 s for 6.5 MiB of numbers (before);
     now such a body, which no valid columnar batch is, goes to the decoder in steps."""
@@ -212,6 +214,7 @@ def test_full_collections_are_deferred_no_longer_than_max_deferred(
 
 
 # -- a real uvicorn: a probe of liveness while big bodies are read --------------------------
+@pytest.mark.alone
 @pytest.mark.slow
 def test_liveness_answers_at_once_while_big_bodies_are_decoded(
     models_dir: Path, tmp_path: Path

@@ -164,6 +164,7 @@ def test_past_the_count_limit_the_count_is_at_least_and_the_first_errors_the_sam
 
 
 # -- bounded work and memory on the audit's bodies, real data --------------------------------
+@pytest.mark.alone
 @pytest.mark.parametrize(
     ("path", "example"),
     [
@@ -194,6 +195,7 @@ def test_100000_unknown_keys_are_counted_not_collected(
     assert growth() < 60 and took < 2.0, (growth(), took)
 
 
+@pytest.mark.alone
 def test_an_item_list_of_near_miss_joint_names_is_searched_only_where_shown(
     client: Any, worded: list[Any]
 ) -> None:
@@ -208,6 +210,7 @@ def test_an_item_list_of_near_miss_joint_names_is_searched_only_where_shown(
     assert took < 2.0, took
 
 
+@pytest.mark.alone
 def test_two_errors_per_three_bytes_cost_no_more_than_the_body(client: Any) -> None:
     """200 items of 2,000 empty joints (1.7 MB): 800,000 errors. Before: 6 s, 1.4 GiB."""
     growth = peak_mib()
@@ -327,6 +330,7 @@ def _post_watched(s: Server, path: str, body: bytes) -> tuple[int, bytes, float,
     return code, answer, took, max(lat), growth()
 
 
+@pytest.mark.alone
 @pytest.mark.slow
 def test_a_server_answers_many_errors_quickly_and_stays_live(
     models_dir: Path, tmp_path: Path
