@@ -757,6 +757,7 @@ def warm() -> None:
     retry_reaches(pose, np.zeros(1), 0.005, shapes, np.ones(1), True, 1.0, tpos[0], np.empty(1))
     body_scales(pose, shapes, np.ones(1), True, 1.0)
     shortest_bones(pose)
+    keep_pairs_item(pose[0].copy(), pose[0])  # (called alone too: service.fabrik_set)
     target_motion(pose, tidx, tpos, counts, np.zeros(1, dtype=np.int64))
     unscale(
         out[6], out[4], out[0], out[3], np.ones(1, dtype=np.bool_), tidx, counts, np.full(1, 0.5),

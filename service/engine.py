@@ -534,7 +534,7 @@ class Engine:
             start[moved] = self.origin_in(origin[moved], facing[moved], trans[moved], floors[moved])
         for g in groups:
             self._finish_group(g, fab, ex, seq_of, sequences, start, out, lengths, tcan,
-                               tols, iterations, suffix)  # fmt: skip
+                               tols, iterations, suffix, batch.body)  # fmt: skip
         world, errors, bone_err = compiled.finish(
             out, facing, trans, floors, tidx, tpos, cnt, lengths
         )
@@ -559,10 +559,11 @@ class Engine:
     def _fabrik(
         self, polish: bool, starts: F64, lengths: F64, goals: F64, tols: F64,
         idx: npt.NDArray[np.int64], weights: F64, hold: npt.NDArray[np.bool_],
+        reference: F64 | None = None,
     ) -> tuple[compiled.F64, npt.NDArray[np.int64], compiled.F64]:  # fmt: skip
         """:func:`service.fabrik_set.fabrik_set` at this engine's iteration cap."""
         return fabrik_set(polish, starts, lengths, goals, tols, idx, weights, hold,
-                          self.fabrik_max_iterations)  # fmt: skip
+                          self.fabrik_max_iterations, reference)  # fmt: skip
 
     def exact_fallback(
         self, polished: tuple[compiled.F64, npt.NDArray[np.int64], compiled.F64], start: F64,
@@ -671,10 +672,11 @@ class Engine:
         self, g: _Group, fab: npt.NDArray[np.bool_], ex: npt.NDArray[np.bool_],
         seq_of: npt.NDArray[np.int64], sequences: list[tuple[str, ...]], canon: F64, out: F64,
         lengths: F64, tcan: F64, tols: F64, iterations: npt.NDArray[np.int64],
-        suffix: npt.NDArray[np.int64],
+        suffix: npt.NDArray[np.int64], body: F64,
     ) -> None:  # fmt: skip
         """FABRIK items, and the polish of neural items that need one, of one target set
-        (``out``, ``iterations``, ``suffix`` are written in place)."""
+        (``out``, ``iterations``, ``suffix`` are written in place; ``body``: the items'
+        ``_Items.body``, whose hips' width a polish keeps)."""
         k = len(g.idx)
         pinned = np.arange(k) >= g.n_targets
 
@@ -682,7 +684,7 @@ class Engine:
             polish: bool, sel: npt.NDArray[np.intp], start: F64, goal: F64
         ) -> tuple[compiled.F64, npt.NDArray[np.int64], compiled.F64]:
             return self._fabrik(polish, start, lengths[sel], goal, tols[sel], g.idx, g.weights,
-                                pinned)  # fmt: skip
+                                pinned, body[sel] if polish else None)  # fmt: skip
 
         members = g.members
         sel = members[fab[members]]

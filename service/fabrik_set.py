@@ -8,9 +8,11 @@ a real pose's pelvis 10 cm sideways over pinned ankles and got the hips 0.028 m 
 (0.129 in the start; a character's hips turned 93 degrees), every target "reached". FABRIK
 with rigid hips everywhere cannot turn the pelvis and loses reach (docs/kinematics.md), so
 an answer whose hips ended nearer each other than :data:`FOLDED` of the start's is solved
-again with ``rigid_hips`` and kept where that reaches as well (:data:`SLACK`). A drag the
-translated pelvis cannot follow (a pelvis target beyond the pinned legs' reach without
-turning it) keeps the folded answer: the retry cannot improve on it.
+again with ``rigid_hips`` and kept where that reaches as well (:data:`SLACK`). A polish
+measures the hips against the caller's start (``reference``), and its retry starts from
+the answer with the pairs it squeezed put back. A pelvis target the translated pelvis
+cannot reach over its pinned legs is tried once more from the start moved there and
+turned to fit the legs (:func:`tilted`); where no turn fits, the folded answer is kept.
 """
 
 from __future__ import annotations
@@ -21,8 +23,8 @@ import numpy as np
 import numpy.typing as npt
 
 from core import compiled_fabrik
-from core.rigid import SQUEEZED
-from core.skeleton import JOINT_INDEX, SUBTREE
+from core.rigid import SQUEEZED, keep_pairs_item
+from core.skeleton import JOINT_INDEX, PARENTS, SUBTREE
 
 F64 = npt.NDArray[np.floating[Any]]
 #: An answer whose hips are nearer each other than this share of the start's distance has
@@ -34,11 +36,17 @@ SLACK = 0.01
 _HIPS = (JOINT_INDEX["left_hip"], JOINT_INDEX["right_hip"])
 #: The joints of the legs: only a target or pin on one moves a hip (the others carry them)
 _LEGS = SUBTREE[_HIPS[0]] | SUBTREE[_HIPS[1]]
+#: The most a dragged pelvis is turned to fit its legs (radians), and how far within a
+#: leg's reach the turn brings the goal or pin on it (metres: FABRIK's rigid hips then
+#: converge onto it)
+MAX_TILT = np.radians(45.0)
+FIT = 0.002
 
 
 def fabrik_set(
     polish: bool, starts: F64, lengths: F64, goals: F64, tols: F64,
     idx: npt.NDArray[np.int64], weights: F64, hold: npt.NDArray[np.bool_], max_iterations: int,
+    reference: F64 | None = None,
 ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.int64], npt.NDArray[np.float64]]:  # fmt: skip
     """The compiled FABRIK (``polish``: the exact-reach polish) of canonical ``starts``
     ``[B, 21, 3]`` onto ``goals`` ``[B, K, 3]`` for one target set (joints ``idx``,
@@ -46,29 +54,51 @@ def fabrik_set(
     error. The columns are solved in joint order, so the answer is the set's whatever order
     a request listed its targets and pins in (the polish's sweeps follow the columns: an
     API audit, 2026-12-06, saw both ankles pinned as ``[right, left]`` move an unasked wrist
-    44 cm from ``[left, right]``)."""
+    44 cm from ``[left, right]``). ``reference`` ``[B, 21, 3]``: the caller's own start
+    where ``starts`` are a solve's answer to polish (its hips' width the body's: a pinned
+    edit's passes each polish, and each pass narrowed the hips a little more, 0.58 of the
+    body's width after four); by default ``starts``."""
     order = np.argsort(idx, kind="stable")
     plans = compiled_fabrik.packed_plans(idx[order], weights[order], hold[order])
 
-    def run(sel: npt.NDArray[np.intp] | slice, rigid: bool) -> tuple[Any, ...]:
+    def run(sel: npt.NDArray[np.intp] | slice, rigid: bool, froms: F64) -> tuple[Any, ...]:
         return compiled_fabrik.solve_batch(
-            polish, np.ascontiguousarray(starts[sel]), np.ascontiguousarray(lengths[sel]),
+            polish, np.ascontiguousarray(froms), np.ascontiguousarray(lengths[sel]),
             np.ascontiguousarray(goals[sel][:, order]), np.ascontiguousarray(tols[sel]),
             max_iterations, plans.local_ints, plans.local_floats, plans.has_local, plans.ints,
             plans.floats, np.ascontiguousarray(hold[order]), True, rigid,
         )  # fmt: skip
 
-    pose, its, errs, _ = run(slice(None), False)
+    def again(sel: npt.NDArray[np.intp], froms: F64) -> npt.NDArray[np.intp]:
+        """The items ``sel`` solved again with the hips rigid from ``froms``, kept where
+        that reaches as well; returns those not kept."""
+        r_pose, r_its, r_errs, _ = run(sel, True, froms)
+        was, tol = errs[sel], tols[sel, None]
+        near = np.all(np.where(was <= tol, r_errs <= tol, r_errs <= was + SLACK), axis=1)
+        kept = sel[near]
+        pose[kept], its[kept], errs[kept] = r_pose[near], its[kept] + r_its[near], r_errs[near]
+        out: npt.NDArray[np.intp] = sel[~near]
+        return out
+
+    pose, its, errs, _ = run(slice(None), False, starts)
     if not _LEGS[idx].any():  # no hip moved: none folded
         folded = np.empty(0, dtype=np.intp)
     else:
-        folded = np.flatnonzero(width2(pose) < FOLDED * FOLDED * width2(starts))
+        ref = starts if reference is None else reference
+        folded = np.flatnonzero(width2(pose) < FOLDED * FOLDED * width2(ref))
     if folded.size:  # again with the hips rigid, kept where it reaches as well
-        r_pose, r_its, r_errs, _ = run(folded, True)
-        was, tol = errs[folded], tols[folded, None]
-        near = np.all(np.where(was <= tol, r_errs <= tol, r_errs <= was + SLACK), axis=1)
-        sel = folded[near]
-        pose[sel], its[sel], errs[sel] = r_pose[near], its[sel] + r_its[near], r_errs[near]
+        froms = np.array(starts[folded], dtype=np.float64)
+        if reference is not None:  # the hips (and collars) the passes squeezed put back
+            for i, b in enumerate(folded.tolist()):
+                keep_pairs_item(froms[i], np.ascontiguousarray(reference[b], dtype=np.float64))
+        left = again(folded, froms)
+        if left.size and (idx == 0).any():  # a dragged pelvis: turned to fit the legs
+            at = np.searchsorted(folded, left)
+            turned = [tilted(froms[i], lengths[b], goals[b], idx, hold)
+                      for i, b in zip(at.tolist(), left.tolist(), strict=True)]  # fmt: skip
+            fits = np.array([t is not None for t in turned], dtype=bool)
+            if fits.any():
+                again(left[fits], np.stack([t for t in turned if t is not None]))
     back = np.empty_like(errs)
     back[:, order] = errs
     return pose, its, back
@@ -78,4 +108,67 @@ def width2(poses: F64) -> npt.NDArray[np.float64]:
     """The squared distance between the hips of each pose ``[B, 21, 3]``."""
     d = poses[:, _HIPS[0]] - poses[:, _HIPS[1]]
     out: npt.NDArray[np.float64] = np.einsum("ij,ij->i", d, d)
+    return out
+
+
+def tilted(
+    start: F64, lengths: F64, goals: F64, idx: npt.NDArray[np.int64], hold: npt.NDArray[np.bool_]
+) -> F64 | None:
+    """``start`` ``[21, 3]`` moved onto the pelvis's goal (``goals[k]`` where ``idx[k]`` is
+    0), turned about its pelvis where that is what brings every goal and pin on a leg within
+    the leg's reach of its hip, the hips rigid (``lengths`` ``[20]``: bone ``j - 1`` ends at
+    joint ``j``); None where no turn of at most :data:`MAX_TILT` does.
+
+    A pelvis dragged sideways over pinned feet, the legs near straight, lies beyond one
+    leg's reach unless the pelvis tilts (the far hip towards its foot), as a body's does:
+    the textbook answer folds both hips onto one side instead, and the rigid one, from the
+    start as it was, stops short of the goal (3-13 cm on real in-studio poses): FABRIK's
+    root, pulled by two legs, stalls. From the pose moved there, each leg reaches on its own.
+    The turn is the least about one axis that brings the leg that falls short within
+    :data:`FIT` of its reach; the other legs must then still reach."""
+    pelvis = goals[int(np.flatnonzero(idx == 0)[0])]
+    legs = []  # (hip, the goal or pin on its leg, the chain's reach from the hip)
+    for k in np.flatnonzero(_LEGS[idx]).tolist():
+        j = int(idx[k])
+        hip = next(h for h in _HIPS if SUBTREE[h, j])
+        reach, a = 0.0, j
+        while a != hip:
+            reach += float(lengths[a - 1])
+            a = PARENTS[a]
+        legs.append((hip, goals[k], reach - FIT))
+
+    def short(turn: F64) -> list[float]:
+        return [
+            float(np.linalg.norm(pelvis + turn @ (start[h] - start[0]) - g)) - r for h, g, r in legs
+        ]
+
+    over = short(np.eye(3))
+    if max(over, default=0.0) <= 0.0:  # within reach unturned: only moved
+        moved: F64 = start + (pelvis - start[0])
+        return moved
+    leg = int(np.argmax(over))
+    h, g, _ = legs[leg]
+    offset, to = start[h] - start[0], g - pelvis
+    axis = np.cross(offset, to)
+    if not np.linalg.norm(axis) > 1e-9:
+        return None
+    axis /= np.linalg.norm(axis)
+    lo, hi = 0.0, min(MAX_TILT, float(np.arccos(np.clip(
+        offset @ to / (np.linalg.norm(offset) * np.linalg.norm(to)), -1.0, 1.0))))  # fmt: skip
+    if short(_about(axis, hi))[leg] > 0.0:
+        return None
+    for _ in range(40):  # the least turn that fits (the leg's miss shrinks as it turns)
+        mid = 0.5 * (lo + hi)
+        lo, hi = (lo, mid) if short(_about(axis, mid))[leg] <= 0.0 else (mid, hi)
+    turn = _about(axis, hi)
+    if max(short(turn)) > 0.0:  # another leg now falls short
+        return None
+    out: F64 = pelvis + (start - start[0]) @ turn.T
+    return out
+
+
+def _about(axis: F64, angle: float) -> F64:
+    """The rotation by ``angle`` (radians) about the unit ``axis`` (Rodrigues)."""
+    k = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
+    out: F64 = np.eye(3) + np.sin(angle) * k + (1.0 - np.cos(angle)) * (k @ k)
     return out

@@ -168,7 +168,7 @@ def solve_lean(
             tcan[:, :c] if last else np.where(pins[None, :, None], tcan[:, :c], out[:, tidx[0, :c]])
         )
         polished = engine._fabrik(
-            True, out, lengths, goal, items.tols, tidx[0, :c], items.w[0, :c], pins
+            True, out, lengths, goal, items.tols, tidx[0, :c], items.w[0, :c], pins, items.body
         )
         before, (out, iterations) = out, polished[:2]
         if not last:  # the legs the polish for the pins raised or sank put back
@@ -297,7 +297,8 @@ def solve_fabrik(
     )
     lengths = own if lengths is None else lengths
     idx, w, pins = items.tidx[0, :c], items.w[0, :c], np.arange(c) >= int(items.n_t[0])
-    polished = engine._fabrik(polish, canon, lengths, tcan[:, :c], items.tols, idx, w, pins)
+    polished = engine._fabrik(polish, canon, lengths, tcan[:, :c], items.tols, idx, w, pins,
+                              items.body if polish else None)  # fmt: skip
     out, iterations = polished[0], polished[1]
     fell = np.zeros(n, dtype=np.bool_)
     if origin is not None:

@@ -189,6 +189,10 @@ class _Items:
     #: [B] kept limbs ease into full stretch over this many metres (0: none; the
     #: request's ``soft_ik``, ``core.ends.soft_reach``)
     soft_ik: compiled.F64
+    #: [B, 21, 3] the callers' own starts, as ``poses`` were before a pass, the turn search
+    #: or a move across replaced them: the body whose hips' width a polish keeps
+    #: (``service.fabrik_set``)
+    body: compiled.F64
 
     @staticmethod
     def of_problem(p: SolveProblem, carry: float, mirror: bool) -> _Items:
@@ -205,12 +209,13 @@ class _Items:
             [p.method == "fabrik", p.preserve_bone_lengths, p.reach == "exact",
              p.turn_search is not False, p.reach != "exact", mirror], dtype=np.bool_,
         )  # fmt: skip
+        pose = compiled.as_f64(p.pose)
         return _Items(
-            poses=compiled.as_f64(p.pose)[None], tidx=tidx[None],
+            poses=pose[None], tidx=tidx[None],
             tpos=compiled.as_f64(p.target_pos).reshape(1, k, 3), cnt=ints[0:1], n_t=ints[1:2],
             w=compiled.as_f64(p.weights)[None], fab=flags[0:1], keep=flags[1:2], ex=flags[2:3],
             tols=reals[0:1], floors=reals[1:2], carry=reals[2:3], turn=flags[3:4],
-            asked_soft=flags[4:5], mirror=flags[5:6], soft_ik=reals[3:4],
+            asked_soft=flags[4:5], mirror=flags[5:6], soft_ik=reals[3:4], body=pose[None],
         )  # fmt: skip
 
     @staticmethod
@@ -240,7 +245,7 @@ class _Items:
             tols=_per_item(tolerance, n, np.float64), floors=_per_item(floor, n, np.float64),
             carry=_per_item(carry, n, np.float64), turn=_per_item(turn_search, n, np.bool_),
             asked_soft=~ex, mirror=_per_item(mirror, n, np.bool_),
-            soft_ik=_per_item(soft_ik, n, np.float64),
+            soft_ik=_per_item(soft_ik, n, np.float64), body=pose_a,
         )  # fmt: skip
         if n and not bool(np.all((items.carry >= 0.0) & (items.carry <= 1.0))):
             raise ValueError("carry must be in [0, 1]")

@@ -190,8 +190,12 @@ def test_a_pelvis_dragged_over_pinned_feet_keeps_the_hips_apart(
     came back with both hips on one side of it (their distance 0.129 -> 0.028 m, a
     character's hips turned 93 degrees), every target "reached". On 30 real poses, pelvis
     drags of 5-20 cm over pinned ankles or feet: without the rigid retry (``FOLDED`` 0)
-    and ``keep_pairs`` most answers fold the hips below 80 % of their distance; the shipped
-    engine few, every pin held and no target left farther than without them."""
+    and ``keep_pairs`` most answers fold the hips below 80 % of their distance (28 here);
+    the shipped engine few, every pin held and no target left farther than without them:
+    4 (soft) and 5 (exact) while each polish measured the hips against its own start (each
+    of a pinned edit's passes narrowed them a little more) and a rigid retry that fell short
+    kept the fold; 1 and 1 since a polish measures them against the caller's start and the
+    pelvis turns to fit the legs (``service.fabrik_set.tilted``)."""
     from service import fabrik_set
     from service.schemas import SolveOptions
     from service.validation import problem_of
@@ -221,5 +225,5 @@ def test_a_pelvis_dragged_over_pinned_feet_keeps_the_hips_apart(
     ours, errors, pins = folds(shipped)
     monkeypatch.setattr(fabrik_set, "FOLDED", 0.0)
     theirs, before, _ = folds(Engine(models_dir, serving={"keep_pairs": False}))
-    assert theirs >= 15 and ours <= 8, (theirs, ours)
+    assert theirs >= 15 and ours <= 2, (theirs, ours)
     assert pins.max() <= 1e-3 and (errors <= np.maximum(before, 1e-3) + 0.01).all()

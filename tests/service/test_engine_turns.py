@@ -306,7 +306,7 @@ def test_search_ends_early_with_the_answers_of_the_full_search(
         cnt=np.full(n, k), n_t=np.full(n, k), w=np.ones((n, k)), fab=np.zeros(n, bool),
         keep=np.ones(n, bool), ex=args["exact"], tols=np.full(n, 1e-3), floors=np.zeros(n),
         carry=np.full(n, engine.serving.carry), turn=np.ones(n, bool), asked_soft=~args["exact"],
-        mirror=np.full(n, engine.serving.solve_mirror), soft_ik=np.zeros(n),
+        mirror=np.full(n, engine.serving.solve_mirror), soft_ik=np.zeros(n), body=args["poses"],
     )  # fmt: skip
     reps = np.full(n, engine.serving.passes)
     from service.turns import search
