@@ -24,10 +24,12 @@ import pytest
 from tests.service.editor_page import (
     REPO_ROOT,
     STATUS,
+    VIEW,
     M,
     drag_joint,
     open_editor,
     open_file,
+    pick,
     recorded,
     settle,
     unreachable,
@@ -229,5 +231,80 @@ def test_a_files_edit_an_outage_interrupted_is_sent_again(browser: Any, outages:
             page.keyboard.press("Control+z")
             page.wait_for_function(f"() => {M}.bvhText() === {json.dumps(text)}")
             assert "right_wrist" not in page.evaluate(f"{M}.targets()")
+    finally:
+        page.context.close()
+
+
+@pytest.mark.browser
+def test_an_edit_made_while_the_edit_sent_again_is_on_its_way_is_a_step_of_its_own(
+    browser: Any, outages: Outages
+) -> None:
+    """The edit sent again still on its way when the user edits (a target's value typed,
+    a joint clicked, another dragged): it lands as the interrupted drag's one step, solved,
+    and the new edit is a step of its own on it (a click that changed nothing, none). It
+    was left the drag's unsolved step, and the next answer, the drag's and the new edit's,
+    one step on it (a click's, the drag's a second step)."""
+    with outages.up():
+        page = open_editor(browser, outages.base)
+    held: list[Any] = []
+
+    def hold(route: Any) -> None:  # (held until let go: then through)
+        if held and held[-1] is None:
+            route.continue_()
+        else:
+            held.append(route)
+
+    try:
+        for how in ("typed", "clicked", "dragged"):
+            start = work(page, shown=True)
+            unreachable(page, "left_knee")
+            made, count = work(page, shown=True), sent(page)
+            held.clear()
+            page.route("**/v1/solve", hold)
+            with outages.ready(page):
+                page.wait_for_function(f"() => {STATUS} === 'connected'")
+                page.wait_for_function(f"() => {M}.solveCount().inflight")  # (sent again, held)
+                assert len(held) == 1
+                if how == "typed":
+                    pick(page, "right_wrist")
+                    page.fill("#joint-y", "1.2")
+                    page.press("#joint-y", "Enter")
+                else:
+                    xy = page.evaluate(f"{M}.projectJoint('right_wrist')")
+                    page.mouse.move(xy["x"], xy["y"])
+                    page.mouse.down()
+                    if how == "dragged":
+                        page.mouse.move(xy["x"] + 20, xy["y"] - 20, steps=4)
+                    page.mouse.up()
+                    page.wait_for_function(f"() => {M}.selected() === 'right_wrist'")
+                held.append(None)  # (let go)
+                held[0].continue_()
+                settle(page)
+                page.unroute("**/v1/solve")
+                now = work(page, shown=True)
+                assert page.evaluate(f"{M}.error()") is None
+                steps = made["history"]["index"] + (0 if how == "clicked" else 1)
+                assert now["history"]["index"] == steps, how
+                assert now["pose"] == now["committed"]
+                if how != "clicked":
+                    assert "right_wrist" in now["targets"]
+                    if how == "typed":
+                        assert now["targets"]["right_wrist"][1] == 1.2
+                        assert sent(page) == count + 2  # (sent again; the value typed)
+                    page.focus(VIEW)  # (a field's own keys are not the page's undo)
+                    page.keyboard.press("Control+z")  # the new edit undone
+                    page.wait_for_function(f"() => {M}.history().index === {steps - 1}")
+                else:
+                    assert now["targets"] == made["targets"]
+                    assert sent(page) == count + 1  # (the click asked nothing new)
+                # the drag, solved: its one step
+                drag = work(page, shown=True)
+                assert drag["targets"] == made["targets"], how
+                assert drag["committed"] != start["committed"], how
+                page.keyboard.press("Control+z")  # and before it
+                before = made["history"]["index"] - 1
+                page.wait_for_function(f"() => {M}.history().index === {before}")
+                assert work(page, shown=True)["committed"] == start["committed"]
+                assert "left_knee" not in page.evaluate(f"{M}.targets()")
     finally:
         page.context.close()

@@ -80,10 +80,13 @@ export function commitShown() {
 
 // The state shown becomes an undo step (unless it is the step shown). ``edit``: how its
 // text was made of the step's, where a splice knows it (sendSolve): then neither text is
-// read to compare them or to find what changed (history.js pushStep).
-export function pushHistory(edit = null) {
+// read to compare them or to find what changed (history.js pushStep). ``kept``: a step whose
+// targets and pins the new one has (landAgain: those of the edit sent again, not the ones
+// shown now, an edit made since among them).
+export function pushHistory(edit = null, kept = null) {
   forgetAnswerText(); // (a gesture given up: its answer's text is not the file's)
   const snap = snapshot();
+  if (kept) Object.assign(snap, { targets: kept.targets.map(([j, p]) => [j, [...p]]), pins: [...kept.pins] });
   if (sameSnapshot(currentStep(), snap, edit)) {
     updateButtons(); // nothing changed (e.g. an option toggled with no targets)
     return;
@@ -424,6 +427,33 @@ function sendAgain() {
 }
 onBack(sendAgain);
 
+// Two solves' requests the same (a file's text compared by reference: the same string).
+const sameRequest = (a, b) => a.bvh === b.bvh && JSON.stringify({ ...a, bvh: 0 }) === JSON.stringify({ ...b, bvh: 0 });
+
+// The edit sent again (sendAgain) answered while the user had begun another since it went
+// (a value typed, a joint pressed or dragged: solver.dirty, ui.drag): it lands as it does
+// alone, the interrupted gesture's one step in place of the one its kept targets made (the
+// answer's pose and text, those targets and pins), and the new edit goes on from it, a step
+// of its own. Its answer waited for the new edit's, the two one step over the kept,
+// unsolved one (undone, the drag as if never solved). ``edit``: the answer's splice, if
+// any. A press's re-ask of the state sent (interaction.js endDrag: a click) is dropped:
+// that state is the step now, solved.
+function landAgain(again, body, edit) {
+  const same = !ui.drag && sameRequest(body, solveBody()); // (before the commit: the pose sent)
+  const spliced = edit && edit.from === doc.text ? edit : null;
+  commitShown();
+  solver.again = null;
+  if (spliced) seedLayout(spliced);
+  if (again.replace) stepBack();
+  pushHistory(spliced, again.step);
+  // a press or drag begun on the kept step: Escape goes back to this one (not the unsolved)
+  if (ui.drag) ui.drag.before = currentStep();
+  if (same || (ui.drag && !solver.dirty)) {
+    solver.dirty = false; // (nothing new to send: the press's gesture, if any, asks its own)
+    solver.commitPending = false;
+  }
+}
+
 const withNote = (err, note) => new ApiError(err.status, err.title, `${err.detail}; ${note}`, err.requestId, err.retryAfter);
 
 export async function sendSolve() {
@@ -462,7 +492,9 @@ export async function sendSolve() {
       requestId: res.requestId,
     };
     clearError();
-    if (commit && !solver.dirty && solver.commitPending && !ui.drag) {
+    if (commit && again && history.stack[history.index] === again.step && (solver.dirty || ui.drag)) {
+      landAgain(again, body, res.edit);
+    } else if (commit && !solver.dirty && solver.commitPending && !ui.drag) {
       // (the splice that made the answer's text, of the committed one: the commit reads
       // neither whole, for the next solve's excerpt nor for the undo step; editor/excerpt.js)
       const edit = res.edit && res.edit.from === doc.text ? res.edit : null;
