@@ -54,6 +54,14 @@ def back(page: Any) -> None:
     settle(page)
 
 
+def caught(page: Any, held: list[Any]) -> None:
+    """Wait until a route a test holds has caught a request (``held`` filled by its handler,
+    which runs while Playwright waits)."""
+    page.wait_for_function(f"() => {M}.solveCount().inflight")
+    while not held:
+        page.wait_for_timeout(50)
+
+
 class Outages:
     """The test's own server on a port of its own, started and stopped at will."""
 
@@ -201,6 +209,61 @@ def test_an_edit_sent_again_that_fails_again_is_said_and_not_sent_a_third_time(
             page.wait_for_function(f"() => {STATUS} === 'connected'")
             page.wait_for_timeout(QUIET_MS)
             assert sent(page) == count + 1  # (not a third time)
+            assert "failed again" in page.evaluate(detail)  # (still said: test below)
+    finally:
+        page.context.close()
+
+
+def failed_again(page: Any, outages: Outages) -> int:
+    """A drag the outage interrupted, sent again once the server is back, which finds it
+    gone again (held on its way while the server stops: a real connection refused): its
+    "failed again" banner, the status "server unreachable". The solves sent so far."""
+    unreachable(page, "left_knee")
+    count = sent(page)
+    held: list[Any] = []
+    page.route("**/v1/solve", lambda route: held.append(route))
+    with outages.ready(page):
+        page.wait_for_function(f"() => {STATUS} === 'connected'")
+        caught(page, held)  # (sent again, held)
+    held[0].continue_()
+    page.wait_for_function(f"() => ({M}.error() || {{detail: ''}}).detail.includes('failed again')")
+    page.unroute("**/v1/solve")
+    assert page.evaluate(STATUS) == "server unreachable"
+    assert sent(page) == count + 1
+    return count + 1
+
+
+@pytest.mark.browser
+def test_the_failed_again_banner_stays_once_the_server_is_back(
+    browser: Any, outages: Outages
+) -> None:
+    """The banner of an edit sent again that failed again stays when the page's liveness
+    check finds the server back: the edit is not sent again, and is not applied. It went
+    then (the banner of a server unreachable, status 0, goes once it is back), the status
+    "connected", no error, the edit never solved. It goes once an edit is solved, or with
+    the edit undone."""
+    with outages.up():
+        page = open_editor(browser, outages.base)
+    try:
+        for then in ("drag", "undo"):
+            made = work(page, shown=True)
+            count = failed_again(page, outages)
+            with outages.up():
+                page.wait_for_function(f"() => {STATUS} === 'connected'")
+                page.wait_for_timeout(QUIET_MS)
+                err = page.evaluate(f"{M}.error()")
+                assert err is not None and "failed again" in err["detail"], then
+                assert page.locator("#error").is_visible()
+                assert sent(page) == count  # (nothing sent since)
+                assert work(page)["committed"] == made["committed"]  # (not applied)
+                if then == "drag":
+                    drag_joint(page, "right_wrist", 20, -20)  # an edit solved
+                else:
+                    page.keyboard.press("Control+z")  # the edit undone
+                    index = made["history"]["index"]
+                    page.wait_for_function(f"() => {M}.history().index === {index}")
+                assert page.evaluate(f"{M}.error()") is None, then
+                assert page.locator("#error").is_hidden()
     finally:
         page.context.close()
 
@@ -263,7 +326,7 @@ def test_an_edit_made_while_the_edit_sent_again_is_on_its_way_is_a_step_of_its_o
             page.route("**/v1/solve", hold)
             with outages.ready(page):
                 page.wait_for_function(f"() => {STATUS} === 'connected'")
-                page.wait_for_function(f"() => {M}.solveCount().inflight")  # (sent again, held)
+                caught(page, held)  # (sent again, held)
                 assert len(held) == 1
                 if how == "typed":
                     pick(page, "right_wrist")

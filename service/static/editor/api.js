@@ -61,16 +61,19 @@ async function watch() {
 // The server answered (a request's answer, or its liveness): the status says "connected"
 // where it said it was down, and the banner that said so goes (a request's that could not
 // reach the server, or that it did not answer: status 0). It stayed up, under "connected",
-// until the next solve landed or it was dismissed. Then, where it said it was down, what
-// waits for the server runs (``onBack``: solve.js sends again the edit the outage
-// interrupted).
+// until the next solve landed or it was dismissed. Not a banner that outlives the outage
+// (``lasting``: solve.js, an edit sent again that failed again, not sent a third time): what
+// it says, the edit not applied, still holds; it went, and the page said "connected", no
+// error, the edit never solved. Then, where it said it was down, what waits for the server
+// runs (``onBack``: solve.js sends again the edit the outage interrupted).
 const whenBack = [];
 export const serverDown = () => DOWN.includes($('status').textContent);
+const lasting = () => Boolean(ui.errorOwner && ui.errorOwner.lasting);
 
 function back() {
   const wasDown = serverDown();
   if (wasDown) $('status').textContent = 'connected';
-  if (ui.currentError && ui.currentError.status === 0) clearError();
+  if (ui.currentError && ui.currentError.status === 0 && !lasting()) clearError();
   if (wasDown) whenBack.forEach((fn) => fn());
 }
 
@@ -80,11 +83,11 @@ export function onBack(fn) {
 }
 
 // Whether the banner is about the server or the page rather than the pose shown: the server
-// down (while the status says so), an API key needed, the models loading (not connected
-// yet), a 3D view that cannot start. Reset and a sample chosen leave such a banner up
-// (solve.js replacedError).
+// down (while the status says so; not a lasting banner, about its edit), an API key needed,
+// the models loading (not connected yet), a 3D view that cannot start. Reset and a sample
+// chosen leave such a banner up (solve.js replacedError).
 export function aboutServer(e) {
-  return (e.status === 0 && DOWN.includes($('status').textContent)) || e.status === 401
+  return (e.status === 0 && DOWN.includes($('status').textContent) && !lasting()) || e.status === 401
     || (e.status === 503 && !ui.connected) || e.title === 'WebGL unavailable';
 }
 
@@ -165,7 +168,8 @@ function keyNeeded() {
 // ------------------------------------------------------------------------------------
 // Error banner
 // ------------------------------------------------------------------------------------
-// ``owner``: the edit a failed solve's banner belongs to (solve.js: undone, the banner goes).
+// ``owner``: the edit a failed solve's banner belongs to (solve.js: undone, the banner goes;
+// ``lasting``, it stays once the server is back: ``back``).
 export function showError(err, owner = null) {
   const e = err instanceof ApiError ? err : new ApiError(-1, 'Editor error', String(err && err.message || err));
   ui.currentError = {

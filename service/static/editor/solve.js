@@ -511,6 +511,7 @@ export async function sendSolve() {
   } catch (err) {
     if (epoch !== solver.epoch) return;
     let said = err;
+    let lasting = false; // (its banner outlives the outage: api.js back)
     const wait = err.retryAfter ? Math.min(err.retryAfter, 30) : 0;
     if (wait) {
       // a busy server (429, 503) says when to come back: no solve goes before (capped at
@@ -547,6 +548,9 @@ export async function sendSolve() {
         said = withNote(err, `still busy after ${BUSY_TRIES} tries: the edit is not applied (the `
           + 'pose is as before it, its targets kept: drag again to retry)');
       } else if (again && err.status === 0) {
+        // (it stays once the server is back, as it still holds: api.js back; until an edit
+        // is solved, or the user moves on: an undo, Reset, a sample)
+        lasting = true;
         said = withNote(err, 'the edit, sent again once the server was back, failed again: it is not '
           + 'applied (the pose is as before it, its targets kept: drag again to retry)');
       } else if (err.status === 0) {
@@ -560,7 +564,7 @@ export async function sendSolve() {
       }
       solver.busyTries = 0;
     }
-    showError(said, solveOwner());
+    showError(said, { ...solveOwner(), lasting });
     refresh();
     settle = !solver.commitPending;
   } finally {

@@ -80,7 +80,7 @@ export const history = { stack: [], index: -1, text: null };
 // Flags several modules read and write (an importer cannot assign a module's `let`).
 export const ui = {
   currentError: null, // the error on the banner (api.js), or null
-  errorOwner: null, // a failed solve's banner: {step, pending}, the edit it belongs to (solve.js)
+  errorOwner: null, // a failed solve's banner: {step, pending, lasting}, the edit it belongs to (solve.js)
   hovered: null, // the joint (or target) under the pointer
   needsRender: true, // the frame loop renders when set
   drag: null, // the gesture in progress (interaction.js; a nudge burst's, keys.js), or null
