@@ -511,6 +511,11 @@ class ModelsResponse(BaseModel):
         "the mean of the two, unless a request says (`options.mirror`; the manifest's "
         "`serving.solve_mirror`)."
     )
+    max_body_bytes: int = Field(
+        description="The largest request body this server takes, in bytes "
+        "(`POSE_MAX_BODY_BYTES`); a larger one is a 413. The editor sends a BVH file over it "
+        "a frame at a time (docs/editor.md), and whole under it."
+    )
     models: list[ModelInfo]
 
 

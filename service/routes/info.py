@@ -29,8 +29,8 @@ async def skeleton(state: State) -> SkeletonResponse:
 
 
 @router.get("/v1/models", response_model=ModelsResponse)
-async def models(engine: ReadyEngine) -> ModelsResponse:
-    """The loaded models: version, licence, solver sets, completion levels, metrics."""
+async def models(engine: ReadyEngine, state: State) -> ModelsResponse:
+    """The loaded models: version, licence, solver sets, completion levels, metrics; body limit."""
     m = engine.manifest
     return ModelsResponse(
         version=m.version,
@@ -61,6 +61,7 @@ async def models(engine: ReadyEngine) -> ModelsResponse:
         pelvis_travel=engine.serving.pelvis_travel,
         reach_travel=engine.serving.reach_travel,
         solve_mirror=engine.serving.solve_mirror,
+        max_body_bytes=state.settings.max_body_bytes,
         models=[
             ModelInfo(
                 name=e.name,

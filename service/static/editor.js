@@ -43,6 +43,7 @@ import {
   fileFrame, hasEdits, jumpToFrame, openFile, otherUnits, readAgain, setFrame,
 } from './editor/file.js';
 import { heldSize } from './editor/history.js';
+import { knowLimit } from './editor/inspect.js';
 import { wireKeys } from './editor/keys.js';
 
 // ------------------------------------------------------------------------------------
@@ -299,9 +300,11 @@ async function fetchSkeleton() {
   }
 }
 
-// The slider starts at the models' own carry (it is sent only once moved).
+// The slider starts at the models' own carry (it is sent only once moved); the server's body
+// limit is the one a big file is sent a frame at a time over (inspect.js knowLimit).
 async function showModelDefaults() {
   const res = await api('GET', 'v1/models');
+  knowLimit(res.data.max_body_bytes);
   const slider = $('carry');
   if (!slider.dataset.touched && typeof res.data.carry === 'number') {
     slider.value = String(res.data.carry);

@@ -22,6 +22,7 @@ import pytest
 
 from tests.character_files import big_file
 from tests.service.editor_page import M, drag_joint, open_editor, recorded, show_frame
+from tests.service.server import serve
 
 # the fixtures `server` (one for the session) and `browser` (one per module)
 pytest_plugins = ("tests.service.editor_page",)
@@ -93,10 +94,11 @@ def test_a_file_over_the_body_limit_opens_edits_and_exports(
 def test_a_file_over_the_body_limit_it_cannot_excerpt_is_said(
     server: str, browser: Any, bvh_files: dict[str, Path]
 ) -> None:
-    """The same file with each frame over two lines: no frame's line alone is the frame, so
-    nothing is sent but the whole file (413); the banner says why the editor cannot send it
-    a frame at a time, not what an API client should send. Binary junk as big is said to be
-    no BVH file."""
+    """The same file with each frame over two lines: no frame's line alone is the frame, and
+    the whole file is over the limit the server said as the page connected (GET v1/models):
+    nothing is sent (it was uploaded whole for a 413 while the page knew no limit but the
+    default); the banner says why the editor cannot send it a frame at a time, not what an
+    API client should send. Binary junk as big is said to be no BVH file."""
     text = big_file(bvh_files["reactidle-6ch"], SIZE)
     head, rows = text.split("Frame Time:", 1)
     time, rows = rows.split("\n", 1)
@@ -118,10 +120,10 @@ def test_a_file_over_the_body_limit_it_cannot_excerpt_is_said(
         )
         assert "POSE_MAX_BODY_BYTES" in err["detail"] and "Send a big file" not in err["detail"]
         assert page.evaluate(f"{M}.bvh()") is None
-        assert len(inspected) == 1  # (the whole file alone)
+        assert inspected == []  # (not uploaded for a 413)
 
         # binary junk as big: said to be no BVH file (it was "no such frames"), and not
-        # uploaded (the limit known from the 413)
+        # uploaded
         page.set_input_files(
             "#bvh-file",
             files=[
@@ -130,7 +132,7 @@ def test_a_file_over_the_body_limit_it_cannot_excerpt_is_said(
         )
         page.wait_for_function(f"() => {M}.error().title === 'Not a BVH file'")
         assert page.evaluate(f"{M}.error()")["detail"].startswith("junk.bvh: no HIERARCHY keyword")
-        assert len(inspected) == 1
+        assert inspected == []
 
         # under the limit in characters, over it as a JSON body (each line end two bytes):
         # sent as an excerpt at once (it was uploaded whole for a 413 each time)
@@ -138,6 +140,42 @@ def test_a_file_over_the_body_limit_it_cannot_excerpt_is_said(
         assert len(text) < LIMIT < len(json.dumps({"bvh": text}))
         give(page, text, "under.bvh")
         page.wait_for_function(f"() => {M}.bvh() && {M}.bvh().name === 'under.bvh'")
-        assert len(inspected) == 2 and len(inspected[1]["bvh"]) < 10_000
+        assert len(inspected) == 1 and len(inspected[0]["bvh"]) < 10_000
     finally:
         page.context.close()
+
+
+def opened(page: Any, text: str, name: str) -> None:
+    """``text`` given as the file ``name``, and open (a warning's banner aside: ReActIdle's
+    root channels), or the refusal said."""
+    give(page, text, name)
+    page.wait_for_function(
+        f"() => ({M}.bvh() && {M}.bvh().name === '{name}') || ({M}.error() || {{}}).status > 0"
+    )
+    assert (page.evaluate(f"{M}.bvh()") or {}).get("name") == name, page.evaluate(f"{M}.error()")
+
+
+@pytest.mark.browser
+def test_the_excerpt_threshold_is_the_servers_raised_limit(
+    browser: Any, bvh_files: dict[str, Path], models_dir: Path, tmp_path: Path
+) -> None:
+    """A server whose operator raised the body limit (POSE_MAX_BODY_BYTES, 12 MiB here): the
+    9.5 MB file, over the default limit but under this one, is inspected whole (every row
+    read: a broken one said as it opens); one over this limit goes as an excerpt at once,
+    not uploaded whole for a 413 first. The page sent the first as an excerpt too, its
+    threshold the default 8 MiB whatever the server said."""
+    raised = 12 * 1024 * 1024
+    with serve(models_dir, tmp_path, POSE_MAX_BODY_BYTES=str(raised)) as server:
+        page = open_editor(browser, f"http://127.0.0.1:{server.port}")
+        inspected = recorded(page, lambda url: url.endswith("/v1/bvh/inspect"))
+        statuses: list[int] = []
+        page.on("response", lambda r: statuses.append(r.status) if "bvh/inspect" in r.url else None)
+        try:
+            text = big_file(bvh_files["reactidle-6ch"], SIZE)
+            assert LIMIT < len(json.dumps({"bvh": text})) < raised
+            opened(page, text, "big.bvh")
+            assert statuses == [200] and inspected[0]["bvh"] == text  # (whole)
+            opened(page, big_file(bvh_files["reactidle-6ch"], raised + 1_000_000), "bigger.bvh")
+            assert statuses == [200, 200] and len(inspected[1]["bvh"]) < 10_000  # (excerpt)
+        finally:
+            page.context.close()

@@ -18,13 +18,23 @@ const lineEnd = (text, start) => {
 // why the page cannot send it a frame at a time. (A 14 MB file could not be opened: the
 // banner told the user to send "an excerpt", which only the page can.)
 //
-// The limit is the service's default until a 413 says what it is: a file whose body is
-// over it goes as an excerpt at once, where it can; one that cannot goes whole while the
-// limit is not known (the service's may be higher). The first big file was uploaded whole
-// only to be refused (9.5 MB for a 413), and a file under the limit in characters but over
-// it as a JSON body (each line end sent as two bytes, \n) was uploaded for a 413 each time.
+// The limit is the server's as it says it (GET v1/models max_body_bytes, read as the page
+// connects: ``knowLimit``; or a 413's detail), else the service's default: a file whose
+// body is over it goes as an excerpt at once, where it can; one that cannot goes whole
+// while the limit is not known (the service's may be higher). The first big file was
+// uploaded whole only to be refused (9.5 MB for a 413), and a file under the limit in
+// characters but over it as a JSON body (each line end sent as two bytes, \n) was uploaded
+// for a 413 each time. A server whose operator raised the limit was sent a file over the
+// default as an excerpt all the same (its other rows unread: rows_warning), the default
+// in force as no 413 came to say otherwise.
 const DEFAULT_LIMIT = 8 * 1024 * 1024; // (service/settings.py max_body_bytes)
-const limit = { bytes: DEFAULT_LIMIT, said: false }; // (said: by a 413)
+const limit = { bytes: DEFAULT_LIMIT, said: false }; // (said: by the server)
+
+// The server's body limit as it says it (``bytes``; not a positive whole number: an older
+// server's answer without it, and the limit stays as it was).
+export function knowLimit(bytes) {
+  if (Number.isInteger(bytes) && bytes > 0) Object.assign(limit, { bytes, said: true });
+}
 
 // The bytes of the JSON body sending ``text`` (and a few fields), or a bound under which it
 // surely is: each character one byte, those JSON escapes (\n, \") two, other control
@@ -68,7 +78,7 @@ export async function inspect(text, fields) {
       if (!(refused instanceof ApiError && refused.status === 413)) throw refused;
       err = refused;
       const said = /(\d+)-byte limit/.exec(err.detail);
-      if (said) Object.assign(limit, { bytes: Number(said[1]), said: true });
+      if (said) knowLimit(Number(said[1]));
     }
   }
   const mb = `${(text.length / 1e6).toFixed(1)} MB`;
