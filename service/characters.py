@@ -61,7 +61,7 @@ from core.text import clip, did_you_mean, quoted, shown
 from core.units import UNITS
 from service.bounded import Bounded, at_most
 from service.engine import Engine
-from service.errors import InvalidRequest
+from service.errors import CHARACTER_BOUND, InvalidRequest
 from service.floors import floor_warning
 from service.joint_names import resolve_joint
 from service.problems import SolveProblem, SolveResult
@@ -78,7 +78,7 @@ from service.schemas import (
 from service.schemas import MAX_COORDINATE as MAX_METRES
 from service.validation import MIN_BONE, problem_of, validate_as
 
-MAX_COORDINATE = 1.0e7  # client units; beyond this a coordinate is nonsense
+MAX_COORDINATE = CHARACTER_BOUND  # client units; beyond this a coordinate is nonsense
 #: The shortest quaternion a client may send (normalised here; shorter ones say nothing of
 #: a rotation that float noise does not).
 MIN_QUAT_LENGTH = 1e-6

@@ -129,7 +129,7 @@ def _numbers(rows: Any, loc: tuple[Any, ...], width: int, n: int, errs: _Errors,
         got = _unpack(rows, loc, width, n, errs)
         return None if got is None else _checked(got, loc, errs, bound)
     if not isinstance(rows, list):
-        errs.add(loc, "list_type", "Input should be a valid list")
+        errs.add(loc, "list_type", "Input should be a valid list", input=rows)
         return None
     if len(rows) != n:
         if rows and not isinstance(rows[0], list):  # one row, as joints and weights may be
@@ -147,7 +147,7 @@ def _numbers(rows: Any, loc: tuple[Any, ...], width: int, n: int, errs: _Errors,
     if arr is None or arr.dtype.kind not in "fi" or arr.shape != (n, width):
         for b, row in enumerate(rows):  # the precise (slow) look, only for a bad body
             if not isinstance(row, list):
-                errs.add((*loc, b), "list_type", "Input should be a valid list")
+                errs.add((*loc, b), "list_type", "Input should be a valid list", input=row)
             elif len(row) != width:
                 errs.add(
                     (*loc, b),
@@ -230,7 +230,7 @@ def _names(value: Any, loc: tuple[Any, ...], n: int, errs: _Errors, least: int
     """Joint names, shared (a list of names) or per item (``n`` rows of as many names),
     as ``[n, k]`` canonical indices; unknown names are errors naming where."""
     if not isinstance(value, list):
-        errs.add(loc, "list_type", "Input should be a valid list of joint names")
+        errs.add(loc, "list_type", "Input should be a valid list of joint names", input=value)
         return None
     shared = not value or not isinstance(value[0], list)
     rows = [value] if shared else value

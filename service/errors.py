@@ -37,6 +37,9 @@ LIMIT = "pose.limit"
 T0 = "pose.t0"
 MAX_DETAIL = 4000  # characters of any detail, whatever built it
 MAX_ERRORS = 20  # field errors a problem lists
+#: a character's numbers, in its own units (``service.characters.MAX_COORDINATE``): one
+#: past it is named with its value (:func:`_message`)
+CHARACTER_BOUND = 1.0e7
 log = logging.getLogger("service")
 
 
@@ -437,6 +440,9 @@ def _message(error: Any) -> str:
         return EMPTY_BVH.format(size="0 bytes")
     if kind in ("model_type", "dict_type"):  # (was "a valid dictionary or instance of Pose")
         return f"a JSON object is required, not {json_type(value)} ({clip(shown(value))})"
+    if kind == "list_type" and "input" in error:  # (was "Input should be a valid list")
+        got = json_type(value) + ("" if value is None else f" ({clip(shown(value))})")
+        return f"a JSON array is required, not {got}"
     if kind == "finite_number":
         return "must be a finite number (NaN and infinities are not)"
     if kind == "float_type" and type(value) is int:  # JSON allows any integer; a float not
@@ -446,6 +452,15 @@ def _message(error: Any) -> str:
         and abs(float(ctx.get("le", ctx.get("ge", 0)))) == 1.0e4
     ):
         return f"coordinate {clip(value, 30)} beyond ±10000 m"
+    if (
+        kind in ("less_than_equal", "greater_than_equal")
+        and abs(float(ctx.get("le", ctx.get("ge", 0)))) == CHARACTER_BOUND
+        and isinstance(value, int | float)
+    ):  # (was pydantic's, no value)
+        return (
+            f"{float(value):g} is beyond ±{CHARACTER_BOUND:g}: a character's numbers are within "
+            f"±{CHARACTER_BOUND:g} in its own units"
+        )
     return clip(error.get("msg", "invalid"), 2 * QUOTE)
 
 

@@ -68,3 +68,66 @@ def test_a_405_names_the_methods_the_path_takes(client: Any) -> None:
         assert " and ".join([", ".join(allow[:-1]), allow[-1]] if len(allow) > 1 else allow) == (
             takes
         )
+
+
+@pytest.mark.parametrize(
+    ("path", "body", "where", "said"),
+    [
+        ("/v1/solve", {**EXAMPLE, "targets": {"left_wrist": GOAL}}, "targets",
+         'an object ({"left_wrist": [1.641, 1.322, -0.913]})'),
+        ("/v1/solve", {**EXAMPLE, "pins": "left_ankle"}, "pins", 'a string ("left_ankle")'),
+        ("/v1/solve", {**EXAMPLE, "targets": None}, "targets", "null"),
+        ("/v1/solve/batch", {"items": {"a": 1}}, "items", 'an object ({"a": 1})'),
+        ("/v1/complete", {"keypoints": {"pelvis": [0, 1, 0]}}, "keypoints",
+         'an object ({"pelvis": [0, 1, 0]})'),
+        ("/v1/solve/batch", {"poses": {"a": 1}, "targets": {"joints": ["left_wrist"],
+         "positions": [GOAL]}}, "poses", 'an object ({"a": 1})'),
+    ],
+)  # fmt: skip
+def test_an_array_given_as_something_else_says_what_came(
+    client: Any, path: str, body: dict[str, Any], where: str, said: str
+) -> None:
+    """An array field given an object, a string or null says an array is required and what
+    came, as an object field given an array does (`pose`: "a JSON object is required, not an
+    array ([1, 2])"); it was pydantic's "Input should be a valid list", naming neither (an
+    API audit, 2026-12-07)."""
+    out = client.post(path, json=body)
+    assert out.status_code == 422, out.text
+    (error,) = out.json()["errors"]
+    assert error["location"] == where, error
+    assert error["message"].startswith("a JSON array is required, not "), error
+    assert said in error["message"], error
+    assert "valid list" not in out.json()["detail"], out.json()["detail"]
+
+
+CHARACTER = json.loads((REPO_ROOT / "docs/examples/solve_character.json").read_text())
+CLIP = json.loads((REPO_ROOT / "docs/examples/bvh_solve.json").read_text())
+
+
+@pytest.mark.parametrize("value", [2e7, -1e300])
+def test_a_character_number_past_its_bound_is_named(client: Any, value: float) -> None:
+    """A character's number past ±1e7 in its own units (an offset, the root position, a
+    target, in the JSON and the BVH forms) is named with its value and the bound, as the
+    pose form names a coordinate past ±10 km (docs/characters.md, "Bounds": "a 422 names the
+    value"); it was pydantic's "Input should be less than or equal to 10000000" (an API
+    audit, 2026-12-07)."""
+    offset = json.loads(json.dumps(CHARACTER))
+    offset["character"]["joints"][1]["offset"][1] = value
+    root = {**CHARACTER, "root_position": [0.0, value, 0.0]}
+    aim = [{"joint": "left_wrist", "position": [0.0, value, 0.0]}]
+    cases = [
+        ("/v1/solve", offset, "character.joints[1].offset[1]"),
+        ("/v1/solve", root, "root_position[1]"),
+        ("/v1/solve", {**CHARACTER, "targets": aim}, "targets[0].position[1]"),
+        ("/v1/bvh/solve", {**CLIP, "targets": aim}, "targets[0].position[1]"),
+        ("/v1/bvh/solve/batch", {"bvh": CLIP["bvh"], "edits": [{"frame": 0, "targets": aim}]},
+         "edits[0].targets[0].position[1]"),
+    ]  # fmt: skip
+    for path, body, where in cases:
+        out = client.post(path, json=body)
+        assert out.status_code == 422, out.text
+        (error,) = out.json()["errors"]
+        assert error["location"] == where, (path, error)
+        assert error["message"] == (
+            f"{value:g} is beyond ±1e+07: a character's numbers are within ±1e+07 in its own units"
+        ), (path, error)
