@@ -21,7 +21,7 @@ from core.characters import Skeleton
 from core.characters_maps import JointMap
 from core.skeleton import JOINT_INDEX, JOINT_NAMES
 from core.text import QUOTE, printable, quoted
-from service.errors import InvalidRequest, name_key
+from service.errors import InvalidRequest, name_key, near_name
 
 
 def resolve_joint(skel: Skeleton, jmap: JointMap, name: str, where: str) -> int:
@@ -41,8 +41,8 @@ def resolve_joint(skel: Skeleton, jmap: JointMap, name: str, where: str) -> int:
     if own is not None:
         _unmapped(jmap, name, where, mapped)
     known = [*(skel.names[a.joint] for a in jmap.anchors if not a.offset.any()), *JOINT_INDEX]
-    same = [k for k in known if name_key(k) == name_key(name)]  # maps ignore case; not here
-    near = f" (did you mean {quoted(same[0])}?)" if same else ""
+    meant = near_name(name, known)  # (maps ignore case; not here)
+    near = f" (did you mean {quoted(meant)}?)" if meant is not None else ""
     raise InvalidRequest(
         f"{where}: {quoted(name)} is neither a mapped joint of this skeleton nor a canonical "
         f"joint{near}; mapped: {mapped}"

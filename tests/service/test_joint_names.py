@@ -219,3 +219,31 @@ def test_an_unmapped_joint_of_a_json_skeleton_is_refused_with_the_map_entry(
     assert r.status_code == 200, r.text
     (pin, *_) = r.json()["pins"]  # the pinned Spine1 (canonical spine1) kept where it was
     assert pin["joint"] == "spine1" and pin["reached"] and pin["error"] <= 1e-3, pin
+
+
+def test_a_slip_in_a_character_s_target_or_pin_is_offered_the_name_meant(client: Any) -> None:
+    """A target or pin of the character and BVH forms a letter off a mapped joint or a
+    canonical name (``left_wrsit``, ``LeftHnad``) is offered it, as the pose form offers
+    ``left_wrist`` for ``left_wrsit``; it was offered only for case (``lefthand``), so the
+    two forms worded the same slip differently (an API audit, 2026-12-07). A neighbour is
+    not offered (``right_hand`` for ``left_hand``: a typo, not another joint)."""
+    body = _character()
+    clip = json.loads((EXAMPLES / "bvh_solve.json").read_text())
+    for name, meant in (("left_wrsit", "left_wrist"), ("LeftHnad", "LeftHand"),
+                        ("lefthand", "LeftHand"), ("RightFot", "RightFoot")):  # fmt: skip
+        aim = {**body, "targets": [{"joint": name, "position": [0.494, 1.328, 0.24]}]}
+        cases = [
+            ("/v1/solve", aim, "targets[0].joint"),
+            ("/v1/solve", {**body, "pins": [name]}, "pins[0]"),
+            ("/v1/bvh/solve", {**clip, "pins": [name]}, "pins[0]"),
+        ]
+        for path, sent, where in cases:
+            error = assert_problem(client.post(path, json=sent), 422)["errors"][0]
+            assert error["location"] == where, error
+            assert error["message"].startswith(
+                f"{quoted(name)} is neither a mapped joint of this skeleton nor a canonical "
+                f"joint (did you mean {quoted(meant)}?); mapped: "
+            ), error["message"]
+    pin = {**body, "pins": ["Right_Hand_Tip"]}  # no joint near enough: no suggestion
+    error = assert_problem(client.post("/v1/solve", json=pin), 422)["errors"][0]
+    assert "did you mean" not in error["message"], error["message"]
