@@ -23,7 +23,7 @@ import numpy as np
 import numpy.typing as npt
 
 from core import compiled_characters
-from core.text import quoted, shown
+from core.text import near_name, quoted, shown
 from core.units import UNITS, UP_AXES
 
 F64 = npt.NDArray[np.float64]
@@ -132,7 +132,9 @@ def build_skeleton(
         if p is None:
             parent_of.append(-1)
         elif p not in seen:
-            raise CharacterError(f"{where}[{i}].parent: unknown joint {quoted(p)}")
+            near = near_name(p, names) if isinstance(p, str) else None
+            meant = "" if near is None else f" (did you mean {quoted(near)}?)"
+            raise CharacterError(f"{where}[{i}].parent: unknown joint {quoted(p)}{meant}")
         elif p == names[i]:
             raise CharacterError(f"{where}[{i}].parent: joint {quoted(p)} is its own parent")
         else:

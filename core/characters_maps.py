@@ -580,7 +580,7 @@ def _resolve_map(
         if canon not in JOINT_INDEX:
             at = f"{where}.{clip(canon, 40)}"  # the key, as a schema error names one
             raise CharacterError(
-                f"{at}: unknown canonical joint {quoted(canon)}; "
+                f"{at}: unknown canonical joint {quoted(canon)}{near(JOINT_NAMES, canon)}; "
                 f"joints are {', '.join(JOINT_NAMES)}",
                 at,
             )

@@ -14,7 +14,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
-from core.text import quoted
+from core.text import near_name, quoted
 
 #: the most of a skeleton's joint names a refusal of a map lists, and the characters they
 #: may take (quoted, each at most core.text.QUOTE): then how many more
@@ -116,8 +116,7 @@ def missing_message(
 
 def near(names: Sequence[str], name: str) -> str:
     """`` (did you mean 'Left  Hand'?)`` for a joint named as ``name`` is but for case and
-    blanks among a skeleton's ``names`` (names are compared as written: a file's two spaces
-    are two), else nothing."""
-    key = " ".join(name.lower().split())
-    same = (n for n in names if " ".join(n.lower().split()) == key)
-    return next((f" (did you mean {quoted(n)}?)" for n in same), "")
+    blanks among a skeleton's ``names`` (offered as written: a file's two spaces are two),
+    or a slip of one (``LeftHnad``: :func:`core.text.near_name`), else nothing."""
+    found = near_name(name, names)
+    return "" if found is None else f" (did you mean {quoted(found)}?)"

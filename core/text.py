@@ -117,3 +117,31 @@ def did_you_mean(name: str, candidates: Iterable[str]) -> str:
     else:
         near = close_match(name, names, cutoff=0.85)
     return f" (did you mean {quoted(near)}?)" if near is not None else ""
+
+
+def name_key(name: str) -> str:
+    """A joint name as a suggestion compares it: no case, ``-`` and each run of blanks
+    (spaces, tabs) as ``_``: a file's ``Left  Hand`` for a client's ``Left Hand``."""
+    return "_".join(name.lower().replace("-", "_").split())
+
+
+def near_name(name: str, names: Iterable[str]) -> str | None:
+    """The one of ``names`` that ``name`` is a slip of: the same by :func:`name_key`, else
+    the one nearest by spelling (difflib's ratio of the keys 0.85 or more: a typo, not a
+    neighbour such as 'left_hand' for 'right_hand'), where one alone is nearest; else None.
+    Spellings are compared only within :data:`SPELLING_WORK` characters (difflib is pure
+    Python). One rule for the names a request gives (the pose form's joints; a character's
+    targets, pins, parents and ``joint_map``: they were offered for case alone, or not)."""
+    keys: dict[str, str] = {}
+    for n in names:
+        keys.setdefault(name_key(n), n)
+    key = name_key(name)
+    if key in keys:
+        return keys[key]
+    if len(key) * sum(map(len, keys)) > SPELLING_WORK:
+        return None
+    near = difflib.get_close_matches(key, list(keys), 2, 0.85)
+    ratio = [difflib.SequenceMatcher(None, key, n).ratio() for n in near]
+    if not near or (len(near) == 2 and ratio[0] == ratio[1]):  # none, or no one nearest
+        return None
+    return keys[near[0]]

@@ -12,7 +12,6 @@ most ``MAX_DETAIL`` characters.
 from __future__ import annotations
 
 import contextlib
-import difflib
 import logging
 import re
 from collections.abc import Sequence
@@ -25,7 +24,7 @@ from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from core.skeleton import JOINT_NAMES
-from core.text import QUOTE, SPELLING_WORK, clip, printable, quoted, shown
+from core.text import QUOTE, clip, near_name, printable, quoted, shown
 
 PROBLEM_JSON = "application/problem+json"
 PROBLEM_BASE = "https://marionette.dev/problems/"
@@ -370,34 +369,6 @@ def _near(value: Any, names: Sequence[str] = JOINT_NAMES) -> str:
         return ""
     near = near_name(value, names)
     return "" if near is None else f" (did you mean {near!r}?)"
-
-
-def near_name(name: str, names: Sequence[str]) -> str | None:
-    """The one of ``names`` that ``name`` is a slip of: the same by :func:`name_key`, else
-    the one nearest by spelling (difflib's ratio of the keys 0.85 or more: a typo, not a
-    neighbour such as 'left_hand' for 'right_hand'), where one alone is nearest; else None.
-    Spellings are compared only within :data:`core.text.SPELLING_WORK` characters (difflib
-    is pure Python). One rule for the pose form's names and a character's
-    (``service.joint_names``: it offered a character's for case alone)."""
-    keys: dict[str, str] = {}
-    for n in names:
-        keys.setdefault(name_key(n), n)
-    key = name_key(name)
-    if key in keys:
-        return keys[key]
-    if len(key) * sum(map(len, keys)) > SPELLING_WORK:
-        return None
-    near = difflib.get_close_matches(key, list(keys), 2, 0.85)
-    ratio = [difflib.SequenceMatcher(None, key, n).ratio() for n in near]
-    if not near or (len(near) == 2 and ratio[0] == ratio[1]):  # none, or no one nearest
-        return None
-    return keys[near[0]]
-
-
-def name_key(name: str) -> str:
-    """A joint name as a suggestion compares it: no case, ``-`` and each run of blanks
-    (spaces, tabs) as ``_``: a file's ``Left  Hand`` for a client's ``Left Hand``."""
-    return "_".join(name.lower().replace("-", "_").split())
 
 
 #: a BVH body with nothing in it (``bvh: ""``, or blanks alone): what a 0-byte file sends

@@ -20,8 +20,8 @@ from typing import NoReturn
 from core.characters import Skeleton
 from core.characters_maps import JointMap
 from core.skeleton import JOINT_INDEX, JOINT_NAMES
-from core.text import QUOTE, printable, quoted
-from service.errors import InvalidRequest, name_key, near_name
+from core.text import QUOTE, name_key, near_name, printable, quoted
+from service.errors import InvalidRequest
 
 
 def resolve_joint(skel: Skeleton, jmap: JointMap, name: str, where: str) -> int:

@@ -247,3 +247,37 @@ def test_a_slip_in_a_character_s_target_or_pin_is_offered_the_name_meant(client:
     pin = {**body, "pins": ["Right_Hand_Tip"]}  # no joint near enough: no suggestion
     error = assert_problem(client.post("/v1/solve", json=pin), 422)["errors"][0]
     assert "did you mean" not in error["message"], error["message"]
+
+
+def test_a_slip_in_a_skeleton_s_or_a_map_s_joint_name_is_offered_the_name_meant(
+    client: Any,
+) -> None:
+    """A joint name a letter off in a ``joint_map`` value, a ``joint_map`` key or a joint's
+    ``parent`` is offered the name meant, as a target's and a ``rotations`` key's are; they
+    were offered for case alone or not at all ("the skeleton has no joint 'LeftHnad'",
+    "unknown canonical joint 'left_wirst'", "unknown joint 'Hip'": an API audit,
+    2026-12-07), in the JSON and the BVH forms alike."""
+    body = _character()
+    clip = json.loads((EXAMPLES / "bvh_solve.json").read_text())
+    parent = copy.deepcopy(body)
+    parent["character"]["joints"][3]["parent"] = "Spine_2"
+    cases = [
+        ({**body, "joint_map": {"left_wrist": "LeftHnad"}}, "joint_map.left_wrist",
+         "the skeleton has no joint 'LeftHnad' (did you mean 'LeftHand'?)"),
+        ({**body, "joint_map": {"left_wirst": "LeftHand"}}, "joint_map.left_wirst",
+         "unknown canonical joint 'left_wirst' (did you mean 'left_wrist'?); joints are "),
+        (parent, "character.joints[3].parent", "unknown joint 'Spine_2' (did you mean 'Spine2'?)"),
+    ]  # fmt: skip
+    for sent, where, said in cases:
+        for path, form in (("/v1/solve", sent), ("/v1/bvh/solve", {**clip, **sent})):
+            if "character" in form and path == "/v1/bvh/solve":
+                continue  # (a file's parents are its nesting)
+            if path == "/v1/bvh/solve":
+                form = {k: v for k, v in form.items() if k not in ("character", "rotations")}
+                form.pop("root_position", None)
+            error = assert_problem(client.post(path, json=form), 422)["errors"][0]
+            assert error["location"] == where, (path, error)
+            assert error["message"].startswith(said), (path, error["message"])
+    far = {**body, "joint_map": {"left_wrist": "Nope"}}  # nothing near: nothing offered
+    error = assert_problem(client.post("/v1/solve", json=far), 422)["errors"][0]
+    assert error["message"] == "the skeleton has no joint 'Nope'", error
