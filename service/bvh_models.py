@@ -23,7 +23,7 @@ from service.characters import (
     _Mapped,
     _Solved,
 )
-from service.errors import TooManyItems
+from service.errors import too_many_items
 from service.schemas import WHOLE
 
 #: How a file's root position channels are read (and an edit written back).
@@ -184,7 +184,7 @@ class BVHBatchRequest(_File):
         if settings is not None and isinstance(edits, list):
             limit = settings.max_batch_items
             if len(edits) > limit:
-                raise TooManyItems(f"edits: {len(edits)} exceed the limit of {limit} per batch")
+                raise too_many_items("edits", len(edits), limit, "edits")
         return data
 
 

@@ -25,7 +25,7 @@ from pydantic import ValidationError
 from core.skeleton import JOINT_INDEX, JOINT_NAMES, NUM_JOINTS
 from service.bounded import context, errors_of
 from service.engine import Engine
-from service.errors import MAX_ERRORS, BodyInvalid, TooManyItems
+from service.errors import MAX_ERRORS, BodyInvalid, too_many_items
 from service.limits import Pricing, chunks_of, searched_price
 from service.problems import BatchAnswer
 from service.responses import starts_warnings
@@ -310,7 +310,7 @@ def parse(data: dict[str, Any], max_items: int, suspect: bool = True) -> Columns
     packed = isinstance(rows, str)
     n = len(rows) if isinstance(rows, list) else _packed_rows(rows, WIDTH) if packed else 0
     if n > max_items:  # (a packed column's count read off its length, before decoding)
-        raise TooManyItems(f"{n} items exceed the limit of {max_items} per batch")
+        raise too_many_items("poses", n, max_items)
     if isinstance(rows, list) and n == 0:
         errs.add(
             ("poses",), "too_short", "List should have at least 1 item after validation, not 0"

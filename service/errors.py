@@ -152,6 +152,17 @@ class TooManyItems(PoseError):
     limit = "POSE_MAX_BATCH_ITEMS"
 
 
+def too_many_items(field: str, count: int, limit: int, noun: str = "items") -> TooManyItems:
+    """The 413 of a batch whose ``field`` holds ``count`` ``noun`` past ``limit``
+    (``POSE_MAX_BATCH_ITEMS``): one wording for the item list, the columnar form and a
+    clip's edits, naming the setting and what to send instead, as a body too large does
+    (they said the counts alone, the field on one route only: an API audit, 2026-12-07)."""
+    return TooManyItems(
+        f"{field}: {count} {noun} exceed the limit of {limit} per batch (the server's "
+        f"{TooManyItems.limit}): send them in several requests of at most {limit}"
+    )
+
+
 class PayloadTooLarge(PoseError):
     status = 413
     title = "Request body too large"

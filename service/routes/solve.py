@@ -31,7 +31,7 @@ from service.characters import (
 )
 from service.deps import ReadyEngine, RequestBudget, ServiceState, State
 from service.engine import Engine
-from service.errors import InvalidRequest, TooManyItems, every_item
+from service.errors import InvalidRequest, every_item, too_many_items
 from service.limits import Budget, Pricing, edit_price, price_of, refuse_price
 from service.problems import SolveProblem, SolveResult
 from service.responses import json_response, raw_response, solve_payload, starts_warnings
@@ -95,7 +95,7 @@ BOTH_FORMS = (
 def too_many(n: int, limit: int) -> None:
     """413 for a batch of ``n`` items beyond ``limit``."""
     if n > limit:
-        raise TooManyItems(f"{n} items exceed the limit of {limit} per batch")
+        raise too_many_items("items", n, limit)
 
 
 @router.post("/v1/solve", response_model=SolveResponse | CharacterSolveResponse)

@@ -133,7 +133,7 @@ def test_a_clip_is_bounded_as_a_batch_is(models_dir: Path, bvh_files: dict[str, 
     with make_client(models_dir, max_batch_items=4) as c:
         many = {"bvh": text, "edits": [{"frame": -1, "targets": []}] * 5}
         assert_problem(
-            c.post("/v1/bvh/solve/batch", json=many), 413, "edits: 5 exceed the limit of 4"
+            c.post("/v1/bvh/solve/batch", json=many), 413, "edits: 5 edits exceed the limit of 4"
         )
         body = clip_of(text, "bandai", [1, 2])
         resp = c.post("/v1/bvh/solve/batch", json=body)

@@ -6,9 +6,11 @@ the path takes, as its ``Allow`` header does (it said "Method Not Allowed" alone
 
 from __future__ import annotations
 
+import base64
 import json
 from typing import Any
 
+import numpy as np
 import pytest
 
 from core.skeleton import JOINT_NAMES
@@ -131,3 +133,27 @@ def test_a_character_number_past_its_bound_is_named(client: Any, value: float) -
         assert error["message"] == (
             f"{value:g} is beyond ±1e+07: a character's numbers are within ±1e+07 in its own units"
         ), (path, error)
+
+
+def test_too_many_items_names_the_setting_and_what_to_send_in_every_form(client: Any) -> None:
+    """A batch past ``POSE_MAX_BATCH_ITEMS`` is told the same way in the item list, the
+    columnar form (rows as lists or packed) and a clip's edits: the field, the count, the
+    setting and what to send instead, as a body past ``POSE_MAX_BODY_BYTES`` is; it said the
+    counts alone, with the field on one route only ("edits: 1025 exceed ...", "1025 items
+    exceed ...": an API audit, 2026-12-07)."""
+    many = 1025
+    goal = {"joints": ["left_wrist"], "positions": [GOAL] * many}
+    packed = base64.b64encode(np.array([ROW] * many, "<f8").tobytes()).decode()
+    edit = {"frame": 0, "targets": CLIP["targets"]}
+    for path, body, said in (
+        ("/v1/solve/batch", {"items": [EXAMPLE] * many}, "items: 1025 items"),
+        ("/v1/solve/batch", {"poses": [ROW] * many, "targets": goal}, "poses: 1025 items"),
+        ("/v1/solve/batch", {"poses": packed, "targets": goal}, "poses: 1025 items"),
+        ("/v1/bvh/solve/batch", {"bvh": CLIP["bvh"], "edits": [edit] * many}, "edits: 1025 edits"),
+    ):
+        out = client.post(path, json=body)
+        assert out.status_code == 413, out.text
+        assert out.json()["detail"] == (
+            f"{said} exceed the limit of 1024 per batch (the server's POSE_MAX_BATCH_ITEMS): "
+            "send them in several requests of at most 1024"
+        ), out.json()["detail"]
