@@ -373,11 +373,12 @@ def parse(data: dict[str, Any], max_items: int, suspect: bool = True) -> Columns
 
             def weight(b: int, i: int) -> None:  # pydantic's words (the item list's)
                 loc = ("targets", "weights", i) if shared else ("targets", "weights", b, i)
-                if weights_in[b, i] <= 0:
-                    errs.add(loc, "greater_than", "Input should be greater than 0")
+                v = float(weights_in[b, i])
+                if v <= 0:
+                    errs.add(loc, "greater_than", "Input should be greater than 0", input=v)
                 else:
-                    errs.add(loc, "less_than_equal",
-                             f"Input should be less than or equal to {MAX_WEIGHT:g}")  # fmt: skip
+                    most = f"Input should be less than or equal to {MAX_WEIGHT:g}"
+                    errs.add(loc, "less_than_equal", most, input=v)
 
             errs.add_all(np.argwhere(~((weights_in > 0) & (weights_in <= MAX_WEIGHT))), weight)
         if got is not None:

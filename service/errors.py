@@ -461,7 +461,16 @@ def _message(error: Any) -> str:
             f"{float(value):g} is beyond ±{CHARACTER_BOUND:g}: a character's numbers are within "
             f"±{CHARACTER_BOUND:g} in its own units"
         )
-    return clip(error.get("msg", "invalid"), 2 * QUOTE)
+    message = clip(error.get("msg", "invalid"), 2 * QUOTE)
+    if kind in _BOUNDS and isinstance(value, int | float) and not isinstance(value, bool):
+        return f"{message}, got {shown(value)}"  # (was pydantic's alone: the value not said)
+    if kind in ("literal_error", "enum") and "input" in error:
+        return f"{message}, got {clip(shown(value))}"
+    return message
+
+
+#: pydantic's error types of a number past a field's bound (said with the value)
+_BOUNDS = frozenset({"less_than_equal", "greater_than_equal", "less_than", "greater_than"})
 
 
 def json_type(value: Any) -> str:

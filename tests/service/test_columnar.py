@@ -303,7 +303,7 @@ def test_columnar_errors_are_counted_and_worded_as_the_item_lists(
         resp = client.post("/v1/solve/batch", json=col)
         errors = resp.json()["errors"]
         assert [e["location"] for e in errors] == [f"targets.weights[{b}][1]" for b in range(20)]
-        assert errors[0]["message"] == f"Input should be {words}", errors[0]
+        assert errors[0]["message"] == f"Input should be {words}, got {w!r}", errors[0]
         item = items(good)[:1]
         item[0]["targets"][1]["weight"] = w
         one = client.post("/v1/solve/batch", json={"items": item}).json()["errors"][0]

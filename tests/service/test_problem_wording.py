@@ -157,3 +157,33 @@ def test_too_many_items_names_the_setting_and_what_to_send_in_every_form(client:
             f"{said} exceed the limit of 1024 per batch (the server's POSE_MAX_BATCH_ITEMS): "
             "send them in several requests of at most 1024"
         ), out.json()["detail"]
+
+
+def test_a_value_out_of_its_bounds_or_choices_is_quoted(client: Any) -> None:
+    """A number past a field's bound and a word none of its choices say what came, as the
+    trainer's config errors do (``, got 1.5``), in every form (the columnar weights'
+    words are pydantic's too); pydantic's message alone named neither (`options.carry:
+    Input should be less than or equal to 1`: an API audit, 2026-12-07)."""
+    goal = {"joints": ["left_wrist"], "positions": [GOAL]}
+    cases = [
+        ("/v1/solve", {**EXAMPLE, "options": {"carry": 2}}, "options.carry",
+         "Input should be less than or equal to 1, got 2"),
+        ("/v1/solve", {**EXAMPLE, "options": {"reach": "exakt"}}, "options.reach",
+         "Input should be 'soft' or 'exact', got \"exakt\""),
+        ("/v1/solve/batch", {"poses": [ROW], "targets": goal, "options": {"passes": 9}},
+         "options.passes", "Input should be less than or equal to 4, got 9"),
+        ("/v1/solve/batch", {"poses": [ROW], "targets": {**goal, "weights": [-0.5]}},
+         "targets.weights[0]", "Input should be greater than 0, got -0.5"),
+        ("/v1/solve", {**CHARACTER, "character": {**CHARACTER["character"], "up": "Z"}},
+         "character.up", "Input should be '+Y' or '+Z', got \"Z\""),
+        ("/v1/bvh/solve", {**CLIP, "frame": -1}, "frame",
+         "Input should be greater than or equal to 0, got -1"),
+        ("/v1/complete", {"keypoints": [{"joint": "pelvis", "position": [0, 1, 0]}],
+         "bone_lengths": {"left_wrist": 5}}, "bone_lengths.left_wrist",
+         "Input should be less than or equal to 2, got 5"),
+    ]  # fmt: skip
+    for path, body, where, said in cases:
+        out = client.post(path, json=body)
+        assert out.status_code == 422, out.text
+        (error,) = out.json()["errors"]
+        assert (error["location"], error["message"]) == (where, said), (path, error)
