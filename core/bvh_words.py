@@ -147,10 +147,21 @@ class Tokens:
             if self.pos == 0:  # (was "unexpected end of HIERARCHY, expected 'HIERARCHY'")
                 raise error(self.file, "not a BVH file (no HIERARCHY keyword): nothing comes "
                             f"before its MOTION line, expected {what}")  # fmt: skip
-            raise error(self.file, f"unexpected end of HIERARCHY, expected {what}")
+            raise self._ended(what)
         word, self._last = self.items[self.pos]
         self.pos += 1
         return word
+
+    def _ended(self, what: str) -> BVHError:
+        """The words run out before the hierarchy is whole: where its text ends, the MOTION
+        line (it said no line: an API audit, 2026-12-07). A file with no MOTION line says
+        it otherwise (``core.bvh._no_motion``, which words this one anew)."""
+        text, end = self._text, self._end
+        line = 1 + text.count("\n", 0, end) + text.count("\r", 0, end) - text.count("\r\n", 0, end)
+        return error(
+            self.file, f"line {line}: unexpected end of HIERARCHY where its MOTION line begins, "
+            f"expected {what}: a joint's '{{' is not closed (a '}}' or a joint's lines lost?)",
+        )  # fmt: skip
 
     def expect(self, word: str) -> None:
         line = self.line()
@@ -179,7 +190,7 @@ class Tokens:
         that named it as written refused); at most :data:`MAX_NAME` characters."""
         line = self.line()
         if self.peek() is None:
-            raise error(self.file, f"unexpected end of HIERARCHY, expected {what}")
+            raise self._ended(what)
         first = (self._start, self.pos)  # (where its first word is: asked for if not alone)
         words: list[str] = []
         size = -1  # of the words joined by one space (no more than as written)

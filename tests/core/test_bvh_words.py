@@ -94,3 +94,27 @@ def test_a_file_with_nothing_before_motion_is_no_bvh_file(
     said = str(caught.value)
     assert said.startswith("walk.bvh: not a BVH file (no HIERARCHY keyword)"), said
     assert "unexpected end" not in said, said
+
+
+@pytest.mark.parametrize("cut", [1, 2, 5])
+@pytest.mark.parametrize("ends", ["\n", "\r\n", "\r"])
+def test_a_hierarchy_that_ends_unclosed_at_its_motion_line_names_the_line(
+    bvh_files: dict[str, Path], cut: int, ends: str
+) -> None:
+    """A hierarchy whose last lines are lost before its MOTION line (a '}' or a joint
+    deleted by hand) names the MOTION line, where it ends unclosed, as every other fault of
+    a file names its line (docs/bvh.md); it was "unexpected end of HIERARCHY, expected
+    JOINT, End Site or '}'" alone (an API audit, 2026-12-07). Short hierarchies (shared,
+    read from their own text) and long ones (read in place) alike."""
+    text = bvh_files["bandai"].read_text()
+    lines = text.split("\n")
+    motion = lines.index("MOTION")
+    kept = lines[: motion - cut] + lines[motion:]
+    line = motion - cut + 1  # the MOTION line's number, 1-based
+    for pad in (0, 1 << 17):  # (past core.bvh.SHARED_TEXT: not shared)
+        body = (ends.join(kept)).replace("HIERARCHY", "HIERARCHY" + " " * pad, 1)
+        with pytest.raises(BVHError) as caught:
+            parse_bvh(body, "walk.bvh", frames=[0])
+        said = str(caught.value)
+        assert said.startswith(f"walk.bvh: line {line}: unexpected end of HIERARCHY"), said
+        assert "where its MOTION line begins" in said, said
