@@ -27,7 +27,7 @@ from fastapi.routing import APIRoute
 from pydantic import BaseModel, ValidationError
 
 from core.text import clip, quoted
-from service import bounded, stepped
+from service import bounded, field_names, stepped
 from service.errors import (
     BodyError,
     BodyInvalid,
@@ -117,7 +117,9 @@ def validate(
     try:
         return model.model_validate(data, context=ctx)
     except ValidationError as exc:  # the first errors, and how many (service.bounded)
-        raise BodyInvalid(*bounded.errors_of(exc, ctx, data)) from None
+        shown, total, partial = bounded.errors_of(exc, ctx, data)
+        field_names.offered(shown, model, data)  # (an unknown key's "did you mean")
+        raise BodyInvalid(shown, total, partial) from None
     except PoseError as exc:  # a validator's refusal of the whole body
         raise BodyError(exc) from None
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import base64
 import binascii
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -23,9 +23,11 @@ import orjson
 from pydantic import ValidationError
 
 from core.skeleton import JOINT_INDEX, JOINT_NAMES, NUM_JOINTS
+from core.text import near_name
 from service.bounded import context, errors_of
 from service.engine import Engine
 from service.errors import MAX_ERRORS, BodyInvalid, too_many_items
+from service.field_names import offered
 from service.limits import Pricing, chunks_of, searched_price
 from service.problems import BatchAnswer
 from service.responses import starts_warnings
@@ -113,6 +115,13 @@ def _shared(row: list[Any], loc: tuple[Any, ...], width: int, n: int, errs: _Err
     errs.total += one.total - len(one.raw)  # those found past the ones kept
     errs.partial = errs.partial or one.partial
     return None if got is None else np.repeat(got, n, axis=0)
+
+
+def _meant(key: Any, fields: Iterable[str]) -> dict[str, Any]:
+    """An unknown key's context: the field it is a slip of, as the item list's
+    (``service.field_names``), where one is."""
+    meant = near_name(key, fields) if isinstance(key, str) and len(key) <= 40 else None
+    return {} if meant is None else {"ctx": {"meant": meant}}
 
 
 def _n(count: int, noun: str) -> str:
@@ -300,7 +309,9 @@ def parse(data: dict[str, Any], max_items: int, suspect: bool = True) -> Columns
     errs = _Errors()
     for key in data:
         if key not in TOP:
-            errs.add((key,), "extra_forbidden", "Extra inputs are not permitted")
+            errs.add(
+                (key,), "extra_forbidden", "Extra inputs are not permitted", **_meant(key, TOP)
+            )
     targets = data.get("targets")
     for key in ("poses", "targets"):
         if key not in data:
@@ -337,7 +348,8 @@ def parse(data: dict[str, Any], max_items: int, suspect: bool = True) -> Columns
         raise AssertionError  # unreachable
     for key in targets:
         if key not in _TARGETS:
-            errs.add(("targets", key), "extra_forbidden", "Extra inputs are not permitted")
+            errs.add(("targets", key), "extra_forbidden", "Extra inputs are not permitted",
+                     **_meant(key, _TARGETS))  # fmt: skip
     for key in ("joints", "positions"):
         if key not in targets:
             errs.add(("targets", key), "missing", "Field required")
@@ -349,6 +361,7 @@ def parse(data: dict[str, Any], max_items: int, suspect: bool = True) -> Columns
         options = SolveOptions.model_validate(given, context=(ctx := context()))
     except ValidationError as exc:
         shown, total, partial = errors_of(exc, ctx, given)
+        offered(shown, SolveOptions, given)  # (an unknown key's "did you mean")
         for e in shown:
             errs.add(("options", *e["loc"]), e["type"], e["msg"], ctx=e.get("ctx"),
                      input=e.get("input"))  # fmt: skip

@@ -427,6 +427,8 @@ def _message(error: Any) -> str:
     loc = tuple(error.get("loc", ()))
     if kind == "extra_forbidden" and loc[-2:-1] == ("pose",) and isinstance(loc[-1], str):
         return _not_canonical(loc[-1])  # (was "Extra inputs are not permitted")
+    if kind == "extra_forbidden" and isinstance(ctx.get("meant"), str):  # service.field_names
+        return f"Extra inputs are not permitted (did you mean {ctx['meant']!r}?)"
     if kind == "string_type" and ("pins" in loc[-2:] or loc[-1:] == ("joint",)):
         return _not_a_name(error)  # a character's joint (was "Input should be a valid string")
     if kind == "string_unicode" and isinstance(value, str):  # a lone surrogate's escape

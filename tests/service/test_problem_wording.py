@@ -187,3 +187,49 @@ def test_a_value_out_of_its_bounds_or_choices_is_quoted(client: Any) -> None:
         assert out.status_code == 422, out.text
         (error,) = out.json()["errors"]
         assert (error["location"], error["message"]) == (where, said), (path, error)
+
+
+def test_an_unknown_key_a_slip_of_a_field_is_offered_the_field(client: Any) -> None:
+    """A key a letter off one of its object's fields (``tolerence``, ``target``) is offered
+    that field, in every route and form, as a joint's name is; only pydantic's "Extra inputs
+    are not permitted" was said (an API audit, 2026-12-07). A key near nothing of its object
+    is told as before, and never offered a field of another object."""
+
+    def renamed(body: dict[str, Any], old: str, new: str) -> dict[str, Any]:
+        return {(new if k == old else k): v for k, v in body.items()}
+
+    aim = {**EXAMPLE["targets"][0]}
+    aim["positon"] = aim.pop("position")
+    edit = {"frame": 0, "targets": CLIP["targets"], "optoins": {}}
+    cases = [
+        ("/v1/solve", {**EXAMPLE, "options": {"tolerence": 0.01}}, "options.tolerence",
+         "tolerance"),
+        ("/v1/solve", renamed(EXAMPLE, "targets", "target"), "target", "targets"),
+        ("/v1/solve", {**EXAMPLE, "targets": [aim]}, "targets[0].positon", "position"),
+        ("/v1/solve", renamed(CHARACTER, "rotations", "rotation"), "rotation", "rotations"),
+        ("/v1/solve/batch", {"items": [renamed(EXAMPLE, "pins", "pin")]}, "items[0].pin",
+         "pins"),
+        ("/v1/solve/batch", {"item": [EXAMPLE]}, "item", "items"),
+        ("/v1/solve/batch", {"poses": [ROW], "target": {}}, "target", "targets"),
+        ("/v1/solve/batch", {"poses": [ROW], "targets": {"joints": ["left_wrist"],
+         "positions": [GOAL], "weight": [1]}, "options": {"tolerence": 1}}, "targets.weight",
+         "weights"),
+        ("/v1/solve/batch", {"poses": [ROW], "targets": {"joints": ["left_wrist"],
+         "positions": [GOAL]}, "options": {"tolerence": 1}}, "options.tolerence",
+         "tolerance"),
+        ("/v1/bvh/solve", renamed(CLIP, "frame", "frames"), "frames", "frame"),
+        ("/v1/bvh/solve/batch", {"bvh": CLIP["bvh"], "edits": [edit]}, "edits[0].optoins",
+         "options"),
+        ("/v1/complete", {"keypoint": []}, "keypoint", "keypoints"),
+    ]  # fmt: skip
+    for path, body, where, meant in cases:
+        out = client.post(path, json=body)
+        assert out.status_code == 422, out.text
+        errors = {e["location"]: e["message"] for e in out.json()["errors"]}
+        assert errors.get(where) == (f"Extra inputs are not permitted (did you mean '{meant}'?)"), (
+            path,
+            errors,
+        )
+    out = client.post("/v1/solve", json={**EXAMPLE, "options": {"frame": 1}})
+    (error,) = out.json()["errors"]  # (`frame` is a field of the BVH routes, not here)
+    assert error == {"location": "options.frame", "message": "Extra inputs are not permitted"}
