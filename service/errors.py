@@ -12,6 +12,7 @@ most ``MAX_DETAIL`` characters.
 from __future__ import annotations
 
 import contextlib
+import difflib
 import logging
 import re
 from collections.abc import Sequence
@@ -525,6 +526,8 @@ def install_handlers(app: FastAPI) -> None:
         path = request.url.path
         if exc.status_code == 404 and path.endswith("/") and _is_route(request, path[:-1]):
             detail = f"no route {clip(path)}: the route is {clip(path[:-1])}, without the slash"
+        elif exc.status_code == 404 and detail == title and (near := _near_route(request, path)):
+            detail = f"no route {clip(path)} (did you mean {near}?)"  # (was "Not Found")
         headers = dict(exc.headers or {})
         allow = [m.strip() for m in headers.get("Allow", "").split(",") if m.strip()]
         if "GET" in allow and "HEAD" not in allow:  # every GET route answers HEAD too
@@ -538,6 +541,19 @@ def install_handlers(app: FastAPI) -> None:
     @app.exception_handler(Exception)
     async def _unexpected(request: Request, exc: Exception) -> JSONResponse:
         return internal_error(request.method, request.url.path)
+
+
+def _near_route(request: Request, path: str) -> str | None:
+    """The route whose path ``path`` is a slip of (a letter or two off: difflib's ratio
+    0.85, one alone nearest), else None; a path of more than 100 characters is none."""
+    if len(path) > 100:
+        return None
+    routes = sorted(getattr(request.app.state, "route_paths", ()))
+    near = difflib.get_close_matches(path, routes, 2, 0.85)
+    if not near:
+        return None
+    ratio = [difflib.SequenceMatcher(None, path, r).ratio() for r in near]
+    return near[0] if len(near) == 1 or ratio[0] > ratio[1] else None
 
 
 def _is_route(request: Request, path: str) -> bool:

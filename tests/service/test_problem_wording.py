@@ -233,3 +233,25 @@ def test_an_unknown_key_a_slip_of_a_field_is_offered_the_field(client: Any) -> N
     out = client.post("/v1/solve", json={**EXAMPLE, "options": {"frame": 1}})
     (error,) = out.json()["errors"]  # (`frame` is a field of the BVH routes, not here)
     assert error == {"location": "options.frame", "message": "Extra inputs are not permitted"}
+
+
+def test_a_404_for_a_slip_of_a_route_s_path_names_the_route(client: Any) -> None:
+    """A path a letter or two off a route's (``/v1/slove``, ``/v1/skeleton`` misspelt) is
+    answered with the route it may mean, whatever the method or content type, as a route's
+    path with a trailing slash names its route; it was "Not Found" alone (an API audit,
+    2026-12-07). A path near no route is the plain 404 it was."""
+    for method, path, meant in (
+        ("POST", "/v1/slove", "/v1/solve"),
+        ("POST", "/v1/bvh/slove", "/v1/bvh/solve"),
+        ("POST", "/v1/solve/bacth", "/v1/solve/batch"),
+        ("GET", "/v1/skeletn", "/v1/skeleton"),
+        ("GET", "/v2/health/raedy", "/v2/health/ready"),
+    ):
+        for headers in ({"content-type": "application/json"},
+                        {"content-type": "application/x-www-form-urlencoded"}):  # fmt: skip
+            out = client.request(method, path, json=EXAMPLE, headers=headers)
+            assert out.status_code == 404, out.text
+            assert out.headers["content-type"] == "application/problem+json"
+            assert out.json()["detail"] == f"no route {path} (did you mean {meant}?)", out.text
+    assert client.get("/nothing-here").json()["detail"] == "Not Found"
+    assert client.post("/v1/x", json={}).json()["detail"] == "Not Found"
