@@ -461,7 +461,7 @@ def _message(error: Any) -> str:
         and isinstance(value, int | float)
     ):  # (was pydantic's, no value)
         return (
-            f"{float(value):g} is beyond ±{CHARACTER_BOUND:g}: a character's numbers are within "
+            f"{clip(value, 30)} is beyond ±{CHARACTER_BOUND:g}: a character's numbers are within "
             f"±{CHARACTER_BOUND:g} in its own units"
         )
     message = clip(error.get("msg", "invalid"), 2 * QUOTE)

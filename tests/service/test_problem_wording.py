@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from core.skeleton import JOINT_NAMES
+from core.text import shown
 from tests.conftest import REPO_ROOT
 
 EXAMPLE = json.loads((REPO_ROOT / "docs/examples/solve.json").read_text())
@@ -130,9 +131,8 @@ def test_a_character_number_past_its_bound_is_named(client: Any, value: float) -
         assert out.status_code == 422, out.text
         (error,) = out.json()["errors"]
         assert error["location"] == where, (path, error)
-        assert error["message"] == (
-            f"{value:g} is beyond ±1e+07: a character's numbers are within ±1e+07 in its own units"
-        ), (path, error)
+        said = "is beyond ±1e+07: a character's numbers are within ±1e+07 in its own units"
+        assert error["message"] == f"{shown(value)} {said}", (path, error)
 
 
 def test_too_many_items_names_the_setting_and_what_to_send_in_every_form(client: Any) -> None:
