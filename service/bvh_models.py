@@ -115,7 +115,9 @@ ROOT_WARNING = Field(
     "`root_position` says, stands more than 0.3 m off the floor (y = 0) and the other "
     "reading stands it on the floor (within 0.1 m): that other reading named (some "
     "exporters write the root's position channels as a displacement from its OFFSET: "
-    "`\"add\"`); the answer is solved (`/v1/bvh/inspect`: read) as asked. Null otherwise.",
+    "`\"add\"`); or where no joint at or above the pelvis has three position channels, that "
+    "the body cannot move in the file (its targets met by turns alone: `root channels: ...`); "
+    "the answer is solved (`/v1/bvh/inspect`: read) as asked. Null otherwise.",
 )  # fmt: skip
 
 

@@ -191,6 +191,9 @@ def root_warning(
     positions, stand ~0.7 m under the floor, and a wrist dragged 1.2 m up was left 7.5 cm
     short without a word: a user's audit, 2026-12-06.) ``g_pos``: the frame's joints'
     world positions, where known."""
+    fixed = _fixed_body(ch)
+    if fixed is not None:  # (no position channel: either reading is the same)
+        return f"root channels: {fixed}; {done} as asked"
     add = root_position == "add"
     asked = _lowest(ch, ch.pose, g_pos)
     if abs(asked) <= OFF_FLOOR_M:
@@ -210,6 +213,25 @@ def root_warning(
         f'root_position: read as "{root_position}", the frame\'s lowest joint stands '
         f'{abs(asked):.2f} m {side} the floor; read as "{name}" ({reading}) it stands '
         f"on it ({other:+.2f} m): the file may be written so; {done} as asked"
+    )
+
+
+def _fixed_body(ch: Character) -> str | None:
+    """Why the body cannot move in its file, where no joint at or above the pelvis's has
+    three position channels (``core.retarget`` moves the body through the nearest that
+    has), else None: its targets are met by turns alone (a pelvis dragged 10 cm came back
+    unmoved without a word, where the JSON form moves its ``root_position``: an API audit,
+    2026-12-07)."""
+    pelvis = ch.jmap.anchors[JOINT_INDEX["pelvis"]].joint
+    j = pelvis
+    while j >= 0 and not ch.skel.translatable[j]:
+        j = ch.skel.parents[j]
+    if j >= 0:
+        return None
+    return (
+        f"no joint at or above the pelvis ({quoted(ch.skel.names[pelvis])}) has three "
+        "position channels: the body cannot move in this file, so its targets are met by "
+        "turning its joints alone"
     )
 
 
