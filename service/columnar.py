@@ -165,11 +165,10 @@ def _numbers(rows: Any, loc: tuple[Any, ...], width: int, n: int, errs: _Errors,
                 )
             else:
                 for i, v in enumerate(row):
-                    if type(v) is not float and type(v) is not int:
-                        errs.add((*loc, b, i), "float_type", "Input should be a valid number")
-                    elif type(v) is int and not -_FLOAT_MAX < v < _FLOAT_MAX:  # 309+ digits
-                        errs.add((*loc, b, i), "float_type", "Input should be a valid number",
-                                 input=v)  # fmt: skip
+                    no_number = type(v) is not float and type(v) is not int
+                    if no_number or (type(v) is int and not -_FLOAT_MAX < v < _FLOAT_MAX):
+                        msg = "Input should be a valid number"  # (an int: 309+ digits)
+                        errs.add((*loc, b, i), "float_type", msg, input=v)
             if len(errs.raw) >= MAX_ERRORS:
                 errs.partial = b + 1 < len(rows)
                 break

@@ -442,14 +442,15 @@ def _message(error: Any) -> str:
     if kind == "string_too_short" and tuple(error.get("loc", ()))[-1:] == ("bvh",):
         return EMPTY_BVH.format(size="0 bytes")
     if kind in ("model_type", "dict_type"):  # (was "a valid dictionary or instance of Pose")
-        return f"a JSON object is required, not {json_type(value)} ({clip(shown(value))})"
+        return f"a JSON object is required, not {_came(value)}"
     if kind == "list_type" and "input" in error:  # (was "Input should be a valid list")
-        got = json_type(value) + ("" if value is None else f" ({clip(shown(value))})")
-        return f"a JSON array is required, not {got}"
+        return f"a JSON array is required, not {_came(value)}"
     if kind == "finite_number":
         return "must be a finite number (NaN and infinities are not)"
     if kind == "float_type" and type(value) is int:  # JSON allows any integer; a float not
         return f"{quoted(value)} is beyond any number this API takes (±1.8e308)"
+    if kind in _SCALARS and "input" in error:  # (was "Input should be a valid number")
+        return f"{_SCALARS[kind]} is required, not {_came(value)}"
     if (
         kind in ("less_than_equal", "greater_than_equal")
         and abs(float(ctx.get("le", ctx.get("ge", 0)))) == 1.0e4
@@ -470,6 +471,15 @@ def _message(error: Any) -> str:
     if kind in ("literal_error", "enum") and "input" in error:
         return f"{message}, got {clip(shown(value))}"
     return message
+
+
+#: what a field of each of pydantic's scalar type errors takes (said with what came)
+_SCALARS = {"float_type": "a number", "int_type": "a whole number", "bool_type": "true or false"}
+
+
+def _came(value: Any) -> str:
+    """What a field of the wrong JSON type was given: its type and value (``null`` alone)."""
+    return json_type(value) + ("" if value is None else f" ({clip(shown(value))})")
 
 
 #: pydantic's error types of a number past a field's bound (said with the value)

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from core.skeleton import JOINT_INDEX, JOINT_NAMES
+from core.text import clip, shown
 from service.middleware import fastpath
 from tests.conftest import PosePairs, make_client
 
@@ -248,8 +249,8 @@ def test_columnar_errors_name_item_and_field(client: Any, synthetic_poses: PoseP
 
     row0 = good["poses"][0]
     cases = [
-        (edited("poses/17/4", "1.0"), "poses[17][4]: Input should be a valid number"),
-        (edited("poses/3/0", True), "poses[3][0]: Input should be a valid number"),
+        (edited("poses/17/4", "1.0"), 'poses[17][4]: a number is required, not a string ("1.0")'),
+        (edited("poses/3/0", True), "poses[3][0]: a number is required, not a boolean (true)"),
         (edited("poses/5/2", 2e4), "poses[5][2]: coordinate 20000.0 beyond ±10000 m"),
         (edited("poses/6", row0[:60]), "poses[6]: must hold 63 numbers, got 60"),
         (edited("targets/joints/4/1", "left_wirst"), "targets.joints[4][1]: unknown joint"),
@@ -410,7 +411,8 @@ def test_a_string_among_the_numbers_costs_no_more_than_its_bytes(
     assert peak < 4 * len(raw) + (1 << 20), peak
     r = client.post("/v1/solve/batch", content=raw, headers={"content-type": "application/json"})
     assert r.status_code == 422
-    assert r.json()["detail"] == "poses[3][7]: Input should be a valid number"
+    said = f"poses[3][7]: a number is required, not a string ({clip(shown('x' * 10_000))})"
+    assert r.json()["detail"] == said, r.json()["detail"]
 
 
 def test_an_integer_past_64_bits_is_named_as_the_routes_name_it(

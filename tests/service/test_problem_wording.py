@@ -255,3 +255,30 @@ def test_a_404_for_a_slip_of_a_route_s_path_names_the_route(client: Any) -> None
             assert out.json()["detail"] == f"no route {path} (did you mean {meant}?)", out.text
     assert client.get("/nothing-here").json()["detail"] == "Not Found"
     assert client.post("/v1/x", json={}).json()["detail"] == "Not Found"
+
+
+def test_a_value_of_the_wrong_json_type_says_what_came(client: Any) -> None:
+    """A number, a whole number or a boolean given as another JSON type says what is
+    required and what came, as an object or an array does, in every form; it was
+    pydantic's "Input should be a valid number" (a string "2", a boolean), naming neither
+    (an API audit, 2026-12-07)."""
+    foot = {**EXAMPLE["pose"], "left_foot": [0.0, 1.0, "2"]}
+    row = [*ROW[:4], True, *ROW[5:]]
+    goal = {"joints": ["left_wrist"], "positions": [GOAL]}
+    cases = [
+        ("/v1/solve", {**EXAMPLE, "pose": foot}, "pose.left_foot[2]",
+         'a number is required, not a string ("2")'),
+        ("/v1/solve/batch", {"poses": [row], "targets": goal}, "poses[0][4]",
+         "a number is required, not a boolean (true)"),
+        ("/v1/solve", {**EXAMPLE, "options": {"mirror": "yes"}}, "options.mirror",
+         'true or false is required, not a string ("yes")'),
+        ("/v1/bvh/solve", {**CLIP, "frame": "3"}, "frame",
+         'a whole number is required, not a string ("3")'),
+        ("/v1/bvh/solve", {**CLIP, "frame": None}, "frame",
+         "a whole number is required, not null"),
+    ]  # fmt: skip
+    for path, body, where, said in cases:
+        out = client.post(path, json=body)
+        assert out.status_code == 422, out.text
+        (error,) = out.json()["errors"]
+        assert (error["location"], error["message"]) == (where, said), (path, error)
