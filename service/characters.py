@@ -63,6 +63,7 @@ from service.bounded import Bounded, at_most
 from service.engine import Engine
 from service.errors import CHARACTER_BOUND, InvalidRequest
 from service.floors import floor_warning
+from service.grounded import grounded
 from service.joint_names import resolve_joint
 from service.problems import SolveProblem, SolveResult
 from service.rigs import json_map, json_skeleton
@@ -635,14 +636,13 @@ def solve_prepared(engine: Engine, ch: Character, p: SolveProblem) -> Edit:
     )  # fmt: skip
     if p.reach == "exact":  # the targets the answer met are held as pins are
         met = (result.errors <= p.tolerance)[given]
-        held = [t for t, ok in zip(targets, met, strict=True) if ok]
-        rest = [t for t, ok in zip(targets, met, strict=True) if not ok]
-        out = retarget(ch.skel, ch.pose, ch.jmap, solved, exact=rest, pins=pins, held=held,
-                       tolerance=p.tolerance / ch.scale)  # fmt: skip
+        goals = {"held": [t for t, ok in zip(targets, met, strict=True) if ok],
+                 "exact": [t for t, ok in zip(targets, met, strict=True) if not ok]}  # fmt: skip
     else:  # the targeted joints come near where the canonical answer put them
-        soft = [(j, solved[j]) for j, _ in targets]
-        out = retarget(ch.skel, ch.pose, ch.jmap, solved, pins=pins, soft=soft,
-                       tolerance=p.tolerance / ch.scale)  # fmt: skip
+        goals = {"soft": [(j, solved[j]) for j, _ in targets]}
+    out = grounded(ch.to_service, p, solved, targets, pins, lambda held: retarget(
+        ch.skel, ch.pose, ch.jmap, solved, pins=held, tolerance=p.tolerance / ch.scale, **goals
+    ))  # fmt: skip
     return Edit(out.pose, out.changed, p, result, engine.version)
 
 
