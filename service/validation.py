@@ -140,20 +140,34 @@ def problem_of(
         canon = JOINT_NAMES[j]
         return repr(canon) if sent in (None, canon) else f"{quoted(sent)} (mapped to {canon!r})"
 
+    def again(j: int, sent: str | None) -> str:
+        """The entry that named joint ``j`` before, where the client named it otherwise
+        (a character's own name and the canonical one: it said only the second)."""
+        k = idx.index(j)
+        pin, at = k >= n_targets, k - n_targets if k >= n_targets else k
+        first = None if given is None else given[pin][at]
+        if first is None or sent is None or first == sent:
+            return ""
+        return f": {'pins' if pin else 'targets'}[{at}], {quoted(first)}, is the same joint"
+
     idx: list[int] = []
+    n_targets = len(targets)
     for i, j in enumerate(targets):
         if j in idx:
+            sent = None if given is None else given[0][i]
             raise InvalidRequest(
                 f"{prefix}targets[{i}]: duplicate target for joint {named(j, i, False)}"
+                f"{again(j, sent)}"
             )
         idx.append(j)
-    n_targets = len(idx)
     for i, j in enumerate(pins):
-        name = named(j, i, True)
+        name, sent = named(j, i, True), None if given is None else given[1][i]
         if j in idx[:n_targets]:
-            raise InvalidRequest(f"{prefix}pins[{i}]: joint {name} is both pinned and targeted")
+            raise InvalidRequest(
+                f"{prefix}pins[{i}]: joint {name} is both pinned and targeted{again(j, sent)}"
+            )
         if j in idx:
-            raise InvalidRequest(f"{prefix}pins[{i}]: joint {name} is pinned twice")
+            raise InvalidRequest(f"{prefix}pins[{i}]: joint {name} is pinned twice{again(j, sent)}")
         idx.append(j)
     target_idx = np.array(idx, dtype=np.intp)
     goals = np.reshape(goals, (-1, 3))

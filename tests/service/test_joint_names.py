@@ -281,3 +281,27 @@ def test_a_slip_in_a_skeleton_s_or_a_map_s_joint_name_is_offered_the_name_meant(
     far = {**body, "joint_map": {"left_wrist": "Nope"}}  # nothing near: nothing offered
     error = assert_problem(client.post("/v1/solve", json=far), 422)["errors"][0]
     assert error["message"] == "the skeleton has no joint 'Nope'", error
+
+
+def test_one_joint_named_twice_by_two_names_says_which_entry_it_is_again(client: Any) -> None:
+    """A character's joint targeted or pinned twice under two names (its own and the
+    canonical one) names the other entry, as the client named it, where it said only the
+    second name ("pins[1]: joint 'left_ankle' is pinned twice": the client sent it once as
+    that; an API audit, 2026-12-07). Twice under one name is told as before."""
+    body = _character()
+    aim = [0.494, 1.328, 0.24]
+    cases = [
+        ({**body, "pins": ["LeftFoot", "left_ankle"]}, "pins[1]",
+         "joint 'left_ankle' is pinned twice: pins[0], 'LeftFoot', is the same joint"),
+        ({**body, "targets": [{"joint": "LeftHand", "position": aim},
+                              {"joint": "left_wrist", "position": aim}]}, "targets[1]",
+         "duplicate target for joint 'left_wrist': targets[0], 'LeftHand', is the same joint"),
+        ({**body, "targets": [{"joint": "left_wrist", "position": aim}], "pins": ["LeftHand"]},
+         "pins[0]", "joint 'LeftHand' (mapped to 'left_wrist') is both pinned and targeted: "
+         "targets[0], 'left_wrist', is the same joint"),
+        ({**body, "pins": ["LeftFoot", "LeftFoot"]}, "pins[1]",
+         "joint 'LeftFoot' (mapped to 'left_ankle') is pinned twice"),
+    ]  # fmt: skip
+    for sent, where, said in cases:
+        error = assert_problem(client.post("/v1/solve", json=sent), 422)["errors"][0]
+        assert (error["location"], error["message"]) == (where, said), error
