@@ -598,3 +598,22 @@ def test_editor_says_when_a_file_s_sides_are_named_the_other_way(
         assert not errors, errors
     finally:
         page.context.close()
+
+
+@pytest.mark.browser
+def test_editor_says_a_file_whose_body_cannot_move_without_pointing_at_a_menu(
+    server: str, browser: Any
+) -> None:
+    """A root of rotations alone (no position channel at or above the pelvis) cannot move
+    its body: the opened file says so (the service's ``root_warning``), and not "the Root
+    channels menu", which reads position channels the file has none of (an API audit)."""
+    from tests.service.test_bvh_fixed_root import EXAMPLE, SAID, _fixed_root
+
+    page = open_editor(browser, server)
+    try:
+        open_file(page, _fixed_root(EXAMPLE["bvh"]), "fixed.bvh")
+        said = page.evaluate(f"{M}.error()")
+        assert said["title"] == "Root channels" and SAID in said["detail"], said
+        assert "menu" not in said["detail"], said
+    finally:
+        page.context.close()

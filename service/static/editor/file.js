@@ -266,7 +266,9 @@ export function lastFrame(info) {
 // ``broken``: why the frame shown has no pose (brokenRow), said first as a "Broken frame"
 // (a file whose frame 0 is broken: the rows_warning names the same line).
 function warnOpened(info, broken = null) {
-  const root = info.root_warning && `${info.root_warning} (the Root channels menu)`;
+  const root = info.root_warning && (info.root_warning.startsWith('root_position:')
+    ? `${info.root_warning} (the Root channels menu)` // (a body that cannot move: no menu helps)
+    : info.root_warning);
   const up = info.up_warning && `${info.up_warning} (the Up axis menu)`;
   const said = [info.cut_short && info.cut_short.detail, !broken && info.rows_warning,
     info.units_warning, up, root, info.sides_warning].filter(Boolean);
