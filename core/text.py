@@ -106,16 +106,9 @@ SPELLING_WORK = 200_000
 
 
 def did_you_mean(name: str, candidates: Iterable[str]) -> str:
-    """`` (did you mean 'Hips'?)`` for a name that is a candidate's but for case, or a slip
-    of one (:func:`close_match`, cutoff 0.85: a typo, not a neighbour such as 'left_hand'
-    for 'right_hand'), else ''. Where comparing spellings would take more than
-    :data:`SPELLING_WORK` characters, the name is matched for case alone."""
-    names = list(dict.fromkeys(candidates))
-    if len(name) * sum(map(len, names)) > SPELLING_WORK:
-        folded = name.casefold()
-        near = next((c for c in names if c.casefold() == folded), None)
-    else:
-        near = close_match(name, names, cutoff=0.85)
+    """`` (did you mean 'Hips'?)`` for a name that is a slip of a candidate
+    (:func:`near_name`), else ''."""
+    near = near_name(name, candidates)
     return f" (did you mean {quoted(near)}?)" if near is not None else ""
 
 
