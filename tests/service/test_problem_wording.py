@@ -22,6 +22,15 @@ ROW = [v for n in JOINT_NAMES for v in EXAMPLE["pose"][n]]
 GOAL = EXAMPLE["targets"][0]["position"]
 
 
+def says_one_error(client: Any, cases: list[tuple[str, dict[str, Any], str, str]]) -> None:
+    """Each (path, body) is a 422 with one error: at ``where``, saying ``said``."""
+    for path, body, where, said in cases:
+        out = client.post(path, json=body)
+        assert out.status_code == 422, out.text
+        (error,) = out.json()["errors"]
+        assert (error["location"], error["message"]) == (where, said), (path, error)
+
+
 def test_a_count_of_one_is_singular(client: Any) -> None:
     cases = [
         ({"joints": ["left_wrist"], "positions": [GOAL, GOAL]}, [ROW], "2 rows for 1 pose: "),
@@ -182,11 +191,7 @@ def test_a_value_out_of_its_bounds_or_choices_is_quoted(client: Any) -> None:
          "bone_lengths": {"left_wrist": 5}}, "bone_lengths.left_wrist",
          "Input should be less than or equal to 2, got 5"),
     ]  # fmt: skip
-    for path, body, where, said in cases:
-        out = client.post(path, json=body)
-        assert out.status_code == 422, out.text
-        (error,) = out.json()["errors"]
-        assert (error["location"], error["message"]) == (where, said), (path, error)
+    says_one_error(client, cases)
 
 
 def test_an_unknown_key_a_slip_of_a_field_is_offered_the_field(client: Any) -> None:
@@ -277,8 +282,4 @@ def test_a_value_of_the_wrong_json_type_says_what_came(client: Any) -> None:
         ("/v1/bvh/solve", {**CLIP, "frame": None}, "frame",
          "a whole number is required, not null"),
     ]  # fmt: skip
-    for path, body, where, said in cases:
-        out = client.post(path, json=body)
-        assert out.status_code == 422, out.text
-        (error,) = out.json()["errors"]
-        assert (error["location"], error["message"]) == (where, said), (path, error)
+    says_one_error(client, cases)
