@@ -670,7 +670,6 @@ def test_hierarchy_words_and_lines_are_those_of_its_lines_split(
         ]
 
 
-@pytest.mark.alone
 @pytest.mark.parametrize(
     ("text", "reason"),
     [  # (8.3 MB each, as much as a request body holds)

@@ -308,7 +308,6 @@ def test_a_block_with_spaces_past_ascii_is_looked_at_by_numpy(
     assert read == {"_narrowed": chunks, "_odd_in": chunks}, read
 
 
-@pytest.mark.alone
 @pytest.mark.parametrize("tail", ["x", ".1.1", "1e400"])
 def test_a_long_word_of_digits_is_looked_at_in_linear_time(
     bvh_files: dict[str, Path], tail: str

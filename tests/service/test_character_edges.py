@@ -243,7 +243,6 @@ def test_a_chain_nested_past_the_limit_is_refused(client: Any) -> None:
     _refused(client, "/v1/bvh/inspect", {"bvh": text}, f"nested more than {MAX_DEPTH} deep")
 
 
-@pytest.mark.alone
 def test_a_hierarchy_of_millions_of_words_is_refused_at_once_and_nothing_is_kept(
     client: Any,
 ) -> None:

@@ -359,7 +359,6 @@ def test_sigterm_under_load_answers_problems_not_text(models_dir: Path, tmp_path
         assert "Traceback" not in s.log.read_text()
 
 
-@pytest.mark.alone
 def test_sigterm_while_the_models_load_exits_at_once(models_dir: Path, tmp_path: Path) -> None:
     """An ops audit's find: a stop during the load (here a cold numba cache, as on a node
     whose CPU the image's seed was not compiled for: ~20-50 s of compiling) waited for the
