@@ -14,9 +14,9 @@ WAIT = 0.3  # s: long enough for a holder that could enter to have entered
 
 
 def _enter(paths: tuple[Path, Path], alone: bool, inside: list[str], name: str,
-           leave: threading.Event) -> threading.Thread:  # fmt: skip
+           leave: threading.Event, patience: float = 30.0) -> threading.Thread:  # fmt: skip
     def run() -> None:
-        with held(*paths, alone):
+        with held(*paths, alone, patience):
             inside.append(name)
             leave.wait(10)
         inside.remove(name)
@@ -71,5 +71,27 @@ def test_a_holder_that_comes_after_one_waiting_alone_waits_behind_it(tmp_path: P
     assert inside == ["c"]
     leave["c"].set()
     for t in (a, b, c):
+        t.join(5)
+    assert inside == []
+
+
+def test_one_waiting_alone_runs_beside_the_others_once_its_patience_is_spent(
+    tmp_path: Path,
+) -> None:
+    paths = lock_paths(tmp_path / "popen-gw0")
+    inside: list[str] = []
+    leave = {n: threading.Event() for n in "abc"}
+    a = _enter(paths, False, inside, "a", leave["a"])
+    time.sleep(WAIT)
+    b = _enter(paths, True, inside, "b", leave["b"], patience=1.0)
+    time.sleep(WAIT)
+    assert inside == ["a"]  # within its patience: waits
+    time.sleep(1.0)
+    assert sorted(inside) == ["a", "b"]  # spent: runs beside a
+    c = _enter(paths, False, inside, "c", leave["c"])  # not held back by b, which holds nothing
+    time.sleep(WAIT)
+    assert sorted(inside) == ["a", "b", "c"]
+    for n, t in zip("abc", (a, b, c), strict=True):
+        leave[n].set()
         t.join(5)
     assert inside == []

@@ -213,7 +213,6 @@ def test_request_heads_are_bounded_and_parser_refusals_are_problems(default_serv
     assert buf.startswith(b"HTTP/1.1 200 ")
 
 
-@pytest.mark.alone
 def test_a_body_whose_chunks_are_not_http_is_a_400_not_a_wait(default_server: Server) -> None:
     """An API audit (2026-12-05): a chunked body whose chunk size is no number (``zz``,
     ``-1``, 20 hex digits) got a 408 at the 2 s body deadline, its admission slot held the
@@ -272,7 +271,6 @@ def _problem_of(answer: bytes) -> tuple[str, dict[str, str], dict[str, Any]]:
     return lines[0], dict(line.lower().split(": ", 1) for line in lines[1:]), json.loads(body)
 
 
-@pytest.mark.alone
 def test_slow_or_silent_connections_are_closed_in_time(models_dir: Path, tmp_path: Path) -> None:
     """An audit (slowloris): a request head never finished stayed open 60 s and more, sent
     at once or a header line a second, on a fresh connection or a kept-alive one, and a
