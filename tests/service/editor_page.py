@@ -223,16 +223,22 @@ def open_file(page: Any, body: str, name: str) -> None:
     page.wait_for_function(f"() => {M}.bvh() && {M}.bvh().name === '{name}'")
 
 
-def held_drag(page: Any, joint: str, dx: float = 30, dy: float = -40) -> list[Any]:
-    """Drag ``joint`` by (dx, dy) and release it while the answers are held back: the
-    held routes, to continue."""
-    held: list[Any] = []
-    page.route("**/v1/bvh/solve", lambda route: held.append(route))
+def gesture(page: Any, joint: str, dx: float, dy: float) -> None:
+    """Press ``joint``'s handle, move it by (dx, dy) in four steps and let go: the gesture
+    alone, its solve not waited for (:func:`drag_joint` waits)."""
     xy = page.evaluate(f"{M}.projectJoint('{joint}')")
     page.mouse.move(xy["x"], xy["y"])
     page.mouse.down()
     page.mouse.move(xy["x"] + dx, xy["y"] + dy, steps=4)
     page.mouse.up()
+
+
+def held_drag(page: Any, joint: str, dx: float = 30, dy: float = -40) -> list[Any]:
+    """Drag ``joint`` by (dx, dy) and release it while the answers are held back: the
+    held routes, to continue."""
+    held: list[Any] = []
+    page.route("**/v1/bvh/solve", lambda route: held.append(route))
+    gesture(page, joint, dx, dy)
     page.wait_for_function(f"() => {M}.solveCount().inflight")
     return held
 

@@ -29,6 +29,7 @@ from tests.service.editor_page import (
     STATUS,
     M,
     drag_joint,
+    gesture,
     open_editor,
     open_file,
     settle,
@@ -105,11 +106,7 @@ def busy(port: int) -> Iterator[None]:
 
 def refused_drag(page: Any) -> None:
     """A drag the busy server refuses: its 429 banner."""
-    xy = page.evaluate(f"{M}.projectJoint('left_wrist')")
-    page.mouse.move(xy["x"], xy["y"])
-    page.mouse.down()
-    page.mouse.move(xy["x"] + 30, xy["y"] - 30, steps=4)
-    page.mouse.up()
+    gesture(page, "left_wrist", 30, -30)
     page.wait_for_function(f"() => {M}.error() !== null && {M}.error().status === 429")
 
 

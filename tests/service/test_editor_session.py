@@ -19,6 +19,7 @@ from tests.service.editor_page import (
     WAIT_MS,
     M,
     drag_joint,
+    gesture,
     give_file,
     open_editor,
     recorded,
@@ -96,11 +97,7 @@ def test_editor_goes_on_when_a_solve_is_never_answered(server: str, browser: Any
         page.wait_for_function(f"() => {M}.error() === null")  # (it stayed, stale)
         assert page.locator("#api-key").get_attribute("aria-invalid") != "true"
         page.route("**/v1/solve", hold_one)
-        xy = page.evaluate(f"{M}.projectJoint('left_wrist')")
-        page.mouse.move(xy["x"], xy["y"])
-        page.mouse.down()
-        page.mouse.move(xy["x"] + 30, xy["y"] - 40, steps=4)
-        page.mouse.up()
+        gesture(page, "left_wrist", 30, -40)
         page.wait_for_function(f"() => {M}.solveCount().inflight")
         assert len(held) == 1
         # an undo drops the gesture, and gives up its solve: the next drag goes out
