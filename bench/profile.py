@@ -89,7 +89,7 @@ def steps(engine: Engine, p: SolveProblem, windows: int, calls: int) -> dict[str
         canon, facing, trans, lengths, scales = ws
         body = engine.body_args
         rest = (items.floors, items.tidx, items.tpos, items.cnt, items.carry, engine.chain_mask,
-                s.keep_ease, collar, hold, s.keep_pairs, s.bend_side, items.soft_ik,
+                s.keep_ease, collar, hold, engine.pairs_of(items.body), s.bend_side, items.soft_ik,
                 s.keep_feet)  # fmt: skip
         out["kernel prepare_into"] = timed(
             lambda: compiled.prepare_into(

@@ -40,6 +40,8 @@ F64 = npt.NDArray[np.float64]
 F32 = npt.NDArray[np.float32]
 I64 = npt.NDArray[np.int64]
 Bool = npt.NDArray[np.bool_]
+#: :func:`unscale`'s ``pairs`` where ``serving.keep_pairs`` is off
+NO_PAIRS: F64 = np.empty((0, NUM_JOINTS, 3))
 
 #: Joints in depth order (stable), and its inverse.
 ORDER: I64 = np.argsort(np.asarray(DEPTH), kind="stable").astype(np.int64)
@@ -484,16 +486,17 @@ def unscale(
     ease: float,
     collar: Bool,
     hold: F64,
-    pairs: bool,
+    pairs: F64,
     side: float,
     soft: F64,
     feet: bool,
 ) -> F64:  # pragma: no cover - compiled
     """Network answers ``[M, 63]`` (float32, at the networks' size) back to the body's
     size (float64), with the bone pass (reference: the start pose) where ``bone``, and
-    there, with ``pairs``, :func:`core.rigid.keep_pairs_item` (the hips and the collars
-    at the start's angles), then, where ``carry[b]`` > 0, :func:`carry_item` below the
-    item's targets ``tidx[b, :counts[b]]`` by that weight, then :func:`ends_item` of the
+    there, with ``pairs`` (the callers' starts ``[M, 21, 3]``; ``[0, 21, 3]``: none),
+    :func:`core.rigid.keep_pairs_item` (the hips and the collars at the callers' angles),
+    then, where ``carry[b]`` > 0, :func:`carry_item` below the item's targets
+    ``tidx[b, :counts[b]]`` by that weight, then :func:`ends_item` of the
     chains ``chains`` marks (the limb ends back where the network put them; a limb the
     networks drew too straight bent towards ``core.ends.PREFER`` by ``side``; easing into
     full stretch over ``soft[b]`` m: ``core.ends.soft_reach``), then with ``feet``
@@ -519,8 +522,8 @@ def unscale(
             if hold[b] > 0.0:
                 hold_pelvis(pose, canon[b], hold[b])
             bone_pass_item(pose, lengths[b], canon[b], True, out[b], xr, lr, rr)
-            if pairs:
-                keep_pairs_item(out[b], canon[b])
+            if pairs.shape[0]:
+                keep_pairs_item(out[b], pairs[b])
             if carry[b] > 0.0:
                 carry_item(out[b], canon[b], lengths[b], tidx[b], counts[b], carry[b], rr,
                            flags, anchor, vecs)  # fmt: skip
@@ -597,7 +600,7 @@ def settle(
     ease: float,
     collar: Bool,
     hold: F64,
-    pairs: bool,
+    pairs: F64,
     side: float,
     soft: F64,
     feet: bool,
@@ -692,7 +695,7 @@ def _views(decoded: F32, n: int) -> F32:  # pragma: no cover - compiled
 def settle_prepare(
     decoded: F32, scales: F64, canon: F64, lengths: F64, facing: F64, trans: F64,
     floors: F64, tidx: I64, tpos: F64, counts: I64, carry: F64, chains: Bool, ease: float,
-    collar: Bool, hold: F64, pairs: bool, side: float, soft: F64, feet: bool, shapes: F64,
+    collar: Bool, hold: F64, pairs: F64, side: float, soft: F64, feet: bool, shapes: F64,
     shape_totals: F64, total_length: bool, reference_total: float, cols: I64, other: I64,
     signs: F32, x_in: F32, t_in: F32,
 ) -> None:  # pragma: no cover - compiled  # fmt: skip
@@ -714,7 +717,7 @@ def settle_prepare(
 def settle_last(
     decoded: F32, scales: F64, canon: F64, lengths: F64, facing: F64, trans: F64,
     floors: F64, tidx: I64, tpos: F64, counts: I64, carry: F64, chains: Bool, ease: float,
-    collar: Bool, hold: F64, pairs: bool, side: float, soft: F64, feet: bool, world: F64,
+    collar: Bool, hold: F64, pairs: F64, side: float, soft: F64, feet: bool, world: F64,
     errors: F64, bone_err: F64,
 ) -> None:  # pragma: no cover - compiled  # fmt: skip
     """:func:`settle` with ``tpos`` in the world (the floor taken off here; ``decoded``
@@ -761,7 +764,7 @@ def warm() -> None:
     target_motion(pose, tidx, tpos, counts, np.zeros(1, dtype=np.int64))
     unscale(
         out[6], out[4], out[0], out[3], np.ones(1, dtype=np.bool_), tidx, counts, np.full(1, 0.5),
-        chains, 0.0, np.ones(1, dtype=np.bool_), np.full(1, 0.02), True, 0.5, np.full(1, 0.01),
+        chains, 0.0, np.ones(1, dtype=np.bool_), np.full(1, 0.02), pose, 0.5, np.full(1, 0.01),
         True,
     )  # fmt: skip
     finish(out[0], out[1], out[2], np.zeros(1), tidx, tpos, counts, out[3])
@@ -770,12 +773,12 @@ def warm() -> None:
     travel(pose, tidx, tpos, counts, counts, ~one, True, True, 5)
     settle(
         out[6], out[4], out[0], out[3], out[1], out[2], np.zeros(1), tidx, tpos, counts,
-        np.full(1, 0.5), chains, 0.0, one, np.full(1, 0.02), True, 0.5, np.full(1, 0.01), True,
+        np.full(1, 0.5), chains, 0.0, one, np.full(1, 0.02), pose, 0.5, np.full(1, 0.01), True,
     )  # fmt: skip
     cols, signs = np.arange(3, dtype=np.int64), np.ones(3, np.float32)
     state = (out[0].copy(), out[1].copy(), out[2].copy(), out[3].copy(), out[4].copy())
     rest = (np.zeros(1), tidx, tpos, counts, np.full(1, 0.5), chains, 0.0, one,
-            np.full(1, 0.02), True, 0.5, np.full(1, 0.01), True)  # fmt: skip
+            np.full(1, 0.02), pose, 0.5, np.full(1, 0.01), True)  # fmt: skip
     for rows in (1, 2):  # one view, both views
         x_in = np.empty((rows, 3 * NUM_JOINTS), np.float32)
         t_in = np.empty((rows, 3), np.float32)

@@ -442,6 +442,11 @@ class Engine:
         on_pelvis = ((items.tidx == PELVIS) & cols).any(axis=1)
         return np.where(few & ~on_pelvis, self.serving.keep_pelvis, 0.0)
 
+    def pairs_of(self, body: F64) -> compiled.F64:
+        """``serving.keep_pairs``' reference (``compiled.unscale``): the callers' starts
+        ``body``, not a pass's (docs/kinematics.md, "A dragged trunk"); none where off."""
+        return compiled.as_f64(body) if self.serving.keep_pairs else compiled.NO_PAIRS
+
     def body_scales(self, poses: compiled.F64) -> compiled.F64:
         """:meth:`scales_of` of world poses ``[B, 21, 3]``, compiled (``compiled.body_scales``:
         the scale ``compiled.prepare`` gives the networks, bit for bit)."""
@@ -509,7 +514,7 @@ class Engine:
                 decoded = networks.answer(self, x, canvas, sequences[0], batch.mirror)
                 out = compiled.unscale(
                     decoded, scales, canon, lengths, bone, tidx, cnt, batch.carry, self.chain_mask,
-                    self.serving.keep_ease, collar, hold, self.serving.keep_pairs,
+                    self.serving.keep_ease, collar, hold, self.pairs_of(batch.body),
                     self.serving.bend_side, batch.soft_ik, self.serving.keep_feet,
                 )  # fmt: skip
             else:
@@ -525,7 +530,7 @@ class Engine:
                     decoded[items], scales[items], canon[items], lengths[items], bone[items],
                     tidx[items], cnt[items], batch.carry[items], self.chain_mask,
                     self.serving.keep_ease, collar[items], hold[items],
-                    self.serving.keep_pairs, self.serving.bend_side, batch.soft_ik[items],
+                    self.pairs_of(batch.body[items]), self.serving.bend_side, batch.soft_ik[items],
                     self.serving.keep_feet,
                 )  # fmt: skip
         start = canon

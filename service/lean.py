@@ -154,13 +154,13 @@ def solve_lean(
             pose, errors, bone_err = compiled.settle(
                 decoded, scales, canon, lengths, facing, trans, floors, tidx, tpos, counts,
                 items.carry, engine.chain_mask, engine.serving.keep_ease, collar, hold,
-                engine.serving.keep_pairs, engine.serving.bend_side, items.soft_ik,
+                engine.pairs_of(items.body), engine.serving.bend_side, items.soft_ik,
                 engine.serving.keep_feet,
             )  # fmt: skip
             continue
         out = compiled.unscale(
             decoded, scales, canon, lengths, every, tidx, counts, items.carry, engine.chain_mask,
-            engine.serving.keep_ease, collar, hold, engine.serving.keep_pairs,
+            engine.serving.keep_ease, collar, hold, engine.pairs_of(items.body),
             engine.serving.bend_side, items.soft_ik, engine.serving.keep_feet,
         )  # fmt: skip
         # exact: every column onto its goal; soft: the pins, the solved targets held
@@ -245,7 +245,7 @@ def solve_one(
         x_in, t_in, canon, facing, trans, lengths, scales,
     )  # fmt: skip
     rest = (items.floors, items.tidx, items.tpos, items.cnt, items.carry, engine.chain_mask,
-            s.keep_ease, collar, hold, s.keep_pairs, s.bend_side, items.soft_ik,
+            s.keep_ease, collar, hold, engine.pairs_of(items.body), s.bend_side, items.soft_ik,
             s.keep_feet)  # fmt: skip
     for _ in range(passes - 1):
         run()
