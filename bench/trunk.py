@@ -48,7 +48,7 @@ def without_retry() -> Iterator[None]:
     from service import fabrik_set
 
     kept = fabrik_set._TRUNK
-    fabrik_set._TRUNK = np.empty(0, dtype=np.int64)
+    fabrik_set._TRUNK = np.zeros_like(kept)
     try:
         yield
     finally:

@@ -30,7 +30,7 @@ import numpy.typing as npt
 
 from core import compiled_fabrik
 from core.rigid import SQUEEZED, keep_pairs_item
-from core.skeleton import JOINT_INDEX, PARENTS, SUBTREE
+from core.skeleton import JOINT_INDEX, NUM_JOINTS, PARENTS, SUBTREE
 
 F64 = npt.NDArray[np.floating[Any]]
 #: An answer whose hips are nearer each other than this share of the start's distance has
@@ -43,7 +43,9 @@ _HIPS = (JOINT_INDEX["left_hip"], JOINT_INDEX["right_hip"])
 _SHOULDERS = (JOINT_INDEX["left_shoulder"], JOINT_INDEX["right_shoulder"])
 #: The trunk's joints above the pelvis: dragged over pinned limbs, FABRIK stalls
 #: (:func:`onto_trunk`)
-_TRUNK = np.array([JOINT_INDEX[n] for n in ("spine1", "spine2", "neck", "head")])
+_TRUNK = np.isin(
+    np.arange(NUM_JOINTS), [JOINT_INDEX[n] for n in ("spine1", "spine2", "neck", "head")]
+)
 #: The joints of the legs: only a target or pin on one moves a hip (the others carry them)
 _LEGS = SUBTREE[_HIPS[0]] | SUBTREE[_HIPS[1]]
 #: The most a dragged pelvis is turned to fit its legs (radians), and how far within a
@@ -85,7 +87,7 @@ def fabrik_set(
         r_pose, r_its, r_errs, _ = run(sel, True, froms)
         was, tol = errs[sel], tols[sel, None]
         ok = np.where(was <= tol, r_errs <= tol, r_errs <= was + SLACK)
-        near = np.all(ok | loose, axis=1)
+        near = np.all(ok if loose is None else ok | loose, axis=1)
         kept = sel[near]
         pose[kept], its[kept], errs[kept] = r_pose[near], its[kept] + r_its[near], r_errs[near]
         out: npt.NDArray[np.intp] = sel[~near]
@@ -94,8 +96,8 @@ def fabrik_set(
     pose, its, errs, _ = run(slice(None), False, starts)
     ref = starts if reference is None else reference
     bases = starts
-    trunk = np.isin(idx, _TRUNK) & ~hold
-    loose = np.zeros(len(idx), dtype=bool)  # columns the rigid answer may miss by any
+    trunk = _TRUNK[idx] & ~hold
+    loose = None  # the columns the rigid answer may miss by any distance, if any
     if trunk.any() and hold.any():  # a trunk joint dragged over pinned limbs
         bases = onto_trunk(pose, its, errs, starts, goals, tols, idx, trunk, ref, run)
         if (hold & _LEGS[idx]).any():  # over pinned legs: a valid body before any reach

@@ -72,7 +72,7 @@ def test_a_chest_dragged_over_pinned_wrists_reaches_with_its_shoulders_apart(
         assert max(r.pin_errors.max() for r in ours) <= 1e-3
         assert max(r.max_bone_error for r in ours) <= 1e-5
         with monkeypatch.context() as m:  # the answers without the retry
-            m.setattr(fabrik_set, "_TRUNK", np.empty(0, dtype=np.int64))
+            m.setattr(fabrik_set, "_TRUNK", np.zeros_like(fabrik_set._TRUNK))
             theirs = engine.solve(problems)
         before = np.array([r.errors[0] for r in theirs])
         print(f"\n{how[1]} {joint}: reach {before.mean():.4f} -> {reach.mean():.4f} m, "
@@ -92,7 +92,7 @@ def test_a_chest_dragged_over_pinned_feet_keeps_the_hips_apart(
     problems = _drags(poses, "spine2", ANKLES, how)
     ours = engine.solve(problems)
     with monkeypatch.context() as m:
-        m.setattr(fabrik_set, "_TRUNK", np.empty(0, dtype=np.int64))
+        m.setattr(fabrik_set, "_TRUNK", np.zeros_like(fabrik_set._TRUNK))
         theirs = engine.solve(problems)
     print(f"\n{how[1]}: hips folded {_folded(theirs, poses, 'hips')} -> "
           f"{_folded(ours, poses, 'hips')} of {len(poses)}")  # fmt: skip
