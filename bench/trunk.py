@@ -22,6 +22,7 @@ import numpy as np
 import typer
 
 from bench.pins import sample_poses
+from core.geometry import rotation_about
 from core.skeleton import JOINT_INDEX
 
 if TYPE_CHECKING:
@@ -128,7 +129,7 @@ def reach_bound(poses: np.ndarray, seed: int, joint: str = "spine2") -> tuple[fl
     d = rng.normal(size=(len(poses), 3))
     d *= rng.uniform(0.05, 0.2, size=(len(poses), 1)) / np.linalg.norm(d, axis=1)[:, None]
     turns = np.stack([np.eye(3)] + [
-        _about(a / np.linalg.norm(a), np.radians(t))
+        rotation_about(a / np.linalg.norm(a), np.radians(t))
         for a in rng.normal(size=(60, 3)) for t in (10, 20, 30)
     ])  # fmt: skip
     j = JOINT_INDEX[joint]
@@ -172,12 +173,6 @@ def _nearest(
         axis=0,
     )
     return p, inside
-
-
-def _about(axis: np.ndarray, angle: float) -> np.ndarray:
-    k = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
-    out: np.ndarray = np.eye(3) + np.sin(angle) * k + (1.0 - np.cos(angle)) * (k @ k)
-    return out
 
 
 @app.command()

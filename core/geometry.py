@@ -26,6 +26,15 @@ def yaw_matrix(yaw: FloatArray) -> FloatArray:
     return _rotation_from_forward(np.sin(yaw), np.cos(yaw))
 
 
+def rotation_about(axis: npt.ArrayLike, angle: float) -> FloatArray:
+    """The rotation by ``angle`` (radians) about the unit ``axis`` (Rodrigues), ``[3, 3]``
+    (``core.compiled_hinges`` has the compiled one)."""
+    a = np.asarray(axis, dtype=np.float64)
+    k = np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
+    out: FloatArray = np.eye(3) + np.sin(angle) * k + (1.0 - np.cos(angle)) * (k @ k)
+    return out
+
+
 def _rotation_from_forward(fx: FloatArray, fz: FloatArray) -> FloatArray:
     """The yaw rotation taking +Z to the unit floor direction (fx, 0, fz)."""
     out = np.zeros((*np.shape(fx), 3, 3))

@@ -29,6 +29,7 @@ import numpy as np
 import numpy.typing as npt
 
 from core import compiled_fabrik
+from core.geometry import rotation_about
 from core.rigid import SQUEEZED, keep_pairs_item
 from core.skeleton import JOINT_INDEX, NUM_JOINTS, PARENTS, SUBTREE
 
@@ -225,20 +226,13 @@ def tilted(
     axis /= np.linalg.norm(axis)
     lo, hi = 0.0, min(MAX_TILT, float(np.arccos(np.clip(
         offset @ to / (np.linalg.norm(offset) * np.linalg.norm(to)), -1.0, 1.0))))  # fmt: skip
-    if short(_about(axis, hi))[leg] > 0.0:
+    if short(rotation_about(axis, hi))[leg] > 0.0:
         return None
     for _ in range(40):  # the least turn that fits (the leg's miss shrinks as it turns)
         mid = 0.5 * (lo + hi)
-        lo, hi = (lo, mid) if short(_about(axis, mid))[leg] <= 0.0 else (mid, hi)
-    turn = _about(axis, hi)
+        lo, hi = (lo, mid) if short(rotation_about(axis, mid))[leg] <= 0.0 else (mid, hi)
+    turn = rotation_about(axis, hi)
     if max(short(turn)) > 0.0:  # another leg now falls short
         return None
     out: F64 = pelvis + (start - start[0]) @ turn.T
-    return out
-
-
-def _about(axis: F64, angle: float) -> F64:
-    """The rotation by ``angle`` (radians) about the unit ``axis`` (Rodrigues)."""
-    k = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
-    out: F64 = np.eye(3) + np.sin(angle) * k + (1.0 - np.cos(angle)) * (k @ k)
     return out
