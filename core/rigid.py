@@ -54,12 +54,19 @@ SQUEEZED = 0.8
 
 def _frames(a: F64, b: F64) -> tuple[F64, Bool]:
     """Rows ``[..., 3, 3]``: unit(a - b), unit((a + b) without that), their cross; and
-    where they are defined."""
+    where they are defined. Where ``a`` and ``b`` point apart on one line (a pair drawn
+    straight across its top, as some skeletons' hips are: ``a + b`` is 0 without its part
+    along the first row), the second row is the axis least along the first without that
+    part: any row across serves, as ``a`` and ``b`` then lie along the first."""
     x = a - b
     nx = np.linalg.norm(x, axis=-1, keepdims=True)
     x = x / np.where(nx > TINY, nx, 1.0)
     y = a + b
     y = y - np.sum(y * x, axis=-1, keepdims=True) * x
+    ny = np.linalg.norm(y, axis=-1, keepdims=True)
+    axis = np.eye(3)[np.argmin(np.abs(x), axis=-1)]
+    across = axis - np.sum(axis * x, axis=-1, keepdims=True) * x
+    y = np.where(ny > TINY, y, across)
     ny = np.linalg.norm(y, axis=-1, keepdims=True)
     y = y / np.where(ny > TINY, ny, 1.0)
     ok = (nx[..., 0] > TINY) & (ny[..., 0] > TINY)
@@ -107,8 +114,20 @@ def _frame_into(a: F64, b: F64, out: F64) -> bool:  # pragma: no cover - compile
     s = y0 * x0 + y1 * x1 + y2 * x2
     y0, y1, y2 = y0 - s * x0, y1 - s * x1, y2 - s * x2
     ny = np.sqrt(y0 * y0 + y1 * y1 + y2 * y2)
-    if ny <= TINY:
-        return False
+    if ny <= TINY:  # a and b apart on one line: the axis least along x, without x
+        k = 0
+        if abs(x1) < abs(x0):
+            k = 1
+        if abs(x2) < abs(x0 if k == 0 else x1):
+            k = 2
+        e0 = 1.0 if k == 0 else 0.0
+        e1 = 1.0 if k == 1 else 0.0
+        e2 = 1.0 if k == 2 else 0.0
+        s = e0 * x0 + e1 * x1 + e2 * x2
+        y0, y1, y2 = e0 - s * x0, e1 - s * x1, e2 - s * x2
+        ny = np.sqrt(y0 * y0 + y1 * y1 + y2 * y2)
+        if ny <= TINY:
+            return False
     y0, y1, y2 = y0 / ny, y1 / ny, y2 / ny
     out[0, 0], out[0, 1], out[0, 2] = x0, x1, x2
     out[1, 0], out[1, 1], out[1, 2] = y0, y1, y2

@@ -12,13 +12,16 @@ again with ``rigid_hips`` and kept where that reaches as well (:data:`SLACK`). A
 measures the hips against the caller's start (``reference``), and its retry starts from
 the answer with the pairs it squeezed put back. A pelvis target the translated pelvis
 cannot reach over its pinned legs is tried once more from the start moved there and
-turned to fit the legs (:func:`tilted`); where no turn fits, the folded answer is kept.
+turned to fit the legs (:func:`tilted`); where no turn fits, the rigid answer from the
+pelvis nearest its goal that both legs reach is kept however far it stops
+(:func:`within_reach`): a valid body before reach.
 
 A trunk joint (the chest, the neck, the head) dragged over pinned limbs is first tried
 again from the start moved onto its goal where the answer missed or folded the hips or
 shoulders (:func:`onto_trunk`); over pinned legs the rigid answer is then kept wherever it
-holds the pins, however far it stops from the dragged joint's goal: there the folded
-answer's extra reach is the fold's own (docs/kinematics.md, "A dragged trunk").
+holds the pins, however far it stops from the dragged joint's goal, as for the pelvis:
+there the folded answer's extra reach is the fold's own (docs/kinematics.md, "A dragged
+trunk").
 """
 
 from __future__ import annotations
@@ -82,9 +85,12 @@ def fabrik_set(
             plans.floats, np.ascontiguousarray(hold[order]), True, rigid,
         )  # fmt: skip
 
-    def again(sel: npt.NDArray[np.intp], froms: F64) -> npt.NDArray[np.intp]:
+    def again(
+        sel: npt.NDArray[np.intp], froms: F64, loose: npt.NDArray[np.bool_] | None = None
+    ) -> npt.NDArray[np.intp]:
         """The items ``sel`` solved again with the hips rigid from ``froms``, kept where
-        that reaches as well; returns those not kept."""
+        that reaches as well (the columns ``loose``: by any distance); returns those not
+        kept."""
         r_pose, r_its, r_errs, _ = run(sel, True, froms)
         was, tol = errs[sel], tols[sel, None]
         ok = np.where(was <= tol, r_errs <= tol, r_errs <= was + SLACK)
@@ -98,11 +104,11 @@ def fabrik_set(
     ref = starts if reference is None else reference
     bases = starts
     trunk = _TRUNK[idx] & ~hold
-    loose = None  # the columns the rigid answer may miss by any distance, if any
     if trunk.any() and hold.any():  # a trunk joint dragged over pinned limbs
         bases = onto_trunk(pose, its, errs, starts, goals, tols, idx, trunk, ref, run)
-        if (hold & _LEGS[idx]).any():  # over pinned legs: a valid body before any reach
-            loose = ~hold[order]
+    # a trunk or the pelvis dragged over pinned legs: a valid body before any reach, at last
+    over_legs = (hold & _LEGS[idx]).any() and (trunk.any() or (idx[~hold] == 0).any())
+    loose = ~hold[order] if over_legs else None
     if not _LEGS[idx].any():  # no hip moved: none folded
         folded = np.empty(0, dtype=np.intp)
     else:
@@ -119,7 +125,19 @@ def fabrik_set(
                       for i, b in zip(at.tolist(), left.tolist(), strict=True)]  # fmt: skip
             fits = np.array([t is not None for t in turned], dtype=bool)
             if fits.any():
-                again(left[fits], np.stack([t for t in turned if t is not None]))
+                left = np.sort(np.concatenate([
+                    again(left[fits], np.stack([t for t in turned if t is not None])),
+                    left[~fits],
+                ]))  # fmt: skip
+        if left.size and loose is not None:  # a valid body before reach, at last
+            at = np.searchsorted(folded, left)
+            lasts = froms[at]
+            if (idx == 0).any():  # from the pelvis nearest its goal that the legs reach
+                for i, b in enumerate(left.tolist()):
+                    near = within_reach(froms[at[i]], lengths[b], goals[b], idx)
+                    if near is not None:
+                        lasts[i] = near
+            again(left, lasts, loose)
     back = np.empty_like(errs)
     back[:, order] = errs
     return pose, its, back
@@ -182,6 +200,58 @@ def _worse(pose: F64, errs: F64, tols: F64, ref: F64) -> npt.NDArray[np.float64]
     return out
 
 
+def _legs(lengths: F64, goals: F64, idx: npt.NDArray[np.int64]) -> list[tuple[int, F64, float]]:
+    """(hip, the goal or pin on its leg, the chain's reach from the hip less :data:`FIT`)
+    of each column on a leg."""
+    legs = []
+    for k in np.flatnonzero(_LEGS[idx]).tolist():
+        j = int(idx[k])
+        hip = next(h for h in _HIPS if SUBTREE[h, j])
+        reach, a = 0.0, j
+        while a != hip:
+            reach += float(lengths[a - 1])
+            a = PARENTS[a]
+        legs.append((hip, goals[k], reach - FIT))
+    return legs
+
+
+def within_reach(start: F64, lengths: F64, goals: F64, idx: npt.NDArray[np.int64]) -> F64 | None:
+    """``start`` ``[21, 3]`` moved, unturned, onto the point nearest the pelvis's goal from
+    which every goal and pin on a leg lies within the leg's reach of its hip (the hips
+    rigid); None where no point is. A pelvis dragged beyond its pinned legs' reach, no turn
+    fitting (:func:`tilted`), stops there: FABRIK with rigid hips, from the start as it
+    was, stalled up to 18 cm from the goal, pulled back by both legs."""
+    pelvis = goals[int(np.flatnonzero(idx == 0)[0])]
+    legs = _legs(lengths, goals, idx)
+    centres = [(g - (start[h] - start[0]))[None] for h, g, _ in legs]
+    near, inside = nearest_within(pelvis, centres, [r for _, _, r in legs])
+    if not inside[0]:
+        return None
+    out: F64 = start + (near[0] - start[0])
+    return out
+
+
+def nearest_within(
+    x: F64, centres: list[F64], radii: list[float]
+) -> tuple[F64, npt.NDArray[np.bool_]]:
+    """Per row of ``centres`` (each ``[T, 3]``, one per ball of radius ``radii[i]``): the
+    point of the balls' intersection nearest ``x`` (Dykstra's alternating projections,
+    300 rounds), and whether they meet there."""
+    p = np.broadcast_to(x, centres[0].shape).copy()
+    fixes = [np.zeros_like(p) for _ in centres]
+    for _ in range(300):
+        for i, (c, r) in enumerate(zip(centres, radii, strict=True)):
+            y = p + fixes[i]
+            n = np.linalg.norm(y - c, axis=1, keepdims=True)
+            q = np.where(n > r, c + (y - c) * (r / np.maximum(n, 1e-12)), y)
+            fixes[i], p = y - q, q
+    inside = np.all(
+        [np.linalg.norm(p - c, axis=1) <= r + 1e-6 for c, r in zip(centres, radii, strict=True)],
+        axis=0,
+    )
+    return p, inside
+
+
 def tilted(
     start: F64, lengths: F64, goals: F64, idx: npt.NDArray[np.int64], hold: npt.NDArray[np.bool_]
 ) -> F64 | None:
@@ -198,15 +268,7 @@ def tilted(
     The turn is the least about one axis that brings the leg that falls short within
     :data:`FIT` of its reach; the other legs must then still reach."""
     pelvis = goals[int(np.flatnonzero(idx == 0)[0])]
-    legs = []  # (hip, the goal or pin on its leg, the chain's reach from the hip)
-    for k in np.flatnonzero(_LEGS[idx]).tolist():
-        j = int(idx[k])
-        hip = next(h for h in _HIPS if SUBTREE[h, j])
-        reach, a = 0.0, j
-        while a != hip:
-            reach += float(lengths[a - 1])
-            a = PARENTS[a]
-        legs.append((hip, goals[k], reach - FIT))
+    legs = _legs(lengths, goals, idx)
 
     def short(turn: F64) -> list[float]:
         return [

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from core.skeleton import JOINT_INDEX, PARENTS, bone_lengths
-from service.fabrik_set import FIT, MAX_TILT, tilted
+from service.fabrik_set import FIT, MAX_TILT, tilted, within_reach
 from tests.conftest import PosePairs
 
 PELVIS = JOINT_INDEX["pelvis"]
@@ -108,3 +108,29 @@ def test_a_pelvis_no_turn_lets_the_legs_follow_is_refused(poses: np.ndarray) -> 
         assert tilted(pose, bone_lengths(pose), _goals(pose, up), IDX, HOLD) is None
         far = _drag(pose, "left", 0.3)  # 30 cm beyond: past any turn of the pelvis
         assert tilted(pose, bone_lengths(pose), _goals(pose, far), IDX, HOLD) is None
+
+
+def test_a_pelvis_beyond_its_legs_reach_stops_at_the_nearest_pelvis_they_reach(
+    poses: np.ndarray,
+) -> None:
+    """``within_reach``: where no turn fits, the start moved (unturned) onto the point
+    nearest the goal from which both legs reach their ankles; a goal they reach, onto it."""
+    for pose in poses:
+        lengths = bone_lengths(pose)
+        for goal in (pose[PELVIS] + np.array([0.0, 0.2, 0.0]), _drag(pose, "left", 0.3)):
+            out = within_reach(pose, lengths, _goals(pose, goal), IDX)
+            assert out is not None
+            np.testing.assert_allclose(out - out[PELVIS], pose - pose[PELVIS], atol=1e-12)
+            gaps = [float(np.linalg.norm(out[HIPS[s]] - pose[ANKLES[s]])) - _leg(pose, s)
+                    for s in ("left", "right")]  # fmt: skip
+            assert max(gaps) <= -FIT + 1e-6, gaps
+            # the nearest: 1 mm further towards the goal, a leg falls short
+            to = goal - out[PELVIS]
+            assert np.linalg.norm(to) > 0.01
+            step = out + 0.001 * to / np.linalg.norm(to)
+            assert max(float(np.linalg.norm(step[HIPS[s]] - pose[ANKLES[s]])) - _leg(pose, s)
+                       for s in ("left", "right")) > -FIT  # fmt: skip
+        down = pose[PELVIS] + np.array([0.0, -0.05, 0.0])
+        out = within_reach(pose, lengths, _goals(pose, down), IDX)
+        assert out is not None
+        np.testing.assert_allclose(out, pose + (down - pose[PELVIS]), atol=1e-9)
