@@ -124,6 +124,7 @@ def reach_bound(poses: np.ndarray, seed: int, joint: str = "spine2") -> tuple[fl
     far beyond the spine's straight length up to ``joint``: no bend limit is counted, so a
     real body can only miss more."""
     from core.skeleton import PARENTS
+    from service.fabrik_set import nearest_within
 
     rng = np.random.default_rng(seed)
     d = rng.normal(size=(len(poses), 3))
@@ -147,32 +148,12 @@ def reach_bound(poses: np.ndarray, seed: int, joint: str = "spine2") -> tuple[fl
             )
             legs.append((pose[ankle], pose[hip] - pose[0], float(reach)))
         centres = [ankle - turns @ off for ankle, off, _ in legs]  # [T, 3] each
-        near, inside = _nearest(goal, centres, [r for _, _, r in legs])
+        near, inside = nearest_within(goal, centres, [r for _, _, r in legs])
         miss = np.maximum(np.linalg.norm(goal - near, axis=1) - spine, 0.0)
         miss = np.where(inside, miss, 1.0)
         still.append(float(miss[0]))
         turned.append(float(miss.min()))
     return float(np.mean(still)), float(np.mean(turned))
-
-
-def _nearest(
-    x: np.ndarray, centres: list[np.ndarray], radii: list[float]
-) -> tuple[np.ndarray, np.ndarray]:
-    """Per row of ``centres`` (each ``[T, 3]``): the point of the balls' intersection
-    nearest ``x`` (Dykstra's alternating projections), and whether they meet there."""
-    p = np.broadcast_to(x, centres[0].shape).copy()
-    fixes = [np.zeros_like(p) for _ in centres]
-    for _ in range(300):
-        for i, (c, r) in enumerate(zip(centres, radii, strict=True)):
-            y = p + fixes[i]
-            n = np.linalg.norm(y - c, axis=1, keepdims=True)
-            q = np.where(n > r, c + (y - c) * (r / np.maximum(n, 1e-12)), y)
-            fixes[i], p = y - q, q
-    inside = np.all(
-        [np.linalg.norm(p - c, axis=1) <= r + 1e-6 for c, r in zip(centres, radii, strict=True)],
-        axis=0,
-    )
-    return p, inside
 
 
 @app.command()
