@@ -100,6 +100,19 @@ def fabrik_set(
         out: npt.NDArray[np.intp] = sel[~near]
         return out
 
+    def again_from(
+        sel: npt.NDArray[np.intp], made: list[F64 | None],
+        loose: npt.NDArray[np.bool_] | None = None,
+    ) -> npt.NDArray[np.intp]:  # fmt: skip
+        """:func:`again` of the items ``sel`` from each its start ``made`` (None: none
+        made, not tried); returns those not kept."""
+        fits = np.array([m is not None for m in made], dtype=bool)
+        if not fits.any():
+            return sel
+        rest = again(sel[fits], np.stack([m for m in made if m is not None]), loose)
+        out: npt.NDArray[np.intp] = np.sort(np.concatenate([rest, sel[~fits]]))
+        return out
+
     pose, its, errs, _ = run(slice(None), False, starts)
     ref = starts if reference is None else reference
     bases = starts
@@ -123,21 +136,21 @@ def fabrik_set(
             at = np.searchsorted(folded, left)
             turned = [tilted(froms[i], lengths[b], goals[b], idx, hold)
                       for i, b in zip(at.tolist(), left.tolist(), strict=True)]  # fmt: skip
-            fits = np.array([t is not None for t in turned], dtype=bool)
-            if fits.any():
-                left = np.sort(np.concatenate([
-                    again(left[fits], np.stack([t for t in turned if t is not None])),
-                    left[~fits],
-                ]))  # fmt: skip
-        if left.size and loose is not None:  # a valid body before reach, at last
-            at = np.searchsorted(folded, left)
-            lasts = froms[at]
-            if (idx == 0).any():  # from the pelvis nearest its goal that the legs reach
-                for i, b in enumerate(left.tolist()):
-                    near = within_reach(froms[at[i]], lengths[b], goals[b], idx)
-                    if near is not None:
-                        lasts[i] = near
-            again(left, lasts, loose)
+            left = again_from(left, turned)
+        if left.size and loose is not None:  # a valid body before reach, at last: from
+            # the pelvis nearest its goal (or, a trunk joint dragged, its start's) that the
+            # legs reach, and from the start as it was; a dragged pelvis tries the first
+            # first (from its start rigid FABRIK stalls short, pulled back by both legs),
+            # a trunk the second (from the first a pin let go: the arms' too)
+            dragged = bool((idx[~hold] == 0).any())
+            for near in (dragged, not dragged):
+                at = np.searchsorted(folded, left)
+                made = (
+                    [within_reach(froms[i], lengths[b], goals[b], idx)
+                     for i, b in zip(at.tolist(), left.tolist(), strict=True)]
+                    if near else list(froms[at])
+                )  # fmt: skip
+                left = again_from(left, made, loose)
     back = np.empty_like(errs)
     back[:, order] = errs
     return pose, its, back
@@ -216,12 +229,14 @@ def _legs(lengths: F64, goals: F64, idx: npt.NDArray[np.int64]) -> list[tuple[in
 
 
 def within_reach(start: F64, lengths: F64, goals: F64, idx: npt.NDArray[np.int64]) -> F64 | None:
-    """``start`` ``[21, 3]`` moved, unturned, onto the point nearest the pelvis's goal from
-    which every goal and pin on a leg lies within the leg's reach of its hip (the hips
-    rigid); None where no point is. A pelvis dragged beyond its pinned legs' reach, no turn
-    fitting (:func:`tilted`), stops there: FABRIK with rigid hips, from the start as it
-    was, stalled up to 18 cm from the goal, pulled back by both legs."""
-    pelvis = goals[int(np.flatnonzero(idx == 0)[0])]
+    """``start`` ``[21, 3]`` moved, unturned, onto the point nearest the pelvis's goal (or,
+    none asked, its own pelvis) from which every goal and pin on a leg lies within the
+    leg's reach of its hip (the hips rigid); None where no point is. A pelvis dragged beyond
+    its pinned legs' reach, no turn fitting (:func:`tilted`), stops there: FABRIK with rigid
+    hips, from the start as it was, stalled up to 18 cm from the goal, pulled back by both
+    legs."""
+    on = np.flatnonzero(idx == 0)
+    pelvis = goals[int(on[0])] if on.size else start[0]
     legs = _legs(lengths, goals, idx)
     centres = [(g - (start[h] - start[0]))[None] for h, g, _ in legs]
     near, inside = nearest_within(pelvis, centres, [r for _, _, r in legs])
