@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from collections.abc import Collection
 from dataclasses import dataclass
-from typing import Annotated, Any, Literal, TypeVar
+from typing import Annotated, Any, ClassVar, Literal, TypeVar
 
 import numpy as np
 from pydantic import (
@@ -220,15 +220,18 @@ class CharacterAliasRequest(CharacterSolveRequest):
     `character`."""
 
     model_config = ConfigDict(extra="forbid", strict=True, json_schema_extra=_alias_schema)
+    #: earlier name -> field (a slip of an earlier name is offered it: service.field_names)
+    EARLIER_NAMES: ClassVar[dict[str, str]] = {"skeleton": "character"}
 
     @model_validator(mode="before")
     @classmethod
     def _earlier_name(cls, data: Any) -> Any:
-        if isinstance(data, dict) and "skeleton" in data:
-            if "character" in data:
-                message = "give `character` or its earlier name `skeleton`, not both"
-                raise field_error(cls.__name__, ("skeleton",), message, data)
-            data = {("character" if k == "skeleton" else k): v for k, v in data.items()}
+        for old, new in cls.EARLIER_NAMES.items():
+            if isinstance(data, dict) and old in data:
+                if new in data:
+                    message = f"give `{new}` or its earlier name `{old}`, not both"
+                    raise field_error(cls.__name__, (old,), message, data)
+                data = {(new if k == old else k): v for k, v in data.items()}
         return data
 
 

@@ -60,7 +60,7 @@ def fields_at(model: Any, data: Any, loc: tuple[Any, ...]) -> list[str]:
     tp = _member(tp, data)
     if not (isinstance(tp, type) and issubclass(tp, BaseModel)):
         return []
-    return [f.alias or name for name, f in tp.model_fields.items()]
+    return _names(tp)
 
 
 def _member(tp: Any, data: Any) -> Any:
@@ -85,7 +85,11 @@ def _member(tp: Any, data: Any) -> Any:
 
 
 def _names(model: type[BaseModel]) -> list[str]:
-    return [f.alias or name for name, f in model.model_fields.items()]
+    """The keys a client may give ``model``: its fields (as spelled: aliases), then the
+    earlier names it still takes (``EARLIER_NAMES``: ``skeleton`` for ``character`` on
+    ``/v1/character/solve``)."""
+    earlier: dict[str, str] = getattr(model, "EARLIER_NAMES", {})
+    return [f.alias or name for name, f in model.model_fields.items()] + list(earlier)
 
 
 def _child(data: Any, part: Any) -> Any:

@@ -44,3 +44,17 @@ def test_only_a_slip_of_its_own_object_s_field_is_offered() -> None:
     ]
     offered(errors, SolveBody, body)
     assert [e.get("ctx", {}).get("meant") for e in errors] == ["tolerance", None, None]
+
+
+def test_a_slip_of_an_earlier_name_is_offered_it(client: Any) -> None:
+    """``/v1/character/solve`` still takes the character under its earlier name
+    ``skeleton``: ``skeletn`` was offered nothing (an API audit, 2026-12-07)."""
+    from service.characters import CharacterAliasRequest
+
+    body = _example("character_solve")
+    body["skeletn"] = body.pop("skeleton")
+    assert "skeleton" in fields_at(CharacterAliasRequest, body, ())
+    r = client.post("/v1/character/solve", json=body)
+    assert r.status_code == 422
+    got = {e["location"]: e["message"] for e in r.json()["errors"]}
+    assert "did you mean 'skeleton'?" in got["skeletn"], got
