@@ -12,7 +12,6 @@ most ``MAX_DETAIL`` characters.
 from __future__ import annotations
 
 import contextlib
-import difflib
 import logging
 import re
 from collections.abc import Sequence
@@ -554,16 +553,12 @@ def install_handlers(app: FastAPI) -> None:
 
 
 def _near_route(request: Request, path: str) -> str | None:
-    """The route whose path ``path`` is a slip of (a letter or two off: difflib's ratio
-    0.85, one alone nearest), else None; a path of more than 100 characters is none."""
+    """The route whose path ``path`` is a slip of (:func:`core.text.near_name`, the rule of
+    every other name a request gives: its case, or a letter or two off), else None; a path
+    of more than 100 characters is none."""
     if len(path) > 100:
         return None
-    routes = sorted(getattr(request.app.state, "route_paths", ()))
-    near = difflib.get_close_matches(path, routes, 2, 0.85)
-    if not near:
-        return None
-    ratio = [difflib.SequenceMatcher(None, path, r).ratio() for r in near]
-    return near[0] if len(near) == 1 or ratio[0] > ratio[1] else None
+    return near_name(path, sorted(getattr(request.app.state, "route_paths", ())))
 
 
 def _is_route(request: Request, path: str) -> bool:

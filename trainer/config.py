@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import difflib
 import math
 import tomllib
 from collections.abc import Mapping
@@ -20,6 +19,7 @@ from pydantic import (
 
 from core.manifest import Serving
 from core.skeleton import BASE_KEYPOINTS, JOINT_NAMES, set_key
+from core.text import did_you_mean
 
 
 class _Section(BaseModel):
@@ -536,7 +536,7 @@ def _read_toml(path: Path, seen: tuple[Path, ...] = ()) -> dict[str, Any]:
 
 def _config_errors(path: Path | str | None, exc: ValidationError) -> ValueError:
     """pydantic's errors as one line naming the file, each field and, for a key that is
-    not a setting, the settings of its section that are near it."""
+    not a setting, the setting of its section it is a slip of (:func:`core.text.near_name`)."""
     parts = []
     for e in exc.errors(include_url=False):
         where = ".".join(str(x) for x in e["loc"])
@@ -549,8 +549,7 @@ def _config_errors(path: Path | str | None, exc: ValidationError) -> ValueError:
                 if not (isinstance(annotation, type) and issubclass(annotation, BaseModel)):
                     break
                 model = annotation
-            near = difflib.get_close_matches(str(e["loc"][-1]), list(model.model_fields), 3)
-            message = "not a setting" + (f"; did you mean {', '.join(near)}?" if near else "")
+            message = "not a setting" + did_you_mean(str(e["loc"][-1]), model.model_fields)
         elif isinstance(e["input"], int | float) and not isinstance(e["input"], bool):
             message += f", got {e['input']!r}"  # (a Written: 1e999, as the file writes it)
         parts.append(f"{where}: {message}")

@@ -745,7 +745,7 @@ def test_train_says_in_one_line_what_is_wrong_with_its_config_or_data(
     r = runner.invoke(app, ["train", "--config", str(typo), "--run-dir", str(tmp_path / "run")])
     assert r.exit_code == 1 and "Traceback" not in r.output
     # the file and the key named, the near setting offered (was pydantic's 4-line text)
-    assert f"{typo}: autoencoder.epoch: not a setting; did you mean epochs?" in r.output
+    assert f"{typo}: autoencoder.epoch: not a setting (did you mean 'epochs'?)" in r.output
     far = tmp_path / "far.toml"
     far.write_text('extends = "trainer/configs/default.toml"\n')  # relative to far.toml
     r = runner.invoke(app, ["train", "--config", str(far), "--run-dir", str(tmp_path / "run")])
