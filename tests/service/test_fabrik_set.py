@@ -118,7 +118,7 @@ def test_a_pelvis_beyond_its_legs_reach_stops_at_the_nearest_pelvis_they_reach(
     for pose in poses:
         lengths = bone_lengths(pose)
         for goal in (pose[PELVIS] + np.array([0.0, 0.2, 0.0]), _drag(pose, "left", 0.3)):
-            out = within_reach(pose, lengths, _goals(pose, goal), IDX)
+            out = within_reach(pose[None], lengths[None], _goals(pose, goal)[None], IDX)[0]
             assert out is not None
             np.testing.assert_allclose(out - out[PELVIS], pose - pose[PELVIS], atol=1e-12)
             gaps = [float(np.linalg.norm(out[HIPS[s]] - pose[ANKLES[s]])) - _leg(pose, s)
@@ -131,6 +131,6 @@ def test_a_pelvis_beyond_its_legs_reach_stops_at_the_nearest_pelvis_they_reach(
             assert max(float(np.linalg.norm(step[HIPS[s]] - pose[ANKLES[s]])) - _leg(pose, s)
                        for s in ("left", "right")) > -FIT  # fmt: skip
         down = pose[PELVIS] + np.array([0.0, -0.05, 0.0])
-        out = within_reach(pose, lengths, _goals(pose, down), IDX)
+        out = within_reach(pose[None], lengths[None], _goals(pose, down)[None], IDX)[0]
         assert out is not None
         np.testing.assert_allclose(out, pose + (down - pose[PELVIS]), atol=1e-9)
