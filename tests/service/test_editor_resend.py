@@ -62,6 +62,13 @@ def caught(page: Any, held: list[Any]) -> None:
         page.wait_for_timeout(50)
 
 
+def holding(page: Any) -> list[Any]:
+    """The page's solves held (the list filled with their routes as they are caught)."""
+    held: list[Any] = []
+    page.route("**/v1/solve", lambda route: held.append(route))
+    return held
+
+
 class Outages:
     """The test's own server on a port of its own, started and stopped at will."""
 
@@ -73,12 +80,14 @@ class Outages:
         return serve(self.models_dir, self.tmp, port=self.port)
 
     @contextlib.contextmanager
-    def ready(self, page: Any) -> Iterator[None]:
-        """Up, and found by the page only once its models are loaded (a start answers its
+    def ready(self, *pages: Any) -> Iterator[None]:
+        """Up, and found by the pages only once its models are loaded (a start answers its
         liveness before: a solve then is a 503 with Retry-After, the edit sent again after)."""
-        page.route("**/v2/health/live", lambda route: route.abort())
+        for page in pages:
+            page.route("**/v2/health/live", lambda route: route.abort())
         with self.up():
-            page.unroute("**/v2/health/live")
+            for page in pages:
+                page.unroute("**/v2/health/live")
             yield
 
 
@@ -93,6 +102,7 @@ def test_the_edit_an_outage_interrupted_is_sent_again_once_it_is_back(
 ) -> None:
     with outages.up():
         page = open_editor(browser, outages.base)
+        two = open_editor(browser, outages.base)  # (the two drags' page, below)
         drag_joint(page, "right_wrist", 30, -40)  # an edit, solved
     try:  # (the server stopped)
         start = work(page, shown=True)
@@ -102,6 +112,13 @@ def test_the_edit_an_outage_interrupted_is_sent_again_once_it_is_back(
         assert "left_knee" in made["targets"]
         assert "sent again once the server is back" in page.evaluate(f"{M}.error().detail")
         count = sent(page)
+        # two drags while it is gone (on a page of their own, through the same outage): the
+        # state shown (both) is sent; found as it starts, still loading its models (503,
+        # Retry-After: 5), it is sent again until they are
+        unreachable(two, "left_elbow", 15, 15)
+        unreachable(two, "right_knee", -10, 10)
+        made_two = work(two, shown=True)
+        bodies = recorded(two, lambda url: url.endswith("/v1/solve"))
         with outages.ready(page):
             back(page)  # (no click, no drag)
             now = work(page, shown=True)
@@ -123,35 +140,37 @@ def test_the_edit_an_outage_interrupted_is_sent_again_once_it_is_back(
             page.keyboard.press("Control+y")  # (redo: the drag as solved)
             page.wait_for_function(f"() => {M}.history().index === {made['history']['index']}")
             assert work(page, shown=True)["committed"] == now["committed"]
-        # two drags while it is gone: the state shown (both) is sent; found as it starts,
-        # still loading its models (503, Retry-After: 5), it is sent again until they are
-        unreachable(page, "left_elbow", 15, 15)
-        unreachable(page, "right_knee", -10, 10)
-        made = work(page, shown=True)
-        bodies = recorded(page, lambda url: url.endswith("/v1/solve"))
-        with outages.up():
-            page.wait_for_function(f"() => {STATUS} === 'connected'")
+            # the two drags' page
+            two.wait_for_function(f"() => {STATUS} === 'connected'")
             moved = f"p => {M}.committedPose().left_elbow.some((v, i) => v !== p[i])"
-            page.wait_for_function(moved, arg=made["committed"]["left_elbow"])
-            settle(page)
+            two.wait_for_function(moved, arg=made_two["committed"]["left_elbow"])
+            settle(two)
             assert bodies and all(b == bodies[0] for b in bodies)  # the one edit
-            assert {t["joint"] for t in bodies[0]["targets"]} == set(made["targets"])
-            now = work(page, shown=True)
-            assert page.evaluate(f"{M}.error()") is None
-            assert now["committed"] != made["committed"] and now["history"] == made["history"]
+            assert {t["joint"] for t in bodies[0]["targets"]} == set(made_two["targets"])
+            now = work(two, shown=True)
+            assert two.evaluate(f"{M}.error()") is None
+            assert now["committed"] != made_two["committed"]
+            assert now["history"] == made_two["history"]
             assert {"left_elbow", "right_knee"} <= set(now["targets"])
     finally:
         page.context.close()
+        two.context.close()
 
 
 @pytest.mark.browser
 def test_nothing_stale_is_sent_once_it_is_back(browser: Any, outages: Outages) -> None:
+    """Each case on a page of its own, all through one outage (a restart each made the test
+    43 s): the kept edit undone, Reset, a sample chosen, and a drag made once the server is
+    back before the page's liveness check finds it (that drag's answer does)."""
+    changes = ("undo", "reset", "sample", "drag")
     with outages.up():
-        page = open_editor(browser, outages.base)
-        page.on("dialog", lambda d: d.accept())  # (a sample over edits asks first)
-        drag_joint(page, "right_wrist", 30, -40)
+        pages = {change: open_editor(browser, outages.base) for change in changes}
+        for page in pages.values():
+            page.on("dialog", lambda d: d.accept())  # (a sample over edits asks first)
+            drag_joint(page, "right_wrist", 30, -40)
     try:
-        for change in ("undo", "reset", "sample"):
+        made, count = {}, {}
+        for change, page in pages.items():
             unreachable(page, "left_knee")
             if change == "undo":
                 page.keyboard.press("Control+z")
@@ -159,34 +178,36 @@ def test_nothing_stale_is_sent_once_it_is_back(browser: Any, outages: Outages) -
             elif change == "reset":
                 page.click("#reset")
                 page.wait_for_function(f"() => Object.keys({M}.targets()).length === 0")
-            else:
+            elif change == "sample":
                 page.select_option("#sample", "2")
                 page.wait_for_function("document.getElementById('sample').value === '2'")
-            made, count = work(page, shown=True), sent(page)
-            with outages.up():
-                back(page)
-                page.wait_for_timeout(QUIET_MS)
-                assert sent(page) == count, change  # nothing sent
-                assert work(page, shown=True) == made, change
-                assert page.evaluate(f"{M}.error()") is None
-                drag_joint(page, "right_wrist", 10, -10)  # (a step to undo, next time)
-        # a drag made once it is back, before the page's liveness check finds it (that drag's
-        # answer does): its own solves go, and nothing else
-        unreachable(page, "left_knee")
-        page.route("**/v2/health/live", lambda route: route.abort())
+            else:  # (the page's liveness check kept from finding it: its drag does)
+                page.route("**/v2/health/live", lambda route: route.abort())
+            made[change], count[change] = work(page, shown=True), sent(page)
         with outages.up():
-            steps = page.evaluate(f"{M}.history().index")
+            for change in changes[:3]:
+                back(pages[change])
+            # a drag made once it is back, before the page's liveness check finds it (that
+            # drag's answer does): its own solves go, and nothing else
+            page = pages["drag"]
             drag_joint(page, "left_wrist", 20, -20)
             assert page.evaluate(STATUS) == "connected"
-            count = sent(page)
+            count["drag"] = sent(page)
             page.unroute("**/v2/health/live")
-            page.wait_for_timeout(QUIET_MS)
-            assert sent(page) == count
-            assert page.evaluate(f"{M}.history().index") == steps + 1
+            page.wait_for_timeout(QUIET_MS)  # (each page's quiet period, at once)
+            for change in changes[:3]:
+                page = pages[change]
+                assert sent(page) == count[change], change  # nothing sent
+                assert work(page, shown=True) == made[change], change
+                assert page.evaluate(f"{M}.error()") is None
+            page = pages["drag"]
+            assert sent(page) == count["drag"]
+            assert page.evaluate(f"{M}.history().index") == made["drag"]["history"]["index"] + 1
             joints = {t["joint"] for t in page.evaluate(f"{M}.lastSolve().request.targets")}
             assert {"left_knee", "left_wrist"} <= joints  # (the drag's solve had both)
     finally:
-        page.context.close()
+        for page in pages.values():
+            page.context.close()
 
 
 @pytest.mark.browser
@@ -214,23 +235,28 @@ def test_an_edit_sent_again_that_fails_again_is_said_and_not_sent_a_third_time(
         page.context.close()
 
 
-def failed_again(page: Any, outages: Outages) -> int:
-    """A drag the outage interrupted, sent again once the server is back, which finds it
-    gone again (held on its way while the server stops: a real connection refused): its
-    "failed again" banner, the status "server unreachable". The solves sent so far."""
-    unreachable(page, "left_knee")
-    count = sent(page)
-    held: list[Any] = []
-    page.route("**/v1/solve", lambda route: held.append(route))
-    with outages.ready(page):
-        page.wait_for_function(f"() => {STATUS} === 'connected'")
-        caught(page, held)  # (sent again, held)
-    held[0].continue_()
-    page.wait_for_function(f"() => ({M}.error() || {{detail: ''}}).detail.includes('failed again')")
-    page.unroute("**/v1/solve")
-    assert page.evaluate(STATUS) == "server unreachable"
-    assert sent(page) == count + 1
-    return count + 1
+def failed_again(pages: list[Any], outages: Outages) -> list[int]:
+    """On each page, a drag the outage interrupted, sent again once the server is back,
+    which finds it gone again (held on its way while the server stops: a real connection
+    refused): its "failed again" banner, the status "server unreachable". The solves each
+    page sent so far."""
+    counts, held = [], []
+    for page in pages:
+        unreachable(page, "left_knee")
+        counts.append(sent(page))
+        held.append(holding(page))
+    with outages.ready(*pages):
+        for page, routes in zip(pages, held, strict=True):
+            page.wait_for_function(f"() => {STATUS} === 'connected'")
+            caught(page, routes)  # (sent again, held)
+    for page, routes, count in zip(pages, held, counts, strict=True):
+        routes[0].continue_()
+        detail = f"({M}.error() || {{detail: ''}}).detail"
+        page.wait_for_function(f"() => {detail}.includes('failed again')")
+        page.unroute("**/v1/solve")
+        assert page.evaluate(STATUS) == "server unreachable"
+        assert sent(page) == count + 1
+    return [count + 1 for count in counts]
 
 
 @pytest.mark.browser
@@ -241,31 +267,34 @@ def test_the_failed_again_banner_stays_once_the_server_is_back(
     check finds the server back: the edit is not sent again, and is not applied. It went
     then (the banner of a server unreachable, status 0, goes once it is back), the status
     "connected", no error, the edit never solved. It goes once an edit is solved, or with
-    the edit undone."""
+    the edit undone (each on a page of its own, through the same outages)."""
+    thens = ("drag", "undo")
     with outages.up():
-        page = open_editor(browser, outages.base)
+        pages = [open_editor(browser, outages.base) for _ in thens]
     try:
-        for then in ("drag", "undo"):
-            made = work(page, shown=True)
-            count = failed_again(page, outages)
-            with outages.up():
+        made = [work(page, shown=True) for page in pages]
+        counts = failed_again(pages, outages)
+        with outages.up():
+            for page in pages:
                 page.wait_for_function(f"() => {STATUS} === 'connected'")
-                page.wait_for_timeout(QUIET_MS)
+            pages[0].wait_for_timeout(QUIET_MS)  # (each page's quiet period, at once)
+            for then, page, was, count in zip(thens, pages, made, counts, strict=True):
                 err = page.evaluate(f"{M}.error()")
                 assert err is not None and "failed again" in err["detail"], then
                 assert page.locator("#error").is_visible()
                 assert sent(page) == count  # (nothing sent since)
-                assert work(page)["committed"] == made["committed"]  # (not applied)
+                assert work(page)["committed"] == was["committed"]  # (not applied)
                 if then == "drag":
                     drag_joint(page, "right_wrist", 20, -20)  # an edit solved
                 else:
                     page.keyboard.press("Control+z")  # the edit undone
-                    index = made["history"]["index"]
+                    index = was["history"]["index"]
                     page.wait_for_function(f"() => {M}.history().index === {index}")
                 assert page.evaluate(f"{M}.error()") is None, then
                 assert page.locator("#error").is_hidden()
     finally:
-        page.context.close()
+        for page in pages:
+            page.context.close()
 
 
 def example_file() -> str:
@@ -307,24 +336,34 @@ def test_an_edit_made_while_the_edit_sent_again_is_on_its_way_is_a_step_of_its_o
     and the new edit is a step of its own on it (a click that changed nothing, none). It
     was left the drag's unsolved step, and the next answer, the drag's and the new edit's,
     one step on it (a click's, the drag's a second step)."""
+    hows = ("typed", "clicked", "dragged")  # (each on a page of its own, one outage)
     with outages.up():
-        page = open_editor(browser, outages.base)
-    held: list[Any] = []
+        pages = {how: open_editor(browser, outages.base) for how in hows}
+    helds: dict[str, list[Any]] = {how: [] for how in hows}
 
-    def hold(route: Any) -> None:  # (held until let go: then through)
-        if held and held[-1] is None:
-            route.continue_()
-        else:
-            held.append(route)
+    def hold(held: list[Any]) -> Any:
+        def route(route: Any) -> None:  # (held until let go: then through)
+            if held and held[-1] is None:
+                route.continue_()
+            else:
+                held.append(route)
+
+        return route
 
     try:
-        for how in ("typed", "clicked", "dragged"):
-            start = work(page, shown=True)
+        start, made, count = {}, {}, {}
+        for how, page in pages.items():
+            start[how] = work(page, shown=True)
             unreachable(page, "left_knee")
-            made, count = work(page, shown=True), sent(page)
-            held.clear()
-            page.route("**/v1/solve", hold)
-            with outages.ready(page):
+            made[how], count[how] = work(page, shown=True), sent(page)
+            page.route("**/v1/solve", hold(helds[how]))
+            # (found only once the models are loaded, and each page in its turn: a held
+            # solve is given up after 60 s, api.js NO_ANSWER_MS)
+            page.route("**/v2/health/live", lambda route: route.abort())
+        with outages.up():
+            for how, page in pages.items():
+                held = helds[how]
+                page.unroute("**/v2/health/live")
                 page.wait_for_function(f"() => {STATUS} === 'connected'")
                 caught(page, held)  # (sent again, held)
                 assert len(held) == 1
@@ -346,28 +385,29 @@ def test_an_edit_made_while_the_edit_sent_again_is_on_its_way_is_a_step_of_its_o
                 page.unroute("**/v1/solve")
                 now = work(page, shown=True)
                 assert page.evaluate(f"{M}.error()") is None
-                steps = made["history"]["index"] + (0 if how == "clicked" else 1)
+                steps = made[how]["history"]["index"] + (0 if how == "clicked" else 1)
                 assert now["history"]["index"] == steps, how
                 assert now["pose"] == now["committed"]
                 if how != "clicked":
                     assert "right_wrist" in now["targets"]
                     if how == "typed":
                         assert now["targets"]["right_wrist"][1] == 1.2
-                        assert sent(page) == count + 2  # (sent again; the value typed)
+                        assert sent(page) == count[how] + 2  # (sent again; the value typed)
                     page.focus(VIEW)  # (a field's own keys are not the page's undo)
                     page.keyboard.press("Control+z")  # the new edit undone
                     page.wait_for_function(f"() => {M}.history().index === {steps - 1}")
                 else:
-                    assert now["targets"] == made["targets"]
-                    assert sent(page) == count + 1  # (the click asked nothing new)
+                    assert now["targets"] == made[how]["targets"]
+                    assert sent(page) == count[how] + 1  # (the click asked nothing new)
                 # the drag, solved: its one step
                 drag = work(page, shown=True)
-                assert drag["targets"] == made["targets"], how
-                assert drag["committed"] != start["committed"], how
+                assert drag["targets"] == made[how]["targets"], how
+                assert drag["committed"] != start[how]["committed"], how
                 page.keyboard.press("Control+z")  # and before it
-                before = made["history"]["index"] - 1
+                before = made[how]["history"]["index"] - 1
                 page.wait_for_function(f"() => {M}.history().index === {before}")
-                assert work(page, shown=True)["committed"] == start["committed"]
+                assert work(page, shown=True)["committed"] == start[how]["committed"]
                 assert "left_knee" not in page.evaluate(f"{M}.targets()")
     finally:
-        page.context.close()
+        for page in pages.values():
+            page.context.close()
