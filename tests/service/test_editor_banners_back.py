@@ -51,11 +51,19 @@ def test_the_unreachable_banner_goes_once_the_server_is_back(
     with contextlib.ExitStack() as first:
         first.enter_context(serve(models_dir, tmp_path, port=port))
         page = open_editor(browser, base)
+        reset = open_editor(browser, base)  # (Reset while it is gone: below, the same outage)
         drag_joint(page, "right_wrist", 30, -40)  # an edit, solved
     try:  # (the server stopped)
         unreachable(page)
         made = work(page)
         assert "right_wrist" in made["targets"] and "left_knee" in made["targets"]
+        # gone: Reset (or a sample) replaces the pose, but the server is still unreachable,
+        # and the banner saying so stays until it is back
+        unreachable(reset)
+        reset.click("#reset")
+        assert reset.evaluate(f"{M}.targets()") == {}
+        assert reset.evaluate(f"{M}.error()")["title"] == "Server unreachable"
+        assert reset.locator("#error").is_visible()
         with serve(models_dir, tmp_path, port=port):
             # no click, no drag: the page's liveness check finds it, and the banner goes
             page.wait_for_function(f"() => {STATUS} === 'connected'")
@@ -70,18 +78,11 @@ def test_the_unreachable_banner_goes_once_the_server_is_back(
             drag_joint(page, "right_wrist", -10, -10)  # and it edits on
             assert page.evaluate(f"{M}.error()") is None
             assert page.evaluate(f"{M}.lastSolve().response.targets")
-        # gone again: Reset (or a sample) replaces the pose, but the server is still
-        # unreachable, and the banner saying so stays until it is back
-        unreachable(page)
-        page.click("#reset")
-        assert page.evaluate(f"{M}.targets()") == {}
-        assert page.evaluate(f"{M}.error()")["title"] == "Server unreachable"
-        assert page.locator("#error").is_visible()
-        with serve(models_dir, tmp_path, port=port):
-            page.wait_for_function(f"() => {M}.error() === null")
-            assert page.evaluate(STATUS) == "connected"
+            reset.wait_for_function(f"() => {M}.error() === null")
+            assert reset.evaluate(STATUS) == "connected"
     finally:
         page.context.close()
+        reset.context.close()
 
 
 def stalled(port: int) -> socket.socket:
