@@ -198,12 +198,15 @@ def drawn_as_inspected(page: Any, server: str, body: dict[str, Any]) -> None:
     assert max(math.dist(a, b) for a, b in zip(got, want, strict=True)) < 1e-6
 
 
-def open_editor(browser: Any, server: str) -> Any:
+def open_editor(browser: Any, server: str, clock: bool = False) -> Any:
     """A fresh page on the editor, loaded and connected (its context closed with the page's
-    ``context``)."""
+    ``context``); ``clock``: its timers on Playwright's clock (``page.clock``, installed
+    before it loads: they run in real time until a test runs the clock on)."""
     context = browser.new_context(viewport={"width": 1280, "height": 800}, device_scale_factor=1)
     page = context.new_page()
     page.set_default_timeout(WAIT_MS)
+    if clock:
+        page.clock.install()
     page.goto(server + "/editor")
     page.wait_for_function(f"() => {M} && {M}.ready()")
     page.wait_for_function("() => document.getElementById('status').textContent === 'connected'")

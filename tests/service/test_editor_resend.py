@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -25,6 +26,7 @@ from tests.service.editor_page import (
     REPO_ROOT,
     STATUS,
     VIEW,
+    WAIT_MS,
     M,
     drag_joint,
     open_editor,
@@ -42,6 +44,40 @@ pytest_plugins = ("tests.service.editor_page",)
 
 #: Longer than the page's liveness period (api.js WATCH_MS, 3 s): what was to be sent is.
 QUIET_MS = 4_500
+#: The page's time a quiet period runs its clock on at a time (ms): see :func:`quiet`.
+STEP_MS = 100
+#: Each page's requests on their way (sent, not yet answered or failed): :func:`opened`.
+OPEN: dict[Any, set[Any]] = {}
+
+
+def opened(browser: Any, base: str) -> Any:
+    """:func:`open_editor`, its timers on Playwright's clock (real time until :func:`quiet`
+    runs it on), its requests on their way kept in ``OPEN[page]``."""
+    page = open_editor(browser, base, clock=True)
+    OPEN[page] = on_way = set()
+    page.on("request", lambda r: on_way.add(r))
+    page.on("requestfinished", lambda r: on_way.discard(r))
+    page.on("requestfailed", lambda r: on_way.discard(r))
+    return page
+
+
+def quiet(*pages: Any) -> None:
+    """``QUIET_MS`` of each page's own time passes: its clock is run on ``STEP_MS`` at a
+    time, each step firing the timers that fall due in it (the frame loop that sends a
+    solve, the liveness check, a Retry-After's end), and what they asked of the server is
+    let finish (answered or failed) before the next step; then the pages settle. What was
+    to be sent is: as a real wait of ``QUIET_MS`` showed, the server's answers here in no
+    time (4.5 s a wait, 8 in this file)."""
+    deadline = time.monotonic() + WAIT_MS / 1000  # (a ceiling, as each page wait has)
+    for _ in range(QUIET_MS // STEP_MS):
+        for page in pages:
+            page.clock.run_for(STEP_MS)
+        for page in pages:
+            while OPEN[page]:
+                assert time.monotonic() < deadline, [r.url for r in OPEN[page]]
+                page.wait_for_timeout(5)
+    for page in pages:
+        settle(page)
 
 
 def sent(page: Any) -> int:
@@ -101,8 +137,8 @@ def test_the_edit_an_outage_interrupted_is_sent_again_once_it_is_back(
     browser: Any, outages: Outages
 ) -> None:
     with outages.up():
-        page = open_editor(browser, outages.base)
-        two = open_editor(browser, outages.base)  # (the two drags' page, below)
+        page = opened(browser, outages.base)
+        two = opened(browser, outages.base)  # (the two drags' page, below)
         drag_joint(page, "right_wrist", 30, -40)  # an edit, solved
     try:  # (the server stopped)
         start = work(page, shown=True)
@@ -130,7 +166,7 @@ def test_the_edit_an_outage_interrupted_is_sent_again_once_it_is_back(
             assert sent(page) == count + 1
             last = page.evaluate(f"{M}.lastSolve()")
             assert {t["joint"] for t in last["request"]["targets"]} == set(made["targets"])
-            page.wait_for_timeout(QUIET_MS)
+            quiet(page)
             assert sent(page) == count + 1  # once
             # one undo takes the drag, as for any drag
             page.keyboard.press("Control+z")
@@ -164,7 +200,7 @@ def test_nothing_stale_is_sent_once_it_is_back(browser: Any, outages: Outages) -
     back before the page's liveness check finds it (that drag's answer does)."""
     changes = ("undo", "reset", "sample", "drag")
     with outages.up():
-        pages = {change: open_editor(browser, outages.base) for change in changes}
+        pages = {change: opened(browser, outages.base) for change in changes}
         for page in pages.values():
             page.on("dialog", lambda d: d.accept())  # (a sample over edits asks first)
             drag_joint(page, "right_wrist", 30, -40)
@@ -194,7 +230,7 @@ def test_nothing_stale_is_sent_once_it_is_back(browser: Any, outages: Outages) -
             assert page.evaluate(STATUS) == "connected"
             count["drag"] = sent(page)
             page.unroute("**/v2/health/live")
-            page.wait_for_timeout(QUIET_MS)  # (each page's quiet period, at once)
+            quiet(*pages.values())
             for change in changes[:3]:
                 page = pages[change]
                 assert sent(page) == count[change], change  # nothing sent
@@ -215,7 +251,7 @@ def test_an_edit_sent_again_that_fails_again_is_said_and_not_sent_a_third_time(
     browser: Any, outages: Outages
 ) -> None:
     with outages.up():
-        page = open_editor(browser, outages.base)
+        page = opened(browser, outages.base)
     try:
         start = work(page, shown=True)
         unreachable(page, "left_knee")
@@ -228,7 +264,7 @@ def test_an_edit_sent_again_that_fails_again_is_said_and_not_sent_a_third_time(
             assert work(page, shown=True)["committed"] == start["committed"]
             assert "left_knee" in page.evaluate(f"{M}.targets()")
             page.wait_for_function(f"() => {STATUS} === 'connected'")
-            page.wait_for_timeout(QUIET_MS)
+            quiet(page)
             assert sent(page) == count + 1  # (not a third time)
             assert "failed again" in page.evaluate(detail)  # (still said: test below)
     finally:
@@ -270,14 +306,14 @@ def test_the_failed_again_banner_stays_once_the_server_is_back(
     the edit undone (each on a page of its own, through the same outages)."""
     thens = ("drag", "undo")
     with outages.up():
-        pages = [open_editor(browser, outages.base) for _ in thens]
+        pages = [opened(browser, outages.base) for _ in thens]
     try:
         made = [work(page, shown=True) for page in pages]
         counts = failed_again(pages, outages)
         with outages.up():
             for page in pages:
                 page.wait_for_function(f"() => {STATUS} === 'connected'")
-            pages[0].wait_for_timeout(QUIET_MS)  # (each page's quiet period, at once)
+            quiet(*pages)
             for then, page, was, count in zip(thens, pages, made, counts, strict=True):
                 err = page.evaluate(f"{M}.error()")
                 assert err is not None and "failed again" in err["detail"], then
@@ -305,7 +341,7 @@ def example_file() -> str:
 @pytest.mark.browser
 def test_a_files_edit_an_outage_interrupted_is_sent_again(browser: Any, outages: Outages) -> None:
     with outages.up():
-        page = open_editor(browser, outages.base)
+        page = opened(browser, outages.base)
         open_file(page, example_file(), "walk.bvh")
         drag_joint(page, "left_wrist", 20, -20)
         text = page.evaluate(f"{M}.bvhText()")
@@ -338,7 +374,7 @@ def test_an_edit_made_while_the_edit_sent_again_is_on_its_way_is_a_step_of_its_o
     one step on it (a click's, the drag's a second step)."""
     hows = ("typed", "clicked", "dragged")  # (each on a page of its own, one outage)
     with outages.up():
-        pages = {how: open_editor(browser, outages.base) for how in hows}
+        pages = {how: opened(browser, outages.base) for how in hows}
     helds: dict[str, list[Any]] = {how: [] for how in hows}
 
     def hold(held: list[Any]) -> Any:
