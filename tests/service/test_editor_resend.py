@@ -61,6 +61,25 @@ def opened(browser: Any, base: str) -> Any:
     return page
 
 
+def drained(page: Any, wanted: Any, deadline: float) -> None:
+    """Wait until none of the page's requests to a URL ``wanted(url)`` is on its way."""
+    while any(wanted(r.url) for r in OPEN[page]):
+        assert time.monotonic() < deadline, [r.url for r in OPEN[page]]
+        page.wait_for_timeout(5)
+
+
+def found(page: Any) -> None:
+    """The page's next liveness check (api.js: every WATCH_MS, 3 s, while its status says
+    the server is down) made now, and again until it finds the server: its clock run on
+    ``STEP_MS`` at a time, each check let finish before the next step, until the status
+    says "connected" (a real wait of up to 3 s for each)."""
+    deadline = time.monotonic() + WAIT_MS / 1000  # (a ceiling, as each page wait has)
+    while page.evaluate(STATUS) != "connected":
+        assert time.monotonic() < deadline, page.evaluate(STATUS)
+        page.clock.run_for(STEP_MS)
+        drained(page, lambda url: url.endswith("/v2/health/live"), deadline)
+
+
 def quiet(*pages: Any) -> None:
     """``QUIET_MS`` of each page's own time passes: its clock is run on ``STEP_MS`` at a
     time, each step firing the timers that fall due in it (the frame loop that sends a
@@ -73,9 +92,7 @@ def quiet(*pages: Any) -> None:
         for page in pages:
             page.clock.run_for(STEP_MS)
         for page in pages:
-            while OPEN[page]:
-                assert time.monotonic() < deadline, [r.url for r in OPEN[page]]
-                page.wait_for_timeout(5)
+            drained(page, lambda url: True, deadline)
     for page in pages:
         settle(page)
 
@@ -86,7 +103,7 @@ def sent(page: Any) -> int:
 
 def back(page: Any) -> None:
     """The server found back (the page's liveness check), and whatever that sent settled."""
-    page.wait_for_function(f"() => {STATUS} === 'connected'")
+    found(page)
     settle(page)
 
 
@@ -177,7 +194,7 @@ def test_the_edit_an_outage_interrupted_is_sent_again_once_it_is_back(
             page.wait_for_function(f"() => {M}.history().index === {made['history']['index']}")
             assert work(page, shown=True)["committed"] == now["committed"]
             # the two drags' page
-            two.wait_for_function(f"() => {STATUS} === 'connected'")
+            found(two)
             moved = f"p => {M}.committedPose().left_elbow.some((v, i) => v !== p[i])"
             two.wait_for_function(moved, arg=made_two["committed"]["left_elbow"])
             settle(two)
@@ -258,12 +275,13 @@ def test_an_edit_sent_again_that_fails_again_is_said_and_not_sent_a_third_time(
         count = sent(page)
         page.route("**/v1/solve", lambda route: route.abort())  # (the server back, its solves not)
         with outages.up():
+            found(page)
             detail = f"({M}.error() && {M}.error().detail || '')"
             page.wait_for_function(f"() => {detail}.includes('failed again')")
             assert sent(page) == count + 1
             assert work(page, shown=True)["committed"] == start["committed"]
             assert "left_knee" in page.evaluate(f"{M}.targets()")
-            page.wait_for_function(f"() => {STATUS} === 'connected'")
+            found(page)
             quiet(page)
             assert sent(page) == count + 1  # (not a third time)
             assert "failed again" in page.evaluate(detail)  # (still said: test below)
@@ -283,7 +301,7 @@ def failed_again(pages: list[Any], outages: Outages) -> list[int]:
         held.append(holding(page))
     with outages.ready(*pages):
         for page, routes in zip(pages, held, strict=True):
-            page.wait_for_function(f"() => {STATUS} === 'connected'")
+            found(page)
             caught(page, routes)  # (sent again, held)
     for page, routes, count in zip(pages, held, counts, strict=True):
         routes[0].continue_()
@@ -312,7 +330,7 @@ def test_the_failed_again_banner_stays_once_the_server_is_back(
         counts = failed_again(pages, outages)
         with outages.up():
             for page in pages:
-                page.wait_for_function(f"() => {STATUS} === 'connected'")
+                found(page)
             quiet(*pages)
             for then, page, was, count in zip(thens, pages, made, counts, strict=True):
                 err = page.evaluate(f"{M}.error()")
@@ -400,7 +418,7 @@ def test_an_edit_made_while_the_edit_sent_again_is_on_its_way_is_a_step_of_its_o
             for how, page in pages.items():
                 held = helds[how]
                 page.unroute("**/v2/health/live")
-                page.wait_for_function(f"() => {STATUS} === 'connected'")
+                found(page)
                 caught(page, held)  # (sent again, held)
                 assert len(held) == 1
                 if how == "typed":
