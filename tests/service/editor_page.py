@@ -325,3 +325,42 @@ def show_frame(page: Any, frame: int) -> None:
     page.locator("#bvh-frame-number").fill(str(frame))
     page.keyboard.press("Enter")
     page.wait_for_function(f"() => {M}.bvh().frame === {frame}")
+
+
+#: The page time (ms) :func:`found` runs a page's clock on at a time (test_editor_resend's
+#: ``quiet`` too).
+STEP_MS = 100
+#: Each page's requests on their way (sent, not yet answered or failed): :func:`opened`.
+OPEN: dict[Any, set[Any]] = {}
+
+
+def opened(browser: Any, base: str) -> Any:
+    """:func:`open_editor`, its timers on Playwright's clock (real time until a test runs it
+    on: :func:`found`), its requests on their way kept in ``OPEN[page]``."""
+    page = open_editor(browser, base, clock=True)
+    OPEN[page] = on_way = set()
+    page.on("request", lambda r: on_way.add(r))
+    page.on("requestfinished", lambda r: on_way.discard(r))
+    page.on("requestfailed", lambda r: on_way.discard(r))
+    return page
+
+
+def drained(page: Any, wanted: Any, deadline: float) -> None:
+    """Wait until none of the page's requests to a URL ``wanted(url)`` is on its way."""
+    while any(wanted(r.url) for r in OPEN[page]):
+        if time.monotonic() > deadline:
+            pytest.fail(f"requests never finished: {[r.url for r in OPEN[page]]}")
+        page.wait_for_timeout(5)
+
+
+def found(page: Any) -> None:
+    """The page's next liveness check (api.js: every WATCH_MS, 3 s, while its status says
+    the server is down) made now, and again until it finds the server: its clock run on
+    ``STEP_MS`` at a time, each check let finish before the next step, until the status
+    says "connected" (a real wait of up to 3 s for each)."""
+    deadline = time.monotonic() + WAIT_MS / 1000  # (a ceiling, as each page wait has)
+    while page.evaluate(STATUS) != "connected":
+        if time.monotonic() > deadline:
+            pytest.fail(f"the server not found back: {page.evaluate(STATUS)}")
+        page.clock.run_for(STEP_MS)
+        drained(page, lambda url: url.endswith("/v2/health/live"), deadline)

@@ -29,9 +29,11 @@ from tests.service.editor_page import (
     STATUS,
     M,
     drag_joint,
+    found,
     gesture,
     open_editor,
     open_file,
+    opened,
     settle,
     unreachable,
     work,
@@ -50,8 +52,8 @@ def test_the_unreachable_banner_goes_once_the_server_is_back(
     base = f"http://127.0.0.1:{port}"
     with contextlib.ExitStack() as first:
         first.enter_context(serve(models_dir, tmp_path, port=port))
-        page = open_editor(browser, base)
-        reset = open_editor(browser, base)  # (Reset while it is gone: below, the same outage)
+        page = opened(browser, base)
+        reset = opened(browser, base)  # (Reset while it is gone: below, the same outage)
         drag_joint(page, "right_wrist", 30, -40)  # an edit, solved
     try:  # (the server stopped)
         unreachable(page)
@@ -66,7 +68,7 @@ def test_the_unreachable_banner_goes_once_the_server_is_back(
         assert reset.locator("#error").is_visible()
         with serve(models_dir, tmp_path, port=port):
             # no click, no drag: the page's liveness check finds it, and the banner goes
-            page.wait_for_function(f"() => {STATUS} === 'connected'")
+            found(page)
             page.wait_for_function(f"() => {M}.error() === null")
             assert page.locator("#error").is_hidden()
             settle(page)  # (the drag the outage interrupted sent again: test_editor_resend.py)
@@ -78,6 +80,7 @@ def test_the_unreachable_banner_goes_once_the_server_is_back(
             drag_joint(page, "right_wrist", -10, -10)  # and it edits on
             assert page.evaluate(f"{M}.error()") is None
             assert page.evaluate(f"{M}.lastSolve().response.targets")
+            found(reset)
             reset.wait_for_function(f"() => {M}.error() === null")
             assert reset.evaluate(STATUS) == "connected"
     finally:

@@ -25,12 +25,15 @@ import pytest
 from tests.service.editor_page import (
     REPO_ROOT,
     STATUS,
+    STEP_MS,
     VIEW,
     WAIT_MS,
     M,
     drag_joint,
-    open_editor,
+    drained,
+    found,
     open_file,
+    opened,
     pick,
     recorded,
     settle,
@@ -44,40 +47,6 @@ pytest_plugins = ("tests.service.editor_page",)
 
 #: Longer than the page's liveness period (api.js WATCH_MS, 3 s): what was to be sent is.
 QUIET_MS = 4_500
-#: The page's time a quiet period runs its clock on at a time (ms): see :func:`quiet`.
-STEP_MS = 100
-#: Each page's requests on their way (sent, not yet answered or failed): :func:`opened`.
-OPEN: dict[Any, set[Any]] = {}
-
-
-def opened(browser: Any, base: str) -> Any:
-    """:func:`open_editor`, its timers on Playwright's clock (real time until :func:`quiet`
-    runs it on), its requests on their way kept in ``OPEN[page]``."""
-    page = open_editor(browser, base, clock=True)
-    OPEN[page] = on_way = set()
-    page.on("request", lambda r: on_way.add(r))
-    page.on("requestfinished", lambda r: on_way.discard(r))
-    page.on("requestfailed", lambda r: on_way.discard(r))
-    return page
-
-
-def drained(page: Any, wanted: Any, deadline: float) -> None:
-    """Wait until none of the page's requests to a URL ``wanted(url)`` is on its way."""
-    while any(wanted(r.url) for r in OPEN[page]):
-        assert time.monotonic() < deadline, [r.url for r in OPEN[page]]
-        page.wait_for_timeout(5)
-
-
-def found(page: Any) -> None:
-    """The page's next liveness check (api.js: every WATCH_MS, 3 s, while its status says
-    the server is down) made now, and again until it finds the server: its clock run on
-    ``STEP_MS`` at a time, each check let finish before the next step, until the status
-    says "connected" (a real wait of up to 3 s for each)."""
-    deadline = time.monotonic() + WAIT_MS / 1000  # (a ceiling, as each page wait has)
-    while page.evaluate(STATUS) != "connected":
-        assert time.monotonic() < deadline, page.evaluate(STATUS)
-        page.clock.run_for(STEP_MS)
-        drained(page, lambda url: url.endswith("/v2/health/live"), deadline)
 
 
 def quiet(*pages: Any) -> None:
@@ -86,7 +55,7 @@ def quiet(*pages: Any) -> None:
     solve, the liveness check, a Retry-After's end), and what they asked of the server is
     let finish (answered or failed) before the next step; then the pages settle. What was
     to be sent is: as a real wait of ``QUIET_MS`` showed, the server's answers here in no
-    time (4.5 s a wait, 8 in this file)."""
+    time (4.5 s a wait, 8 in this file). ``STEP_MS``: editor_page's."""
     deadline = time.monotonic() + WAIT_MS / 1000  # (a ceiling, as each page wait has)
     for _ in range(QUIET_MS // STEP_MS):
         for page in pages:
