@@ -337,7 +337,11 @@ OPEN: dict[Any, set[Any]] = {}
 def opened(browser: Any, base: str) -> Any:
     """:func:`open_editor`, its timers on Playwright's clock (real time until a test runs it
     on: :func:`found`), its requests on their way kept in ``OPEN[page]``."""
-    page = open_editor(browser, base, clock=True)
+    return tracked(open_editor(browser, base, clock=True))
+
+
+def tracked(page: Any) -> Any:
+    """``page``, its requests on their way from now on kept in ``OPEN[page]``."""
     OPEN[page] = on_way = set()
     page.on("request", lambda r: on_way.add(r))
     page.on("requestfinished", lambda r: on_way.discard(r))

@@ -19,11 +19,13 @@ from tests.service.editor_page import (
     WAIT_MS,
     M,
     drag_joint,
+    found,
     gesture,
     give_file,
     open_editor,
     recorded,
     settle,
+    tracked,
 )
 
 # the fixtures `server` (one for the session) and `browser` (one per module)
@@ -60,6 +62,7 @@ def test_editor_goes_on_when_a_solve_is_never_answered(server: str, browser: Any
     page = context.new_page()
     page.set_default_timeout(WAIT_MS)
     page.clock.install()  # (time flows; fast_forward jumps it)
+    tracked(page)  # (found: the liveness check run on)
     solves = recorded(page, lambda url: url.endswith("/v1/solve"))
     held: list[Any] = []
 
@@ -134,7 +137,7 @@ def test_editor_goes_on_when_a_solve_is_never_answered(server: str, browser: Any
         # again then, lands: test_editor_resend.py)
         hold["all"] = False
         page.unroute("**/v2/health/live")
-        page.wait_for_function(f"() => {STATUS} === 'connected'")
+        found(page)
         settle(page)
         assert page.evaluate(f"{M}.committedPose()") != before
         drag_joint(page, "left_knee", 10, -10)  # the next drag is solved, the banner clears
