@@ -246,7 +246,7 @@ def _issue14_set(
     def kernel(i: int) -> object:
         return compiled_fabrik.solve_batch(
             False, start[i : i + 1], lens[i : i + 1], goals[i], tol, cap, plans.local_ints,
-            plans.local_floats, plans.has_local, plans.ints, plans.floats, pinned, False,
+            plans.local_floats, plans.has_local, plans.ints, plans.floats, pinned, False, False,
         )  # fmt: skip
 
     def numpy_fabrik(i: int) -> object:

@@ -482,7 +482,7 @@ def _solve(
 def solve_batch(
     polish: bool, starts: F64, lengths: F64, goals: F64, tols: F64, max_it: int,
     li: I64, lf: F64, has_local: bool, gi: I64, gf: F64, hold: Bool, has_hold: bool,
-    rigid_hips: bool = False,
+    rigid_hips: bool,
 ) -> tuple[F64, I64, F64, Bool]:  # pragma: no cover - compiled  # fmt: skip
     """``kinematics.fabrik`` (``polish`` False) or ``kinematics.polish`` of every item
     (``rigid_hips`` as there):
@@ -541,8 +541,8 @@ def warm() -> None:
     plans = packed_plans(idx, np.ones(2))
     goals = pose[:, idx] + 0.05
     hold = np.asarray([False, True])
-    for polish in (False, True):  # (rigid_hips given as the engine gives it: an omitted
-        solve_batch(  # argument is another signature, compiled at the first solve)
+    for polish in (False, True):  # (every argument given, rigid_hips too: an omitted one
+        solve_batch(  # would be another signature, compiled ~20 s at its first call)
             polish, pose, lens, goals, np.full(1, 1e-3), 8, plans.local_ints,
             plans.local_floats, plans.has_local, plans.ints, plans.floats, hold, True, False,
         )  # fmt: skip

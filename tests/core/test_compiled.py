@@ -82,7 +82,7 @@ def test_fabrik_and_polish_match_numpy(
     again = compiled_fabrik.solve_batch(
         polish, np.ascontiguousarray(starts[3:4]), lens[3:4], np.ascontiguousarray(goals[3:4]),
         np.full(1, 1e-4), 64, plans.local_ints, plans.local_floats, plans.has_local,
-        plans.ints, plans.floats, pinned, True,
+        plans.ints, plans.floats, pinned, True, False,
     )  # fmt: skip
     assert np.array_equal(again[0][0], pose[3])
 
