@@ -52,6 +52,9 @@ _TRUNK = np.isin(
 )
 #: The joints of the legs: only a target or pin on one moves a hip (the others carry them)
 _LEGS = SUBTREE[_HIPS[0]] | SUBTREE[_HIPS[1]]
+#: :func:`nearest_within`'s rounds at most, and the move of a round (metres) below which it
+#: has converged (looked at every 8 rounds; two legs' balls: ~20-60 rounds)
+ROUNDS, STILL = 300, 1e-13
 #: The most a dragged pelvis is turned to fit its legs (radians), and how far within a
 #: leg's reach the turn brings the goal or pin on it (metres: FABRIK's rigid hips then
 #: converge onto it)
@@ -144,6 +147,8 @@ def fabrik_set(
             # a trunk the second (from the first a pin let go: the arms' too)
             dragged = bool((idx[~hold] == 0).any())
             for near in (dragged, not dragged):
+                if not left.size:
+                    break
                 at = np.searchsorted(folded, left)
                 made = (within_reach(froms[at], lengths[left], goals[left], idx) if near
                         else list(froms[at]))  # fmt: skip
@@ -251,22 +256,73 @@ def nearest_within(
 ) -> tuple[F64, npt.NDArray[np.bool_]]:
     """Per row of ``centres`` (each ``[T, 3]``, one per ball of radius ``radii[i]``: a
     number or ``[T]``): the point of the balls' intersection nearest ``x`` (``[3]`` or
-    ``[T, 3]``; Dykstra's alternating projections, 300 rounds), and whether they meet
-    there."""
+    ``[T, 3]``; Dykstra's alternating projections, :data:`ROUNDS` at most), and whether they
+    meet there."""
     p = np.broadcast_to(x, centres[0].shape).copy()
     rs = [np.broadcast_to(np.asarray(r, dtype=np.float64), p.shape[:1])[:, None] for r in radii]
+    apart = np.zeros(p.shape[0], dtype=bool)  # two balls that do not meet: none nearest
+    for i in range(len(centres)):
+        for j in range(i):
+            gap = np.linalg.norm(centres[i] - centres[j], axis=1)
+            apart |= gap > rs[i][:, 0] + rs[j][:, 0]
+    if apart.all():
+        return p, ~apart
+    if len(centres) == 2:  # (two legs, the common case: in closed form)
+        return _nearest_of_two(p, centres, rs, apart)
     fixes = [np.zeros_like(p) for _ in centres]
-    for _ in range(300):
+    for k in range(ROUNDS):
+        was = p
         for i, (c, r) in enumerate(zip(centres, rs, strict=True)):
             y = p + fixes[i]
             n = np.linalg.norm(y - c, axis=1, keepdims=True)
             q = np.where(n > r, c + (y - c) * (r / np.maximum(n, 1e-12)), y)
             fixes[i], p = y - q, q
+        if k % 8 == 7 and not np.abs(p - was)[~apart].max(initial=0.0) > STILL:  # (NaN: on)
+            break
     inside = np.all(
         [np.linalg.norm(p - c, axis=1) <= r[:, 0] + 1e-6 for c, r in zip(centres, rs, strict=True)],
         axis=0,
     )
-    return p, inside
+    return p, inside & ~apart
+
+
+def _nearest_of_two(
+    x: F64, centres: list[F64], rs: list[Any], apart: npt.NDArray[np.bool_]
+) -> tuple[F64, npt.NDArray[np.bool_]]:
+    """:func:`nearest_within` of two balls per row (radii ``rs`` ``[T, 1]``), in closed
+    form: ``x`` where it lies in both, else its projection onto one ball where that lies
+    in the other (the nearer of two), else the point of the circle where the two spheres
+    meet nearest it."""
+    (c1, c2), (r1, r2) = centres, rs
+
+    def onto(c: F64, r: F64) -> F64:
+        v = x - c
+        n = np.linalg.norm(v, axis=1, keepdims=True)
+        out: F64 = np.where(n > r, c + v * (r / np.maximum(n, 1e-12)), x)
+        return out
+
+    def within(q: F64, c: F64, r: F64) -> npt.NDArray[np.bool_]:
+        out: npt.NDArray[np.bool_] = np.linalg.norm(q - c, axis=1) <= r[:, 0] + 1e-9
+        return out
+
+    p1, p2 = onto(c1, r1), onto(c2, r2)
+    ok1, ok2 = within(p1, c2, r2), within(p2, c1, r1)
+    d1, d2 = np.linalg.norm(p1 - x, axis=1), np.linalg.norm(p2 - x, axis=1)
+    one = np.where((ok1 & (~ok2 | (d1 <= d2)))[:, None], p1, p2)
+    gap = np.linalg.norm(c2 - c1, axis=1, keepdims=True)
+    n = (c2 - c1) / np.maximum(gap, 1e-12)
+    a = (gap * gap + r1 * r1 - r2 * r2) / (2.0 * np.maximum(gap, 1e-12))
+    mid = c1 + a * n
+    rho = np.sqrt(np.maximum(r1 * r1 - a * a, 0.0))
+    w = x - mid
+    w = w - np.sum(w * n, axis=1, keepdims=True) * n
+    lw = np.linalg.norm(w, axis=1, keepdims=True)
+    axis = np.eye(3)[np.argmin(np.abs(n), axis=1)]  # (x on the axis: any point of it)
+    axis = axis - np.sum(axis * n, axis=1, keepdims=True) * n
+    w = np.where(lw > 1e-12, w, axis)
+    ring = mid + rho * w / np.linalg.norm(w, axis=1, keepdims=True)
+    out: F64 = np.where((ok1 | ok2)[:, None], one, ring)
+    return out, ~apart
 
 
 def tilted(
