@@ -24,7 +24,7 @@ from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from core.skeleton import JOINT_NAMES
-from core.text import QUOTE, clip, near_name, printable, quoted, shown
+from core.text import QUOTE, clip, did_you_mean, near_name, printable, quoted, shown
 
 PROBLEM_JSON = "application/problem+json"
 PROBLEM_BASE = "https://marionette.dev/problems/"
@@ -378,8 +378,7 @@ def _near(value: Any, names: Sequence[str] = JOINT_NAMES) -> str:
     case, a dash for the underscore, a letter off), else nothing."""
     if not isinstance(value, str) or len(value) > 40:
         return ""
-    near = near_name(value, names)
-    return "" if near is None else f" (did you mean {near!r}?)"
+    return did_you_mean(value, names)
 
 
 #: a BVH body with nothing in it (``bvh: ""``, or blanks alone): what a 0-byte file sends
