@@ -23,11 +23,10 @@ import orjson
 from pydantic import ValidationError
 
 from core.skeleton import JOINT_INDEX, JOINT_NAMES, NUM_JOINTS
-from core.text import near_name
 from service.bounded import context, errors_of
 from service.engine import Engine
 from service.errors import MAX_ERRORS, BodyInvalid, too_many_items
-from service.field_names import offered
+from service.field_names import offered, slip_of
 from service.limits import Pricing, chunks_of, searched_price
 from service.problems import BatchAnswer
 from service.responses import starts_warnings
@@ -120,7 +119,7 @@ def _shared(row: list[Any], loc: tuple[Any, ...], width: int, n: int, errs: _Err
 def _meant(key: Any, fields: Iterable[str]) -> dict[str, Any]:
     """An unknown key's context: the field it is a slip of, as the item list's
     (``service.field_names``), where one is."""
-    meant = near_name(key, fields) if isinstance(key, str) and len(key) <= 40 else None
+    meant = slip_of(key, list(fields))
     return {} if meant is None else {"ctx": {"meant": meant}}
 
 

@@ -11,6 +11,7 @@ only ever offered a field of its own object: ``options.frame`` is offered nothin
 from __future__ import annotations
 
 import types
+from collections.abc import Sequence
 from typing import Annotated, Any, Union, get_args, get_origin
 
 from pydantic import BaseModel, RootModel
@@ -29,10 +30,15 @@ def offered(errors: list[ErrorDetails], model: type[BaseModel], data: Any) -> No
         loc = error.get("loc", ())
         if error.get("type") != "extra_forbidden" or not loc or not isinstance(loc[-1], str):
             continue
-        names = fields_at(model, data, tuple(loc[:-1]))
-        meant = near_name(loc[-1], names) if names and len(loc[-1]) <= 40 else None
+        meant = slip_of(loc[-1], fields_at(model, data, tuple(loc[:-1])))
         if meant is not None:
             error["ctx"] = {**(error.get("ctx") or {}), "meant": meant}
+
+
+def slip_of(key: Any, names: Sequence[str]) -> str | None:
+    """The one of ``names`` an unknown ``key`` is a slip of (:func:`core.text.near_name`; a
+    key of more than 40 characters is none)."""
+    return near_name(key, names) if isinstance(key, str) and names and len(key) <= 40 else None
 
 
 def fields_at(model: Any, data: Any, loc: tuple[Any, ...]) -> list[str]:
