@@ -96,7 +96,10 @@ def complete(
             f"keypoints: the pelvis and the neck lie {torso * 1000:.3g} mm apart; the body's "
             f"size is read from them: they must be at least {MIN_SPAN * 100:g} cm apart"
         )
-    origin[1] = min(max(floor, origin[1] - FLOOR_REACH * torso), origin[1])
+    # (and not above the lowest key point: a floor over the feet read the standing key
+    # points as a body crouched or lying on it, 93-106 mm off: an API audit, 2026-12-07)
+    lowest = min(float(v[1]) for v in keypoints.values())
+    origin[1] = min(max(floor, origin[1] - FLOOR_REACH * torso), lowest)
     ref = engine.reference_lengths
     lengths = ref.copy()
     scale = 1.0
@@ -136,15 +139,17 @@ def complete(
     assert pred is not None
     if not given_lengths:  # the network's own estimate of this body's proportions
         lengths = np.asarray(bone_lengths(pred), dtype=np.float64) * scale
-    # a bone whose two ends are key points has the length they fix (within what a bone
-    # may be: the answer is a pose /v1/solve takes), unless bone_lengths names it (the
-    # network's estimate missed them by up to 11 mm, at levels 2 and 3)
+    # a bone whose two ends are key points has the length they fix (at least the shortest
+    # a bone may be: the answer is a pose /v1/solve takes; at any size: a body 10 times
+    # the networks' took their estimate for its bones over 2 m and missed key points by
+    # 1.56 m, an API audit, 2026-12-07), unless bone_lengths names it (the network's
+    # estimate missed them by up to 11 mm, at levels 2 and 3)
     fixed_by_points: set[str] = set()
     for b, (c, p) in enumerate(BONES):
         child, parent = JOINT_NAMES[c], JOINT_NAMES[p]
         if child in keypoints and parent in keypoints and child not in (given_lengths or {}):
             fixed = float(np.linalg.norm(keypoints[child] - keypoints[parent]))
-            if BONE_M[0] <= fixed <= BONE_M[1]:
+            if fixed >= BONE_M[0]:
                 lengths[b] = fixed
                 fixed_by_points.add(child)
     idx = np.asarray([JOINT_INDEX[j] for j in keypoints], dtype=np.intp)

@@ -311,8 +311,8 @@ class Keypoint(_Body):
     position: Vec3
 
 
-#: The length a bone of a completion may have, metres (``bone_lengths``; a bone two key
-#: points fix takes their distance only within it: ``service.completion``).
+#: The length a bone of a completion's ``bone_lengths`` may have, metres (a bone two key
+#: points fix takes their distance, at least the shortest: ``service.completion``).
 BONE_M: Final[tuple[float, float]] = (1e-3, 2.0)
 
 
@@ -354,9 +354,9 @@ class CompleteResponse(BaseModel):
     levels: list[int] = Field(description="Completion levels run (1 = six base points).")
     floor: float = Field(
         description="Height (m, world y) of the ground the completion used: the request's "
-        "`floor`, or the pelvis key point's height where it lies above that (a body lying "
-        "there), or 4 pelvis-to-neck lengths below it where it lies farther below (no body "
-        "of the training data stood higher)."
+        "`floor`, or the lowest key point's height where it lies above that (no body stands "
+        "under its ground), or 4 pelvis-to-neck lengths below the pelvis where it lies "
+        "farther below (no body of the training data stood higher)."
     )
     model: str
     scale_warning: str | None = Field(
