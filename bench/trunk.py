@@ -45,15 +45,16 @@ Row = tuple[float, int, int, float]
 
 @contextlib.contextmanager
 def without_retry() -> Iterator[None]:
-    """The engine as it answers without :func:`service.fabrik_set.onto_trunk`."""
+    """The engine as it answers without :func:`service.fabrik_set.onto_trunk` and without
+    the rigid-hips retry (which over pinned legs keeps a valid body before reach)."""
     from service import fabrik_set
 
-    kept = fabrik_set._TRUNK
-    fabrik_set._TRUNK = np.zeros_like(kept)
+    kept, folded = fabrik_set._TRUNK, fabrik_set.FOLDED
+    fabrik_set._TRUNK, fabrik_set.FOLDED = np.zeros_like(kept), 0.0
     try:
         yield
     finally:
-        fabrik_set._TRUNK = kept
+        fabrik_set._TRUNK, fabrik_set.FOLDED = kept, folded
 
 
 def run(models: Path, poses: np.ndarray, seed: int) -> dict[tuple[str, str, str], list[Row]]:
