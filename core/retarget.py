@@ -143,11 +143,19 @@ def _weights(heavy: frozenset[int]) -> F64:
 
 
 def _place_pelvis(
-    skel: Skeleton, pose: Pose, jmap: JointMap, plan: _Plan, goal: F64, pelvis_weight: float
+    skel: Skeleton, pose: Pose, jmap: JointMap, plan: _Plan, goal: F64
 ) -> tuple[int | None, int | None]:
     """Move and turn the pelvis's joint as one rigid body onto the solved pelvis, spine1 and
     hips (weighted Kabsch with translation; the hips weigh most, since the legs hang from
-    them). Returns (the joint translated, the joint turned), None where none could be."""
+    them). Returns (the joint translated, the joint turned), None where none could be.
+
+    An exact pelvis target once weighed the pelvis 100 times, so that the fit put it on the
+    goal: the turn then fitted the solved hips and spine about the pelvis alone, and where
+    the character's pelvis triangle is not the networks' (its hips nearly level with its
+    pelvis), a lowered pelvis turned the character's 139-161 degrees over, its spine below
+    its hips and its shoulders shrugged to 0.66-0.77 of their width (an API audit,
+    2026-12-07, AnimatedDrawings' children). The exact reach that follows meets the pelvis
+    target anyway (0.002-0.003 mm there)."""
     anchor = jmap.anchors[_PELVIS]
     t = anchor.joint
     while t >= 0 and not skel.translatable[t]:
@@ -157,7 +165,7 @@ def _place_pelvis(
     b = anchor.joint
     kids = plan.groups.get(b, [])
     members = [_PELVIS, *kids]
-    weights = np.array([pelvis_weight] + [1.0 if c in _HIPS else 0.25 for c in kids])
+    weights = np.array([0.25] + [1.0 if c in _HIPS else 0.25 for c in kids])
     g_rot, g_pos = forward_kinematics(skel, pose)
     now = jmap.points(g_rot, g_pos)[members]
     want = goal[members]
@@ -280,8 +288,7 @@ def _attempt(
     new = pose.copy()
     goal = goal.copy()
     changed: set[int] = set()
-    pelvis_weight = 100.0 if any(j == _PELVIS for j, _ in exact) else 0.25
-    root, turned = _place_pelvis(skel, new, jmap, plan, goal, pelvis_weight)
+    root, turned = _place_pelvis(skel, new, jmap, plan, goal)
     if turned is not None:
         changed.add(turned)
     changed |= _aim_pass(skel, new, jmap, plan, goal, turned, pose, weigh)

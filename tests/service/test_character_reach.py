@@ -388,3 +388,39 @@ def test_a_pinned_head_or_neck_holds_on_the_character_under_far_wrists(
             body = {"targets": wrists, "pins": [label[p] for p in pins], "options": options}
             _, out = _answer(engine, text, name, body)
             assert max(p["error"] for p in out["pins"]) <= bound, (options, out["pins"])
+
+
+@pytest.mark.parametrize("name", sorted(FILES))
+def test_a_pelvis_lowered_in_exact_reach_keeps_the_body_upright(
+    engine: Engine, bvh_files: dict[str, Path], name: str
+) -> None:
+    """An API audit (2026-12-07): a character's pelvis lowered 15-25 % of its height in
+    exact reach came back turned over (the pelvis-to-spine line 139-161 degrees from up on
+    AnimatedDrawings' children, 51 on CMU's jumping jacks) with its shoulders shrugged to
+    0.66-0.78 of their width, where soft reach and the pose form crouched it upright: the
+    pelvis's fit weighed an exact pelvis target 100 times (``core.retarget._place_pelvis``).
+    Now, free and over pinned ankles: the shoulders keep 80 % of their width, the spine
+    leans less than 90 degrees from up, and the pelvis is met."""
+    text = bvh_files[name].read_text()
+    pts = _points(text, name)
+    label = resolve_map(skeleton_of(parse_bvh(text))).describe()
+    up = pts[JOINT_INDEX["head"]] - pts[JOINT_INDEX["pelvis"]]
+    up = up / np.linalg.norm(up)
+    sh = [JOINT_INDEX["left_shoulder"], JOINT_INDEX["right_shoulder"]]
+    width = float(np.linalg.norm(np.subtract(*pts[sh])))
+    height = float(np.linalg.norm(pts[JOINT_INDEX["head"]] - pts[JOINT_INDEX["left_ankle"]]))
+    for drop in (0.15, 0.25):
+        at = pts[JOINT_INDEX["pelvis"]] - drop * height * up
+        for pins in ([], [label[p] for p in PINS]):
+            body = {
+                "targets": [{"joint": label["pelvis"], "position": at.tolist()}],
+                "pins": pins,
+                "options": {"reach": "exact"},
+            }
+            _, out = _answer(engine, text, name, body)
+            got = _points(out["bvh"], name)
+            spine = got[JOINT_INDEX["spine1"]] - got[JOINT_INDEX["pelvis"]]
+            lean = np.degrees(np.arccos(spine @ up / np.linalg.norm(spine)))
+            ratio = float(np.linalg.norm(np.subtract(*got[sh]))) / width
+            assert ratio >= 0.8 and lean < 90.0, (drop, pins, ratio, lean)
+            assert out["targets"][0]["error"] <= TOL, out["targets"]
