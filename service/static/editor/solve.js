@@ -454,7 +454,9 @@ function landAgain(again, body, edit) {
   }
 }
 
-const withNote = (err, note) => new ApiError(err.status, err.title, `${err.detail}; ${note}`, err.requestId, err.retryAfter);
+const withNote = (err, note, title = err.title) => new ApiError(
+  err.status, title, `${err.detail}; ${note}`, err.requestId, err.retryAfter,
+);
 
 export async function sendSolve() {
   solver.dirty = false;
@@ -549,10 +551,11 @@ export async function sendSolve() {
           + 'pose is as before it, its targets kept: drag again to retry)');
       } else if (again && err.status === 0) {
         // (it stays once the server is back, as it still holds: api.js back; until an edit
-        // is solved, or the user moves on: an undo, Reset, a sample)
+        // is solved, or the user moves on: an undo, Reset, a sample). Titled for the edit,
+        // not the server: it said "Server unreachable" under the status "connected" then.
         lasting = true;
         said = withNote(err, 'the edit, sent again once the server was back, failed again: it is not '
-          + 'applied (the pose is as before it, its targets kept: drag again to retry)');
+          + 'applied (the pose is as before it, its targets kept: drag again to retry)', 'Edit failed again');
       } else if (err.status === 0) {
         // (the same step kept again, an option changed meanwhile: still the step to replace)
         const before = solver.interrupted;
