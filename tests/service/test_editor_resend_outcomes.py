@@ -3,6 +3,9 @@
 page's own: its solves and its liveness checks aborted (a network failure as the page sees
 it: "server unreachable"), then let through. An outage review's defects, 2026-12-07:
 
+- the server found back while a joint is pressed: the edit was not sent again (the press
+  under way), and the banner saying it was not solved went, the status "connected": the
+  kept targets unsolved, without a word;
 - the "failed again" banner titled "Server unreachable" under the status "connected".
 
 Shared parts: ``tests/service/editor_page.py``.
@@ -19,6 +22,7 @@ from tests.service.editor_page import (
     M,
     found,
     opened,
+    settle,
     unreachable,
     work,
 )
@@ -57,6 +61,41 @@ def banner(page: Any) -> dict[str, Any]:
         "shown": page.locator("#error").is_visible(),
         "status": page.evaluate(STATUS),
     }
+
+
+@pytest.mark.browser
+def test_the_edit_not_sent_again_as_a_joint_is_pressed_is_still_said(
+    server: str, browser: Any
+) -> None:
+    """Found back while a joint is pressed (a click under way): the edit is not sent again
+    then, and the banner says it is not applied (it went, the status "connected", the kept
+    targets unsolved); it goes once an edit is solved."""
+    page = opened(browser, server)
+    try:
+        start, made = interrupted(page)
+        count = page.evaluate(f"{M}.solveCount().sent")
+        page.unroute(SOLVE)
+        page.unroute(LIVE)
+        press(page, "right_wrist")
+        found(page)  # (while pressed)
+        page.mouse.up()
+        settle(page)
+        now = work(page, shown=True)
+        assert now == made  # not sent again: the pose as before the drag, its targets kept
+        assert page.evaluate(f"{M}.solveCount().sent") == count
+        assert now["committed"] == start["committed"] and "left_knee" in now["targets"]
+        said = banner(page)
+        assert said["shown"] and said["status"] == "connected", said
+        assert said["title"] == "Edit not applied"
+        assert "not sent again" in said["detail"] and "drag again to retry" in said["detail"]
+        page.mouse.move(0, 0)
+        found(page)  # (the page's next liveness check: it stays)
+        page.clock.run_for(4_000)
+        assert banner(page)["shown"]
+        page.click("#reset")  # moved on: it goes with the edit
+        page.wait_for_function(f"() => {M}.error() === null")
+    finally:
+        page.context.close()
 
 
 @pytest.mark.browser

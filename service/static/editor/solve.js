@@ -415,12 +415,23 @@ export const BUSY_TRIES = 4;
 // place of the step its kept targets made. Not when anything has changed since: an undo,
 // Reset, a sample, a file opened or a frame scrubbed (cancelSolves), a drag or another edit
 // on its way, a file being read. The kept targets stayed unsolved, the user to drag again.
+// Not sent for something under way (a joint pressed, a drag, a solve, a file read), the
+// edit still shown: said, as the outage's banner goes (api.js back): it went, the status
+// "connected", the kept targets unsolved without a word (a joint pressed as the server was
+// found back). It stays until an edit is solved (the drag under way's solves, which carry
+// the kept targets, among them) or the user moves on (an undo of it, Reset, a sample).
 function sendAgain() {
   const kept = solver.interrupted;
   solver.interrupted = null;
   if (!kept || kept.epoch !== solver.epoch || history.stack[history.index] !== kept.step) return;
-  if (ui.drag || ui.reading || solver.commitPending || solver.dirty || solver.inflight) return;
   if (state.targets.size === 0) return;
+  if (ui.drag || ui.reading || solver.commitPending || solver.dirty || solver.inflight) {
+    const why = 'the server is back, but the edit its outage interrupted was not sent again '
+      + '(something else was under way): it is not applied (the pose is as before it, its '
+      + 'targets kept: drag again to retry)';
+    showError(new ApiError(0, 'Edit not applied', why), { step: kept.step, pending: false, lasting: true });
+    return;
+  }
   solver.again = kept;
   solver.commitPending = true;
   solver.dirty = true; // (editor.js's frame loop sends it)
