@@ -82,7 +82,8 @@ export function commitShown() {
 // text was made of the step's, where a splice knows it (sendSolve): then neither text is
 // read to compare them or to find what changed (history.js pushStep). ``kept``: a step whose
 // targets and pins the new one has (landAgain: those of the edit sent again, not the ones
-// shown now, an edit made since among them).
+// shown now, an edit made since among them; a gesture's failed commit during a drag begun
+// since: the state that drag began from).
 export function pushHistory(edit = null, kept = null) {
   forgetAnswerText(); // (a gesture given up: its answer's text is not the file's)
   const snap = snapshot();
@@ -549,12 +550,16 @@ export async function sendSolve() {
     } else if (commit && !solver.dirty) {
       // The gesture's final solve failed: keep its targets (so it can be retried) but not
       // a pose the server never produced, nor one of the drag's answers: the screen shows
-      // the pose as it was, the one Export writes and the next solve starts from.
+      // the pose as it was, the one Export writes and the next solve starts from. A drag
+      // begun since (its solves went as this gesture's: commitPending) is not part of it:
+      // the step is the state as it was pressed (``before``); it was the drag's targets
+      // then, a step mid-drag, and its release made another (an undo went back to a point
+      // of the drag never let go).
       solver.commitPending = false;
       state.pose = clonePose(state.committed);
       doc.shown = doc.text;
       const shown = history.stack[history.index];
-      pushHistory();
+      pushHistory(null, ui.drag && ui.drag.moved ? ui.drag.before : null);
       const step = history.stack[history.index];
       solver.again = null;
       if (wait) {
