@@ -251,7 +251,8 @@ UP_WARNING = Field(
     "the frame edited stands up along the other axis (ankles to head; its root turns the "
     "rest pose so: a rig exported with its root turned a quarter turn, or a body lying down "
     "in a frame): both named, with the `up` that reads the frame upright; the answer used "
-    "the rest pose's axis. Null otherwise.",
+    "the rest pose's axis. Or where `up` was given and the frame stands up along the other "
+    "axis, the rest pose along neither: solved lying down, as given. Null otherwise.",
 )  # fmt: skip
 
 
@@ -491,6 +492,8 @@ def make_character(
             f'"up": "{rest_up}", or null to infer it'
         )
     up_warning = None
+    if up is not None and rest_up is None and frame_up not in (None, up):
+        up_warning = _up_against_frame(f"{prefix}up", up, frame_up, up_stated)
     if up is None:
         found = rest_up
         if found is not None and frame_up not in (None, found):
@@ -499,7 +502,7 @@ def make_character(
         if found is None:
             raise InvalidRequest(
                 f"{prefix}up: neither the rest pose nor this frame stands up along +Y or +Z; "
-                'state it, e.g. "up": "+Z"'
+                'state the axis the file\'s world has up: "up": "+Y" or "+Z"'
             )
         up = found
     turn = up_rotation(up)
@@ -521,6 +524,19 @@ def _up_inferred(where: str, rest: str, frame: str) -> str:
         f"frame stands up along {frame} (its root turns the rest pose so): give "
         f'"up": "{frame}" if the file\'s world is {frame} up; {quoted(rest)} is right for a '
         "body lying down in this frame"
+    )
+
+
+def _up_against_frame(where: str, up: str, frame: str, stated: bool) -> str:
+    """The answers' ``up_warning``: ``up`` given (or the default), the rest pose standing
+    along neither axis and the frame edited along ``frame``: solved lying down. An API audit
+    (2026-12-07) sent a Bandai-Namco walk (a +Y file whose rest pose stands along neither)
+    with ``"up": "+Z"``: it was solved lying down without a word."""
+    given = "" if stated else " (the default: no up was given)"
+    return (
+        f"{where}: {quoted(up)}{given}, but this frame stands up along {frame} (ankles to "
+        f"head; the rest pose along neither axis), so it was solved lying down: give "
+        f'"up": "{frame}" if the file\'s world is {frame} up'
     )
 
 

@@ -103,3 +103,25 @@ def test_a_json_rig_turned_upright_by_its_root_is_told_its_up(client: Any) -> No
     for name, at in plain["positions"].items():  # the same body, where it stands
         assert np.allclose(upright["positions"][name], at, atol=1e-9), name
     assert [t["reached"] for t in upright["targets"]] == [True]
+
+
+def test_an_up_the_frame_does_not_stand_along_is_said_where_the_rest_pose_cannot_tell(
+    client: Any, bvh_files: dict[str, Path]
+) -> None:
+    """An API audit (2026-12-07): a Bandai-Namco walk (+Y up; its rest pose stands along
+    neither axis) sent with ``"up": "+Z"`` was solved lying down without a word. The
+    answer now says the frame stands along +Y; ``"+Y"`` stated (or inferred) says nothing."""
+    text = bvh_files["bandai"].read_text()
+    frame = 30
+    for up, told in (("+Z", True), ("+Y", False), (None, False)):
+        ask: dict[str, Any] = {"bvh": text, "frame": frame}
+        if up is not None:
+            ask["up"] = up
+        out = client.post("/v1/bvh/inspect", json=ask)
+        assert out.status_code == 200, out.text
+        warning = out.json().get("up_warning")
+        if told:
+            assert warning is not None and 'give "up": "+Y"' in warning, warning
+            assert "solved lying down" in warning
+        else:
+            assert warning is None, (up, warning)
