@@ -29,6 +29,12 @@ F64 = npt.NDArray[np.floating[Any]]
 #: 2026-12-04), and 9 m above them it made bones up to 1.25 m long. A solve is answered
 #: with the floor it was given and says so (:func:`floor_warnings`).
 FLOOR_REACH = 4.0
+#: Nor stood with its lowest joint under the floor by more than this many pelvis-to-neck
+#: distances (ReActIdle's takes stand a few cm under theirs). A body built with its root at
+#: the origin (SMPL-like rigs: the pelvis at the floor, the feet 0.8-0.9 m under it) was
+#: solved without a word, the answer up to 4.3 cm from the standing body's (an API audit,
+#: 2026-12-07).
+SUNK = 0.5
 _PELVIS, _NECK = JOINT_INDEX["pelvis"], JOINT_INDEX["neck"]
 
 
@@ -41,12 +47,17 @@ def floor_warnings(poses: F64, floors: float | F64) -> list[str | None]:
     pelvis = poses[:, _PELVIS, 1]
     trunks = poses[:, _NECK] - poses[:, _PELVIS]
     torsos = np.sqrt(np.add.reduce(trunks * trunks, axis=1))
-    off = (floors > pelvis) | (floors < pelvis - FLOOR_REACH * torsos)
+    lowest = poses[:, :, 1].min(axis=1)
+    off = (
+        (floors > pelvis)
+        | (floors < pelvis - FLOOR_REACH * torsos)
+        | (floors > lowest + SUNK * torsos)
+    )
     out: list[str | None] = [None] * len(poses)
     if off.any():
         at = np.broadcast_to(floors, pelvis.shape)
         for b in np.flatnonzero(off).tolist():
-            out[b] = _words(float(at[b]), float(pelvis[b]), float(torsos[b]))
+            out[b] = _words(float(at[b]), float(pelvis[b]), float(torsos[b]), float(lowest[b]))
     return out
 
 
@@ -59,15 +70,23 @@ def floor_warning(pose: F64, floor: float, height: str = "y") -> str | None:
     (px, py, pz), (nx, ny, nz) = pose[[_PELVIS, _NECK]].tolist()
     tx, ty, tz = nx - px, ny - py, nz - pz
     torso = math.sqrt(tx * tx + ty * ty + tz * tz)
-    if floor > py or floor < py - FLOOR_REACH * torso:
-        return _words(float(floor), py, torso, height)
+    lowest = min(pose[:, 1].tolist())
+    if floor > py or floor < py - FLOOR_REACH * torso or floor > lowest + SUNK * torso:
+        return _words(float(floor), py, torso, lowest, height)
     return None
 
 
-def _words(floor: float, pelvis: float, torso: float, height: str = "y") -> str:
+def _words(floor: float, pelvis: float, torso: float, lowest: float, height: str = "y") -> str:
     """The warning of a floor at world y ``floor`` under (over) a pelvis at ``pelvis``,
-    ``torso`` its pelvis-to-neck distance; ``height``: the up axis's name in the words."""
-    if floor > pelvis:
+    ``torso`` its pelvis-to-neck distance, ``lowest`` the start's lowest joint's height;
+    ``height``: the up axis's name in the words."""
+    if pelvis >= floor > lowest + SUNK * torso:
+        where = (
+            f"{floor - lowest:.3g} m above the start pose's lowest joint ({height} = "
+            f"{lowest:.3g} m; its pelvis at {pelvis:.3g} m)"
+        )
+        read = "so this body was solved with its legs under its ground (a root at the origin?)"
+    elif floor > pelvis:
         where = f"{floor - pelvis:.3g} m above the start pose's pelvis ({height} = {pelvis:.3g} m)"
         read = "so this body was solved standing under its ground"
     else:

@@ -255,7 +255,9 @@ ITERATIONS = (
 FLOOR_WARNING = (
     "Null unless `options.floor` lies above the start pose's pelvis, or below it by more "
     "than 4 times its pelvis-to-neck distance (no body the networks learned stood higher: "
-    "3.5 mid-jump, 2.2 standing): the body was solved over that floor as asked, a body "
+    "3.5 mid-jump, 2.2 standing), or above its lowest joint by more than half that "
+    "distance (its legs under the ground: a root at the origin): the body was solved over "
+    "that floor as asked, a body "
     "under its ground or far above it (`/v1/complete` takes such a floor into that band and "
     "answers the floor it used). Says where the floor lies; the floor is the world height "
     "of the ground the character stands on."
