@@ -97,7 +97,9 @@ def missing_message(
     :data:`LISTED_CHARS`, then how many more), for a client to write ``joint_map`` with.
     Was the scheme alone, "closest" too where no name matched any (a new-user audit,
     2026-12-06: a rig renamed `root_jnt`, `hand_lf`, ... got "closest naming scheme:
-    bandai-namco", and no joint name to write the map with)."""
+    bandai-namco", and no joint name to write the map with). The form of a point along a
+    bone is offered too: an API audit (2026-12-07) built a rig without clavicles, and the
+    refusal named only joints, though ``"0.25 of Spine3->LeftArm"`` answered it."""
     listed: list[str] = []
     size = 0
     for name in names[:LISTED_NAMES]:
@@ -110,7 +112,9 @@ def missing_message(
     return (
         f"{where}: no joint found for {missing} ({why}); give them in joint_map as "
         f"{{canonical: joint name}}, naming one of the skeleton's {len(names)} joints: "
-        f"{', '.join(listed)}{more}; schemes found automatically: {schemes}"
+        f"{', '.join(listed)}{more}, or a point part-way along a bone where the rig has no "
+        f'such joint (a rig without clavicles: {{"{missing[0]}": "0.25 of <joint>-><its '
+        f'child>"}}); schemes found automatically: {schemes}'
     )
 
 

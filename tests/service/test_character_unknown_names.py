@@ -43,7 +43,9 @@ def test_a_rig_no_scheme_knows_is_told_so_with_its_joint_names(
         assert "(no joint name matched a scheme's)" in detail, detail
         assert "closest naming scheme" not in detail, detail
         assert f"naming one of the skeleton's {len(names)} joints: {shown}" in detail, detail
-        assert (f"{shown} and {len(names) - 40} more;" in detail) == (len(names) > 40), detail
+        assert (f"{shown} and {len(names) - 40} more," in detail) == (len(names) > 40), detail
+        assert "a point part-way along a bone where the rig has no such joint" in detail
+        assert '{"pelvis": "0.25 of <joint>-><its child>"}' in detail, detail
         assert len(detail) <= MAX_DETAIL
         details.add(detail)
     assert len(details) == 1
