@@ -58,6 +58,18 @@ def press(page: Any, joint: str) -> dict[str, float]:
     return xy
 
 
+def sent_again(page: Any, hold: Any, held: list[Any]) -> None:
+    """The server found back, the page's solves routed through ``hold``: returns once the
+    edit sent again is on its way and held (``held`` gets its route)."""
+    page.unroute(SOLVE)
+    page.route(SOLVE, hold)
+    page.unroute(LIVE)
+    found(page)
+    page.wait_for_function(f"() => {M}.solveCount().inflight")
+    while not held:
+        page.wait_for_timeout(20)
+
+
 def banner(page: Any) -> dict[str, Any]:
     return {
         "title": page.text_content("#error-title"),
@@ -126,13 +138,7 @@ def test_the_edit_sent_again_failing_during_a_new_drag_makes_no_step_mid_drag(
             else:
                 route.abort()
 
-        page.unroute(SOLVE)
-        page.route(SOLVE, hold)
-        page.unroute(LIVE)
-        found(page)
-        page.wait_for_function(f"() => {M}.solveCount().inflight")
-        while not held:
-            page.wait_for_timeout(20)
+        sent_again(page, hold, held)
         xy = press(page, "right_wrist")
         page.mouse.move(xy["x"] + 10, xy["y"] - 10, steps=2)
         through["now"] = False  # the server gone again
@@ -187,13 +193,7 @@ def test_the_edit_sent_again_refused_while_a_value_is_typed_goes_on_with_the_typ
             else:
                 held.append(route)
 
-        page.unroute(SOLVE)
-        page.route(SOLVE, hold)
-        page.unroute(LIVE)
-        found(page)
-        page.wait_for_function(f"() => {M}.solveCount().inflight")
-        while not held:
-            page.wait_for_timeout(20)
+        sent_again(page, hold, held)
         pick(page, "right_wrist")
         page.fill("#joint-y", "1.2")
         page.press("#joint-y", "Enter")
