@@ -396,6 +396,22 @@ FLEX_MARGIN = 0.035
 
 
 @jit
+def _dot3(a: F64, b: F64) -> float:  # pragma: no cover - compiled
+    """``a @ b`` of two 3-vectors (numba's ``@`` needs scipy's BLAS, which the image has not)."""
+    return float(a[0] * b[0] + a[1] * b[1] + a[2] * b[2])
+
+
+@jit
+def _turn_into(out: F64, r: F64, n: F64, ca: float, sa: float) -> None:  # pragma: no cover
+    """``out`` = ``r`` turned about the unit axis ``n`` by the angle whose cosine and sine
+    are ``ca`` and ``-sa`` (towards the bone above, :func:`_flex_below`)."""
+    nr = _dot3(n, r)
+    out[0] = r[0] * ca - (n[1] * r[2] - n[2] * r[1]) * sa + n[0] * nr * (1.0 - ca)
+    out[1] = r[1] * ca - (n[2] * r[0] - n[0] * r[2]) * sa + n[1] * nr * (1.0 - ca)
+    out[2] = r[2] * ca - (n[0] * r[1] - n[1] * r[0]) * sa + n[2] * nr * (1.0 - ca)
+
+
+@jit
 def _turned_low(
     out: F64, c: int, pivot: int, first: int, n: F64, angle: float
 ) -> float:  # pragma: no cover
@@ -403,11 +419,11 @@ def _turned_low(
     turned by ``-angle`` about the axis ``n`` through ``pivot`` (``out [21, 3]``)."""
     ca, sa = np.cos(angle), np.sin(angle)
     m = np.inf
+    turned = np.empty(3)
     for j in range(NUM_JOINTS):
         if j == first or _ENDS_BELOW[c, j]:
-            r = out[j] - out[pivot]
-            y = r[1] * ca - (n[2] * r[0] - n[0] * r[2]) * sa + n[1] * (n @ r) * (1.0 - ca)
-            m = min(m, out[pivot, 1] + y)
+            _turn_into(turned, out[j] - out[pivot], n, ca, sa)
+            m = min(m, out[pivot, 1] + turned[1])
     return m
 
 
@@ -445,21 +461,25 @@ def _flex_below(out: F64, start: F64, c: int, flags: I64) -> None:  # pragma: no
     for j in range(NUM_JOINTS):
         if j == first or _ENDS_BELOW[c, j]:
             low, was = min(low, out[j, 1]), min(was, start[j, 1])
-    leg = np.sqrt((out[knee] - out[hip]) @ (out[knee] - out[hip])) + np.sqrt(
-        (out[ankle] - out[knee]) @ (out[ankle] - out[knee])
-    )
+    thigh, shin = out[knee] - out[hip], out[ankle] - out[knee]
+    leg = np.sqrt(_dot3(thigh, thigh)) + np.sqrt(_dot3(shin, shin))
     level = min(-FLEX_MARGIN * leg, was)
     if not low < level:
         return
     t = out[above] - out[pivot]
     r = out[first] - out[pivot]
-    lt, lr = np.sqrt(t @ t), np.sqrt(r @ r)
-    n = np.cross(t, r)
-    nn = np.sqrt(n @ n)
+    lt, lr = np.sqrt(_dot3(t, t)), np.sqrt(_dot3(r, r))
+    n = np.empty(3)
+    n[0], n[1], n[2] = (
+        t[1] * r[2] - t[2] * r[1],
+        t[2] * r[0] - t[0] * r[2],
+        t[0] * r[1] - t[1] * r[0],
+    )
+    nn = np.sqrt(_dot3(n, n))
     if not (nn > 1e-9 * lt * lr and lt > _ENDS_TINY and lr > _ENDS_TINY):
         return  # (straight there: no plane to bend in)
     n = n / nn
-    most = np.arccos(min(max((t @ r) / (lt * lr), -1.0), 1.0)) - _FLEX_SPARE
+    most = np.arccos(min(max(_dot3(t, r) / (lt * lr), -1.0), 1.0)) - _FLEX_SPARE
     if not most > 0.0:
         return
     if _turned_low(out, c, pivot, first, n, most) < level:  # as far as it lifts
@@ -477,10 +497,12 @@ def _flex_below(out: F64, start: F64, c: int, flags: I64) -> None:  # pragma: no
             else:
                 lo = mid
     ca, sa = np.cos(hi), np.sin(hi)
+    turned = np.empty(3)
     for j in range(NUM_JOINTS):
         if j == first or _ENDS_BELOW[c, j]:
-            r = out[j] - out[pivot]
-            out[j] = out[pivot] + r * ca - np.cross(n, r) * sa + n * (n @ r) * (1.0 - ca)
+            _turn_into(turned, out[j] - out[pivot], n, ca, sa)
+            for i in range(3):
+                out[j, i] = out[pivot, i] + turned[i]
 
 
 @jit
