@@ -69,3 +69,31 @@ def test_this_process_and_its_children_use_the_core_sources_folder() -> None:
         capture_output=True, text=True, check=True,
     )  # fmt: skip
     assert out.stdout.strip() == folder
+
+
+#: Calls numba lowers through scipy's BLAS or LAPACK, which the service image leaves out
+BLAS = {"dot", "vdot", "inner", "matmul"}
+
+
+def test_no_compiled_kernel_calls_blas() -> None:
+    """A kernel that used ``@`` on two 3-vectors compiled here (scipy is installed for
+    training) and broke the image's build at ``compiled.warm()``: numba lowers ``@``,
+    ``np.dot`` and ``np.linalg`` through scipy's BLAS and LAPACK, which the slim image has
+    not (CI, 2026-12-07). Every function decorated ``@jit`` in ``core`` is read for them."""
+    import ast
+
+    found = []
+    for path in sorted(CORE.glob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if not isinstance(node, ast.FunctionDef):
+                continue
+            if not any(isinstance(d, ast.Name) and d.id == "jit" for d in node.decorator_list):
+                continue
+            for inner in ast.walk(node):
+                bad = isinstance(inner, ast.BinOp) and isinstance(inner.op, ast.MatMult)
+                if isinstance(inner, ast.Attribute):
+                    bad = bad or inner.attr in BLAS or inner.attr == "linalg"
+                if bad:
+                    found.append(f"{path.name}:{inner.lineno} in {node.name}")
+    assert not found, found
+    assert len(list(CORE.glob("compiled*.py"))) >= 6  # (the kernels were read)
