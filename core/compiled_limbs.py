@@ -344,7 +344,7 @@ def floor_item(
         if asked != 0:  # below a target or pin: bent further about it
             _flex_below(out, start, c, flags)
             continue
-        if asked != 0 or not (lift > 0.0 or (plant and lift < -_ENDS_TINY)):
+        if not (lift > 0.0 or (plant and lift < -_ENDS_TINY)):
             continue
         for i in range(3):
             s[i], w0[i] = out[top, i], out[end, i]
@@ -396,33 +396,26 @@ FLEX_MARGIN = 0.035
 
 
 @jit
-def _dot3(a: F64, b: F64) -> float:  # pragma: no cover - compiled
-    """``a @ b`` of two 3-vectors (numba's ``@`` needs scipy's BLAS, which the image has not)."""
-    return float(a[0] * b[0] + a[1] * b[1] + a[2] * b[2])
-
-
-@jit
-def _turn_into(out: F64, r: F64, n: F64, ca: float, sa: float) -> None:  # pragma: no cover
-    """``out`` = ``r`` turned about the unit axis ``n`` by the angle whose cosine and sine
-    are ``ca`` and ``-sa`` (towards the bone above, :func:`_flex_below`)."""
-    nr = _dot3(n, r)
-    out[0] = r[0] * ca - (n[1] * r[2] - n[2] * r[1]) * sa + n[0] * nr * (1.0 - ca)
-    out[1] = r[1] * ca - (n[2] * r[0] - n[0] * r[2]) * sa + n[1] * nr * (1.0 - ca)
-    out[2] = r[2] * ca - (n[0] * r[1] - n[1] * r[0]) * sa + n[2] * nr * (1.0 - ca)
+def _bent_into(r: F64, p: F64, angle: float, out: F64) -> None:  # pragma: no cover
+    """``out``: the unit vector ``angle`` (radians) from the unit ``r`` towards the unit
+    ``p`` across it (the first bone below a leg's asked joint, bent further)."""
+    ca, sa = np.cos(angle), np.sin(angle)
+    out[0], out[1], out[2] = r[0] * ca + p[0] * sa, r[1] * ca + p[1] * sa, r[2] * ca + p[2] * sa
 
 
 @jit
 def _turned_low(
-    out: F64, c: int, pivot: int, first: int, n: F64, angle: float
+    out: F64, c: int, pivot: int, first: int, r: F64, p: F64, angle: float
 ) -> float:  # pragma: no cover
     """The height of the lowest of ``first`` and the joints below chain ``c``'s end once
-    turned by ``-angle`` about the axis ``n`` through ``pivot`` (``out [21, 3]``)."""
-    ca, sa = np.cos(angle), np.sin(angle)
+    turned about ``pivot`` by ``angle`` from ``r`` towards ``p`` (:func:`_bent_into`;
+    ``out [21, 3]``)."""
+    d, turned = np.empty(3), np.empty(3)
+    _bent_into(r, p, angle, d)
     m = np.inf
-    turned = np.empty(3)
     for j in range(NUM_JOINTS):
         if j == first or _ENDS_BELOW[c, j]:
-            _turn_into(turned, out[j] - out[pivot], n, ca, sa)
+            swing_into(r, d, out[j] - out[pivot], turned)
             m = min(m, out[pivot, 1] + turned[1])
     return m
 
@@ -461,46 +454,47 @@ def _flex_below(out: F64, start: F64, c: int, flags: I64) -> None:  # pragma: no
     for j in range(NUM_JOINTS):
         if j == first or _ENDS_BELOW[c, j]:
             low, was = min(low, out[j, 1]), min(was, start[j, 1])
-    thigh, shin = out[knee] - out[hip], out[ankle] - out[knee]
-    leg = np.sqrt(_dot3(thigh, thigh)) + np.sqrt(_dot3(shin, shin))
+    leg = 0.0
+    for a, z in ((hip, knee), (knee, ankle)):
+        leg += np.sqrt(
+            (out[z, 0] - out[a, 0]) ** 2 + (out[z, 1] - out[a, 1]) ** 2
+            + (out[z, 2] - out[a, 2]) ** 2
+        )  # fmt: skip
     level = min(-FLEX_MARGIN * leg, was)
     if not low < level:
         return
+    r, p = np.empty(3), np.empty(3)  # the bone below, and across it towards the bone above
+    if not unit_into(out[first] - out[pivot], r):
+        return
     t = out[above] - out[pivot]
-    r = out[first] - out[pivot]
-    lt, lr = np.sqrt(_dot3(t, t)), np.sqrt(_dot3(r, r))
-    n = np.empty(3)
-    n[0], n[1], n[2] = (
-        t[1] * r[2] - t[2] * r[1],
-        t[2] * r[0] - t[0] * r[2],
-        t[0] * r[1] - t[1] * r[0],
-    )
-    nn = np.sqrt(_dot3(n, n))
-    if not (nn > 1e-9 * lt * lr and lt > _ENDS_TINY and lr > _ENDS_TINY):
+    along = t[0] * r[0] + t[1] * r[1] + t[2] * r[2]
+    across = t - along * r
+    lt = np.sqrt(t[0] * t[0] + t[1] * t[1] + t[2] * t[2])
+    wide = np.sqrt(across[0] * across[0] + across[1] * across[1] + across[2] * across[2])
+    if not (lt > _ENDS_TINY and wide > 1e-9 * lt and unit_into(across, p)):
         return  # (straight there: no plane to bend in)
-    n = n / nn
-    most = np.arccos(min(max(_dot3(t, r) / (lt * lr), -1.0), 1.0)) - _FLEX_SPARE
+    most = np.arccos(min(max(along / lt, -1.0), 1.0)) - _FLEX_SPARE
     if not most > 0.0:
         return
-    if _turned_low(out, c, pivot, first, n, most) < level:  # as far as it lifts
+    if _turned_low(out, c, pivot, first, r, p, most) < level:  # as far as it lifts
         best, hi = -np.inf, 0.0
         for i in range(1, 65):
-            h = _turned_low(out, c, pivot, first, n, most * i / 64)
+            h = _turned_low(out, c, pivot, first, r, p, most * i / 64)
             if h > best:
                 best, hi = h, most * i / 64
     else:
         lo, hi = 0.0, most
         for _ in range(_FLEX_HALVINGS):
             mid = 0.5 * (lo + hi)
-            if _turned_low(out, c, pivot, first, n, mid) >= level:
+            if _turned_low(out, c, pivot, first, r, p, mid) >= level:
                 hi = mid
             else:
                 lo = mid
-    ca, sa = np.cos(hi), np.sin(hi)
-    turned = np.empty(3)
+    d, turned = np.empty(3), np.empty(3)
+    _bent_into(r, p, hi, d)
     for j in range(NUM_JOINTS):
         if j == first or _ENDS_BELOW[c, j]:
-            _turn_into(turned, out[j] - out[pivot], n, ca, sa)
+            swing_into(r, d, out[j] - out[pivot], turned)
             for i in range(3):
                 out[j, i] = out[pivot, i] + turned[i]
 
