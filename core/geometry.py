@@ -35,6 +35,14 @@ def rotation_about(axis: npt.ArrayLike, angle: float) -> FloatArray:
     return out
 
 
+def perpendicular(v: FloatArray) -> FloatArray:
+    """A direction across each unit ``v`` ``[..., 3]``: the axis least along it, without
+    its part along ``v`` (not of unit length; ``core.rigid``'s compiled frame has its own)."""
+    axis = np.eye(3)[np.argmin(np.abs(v), axis=-1)]
+    out: FloatArray = axis - np.sum(axis * v, axis=-1, keepdims=True) * v
+    return out
+
+
 def _rotation_from_forward(fx: FloatArray, fz: FloatArray) -> FloatArray:
     """The yaw rotation taking +Z to the unit floor direction (fx, 0, fz)."""
     out = np.zeros((*np.shape(fx), 3, 3))

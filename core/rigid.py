@@ -29,6 +29,7 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
+from core.geometry import perpendicular
 from core.jit import jit
 from core.skeleton import JOINT_INDEX, NUM_JOINTS, SUBTREE
 
@@ -64,9 +65,7 @@ def _frames(a: F64, b: F64) -> tuple[F64, Bool]:
     y = a + b
     y = y - np.sum(y * x, axis=-1, keepdims=True) * x
     ny = np.linalg.norm(y, axis=-1, keepdims=True)
-    axis = np.eye(3)[np.argmin(np.abs(x), axis=-1)]
-    across = axis - np.sum(axis * x, axis=-1, keepdims=True) * x
-    y = np.where(ny > TINY, y, across)
+    y = np.where(ny > TINY, y, perpendicular(x))
     ny = np.linalg.norm(y, axis=-1, keepdims=True)
     y = y / np.where(ny > TINY, ny, 1.0)
     ok = (nx[..., 0] > TINY) & (ny[..., 0] > TINY)

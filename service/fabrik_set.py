@@ -34,7 +34,7 @@ import numpy as np
 import numpy.typing as npt
 
 from core import compiled_fabrik
-from core.geometry import rotation_about
+from core.geometry import perpendicular, rotation_about
 from core.rigid import SQUEEZED, keep_pairs_item
 from core.skeleton import JOINT_INDEX, NUM_JOINTS, PARENTS, SUBTREE
 
@@ -319,9 +319,7 @@ def _nearest_of_two(
     w = x - mid
     w = w - np.sum(w * n, axis=1, keepdims=True) * n
     lw = np.linalg.norm(w, axis=1, keepdims=True)
-    axis = np.eye(3)[np.argmin(np.abs(n), axis=1)]  # (x on the axis: any point of it)
-    axis = axis - np.sum(axis * n, axis=1, keepdims=True) * n
-    w = np.where(lw > 1e-12, w, axis)
+    w = np.where(lw > 1e-12, w, perpendicular(n))  # (x on the axis: any point of it)
     ring = mid + rho * w / np.linalg.norm(w, axis=1, keepdims=True)
     out: F64 = np.where((ok1 | ok2)[:, None], one, ring)
     return out, ~apart
