@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from bench.trunk import without_retry
 from core.skeleton import JOINT_INDEX
 from service import fabrik_set
 from service.engine import Engine
@@ -85,15 +86,13 @@ def test_a_chest_dragged_over_pinned_wrists_reaches_with_its_shoulders_apart(
 
 @pytest.mark.parametrize("how", CASES, ids=lambda c: c[1])
 def test_a_chest_dragged_over_pinned_feet_keeps_the_hips_apart(
-    engine: Engine, poses: np.ndarray, monkeypatch: pytest.MonkeyPatch, how: tuple[str, str]
+    engine: Engine, poses: np.ndarray, how: tuple[str, str]
 ) -> None:
     """Over pinned legs a fold is the answer's only way to some goals (upwards, the legs
     straight): it stops short there, as at any goal beyond reach, every pin held."""
     problems = _drags(poses, "spine2", ANKLES, how)
     ours = engine.solve(problems)
-    with monkeypatch.context() as m:  # no retry at all (over pinned legs, any target's)
-        m.setattr(fabrik_set, "_TRUNK", np.zeros_like(fabrik_set._TRUNK))
-        m.setattr(fabrik_set, "FOLDED", 0.0)
+    with without_retry():  # no retry at all (over pinned legs, any target's)
         theirs = engine.solve(problems)
     print(f"\n{how[1]}: hips folded {_folded(theirs, poses, 'hips')} -> "
           f"{_folded(ours, poses, 'hips')} of {len(poses)}")  # fmt: skip
