@@ -14,9 +14,11 @@ import numpy as np
 import numpy.typing as npt
 
 from core.carry import BONE_OF
+from core.chest import CLAVICLE_CONE as _CONE
 from core.ends import BELOW as _ENDS_BELOW
 from core.ends import CHAINS as _CHAINS
 from core.ends import COLLARS as _ENDS_COLLARS
+from core.ends import OTHER_COLLAR
 from core.ends import PREFER as _PREFER
 from core.ends import SOFT_IK_LIMB as _SOFT_IK_LIMB
 from core.ends import TINY as _ENDS_TINY
@@ -281,6 +283,16 @@ def _collar_turn(
     phi = np.arctan2(wq, wp)
     th = phi - np.arccos(min(kk / rho, 1.0)) if kk < rho else phi
     th = max(th, 0.0)
+    o = OTHER_COLLAR[k]  # within the clavicle's cone about the collars' line
+    ax, ay, az = cx - out[o, 0], cy - out[o, 1], cz - out[o, 2]
+    na = np.sqrt(ax * ax + ay * ay + az * az)
+    sc = na if na > _ENDS_TINY else 1.0
+    ax, ay, az = ax / sc, ay / sc, az / sc
+    ca, cb = ax * px + ay * py + az * pz, ax * qx + ay * qy + az * qz
+    lim = min(np.cos(_CONE), ca)
+    r = np.sqrt(ca * ca + cb * cb)
+    if na > _ENDS_TINY and r > _ENDS_TINY:
+        th = min(th, np.arctan2(cb, ca) + np.arccos(min(max(lim / r, -1.0), 1.0)))
     ct, st = np.cos(th), np.sin(th)
     shift = (
         (cx + cl * (ct * px + st * qx)) - out[top, 0],

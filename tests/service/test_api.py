@@ -74,14 +74,18 @@ def assert_problem(resp: Any, status: int, *needles: str) -> dict[str, Any]:
 def test_solve_reaches_real_targets_with_input_bone_lengths(
     client: Any, real_poses: PosePairs
 ) -> None:
-    reach = []
+    reach, polished = [], 0
     for k in range(20):
         body = solve_body(real_poses, k, ["left_wrist", "right_wrist"])
         resp = client.post("/v1/solve", json=body)
         assert resp.status_code == 200, resp.text
         out = resp.json()
         assert set(out["pose"]) == set(JOINT_NAMES)
-        assert out["solvers"] == ["left_wrist+right_wrist"]
+        assert out["solvers"][0] == "left_wrist+right_wrist"
+        # a wrist the retry's pass left short, its collar turned only within the clavicle's
+        # cone (core.chest): polished, in 1 of these 20
+        assert out["solvers"][1:] in ([], ["fabrik-polish"])
+        polished += len(out["solvers"]) - 1
         assert out["method"] == "neural"
         start_len = bone_lengths(as_array(body["pose"]))
         out_len = bone_lengths(as_array(out["pose"]))
@@ -90,6 +94,7 @@ def test_solve_reaches_real_targets_with_input_bone_lengths(
         reach += [t["error"] for t in out["targets"]]
     # soft reach on real edits: centimetres, not decimetres
     assert float(np.mean(reach)) < 0.06, np.mean(reach)
+    assert polished <= 1
 
 
 def test_exact_reach_and_pins(client: Any, synthetic_poses: PosePairs) -> None:

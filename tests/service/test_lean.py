@@ -67,6 +67,7 @@ def test_lean_answers_are_the_general_paths(
         ]  # fmt: skip
     together = engine.solve(probs)
     general = engine.solve([*probs, _fabrik_item(real_poses)])[:-1]
+    polished = 0
     for p, a, g in zip(probs, together, general, strict=True):
         (one,) = engine.solve([p])
         for r in (a, one):
@@ -82,8 +83,13 @@ def test_lean_answers_are_the_general_paths(
             assert one.reached.all() or pins  # a pin may hold a target out of reach
         elif pins:  # the pins' polish, or the retry's (or its fallback from the start)
             assert one.solvers[-1] in ("fabrik-polish", "fabrik-fallback")
+        elif one.iterations:  # a soft answer the retry's pass left short: polished
+            assert one.solvers[-1] in ("fabrik-polish", "fabrik-fallback")
+            polished += 1
         else:
-            assert one.iterations == 0 and "fabrik-polish" not in one.solvers
+            assert "fabrik-polish" not in one.solvers
+    # (a wrist's collar turned only within its cone, core.chest: 1 in 30 at most here)
+    assert polished <= 1
 
 
 @pytest.mark.parametrize("passes", [1, 2])
