@@ -2,12 +2,11 @@
 
 Two tables (docs/kinematics.md, "The chest"):
 
-1. **Real motion** (the constants of :mod:`core.chest`): pairs of frames 0.2-1 s apart in
-   world space, seeded, per split (TRAIN, the held-out bodies): how far the collar-to-
-   collar distance and the shoulder width change, how far each collar turns against the
-   spine bone (the chest's tilt, :data:`core.chest.TILT`), and how far each clavicle
-   strays from its mean direction in a chest frame (the spine bone and the collars' line:
-   :data:`core.chest.CLAVICLE_CONE`).
+1. **Real motion**: pairs of frames 0.2-1 s apart in world space, seeded, per split
+   (TRAIN, the held-out bodies): how far the collar-to-collar distance and the shoulder
+   width change, how far each collar turns against the spine bone, and how far each
+   clavicle strays from its mean direction in a chest frame (the spine bone and the
+   collars' line: ``core.ends.CLAVICLE_CONE``).
 2. **Far reaches** through :class:`service.engine.Engine` with the shipped models: one
    wrist moved 0.4-1.0 m in a seeded direction, both wrists of ``--poses`` real poses from
    each of TEST and the held-out bodies (:func:`bench.pins.sample_poses`), without and with

@@ -22,7 +22,6 @@ from functools import lru_cache
 import numpy as np
 import numpy.typing as npt
 
-from core import compiled_chest as chest
 from core import kinematics
 from core.compiled import LEN_ORDER, ORDER, PARENT_RANK, REST_DIRS_RANK, bone_pass_item
 from core.compiled_limbs import TINY, swing_into, unit_or
@@ -275,32 +274,11 @@ def _hold_targets(
 
 
 @jit
-def _chest_weights(pi: I64, pf: F64) -> F64:  # pragma: no cover - compiled
-    """Per rank, a moving collar's weight in the chest's turn (``kinematics._Plan.chest``):
-    its chain's in the chest's centroid (1 where the chest takes none), -1 where it does not
-    move; at ``spine2`` 1 where the chest moves, 0 where not."""
-    w = np.full(NUM_JOINTS, -1.0)
-    bwk = pi[pi[_O_BWK] :]
-    for i in range(pi[pi[_O_BWP] + pi[_LB]]):
-        w[bwk[i]] = 1.0
-    w[chest.SPINE2] = 1.0 if w[chest.SPINE2] > 0.0 else 0.0
-    fwp, fwk, fww = pi[pi[_O_FWP] :], pi[pi[_O_FWK] :], pf[pi[_O_FWW] :]
-    for i in range(fwp[pi[_LF]]):
-        if fwk[i] == chest.L_COLLAR or fwk[i] == chest.R_COLLAR:
-            w[fwk[i]] = fww[i]
-    return w
-
-
-@jit
 def _iterate(
     x: F64, proposal: F64, y: F64, lens: F64, pi: I64, pf: F64, clamp: bool, start: F64,
-    tpos: F64, radii: F64, inner: F64, anchors: Bool, rigid: Bool, x0: F64, cw: F64,
-    free: bool, rot: F64, rot_new: F64, natural: bool, safe: bool, frozen: bool,
+    tpos: F64, radii: F64, inner: F64, anchors: Bool, rigid: Bool, safe: bool, frozen: bool,
 ) -> bool:  # pragma: no cover - compiled  # fmt: skip
-    """One FABRIK iteration (``kinematics._iterate``) into ``y``; False if not finite.
-    The chest (:mod:`core.compiled_chest`): ``x0`` the solve's start, ``cw`` its collars'
-    weights, ``free`` whether it turns, ``rot`` its turn in ``x``, ``rot_new`` in ``y``; all
-    only where ``natural``."""
+    """One FABRIK iteration (``kinematics._iterate``) into ``y``; False if not finite."""
     v, f1, f2, u = np.empty(3), np.empty(3), np.empty(3), np.empty(3)
     fwp, fwk, fwpar = pi[pi[_O_FWP] :], pi[pi[_O_FWK] :], pi[pi[_O_FWPAR] :]
     fwmix, fww = pi[pi[_O_FWMIX] :], pf[pi[_O_FWW] :]
@@ -330,23 +308,10 @@ def _iterate(
                 q0 = proposal[kid, 0] + v[0] * f
                 q1 = proposal[kid, 1] + v[1] * f
                 q2 = proposal[kid, 2] + v[2] * f
-            shoulder = kid == chest.L_SHOULDER or kid == chest.R_SHOULDER
-            if natural and shoulder and ln > 0.0:  # its cone
-                u[0] = (proposal[kid, 0] - q0) / ln
-                u[1] = (proposal[kid, 1] - q1) / ln
-                u[2] = (proposal[kid, 2] - q2) / ln
-                if chest.cone(x0, kid, rot, u):
-                    q0 = proposal[kid, 0] - u[0] * ln
-                    q1 = proposal[kid, 1] - u[1] * ln
-                    q2 = proposal[kid, 2] - u[2] * ln
             if rigid[kid]:  # kinematics._iterate: a rigid hip, the root where it puts it
                 q0 = proposal[kid, 0] - (x[kid, 0] - x[0, 0])
                 q1 = proposal[kid, 1] - (x[kid, 1] - x[0, 1])
                 q2 = proposal[kid, 2] - (x[kid, 2] - x[0, 2])
-            elif natural and (kid == chest.L_COLLAR or kid == chest.R_COLLAR):  # the chest
-                q0 = proposal[kid, 0] - (x[kid, 0] - x[par, 0])
-                q1 = proposal[kid, 1] - (x[kid, 1] - x[par, 1])
-                q2 = proposal[kid, 2] - (x[kid, 2] - x[par, 2])
             if mixed:
                 w = fww[i]
                 proposal[par, 0] += w * q0
@@ -360,19 +325,11 @@ def _iterate(
     if pi[_ROOT_MOVES] == 1 and not frozen:
         y[0, :] = proposal[0, :]
     bwp, bwk, bwpar = pi[pi[_O_BWP] :], pi[pi[_O_BWK] :], pi[pi[_O_BWPAR] :]
-    ok, turned = True, False
+    ok = True
     for level in range(pi[_LB]):
         for i in range(bwp[level], bwp[level + 1]):
             kid, par = bwk[i], bwpar[i]
             ln = lens[kid - 1]
-            if natural and (kid == chest.L_COLLAR or kid == chest.R_COLLAR):  # one body
-                if not turned:
-                    chest.turn(x0, y, proposal, cw, free, rot_new)
-                    turned = True
-                chest.place(x0, y, kid, rot_new)
-                for c in range(3):
-                    ok = ok and np.isfinite(y[kid, c])
-                continue
             for c in range(3):
                 v[c] = proposal[kid, c] - y[par, c]
             if safe:
@@ -386,13 +343,6 @@ def _iterate(
                 f = ln / np.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
                 for c in range(3):
                     y[kid, c] = y[par, c] + v[c] * f
-            shoulder = kid == chest.L_SHOULDER or kid == chest.R_SHOULDER
-            if natural and shoulder and ln > 0.0:  # its cone
-                for c in range(3):
-                    u[c] = (y[kid, c] - y[par, c]) / ln
-                if chest.cone(x0, kid, rot_new, u):
-                    for c in range(3):
-                        y[kid, c] = y[par, c] + u[c] * ln
             if rigid[kid]:  # kinematics._iterate: a rigid hip, moved with the root
                 for c in range(3):
                     y[kid, c] = y[0, c] + (x[kid, c] - x[0, c])
@@ -402,16 +352,11 @@ def _iterate(
 
 
 @jit
-def _carry(x0: F64, x: F64, pi: I64, turned: bool, rot: F64) -> None:  # pragma: no cover
-    """``kinematics._carry`` in place on ``x``: untargeted branches carried rigidly (from
-    a chest that ``turned``, by its turn ``rot``: :mod:`core.compiled_chest`)."""
+def _carry(x0: F64, x: F64, pi: I64) -> None:  # pragma: no cover - compiled
+    """``kinematics._carry`` in place on ``x``: untargeted branches carried rigidly."""
     kids, anchors = pi[pi[_O_CAR] :], pi[pi[_O_ANC] :]
     a0, a1, off, out = np.empty(3), np.empty(3), np.empty(3), np.empty(3)
     placed = np.empty((pi[_C], 3))
-    still = True
-    for i in range(3):
-        for j in range(3):
-            still = still and rot[i, j] == (1.0 if i == j else 0.0)
     for i in range(pi[_C]):
         kid, anc = kids[i], anchors[i]
         ap = 0 if anc == 0 else PARENT_RANK[anc]
@@ -419,16 +364,11 @@ def _carry(x0: F64, x: F64, pi: I64, turned: bool, rot: F64) -> None:  # pragma:
             a0[c] = x0[anc, c] - x0[ap, c]
             a1[c] = x[anc, c] - x[ap, c]
             off[c] = x0[kid, c] - x0[anc, c]
-        chest_turned = turned and anc == chest.SPINE2
-        keep = still or not chest_turned
+        keep = True
         for c in range(3):
             keep = keep and a0[c] == a1[c] and x[anc, c] == x0[anc, c]
         if keep:
             placed[i, :] = x0[kid, :]
-        elif chest_turned:
-            for c in range(3):
-                placed[i, c] = x[anc, c] + ((rot[c, 0] * off[0] + rot[c, 1] * off[1])
-                                            + rot[c, 2] * off[2])  # fmt: skip
         else:
             swing_into(a0, a1, off, out)
             for c in range(3):
@@ -450,7 +390,6 @@ def _errors(x: F64, tpos: F64, pi: I64, out: F64) -> None:  # pragma: no cover -
 def _solve(
     x0: F64, lens: F64, tpos: F64, pi: I64, pf: F64, tol: float, max_it: int,
     hold: Bool, hold_any: bool, kts: I64, below: Bool, x: F64, errors: F64, rigid_hips: bool,
-    natural: bool,
 ) -> tuple[int, bool]:  # pragma: no cover - compiled  # fmt: skip
     """``kinematics._solve`` for one item (rank order); ``x``/``errors`` receive the answer.
     ``hold_any``: some target is pinned (``hold``); ``kts``, ``below``: the plan's targets
@@ -504,22 +443,15 @@ def _solve(
     new_errors = np.empty(k_n)
     y = np.empty_like(x)
     holding = bool((kts >= 0).any())
-    natural = natural and chest.applies(pi[pi[_O_TR] : pi[_O_TR] + k_n])
-    cw, rot, rot_new = _chest_weights(pi, pf), np.eye(3), np.eye(3)
-    free = cw[chest.SPINE2] > 0.0
-    turned = natural and (cw[chest.L_COLLAR] >= 0.0 or cw[chest.R_COLLAR] >= 0.0)
     strikes, its, frozen = 0, 0, False
     while its < max_it and not done:
         its += 1
         if holding:  # kinematics._solve: a target above a pin, as far as the pin allows
             _hold_targets(proposal, aim, pi, pf, lens, tpos, x[0], kts, below)
-        args = (x, proposal, y, lens, pi, pf, clamp, start, centres, radii, inner, anchors, rigid,
-                x0, cw, free, rot, rot_new, natural)  # fmt: skip
+        args = (x, proposal, y, lens, pi, pf, clamp, start, centres, radii, inner, anchors, rigid)
         if not _iterate(*args, False, frozen):
             _iterate(*args, True, frozen)
         x[:, :] = y
-        if turned:
-            rot[:, :] = rot_new
         _errors(x, tpos, pi, new_errors)
         progress, pin_progress, newly, all_ok = 0.0, 0.0, False, True
         for k in range(k_n):
@@ -541,7 +473,7 @@ def _solve(
         errors[:] = new_errors
         done = finished
     if its:
-        _carry(x0, x, pi, turned and free, rot)
+        _carry(x0, x, pi)
         _errors(x, tpos, pi, errors)
     return its, converged
 
@@ -565,8 +497,6 @@ def solve_batch(
     pose, xr, rr, lr = (np.empty((NUM_JOINTS, 3)), np.empty((NUM_JOINTS, 3)),
                         np.empty((NUM_JOINTS, 3)), np.empty(_NB))  # fmt: skip
     x0, x = np.empty((NUM_JOINTS, 3)), np.empty((NUM_JOINTS, 3))
-    xs, xa, ea = np.empty((NUM_JOINTS, 3)), np.empty((NUM_JOINTS, 3)), np.empty(k_n)
-    xk, natural = np.empty((NUM_JOINTS, 3)), chest.applies(gi[gi[_O_TR] : gi[_O_TR] + k_n])
     lens, tp = np.empty(_NB), np.empty((k_n, 3))
     hold_any, free = has_hold and bool(hold.any()), np.zeros(k_n, dtype=np.bool_)
     l_kts, l_below = _above_pins(li, lf, free)  # (the trunk-locked stage holds no pins)
@@ -583,7 +513,7 @@ def solve_batch(
         solved = False
         if polish and has_local:
             n_it, c = _solve(x0, lens, tp, li, lf, tol, max_it, hold, False, l_kts, l_below, x,
-                             errs[b], rigid_hips, True)  # fmt: skip
+                             errs[b], rigid_hips)  # fmt: skip
             solved = True
             for k in range(k_n):
                 solved = solved and errs[b, k] <= tol
@@ -591,34 +521,8 @@ def solve_batch(
             if not solved:
                 x0[:, :] = x
         if not solved:
-            xs[:, :] = x0
-            xk[:, :] = x0
             g_it, c = _solve(x0, lens, tp, gi, gf, tol, max_it, hold, hold_any, g_kts, g_below,
-                             x, errs[b], rigid_hips, True)  # fmt: skip
-            pin_w, worst = 0.0, 0.0
-            for k in range(k_n):
-                if hold_any and hold[k]:
-                    pin_w = max(pin_w, errs[b, k])
-                else:
-                    worst = max(worst, errs[b, k])
-            if natural and (pin_w > tol or worst > tol):  # kinematics._held
-                a_it, a_c = _solve(xs, lens, tp, gi, gf, tol, max_it, hold, hold_any, g_kts,
-                                   g_below, xa, ea, rigid_hips, False)  # fmt: skip
-                g_it += a_it
-                a_pin, a_worst = 0.0, 0.0
-                for k in range(k_n):
-                    if hold_any and hold[k]:
-                        a_pin = max(a_pin, ea[k])
-                    else:
-                        a_worst = max(a_worst, ea[k])
-                if pin_w > tol:
-                    take = a_pin < pin_w
-                else:
-                    take = a_pin <= tol and a_worst <= tol and chest.kept(xk, xa)
-                if take:
-                    x[:, :] = xa
-                    errs[b, :] = ea
-                    c = a_c
+                             x, errs[b], rigid_hips)  # fmt: skip
             n_it += g_it
             conv[b] = c
         its[b] = n_it

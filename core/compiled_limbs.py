@@ -14,9 +14,9 @@ import numpy as np
 import numpy.typing as npt
 
 from core.carry import BONE_OF
-from core.chest import CLAVICLE_CONE as _CONE
 from core.ends import BELOW as _ENDS_BELOW
 from core.ends import CHAINS as _CHAINS
+from core.ends import CLAVICLE_CONE as _CONE
 from core.ends import COLLARS as _ENDS_COLLARS
 from core.ends import OTHER_COLLAR
 from core.ends import PREFER as _PREFER

@@ -28,35 +28,128 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from core import chest
-from core.layout import (
-    _LEN_ORDER,
-    _ORDER,
-    _PARENT_RANK,
-    _RANK,
-    _REST_DIRS_I,
-    _SLICES,
-    _as_float64,
-    _cross3,
-    _from_internal,
-    _lengths_internal,
-    _out_dtype,
-    _to_internal,
-    _unit_or,
-)
+from core.rest import REST_DIRS
 from core.rigid import PAIRS
+from core.shells import TINY as _TINY
 from core.shells import Shells, above_pins, clamp_root, hold_targets, onto_pins, pin_mask, shells
 from core.shells import dot3 as _dot3
 from core.shells import norm3 as _norm3
-from core.skeleton import NUM_JOINTS, TRUNK
+from core.skeleton import BONE_CHILDREN, DEPTH, NUM_JOINTS, PARENTS, TRUNK
 
 F64 = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.intp]
 BoolArray = npt.NDArray[np.bool_]
 
+_ROOT = PARENTS.index(-1)
+_MAX_DEPTH = max(DEPTH)
+
+#: Bone index (position in ``BONES`` / the ``lengths`` axis) of each non-root joint.
+_BONE_OF: dict[int, int] = {int(c): b for b, c in enumerate(BONE_CHILDREN)}
+
+# --------------------------------------------------------------------------------------
+# Internal layout
+# --------------------------------------------------------------------------------------
+# Inside, poses are joint-first and depth-ordered: ``[21, 3, N]`` (N = flattened batch),
+# rank r holding joint ``_ORDER[r]``. Every depth level is then a contiguous slice, the
+# per-level work is a handful of ufunc calls on contiguous blocks, and the batch is the
+# fastest axis. Lengths are ``[20, N]`` (or ``[20, 1]`` when shared), row ``r - 1``
+# holding the bone that ends at rank ``r``.
+
+#: Joints sorted by depth (stable): the internal order. ``_RANK`` is its inverse.
+_ORDER: IntArray = np.argsort(np.asarray(DEPTH), kind="stable").astype(np.intp)
+_RANK: IntArray = np.argsort(_ORDER, kind="stable").astype(np.intp)
+_ROOT_RANK = int(_RANK[_ROOT])
+if _ROOT_RANK != 0:  # pragma: no cover - PARENTS has exactly one root at depth 0
+    raise RuntimeError("the root must be the only joint at depth 0")
+#: Bone index (``lengths`` axis) of the bone ending at each rank 1..20.
+_LEN_ORDER: IntArray = np.asarray([_BONE_OF[int(j)] for j in _ORDER[1:]], dtype=np.intp)
+#: Rank of the parent of each rank (-1 for the root).
+_PARENT_RANK: IntArray = np.asarray(
+    [-1 if PARENTS[int(j)] < 0 else int(_RANK[PARENTS[int(j)]]) for j in _ORDER], dtype=np.intp
+)
+
 #: Ranks of the hips (``core.rigid.PAIRS``), children of the root: with ``rigid_hips`` the
 #: ones no target is on move with the pelvis, translated (``_Plan.rigid``; docs/kinematics.md).
 _RIGID: BoolArray = np.isin(np.arange(NUM_JOINTS), _RANK[PAIRS[0, 1:]])
+
+
+def _depth_slices() -> tuple[tuple[int, int, IntArray], ...]:
+    out = []
+    depth = np.asarray(DEPTH)[_ORDER]
+    for d in range(1, _MAX_DEPTH + 1):
+        ranks = np.flatnonzero(depth == d)
+        start, stop = int(ranks[0]), int(ranks[-1]) + 1
+        out.append((start, stop, _PARENT_RANK[start:stop].copy()))
+    return tuple(out)
+
+
+#: Per depth level 1..max: (first rank, end rank, parent ranks).
+_SLICES = _depth_slices()
+#: Rest-pose unit bone directions per rank 1..20, ``[20, 3, 1]``.
+_REST_DIRS_I: F64 = np.ascontiguousarray(REST_DIRS[_ORDER[1:]][:, :, None])
+_REST_DIRS_I.flags.writeable = False
+
+
+def _as_float64(a: npt.ArrayLike) -> F64:
+    return np.asarray(a, dtype=np.float64)
+
+
+def _out_dtype(a: npt.ArrayLike) -> np.dtype[np.floating[Any]]:
+    dt = np.asarray(a).dtype
+    if np.issubdtype(dt, np.floating):
+        return np.dtype(dt.type)
+    return np.dtype(np.float64)
+
+
+def _to_internal(a: F64, batch: tuple[int, ...]) -> F64:
+    """``[*batch, J, 3]`` (broadcastable) -> ``[J, 3, N]`` in internal (rank) order,
+    always a fresh array."""
+    if a.ndim == 2 and not batch:
+        return a.take(_ORDER, axis=0)[:, :, None]
+    flat = np.broadcast_to(a, (*batch, NUM_JOINTS, 3)).reshape(-1, NUM_JOINTS, 3)
+    if flat.shape[0] == 1:
+        return np.ascontiguousarray(flat[0][_ORDER][:, :, None])
+    if flat.shape[0] <= 64:
+        return np.ascontiguousarray(flat.transpose(1, 2, 0)[_ORDER])
+    # Large batches: one destination filled joint by joint (numpy's gathers from a
+    # transposed view are an order of magnitude slower than these strided copies).
+    out = np.empty((NUM_JOINTS, 3, flat.shape[0]))
+    for rank, joint in enumerate(_ORDER.tolist()):
+        np.copyto(out[rank], flat[:, joint, :].T)
+    return out
+
+
+def _from_internal(x: F64, batch: tuple[int, ...]) -> F64:
+    """Inverse of :func:`_to_internal` (a view for batches: the batch axis is inside)."""
+    y = x[_RANK]
+    if y.shape[-1] == 1:
+        return y.reshape(*batch, NUM_JOINTS, 3)
+    return np.moveaxis(y, -1, 0).reshape(*batch, NUM_JOINTS, 3)
+
+
+def _lengths_internal(lens: F64, batch: tuple[int, ...]) -> F64:
+    """``[..., 20]`` -> ``[20, N]`` in rank order (``[20, 1]`` when shared)."""
+    if lens.ndim == 1:
+        return np.ascontiguousarray(lens[_LEN_ORDER][:, None])
+    flat = np.broadcast_to(lens, (*batch, NUM_JOINTS - 1)).reshape(-1, NUM_JOINTS - 1)
+    return np.ascontiguousarray(flat[:, _LEN_ORDER].T)
+
+
+def _cross3(a: F64, b: F64) -> F64:
+    ax, ay, az = a[:, 0], a[:, 1], a[:, 2]
+    bx, by, bz = b[:, 0], b[:, 1], b[:, 2]
+    return np.stack([ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx], axis=1)
+
+
+def _unit_or(v: F64, *fallbacks: F64) -> F64:
+    """Unit ``v`` over axis 1; the first usable fallback where ``v`` has no direction
+    (zero, or too short to invert). The last fallback must be unit (or zero)."""
+    n = _norm3(v)
+    ok = n > _TINY
+    u: F64 = v / np.where(ok, n, 1.0)[:, None]
+    if not fallbacks or bool(ok.all()):
+        return u
+    return np.where(ok[:, None], u, _unit_or(*fallbacks))
 
 
 # --------------------------------------------------------------------------------------
@@ -220,7 +313,6 @@ class _Plan:
     rigid: BoolArray  # [21] with rigid_hips, the ranks of _RIGID no target or pin is on
     shell_top: IntArray  # [K] the rigid hip on each target's chain, or 0; its shell's chain:
     shell_path: F64  # [K, 20] ``path`` less that hip's bone (centred the hip's offset off)
-    chest: F64  # [21] the collars' weights in the chest's turn (core.chest.weights)
 
 
 def _make_plan(
@@ -336,7 +428,6 @@ def _make_plan(
         carried_joints=np.asarray(still, dtype=np.intp),
         carried_anchors=np.asarray([anchor[r] for r in still], dtype=np.intp),
         path=path,
-        chest=chest.weights(forward, backward),
     )
 
 
@@ -363,19 +454,13 @@ def _iterate(
     lengths: _LevelLengths,
     clamp: Shells | None,
     safe: bool,
-    frozen: BoolArray | None,
-    x0: F64,
-    lens: F64,
-    rot: F64,
-    natural: bool,
-) -> tuple[F64, F64 | None]:
+    frozen: BoolArray | None = None,
+) -> F64:
     """One FABRIK iteration (forward then backward reaching); returns the new pose.
 
     ``proposal`` is scratch holding the fixed targets; the fast path lets undefined
     directions produce non-finite values, the caller then reruns with ``safe``.
-    ``frozen`` ``[N]``: items whose moving root stays where it is. The chest and clavicles
-    (:mod:`core.chest`, where ``natural``): ``x0``, ``lens`` the solve's start and lengths,
-    ``rot`` the chest's turn in ``x``; its turn in ``y`` is returned (None: not turned).
+    ``frozen`` ``[N]``: items whose moving root stays where it is.
     """
     # Forward reaching: from the targeted joints towards the (sub-)bases.
     for fw, length in zip(plan.forward, lengths.forward, strict=True):
@@ -387,8 +472,6 @@ def _iterate(
             q = pc + u * length
         else:
             q = pc + toward * (length / _norm3(toward)[:, None])
-        if natural:
-            chest.forward(x0, x, proposal, fw.kids, q, lens, rot)
         rigid = plan.rigid[fw.kids]
         if rigid.any():  # a rigid hip: the root where its offset puts it
             q[rigid] = proposal[fw.kids[rigid]] - (x[fw.kids[rigid]] - x[0])
@@ -400,7 +483,7 @@ def _iterate(
     if clamp is not None:  # the free root: centroid, kept within reach of the pins
         proposal[0] = clamp_root(proposal[0], clamp)
     # Backward reaching: from the root outwards, every active bone exact again.
-    y, turned = x.copy(), None
+    y = x.copy()
     if plan.root_moves:
         y[0] = proposal[0] if frozen is None else np.where(frozen[None], x[0], proposal[0])
     for (kids, parents, where), length in zip(plan.backward, lengths.backward, strict=True):
@@ -412,12 +495,10 @@ def _iterate(
             y[where] = par + u * length
         else:
             y[where] = par + toward * (length / _norm3(toward)[:, None])
-        if natural:
-            turned = chest.backward(x0, y, proposal, kids, lens, plan.chest, turned)
         rigid = plan.rigid[kids]
         if rigid.any():  # a rigid hip: moved with the root
             y[kids[rigid]] = y[0] + (x[kids[rigid]] - x[0])
-    return y, turned
+    return y
 
 
 @dataclass(frozen=True)
@@ -451,12 +532,9 @@ def _solve(
     tolerance: float,
     max_iterations: int,
     pinned: BoolArray | None = None,
-    natural: bool = True,
 ) -> _Solved:
-    """Multi-end-effector FABRIK on internal arrays from ``x0`` (exact lengths);
-    ``natural``: the chest rigid and the clavicles in their cones (:mod:`core.chest`)."""
+    """Multi-end-effector FABRIK on internal arrays from ``x0`` (exact lengths)."""
     stall = tolerance * 1e-3
-    natural = natural and chest.applies(plan.target_ranks)
     hold = pinned if pinned is not None and bool(np.any(pinned)) else None
     # the pins wherever the start put them (chains of any length)
     pins = None if hold is None else hold[:, None] & (plan.path @ lens > 0)
@@ -483,21 +561,17 @@ def _solve(
         np.zeros(x0.shape[-1], dtype=np.bool_) if pins is not None and plan.root_moves else None
     )
     above = [] if hold is None else above_pins(plan.targeted, plan.target_ranks, plan.path, hold)
-    iterations, rot = 0, np.broadcast_to(np.eye(3), (x0.shape[-1], 3, 3)).copy()
-    chest_at = (x0, lens, rot, natural)
+    iterations = 0
     while iterations < max_iterations and not bool(np.all(done)):
         iterations += 1
         if above:  # a target above a pin: as far as the pin allows
             hold_targets(proposal, joint_t, above, plan.path, lens, tpos, x[0])
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            y, turn = _iterate(x, proposal, plan, level_lengths, clamp, False, frozen, *chest_at)
+            y = _iterate(x, proposal, plan, level_lengths, clamp, False, frozen)
         if not np.isfinite(np.add.reduce(y, axis=None)):
-            y, turn = _iterate(x, proposal, plan, level_lengths, clamp, True, frozen, *chest_at)
+            y = _iterate(x, proposal, plan, level_lengths, clamp, True, frozen)
         if done.any():  # finished poses of a batch keep their answer
             y = np.where(done[None, None], x, y)
-        if turn is not None:
-            rot = turn if not done.any() else np.where(done[:, None, None], rot, turn)
-            chest_at = (x0, lens, rot, natural)
         x = y
         new_errors = _norm3(x.take(plan.target_ranks, axis=0) - tpos)
         # Stall: no target newly reached and the ones still missing got closer by less
@@ -525,49 +599,15 @@ def _solve(
         done = done | finished
 
     if iterations:
-        x = _carry(x0, x, plan, rot if natural else None)
+        x = _carry(x0, x, plan)
         errors = _norm3(x.take(plan.target_ranks, axis=0) - tpos)
     return _Solved(x=x, iterations=iterations, errors=errors, converged=converged)
 
 
-def _held(
-    x0: F64, lens: F64, tpos: F64, plan: _Plan, tolerance: float, max_iterations: int,
-    pins: BoolArray | None,
-) -> _Solved:  # fmt: skip
-    """:func:`_solve`, and where the natural chest let a pin go or missed a target, the
-    textbook one's answer where that holds the pins better, or meets every target and keeps
-    the chest (:func:`core.chest.kept`; :mod:`core.chest`, "Pins come first")."""
-    solved = _solve(x0, lens, tpos, plan, tolerance, max_iterations, pins)
-    if not chest.applies(plan.target_ranks):
-        return solved
-    held = np.zeros(len(plan.target_ranks), dtype=np.bool_) if pins is None else pins
-    n = x0.shape[-1]
-    worst_pin = solved.errors[held].max(axis=0) if held.any() else np.zeros(n)
-    worst = solved.errors[~held].max(axis=0) if (~held).any() else np.zeros(n)
-    off = (worst_pin > tolerance) | (worst > tolerance)
-    if not bool(off.any()):
-        return solved
-    again = _solve(x0, lens, tpos, plan, tolerance, max_iterations, pins, natural=False)
-    a_pin = again.errors[held].max(axis=0) if held.any() else np.zeros(n)
-    a_worst = again.errors[~held].max(axis=0) if (~held).any() else np.zeros(n)
-    better = np.where(
-        worst_pin > tolerance,
-        a_pin < worst_pin,
-        off & (a_pin <= tolerance) & (a_worst <= tolerance) & chest.kept(x0, again.x),
-    )
-    return _Solved(
-        x=np.where(better[None, None], again.x, solved.x),
-        iterations=solved.iterations + again.iterations,
-        errors=np.where(better[None], again.errors, solved.errors),
-        converged=np.where(better, again.converged, solved.converged),
-    )
-
-
-def _carry(x0: F64, x: F64, plan: _Plan, rot: F64 | None) -> F64:
+def _carry(x0: F64, x: F64, plan: _Plan) -> F64:
     """Place the joints the iteration left alone: each untargeted branch is a rigid body
     hanging from its anchor, turned by the swing of the anchor's bone since ``x0``
-    (translated only when the anchor is the root; from a turned chest by its turn ``rot``,
-    :mod:`core.chest`). Exactly in place if nothing moved."""
+    (translated only when the anchor is the root). Exactly in place if nothing moved."""
     kids, anchors = plan.carried_joints, plan.carried_anchors
     if len(kids) == 0:
         return x
@@ -578,11 +618,6 @@ def _carry(x0: F64, x: F64, plan: _Plan, rot: F64 | None) -> F64:
     base = x.take(anchors, axis=0)
     placed = base + _swing(a0, a1, off)
     keep = np.all(a0 == a1, axis=1) & np.all(base == x0.take(anchors, axis=0), axis=1)
-    if rot is not None and chest.turns(plan.chest):  # from the chest: by its turn
-        still = np.all(rot == np.eye(3), axis=(1, 2))
-        for i in np.flatnonzero(anchors == chest.SPINE2).tolist():
-            placed[i] = chest.carried(x0, x, int(kids[i]), chest.SPINE2, rot)
-            keep[i] &= still
     x = x.copy()
     x[kids] = np.where(keep[:, None], x0.take(kids, axis=0), placed)
     return x
@@ -704,7 +739,7 @@ def fabrik(
         return _result(pb, _no_targets(pb), tolerance, 0)
     pins = pin_mask(pinned, len(pb.idx))
     plan = _make_plan(pb.idx, pb.weights, frozenset(), free_root, pins, rigid_hips)
-    solved = _held(pb.x0, pb.lens, pb.tpos, plan, tolerance, max_iterations, pins)
+    solved = _solve(pb.x0, pb.lens, pb.tpos, plan, tolerance, max_iterations, pins)
     return _result(pb, solved, tolerance, solved.iterations)
 
 
@@ -759,5 +794,5 @@ def polish(
             return _result(pb, local, tolerance, local.iterations)
         x0, iterations = local.x, local.iterations
     plan = _make_plan(pb.idx, pb.weights, frozenset(), free_root, pins, rigid_hips)
-    solved = _held(x0, pb.lens, pb.tpos, plan, tolerance, max_iterations, pins)
+    solved = _solve(x0, pb.lens, pb.tpos, plan, tolerance, max_iterations, pins)
     return _result(pb, solved, tolerance, iterations + solved.iterations)

@@ -7,9 +7,17 @@ import numpy as np
 import pytest
 
 from core import compiled
-from core.chest import CLAVICLE_CONE
 from core.compiled_limbs import ends_item
-from core.ends import BELOW, CHAINS, PREFER, active, keep_ends, kept_chains, soft_reach
+from core.ends import (
+    BELOW,
+    CHAINS,
+    CLAVICLE_CONE,
+    PREFER,
+    active,
+    keep_ends,
+    kept_chains,
+    soft_reach,
+)
 from core.skeleton import JOINT_INDEX, bone_lengths
 from tests.conftest import PosePairs
 
@@ -286,7 +294,7 @@ def test_a_wrist_out_of_reach_turns_its_shoulder_about_the_collar(
     assert (after[out] < before[out]).mean() > 0.9 and after[out].mean() < 0.8 * before[out].mean()
     # brought within reach by the turn: the wrist on its goal; else the shoulder turned all
     # the way, onto the line from the collar to the goal, or as far as the clavicle's cone
-    # about the collars' line lets it (core.chest.CLAVICLE_CONE, or the start's angle)
+    # about the collars' line lets it (core.ends.CLAVICLE_CONE, or the start's angle)
     on = after[out] < 1e-9
     assert 0.2 < on.mean() < 1.0
     rest_out = np.flatnonzero(out)[~on]

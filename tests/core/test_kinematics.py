@@ -218,16 +218,10 @@ def test_fabrik_unreachable_target_stretches_towards_it() -> None:
     assert bool(res.converged)
     got = res.positions[wrist]
     assert np.array_equal(res.positions[ROOT], root)  # a lone drag does not float the body
-    # Towards the target as far as the chain stretches with a rigid chest and the clavicle
-    # in its cone (core.chest): within 3 cm of the textbook's straight line, 1.8 cm short
-    # of its full stretch, the shoulders still 94 % of their width apart.
-    assert np.linalg.norm(np.cross(got - root, direction)) <= 0.03 * 2
-    assert reach - TOL <= res.errors[0] <= reach + 0.03
-    width = np.linalg.norm(pose[J["left_shoulder"]] - pose[J["right_shoulder"]])
-    got_width = np.linalg.norm(
-        res.positions[J["left_shoulder"]] - res.positions[J["right_shoulder"]]
-    )
-    assert got_width >= 0.9 * width
+    # On the line root -> target, as far as the chain stretches.
+    assert np.linalg.norm(np.cross(got - root, direction)) <= TOL
+    assert abs(np.linalg.norm(got - root) - reach) <= TOL
+    assert abs(res.errors[0] - reach) <= TOL
 
 
 def test_fabrik_unreachable_drag_keeps_pinned_feet() -> None:

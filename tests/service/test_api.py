@@ -83,7 +83,7 @@ def test_solve_reaches_real_targets_with_input_bone_lengths(
         assert set(out["pose"]) == set(JOINT_NAMES)
         assert out["solvers"][0] == "left_wrist+right_wrist"
         # a wrist the retry's pass left short, its collar turned only within the clavicle's
-        # cone (core.chest): polished, in 1 of these 20
+        # cone (core.ends.CLAVICLE_CONE): polished, in 1 of these 20
         assert out["solvers"][1:] in ([], ["fabrik-polish"])
         polished += len(out["solvers"]) - 1
         assert out["method"] == "neural"

@@ -306,17 +306,18 @@ _WRISTS_APART = {
 
 
 @pytest.mark.parametrize("pins", [[], PINS], ids=["free", "ankles"])
-def test_wrists_beyond_a_rigid_chest_are_missed_by_no_more_than_they_must(
+def test_wrists_the_answer_met_beyond_a_rigid_chest_are_missed_by_no_more_than_they_must(
     engine: Engine, bvh_files: dict[str, Path], pins: list[str]
 ) -> None:
-    """Wrists beyond what a rigid chest reaches are missed, by about the least that chest
-    can. The child's collars hang 1.58 in apart from one rigid ``Spine3``, so its wrists
-    are never farther apart than two arms (collar to wrist) and that: the two misses add up
-    to what the targets lie beyond it at least, the farther to half of it (42.0 mm). Before,
-    the canonical answer met both targets by swinging its collars from 1.58 to 8.9 in apart
-    (textbook FABRIK: bones that turn apart) and the character then missed them; its chest
-    is now as rigid (``core.chest``): the answer misses them itself, ``reached`` false, pins
-    held, each miss within 5 mm of that bound (4.2-4.5 cm)."""
+    """Where the canonical answer meets a target only by bending what is rigid on the
+    character, the character misses it, by the least its own skeleton can. The canonical
+    skeleton's chest is bones that turn apart (``core.kinematics``: bone lengths, no rigid
+    groups): to meet both wrists of this edit, the answer swings its collars from 1.58 to
+    8.9 in apart. The child's collars hang 1.58 in apart from one rigid ``Spine3``, so its
+    wrists are never farther apart than two arms (collar to wrist) and that: the two misses
+    add up to what the targets lie beyond it at least, the farther to half of it (42.0 mm),
+    whatever the retarget does; the character's spine folding there is the polish taking
+    that least. Pins held, ``reached`` false; the miss within 1 mm of that bound."""
     name = "fair1-child-inches-zup"
     text = bvh_files[name].read_text()
     _, _, units, frame = FILES[name]
@@ -328,13 +329,14 @@ def test_wrists_beyond_a_rigid_chest_are_missed_by_no_more_than_they_must(
     ch = character_from_bvh(read_request_bvh(text), req, req.frame)
     edit = solve_prepared(engine, ch, character_problem(ch, req))
     p, res = edit.problem, edit.result
+    solved = np.asarray(res.pose)
     wrists = [JOINT_INDEX[f"{s}_wrist"] for s in ("left", "right")]
     collars = [JOINT_INDEX[f"{s}_collar"] for s in ("left", "right")]
-    assert (res.errors > TOL).all() and not res.reached.any()
-    assert (res.pin_errors <= TOL).all()
+    assert (res.errors <= TOL).all() and (res.pin_errors <= TOL).all()  # the answer meets
     before = ch.to_service(canonical_points(ch.skel, ch.pose, ch.jmap))
     after = ch.to_service(canonical_points(ch.skel, edit.pose, ch.jmap))
     span = float(np.linalg.norm(np.subtract(*before[collars])))
+    assert np.linalg.norm(np.subtract(*solved[collars])) > 4 * span  # the answer's collars
     assert abs(np.linalg.norm(np.subtract(*after[collars])) - span) < 1e-9  # rigid here
     # an arm's reach: its three bones, collar to wrist (the character's own lengths)
     bones = [(w, PARENTS[w], PARENTS[PARENTS[w]]) for w in wrists]
@@ -344,7 +346,7 @@ def test_wrists_beyond_a_rigid_chest_are_missed_by_no_more_than_they_must(
     assert least > 0.04  # 42.0 mm: out of the character's reach
     miss = np.linalg.norm(after[p.target_idx] - p.target_pos, axis=1)
     assert miss[:2].sum() >= 2 * least - 1e-9  # (no pose does better: a check of the bound)
-    assert miss[:2].max() <= least + 0.005, (miss, least)
+    assert miss[:2].max() <= least + TOL, (miss, least)
     if pins:
         assert miss[2:].max() <= TOL
 

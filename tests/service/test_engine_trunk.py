@@ -80,10 +80,7 @@ def test_a_chest_dragged_over_pinned_wrists_reaches_with_its_shoulders_apart(
               f"shoulders folded {_folded(theirs, poses, 'shoulders')} -> "
               f"{_folded(ours, poses, 'shoulders')} of {len(poses)}")  # fmt: skip
         assert before.mean() > 0.02 and reach.mean() < 0.01, (before.mean(), reach.mean())
-        assert _folded(ours, poses, "shoulders") == 0
-        if joint == "spine2":  # without the retry: the natural chest lets a pinned wrist
-            # go, and FABRIK with textbook bones, which holds it, folds them (core.chest)
-            assert _folded(theirs, poses, "shoulders") >= 10
+        assert _folded(theirs, poses, "shoulders") >= 10 >= 2 * _folded(ours, poses, "shoulders")
         assert _folded(ours, poses, "hips") == 0
 
 

@@ -88,7 +88,7 @@ def test_lean_answers_are_the_general_paths(
             polished += 1
         else:
             assert "fabrik-polish" not in one.solvers
-    # (a wrist's collar turned only within its cone, core.chest: 1 in 30 at most here)
+    # (a wrist's collar turned only within its cone, core.ends: 1 in 30 at most here)
     assert polished <= 1
 
 
