@@ -1,6 +1,6 @@
 """Does a far reach fold the shoulders? ``python -m bench.chest [--poses 60] [--data-only]``.
 
-Two tables (docs/kinematics.md, "The chest"):
+Two tables (docs/kinematics.md, "Far reaches fold the shoulders"):
 
 1. **Real motion**: pairs of frames 0.2-1 s apart in world space, seeded, per split
    (TRAIN, the held-out bodies): how far the collar-to-collar distance and the shoulder
