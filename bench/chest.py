@@ -2,11 +2,11 @@
 
 Two tables (docs/kinematics.md, "Far reaches fold the shoulders"):
 
-1. **Real motion**: pairs of frames 0.2-1 s apart in world space, seeded, per split
-   (TRAIN, the held-out bodies): how far the collar-to-collar distance and the shoulder
-   width change, how far each collar turns against the spine bone, and how far each
-   clavicle strays from its mean direction in a chest frame (the spine bone and the
-   collars' line: ``core.ends.CLAVICLE_CONE``).
+1. **Real motion**: pairs of frames 0.2-1 s apart in world space, seeded, per split (TRAIN,
+   the held-out bodies; ``bench.edits.sample_pairs``, the training pair sampler): how far
+   the collar-to-collar distance and the shoulder width change, how far each collar turns
+   against the spine bone, and how far each clavicle strays from its mean direction in a
+   chest frame (the spine bone and the collars' line: ``core.ends.CLAVICLE_CONE``).
 2. **Far reaches** through :class:`service.engine.Engine` with the shipped models: one
    wrist moved 0.4-1.0 m in a seeded direction, both wrists of ``--poses`` real poses from
    each of TEST and the held-out bodies (:func:`bench.pins.sample_poses`), without and with
@@ -25,6 +25,7 @@ import numpy as np
 import numpy.typing as npt
 import typer
 
+from bench.characters import Models
 from core.skeleton import JOINT_INDEX as J
 
 F64 = npt.NDArray[np.float64]
@@ -59,6 +60,7 @@ def _gap(w: F64, i: npt.NDArray[np.intp], a: str, b: str) -> F64:
 
 def real_motion(dataset: Path, pairs: int, seed: int) -> None:
     """Print table 1 (see the module)."""
+    from bench.edits import sample_pairs
     from trainer.data.dataset import load_dataset
 
     data = load_dataset(dataset)
@@ -68,14 +70,7 @@ def real_motion(dataset: Path, pairs: int, seed: int) -> None:
     for split in ("train", "holdout"):
         part = data.subset(data.split_mask(split))
         w = part.world()
-        rng = np.random.default_rng(seed)
-        a = rng.integers(0, len(part), pairs)
-        b = a + rng.integers(6, 31, pairs)  # 0.2-1 s at 30 fps
-        ok = b < len(part)
-        a, b = a[ok], b[ok]
-        ok = part.clip[a] == part.clip[b]
-        a, b = a[ok], b[ok]
-
+        a, b = sample_pairs(part, pairs, np.random.default_rng(seed))
         fa, fb = _chest_frame(w, a), _chest_frame(w, b)
         tilt, clav = [], []
         for side in ("left", "right"):
@@ -140,7 +135,7 @@ def far_reaches(models: Path, dataset: Path, poses: int, seed: int) -> None:
 
 
 def main(
-    models: Annotated[Path, typer.Option(help="Models folder (manifest.json).")] = Path("models"),
+    models: Models = Path("models"),
     dataset: Annotated[Path, typer.Option(help="Dataset file (format 2).")] = Path(
         "data/poses.npz"
     ),
