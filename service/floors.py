@@ -48,11 +48,7 @@ def floor_warnings(poses: F64, floors: float | F64) -> list[str | None]:
     trunks = poses[:, _NECK] - poses[:, _PELVIS]
     torsos = np.sqrt(np.add.reduce(trunks * trunks, axis=1))
     lowest = poses[:, :, 1].min(axis=1)
-    off = (
-        (floors > pelvis)
-        | (floors < pelvis - FLOOR_REACH * torsos)
-        | (floors > lowest + SUNK * torsos)
-    )
+    off = _outside(floors, pelvis, torsos, lowest)
     out: list[str | None] = [None] * len(poses)
     if off.any():
         at = np.broadcast_to(floors, pelvis.shape)
@@ -63,17 +59,27 @@ def floor_warnings(poses: F64, floors: float | F64) -> list[str | None]:
 
 def floor_warning(pose: F64, floor: float, height: str = "y") -> str | None:
     """The ``floor_warning`` of one start pose (``[21, 3]``, world) over ``floor``: as
-    :func:`floor_warnings` says it (the same operations, in Python floats: ~1 us, a lone
-    edit's hot path; numpy's passes cost ~5). ``height`` names the up axis in the words:
+    :func:`floor_warnings` says it (the same rule, :func:`_outside`, on Python floats: ~1 us,
+    a lone edit's hot path; numpy's passes cost ~5). ``height`` names the up axis in the words:
     the pose form's world y, a character's own up axis (``"z"`` for ``+Z``, its
     coordinates in metres)."""
     (px, py, pz), (nx, ny, nz) = pose[[_PELVIS, _NECK]].tolist()
     tx, ty, tz = nx - px, ny - py, nz - pz
     torso = math.sqrt(tx * tx + ty * ty + tz * tz)
     lowest = min(pose[:, 1].tolist())
-    if floor > py or floor < py - FLOOR_REACH * torso or floor > lowest + SUNK * torso:
+    if _outside(floor, py, torso, lowest):
         return _words(float(floor), py, torso, lowest, height)
     return None
+
+
+def _outside(floor: Any, pelvis: Any, torso: Any, lowest: Any) -> Any:
+    """Whether a floor lies outside the band the networks know (the rule, once): above the
+    pelvis, more than :data:`FLOOR_REACH` pelvis-to-neck distances ``torso`` below it, or
+    above the lowest joint by more than :data:`SUNK` of them. Python floats (a lone edit)
+    or numpy arrays (a batch) alike: ``|`` on bools or on boolean arrays."""
+    return (
+        (floor > pelvis) | (floor < pelvis - FLOOR_REACH * torso) | (floor > lowest + SUNK * torso)
+    )
 
 
 def _words(floor: float, pelvis: float, torso: float, lowest: float, height: str = "y") -> str:
