@@ -5,9 +5,12 @@ TEST split as captured and rebuilt as other bodies; the same edits, seed 0): the
 soft answer (neural + bone pass) ``N``, FABRIK's answer from the caller's start ``F``, and
 ``bone_pass(lam * N + (1 - lam) * F)`` for each ``--lam``. Prints, per group of families,
 the mean MPJPE over sets and how many sets each answer has below FABRIK, and the 5 end
-effectors' MPJPE over FABRIK's (issue 11's goal: at most 0.7).
+effectors' MPJPE over FABRIK's (issue 11's goal: at most 0.7). ``--split val`` scores the
+VAL split's clips (sources the networks trained on, clips they did not) as the held-out
+families; ``--per-set`` also prints, per family and set, the best ``lam`` of 0, 0.1, .., 1.
 
     .venv/bin/python scripts/blend_fabrik.py [--models models] [--lam 0.5 0.75]
+        [--split holdout|val] [--per-set]
 """
 
 from __future__ import annotations
@@ -28,8 +31,11 @@ from core.kinematics import bone_pass
 from core.skeleton import bone_lengths
 from trainer.data.dataset import load_dataset
 
+GRID = [round(0.1 * i, 1) for i in range(11)]
 GROUPS = {
-    "held-out (3 sources)": lambda f: f.startswith("holdout") and not f.endswith(": all"),
+    "held-out sources": lambda f: (
+        f.split(": ")[0] in ("holdout", "val") and not f.endswith(": all")
+    ),
     "in-studio world": lambda f: f == heldout.STUDIO,
     "stress bodies": lambda f: f.startswith("test: ") and f.endswith("bodies"),
 }
@@ -40,6 +46,8 @@ def main() -> None:
     ap.add_argument("--models", type=Path, default=Path("models"))
     ap.add_argument("--dataset", type=Path, default=heldout.DEFAULT_DATASET)
     ap.add_argument("--lam", type=float, nargs="+", default=[0.5, 0.75])
+    ap.add_argument("--split", default="holdout", choices=["holdout", "val"])
+    ap.add_argument("--per-set", action="store_true")
     args = ap.parse_args()
     engine = heldout.engine_for(args.models, None, threads=1)
     calls: list[dict[str, dict[str, float]]] = []  # per run_sets call: set -> answer -> MPJPE
@@ -56,7 +64,7 @@ def main() -> None:
                 "shipped": float(per_item(edits, net)["mpjpe"].mean()),
             }
             lengths = bone_lengths(edits.start)
-            for lam in args.lam:
+            for lam in [*args.lam, *(GRID if args.per_set else [])]:
                 mix = bone_pass(lam * net + (1 - lam) * fab, lengths)
                 row[name][f"blend {lam:g}"] = float(per_item(edits, mix)["mpjpe"].mean())
         calls.append(row)
@@ -64,7 +72,11 @@ def main() -> None:
 
     heldout.run_sets = patched  # type: ignore[assignment]
     res = heldout.run_heldout(
-        engine, load_dataset(args.dataset), heldout.HeldoutConfig(), log=lambda s: None
+        engine,
+        load_dataset(args.dataset),
+        heldout.HeldoutConfig(),
+        split=args.split,
+        log=lambda s: None,
     )
     names = [f.name for f in res.families if not f.name.endswith(": all")]
     answers = ["shipped", *(f"blend {lam:g}" for lam in args.lam)]
@@ -78,6 +90,14 @@ def main() -> None:
             below = sum(s[a] < s["fabrik"] for r in rows for s in r.values())
             five = np.mean([r[FIVE][a] / r[FIVE]["fabrik"] for r in rows])
             print(f"| {group} | {a} | {np.mean(means):.4f} | {below} / {len(means)} | {five:.3f} |")
+    if args.per_set:
+        print("\n| family | set | FABRIK | shipped | best lam | its MPJPE |")
+        print("|---|---|---|---|---|---|")
+        for n, r in zip(names, calls, strict=True):
+            for name, v in r.items():
+                best = min(GRID, key=lambda lam: v[f"blend {lam:g}"])
+                print(f"| {n} | {name} | {v['fabrik']:.3f} | {v['shipped']:.3f} | {best:g} | "
+                      f"{v[f'blend {best:g}']:.3f} |")  # fmt: skip
 
 
 if __name__ == "__main__":
