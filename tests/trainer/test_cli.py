@@ -151,10 +151,21 @@ def test_an_interrupted_training_says_how_to_resume(small_dataset: Path, tmp_pat
     cmd = [sys.executable, "-m", "trainer.cli", "train", "--quick", "--dataset",
            str(small_dataset), "--run-dir", str(run), "--out", str(out)]  # fmt: skip
     env = {**os.environ, "PYTHONUNBUFFERED": "1", "COLUMNS": "200"}
-    proc = subprocess.Popen(
-        cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
-        cwd=Path(__file__).resolve().parents[2],
-    )  # fmt: skip
+    # A suite started in the background (`make test &`, nohup) ignores SIGINT, and a child
+    # inherits that through exec: CPython then installs no KeyboardInterrupt handler and
+    # the training ran on to the end, exit 0 (seen 2026-12-08). The child gets SIGINT's
+    # default, as from a terminal.
+    ignored = signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+    if ignored:
+        signal.signal(signal.SIGINT, signal.SIG_DFL)
+    try:
+        proc = subprocess.Popen(
+            cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+            cwd=Path(__file__).resolve().parents[2],
+        )  # fmt: skip
+    finally:
+        if ignored:
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
     assert proc.stderr is not None
     deadline = time.monotonic() + 120
     said = []
