@@ -26,7 +26,7 @@
 // the frame loop, starts up and sets the test hook.
 
 import { $, doc, history, pointerDrag, solver, state, ui } from './editor/state.js';
-import { api, ApiError, clearError, showError } from './editor/api.js';
+import { api, ApiError, clearError, onBack, showError } from './editor/api.js';
 import {
   BOUNDED, checkField, chooseSample, clonePose, loadSample, options, redo, requestSolve, reset,
   sendSolve, setUpFields, takeField, undo,
@@ -311,6 +311,35 @@ async function showModelDefaults() {
     $('carry-label').textContent = `${res.data.carry.toFixed(2)} (models' default)`;
   }
 }
+
+// The server found back after an outage (api.js onBack: restarted, perhaps with other models
+// or settings): GET v1/models read again, once, and applied as at start-up
+// (showModelDefaults: the carry slider's default where it was not moved, the body limit).
+// It was read at start-up only: the slider kept the first server's default, and a file over
+// a lower limit went whole to be refused first. A server back but still loading its models
+// answers 503 with Retry-After: asked again then (start-up asks every 2 s); models that
+// failed to load (no Retry-After), or any other failure: left (the solves say what they
+// meet; the banner is theirs). A server gone again: read again once it is back again.
+let rereading = false;
+
+async function readModelsAgain() {
+  if (!ui.connected || loadingSkeleton || rereading) return; // (start-up reads them)
+  rereading = true;
+  try {
+    for (;;) {
+      try {
+        await showModelDefaults();
+        return;
+      } catch (err) {
+        if (err.status !== 503 || !err.retryAfter) return;
+        await new Promise((r) => setTimeout(r, err.retryAfter * 1000));
+      }
+    }
+  } finally {
+    rereading = false;
+  }
+}
+onBack(readModelsAgain);
 
 async function loadSamples() {
   const res = await fetch('static/samples.json', { cache: 'no-cache' });

@@ -62,10 +62,13 @@ async function watch() {
 // where it said it was down, and the banner that said so goes (a request's that could not
 // reach the server, or that it did not answer: status 0). It stayed up, under "connected",
 // until the next solve landed or it was dismissed. Not a banner that outlives the outage
-// (``lasting``: solve.js, an edit sent again that failed again, not sent a third time): what
-// it says, the edit not applied, still holds; it went, and the page said "connected", no
-// error, the edit never solved. Then, where it said it was down, what waits for the server
-// runs (``onBack``: solve.js sends again the edit the outage interrupted).
+// (``lasting``: solve.js, an edit sent again that failed again, or that the server failed,
+// not sent a third time; one not sent again, something under way): what it says, the edit
+// not applied, still holds; it went, and the page said "connected", no error, the edit
+// never solved. It goes once an edit is solved, its answer committed (solve.js sendSolve),
+// or with the edit undone, Reset, a sample, ×. Then, where it said it was down, what waits
+// for the server runs (``onBack``: solve.js sends again the edit the outage interrupted;
+// editor.js reads GET v1/models again).
 const whenBack = [];
 export const serverDown = () => DOWN.includes($('status').textContent);
 const lasting = () => Boolean(ui.errorOwner && ui.errorOwner.lasting);
@@ -169,7 +172,8 @@ function keyNeeded() {
 // Error banner
 // ------------------------------------------------------------------------------------
 // ``owner``: the edit a failed solve's banner belongs to (solve.js: undone, the banner goes;
-// ``lasting``, it stays once the server is back: ``back``).
+// ``lasting``, it stays once the server is back, and until an edit's answer is committed:
+// ``back``).
 export function showError(err, owner = null) {
   const e = err instanceof ApiError ? err : new ApiError(-1, 'Editor error', String(err && err.message || err));
   ui.currentError = {

@@ -419,8 +419,9 @@ export const BUSY_TRIES = 4;
 // Not sent for something under way (a joint pressed, a drag, a solve, a file read), the
 // edit still shown: said, as the outage's banner goes (api.js back): it went, the status
 // "connected", the kept targets unsolved without a word (a joint pressed as the server was
-// found back). It stays until an edit is solved (the drag under way's solves, which carry
-// the kept targets, among them) or the user moves on (an undo of it, Reset, a sample).
+// found back). It stays until an edit is solved (the drag under way, let go: its answer,
+// which carries the kept targets, committed; not its answers on the way, which an Escape
+// drops) or the user moves on (an undo of it, Reset, a sample).
 function sendAgain() {
   const kept = solver.interrupted;
   solver.interrupted = null;
@@ -505,9 +506,17 @@ export async function sendSolve() {
       rttMs: res.rtt,
       requestId: res.requestId,
     };
-    clearError();
+    // A lasting banner (an edit sent again, or not sent, not applied: api.js ``back``) goes
+    // once an edit is solved, its answer committed; not with an answer on its way (a drag's,
+    // not let go: an Escape drops it, the kept targets still unsolved). It went with a drag's
+    // first answer as the server was found back, unseen: an Escape then, and the edit stayed
+    // unsolved without a word.
+    const lastingBanner = Boolean(ui.errorOwner && ui.errorOwner.lasting);
+    let solved = false;
+    if (!lastingBanner) clearError();
     if (commit && again && history.stack[history.index] === again.step && (solver.dirty || ui.drag)) {
       landAgain(again, body, res.edit);
+      solved = true;
     } else if (commit && !solver.dirty && solver.commitPending && !ui.drag) {
       // (the splice that made the answer's text, of the committed one: the commit reads
       // neither whole, for the next solve's excerpt nor for the undo step; editor/excerpt.js)
@@ -519,7 +528,9 @@ export async function sendSolve() {
       // the edit sent again: its answer takes the place of the step its kept targets made
       if (again && again.replace && history.stack[history.index] === again.step) stepBack();
       pushHistory(edit);
+      solved = true;
     }
+    if (lastingBanner && solved) clearError();
     refresh();
     settle = !solver.commitPending;
   } catch (err) {
@@ -572,6 +583,14 @@ export async function sendSolve() {
         lasting = true;
         said = withNote(err, 'the edit, sent again once the server was back, failed again: it is not '
           + 'applied (the pose is as before it, its targets kept: drag again to retry)', 'Edit failed again');
+      } else if (again && err.status >= 400) {
+        // The edit sent again answered with the server's error (a 500; a 4xx, refused): its
+        // title and detail, and what it means for the edit, as for one that failed again (a
+        // lasting banner, not sent a third time). It said only the server's error.
+        lasting = true;
+        const how = err.status >= 500 ? 'failed on the server' : 'was refused by the server';
+        said = withNote(err, `the edit, sent again once the server was back, ${how}: it is not `
+          + 'applied (the pose is as before it, its targets kept: drag again to retry)');
       } else if (err.status === 0) {
         // (the same step kept again, an option changed meanwhile: still the step to replace)
         const before = solver.interrupted;
