@@ -10,13 +10,14 @@ is session-scoped (one server, a subprocess, for every editor test module), ``br
 module-scoped (each module's own Chromium, closed with it: Playwright's sync API keeps an
 asyncio loop running in the main thread while it is open, so a session's Chromium made every
 later ``asyncio.run``/``anyio.run`` test fail with "cannot be called from a running event
-loop"). It holds no asserts
-(PYTEST_DONT_REWRITE: the tests import it before it becomes their plugin, and pytest would
-warn that it cannot rewrite it).
+loop"); ``outages`` is a test's own server (:class:`Outages`), stopped and started at will.
+It holds no asserts (PYTEST_DONT_REWRITE: the tests import it before it becomes their
+plugin, and pytest would warn that it cannot rewrite it).
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
@@ -34,7 +35,7 @@ from typing import IO, Any
 import pytest
 
 from tests.conftest import REPO_ROOT
-from tests.service.server import free_port
+from tests.service.server import free_port, serve
 
 CHROMIUM_ARGS = [
     "--headless",
@@ -368,3 +369,31 @@ def found(page: Any) -> None:
             pytest.fail(f"the server not found back: {page.evaluate(STATUS)}")
         page.clock.run_for(STEP_MS)
         drained(page, lambda url: url.endswith("/v2/health/live"), deadline)
+
+
+class Outages:
+    """The test's own server on a port of its own, started and stopped at will."""
+
+    def __init__(self, models_dir: Path, tmp: Path) -> None:
+        self.models_dir, self.tmp, self.port = models_dir, tmp, free_port()
+        self.base = f"http://127.0.0.1:{self.port}"
+
+    def up(self) -> Any:
+        return serve(self.models_dir, self.tmp, port=self.port)
+
+    @contextlib.contextmanager
+    def ready(self, *pages: Any) -> Iterator[None]:
+        """Up, and found by the pages only once its models are loaded (a start answers its
+        liveness before: a solve then is a 503 with Retry-After, the edit sent again after)."""
+        for page in pages:
+            page.route("**/v2/health/live", lambda route: route.abort())
+        with self.up():
+            for page in pages:
+                page.unroute("**/v2/health/live")
+            yield
+
+
+@pytest.fixture
+def outages(models_dir: Path, tmp_path: Path) -> Outages:
+    """The test's own server, stopped and started at will (an outage the page meets)."""
+    return Outages(models_dir, tmp_path)

@@ -29,6 +29,7 @@ from tests.service.editor_page import (
     STATUS,
     WAIT_MS,
     M,
+    Outages,
     drag_joint,
     found,
     open_file,
@@ -39,7 +40,7 @@ from tests.service.editor_page import (
     work,
 )
 from tests.service.server import serve
-from tests.service.test_editor_resend import Outages, example_file, quiet, sent
+from tests.service.test_editor_resend import example_file, quiet, sent
 from tests.service.test_editor_resend_outcomes import LIVE, SOLVE, banner, interrupted, press
 
 # the fixtures `server` (one for the session) and `browser` (one per module)
@@ -62,12 +63,6 @@ FAULTY = [
     "Engine.warmup = warmup\n"
     "exec(sys.argv[-1])\n",  # (serve's own command: the service's main)
 ]
-
-
-@pytest.fixture
-def outages(models_dir: Path, tmp_path: Path) -> Outages:
-    """The test's own server (test_editor_resend's), stopped and started at will."""
-    return Outages(models_dir, tmp_path)
 
 
 @pytest.mark.browser

@@ -13,11 +13,8 @@ Shared parts: ``tests/service/editor_page.py``.
 
 from __future__ import annotations
 
-import contextlib
 import json
 import time
-from collections.abc import Iterator
-from pathlib import Path
 from typing import Any
 
 import pytest
@@ -29,6 +26,7 @@ from tests.service.editor_page import (
     VIEW,
     WAIT_MS,
     M,
+    Outages,
     drag_joint,
     drained,
     found,
@@ -40,7 +38,6 @@ from tests.service.editor_page import (
     unreachable,
     work,
 )
-from tests.service.server import free_port, serve
 
 # the fixtures `server` (one for the session) and `browser` (one per module)
 pytest_plugins = ("tests.service.editor_page",)
@@ -89,33 +86,6 @@ def holding(page: Any) -> list[Any]:
     held: list[Any] = []
     page.route("**/v1/solve", lambda route: held.append(route))
     return held
-
-
-class Outages:
-    """The test's own server on a port of its own, started and stopped at will."""
-
-    def __init__(self, models_dir: Path, tmp: Path) -> None:
-        self.models_dir, self.tmp, self.port = models_dir, tmp, free_port()
-        self.base = f"http://127.0.0.1:{self.port}"
-
-    def up(self) -> Any:
-        return serve(self.models_dir, self.tmp, port=self.port)
-
-    @contextlib.contextmanager
-    def ready(self, *pages: Any) -> Iterator[None]:
-        """Up, and found by the pages only once its models are loaded (a start answers its
-        liveness before: a solve then is a 503 with Retry-After, the edit sent again after)."""
-        for page in pages:
-            page.route("**/v2/health/live", lambda route: route.abort())
-        with self.up():
-            for page in pages:
-                page.unroute("**/v2/health/live")
-            yield
-
-
-@pytest.fixture
-def outages(models_dir: Path, tmp_path: Path) -> Outages:
-    return Outages(models_dir, tmp_path)
 
 
 @pytest.mark.browser
