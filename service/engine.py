@@ -239,12 +239,12 @@ class Engine:
         )
         return [self._result(p, ans, b) for b, p in enumerate(problems)]
 
-    def _lean_single(self, p: SolveProblem) -> SolveResult | Searches | None:
+    def _lean_single(self, p: SolveProblem, one: bool = False) -> SolveResult | Searches | None:
         """One edit on the lean path (:mod:`service.lean`) straight from its problem, if
         it qualifies: what :meth:`solve_arrays` gives it, without its option arrays;
         if it searches its turn (:mod:`service.turns`), its items (:meth:`_items_of`) and
         the searching ones (:meth:`_searched` solves it from them); None if it takes the
-        general path for another reason."""
+        general path for another reason (``one``: or needs more than one solver)."""
         tidx = compiled.as_i64(p.target_idx)
         weights = compiled.as_f64(p.weights)
         passes, seq, look = 1, None, None
@@ -258,21 +258,18 @@ class Engine:
             if not p.preserve_bone_lengths:
                 return None  # the bone pass left out: the general path
             passes, seq = self.passes_of(p), covering(self, tidx, weights)
-            if seq is None or passes < 1:
+            if seq is None or passes < 1 or (one and len(seq) > 1):
                 return None
         asked, items = self._items_of(p) if look is None else look
         ans = retry.last_steps(self, items, lean_answer(self, items, passes, seq))
         return self._result(p, prefer_fabrik(self, asked, ans, self._solve_items), 0)
 
-    def solve_lone(self, p: SolveProblem) -> SolveResult | Searches:
-        """``solve([p])[0]``, or, if ``p`` searches its turn (a dozen solves: the routes
-        run those in a worker, the others on the event loop), its items as looked at, for
-        :meth:`solve_searching` to solve (its targets looked at once for both, its items
-        made once)."""
-        lean = self._lean_single(p)
-        if lean is None:  # the general path
-            return self.solve([p])[0]
-        return lean
+    def solve_lone(self, p: SolveProblem) -> SolveResult | Searches | None:
+        """``solve([p])[0]`` if ``p`` takes the lean path with one solver (a few network
+        runs: the routes run it on the event loop); if it searches its turn, its items as
+        looked at, for :meth:`solve_searching` (in a worker; its items made once); None
+        for anything else (composed solvers, the general path): :meth:`solve` in a worker."""
+        return self._lean_single(p, one=True)
 
     def solve_searching(self, p: SolveProblem, searches: Searches) -> SolveResult:
         """``solve([p])[0]`` of an edit that searches its turn, from its items as

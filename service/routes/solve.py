@@ -115,12 +115,16 @@ async def solve(body: SolveBody, engine: ReadyEngine, budget: RequestBudget,
 
 async def solve_one(p: SolveProblem, pinned: bool, engine: Engine, budget: Budget) -> SolveResult:
     """One pose problem (``pinned``: it has pins), its engine time added to the budget's:
-    a cheap one inline (:func:`inline`: 0.1-0.7 ms), anything else in a worker thread on a
-    compute token within the deadline (FABRIK iterations, pins, exact reach, a turn search
-    or extra passes can take milliseconds: the loop stays free). Whether an edit searches
-    its turn is known once its targets are looked at (``serving.turn_gate``):
-    ``Engine.solve_lone`` looks, and solves it unless it searches; a search is then solved
-    in a worker from the items it was looked at as (``Engine.solve_searching``).
+    a cheap one inline (:func:`inline`, one solver: 0.1-2 ms), anything else in a worker
+    thread on a compute token within the deadline (FABRIK iterations, pins, exact reach, a
+    turn search, extra passes or composed solvers can take milliseconds: the loop stays
+    free). Whether an edit searches its turn, and how many solvers it needs, is known once
+    its targets are looked at (``serving.turn_gate``): ``Engine.solve_lone`` looks, and
+    solves it unless it searches (then solved in a worker from the items it was looked at
+    as, ``Engine.solve_searching``) or needs more than one solver or the general path (then
+    ``Engine.solve`` in a worker). Composed solvers ran on the loop too, once: a lone
+    15-target soft edit held it 8-26 ms, liveness p50 23-53 ms under three clients of it
+    (an API audit, 2026-12-08).
 
     The turn search ran inline too, once (in a worker it shares the GIL with the loop: a
     lone 5-target edit took 6.2 against 5.0 ms over HTTP), but a flood of them starved
@@ -134,10 +138,12 @@ async def solve_one(p: SolveProblem, pinned: bool, engine: Engine, budget: Budge
             lone = engine.solve_lone(p)
         if isinstance(lone, SolveResult):
             return lone
-        (result,) = await budget.run(
-            lambda ps: [engine.solve_searching(ps[0], lone)], [p], Pricing.of(engine)
-        )
-        return result
+        if lone is not None:  # it searches its turn: from the items it was looked at as
+            searches = lone
+            (result,) = await budget.run(
+                lambda ps: [engine.solve_searching(ps[0], searches)], [p], Pricing.of(engine)
+            )
+            return result
     (result,) = await budget.run(engine.solve, [p], Pricing.of(engine))
     return result
 
@@ -145,7 +151,8 @@ async def solve_one(p: SolveProblem, pinned: bool, engine: Engine, budget: Budge
 def inline(p: SolveProblem, pinned: bool, engine: Engine) -> bool:
     """Whether a lone edit may be solved on the event loop: neural, soft reach, no pins and
     no more passes than the models serve (its cost then a few network runs,
-    ``service.lean``), unless it searches its turn (``Engine.solve_lone`` tells)."""
+    ``service.lean``), unless it searches its turn or needs more than one solver
+    (``Engine.solve_lone`` tells)."""
     return (
         p.method == "neural" and p.reach == "soft" and not pinned
         and engine.passes_of(p) <= engine.serving.passes
