@@ -31,7 +31,7 @@ from service.limits import Pricing, chunks_of, searched_price
 from service.problems import BatchAnswer
 from service.responses import starts_warnings
 from service.schemas import MAX_COORDINATE, MAX_WEIGHT, SolveOptions
-from service.validation import check_bones, check_options
+from service.validation import check_bones, check_options, pin_weights
 
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]
@@ -394,6 +394,7 @@ def parse(data: dict[str, Any], max_items: int, suspect: bool = True) -> Columns
             errs.add_all(np.argwhere(~((weights_in > 0) & (weights_in <= MAX_WEIGHT))), weight)
         if got is not None:
             weights[:, :k] = got
+    weights = pin_weights(weights[:, :k], p)
     errs.raise_any()
     assert goals is not None
     tidx = np.concatenate([tj, pj], axis=1)
