@@ -295,7 +295,7 @@ def explain_count(name: str, body: str, first_line: int, n_frames: int, n_channe
         if count and seen >= n_frames:
             raise error(
                 name,
-                f"line {first_line + offset}: more frame lines than the {n_frames} "
+                f"line {first_line + offset}: more frame lines than the {clip(n_frames)} "
                 "declared in 'Frames:'",
             )
         if count and count != n_channels:
@@ -306,7 +306,7 @@ def explain_count(name: str, body: str, first_line: int, n_frames: int, n_channe
         seen, last = (seen + 1, offset) if count else (seen, last)
         offset, at = offset + 1, end + 1
     ends = f"line {first_line + last}: truncated"  # (where the block ends)
-    raise error(name, f"{ends}: 'Frames:' declares {n_frames} frames, found {seen}")
+    raise error(name, f"{ends}: 'Frames:' declares {clip(n_frames)} frames, found {seen}")
 
 
 def after_newlines(text: str, at: int, k: int) -> int:

@@ -302,6 +302,16 @@ def test_counts_are_ascii_whole_numbers(word: str) -> None:
     )
 
 
+def test_a_frame_count_of_thousands_of_digits_is_not_quoted_whole() -> None:
+    """An API audit (2026-12-08): a 3,000-digit ``Frames:`` count over 4 frame lines was
+    quoted whole, a 3,061-character detail; details quote client input clipped."""
+    count = "9" * 3000
+    said = _refusal(TINY.replace("Frames: 4", f"Frames: {count}"))
+    assert said == (
+        "line 22: truncated: 'Frames:' declares <an integer of 3000 digits> frames, found 4"
+    )
+
+
 def test_decimals_as_writers_write_them_are_read_as_float_reads_them() -> None:
     """Signs, a point at either end, exponents, leading zeros: the values ``float()``
     gives, read whole or one frame alone, and in an OFFSET. A decimal past the float range
