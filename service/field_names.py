@@ -37,8 +37,12 @@ def offered(errors: list[ErrorDetails], model: type[BaseModel], data: Any) -> No
 
 def slip_of(key: Any, names: Sequence[str]) -> str | None:
     """The one of ``names`` an unknown ``key`` is a slip of (:func:`core.text.near_name`; a
-    key of more than 40 characters is none)."""
-    return near_name(key, names) if isinstance(key, str) and names and len(key) <= 40 else None
+    key of more than 40 characters is none, and never the key itself: a key unknown where
+    it is may be a field of another form, which the client did not mean)."""
+    if not isinstance(key, str) or not names or len(key) > 40:
+        return None
+    meant = near_name(key, names)
+    return None if meant == key else meant
 
 
 def fields_at(model: Any, data: Any, loc: tuple[Any, ...]) -> list[str]:

@@ -46,7 +46,14 @@ R = TypeVar("R")
 
 
 def _batch_form(data: Any) -> str:
-    return "columns" if columnar.is_columnar(data) or isinstance(data, ColumnarBatch) else "items"
+    """The form a batch body is read as: columnar by its ``poses`` (``columnar.is_columnar``)
+    or, without ``items``, by the columnar form's other keys, so that a columnar body
+    missing its ``poses`` is told that (it was read as the item list: "items: Field
+    required; pins: Extra inputs are not permitted"; an API audit, 2026-12-08)."""
+    if columnar.is_columnar(data) or isinstance(data, ColumnarBatch):
+        return "columns"
+    own = isinstance(data, dict) and "items" not in data and bool({"targets", "pins"} & set(data))
+    return "columns" if own else "items"
 
 
 class BatchBody(

@@ -58,3 +58,23 @@ def test_a_slip_of_an_earlier_name_is_offered_it(client: Any) -> None:
     assert r.status_code == 422
     got = {e["location"]: e["message"] for e in r.json()["errors"]}
     assert "did you mean 'skeleton'?" in got["skeletn"], got
+
+
+def test_a_columnar_batch_without_poses_is_told_so_and_no_key_is_offered_itself(
+    client: Any,
+) -> None:
+    """An API audit (2026-12-08): ``{"pins": [], "targets": {}}`` was read as the item list
+    and told "pins: Extra inputs are not permitted (did you mean 'pins'?)". Now a body with
+    the columnar form's keys and no ``items`` is read as that form, and a key unknown where
+    it is is never offered its own name."""
+    from service.field_names import slip_of
+
+    assert slip_of("pins", ["poses", "targets", "pins"]) is None
+    for body in ({"pins": [], "targets": {}}, {"targets": {"joints": ["head"]}}):
+        r = client.post("/v1/solve/batch", json=body)
+        assert r.status_code == 422, r.text
+        got = {e["location"]: e["message"] for e in r.json()["errors"]}
+        assert got["poses"] == "Field required", got
+        assert "items" not in got and "did you mean" not in r.text, got
+    r = client.post("/v1/solve/batch", json={"items": [], "pins": []})  # both: as before
+    assert "a batch takes one form, not both" in r.json()["detail"], r.text
