@@ -567,7 +567,8 @@ def parse_bvh(text: str, name: str = "<string>", frames: Iterable[int] | None = 
     if n_frames < 0:
         raise _error(name, f"line {motion_line + 1}: negative frame count {quoted(n_frames)}")
     if not np.isfinite(frame_time) or frame_time <= 0:
-        raise _error(name, f"line {motion_line + 2}: bad Frame Time {frame_time}")
+        said = quoted(time_match.group(1))  # (as the file has it: 1e-400 read as 0.0)
+        raise _error(name, f"line {motion_line + 2}: bad Frame Time {said}: not above 0 and finite")
 
     body_offset = len(text) if ends[2] < 0 else ends[2] + 1
     first_line = motion_line + 3

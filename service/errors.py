@@ -444,7 +444,7 @@ def _message(error: Any) -> str:
     if kind == "list_type" and "input" in error:  # (was "Input should be a valid list")
         return f"a JSON array is required, not {_came(value)}"
     if kind == "finite_number":
-        return "must be a finite number (NaN and infinities are not)"
+        return NOT_FINITE
     if kind == "float_type" and type(value) is int:  # JSON allows any integer; a float not
         return f"{quoted(value)} is beyond any number this API takes (±1.8e308)"
     if kind in _SCALARS and "input" in error:  # (was "Input should be a valid number")
@@ -471,8 +471,18 @@ def _message(error: Any) -> str:
     return message
 
 
+#: A number that is not finite (a float past the range reads as infinite: ``1e309``, which the
+#: client never wrote as an infinity, was told "NaN and infinities are not"; an API audit,
+#: 2026-12-08).
+NOT_FINITE = (
+    "must be a finite number (NaN and infinities are not; a number past ±1.8e308, such as "
+    "1e309, reads as infinite)"
+)
 #: what a field of each of pydantic's scalar type errors takes (said with what came)
-_SCALARS = {"float_type": "a number", "int_type": "a whole number", "bool_type": "true or false"}
+_SCALARS = {
+    "float_type": "a number", "int_type": "a whole number", "bool_type": "true or false",
+    "string_type": "a string",  # (was "Input should be a valid string": an API audit, 2026-12-08)
+}  # fmt: skip
 
 
 def _came(value: Any) -> str:

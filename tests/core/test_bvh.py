@@ -137,6 +137,15 @@ Frame Time: 0.01
         (lambda t: t.replace("  }\n}\nMOTION", "MOTION"), "unexpected end of HIERARCHY"),
         (lambda t: "garbage\x00\x01 not a bvh at all", "not a BVH file"),
         (lambda t: t.replace("Frame Time: 0.0333333", "Frame Time: 0"), "bad Frame Time"),
+        # quoted as the file has it (an API audit, 2026-12-08: "bad Frame Time 0.0", "inf")
+        (
+            lambda t: t.replace("Frame Time: 0.0333333", "Frame Time: 1e-400"),
+            "line 18: bad Frame Time '1e-400': not above 0 and finite",
+        ),
+        (
+            lambda t: t.replace("Frame Time: 0.0333333", "Frame Time: 1" + "0" * 400),
+            "line 18: bad Frame Time '1000000000",
+        ),
         # each was blamed on the line before, as "bad Frames / Frame Time values"
         (
             lambda t: t.replace("Frame Time: 0.0333333", "Frame Time: 0,0333333"),
