@@ -203,7 +203,7 @@ class Gate:
                 "(charset=utf-8, or none)"
             )
         coding = headers.get("content-encoding", "identity").strip().lower()
-        if coding not in ("", "identity"):
+        if any(t.strip() not in ("", "identity") for t in coding.split(",")):  # (a list too)
             raise UnsupportedMediaType(
                 f"content encoding {clip(coding, 40)!r} is not accepted: send the body "
                 "uncompressed (no Content-Encoding, or identity)"

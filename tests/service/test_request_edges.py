@@ -222,6 +222,15 @@ def test_a_compressed_body_is_a_415(client: Any, coding: str) -> None:
             headers={"content-type": "application/json", "content-encoding": coding},
         )  # fmt: skip
         assert_problem(r, 415, coding)
+    for listed in ("identity, identity", "identity, gzip"):  # a list of codings (RFC 9110)
+        r = client.post(
+            "/v1/solve", content=plain,
+            headers={"content-type": "application/json", "content-encoding": listed},
+        )  # fmt: skip
+        if "gzip" in listed:
+            assert_problem(r, 415, listed)
+        else:  # (a 415 before: an API audit, 2026-12-08)
+            assert r.status_code == 200, r.text
 
 
 def test_a_charset_other_than_utf8_is_a_415(client: Any) -> None:
