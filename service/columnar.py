@@ -374,11 +374,13 @@ def parse(data: dict[str, Any], max_items: int, suspect: bool = True) -> Columns
     if targets.get("weights") is not None:
         w = targets["weights"]
         shared = isinstance(w, list) and bool(w) and not isinstance(w[0], list)
-        got = (
-            _shared(w, ("targets", "weights"), k, n, errs, suspect)
-            if shared
-            else _numbers(w, ("targets", "weights"), k, n, errs, suspect, None)
-        )
+        got = None
+        if isinstance(w, str):  # (packed are only poses and positions: the schema's)
+            errs.add(("targets", "weights"), "list_type", "not packed", input=w)
+        elif shared:
+            got = _shared(w, ("targets", "weights"), k, n, errs, suspect)
+        else:
+            got = _numbers(w, ("targets", "weights"), k, n, errs, suspect, None)
         if got is not None and not ((got > 0) & (got <= MAX_WEIGHT)).all():
             weights_in = got[:1] if shared else got
 

@@ -93,6 +93,10 @@ def test_bad_packed_columns_are_named(models_dir: Path, real_poses: PosePairs) -
          "targets.positions: 30 bytes packed for 8 poses: one row of 6 float64 numbers "
          "(48 bytes) per pose, 384 bytes"),
         ({"poses": pack(poses[:7])}, "targets.joints: 8 rows for 7 poses"),  # (counted packed)
+        # only poses and positions are packed (the schema's), on the hot path as on the
+        # route: packed weights were taken there (an API audit, 2026-12-08)
+        ({"targets": {**body["targets"], "weights": pack(np.ones((8, 2)))}},
+         "targets.weights: a JSON array is required, not a string"),
     ]  # fmt: skip
     with make_client(models_dir, max_batch_items=8) as c:
         for change, said in cases:
