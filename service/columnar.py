@@ -370,7 +370,7 @@ def parse(data: dict[str, Any], max_items: int, suspect: bool = True) -> Columns
     k, p = tj.shape[1], pj.shape[1]
     check_options(options, p > 0)  # (as every other form's, by problem_of)
     goals = _numbers(targets["positions"], ("targets", "positions"), 3 * k, n, errs, suspect)
-    weights = np.ones((n, k + p))
+    weights = np.ones((n, k))  # (the pins' columns added below: pin_weights)
     if targets.get("weights") is not None:
         w = targets["weights"]
         shared = isinstance(w, list) and bool(w) and not isinstance(w[0], list)
@@ -395,8 +395,8 @@ def parse(data: dict[str, Any], max_items: int, suspect: bool = True) -> Columns
 
             errs.add_all(np.argwhere(~((weights_in > 0) & (weights_in <= MAX_WEIGHT))), weight)
         if got is not None:
-            weights[:, :k] = got
-    weights = pin_weights(weights[:, :k], p)
+            weights[:] = got
+    weights = pin_weights(weights, p)
     errs.raise_any()
     assert goals is not None
     tidx = np.concatenate([tj, pj], axis=1)

@@ -71,12 +71,12 @@ async function watch() {
 // editor.js reads GET v1/models again).
 const whenBack = [];
 export const serverDown = () => DOWN.includes($('status').textContent);
-const lasting = () => Boolean(ui.errorOwner && ui.errorOwner.lasting);
+export const bannerLasts = () => Boolean(ui.errorOwner && ui.errorOwner.lasting);
 
 function back() {
   const wasDown = serverDown();
   if (wasDown) $('status').textContent = 'connected';
-  if (ui.currentError && ui.currentError.status === 0 && !lasting()) clearError();
+  if (ui.currentError && ui.currentError.status === 0 && !bannerLasts()) clearError();
   if (wasDown) whenBack.forEach((fn) => fn());
 }
 
@@ -90,7 +90,7 @@ export function onBack(fn) {
 // the models loading (not connected yet), a 3D view that cannot start. Reset and a sample
 // chosen leave such a banner up (solve.js replacedError).
 export function aboutServer(e) {
-  return (e.status === 0 && DOWN.includes($('status').textContent) && !lasting()) || e.status === 401
+  return (e.status === 0 && DOWN.includes($('status').textContent) && !bannerLasts()) || e.status === 401
     || (e.status === 503 && !ui.connected) || e.title === 'WebGL unavailable';
 }
 

@@ -3,7 +3,7 @@
 
 import { $, doc, history, solver, state, ui } from './state.js';
 import {
-  aboutServer, api, ApiError, clearError, onBack, serverDown, showError,
+  aboutServer, api, ApiError, bannerLasts, clearError, onBack, serverDown, showError,
 } from './api.js';
 import { excerptOf, seedLayout } from './excerpt.js';
 import { endDrag } from './interaction.js';
@@ -422,6 +422,11 @@ export const BUSY_TRIES = 4;
 // found back). It stays until an edit is solved (the drag under way, let go: its answer,
 // which carries the kept targets, committed; not its answers on the way, which an Escape
 // drops) or the user moves on (an undo of it, Reset, a sample).
+// What an edit not applied leaves, and the edit sent again once the server was back (the
+// banners' words).
+const KEPT = '(the pose is as before it, its targets kept: drag again to retry)';
+const SENT_AGAIN = 'the edit, sent again once the server was back,';
+
 function sendAgain() {
   const kept = solver.interrupted;
   solver.interrupted = null;
@@ -429,8 +434,7 @@ function sendAgain() {
   if (state.targets.size === 0) return;
   if (ui.drag || ui.reading || solver.commitPending || solver.dirty || solver.inflight) {
     const why = 'the server is back, but the edit its outage interrupted was not sent again '
-      + '(something else was under way): it is not applied (the pose is as before it, its '
-      + 'targets kept: drag again to retry)';
+      + `(something else was under way): it is not applied ${KEPT}`;
     showError(new ApiError(0, 'Edit not applied', why), { step: kept.step, pending: false, lasting: true });
     return;
   }
@@ -511,7 +515,7 @@ export async function sendSolve() {
     // not let go: an Escape drops it, the kept targets still unsolved). It went with a drag's
     // first answer as the server was found back, unseen: an Escape then, and the edit stayed
     // unsolved without a word.
-    const lastingBanner = Boolean(ui.errorOwner && ui.errorOwner.lasting);
+    const lastingBanner = bannerLasts();
     let solved = false;
     if (!lastingBanner) clearError();
     if (commit && again && history.stack[history.index] === again.step && (solver.dirty || ui.drag)) {
@@ -574,23 +578,20 @@ export async function sendSolve() {
       const step = history.stack[history.index];
       solver.again = null;
       if (wait) {
-        said = withNote(err, `still busy after ${BUSY_TRIES} tries: the edit is not applied (the `
-          + 'pose is as before it, its targets kept: drag again to retry)');
+        said = withNote(err, `still busy after ${BUSY_TRIES} tries: the edit is not applied ${KEPT}`);
       } else if (again && err.status === 0) {
         // (it stays once the server is back, as it still holds: api.js back; until an edit
         // is solved, or the user moves on: an undo, Reset, a sample). Titled for the edit,
         // not the server: it said "Server unreachable" under the status "connected" then.
         lasting = true;
-        said = withNote(err, 'the edit, sent again once the server was back, failed again: it is not '
-          + 'applied (the pose is as before it, its targets kept: drag again to retry)', 'Edit failed again');
+        said = withNote(err, `${SENT_AGAIN} failed again: it is not applied ${KEPT}`, 'Edit failed again');
       } else if (again && err.status >= 400) {
         // The edit sent again answered with the server's error (a 500; a 4xx, refused): its
         // title and detail, and what it means for the edit, as for one that failed again (a
         // lasting banner, not sent a third time). It said only the server's error.
         lasting = true;
         const how = err.status >= 500 ? 'failed on the server' : 'was refused by the server';
-        said = withNote(err, `the edit, sent again once the server was back, ${how}: it is not `
-          + 'applied (the pose is as before it, its targets kept: drag again to retry)');
+        said = withNote(err, `${SENT_AGAIN} ${how}: it is not applied ${KEPT}`);
       } else if (err.status === 0) {
         // (the same step kept again, an option changed meanwhile: still the step to replace)
         const before = solver.interrupted;
